@@ -1,0 +1,1 @@
+"""Virtual Orthoglide: geometry, kinematics, PyBullet machine, gauges and Gymnasium env."""

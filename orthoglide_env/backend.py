@@ -1,0 +1,83 @@
+"""What the environment needs from a virtual machine, and the exact-model machine.
+
+Two machines implement :class:`MachineBackend`: :class:`ExactMachine` (this module: the
+closed-form/Newton solution of the geometry, instant) and the PyBullet closed-chain
+machine of :mod:`orthoglide_env.machine` (the faithful one).  The environment and the
+fidelity tests treat them alike.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+
+from .gauges import Gauge, exact_ray_distances
+from .geometry import MachineParams
+from .kinematics import direct
+
+MOTION_MODES: tuple[str, ...] = ("quasi-static", "dynamic")
+
+
+class MachineBackend(Protocol):
+    """A virtual Orthoglide with gauges installed on its base (ground truth inside)."""
+
+    machine: MachineParams
+    gauges: list[Gauge]
+
+    def move(self, rho: np.ndarray, mode: str = "quasi-static") -> None:
+        """Drive the three actuators to control coordinates ``rho`` (mm, already
+        validated against the control limits) and let the mechanism settle."""
+
+    def encoders(self) -> np.ndarray:
+        """Encoder readings (mm, control coordinates), shape (3,)."""
+
+    def tcp(self) -> np.ndarray:
+        """True TCP position (mm), shape (3,)."""
+
+    def gauge_distances(self) -> np.ndarray:
+        """Ray distance ``t`` (mm) of every gauge's tip to its target; NaN when the ray
+        does not hit the target bar first."""
+
+    def collisions(self) -> list[str]:
+        """Names of the pairs of parts in contact (empty when none)."""
+
+    def set_gauges(self, gauges: list[Gauge]) -> None:
+        """Replace the installed gauges (same layout, e.g. after zeroing)."""
+
+    def close(self) -> None:
+        """Release every resource."""
+
+
+class ExactMachine:
+    """The machine as the exact kinematic model computes it (no dynamics, no solver)."""
+
+    def __init__(self, machine: MachineParams, gauges: list[Gauge]) -> None:
+        self.machine = machine
+        self.gauges = list(gauges)
+        self._rho = np.zeros(3)
+        self._tcp = direct(machine, self._rho)
+
+    def move(self, rho: np.ndarray, mode: str = "quasi-static") -> None:
+        if mode not in MOTION_MODES:
+            raise ValueError(f"unknown motion mode '{mode}'; choose from {list(MOTION_MODES)}")
+        self._tcp = direct(self.machine, rho)
+        self._rho = np.array(rho, dtype=float)
+
+    def encoders(self) -> np.ndarray:
+        return self._rho.copy()
+
+    def tcp(self) -> np.ndarray:
+        return self._tcp.copy()
+
+    def gauge_distances(self) -> np.ndarray:
+        return exact_ray_distances(self.machine, self.gauges, self._rho)
+
+    def collisions(self) -> list[str]:
+        return []
+
+    def set_gauges(self, gauges: list[Gauge]) -> None:
+        self.gauges = list(gauges)
+
+    def close(self) -> None:
+        """Nothing to release."""

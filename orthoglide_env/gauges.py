@@ -1,0 +1,284 @@
+"""Dial gauges: layout, installation, the exact reading model, noise and quantisation.
+
+A gauge is a plunger on a magnetic stand fixed to the base.  Its ray starts at
+``origin`` (the tip when the plunger is pushed fully in) and runs along ``direction``
+(toward the target); the tip touches the first face of the target bar at distance
+``t``.  The plunger can extend by ``travel`` mm, so the gauge is in contact when
+``0 <= t <= travel``.  ``t > travel``: the tip hangs in the air (no contact); ``t < 0``:
+the bar has pushed the plunger past its travel toward the stand (overtravel, which
+would damage a real gauge).
+
+Reading convention (DESIGN.md): the coordinate of the touched surface point along the
+gauge's world measuring axis, relative to the gauge's zero, in mm::
+
+    reading = sign * (t - zero),  sign = direction . e_axis  (+1 or -1 nominally)
+
+so the difference of two readings is the surface's displacement along that axis.
+
+Targets: a gauge measuring leg ``i`` along the leg's local Y touches the bar at
+``+d/2`` along local Z, at that height; one measuring along local Z comes from below
+and touches the bar at ``-d/2``.  Both are flat box faces, as DESIGN.md advises.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from enum import IntEnum
+
+import numpy as np
+
+from .geometry import (
+    AXIS_NAMES,
+    BAR_CLEARANCE,
+    BAR_SECTION,
+    D_NOMINAL,
+    L_NOMINAL,
+    LEG_NAMES,
+    R_LEG,
+    R_TOOL,
+    ErrorPreset,
+    MachineParams,
+)
+from .kinematics import carriage_points, direct, platform_points
+
+DEFAULT_TRAVEL: float = 10.0  # mm
+DEFAULT_RESOLUTION: float = 0.01  # mm (paper, section 4)
+DEFAULT_SIGMA: float = 0.02  # mm, repeatability (paper, section 4)
+#: The simulator casts rays from this far behind ``origin`` so that an overtravel is seen
+#: as a hit at negative ``t`` rather than from inside the bar.
+RAY_BACKOFF: float = 30.0
+
+
+class Status(IntEnum):
+    """Why a reading is or is not valid."""
+
+    VALID = 0
+    NO_CONTACT = 1  # tip extended fully without touching
+    OVERTRAVEL = 2  # plunger pushed in past its travel
+    MISSED = 3  # the ray misses the target bar (tip off the bar) or hits something else
+
+
+@dataclass(frozen=True)
+class GaugeSpec:
+    """Where a gauge goes, nominally: which leg, which world axis, where along the leg.
+
+    ``at`` is the fraction of the leg from the platform end (0) to the carriage end (1) at
+    the Zero posture; the paper's gauges sit in the middle (0.5).
+    """
+
+    leg: int
+    axis: int
+    at: float = 0.5
+
+    def __post_init__(self) -> None:
+        if self.leg not in (0, 1, 2) or self.axis not in (0, 1, 2):
+            raise ValueError("gauge leg and axis must be 0, 1 or 2 (x, y, z)")
+        if self.leg == self.axis:
+            raise ValueError("a gauge measures a leg along one of the two axes normal to it")
+        if not 0.05 <= self.at <= 0.95:
+            raise ValueError("gauge position 'at' must lie in [0.05, 0.95] along the leg")
+
+    @property
+    def name(self) -> str:
+        return f"{LEG_NAMES[self.leg]}-leg/{AXIS_NAMES[self.axis]}"
+
+    @property
+    def local_axis(self) -> int:
+        """1 when the gauge measures along the leg's local Y, 2 along local Z."""
+        return 1 if self.axis == (self.leg + 1) % 3 else 2
+
+    @property
+    def bar(self) -> int:
+        """+1: the bar at +d/2 along local Z; -1: the one at -d/2."""
+        return 1 if self.local_axis == 1 else -1
+
+
+#: The paper's layout: two gauges at the middle of each leg, in the documented order.
+PAPER_LAYOUT: tuple[GaugeSpec, ...] = tuple(
+    GaugeSpec(leg, axis) for leg, axis in ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))
+)
+
+
+@dataclass(frozen=True)
+class Gauge:
+    """An installed gauge: its real stand pose, travel and zero."""
+
+    spec: GaugeSpec
+    origin: np.ndarray
+    direction: np.ndarray
+    sign: float
+    travel: float = DEFAULT_TRAVEL
+    zero: float = DEFAULT_TRAVEL / 2
+
+    def with_zero(self, t_zero: float) -> Gauge:
+        return replace(self, zero=float(t_zero))
+
+
+def layout_from_names(names: list[str]) -> tuple[GaugeSpec, ...]:
+    """Parse names such as ``"x-leg/y"`` or ``"x/y@0.3"`` into gauge specs."""
+    specs = []
+    for raw in names:
+        body, _, at = raw.partition("@")
+        leg, _, axis = body.replace("-leg", "").partition("/")
+        if leg not in LEG_NAMES or axis not in AXIS_NAMES:
+            raise ValueError(f"bad gauge name '{raw}': expected like 'x-leg/y' or 'x/y@0.5'")
+        specs.append(
+            GaugeSpec(LEG_NAMES.index(leg), AXIS_NAMES.index(axis), float(at) if at else 0.5)
+        )
+    return tuple(specs)
+
+
+def _nominal_ray(spec: GaugeSpec, travel: float) -> tuple[np.ndarray, np.ndarray]:
+    """Ray origin and direction of a perfectly installed gauge on the nominal machine."""
+    frame = R_LEG[spec.leg]
+    along = R_TOOL + spec.at * L_NOMINAL
+    half = BAR_SECTION[spec.local_axis - 1] / 2
+    if spec.local_axis == 1:  # along local Y, at the height of the +d/2 bar
+        local = np.array([along, -half - travel / 2, D_NOMINAL / 2])
+        direction = frame[:, 1]
+    else:  # along local Z, from below the -d/2 bar
+        local = np.array([along, 0.0, -D_NOMINAL / 2 - half - travel / 2])
+        direction = frame[:, 2]
+    return frame @ local, direction.copy()
+
+
+def install(
+    specs: tuple[GaugeSpec, ...] | list[GaugeSpec],
+    *,
+    travel: float = DEFAULT_TRAVEL,
+    preset: ErrorPreset | None = None,
+    rng: np.random.Generator | None = None,
+) -> list[Gauge]:
+    """Install gauges at their nominal places plus the preset's installation errors.
+
+    The zero is provisional (mid-travel); :func:`zero_gauges` sets it from a reading at
+    the Zero posture, as a technician does.
+    """
+    if travel <= 0:
+        raise ValueError("gauge travel must be positive")
+    gauges = []
+    for spec in specs:
+        origin, direction = _nominal_ray(spec, travel)
+        sign = 1.0
+        if preset is not None and rng is not None:
+            origin = origin + rng.normal(0.0, preset.gauge_position, 3)
+            tilt = rng.normal(0.0, preset.gauge_tilt, 3)
+            direction = direction + np.cross(tilt, direction)
+            direction /= np.linalg.norm(direction)
+        gauges.append(Gauge(spec, origin, direction, sign, travel))
+    return gauges
+
+
+def zero_gauges(gauges: list[Gauge], t_at_zero: np.ndarray) -> list[Gauge]:
+    """Set each gauge's zero to its ray distance ``t`` measured at the Zero posture."""
+    return [g.with_zero(t) for g, t in zip(gauges, np.asarray(t_at_zero, dtype=float), strict=True)]
+
+
+def bar_boxes(
+    machine: MachineParams, rho: np.ndarray, p: np.ndarray, leg: int, bar: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pose and half extents of one bar's box: centre ``(..., 3)``, rotation ``(..., 3, 3)``
+    (columns: along the bar, hinge axis, normal) and half extents ``(..., 3)``."""
+    a = carriage_points(machine, rho)[..., leg, :]
+    c = platform_points(machine, p)[..., leg, :]
+    shift = bar * D_NOMINAL / 2 * R_LEG[leg][:, 2]
+    v = c - a
+    length = np.linalg.norm(v, axis=-1)
+    along = v / length[..., None]
+    hinge = np.cross(R_LEG[leg][:, 2], along)
+    hinge /= np.linalg.norm(hinge, axis=-1, keepdims=True)
+    normal = np.cross(along, hinge)
+    rot = np.stack([along, hinge, normal], axis=-1)
+    half = np.stack(
+        [length / 2 - BAR_CLEARANCE, *(np.full_like(length, s / 2) for s in BAR_SECTION)], axis=-1
+    )
+    return (a + c) / 2 + shift, rot, half
+
+
+def ray_box_distance(
+    origin: np.ndarray, direction: np.ndarray, centre: np.ndarray, rot: np.ndarray, half: np.ndarray
+) -> np.ndarray:
+    """Distance along the ray at which it enters the box (slab method); NaN on a miss.
+
+    The ray is the whole line ``origin + t * direction``: negative ``t`` is reported, so an
+    overtravel (box between the tip and the stand) is seen.
+    """
+    o = np.einsum("...ji,...j->...i", rot, origin - centre)
+    d = np.einsum("...ji,...j->...i", rot, np.broadcast_to(direction, o.shape))
+    inside = np.abs(o) <= half
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1 = (-half - o) / d
+        t2 = (half - o) / d
+    # A ray parallel to a slab is inside it everywhere or nowhere.
+    lo = np.where(d == 0, np.where(inside, -np.inf, np.inf), np.minimum(t1, t2))
+    hi = np.where(d == 0, np.where(inside, np.inf, -np.inf), np.maximum(t1, t2))
+    t_in = np.max(lo, axis=-1)
+    t_out = np.min(hi, axis=-1)
+    return np.where(t_out >= t_in, t_in, np.nan)
+
+
+def exact_ray_distances(machine: MachineParams, gauges: list[Gauge], rho: np.ndarray) -> np.ndarray:
+    """Exact tip distances ``t`` of every gauge, shape ``(..., n_gauges)`` (NaN: miss)."""
+    rho = np.asarray(rho, dtype=float)
+    p = direct(machine, rho)
+    out = np.empty((*rho.shape[:-1], len(gauges)))
+    for k, g in enumerate(gauges):
+        centre, rot, half = bar_boxes(machine, rho, p, g.spec.leg, g.spec.bar)
+        out[..., k] = ray_box_distance(g.origin, g.direction, centre, rot, half)
+    return out
+
+
+def status_of(gauges: list[Gauge], t: np.ndarray) -> np.ndarray:
+    """Status codes for ray distances ``t`` (NaN means the ray missed the target)."""
+    travel = np.array([g.travel for g in gauges])
+    status = np.full(np.shape(t), Status.VALID, dtype=np.int8)
+    with np.errstate(invalid="ignore"):
+        status[t > travel] = Status.NO_CONTACT
+        status[t < 0] = Status.OVERTRAVEL
+    status[np.isnan(t)] = Status.MISSED
+    return status
+
+
+def readings_from_distances(gauges: list[Gauge], t: np.ndarray) -> np.ndarray:
+    """Ideal readings (mm) from ray distances; NaN where the gauge is not in contact."""
+    sign = np.array([g.sign for g in gauges])
+    zero = np.array([g.zero for g in gauges])
+    reading = sign * (t - zero)
+    return np.where(status_of(gauges, t) == Status.VALID, reading, np.nan)
+
+
+def exact_readings(machine: MachineParams, gauges: list[Gauge], rho: np.ndarray) -> np.ndarray:
+    """Ideal (noise-free, unquantised) readings of the exact model; NaN if not valid."""
+    return readings_from_distances(gauges, exact_ray_distances(machine, gauges, rho))
+
+
+def installed_on(machine: MachineParams, gauges: list[Gauge]) -> list[Gauge]:
+    """The gauges zeroed by the exact model at the Zero posture of ``machine``."""
+    return zero_gauges(gauges, exact_ray_distances(machine, gauges, np.zeros(3)))
+
+
+@dataclass(frozen=True)
+class GaugeNoise:
+    """Repeatability noise (normal, ``sigma`` mm) and display resolution (mm); 0 = ideal."""
+
+    sigma: float = DEFAULT_SIGMA
+    resolution: float = DEFAULT_RESOLUTION
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.sigma) and self.sigma >= 0):
+            raise ValueError("gauge sigma must be a finite number >= 0")
+        if not (np.isfinite(self.resolution) and self.resolution >= 0):
+            raise ValueError("gauge resolution must be a finite number >= 0")
+
+    def apply(self, readings: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Noisy, quantised readings (NaN stays NaN).  Noise is drawn for every gauge so
+        the random stream does not depend on which readings are valid."""
+        noisy = np.asarray(readings, dtype=float) + rng.normal(0.0, 1.0, np.shape(readings)) * self.sigma
+        if self.resolution > 0:
+            noisy = np.round(noisy / self.resolution) * self.resolution
+        return noisy
+
+    @property
+    def effective_sigma(self) -> float:
+        """Standard deviation of one reading: noise plus uniform quantisation error."""
+        return float(np.hypot(self.sigma, self.resolution / np.sqrt(12)))

@@ -1,0 +1,302 @@
+"""Nominal geometry, joint limits, machine parameter sets and error presets.
+
+This module is the one source of truth for every number that describes an Orthoglide:
+the URDF writer, the PyBullet machine, the exact kinematic model and the calibrators all
+read it.  Units: millimetres and radians.
+
+Frames
+------
+World: origin at the intersection of the nominal actuator axes, x, y, z along them.
+Each leg ``i`` has a *leg frame* ``R_LEG[i]`` (columns = leg-frame axes in world):
+
+* local X: the actuator axis (x-leg: world x),
+* local Z: the axis of the revolute joints R1/R2 (x-leg: world z),
+* local Y = Z x X (x-leg: world y).
+
+The y and z legs follow by the cyclic permutation x -> y -> z -> x.
+
+Machine model (what a ``MachineParams`` describes)
+-------------------------------------------------
+For control coordinate ``rho_i`` (mm, 0 at the nominal isotropic posture) the centre of
+the R1 joint of leg ``i`` is::
+
+    A_i = o_i + (L + r + drho_i + rho_i) * u_i
+
+with ``o_i = R_LEG[i] @ (0, axis_offset[i, 0], axis_offset[i, 1])`` the actuator axis
+position error and ``u_i = R_LEG[i] @ normalize(1, tan(axis_tilt[i, 0]),
+tan(axis_tilt[i, 1]))`` the actuator travel direction.  The carriage itself keeps its
+nominal orientation (the error is in the guideway's direction, not in the R1 axis).
+The centre of the R2 joint, on the platform, is ``C_i = P + r * e_i + attach[i]``
+(the platform only translates).  The leg closes when ``|C_i - A_i| = L + dL_i``, which
+with zero extended errors is the paper's equation (2) with ``q_i = L + rho_i + drho_i``.
+
+Unequal bars within one parallelogram are *not* part of the model: they turn the
+parallelogram's coupler, and because every leg locks two platform rotations (six
+constraints on three rotations), the rigid machine then cannot be assembled.  A real
+machine takes that up in joint clearance, which neither a rigid-body simulator nor an
+exact model represents; a parameter that no simulator can reproduce honestly would only
+fake fidelity.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+# --- nominal prototype (paper, section 2.1) -------------------------------------------
+L_NOMINAL: float = 310.25  # parallelogram length, mm
+D_NOMINAL: float = 80.0  # parallelogram width (hinge spacing along the R axes), mm
+R_TOOL: float = 31.0  # distance from the R2 centre C_i to the TCP, mm
+
+# --- control limits (paper, section 2.3) ---------------------------------------------
+RHO_MIN: float = -100.0
+RHO_MAX: float = 60.0
+#: The URDF's prismatic limits are wider than the control limits because PyBullet's
+#: position motors silently clamp targets to URDF limits; control limits are enforced in
+#: code, where a violation can be reported.
+URDF_RHO_MARGIN: float = 50.0
+
+# --- link shapes (for the URDF, the gauges' targets and pictures) --------------------
+BAR_SECTION: tuple[float, float] = (12.0, 12.0)  # bar cross-section along (hinge, normal), mm
+BAR_CLEARANCE: float = 10.0  # bar box stops this far short of each hinge centre, mm
+
+LEG_NAMES: tuple[str, str, str] = ("x", "y", "z")
+AXIS_NAMES: tuple[str, str, str] = ("x", "y", "z")
+
+_E = np.eye(3)
+#: Leg frames: R_LEG[i][:, 0] actuator axis, [:, 1] local Y, [:, 2] R-joint axis.
+R_LEG: np.ndarray = np.stack(
+    [np.column_stack([_E[i], _E[(i + 1) % 3], _E[(i + 2) % 3]]) for i in range(3)]
+)
+
+
+class MachineFileError(ValueError):
+    """A machine description (JSON file or dict) that does not describe a machine."""
+
+
+def _vector_field(shape: tuple[int, ...]) -> Any:
+    return field(default_factory=lambda: np.zeros(shape))
+
+
+@dataclass
+class MachineParams:
+    """Geometric errors of one Orthoglide, relative to the nominal prototype.
+
+    All fields default to zero (the nominal machine).  JSON schema (every key optional,
+    unknown keys rejected, lengths in mm, angles in rad)::
+
+        {
+          "drho":        [3]     encoder offsets (paper)
+          "dL":          [3]     leg length deviations (paper)
+          "axis_tilt":   [3][2]  actuator direction, tilt toward local Y and local Z
+          "axis_offset": [3][2]  actuator axis position along local Y and local Z
+          "attach":      [3][3]  R2 centre on the platform, world-frame offset
+        }
+    """
+
+    drho: np.ndarray = _vector_field((3,))
+    dL: np.ndarray = _vector_field((3,))
+    axis_tilt: np.ndarray = _vector_field((3, 2))
+    axis_offset: np.ndarray = _vector_field((3, 2))
+    attach: np.ndarray = _vector_field((3, 3))
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            shape = _SHAPES[f.name]
+            value = np.array(getattr(self, f.name), dtype=float)
+            if value.shape != shape:
+                raise MachineFileError(
+                    f"machine key '{f.name}' must have shape {list(shape)}, got {list(value.shape)}"
+                )
+            if not np.all(np.isfinite(value)):
+                raise MachineFileError(f"machine key '{f.name}' holds a non-finite number")
+            setattr(self, f.name, value)
+        if np.any(L_NOMINAL + self.dL <= D_NOMINAL / 2):
+            raise MachineFileError(f"leg length L + dL must exceed {D_NOMINAL / 2} mm")
+
+    # -- derived geometry, used by the kinematics and the URDF writer ------------------
+    @property
+    def leg_lengths(self) -> np.ndarray:
+        """True leg lengths L + dL, shape (3,)."""
+        return L_NOMINAL + self.dL
+
+    @property
+    def axis_directions(self) -> np.ndarray:
+        """Unit actuator travel directions u_i in world, shape (3, 3) (row i = leg i)."""
+        local = np.column_stack(
+            [np.ones(3), np.tan(self.axis_tilt[:, 0]), np.tan(self.axis_tilt[:, 1])]
+        )
+        local /= np.linalg.norm(local, axis=1, keepdims=True)
+        return np.einsum("ijk,ik->ij", R_LEG, local)
+
+    @property
+    def axis_origins(self) -> np.ndarray:
+        """Points o_i of the actuator axes in world, shape (3, 3)."""
+        local = np.column_stack([np.zeros(3), self.axis_offset])
+        return np.einsum("ijk,ik->ij", R_LEG, local)
+
+    @property
+    def attach_points(self) -> np.ndarray:
+        """R2 centres C_i relative to the TCP, in world, shape (3, 3)."""
+        return R_TOOL * np.eye(3) + self.attach
+
+    @property
+    def is_paper_model(self) -> bool:
+        """True when only the paper's six parameters are non-zero."""
+        return not (self.axis_tilt.any() or self.axis_offset.any() or self.attach.any())
+
+    # -- (de)serialisation ---------------------------------------------------------------
+    def to_dict(self) -> dict[str, list]:
+        return {f.name: getattr(self, f.name).tolist() for f in fields(self)}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> MachineParams:
+        """Build from a JSON-like dict; missing keys are zero, unknown keys an error."""
+        if not isinstance(data, dict):
+            raise MachineFileError("a machine must be a JSON object")
+        unknown = sorted(set(data) - set(_SHAPES))
+        if unknown:
+            raise MachineFileError(
+                f"unknown machine key(s) {unknown}; allowed: {sorted(_SHAPES)}"
+            )
+        kwargs = {}
+        for key, value in data.items():
+            try:
+                kwargs[key] = np.array(value, dtype=float)
+            except (TypeError, ValueError):
+                raise MachineFileError(
+                    f"machine key '{key}' must hold numbers, got {value!r}"
+                ) from None
+        return cls(**kwargs)
+
+    def to_json(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+
+    @classmethod
+    def from_json(cls, path: str | Path) -> MachineParams:
+        path = Path(path)
+        try:
+            text = path.read_text()
+        except FileNotFoundError:
+            raise MachineFileError(f"machine file not found: {path}") from None
+        except OSError as exc:
+            raise MachineFileError(f"cannot read machine file {path}: {exc.strerror}") from None
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise MachineFileError(
+                f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})"
+            ) from None
+        try:
+            return cls.from_dict(data)
+        except MachineFileError as exc:
+            raise MachineFileError(f"{path}: {exc}") from None
+
+    def with_paper_params(self, drho: np.ndarray, dL: np.ndarray) -> MachineParams:
+        """A copy whose paper parameters are replaced (extended errors kept)."""
+        data = self.to_dict()
+        data["drho"], data["dL"] = np.asarray(drho).tolist(), np.asarray(dL).tolist()
+        return MachineParams.from_dict(data)
+
+
+_SHAPES: dict[str, tuple[int, ...]] = {
+    "drho": (3,),
+    "dL": (3,),
+    "axis_tilt": (3, 2),
+    "axis_offset": (3, 2),
+    "attach": (3, 3),
+}
+
+
+@dataclass(frozen=True)
+class ErrorPreset:
+    """Standard deviations of zero-mean normal errors of a random machine and its gauges.
+
+    ``gauge_position`` and ``gauge_tilt`` are installation errors of each gauge's stand
+    (position in mm per axis, tilt of the measuring axis in rad per transverse axis).
+    """
+
+    name: str
+    drho: float = 0.0
+    dL: float = 0.0
+    axis_tilt: float = 0.0
+    axis_offset: float = 0.0
+    attach: float = 0.0
+    gauge_position: float = 0.0
+    gauge_tilt: float = 0.0
+    description: str = ""
+
+    def sample(self, rng: np.random.Generator) -> MachineParams:
+        """Draw one machine (the gauge installation errors are drawn by the gauges)."""
+        return MachineParams(
+            drho=rng.normal(0.0, self.drho, 3),
+            dL=rng.normal(0.0, self.dL, 3),
+            axis_tilt=rng.normal(0.0, self.axis_tilt, (3, 2)),
+            axis_offset=rng.normal(0.0, self.axis_offset, (3, 2)),
+            attach=rng.normal(0.0, self.attach, (3, 3)),
+        )
+
+
+#: Named error presets.  ``realistic`` sizes the extended errors so that the paper's
+#: six-parameter model is left with gauge residuals of the order the paper reports
+#: (about 0.1 mm, Table 1); ``benchmarks/preset_residuals.py`` measures that.
+PRESETS: dict[str, ErrorPreset] = {
+    p.name: p
+    for p in (
+        ErrorPreset("nominal", description="no error at all"),
+        ErrorPreset(
+            "paper",
+            drho=2.0,
+            dL=2.0,
+            description="only the paper's six parameters: drho, dL ~ N(0, 2 mm)",
+        ),
+        ErrorPreset(
+            "realistic",
+            drho=2.0,
+            dL=2.0,
+            axis_tilt=2e-3,
+            axis_offset=0.5,
+            attach=0.3,
+            gauge_position=0.5,
+            gauge_tilt=5e-3,
+            description=(
+                "paper errors N(0, 2 mm) plus actuator tilt N(0, 2 mrad), axis offset "
+                "N(0, 0.5 mm), platform attachment N(0, 0.3 mm), gauge stand position "
+                "N(0, 0.5 mm) and tilt N(0, 5 mrad)"
+            ),
+        ),
+    )
+}
+DEFAULT_PRESET = "realistic"
+
+
+def get_preset(name: str) -> ErrorPreset:
+    """Look up an error preset by name, with a clear error listing the valid ones."""
+    try:
+        return PRESETS[name]
+    except KeyError:
+        raise ValueError(f"unknown error preset '{name}'; choose from {sorted(PRESETS)}") from None
+
+
+def random_machine(seed: int | np.random.Generator | None, preset: str = DEFAULT_PRESET) -> MachineParams:
+    """A seeded random machine drawn from a named preset."""
+    return get_preset(preset).sample(np.random.default_rng(seed))
+
+
+def check_rho(rho: np.ndarray, *, margin: float = 0.0) -> np.ndarray:
+    """Validate control coordinates (shape (..., 3), finite, within the control limits)."""
+    rho = np.asarray(rho, dtype=float)
+    if rho.shape[-1:] != (3,):
+        raise ValueError(f"joint targets must have 3 components, got shape {list(rho.shape)}")
+    if not np.all(np.isfinite(rho)):
+        raise ValueError("joint targets must be finite numbers")
+    lo, hi = RHO_MIN - margin, RHO_MAX + margin
+    bad = (rho < lo) | (rho > hi)
+    if np.any(bad):
+        value = rho[bad].flat[0]
+        raise ValueError(f"joint target {value:g} mm is outside the joint limits [{lo:g}, {hi:g}] mm")
+    return rho

@@ -1,0 +1,184 @@
+"""Exact kinematics of the Orthoglide, vectorised over postures.
+
+Two layers:
+
+* the paper's closed forms for its six-parameter model (eq. 3 inverse, eq. 4 direct,
+  eq. 5 Jacobian), in the paper's variables ``q_i = L + rho_i + drho_i``;
+* the general model of :class:`~orthoglide_env.geometry.MachineParams` (tilted and
+  offset actuator axes, platform attachment errors), solved exactly: the inverse in
+  closed form, the direct by Newton's method started from the paper's closed form.
+
+Every function takes arrays of shape ``(..., 3)`` and keeps the leading dimensions.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .geometry import L_NOMINAL, R_LEG, R_TOOL, RHO_MAX, RHO_MIN, MachineParams
+
+
+class UnreachableError(ValueError):
+    """A posture the machine cannot reach or assemble in."""
+
+
+# --- the paper's model ---------------------------------------------------------------
+def inverse_paper(p: np.ndarray, drho: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """Eq. (3): control coordinates ``rho`` (mm) placing the TCP at ``p``.
+
+    ``rho_i = p_i + sqrt(L_i^2 - p_j^2 - p_k^2) - drho_i - L`` (the configuration index
+    s_i = +1 of the prototype's assembly mode; ``-L`` converts the paper's joint variable
+    into control coordinates).
+    """
+    p = np.asarray(p, dtype=float)
+    sq = np.sum(p**2, axis=-1, keepdims=True)
+    disc = np.asarray(lengths) ** 2 - (sq - p**2)
+    _require(disc >= 0, "the TCP is farther from an actuator axis than the leg length")
+    return p + np.sqrt(disc) - np.asarray(drho) - L_NOMINAL
+
+
+def direct_paper(rho: np.ndarray, drho: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """Eq. (4): TCP position from control coordinates, the assembly mode's root.
+
+    With ``q = L + rho + drho``, subtracting the equations (2) pairwise gives
+    ``p_i = a_i + t / q_i`` with ``a_i = (q_i^2 - L_i^2) / (2 q_i)`` and ``t = |p|^2 / 2``;
+    ``|p|^2 = 2t`` is then quadratic in ``t``.  The prototype's assembly mode is the
+    *smaller* root (at Zero the roots are ``0`` and ``2L^2/3``; the root printed in the
+    paper, with ``+sqrt``, is the other mode), computed in the cancellation-free form
+    ``t = 2c / (-b + sqrt(b^2 - 4ac))``.
+    """
+    q = L_NOMINAL + np.asarray(rho, dtype=float) + np.asarray(drho)
+    lengths = np.asarray(lengths, dtype=float)
+    _require(np.abs(q) > 1e-9, "an actuator carriage sits at the axis intersection")
+    a_vec = (q**2 - lengths**2) / (2 * q)
+    b_vec = 1.0 / q
+    qa = np.sum(b_vec**2, axis=-1)
+    qb = 2 * np.sum(a_vec * b_vec, axis=-1) - 2.0
+    qc = np.sum(a_vec**2, axis=-1)
+    disc = qb**2 - 4 * qa * qc
+    _require(disc >= 0, "the legs cannot be assembled at these joint coordinates")
+    t = 2 * qc / (-qb + np.sqrt(disc))
+    return a_vec + t[..., None] * b_vec
+
+
+def jacobian_paper(p: np.ndarray, rho: np.ndarray, drho: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """Eq. (5): ``dp / d(drho, L)``, shape ``(..., 3, 6)``.
+
+    Differentiating eq. (2) gives ``M dp/ddrho = diag(p_i - q_i)`` and
+    ``M dp/dL = diag(L_i)`` with ``M[i] = p - q_i e_i``.
+    """
+    p = np.asarray(p, dtype=float)
+    q = L_NOMINAL + np.asarray(rho, dtype=float) + np.asarray(drho)
+    lengths = np.broadcast_to(np.asarray(lengths, dtype=float), q.shape)
+    m = p[..., None, :] - q[..., :, None] * np.eye(3)
+    diag_p = np.eye(3) * (p - q)[..., None, :]
+    diag_l = np.eye(3) * lengths[..., None, :]
+    return np.linalg.solve(m, np.concatenate([diag_p, diag_l], axis=-1))
+
+
+# --- the general model -----------------------------------------------------------------
+def carriage_points(machine: MachineParams, rho: np.ndarray) -> np.ndarray:
+    """Centres A_i of the R1 joints, shape ``(..., 3 legs, 3)``."""
+    rho = np.asarray(rho, dtype=float)
+    s = L_NOMINAL + R_TOOL + machine.drho + rho
+    return machine.axis_origins + s[..., :, None] * machine.axis_directions
+
+
+def platform_points(machine: MachineParams, p: np.ndarray) -> np.ndarray:
+    """Centres C_i of the R2 joints for TCP ``p``, shape ``(..., 3 legs, 3)``."""
+    return np.asarray(p, dtype=float)[..., None, :] + machine.attach_points
+
+
+def inverse(machine: MachineParams, p: np.ndarray) -> np.ndarray:
+    """Control coordinates ``rho`` (mm) that put the TCP at ``p`` (mm), exactly.
+
+    Raises :class:`UnreachableError` when a leg cannot reach; the joint limits are not
+    checked here (see :func:`check_reachable`).
+    """
+    u = machine.axis_directions
+    w = platform_points(machine, p) - machine.axis_origins - (
+        (L_NOMINAL + R_TOOL + machine.drho)[:, None] * u
+    )
+    uw = np.sum(w * u, axis=-1)
+    disc = uw**2 - np.sum(w**2, axis=-1) + machine.leg_lengths**2
+    _require(disc >= 0, "the TCP is out of reach of a leg")
+    return uw + np.sqrt(disc)
+
+
+def direct(machine: MachineParams, rho: np.ndarray, *, tol: float = 1e-11, max_iter: int = 30) -> np.ndarray:
+    """TCP position (mm) for control coordinates ``rho``, exactly (Newton to ``tol`` mm)."""
+    rho = np.asarray(rho, dtype=float)
+    p = direct_paper(rho, machine.drho, machine.leg_lengths)
+    if machine.is_paper_model:
+        return p
+    a = carriage_points(machine, rho)
+    lengths2 = machine.leg_lengths**2
+    for _ in range(max_iter):
+        v = platform_points(machine, p) - a
+        f = np.sum(v**2, axis=-1) - lengths2
+        step = np.linalg.solve(2 * v, f[..., None])[..., 0]
+        p = p - step
+        if np.max(np.abs(step), initial=0.0) < tol:
+            return p
+    raise UnreachableError("direct kinematics did not converge: posture near a singularity")
+
+
+def leg_vectors(machine: MachineParams, rho: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Vectors A_i -> C_i (carriage to platform) in world, shape ``(..., 3, 3)``."""
+    return platform_points(machine, p) - carriage_points(machine, rho)
+
+
+def leg_angles(machine: MachineParams, rho: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Passive joint angles ``(theta, beta)`` of each leg, shapes ``(..., 3)``.
+
+    ``theta`` turns R1 about the leg's local Z; ``beta`` turns the parallelogram bars about
+    their hinge axis (local Y after R1).  With both zero the bars point along local -X,
+    from the carriage toward the platform:
+    ``v = -|v| (cos theta cos beta, sin theta cos beta, -sin beta)`` in the leg frame.
+    The coupler turns by ``-beta`` and R2 by ``-theta`` because the platform only translates.
+    """
+    v = np.einsum("lji,...lj->...li", R_LEG, leg_vectors(machine, rho, p))
+    theta = np.arctan2(-v[..., 1], -v[..., 0])
+    beta = np.arcsin(np.clip(v[..., 2] / np.linalg.norm(v, axis=-1), -1.0, 1.0))
+    return theta, beta
+
+
+def check_reachable(machine: MachineParams, p: np.ndarray) -> np.ndarray:
+    """Inverse kinematics that also enforces the control limits; returns ``rho``."""
+    rho = inverse(machine, p)
+    bad = (rho < RHO_MIN) | (rho > RHO_MAX)
+    if np.any(bad):
+        raise UnreachableError(
+            f"TCP needs joint coordinate {rho[bad].flat[0]:.3f} mm, outside the control "
+            f"limits [{RHO_MIN:g}, {RHO_MAX:g}] mm"
+        )
+    return rho
+
+
+# --- the paper's test postures -----------------------------------------------------------
+PAPER_POSTURES: tuple[str, ...] = ("Zero", "XMax", "XMin", "YMax", "YMin", "ZMax", "ZMin")
+
+
+def paper_posture(name: str) -> np.ndarray:
+    """Control coordinates of a paper posture, computed on the nominal model (as the
+    controller does: it only knows the nominal geometry).
+
+    ``XMax``: TCP at ``(L sin a, 0, 0)`` with ``a = asin(rho_max / L)``, so
+    ``rho = (L sin a, L cos a - L, L cos a - L)``; likewise ``Min`` with ``rho_min`` and
+    the Y, Z postures by permutation.
+    """
+    if name == "Zero":
+        return np.zeros(3)
+    if name not in PAPER_POSTURES:
+        raise ValueError(f"unknown posture '{name}'; choose from {list(PAPER_POSTURES)}")
+    leg = "XYZ".index(name[0])
+    limit = RHO_MAX if name.endswith("Max") else RHO_MIN
+    alpha = np.arcsin(limit / L_NOMINAL)
+    rho = np.full(3, L_NOMINAL * np.cos(alpha) - L_NOMINAL)
+    rho[leg] = L_NOMINAL * np.sin(alpha)
+    return rho
+
+
+def _require(condition: np.ndarray, message: str) -> None:
+    if not np.all(condition):
+        raise UnreachableError(message)
