@@ -273,7 +273,8 @@ class GaugeNoise:
     def apply(self, readings: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Noisy, quantised readings (NaN stays NaN).  Noise is drawn for every gauge so
         the random stream does not depend on which readings are valid."""
-        noisy = np.asarray(readings, dtype=float) + rng.normal(0.0, 1.0, np.shape(readings)) * self.sigma
+        draws = rng.normal(0.0, 1.0, np.shape(readings))
+        noisy = np.asarray(readings, dtype=float) + draws * self.sigma
         if self.resolution > 0:
             noisy = np.round(noisy / self.resolution) * self.resolution
         return noisy

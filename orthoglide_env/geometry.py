@@ -78,10 +78,6 @@ class MachineFileError(ValueError):
     """A machine description (JSON file or dict) that does not describe a machine."""
 
 
-def _vector_field(shape: tuple[int, ...]) -> Any:
-    return field(default_factory=lambda: np.zeros(shape))
-
-
 @dataclass
 class MachineParams:
     """Geometric errors of one Orthoglide, relative to the nominal prototype.
@@ -98,11 +94,11 @@ class MachineParams:
         }
     """
 
-    drho: np.ndarray = _vector_field((3,))
-    dL: np.ndarray = _vector_field((3,))
-    axis_tilt: np.ndarray = _vector_field((3, 2))
-    axis_offset: np.ndarray = _vector_field((3, 2))
-    attach: np.ndarray = _vector_field((3, 3))
+    drho: np.ndarray = field(default_factory=lambda: np.zeros((3,)))
+    dL: np.ndarray = field(default_factory=lambda: np.zeros((3,)))
+    axis_tilt: np.ndarray = field(default_factory=lambda: np.zeros((3, 2)))
+    axis_offset: np.ndarray = field(default_factory=lambda: np.zeros((3, 2)))
+    attach: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -282,7 +278,9 @@ def get_preset(name: str) -> ErrorPreset:
         raise ValueError(f"unknown error preset '{name}'; choose from {sorted(PRESETS)}") from None
 
 
-def random_machine(seed: int | np.random.Generator | None, preset: str = DEFAULT_PRESET) -> MachineParams:
+def random_machine(
+    seed: int | np.random.Generator | None, preset: str = DEFAULT_PRESET
+) -> MachineParams:
     """A seeded random machine drawn from a named preset."""
     return get_preset(preset).sample(np.random.default_rng(seed))
 
@@ -298,5 +296,7 @@ def check_rho(rho: np.ndarray, *, margin: float = 0.0) -> np.ndarray:
     bad = (rho < lo) | (rho > hi)
     if np.any(bad):
         value = rho[bad].flat[0]
-        raise ValueError(f"joint target {value:g} mm is outside the joint limits [{lo:g}, {hi:g}] mm")
+        raise ValueError(
+            f"joint target {value:g} mm is outside the joint limits [{lo:g}, {hi:g}] mm"
+        )
     return rho

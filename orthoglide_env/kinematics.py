@@ -61,7 +61,9 @@ def direct_paper(rho: np.ndarray, drho: np.ndarray, lengths: np.ndarray) -> np.n
     return a_vec + t[..., None] * b_vec
 
 
-def jacobian_paper(p: np.ndarray, rho: np.ndarray, drho: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+def jacobian_paper(
+    p: np.ndarray, rho: np.ndarray, drho: np.ndarray, lengths: np.ndarray
+) -> np.ndarray:
     """Eq. (5): ``dp / d(drho, L)``, shape ``(..., 3, 6)``.
 
     Differentiating eq. (2) gives ``M dp/ddrho = diag(p_i - q_i)`` and
@@ -105,7 +107,9 @@ def inverse(machine: MachineParams, p: np.ndarray) -> np.ndarray:
     return uw + np.sqrt(disc)
 
 
-def direct(machine: MachineParams, rho: np.ndarray, *, tol: float = 1e-11, max_iter: int = 30) -> np.ndarray:
+def direct(
+    machine: MachineParams, rho: np.ndarray, *, tol: float = 1e-11, max_iter: int = 30
+) -> np.ndarray:
     """TCP position (mm) for control coordinates ``rho``, exactly (Newton to ``tol`` mm)."""
     rho = np.asarray(rho, dtype=float)
     p = direct_paper(rho, machine.drho, machine.leg_lengths)
@@ -128,7 +132,9 @@ def leg_vectors(machine: MachineParams, rho: np.ndarray, p: np.ndarray) -> np.nd
     return platform_points(machine, p) - carriage_points(machine, rho)
 
 
-def leg_angles(machine: MachineParams, rho: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def leg_angles(
+    machine: MachineParams, rho: np.ndarray, p: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Passive joint angles ``(theta, beta)`` of each leg, shapes ``(..., 3)``.
 
     ``theta`` turns R1 about the leg's local Z; ``beta`` turns the parallelogram bars about

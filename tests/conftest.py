@@ -1,0 +1,47 @@
+"""Shared fixtures: seeded machines and the paper's row order of eq. (10)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from orthoglide_env.geometry import L_NOMINAL, RHO_MAX, RHO_MIN
+
+#: Rows of eq. (10) as (posture, index of the gauge in the paper layout).  The paper's
+#: labels of rows 9-12 are misprinted (DESIGN.md); these are the physical ones.
+EQ10_ROWS: tuple[tuple[str, int], ...] = (
+    ("YMax", 2), ("XMax", 0), ("YMin", 2), ("XMin", 0),
+    ("ZMax", 5), ("YMax", 3), ("ZMin", 5), ("YMin", 3),
+    ("ZMax", 4), ("XMax", 1), ("ZMin", 4), ("XMin", 1),
+)  # fmt: skip
+
+
+def paper_matrix() -> np.ndarray:
+    """Eq. (10)'s 12x6 matrix, written from the paper's a_i, b_i, c_i formulas."""
+    coef = []
+    for limit in (RHO_MAX, RHO_MIN):
+        alpha = np.arcsin(limit / L_NOMINAL)
+        s, t, c = np.sin(alpha), np.tan(alpha), np.cos(alpha)
+        coef.append((s, (0.5 + s) * t, (0.5 + s) / c - 0.5))
+    (a1, b1, c1), (a2, b2, c2) = coef
+    return np.array(
+        [
+            [a1, b1, 0, -c1, -b1, 0], [b1, a1, 0, -b1, -c1, 0],
+            [a2, b2, 0, -c2, -b2, 0], [b2, a2, 0, -b2, -c2, 0],
+            [0, a1, b1, 0, -c1, -b1], [0, b1, a1, 0, -b1, -c1],
+            [0, a2, b2, 0, -c2, -b2], [0, b2, a2, 0, -b2, -c2],
+            [a1, 0, b1, -c1, 0, -b1], [b1, 0, a1, -b1, 0, -c1],
+            [a2, 0, b2, -c2, 0, -b2], [b2, 0, a2, -b2, 0, -c2],
+        ]
+    )  # fmt: skip
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(20261122)
+
+
+@pytest.fixture
+def joint_samples(rng: np.random.Generator) -> np.ndarray:
+    """Random control coordinates across the whole joint range."""
+    return rng.uniform(RHO_MIN, RHO_MAX, (500, 3))

@@ -1,0 +1,134 @@
+"""Exact kinematics: identities, the paper's closed forms, and its Jacobian (eq. 5)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from orthoglide_env.geometry import L_NOMINAL, RHO_MAX, MachineParams, random_machine
+from orthoglide_env.kinematics import (
+    UnreachableError,
+    carriage_points,
+    check_reachable,
+    direct,
+    direct_paper,
+    inverse,
+    inverse_paper,
+    jacobian_paper,
+    leg_angles,
+    leg_vectors,
+    paper_posture,
+    platform_points,
+)
+
+# Round-off on ~300 mm quantities is ~1e-13 mm; the Newton solver stops at 1e-11 mm.
+EXACT = 1e-9
+
+
+@pytest.mark.parametrize("preset", ["paper", "realistic"])
+def test_inverse_of_direct_is_identity(preset: str, joint_samples: np.ndarray) -> None:
+    for seed in range(5):
+        machine = random_machine(seed, preset)
+        p = direct(machine, joint_samples)
+        np.testing.assert_allclose(inverse(machine, p), joint_samples, atol=EXACT, rtol=0)
+
+
+def test_direct_closes_every_leg(joint_samples: np.ndarray) -> None:
+    machine = random_machine(11, "realistic")
+    p = direct(machine, joint_samples)
+    lengths = np.linalg.norm(leg_vectors(machine, joint_samples, p), axis=-1)
+    np.testing.assert_allclose(lengths, np.broadcast_to(machine.leg_lengths, lengths.shape),
+                               atol=EXACT, rtol=0)
+
+
+def test_paper_closed_forms_match_general_model(joint_samples: np.ndarray) -> None:
+    machine = random_machine(2, "paper")
+    p = direct_paper(joint_samples, machine.drho, machine.leg_lengths)
+    np.testing.assert_allclose(inverse(machine, p), joint_samples, atol=EXACT, rtol=0)
+    np.testing.assert_allclose(inverse_paper(p, machine.drho, machine.leg_lengths),
+                               joint_samples, atol=EXACT, rtol=0)
+
+
+def test_direct_paper_picks_the_assembly_mode_at_zero() -> None:
+    # At Zero the quadratic's roots are t = 0 (this mode) and t = 2 L^2 / 3 (the other).
+    np.testing.assert_allclose(direct_paper(np.zeros(3), np.zeros(3), np.full(3, L_NOMINAL)),
+                               0.0, atol=1e-12)
+
+
+def test_paper_postures_put_the_tcp_on_the_axes() -> None:
+    nominal = MachineParams()
+    alpha = np.arcsin(RHO_MAX / L_NOMINAL)
+    np.testing.assert_allclose(direct(nominal, paper_posture("YMax")),
+                               [0, L_NOMINAL * np.sin(alpha), 0], atol=EXACT)
+    np.testing.assert_allclose(direct(nominal, paper_posture("ZMin")), [0, 0, -100], atol=EXACT)
+    with pytest.raises(ValueError, match="unknown posture"):
+        paper_posture("WMax")
+
+
+def test_zero_posture_follows_eq7() -> None:
+    # Eq. (7): at Zero, dp_i = drho_i - dL_i to first order; the remainder is of order
+    # |dp|^2 / L (the other coordinates shorten the leg's projection), bounded below.
+    machine = MachineParams(drho=[1e-3, -2e-3, 3e-3], dL=[2e-3, 1e-3, -1e-3])
+    dp = machine.drho - machine.dL
+    second_order = 3 * np.max(np.abs(dp)) ** 2 / L_NOMINAL
+    np.testing.assert_allclose(direct(machine, np.zeros(3)), dp, atol=second_order, rtol=0)
+
+
+def test_jacobian_equals_finite_differences(joint_samples: np.ndarray) -> None:
+    machine = random_machine(4, "paper")
+    rho = joint_samples[:50]
+    p = direct(machine, rho)
+    jac = jacobian_paper(p, rho, machine.drho, machine.leg_lengths)
+    h = 1e-4  # central differences: truncation ~h^2 * p''' ~ 1e-10 here
+    fd = np.empty_like(jac)
+    for k in range(6):
+        step = np.zeros(6)
+        step[k] = h
+        plus = direct_paper(rho, machine.drho + step[:3], machine.leg_lengths + step[3:])
+        minus = direct_paper(rho, machine.drho - step[:3], machine.leg_lengths - step[3:])
+        fd[..., k] = (plus - minus) / (2 * h)
+    np.testing.assert_allclose(jac, fd, atol=1e-7, rtol=0)
+
+
+def test_jacobian_at_zero_and_xmax_are_eq6_and_eq8() -> None:
+    lengths = np.full(3, L_NOMINAL)
+    j0 = jacobian_paper(np.zeros(3), np.zeros(3), np.zeros(3), lengths)
+    np.testing.assert_allclose(j0, np.hstack([np.eye(3), -np.eye(3)]), atol=1e-12)
+    alpha = np.arcsin(RHO_MAX / L_NOMINAL)
+    t, c = np.tan(alpha), np.cos(alpha)
+    rho = paper_posture("XMax")
+    jx = jacobian_paper(direct_paper(rho, np.zeros(3), lengths), rho, np.zeros(3), lengths)
+    expected = np.array([[1, 0, 0, -1, 0, 0], [t, 1, 0, -t, -1 / c, 0], [t, 0, 1, -t, 0, -1 / c]])
+    np.testing.assert_allclose(jx, expected, atol=1e-12)
+
+
+def test_leg_angles_rebuild_the_leg_vectors(joint_samples: np.ndarray) -> None:
+    from orthoglide_env.geometry import R_LEG
+
+    machine = random_machine(9, "realistic")
+    p = direct(machine, joint_samples)
+    theta, beta = leg_angles(machine, joint_samples, p)
+    local = -np.stack([np.cos(theta) * np.cos(beta), np.sin(theta) * np.cos(beta),
+                       -np.sin(beta)], axis=-1) * machine.leg_lengths[:, None]
+    np.testing.assert_allclose(np.einsum("lij,...lj->...li", R_LEG, local),
+                               leg_vectors(machine, joint_samples, p), atol=EXACT)
+    # Nominal Zero: every leg points straight at the platform.
+    t0, b0 = leg_angles(MachineParams(), np.zeros(3), np.zeros(3))
+    np.testing.assert_allclose(np.concatenate([t0, b0]), 0.0, atol=1e-12)
+
+
+def test_points_at_zero_are_nominal() -> None:
+    nominal = MachineParams()
+    np.testing.assert_allclose(carriage_points(nominal, np.zeros(3)),
+                               (L_NOMINAL + 31.0) * np.eye(3))
+    np.testing.assert_allclose(platform_points(nominal, np.zeros(3)), 31.0 * np.eye(3))
+
+
+def test_unreachable_postures_raise_clear_errors() -> None:
+    nominal = MachineParams()
+    with pytest.raises(UnreachableError, match="out of reach"):
+        inverse(nominal, np.array([0.0, 400.0, 0.0]))
+    with pytest.raises(UnreachableError, match="control limits"):
+        check_reachable(nominal, np.array([90.0, 0.0, 0.0]))
+    with pytest.raises(UnreachableError, match="cannot be assembled"):
+        direct(MachineParams(dL=[-250.0, -250.0, -250.0]), np.zeros(3))
