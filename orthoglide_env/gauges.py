@@ -151,8 +151,7 @@ def install(
 ) -> list[Gauge]:
     """Install gauges at their nominal places plus the preset's installation errors.
 
-    The zero is provisional (mid-travel); :func:`zero_gauges` sets it from a reading at
-    the Zero posture, as a technician does.
+    The zero is provisional; :func:`zero_gauges` sets the gauges up at the Zero posture.
     """
     if travel <= 0:
         raise ValueError("gauge travel must be positive")
@@ -170,8 +169,20 @@ def install(
 
 
 def zero_gauges(gauges: list[Gauge], t_at_zero: np.ndarray) -> list[Gauge]:
-    """Set each gauge's zero to its ray distance ``t`` measured at the Zero posture."""
-    return [g.with_zero(t) for g, t in zip(gauges, np.asarray(t_at_zero, dtype=float), strict=True)]
+    """Set up each gauge at the Zero posture as a technician does: slide it in its holder
+    until the plunger sits at mid-travel, then zero the dial there.
+
+    ``t_at_zero`` are the ray distances measured at Zero before the adjustment; a gauge
+    whose ray misses its target (NaN) cannot be set up and raises ``ValueError``.
+    """
+    t_at_zero = np.asarray(t_at_zero, dtype=float)
+    if np.isnan(t_at_zero).any():
+        names = [g.spec.name for g, t in zip(gauges, t_at_zero, strict=True) if np.isnan(t)]
+        raise ValueError(f"gauge(s) {names} do not touch their bar at the Zero posture")
+    return [
+        replace(g, origin=g.origin + (t - g.travel / 2) * g.direction, zero=g.travel / 2)
+        for g, t in zip(gauges, t_at_zero, strict=True)
+    ]
 
 
 def bar_boxes(
@@ -250,6 +261,14 @@ def readings_from_distances(gauges: list[Gauge], t: np.ndarray) -> np.ndarray:
 def exact_readings(machine: MachineParams, gauges: list[Gauge], rho: np.ndarray) -> np.ndarray:
     """Ideal (noise-free, unquantised) readings of the exact model; NaN if not valid."""
     return readings_from_distances(gauges, exact_ray_distances(machine, gauges, rho))
+
+
+def model_readings(machine: MachineParams, gauges: list[Gauge], rho: np.ndarray) -> np.ndarray:
+    """Readings of the exact model *without* the travel limits (NaN only where the ray
+    misses the bar): what a calibrator's model predicts while it iterates over estimates
+    whose gauges would be out of travel."""
+    t = exact_ray_distances(machine, gauges, rho)
+    return np.array([g.sign for g in gauges]) * (t - np.array([g.zero for g in gauges]))
 
 
 def installed_on(machine: MachineParams, gauges: list[Gauge]) -> list[Gauge]:

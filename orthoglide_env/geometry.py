@@ -239,7 +239,7 @@ class ErrorPreset:
 
 #: Named error presets.  ``realistic`` sizes the extended errors so that the paper's
 #: six-parameter model is left with gauge residuals of the order the paper reports
-#: (about 0.1 mm, Table 1); ``benchmarks/preset_residuals.py`` measures that.
+#: (about 0.1 mm, Table 1); ``benchmarks/realistic.py`` measures that.
 PRESETS: dict[str, ErrorPreset] = {
     p.name: p
     for p in (
