@@ -32,10 +32,8 @@ from .geometry import (
     BAR_CLEARANCE,
     BAR_SECTION,
     D_NOMINAL,
-    L_NOMINAL,
     LEG_NAMES,
     R_LEG,
-    R_TOOL,
     ErrorPreset,
     MachineParams,
 )
@@ -44,6 +42,10 @@ from .kinematics import carriage_points, direct, platform_points
 DEFAULT_TRAVEL: float = 10.0  # mm
 DEFAULT_RESOLUTION: float = 0.01  # mm (paper, section 4)
 DEFAULT_SIGMA: float = 0.02  # mm, repeatability (paper, section 4)
+#: A reading is valid only where the contact ball (radius ~1.5 mm) sits wholly on the
+#: flat face: closer to an edge a real tip rolls over it, and PyBullet's boxes are
+#: rounded there by their collision margin (measured: exact again 1 mm from an edge).
+TIP_EDGE_MARGIN: float = 1.5
 #: The simulator casts rays from this far behind ``origin`` so that an overtravel is seen
 #: as a hit at negative ``t`` rather than from inside the bar.
 RAY_BACKOFF: float = 30.0
@@ -55,7 +57,7 @@ class Status(IntEnum):
     VALID = 0
     NO_CONTACT = 1  # tip extended fully without touching
     OVERTRAVEL = 2  # plunger pushed in past its travel
-    MISSED = 3  # the ray misses the target bar (tip off the bar) or hits something else
+    MISSED = 3  # tip off the bar's flat face, or the ray meets something else first
 
 
 @dataclass(frozen=True)
@@ -128,43 +130,47 @@ def layout_from_names(names: list[str]) -> tuple[GaugeSpec, ...]:
     return tuple(specs)
 
 
-def _nominal_ray(spec: GaugeSpec, travel: float) -> tuple[np.ndarray, np.ndarray]:
-    """Ray origin and direction of a perfectly installed gauge on the nominal machine."""
+def _target_ray(
+    spec: GaugeSpec, machine: MachineParams, travel: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Ray of a perfectly installed gauge: aimed at the middle of the bar's face at the
+    Zero posture of ``machine``, the plunger at mid-travel."""
     frame = R_LEG[spec.leg]
-    along = R_TOOL + spec.at * L_NOMINAL
-    half = BAR_SECTION[spec.local_axis - 1] / 2
-    if spec.local_axis == 1:  # along local Y, at the height of the +d/2 bar
-        local = np.array([along, -half - travel / 2, D_NOMINAL / 2])
-        direction = frame[:, 1]
-    else:  # along local Z, from below the -d/2 bar
-        local = np.array([along, 0.0, -D_NOMINAL / 2 - half - travel / 2])
-        direction = frame[:, 2]
-    return frame @ local, direction.copy()
+    direction = frame[:, spec.local_axis].copy()
+    zero = np.zeros(3)
+    centre, rot, half = bar_boxes(machine, zero, direct(machine, zero), spec.leg, spec.bar)
+    # Along the bar from its platform end (at=0) to its carriage end (at=1).
+    along = (spec.at - 0.5) * 2 * (half[0] + BAR_CLEARANCE) * -rot[:, 0]
+    face = centre + along - direction * half[spec.local_axis]
+    return face - direction * (travel / 2), direction
 
 
 def install(
     specs: tuple[GaugeSpec, ...] | list[GaugeSpec],
+    machine: MachineParams | None = None,
     *,
     travel: float = DEFAULT_TRAVEL,
     preset: ErrorPreset | None = None,
     rng: np.random.Generator | None = None,
 ) -> list[Gauge]:
-    """Install gauges at their nominal places plus the preset's installation errors.
+    """Install gauges on ``machine`` (default nominal) as the paper does: each aimed at
+    the middle of its bar's face at the Zero posture, plus the preset's installation
+    errors (stand position and tilt) when ``preset`` and ``rng`` are given.
 
     The zero is provisional; :func:`zero_gauges` sets the gauges up at the Zero posture.
     """
     if travel <= 0:
         raise ValueError("gauge travel must be positive")
+    machine = machine if machine is not None else MachineParams()
     gauges = []
     for spec in specs:
-        origin, direction = _nominal_ray(spec, travel)
-        sign = 1.0
+        origin, direction = _target_ray(spec, machine, travel)
         if preset is not None and rng is not None:
             origin = origin + rng.normal(0.0, preset.gauge_position, 3)
             tilt = rng.normal(0.0, preset.gauge_tilt, 3)
             direction = direction + np.cross(tilt, direction)
             direction /= np.linalg.norm(direction)
-        gauges.append(Gauge(spec, origin, direction, sign, travel))
+        gauges.append(Gauge(spec, origin, direction, 1.0, travel))
     return gauges
 
 
@@ -228,6 +234,18 @@ def ray_box_distance(
     return np.where(t_out >= t_in, t_in, np.nan)
 
 
+def on_flat_face(
+    point: np.ndarray, centre: np.ndarray, rot: np.ndarray, half: np.ndarray,
+    margin: float = TIP_EDGE_MARGIN,
+) -> np.ndarray:
+    """Whether a contact point on a box's surface lies ``margin`` inside its face's edges."""
+    local = np.einsum("...ji,...j->...i", rot, point - centre)
+    ratio = np.abs(local) / half
+    face = np.argmax(ratio, axis=-1)[..., None]
+    inner = np.abs(local) <= half - margin
+    return np.all(inner | (np.arange(3) == face), axis=-1)
+
+
 def exact_ray_distances(machine: MachineParams, gauges: list[Gauge], rho: np.ndarray) -> np.ndarray:
     """Exact tip distances ``t`` of every gauge, shape ``(..., n_gauges)`` (NaN: miss)."""
     rho = np.asarray(rho, dtype=float)
@@ -235,7 +253,9 @@ def exact_ray_distances(machine: MachineParams, gauges: list[Gauge], rho: np.nda
     out = np.empty((*rho.shape[:-1], len(gauges)))
     for k, g in enumerate(gauges):
         centre, rot, half = bar_boxes(machine, rho, p, g.spec.leg, g.spec.bar)
-        out[..., k] = ray_box_distance(g.origin, g.direction, centre, rot, half)
+        t = ray_box_distance(g.origin, g.direction, centre, rot, half)
+        hit = g.origin + np.nan_to_num(t)[..., None] * g.direction
+        out[..., k] = np.where(on_flat_face(hit, centre, rot, half), t, np.nan)
     return out
 
 
@@ -272,8 +292,16 @@ def model_readings(machine: MachineParams, gauges: list[Gauge], rho: np.ndarray)
 
 
 def installed_on(machine: MachineParams, gauges: list[Gauge]) -> list[Gauge]:
-    """The gauges zeroed by the exact model at the Zero posture of ``machine``."""
+    """The gauges set up and zeroed by the exact model at the Zero posture of ``machine``."""
     return zero_gauges(gauges, exact_ray_distances(machine, gauges, np.zeros(3)))
+
+
+def model_gauges(
+    machine: MachineParams, specs: tuple[GaugeSpec, ...] | list[GaugeSpec]
+) -> list[Gauge]:
+    """Ideal gauges installed and zeroed on ``machine``: what a calibrator's model assumes
+    for its current estimate (it cannot know the installation errors)."""
+    return installed_on(machine, install(specs, machine))
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 from conftest import EQ10_ROWS, paper_matrix
 
-from orthoglide_env import gauges as gauges_mod
 from orthoglide_env import geometry, kinematics
 from orthoglide_env.gauges import (
     PAPER_LAYOUT,
@@ -69,11 +68,11 @@ def test_tool_offset_cancels_in_every_gauge_difference(monkeypatch, tilted: bool
     rho = np.vstack([small, [paper_posture(n) for n in PAPER_POSTURES]])
 
     def differences() -> np.ndarray:
-        gauges = installed_on(machine, install(PAPER_LAYOUT, travel=200.0))
+        gauges = installed_on(machine, install(PAPER_LAYOUT, machine, travel=200.0))
         return exact_readings(machine, gauges, rho)
 
     with_r = differences()
-    for module in (geometry, kinematics, gauges_mod):
+    for module in (geometry, kinematics):
         monkeypatch.setattr(module, "R_TOOL", 0.0)
     without_r = differences()
     assert np.isfinite(with_r).sum() > 250  # the check is about real readings

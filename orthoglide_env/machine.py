@@ -1,0 +1,269 @@
+"""The Orthoglide as a PyBullet closed-chain multibody, with its dial gauges.
+
+The URDF (:mod:`orthoglide_env.urdf_writer`) holds the tree; this module closes the
+loops: each parallelogram's second bar is pinned to the coupler with a point-to-point
+constraint (its hinge axis is already fixed by its revolute joint at the other end, so
+one point closes it), and the y and z legs' R2 bodies are welded to the platform with
+fixed constraints.  The actuators are position-controlled; the passive joints are free.
+
+Two ways to reach a posture:
+
+* ``quasi-static`` (calibration): every joint is placed at the exact closed
+  configuration of the true geometry, then the solver holds it for a few steps;
+* ``dynamic``: the position motors drive the carriages and the mechanism is stepped
+  until it has settled.
+
+Readings use the double-precision centre-of-mass poses of PyBullet (the link-frame pose
+it returns is single precision); every link's inertial frame is unrotated, so a link
+frame is its COM frame shifted by the URDF's inertial origin.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pybullet as pb
+from scipy.spatial.transform import Rotation
+
+from .gauges import RAY_BACKOFF, Gauge, on_flat_face, ray_box_distance
+from .geometry import BAR_SECTION, D_NOMINAL, LEG_NAMES, R_LEG, MachineParams
+from .kinematics import direct, leg_angles
+from .simulator import PhysicsSettings, Simulator
+from .urdf_writer import MM, bar_length, link_name, write_urdf
+
+MOTION_MODES: tuple[str, ...] = ("quasi-static", "dynamic")
+QUASI_STATIC_STEPS = 2  # steps after placement: enough for the solver to take hold
+SETTLE_TOL = 1e-8  # m and m/s: a settled carriage is within 0.01 µm of its target, at rest
+MAX_SETTLE_STEPS = 3000
+POSITION_GAIN = 0.3
+MOTOR_FORCE = 5000.0  # N, far above what gravity asks of the carriages
+STAND_COLOUR = (0.1, 0.6, 0.2, 1.0)
+
+
+class OrthoglideMachine:
+    """A virtual Orthoglide in PyBullet, with gauges installed on its base."""
+
+    def __init__(
+        self,
+        machine: MachineParams,
+        gauges: list[Gauge],
+        *,
+        gui: bool = False,
+        gravity: bool = True,
+        settings: PhysicsSettings | None = None,
+    ) -> None:
+        self.machine = machine
+        self.gauges = list(gauges)
+        settings = settings or PhysicsSettings(gravity=-9.81 if gravity else 0.0)
+        self.sim = Simulator(gui=gui, settings=settings)
+        self.bc = self.sim.client
+        self.body = self.sim.load_urdf_text(write_urdf(machine))
+        self._index = {
+            self.bc.getJointInfo(self.body, j)[12].decode(): j
+            for j in range(self.bc.getNumJoints(self.body))
+        }
+        self._com = {
+            name: np.array(self.bc.getDynamicsInfo(self.body, j)[3]) / MM
+            for name, j in self._index.items()
+        }
+        self.slides = [self._index[link_name(i, "carriage")] for i in range(3)]
+        self.platform = self._index["platform"]
+        for j in range(self.bc.getNumJoints(self.body)):
+            # Passive joints come with a velocity motor that would brake the mechanism.
+            self.bc.setJointMotorControl2(self.body, j, pb.VELOCITY_CONTROL, force=0.0)
+        self._closures = self._close_loops()
+        self._stand_ids: list[int] = []
+        self._draw_stands()
+        self.last_settle_steps = 0
+        self.move(np.zeros(3))
+
+    # -- construction ----------------------------------------------------------------
+    def _pivot(self, link: str, point_mm: np.ndarray) -> list[float]:
+        """A point given in a link's URDF frame, expressed in its COM frame (metres)."""
+        return list((np.asarray(point_mm) - self._com[link]) * MM)
+
+    def _close_loops(self) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
+        closures = []
+        for i in range(3):
+            bar2, coupler = link_name(i, "bar2"), link_name(i, "coupler")
+            far_end = np.array([-self.machine.leg_lengths[i], 0.0, 0.0])
+            on_coupler = np.array([0.0, 0.0, -D_NOMINAL])
+            self.bc.createConstraint(
+                self.body, self._index[bar2], self.body, self._index[coupler],
+                pb.JOINT_POINT2POINT, [0, 0, 0],
+                self._pivot(bar2, far_end), self._pivot(coupler, on_coupler),
+            )
+            closures.append((bar2, coupler, far_end, on_coupler))
+        for i in (1, 2):
+            r2 = link_name(i, "r2")
+            attach = self.machine.attach_points[i]
+            quat = Rotation.from_matrix(R_LEG[i]).as_quat()
+            cid = self.bc.createConstraint(
+                self.body, self._index[r2], self.body, self.platform,
+                pb.JOINT_FIXED, [0, 0, 0],
+                self._pivot(r2, np.zeros(3)), self._pivot("platform", attach),
+                [0, 0, 0, 1], list(quat),
+            )
+            self.bc.changeConstraint(cid, maxForce=1e9)
+            closures.append((r2, "platform", np.zeros(3), attach))
+        return closures
+
+    def _draw_stands(self) -> None:
+        """Visual-only stands and plungers: rays hit collision shapes, and these have none."""
+        for g in self.gauges:
+            length = 60.0
+            centre = (g.origin - g.direction * length / 2) * MM
+            shape = self.bc.createVisualShape(
+                pb.GEOM_CYLINDER, radius=6 * MM, length=length * MM, rgbaColor=STAND_COLOUR
+            )
+            z = np.array([0.0, 0.0, 1.0])
+            rot, _ = Rotation.align_vectors([g.direction], [z])
+            self._stand_ids.append(
+                self.bc.createMultiBody(
+                    baseMass=0, baseVisualShapeIndex=shape, basePosition=list(centre),
+                    baseOrientation=list(rot.as_quat()),
+                )
+            )
+
+    # -- motion -------------------------------------------------------------------------
+    def move(self, rho: np.ndarray, mode: str = "quasi-static") -> None:
+        """Drive the carriages to control coordinates ``rho`` (mm) and settle."""
+        rho = np.asarray(rho, dtype=float)
+        if mode not in MOTION_MODES:
+            raise ValueError(f"unknown motion mode '{mode}'; choose from {list(MOTION_MODES)}")
+        if mode == "quasi-static":
+            self._place(rho)
+            self._hold(rho)
+            self.sim.step(QUASI_STATIC_STEPS)
+            self.last_settle_steps = QUASI_STATIC_STEPS
+        else:
+            self._hold(rho)
+            self.last_settle_steps = self._settle(rho)
+
+    def _place(self, rho: np.ndarray) -> None:
+        p = direct(self.machine, rho)
+        theta, beta = leg_angles(self.machine, rho, p)
+        for i in range(3):
+            values = {
+                "carriage": rho[i] * MM, "r1": theta[i], "bar1": beta[i],
+                "coupler": -beta[i], "r2": -theta[i], "bar2": beta[i],
+            }
+            for part, value in values.items():
+                self.bc.resetJointState(self.body, self._index[link_name(i, part)], value, 0.0)
+
+    def _hold(self, rho: np.ndarray) -> None:
+        for i, j in enumerate(self.slides):
+            self.bc.setJointMotorControl2(
+                self.body, j, pb.POSITION_CONTROL, targetPosition=rho[i] * MM,
+                positionGain=POSITION_GAIN, force=MOTOR_FORCE,
+            )
+
+    def _settle(self, rho: np.ndarray) -> int:
+        target = rho * MM
+        for n in range(1, MAX_SETTLE_STEPS + 1):
+            self.sim.step()
+            states = self.bc.getJointStates(self.body, self.slides)
+            pos = np.array([s[0] for s in states])
+            vel = np.array([s[1] for s in states])
+            if np.all(np.abs(pos - target) < SETTLE_TOL) and np.all(np.abs(vel) < SETTLE_TOL):
+                return n
+        raise RuntimeError(f"the machine did not settle in {MAX_SETTLE_STEPS} steps")
+
+    # -- readings -----------------------------------------------------------------------
+    def encoders(self) -> np.ndarray:
+        """Encoder readings: the prismatic joint values (mm)."""
+        return np.array([s[0] for s in self.bc.getJointStates(self.body, self.slides)]) / MM
+
+    def _link_pose(self, link: str) -> tuple[np.ndarray, np.ndarray]:
+        """Link frame position (mm) and rotation matrix from the double-precision COM pose."""
+        state = self.bc.getLinkState(self.body, self._index[link], computeForwardKinematics=True)
+        rot = np.array(self.bc.getMatrixFromQuaternion(state[1])).reshape(3, 3)
+        return np.array(state[0]) / MM - rot @ self._com[link], rot
+
+    def _point(self, link: str, local_mm: np.ndarray) -> np.ndarray:
+        pos, rot = self._link_pose(link)
+        return pos + rot @ np.asarray(local_mm)
+
+    def tcp(self) -> np.ndarray:
+        """TCP position (mm): the platform frame's origin."""
+        return self._link_pose("platform")[0]
+
+    def platform_orientation_error(self) -> float:
+        """Rotation angle of the platform away from its nominal orientation (rad)."""
+        rot = self._link_pose("platform")[1]
+        return float(Rotation.from_matrix(rot).magnitude())
+
+    def loop_residual(self) -> float:
+        """The worst gap (mm) between the two sides of any loop closure."""
+        gaps = [
+            np.linalg.norm(self._point(a, pa) - self._point(b, pb_))
+            for a, b, pa, pb_ in self._closures
+        ]
+        return float(max(gaps))
+
+    def gauge_distances(self) -> np.ndarray:
+        """Ray distance of each gauge's tip to its target bar (mm); NaN if the first thing
+        the ray meets is not the target bar."""
+        if not self.gauges:
+            return np.empty(0)
+        starts = np.array([g.origin - RAY_BACKOFF * g.direction for g in self.gauges])
+        ends = np.array([g.origin + (g.travel + RAY_BACKOFF) * g.direction for g in self.gauges])
+        hits = self.bc.rayTestBatch(list(starts * MM), list(ends * MM))
+        out = np.full(len(self.gauges), np.nan)
+        for k, (g, hit) in enumerate(zip(self.gauges, hits, strict=True)):
+            bar = link_name(g.spec.leg, "bar1" if g.spec.bar > 0 else "bar2")
+            box = self._bar_box(g.spec.leg, bar)
+            if hit[0] == self.body and hit[1] == self._index[bar] and hit[2] > 0:
+                t = float(np.dot(np.array(hit[3]) / MM - g.origin, g.direction))
+            else:
+                # A bar pushed past the ray's start (deep overtravel: it went through the
+                # stand) is invisible to the ray, or met at fraction 0 from inside; the
+                # simulated bar pose still shows where it entered.
+                t = float(ray_box_distance(g.origin, g.direction, *box))
+                if not t < -RAY_BACKOFF:
+                    continue
+            if on_flat_face(g.origin + t * g.direction, *box):
+                out[k] = t
+        return out
+
+    def _bar_box(self, leg: int, bar: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Centre (mm), rotation and half extents (mm) of a bar's box, as simulated."""
+        pos, rot = self._link_pose(bar)
+        length = self.machine.leg_lengths[leg]
+        half = np.array([bar_length(self.machine, leg) / 2, *(np.array(BAR_SECTION) / 2)])
+        return pos + rot @ np.array([-length / 2, 0.0, 0.0]), rot, half
+
+    def collisions(self) -> list[str]:
+        """Pairs of parts of different legs (or a leg and the platform) in contact."""
+        parts = {i: [link_name(i, p) for p in ("bar1", "bar2", "coupler")] for i in range(3)}
+        pairs = [(a, b) for i in range(3) for j in range(i + 1, 3) for a in parts[i]
+                 for b in parts[j]]
+        pairs += [("platform", link_name(i, b)) for i in range(3) for b in ("bar1", "bar2")]
+        found = []
+        for a, b in pairs:
+            if self.bc.getClosestPoints(self.body, self.body, 0.0, self._index[a], self._index[b]):
+                found.append(f"{a}/{b}")
+        return found
+
+    def set_gauges(self, gauges: list[Gauge]) -> None:
+        for sid in self._stand_ids:
+            self.bc.removeBody(sid)
+        self._stand_ids = []
+        self.gauges = list(gauges)
+        self._draw_stands()
+
+    def render(self, width: int = 640, height: int = 480) -> np.ndarray:
+        """An RGB image (height, width, 3) of the machine from a three-quarter view."""
+        view = self.bc.computeViewMatrix(
+            cameraEyePosition=[0.75, 0.62, 0.5], cameraTargetPosition=[0.12, 0.12, 0.05],
+            cameraUpVector=[0, 0, 1],
+        )
+        proj = self.bc.computeProjectionMatrixFOV(fov=50, aspect=width / height, nearVal=0.05,
+                                                  farVal=5.0)
+        img = self.bc.getCameraImage(width, height, view, proj, renderer=pb.ER_TINY_RENDERER)
+        return np.reshape(np.asarray(img[2], dtype=np.uint8), (height, width, 4))[..., :3]
+
+    def close(self) -> None:
+        self.sim.close()
+
+    def __repr__(self) -> str:
+        return f"OrthoglideMachine(legs={LEG_NAMES}, gauges={len(self.gauges)})"
