@@ -254,7 +254,7 @@ class OrthoglideMachine:
     def render(self, width: int = 640, height: int = 480) -> np.ndarray:
         """An RGB image (height, width, 3) of the machine from a three-quarter view."""
         view = self.bc.computeViewMatrix(
-            cameraEyePosition=[0.75, 0.62, 0.5], cameraTargetPosition=[0.12, 0.12, 0.05],
+            cameraEyePosition=[0.8, 0.68, 0.62], cameraTargetPosition=[0.12, 0.12, 0.14],
             cameraUpVector=[0, 0, 1],
         )
         proj = self.bc.computeProjectionMatrixFOV(fov=50, aspect=width / height, nearVal=0.05,

@@ -1,0 +1,38 @@
+"""The URDF writer and the checked-in nominal URDF."""
+
+from __future__ import annotations
+
+import pybullet as pb
+
+from orthoglide_env.geometry import RHO_MAX, RHO_MIN, MachineParams, random_machine
+from orthoglide_env.simulator import Simulator
+from orthoglide_env.urdf_writer import LINKS_PER_LEG, MM, link_name, nominal_urdf_path, write_urdf
+
+
+def test_checked_in_urdf_is_current() -> None:
+    assert nominal_urdf_path().read_text() == write_urdf(MachineParams()), (
+        "urdf/orthoglide.urdf is stale: run `python -m orthoglide_env.urdf_writer`"
+    )
+
+
+def test_urdf_loads_with_the_expected_tree() -> None:
+    sim = Simulator()
+    try:
+        body = sim.load_urdf_text(write_urdf(random_machine(1, "realistic")))
+        info = [sim.client.getJointInfo(body, j) for j in range(sim.client.getNumJoints(body))]
+    finally:
+        sim.close()
+    links = {i[12].decode(): i for i in info}
+    expected = {link_name(leg, part) for leg in range(3) for part in LINKS_PER_LEG} | {"platform"}
+    assert set(links) == expected
+    kinds = [links[link_name(leg, "carriage")][2] for leg in range(3)]
+    assert kinds == [pb.JOINT_PRISMATIC] * 3
+    assert links["platform"][2] == pb.JOINT_FIXED
+    for leg in range(3):
+        lower, upper = links[link_name(leg, "carriage")][8:10]
+        # URDF limits must be wider than the control limits: PyBullet clamps silently.
+        assert lower < RHO_MIN * MM and upper > RHO_MAX * MM
+
+
+def test_machine_errors_change_the_urdf() -> None:
+    assert write_urdf(random_machine(1, "realistic")) != write_urdf(MachineParams())
