@@ -33,11 +33,13 @@ from .geometry import (
     BAR_SECTION,
     D_NOMINAL,
     LEG_NAMES,
+    PLATFORM_SIZE,
     R_LEG,
+    SHORT_LINK_SIZE,
     ErrorPreset,
     MachineParams,
 )
-from .kinematics import carriage_points, direct, platform_points
+from .kinematics import carriage_points, direct, leg_angles, platform_points
 
 DEFAULT_TRAVEL: float = 10.0  # mm
 DEFAULT_RESOLUTION: float = 0.01  # mm (paper, section 4)
@@ -198,28 +200,33 @@ def bar_boxes(
     (columns: along the bar, hinge axis, normal) and half extents ``(..., 3)``."""
     a = carriage_points(machine, rho)[..., leg, :]
     c = platform_points(machine, p)[..., leg, :]
-    shift = bar * D_NOMINAL / 2 * R_LEG[leg][:, 2]
+    return _boxes(a, c, np.asarray(leg), np.asarray(bar))
+
+
+def _boxes(
+    a: np.ndarray, c: np.ndarray, legs: np.ndarray, bars: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Bar boxes from the joint centres ``a`` (carriage) and ``c`` (platform) of their legs."""
+    r_axis = R_LEG[legs][..., :, 2]
     v = c - a
     length = np.linalg.norm(v, axis=-1)
     along = v / length[..., None]
-    hinge = np.cross(R_LEG[leg][:, 2], along)
+    hinge = np.cross(r_axis, along)
     hinge /= np.linalg.norm(hinge, axis=-1, keepdims=True)
     normal = np.cross(along, hinge)
     rot = np.stack([along, hinge, normal], axis=-1)
     half = np.stack(
         [length / 2 - BAR_CLEARANCE, *(np.full_like(length, s / 2) for s in BAR_SECTION)], axis=-1
     )
-    return (a + c) / 2 + shift, rot, half
+    centre = (a + c) / 2 + (bars * D_NOMINAL / 2)[..., None] * r_axis
+    return centre, rot, half
 
 
-def ray_box_distance(
+def ray_box_interval(
     origin: np.ndarray, direction: np.ndarray, centre: np.ndarray, rot: np.ndarray, half: np.ndarray
-) -> np.ndarray:
-    """Distance along the ray at which it enters the box (slab method); NaN on a miss.
-
-    The ray is the whole line ``origin + t * direction``: negative ``t`` is reported, so an
-    overtravel (box between the tip and the stand) is seen.
-    """
+) -> tuple[np.ndarray, np.ndarray]:
+    """Where the line ``origin + t * direction`` enters and leaves a box (slab method);
+    ``t_in > t_out`` when it misses."""
     o = np.einsum("...ji,...j->...i", rot, origin - centre)
     d = np.einsum("...ji,...j->...i", rot, np.broadcast_to(direction, o.shape))
     inside = np.abs(o) <= half
@@ -229,8 +236,18 @@ def ray_box_distance(
     # A ray parallel to a slab is inside it everywhere or nowhere.
     lo = np.where(d == 0, np.where(inside, -np.inf, np.inf), np.minimum(t1, t2))
     hi = np.where(d == 0, np.where(inside, np.inf, -np.inf), np.maximum(t1, t2))
-    t_in = np.max(lo, axis=-1)
-    t_out = np.min(hi, axis=-1)
+    return np.max(lo, axis=-1), np.min(hi, axis=-1)
+
+
+def ray_box_distance(
+    origin: np.ndarray, direction: np.ndarray, centre: np.ndarray, rot: np.ndarray, half: np.ndarray
+) -> np.ndarray:
+    """Distance along the ray at which it enters the box; NaN on a miss.
+
+    The ray is the whole line ``origin + t * direction``: negative ``t`` is reported, so an
+    overtravel (box between the tip and the stand) is seen.
+    """
+    t_in, t_out = ray_box_interval(origin, direction, centre, rot, half)
     return np.where(t_out >= t_in, t_in, np.nan)
 
 
@@ -246,17 +263,75 @@ def on_flat_face(
     return np.all(inner | (np.arange(3) == face), axis=-1)
 
 
+def collision_boxes(
+    machine: MachineParams, rho: np.ndarray, p: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every moving collision box, in the order of :data:`BOX_NAMES`: centres
+    ``(..., 10, 3)``, rotations ``(..., 10, 3, 3)``, half extents ``(..., 10, 3)``."""
+    legs = np.repeat(np.arange(3), 2)
+    bars = np.tile([1, -1], 3)
+    a = carriage_points(machine, rho)
+    c = platform_points(machine, p)
+    centre, rot, half = _boxes(a[..., legs, :], c[..., legs, :], legs, bars)
+    theta, _ = leg_angles(machine, rho, p)
+    cos, sin = np.cos(theta), np.sin(theta)
+    zeros, ones = np.zeros_like(theta), np.ones_like(theta)
+    rz = np.stack([np.stack([cos, -sin, zeros], -1), np.stack([sin, cos, zeros], -1),
+                   np.stack([zeros, zeros, ones], -1)], -2)
+    coupler_rot = R_LEG @ rz
+    shape = (*np.shape(theta)[:-1], 3, 3)
+    centres = np.concatenate([centre, c, np.asarray(p)[..., None, :]], axis=-2)
+    rots = np.concatenate([rot, coupler_rot, np.broadcast_to(np.eye(3), (*shape[:-2], 1, 3, 3))],
+                          axis=-3)
+    halves = np.concatenate([
+        half,
+        np.broadcast_to(np.array(SHORT_LINK_SIZE) / 2, shape),
+        np.broadcast_to(np.full(3, PLATFORM_SIZE / 2), (*shape[:-2], 1, 3)),
+    ], axis=-2)
+    return centres, rots, halves
+
+
+#: Names of the moving collision boxes (the simulator's link names).
+BOX_NAMES: tuple[str, ...] = tuple(
+    [f"{leg}_{bar}" for leg in LEG_NAMES for bar in ("bar1", "bar2")]
+    + [f"{leg}_coupler" for leg in LEG_NAMES] + ["platform"]
+)
+
+
+def target_box(spec: GaugeSpec) -> int:
+    """Index in :data:`BOX_NAMES` of the bar a gauge touches."""
+    return 2 * spec.leg + (0 if spec.bar > 0 else 1)
+
+
 def exact_ray_distances(machine: MachineParams, gauges: list[Gauge], rho: np.ndarray) -> np.ndarray:
-    """Exact tip distances ``t`` of every gauge, shape ``(..., n_gauges)`` (NaN: miss)."""
+    """Exact tip distances ``t`` of every gauge, shape ``(..., n_gauges)``.
+
+    NaN when the ray misses the bar's flat face, or when another part lies on the ray
+    before the bar within the window a gauge can see (``-RAY_BACKOFF`` to
+    ``travel + RAY_BACKOFF``).  A bar behind the tip (``t < 0``) is an overtravel
+    whatever else is on the ray: it presses the gauge.
+    """
     rho = np.asarray(rho, dtype=float)
-    p = direct(machine, rho)
-    out = np.empty((*rho.shape[:-1], len(gauges)))
-    for k, g in enumerate(gauges):
-        centre, rot, half = bar_boxes(machine, rho, p, g.spec.leg, g.spec.bar)
-        t = ray_box_distance(g.origin, g.direction, centre, rot, half)
-        hit = g.origin + np.nan_to_num(t)[..., None] * g.direction
-        out[..., k] = np.where(on_flat_face(hit, centre, rot, half), t, np.nan)
-    return out
+    if not gauges:
+        return np.empty((*rho.shape[:-1], 0))
+    origins = np.array([g.origin for g in gauges])[:, None, :]
+    directions = np.array([g.direction for g in gauges])[:, None, :]
+    target = np.array([target_box(g.spec) for g in gauges])
+    centre, rot, half = collision_boxes(machine, rho, direct(machine, rho))
+    t_in, t_out = ray_box_interval(
+        origins, directions, centre[..., None, :, :], rot[..., None, :, :, :],
+        half[..., None, :, :],
+    )  # (..., gauges, boxes)
+    pick = (..., np.arange(len(gauges)), target)
+    t = np.where(t_out[pick] >= t_in[pick], t_in[pick], np.nan)
+    hit = origins[:, 0] + np.nan_to_num(t)[..., None] * directions[:, 0]
+    t = np.where(on_flat_face(hit, centre[..., target, :], rot[..., target, :, :],
+                              half[..., target, :]), t, np.nan)
+    others = np.arange(len(BOX_NAMES)) != target[:, None]
+    reach = np.array([g.travel for g in gauges]) + RAY_BACKOFF
+    in_window = (t_out >= -RAY_BACKOFF) & (t_in <= t_out) & (t_in < t[..., None])
+    occluded = np.any(in_window & others, axis=-1) & (t >= 0)
+    return np.where(occluded | (t > reach), np.nan, t)
 
 
 def status_of(gauges: list[Gauge], t: np.ndarray) -> np.ndarray:

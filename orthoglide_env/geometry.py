@@ -63,6 +63,9 @@ URDF_RHO_MARGIN: float = 50.0
 # --- link shapes (for the URDF, the gauges' targets and pictures) --------------------
 BAR_SECTION: tuple[float, float] = (12.0, 12.0)  # bar cross-section along (hinge, normal), mm
 BAR_CLEARANCE: float = 10.0  # bar box stops this far short of each hinge centre, mm
+#: Short links of the parallelogram (local X, Y, Z of the leg frame), centred on the R axis.
+SHORT_LINK_SIZE: tuple[float, float, float] = (20.0, 20.0, 100.0)
+PLATFORM_SIZE: float = 55.0  # edge of the platform cube centred on the TCP, mm
 
 LEG_NAMES: tuple[str, str, str] = ("x", "y", "z")
 AXIS_NAMES: tuple[str, str, str] = ("x", "y", "z")

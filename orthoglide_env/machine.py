@@ -215,11 +215,12 @@ class OrthoglideMachine:
             if hit[0] == self.body and hit[1] == self._index[bar] and hit[2] > 0:
                 t = float(np.dot(np.array(hit[3]) / MM - g.origin, g.direction))
             else:
-                # A bar pushed past the ray's start (deep overtravel: it went through the
-                # stand) is invisible to the ray, or met at fraction 0 from inside; the
-                # simulated bar pose still shows where it entered.
+                # Another part first: in front of the tip it blocks the plunger, but a bar
+                # behind the tip presses the gauge whatever else the ray meets (or the ray
+                # starts inside it and Bullet reports nothing useful); the simulated bar
+                # pose still shows where it is.
                 t = float(ray_box_distance(g.origin, g.direction, *box))
-                if not t < -RAY_BACKOFF:
+                if not t < 0:
                     continue
             if on_flat_face(g.origin + t * g.direction, *box):
                 out[k] = t

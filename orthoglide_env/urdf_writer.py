@@ -31,10 +31,12 @@ from .geometry import (
     D_NOMINAL,
     L_NOMINAL,
     LEG_NAMES,
+    PLATFORM_SIZE,
     R_LEG,
     R_TOOL,
     RHO_MAX,
     RHO_MIN,
+    SHORT_LINK_SIZE,
     URDF_RHO_MARGIN,
     MachineParams,
 )
@@ -146,7 +148,7 @@ def _leg(machine: MachineParams, i: int) -> list[str]:
     bar = np.array([bar_length(machine, i), *BAR_SECTION])
     bar_mid = np.array([-length / 2, 0.0, 0.0])
     carriage = np.array([70.0, 60.0, 110.0])
-    short = np.array([20.0, 20.0, D_NOMINAL + 20.0])
+    short = np.array(SHORT_LINK_SIZE)
     n = lambda part: link_name(i, part)  # noqa: E731
     return [
         _link(n("carriage"), _inertial(MASS["carriage"], np.zeros(3), carriage)
@@ -187,9 +189,9 @@ def _base() -> str:
 
 
 def _platform(machine: MachineParams) -> list[str]:
-    size = np.full(3, 2 * R_TOOL)
+    size = np.full(3, PLATFORM_SIZE)
     body = _inertial(MASS["platform"], np.zeros(3), size)
-    body += _box(size * 0.9, np.zeros(3), "platform", collide=True)
+    body += _box(size, np.zeros(3), "platform", collide=True)
     tool = np.array([8.0, 8.0, 40.0])
     body += _box(tool, np.array([0, 0, -20.0 - R_TOOL]), "joint", collide=False)
     return [
