@@ -1,0 +1,78 @@
+"""The calibration task: what the lab sees of a machine, and what each move costs.
+
+Kept apart from the environment class (as panda-gym keeps task and robot apart): the
+task turns the machine's raw gauge geometry into readings (noise, resolution, validity),
+keeps the book of gauge overtravels and crashes, and prices every move in seconds of a
+real experiment.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .backend import MachineBackend
+from .gauges import Gauge, GaugeNoise, Status, readings_from_distances, status_of
+
+#: Drive speed of every carriage (mm/s); axes move together, so a move lasts
+#: ``max |delta rho| / DRIVE_SPEED``.  A slow, careful calibration move on the prototype.
+DRIVE_SPEED: float = 20.0
+#: Dwell per posture (s): the machine settles and the operator reads the dials.
+SETTLE_AND_READ: float = 5.0
+#: Extra cost (s) of an overtravel: the gauge must be checked, re-installed and re-zeroed.
+OVERTRAVEL_PENALTY: float = 120.0
+#: A bar more than this far behind a gauge's tip (mm) has bottomed the plunger and drives
+#: into the gauge body and stand: a collision, not just an overtravel.
+STAND_CRASH_DEPTH: float = 5.0
+
+
+@dataclass(frozen=True)
+class Reading:
+    """What the lab sees after one move."""
+
+    gauges: np.ndarray  # mm, 0.0 where not valid
+    valid: np.ndarray  # int8, 1 where the gauge touches its bar within travel
+    joints: np.ndarray  # encoder readings, mm
+    status: np.ndarray  # Status codes, one per gauge
+
+
+class CalibrationTask:
+    """Readings with noise, move costs and the overtravel/collision book."""
+
+    def __init__(self, noise: GaugeNoise) -> None:
+        self.noise = noise
+
+    def read(self, machine: MachineBackend, rng: np.random.Generator) -> Reading:
+        """Read every gauge and encoder of ``machine`` (noise drawn from ``rng``)."""
+        t = machine.gauge_distances()
+        status = status_of(machine.gauges, t)
+        values = self.noise.apply(readings_from_distances(machine.gauges, t), rng)
+        valid = status == Status.VALID
+        return Reading(
+            gauges=np.where(valid, values, 0.0),
+            valid=valid.astype(np.int8),
+            joints=machine.encoders(),
+            status=status,
+        )
+
+    @staticmethod
+    def move_time(start: np.ndarray, target: np.ndarray) -> float:
+        """Seconds a real machine spends driving from ``start`` to ``target`` and reading."""
+        return float(np.max(np.abs(np.asarray(target) - np.asarray(start)))) / DRIVE_SPEED + (
+            SETTLE_AND_READ
+        )
+
+    @staticmethod
+    def crashed_gauges(machine: MachineBackend) -> list[str]:
+        """Gauges whose bar has gone past the plunger into the gauge body."""
+        t = machine.gauge_distances()
+        with np.errstate(invalid="ignore"):
+            deep = t < -STAND_CRASH_DEPTH
+        return [g.spec.name for g, d in zip(machine.gauges, deep, strict=True) if d]
+
+    @staticmethod
+    def new_overtravels(gauges: list[Gauge], before: np.ndarray, after: np.ndarray) -> list[str]:
+        """Names of gauges that went into overtravel on this move."""
+        entered = (after == Status.OVERTRAVEL) & (before != Status.OVERTRAVEL)
+        return [g.spec.name for g, e in zip(gauges, entered, strict=True) if e]
