@@ -12,7 +12,7 @@ from typing import Protocol
 
 import numpy as np
 
-from .gauges import Gauge, exact_ray_distances
+from .gauges import Gauge, exact_ray_distances, exact_target_boxes
 from .geometry import MachineParams
 from .kinematics import direct
 
@@ -40,7 +40,10 @@ class MachineBackend(Protocol):
         does not hit the target bar first."""
 
     def collisions(self) -> list[str]:
-        """Names of the pairs of parts in contact (empty when none)."""
+        """Names of the pairs of moving parts in contact (empty when none)."""
+
+    def target_boxes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Box of every gauge's target bar: centres (mm), rotations, half extents (mm)."""
 
     def set_gauges(self, gauges: list[Gauge]) -> None:
         """Replace the installed gauges (same layout, e.g. after zeroing)."""
@@ -74,7 +77,12 @@ class ExactMachine:
         return exact_ray_distances(self.machine, self.gauges, self._rho)
 
     def collisions(self) -> list[str]:
+        # Parts of different legs cannot meet within the joint limits: the simulator's
+        # contact check finds none over the whole joint cube (tests/test_machine.py).
         return []
+
+    def target_boxes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return exact_target_boxes(self.machine, self.gauges, self._rho)
 
     def set_gauges(self, gauges: list[Gauge]) -> None:
         self.gauges = list(gauges)

@@ -72,11 +72,18 @@ class OrthoglideCalibrationEnv(gym.Env):
     dwell, plus :data:`~orthoglide_env.task.OVERTRAVEL_PENALTY` for every gauge pushed past
     its travel toward its stand on this move.
 
+    Overtravel: a bar that presses a gauge past its travel toward its stand (into the
+    plunger or the gauge body, on the measuring face or not) makes that gauge's reading
+    invalid, is named in ``info["overtravel"]`` on the move that causes it and costs the
+    penalty.  With the paper's six gauges all installed, the Min postures do this to the
+    other legs' gauges (the paper installs one leg's gauges at a time).
+
     Termination
     -----------
-    ``terminated`` when moving parts collide with each other, or a bar drives into a
-    gauge's body (deeper than :data:`~orthoglide_env.task.STAND_CRASH_DEPTH` past the
-    tip); ``info["collision"]`` names it.  Truncation comes from ``max_episode_steps``.
+    ``terminated`` when moving parts of different legs (bars, couplers, platform) collide;
+    ``info["collision"]`` names them.  Within the joint limits the geometry allows no such
+    contact (the PyBullet contact check finds none over the joint cube), so this is a
+    guard for machines far from nominal.  Truncation comes from ``max_episode_steps``.
 
     Info
     ----
@@ -146,7 +153,7 @@ class OrthoglideCalibrationEnv(gym.Env):
         self._machine: MachineBackend | None = None
         self._rho = np.zeros(3)
         self._steps = 0
-        self._status = np.zeros(n, dtype=np.int8)
+        self._pressed = np.zeros(n, dtype=bool)
 
     # -- ground truth, for the scorer only --------------------------------------------------
     @property
@@ -188,7 +195,7 @@ class OrthoglideCalibrationEnv(gym.Env):
         self._rho = np.zeros(3)
         self._steps = 0
         reading = self.task.read(self._machine, self.np_random)
-        self._status = reading.status
+        self._pressed = self.task.pressed(self._machine)
         return self._observation(reading), self._info(reading, [], 0.0, "")
 
     def step(
@@ -198,12 +205,11 @@ class OrthoglideCalibrationEnv(gym.Env):
         target = self._check_action(action)
         machine.move(target, self.motion)
         reading = self.task.read(machine, self.np_random)
-        overtravel = self.task.new_overtravels(machine.gauges, self._status, reading.status)
+        pressed = self.task.pressed(machine)
+        overtravel = self.task.new_overtravels(machine.gauges, self._pressed, pressed)
         step_time = self.task.move_time(self._rho, target) + OVERTRAVEL_PENALTY * len(overtravel)
-        collision = ", ".join(machine.collisions() + [
-            f"{name} bar/gauge body" for name in self.task.crashed_gauges(machine)
-        ])
-        self._rho, self._status = target, reading.status
+        collision = ", ".join(machine.collisions())
+        self._rho, self._pressed = target, pressed
         self._steps += 1
         truncated = self.max_episode_steps is not None and self._steps >= self.max_episode_steps
         obs = self._observation(reading)

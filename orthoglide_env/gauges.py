@@ -48,6 +48,11 @@ DEFAULT_SIGMA: float = 0.02  # mm, repeatability (paper, section 4)
 #: flat face: closer to an edge a real tip rolls over it, and PyBullet's boxes are
 #: rounded there by their collision margin (measured: exact again 1 mm from an edge).
 TIP_EDGE_MARGIN: float = 1.5
+#: The gauge body (radius, mm) and its stand behind the tip (length, mm): a bar that
+#: reaches into them behind the tip presses the plunger past its travel, even when it is
+#: off the flat face that gives a reading.
+GAUGE_BODY_RADIUS: float = 6.0
+STAND_LENGTH: float = 60.0
 #: The simulator casts rays from this far behind ``origin`` so that an overtravel is seen
 #: as a hit at negative ``t`` rather than from inside the bar.
 RAY_BACKOFF: float = 30.0
@@ -332,6 +337,33 @@ def exact_ray_distances(machine: MachineParams, gauges: list[Gauge], rho: np.nda
     in_window = (t_out >= -RAY_BACKOFF) & (t_in <= t_out) & (t_in < t[..., None])
     occluded = np.any(in_window & others, axis=-1) & (t >= 0)
     return np.where(occluded | (t > reach), np.nan, t)
+
+
+def exact_target_boxes(
+    machine: MachineParams, gauges: list[Gauge], rho: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The box of every gauge's target bar at ``rho`` (centres, rotations, half extents)."""
+    rho = np.asarray(rho, dtype=float)
+    centre, rot, half = collision_boxes(machine, rho, direct(machine, rho))
+    target = [target_box(g.spec) for g in gauges]
+    return centre[..., target, :], rot[..., target, :, :], half[..., target, :]
+
+
+def pressed_past_travel(
+    gauges: list[Gauge], centre: np.ndarray, rot: np.ndarray, half: np.ndarray
+) -> np.ndarray:
+    """Whether each gauge's target bar presses it past its travel: the bar's box, grown by
+    the body radius, meets the gauge axis behind the fully pushed-in tip (``t < 0``) and
+    in front of the stand's end."""
+    if not gauges:
+        return np.zeros(0, dtype=bool)
+    origins = np.array([g.origin for g in gauges])
+    directions = np.array([g.direction for g in gauges])
+    # The body is a cylinder around the gauge axis: grow the box across the axis only.
+    along = np.einsum("...ji,...j->...i", rot, directions)
+    grown = half + GAUGE_BODY_RADIUS * np.sqrt(np.clip(1 - along**2, 0.0, 1.0))
+    t_in, t_out = ray_box_interval(origins, directions, centre, rot, grown)
+    return (t_in <= t_out) & (t_in < 0) & (t_out > -STAND_LENGTH)
 
 
 def status_of(gauges: list[Gauge], t: np.ndarray) -> np.ndarray:

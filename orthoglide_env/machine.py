@@ -226,6 +226,12 @@ class OrthoglideMachine:
                 out[k] = t
         return out
 
+    def target_boxes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Box of every gauge's target bar as simulated: centres, rotations, half extents."""
+        boxes = [self._bar_box(g.spec.leg, link_name(g.spec.leg, "bar1" if g.spec.bar > 0
+                                                     else "bar2")) for g in self.gauges]
+        return tuple(np.array(part) for part in zip(*boxes, strict=True))  # type: ignore[return-value]
+
     def _bar_box(self, leg: int, bar: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Centre (mm), rotation and half extents (mm) of a bar's box, as simulated."""
         pos, rot = self._link_pose(bar)

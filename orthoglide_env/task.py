@@ -13,7 +13,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from .backend import MachineBackend
-from .gauges import Gauge, GaugeNoise, Status, readings_from_distances, status_of
+from .gauges import (
+    Gauge,
+    GaugeNoise,
+    Status,
+    pressed_past_travel,
+    readings_from_distances,
+    status_of,
+)
 
 #: Drive speed of every carriage (mm/s); axes move together, so a move lasts
 #: ``max |delta rho| / DRIVE_SPEED``.  A slow, careful calibration move on the prototype.
@@ -22,9 +29,6 @@ DRIVE_SPEED: float = 20.0
 SETTLE_AND_READ: float = 5.0
 #: Extra cost (s) of an overtravel: the gauge must be checked, re-installed and re-zeroed.
 OVERTRAVEL_PENALTY: float = 120.0
-#: A bar more than this far behind a gauge's tip (mm) has bottomed the plunger and drives
-#: into the gauge body and stand: a collision, not just an overtravel.
-STAND_CRASH_DEPTH: float = 5.0
 
 
 @dataclass(frozen=True)
@@ -64,15 +68,13 @@ class CalibrationTask:
         )
 
     @staticmethod
-    def crashed_gauges(machine: MachineBackend) -> list[str]:
-        """Gauges whose bar has gone past the plunger into the gauge body."""
-        t = machine.gauge_distances()
-        with np.errstate(invalid="ignore"):
-            deep = t < -STAND_CRASH_DEPTH
-        return [g.spec.name for g, d in zip(machine.gauges, deep, strict=True) if d]
+    def pressed(machine: MachineBackend) -> np.ndarray:
+        """Which gauges a bar presses past their travel toward the stand (overtravel),
+        whether or not the tip is on the face that gives a reading."""
+        return pressed_past_travel(machine.gauges, *machine.target_boxes())
 
     @staticmethod
     def new_overtravels(gauges: list[Gauge], before: np.ndarray, after: np.ndarray) -> list[str]:
-        """Names of gauges that went into overtravel on this move."""
-        entered = (after == Status.OVERTRAVEL) & (before != Status.OVERTRAVEL)
-        return [g.spec.name for g, e in zip(gauges, entered, strict=True) if e]
+        """Names of gauges that went into overtravel on this move (``before``/``after``:
+        the :meth:`pressed` masks); staying in overtravel is not a new one."""
+        return [g.spec.name for g, b, a in zip(gauges, before, after, strict=True) if a and not b]

@@ -1,0 +1,187 @@
+"""The Gymnasium environment: API conventions, determinism and agreement with the exact
+model, on both machine backends."""
+
+from __future__ import annotations
+
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import orthoglide_env
+from orthoglide_env.gauges import exact_readings
+from orthoglide_env.kinematics import PAPER_POSTURES, paper_posture
+from orthoglide_env.task import DRIVE_SPEED, OVERTRAVEL_PENALTY, SETTLE_AND_READ
+
+BACKENDS = ("exact", "pybullet")
+#: check_env recommends actions normalised to [-1, 1]; ours are joint targets in mm, as the
+#: env's users (and the issue) ask, so that one warning is expected.
+EXPECTED_WARNING = "symmetric and normalized space"
+
+
+def make(backend: str, **kwargs) -> gym.Env:
+    return gym.make(orthoglide_env.ENV_ID, backend=backend, **kwargs)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_check_env_passes_without_unexpected_warnings(backend: str) -> None:
+    env = make(backend)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env.unwrapped, skip_render_check=True)
+    unexpected = [str(w.message) for w in caught if EXPECTED_WARNING not in str(w.message)]
+    assert unexpected == []
+    env.close()
+
+
+def test_registered_under_both_names() -> None:
+    for env_id in (orthoglide_env.ENV_ID, f"orthoglide_env:{orthoglide_env.ENV_ID}"):
+        env = gym.make(env_id, backend="exact")
+        assert env.spec.max_episode_steps == 500
+        env.close()
+
+
+def run_episode(env: gym.Env, seed: int, actions: np.ndarray) -> list:
+    out = [env.reset(seed=seed)[0]]
+    for action in actions:
+        obs, reward, terminated, truncated, info = env.step(action)
+        out.append((obs, reward, terminated, truncated, info))
+    return out
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_same_seed_and_actions_replay_exactly(backend: str) -> None:
+    actions = np.random.default_rng(3).uniform(-20, 20, (15, 3))
+    env = make(backend)
+    first, second = run_episode(env, 11, actions), run_episode(env, 11, actions)
+    third = run_episode(env, 12, actions)
+    env.close()
+    assert repr(first) == repr(second)
+    assert repr(first) != repr(third)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_paper_sequence_matches_exact_model_with_ideal_gauges(backend: str) -> None:
+    env = make(backend, gauge_sigma=0.0, gauge_resolution=0.0)
+    obs, _ = env.reset(seed=5)
+    truth, gauges = env.unwrapped.true_machine, env.unwrapped.true_gauges
+    zero = exact_readings(truth, gauges, np.zeros(3))
+    compared = 0
+    for name in PAPER_POSTURES:
+        obs, *_ = env.step(paper_posture(name))
+        expected = exact_readings(truth, gauges, paper_posture(name)) - zero
+        valid = obs["valid"].astype(bool)
+        np.testing.assert_array_equal(valid, np.isfinite(expected))
+        # 1 µm: the fidelity bar (a tenth of the gauges' resolution).
+        np.testing.assert_allclose(obs["gauges"][valid], expected[valid], atol=1e-3)
+        compared += valid.sum()
+    assert compared >= 12  # the twelve differences of the paper at least
+    env.close()
+
+
+def test_reward_is_the_experiment_time() -> None:
+    env = make("exact")
+    env.reset(seed=0)
+    _, reward, *_ = env.step(np.array([40.0, -10.0, 0.0]))
+    assert reward == pytest.approx(-(40.0 / DRIVE_SPEED + SETTLE_AND_READ))
+    env.close()
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_overtravel_is_reported_and_penalised(backend: str) -> None:
+    env = make(backend)
+    # Toward -y the x leg presses its y gauge (stand on the -y side) past its travel, and
+    # at YMin (50 mm at the gauge) it is off the face too: still an overtravel.
+    for target in (np.array([0.0, -12.0, 0.0]), paper_posture("YMin")):
+        env.reset(seed=0)
+        _, reward, terminated, _, info = env.step(target)
+        assert "x-leg/y" in info["overtravel"] and not terminated
+        assert info["status"][0] in ("overtravel", "missed")
+        assert reward <= -OVERTRAVEL_PENALTY
+    # Staying in overtravel is not charged again; leaving and re-entering is.
+    _, reward, *_ = env.step(paper_posture("YMin"))
+    assert reward == pytest.approx(-SETTLE_AND_READ)
+    env.step(np.zeros(3))
+    _, reward, _, _, info = env.step(np.array([0.0, -12.0, 0.0]))
+    assert "x-leg/y" in info["overtravel"]
+    env.close()
+
+
+@pytest.mark.parametrize(
+    ("action", "fragment"),
+    [
+        (np.array([0.0, 0.0, 61.0]), "joint limits"),
+        (np.array([0.0, np.nan, 0.0]), "finite"),
+        (np.array([0.0, np.inf, 0.0]), "finite"),
+        (np.zeros(2), "shape"),
+        ("abc", "3 numbers"),
+    ],
+)
+def test_bad_actions_are_refused(action, fragment: str) -> None:
+    env = make("exact")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=fragment):
+        env.step(action)
+    env.close()
+
+
+def test_clipping_only_when_asked() -> None:
+    env = make("exact", clip_actions=True)
+    env.reset(seed=0)
+    obs, *_ = env.step(np.array([0.0, 0.0, 75.0]))
+    np.testing.assert_allclose(obs["joints"], [0.0, 0.0, 60.0])
+    with pytest.raises(ValueError):
+        env.step(np.array([0.0, 0.0, np.nan]))
+    env.close()
+
+
+def test_reset_options_and_constructor_errors() -> None:
+    env = make("exact")
+    obs, _ = env.reset(seed=0, options={"machine": {"drho": [1, 2, 3]},
+                                        "gauges": ["x-leg/y", "x-leg/z", "y/x", "y/z", "z/x",
+                                                   "z/y@0.4"]})
+    np.testing.assert_array_equal(env.unwrapped.true_machine.drho, [1, 2, 3])
+    assert obs["gauges"].shape == (6,)
+    for options, fragment in (({"gauges": ["x-leg/y"]}, "observes 6 gauges"),
+                              ({"machine": {"bogus": 1}}, "unknown machine key"),
+                              ({"speed": 3}, "unknown reset option")):
+        with pytest.raises(ValueError, match=fragment):
+            env.reset(options=options)
+    env.close()
+    for kwargs, fragment in (({"errors": "wild"}, "preset"), ({"motion": "warp"}, "motion"),
+                             ({"gauge_sigma": 1.0}, "repeatability"),
+                             ({"render_mode": "rgb_array"}, "no picture")):
+        with pytest.raises(ValueError, match=fragment):
+            make("exact", **kwargs)
+    with pytest.raises(RuntimeError, match="reset"):
+        make("exact").unwrapped.step(np.zeros(3))
+
+
+def test_ground_truth_is_not_in_observations_or_info() -> None:
+    env = make("exact")
+    obs, info = env.reset(seed=2)
+    assert set(obs) == {"gauges", "valid", "joints"}
+    assert set(info) == {"gauge_names", "status", "overtravel", "step_time_s", "collision"}
+    env.close()
+
+
+def test_rgb_array_frames_come_from_direct_mode() -> None:
+    env = make("pybullet", render_mode="rgb_array")
+    env.reset(seed=0)
+    frame = env.render()
+    env.close()
+    assert frame.shape == (480, 640, 3) and frame.dtype == np.uint8
+    assert len(np.unique(frame.reshape(-1, 3), axis=0)) > 20  # a picture, not a blank
+
+
+@pytest.mark.parametrize("vector", [gym.vector.SyncVectorEnv, gym.vector.AsyncVectorEnv])
+def test_vector_envs_run(vector) -> None:
+    envs = vector([lambda: make("pybullet") for _ in range(3)])
+    obs, _ = envs.reset(seed=4)
+    assert obs["gauges"].shape == (3, 6)
+    for _ in range(5):
+        obs, reward, *_ = envs.step(np.random.default_rng(0).uniform(-5, 5, (3, 3)))
+    assert reward.shape == (3,) and np.all(reward < 0)
+    envs.close()
