@@ -1,0 +1,232 @@
+"""The calibrator interface: measurements, estimates and the registry of strategies.
+
+A strategy has two halves, kept apart so a real machine's measured readings (a file) go
+through the same estimator as a virtual experiment:
+
+* ``collect(env)``: drives the environment through its public API only (actions in,
+  observations out) and returns the :class:`Measurements` it read and the time spent;
+* ``estimate(measurements, params, sigma)``: turns readings into an :class:`Estimate`.
+
+Strategies register themselves by name with :func:`register`; every module of this
+package is imported by :func:`available`, so adding a strategy is adding one module.
+"""
+
+from __future__ import annotations
+
+import csv
+import importlib
+import pkgutil
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+
+from orthoglide_env.gauges import GaugeSpec, layout_from_names
+from orthoglide_env.geometry import AXIS_NAMES, LEG_NAMES
+from orthoglide_env.kinematics import PAPER_POSTURES, paper_posture
+
+PARAM_NAMES: tuple[str, ...] = ("drho_x", "drho_y", "drho_z", "dL_x", "dL_y", "dL_z")
+#: Which of the six paper parameters each ``--params`` choice frees (the others stay 0).
+PARAM_SETS: dict[str, tuple[int, ...]] = {
+    "full": (0, 1, 2, 3, 4, 5),
+    "drho": (0, 1, 2),
+    "dL": (3, 4, 5),
+}
+CSV_COLUMNS: tuple[str, ...] = ("leg", "axis", "posture", "repetition", "reading_mm")
+
+
+class MeasurementFileError(ValueError):
+    """A measurement file that cannot be read; the message names line and column."""
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """One gauge reading: which gauge, at which posture, in which repetition."""
+
+    gauge: GaugeSpec
+    posture: str
+    repetition: int
+    reading: float
+
+
+@dataclass
+class Measurements:
+    """The readings of one experiment, plus the experiment time it cost (s)."""
+
+    items: list[Measurement] = field(default_factory=list)
+    experiment_time_s: float = 0.0
+
+    def __len__(self) -> int:
+        return len(self.items)
+
+    def to_csv(self, path: str | Path) -> None:
+        with Path(path).open("w", newline="") as handle:
+            writer = csv.writer(handle)
+            writer.writerow(CSV_COLUMNS)
+            for m in self.items:
+                writer.writerow([LEG_NAMES[m.gauge.leg], AXIS_NAMES[m.gauge.axis], m.posture,
+                                 m.repetition, repr(m.reading)])
+
+    @classmethod
+    def from_csv(cls, path: str | Path) -> Measurements:
+        """Read the documented CSV (header ``leg,axis,posture,repetition,reading_mm``)."""
+        path = Path(path)
+        try:
+            text = path.read_text()
+        except FileNotFoundError:
+            raise MeasurementFileError(f"measurement file not found: {path}") from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise MeasurementFileError(f"cannot read measurement file {path}: {exc}") from None
+        rows = list(csv.reader(text.splitlines()))
+        if not rows or [c.strip() for c in rows[0]] != list(CSV_COLUMNS):
+            raise MeasurementFileError(
+                f"{path}:1: header must be '{','.join(CSV_COLUMNS)}'"
+            )
+        items = [_parse_row(path, n, row) for n, row in enumerate(rows[1:], start=2)
+                 if any(c.strip() for c in row)]
+        if not items:
+            raise MeasurementFileError(f"{path}: no readings after the header")
+        return cls(items)
+
+
+def _parse_row(path: Path, line: int, row: list[str]) -> Measurement:
+    def fail(column: int, message: str) -> MeasurementFileError:
+        return MeasurementFileError(f"{path}:{line}: column {column} ({CSV_COLUMNS[column - 1]}): "
+                                    f"{message}")
+
+    if len(row) != len(CSV_COLUMNS):
+        raise MeasurementFileError(f"{path}:{line}: expected {len(CSV_COLUMNS)} columns, "
+                                   f"got {len(row)}")
+    leg, axis, posture, repetition, reading = (c.strip() for c in row)
+    if leg not in LEG_NAMES:
+        raise fail(1, f"leg must be one of {list(LEG_NAMES)}, got '{leg}'")
+    if axis not in AXIS_NAMES or axis == leg:
+        raise fail(2, f"axis must be one of the two axes normal to the {leg} leg, got '{axis}'")
+    if posture not in PAPER_POSTURES:
+        raise fail(3, f"posture must be one of {list(PAPER_POSTURES)}, got '{posture}'")
+    try:
+        rep = int(repetition)
+    except ValueError:
+        raise fail(4, f"repetition must be an integer, got '{repetition}'") from None
+    try:
+        value = float(reading)
+    except ValueError:
+        raise fail(5, f"reading must be a number in mm, got '{reading}'") from None
+    if not np.isfinite(value):
+        raise fail(5, f"reading must be finite, got '{reading}'")
+    return Measurement(layout_from_names([f"{leg}/{axis}"])[0], posture, rep, value)
+
+
+@dataclass
+class Estimate:
+    """A calibration result with its uncertainty and identifiability.
+
+    ``covariance`` is over the freed parameters (in ``PARAM_NAMES`` order); ``std`` has
+    ``None`` for the parameters the fit kept at zero.
+    """
+
+    strategy: str
+    params: str
+    drho: np.ndarray
+    dL: np.ndarray
+    covariance: np.ndarray
+    residuals: np.ndarray
+    singular_values: np.ndarray
+    crlb: np.ndarray
+    weak_directions: list[dict[str, float]]
+    n_readings: int
+    experiment_time_s: float
+    verification_rms_mm: float | None = None
+    iterations: int = 0
+
+    @property
+    def std(self) -> dict[str, list[float | None]]:
+        free = PARAM_SETS[self.params]
+        full: list[float | None] = [None] * 6
+        for k, idx in enumerate(free):
+            full[idx] = float(np.sqrt(max(self.covariance[k, k], 0.0)))
+        return {"drho": full[:3], "dL": full[3:]}
+
+    @property
+    def residual_rms_mm(self) -> float:
+        return float(np.sqrt(np.mean(self.residuals**2))) if self.residuals.size else 0.0
+
+    @property
+    def condition_number(self) -> float:
+        sv = self.singular_values
+        return float(sv[0] / sv[-1]) if sv.size and sv[-1] > 0 else float("inf")
+
+    def to_dict(self) -> dict[str, Any]:
+        data = asdict(self)
+        data.update(
+            drho=self.drho.tolist(), dL=self.dL.tolist(), covariance=self.covariance.tolist(),
+            residuals=self.residuals.tolist(), singular_values=self.singular_values.tolist(),
+            crlb=self.crlb.tolist(), std=self.std, residual_rms_mm=self.residual_rms_mm,
+            condition_number=self.condition_number,
+        )
+        return data
+
+
+class Calibrator:
+    """Base class of strategies: ``collect`` then ``estimate``."""
+
+    name: ClassVar[str] = ""
+
+    def collect(self, env: gym.Env) -> Measurements:
+        raise NotImplementedError
+
+    def estimate(self, data: Measurements, params: str = "full", sigma: float = 0.01,
+                 *, verify: bool = True) -> Estimate:
+        raise NotImplementedError
+
+    def run(self, env: gym.Env, params: str = "full", sigma: float | None = None,
+            *, verify: bool = True) -> Estimate:
+        """Run one experiment on ``env`` (already reset) and estimate.  ``sigma`` defaults
+        to the gauges' spec-sheet noise (``env.unwrapped.gauge_noise``)."""
+        if sigma is None:
+            sigma = env.unwrapped.gauge_noise.effective_sigma
+        return self.estimate(self.collect(env), params, sigma, verify=verify)
+
+
+_REGISTRY: dict[str, type[Calibrator]] = {}
+
+
+def register(cls: type[Calibrator]) -> type[Calibrator]:
+    """Class decorator: make a strategy available by its ``name``."""
+    if not cls.name or cls.name in _REGISTRY:
+        raise ValueError(f"strategy name '{cls.name}' is empty or taken")
+    _REGISTRY[cls.name] = cls
+    return cls
+
+
+def available() -> list[str]:
+    """Names of every strategy (imports each module of this package once)."""
+    package = importlib.import_module("calibrators")
+    for module in pkgutil.iter_modules(package.__path__):
+        if module.name not in ("cli", "__main__"):
+            importlib.import_module(f"calibrators.{module.name}")
+    return sorted(_REGISTRY)
+
+
+def get_strategy(name: str) -> Calibrator:
+    names = available()
+    if name not in _REGISTRY:
+        raise ValueError(f"unknown strategy '{name}'; choose from {names}")
+    return _REGISTRY[name]()
+
+
+def check_params(params: str) -> tuple[int, ...]:
+    if params not in PARAM_SETS:
+        raise ValueError(f"unknown parameter set '{params}'; choose from {list(PARAM_SETS)}")
+    return PARAM_SETS[params]
+
+
+def move_and_read(env: gym.Env, posture: str) -> tuple[dict[str, np.ndarray], float]:
+    """Drive to a paper posture; returns the observation and the time it cost (s)."""
+    obs, reward, terminated, truncated, info = env.step(paper_posture(posture))
+    if terminated or truncated:
+        reason = info.get("collision") or "the episode's step limit"
+        raise RuntimeError(f"experiment stopped at {posture}: {reason}")
+    return obs, -float(reward)
