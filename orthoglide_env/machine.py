@@ -21,13 +21,12 @@ frame is its COM frame shifted by the URDF's inertial origin.
 from __future__ import annotations
 
 import numpy as np
-import pybullet as pb
 from scipy.spatial.transform import Rotation
 
 from .gauges import RAY_BACKOFF, Gauge, on_flat_face, ray_box_distance
 from .geometry import BAR_SECTION, D_NOMINAL, LEG_NAMES, R_LEG, MachineParams
 from .kinematics import direct, leg_angles
-from .simulator import PhysicsSettings, Simulator
+from .simulator import PhysicsSettings, Simulator, pb
 from .urdf_writer import MM, bar_length, link_name, write_urdf
 
 MOTION_MODES: tuple[str, ...] = ("quasi-static", "dynamic")

@@ -7,12 +7,39 @@ releases it on :meth:`close`.  Metres and kilograms live here and below only.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import sys
 import tempfile
+from collections.abc import Iterator
 from dataclasses import dataclass
 
-import pybullet as pb
-from pybullet_utils.bullet_client import BulletClient
+
+@contextlib.contextmanager
+def _c_output_silenced() -> Iterator[None]:
+    """Silence what PyBullet's C code prints on import and connect (a build banner on
+    stderr, ``argv[0]=`` on stdout): it would corrupt ``--json`` output and one-line
+    error messages.  Python-level streams are flushed first so nothing of ours is lost."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 1)
+        os.dup2(devnull, 2)
+        yield
+    finally:
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        for fd in (*saved, devnull):
+            os.close(fd)
+
+
+with _c_output_silenced():
+    import pybullet as pb
+    from pybullet_utils.bullet_client import BulletClient
+
+__all__ = ["PhysicsSettings", "Simulator", "pb"]
 
 
 @dataclass(frozen=True)
@@ -37,7 +64,8 @@ class Simulator:
     def __init__(self, *, gui: bool = False, settings: PhysicsSettings | None = None) -> None:
         self.settings = settings or PhysicsSettings()
         self.gui = gui
-        self.client = BulletClient(connection_mode=pb.GUI if gui else pb.DIRECT)
+        with _c_output_silenced():
+            self.client = BulletClient(connection_mode=pb.GUI if gui else pb.DIRECT)
         s = self.settings
         self.client.setPhysicsEngineParameter(
             fixedTimeStep=s.time_step,

@@ -1,0 +1,179 @@
+"""Monte-Carlo comparison of strategies over many random machines.
+
+Every machine is drawn from a seed; each strategy runs its own experiment on a fresh
+episode of that machine (same seed, so the same gauge installation and noise stream),
+and is scored against the truth.  Work is spread over processes; the results are the
+same whatever the number of processes.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+from tqdm import tqdm
+
+import orthoglide_env
+from orthoglide_env.geometry import MachineParams
+from orthoglide_env.scoring import score
+
+from .base import PARAM_NAMES, PARAM_SETS, get_strategy
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One strategy on one machine."""
+
+    strategy: str
+    machine: int
+    param_error: np.ndarray  # (6,), estimate - truth, mm
+    crlb: np.ndarray  # (6,), mm (NaN for fixed parameters)
+    std: np.ndarray  # (6,), reported standard deviations, mm
+    tcp_before_rms: float
+    tcp_after_rms: float
+    tcp_after_max: float
+    residual_rms: float
+    experiment_time_s: float
+
+
+@dataclass(frozen=True)
+class Config:
+    strategies: tuple[str, ...]
+    errors: str
+    sigma: float
+    resolution: float
+    backend: str
+    params: str
+    seed: int
+
+
+def run_machine(config: Config, index: int) -> list[Trial]:
+    """Every strategy on machine ``index`` of the run."""
+    env = gym.make(orthoglide_env.ENV_ID, errors=config.errors, gauge_sigma=config.sigma,
+                   gauge_resolution=config.resolution, backend=config.backend)
+    seed = config.seed * 1_000_003 + index
+    trials = []
+    try:
+        for name in config.strategies:
+            env.reset(seed=seed)
+            sigma = env.unwrapped.gauge_noise.effective_sigma
+            est = get_strategy(name).run(env, config.params, sigma, verify=False)
+            truth = env.unwrapped.true_machine
+            report = score(MachineParams(drho=est.drho, dL=est.dL), truth)
+            free = list(PARAM_SETS[config.params])
+            crlb, std = np.full(6, np.nan), np.full(6, np.nan)
+            crlb[free] = est.crlb
+            std[free] = np.sqrt(np.diag(est.covariance))
+            trials.append(Trial(
+                name, index, np.concatenate([est.drho - truth.drho, est.dL - truth.dL]),
+                crlb, std, report.tcp_before.rms, report.tcp_after.rms, report.tcp_after.max,
+                est.residual_rms_mm, est.experiment_time_s,
+            ))
+    finally:
+        env.close()
+    return trials
+
+
+def run(config: Config, machines: int, jobs: int | None = None,
+        progress: bool = True) -> list[Trial]:
+    """Run the comparison; ``jobs`` processes (default: every core)."""
+    jobs = jobs or os.cpu_count() or 1
+    trials: list[Trial] = []
+    bar = tqdm(total=machines, desc="machines", disable=not progress, unit="machine")
+    if jobs == 1:
+        for i in range(machines):
+            trials += run_machine(config, i)
+            bar.update()
+    else:
+        with ProcessPoolExecutor(jobs) as pool:
+            futures = [pool.submit(run_machine, config, i) for i in range(machines)]
+            for future in futures:
+                trials += future.result()
+                bar.update()
+    bar.close()
+    return trials
+
+
+def summary(trials: list[Trial]) -> list[dict[str, float | str]]:
+    """Per strategy: median and 95th percentile of |parameter error| (over all freed
+    parameters), TCP error after calibration, experiment time, and the ratio of the RMS
+    error of each parameter to its Cramér-Rao bound (worst parameter shown)."""
+    rows = []
+    for name in dict.fromkeys(t.strategy for t in trials):
+        mine = [t for t in trials if t.strategy == name]
+        err = np.array([t.param_error for t in mine])
+        free = ~np.isnan(mine[0].crlb)
+        abs_err = np.abs(err[:, free])
+        rms = np.sqrt(np.mean(err[:, free] ** 2, axis=0))
+        crlb = np.sqrt(np.mean(np.array([t.crlb[free] for t in mine]) ** 2, axis=0))
+        after = np.array([t.tcp_after_rms for t in mine])
+        rows.append({
+            "strategy": name,
+            "machines": len(mine),
+            "param_err_median_mm": float(np.median(abs_err)),
+            "param_err_p95_mm": float(np.percentile(abs_err, 95)),
+            "tcp_before_rms_median_mm": float(np.median([t.tcp_before_rms for t in mine])),
+            "tcp_after_rms_median_mm": float(np.median(after)),
+            "tcp_after_rms_p95_mm": float(np.percentile(after, 95)),
+            "residual_rms_median_mm": float(np.median([t.residual_rms for t in mine])),
+            "experiment_time_median_s": float(np.median([t.experiment_time_s for t in mine])),
+            "rms_over_crlb_worst": float(np.max(rms / crlb)),
+            "rms_over_crlb_best": float(np.min(rms / crlb)),
+        })
+    return rows
+
+
+def write_outputs(trials: list[Trial], rows: list[dict], out: Path) -> list[Path]:
+    """CSV of every trial and of the summary, and PNG plots, in ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    trial_csv = out / "trials.csv"
+    with trial_csv.open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["strategy", "machine", *(f"err_{n}" for n in PARAM_NAMES),
+                         *(f"crlb_{n}" for n in PARAM_NAMES), "tcp_before_rms", "tcp_after_rms",
+                         "tcp_after_max", "residual_rms", "experiment_time_s"])
+        for t in trials:
+            writer.writerow([t.strategy, t.machine, *t.param_error, *t.crlb, t.tcp_before_rms,
+                             t.tcp_after_rms, t.tcp_after_max, t.residual_rms,
+                             t.experiment_time_s])
+    summary_csv = out / "summary.csv"
+    with summary_csv.open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    return [trial_csv, summary_csv, *_plots(trials, out)]
+
+
+def _plots(trials: list[Trial], out: Path) -> list[Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot as plt
+
+    names = list(dict.fromkeys(t.strategy for t in trials))
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    for name in names:
+        mine = [t for t in trials if t.strategy == name]
+        err = np.array([t.param_error for t in mine])
+        axes[0].plot(PARAM_NAMES, np.sqrt(np.nanmean(err**2, axis=0)), "o-", label=f"{name} RMS")
+        crlb = np.sqrt(np.mean(np.array([t.crlb for t in mine]) ** 2, axis=0))
+        axes[0].plot(PARAM_NAMES, crlb, "x--", label=f"{name} CRLB")
+    axes[0].set_ylabel("parameter error (mm)")
+    axes[0].set_title("RMS parameter error vs Cramér-Rao bound")
+    axes[0].legend(fontsize=8)
+    before = [t.tcp_before_rms for t in trials if t.strategy == names[0]]
+    data = [before] + [[t.tcp_after_rms for t in trials if t.strategy == n] for n in names]
+    axes[1].boxplot(data, tick_labels=["uncalibrated", *names])
+    axes[1].set_yscale("log")
+    axes[1].set_ylabel("TCP error RMS over the workspace (mm)")
+    axes[1].set_title("Positioning accuracy")
+    fig.tight_layout()
+    path = out / "compare.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return [path]

@@ -1,0 +1,180 @@
+"""Calibration strategies: the paper's Table 1, the exact solver, statistics against the
+Cramér-Rao bound, the measurement file and the registry."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from conftest import paper_matrix as eq10
+
+import orthoglide_env
+from calibrators.base import (
+    Measurement,
+    MeasurementFileError,
+    Measurements,
+    available,
+    get_strategy,
+)
+from calibrators.differences import differences, paper_matrix
+from orthoglide_env.gauges import GaugeSpec
+
+TABLE1 = {"drho": [4.66, -5.36, 1.46], "dL": [5.20, -5.96, 3.16]}
+
+
+def run(strategy: str, params: str, machine: dict, **env_kwargs):
+    env = gym.make(orthoglide_env.ENV_ID, backend="exact", errors="paper", **env_kwargs)
+    env.reset(seed=0, options={"machine": machine})
+    est = get_strategy(strategy).run(env, params)
+    truth = env.unwrapped.true_machine
+    env.close()
+    return est, truth
+
+
+def test_registry_finds_every_strategy() -> None:
+    assert {"paper", "gauss-newton"} <= set(available())
+    with pytest.raises(ValueError, match="unknown strategy"):
+        get_strategy("oracle")
+
+
+@pytest.mark.parametrize(
+    ("params", "drho", "dL"),
+    [("drho", [-0.48, 0.49, -1.67], [0, 0, 0]), ("dL", [0, 0, 0], [0.50, -0.52, 1.69])],
+)
+def test_paper_reduced_fits_reproduce_table1(params: str, drho, dL) -> None:
+    # Noise-free machine whose true errors are Table 1's full-set row; the paper's rows
+    # are printed to 0.01 mm, and the tolerance is the issue's 0.02 mm.
+    est, _ = run("paper", params, TABLE1, gauge_sigma=0.0, gauge_resolution=0.0)
+    np.testing.assert_allclose(est.drho, drho, atol=0.02)
+    np.testing.assert_allclose(est.dL, dL, atol=0.02)
+
+
+def test_gauss_newton_recovers_table1_exactly_and_paper_is_biased() -> None:
+    gn, truth = run("gauss-newton", "full", TABLE1, gauge_sigma=0.0, gauge_resolution=0.0)
+    np.testing.assert_allclose(np.concatenate([gn.drho, gn.dL]),
+                               np.concatenate([truth.drho, truth.dL]), atol=1e-3)
+    assert gn.residual_rms_mm < 1e-9
+    paper, _ = run("paper", "full", TABLE1, gauge_sigma=0.0, gauge_resolution=0.0)
+    bias = np.concatenate([paper.drho - truth.drho, paper.dL - truth.dL])
+    # The linearisation of eq. (10) at errors of ~5 mm leaves a bias of tenths of a mm.
+    assert 0.1 < np.max(np.abs(bias)) < 0.5
+
+
+def test_paper_design_matches_eq10_and_its_conditioning() -> None:
+    est, _ = run("paper", "full", TABLE1, gauge_sigma=0.0, gauge_resolution=0.0)
+    np.testing.assert_allclose(est.singular_values,
+                               np.linalg.svd(eq10(), compute_uv=False), rtol=1e-12)
+    assert est.condition_number == pytest.approx(61.9, abs=0.1)
+    # The three weak directions are drho_i ~ dL_i, growing together.
+    assert len(est.weak_directions) == 3
+    for weak in est.weak_directions:
+        for axis in "xyz":
+            assert weak.get(f"drho_{axis}", 0) == pytest.approx(weak.get(f"dL_{axis}", 0),
+                                                                abs=0.03)
+
+
+def test_crlb_of_the_paper_design_is_about_43_sigma() -> None:
+    """DESIGN.md: with independent noise sigma on each of the twelve differences, each
+    parameter's std is ~43 sigma.  Our differences average 3 repetitions against 4 Zero
+    readings, so their variance is sigma^2 (1/3 + 1/4) with covariance sigma^2/4 within
+    a gauge; the bound follows from the same matrix."""
+    ones = np.linalg.inv(eq10().T @ eq10())
+    assert np.sqrt(np.diag(ones)) == pytest.approx(np.full(6, 43.0), rel=0.05)
+    sigma = 0.01
+    rows = differences(Measurements(est_items(TABLE1)))
+    jac = paper_matrix(rows)
+    expected = sigma * np.sqrt(np.diag(np.linalg.inv(jac.T @ np.linalg.inv(rows.cov_unit) @ jac)))
+    paper = get_strategy("paper").estimate(Measurements(est_items(TABLE1)), "full", sigma)
+    np.testing.assert_allclose(paper.crlb, expected, rtol=1e-12)
+    assert np.all((paper.crlb > 30 * sigma) & (paper.crlb < 43 * sigma))
+
+
+def est_items(machine: dict) -> list[Measurement]:
+    env = gym.make(orthoglide_env.ENV_ID, backend="exact", errors="paper", gauge_sigma=0.0,
+                   gauge_resolution=0.0)
+    env.reset(seed=0, options={"machine": machine})
+    data = get_strategy("paper").collect(env)
+    env.close()
+    return data.items
+
+
+def test_experiment_is_the_papers_sequence() -> None:
+    items = est_items(TABLE1)
+    postures = [m.posture for m in items if m.gauge == GaugeSpec(0, 1)]
+    assert postures == ["Zero", "XMax", "XMin"] * 3 + ["Zero"]
+    assert len(items) == 60  # 3 legs x 2 gauges x 10 postures, all valid
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("strategy", ["gauss-newton", "paper"])
+def test_statistics_against_the_cramer_rao_bound(strategy: str) -> None:
+    """Paper-preset machines, gauge sigma 0.01 mm (resolution 0 so the noise is exactly
+    normal with known variance), 200 machines.  The RMS error of each parameter estimates
+    sigma_k with a relative standard error of 1/sqrt(2 * 200) = 5%, so 10% is a 2-sigma
+    band for an efficient, unbiased estimator (gauss-newton); the reported std must match
+    the empirical spread in the same band.  The linear paper fit is unbiased only to first
+    order: on machines with 2 mm errors its mean error is systematically off (measured
+    -0.14 to -0.21 mm, 4-6 standard errors), so its RMS exceeds its bound; it must never
+    beat the bound by more than the sampling band."""
+    env = gym.make(orthoglide_env.ENV_ID, backend="exact", errors="paper", gauge_sigma=0.01,
+                   gauge_resolution=0.0)
+    calibrator = get_strategy(strategy)
+    errors, stds, crlbs = [], [], []
+    for seed in range(200):
+        env.reset(seed=seed)
+        est = calibrator.run(env, "full", verify=False)
+        truth = env.unwrapped.true_machine
+        errors.append(np.concatenate([est.drho - truth.drho, est.dL - truth.dL]))
+        stds.append(np.sqrt(np.diag(est.covariance)))
+        crlbs.append(est.crlb)
+    env.close()
+    rms = np.sqrt(np.mean(np.square(errors), axis=0))
+    crlb = np.sqrt(np.mean(np.square(crlbs), axis=0))
+    reported = np.sqrt(np.mean(np.square(stds), axis=0))
+    ratio = rms / crlb
+    if strategy == "gauss-newton":
+        np.testing.assert_allclose(ratio, 1.0, atol=0.10)
+        np.testing.assert_allclose(rms / reported, 1.0, atol=0.10)
+    else:
+        assert np.all(ratio > 0.9)
+        mean = np.mean(errors, axis=0)
+        standard_error = np.std(errors, axis=0) / np.sqrt(len(errors))
+        assert np.all(np.abs(mean) > 3 * standard_error)  # the linearisation bias
+
+
+def test_measurement_csv_round_trip_and_errors(tmp_path) -> None:
+    data = Measurements(est_items(TABLE1))
+    path = tmp_path / "m.csv"
+    data.to_csv(path)
+    again = Measurements.from_csv(path)
+    assert again.items == data.items
+    est = get_strategy("gauss-newton").estimate(again, "full", 0.01)
+    np.testing.assert_allclose(est.drho, TABLE1["drho"], atol=1e-3)
+    lines = path.read_text().splitlines()
+    for bad, fragment in (
+        ("leg,axis,posture,rep,reading_mm", ":1: header"),
+        ("x,x,XMax,1,0.1", ":2: column 2 (axis)"),
+        ("x,y,XMid,1,0.1", ":2: column 3 (posture)"),
+        ("x,y,XMax,one,0.1", ":2: column 4 (repetition)"),
+        ("x,y,XMax,1,abc", ":2: column 5 (reading_mm)"),
+        ("x,y,XMax,1", ":2: expected 5 columns"),
+    ):
+        content = [bad] if bad.startswith("leg") else [lines[0], bad]
+        path.write_text("\n".join(content) + "\n")
+        with pytest.raises(MeasurementFileError, match=fragment.replace("(", r"\(")
+                           .replace(")", r"\)")):
+            Measurements.from_csv(path)
+    with pytest.raises(MeasurementFileError, match="not found"):
+        Measurements.from_csv(tmp_path / "none.csv")
+
+
+def test_too_few_valid_readings_is_a_clear_error() -> None:
+    data = Measurements(est_items(TABLE1)[:10])
+    with pytest.raises(ValueError, match="usable differences"):
+        get_strategy("paper").estimate(data, "full", 0.01)
+
+
+def test_verification_on_held_out_repetitions_sees_the_noise() -> None:
+    est, _ = run("gauss-newton", "full", TABLE1, gauge_sigma=0.02, gauge_resolution=0.01)
+    # Held-out differences of one repetition carry noise of about sigma * sqrt(2).
+    assert 0.01 < est.verification_rms_mm < 0.1
