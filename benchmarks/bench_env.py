@@ -1,0 +1,60 @@
+"""Environment throughput: steps per second of one env and of an AsyncVectorEnv of 2.
+
+    python benchmarks/bench_env.py [--steps 3000]
+
+Actions are small random moves around Zero (the gauges stay in contact, as in a
+calibration); resets are not timed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import gymnasium as gym
+import numpy as np
+
+import orthoglide_env
+
+
+def make(backend: str):
+    return lambda: gym.make(orthoglide_env.ENV_ID, backend=backend)
+
+
+def single(backend: str, steps: int) -> float:
+    env = make(backend)()
+    env.reset(seed=0)
+    actions = np.random.default_rng(0).uniform(-8, 8, (steps, 3))
+    start = time.perf_counter()
+    for a in actions:
+        env.step(a)
+    rate = steps / (time.perf_counter() - start)
+    env.close()
+    return rate
+
+
+def vector(backend: str, steps: int, workers: int) -> float:
+    envs = gym.vector.AsyncVectorEnv([make(backend) for _ in range(workers)])
+    envs.reset(seed=0)
+    actions = np.random.default_rng(0).uniform(-8, 8, (steps // workers, workers, 3))
+    start = time.perf_counter()
+    for a in actions:
+        envs.step(a)
+    rate = len(actions) * workers / (time.perf_counter() - start)
+    envs.close()
+    return rate
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=3000)
+    args = parser.parse_args()
+    print(f"{'backend':10}{'1 env steps/s':>15}{'Async x2 steps/s':>18}{'speed-up':>10}")
+    for backend in ("pybullet", "exact"):
+        one = single(backend, args.steps)
+        two = vector(backend, args.steps, 2)
+        print(f"{backend:10}{one:15.0f}{two:18.0f}{two / one:10.2f}")
+
+
+if __name__ == "__main__":
+    main()
