@@ -17,12 +17,12 @@ import numpy as np
 import orthoglide_env
 
 
-def make(backend: str):
-    return lambda: gym.make(orthoglide_env.ENV_ID, backend=backend)
+def make(backend: str, motion: str = "quasi-static"):
+    return lambda: gym.make(orthoglide_env.ENV_ID, backend=backend, motion=motion)
 
 
-def single(backend: str, steps: int) -> float:
-    env = make(backend)()
+def single(backend: str, steps: int, motion: str = "quasi-static") -> float:
+    env = make(backend, motion)()
     env.reset(seed=0)
     actions = np.random.default_rng(0).uniform(-8, 8, (steps, 3))
     start = time.perf_counter()
@@ -33,8 +33,8 @@ def single(backend: str, steps: int) -> float:
     return rate
 
 
-def vector(backend: str, steps: int, workers: int) -> float:
-    envs = gym.vector.AsyncVectorEnv([make(backend) for _ in range(workers)])
+def vector(backend: str, steps: int, workers: int, motion: str = "quasi-static") -> float:
+    envs = gym.vector.AsyncVectorEnv([make(backend, motion) for _ in range(workers)])
     envs.reset(seed=0)
     actions = np.random.default_rng(0).uniform(-8, 8, (steps // workers, workers, 3))
     start = time.perf_counter()
@@ -49,11 +49,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=3000)
     args = parser.parse_args()
-    print(f"{'backend':10}{'1 env steps/s':>15}{'Async x2 steps/s':>18}{'speed-up':>10}")
-    for backend in ("pybullet", "exact"):
-        one = single(backend, args.steps)
-        two = vector(backend, args.steps, 2)
-        print(f"{backend:10}{one:15.0f}{two:18.0f}{two / one:10.2f}")
+    print(f"{'backend':10}{'motion':14}{'1 env steps/s':>15}{'Async x2 steps/s':>18}"
+          f"{'speed-up':>10}")
+    for backend, motion, steps in (("pybullet", "quasi-static", args.steps),
+                                   ("pybullet", "dynamic", args.steps // 10),
+                                   ("exact", "quasi-static", args.steps)):
+        one = single(backend, steps, motion)
+        two = vector(backend, steps, 2, motion)
+        print(f"{backend:10}{motion:14}{one:15.0f}{two:18.0f}{two / one:10.2f}")
 
 
 if __name__ == "__main__":

@@ -185,6 +185,9 @@ def cmd_compare(args: argparse.Namespace) -> None:
               f"{r['tcp_after_rms_p95_mm']:8.4f}{r['residual_rms_median_mm']:8.4f}"
               f"{r['experiment_time_median_s']:8.0f}"
               f"{r['rms_over_crlb_best']:7.2f}-{r['rms_over_crlb_worst']:<7.2f}")
+    for r in rows:
+        if r["failed"]:
+            print(f"{r['strategy']}: {r['failed']} of {r['machines']} calibrations failed")
     for path in paths:
         print(f"wrote {path}")
 

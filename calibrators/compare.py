@@ -62,8 +62,13 @@ def run_machine(config: Config, index: int) -> list[Trial]:
         for name in config.strategies:
             env.reset(seed=seed)
             sigma = env.unwrapped.gauge_noise.effective_sigma
-            est = get_strategy(name).run(env, config.params, sigma, verify=False)
             truth = env.unwrapped.true_machine
+            try:
+                est = get_strategy(name).run(env, config.params, sigma, verify=False)
+            except (RuntimeError, ValueError, np.linalg.LinAlgError):
+                # A failed calibration is a result too: it counts, it does not stop the run.
+                trials.append(Trial(name, index, *(np.full(6, np.nan),) * 3, *(np.nan,) * 5))
+                continue
             report = score(MachineParams(drho=est.drho, dL=est.dL), truth)
             free = list(PARAM_SETS[config.params])
             crlb, std = np.full(6, np.nan), np.full(6, np.nan)
@@ -105,7 +110,8 @@ def summary(trials: list[Trial]) -> list[dict[str, float | str]]:
     error of each parameter to its Cramér-Rao bound (worst parameter shown)."""
     rows = []
     for name in dict.fromkeys(t.strategy for t in trials):
-        mine = [t for t in trials if t.strategy == name]
+        everything = [t for t in trials if t.strategy == name]
+        mine = [t for t in everything if np.isfinite(t.tcp_after_rms)]
         err = np.array([t.param_error for t in mine])
         free = ~np.isnan(mine[0].crlb)
         abs_err = np.abs(err[:, free])
@@ -114,7 +120,8 @@ def summary(trials: list[Trial]) -> list[dict[str, float | str]]:
         after = np.array([t.tcp_after_rms for t in mine])
         rows.append({
             "strategy": name,
-            "machines": len(mine),
+            "machines": len(everything),
+            "failed": len(everything) - len(mine),
             "param_err_median_mm": float(np.median(abs_err)),
             "param_err_p95_mm": float(np.percentile(abs_err, 95)),
             "tcp_before_rms_median_mm": float(np.median([t.tcp_before_rms for t in mine])),
@@ -158,7 +165,7 @@ def _plots(trials: list[Trial], out: Path) -> list[Path]:
     names = list(dict.fromkeys(t.strategy for t in trials))
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
     for name in names:
-        mine = [t for t in trials if t.strategy == name]
+        mine = [t for t in trials if t.strategy == name and np.isfinite(t.tcp_after_rms)]
         err = np.array([t.param_error for t in mine])
         axes[0].plot(PARAM_NAMES, np.sqrt(np.nanmean(err**2, axis=0)), "o-", label=f"{name} RMS")
         crlb = np.sqrt(np.mean(np.array([t.crlb for t in mine]) ** 2, axis=0))
@@ -166,8 +173,10 @@ def _plots(trials: list[Trial], out: Path) -> list[Path]:
     axes[0].set_ylabel("parameter error (mm)")
     axes[0].set_title("RMS parameter error vs Cramér-Rao bound")
     axes[0].legend(fontsize=8)
-    before = [t.tcp_before_rms for t in trials if t.strategy == names[0]]
-    data = [before] + [[t.tcp_after_rms for t in trials if t.strategy == n] for n in names]
+    before = [t.tcp_before_rms for t in trials if t.strategy == names[0]
+              and np.isfinite(t.tcp_before_rms)]
+    data = [before] + [[t.tcp_after_rms for t in trials if t.strategy == n
+                        and np.isfinite(t.tcp_after_rms)] for n in names]
     axes[1].boxplot(data, tick_labels=["uncalibrated", *names])
     axes[1].set_yscale("log")
     axes[1].set_ylabel("TCP error RMS over the workspace (mm)")

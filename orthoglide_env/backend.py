@@ -12,7 +12,7 @@ from typing import Protocol
 
 import numpy as np
 
-from .gauges import Gauge, exact_ray_distances, exact_target_boxes
+from .gauges import Gauge, collision_boxes, exact_ray_distances, exact_target_boxes
 from .geometry import MachineParams
 from .kinematics import direct
 
@@ -58,14 +58,15 @@ class ExactMachine:
     def __init__(self, machine: MachineParams, gauges: list[Gauge]) -> None:
         self.machine = machine
         self.gauges = list(gauges)
-        self._rho = np.zeros(3)
-        self._tcp = direct(machine, self._rho)
+        self.move(np.zeros(3))
 
     def move(self, rho: np.ndarray, mode: str = "quasi-static") -> None:
         if mode not in MOTION_MODES:
             raise ValueError(f"unknown motion mode '{mode}'; choose from {list(MOTION_MODES)}")
-        self._tcp = direct(self.machine, rho)
         self._rho = np.array(rho, dtype=float)
+        self._tcp = direct(self.machine, self._rho)
+        # The geometry of a posture is computed once; every reading below uses it.
+        self._boxes = collision_boxes(self.machine, self._rho, self._tcp)
 
     def encoders(self) -> np.ndarray:
         return self._rho.copy()
@@ -74,7 +75,7 @@ class ExactMachine:
         return self._tcp.copy()
 
     def gauge_distances(self) -> np.ndarray:
-        return exact_ray_distances(self.machine, self.gauges, self._rho)
+        return exact_ray_distances(self.machine, self.gauges, self._rho, self._boxes)
 
     def collisions(self) -> list[str]:
         # Parts of different legs cannot meet within the joint limits: the simulator's
@@ -82,7 +83,7 @@ class ExactMachine:
         return []
 
     def target_boxes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return exact_target_boxes(self.machine, self.gauges, self._rho)
+        return exact_target_boxes(self.gauges, self._boxes)
 
     def set_gauges(self, gauges: list[Gauge]) -> None:
         self.gauges = list(gauges)

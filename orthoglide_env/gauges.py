@@ -320,13 +320,17 @@ def target_box(spec: GaugeSpec) -> int:
     return 2 * spec.leg + (0 if spec.bar > 0 else 1)
 
 
-def exact_ray_distances(machine: MachineParams, gauges: list[Gauge], rho: np.ndarray) -> np.ndarray:
+def exact_ray_distances(
+    machine: MachineParams, gauges: list[Gauge], rho: np.ndarray,
+    boxes: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
     """Exact tip distances ``t`` of every gauge, shape ``(..., n_gauges)``.
 
     NaN when the ray misses the bar's flat face, or when another part lies on the ray
     before the bar within the window a gauge can see (``-RAY_BACKOFF`` to
     ``travel + RAY_BACKOFF``).  A bar behind the tip (``t < 0``) is an overtravel
-    whatever else is on the ray: it presses the gauge.
+    whatever else is on the ray: it presses the gauge.  ``boxes``: the
+    :func:`collision_boxes` at ``rho`` when already computed.
     """
     rho = np.asarray(rho, dtype=float)
     if not gauges:
@@ -334,7 +338,7 @@ def exact_ray_distances(machine: MachineParams, gauges: list[Gauge], rho: np.nda
     origins = np.array([g.origin for g in gauges])[:, None, :]
     directions = np.array([g.direction for g in gauges])[:, None, :]
     target = np.array([target_box(g.spec) for g in gauges])
-    centre, rot, half = collision_boxes(machine, rho, direct(machine, rho))
+    centre, rot, half = boxes or collision_boxes(machine, rho, direct(machine, rho))
     t_in, t_out = ray_box_interval(
         origins, directions, centre[..., None, :, :], rot[..., None, :, :, :],
         half[..., None, :, :],
@@ -352,11 +356,10 @@ def exact_ray_distances(machine: MachineParams, gauges: list[Gauge], rho: np.nda
 
 
 def exact_target_boxes(
-    machine: MachineParams, gauges: list[Gauge], rho: np.ndarray
+    gauges: list[Gauge], boxes: tuple[np.ndarray, np.ndarray, np.ndarray]
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The box of every gauge's target bar at ``rho`` (centres, rotations, half extents)."""
-    rho = np.asarray(rho, dtype=float)
-    centre, rot, half = collision_boxes(machine, rho, direct(machine, rho))
+    """The box of every gauge's target bar among the :func:`collision_boxes` ``boxes``."""
+    centre, rot, half = boxes
     target = [target_box(g.spec) for g in gauges]
     return centre[..., target, :], rot[..., target, :, :], half[..., target, :]
 
