@@ -20,7 +20,12 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -q
 
 bench: $(STAMP)
-	$(BIN)/python benchmarks/run_all.py
+	$(BIN)/python benchmarks/fidelity.py --machines 200
+	$(BIN)/python benchmarks/bench_machine.py
+	$(BIN)/python benchmarks/bench_env.py
+	$(BIN)/python benchmarks/statistics.py
+	$(BIN)/python benchmarks/realistic.py
+	$(BIN)/python benchmarks/bench_calibrators.py
 
 clean:
 	rm -rf $(VENV) results .pytest_cache
