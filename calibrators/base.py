@@ -24,7 +24,7 @@ import gymnasium as gym
 import numpy as np
 
 from orthoglide_env.gauges import GaugeSpec, layout_from_names
-from orthoglide_env.geometry import AXIS_NAMES, LEG_NAMES
+from orthoglide_env.geometry import AXIS_NAMES, LEG_NAMES, read_user_file
 from orthoglide_env.kinematics import PAPER_POSTURES, paper_posture
 
 PARAM_NAMES: tuple[str, ...] = ("drho_x", "drho_y", "drho_z", "dL_x", "dL_y", "dL_z")
@@ -73,12 +73,7 @@ class Measurements:
     def from_csv(cls, path: str | Path) -> Measurements:
         """Read the documented CSV (header ``leg,axis,posture,repetition,reading_mm``)."""
         path = Path(path)
-        try:
-            text = path.read_text()
-        except FileNotFoundError:
-            raise MeasurementFileError(f"measurement file not found: {path}") from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise MeasurementFileError(f"cannot read measurement file {path}: {exc}") from None
+        text = read_user_file(path, "measurement file", MeasurementFileError)
         rows = list(csv.reader(text.splitlines()))
         if not rows or [c.strip() for c in rows[0]] != list(CSV_COLUMNS):
             raise MeasurementFileError(

@@ -81,6 +81,17 @@ class MachineFileError(ValueError):
     """A machine description (JSON file or dict) that does not describe a machine."""
 
 
+def read_user_file(path: Path, kind: str, error: type[ValueError]) -> str:
+    """A user's text file, or ``error`` with a one-line message naming the file."""
+    try:
+        return path.read_text()
+    except FileNotFoundError:
+        raise error(f"{kind} not found: {path}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        reason = getattr(exc, "strerror", None) or str(exc)
+        raise error(f"cannot read {kind} {path}: {reason}") from None
+
+
 @dataclass
 class MachineParams:
     """Geometric errors of one Orthoglide, relative to the nominal prototype.
@@ -178,12 +189,7 @@ class MachineParams:
     @classmethod
     def from_json(cls, path: str | Path) -> MachineParams:
         path = Path(path)
-        try:
-            text = path.read_text()
-        except FileNotFoundError:
-            raise MachineFileError(f"machine file not found: {path}") from None
-        except OSError as exc:
-            raise MachineFileError(f"cannot read machine file {path}: {exc.strerror}") from None
+        text = read_user_file(path, "machine file", MachineFileError)
         try:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
