@@ -19,6 +19,11 @@ from .kinematics import direct
 MOTION_MODES: tuple[str, ...] = ("quasi-static", "dynamic")
 
 
+def check_motion_mode(mode: str) -> None:
+    if mode not in MOTION_MODES:
+        raise ValueError(f"unknown motion mode '{mode}'; choose from {list(MOTION_MODES)}")
+
+
 class MachineBackend(Protocol):
     """A virtual Orthoglide with gauges installed on its base (ground truth inside)."""
 
@@ -61,8 +66,7 @@ class ExactMachine:
         self.move(np.zeros(3))
 
     def move(self, rho: np.ndarray, mode: str = "quasi-static") -> None:
-        if mode not in MOTION_MODES:
-            raise ValueError(f"unknown motion mode '{mode}'; choose from {list(MOTION_MODES)}")
+        check_motion_mode(mode)
         self._rho = np.array(rho, dtype=float)
         self._tcp = direct(self.machine, self._rho)
         # The geometry of a posture is computed once; every reading below uses it.

@@ -119,9 +119,6 @@ class Gauge:
     travel: float = DEFAULT_TRAVEL
     zero: float = DEFAULT_TRAVEL / 2
 
-    def with_zero(self, t_zero: float) -> Gauge:
-        return replace(self, zero=float(t_zero))
-
 
 def layout_from_names(names: list[str]) -> tuple[GaugeSpec, ...]:
     """Parse names such as ``"x-leg/y"`` or ``"x/y@0.3"`` into gauge specs."""
@@ -181,7 +178,9 @@ def install(
             tilt = rng.normal(0.0, preset.gauge_tilt, 3)
             direction = direction + np.cross(tilt, direction)
             direction /= np.linalg.norm(direction)
-        gauges.append(Gauge(spec, origin, direction, 1.0, travel))
+        # The reading runs along the world axis, whichever side the stand is on.
+        sign = float(np.sign(direction[spec.axis]))
+        gauges.append(Gauge(spec, origin, direction, sign, travel))
     return gauges
 
 
@@ -200,16 +199,6 @@ def zero_gauges(gauges: list[Gauge], t_at_zero: np.ndarray) -> list[Gauge]:
         replace(g, origin=g.origin + (t - g.travel / 2) * g.direction, zero=g.travel / 2)
         for g, t in zip(gauges, t_at_zero, strict=True)
     ]
-
-
-def bar_boxes(
-    machine: MachineParams, rho: np.ndarray, p: np.ndarray, leg: int, bar: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Pose and half extents of one bar's box: centre ``(..., 3)``, rotation ``(..., 3, 3)``
-    (columns: along the bar, hinge axis, normal) and half extents ``(..., 3)``."""
-    a = carriage_points(machine, rho)[..., leg, :]
-    c = platform_points(machine, p)[..., leg, :]
-    return _boxes(a, c, np.asarray(leg), np.asarray(bar))
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -23,13 +23,13 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from .backend import check_motion_mode
 from .gauges import RAY_BACKOFF, Gauge, on_flat_face, ray_box_distance
 from .geometry import BAR_SECTION, D_NOMINAL, LEG_NAMES, R_LEG, MachineParams
 from .kinematics import direct, leg_angles
 from .simulator import PhysicsSettings, Simulator, pb
 from .urdf_writer import MM, bar_length, link_name, write_urdf
 
-MOTION_MODES: tuple[str, ...] = ("quasi-static", "dynamic")
 QUASI_STATIC_STEPS = 2  # steps after placement: enough for the solver to take hold
 SETTLE_TOL = 1e-8  # m and m/s: a settled carriage is within 0.01 µm of its target, at rest
 MAX_SETTLE_STEPS = 3000
@@ -127,8 +127,7 @@ class OrthoglideMachine:
     def move(self, rho: np.ndarray, mode: str = "quasi-static") -> None:
         """Drive the carriages to control coordinates ``rho`` (mm) and settle."""
         rho = np.asarray(rho, dtype=float)
-        if mode not in MOTION_MODES:
-            raise ValueError(f"unknown motion mode '{mode}'; choose from {list(MOTION_MODES)}")
+        check_motion_mode(mode)
         if mode == "quasi-static":
             self._place(rho)
             self._hold(rho)

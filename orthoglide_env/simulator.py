@@ -95,10 +95,6 @@ class Simulator:
         for _ in range(n):
             self.client.stepSimulation()
 
-    @property
-    def connected(self) -> bool:
-        return self.client._client >= 0 and pb.getConnectionInfo(self.client._client)["isConnected"]
-
     def close(self) -> None:
         """Disconnect; safe to call twice."""
         if self.client._client >= 0:

@@ -181,7 +181,7 @@ def _leg(machine: MachineParams, i: int) -> list[str]:
 def _base() -> str:
     body = _inertial(0.0, np.zeros(3), np.ones(3))
     for i in range(3):
-        centre = R_LEG[i][:, 0] * (L_NOMINAL + R_TOOL - 20) + R_LEG[i][:, 1] * 0.0
+        centre = R_LEG[i][:, 0] * (L_NOMINAL + R_TOOL - 20)
         size = np.abs(R_LEG[i] @ np.array([RAIL_LENGTH, 40.0, 30.0]))
         offset = -R_LEG[i][:, 1] * 45.0  # the rail sits beside the carriage, not through it
         body += _box(size, centre + offset, "rail", collide=False)
