@@ -23,8 +23,10 @@ from orthoglide_env.simulator import PhysicsSettings
 
 def measure(preset: str, n: int, seed: int) -> dict[str, dict[str, np.ndarray]]:
     rng = np.random.default_rng(seed)
-    out: dict[str, dict[str, list]] = {m: {k: [] for k in ("tcp", "gauge", "rot", "loop")}
-                                       for m in ("quasi-static", "dynamic")}
+    out: dict[str, dict[str, list]] = {
+        m: {k: [] for k in ("tcp", "gauge", "rot", "loop", "steps")}
+        for m in ("quasi-static", "dynamic")
+    }
     agree = total = 0
     for _ in tqdm(range(n), desc=preset, leave=False):
         machine = random_machine(rng, preset)
@@ -45,6 +47,7 @@ def measure(preset: str, n: int, seed: int) -> dict[str, dict[str, np.ndarray]]:
             stats["gauge"].extend(np.abs(t - exact_t)[ok])
             stats["rot"].append(sim.platform_orientation_error())
             stats["loop"].append(sim.loop_residual())
+            stats["steps"].append(sim.last_settle_steps)
             agree += int(np.sum(np.isnan(t) == np.isnan(exact_t)))
             total += t.size
         sim.close()
@@ -60,7 +63,7 @@ def main() -> None:
     args = parser.parse_args()
     print(f"settings: {PhysicsSettings()}")
     header = f"{'preset':10} {'mode':13} {'TCP max':>9} {'TCP med':>9} {'gauge max':>10} " \
-             f"{'gauge med':>10} {'n gauge':>8} {'rot max':>9} {'loop max':>9}"
+             f"{'gauge med':>10} {'n gauge':>8} {'rot max':>9} {'loop max':>9} {'steps':>14}"
     rows = []
     for preset in args.presets.split(","):
         for mode, s in measure(preset, args.machines, args.seed).items():
@@ -69,6 +72,7 @@ def main() -> None:
                 f"{preset:10} {mode:13} {tcp.max():9.2e} {np.median(tcp):9.2e}"
                 f" {1e3 * s['gauge'].max():10.2e} {1e3 * np.median(s['gauge']):10.2e}"
                 f" {s['gauge'].size:8d} {s['rot'].max():9.2e} {1e3 * s['loop'].max():9.2e}"
+                f" {np.median(s['steps']):7.0f}/{s['steps'].max():<6.0f}"
             )
     print("errors in µm, rotation in rad")
     print(header)

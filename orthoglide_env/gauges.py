@@ -259,14 +259,20 @@ def ray_box_distance(
 
 def on_flat_face(
     point: np.ndarray, centre: np.ndarray, rot: np.ndarray, half: np.ndarray,
-    margin: float = TIP_EDGE_MARGIN,
+    margin: float = TIP_EDGE_MARGIN, face: np.ndarray | int | None = None,
 ) -> np.ndarray:
-    """Whether a contact point on a box's surface lies ``margin`` inside its face's edges."""
+    """Whether a contact point on a box's surface lies ``margin`` inside its face's edges,
+    and, when ``face`` (box axis 0, 1 or 2) is given, on that face.
+
+    A gauge reads only on the face it is aimed at: near a bar's end its ray can enter
+    through the end face at grazing incidence, where a real tip slides off the edge (and
+    PyBullet's rounded box edges disagree with the sharp box by ~1 mm)."""
     local = np.einsum("...ji,...j->...i", rot, point - centre)
     ratio = np.abs(local) / half
-    face = np.argmax(ratio, axis=-1)[..., None]
+    touched = np.argmax(ratio, axis=-1)
     inner = np.abs(local) <= half - margin
-    return np.all(inner | (np.arange(3) == face), axis=-1)
+    ok = np.all(inner | (np.arange(3) == touched[..., None]), axis=-1)
+    return ok if face is None else ok & (touched == face)
 
 
 def collision_boxes(
@@ -335,8 +341,9 @@ def exact_ray_distances(
     pick = (..., np.arange(len(gauges)), target)
     t = np.where(t_out[pick] >= t_in[pick], t_in[pick], np.nan)
     hit = origins[:, 0] + np.nan_to_num(t)[..., None] * directions[:, 0]
+    face = np.array([g.spec.local_axis for g in gauges])
     t = np.where(on_flat_face(hit, centre[..., target, :], rot[..., target, :, :],
-                              half[..., target, :]), t, np.nan)
+                              half[..., target, :], face=face), t, np.nan)
     others = np.arange(len(BOX_NAMES)) != target[:, None]
     reach = np.array([g.travel for g in gauges]) + RAY_BACKOFF
     in_window = (t_out >= -RAY_BACKOFF) & (t_in <= t_out) & (t_in < t[..., None])

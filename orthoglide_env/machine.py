@@ -36,6 +36,9 @@ MAX_SETTLE_STEPS = 3000
 POSITION_GAIN = 0.3
 MOTOR_FORCE = 5000.0  # N, far above what gravity asks of the carriages
 STAND_COLOUR = (0.1, 0.6, 0.2, 1.0)
+CONTACT_QUERY = 1e-6  # m, query distance of the contact check
+CAMERA_EYE = np.array([800.0, 680.0, 620.0])  # mm
+CAMERA_TARGET = np.array([120.0, 120.0, 140.0])  # mm
 
 
 class OrthoglideMachine:
@@ -54,26 +57,32 @@ class OrthoglideMachine:
         self.gauges = list(gauges)
         settings = settings or PhysicsSettings(gravity=-9.81 if gravity else 0.0)
         self.sim = Simulator(gui=gui, settings=settings)
-        self.bc = self.sim.client
-        self.body = self.sim.load_urdf_text(write_urdf(machine))
-        self._index = {
-            self.bc.getJointInfo(self.body, j)[12].decode(): j
-            for j in range(self.bc.getNumJoints(self.body))
-        }
-        self._com = {
-            name: np.array(self.bc.getDynamicsInfo(self.body, j)[3]) / MM
-            for name, j in self._index.items()
-        }
-        self.slides = [self._index[link_name(i, "carriage")] for i in range(3)]
-        self.platform = self._index["platform"]
-        for j in range(self.bc.getNumJoints(self.body)):
-            # Passive joints come with a velocity motor that would brake the mechanism.
-            self.bc.setJointMotorControl2(self.body, j, pb.VELOCITY_CONTROL, force=0.0)
-        self._closures = self._close_loops()
-        self._stand_ids: list[int] = []
-        self._draw_stands()
-        self.last_settle_steps = 0
-        self.move(np.zeros(3))
+        try:
+            self.bc = self.sim.client
+            self.body = self.sim.load_urdf_text(write_urdf(machine))
+            self._index = {
+                self.bc.getJointInfo(self.body, j)[12].decode(): j
+                for j in range(self.bc.getNumJoints(self.body))
+            }
+            self._com = {
+                name: np.array(self.bc.getDynamicsInfo(self.body, j)[3]) / MM
+                for name, j in self._index.items()
+            }
+            self.slides = [self._index[link_name(i, "carriage")] for i in range(3)]
+            self.platform = self._index["platform"]
+            for j in range(self.bc.getNumJoints(self.body)):
+                # Passive joints come with a velocity motor that would brake the mechanism.
+                self.bc.setJointMotorControl2(self.body, j, pb.VELOCITY_CONTROL, force=0.0)
+            self._closures = self._close_loops()
+            self._pairs = self._collision_pairs()
+            self._stand_ids: list[int] = []
+            self._draw_stands()
+            self.last_settle_steps = 0
+            self.move(np.zeros(3))
+        except BaseException:
+            # A machine that cannot be built must not leave its client behind.
+            self.sim.close()
+            raise
 
     # -- construction ----------------------------------------------------------------
     def _pivot(self, link: str, point_mm: np.ndarray) -> list[float]:
@@ -220,7 +229,7 @@ class OrthoglideMachine:
                 t = float(ray_box_distance(g.origin, g.direction, *box))
                 if not t < 0:
                     continue
-            if on_flat_face(g.origin + t * g.direction, *box):
+            if on_flat_face(g.origin + t * g.direction, *box, face=g.spec.local_axis):
                 out[k] = t
         return out
 
@@ -237,17 +246,28 @@ class OrthoglideMachine:
         half = np.array([bar_length(self.machine, leg) / 2, *(np.array(BAR_SECTION) / 2)])
         return pos + rot @ np.array([-length / 2, 0.0, 0.0]), rot, half
 
+    def _collision_pairs(self) -> list[tuple[int, int, str]]:
+        """Link pairs that touch only in a crash: parts of different legs (bars, couplers,
+        carriages), and the platform with any bar or carriage.  Parts of one leg, and the
+        couplers with the platform they are mounted on, touch by design and are left out.
+        The base has no collision shape (its rails are drawn only), so it is not checked."""
+        legs = {i: [link_name(i, p) for p in ("bar1", "bar2", "coupler", "carriage")]
+                for i in range(3)}
+        pairs = [(a, b) for i in range(3) for j in range(i + 1, 3) for a in legs[i]
+                 for b in legs[j]]
+        pairs += [("platform", link_name(i, p)) for i in range(3)
+                  for p in ("bar1", "bar2", "carriage")]
+        return [(self._index[a], self._index[b], f"{a}/{b}") for a, b in pairs]
+
     def collisions(self) -> list[str]:
-        """Pairs of parts of different legs (or a leg and the platform) in contact."""
-        parts = {i: [link_name(i, p) for p in ("bar1", "bar2", "coupler")] for i in range(3)}
-        pairs = [(a, b) for i in range(3) for j in range(i + 1, 3) for a in parts[i]
-                 for b in parts[j]]
-        pairs += [("platform", link_name(i, b)) for i in range(3) for b in ("bar1", "bar2")]
-        found = []
-        for a, b in pairs:
-            if self.bc.getClosestPoints(self.body, self.body, 0.0, self._index[a], self._index[b]):
-                found.append(f"{a}/{b}")
-        return found
+        """Pairs of parts in contact that should never touch (see :meth:`_collision_pairs`)."""
+        # getClosestPoints(distance=0) reports nothing, not even a deep penetration: ask
+        # for a hair more and keep what touches.
+        return [
+            name for a, b, name in self._pairs
+            if any(pt[8] <= 0.0 for pt in
+                   self.bc.getClosestPoints(self.body, self.body, CONTACT_QUERY, a, b))
+        ]
 
     def set_gauges(self, gauges: list[Gauge]) -> None:
         for sid in self._stand_ids:
@@ -256,13 +276,22 @@ class OrthoglideMachine:
         self.gauges = list(gauges)
         self._draw_stands()
 
-    def render(self, width: int = 640, height: int = 480) -> np.ndarray:
-        """An RGB image (height, width, 3) of the machine from a three-quarter view."""
+    def render(
+        self, width: int = 640, height: int = 480, *, eye: np.ndarray | None = None,
+        target: np.ndarray | None = None, fov: float = 50.0,
+    ) -> np.ndarray:
+        """An RGB image (height, width, 3) of the machine and its gauges, TinyRenderer.
+
+        ``eye`` and ``target``: camera position and aim point (mm, world); the default is a
+        three-quarter view from the side of the positive axes that shows every leg.
+        """
+        eye = CAMERA_EYE if eye is None else np.asarray(eye, dtype=float)
+        target = CAMERA_TARGET if target is None else np.asarray(target, dtype=float)
         view = self.bc.computeViewMatrix(
-            cameraEyePosition=[0.8, 0.68, 0.62], cameraTargetPosition=[0.12, 0.12, 0.14],
+            cameraEyePosition=list(eye * MM), cameraTargetPosition=list(target * MM),
             cameraUpVector=[0, 0, 1],
         )
-        proj = self.bc.computeProjectionMatrixFOV(fov=50, aspect=width / height, nearVal=0.05,
+        proj = self.bc.computeProjectionMatrixFOV(fov=fov, aspect=width / height, nearVal=0.05,
                                                   farVal=5.0)
         img = self.bc.getCameraImage(width, height, view, proj, renderer=pb.ER_TINY_RENDERER)
         return np.reshape(np.asarray(img[2], dtype=np.uint8), (height, width, 4))[..., :3]

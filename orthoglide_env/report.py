@@ -25,7 +25,11 @@ from .machine import OrthoglideMachine
 def _machine_with_gauges(machine: MachineParams) -> OrthoglideMachine:
     """A simulated machine with the paper's gauges set up and zeroed at Zero on it."""
     sim = OrthoglideMachine(machine, install(PAPER_LAYOUT, machine))
-    sim.set_gauges(zero_gauges(sim.gauges, sim.gauge_distances()))
+    try:
+        sim.set_gauges(zero_gauges(sim.gauges, sim.gauge_distances()))
+    except BaseException:
+        sim.close()
+        raise
     return sim
 
 

@@ -55,7 +55,12 @@ COLOURS = {
     "platform": (0.7, 0.15, 0.15, 1),
 }
 HINGE_RADIUS = 8.0  # mm, visual hinge pins
-RAIL_LENGTH = 260.0  # mm, visual guideways
+#: Carriage box (leg frame, mm) and how far behind the R1 centre it starts: the carriage
+#: and its guideway stay behind R1 at any travel, clear of the bars that leave R1 forward.
+CARRIAGE_SIZE = (70.0, 60.0, 110.0)
+CARRIAGE_SETBACK = 10.0
+RAIL_SECTION = (40.0, 30.0)  # mm, along local Y and Z
+RAIL_BESIDE = 45.0  # mm, rail centre to actuator axis along -local Y (beside the carriage)
 
 LINKS_PER_LEG = ("carriage", "r1", "bar1", "coupler", "r2", "bar2")
 
@@ -147,12 +152,13 @@ def _leg(machine: MachineParams, i: int) -> list[str]:
     half_d = D_NOMINAL / 2
     bar = np.array([bar_length(machine, i), *BAR_SECTION])
     bar_mid = np.array([-length / 2, 0.0, 0.0])
-    carriage = np.array([70.0, 60.0, 110.0])
+    carriage = np.array(CARRIAGE_SIZE)
     short = np.array(SHORT_LINK_SIZE)
     n = lambda part: link_name(i, part)  # noqa: E731
     return [
         _link(n("carriage"), _inertial(MASS["carriage"], np.zeros(3), carriage)
-              + _box(carriage, np.array([carriage[0] / 2 + 10, 0, 0]), "carriage", collide=False)),
+              + _box(carriage, np.array([carriage[0] / 2 + CARRIAGE_SETBACK, 0, 0]), "carriage",
+                     collide=True)),
         _joint(n("slide"), "prismatic", "base", n("carriage"), _origin(slide_origin, frame),
                _xyz(u_local / MM), limit),
         _link(n("r1"), _inertial(MASS["r1"], np.zeros(3), short)
@@ -180,11 +186,15 @@ def _leg(machine: MachineParams, i: int) -> list[str]:
 
 def _base() -> str:
     body = _inertial(0.0, np.zeros(3), np.ones(3))
+    # Each rail spans the carriage's travel between the control limits, nominal axes.
+    start = L_NOMINAL + R_TOOL + RHO_MIN + CARRIAGE_SETBACK
+    end = L_NOMINAL + R_TOOL + RHO_MAX + CARRIAGE_SETBACK + CARRIAGE_SIZE[0]
     for i in range(3):
-        centre = R_LEG[i][:, 0] * (L_NOMINAL + R_TOOL - 20)
-        size = np.abs(R_LEG[i] @ np.array([RAIL_LENGTH, 40.0, 30.0]))
-        offset = -R_LEG[i][:, 1] * 45.0  # the rail sits beside the carriage, not through it
-        body += _box(size, centre + offset, "rail", collide=False)
+        centre = R_LEG[i][:, 0] * (start + end) / 2 - R_LEG[i][:, 1] * RAIL_BESIDE
+        size = np.abs(R_LEG[i] @ np.array([end - start, *RAIL_SECTION]))
+        # Drawn only: a rail beside the axis lies in the sweep of its own leg's bars ahead
+        # of the carriage, where the prototype's guideways (not modelled) do not.
+        body += _box(size, centre, "rail", collide=False)
     return _link("base", body)
 
 
