@@ -83,7 +83,7 @@ class ExactMachine:
 
     def collisions(self) -> list[str]:
         # Parts of different legs cannot meet within the joint limits: the simulator's
-        # contact check finds none over the whole joint cube (tests/test_machine.py).
+        # contact check finds none on grids of the joint range (tests/test_machine.py).
         return []
 
     def target_boxes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

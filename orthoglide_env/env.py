@@ -82,8 +82,9 @@ class OrthoglideCalibrationEnv(gym.Env):
     -----------
     ``terminated`` when moving parts of different legs (bars, couplers, platform) collide;
     ``info["collision"]`` names them.  Within the joint limits the geometry allows no such
-    contact (the PyBullet contact check finds none over the joint cube), so this is a
-    guard for machines far from nominal.  Truncation comes from ``max_episode_steps``.
+    contact (the PyBullet contact check, which does see a forced crash, finds none on grids
+    of the joint range), so this is a guard for machines far from nominal.  Truncation
+    comes from ``max_episode_steps``.
 
     Info
     ----
