@@ -2,8 +2,9 @@
 
     python benchmarks/bench_calibrators.py [--machines 1000]
 
-The comparison runs both strategies (paper, gauss-newton) on every machine, so 1000
-machines are 2000 calibration episodes, on every core.
+The comparison runs both strategies (paper, gauss-newton) on every machine, on every
+core; they share one experiment (the same postures and readings), so 1000 machines are
+1000 experiments and 2000 estimates.
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ def main() -> None:
         run(config, args.machines, progress=False)
         wall = time.perf_counter() - start
         print(f"compare --machines {args.machines} --backend {backend}: {wall:.1f} s "
-              f"({2 * args.machines} episodes, {1e3 * wall / (2 * args.machines):.1f} ms each)")
+              f"({1e3 * wall / args.machines:.1f} ms per machine)")
 
 
 if __name__ == "__main__":

@@ -26,6 +26,10 @@ def main() -> None:
     config = Config(("paper", "gauss-newton"), "realistic", 0.0, 0.0, args.backend, "full", 7)
     trials = run(config, args.machines, progress=True)
     print(f"{args.machines} realistic machines, noise-free gauges, {args.backend} backend")
+    nominal = np.array([t.nominal_residual_rms for t in trials
+                        if t.strategy == config.strategies[0]])
+    print(f"nominal model (no calibration): residual median {np.median(nominal):.4f}, "
+          f"p90 {np.percentile(nominal, 90):.4f} mm")
     print(f"{'strategy':14}{'residual med':>13}{'p90':>8}{'TCP before med':>16}"
           f"{'TCP after med':>15}{'p90':>8}{'max':>8}")
     for name in config.strategies:

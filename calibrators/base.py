@@ -15,8 +15,9 @@ from __future__ import annotations
 
 import csv
 import importlib
+import json
 import pkgutil
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -24,7 +25,7 @@ import gymnasium as gym
 import numpy as np
 
 from orthoglide_env.gauges import GaugeSpec, layout_from_names
-from orthoglide_env.geometry import AXIS_NAMES, LEG_NAMES, read_user_file
+from orthoglide_env.geometry import AXIS_NAMES, LEG_NAMES, MachineParams, read_user_file
 from orthoglide_env.kinematics import PAPER_POSTURES, paper_posture
 
 PARAM_NAMES: tuple[str, ...] = ("drho_x", "drho_y", "drho_z", "dL_x", "dL_y", "dL_z")
@@ -41,14 +42,51 @@ class MeasurementFileError(ValueError):
     """A measurement file that cannot be read; the message names line and column."""
 
 
+ZERO_RHO: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
 @dataclass(frozen=True)
 class Measurement:
-    """One gauge reading: which gauge, at which posture, in which repetition."""
+    """One gauge reading: which gauge, at which posture, in which repetition.
+
+    ``rho`` is the commanded posture (control coordinates, mm); ``posture`` its label, a
+    paper posture name (whose ``rho`` is filled in when not given) or any other label for
+    a posture of a strategy's own.  Differences are taken against the Zero posture
+    ``rho = (0, 0, 0)``, where the gauges were zeroed.
+    """
 
     gauge: GaugeSpec
     posture: str
     repetition: int
     reading: float
+    rho: tuple[float, float, float] | None = None
+
+    def __post_init__(self) -> None:
+        if self.rho is None:
+            if self.posture not in PAPER_POSTURES:
+                raise ValueError(f"posture '{self.posture}' is not a paper posture: give its rho")
+            rho = paper_posture(self.posture)
+        else:
+            rho = np.asarray(self.rho, dtype=float)
+            if rho.shape != (3,):
+                raise ValueError("a measurement's rho must have 3 components")
+        object.__setattr__(self, "rho", tuple(float(v) for v in rho))
+
+    @property
+    def is_zero(self) -> bool:
+        return self.rho == ZERO_RHO
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"leg": LEG_NAMES[self.gauge.leg], "axis": AXIS_NAMES[self.gauge.axis],
+                "at": self.gauge.at, "posture": self.posture, "rho": list(self.rho),
+                "repetition": self.repetition, "reading_mm": self.reading}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Measurement:
+        gauge = GaugeSpec(LEG_NAMES.index(data["leg"]), AXIS_NAMES.index(data["axis"]),
+                          float(data.get("at", 0.5)))
+        return cls(gauge, str(data["posture"]), int(data["repetition"]),
+                   float(data["reading_mm"]), data.get("rho"))
 
 
 @dataclass
@@ -61,7 +99,23 @@ class Measurements:
     def __len__(self) -> int:
         return len(self.items)
 
+    def to_dict(self) -> dict[str, Any]:
+        return {"experiment_time_s": self.experiment_time_s,
+                "readings": [m.to_dict() for m in self.items]}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Measurements:
+        return cls([Measurement.from_dict(m) for m in data["readings"]],
+                   float(data["experiment_time_s"]))
+
     def to_csv(self, path: str | Path) -> None:
+        """Write the documented CSV; only paper postures and mid-leg gauges have a place
+        in it (a real machine is measured by the paper's procedure)."""
+        for m in self.items:
+            if m.posture not in PAPER_POSTURES or m.rho != tuple(paper_posture(m.posture)):
+                raise ValueError(f"posture '{m.posture}' has no place in the measurement CSV")
+            if m.gauge.at != 0.5:
+                raise ValueError(f"gauge {m.gauge.name}@{m.gauge.at} has no place in the CSV")
         with Path(path).open("w", newline="") as handle:
             writer = csv.writer(handle)
             writer.writerow(CSV_COLUMNS)
@@ -118,8 +172,10 @@ def _parse_row(path: Path, line: int, row: list[str]) -> Measurement:
 class Estimate:
     """A calibration result with its uncertainty and identifiability.
 
-    ``covariance`` is over the freed parameters (in ``PARAM_NAMES`` order); ``std`` has
-    ``None`` for the parameters the fit kept at zero.
+    ``covariance``, ``fisher`` (for readings of unit variance: divide by sigma^2) and
+    ``crlb`` are over the freed parameters (in ``PARAM_NAMES`` order); ``std`` has
+    ``None`` for the parameters the fit kept at zero.  ``readings`` are the readings the
+    estimate was computed from.
     """
 
     strategy: str
@@ -135,6 +191,9 @@ class Estimate:
     experiment_time_s: float
     verification_rms_mm: float | None = None
     iterations: int = 0
+    sigma: float = 0.0
+    fisher: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    readings: Measurements = field(default_factory=Measurements)
 
     @property
     def std(self) -> dict[str, list[float | None]]:
@@ -153,21 +212,59 @@ class Estimate:
         sv = self.singular_values
         return float(sv[0] / sv[-1]) if sv.size and sv[-1] > 0 else float("inf")
 
+    @property
+    def machine(self) -> MachineParams:
+        """The estimated machine (paper parameters only)."""
+        return MachineParams(drho=self.drho, dL=self.dL)
+
     def to_dict(self) -> dict[str, Any]:
-        data = asdict(self)
-        data.update(
-            drho=self.drho.tolist(), dL=self.dL.tolist(), covariance=self.covariance.tolist(),
-            residuals=self.residuals.tolist(), singular_values=self.singular_values.tolist(),
-            crlb=self.crlb.tolist(), std=self.std, residual_rms_mm=self.residual_rms_mm,
-            condition_number=self.condition_number,
-        )
+        """JSON-ready; the derived ``std``, ``residual_rms_mm`` and ``condition_number``
+        are included for readers and ignored by :meth:`from_dict`."""
+        data = {f.name: getattr(self, f.name) for f in fields(self)}
+        for key, value in data.items():
+            if isinstance(value, np.ndarray):
+                data[key] = value.tolist()
+        data.update(readings=self.readings.to_dict(), std=self.std,
+                    residual_rms_mm=self.residual_rms_mm, condition_number=self.condition_number)
         return data
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Estimate:
+        kwargs = {f.name: data[f.name] for f in fields(cls) if f.name in data}
+        for key in _ARRAY_FIELDS:
+            if key in kwargs:
+                kwargs[key] = np.array(kwargs[key], dtype=float)
+        for key in ("covariance", "fisher"):
+            if key in kwargs and kwargs[key].size == 0:
+                kwargs[key] = np.zeros((0, 0))  # an empty matrix comes back from JSON as []
+        if "readings" in kwargs:
+            kwargs["readings"] = Measurements.from_dict(kwargs["readings"])
+        return cls(**kwargs)
+
+    def to_json(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+
+    @classmethod
+    def from_json(cls, path: str | Path) -> Estimate:
+        return cls.from_dict(json.loads(Path(path).read_text()))
+
+
+_ARRAY_FIELDS: tuple[str, ...] = ("drho", "dL", "covariance", "residuals", "singular_values",
+                                  "crlb", "fisher")
 
 
 class Calibrator:
     """Base class of strategies: ``collect`` then ``estimate``."""
 
     name: ClassVar[str] = ""
+    #: Strategies with the same (non-empty) experiment key run the same experiment, so a
+    #: comparison may measure once and hand the readings to each estimator.
+    experiment: ClassVar[str] = ""
+
+    @property
+    def experiment_key(self) -> str:
+        """What identifies this strategy's experiment (its name unless it shares one)."""
+        return self.experiment or self.name
 
     def collect(self, env: gym.Env) -> Measurements:
         raise NotImplementedError

@@ -12,6 +12,7 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import NoReturn
 
 import gymnasium as gym
 import numpy as np
@@ -22,10 +23,18 @@ from orthoglide_env.geometry import PRESETS, MachineParams, check_rho, random_ma
 from orthoglide_env.scoring import score
 
 from .base import PARAM_SETS, Estimate, Measurements, get_strategy
+from .prediction import predicted_correction, predicted_tcp_std
 
 
 class UsageError(Exception):
     """Bad input from the user: reported in one line, exit status 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """Reports a bad command line in one line (argparse adds a usage block; ``-h`` has it)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message}\n")
 
 
 def _machine(args: argparse.Namespace) -> MachineParams:
@@ -47,7 +56,9 @@ def cmd_pose(args: argparse.Namespace) -> None:
     machine, rho = MachineParams.from_json(args.machine), _rho(args.rho)
     from orthoglide_env.report import pose_report  # loads the simulator: after validation
 
-    report = pose_report(machine, rho, noise_free=args.noise_free, seed=args.seed)
+    report = pose_report(machine, rho, noise_free=args.noise_free, seed=args.seed,
+                         sigma=DEFAULT_SIGMA if args.sigma is None else args.sigma,
+                         resolution=args.resolution)
     if args.json:
         print(json.dumps(report, indent=2))
         return
@@ -90,6 +101,8 @@ def _report(est: Estimate, truth: MachineParams | None) -> dict:
         "crlb": est.crlb.tolist(),
         "weak_directions": est.weak_directions,
         "iterations": est.iterations,
+        "predicted_correction_mm": vars(predicted_correction(est)),
+        "predicted_tcp_std_after_mm": vars(predicted_tcp_std(est)),
     }
     if truth is not None:
         report = score(MachineParams(drho=est.drho, dL=est.dL), truth)
@@ -120,8 +133,11 @@ def _print_table(data: dict) -> None:
           + f" (condition {data['condition_number']:.1f})")
     print("Cramér-Rao bound (mm) " + ", ".join(f"{c:.4f}" for c in data["crlb"]))
     for weak in data["weak_directions"]:
-        print("weakly identified: " + " + ".join(f"{v:+.2f} {k}" for k, v in weak.items()))
+        print("weakly identified: " + " ".join(f"{v:+.2f} {k}" for k, v in weak.items()))
     print(f"experiment time {data['experiment_time_s']:.0f} s")
+    c, u = data["predicted_correction_mm"], data["predicted_tcp_std_after_mm"]
+    print(f"predicted over the workspace: correction RMS {c['rms']:.4f} / max {c['max']:.4f} mm,"
+          f" TCP std after RMS {u['rms']:.4f} / max {u['max']:.4f} mm")
     if "tcp_error_before_mm" in data:
         b, a = data["tcp_error_before_mm"], data["tcp_error_after_mm"]
         print(f"TCP error over the workspace: before RMS {b['rms']:.4f} / max {b['max']:.4f} mm,"
@@ -194,7 +210,7 @@ def cmd_compare(args: argparse.Namespace) -> None:
 
 # -- parser -------------------------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="orthoglide", description=__doc__.splitlines()[0])
+    parser = _Parser(prog="orthoglide", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
     presets = sorted(PRESETS)
 
@@ -207,6 +223,10 @@ def build_parser() -> argparse.ArgumentParser:
     machine_posture(p)
     p.add_argument("--noise-free", action="store_true", help="ideal gauges (no noise, no "
                    "quantisation)")
+    p.add_argument("--sigma", type=float, default=None,
+                   help=f"gauge repeatability (mm, default {DEFAULT_SIGMA})")
+    p.add_argument("--resolution", type=float, default=DEFAULT_RESOLUTION,
+                   help=f"gauge display resolution (mm, default {DEFAULT_RESOLUTION})")
     p.add_argument("--seed", type=int, default=None, help="seed of the gauge noise")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_pose)
@@ -262,10 +282,11 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    sigma = getattr(args, "sigma", None)
     try:
-        if sigma is not None and not (np.isfinite(sigma) and sigma >= 0):
-            raise UsageError("--sigma must be a finite number >= 0")
+        for option in ("sigma", "resolution"):
+            value = getattr(args, option, None)
+            if value is not None and not (np.isfinite(value) and value >= 0):
+                raise UsageError(f"--{option} must be a finite number >= 0")
         args.func(args)
     except (UsageError, ValueError, OSError, RuntimeError) as exc:
         message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__

@@ -13,11 +13,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from orthoglide_env.gauges import GaugeSpec, model_gauges, model_readings
+from orthoglide_env.gauges import GaugeSpec, collision_boxes, exact_ray_distances, install
 from orthoglide_env.geometry import L_NOMINAL, RHO_MAX, RHO_MIN, MachineParams
-from orthoglide_env.kinematics import paper_posture
+from orthoglide_env.kinematics import direct
 
-from .base import Measurements
+from .base import ZERO_RHO, Measurements
 
 
 @dataclass(frozen=True)
@@ -25,7 +25,8 @@ class Differences:
     """Averaged differences, one row per (gauge, non-Zero posture)."""
 
     gauges: tuple[GaugeSpec, ...]
-    postures: tuple[str, ...]
+    postures: tuple[str, ...]  # labels (paper posture names)
+    rho: np.ndarray  # (n, 3) the postures, control coordinates, mm
     values: np.ndarray  # mm
     cov_unit: np.ndarray  # covariance of ``values`` for readings of unit variance
 
@@ -39,36 +40,63 @@ def differences(data: Measurements, repetitions: set[int] | None = None) -> Diff
     ``repetitions`` keeps only those repetitions (a Zero reading belongs to the
     repetition it opens).  Rows whose gauge has no Zero reading are dropped.
     """
-    groups: dict[tuple[GaugeSpec, str], list[float]] = {}
+    groups: dict[tuple[GaugeSpec, tuple[float, ...]], list[float]] = {}
+    labels: dict[tuple[float, ...], str] = {}
     for m in data.items:
         if repetitions is None or m.repetition in repetitions:
-            groups.setdefault((m.gauge, m.posture), []).append(m.reading)
-    keys = sorted((k for k in groups if k[1] != "Zero" and (k[0], "Zero") in groups),
-                  key=lambda k: (k[0].leg, k[0].axis, k[0].at, k[1]))
-    values = np.array([np.mean(groups[k]) - np.mean(groups[(k[0], "Zero")]) for k in keys])
+            groups.setdefault((m.gauge, m.rho), []).append(m.reading)
+            labels.setdefault(m.rho, m.posture)
+    keys = sorted((k for k in groups if k[1] != ZERO_RHO and (k[0], ZERO_RHO) in groups),
+                  key=lambda k: (k[0].leg, k[0].axis, k[0].at, labels[k[1]], k[1]))
+    values = np.array([np.mean(groups[k]) - np.mean(groups[(k[0], ZERO_RHO)]) for k in keys])
     cov = np.zeros((len(keys), len(keys)))
     for a, (ga, pa) in enumerate(keys):
         for b, (gb, pb) in enumerate(keys):
             if ga == gb:
-                cov[a, b] = 1 / len(groups[(ga, "Zero")]) + (1 / len(groups[(ga, pa)])
-                                                             if pa == pb else 0.0)
-    return Differences(tuple(k[0] for k in keys), tuple(k[1] for k in keys), values, cov)
+                cov[a, b] = 1 / len(groups[(ga, ZERO_RHO)]) + (1 / len(groups[(ga, pa)])
+                                                               if pa == pb else 0.0)
+    rho = np.array([k[1] for k in keys], dtype=float).reshape(-1, 3)
+    return Differences(tuple(k[0] for k in keys), tuple(labels[k[1]] for k in keys), rho,
+                       values, cov)
 
 
 def model_differences(theta: np.ndarray, rows: Differences) -> np.ndarray:
     """The exact model's differences for paper parameters ``theta`` (drho, dL), with ideal
-    gauges installed and zeroed on that machine (installation errors are unknowable)."""
+    gauges installed on that machine (installation errors are unknowable).
+
+    Zeroing a gauge slides it along its own ray, which shifts every ray distance by one
+    constant: a difference ``sign * (t - t_zero)`` does not depend on it, so the model
+    skips the zeroing (``gauges.model_gauges``) and reads one batch of postures, whose
+    geometry is computed once."""
     machine = MachineParams(drho=theta[:3], dL=theta[3:])
     specs = sorted(set(rows.gauges), key=lambda g: (g.leg, g.axis, g.at))
-    gauges = model_gauges(machine, specs)
-    postures = sorted(set(rows.postures))
-    rho = np.array([paper_posture(p) for p in ("Zero", *postures)])
-    readings = model_readings(machine, gauges, rho)  # (postures, gauges)
-    zero = readings[0]
-    col = {g: k for k, g in enumerate(specs)}
-    row = {p: k + 1 for k, p in enumerate(postures)}
-    return np.array([readings[row[p], col[g]] - zero[col[g]]
-                     for g, p in zip(rows.gauges, rows.postures, strict=True)])
+    gauges = install(specs, machine)
+    postures, row = np.unique(rows.rho, axis=0, return_inverse=True)
+    rho = np.vstack([np.zeros(3), postures])
+    boxes = collision_boxes(machine, rho, direct(machine, rho))
+    t = exact_ray_distances(machine, gauges, rho, boxes)  # (postures, gauges)
+    diff = np.array([g.sign for g in gauges]) * (t[1:] - t[0])
+    col = np.array([specs.index(g) for g in rows.gauges], dtype=int)
+    return diff[np.ravel(row), col]
+
+
+#: Forward differences: truncation ~FD_STEP / L ~ 3e-7 of each derivative, which only
+#: touches a Gauss-Newton iteration's convergence rate and a covariance at that relative
+#: level, never a fixed point (residuals are always evaluated exactly).
+FD_STEP: float = 1e-4  # mm
+
+
+def model_jacobian(theta: np.ndarray, rows: Differences, free: tuple[int, ...],
+                   at: np.ndarray | None = None) -> np.ndarray:
+    """Forward-difference Jacobian of :func:`model_differences` over the ``free``
+    parameters (``at``: the model's value at ``theta`` when already known)."""
+    base = model_differences(theta, rows) if at is None else at
+    cols = []
+    for k in free:
+        step = np.zeros(6)
+        step[k] = FD_STEP
+        cols.append((model_differences(theta + step, rows) - base) / FD_STEP)
+    return np.column_stack(cols)
 
 
 def paper_matrix(rows: Differences) -> np.ndarray:

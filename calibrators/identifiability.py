@@ -15,7 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import PARAM_NAMES
+from .base import PARAM_NAMES, Measurements, check_params
+from .differences import differences, model_jacobian
 
 #: A direction is reported as weak when its singular value is below this fraction of the
 #: largest (the paper's design: 0.0164 / 1.01 ~ 0.016 for the drho ~ dL directions).
@@ -39,6 +40,8 @@ def analyse(jac: np.ndarray, cov_unit: np.ndarray, sigma: float,
     """Identifiability of parameters with Jacobian ``jac`` (rows: data, columns: params)
     for data with covariance ``sigma^2 * cov_unit``."""
     names = names or PARAM_NAMES[: jac.shape[1]]
+    if not np.all(np.isfinite(jac)):
+        raise ValueError("the design reads gauges where they miss their bar (no information)")
     _, sv, vt = np.linalg.svd(jac, full_matrices=False)
     if len(sv) < jac.shape[1] or sv[-1] <= sv[0] * 1e-12:
         raise ValueError("the design does not identify every parameter (rank deficient)")
@@ -50,3 +53,19 @@ def analyse(jac: np.ndarray, cov_unit: np.ndarray, sigma: float,
         for s, row in zip(sv, vt, strict=True) if s < WEAK_RATIO * sv[0]
     ]
     return Identifiability(fisher, crlb, sv, weak)
+
+
+def of_design(data: Measurements, params: str = "full", sigma: float = 0.01,
+              theta: np.ndarray | None = None) -> Identifiability:
+    """Identifiability of any strategy's readings (its design): the exact gauge model's
+    Jacobian of the averaged differences at the machine ``theta`` (drho, dL; default
+    nominal, the only one known before calibrating), with the covariance the averaging
+    gives them.  Only where the readings are taken and how often matters, not their
+    values."""
+    free = check_params(params)
+    rows = differences(data)
+    if len(rows) < len(free):
+        raise ValueError(f"only {len(rows)} differences for {len(free)} parameters")
+    theta = np.zeros(6) if theta is None else np.asarray(theta, dtype=float)
+    names = tuple(PARAM_NAMES[k] for k in free)
+    return analyse(model_jacobian(theta, rows, free), rows.cov_unit, sigma, names)

@@ -12,6 +12,7 @@ import gymnasium as gym
 import numpy as np
 
 from .base import (
+    PARAM_NAMES,
     Calibrator,
     Estimate,
     Measurement,
@@ -35,7 +36,7 @@ def leg_sequence(leg: int, repetitions: int = REPETITIONS) -> list[tuple[str, in
 
 def split_repetitions(data: Measurements) -> list[int]:
     """Repetitions that have Max/Min readings (the last Zero opens none)."""
-    return sorted({m.repetition for m in data.items if m.posture != "Zero"})
+    return sorted({m.repetition for m in data.items if not m.is_zero})
 
 
 @register
@@ -43,6 +44,7 @@ class PaperCalibrator(Calibrator):
     """The paper's procedure and its linear least-squares solution."""
 
     name = "paper"
+    experiment = "paper-sequence"
     repetitions = REPETITIONS
 
     def collect(self, env: gym.Env) -> Measurements:
@@ -86,7 +88,8 @@ class PaperCalibrator(Calibrator):
             raise ValueError(f"only {len(rows)} usable differences for {len(free)} parameters: "
                              "too many readings were not valid")
         theta, cov, iterations = self.solve(rows, free, sigma)
-        ident = analyse(self.jacobian(rows, theta, free), rows.cov_unit, sigma)
+        ident = analyse(self.jacobian(rows, theta, free), rows.cov_unit, sigma,
+                        tuple(PARAM_NAMES[k] for k in free))
         return Estimate(
             strategy=self.name, params=params, drho=theta[:3], dL=theta[3:], covariance=cov,
             residuals=rows.values - self.predict(rows, theta),
@@ -94,7 +97,7 @@ class PaperCalibrator(Calibrator):
             weak_directions=ident.weak_directions, n_readings=len(data),
             experiment_time_s=data.experiment_time_s,
             verification_rms_mm=self.verify(data, free, sigma) if verify else None,
-            iterations=iterations,
+            iterations=iterations, sigma=sigma, fisher=ident.fisher, readings=data,
         )
 
     def verify(self, data: Measurements, free: tuple[int, ...], sigma: float) -> float | None:

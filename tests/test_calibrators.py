@@ -3,6 +3,8 @@ Cramér-Rao bound, the measurement file and the registry."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -10,6 +12,7 @@ from conftest import paper_matrix as eq10
 
 import orthoglide_env
 from calibrators.base import (
+    Estimate,
     Measurement,
     MeasurementFileError,
     Measurements,
@@ -178,3 +181,84 @@ def test_verification_on_held_out_repetitions_sees_the_noise() -> None:
     est, _ = run("gauss-newton", "full", TABLE1, gauge_sigma=0.02, gauge_resolution=0.01)
     # Held-out differences of one repetition carry noise of about sigma * sqrt(2).
     assert 0.01 < est.verification_rms_mm < 0.1
+
+
+def test_estimate_json_round_trip(tmp_path) -> None:
+    est, _ = run("gauss-newton", "drho", TABLE1, gauge_sigma=0.02, gauge_resolution=0.01)
+    path = tmp_path / "estimate.json"
+    est.to_json(path)
+    again = Estimate.from_json(path)
+    assert again.to_dict() == est.to_dict()
+    assert again.readings.items == est.readings.items and len(again.readings) == 60
+    assert again.std["dL"] == [None, None, None]
+
+
+def test_readings_of_custom_postures_stay_out_of_the_csv(tmp_path) -> None:
+    custom = Measurements([Measurement(GaugeSpec(0, 1), "probe", 1, 0.1, (1.0, 2.0, 3.0))])
+    with pytest.raises(ValueError, match="no place in the measurement CSV"):
+        custom.to_csv(tmp_path / "m.csv")
+    with pytest.raises(ValueError, match="give its rho"):
+        Measurement(GaugeSpec(0, 1), "probe", 1, 0.1)
+
+
+def test_strategies_sharing_an_experiment_measure_once() -> None:
+    """paper and gauss-newton run the same experiment: a comparison measures it once, and
+    gets exactly what two separate episodes of the same seed would have read."""
+    from calibrators.compare import Config, run_chunk
+
+    config = Config(("paper", "gauss-newton"), "realistic", 0.02, 0.01, "exact", "full", 5)
+    shared = run_chunk(config, range(2))
+    alone = run_chunk(replace(config, strategies=("gauss-newton",)), range(2))
+    for a, b in zip([t for t in shared if t.strategy == "gauss-newton"], alone, strict=True):
+        np.testing.assert_array_equal(a.param_error, b.param_error)
+        assert a.experiment_time_s == b.experiment_time_s
+
+
+def test_predictions_without_the_truth() -> None:
+    """On a noise-free paper-model machine gauss-newton's estimate is the truth, so the
+    predicted correction is the uncalibrated machine's real TCP error; the predicted
+    spread of the compensated TCP scales with the gauge noise assumed."""
+    from calibrators.prediction import predicted_correction, predicted_tcp_std
+    from orthoglide_env.scoring import score
+
+    est, truth = run("gauss-newton", "full", TABLE1, gauge_sigma=0.0, gauge_resolution=0.0)
+    before = score(est.machine, truth).tcp_before
+    assert predicted_correction(est).rms == pytest.approx(before.rms, abs=1e-5)
+    noisy = get_strategy("gauss-newton").estimate(est.readings, "full", 0.02, verify=False)
+    twice = get_strategy("gauss-newton").estimate(est.readings, "full", 0.04, verify=False)
+    assert predicted_tcp_std(twice).rms == pytest.approx(2 * predicted_tcp_std(noisy).rms,
+                                                         rel=1e-6)
+    # The weak drho ~ dL directions barely move the TCP: it is known far better than the
+    # parameters (~0.77 mm each at 0.02 mm gauges).
+    assert predicted_tcp_std(noisy).max < 0.2
+
+
+def test_a_new_strategy_is_one_registered_class() -> None:
+    """What docs/calibrators.md promises: a registered subclass is found by name, runs its
+    own experiment (here five repetitions instead of three) and goes through compare."""
+    from calibrators.base import register
+    from calibrators.compare import Config, run
+    from calibrators.paper import PaperCalibrator
+
+    if "paper-5" not in available():
+
+        @register
+        class FiveRepetitions(PaperCalibrator):
+            name = "paper-5"
+            experiment = "paper-sequence-5"
+            repetitions = 5
+
+    est = run_strategy_once("paper-5")
+    assert est.n_readings == 3 * 2 * (3 * 5 + 1)
+    trials = run(Config(("paper", "paper-5"), "paper", 0.02, 0.0, "exact", "full", 1), 2,
+                 jobs=1, progress=False)
+    times = {t.strategy: t.experiment_time_s for t in trials if t.machine == 0}
+    assert times["paper-5"] > times["paper"]
+
+
+def run_strategy_once(name: str):
+    env = gym.make(orthoglide_env.ENV_ID, backend="exact", errors="paper")
+    env.reset(seed=0)
+    est = get_strategy(name).run(env, "full", verify=False)
+    env.close()
+    return est

@@ -79,7 +79,10 @@ def test_fit_from_a_measurement_file(tmp_path, capsys) -> None:
     get_strategy("paper").collect(env).to_csv(path)
     env.close()
     out = run_json(capsys, ["fit", str(path), "--json"])
-    assert "truth" not in out and out["n_readings"] == 60
+    assert "truth" not in out and "tcp_error_after_mm" not in out and out["n_readings"] == 60
+    # Instead of errors against a truth: what the compensation will change, and how sure.
+    assert out["predicted_correction_mm"]["rms"] > 1.0
+    assert 0 < out["predicted_tcp_std_after_mm"]["rms"] < 0.2
     # Within 5 reported standard deviations of the truth.
     for group in ("drho", "dL"):
         for est, std, true in zip(out["estimate"][group], out["std"][group],
@@ -108,6 +111,9 @@ def test_compare_writes_table_csv_and_plot(tmp_path, capsys) -> None:
         (["calibrate", "--strategy", "oracle"], "unknown strategy"),
         (["calibrate", "--machine", "MISSING"], "not found"),
         (["calibrate", "--sigma", "-1"], "--sigma"),
+        (["pose", "--machine", "GOOD", "--rho", "0", "0", "0", "--resolution", "nan"],
+         "--resolution"),
+        (["calibrate", "--params", "all"], "invalid choice"),
         (["fit", "MISSING"], "not found"),
         (["fit", "BAD_CSV"], "column 5"),
         (["compare", "--strategies", "paper,oracle"], "unknown strategy"),
