@@ -80,11 +80,28 @@ class OrthoglideCalibrationEnv(gym.Env):
 
     Termination
     -----------
-    ``terminated`` when moving parts of different legs (bars, couplers, platform) collide;
-    ``info["collision"]`` names them.  Within the joint limits the geometry allows no such
-    contact (the PyBullet contact check, which does see a forced crash, finds none on grids
-    of the joint range), so this is a guard for machines far from nominal.  Truncation
-    comes from ``max_episode_steps``.
+    ``terminated`` when moving parts that must never meet touch: parts of different legs
+    (bars, couplers, carriages), or the platform and a bar or carriage;
+    ``info["collision"]`` names the pairs (``"x_coupler/y_coupler, ..."``).  PyBullet's
+    contact check and, on the exact backend, the separating-axis test of
+    :mod:`orthoglide_env.collisions` decide it.  On the nominal and realistic machines the
+    nearest such parts stay more than 5 mm apart over the whole joint cube, so this guards
+    machines far from nominal (given through the ``machine`` reset option).  Both backends
+    check the posture reached, not the path to it.  The base has no collision geometry.
+    Truncation comes from ``max_episode_steps``.
+
+    Reset options
+    -------------
+    ``machine``: the true machine, a dict in the machine file schema
+    (:meth:`MachineParams.from_dict`) or a ``MachineParams``; default: drawn from the
+    ``errors`` preset with ``np_random``.  ``gauges``: the layout of this episode, names
+    such as ``"x-leg/y"`` or ``"z/x@0.3"`` or ``GaugeSpec`` objects; it must hold as many
+    gauges as the constructor's ``gauges`` (the observation space is fixed), otherwise
+    ``ValueError``.  Installation errors are drawn from the preset with ``np_random``; the
+    gauges are then set up at mid-travel and zeroed at the Zero posture.
+
+    Public attributes for calibrators: ``gauge_layout`` (this episode's tuple of
+    ``GaugeSpec``), ``gauge_noise`` (the spec sheet's sigma and resolution), ``travel``.
 
     Info
     ----
@@ -131,7 +148,8 @@ class OrthoglideCalibrationEnv(gym.Env):
                 f"at most travel/{1 / MAX_SIGMA_FRACTION:g} = {travel * MAX_SIGMA_FRACTION:g} mm"
             )
         self.gauge_noise = GaugeNoise(gauge_sigma, gauge_resolution)
-        self.gauge_layout = _layout(gauges)
+        self._default_layout = _layout(gauges)
+        self.gauge_layout = self._default_layout
         self.travel = float(travel)
         self.motion = motion
         self.backend_name = backend
@@ -181,11 +199,11 @@ class OrthoglideCalibrationEnv(gym.Env):
         )
         if not isinstance(machine, MachineParams):
             raise ValueError("reset option 'machine' must be a dict in the machine file schema")
-        layout = _layout(options["gauges"]) if "gauges" in options else self.gauge_layout
-        if len(layout) != len(self.gauge_layout):
+        layout = _layout(options["gauges"]) if "gauges" in options else self._default_layout
+        if len(layout) != len(self._default_layout):
             raise ValueError(
-                f"this env observes {len(self.gauge_layout)} gauges; a layout of {len(layout)} "
-                "needs an env built with gauges=[...] of that size"
+                f"this env observes {len(self._default_layout)} gauges; a layout of "
+                f"{len(layout)} needs an env built with gauges=[...] of that size"
             )
         gauges = install(layout, machine, travel=self.travel, preset=self.preset,
                          rng=self.np_random)
@@ -193,6 +211,7 @@ class OrthoglideCalibrationEnv(gym.Env):
             self._machine.close()
         self._machine = self._build(machine, gauges)
         self._machine.set_gauges(zero_gauges(gauges, self._machine.gauge_distances()))
+        self.gauge_layout = layout
         self._rho = np.zeros(3)
         self._steps = 0
         reading = self.task.read(self._machine, self.np_random)
@@ -232,8 +251,12 @@ class OrthoglideCalibrationEnv(gym.Env):
     def _build(self, machine: MachineParams, gauges: list) -> MachineBackend:
         if self.backend_name == "exact":
             return ExactMachine(machine, gauges)
-        from .machine import OrthoglideMachine
-
+        try:
+            from .machine import OrthoglideMachine
+        except ImportError as exc:
+            raise ImportError(
+                f"the pybullet backend is not available ({exc}); use backend='exact'"
+            ) from exc
         return OrthoglideMachine(machine, gauges, gui=self.render_mode == "human")
 
     def _require_machine(self) -> MachineBackend:

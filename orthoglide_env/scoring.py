@@ -8,12 +8,14 @@ from the target over a grid of the workspace, compared with the uncompensated ma
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from .geometry import RHO_MAX, RHO_MIN, MachineParams
-from .kinematics import direct, inverse
+from .kinematics import UnreachableError, direct, inverse
 
 #: TCP targets of the scoring grid span this cube (mm): inside the workspace that the
 #: nominal model reaches within the control limits.
@@ -54,14 +56,31 @@ def workspace_grid(points: int = GRID_POINTS) -> np.ndarray:
     return grid[np.all((rho >= RHO_MIN) & (rho <= RHO_MAX), axis=-1)]
 
 
+def _rowwise(solve: Callable[[np.ndarray], np.ndarray], points: np.ndarray) -> np.ndarray:
+    """``solve`` over rows of ``points`` (n, 3), NaN rows where it finds no solution: the
+    batch call raises for the whole batch when one row fails, so only then go row by row
+    (a poor estimate may put some targets out of its own reach)."""
+    try:
+        return solve(points)
+    except UnreachableError:
+        out = np.full(points.shape, np.nan)
+        for k, point in enumerate(points):
+            with contextlib.suppress(UnreachableError):
+                out[k] = solve(point)
+        return out
+
+
 def tcp_errors(model: MachineParams, truth: MachineParams, targets: np.ndarray) -> np.ndarray:
     """Distance (mm) from each target to where the true machine goes when commanded with
-    ``model``; NaN where a command would leave the control limits."""
-    rho = inverse(model, targets)
-    reached = direct(truth, rho)
-    errors = np.linalg.norm(reached - targets, axis=-1)
-    inside = np.all((rho >= RHO_MIN) & (rho <= RHO_MAX), axis=-1)
-    return np.where(inside, errors, np.nan)
+    ``model``; NaN where the model has no command or it would leave the control limits."""
+    targets = np.asarray(targets, dtype=float).reshape(-1, 3)
+    rho = _rowwise(lambda p: inverse(model, p), targets)
+    with np.errstate(invalid="ignore"):
+        inside = np.all((rho >= RHO_MIN) & (rho <= RHO_MAX), axis=-1)
+    errors = np.full(len(targets), np.nan)
+    reached = _rowwise(lambda r: direct(truth, r), rho[inside])
+    errors[inside] = np.linalg.norm(reached - targets[inside], axis=-1)
+    return errors
 
 
 def score(

@@ -3,6 +3,7 @@ model, on both machine backends."""
 
 from __future__ import annotations
 
+import importlib.util
 import warnings
 
 import gymnasium as gym
@@ -12,10 +13,16 @@ from gymnasium.utils.env_checker import check_env
 
 import orthoglide_env
 from orthoglide_env.gauges import exact_readings
+from orthoglide_env.geometry import MachineParams
 from orthoglide_env.kinematics import PAPER_POSTURES, paper_posture
 from orthoglide_env.task import DRIVE_SPEED, OVERTRAVEL_PENALTY, SETTLE_AND_READ
 
-BACKENDS = ("exact", "pybullet")
+#: The PyBullet machine is built separately; its tests skip until it can be imported.
+HAVE_PYBULLET = importlib.util.find_spec("orthoglide_env.machine") is not None
+needs_pybullet = pytest.mark.skipif(not HAVE_PYBULLET, reason="orthoglide_env.machine absent")
+BACKENDS = ("exact", pytest.param("pybullet", marks=needs_pybullet))
+#: x-leg's R2 moved 8 mm toward the y axis: clear at Zero, couplers crash at (60, 60, 60).
+CRASHING = MachineParams(attach=[[-8.0, 8.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
 #: check_env recommends actions normalised to [-1, 1]; ours are joint targets in mm, as the
 #: env's users (and the issue) ask, so that one warning is expected.
 EXPECTED_WARNING = "symmetric and normalized space"
@@ -167,6 +174,7 @@ def test_ground_truth_is_not_in_observations_or_info() -> None:
     env.close()
 
 
+@needs_pybullet
 def test_rgb_array_frames_come_from_direct_mode() -> None:
     env = make("pybullet", render_mode="rgb_array")
     env.reset(seed=0)
@@ -176,12 +184,38 @@ def test_rgb_array_frames_come_from_direct_mode() -> None:
     assert len(np.unique(frame.reshape(-1, 3), axis=0)) > 20  # a picture, not a blank
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("vector", [gym.vector.SyncVectorEnv, gym.vector.AsyncVectorEnv])
-def test_vector_envs_run(vector) -> None:
-    envs = vector([lambda: make("pybullet") for _ in range(3)])
+def test_vector_envs_run(vector, backend: str) -> None:
+    envs = vector([lambda: make(backend) for _ in range(3)])
     obs, _ = envs.reset(seed=4)
     assert obs["gauges"].shape == (3, 6)
     for _ in range(5):
         obs, reward, *_ = envs.step(np.random.default_rng(0).uniform(-5, 5, (3, 3)))
     assert reward.shape == (3,) and np.all(reward < 0)
     envs.close()
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_crash_ends_the_episode(backend: str) -> None:
+    env = make(backend)
+    env.reset(seed=0, options={"machine": CRASHING.to_dict()})
+    _, _, terminated, _, info = env.step(np.full(3, 30.0))
+    assert not terminated and info["collision"] == ""
+    _, reward, terminated, truncated, info = env.step(np.full(3, 60.0))
+    assert terminated and not truncated
+    assert info["collision"] == "x_coupler/y_coupler, x_coupler/z_coupler"
+    assert np.isfinite(reward)
+    env.close()
+
+
+def test_episode_layout_is_public_and_named_in_info() -> None:
+    env = make("exact", gauges=["x-leg/y", "y-leg/z"])
+    _, info = env.reset(seed=0)
+    assert info["gauge_names"] == ["x-leg/y", "y-leg/z"]
+    _, info = env.reset(seed=0, options={"gauges": ["z/x", "x/z@0.3"]})
+    assert info["gauge_names"] == ["z-leg/x", "x-leg/z"]
+    assert [g.at for g in env.unwrapped.gauge_layout] == [0.5, 0.3]
+    _, info = env.reset(seed=0)  # without the option: the constructor's layout again
+    assert info["gauge_names"] == ["x-leg/y", "y-leg/z"]
+    env.close()

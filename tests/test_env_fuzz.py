@@ -5,6 +5,10 @@ neither memory nor PyBullet clients."""
 from __future__ import annotations
 
 import gc
+import importlib.util
+import signal
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import gymnasium as gym
 import numpy as np
@@ -14,6 +18,36 @@ import pytest
 
 import orthoglide_env
 from orthoglide_env.geometry import RHO_MAX, RHO_MIN
+
+needs_pybullet = pytest.mark.skipif(
+    importlib.util.find_spec("orthoglide_env.machine") is None,
+    reason="orthoglide_env.machine absent",
+)
+
+
+@contextmanager
+def deadline(seconds: float) -> Iterator[None]:
+    """Fail instead of hanging: a step that never returns raises TimeoutError."""
+
+    def expire(signum: int, frame: object) -> None:
+        raise TimeoutError(f"no answer within {seconds} s")
+
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def acceptable(action: object) -> bool:
+    """What the issue specifies: exactly three finite numbers within the joint limits."""
+    try:
+        a = np.asarray(action, dtype=float)
+    except (TypeError, ValueError):
+        return False
+    return a.shape == (3,) and bool(np.all(np.isfinite(a) & (a >= RHO_MIN) & (a <= RHO_MAX)))
 
 
 def random_action(rng: np.random.Generator):
@@ -37,11 +71,15 @@ def fuzz(env: gym.Env, steps: int, seed: int) -> tuple[int, int]:
     refused = accepted = 0
     for _ in range(steps):
         action = random_action(rng)
-        try:
-            obs, reward, terminated, truncated, _ = env.step(action)
-        except ValueError:
-            refused += 1
-            continue
+        # Each step gets a generous deadline: a hang fails the test instead of stalling it.
+        with deadline(5.0):
+            try:
+                obs, reward, terminated, truncated, _ = env.step(action)
+            except ValueError:
+                assert not acceptable(action), action
+                refused += 1
+                continue
+        assert acceptable(action), action
         accepted += 1
         assert env.observation_space.contains(obs)
         assert np.isfinite(reward) and reward < 0
@@ -57,6 +95,7 @@ def test_fuzz_exact_backend_thousands_of_steps() -> None:
     assert accepted > 1000 and refused > 1000
 
 
+@needs_pybullet
 def test_fuzz_pybullet_backend() -> None:
     env = gym.make(orthoglide_env.ENV_ID, backend="pybullet")
     accepted, refused = fuzz(env, 600, seed=2)
@@ -68,7 +107,10 @@ def _connected_clients() -> int:
     return sum(pb.getConnectionInfo(c)["isConnected"] for c in range(64))
 
 
-@pytest.mark.parametrize(("backend", "resets"), [("exact", 1000), ("pybullet", 300)])
+@pytest.mark.parametrize(
+    ("backend", "resets"),
+    [("exact", 1000), pytest.param("pybullet", 300, marks=needs_pybullet)],
+)
 def test_many_resets_leak_nothing(backend: str, resets: int) -> None:
     gc.collect()  # envs of earlier tests that were not closed release their clients here
     base = _connected_clients()

@@ -44,3 +44,29 @@ def test_score_report_round_trips_to_dict() -> None:
     assert set(data) == {"drho_error", "dL_error", "tcp_before", "tcp_after", "n_targets",
                          "n_skipped"}
     assert set(data["tcp_after"]) == {"rms", "max"}
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_compensating_a_realistic_machine_with_its_truth_leaves_no_error(seed: int) -> None:
+    truth = random_machine(seed, "realistic")
+    report = score(truth, truth)
+    # The general direct model is Newton's method converged to 1e-11 mm per step;
+    # measured maxima are ~2e-13 mm.
+    assert report.tcp_after.max < 1e-9
+    assert report.n_targets + report.n_skipped == len(workspace_grid())
+
+
+def test_commands_outside_the_limits_are_skipped_and_counted() -> None:
+    # An estimate that believes the x encoder reads 30 mm high commands 30 mm less on x:
+    # targets near the -100 mm limit get commands the controller refuses.
+    report = score(MachineParams(drho=[30.0, 0.0, 0.0]), random_machine(1, "realistic"))
+    assert report.n_skipped > 0
+    assert report.n_targets + report.n_skipped == len(workspace_grid())
+
+
+def test_a_wild_estimate_is_scored_without_crashing() -> None:
+    # Legs of 60 mm cannot reach most targets: no command, no crash, NaN errors.
+    wild = MachineParams(dL=[-250.0, 0.0, 0.0])
+    assert np.all(np.isnan(tcp_errors(wild, MachineParams(), workspace_grid())))
+    with pytest.raises(ValueError, match="no target"):
+        score(wild, MachineParams())

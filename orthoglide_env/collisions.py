@@ -1,0 +1,122 @@
+"""Collisions between moving parts, computed from the exact geometry.
+
+The exact backend has no physics engine to ask for contacts, so it checks the same parts
+the PyBullet machine checks (its ``_collision_pairs``) with the separating-axis test on
+their boxes: two boxes are apart when one of fifteen axes (the three face normals of
+each and the nine cross products of their edges) separates their projections.
+
+The largest gap over those axes is a lower bound on the distance between the boxes (a
+projection never lengthens a segment), so :func:`clearance` also measures how far a
+posture is from a crash.  The base has no collision geometry in either backend: its
+rails are drawn only (see ``urdf_writer._base``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .gauges import BOX_NAMES, collision_boxes
+from .geometry import LEG_NAMES, R_LEG, MachineParams
+from .kinematics import carriage_points, direct
+from .urdf_writer import CARRIAGE_SETBACK, CARRIAGE_SIZE
+
+#: Every moving box: the bars, couplers and platform of :data:`gauges.BOX_NAMES`, then
+#: the three carriages (named as the simulator's links).
+PART_NAMES: tuple[str, ...] = (*BOX_NAMES, *(f"{leg}_carriage" for leg in LEG_NAMES))
+
+
+def _crash_pairs() -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+    """Pairs that touch only in a crash, in the simulator's order and naming: parts of
+    different legs (bars, couplers, carriages), and the platform with every bar and
+    carriage.  Parts of one leg, and couplers with the platform, touch by design."""
+    index = {name: k for k, name in enumerate(PART_NAMES)}
+    legs = [[f"{leg}_{p}" for p in ("bar1", "bar2", "coupler", "carriage")] for leg in LEG_NAMES]
+    pairs = [(a, b) for i in range(3) for j in range(i + 1, 3) for a in legs[i] for b in legs[j]]
+    pairs += [("platform", f"{leg}_{p}") for leg in LEG_NAMES for p in ("bar1", "bar2", "carriage")]
+    first = np.array([index[a] for a, _ in pairs])
+    second = np.array([index[b] for _, b in pairs])
+    return first, second, tuple(f"{a}/{b}" for a, b in pairs)
+
+
+PAIR_FIRST, PAIR_SECOND, PAIR_NAMES = _crash_pairs()
+
+
+def part_boxes(
+    machine: MachineParams, rho: np.ndarray, boxes: tuple[np.ndarray, ...] | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Boxes of :data:`PART_NAMES` at control coordinates ``rho`` (shape ``(..., 3)``):
+    centres ``(..., 13, 3)``, rotations ``(..., 13, 3, 3)``, half extents ``(..., 13, 3)``.
+    ``boxes``: the :func:`gauges.collision_boxes` at ``rho`` when already computed."""
+    rho = np.asarray(rho, dtype=float)
+    centre, rot, half = boxes or collision_boxes(machine, rho, direct(machine, rho))
+    # A carriage keeps its nominal orientation; it starts CARRIAGE_SETBACK ahead of R1.
+    ahead = CARRIAGE_SETBACK + CARRIAGE_SIZE[0] / 2
+    carriage_centre = carriage_points(machine, rho) + ahead * R_LEG[:, :, 0]
+    lead = rho.shape[:-1]
+    return (
+        np.concatenate([centre, carriage_centre], axis=-2),
+        np.concatenate([rot, np.broadcast_to(R_LEG, (*lead, 3, 3, 3))], axis=-3),
+        np.concatenate([half, np.broadcast_to(np.array(CARRIAGE_SIZE) / 2, (*lead, 3, 3))],
+                       axis=-2),
+    )
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product over the last axis, broadcast (np.cross costs several times more on
+    the small arrays of one posture, and this runs on every step of the exact backend)."""
+    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
+                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+
+
+def box_gap(
+    centre_a: np.ndarray, rot_a: np.ndarray, half_a: np.ndarray,
+    centre_b: np.ndarray, rot_b: np.ndarray, half_b: np.ndarray,
+) -> np.ndarray:
+    """Largest separating-axis gap (mm) between boxes A and B, broadcast over leading
+    dimensions: positive means apart by at least that much, zero or less means touching
+    or overlapping.  Rotation columns are the box axes in world."""
+    axes_a = np.swapaxes(rot_a, -1, -2)  # rows: the box's axes
+    axes_b = np.swapaxes(rot_b, -1, -2)
+    edges = _cross(axes_a[..., :, None, :], axes_b[..., None, :, :])
+    edges = edges.reshape(*edges.shape[:-3], 9, 3)
+    norm = np.linalg.norm(edges, axis=-1)
+    # Parallel edges give no axis of their own (a face normal already covers them).
+    degenerate = norm < 1e-9
+    edges = edges / np.where(degenerate, 1.0, norm)[..., None]
+    lead = edges.shape[:-2]
+    axes = np.concatenate([np.broadcast_to(axes_a, (*lead, 3, 3)),
+                           np.broadcast_to(axes_b, (*lead, 3, 3)), edges], axis=-2)
+    offset = np.abs(np.einsum("...ki,...i->...k", axes, centre_b - centre_a))
+    reach_a = np.einsum("...kj,...j->...k", np.abs(axes @ rot_a), half_a)
+    reach_b = np.einsum("...kj,...j->...k", np.abs(axes @ rot_b), half_b)
+    gap = offset - reach_a - reach_b
+    gap[..., 6:] = np.where(degenerate, -np.inf, gap[..., 6:])
+    return np.max(gap, axis=-1)
+
+
+def pair_gaps(
+    machine: MachineParams, rho: np.ndarray, boxes: tuple[np.ndarray, ...] | None = None
+) -> np.ndarray:
+    """Separating-axis gap (mm) of every pair of :data:`PAIR_NAMES`, shape ``(..., pairs)``."""
+    centre, rot, half = part_boxes(machine, rho, boxes)
+    first, second = PAIR_FIRST, PAIR_SECOND
+    return box_gap(centre[..., first, :], rot[..., first, :, :], half[..., first, :],
+                   centre[..., second, :], rot[..., second, :, :], half[..., second, :])
+
+
+def clearance(
+    machine: MachineParams, rho: np.ndarray, boxes: tuple[np.ndarray, ...] | None = None
+) -> np.ndarray:
+    """Smallest gap (mm) over the crash pairs at ``rho``, shape ``rho.shape[:-1]``: a lower
+    bound on how far the nearest two parts that must never meet are apart."""
+    return np.min(pair_gaps(machine, rho, boxes), axis=-1)
+
+
+def collisions(
+    machine: MachineParams, rho: np.ndarray, boxes: tuple[np.ndarray, ...] | None = None
+) -> list[str]:
+    """Names (``"a/b"``, as the simulator names them) of the crash pairs in contact at one
+    posture ``rho`` (shape ``(3,)``)."""
+    gaps = pair_gaps(machine, rho, boxes)
+    return [name for name, gap in zip(PAIR_NAMES, gaps, strict=True) if gap <= 0.0]
