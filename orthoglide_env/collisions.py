@@ -1,7 +1,7 @@
 """Collisions between moving parts, computed from the exact geometry.
 
 The exact backend has no physics engine to ask for contacts, so it checks the same parts
-the PyBullet machine checks (its ``_collision_pairs``) with the separating-axis test on
+the PyBullet machine checks (:func:`crash_pairs`) with the separating-axis test on
 their boxes: two boxes are apart when one of fifteen axes (the three face normals of
 each and the nine cross products of their edges) separates their projections.
 
@@ -15,30 +15,35 @@ from __future__ import annotations
 
 import numpy as np
 
-from .gauges import BOX_NAMES, collision_boxes
-from .geometry import LEG_NAMES, R_LEG, MachineParams
+from .gauges import BOX_NAMES, collision_boxes, cross
+from .geometry import CARRIAGE_SETBACK, CARRIAGE_SIZE, LEG_NAMES, R_LEG, MachineParams
 from .kinematics import carriage_points, direct
-from .urdf_writer import CARRIAGE_SETBACK, CARRIAGE_SIZE
 
 #: Every moving box: the bars, couplers and platform of :data:`gauges.BOX_NAMES`, then
 #: the three carriages (named as the simulator's links).
 PART_NAMES: tuple[str, ...] = (*BOX_NAMES, *(f"{leg}_carriage" for leg in LEG_NAMES))
 
 
-def _crash_pairs() -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
-    """Pairs that touch only in a crash, in the simulator's order and naming: parts of
+def crash_pairs() -> list[tuple[str, str]]:
+    """Pairs of parts (the simulator's link names) that touch only in a crash: parts of
     different legs (bars, couplers, carriages), and the platform with every bar and
-    carriage.  Parts of one leg, and couplers with the platform, touch by design."""
-    index = {name: k for k, name in enumerate(PART_NAMES)}
+    carriage.  Parts of one leg, and couplers with the platform, touch by design.  Both
+    backends check exactly these."""
     legs = [[f"{leg}_{p}" for p in ("bar1", "bar2", "coupler", "carriage")] for leg in LEG_NAMES]
     pairs = [(a, b) for i in range(3) for j in range(i + 1, 3) for a in legs[i] for b in legs[j]]
-    pairs += [("platform", f"{leg}_{p}") for leg in LEG_NAMES for p in ("bar1", "bar2", "carriage")]
+    return pairs + [("platform", f"{leg}_{p}") for leg in LEG_NAMES
+                    for p in ("bar1", "bar2", "carriage")]
+
+
+def _pair_indices() -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+    index = {name: k for k, name in enumerate(PART_NAMES)}
+    pairs = crash_pairs()
     first = np.array([index[a] for a, _ in pairs])
     second = np.array([index[b] for _, b in pairs])
     return first, second, tuple(f"{a}/{b}" for a, b in pairs)
 
 
-PAIR_FIRST, PAIR_SECOND, PAIR_NAMES = _crash_pairs()
+PAIR_FIRST, PAIR_SECOND, PAIR_NAMES = _pair_indices()
 
 
 def part_boxes(
@@ -61,14 +66,6 @@ def part_boxes(
     )
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product over the last axis, broadcast (np.cross costs several times more on
-    the small arrays of one posture, and this runs on every step of the exact backend)."""
-    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
-                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
-                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
-
-
 def box_gap(
     centre_a: np.ndarray, rot_a: np.ndarray, half_a: np.ndarray,
     centre_b: np.ndarray, rot_b: np.ndarray, half_b: np.ndarray,
@@ -78,7 +75,7 @@ def box_gap(
     or overlapping.  Rotation columns are the box axes in world."""
     axes_a = np.swapaxes(rot_a, -1, -2)  # rows: the box's axes
     axes_b = np.swapaxes(rot_b, -1, -2)
-    edges = _cross(axes_a[..., :, None, :], axes_b[..., None, :, :])
+    edges = cross(axes_a[..., :, None, :], axes_b[..., None, :, :])
     edges = edges.reshape(*edges.shape[:-3], 9, 3)
     norm = np.linalg.norm(edges, axis=-1)
     # Parallel edges give no axis of their own (a face normal already covers them).

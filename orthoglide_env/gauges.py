@@ -201,7 +201,7 @@ def zero_gauges(gauges: list[Gauge], t_at_zero: np.ndarray) -> list[Gauge]:
     ]
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Cross product over the last axis (np.cross costs ~10x more on small arrays)."""
     a, b = np.broadcast_arrays(a, b)
     return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
@@ -217,9 +217,9 @@ def _boxes(
     v = c - a
     length = np.linalg.norm(v, axis=-1)
     along = v / length[..., None]
-    hinge = _cross(r_axis, along)
+    hinge = cross(r_axis, along)
     hinge /= np.linalg.norm(hinge, axis=-1, keepdims=True)
-    normal = _cross(along, hinge)
+    normal = cross(along, hinge)
     rot = np.stack([along, hinge, normal], axis=-1)
     half = np.stack(
         [length / 2 - BAR_CLEARANCE, *(np.full_like(length, s / 2) for s in BAR_SECTION)], axis=-1

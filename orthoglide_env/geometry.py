@@ -65,6 +65,10 @@ BAR_SECTION: tuple[float, float] = (12.0, 12.0)  # bar cross-section along (hing
 BAR_CLEARANCE: float = 10.0  # bar box stops this far short of each hinge centre, mm
 #: Short links of the parallelogram (local X, Y, Z of the leg frame), centred on the R axis.
 SHORT_LINK_SIZE: tuple[float, float, float] = (20.0, 20.0, 100.0)
+#: Carriage box (leg frame, mm) and how far behind the R1 centre it starts: the carriage
+#: and its guideway stay behind R1 at any travel, clear of the bars that leave R1 forward.
+CARRIAGE_SIZE: tuple[float, float, float] = (70.0, 60.0, 110.0)
+CARRIAGE_SETBACK: float = 10.0
 PLATFORM_SIZE: float = 55.0  # edge of the platform cube centred on the TCP, mm
 
 LEG_NAMES: tuple[str, str, str] = ("x", "y", "z")

@@ -24,6 +24,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .backend import check_motion_mode
+from .collisions import crash_pairs
 from .gauges import RAY_BACKOFF, Gauge, on_flat_face, ray_box_distance
 from .geometry import BAR_SECTION, D_NOMINAL, LEG_NAMES, R_LEG, MachineParams
 from .kinematics import direct, leg_angles
@@ -247,17 +248,9 @@ class OrthoglideMachine:
         return pos + rot @ np.array([-length / 2, 0.0, 0.0]), rot, half
 
     def _collision_pairs(self) -> list[tuple[int, int, str]]:
-        """Link pairs that touch only in a crash: parts of different legs (bars, couplers,
-        carriages), and the platform with any bar or carriage.  Parts of one leg, and the
-        couplers with the platform they are mounted on, touch by design and are left out.
-        The base has no collision shape (its rails are drawn only), so it is not checked."""
-        legs = {i: [link_name(i, p) for p in ("bar1", "bar2", "coupler", "carriage")]
-                for i in range(3)}
-        pairs = [(a, b) for i in range(3) for j in range(i + 1, 3) for a in legs[i]
-                 for b in legs[j]]
-        pairs += [("platform", link_name(i, p)) for i in range(3)
-                  for p in ("bar1", "bar2", "carriage")]
-        return [(self._index[a], self._index[b], f"{a}/{b}") for a, b in pairs]
+        """Link indices of :func:`~orthoglide_env.collisions.crash_pairs`.  The base has no
+        collision shape (its rails are drawn only), so it is not checked."""
+        return [(self._index[a], self._index[b], f"{a}/{b}") for a, b in crash_pairs()]
 
     def collisions(self) -> list[str]:
         """Pairs of parts in contact that should never touch (see :meth:`_collision_pairs`)."""

@@ -28,6 +28,8 @@ from scipy.spatial.transform import Rotation
 from .geometry import (
     BAR_CLEARANCE,
     BAR_SECTION,
+    CARRIAGE_SETBACK,
+    CARRIAGE_SIZE,
     D_NOMINAL,
     L_NOMINAL,
     LEG_NAMES,
@@ -55,10 +57,6 @@ COLOURS = {
     "platform": (0.7, 0.15, 0.15, 1),
 }
 HINGE_RADIUS = 8.0  # mm, visual hinge pins
-#: Carriage box (leg frame, mm) and how far behind the R1 centre it starts: the carriage
-#: and its guideway stay behind R1 at any travel, clear of the bars that leave R1 forward.
-CARRIAGE_SIZE = (70.0, 60.0, 110.0)
-CARRIAGE_SETBACK = 10.0
 RAIL_SECTION = (40.0, 30.0)  # mm, along local Y and Z
 RAIL_BESIDE = 45.0  # mm, rail centre to actuator axis along -local Y (beside the carriage)
 
