@@ -1,0 +1,76 @@
+"""How ``calibrate`` and ``fit`` show an estimate: a JSON object or a table."""
+
+from __future__ import annotations
+
+import json
+
+from orthoglide_env.geometry import MachineParams
+from orthoglide_env.scoring import score
+
+from ..base import Estimate
+from ..prediction import predicted_correction, predicted_tcp_std
+
+
+def report(est: Estimate, truth: MachineParams | None) -> dict:
+    data = {
+        "strategy": est.strategy,
+        "params": est.params,
+        "estimate": {"drho": est.drho.tolist(), "dL": est.dL.tolist()},
+        "std": est.std,
+        "residual_rms_mm": est.residual_rms_mm,
+        "verification_rms_mm": est.verification_rms_mm,
+        "experiment_time_s": est.experiment_time_s,
+        "n_readings": est.n_readings,
+        "singular_values": est.singular_values.tolist(),
+        "condition_number": est.condition_number,
+        "crlb": est.crlb.tolist(),
+        "weak_directions": est.weak_directions,
+        "iterations": est.iterations,
+        "predicted_correction_mm": vars(predicted_correction(est)),
+        "predicted_tcp_std_after_mm": vars(predicted_tcp_std(est)),
+    }
+    if truth is not None:
+        report = score(MachineParams(drho=est.drho, dL=est.dL), truth)
+        data["truth"] = {"drho": truth.drho.tolist(), "dL": truth.dL.tolist()}
+        data["tcp_error_before_mm"] = vars(report.tcp_before)
+        data["tcp_error_after_mm"] = vars(report.tcp_after)
+    return data
+
+
+def print_table(data: dict) -> None:
+    print(f"strategy {data['strategy']}, parameters {data['params']}")
+    print(f"{'':8}{'estimate':>10}{'std':>9}" + (f"{'truth':>10}{'error':>10}" if "truth" in data
+                                                   else ""))
+    for group in ("drho", "dL"):
+        for k, axis in enumerate("xyz"):
+            est = data["estimate"][group][k]
+            std = data["std"][group][k]
+            shown = f"{std:9.4f}" if std is not None else "    fixed"
+            line = f"{group}_{axis:<4}{est:10.4f}{shown}"
+            if "truth" in data:
+                true = data["truth"][group][k]
+                line += f"{true:10.4f}{est - true:10.4f}"
+            print(line)
+    print(f"residual RMS {data['residual_rms_mm']:.4f} mm over {data['n_readings']} readings"
+          + (f"; held-out repetitions {data['verification_rms_mm']:.4f} mm"
+             if data["verification_rms_mm"] is not None else ""))
+    print("singular values " + ", ".join(f"{s:.4g}" for s in data["singular_values"])
+          + f" (condition {data['condition_number']:.1f})")
+    print("Cramér-Rao bound (mm) " + ", ".join(f"{c:.4f}" for c in data["crlb"]))
+    for weak in data["weak_directions"]:
+        print("weakly identified: " + " ".join(f"{v:+.2f} {k}" for k, v in weak.items()))
+    print(f"experiment time {data['experiment_time_s']:.0f} s")
+    c, u = data["predicted_correction_mm"], data["predicted_tcp_std_after_mm"]
+    print(f"predicted over the workspace: correction RMS {c['rms']:.4f} / max {c['max']:.4f} mm,"
+          f" TCP std after RMS {u['rms']:.4f} / max {u['max']:.4f} mm")
+    if "tcp_error_before_mm" in data:
+        b, a = data["tcp_error_before_mm"], data["tcp_error_after_mm"]
+        print(f"TCP error over the workspace: before RMS {b['rms']:.4f} / max {b['max']:.4f} mm,"
+              f" after RMS {a['rms']:.4f} / max {a['max']:.4f} mm")
+
+
+def emit(data: dict, as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(data, indent=2))
+    else:
+        print_table(data)

@@ -1,0 +1,46 @@
+"""``orthoglide pose``: simulate one posture of a machine and read its gauges."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+
+from orthoglide_env.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
+from orthoglide_env.geometry import MachineParams
+
+from .common import add_machine_posture, rho_of, vec
+
+
+def run(args: argparse.Namespace) -> None:
+    machine, rho = MachineParams.from_json(args.machine), rho_of(args.rho)
+    from orthoglide_env.report import pose_report  # loads the simulator: after validation
+
+    report = pose_report(machine, rho, noise_free=args.noise_free, seed=args.seed,
+                         sigma=DEFAULT_SIGMA if args.sigma is None else args.sigma,
+                         resolution=args.resolution)
+    if args.json:
+        print(json.dumps(report, indent=2))
+        return
+    print(f"TCP simulated   {vec(report['tcp'], 6)} mm")
+    print(f"TCP exact model {vec(report['tcp_model'], 6)} mm")
+    gap = 1e3 * np.linalg.norm(np.subtract(report["tcp"], report["tcp_model"]))
+    print(f"difference      {gap:.2e} µm; loop residual {1e3 * report['loop_residual_mm']:.2e} µm")
+    for g in report["gauges"]:
+        value = f"{g['reading']:+8.3f} mm" if g["valid"] else f"{'-':>8}    "
+        print(f"  gauge {g['leg']}-leg/{g['axis']}: {value}  ({g['status']})")
+
+
+def add(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("pose", help="simulate one posture of a machine and read its gauges")
+    add_machine_posture(p)
+    p.add_argument("--noise-free", action="store_true", help="ideal gauges (no noise, no "
+                   "quantisation)")
+    p.add_argument("--sigma", type=float, default=None,
+                   help=f"gauge repeatability (mm, default {DEFAULT_SIGMA})")
+    p.add_argument("--resolution", type=float, default=DEFAULT_RESOLUTION,
+                   help=f"gauge display resolution (mm, default {DEFAULT_RESOLUTION})")
+    p.add_argument("--seed", type=int, default=None, help="seed of the gauge noise")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=run)

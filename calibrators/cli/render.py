@@ -1,0 +1,24 @@
+"""``orthoglide render``: a PNG picture of a machine at a posture."""
+
+from __future__ import annotations
+
+import argparse
+
+from orthoglide_env.geometry import MachineParams
+
+from .common import add_machine_posture, rho_of
+
+
+def run(args: argparse.Namespace) -> None:
+    machine, rho = MachineParams.from_json(args.machine), rho_of(args.rho)
+    from orthoglide_env.report import render_png
+
+    path = render_png(machine, rho, args.out)
+    print(f"wrote {path}")
+
+
+def add(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("render", help="write a PNG picture of a machine at a posture")
+    add_machine_posture(p)
+    p.add_argument("--out", required=True, help="PNG file to write")
+    p.set_defaults(func=run)
