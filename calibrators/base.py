@@ -25,12 +25,21 @@ import gymnasium as gym
 import numpy as np
 
 from orthoglide_env.gauges import GaugeSpec, layout_from_names
-from orthoglide_env.geometry import AXIS_NAMES, LEG_NAMES, MachineParams, read_user_file
+from orthoglide_env.geometry import (
+    AXIS_NAMES,
+    ERROR_GROUPS,
+    ERROR_NAMES,
+    LEG_NAMES,
+    MachineParams,
+    error_group,
+    read_user_file,
+)
 from orthoglide_env.kinematics import PAPER_POSTURES, paper_posture
 
 PARAM_NAMES: tuple[str, ...] = ("drho_x", "drho_y", "drho_z", "dL_x", "dL_y", "dL_z")
 #: Which of the six paper parameters each ``--params`` choice frees (the others stay 0).
 PARAM_SETS: dict[str, tuple[int, ...]] = {
+    "paper6": (0, 1, 2, 3, 4, 5),
     "full": (0, 1, 2, 3, 4, 5),
     "drho": (0, 1, 2),
     "dL": (3, 4, 5),
@@ -173,9 +182,11 @@ class Estimate:
     """A calibration result with its uncertainty and identifiability.
 
     ``covariance``, ``fisher`` (for readings of unit variance: divide by sigma^2) and
-    ``crlb`` are over the freed parameters (in ``PARAM_NAMES`` order); ``std`` has
-    ``None`` for the parameters the fit kept at zero.  ``readings`` are the readings the
-    estimate was computed from.
+    ``crlb`` are over the free parameters, named in ``names``; ``theta`` holds every
+    parameter of the fit (the 27 machine errors, then four per stand mounting, named in
+    ``space``).  ``residuals`` are per reading for exact-model fits (``reading -
+    model - zero``, mm) and per difference for the paper's linear fit.  ``readings`` are
+    the readings the estimate was computed from.
     """
 
     strategy: str
@@ -194,18 +205,43 @@ class Estimate:
     sigma: float = 0.0
     fisher: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     readings: Measurements = field(default_factory=Measurements)
+    names: list[str] = field(default_factory=list)
+    space: list[str] = field(default_factory=list)
+    theta: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    prior: str = "none"
+    chi2: float | None = None
+    dof: int | None = None
+    covariance_scale: float = 1.0
+    warnings: list[str] = field(default_factory=list)
+    identifiable: list[str] = field(default_factory=list)
+    unidentifiable: list[str] = field(default_factory=list)
+    outliers: list[int] = field(default_factory=list)
+    holdout_rms_mm: float | None = None
+
+    def __post_init__(self) -> None:
+        if not self.names:
+            self.names = [PARAM_NAMES[k] for k in PARAM_SETS[self.params]]
+        if not len(self.theta):
+            self.space = list(ERROR_NAMES)
+            self.theta = np.concatenate([self.drho, self.dL, np.zeros(len(ERROR_NAMES) - 6)])
 
     @property
-    def std(self) -> dict[str, list[float | None]]:
-        free = PARAM_SETS[self.params]
-        full: list[float | None] = [None] * 6
-        for k, idx in enumerate(free):
-            full[idx] = float(np.sqrt(max(self.covariance[k, k], 0.0)))
-        return {"drho": full[:3], "dL": full[3:]}
+    def std(self) -> dict[str, Any]:
+        """Standard deviation of every parameter in the machine-file schema (``None`` for
+        the ones the fit kept fixed), stands under ``"stands"``."""
+        full: list[float | None] = [None] * len(self.space)
+        for k, name in enumerate(self.names):
+            full[self.space.index(name)] = float(np.sqrt(max(self.covariance[k, k], 0.0)))
+        return schema(full, self.space)
+
+    @property
+    def estimate(self) -> dict[str, Any]:
+        """Every parameter's value in the machine-file schema, stands under ``"stands"``."""
+        return schema(self.theta.tolist(), self.space)
 
     @property
     def residual_rms_mm(self) -> float:
-        return float(np.sqrt(np.mean(self.residuals**2))) if self.residuals.size else 0.0
+        return float(np.sqrt(np.nanmean(self.residuals**2))) if self.residuals.size else 0.0
 
     @property
     def condition_number(self) -> float:
@@ -214,8 +250,8 @@ class Estimate:
 
     @property
     def machine(self) -> MachineParams:
-        """The estimated machine (paper parameters only)."""
-        return MachineParams(drho=self.drho, dL=self.dL)
+        """The estimated machine (every machine error the fit has)."""
+        return MachineParams.from_vector(self.theta[: len(ERROR_NAMES)])
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready; the derived ``std``, ``residual_rms_mm`` and ``condition_number``
@@ -249,8 +285,29 @@ class Estimate:
         return cls.from_dict(json.loads(Path(path).read_text()))
 
 
+def schema(values: list, space: list[str]) -> dict[str, Any]:
+    """Per-parameter ``values`` (in the order of the names ``space``) in the machine-file
+    schema; stand parameters go under ``"stands"`` keyed by mounting."""
+    n = len(ERROR_NAMES)
+    out: dict[str, Any] = {}
+    start = 0
+    for key in ERROR_GROUPS:
+        size = len([name for name in ERROR_NAMES if error_group(name) == key])
+        block = values[start:start + size]
+        out[key] = block if key in ("drho", "dL") else [block[i:i + len(block) // 3]
+                                                       for i in range(0, size, size // 3)]
+        start += size
+    stands: dict[str, list] = {}
+    for name, value in zip(space[n:], values[n:], strict=True):
+        mounting = name.rsplit(".", 1)[0]
+        stands.setdefault(mounting, []).append(value)
+    if stands:
+        out["stands"] = stands
+    return out
+
+
 _ARRAY_FIELDS: tuple[str, ...] = ("drho", "dL", "covariance", "residuals", "singular_values",
-                                  "crlb", "fisher")
+                                  "crlb", "fisher", "theta")
 
 
 class Calibrator:

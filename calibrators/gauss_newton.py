@@ -1,87 +1,203 @@
-"""``gauss-newton``: the paper's measurements, fitted with the exact gauge model.
+"""``gauss-newton``: any experiment's readings, fitted with the exact model.
 
-The paper linearises the gauge differences around the nominal machine; with errors of a
-few millimetres that leaves a bias of tenths of a millimetre.  This strategy iterates
-Gauss-Newton on the exact model (the same ray-on-bar geometry the machine has, evaluated
-at the current estimate with ideally installed gauges) to convergence (steps below
-1e-7 mm), weighting the differences by the inverse of their exact covariance (they share
-Zero readings), so the estimate is efficient and its covariance is the Cramér-Rao bound.
-A step that does not lower the cost is retried with Levenberg-Marquardt damping, which
-keeps it converging on machines the six-parameter model does not describe exactly.
+The paper linearises the gauge differences around the nominal machine and fits six
+parameters.  This strategy fits the exact model (:mod:`calibrators.exact_model`) with the
+batched damped Gauss-Newton solver of :mod:`calibrators.estimator`, over any parameter
+selection (``paper6``, ``extended`` with the gauge stands, groups, names), with priors or
+base parameters, and reports what the data could and could not determine, a chi-square
+test of the model, per-reading residuals with outliers flagged, and optional held-out
+readings.  Its experiment is the paper's (it shares ``collect``); its estimator reads any
+measurement file.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import solve_triangular
 
-from .base import register
-from .differences import Differences, model_differences, model_jacobian
-from .paper import PaperCalibrator
+from .base import Estimate, Measurements, register
+from .estimator import CHI2_LEVEL, NOISE_FLOOR, BatchFit, fit_batch
+from .exact_model import Design, mounting_key, predict
+from .paper import PaperCalibrator, split_repetitions
+from .parameters import (
+    ParameterSpace,
+    describe,
+    fixed_values,
+    prior_sigmas,
+    scales,
+    select,
+)
 
-#: Convergence: the model's round-off makes steps wander at ~1e-9 mm once converged (the
-#: weak drho ~ dL directions amplify it ~60x), so steps are resolved to 1e-7 mm, five
-#: orders below a gauge's resolution.
-STEP_TOL: float = 1e-7  # mm
-MAX_ITERATIONS: int = 50
-#: Damping of a rejected step grows tenfold per retry, from this fraction of diag(J^T J).
-DAMPING_START: float = 1e-4
+#: A reading is an outlier when its residual exceeds this many robust standard deviations
+#: (1.4826 x the median absolute residual, or the gauge sigma when larger): a normal
+#: reading does so with probability 6e-5, so 60 readings flag a good one once in 270 fits.
+OUTLIER_K: float = 4.0
+#: At most this fraction of the readings is flagged; beyond it the model, not the
+#: readings, is wrong, and the warning says so.
+MAX_OUTLIER_FRACTION: float = 0.05
+
+
+def design_of(data: Measurements) -> tuple[Design, np.ndarray]:
+    """The design and the readings of ``data``."""
+    if not len(data):
+        raise ValueError("no readings to fit")
+    mountings = [getattr(m, "mounting", "") or mounting_key(m.gauge) for m in data.items]
+    design = Design.of(mountings, [m.gauge for m in data.items],
+                       np.array([m.rho for m in data.items], dtype=float))
+    return design, np.array([m.reading for m in data.items], dtype=float)
 
 
 @register
 class GaussNewtonCalibrator(PaperCalibrator):
-    """Same experiment as ``paper``; exact model, iterated to convergence."""
+    """Same experiment as ``paper``; exact model, any parameter set."""
 
     name = "gauss-newton"
 
-    def jacobian(self, rows: Differences, theta: np.ndarray, free: tuple[int, ...],
-                 at: np.ndarray | None = None) -> np.ndarray:
-        """The exact model's Jacobian over the free parameters (``at``: the model's value
-        at ``theta`` when already known)."""
-        return model_jacobian(theta, rows, free, at)
+    def estimate(self, data: Measurements, params: str = "paper6", sigma: float = 0.01,
+                 *, verify: bool = True, prior: str = "auto",
+                 fix: dict[str, float] | None = None, keep_outliers: bool = False,
+                 holdout: float = 0.0, seed: int = 0) -> Estimate:
+        design, values = design_of(data)
+        space = design.space
+        free = select(params, space)
+        fixed = fixed_values(fix or {}, space)
+        for name in fix or {}:
+            free[space.names.index(name)] = False
+        if not free.any():
+            raise ValueError("every parameter of the selection is fixed: nothing to fit")
+        priors = prior_sigmas(prior, space, free)
+        scale = scales(space, priors)
+        needed = len(design.mountings) + int(np.sum(~np.isfinite(priors[free]))) + 1
+        if len(values) < needed:
+            raise ValueError(f"{len(values)} readings cannot determine {len(design.mountings)} "
+                             f"gauge zeros and the parameters without a prior: at least "
+                             f"{needed} are needed")
 
-    def predict(self, rows: Differences, theta: np.ndarray) -> np.ndarray:
-        return model_differences(theta, rows)
+        def fit(mask: np.ndarray) -> BatchFit:
+            result = fit_batch(design, values[None], mask[None], sigma, free, fixed, priors,
+                               scale)
+            if not result.converged[0]:
+                raise RuntimeError("the exact-model fit did not converge")
+            return result
 
-    def solve(self, rows: Differences, free: tuple[int, ...], sigma: float
-              ) -> tuple[np.ndarray, np.ndarray, int]:
-        """Weighted least squares on the exact model, started from the linear solution.
+        mask = np.ones(len(values), dtype=bool)
+        held = _holdout(design, holdout, seed) if holdout else np.zeros(len(values), bool)
+        mask &= ~held
+        result = fit(mask)
+        outliers: list[int] = []
+        while len(outliers) < MAX_OUTLIER_FRACTION * len(values):
+            residual = np.abs(result.residuals[0])
+            robust = 1.4826 * np.nanmedian(residual)
+            worst = int(np.nanargmax(residual))
+            if residual[worst] <= OUTLIER_K * max(sigma, robust, NOISE_FLOOR):
+                break
+            outliers.append(worst)
+            mask[worst] = False
+            result = fit(mask)
+        if outliers and keep_outliers:
+            mask[outliers] = True
+            result = fit(mask)
+        if not len(result.identifiable(0)):
+            raise ValueError(f"the readings identify no combination of the parameters "
+                             f"'{params}' (every one is below its a-priori scale)")
+        return self._estimate(data, params, prior, sigma, design, values, result, mask, held,
+                              outliers, verify)
 
-        The residuals are whitened by the covariance's Cholesky factor, so the fixed point
-        is the weighted least-squares one.  Plain Gauss-Newton steps converge
-        quadratically on a machine the model describes (a few iterations from the linear
-        start); with model error the residual's curvature along the weak drho ~ dL
-        directions rivals J^T W J, and a step that raises the cost is damped instead."""
-        theta, _, _ = super().solve(rows, free, sigma)
-        chol = np.linalg.cholesky(rows.cov_unit)
-        idx = list(free)
+    def _estimate(self, data: Measurements, params: str, prior: str, sigma: float,
+                  design: Design, values: np.ndarray, result: BatchFit, mask: np.ndarray,
+                  held: np.ndarray, outliers: list[int], verify: bool) -> Estimate:
+        space = design.space
+        names = [n for n, f in zip(space.names, result.free, strict=True) if f]
+        idx = np.flatnonzero(result.free)
+        s = result.scale[idx]
+        info = result.information[0]
+        eig = np.sort(np.linalg.eigvalsh(info))[::-1]
+        cov = result.scaled_covariance[0]
+        theta = result.theta[0]
+        warnings = []
+        if result.misfit[0]:
+            hint = ("try --params extended" if not result.free[6:].any() else
+                    "look for outliers, a gauge that moved, or a slipping stand")
+            warnings.append(
+                f"the model does not explain the readings: chi2/dof = "
+                f"{result.chi2_dof[0]:.1f} (chi-square test at {CHI2_LEVEL:g}); error bars "
+                f"are scaled by sqrt(chi2/dof) = {np.sqrt(result.chi2_dof[0]):.2f}; {hint}")
+        if outliers:
+            where = ", ".join(_where(data, k) for k in outliers)
+            warnings.append(f"{len(outliers)} outlier reading(s) "
+                            f"{'kept' if mask[outliers].all() else 'left out'}: {where}")
+        residuals = result.residuals[0]
+        if held.any():
+            residuals = np.where(held, _held_out(design, values, theta, mask, held), residuals)
+        return Estimate(
+            strategy=self.name, params=params, drho=theta[:3], dL=theta[3:6], covariance=cov,
+            residuals=residuals, singular_values=np.sqrt(np.clip(eig, 0, None)),
+            crlb=np.sqrt(np.diag(result.covariance[0])), weak_directions=[],
+            n_readings=int(mask.sum()), experiment_time_s=data.experiment_time_s,
+            verification_rms_mm=self._verify(design, values, result, mask, data)
+            if verify else None,
+            iterations=int(result.iterations[0]), sigma=sigma,
+            # Physical units, for readings of unit variance (as the paper's fit reports it).
+            fisher=info / np.outer(s, s) * max(sigma, NOISE_FLOOR) ** 2,
+            readings=data, names=names, space=list(space.names), theta=theta, prior=prior,
+            chi2=float(result.chi2[0]), dof=int(result.dof[0]),
+            covariance_scale=float(result.covariance_scale[0]), warnings=warnings,
+            identifiable=[describe(d, names) for d in result.identifiable(0)],
+            unidentifiable=[describe(d, names) for d in result.unidentifiable(0)],
+            outliers=outliers,
+            holdout_rms_mm=float(np.sqrt(np.mean(residuals[held] ** 2))) if held.any() else None,
+        )
 
-        def whiten(values: np.ndarray) -> np.ndarray:
-            return solve_triangular(chol, values, lower=True)
+    def _verify(self, design: Design, values: np.ndarray, result: BatchFit, mask: np.ndarray,
+                data: Measurements) -> float | None:
+        """Leave one repetition out: fit without it, predict its readings (each mounting's
+        zero from the rest); the RMS over every held-out reading (mm)."""
+        reps = np.array([m.repetition for m in data.items])
+        errors = []
+        for rep in split_repetitions(data):
+            test = mask & (reps == rep)
+            train = mask & ~test
+            try:
+                fit = fit_batch(design, values[None], train[None], result.sigma,
+                                result.free, result.theta[0], result.prior, result.scale)
+            except np.linalg.LinAlgError:
+                continue
+            if fit.converged[0]:
+                errors.append(_held_out(design, values, fit.theta[0], train, test)[test])
+        return float(np.sqrt(np.mean(np.concatenate(errors) ** 2))) if errors else None
 
-        model = self.predict(rows, theta)
-        residual = whiten(model - rows.values)
-        damping = 0.0
-        for iteration in range(1, MAX_ITERATIONS + 1):
-            jac = whiten(self.jacobian(rows, theta, free, at=model))
-            normal = jac.T @ jac
-            gradient = jac.T @ residual
-            while True:
-                lhs = normal + damping * np.diag(np.diag(normal))
-                step = np.zeros(6)
-                step[idx] = -np.linalg.solve(lhs, gradient)
-                trial_model = self.predict(rows, theta + step)
-                trial = whiten(trial_model - rows.values)
-                converged = np.max(np.abs(step)) < STEP_TOL
-                if trial @ trial <= residual @ residual or converged:
-                    break
-                damping = DAMPING_START if damping == 0.0 else 10 * damping
-                if damping > 1e12:
-                    raise RuntimeError("Gauss-Newton stalled: no step lowers the cost")
-            theta, model, residual = theta + step, trial_model, trial
-            damping = damping / 10 if damping > DAMPING_START else 0.0
-            if converged:
-                # The Jacobian of the last iteration is within STEP_TOL of the solution:
-                # its covariance differs from the one at the solution by ~1e-9 relative.
-                return theta, sigma**2 * np.linalg.inv(normal), iteration
-        raise RuntimeError(f"Gauss-Newton did not converge in {MAX_ITERATIONS} iterations")
+
+def _held_out(design: Design, values: np.ndarray, theta: np.ndarray, train: np.ndarray,
+              test: np.ndarray) -> np.ndarray:
+    """Residuals of the ``test`` readings predicted by ``theta``, each mounting's zero taken
+    from its ``train`` readings (NaN where a mounting has none)."""
+    raw = values - predict(theta, design)
+    out = np.full(len(values), np.nan)
+    for k in range(len(design.mountings)):
+        mine = design.mounting == k
+        if (mine & train).any():
+            out[mine & test] = raw[mine & test] - raw[mine & train].mean()
+    return out
+
+
+def _holdout(design: Design, fraction: float, seed: int) -> np.ndarray:
+    """A random ``fraction`` of the readings, never a mounting's last remaining one."""
+    if not 0 < fraction < 1:
+        raise ValueError(f"--holdout must be a fraction in (0, 1), got {fraction:g}")
+    rng = np.random.default_rng(seed)
+    held = np.zeros(len(design), dtype=bool)
+    held[rng.permutation(len(design))[: round(fraction * len(design))]] = True
+    for k in range(len(design.mountings)):
+        mine = np.flatnonzero(design.mounting == k)
+        if held[mine].all():
+            held[mine[0]] = False
+    return held
+
+
+def _where(data: Measurements, k: int) -> str:
+    m = data.items[k]
+    line = getattr(m, "line", None)
+    place = f"line {line}" if line else f"reading {k + 1}"
+    return f"{place} ({m.gauge.name}@{m.gauge.at:g}, {m.posture}, repetition {m.repetition})"
+
+
+__all__ = ["GaussNewtonCalibrator", "ParameterSpace", "design_of"]

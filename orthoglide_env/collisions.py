@@ -57,7 +57,7 @@ def part_boxes(
     # A carriage keeps its nominal orientation; it starts CARRIAGE_SETBACK ahead of R1.
     ahead = CARRIAGE_SETBACK + CARRIAGE_SIZE[0] / 2
     carriage_centre = carriage_points(machine, rho) + ahead * R_LEG[:, :, 0]
-    lead = rho.shape[:-1]
+    lead = centre.shape[:-2]
     return (
         np.concatenate([centre, carriage_centre], axis=-2),
         np.concatenate([rot, np.broadcast_to(R_LEG, (*lead, 3, 3, 3))], axis=-3),

@@ -134,22 +134,109 @@ def layout_from_names(names: list[str]) -> tuple[GaugeSpec, ...]:
     return tuple(specs)
 
 
-def _target_rays(
-    specs: tuple[GaugeSpec, ...] | list[GaugeSpec], machine: MachineParams, travel: float
+def ideal_rays(
+    specs: tuple[GaugeSpec, ...] | list[GaugeSpec], machine: MachineParams,
+    travel: float = DEFAULT_TRAVEL,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Rays of perfectly installed gauges: each aimed at the middle of its bar's face at the
-    Zero posture of ``machine``, the plunger at mid-travel.  Origins and directions (n, 3)."""
+    Zero posture of ``machine``, the plunger at mid-travel.  Origins ``(*batch, n, 3)``
+    and directions ``(n, 3)`` (a stand's nominal direction is a world axis)."""
     zero = np.zeros(3)
     centre, rot, half = collision_boxes(machine, zero, direct(machine, zero))
     target = [target_box(s) for s in specs]
-    centre, rot, half = centre[target], rot[target], half[target]
+    centre, rot, half = centre[..., target, :], rot[..., target, :, :], half[..., target, :]
     axis = np.array([s.local_axis for s in specs])
     direction = R_LEG[[s.leg for s in specs], :, axis]
     # Along the bar from its platform end (at=0) to its carriage end (at=1).
     at = np.array([s.at for s in specs])
-    along = ((at - 0.5) * 2 * (half[:, 0] + BAR_CLEARANCE))[:, None] * -rot[:, :, 0]
-    face = centre + along - direction * half[np.arange(len(specs)), axis][:, None]
+    along = ((at - 0.5) * 2 * (half[..., 0] + BAR_CLEARANCE))[..., None] * -rot[..., :, 0]
+    face = centre + along - direction * half[..., np.arange(len(specs)), axis][..., None]
     return face - direction * (travel / 2), direction
+
+
+# --- the stand's installation, as an estimator sees it ------------------------------------
+#: A stand is never exactly where the layout says.  Sliding it along its own measuring
+#: axis only moves the zero, and turning the gauge about that axis changes nothing, so its
+#: installation has four effective parameters: the ray's shift along the two other world
+#: axes (mm) and its tilt toward them (rad).
+STAND_PARAMS: tuple[str, ...] = ("shift", "shift", "tilt", "tilt")
+
+
+def stand_axes(spec: GaugeSpec) -> tuple[int, int]:
+    """The two world axes across a gauge's measuring axis, in x, y, z order."""
+    a, b = (k for k in range(3) if k != spec.axis)
+    return a, b
+
+
+def stand_names(mounting: str, spec: GaugeSpec) -> list[str]:
+    """Names of a mounting's four stand parameters, e.g. ``x-leg/y@0.5.shift_x``."""
+    a, b = (AXIS_NAMES[k] for k in stand_axes(spec))
+    return [f"{mounting}.shift_{a}", f"{mounting}.shift_{b}",
+            f"{mounting}.tilt_{a}", f"{mounting}.tilt_{b}"]
+
+
+def _across(specs: tuple[GaugeSpec, ...] | list[GaugeSpec]) -> np.ndarray:
+    """Unit vectors of the two cross axes of each gauge, shape (n, 2, 3)."""
+    return np.stack([np.eye(3)[list(stand_axes(s))] for s in specs])
+
+
+def stand_rays(
+    specs: tuple[GaugeSpec, ...] | list[GaugeSpec], origins: np.ndarray,
+    directions: np.ndarray, stand: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rays of stands installed with errors ``stand`` (shape ``(*batch, n, 4)``, in
+    :data:`STAND_PARAMS` order) from the ideal ``origins`` and ``directions``."""
+    across = _across(specs)
+    stand = np.asarray(stand, dtype=float)
+    origin = origins + np.einsum("...gk,gkj->...gj", stand[..., :2], across)
+    direction = directions + np.einsum("...gk,gkj->...gj", stand[..., 2:], across)
+    return origin, direction / np.linalg.norm(direction, axis=-1, keepdims=True)
+
+
+def stand_errors(
+    specs: tuple[GaugeSpec, ...] | list[GaugeSpec], origins: np.ndarray,
+    directions: np.ndarray, ideal_origins: np.ndarray, ideal_directions: np.ndarray,
+) -> np.ndarray:
+    """The stand parameters (n, 4) of installed rays relative to ideal ones: the inverse of
+    :func:`stand_rays` (the shift is measured where the ray crosses the plane through the
+    ideal origin normal to the ideal direction).  For scoring against the truth only."""
+    across = _across(specs)
+    d0 = ideal_directions
+    slope = np.sum(directions * d0, axis=-1, keepdims=True)
+    s = np.sum((ideal_origins - origins) * d0, axis=-1, keepdims=True) / slope
+    crossing = origins + s * directions - ideal_origins
+    tilt = np.einsum("gj,gkj->gk", directions / slope, across)
+    return np.concatenate([np.einsum("gj,gkj->gk", crossing, across), tilt], axis=-1)
+
+
+def face_distances(
+    machine: MachineParams, specs: tuple[GaugeSpec, ...] | list[GaugeSpec],
+    origins: np.ndarray, directions: np.ndarray, rho: np.ndarray,
+) -> np.ndarray:
+    """Distance along each ray to the plane of the face its gauge is aimed at, at every
+    posture: shape ``(*batch, *postures, n)`` for ``rho`` of shape
+    ``(*batch, *postures, 3)`` and rays ``(*batch, n, 3)``.
+
+    This is the reading model of an estimator: the plane is smooth in every parameter
+    (no edges, no occlusion, no travel), and on a valid reading it is exactly the
+    simulator's ray distance (the tip sits on that face)."""
+    rho = np.asarray(rho, dtype=float)
+    p = direct(machine, rho)
+    legs = np.array([s.leg for s in specs])
+    bars = np.array([s.bar for s in specs])
+    a = carriage_points(machine, rho)[..., legs, :]
+    c = platform_points(machine, p)[..., legs, :]
+    centre, rot, half = _boxes(a, c, legs, bars)
+    face = np.array([s.local_axis for s in specs])
+    normal = np.einsum("...gjk,gk->...gj", rot, np.eye(3)[face])
+    thickness = half[..., np.arange(len(specs)), face]
+    extra = centre.ndim - 2 - (np.ndim(origins) - 2)
+    shape = (*np.shape(origins)[:-2], *(1,) * extra, len(specs), 3)
+    o = np.reshape(origins, shape)
+    d = np.reshape(np.broadcast_to(directions, np.broadcast_shapes(np.shape(directions),
+                                                                  np.shape(origins))), shape)
+    nd = np.sum(normal * d, axis=-1)
+    return (np.sum(normal * (centre - o), axis=-1) - thickness * np.sign(nd)) / nd
 
 
 def install(
@@ -172,7 +259,7 @@ def install(
     gauges = []
     if not specs:
         return gauges
-    for spec, origin, direction in zip(specs, *_target_rays(specs, machine, travel), strict=True):
+    for spec, origin, direction in zip(specs, *ideal_rays(specs, machine, travel), strict=True):
         if preset is not None and rng is not None:
             origin = origin + rng.normal(0.0, preset.gauge_position, 3)
             tilt = rng.normal(0.0, preset.gauge_tilt, 3)

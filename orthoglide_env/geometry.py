@@ -119,18 +119,75 @@ class MachineParams:
     attach: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
 
     def __post_init__(self) -> None:
+        values = {}
         for f in fields(self):
             shape = _SHAPES[f.name]
             value = np.array(getattr(self, f.name), dtype=float)
-            if value.shape != shape:
+            if value.shape[value.ndim - len(shape):] != shape or value.ndim < len(shape):
                 raise MachineFileError(
                     f"machine key '{f.name}' must have shape {list(shape)}, got {list(value.shape)}"
                 )
             if not np.all(np.isfinite(value)):
                 raise MachineFileError(f"machine key '{f.name}' holds a non-finite number")
-            setattr(self, f.name, value)
+            values[f.name] = value
+        try:
+            batch = np.broadcast_shapes(
+                *(v.shape[: v.ndim - len(_SHAPES[k])] for k, v in values.items())
+            )
+        except ValueError:
+            raise MachineFileError("machine keys have different batch shapes") from None
+        for key, value in values.items():
+            shape = (*batch, *_SHAPES[key])
+            if value.shape != shape:
+                value = np.broadcast_to(value, shape).copy()
+            setattr(self, key, value)
         if np.any(L_NOMINAL + self.dL <= D_NOMINAL / 2):
             raise MachineFileError(f"leg length L + dL must exceed {D_NOMINAL / 2} mm")
+
+    # -- batches of machines ----------------------------------------------------------------
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        """Leading shape of a batch of machines; ``()`` for one machine.
+
+        Every field may carry leading batch dimensions (``drho`` of shape ``(B, 3)`` holds B
+        machines); the kinematics broadcast over them, so a single machine is a batch of
+        shape ``()`` and there is one code path."""
+        return self.drho.shape[:-1]
+
+    def __getitem__(self, index: Any) -> MachineParams:
+        """One machine (or a sub-batch) of a batch."""
+        if not self.batch_shape:
+            raise IndexError("a single machine has no batch axis to index")
+        return MachineParams(**{f.name: getattr(self, f.name)[index] for f in fields(self)})
+
+    @classmethod
+    def stack(cls, machines: list[MachineParams]) -> MachineParams:
+        """A batch of shape ``(len(machines),)`` from single machines."""
+        if not machines:
+            raise ValueError("cannot stack an empty list of machines")
+        return cls(**{f.name: np.stack([getattr(m, f.name) for m in machines])
+                      for f in fields(cls)})
+
+    def to_vector(self) -> np.ndarray:
+        """The 27 errors as one vector in :data:`ERROR_NAMES` order, shape ``(*batch, 27)``."""
+        batch = self.batch_shape
+        return np.concatenate(
+            [getattr(self, f.name).reshape(*batch, -1) for f in fields(self)], axis=-1
+        )
+
+    @classmethod
+    def from_vector(cls, vector: np.ndarray) -> MachineParams:
+        """Inverse of :meth:`to_vector` (leading dimensions are batch dimensions)."""
+        vector = np.asarray(vector, dtype=float)
+        if vector.shape[-1:] != (len(ERROR_NAMES),):
+            raise ValueError(f"a machine vector has {len(ERROR_NAMES)} entries, "
+                             f"got shape {list(vector.shape)}")
+        batch, kwargs, start = vector.shape[:-1], {}, 0
+        for key, shape in _SHAPES.items():
+            size = int(np.prod(shape))
+            kwargs[key] = vector[..., start:start + size].reshape(*batch, *shape)
+            start += size
+        return cls(**kwargs)
 
     # -- derived geometry, used by the kinematics and the URDF writer ------------------
     @property
@@ -140,27 +197,27 @@ class MachineParams:
 
     @property
     def axis_directions(self) -> np.ndarray:
-        """Unit actuator travel directions u_i in world, shape (3, 3) (row i = leg i)."""
-        local = np.column_stack(
-            [np.ones(3), np.tan(self.axis_tilt[:, 0]), np.tan(self.axis_tilt[:, 1])]
-        )
-        local /= np.linalg.norm(local, axis=1, keepdims=True)
-        return np.einsum("ijk,ik->ij", R_LEG, local)
+        """Unit actuator travel directions u_i in world, shape (*batch, 3, 3) (row i = leg i)."""
+        tilt = np.tan(self.axis_tilt)
+        local = np.concatenate([np.ones((*tilt.shape[:-1], 1)), tilt], axis=-1)
+        local /= np.linalg.norm(local, axis=-1, keepdims=True)
+        return np.einsum("ijk,...ik->...ij", R_LEG, local)
 
     @property
     def axis_origins(self) -> np.ndarray:
-        """Points o_i of the actuator axes in world, shape (3, 3)."""
-        local = np.column_stack([np.zeros(3), self.axis_offset])
-        return np.einsum("ijk,ik->ij", R_LEG, local)
+        """Points o_i of the actuator axes in world, shape (*batch, 3, 3)."""
+        offset = self.axis_offset
+        local = np.concatenate([np.zeros((*offset.shape[:-1], 1)), offset], axis=-1)
+        return np.einsum("ijk,...ik->...ij", R_LEG, local)
 
     @property
     def attach_points(self) -> np.ndarray:
-        """R2 centres C_i relative to the TCP, in world, shape (3, 3)."""
+        """R2 centres C_i relative to the TCP, in world, shape (*batch, 3, 3)."""
         return R_TOOL * np.eye(3) + self.attach
 
     @property
     def is_paper_model(self) -> bool:
-        """True when only the paper's six parameters are non-zero."""
+        """True when only the paper's six parameters are non-zero (in every machine)."""
         return not (self.axis_tilt.any() or self.axis_offset.any() or self.attach.any())
 
     # -- (de)serialisation ---------------------------------------------------------------
@@ -220,6 +277,33 @@ _SHAPES: dict[str, tuple[int, ...]] = {
     "attach": (3, 3),
 }
 
+#: Error groups of a machine file, in schema order.
+ERROR_GROUPS: tuple[str, ...] = tuple(_SHAPES)
+
+
+def _element_names(key: str) -> list[str]:
+    """Names of one group's elements.  Tilts and offsets are named by the leg and the world
+    axis they point to (``axis_tilt_y.z``: the y actuator tilted toward z), attachment
+    errors by the leg and the world component (``attach_x.y``)."""
+    if key in ("drho", "dL"):
+        return [f"{key}_{leg}" for leg in LEG_NAMES]
+    if key == "attach":
+        return [f"{key}_{leg}.{ax}" for leg in LEG_NAMES for ax in AXIS_NAMES]
+    return [f"{key}_{LEG_NAMES[i]}.{AXIS_NAMES[(i + k) % 3]}" for i in range(3) for k in (1, 2)]
+
+
+#: The 27 errors of a machine, in :meth:`MachineParams.to_vector` order.
+ERROR_NAMES: tuple[str, ...] = tuple(n for key in ERROR_GROUPS for n in _element_names(key))
+#: Units of each group, for reports.
+ERROR_UNITS: dict[str, str] = {"drho": "mm", "dL": "mm", "axis_tilt": "rad",
+                               "axis_offset": "mm", "attach": "mm"}
+
+
+def error_group(name: str) -> str:
+    """The machine-file key an error name belongs to (``attach_x.y`` -> ``attach``)."""
+    return name.split("_", 1)[0] if not name.startswith("axis_") else "_".join(
+        name.split("_")[:2])
+
 
 @dataclass(frozen=True)
 class ErrorPreset:
@@ -238,6 +322,10 @@ class ErrorPreset:
     gauge_position: float = 0.0
     gauge_tilt: float = 0.0
     description: str = ""
+
+    def sigmas(self) -> np.ndarray:
+        """Standard deviation of each of the 27 errors, in :data:`ERROR_NAMES` order."""
+        return np.array([getattr(self, error_group(n)) for n in ERROR_NAMES], dtype=float)
 
     def sample(self, rng: np.random.Generator) -> MachineParams:
         """Draw one machine (the gauge installation errors are drawn by the gauges)."""

@@ -8,10 +8,16 @@ Two layers:
   offset actuator axes, platform attachment errors), solved exactly: the inverse in
   closed form, the direct by Newton's method started from the paper's closed form.
 
-Every function takes arrays of shape ``(..., 3)`` and keeps the leading dimensions.
+Every function takes arrays of shape ``(..., 3)`` and keeps the leading dimensions.  A
+machine may be a batch (:attr:`MachineParams.batch_shape`): then the leading dimensions of
+``rho`` or ``p`` are the batch dimensions, followed by any posture dimensions, so
+``rho`` of shape ``(B, P, 3)`` is P postures of each of B machines and ``(1, P, 3)`` the
+same P postures on every machine.  One machine is a batch of shape ``()``.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 
@@ -20,6 +26,36 @@ from .geometry import L_NOMINAL, R_LEG, R_TOOL, RHO_MAX, RHO_MIN, MachineParams
 
 class UnreachableError(ValueError):
     """A posture the machine cannot reach or assemble in."""
+
+
+class Geometry(NamedTuple):
+    """A machine's derived geometry, shaped to broadcast against a batch of postures."""
+
+    drho: np.ndarray  # (*batch, *1, 3)
+    lengths: np.ndarray  # (*batch, *1, 3)
+    u: np.ndarray  # actuator directions (*batch, *1, 3, 3)
+    o: np.ndarray  # actuator axis points (*batch, *1, 3, 3)
+    attach: np.ndarray  # R2 centres relative to the TCP (*batch, *1, 3, 3)
+
+
+def geometry(machine: MachineParams, points: np.ndarray) -> tuple[Geometry, np.ndarray]:
+    """``machine``'s geometry with one singleton axis per posture dimension of ``points``
+    (shape ``(*batch, *postures, 3)``; fewer leading dimensions than the batch broadcast
+    over it), and ``points`` as a float array."""
+    points = np.asarray(points, dtype=float)
+    batch = machine.batch_shape
+    extra = points.ndim - 1 - len(batch)
+    if extra < 0:
+        points = points.reshape((1,) * -extra + points.shape)
+        extra = 0
+    pad = (1,) * extra
+
+    def shaped(value: np.ndarray, tail: int) -> np.ndarray:
+        return value.reshape(*batch, *pad, *value.shape[value.ndim - tail:])
+
+    return Geometry(shaped(machine.drho, 1), shaped(machine.leg_lengths, 1),
+                    shaped(machine.axis_directions, 2), shaped(machine.axis_origins, 2),
+                    shaped(machine.attach_points, 2)), points
 
 
 # --- the paper's model ---------------------------------------------------------------
@@ -81,14 +117,15 @@ def jacobian_paper(
 # --- the general model -----------------------------------------------------------------
 def carriage_points(machine: MachineParams, rho: np.ndarray) -> np.ndarray:
     """Centres A_i of the R1 joints, shape ``(..., 3 legs, 3)``."""
-    rho = np.asarray(rho, dtype=float)
-    s = L_NOMINAL + R_TOOL + machine.drho + rho
-    return machine.axis_origins + s[..., :, None] * machine.axis_directions
+    g, rho = geometry(machine, rho)
+    s = L_NOMINAL + R_TOOL + g.drho + rho
+    return g.o + s[..., :, None] * g.u
 
 
 def platform_points(machine: MachineParams, p: np.ndarray) -> np.ndarray:
     """Centres C_i of the R2 joints for TCP ``p``, shape ``(..., 3 legs, 3)``."""
-    return np.asarray(p, dtype=float)[..., None, :] + machine.attach_points
+    g, p = geometry(machine, p)
+    return p[..., None, :] + g.attach
 
 
 def inverse(machine: MachineParams, p: np.ndarray) -> np.ndarray:
@@ -97,12 +134,10 @@ def inverse(machine: MachineParams, p: np.ndarray) -> np.ndarray:
     Raises :class:`UnreachableError` when a leg cannot reach; the joint limits are not
     checked here (see :func:`check_reachable`).
     """
-    u = machine.axis_directions
-    w = platform_points(machine, p) - machine.axis_origins - (
-        (L_NOMINAL + R_TOOL + machine.drho)[:, None] * u
-    )
-    uw = np.sum(w * u, axis=-1)
-    disc = uw**2 - np.sum(w**2, axis=-1) + machine.leg_lengths**2
+    g, p = geometry(machine, p)
+    w = p[..., None, :] + g.attach - g.o - (L_NOMINAL + R_TOOL + g.drho)[..., None] * g.u
+    uw = np.sum(w * g.u, axis=-1)
+    disc = uw**2 - np.sum(w**2, axis=-1) + g.lengths**2
     _require(disc >= 0, "the TCP is out of reach of a leg")
     return uw + np.sqrt(disc)
 
@@ -111,14 +146,14 @@ def direct(
     machine: MachineParams, rho: np.ndarray, *, tol: float = 1e-11, max_iter: int = 30
 ) -> np.ndarray:
     """TCP position (mm) for control coordinates ``rho``, exactly (Newton to ``tol`` mm)."""
-    rho = np.asarray(rho, dtype=float)
-    p = direct_paper(rho, machine.drho, machine.leg_lengths)
+    g, rho = geometry(machine, rho)
+    p = direct_paper(rho, g.drho, g.lengths)
     if machine.is_paper_model:
         return p
-    a = carriage_points(machine, rho)
-    lengths2 = machine.leg_lengths**2
+    a = g.o + (L_NOMINAL + R_TOOL + g.drho + rho)[..., :, None] * g.u
+    lengths2 = g.lengths**2
     for _ in range(max_iter):
-        v = platform_points(machine, p) - a
+        v = p[..., None, :] + g.attach - a
         f = np.sum(v**2, axis=-1) - lengths2
         step = np.linalg.solve(2 * v, f[..., None])[..., 0]
         p = p - step
