@@ -217,6 +217,10 @@ class Estimate:
     unidentifiable: list[str] = field(default_factory=list)
     outliers: list[int] = field(default_factory=list)
     holdout_rms_mm: float | None = None
+    #: Data information over the free parameters in units of their ``scale`` (the
+    #: identifiability analysis of exact-model fits).
+    information: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    scale: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def __post_init__(self) -> None:
         if not self.names:
@@ -270,7 +274,7 @@ class Estimate:
         for key in _ARRAY_FIELDS:
             if key in kwargs:
                 kwargs[key] = np.array(kwargs[key], dtype=float)
-        for key in ("covariance", "fisher"):
+        for key in ("covariance", "fisher", "information"):
             if key in kwargs and kwargs[key].size == 0:
                 kwargs[key] = np.zeros((0, 0))  # an empty matrix comes back from JSON as []
         if "readings" in kwargs:
@@ -307,7 +311,7 @@ def schema(values: list, space: list[str]) -> dict[str, Any]:
 
 
 _ARRAY_FIELDS: tuple[str, ...] = ("drho", "dL", "covariance", "residuals", "singular_values",
-                                  "crlb", "fisher", "theta")
+                                  "crlb", "fisher", "theta", "information", "scale")
 
 
 class Calibrator:

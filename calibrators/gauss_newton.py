@@ -64,6 +64,8 @@ class GaussNewtonCalibrator(PaperCalibrator):
             free[space.names.index(name)] = False
         if not free.any():
             raise ValueError("every parameter of the selection is fixed: nothing to fit")
+        unmodelled = ~free & ~np.isin(np.arange(len(space)),
+                                      [space.names.index(n) for n in fix or {}])
         priors = prior_sigmas(prior, space, free)
         scale = scales(space, priors)
         needed = len(design.mountings) + int(np.sum(~np.isfinite(priors[free]))) + 1
@@ -74,7 +76,7 @@ class GaussNewtonCalibrator(PaperCalibrator):
 
         def fit(mask: np.ndarray) -> BatchFit:
             result = fit_batch(design, values[None], mask[None], sigma, free, fixed, priors,
-                               scale)
+                               scale, unmodelled=unmodelled)
             if not result.converged[0]:
                 raise RuntimeError("the exact-model fit did not converge")
             return result
@@ -143,7 +145,7 @@ class GaussNewtonCalibrator(PaperCalibrator):
             covariance_scale=float(result.covariance_scale[0]), warnings=warnings,
             identifiable=[describe(d, names) for d in result.identifiable(0)],
             unidentifiable=[describe(d, names) for d in result.unidentifiable(0)],
-            outliers=outliers,
+            outliers=outliers, information=info, scale=s,
             holdout_rms_mm=float(np.sqrt(np.mean(residuals[held] ** 2))) if held.any() else None,
         )
 
