@@ -330,17 +330,19 @@ class Calibrator:
     def collect(self, env: gym.Env) -> Measurements:
         raise NotImplementedError
 
-    def estimate(self, data: Measurements, params: str = "full", sigma: float = 0.01,
-                 *, verify: bool = True) -> Estimate:
+    def estimate(self, data: Measurements, params: str = "paper6", sigma: float = 0.01,
+                 *, verify: bool = True, **options: Any) -> Estimate:
+        """Estimate from ``data``; ``options`` are the estimator's own (see
+        :meth:`calibrators.gauss_newton.GaussNewtonCalibrator.estimate`)."""
         raise NotImplementedError
 
-    def run(self, env: gym.Env, params: str = "full", sigma: float | None = None,
-            *, verify: bool = True) -> Estimate:
+    def run(self, env: gym.Env, params: str = "paper6", sigma: float | None = None,
+            *, verify: bool = True, **options: Any) -> Estimate:
         """Run one experiment on ``env`` (already reset) and estimate.  ``sigma`` defaults
         to the gauges' spec-sheet noise (``env.unwrapped.gauge_noise``)."""
         if sigma is None:
             sigma = env.unwrapped.gauge_noise.effective_sigma
-        return self.estimate(self.collect(env), params, sigma, verify=verify)
+        return self.estimate(self.collect(env), params, sigma, verify=verify, **options)
 
 
 _REGISTRY: dict[str, type[Calibrator]] = {}

@@ -31,6 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
+from orthoglide_env.geometry import L_NOMINAL
+
 from .exact_model import Design, jacobian, predict
 
 #: A combination is identifiable (and moved by a base-parameter fit) when its information
@@ -40,10 +42,13 @@ RETAIN: float = 1.0
 #: A noise-free fit is weighted as if its gauges had this repeatability (mm): weights and
 #: the identifiability threshold need a finite sigma.
 NOISE_FLOOR: float = 1e-6
-#: Convergence on the step, in units of each parameter's scale (2e-8 mm for drho).
-STEP_TOL: float = 1e-8
-#: ... or on the cost, when a step lowers it by less than this fraction.
-COST_RTOL: float = 1e-12
+#: Convergence on the step, in units of each parameter's scale (2e-9 mm for drho): five
+#: times the wander that the Jacobian's round-off leaves (see ``exact_model.FD_STEP``), so
+#: a converged fit is reproducible to ~1e-9 of each scale whatever batch it ran in.
+STEP_TOL: float = 1e-9
+#: A predicted decrease below this many times the cost's round-off is not tested against
+#: the cost (see :meth:`_Problem.cost_resolution`).
+RESOLUTION_MARGIN: float = 100.0
 MAX_ITERATIONS: int = 50
 DAMPING_START: float = 1e-3
 DAMPING_MAX: float = 1e10
@@ -148,48 +153,66 @@ def _centre(values: np.ndarray, mask: np.ndarray, onehot: np.ndarray) -> np.ndar
     return (values - np.einsum("mkf,nk->mnf", mean, onehot)) * weights[..., None]
 
 
-def fit_batch(design: Design, values: np.ndarray, mask: np.ndarray, sigma: float,
-              free: np.ndarray, fixed: np.ndarray, prior: np.ndarray, scale: np.ndarray,
-              max_iterations: int = MAX_ITERATIONS,
-              unmodelled: np.ndarray | None = None) -> BatchFit:
-    """Fit machines whose readings ``values`` (M, N) of ``design`` are used where ``mask``.
+class _Problem:
+    """The least-squares problem of :func:`fit_batch`, for a subset ``rows`` of machines."""
 
-    ``free``, ``fixed``, ``prior``, ``scale``: per parameter of ``design.space`` (mask of the
-    free ones, values of the others, prior sigmas or inf, scales).  The fit starts from
-    nominal (the prior mean) for the free parameters.  ``unmodelled``: the parameters that
-    are neither free nor known (the model leaves them out); their misfit goes into the
-    reported covariance (:func:`_model_error`)."""
-    values = np.atleast_2d(np.asarray(values, dtype=float))
-    mask = np.atleast_2d(np.asarray(mask, dtype=bool)) & np.isfinite(values)
-    values = np.where(mask, values, 0.0)
-    m_count = len(values)
-    idx = np.flatnonzero(free)
-    s = scale[idx]
-    with np.errstate(divide="ignore"):
-        precision = np.where(np.isfinite(prior[idx]), (s / prior[idx]) ** 2, 0.0)
-    weight = 1.0 / max(sigma, NOISE_FLOOR)
-    onehot = np.eye(len(design.mountings))[design.mounting]
-    theta = np.tile(np.asarray(fixed, dtype=float), (m_count, 1))
-    theta[:, idx] = 0.0
+    def __init__(self, design: Design, values: np.ndarray, mask: np.ndarray, sigma: float,
+                 free: np.ndarray, prior: np.ndarray, scale: np.ndarray) -> None:
+        self.design, self.values, self.mask, self.free, self.scale = (
+            design, values, mask, free, scale)
+        self.idx = np.flatnonzero(free)
+        self.s = scale[self.idx]
+        with np.errstate(divide="ignore"):
+            self.precision = np.where(np.isfinite(prior[self.idx]),
+                                      (self.s / prior[self.idx]) ** 2, 0.0)
+        self.weight = 1.0 / max(sigma, NOISE_FLOOR)
+        self.onehot = np.eye(len(design.mountings))[design.mounting]
 
-    def cost_of(model: np.ndarray, th: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, ...]:
-        r = _centre((model - values[rows]) * weight, mask[rows], onehot)
-        phi = th[:, idx] / s
-        return r, np.sum(r**2, axis=1) + np.sum(precision * phi**2, axis=1)
+    def residual(self, theta: np.ndarray, rows: np.ndarray,
+                 model: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Whitened data residuals (zeros eliminated) and the total cost with the prior."""
+        model = predict(theta, self.design) if model is None else model
+        r = _centre((model - self.values[rows]) * self.weight, self.mask[rows], self.onehot)
+        phi = theta[:, self.idx] / self.s
+        return r, np.sum(r**2, axis=1) + np.sum(self.precision * phi**2, axis=1)
 
-    def normal(th: np.ndarray, model: np.ndarray, rows: np.ndarray, r: np.ndarray):
-        jac = _centre(jacobian(th, design, free, scale, at=model) * weight, mask[rows], onehot)
-        info = np.einsum("mnf,mng->mfg", jac, jac)
-        a = info + np.eye(len(idx)) * precision
-        g = np.einsum("mnf,mn->mf", jac, r) + precision * th[:, idx] / s
-        return info, a, g
+    def jacobian(self, theta: np.ndarray, rows: np.ndarray, free: np.ndarray | None = None
+                 ) -> np.ndarray:
+        """Whitened Jacobian over ``free`` (default: the free parameters), scaled units."""
+        free = self.free if free is None else free
+        jac = jacobian(theta, self.design, free, self.scale)
+        return _centre(jac * self.weight, self.mask[rows], self.onehot)
 
-    def step_of(a: np.ndarray, g: np.ndarray, damping: np.ndarray) -> np.ndarray:
-        lam, vec = np.linalg.eigh(a)
-        keep = lam >= RETAIN * (1 - 1e-9)
-        inv = np.where(keep, 1.0 / (np.where(keep, lam, 1.0) + damping[:, None]), 0.0)
-        return -np.einsum("mfk,mk,mgk,mg->mf", vec, inv, vec, g)
+    def cost_resolution(self, cost: np.ndarray) -> np.ndarray:
+        """What a cost comparison can resolve, with a safety factor: each reading's model
+        carries round-off ~eps * L (positions of the order of the leg length), so the cost
+        carries ~2 sqrt(cost) eps L / sigma."""
+        roundoff = np.finfo(float).eps * L_NOMINAL * self.weight
+        return RESOLUTION_MARGIN * 2 * (np.sqrt(cost) + 1.0) * roundoff
 
+    def normal(self, jac: np.ndarray, r: np.ndarray, theta: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """Normal matrix with the prior, and gradient."""
+        a = np.einsum("mnf,mng->mfg", jac, jac) + np.eye(len(self.idx)) * self.precision
+        g = np.einsum("mnf,mn->mf", jac, r) + self.precision * theta[:, self.idx] / self.s
+        return a, g
+
+
+def _step(a: np.ndarray, g: np.ndarray, damping: np.ndarray) -> np.ndarray:
+    """Damped Gauss-Newton step in the retained directions of the normal matrix ``a``."""
+    lam, vec = np.linalg.eigh(a)
+    keep = lam >= RETAIN * (1 - 1e-9)
+    inv = np.where(keep, 1.0 / (np.where(keep, lam, 1.0) + damping[:, None]), 0.0)
+    return -np.einsum("mfk,mk,mgk,mg->mf", vec, inv, vec, g)
+
+
+def _damped_gauss_newton(problem: _Problem, theta: np.ndarray, max_iterations: int
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """Levenberg-damped Gauss-Newton, each machine with its own damping: a step that does
+    not lower the cost is retried with ten times the damping.  Updates ``theta`` in place;
+    returns (converged, iterations) per machine."""
+    m_count = len(theta)
+    idx, s = problem.idx, problem.s
     done = np.zeros(m_count, dtype=bool)
     failed = np.zeros(m_count, dtype=bool)
     iterations = np.zeros(m_count, dtype=int)
@@ -199,66 +222,133 @@ def fit_batch(design: Design, values: np.ndarray, mask: np.ndarray, sigma: float
         if not len(rows):
             break
         th = theta[rows]
-        model = predict(th, design)
-        r, cost = cost_of(model, th, rows)
-        _, a, g = normal(th, model, rows, r)
+        model = predict(th, problem.design)
+        r, cost = problem.residual(th, rows, model)
+        a, g = problem.normal(problem.jacobian(th, rows), r, th)
         iterations[rows] += 1
-        pending = np.ones(len(rows), dtype=bool)
+        # Near the solution the cost cannot resolve a step (its round-off, ~1e-16 of it,
+        # exceeds the decrease g A^-1 g / 2 a step brings), so there the undamped step is
+        # taken untested; convergence is on the step size alone (the Gauss-Newton rate is
+        # only linear where residuals and curvature meet, so a small predicted decrease
+        # does not yet mean a converged parameter).
+        newton = _step(a, g, np.zeros(len(rows)))
+        decrease = -0.5 * np.einsum("mf,mf->m", g, newton)
+        untested = decrease <= problem.cost_resolution(cost)
+        theta[rows[untested][:, None], idx] += newton[untested] * s
+        done[rows[np.max(np.abs(newton), axis=1, initial=0.0) < STEP_TOL]] = True
+        pending = ~untested
         while pending.any():
             sub = np.flatnonzero(pending)
-            step = step_of(a[sub], g[sub], damping[rows[sub]])
+            step = _step(a[sub], g[sub], damping[rows[sub]])
             trial = th[sub].copy()
             trial[:, idx] += step * s
-            _, trial_cost = cost_of(predict(trial, design), trial, rows[sub])
-            small = np.max(np.abs(step), axis=1, initial=0.0) < STEP_TOL
+            _, trial_cost = problem.residual(trial, rows[sub])
             accept = trial_cost <= cost[sub]
-            flat = accept & (cost[sub] - trial_cost <= COST_RTOL * cost[sub])
             ok = sub[accept]
             theta[rows[ok]] = trial[accept]
-            done[rows[sub[(accept & (small | flat)) | small]]] = True
             damping[rows[ok]] = np.where(damping[rows[ok]] > DAMPING_START,
                                          damping[rows[ok]] / 10, 0.0)
             pending[ok] = False
-            pending[sub[small]] = False
-            grow = sub[~accept & ~small]
+            grow = sub[~accept]
             damping[rows[grow]] = np.maximum(damping[rows[grow]] * 10, DAMPING_START)
             give_up = grow[damping[rows[grow]] > DAMPING_MAX]
             failed[rows[give_up]] = True
             pending[give_up] = False
-    converged = done & ~failed
+    return done & ~failed, iterations
+
+
+def _scipy_least_squares(problem: _Problem, theta: np.ndarray, max_iterations: int
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """The same cost minimised by ``scipy.optimize.least_squares`` (trust-region
+    reflective), one machine at a time: a cross-check of the batched solver.  It does not
+    truncate unidentifiable directions, so use it with a prior or a full-rank selection."""
+    from scipy.optimize import least_squares
+
+    idx, s = problem.idx, problem.s
+    root = np.sqrt(problem.precision)
+    converged = np.zeros(len(theta), dtype=bool)
+    iterations = np.zeros(len(theta), dtype=int)
+    for m in range(len(theta)):
+        rows = np.array([m])
+        start = theta[rows].copy()
+
+        def at(phi: np.ndarray, start: np.ndarray = start) -> np.ndarray:
+            th = start.copy()
+            th[:, idx] = phi * s
+            return th
+
+        def residual(phi: np.ndarray, rows: np.ndarray = rows) -> np.ndarray:
+            r, _ = problem.residual(at(phi), rows)
+            return np.concatenate([r[0], root * phi])
+
+        def jac(phi: np.ndarray, rows: np.ndarray = rows) -> np.ndarray:
+            return np.vstack([problem.jacobian(at(phi), rows)[0], np.diag(root)])
+
+        out = least_squares(residual, start[0, idx] / s, jac=jac, method="trf", xtol=1e-15,
+                            ftol=1e-15, gtol=1e-15, max_nfev=4 * max_iterations)
+        theta[m, idx] = out.x * s
+        converged[m] = out.status > 0
+        iterations[m] = out.nfev
+    return converged, iterations
+
+
+SOLVERS = {"gauss-newton": _damped_gauss_newton, "scipy": _scipy_least_squares}
+
+
+def fit_batch(design: Design, values: np.ndarray, mask: np.ndarray, sigma: float,
+              free: np.ndarray, fixed: np.ndarray, prior: np.ndarray, scale: np.ndarray,
+              max_iterations: int = MAX_ITERATIONS, unmodelled: np.ndarray | None = None,
+              solver: str = "gauss-newton") -> BatchFit:
+    """Fit machines whose readings ``values`` (M, N) of ``design`` are used where ``mask``.
+
+    ``free``, ``fixed``, ``prior``, ``scale``: per parameter of ``design.space`` (mask of the
+    free ones, values of the others, prior sigmas or inf, scales).  The fit starts from
+    nominal (the prior mean) for the free parameters.  ``unmodelled``: the parameters that
+    are neither free nor known (the model leaves them out); their misfit goes into the
+    reported covariance (:func:`_model_error`).  ``solver``: one of :data:`SOLVERS`."""
+    if solver not in SOLVERS:
+        raise ValueError(f"unknown solver '{solver}'; choose from {list(SOLVERS)}")
+    values = np.atleast_2d(np.asarray(values, dtype=float))
+    mask = np.atleast_2d(np.asarray(mask, dtype=bool)) & np.isfinite(values)
+    values = np.where(mask, values, 0.0)
+    m_count = len(values)
+    problem = _Problem(design, values, mask, sigma, np.asarray(free, dtype=bool),
+                       np.asarray(prior, dtype=float), np.asarray(scale, dtype=float))
+    idx, s = problem.idx, problem.s
+    theta = np.tile(np.asarray(fixed, dtype=float), (m_count, 1))
+    theta[:, idx] = 0.0
+    converged, iterations = SOLVERS[solver](problem, theta, max_iterations)
 
     # The covariance and information at the solution.
     rows = np.arange(m_count)
     model = predict(theta, design)
-    r, cost = cost_of(model, theta, rows)
-    jac = _centre(jacobian(theta, design, free, scale, at=model) * weight, mask, onehot)
+    _, cost = problem.residual(theta, rows, model)
+    jac = problem.jacobian(theta, rows)
     info = np.einsum("mnf,mng->mfg", jac, jac)
-    lam, vec = np.linalg.eigh(info + np.eye(len(idx)) * precision)
+    lam, vec = np.linalg.eigh(info + np.eye(len(idx)) * problem.precision)
     keep = lam >= RETAIN * (1 - 1e-9)
     # Directions the fit did not move keep their a-priori scale (1 in scaled units).
     inv = np.where(keep, 1.0 / np.where(keep, lam, 1.0), 1.0)
     cov_scaled = np.einsum("mfk,mk,mgk->mfg", vec, inv, vec)
-    mountings_used = (mask.astype(float) @ onehot > 0).sum(axis=1)
-    free_without_prior = np.sum(precision == 0)
+    mountings_used = (mask.astype(float) @ problem.onehot > 0).sum(axis=1)
     retained = keep.sum(axis=1)
-    dof = mask.sum(axis=1) - mountings_used - np.maximum(
-        retained - (len(idx) - free_without_prior), 0)
-    residuals = np.where(mask, -r / weight, np.nan)
+    priored = int(np.sum(problem.precision > 0))
+    dof = mask.sum(axis=1) - mountings_used - np.maximum(retained - priored, 0)
+    r, _ = problem.residual(theta, rows, model)
     fit = BatchFit(
-        theta=theta, free=np.asarray(free, dtype=bool), scale=np.asarray(scale, dtype=float),
+        theta=theta, free=problem.free, scale=problem.scale,
         prior=np.asarray(prior, dtype=float), covariance=cov_scaled * np.outer(s, s),
-        information=info, residuals=residuals, chi2=cost, dof=dof, retained=retained,
-        converged=converged, iterations=iterations, sigma=sigma,
+        information=info, residuals=np.where(mask, -r / problem.weight, np.nan), chi2=cost,
+        dof=dof, retained=retained, converged=converged, iterations=iterations, sigma=sigma,
         error_covariance=np.zeros((m_count, len(free), len(free))),
     )
-    unmodelled = np.zeros(len(free), dtype=bool) if unmodelled is None else unmodelled
     gain = np.einsum("mfk,mk,mgk,mng->mfn", vec, np.where(keep, inv, 0.0), vec, jac)
-    _model_error(fit, design, mask, onehot, weight, jac, gain, unmodelled)
+    _model_error(fit, problem, jac, gain,
+                 np.zeros(len(free), dtype=bool) if unmodelled is None else unmodelled)
     return fit
 
 
-def _model_error(fit: BatchFit, design: Design, mask: np.ndarray, onehot: np.ndarray,
-                 weight: float, jac: np.ndarray, gain: np.ndarray,
+def _model_error(fit: BatchFit, problem: _Problem, jac: np.ndarray, gain: np.ndarray,
                  unmodelled: np.ndarray) -> None:
     """Fill ``fit.error_covariance``: the covariance of (estimate - truth) over every
     parameter, including the ``unmodelled`` ones the fit kept at nominal.
@@ -282,8 +372,7 @@ def _model_error(fit: BatchFit, design: Design, mask: np.ndarray, onehot: np.nda
     rows = np.flatnonzero(fit.misfit)
     if not len(out) or not len(rows):
         return
-    ju = _centre(jacobian(fit.theta[rows], design, unmodelled, fit.scale) * weight,
-                 mask[rows], onehot)  # (m, N, n_out)
+    ju = problem.jacobian(fit.theta[rows], rows, free=unmodelled)  # (m, N, n_out)
     propagated = np.einsum("mfn,mnu->mfu", gain[rows], ju)  # gain J_u
     left = ju - np.einsum("mnf,mfu->mnu", jac[rows], propagated)
     excess = np.maximum(fit.chi2[rows] - fit.dof[rows], 0.0)

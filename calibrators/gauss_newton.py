@@ -55,7 +55,8 @@ class GaussNewtonCalibrator(PaperCalibrator):
     def estimate(self, data: Measurements, params: str = "paper6", sigma: float = 0.01,
                  *, verify: bool = True, prior: str = "auto",
                  fix: dict[str, float] | None = None, keep_outliers: bool = False,
-                 holdout: float = 0.0, seed: int = 0) -> Estimate:
+                 holdout: float = 0.0, seed: int = 0, solver: str = "gauss-newton"
+                 ) -> Estimate:
         design, values = design_of(data)
         space = design.space
         free = select(params, space)
@@ -76,7 +77,7 @@ class GaussNewtonCalibrator(PaperCalibrator):
 
         def fit(mask: np.ndarray) -> BatchFit:
             result = fit_batch(design, values[None], mask[None], sigma, free, fixed, priors,
-                               scale, unmodelled=unmodelled)
+                               scale, unmodelled=unmodelled, solver=solver)
             if not result.converged[0]:
                 raise RuntimeError("the exact-model fit did not converge")
             return result

@@ -8,11 +8,14 @@ the Moore-Penrose pseudo-inverse for the full set or for drho or dL alone.
 
 from __future__ import annotations
 
+from typing import Any
+
 import gymnasium as gym
 import numpy as np
 
 from .base import (
     PARAM_NAMES,
+    PARAM_SETS,
     Calibrator,
     Estimate,
     Measurement,
@@ -80,8 +83,16 @@ class PaperCalibrator(Calibrator):
     def predict(self, rows: Differences, theta: np.ndarray) -> np.ndarray:
         return paper_matrix(rows) @ theta
 
-    def estimate(self, data: Measurements, params: str = "full", sigma: float = 0.01,
-                 *, verify: bool = True) -> Estimate:
+    def estimate(self, data: Measurements, params: str = "paper6", sigma: float = 0.01,
+                 *, verify: bool = True, **options: Any) -> Estimate:
+        used = {k: v for k, v in options.items() if v not in (None, False, 0, 0.0, {}, "",
+                                                               "auto", "none", "gauss-newton")}
+        if used:
+            raise ValueError(f"the paper's linear fit (eq. 10) takes no {', '.join(used)}: "
+                             "use --strategy gauss-newton")
+        if params not in PARAM_SETS:
+            raise ValueError(f"the paper's linear fit (eq. 10) estimates {list(PARAM_SETS)} "
+                             f"only, not '{params}': use --strategy gauss-newton")
         free = check_params(params)
         rows = differences(data)
         if len(rows) < len(free):

@@ -152,12 +152,16 @@ def direct(
         return p
     a = g.o + (L_NOMINAL + R_TOOL + g.drho + rho)[..., :, None] * g.u
     lengths2 = g.lengths**2
+    moving = np.ones(p.shape[:-1], dtype=bool)
     for _ in range(max_iter):
         v = p[..., None, :] + g.attach - a
         f = np.sum(v**2, axis=-1) - lengths2
         step = np.linalg.solve(2 * v, f[..., None])[..., 0]
-        p = p - step
-        if np.max(np.abs(step), initial=0.0) < tol:
+        # A converged posture stops moving, so its result does not depend on the batch
+        # it was solved in (one machine or many give the same bits).
+        p = p - np.where(moving[..., None], step, 0.0)
+        moving &= np.max(np.abs(step), axis=-1) >= tol
+        if not moving.any():
             return p
     raise UnreachableError("direct kinematics did not converge: posture near a singularity")
 

@@ -1,0 +1,221 @@
+"""The exact-model estimator: exactness, batching, parameter sets, honesty of its errors."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import orthoglide_env
+from calibrators.base import get_strategy
+from calibrators.estimator import fit_batch, z_scores
+from calibrators.exact_model import parameters_of, predict
+from calibrators.gauss_newton import design_of
+from calibrators.parameters import (
+    ParameterSpace,
+    fixed_values,
+    prior_sigmas,
+    scales,
+    select,
+)
+from orthoglide_env.gauges import (
+    PAPER_LAYOUT,
+    exact_ray_distances,
+    face_distances,
+    ideal_rays,
+    install,
+    installed_on,
+    stand_errors,
+    stand_rays,
+)
+from orthoglide_env.geometry import (
+    ERROR_NAMES,
+    L_NOMINAL,
+    PRESETS,
+    MachineParams,
+    random_machine,
+)
+from orthoglide_env.kinematics import PAPER_POSTURES, paper_posture
+
+TABLE1 = MachineParams(drho=[4.66, -5.36, 1.46], dL=[5.20, -5.96, 3.16])
+
+
+def experiment(machine: MachineParams | None, seed: int, errors: str = "realistic",
+               sigma: float = 0.01, resolution: float = 0.01):
+    """The paper's experiment on the exact backend: readings, truth and true parameters."""
+    env = gym.make(orthoglide_env.ENV_ID, errors=errors, gauge_sigma=sigma,
+                   gauge_resolution=resolution, backend="exact")
+    options = {"machine": machine.to_dict()} if machine is not None else None
+    env.reset(seed=seed, options=options)
+    data = get_strategy("paper").collect(env)
+    design, _ = design_of(data)
+    truth = parameters_of(design, env.unwrapped.true_machine, env.unwrapped.true_gauges)
+    return data, truth, env.unwrapped.gauge_noise.effective_sigma
+
+
+@pytest.mark.parametrize("solver", ["gauss-newton", "scipy"])
+def test_noise_free_table1_machine_is_recovered_exactly(solver: str) -> None:
+    data, truth, _ = experiment(TABLE1, 0, errors="nominal", sigma=0.0, resolution=0.0)
+    est = get_strategy("gauss-newton").estimate(data, "paper6", 0.0, solver=solver)
+    # Newton on an exact model converges to round-off: 1e-6 mm is the issue's bar and
+    # three orders above what the solver reaches (~1e-12 mm).
+    assert np.abs(est.theta[:6] - truth[:6]).max() < 1e-6
+    assert not est.warnings and est.outliers == []
+
+
+def test_the_face_model_is_the_simulators_gauge_on_valid_readings() -> None:
+    """The estimator's smooth plane model and the exact ray-on-box gauge agree wherever a
+    reading is valid, with stands installed with realistic errors; and the stand
+    parameters of an installed gauge rebuild its ray exactly."""
+    machine = random_machine(5)
+    gauges = installed_on(machine, install(PAPER_LAYOUT, machine, preset=PRESETS["realistic"],
+                                           rng=np.random.default_rng(3)))
+    rho = np.stack([paper_posture(n) for n in PAPER_POSTURES])
+    origins, directions = ideal_rays(PAPER_LAYOUT, machine)
+    true_origins = np.array([g.origin for g in gauges])
+    true_directions = np.array([g.direction for g in gauges])
+    stand = stand_errors(PAPER_LAYOUT, true_origins, true_directions, origins, directions)
+    o, d = stand_rays(PAPER_LAYOUT, origins, directions, stand)
+    np.testing.assert_allclose(d, true_directions, atol=1e-15)
+    # Same line: the rebuilt origin lies on the true ray.
+    offset = o - true_origins
+    np.testing.assert_allclose(np.cross(offset, true_directions), 0, atol=1e-12)
+    t_exact = exact_ray_distances(machine, gauges, rho)
+    t_model = face_distances(machine, PAPER_LAYOUT, o, d, rho)
+    valid = np.isfinite(t_exact)
+    for k, spec in enumerate(PAPER_LAYOUT):  # every gauge at Zero and its leg's Max and Min
+        assert valid[[0, 1 + 2 * spec.leg, 2 + 2 * spec.leg], k].all()
+    diff = (t_exact - t_exact[0]) - (t_model - t_model[0])
+    assert np.abs(diff[valid & valid[0]]).max() < 1e-9
+
+
+def test_batched_fit_is_the_single_fits() -> None:
+    """One code path: three machines in one call give each machine's own fit."""
+    runs = [experiment(None, seed) for seed in (11, 12, 13)]
+    design, _ = design_of(runs[0][0])
+    values = np.array([design_of(data)[1] for data, _, _ in runs])
+    space = design.space
+    free = select("extended", space)
+    prior = prior_sigmas("auto", space, free)
+    args = (free, fixed_values({}, space), prior, scales(space, prior))
+    batch = fit_batch(design, values, np.ones_like(values, bool), runs[0][2], *args)
+    for m, row in enumerate(values):
+        single = fit_batch(design, row[None], np.ones((1, len(row)), bool), runs[0][2], *args)
+        np.testing.assert_allclose(batch.theta[m], single.theta[0], rtol=0, atol=1e-9)
+        # Both solutions are converged to 1e-9 of each scale, so their covariances
+        # (Jacobians at those points) agree to ~1e-9 of the largest entry.
+        np.testing.assert_allclose(batch.covariance[m], single.covariance[0], rtol=0,
+                                   atol=1e-8 * np.abs(single.covariance[0]).max())
+    assert batch.converged.all()
+
+
+def test_a_gauge_zero_is_eliminated() -> None:
+    """Shifting every reading of one mounting (a gauge zeroed elsewhere) changes nothing."""
+    data, _, sigma = experiment(None, 21)
+    est = get_strategy("gauss-newton").estimate(data, "extended", sigma, verify=False)
+    for m in data.items:
+        if m.gauge.leg == 1 and m.gauge.axis == 0:
+            object.__setattr__(m, "reading", m.reading + 0.37)
+    moved = get_strategy("gauss-newton").estimate(data, "extended", sigma, verify=False)
+    np.testing.assert_allclose(moved.theta, est.theta, atol=1e-8)
+
+
+def test_fd_jacobian_matches_central_differences() -> None:
+    """The forward-difference Jacobian of the batched model equals central differences:
+    truncation ~ step * curvature (relative 1e-6 * scale / L), round-off ~ eps * L / step
+    (the model computes positions of the order of the leg length L), which sets the
+    absolute tolerance (x10)."""
+    data, truth, _ = experiment(None, 31)
+    design, _ = design_of(data)
+    from calibrators.exact_model import jacobian
+
+    space = design.space
+    free = select("extended", space)
+    scale = scales(space, prior_sigmas("realistic", space, free))
+    jac = jacobian(truth, design, free, scale)
+    from calibrators.exact_model import FD_STEP
+
+    for name in ("drho_y", "axis_tilt_y.x", "attach_z.x", space.names[-1]):
+        k = space.names.index(name)
+        h = 1e-3 * scale[k]
+        step = np.zeros(len(space))
+        step[k] = h
+        central = (predict(truth + step, design) - predict(truth - step, design)) / (2 * h)
+        roundoff = 10 * np.finfo(float).eps * L_NOMINAL / (FD_STEP * scale[k])
+        np.testing.assert_allclose(jac[:, k] / scale[k], central, rtol=1e-4, atol=roundoff)
+
+
+def test_parameter_selection_and_prior_errors() -> None:
+    space = ParameterSpace(("x-leg/y@0.5",), PAPER_LAYOUT[:1])
+    assert select("paper6", space).sum() == 6
+    assert select("extended", space).sum() == 27 + 4
+    assert select("drho,attach_y.z,x-leg/y@0.5.tilt_z", space).sum() == 5
+    with pytest.raises(ValueError, match="unknown parameter 'drho_w'"):
+        select("drho_w", space)
+    free = select("extended", space)
+    with pytest.raises(ValueError, match="must be > 0"):
+        prior_sigmas("attach=0", space, free)
+    with pytest.raises(ValueError, match="unknown prior"):
+        prior_sigmas("wild", space, free)
+    sig = prior_sigmas("realistic,attach=0.1", space, free)
+    assert sig[ERROR_NAMES.index("attach_x.y")] == 0.1 and sig[0] == 2.0
+    assert sig[-1] == PRESETS["realistic"].gauge_tilt
+
+
+def test_too_few_readings_and_nothing_identifiable_are_clear_errors() -> None:
+    data, _, sigma = experiment(None, 41)
+    gn = get_strategy("gauss-newton")
+    few = type(data)(data.items[:8])
+    with pytest.raises(ValueError, match="readings cannot determine"):
+        gn.estimate(few, "paper6", sigma)
+    # The stand shift along a bar's width is invisible to a flat face: nothing to see.
+    with pytest.raises(ValueError, match="identify no combination"):
+        gn.estimate(data, "x-leg/y@0.5.shift_z", sigma, prior="none")
+
+
+def test_a_mistyped_reading_is_flagged_and_left_out() -> None:
+    """0.43 typed for 0.043: flagged by its place, and the estimate stays within 3 std of
+    the clean fit (the issue's bar)."""
+    data, _, sigma = experiment(None, 51, errors="paper")
+    gn = get_strategy("gauss-newton")
+    clean = gn.estimate(data, "paper6", sigma, verify=False)
+    k = next(i for i, m in enumerate(data.items) if m.posture == "YMax" and m.repetition == 2)
+    object.__setattr__(data.items[k], "reading", data.items[k].reading * 10 + 0.3)
+    dirty = gn.estimate(data, "paper6", sigma, verify=False)
+    assert dirty.outliers == [k]
+    assert "outlier" in dirty.warnings[-1] and "YMax" in dirty.warnings[-1]
+    std = np.sqrt(np.diag(clean.covariance))
+    assert np.all(np.abs(dirty.theta[:6] - clean.theta[:6]) < 3 * std)
+
+
+def test_holdout_predicts_the_readings_it_did_not_fit() -> None:
+    """On a machine the model describes, held-out readings are predicted to the gauge
+    noise: their RMS residual is sigma * sqrt(1 + leverage), between sigma and 1.5 sigma
+    for a third of 60 readings held out (a chi-square with ~20 dof keeps it within
+    +-35% of that 19 times out of 20)."""
+    data, _, sigma = experiment(None, 61, errors="paper")
+    est = get_strategy("gauss-newton").estimate(data, "paper6", sigma, holdout=1 / 3, seed=4)
+    assert 0.65 * sigma < est.holdout_rms_mm < 1.5 * 1.35 * sigma
+
+
+@pytest.mark.slow
+def test_extended_estimator_is_honest_and_beats_the_paper_model() -> None:
+    """Realistic machines, sigma 0.01 mm: the extended fit's errors along the identifiable
+    combinations have unit variance (z-RMS within the issue's 0.8-1.25: with ~300 z values
+    its standard error is ~0.04), while the paper's six parameters are rejected by the
+    chi-square test and their model-error covariance still covers the real error
+    (z-RMS <= 1.5)."""
+    gn = get_strategy("gauss-newton")
+    z_ext, z_paper, warned = [], [], []
+    for seed in range(30):
+        data, truth, sigma = experiment(None, 7000 + seed)
+        for params, zs in (("extended", z_ext), ("paper6", z_paper)):
+            est = gn.estimate(data, params, sigma, verify=False)
+            free = [est.space.index(n) for n in est.names]
+            zs.extend(z_scores(est.theta[free], truth[free], est.covariance, est.information,
+                               est.scale))
+            if params == "paper6":
+                warned.append(bool(est.warnings) and est.covariance_scale > 1)
+    assert 0.8 <= np.sqrt(np.mean(np.square(z_ext))) <= 1.25
+    assert np.mean(warned) >= 0.9
+    assert np.sqrt(np.mean(np.square(z_paper))) <= 1.5
