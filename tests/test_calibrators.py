@@ -216,14 +216,18 @@ def test_strategies_sharing_an_experiment_measure_once() -> None:
 
 def test_predictions_without_the_truth() -> None:
     """On a noise-free paper-model machine gauss-newton's estimate is the truth, so the
-    predicted correction is the uncalibrated machine's real TCP error; the predicted
-    spread of the compensated TCP scales with the gauge noise assumed."""
+    predicted correction is the uncalibrated machine's real TCP error, in every frame; the
+    predicted spread of the compensated TCP scales with the gauge noise assumed."""
     from calibrators.prediction import predicted_correction, predicted_tcp_std
-    from orthoglide_env.scoring import score
+    from orthoglide_env.scoring import FRAMES, score
 
     est, truth = run("gauss-newton", "full", TABLE1, gauge_sigma=0.0, gauge_resolution=0.0)
     before = score(est.machine, truth).tcp_before
-    assert predicted_correction(est).rms == pytest.approx(before.rms, abs=1e-5)
+    correction = predicted_correction(est)
+    for frame in FRAMES:
+        # The estimate is the truth to the 1e-7 mm of the solver's stopping rule.
+        assert getattr(correction, frame).rms == pytest.approx(getattr(before, frame).rms,
+                                                               abs=1e-5)
     noisy = get_strategy("gauss-newton").estimate(est.readings, "full", 0.02, verify=False)
     twice = get_strategy("gauss-newton").estimate(est.readings, "full", 0.04, verify=False)
     assert predicted_tcp_std(twice).rms == pytest.approx(2 * predicted_tcp_std(noisy).rms,
