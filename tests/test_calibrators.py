@@ -217,8 +217,8 @@ def test_strategies_sharing_an_experiment_measure_once() -> None:
 def test_predictions_without_the_truth() -> None:
     """On a noise-free paper-model machine gauss-newton's estimate is the truth, so the
     predicted correction is the uncalibrated machine's real TCP error, in every frame; the
-    predicted spread of the compensated TCP scales with the gauge noise assumed."""
-    from calibrators.prediction import predicted_correction, predicted_tcp_std
+    predicted error of the compensated TCP scales with the gauge noise assumed."""
+    from calibrators.prediction import predicted_correction, predicted_tcp_error
     from orthoglide_env.scoring import FRAMES, score
 
     est, truth = run("gauss-newton", "full", TABLE1, gauge_sigma=0.0, gauge_resolution=0.0)
@@ -230,11 +230,13 @@ def test_predictions_without_the_truth() -> None:
                                                                abs=1e-5)
     noisy = get_strategy("gauss-newton").estimate(est.readings, "full", 0.02, verify=False)
     twice = get_strategy("gauss-newton").estimate(est.readings, "full", 0.04, verify=False)
-    assert predicted_tcp_std(twice).rms == pytest.approx(2 * predicted_tcp_std(noisy).rms,
-                                                         rel=1e-6)
+    for frame in FRAMES:
+        # The covariance scales with sigma^2 and the prediction is linear in its root.
+        assert getattr(predicted_tcp_error(twice), frame).rms == pytest.approx(
+            2 * getattr(predicted_tcp_error(noisy), frame).rms, rel=1e-6)
     # The weak drho ~ dL directions barely move the TCP: it is known far better than the
     # parameters (~0.77 mm each at 0.02 mm gauges).
-    assert predicted_tcp_std(noisy).max < 0.2
+    assert predicted_tcp_error(noisy).raw.max < 0.2
 
 
 def test_a_new_strategy_is_one_registered_class() -> None:

@@ -59,7 +59,8 @@ def test_calibrate_json_keys_and_exact_recovery(capsys, machine_file) -> None:
                         "tcp_error_before_mm", "tcp_error_after_mm", "experiment_time_s",
                         "n_readings", "singular_values"}
     assert out["estimate"]["drho"] == pytest.approx(out["truth"]["drho"], abs=1e-3)
-    for key in ("tcp_error_before_mm", "tcp_error_after_mm", "predicted_correction_mm"):
+    for key in ("tcp_error_before_mm", "tcp_error_after_mm", "predicted_correction_mm",
+                "predicted_tcp_std_after_mm"):
         assert {f: set(v) for f, v in out[key].items()} == {
             "raw": {"rms", "max"}, "translation": {"rms", "max"}, "rigid": {"rms", "max"}}
     for frame in ("raw", "translation", "rigid"):
@@ -89,7 +90,7 @@ def test_fit_from_a_measurement_file(tmp_path, capsys) -> None:
     assert "truth" not in out and "tcp_error_after_mm" not in out and out["n_readings"] == 60
     # Instead of errors against a truth: what the compensation will change, and how sure.
     assert out["predicted_correction_mm"]["raw"]["rms"] > 1.0
-    assert 0 < out["predicted_tcp_std_after_mm"]["rms"] < 0.2
+    assert 0 < out["predicted_tcp_std_after_mm"]["raw"]["rms"] < 0.2
     # Within 5 reported standard deviations of the truth.
     for group in ("drho", "dL"):
         for est, std, true in zip(out["estimate"][group], out["std"][group],

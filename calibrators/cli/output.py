@@ -8,7 +8,7 @@ from orthoglide_env.geometry import MachineParams
 from orthoglide_env.scoring import FRAMES, score
 
 from ..base import Estimate
-from ..prediction import predicted_correction, predicted_tcp_std
+from ..prediction import predicted_correction, predicted_tcp_error
 
 
 def report(est: Estimate, truth: MachineParams | None) -> dict:
@@ -27,7 +27,7 @@ def report(est: Estimate, truth: MachineParams | None) -> dict:
         "weak_directions": est.weak_directions,
         "iterations": est.iterations,
         "predicted_correction_mm": predicted_correction(est).to_dict(),
-        "predicted_tcp_std_after_mm": predicted_tcp_std(est).to_dict(),
+        "predicted_tcp_std_after_mm": predicted_tcp_error(est).to_dict(),
     }
     if truth is not None:
         report = score(MachineParams(drho=est.drho, dL=est.dL), truth)
@@ -60,12 +60,11 @@ def print_table(data: dict) -> None:
     for weak in data["weak_directions"]:
         print("weakly identified: " + " ".join(f"{v:+.2f} {k}" for k, v in weak.items()))
     print(f"experiment time {data['experiment_time_s']:.0f} s")
-    u = data["predicted_tcp_std_after_mm"]
-    print(f"predicted TCP std after RMS {u['rms']:.4f} / max {u['max']:.4f} mm")
     print("TCP error over the workspace (mm, RMS / max): raw = world frame, then after the "
           "best-fit translation and rigid motion")
     print(f"{'':22}" + "".join(f"{frame:>19}" for frame in FRAMES))
     rows = [("predicted correction", "predicted_correction_mm"),
+            ("predicted after (std)", "predicted_tcp_std_after_mm"),
             ("before", "tcp_error_before_mm"), ("after", "tcp_error_after_mm")]
     for label, key in rows:
         if key in data:
