@@ -167,11 +167,11 @@ def best_rigid_motion(
 
 def remove_translation(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """Error vectors (..., n, 3) left after the best-fit translation over ``mask``: the
-    errors minus their mean; NaN outside ``mask``."""
+    errors minus their mean, i.e. the centred reached points minus the centred targets;
+    NaN outside ``mask``."""
     mask = np.asarray(mask, dtype=bool)
-    errors = np.where(mask[..., None], reached - targets, 0.0)
-    mean = errors.sum(axis=-2) / np.sum(mask, axis=-1)[..., None]
-    return np.where(mask[..., None], errors - mean[..., None, :], np.nan)
+    q, p, _, _ = _masked_centroids(targets, reached, mask)
+    return np.where(mask[..., None], p - q, np.nan)
 
 
 def remove_rigid(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray) -> np.ndarray:
