@@ -31,7 +31,7 @@ def main() -> None:
     print(f"{'strategy':14}{'param':8}{'RMS':>8}{'mean':>9}{'CRLB':>8}{'std':>8}"
           f"{'RMS/CRLB':>10}{'RMS/std':>9}")
     for name in config.strategies:
-        mine = [t for t in trials if t.strategy == name and np.isfinite(t.tcp_after_rms)]
+        mine = [t for t in trials if t.strategy == name and np.isfinite(t.tcp_after_rigid_rms)]
         err = np.array([t.param_error for t in mine])
         rms = np.sqrt(np.mean(err**2, axis=0))
         crlb = np.sqrt(np.mean(np.array([t.crlb for t in mine]) ** 2, axis=0))

@@ -221,6 +221,9 @@ class Estimate:
     #: identifiability analysis of exact-model fits).
     information: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     scale: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: Covariance of (estimate - truth) over every parameter of ``space``, with the errors
+    #: the model leaves out when the data show them (what a TCP prediction needs).
+    error_covariance: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
     def __post_init__(self) -> None:
         if not self.names:
@@ -228,6 +231,11 @@ class Estimate:
         if not len(self.theta):
             self.space = list(ERROR_NAMES)
             self.theta = np.concatenate([self.drho, self.dL, np.zeros(len(ERROR_NAMES) - 6)])
+        if not self.error_covariance.size:
+            # A fit that does not say otherwise takes its model to be the machine.
+            idx = [self.space.index(n) for n in self.names]
+            self.error_covariance = np.zeros((len(self.space), len(self.space)))
+            self.error_covariance[np.ix_(idx, idx)] = self.covariance
 
     @property
     def std(self) -> dict[str, Any]:
@@ -274,7 +282,7 @@ class Estimate:
         for key in _ARRAY_FIELDS:
             if key in kwargs:
                 kwargs[key] = np.array(kwargs[key], dtype=float)
-        for key in ("covariance", "fisher", "information"):
+        for key in ("covariance", "fisher", "information", "error_covariance"):
             if key in kwargs and kwargs[key].size == 0:
                 kwargs[key] = np.zeros((0, 0))  # an empty matrix comes back from JSON as []
         if "readings" in kwargs:
@@ -311,7 +319,8 @@ def schema(values: list, space: list[str]) -> dict[str, Any]:
 
 
 _ARRAY_FIELDS: tuple[str, ...] = ("drho", "dL", "covariance", "residuals", "singular_values",
-                                  "crlb", "fisher", "theta", "information", "scale")
+                                  "crlb", "fisher", "theta", "information", "scale",
+                                  "error_covariance")
 
 
 class Calibrator:

@@ -13,7 +13,7 @@ import os
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from multiprocessing import get_context
 from pathlib import Path
 
@@ -22,8 +22,7 @@ import numpy as np
 from tqdm import tqdm
 
 import orthoglide_env
-from orthoglide_env.geometry import MachineParams
-from orthoglide_env.scoring import score
+from orthoglide_env.scoring import FRAMES, ScoreReport, score
 
 from .base import PARAM_NAMES, PARAM_SETS, Measurements, get_strategy
 from .differences import differences
@@ -38,12 +37,33 @@ class Trial:
     param_error: np.ndarray  # (6,), estimate - truth, mm
     crlb: np.ndarray  # (6,), mm (NaN for fixed parameters)
     std: np.ndarray  # (6,), reported standard deviations, mm
-    tcp_before_rms: float
-    tcp_after_rms: float
-    tcp_after_max: float
     residual_rms: float
     nominal_residual_rms: float  # RMS of the differences: what the nominal model leaves
     experiment_time_s: float
+    # TCP error RMS over the workspace grid (mm), uncompensated and compensated, in the
+    # three frames of the scoring; the rigid frame is the headline.
+    tcp_before_raw_rms: float
+    tcp_before_translation_rms: float
+    tcp_before_rigid_rms: float
+    tcp_after_raw_rms: float
+    tcp_after_translation_rms: float
+    tcp_after_rigid_rms: float
+    tcp_after_raw_max: float
+    tcp_after_rigid_max: float
+
+
+#: The TCP fields of a :class:`Trial`, in the order of its CSV columns.
+TCP_FIELDS: tuple[str, ...] = tuple(f.name for f in fields(Trial) if f.name.startswith("tcp_"))
+
+
+def _tcp_fields(report: ScoreReport) -> dict[str, float]:
+    """A score's values for :data:`TCP_FIELDS`."""
+    values = {f"tcp_{when}_{frame}_rms": getattr(frames, frame).rms
+              for when, frames in (("before", report.tcp_before), ("after", report.tcp_after))
+              for frame in FRAMES}
+    values.update(tcp_after_raw_max=report.tcp_after.raw.max,
+                  tcp_after_rigid_max=report.tcp_after.rigid.max)
+    return values
 
 
 @dataclass(frozen=True)
@@ -59,7 +79,8 @@ class Config:
 
 def _failed(name: str, index: int) -> Trial:
     nan6 = np.full(6, np.nan)
-    return Trial(name, index, nan6, nan6, nan6, *(np.nan,) * 6)
+    return Trial(name, index, nan6, nan6, nan6, *(np.nan,) * 3,
+                 **dict.fromkeys(TCP_FIELDS, np.nan))
 
 
 def run_machine(env: gym.Env, config: Config, index: int) -> list[Trial]:
@@ -92,16 +113,16 @@ def run_machine(env: gym.Env, config: Config, index: int) -> list[Trial]:
             # A failed calibration is a result too: it counts, it does not stop the run.
             trials.append(_failed(name, index))
             continue
-        report = score(MachineParams(drho=est.drho, dL=est.dL), truth)
+        report = score(est.machine, truth)
         free = list(PARAM_SETS[config.params])
         crlb, std = np.full(6, np.nan), np.full(6, np.nan)
         crlb[free] = est.crlb
         std[free] = np.sqrt(np.diag(est.covariance))
         trials.append(Trial(
             name, index, np.concatenate([est.drho - truth.drho, est.dL - truth.dL]),
-            crlb, std, report.tcp_before.rms, report.tcp_after.rms, report.tcp_after.max,
-            est.residual_rms_mm, float(np.sqrt(np.mean(differences(data).values ** 2))),
-            est.experiment_time_s,
+            crlb, std, est.residual_rms_mm,
+            float(np.sqrt(np.mean(differences(data).values ** 2))), est.experiment_time_s,
+            **_tcp_fields(report),
         ))
     return trials
 
@@ -170,27 +191,29 @@ def run(config: Config, machines: int, jobs: int | None = None,
 
 def summary(trials: list[Trial]) -> list[dict[str, float | str]]:
     """Per strategy: median and 95th percentile of |parameter error| (over all freed
-    parameters), TCP error after calibration, experiment time, and the ratio of the RMS
-    error of each parameter to its Cramér-Rao bound (worst parameter shown)."""
+    parameters), TCP error RMS before and after calibration (median in every frame, the
+    rigid one first, and its 95th percentile after), experiment time, and the ratio of the
+    RMS error of each parameter to its Cramér-Rao bound (worst parameter shown)."""
     rows = []
     for name in dict.fromkeys(t.strategy for t in trials):
         everything = [t for t in trials if t.strategy == name]
-        mine = [t for t in everything if np.isfinite(t.tcp_after_rms)]
+        mine = [t for t in everything if np.isfinite(t.tcp_after_rigid_rms)]
         err = np.array([t.param_error for t in mine])
         free = ~np.isnan(mine[0].crlb)
         abs_err = np.abs(err[:, free])
         rms = np.sqrt(np.mean(err[:, free] ** 2, axis=0))
         crlb = np.sqrt(np.mean(np.array([t.crlb[free] for t in mine]) ** 2, axis=0))
-        after = np.array([t.tcp_after_rms for t in mine])
+        after = np.array([t.tcp_after_rigid_rms for t in mine])
         rows.append({
             "strategy": name,
             "machines": len(everything),
             "failed": len(everything) - len(mine),
             "param_err_median_mm": float(np.median(abs_err)),
             "param_err_p95_mm": float(np.percentile(abs_err, 95)),
-            "tcp_before_rms_median_mm": float(np.median([t.tcp_before_rms for t in mine])),
-            "tcp_after_rms_median_mm": float(np.median(after)),
-            "tcp_after_rms_p95_mm": float(np.percentile(after, 95)),
+            **{f"tcp_{when}_{frame}_rms_median_mm":
+               float(np.median([getattr(t, f"tcp_{when}_{frame}_rms") for t in mine]))
+               for when in ("before", "after") for frame in reversed(FRAMES)},
+            "tcp_after_rigid_rms_p95_mm": float(np.percentile(after, 95)),
             "residual_rms_median_mm": float(np.median([t.residual_rms for t in mine])),
             "experiment_time_median_s": float(np.median([t.experiment_time_s for t in mine])),
             "rms_over_crlb_worst": float(np.max(rms / crlb)),
@@ -206,14 +229,12 @@ def write_outputs(trials: list[Trial], rows: list[dict], out: Path) -> list[Path
     with trial_csv.open("w", newline="") as handle:
         writer = csv.writer(handle)
         writer.writerow(["strategy", "machine", *(f"err_{n}" for n in PARAM_NAMES),
-                         *(f"crlb_{n}" for n in PARAM_NAMES), "tcp_before_rms", "tcp_after_rms",
-                         "tcp_after_max", "residual_rms", "nominal_residual_rms",
-                         "experiment_time_s"])
+                         *(f"crlb_{n}" for n in PARAM_NAMES), *TCP_FIELDS, "residual_rms",
+                         "nominal_residual_rms", "experiment_time_s"])
         for t in trials:
-            writer.writerow([t.strategy, t.machine, *t.param_error, *t.crlb, t.tcp_before_rms,
-                             t.tcp_after_rms, t.tcp_after_max, t.residual_rms,
-                             t.nominal_residual_rms,
-                             t.experiment_time_s])
+            writer.writerow([t.strategy, t.machine, *t.param_error, *t.crlb,
+                             *(getattr(t, key) for key in TCP_FIELDS), t.residual_rms,
+                             t.nominal_residual_rms, t.experiment_time_s])
     summary_csv = out / "summary.csv"
     with summary_csv.open("w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
@@ -231,7 +252,7 @@ def _plots(trials: list[Trial], out: Path) -> list[Path]:
     names = list(dict.fromkeys(t.strategy for t in trials))
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
     for name in names:
-        mine = [t for t in trials if t.strategy == name and np.isfinite(t.tcp_after_rms)]
+        mine = [t for t in trials if t.strategy == name and np.isfinite(t.tcp_after_rigid_rms)]
         err = np.array([t.param_error for t in mine])
         axes[0].plot(PARAM_NAMES, np.sqrt(np.nanmean(err**2, axis=0)), "o-", label=f"{name} RMS")
         crlb = np.sqrt(np.mean(np.array([t.crlb for t in mine]) ** 2, axis=0))
@@ -239,13 +260,13 @@ def _plots(trials: list[Trial], out: Path) -> list[Path]:
     axes[0].set_ylabel("parameter error (mm)")
     axes[0].set_title("RMS parameter error vs Cramér-Rao bound")
     axes[0].legend(fontsize=8)
-    before = [t.tcp_before_rms for t in trials if t.strategy == names[0]
-              and np.isfinite(t.tcp_before_rms)]
-    data = [before] + [[t.tcp_after_rms for t in trials if t.strategy == n
-                        and np.isfinite(t.tcp_after_rms)] for n in names]
+    before = [t.tcp_before_rigid_rms for t in trials if t.strategy == names[0]
+              and np.isfinite(t.tcp_before_rigid_rms)]
+    data = [before] + [[t.tcp_after_rigid_rms for t in trials if t.strategy == n
+                        and np.isfinite(t.tcp_after_rigid_rms)] for n in names]
     axes[1].boxplot(data, tick_labels=["uncalibrated", *names])
     axes[1].set_yscale("log")
-    axes[1].set_ylabel("TCP error RMS over the workspace (mm)")
+    axes[1].set_ylabel("TCP error RMS after best-fit rigid motion (mm)")
     axes[1].set_title("Positioning accuracy")
     fig.tight_layout()
     path = out / "compare.png"

@@ -115,6 +115,8 @@ class GaussNewtonCalibrator(PaperCalibrator):
         info = result.information[0]
         eig = np.sort(np.linalg.eigvalsh(info))[::-1]
         cov = result.scaled_covariance[0]
+        error_cov = result.error_covariance[0].copy()
+        error_cov[np.ix_(idx, idx)] = cov
         theta = result.theta[0]
         warnings = []
         if result.misfit[0]:
@@ -146,7 +148,7 @@ class GaussNewtonCalibrator(PaperCalibrator):
             covariance_scale=float(result.covariance_scale[0]), warnings=warnings,
             identifiable=[describe(d, names) for d in result.identifiable(0)],
             unidentifiable=[describe(d, names) for d in result.unidentifiable(0)],
-            outliers=outliers, information=info, scale=s,
+            outliers=outliers, information=info, scale=s, error_covariance=error_cov,
             holdout_rms_mm=float(np.sqrt(np.mean(residuals[held] ** 2))) if held.any() else None,
         )
 

@@ -1,16 +1,26 @@
 """Scoring an estimate against the true machine (for benchmarks, never for agents).
 
 The controller of a calibrated machine computes its joint commands with the estimated
-model; the TCP then lands where the *true* machine puts it.  The score is the distance
-from the target over a grid of the workspace, compared with the uncompensated machine
-(commands from the nominal model).
+model; the TCP then lands where the *true* machine puts it.  The score is the TCP error
+over a fixed grid of the workspace, compared with the uncompensated machine (commands
+from the nominal model), in three frames:
+
+* ``raw``: the world frame;
+* ``translation``: after the translation that best fits the reached points to the targets;
+* ``rigid``: after the best-fitting rigid motion (rotation and translation, no scale).
+
+No instrument fixed to the base sees the world frame, and no user needs it: before
+machining the operator touches off the workpiece, which takes out any rigid offset and
+rotation of the machine frame.  What is left after the rigid fit is what a user can act
+on, so it is the headline; raw stays beside it.  Best fits are least squares over the
+grid, batched over machines (a single machine is a batch of one).
 """
 
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -21,31 +31,51 @@ from .kinematics import UnreachableError, direct, inverse
 #: nominal model reaches within the control limits.
 GRID_RANGE: tuple[float, float] = (-80.0, 50.0)
 GRID_POINTS: int = 7
+#: The frames a TCP error is reported in, headline last.
+FRAMES: tuple[str, ...] = ("raw", "translation", "rigid")
 
 
 @dataclass(frozen=True)
 class ErrorStats:
+    """RMS and maximum (mm) of the TCP error's length over the targets."""
+
     rms: float
     max: float
 
-    @classmethod
-    def of(cls, errors: np.ndarray) -> ErrorStats:
-        return cls(float(np.sqrt(np.mean(errors**2))), float(np.max(errors)))
+    def to_dict(self) -> dict[str, float]:
+        return {"rms": self.rms, "max": self.max}
+
+
+@dataclass(frozen=True)
+class FrameErrors:
+    """One TCP error in the three frames of :data:`FRAMES`."""
+
+    raw: ErrorStats
+    translation: ErrorStats
+    rigid: ErrorStats
+
+    def to_dict(self) -> dict[str, dict[str, float]]:
+        """``{"raw": {"rms", "max"}, "translation": {...}, "rigid": {...}}`` in mm: the
+        shape scripts read."""
+        return {frame: getattr(self, frame).to_dict() for frame in FRAMES}
 
 
 @dataclass(frozen=True)
 class ScoreReport:
-    """Parameter errors (estimate - truth, mm) and TCP errors over the workspace grid."""
+    """Parameter errors (estimate - truth, mm) and TCP errors over the workspace grid,
+    before and after compensation, over the same targets."""
 
     drho_error: list[float]
     dL_error: list[float]
-    tcp_before: ErrorStats
-    tcp_after: ErrorStats
+    tcp_before: FrameErrors
+    tcp_after: FrameErrors
     n_targets: int
     n_skipped: int
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        return {"drho_error": self.drho_error, "dL_error": self.dL_error,
+                "tcp_before": self.tcp_before.to_dict(), "tcp_after": self.tcp_after.to_dict(),
+                "n_targets": self.n_targets, "n_skipped": self.n_skipped}
 
 
 def workspace_grid(points: int = GRID_POINTS) -> np.ndarray:
@@ -70,35 +100,148 @@ def _rowwise(solve: Callable[[np.ndarray], np.ndarray], points: np.ndarray) -> n
         return out
 
 
-def tcp_errors(model: MachineParams, truth: MachineParams, targets: np.ndarray) -> np.ndarray:
-    """Distance (mm) from each target to where the true machine goes when commanded with
-    ``model``; NaN where the model has no command or it would leave the control limits."""
-    targets = np.asarray(targets, dtype=float).reshape(-1, 3)
-    rho = _rowwise(lambda p: inverse(model, p), targets)
+def commands(model: MachineParams, targets: np.ndarray) -> np.ndarray:
+    """Joint commands ``rho`` (mm, shape of ``targets``) that ``model`` computes for the
+    TCP ``targets`` (..., 3); NaN rows where it has none within the control limits (the
+    controller refuses those)."""
+    targets = np.asarray(targets, dtype=float)
+    rho = _rowwise(lambda p: inverse(model, p), targets.reshape(-1, 3))
     with np.errstate(invalid="ignore"):
         inside = np.all((rho >= RHO_MIN) & (rho <= RHO_MAX), axis=-1)
-    errors = np.full(len(targets), np.nan)
-    reached = _rowwise(lambda r: direct(truth, r), rho[inside])
-    errors[inside] = np.linalg.norm(reached - targets[inside], axis=-1)
-    return errors
+    rho[~inside] = np.nan
+    return rho.reshape(targets.shape)
+
+
+def tcp_error_vectors(model: MachineParams, truth: MachineParams,
+                      targets: np.ndarray) -> np.ndarray:
+    """TCP error vectors ``reached - target`` (mm, shape of ``targets`` (..., n, 3)) of the
+    true machine commanded with ``model``; NaN rows where ``model`` has no command within
+    the control limits."""
+    targets = np.asarray(targets, dtype=float)
+    rho = commands(model, targets).reshape(-1, 3)
+    inside = np.isfinite(rho).all(axis=-1)
+    reached = np.full(rho.shape, np.nan)
+    reached[inside] = _rowwise(lambda r: direct(truth, r), rho[inside])
+    return reached.reshape(targets.shape) - targets
+
+
+def tcp_errors(model: MachineParams, truth: MachineParams, targets: np.ndarray) -> np.ndarray:
+    """Distance (mm) from each target to where the true machine goes when commanded with
+    ``model``; NaN where the model has no command within the control limits."""
+    return np.linalg.norm(tcp_error_vectors(model, truth, targets), axis=-1)
+
+
+def _masked_centroids(
+    targets: np.ndarray, reached: np.ndarray, mask: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Targets and reached points about their centroids over ``mask``, zero (not NaN) in
+    the rows left out so that sums ignore them, and the two centroids (..., 3)."""
+    keep = mask[..., None]
+    q = np.where(keep, targets, 0.0)
+    p = np.where(keep, reached, 0.0)
+    count = np.sum(mask, axis=-1)[..., None]
+    cq = q.sum(axis=-2) / count
+    cp = p.sum(axis=-2) / count
+    return (np.where(keep, q - cq[..., None, :], 0.0), np.where(keep, p - cp[..., None, :], 0.0),
+            cq, cp)
+
+
+def best_rigid_motion(
+    targets: np.ndarray, reached: np.ndarray, mask: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation ``R`` (..., 3, 3) and translation ``t`` (..., 3) minimising the sum over
+    ``mask`` of ``|R reached + t - target|^2``, for a batch of machines: ``targets`` and
+    ``reached`` (..., n, 3) broadcast together, ``mask`` (..., n) marks the usable targets.
+
+    Kabsch's solution without scale: with ``H = sum p q^T`` over the centred points and
+    ``H = U S V^T``, ``R = V diag(1, 1, d) U^T`` where ``d = det(V U^T)`` keeps ``R`` a
+    rotation when the best orthogonal fit would be a reflection."""
+    targets, reached = np.broadcast_arrays(targets, reached)
+    q, p, cq, cp = _masked_centroids(targets, reached, np.asarray(mask, dtype=bool))
+    u, _, vt = np.linalg.svd(np.einsum("...ni,...nj->...ij", p, q))
+    ut, v = np.swapaxes(u, -1, -2), np.swapaxes(vt, -1, -2).copy()
+    v[..., 2] *= np.sign(np.linalg.det(v @ ut))[..., None]
+    rotation = v @ ut
+    return rotation, cq - np.einsum("...ij,...j->...i", rotation, cp)
+
+
+def remove_translation(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Error vectors (..., n, 3) left after the best-fit translation over ``mask``: the
+    errors minus their mean, i.e. the centred reached points minus the centred targets;
+    NaN outside ``mask``."""
+    mask = np.asarray(mask, dtype=bool)
+    q, p, _, _ = _masked_centroids(targets, reached, mask)
+    return np.where(mask[..., None], p - q, np.nan)
+
+
+def remove_rigid(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Error vectors ``R reached + t - target`` (..., n, 3) left after the best-fit rigid
+    motion over ``mask`` (:func:`best_rigid_motion`); NaN outside ``mask``."""
+    rotation, shift = best_rigid_motion(targets, reached, mask)
+    moved = np.einsum("...ij,...nj->...ni", rotation, reached) + shift[..., None, :]
+    return np.where(np.asarray(mask, dtype=bool)[..., None], moved - targets, np.nan)
+
+
+def _stats(errors: np.ndarray, mask: np.ndarray) -> list[ErrorStats]:
+    """RMS and max of the lengths of error vectors (B, n, 3) over ``mask`` (B, n)."""
+    length2 = np.sum(np.where(mask[..., None], errors, 0.0) ** 2, axis=-1)
+    rms = np.sqrt(length2.sum(axis=-1) / mask.sum(axis=-1))
+    worst = np.sqrt(np.max(length2, axis=-1))
+    return [ErrorStats(float(r), float(m)) for r, m in zip(rms, worst, strict=True)]
+
+
+def frame_errors(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray) -> list[FrameErrors]:
+    """TCP errors in the three frames for each machine of a batch: ``reached`` (B, n, 3),
+    ``targets`` broadcasting to it (a shared grid (n, 3) does), ``mask`` (B, n) of the
+    usable targets (at least one per machine)."""
+    targets, reached = np.broadcast_arrays(np.asarray(targets, dtype=float),
+                                           np.asarray(reached, dtype=float))
+    mask = np.asarray(mask, dtype=bool)
+    if reached.ndim != 3 or mask.shape != reached.shape[:2]:
+        raise ValueError("frame_errors needs reached (B, n, 3) and mask (B, n)")
+    if not mask.any(axis=-1).all():
+        raise ValueError("every machine needs at least one usable target")
+    raw = _stats(reached - targets, mask)
+    translation = _stats(remove_translation(targets, reached, mask), mask)
+    rigid = _stats(remove_rigid(targets, reached, mask), mask)
+    return [FrameErrors(*frames) for frames in zip(raw, translation, rigid, strict=True)]
+
+
+def score_batch(
+    estimates: Sequence[MachineParams], truths: Sequence[MachineParams],
+    grid: np.ndarray | None = None,
+) -> list[ScoreReport]:
+    """Score each estimate against its true machine (see :func:`score`).
+
+    The kinematics run machine by machine (``MachineParams`` holds one machine); the
+    frame fits run once over the whole batch."""
+    if len(estimates) != len(truths) or not truths:
+        raise ValueError("score_batch needs as many estimates as true machines, at least one")
+    targets = workspace_grid() if grid is None else np.asarray(grid, dtype=float)
+    before = np.stack([tcp_error_vectors(MachineParams(), t, targets) for t in truths])
+    after = np.stack([tcp_error_vectors(e, t, targets)
+                      for e, t in zip(estimates, truths, strict=True)])
+    usable = np.isfinite(before).all(axis=-1) & np.isfinite(after).all(axis=-1)
+    empty = np.flatnonzero(~usable.any(axis=-1))
+    if empty.size:
+        raise ValueError("no target of the scoring grid is reachable within the control "
+                         f"limits (machines {empty.tolist()} of the batch)")
+    frames_before = frame_errors(targets, targets + before, usable)
+    frames_after = frame_errors(targets, targets + after, usable)
+    return [
+        ScoreReport(
+            drho_error=(e.drho - t.drho).tolist(), dL_error=(e.dL - t.dL).tolist(),
+            tcp_before=b, tcp_after=a, n_targets=int(m.sum()), n_skipped=int((~m).sum()),
+        )
+        for e, t, b, a, m in zip(estimates, truths, frames_before, frames_after, usable,
+                                 strict=True)
+    ]
 
 
 def score(
     estimate: MachineParams, truth: MachineParams, grid: np.ndarray | None = None
 ) -> ScoreReport:
     """Score ``estimate`` against ``truth``: parameter errors and TCP errors before
-    (nominal model) and after (estimated model) compensation."""
-    targets = workspace_grid() if grid is None else np.asarray(grid, dtype=float)
-    before = tcp_errors(MachineParams(), truth, targets)
-    after = tcp_errors(estimate, truth, targets)
-    usable = np.isfinite(before) & np.isfinite(after)
-    if not usable.any():
-        raise ValueError("no target of the scoring grid is reachable within the control limits")
-    return ScoreReport(
-        drho_error=(estimate.drho - truth.drho).tolist(),
-        dL_error=(estimate.dL - truth.dL).tolist(),
-        tcp_before=ErrorStats.of(before[usable]),
-        tcp_after=ErrorStats.of(after[usable]),
-        n_targets=int(usable.sum()),
-        n_skipped=int((~usable).sum()),
-    )
+    (nominal model) and after (estimated model) compensation, in the three frames, over
+    the targets both reach within the control limits."""
+    return score_batch([estimate], [truth], grid)[0]

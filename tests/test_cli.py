@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import subprocess
 import sys
@@ -58,7 +59,14 @@ def test_calibrate_json_keys_and_exact_recovery(capsys, machine_file) -> None:
                         "tcp_error_before_mm", "tcp_error_after_mm", "experiment_time_s",
                         "n_readings", "singular_values"}
     assert out["estimate"]["drho"] == pytest.approx(out["truth"]["drho"], abs=1e-3)
-    assert out["tcp_error_after_mm"]["max"] < 1e-3 < out["tcp_error_before_mm"]["rms"]
+    for key in ("tcp_error_before_mm", "tcp_error_after_mm", "predicted_correction_mm",
+                "predicted_tcp_std_after_mm"):
+        assert {f: set(v) for f, v in out[key].items()} == {
+            "raw": {"rms", "max"}, "translation": {"rms", "max"}, "rigid": {"rms", "max"}}
+    for frame in ("raw", "translation", "rigid"):
+        # The noise-free fit is the truth to ~1e-7 mm; the paper errors move the TCP by mm.
+        assert out["tcp_error_after_mm"][frame]["max"] < 1e-3
+        assert out["tcp_error_before_mm"][frame]["rms"] > 1e-3
 
 
 def test_calibrate_table_and_fixed_params(capsys) -> None:
@@ -81,8 +89,8 @@ def test_fit_from_a_measurement_file(tmp_path, capsys) -> None:
     out = run_json(capsys, ["fit", str(path), "--json"])
     assert "truth" not in out and "tcp_error_after_mm" not in out and out["n_readings"] == 60
     # Instead of errors against a truth: what the compensation will change, and how sure.
-    assert out["predicted_correction_mm"]["rms"] > 1.0
-    assert 0 < out["predicted_tcp_std_after_mm"]["rms"] < 0.2
+    assert out["predicted_correction_mm"]["raw"]["rms"] > 1.0
+    assert 0 < out["predicted_tcp_std_after_mm"]["raw"]["rms"] < 0.2
     # Within 5 reported standard deviations of the truth.
     for group in ("drho", "dL"):
         for est, std, true in zip(out["estimate"][group], out["std"][group],
@@ -94,9 +102,18 @@ def test_compare_writes_table_csv_and_plot(tmp_path, capsys) -> None:
     assert main(["compare", "--machines", "4", "--backend", "exact", "--errors", "paper",
                  "--jobs", "1", "--quiet", "--out", str(tmp_path)]) == 0
     text = capsys.readouterr().out
-    assert "gauss-newton" in text and "paper" in text
+    assert "gauss-newton" in text and "paper" in text and "TCP after (rigid) med" in text
     for name in ("trials.csv", "summary.csv", "compare.png"):
         assert (tmp_path / name).stat().st_size > 0
+    with (tmp_path / "trials.csv").open() as handle:
+        rows = list(csv.DictReader(handle))
+    for row in rows:
+        # Each best fit includes the one before it (a translation is a rigid motion), up
+        # to the fits' round-off (~1e-13 mm, tests/test_scoring.py).
+        for when in ("before", "after"):
+            raw, translation, rigid = (float(row[f"tcp_{when}_{frame}_rms"])
+                                       for frame in ("raw", "translation", "rigid"))
+            assert rigid <= translation + 1e-11 and translation <= raw + 1e-11
 
 
 @pytest.mark.parametrize(

@@ -5,10 +5,10 @@ from __future__ import annotations
 import json
 
 from orthoglide_env.geometry import MachineParams
-from orthoglide_env.scoring import score
+from orthoglide_env.scoring import FRAMES, score
 
 from ..base import Estimate
-from ..prediction import predicted_correction, predicted_tcp_std
+from ..prediction import predicted_correction, predicted_tcp_error
 
 
 def report(est: Estimate, truth: MachineParams | None) -> dict:
@@ -26,14 +26,14 @@ def report(est: Estimate, truth: MachineParams | None) -> dict:
         "crlb": est.crlb.tolist(),
         "weak_directions": est.weak_directions,
         "iterations": est.iterations,
-        "predicted_correction_mm": vars(predicted_correction(est)),
-        "predicted_tcp_std_after_mm": vars(predicted_tcp_std(est)),
+        "predicted_correction_mm": predicted_correction(est).to_dict(),
+        "predicted_tcp_std_after_mm": predicted_tcp_error(est).to_dict(),
     }
     if truth is not None:
-        report = score(MachineParams(drho=est.drho, dL=est.dL), truth)
+        report = score(est.machine, truth)
         data["truth"] = {"drho": truth.drho.tolist(), "dL": truth.dL.tolist()}
-        data["tcp_error_before_mm"] = vars(report.tcp_before)
-        data["tcp_error_after_mm"] = vars(report.tcp_after)
+        data["tcp_error_before_mm"] = report.tcp_before.to_dict()
+        data["tcp_error_after_mm"] = report.tcp_after.to_dict()
     return data
 
 
@@ -60,13 +60,16 @@ def print_table(data: dict) -> None:
     for weak in data["weak_directions"]:
         print("weakly identified: " + " ".join(f"{v:+.2f} {k}" for k, v in weak.items()))
     print(f"experiment time {data['experiment_time_s']:.0f} s")
-    c, u = data["predicted_correction_mm"], data["predicted_tcp_std_after_mm"]
-    print(f"predicted over the workspace: correction RMS {c['rms']:.4f} / max {c['max']:.4f} mm,"
-          f" TCP std after RMS {u['rms']:.4f} / max {u['max']:.4f} mm")
-    if "tcp_error_before_mm" in data:
-        b, a = data["tcp_error_before_mm"], data["tcp_error_after_mm"]
-        print(f"TCP error over the workspace: before RMS {b['rms']:.4f} / max {b['max']:.4f} mm,"
-              f" after RMS {a['rms']:.4f} / max {a['max']:.4f} mm")
+    print("TCP error over the workspace (mm, RMS / max): raw = world frame, then after the "
+          "best-fit translation and rigid motion")
+    print(f"{'':22}" + "".join(f"{frame:>19}" for frame in FRAMES))
+    rows = [("predicted correction", "predicted_correction_mm"),
+            ("predicted after (std)", "predicted_tcp_std_after_mm"),
+            ("before", "tcp_error_before_mm"), ("after", "tcp_error_after_mm")]
+    for label, key in rows:
+        if key in data:
+            print(f"{label:22}" + "".join(f"{data[key][f]['rms']:10.4f} /{data[key][f]['max']:7.4f}"
+                                          for f in FRAMES))
 
 
 def emit(data: dict, as_json: bool) -> None:

@@ -1,0 +1,91 @@
+"""Predicted TCP errors from an estimate's covariance: the frames' projections on linear
+toys, and a Monte-Carlo check against the scorer on sampled true machines."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import orthoglide_env
+from calibrators.base import get_strategy
+from calibrators.prediction import (
+    motion_basis,
+    predicted_frame_errors,
+    predicted_tcp_error,
+)
+from orthoglide_env.gauges import cross
+from orthoglide_env.geometry import MachineParams
+from orthoglide_env.scoring import FRAMES, score_batch, workspace_grid
+
+TABLE1 = {"drho": [4.66, -5.36, 1.46], "dL": [5.20, -5.96, 3.16]}
+#: A projection leaves round-off of a few ulps of the largest column (~100 mm for a
+#: rotation about the origin): 1e-12 of it.
+PROJECTION_ROUND_OFF: float = 1e-10
+
+
+def random_covariance(rng: np.random.Generator, size: int) -> np.ndarray:
+    factor = rng.normal(size=(size, size))
+    return factor @ factor.T
+
+
+def test_a_translation_in_tcp_space_is_predicted_away() -> None:
+    # delta moves every target by the same vector: raw error sqrt(trace C) everywhere.
+    rng = np.random.default_rng(0)
+    targets = workspace_grid()
+    jac = np.broadcast_to(np.eye(3), (len(targets), 3, 3))
+    cov = random_covariance(rng, 3)
+    frames = predicted_frame_errors(targets, jac, cov)
+    assert frames.raw.rms == pytest.approx(np.sqrt(np.trace(cov)), rel=1e-12)
+    assert frames.raw.max == pytest.approx(np.sqrt(np.trace(cov)), rel=1e-12)
+    assert frames.translation.max < PROJECTION_ROUND_OFF
+    assert frames.rigid.max < PROJECTION_ROUND_OFF
+
+
+def test_a_small_rotation_is_predicted_away_only_by_the_rigid_frame() -> None:
+    # delta = omega, a rotation about the origin: the error omega x target.
+    rng = np.random.default_rng(1)
+    targets = workspace_grid()
+    jac = np.stack([cross(axis, targets) for axis in np.eye(3)], axis=-1)
+    frames = predicted_frame_errors(targets, jac, random_covariance(rng, 3))
+    assert frames.rigid.max < PROJECTION_ROUND_OFF * np.abs(targets).max()
+    assert frames.translation.rms > 1.0 and frames.raw.rms >= frames.translation.rms
+
+
+def test_the_rigid_basis_spans_six_motions() -> None:
+    targets = workspace_grid()
+    assert motion_basis(targets, "raw").shape == (3 * len(targets), 0)
+    assert np.linalg.matrix_rank(motion_basis(targets, "translation")) == 3
+    assert np.linalg.matrix_rank(motion_basis(targets, "rigid")) == 6
+    with pytest.raises(ValueError, match="unknown frame"):
+        motion_basis(targets, "affine")
+
+
+def test_predicted_rms_matches_sampled_true_machines() -> None:
+    """Sample true machines theta_hat + delta, delta ~ N(0, C) of a gauss-newton estimate,
+    score the estimate against each: the mean square of the scored RMS is the prediction,
+    in every frame."""
+    env = gym.make(orthoglide_env.ENV_ID, backend="exact", errors="paper", gauge_sigma=0.0,
+                   gauge_resolution=0.0)
+    env.reset(seed=0, options={"machine": TABLE1})
+    readings = get_strategy("paper").collect(env)
+    env.close()
+    # With 1e-4 mm gauges the parameters wander ~4e-3 mm (43 sigma), so the second-order
+    # TCP error, ~|delta|^2 / L ~ 4e-7 mm, is ~1e-3 of the first-order one (~5e-4 mm);
+    # its share of the mean square is ~1e-6, far below the sampling error.
+    est = get_strategy("gauss-newton").estimate(readings, "full", 1e-4, verify=False)
+    samples = 1000
+    rng = np.random.default_rng(2)
+    theta = np.concatenate([est.drho, est.dL])
+    deltas = rng.multivariate_normal(np.zeros(6), est.covariance, size=samples)
+    truths = [MachineParams(drho=t[:3], dL=t[3:]) for t in theta + deltas]
+    reports = score_batch([est.machine] * samples, truths)
+    predicted = predicted_tcp_error(est)
+    for frame in FRAMES:
+        square = np.array([getattr(r.tcp_after, frame).rms for r in reports]) ** 2
+        # Five standard errors of the sample mean (CLT over 1000 samples): a false alarm
+        # has probability ~6e-7, and the seed is fixed.
+        tolerance = 5 * square.std() / np.sqrt(samples)
+        assert abs(square.mean() - getattr(predicted, frame).rms ** 2) < tolerance, frame
+    assert predicted.rigid.rms < predicted.translation.rms < predicted.raw.rms
+
