@@ -6,9 +6,10 @@ import argparse
 import time
 from pathlib import Path
 
-from ..base import get_strategy
-from .calibrate import add_common
-from .common import UsageError, noise_of
+from orthoglide_env.geometry import PRESETS
+
+from ..base import PARAM_SETS, get_strategy
+from .common import UsageError, add_noise_options, noise_of
 
 
 def run(args: argparse.Namespace) -> None:
@@ -55,5 +56,9 @@ def add(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--jobs", type=int, default=None, help="processes (default: every core)")
     p.add_argument("--out", default=None, help="folder for CSV files and PNG plots")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    add_common(p)
+    p.add_argument("--params", choices=list(PARAM_SETS), default="paper6")
+    p.add_argument("--errors", choices=sorted(PRESETS), default="realistic",
+                   help="error preset of random machines")
+    p.add_argument("--backend", choices=["pybullet", "exact"], default="pybullet")
+    add_noise_options(p)
     p.set_defaults(func=run)

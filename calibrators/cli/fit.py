@@ -8,25 +8,41 @@ import numpy as np
 
 from orthoglide_env.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 
-from ..base import PARAM_SETS, Measurements, get_strategy
+from ..base import Measurements, get_strategy
+from . import estimator_options
+from .common import UsageError
 from .output import emit, report
+
+#: Largest repeatability accepted (mm): a dial gauge that scatters by more than this is
+#: not measuring, and the weights would say nothing.
+MAX_SIGMA: float = 1.0
 
 
 def run(args: argparse.Namespace) -> None:
+    for name in ("sigma", "resolution"):
+        value = getattr(args, name)
+        if not 0 <= value <= MAX_SIGMA:
+            raise UsageError(f"--{name} must be between 0 and {MAX_SIGMA:g} mm, got {value:g}")
     data = Measurements.from_csv(args.file)
-    sigma = np.hypot(DEFAULT_SIGMA if args.sigma is None else args.sigma,
-                     DEFAULT_RESOLUTION / np.sqrt(12))
-    est = get_strategy(args.strategy).estimate(data, args.params, float(sigma))
+    if args.to_csv:
+        data.to_csv(args.to_csv)
+    sigma = float(np.hypot(args.sigma, args.resolution / np.sqrt(12)))
+    est = get_strategy(args.strategy).estimate(data, args.params, sigma,
+                                               **estimator_options.options(args))
     emit(report(est, None), args.json)
-
 
 
 def add(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fit", help="calibrate a real machine from measured gauge readings")
-    p.add_argument("file", help="CSV: leg,axis,posture,repetition,reading_mm")
-    p.add_argument("--strategy", default="gauss-newton")
-    p.add_argument("--params", choices=list(PARAM_SETS), default="full")
-    p.add_argument("--sigma", type=float, default=None,
-                   help=f"gauge repeatability (mm, default {DEFAULT_SIGMA})")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("file", help="measurement file (CSV with a header; see the README)")
+    p.add_argument("--sigma", type=float, default=DEFAULT_SIGMA,
+                   help="gauge repeatability (mm, default %(default)s)")
+    p.add_argument("--resolution", type=float, default=DEFAULT_RESOLUTION,
+                   help="gauge display resolution (mm, default %(default)s)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of the --holdout draw (default: %(default)s)")
+    estimator_options.add(p)
+    p.add_argument("--to-csv", metavar="FILE.csv",
+                   help="also write the readings as CSV (shortest round-trip numbers)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)

@@ -1,79 +1,159 @@
-"""How ``calibrate`` and ``fit`` show an estimate: a JSON object or a table."""
+"""How ``calibrate`` and ``fit`` show an estimate: a JSON object or a table.
+
+The JSON object's keys are a contract that scripts rely on: ``estimate`` and ``std``
+(parameter values and standard deviations in the machine-file schema, gauge stands under
+``stands``), ``chi2_dof``, ``warnings``, ``residuals`` (one object per reading: ``posture``,
+``gauge``, ``residual_mm``, ``outlier``, and ``line`` when read from a file),
+``identifiable``, ``predicted_tcp_error_mm``, and for virtual machines ``truth``,
+``tcp_error_before_mm`` and ``tcp_error_after_mm``; each TCP error is
+``{"raw": {"rms", "max"}, "translation": {...}, "rigid": {...}}`` in mm.
+"""
 
 from __future__ import annotations
 
 import json
+from typing import Any
 
-from orthoglide_env.geometry import MachineParams
+import numpy as np
+
+from orthoglide_env.geometry import ERROR_GROUPS, MachineParams
 from orthoglide_env.scoring import FRAMES, score
 
 from ..base import Estimate
 from ..prediction import predicted_correction, predicted_tcp_error
 
+#: How many combinations a table lists before it only counts them (JSON lists all).
+LISTED: int = 6
 
-def report(est: Estimate, truth: MachineParams | None) -> dict:
-    data = {
+
+def _residuals(est: Estimate) -> list[dict[str, Any]]:
+    """One object per reading (exact-model fits) or per difference (the paper's fit)."""
+    outliers = set(est.outliers)
+    out = []
+    if len(est.residuals) == len(est.readings):
+        for k, (m, r) in enumerate(zip(est.readings.items, est.residuals, strict=True)):
+            item = {"posture": m.posture, "gauge": f"{m.gauge.name}@{m.gauge.at:g}",
+                    "repetition": m.repetition,
+                    "residual_mm": None if not np.isfinite(r) else float(r),
+                    "outlier": k in outliers}
+            if getattr(m, "line", None):
+                item["line"] = m.line
+            out.append(item)
+        return out
+    from ..differences import differences
+
+    rows = differences(est.readings)
+    return [{"posture": p, "gauge": f"{g.name}@{g.at:g}", "residual_mm": float(r),
+             "outlier": False}
+            for g, p, r in zip(rows.gauges, rows.postures, est.residuals, strict=True)]
+
+
+def report(est: Estimate, truth: MachineParams | None,
+           z_rms: float | None = None) -> dict[str, Any]:
+    """The JSON-ready report of an estimate (and of its score, when the truth is known)."""
+    data: dict[str, Any] = {
         "strategy": est.strategy,
         "params": est.params,
-        "estimate": {"drho": est.drho.tolist(), "dL": est.dL.tolist()},
+        "prior": est.prior,
+        "free": est.names,
+        "estimate": est.estimate,
         "std": est.std,
+        "chi2": est.chi2,
+        "dof": est.dof,
+        "chi2_dof": est.chi2 / est.dof if est.chi2 is not None and est.dof else None,
+        "covariance_scale": est.covariance_scale,
+        "warnings": est.warnings,
+        "identifiable": est.identifiable,
+        "unidentifiable": est.unidentifiable,
+        "residuals": _residuals(est),
         "residual_rms_mm": est.residual_rms_mm,
         "verification_rms_mm": est.verification_rms_mm,
+        "holdout_rms_mm": est.holdout_rms_mm,
         "experiment_time_s": est.experiment_time_s,
         "n_readings": est.n_readings,
         "singular_values": est.singular_values.tolist(),
-        "condition_number": est.condition_number,
-        "crlb": est.crlb.tolist(),
-        "weak_directions": est.weak_directions,
+        # Infinite when some combination is not seen at all (see ``unidentifiable``).
+        "condition_number": est.condition_number if np.isfinite(est.condition_number)
+        else None,
         "iterations": est.iterations,
         "predicted_correction_mm": predicted_correction(est).to_dict(),
-        "predicted_tcp_std_after_mm": predicted_tcp_error(est).to_dict(),
+        "predicted_tcp_error_mm": predicted_tcp_error(est).to_dict(),
     }
     if truth is not None:
-        report = score(est.machine, truth)
-        data["truth"] = {"drho": truth.drho.tolist(), "dL": truth.dL.tolist()}
-        data["tcp_error_before_mm"] = report.tcp_before.to_dict()
-        data["tcp_error_after_mm"] = report.tcp_after.to_dict()
+        scored = score(est.machine, truth)
+        data["truth"] = truth.to_dict()
+        data["tcp_error_before_mm"] = scored.tcp_before.to_dict()
+        data["tcp_error_after_mm"] = scored.tcp_after.to_dict()
+        data["z_rms"] = z_rms
     return data
 
 
-def print_table(data: dict) -> None:
-    print(f"strategy {data['strategy']}, parameters {data['params']}")
-    print(f"{'':8}{'estimate':>10}{'std':>9}" + (f"{'truth':>10}{'error':>10}" if "truth" in data
-                                                   else ""))
-    for group in ("drho", "dL"):
-        for k, axis in enumerate("xyz"):
-            est = data["estimate"][group][k]
-            std = data["std"][group][k]
-            shown = f"{std:9.4f}" if std is not None else "    fixed"
-            line = f"{group}_{axis:<4}{est:10.4f}{shown}"
-            if "truth" in data:
-                true = data["truth"][group][k]
-                line += f"{true:10.4f}{est - true:10.4f}"
+def _flat(schema: dict[str, Any], key: str) -> list:
+    return list(np.ravel(np.array(schema[key], dtype=object)))
+
+
+def print_table(data: dict[str, Any]) -> None:
+    print(f"strategy {data['strategy']}, parameters {data['params']}, prior {data['prior']}")
+    free = set(data["free"])
+    print(f"{'':16}{'estimate':>10}{'std':>9}" + (f"{'truth':>10}{'error':>10}"
+                                                   if "truth" in data else ""))
+    from orthoglide_env.geometry import ERROR_NAMES, error_group
+
+    for group in ERROR_GROUPS:
+        names = [n for n in ERROR_NAMES if error_group(n) == group]
+        if not free & set(names) and group not in ("drho", "dL"):
+            continue
+        values, stds = _flat(data["estimate"], group), _flat(data["std"], group)
+        truths = _flat(data["truth"], group) if "truth" in data else None
+        for k, name in enumerate(names):
+            shown = f"{stds[k]:9.4f}" if stds[k] is not None else "    fixed"
+            line = f"{name:16}{values[k]:10.4f}{shown}"
+            if truths is not None:
+                line += f"{truths[k]:10.4f}{values[k] - truths[k]:10.4f}"
             print(line)
+    if "stands" in data["estimate"]:
+        print(f"gauge stands: {len(data['estimate']['stands'])} mountings estimated "
+              "(see --json)")
+    if data["chi2_dof"] is not None:
+        print(f"chi2/dof {data['chi2_dof']:.2f} ({data['dof']} degrees of freedom)")
     print(f"residual RMS {data['residual_rms_mm']:.4f} mm over {data['n_readings']} readings"
           + (f"; held-out repetitions {data['verification_rms_mm']:.4f} mm"
-             if data["verification_rms_mm"] is not None else ""))
-    print("singular values " + ", ".join(f"{s:.4g}" for s in data["singular_values"])
-          + f" (condition {data['condition_number']:.1f})")
-    print("Cramér-Rao bound (mm) " + ", ".join(f"{c:.4f}" for c in data["crlb"]))
-    for weak in data["weak_directions"]:
-        print("weakly identified: " + " ".join(f"{v:+.2f} {k}" for k, v in weak.items()))
+             if data["verification_rms_mm"] is not None else "")
+          + (f"; held-out readings {data['holdout_rms_mm']:.4f} mm"
+             if data["holdout_rms_mm"] is not None else ""))
+    for label, key in (("identified", "identifiable"), ("not identified", "unidentifiable")):
+        combos = data[key]
+        if combos:
+            print(f"{label} by these readings ({len(combos)} combinations):")
+            for text in combos[:LISTED]:
+                print(f"  {text}")
+            if len(combos) > LISTED:
+                print(f"  ... and {len(combos) - LISTED} more (see --json)")
+    outliers = [r for r in data["residuals"] if r["outlier"]]
+    for r in outliers:
+        where = f"line {r['line']}" if "line" in r else r["gauge"]
+        print(f"outlier: {where} ({r['gauge']}, {r['posture']}): residual "
+              f"{r['residual_mm']} mm")
     print(f"experiment time {data['experiment_time_s']:.0f} s")
     print("TCP error over the workspace (mm, RMS / max): raw = world frame, then after the "
-          "best-fit translation and rigid motion")
-    print(f"{'':22}" + "".join(f"{frame:>19}" for frame in FRAMES))
+          "best-fit translation and rigid motion (the headline: what a user who touches off "
+          "the workpiece sees)")
+    print(f"{'':24}" + "".join(f"{frame:>19}" for frame in FRAMES))
     rows = [("predicted correction", "predicted_correction_mm"),
-            ("predicted after (std)", "predicted_tcp_std_after_mm"),
-            ("before", "tcp_error_before_mm"), ("after", "tcp_error_after_mm")]
+            ("predicted error after", "predicted_tcp_error_mm"),
+            ("before calibration", "tcp_error_before_mm"),
+            ("after calibration", "tcp_error_after_mm")]
     for label, key in rows:
         if key in data:
-            print(f"{label:22}" + "".join(f"{data[key][f]['rms']:10.4f} /{data[key][f]['max']:7.4f}"
-                                          for f in FRAMES))
+            print(f"{label:24}" + "".join(
+                f"{data[key][f]['rms']:10.4f} /{data[key][f]['max']:7.4f}" for f in FRAMES))
+    if data.get("z_rms") is not None:
+        print(f"z-RMS of the identifiable combinations against the truth: {data['z_rms']:.2f}")
 
 
-def emit(data: dict, as_json: bool) -> None:
+def emit(data: dict[str, Any], as_json: bool) -> None:
+    """Print the report; JSON output never holds NaN or Infinity (not JSON)."""
     if as_json:
-        print(json.dumps(data, indent=2))
+        print(json.dumps(data, indent=2, allow_nan=False))
     else:
         print_table(data)

@@ -1,0 +1,47 @@
+"""The estimator's options, shared by ``calibrate`` and ``fit``."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from ..estimator import SOLVERS
+from ..gauss_newton import MAX_OUTLIER_FRACTION, OUTLIER_K
+from ..parameters import parse_assignments
+
+DEFAULT_STRATEGY = "gauss-newton"
+
+
+def add(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--strategy", default=DEFAULT_STRATEGY,
+                   help="estimator: gauss-newton (exact model, any parameters) or paper "
+                        "(eq. 10, linear, paper6/drho/dL only) (default: %(default)s)")
+    p.add_argument("--params", default="paper6",
+                   help="free parameters: paper6 (drho, dL), extended (all 27 machine errors "
+                        "and 4 per gauge stand), or a comma list of groups (drho, dL, "
+                        "axis_tilt, axis_offset, attach, stands) and names (drho_x, "
+                        "attach_y.z, x-leg/y@0.5.tilt_z) (default: %(default)s)")
+    p.add_argument("--prior", default="auto",
+                   help="zero-mean normal prior: none (base parameters: combinations the "
+                        "readings cannot see stay nominal), a preset name (its sigmas), and/or "
+                        "GROUP=SIGMA or NAME=SIGMA (mm, rad); auto = the realistic preset's "
+                        "when more than paper6 is free, else none (default: %(default)s)")
+    p.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
+                   help="hold a parameter at a known value (mm, rad); repeatable")
+    p.add_argument("--solver", choices=list(SOLVERS), default="gauss-newton",
+                   help="batched damped Gauss-Newton, or scipy's least_squares as a cross-check "
+                        "(default: %(default)s)")
+    p.add_argument("--keep-outliers", action="store_true",
+                   help=f"flag readings beyond {OUTLIER_K:g} robust sigma but keep them in the "
+                        f"fit (default: leave them out, at most "
+                        f"{MAX_OUTLIER_FRACTION:.0%} of the readings)")
+    p.add_argument("--holdout", type=float, default=0.0, metavar="FRACTION",
+                   help="fit on the other readings and report the prediction residual of this "
+                        "random fraction (default: none)")
+
+
+def options(args: argparse.Namespace) -> dict[str, Any]:
+    """Keyword arguments of ``Calibrator.estimate`` from the parsed options."""
+    return {"prior": args.prior, "fix": parse_assignments(args.fix, "--fix"),
+            "keep_outliers": args.keep_outliers, "holdout": args.holdout,
+            "seed": args.seed if args.seed is not None else 0, "solver": args.solver}
