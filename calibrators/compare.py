@@ -25,8 +25,9 @@ import orthoglide_env
 from orthoglide_env.geometry import MachineParams
 from orthoglide_env.scoring import score
 
-from .base import PARAM_NAMES, PARAM_SETS, Measurements, get_strategy
+from .base import PARAM_NAMES, PARAM_SETS, get_strategy
 from .differences import differences
+from .measurements import Measurements
 
 
 @dataclass(frozen=True)
