@@ -42,19 +42,19 @@ names a paper posture, and a paper posture's rho, when given, is its own.
 
 JSON
 ----
-``{"readings": [{...}, ...], "experiment_time_s": 12.5}`` (the time is optional, >= 0):
+``{"readings": [{...}, ...], "experiment_time_s": 12.5}`` (the time optional, 0 .. 1e9):
 each reading an object whose keys are the CSV's column names, numbers as JSON numbers
 (not strings or booleans), rho as ``"rho": [x, y, z]`` or as ``rho_x``, ``rho_y``,
 ``rho_z``; a missing key, ``null`` or ``""`` is a value not given.  Keys appear once.
 
 Rules of both formats (a file that breaks one is refused with one line naming the file,
-the line and column of a CSV, or the index of a JSON reading, and the rule): numbers are
-finite; a reading lies within +-:data:`MAX_READING_MM` (a dial gauge's travel is about
-10 mm); rho lies within the control limits ``RHO_MIN .. RHO_MAX``; a repetition is an
-integer 1 .. :data:`MAX_REPETITION`; a posture label or mounting is 1 ..
+the line and column of a CSV, or the index, from 0, of a JSON reading, and the rule):
+numbers are finite; a reading lies within +-:data:`MAX_READING_MM` (a dial gauge's
+travel is about 10 mm); rho lies within the control limits ``RHO_MIN .. RHO_MAX``; a
+repetition is an integer 1 .. :data:`MAX_REPETITION`; a posture label or mounting is 1 ..
 :data:`MAX_FIELD_CHARS` printable characters without surrounding blanks; a mounting
-holds one gauge; a file holds 1 .. :data:`MAX_ROWS` readings (so at
-most that many distinct repetitions).  A CSV cell holds at most :data:`MAX_FIELD_CHARS`
+holds one gauge; a file holds 1 .. :data:`MAX_ROWS` readings (so at most that many
+distinct repetitions).  A CSV cell holds at most :data:`MAX_FIELD_CHARS`
 characters, a line at most :data:`MAX_LINE_BYTES` bytes, and a reading one line: a
 quoted line break is refused.  A JSON file holds at most :data:`MAX_JSON_BYTES` bytes.
 The CSV has no place for the experiment time; the JSON file keeps it.
@@ -226,8 +226,8 @@ class Measurement:
     a posture given by its ``rho`` ("" makes one from the rho).  ``mounting`` names one
     installation of the gauge's stand ("": the gauge's name): each has its own zero, and
     differences are taken against its readings at ``rho = (0, 0, 0)``.  ``line`` is where
-    the reading came from in a file (not part of the reading: equality ignores it).  Every
-    rule of the module's docstring is checked here; a broken one raises
+    the reading came from in a file (not part of the reading: equality ignores it).  The
+    module docstring's rules of one reading are checked here; a broken one raises
     :class:`FieldError` (a ValueError) naming the field.
     """
 
