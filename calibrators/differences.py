@@ -51,8 +51,9 @@ def differences(data: Measurements, repetitions: Collection[int] | None = None) 
     A mounting (``Measurement.mounting``) is one installation of a gauge, with a zero of
     its own.  ``repetitions`` keeps only those repetitions (a Zero reading belongs to the
     repetition it opens).  A mounting with readings but none at Zero raises
-    :class:`MissingZeroError`: dropping it would hide a file's fault, and the readers'
-    callers, which skip what cannot be predicted, catch it.  Linear in the readings.
+    :class:`MissingZeroError` rather than being dropped, which would hide a fault of the
+    file; a caller that can do without a subset (the verification's held-out sets)
+    catches it.  Linear in the readings.
     """
     groups: dict[tuple[str, GaugeSpec, tuple[float, ...]], list[float]] = {}
     labels: dict[tuple[float, ...], str] = {}

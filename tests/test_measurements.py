@@ -14,6 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import orthoglide_env
+from calibrators import differences as differences_module
 from calibrators import measurements
 from calibrators.base import get_strategy
 from calibrators.cli import main
@@ -479,6 +480,16 @@ def test_each_mounting_has_its_own_zero() -> None:
     assert rows.mountings == ("first", "second")
     np.testing.assert_allclose(rows.values, [0.6, 0.6], atol=1e-12)
     np.testing.assert_allclose(rows.cov_unit, np.diag([1.0, 1.0]))  # 1/2 + 1/2 each
+
+
+def test_more_differences_than_an_estimate_can_weigh(monkeypatch) -> None:
+    gauge = GaugeSpec(0, 1)
+    items = [Measurement(gauge, "Zero", 1, 0.0)] + [
+        Measurement(gauge, "", 1, 0.1, (float(k), 0.0, 0.0)) for k in range(1, 4)]
+    assert len(differences(Measurements(items))) == 3
+    monkeypatch.setattr(differences_module, "MAX_DIFFERENCES", 2)
+    with pytest.raises(ValueError, match=r"3 \(mounting, posture\) pairs: more than the 2"):
+        differences(Measurements(items))
 
 
 @pytest.fixture(scope="module")
