@@ -26,6 +26,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/statistics.py
 	$(BIN)/python benchmarks/realistic.py
 	$(BIN)/python benchmarks/bench_calibrators.py
+	$(BIN)/python benchmarks/bench_measurements.py
 
 clean:
 	rm -rf $(VENV) results .pytest_cache

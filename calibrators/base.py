@@ -1,10 +1,11 @@
-"""The calibrator interface: measurements, estimates and the registry of strategies.
+"""The calibrator interface: estimates and the registry of strategies.
 
 A strategy has two halves, kept apart so a real machine's measured readings (a file) go
 through the same estimator as a virtual experiment:
 
 * ``collect(env)``: drives the environment through its public API only (actions in,
-  observations out) and returns the :class:`Measurements` it read and the time spent;
+  observations out) and returns the :class:`~calibrators.measurements.Measurements` it
+  read and the time spent;
 * ``estimate(measurements, params, sigma)``: turns readings into an :class:`Estimate`.
 
 Strategies register themselves by name with :func:`register`; every module of this
@@ -13,7 +14,6 @@ package is imported by :func:`available`, so adding a strategy is adding one mod
 
 from __future__ import annotations
 
-import csv
 import importlib
 import json
 import pkgutil
@@ -24,17 +24,15 @@ from typing import Any, ClassVar
 import gymnasium as gym
 import numpy as np
 
-from orthoglide_env.gauges import GaugeSpec, layout_from_names
 from orthoglide_env.geometry import (
-    AXIS_NAMES,
     ERROR_GROUPS,
     ERROR_NAMES,
-    LEG_NAMES,
     MachineParams,
     error_group,
-    read_user_file,
 )
-from orthoglide_env.kinematics import PAPER_POSTURES, paper_posture
+from orthoglide_env.kinematics import paper_posture
+
+from .measurements import Measurements
 
 PARAM_NAMES: tuple[str, ...] = ("drho_x", "drho_y", "drho_z", "dL_x", "dL_y", "dL_z")
 #: Which of the six paper parameters each ``--params`` choice frees (the others stay 0).
@@ -44,137 +42,6 @@ PARAM_SETS: dict[str, tuple[int, ...]] = {
     "drho": (0, 1, 2),
     "dL": (3, 4, 5),
 }
-CSV_COLUMNS: tuple[str, ...] = ("leg", "axis", "posture", "repetition", "reading_mm")
-
-
-class MeasurementFileError(ValueError):
-    """A measurement file that cannot be read; the message names line and column."""
-
-
-ZERO_RHO: tuple[float, float, float] = (0.0, 0.0, 0.0)
-
-
-@dataclass(frozen=True)
-class Measurement:
-    """One gauge reading: which gauge, at which posture, in which repetition.
-
-    ``rho`` is the commanded posture (control coordinates, mm); ``posture`` its label, a
-    paper posture name (whose ``rho`` is filled in when not given) or any other label for
-    a posture of a strategy's own.  Differences are taken against the Zero posture
-    ``rho = (0, 0, 0)``, where the gauges were zeroed.
-    """
-
-    gauge: GaugeSpec
-    posture: str
-    repetition: int
-    reading: float
-    rho: tuple[float, float, float] | None = None
-
-    def __post_init__(self) -> None:
-        if self.rho is None:
-            if self.posture not in PAPER_POSTURES:
-                raise ValueError(f"posture '{self.posture}' is not a paper posture: give its rho")
-            rho = paper_posture(self.posture)
-        else:
-            rho = np.asarray(self.rho, dtype=float)
-            if rho.shape != (3,):
-                raise ValueError("a measurement's rho must have 3 components")
-        object.__setattr__(self, "rho", tuple(float(v) for v in rho))
-
-    @property
-    def is_zero(self) -> bool:
-        return self.rho == ZERO_RHO
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"leg": LEG_NAMES[self.gauge.leg], "axis": AXIS_NAMES[self.gauge.axis],
-                "at": self.gauge.at, "posture": self.posture, "rho": list(self.rho),
-                "repetition": self.repetition, "reading_mm": self.reading}
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> Measurement:
-        gauge = GaugeSpec(LEG_NAMES.index(data["leg"]), AXIS_NAMES.index(data["axis"]),
-                          float(data.get("at", 0.5)))
-        return cls(gauge, str(data["posture"]), int(data["repetition"]),
-                   float(data["reading_mm"]), data.get("rho"))
-
-
-@dataclass
-class Measurements:
-    """The readings of one experiment, plus the experiment time it cost (s)."""
-
-    items: list[Measurement] = field(default_factory=list)
-    experiment_time_s: float = 0.0
-
-    def __len__(self) -> int:
-        return len(self.items)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"experiment_time_s": self.experiment_time_s,
-                "readings": [m.to_dict() for m in self.items]}
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> Measurements:
-        return cls([Measurement.from_dict(m) for m in data["readings"]],
-                   float(data["experiment_time_s"]))
-
-    def to_csv(self, path: str | Path) -> None:
-        """Write the documented CSV; only paper postures and mid-leg gauges have a place
-        in it (a real machine is measured by the paper's procedure)."""
-        for m in self.items:
-            if m.posture not in PAPER_POSTURES or m.rho != tuple(paper_posture(m.posture)):
-                raise ValueError(f"posture '{m.posture}' has no place in the measurement CSV")
-            if m.gauge.at != 0.5:
-                raise ValueError(f"gauge {m.gauge.name}@{m.gauge.at} has no place in the CSV")
-        with Path(path).open("w", newline="") as handle:
-            writer = csv.writer(handle)
-            writer.writerow(CSV_COLUMNS)
-            for m in self.items:
-                writer.writerow([LEG_NAMES[m.gauge.leg], AXIS_NAMES[m.gauge.axis], m.posture,
-                                 m.repetition, repr(m.reading)])
-
-    @classmethod
-    def from_csv(cls, path: str | Path) -> Measurements:
-        """Read the documented CSV (header ``leg,axis,posture,repetition,reading_mm``)."""
-        path = Path(path)
-        text = read_user_file(path, "measurement file", MeasurementFileError)
-        rows = list(csv.reader(text.splitlines()))
-        if not rows or [c.strip() for c in rows[0]] != list(CSV_COLUMNS):
-            raise MeasurementFileError(
-                f"{path}:1: header must be '{','.join(CSV_COLUMNS)}'"
-            )
-        items = [_parse_row(path, n, row) for n, row in enumerate(rows[1:], start=2)
-                 if any(c.strip() for c in row)]
-        if not items:
-            raise MeasurementFileError(f"{path}: no readings after the header")
-        return cls(items)
-
-
-def _parse_row(path: Path, line: int, row: list[str]) -> Measurement:
-    def fail(column: int, message: str) -> MeasurementFileError:
-        return MeasurementFileError(f"{path}:{line}: column {column} ({CSV_COLUMNS[column - 1]}): "
-                                    f"{message}")
-
-    if len(row) != len(CSV_COLUMNS):
-        raise MeasurementFileError(f"{path}:{line}: expected {len(CSV_COLUMNS)} columns, "
-                                   f"got {len(row)}")
-    leg, axis, posture, repetition, reading = (c.strip() for c in row)
-    if leg not in LEG_NAMES:
-        raise fail(1, f"leg must be one of {list(LEG_NAMES)}, got '{leg}'")
-    if axis not in AXIS_NAMES or axis == leg:
-        raise fail(2, f"axis must be one of the two axes normal to the {leg} leg, got '{axis}'")
-    if posture not in PAPER_POSTURES:
-        raise fail(3, f"posture must be one of {list(PAPER_POSTURES)}, got '{posture}'")
-    try:
-        rep = int(repetition)
-    except ValueError:
-        raise fail(4, f"repetition must be an integer, got '{repetition}'") from None
-    try:
-        value = float(reading)
-    except ValueError:
-        raise fail(5, f"reading must be a number in mm, got '{reading}'") from None
-    if not np.isfinite(value):
-        raise fail(5, f"reading must be finite, got '{reading}'")
-    return Measurement(layout_from_names([f"{leg}/{axis}"])[0], posture, rep, value)
 
 
 @dataclass

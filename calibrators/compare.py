@@ -24,8 +24,9 @@ from tqdm import tqdm
 import orthoglide_env
 from orthoglide_env.scoring import FRAMES, ScoreReport, score
 
-from .base import PARAM_NAMES, PARAM_SETS, Measurements, get_strategy
+from .base import PARAM_NAMES, PARAM_SETS, get_strategy
 from .differences import differences
+from .measurements import Measurements
 
 
 @dataclass(frozen=True)

@@ -9,6 +9,7 @@ is the one of the data actually used.
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,47 +18,72 @@ from orthoglide_env.gauges import GaugeSpec, collision_boxes, exact_ray_distance
 from orthoglide_env.geometry import L_NOMINAL, RHO_MAX, RHO_MIN, MachineParams
 from orthoglide_env.kinematics import direct
 
-from .base import ZERO_RHO, Measurements
+from .measurements import ZERO_RHO, Measurement, Measurements, gauge_name
+
+#: Differences share a dense covariance (estimators whiten with its Cholesky factor): this
+#: many rows take 130 MB and seconds; a design needs a few hundred (DESIGN.md: 40
+#: mountings of 15 postures).
+MAX_DIFFERENCES: int = 4096
+
+
+class MissingZeroError(ValueError):
+    """A mounting has readings but none at Zero: its zero is unknown."""
 
 
 @dataclass(frozen=True)
 class Differences:
-    """Averaged differences, one row per (gauge, non-Zero posture)."""
+    """Averaged differences, one row per (mounting, non-Zero posture)."""
 
     gauges: tuple[GaugeSpec, ...]
     postures: tuple[str, ...]  # labels (paper posture names)
     rho: np.ndarray  # (n, 3) the postures, control coordinates, mm
     values: np.ndarray  # mm
     cov_unit: np.ndarray  # covariance of ``values`` for readings of unit variance
+    mountings: tuple[str, ...] = ()
 
     def __len__(self) -> int:
         return len(self.values)
 
 
-def differences(data: Measurements, repetitions: set[int] | None = None) -> Differences:
-    """Average each gauge's readings per posture and subtract its mean Zero reading.
+def differences(data: Measurements, repetitions: Collection[int] | None = None) -> Differences:
+    """Average each mounting's readings per posture and subtract its mean Zero reading.
 
-    ``repetitions`` keeps only those repetitions (a Zero reading belongs to the
-    repetition it opens).  Rows whose gauge has no Zero reading are dropped.
+    A mounting (``Measurement.mounting``) is one installation of a gauge, with a zero of
+    its own.  ``repetitions`` keeps only those repetitions (a Zero reading belongs to the
+    repetition it opens).  A mounting with readings but none at Zero raises
+    :class:`MissingZeroError` rather than being dropped, which would hide a fault of the
+    file; a caller that can do without a subset (the verification's held-out sets)
+    catches it.  Linear in the readings.
     """
-    groups: dict[tuple[GaugeSpec, tuple[float, ...]], list[float]] = {}
+    groups: dict[tuple[str, GaugeSpec, tuple[float, ...]], list[float]] = {}
     labels: dict[tuple[float, ...], str] = {}
+    first: dict[tuple[str, GaugeSpec], Measurement] = {}
     for m in data.items:
         if repetitions is None or m.repetition in repetitions:
-            groups.setdefault((m.gauge, m.rho), []).append(m.reading)
+            groups.setdefault((m.mounting, m.gauge, m.rho), []).append(m.reading)
             labels.setdefault(m.rho, m.posture)
-    keys = sorted((k for k in groups if k[1] != ZERO_RHO and (k[0], ZERO_RHO) in groups),
-                  key=lambda k: (k[0].leg, k[0].axis, k[0].at, labels[k[1]], k[1]))
-    values = np.array([np.mean(groups[k]) - np.mean(groups[(k[0], ZERO_RHO)]) for k in keys])
-    cov = np.zeros((len(keys), len(keys)))
-    for a, (ga, pa) in enumerate(keys):
-        for b, (gb, pb) in enumerate(keys):
-            if ga == gb:
-                cov[a, b] = 1 / len(groups[(ga, ZERO_RHO)]) + (1 / len(groups[(ga, pa)])
-                                                               if pa == pb else 0.0)
-    rho = np.array([k[1] for k in keys], dtype=float).reshape(-1, 3)
-    return Differences(tuple(k[0] for k in keys), tuple(labels[k[1]] for k in keys), rho,
-                       values, cov)
+            first.setdefault((m.mounting, m.gauge), m)
+    for (mounting, gauge), m in first.items():
+        if (mounting, gauge, ZERO_RHO) not in groups:
+            where = f" (first reading: line {m.line})" if m.line is not None else ""
+            raise MissingZeroError(f"gauge {gauge_name(gauge)}, mounting '{mounting}', has "
+                                   f"readings but none at Zero{where}: its zero is unknown")
+    keys = sorted((k for k in groups if k[2] != ZERO_RHO),
+                  key=lambda k: (k[1].leg, k[1].axis, k[1].at, k[0], labels[k[2]], k[2]))
+    if len(keys) > MAX_DIFFERENCES:
+        raise ValueError(f"{len(keys)} (mounting, posture) pairs: more than the "
+                         f"{MAX_DIFFERENCES} differences an estimate can weigh")
+    zero = [groups[(k[0], k[1], ZERO_RHO)] for k in keys]
+    values = np.array([np.mean(groups[k]) - np.mean(z) for k, z in zip(keys, zero, strict=True)])
+    # Rows of one mounting share its mean Zero reading; each has its own posture's mean.
+    number: dict[tuple[str, GaugeSpec], int] = {}
+    mounting = np.array([number.setdefault(k[:2], len(number)) for k in keys], dtype=int)
+    shared = mounting[:, None] == mounting[None, :]
+    cov = (np.where(shared, np.array([1 / len(z) for z in zero])[:, None], 0.0)
+           + np.diag([1 / len(groups[k]) for k in keys]))
+    rho = np.array([k[2] for k in keys], dtype=float).reshape(-1, 3)
+    return Differences(tuple(k[1] for k in keys), tuple(labels[k[2]] for k in keys), rho,
+                       values, cov, tuple(k[0] for k in keys))
 
 
 def model_differences(theta: np.ndarray, rows: Differences) -> np.ndarray:

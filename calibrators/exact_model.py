@@ -28,14 +28,10 @@ from orthoglide_env.gauges import (
 )
 from orthoglide_env.geometry import ERROR_NAMES, MachineParams
 
+from .measurements import gauge_name
 from .parameters import ParameterSpace
 
 N_MACHINE: int = len(ERROR_NAMES)
-
-
-def mounting_key(spec: GaugeSpec) -> str:
-    """Default name of a gauge's mounting: its slot, ``x-leg/y@0.5``."""
-    return f"{spec.name}@{spec.at:g}"
 
 
 @dataclass(frozen=True)
@@ -130,11 +126,12 @@ def parameters_of(design: Design, machine: MachineParams, gauges: list[Gauge]) -
     """The true parameter vector of a simulated experiment: the machine's errors and the
     stand parameters of its installed ``gauges`` (matched to the design's mountings by
     slot).  For scoring an estimate; an agent never sees it."""
-    by_slot = {mounting_key(g.spec): g for g in gauges}
-    missing = [m for m in design.mountings if m not in by_slot]
+    by_slot = {gauge_name(g.spec): g for g in gauges}
+    slots = [gauge_name(spec) for spec in design.specs]
+    missing = [m for m, slot in zip(design.mountings, slots, strict=True) if slot not in by_slot]
     if missing:
         raise ValueError(f"no installed gauge for mounting(s) {missing}")
-    installed = [by_slot[m] for m in design.mountings]
+    installed = [by_slot[slot] for slot in slots]
     origins, directions = ideal_rays(design.specs, machine)
     stand = stand_errors(design.specs, np.array([g.origin for g in installed]),
                          np.array([g.direction for g in installed]), origins, directions)

@@ -16,7 +16,7 @@ import numpy as np
 
 from .base import Estimate, Measurements, register
 from .estimator import CHI2_LEVEL, NOISE_FLOOR, BatchFit, fit_batch
-from .exact_model import Design, mounting_key, predict
+from .exact_model import Design, predict
 from .paper import PaperCalibrator, split_repetitions
 from .parameters import (
     ParameterSpace,
@@ -40,7 +40,7 @@ def design_of(data: Measurements) -> tuple[Design, np.ndarray]:
     """The design and the readings of ``data``."""
     if not len(data):
         raise ValueError("no readings to fit")
-    mountings = [getattr(m, "mounting", "") or mounting_key(m.gauge) for m in data.items]
+    mountings = [m.mounting for m in data.items]
     design = Design.of(mountings, [m.gauge for m in data.items],
                        np.array([m.rho for m in data.items], dtype=float))
     return design, np.array([m.reading for m in data.items], dtype=float)
@@ -200,8 +200,7 @@ def _holdout(design: Design, fraction: float, seed: int) -> np.ndarray:
 
 def _where(data: Measurements, k: int) -> str:
     m = data.items[k]
-    line = getattr(m, "line", None)
-    place = f"line {line}" if line else f"reading {k + 1}"
+    place = f"line {m.line}" if m.line else f"reading {k + 1}"
     return f"{place} ({m.gauge.name}@{m.gauge.at:g}, {m.posture}, repetition {m.repetition})"
 
 

@@ -15,8 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import PARAM_NAMES, Measurements, check_params
+from .base import PARAM_NAMES, check_params
 from .differences import differences, model_jacobian
+from .measurements import Measurements
 
 #: A direction is reported as weak when its singular value is below this fraction of the
 #: largest (the paper's design: 0.0164 / 1.01 ~ 0.016 for the drho ~ dL directions).

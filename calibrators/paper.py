@@ -18,16 +18,18 @@ from .base import (
     PARAM_SETS,
     Calibrator,
     Estimate,
-    Measurement,
-    Measurements,
     check_params,
     move_and_read,
     register,
 )
-from .differences import Differences, differences, paper_matrix
+from .differences import Differences, MissingZeroError, differences, paper_matrix
 from .identifiability import analyse
+from .measurements import Measurement, Measurements
 
 REPETITIONS: int = 3
+#: Held-out sets of the verification: up to this many repetitions each is one; beyond,
+#: this many runs of consecutive ones, so that its cost stays linear in the readings.
+MAX_FOLDS: int = 10
 
 
 def leg_sequence(leg: int, repetitions: int = REPETITIONS) -> list[tuple[str, int]]:
@@ -40,6 +42,15 @@ def leg_sequence(leg: int, repetitions: int = REPETITIONS) -> list[tuple[str, in
 def split_repetitions(data: Measurements) -> list[int]:
     """Repetitions that have Max/Min readings (the last Zero opens none)."""
     return sorted({m.repetition for m in data.items if not m.is_zero})
+
+
+def folds(data: Measurements) -> list[set[int]]:
+    """The held-out sets of repetitions of the verification (see :data:`MAX_FOLDS`)."""
+    reps = split_repetitions(data)
+    if not reps:
+        return []
+    return [set(run.tolist()) for run in np.array_split(np.array(reps, dtype=int),
+                                                         min(len(reps), MAX_FOLDS))]
 
 
 @register
@@ -112,16 +123,21 @@ class PaperCalibrator(Calibrator):
         )
 
     def verify(self, data: Measurements, free: tuple[int, ...], sigma: float) -> float | None:
-        """Leave-one-repetition-out: fit without a repetition, predict its differences; the
-        RMS over every held-out difference (mm).  None with fewer than two repetitions."""
-        reps = split_repetitions(data)
-        if len(reps) < 2:
+        """Leave-one-repetition-out (runs of repetitions beyond :data:`MAX_FOLDS`): fit
+        without them, predict their differences; the RMS over every held-out difference
+        (mm).  None with fewer than two repetitions.  A held-out set that cannot be fitted
+        or predicted (too few rows, a mounting without its Zero) is skipped."""
+        held_out = folds(data)
+        if len(held_out) < 2:
             return None
-        last = max(m.repetition for m in data.items)
+        occurring = {m.repetition for m in data.items}
         errors = []
-        for held in reps:
-            train = differences(data, set(range(1, last + 1)) - {held})
-            test = differences(data, {held})
+        for held in held_out:
+            try:
+                train = differences(data, occurring - held)
+                test = differences(data, held)
+            except MissingZeroError:
+                continue
             if len(train) < len(free) or not len(test):
                 continue
             theta, _, _ = self.solve(train, free, sigma)

@@ -11,15 +11,9 @@ import pytest
 from conftest import paper_matrix as eq10
 
 import orthoglide_env
-from calibrators.base import (
-    Estimate,
-    Measurement,
-    MeasurementFileError,
-    Measurements,
-    available,
-    get_strategy,
-)
+from calibrators.base import Estimate, available, get_strategy
 from calibrators.differences import differences, paper_matrix
+from calibrators.measurements import Measurement, MeasurementFileError, Measurements
 from orthoglide_env.gauges import GaugeSpec
 
 TABLE1 = {"drho": [4.66, -5.36, 1.46], "dL": [5.20, -5.96, 3.16]}
@@ -153,7 +147,7 @@ def test_measurement_csv_round_trip_and_errors(tmp_path) -> None:
     assert again.items == data.items
     est = get_strategy("gauss-newton").estimate(again, "full", 0.01)
     np.testing.assert_allclose(est.drho, TABLE1["drho"], atol=1e-3)
-    lines = path.read_text().splitlines()
+    old_header = "leg,axis,posture,repetition,reading_mm"
     for bad, fragment in (
         ("leg,axis,posture,rep,reading_mm", ":1: header"),
         ("x,x,XMax,1,0.1", ":2: column 2 (axis)"),
@@ -162,7 +156,7 @@ def test_measurement_csv_round_trip_and_errors(tmp_path) -> None:
         ("x,y,XMax,1,abc", ":2: column 5 (reading_mm)"),
         ("x,y,XMax,1", ":2: expected 5 columns"),
     ):
-        content = [bad] if bad.startswith("leg") else [lines[0], bad]
+        content = [bad] if bad.startswith("leg") else [old_header, bad]
         path.write_text("\n".join(content) + "\n")
         with pytest.raises(MeasurementFileError, match=fragment.replace("(", r"\(")
                            .replace(")", r"\)")):
@@ -193,11 +187,23 @@ def test_estimate_json_round_trip(tmp_path) -> None:
     assert again.std["dL"] == [None, None, None]
 
 
-def test_readings_of_custom_postures_stay_out_of_the_csv(tmp_path) -> None:
-    custom = Measurements([Measurement(GaugeSpec(0, 1), "probe", 1, 0.1, (1.0, 2.0, 3.0))])
-    with pytest.raises(ValueError, match="no place in the measurement CSV"):
-        custom.to_csv(tmp_path / "m.csv")
-    with pytest.raises(ValueError, match="give its rho"):
+def test_readings_of_custom_postures_round_trip_through_the_csv(tmp_path) -> None:
+    """Any experiment has a place in the file: custom labels, postures given by rho alone,
+    gauges off the middle of their leg, several mountings of one gauge."""
+    gauge = GaugeSpec(0, 1, 0.3)
+    custom = Measurements([
+        Measurement(gauge, "Zero", 1, 0.0),
+        Measurement(gauge, "probe", 1, 0.1, (1.0, 2.0, 3.0)),
+        Measurement(gauge, "", 2, -0.25, (5.0, -5.0, 0.0), mounting="stand B"),
+        Measurement(gauge, "Zero", 2, 3.0, mounting="stand B"),
+    ])
+    path = tmp_path / "m.csv"
+    custom.to_csv(path)
+    again = Measurements.from_csv(path)
+    assert again.items == custom.items
+    assert again.items[2].posture == "rho(5,-5,0)"
+    assert [m.line for m in again.items] == [2, 3, 4, 5]
+    with pytest.raises(ValueError, match="unless rho is given"):
         Measurement(GaugeSpec(0, 1), "probe", 1, 0.1)
 
 

@@ -148,6 +148,7 @@ def test_compare_writes_table_csv_and_plot(tmp_path, capsys) -> None:
         (["fit", "GOOD_CSV", "--sigma", "1e308"], "--sigma"),
         (["fit", "MISSING"], "not found"),
         (["fit", "BAD_CSV"], "column 5"),
+        (["fit", "GOOD"], ".csv or .json"),
         (["compare", "--strategies", "paper,oracle"], "unknown strategy"),
         (["compare", "--machines", "0"], "--machines"),
     ],
@@ -165,7 +166,7 @@ def test_bad_input_gives_one_line_and_status_2(tmp_path, argv, fragment: str) ->
     resolved = []
     for arg in argv:
         if arg in files and isinstance(files[arg], str):
-            path = tmp_path / f"{arg}.txt"
+            path = tmp_path / (f"{arg}.csv" if arg.endswith("CSV") else f"{arg}.txt")
             path.write_text(files[arg])
             resolved.append(str(path))
         elif arg in files:

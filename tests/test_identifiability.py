@@ -9,9 +9,10 @@ import pytest
 from conftest import paper_matrix as eq10
 
 import orthoglide_env
-from calibrators.base import Measurement, Measurements, get_strategy
+from calibrators.base import get_strategy
 from calibrators.differences import differences
 from calibrators.identifiability import analyse, of_design
+from calibrators.measurements import Measurement, Measurements
 from orthoglide_env.gauges import PAPER_LAYOUT
 
 

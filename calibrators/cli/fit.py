@@ -8,7 +8,8 @@ import numpy as np
 
 from orthoglide_env.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 
-from ..base import Measurements, get_strategy
+from ..base import get_strategy
+from ..measurements import Measurements
 from . import estimator_options
 from .common import UsageError
 from .output import emit, report
@@ -23,7 +24,7 @@ def run(args: argparse.Namespace) -> None:
         value = getattr(args, name)
         if not 0 <= value <= MAX_SIGMA:
             raise UsageError(f"--{name} must be between 0 and {MAX_SIGMA:g} mm, got {value:g}")
-    data = Measurements.from_csv(args.file)
+    data = Measurements.read(args.file)
     if args.to_csv:
         data.to_csv(args.to_csv)
     sigma = float(np.hypot(args.sigma, args.resolution / np.sqrt(12)))
@@ -34,7 +35,7 @@ def run(args: argparse.Namespace) -> None:
 
 def add(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fit", help="calibrate a real machine from measured gauge readings")
-    p.add_argument("file", help="measurement file (CSV with a header; see the README)")
+    p.add_argument("file", help="readings, .csv or .json (README: the measurement file)")
     p.add_argument("--sigma", type=float, default=DEFAULT_SIGMA,
                    help="gauge repeatability (mm, default %(default)s)")
     p.add_argument("--resolution", type=float, default=DEFAULT_RESOLUTION,

@@ -36,7 +36,7 @@ def _residuals(est: Estimate) -> list[dict[str, Any]]:
                     "repetition": m.repetition,
                     "residual_mm": None if not np.isfinite(r) else float(r),
                     "outlier": k in outliers}
-            if getattr(m, "line", None):
+            if m.line is not None:
                 item["line"] = m.line
             out.append(item)
         return out

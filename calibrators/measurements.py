@@ -1,0 +1,623 @@
+"""Gauge readings of one experiment, and their files (CSV or JSON).
+
+A :class:`Measurement` is one dial reading: which gauge (leg, axis, place ``at`` along the
+leg), in which mounting of its stand, at which posture, in which repetition.
+:class:`Measurements` holds an experiment's readings; :meth:`Measurements.read` and
+:meth:`Measurements.write` choose the format by the file's extension, ``.csv`` or
+``.json``.
+
+CSV
+---
+UTF-8 text (a byte-order mark is accepted): a header line naming the columns, then one
+reading per line.  Columns come in any order, their names are case-sensitive, cells are
+stripped of surrounding blanks, blank lines are skipped, an empty cell is a value not
+given.  The paper's five columns ``leg,axis,posture,repetition,reading_mm`` are one
+case of this format.
+
+============================  ========  ================================================
+column                        required  meaning
+============================  ========  ================================================
+``reading_mm``                yes       the dial reading (mm), positive along the axis
+``gauge``                     (a)       a gauge name: ``x-leg/y``, ``x/y@0.3``
+``leg``, ``axis``             (a)       the leg touched (x, y, z) and the world axis
+                                        measured along, one of the two normal to it
+``at``                        no        with ``leg``, ``axis``: the gauge's place along
+                                        the leg, 0.05 .. 0.95 from the platform end
+                                        (default 0.5, the middle, as in the paper)
+``posture``                   (b)       a paper posture (Zero, XMax, XMin, YMax, YMin,
+                                        ZMax, ZMin), or any label when rho is given
+``rho_x``, ``rho_y``,         (b)       the commanded posture, control coordinates (mm);
+``rho_z``                               without a label one is made: ``rho(5,-5,0)``
+``repetition``                no        an integer grouping a Zero reading with the
+                                        readings that follow it (default 1)
+``mounting``                  no        one installation of a stand: a gauge re-mounted
+                                        at the same place is a new mounting with its
+                                        own zero (default: the gauge's name,
+                                        ``x-leg/y@0.5``)
+============================  ========  ================================================
+
+(a) the gauge either as ``gauge`` or as ``leg`` and ``axis`` (and ``at``), not both.
+(b) ``posture`` and/or the three ``rho_*`` columns; a row whose rho cells are empty
+names a paper posture, and a paper posture's rho, when given, is its own.
+
+JSON
+----
+``{"readings": [{...}, ...], "experiment_time_s": 12.5}`` (the time optional, 0 .. 1e9):
+each reading an object whose keys are the CSV's column names, numbers as JSON numbers
+(not strings or booleans), rho as ``"rho": [x, y, z]`` or as ``rho_x``, ``rho_y``,
+``rho_z``; a missing key, ``null`` or ``""`` is a value not given.  Keys appear once.
+
+Rules of both formats (a file that breaks one is refused with one line naming the file,
+the line and column of a CSV, or the index, from 0, of a JSON reading, and the rule):
+numbers are finite; a reading lies within +-:data:`MAX_READING_MM` (a dial gauge's
+travel is about 10 mm); rho lies within the control limits ``RHO_MIN .. RHO_MAX``; a
+repetition is an integer 1 .. :data:`MAX_REPETITION`; a posture label or mounting is 1 ..
+:data:`MAX_FIELD_CHARS` printable characters without surrounding blanks; a mounting
+holds one gauge; a file holds 1 .. :data:`MAX_ROWS` readings (so at most that many
+distinct repetitions).  A CSV cell holds at most :data:`MAX_FIELD_CHARS`
+characters, a line at most :data:`MAX_LINE_BYTES` bytes, and a reading one line: a
+quoted line break is refused.  A JSON file holds at most :data:`MAX_JSON_BYTES` bytes.
+The CSV has no place for the experiment time; the JSON file keeps it.
+"""
+
+from __future__ import annotations
+
+import csv
+import functools
+import json
+import math
+import numbers
+import re
+import sys
+from collections import Counter
+from collections.abc import Collection, Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, BinaryIO
+
+from orthoglide_env.gauges import GaugeSpec, layout_from_names
+from orthoglide_env.geometry import AXIS_NAMES, LEG_NAMES, RHO_MAX, RHO_MIN
+from orthoglide_env.kinematics import PAPER_POSTURES, paper_posture
+
+#: A dial gauge's travel is about 10 mm: a reading ten times that is a wrong unit or column.
+MAX_READING_MM: float = 100.0
+MAX_REPETITION: int = 1_000_000
+MAX_ROWS: int = 1_000_000
+#: Labels are names, not documents; the bound also keeps integer parsing cheap (CPython's
+#: int() is quadratic in the digits).
+MAX_FIELD_CHARS: int = 1024
+#: Bounds the memory one line can take before the csv module sees it.
+MAX_LINE_BYTES: int = 65_536
+MAX_JSON_BYTES: int = 256 * 1024 * 1024
+#: A paper posture given with its rho: the rho may be rounded this much (mm); the reading
+#: then takes the paper posture's exact rho, so that readings at it group together.
+PAPER_RHO_TOLERANCE: float = 1e-6
+#: An experiment time beyond ~30 years is a wrong unit.
+MAX_EXPERIMENT_TIME_S: float = 1e9
+
+#: The columns :meth:`Measurements.to_csv` writes, in order.
+COLUMNS: tuple[str, ...] = ("mounting", "leg", "axis", "at", "posture", "rho_x", "rho_y",
+                            "rho_z", "repetition", "reading_mm")
+RHO_FIELDS: tuple[str, str, str] = ("rho_x", "rho_y", "rho_z")
+#: Every name a CSV column or a JSON reading's key may have.
+FIELDS: tuple[str, ...] = (*COLUMNS, "gauge")
+NUMBER_FIELDS: frozenset[str] = frozenset({"at", *RHO_FIELDS, "repetition", "reading_mm"})
+JSON_KEYS: tuple[str, ...] = ("readings", "experiment_time_s")
+
+ZERO_RHO: tuple[float, float, float] = (0.0, 0.0, 0.0)
+_PAPER_RHO: dict[str, tuple[float, ...]] = {
+    name: tuple(float(v) for v in paper_posture(name)) for name in PAPER_POSTURES
+}
+_READING_RULE = "mm (a dial gauge's travel is about 10 mm)"
+_RHO_RULE = "mm (the control limits)"
+
+
+class MeasurementFileError(ValueError):
+    """A measurement file that cannot be read; the one-line message names the file, the
+    place (line and column, or reading index) and the rule broken."""
+
+
+class FieldError(ValueError):
+    """A value that breaks a rule; ``field`` is its name in the files (None: the reading
+    as a whole), so a reader can point at the column or key."""
+
+    def __init__(self, field: str | None, rule: str) -> None:
+        super().__init__(f"{field}: {rule}" if field else rule)
+        self.field = field
+        self.rule = rule
+
+
+def _show(value: object) -> str:
+    """A value for a one-line message: quoted, escaped, cut to a readable length."""
+    if isinstance(value, int) and value.bit_length() > 3000:  # str() refuses > 4300 digits
+        return "a huge integer"
+    text = value if isinstance(value, str) else repr(value)
+    return repr(text if len(text) <= 40 else text[:37] + "...")
+
+
+def _real(value: object, name: str, low: float, high: float, unit: str) -> float:
+    """``value`` as a float: a number (not a bool or a string), finite, in [low, high]."""
+    if type(value) is float and low <= value <= high:  # the common case, without ABC checks
+        return value
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise FieldError(name, f"must be a number, got {_show(value)}")
+    if not isinstance(value, numbers.Integral) and not math.isfinite(value):
+        raise FieldError(name, f"must be finite, got {_show(value)}")
+    # Compared before any conversion: exact for integers of any size, which float() is not.
+    if not low <= value <= high:
+        raise FieldError(name, f"must lie in [{low:g}, {high:g}] {unit}, got {_show(value)}")
+    return float(value)
+
+
+def _repetition(value: object) -> int:
+    if type(value) is int and 1 <= value <= MAX_REPETITION:  # the common case, fast
+        return value
+    if (isinstance(value, bool) or not isinstance(value, numbers.Integral)
+            or not 1 <= value <= MAX_REPETITION):
+        raise FieldError("repetition", f"must be an integer 1..{MAX_REPETITION}, "
+                                       f"got {_show(value)}")
+    return int(value)
+
+
+def _label(value: object, name: str) -> str:
+    """A posture label or mounting name; interned, since a file repeats a few of them."""
+    if (not isinstance(value, str) or not value or len(value) > MAX_FIELD_CHARS
+            or value != value.strip() or not value.isprintable()):
+        raise FieldError(name, f"must be 1 to {MAX_FIELD_CHARS} printable characters without "
+                               f"surrounding blanks, got {_show(value)}")
+    return sys.intern(value)
+
+
+def _compact(value: float) -> str:
+    text = repr(value)
+    return text[:-2] if text.endswith(".0") else text
+
+
+def rho_label(rho: Sequence[float]) -> str:
+    """The label of a posture given by its rho alone, e.g. ``rho(5,-5,0)``."""
+    return "rho(" + ",".join(_compact(v) for v in rho) + ")"
+
+
+def _posture(label: object, rho: Iterable[object] | None) -> tuple[str, tuple[float, ...]]:
+    """A reading's posture label and rho: a paper posture's rho is filled in (and checked
+    when given); a label of one's own needs its rho; no label with a rho gets one made."""
+    if rho is None:
+        if type(label) is str and label in _PAPER_RHO:  # the common case, fast
+            return label, _PAPER_RHO[label]
+        label = _label(label, "posture")
+        if label not in _PAPER_RHO:
+            raise FieldError("posture", f"must be a paper posture ({', '.join(PAPER_POSTURES)})"
+                                        f" unless rho is given, got {_show(label)}")
+        return label, _PAPER_RHO[label]
+    try:
+        components = [] if isinstance(rho, (str, bytes, Mapping)) else list(rho)
+    except TypeError:  # not a sequence at all
+        components = []
+    if len(components) != 3:
+        raise FieldError("rho", f"must have 3 components, got {_show(rho)}")
+    values = tuple(_real(v, name, RHO_MIN, RHO_MAX, _RHO_RULE)
+                   for v, name in zip(components, RHO_FIELDS, strict=True))
+    if label == "":
+        return rho_label(values), values
+    label = _label(label, "posture")
+    paper = _PAPER_RHO.get(label)
+    if paper is None:
+        return label, values
+    if max(abs(a - b) for a, b in zip(values, paper, strict=True)) > PAPER_RHO_TOLERANCE:
+        raise FieldError("posture", f"{label} is the paper posture at rho "
+                                    f"({', '.join(_compact(v) for v in paper)}): label a "
+                                    f"posture of your own with a name of your own")
+    return label, paper
+
+
+@functools.lru_cache(maxsize=4096)
+def gauge_name(gauge: GaugeSpec) -> str:
+    """A gauge's full name, place included, e.g. ``x-leg/y@0.5``: the default mounting."""
+    return sys.intern(f"{gauge.name}@{float(gauge.at)!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class Measurement:
+    """One gauge reading: which gauge, in which mounting, at which posture and repetition.
+
+    ``rho`` is the commanded posture (control coordinates, mm); ``posture`` its label, a
+    paper posture name (whose ``rho`` is filled in when not given) or any other label for
+    a posture given by its ``rho`` ("" makes one from the rho).  ``mounting`` names one
+    installation of the gauge's stand ("": the gauge's name): each has its own zero, and
+    differences are taken against its readings at ``rho = (0, 0, 0)``.  ``line`` is where
+    the reading came from in a file (not part of the reading: equality ignores it).  The
+    module docstring's rules of one reading are checked here; a broken one raises
+    :class:`FieldError` (a ValueError) naming the field.
+    """
+
+    gauge: GaugeSpec
+    posture: str
+    repetition: int
+    reading: float
+    rho: tuple[float, float, float] | None = None
+    mounting: str = ""
+    line: int | None = field(default=None, compare=False)
+
+    def __post_init__(self) -> None:
+        posture, rho = _posture(self.posture, self.rho)
+        mounting = gauge_name(self.gauge) if self.mounting == "" else _label(self.mounting,
+                                                                              "mounting")
+        reading = _real(self.reading, "reading_mm", -MAX_READING_MM, MAX_READING_MM,
+                        _READING_RULE)
+        for name, value in (("posture", posture), ("rho", rho), ("mounting", mounting),
+                            ("repetition", _repetition(self.repetition)),
+                            ("reading", reading)):
+            object.__setattr__(self, name, value)
+
+    @property
+    def is_zero(self) -> bool:
+        return self.rho == ZERO_RHO
+
+    def to_dict(self) -> dict[str, Any]:
+        """The reading as a JSON object of the file format."""
+        return {"mounting": self.mounting, "leg": LEG_NAMES[self.gauge.leg],
+                "axis": AXIS_NAMES[self.gauge.axis], "at": float(self.gauge.at),
+                "posture": self.posture, "rho": list(self.rho), "repetition": self.repetition,
+                "reading_mm": self.reading}
+
+    @classmethod
+    def from_dict(cls, data: object) -> Measurement:
+        """A reading from a JSON object of the file format (:class:`FieldError` if bad)."""
+        if not isinstance(data, dict):
+            raise FieldError(None, f"must be a JSON object, got {_show(data)}")
+        if getattr(data, "duplicates", ()):
+            raise FieldError(data.duplicates[0], "the key appears more than once")
+        fields = dict(data)
+        if "rho" in fields:
+            rho = fields.pop("rho")
+            if any(name in fields for name in RHO_FIELDS):
+                raise FieldError("rho", "give rho as a list or as rho_x, rho_y, rho_z, not both")
+            if not isinstance(rho, list) or len(rho) != 3:
+                raise FieldError("rho", f"must be a list of 3 numbers, got {_show(rho)}")
+            fields.update(zip(RHO_FIELDS, rho, strict=True))
+        problem = _fields_problem(fields, "key")
+        if problem:
+            raise FieldError(None, problem)
+        return _measurement(fields, None)
+
+    def csv_row(self) -> list[str]:
+        """The reading as a row of :data:`COLUMNS`; numbers as their shortest round-trip
+        ``repr``, so reading the file back gives the identical floats."""
+        return [self.mounting, LEG_NAMES[self.gauge.leg], AXIS_NAMES[self.gauge.axis],
+                repr(float(self.gauge.at)), self.posture, *(repr(v) for v in self.rho),
+                str(self.repetition), repr(self.reading)]
+
+
+def _fields_problem(names: Collection[str], kind: str) -> str | None:
+    """What is wrong with the set of fields a CSV header or a JSON reading gives, if any."""
+    unknown = [name for name in names if name not in FIELDS]
+    if unknown:
+        shown = ", ".join(_show(name) for name in unknown[:5])
+        return f"unknown {kind} {shown}; the {kind}s are {', '.join(FIELDS)}"
+    if "reading_mm" not in names:
+        return f"the {kind} 'reading_mm' is required"
+    if "gauge" in names and {"leg", "axis", "at"} & set(names):
+        return "give the gauge as 'gauge' or as 'leg', 'axis' (and 'at'), not both"
+    if "gauge" not in names and not {"leg", "axis"} <= set(names):
+        return "the gauge is missing: give 'gauge', or 'leg' and 'axis'"
+    rho = [name for name in RHO_FIELDS if name in names]
+    if 0 < len(rho) < 3:
+        return "rho needs all of rho_x, rho_y and rho_z"
+    if not rho and "posture" not in names:
+        return "the posture is missing: give 'posture' and/or rho_x, rho_y, rho_z"
+    return None
+
+
+def _given(fields: Mapping[str, object], name: str) -> Any:
+    """A field's value, or None when it is absent, null or empty."""
+    value = fields.get(name)
+    return None if value is None or value == "" else value
+
+
+def _required(fields: Mapping[str, object], name: str) -> Any:
+    value = _given(fields, name)
+    if value is None:
+        raise FieldError(name, "empty: every reading needs it")
+    return value
+
+
+#: A file names a few gauges many times.
+_spec = functools.lru_cache(maxsize=4096)(GaugeSpec)
+
+
+@functools.lru_cache(maxsize=4096)
+def _named_gauge(name: str) -> GaugeSpec:
+    try:
+        return layout_from_names([name])[0]
+    except ValueError as exc:
+        raise FieldError("gauge", f"must name a gauge like 'x-leg/y' or 'x/y@0.3' ({exc}), "
+                                  f"got {_show(name)}") from None
+
+
+def _gauge(fields: Mapping[str, object]) -> GaugeSpec:
+    if "gauge" in fields:
+        name = _required(fields, "gauge")
+        if not isinstance(name, str):
+            raise FieldError("gauge", f"must be a gauge name, got {_show(name)}")
+        return _named_gauge(name)
+    leg, axis = _required(fields, "leg"), _required(fields, "axis")
+    if not isinstance(leg, str) or leg not in LEG_NAMES:
+        raise FieldError("leg", f"must be one of {', '.join(LEG_NAMES)}, got {_show(leg)}")
+    if not isinstance(axis, str) or axis not in AXIS_NAMES or axis == leg:
+        raise FieldError("axis", f"must be one of the two axes normal to the {leg} leg, "
+                                 f"got {_show(axis)}")
+    at = _given(fields, "at")
+    at = 0.5 if at is None else _real(at, "at", 0.0, 1.0, "(a fraction of the leg)")
+    try:
+        return _spec(LEG_NAMES.index(leg), AXIS_NAMES.index(axis), at)
+    except ValueError as exc:
+        raise FieldError("at", str(exc)) from None
+
+
+def _measurement(fields: Mapping[str, object], line: int | None) -> Measurement:
+    """One reading from its fields: a CSV row's cells (numbers parsed) or a JSON object."""
+    reading = _required(fields, "reading_mm")
+    gauge = _gauge(fields)
+    rho = [_given(fields, name) for name in RHO_FIELDS]
+    if None in rho:
+        if any(v is not None for v in rho):
+            raise FieldError(RHO_FIELDS[rho.index(None)],
+                             "empty: give all of rho_x, rho_y, rho_z or none")
+        rho = None
+    posture = _given(fields, "posture")
+    if posture is None and rho is None:
+        raise FieldError("posture", "empty: give a paper posture, or the rho")
+    repetition, mounting = _given(fields, "repetition"), _given(fields, "mounting")
+    return Measurement(gauge, "" if posture is None else posture,
+                       1 if repetition is None else repetition, reading, rho,
+                       "" if mounting is None else mounting, line)
+
+
+class _Readings:
+    """Readings as they are read or written, with the rules that span readings."""
+
+    def __init__(self) -> None:
+        self.items: list[Measurement] = []
+        self._mounting: dict[str, tuple[GaugeSpec, str]] = {}
+
+    def add(self, m: Measurement, where: str) -> None:
+        if len(self.items) >= MAX_ROWS:
+            raise FieldError(None, f"more than {MAX_ROWS} readings")
+        gauge, first = self._mounting.setdefault(m.mounting, (m.gauge, where))
+        if gauge != m.gauge:
+            raise FieldError("mounting", f"mounting {_show(m.mounting)} holds gauge "
+                                         f"{gauge_name(gauge)} ({first}), not "
+                                         f"{gauge_name(m.gauge)}: one stand, one gauge")
+        self.items.append(m)
+
+
+_INTEGER = re.compile(r"[+-]?[0-9]+")
+
+
+def _cell_value(name: str, text: str) -> object:
+    """A CSV cell as its field's value: a number for the number fields."""
+    if len(text) > MAX_FIELD_CHARS:
+        raise FieldError(name, f"longer than {MAX_FIELD_CHARS} characters")
+    if name not in NUMBER_FIELDS or not text:
+        return text
+    if _INTEGER.fullmatch(text):
+        return int(text)
+    if text.isascii() and "_" not in text:
+        try:
+            return float(text)
+        except ValueError:
+            pass
+    raise FieldError(name, f"must be a number, got {_show(text)}")
+
+
+def _lines(handle: BinaryIO, path: Path) -> Iterator[str]:
+    """The file's lines as text, decoded one by one so that a fault names its line."""
+    for number, raw in enumerate(iter(functools.partial(handle.readline, MAX_LINE_BYTES + 1),
+                                      b""), start=1):
+        if len(raw) > MAX_LINE_BYTES:
+            raise MeasurementFileError(f"{path}:{number}: longer than {MAX_LINE_BYTES} bytes")
+        try:
+            text = raw.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise MeasurementFileError(f"{path}:{number}: not UTF-8 text (byte {exc.start + 1} "
+                                       f"of the line)") from None
+        yield text.removeprefix("\ufeff") if number == 1 else text
+
+
+def _records(handle: BinaryIO, path: Path) -> Iterator[tuple[int, list[str]]]:
+    """(line, stripped cells) of every record that is not blank; a record is one line."""
+    reader = csv.reader(_lines(handle, path))
+    while True:
+        start = reader.line_num + 1
+        try:
+            row = next(reader)
+        except StopIteration:
+            return
+        except csv.Error as exc:  # e.g. its field_size_limit, NUL bytes
+            raise MeasurementFileError(f"{path}:{start}: not CSV: {exc}") from None
+        if reader.line_num > start:
+            raise MeasurementFileError(f"{path}:{start}: a quoted field runs on to line "
+                                       f"{reader.line_num}: a reading takes one line")
+        cells = [cell.strip() for cell in row]
+        if any(cells):
+            yield start, cells
+
+
+def _read_csv(handle: BinaryIO, path: Path) -> list[Measurement]:
+    records = _records(handle, path)
+    first = next(records, None)
+    if first is None:
+        raise MeasurementFileError(f"{path}: empty: the header line naming the columns is "
+                                   "missing")
+    line, header = first
+    repeated = [name for name, count in Counter(header).items() if count > 1]
+    problem = (f"column {_show(repeated[0])} appears more than once" if repeated
+               else _fields_problem(header, "column"))
+    if problem:
+        raise MeasurementFileError(f"{path}:{line}: header: {problem}")
+    readings = _Readings()
+    for line, cells in records:
+        if len(cells) != len(header):
+            raise MeasurementFileError(f"{path}:{line}: expected {len(header)} columns as in "
+                                       f"the header, got {len(cells)}")
+        try:
+            fields = {name: _cell_value(name, text)
+                      for name, text in zip(header, cells, strict=True)}
+            readings.add(_measurement(fields, line), f"line {line}")
+        except FieldError as exc:
+            place = (f"column {header.index(exc.field) + 1} ({exc.field}): "
+                     if exc.field in header else "")
+            raise MeasurementFileError(f"{path}:{line}: {place}{exc.rule}") from None
+    if not readings.items:
+        raise MeasurementFileError(f"{path}: no readings after the header")
+    return readings.items
+
+
+class _JsonObject(dict):
+    """A JSON object that remembers which of its keys appeared more than once."""
+
+    duplicates: tuple[str, ...] = ()
+
+    @classmethod
+    def of(cls, pairs: list[tuple[str, Any]]) -> _JsonObject:
+        obj = cls(pairs)
+        if len(obj) < len(pairs):
+            obj.duplicates = tuple(k for k, n in Counter(k for k, _ in pairs).items() if n > 1)
+        return obj
+
+
+def _load_json(handle: BinaryIO, path: Path) -> object:
+    raw = handle.read(MAX_JSON_BYTES + 1)
+    if len(raw) > MAX_JSON_BYTES:
+        raise MeasurementFileError(f"{path}: larger than {MAX_JSON_BYTES} bytes")
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b"\n") + 1
+        raise MeasurementFileError(f"{path}:{line}: not UTF-8 text") from None
+    try:
+        return json.loads(text, object_pairs_hook=_JsonObject.of)
+    except json.JSONDecodeError as exc:
+        raise MeasurementFileError(f"{path}:{exc.lineno}:{exc.colno}: not valid JSON: "
+                                   f"{exc.msg}") from None
+    except (ValueError, RecursionError) as exc:  # e.g. an integer of > 4300 digits
+        raise MeasurementFileError(f"{path}: not valid JSON: {exc}") from None
+
+
+@contextmanager
+def _opened(path: Path) -> Iterator[BinaryIO]:
+    try:
+        handle = path.open("rb")
+    except FileNotFoundError:
+        raise MeasurementFileError(f"measurement file not found: {path}") from None
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        raise MeasurementFileError(f"cannot read measurement file {path}: {reason}") from None
+    with handle:
+        yield handle
+
+
+def _suffix(path: Path) -> str:
+    suffix = path.suffix.lower()
+    if suffix not in (".csv", ".json"):
+        raise MeasurementFileError(f"{path}: a measurement file ends in .csv or .json")
+    return suffix
+
+
+@dataclass
+class Measurements:
+    """The readings of one experiment, plus the experiment time it cost (s)."""
+
+    items: list[Measurement] = field(default_factory=list)
+    experiment_time_s: float = 0.0
+
+    def __len__(self) -> int:
+        return len(self.items)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON document of the file format."""
+        return {"experiment_time_s": self.experiment_time_s,
+                "readings": [m.to_dict() for m in self.items]}
+
+    @classmethod
+    def from_dict(cls, data: object, source: str = "readings") -> Measurements:
+        """Readings from the JSON document; ``source`` names it in error messages."""
+        if not isinstance(data, dict):
+            raise MeasurementFileError(f"{source}: must be a JSON object with 'readings'")
+        if getattr(data, "duplicates", ()):
+            raise MeasurementFileError(f"{source}: the key {_show(data.duplicates[0])} "
+                                       "appears more than once")
+        unknown = [key for key in data if key not in JSON_KEYS]
+        if unknown:
+            raise MeasurementFileError(f"{source}: unknown key {_show(unknown[0])}; the keys "
+                                       f"are {', '.join(JSON_KEYS)}")
+        items = data.get("readings")
+        if not isinstance(items, list):
+            raise MeasurementFileError(f"{source}: 'readings' must be a list")
+        if len(items) > MAX_ROWS:
+            raise MeasurementFileError(f"{source}: more than {MAX_ROWS} readings")
+        try:
+            seconds = _real(data.get("experiment_time_s", 0.0), "experiment_time_s", 0.0,
+                            MAX_EXPERIMENT_TIME_S, "s")
+        except FieldError as exc:
+            raise MeasurementFileError(f"{source}: {exc}") from None
+        readings = _Readings()
+        for index, item in enumerate(items):
+            try:
+                readings.add(Measurement.from_dict(item), f"reading {index}")
+            except FieldError as exc:
+                raise MeasurementFileError(f"{source}: reading {index}: {exc}") from None
+        return cls(readings.items, seconds)
+
+    def check(self) -> None:
+        """Refuse (ValueError naming the reading's index) what a file could not hold, so
+        that whatever is written reads back."""
+        readings = _Readings()
+        for index, m in enumerate(self.items):
+            try:
+                readings.add(m, f"reading {index}")
+            except FieldError as exc:
+                raise ValueError(f"reading {index}: {exc}") from None
+
+    def to_json(self, path: str | Path) -> None:
+        """Write the JSON format, one reading per line."""
+        self.check()
+        body = ",\n".join(json.dumps(m.to_dict()) for m in self.items)
+        Path(path).write_text(f'{{"experiment_time_s": {json.dumps(self.experiment_time_s)},'
+                              f' "readings": [\n{body}\n]}}\n', encoding="utf-8")
+
+    @classmethod
+    def from_json(cls, path: str | Path) -> Measurements:
+        path = Path(path)
+        with _opened(path) as handle:
+            data = _load_json(handle, path)
+        result = cls.from_dict(data, str(path))
+        if not result.items:
+            raise MeasurementFileError(f"{path}: no readings")
+        return result
+
+    def to_csv(self, path: str | Path) -> None:
+        """Write the CSV format: the header :data:`COLUMNS`, then one reading per row."""
+        self.check()
+        with Path(path).open("w", newline="", encoding="utf-8") as handle:
+            writer = csv.writer(handle)
+            writer.writerow(COLUMNS)
+            writer.writerows(m.csv_row() for m in self.items)
+
+    @classmethod
+    def from_csv(cls, path: str | Path) -> Measurements:
+        path = Path(path)
+        with _opened(path) as handle:
+            return cls(_read_csv(handle, path))
+
+    def write(self, path: str | Path) -> None:
+        """Write ``path`` in the format its extension names (.csv or .json)."""
+        path = Path(path)
+        (self.to_json if _suffix(path) == ".json" else self.to_csv)(path)
+
+    @classmethod
+    def read(cls, path: str | Path) -> Measurements:
+        """Read ``path`` in the format its extension names (.csv or .json)."""
+        path = Path(path)
+        return (cls.from_json if _suffix(path) == ".json" else cls.from_csv)(path)
