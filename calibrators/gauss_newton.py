@@ -20,11 +20,13 @@ from .exact_model import Design, predict
 from .paper import PaperCalibrator, split_repetitions
 from .parameters import (
     ParameterSpace,
+    act_together,
     describe,
     fixed_values,
     prior_sigmas,
     scales,
     select,
+    sparse_basis,
 )
 
 #: A reading is an outlier when its residual exceeds this many robust standard deviations
@@ -147,7 +149,8 @@ class GaussNewtonCalibrator(PaperCalibrator):
             chi2=float(result.chi2[0]), dof=int(result.dof[0]),
             covariance_scale=float(result.covariance_scale[0]), warnings=warnings,
             identifiable=[describe(d, names) for d in result.identifiable(0)],
-            unidentifiable=[describe(d, names) for d in result.unidentifiable(0)],
+            unidentifiable=[act_together(d, names)
+                            for d in sparse_basis(result.unidentifiable(0))],
             outliers=outliers, information=info, scale=s, error_covariance=error_cov,
             holdout_rms_mm=float(np.sqrt(np.mean(residuals[held] ** 2))) if held.any() else None,
         )

@@ -184,3 +184,37 @@ def describe(direction: np.ndarray, names: tuple[str, ...] | list[str],
     sign = np.sign(direction[order[0]]) or 1.0
     return " ".join(f"{sign * direction[k]:+.2f} {names[k]}" for k in big[:6]) + (
         f" (+{len(big) - 6} more)" if len(big) > 6 else "")
+
+
+def sparse_basis(vectors: np.ndarray, iterations: int = 100) -> np.ndarray:
+    """A rotation of the rows of ``vectors`` (an orthonormal basis of a subspace) whose
+    rows are as sparse as the subspace allows (varimax): the eigenvectors of a degenerate
+    subspace mix every parameter in it, while ``drho_x - attach_x.x`` is what a reader can
+    act on."""
+    basis = np.asarray(vectors, dtype=float).T  # (params, k)
+    k = basis.shape[1]
+    if k < 2:
+        return basis.T
+    rotation = np.eye(k)
+    previous = 0.0
+    for _ in range(iterations):
+        rotated = basis @ rotation
+        target = rotated**3 - rotated @ np.diag(np.sum(rotated**2, axis=0)) / len(basis)
+        u, singular, vt = np.linalg.svd(basis.T @ target)
+        rotation = u @ vt
+        if singular.sum() < previous * (1 + 1e-9):
+            break
+        previous = singular.sum()
+    return (basis @ rotation).T
+
+
+def act_together(direction: np.ndarray, names: tuple[str, ...] | list[str]) -> str:
+    """An unseen combination in words: ``drho_x and attach_x.x act together (+0.71 drho_x
+    -0.71 attach_x.x is not seen)``, or the largest components when more are involved."""
+    text = describe(direction, names)
+    parts = [p for p in text.split() if not p.startswith(("+", "-", "("))]
+    if len(parts) == 1:
+        return f"{parts[0]} is not seen"
+    if len(parts) <= 3 and "more" not in text:
+        return f"{' and '.join(parts)} act together ({text} is not seen)"
+    return f"not seen: {text}"
