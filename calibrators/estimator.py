@@ -32,8 +32,7 @@ import numpy as np
 from scipy import stats
 
 from orthoglide_env.geometry import L_NOMINAL
-
-from .exact_model import Design, jacobian, predict
+from orthoglide_env.reading_model import Design, jacobian, predict
 
 #: A combination is identifiable (and moved by a base-parameter fit) when its information
 #: in scaled units is at least this: the data determine it at least as well as its
@@ -43,8 +42,9 @@ RETAIN: float = 1.0
 #: the identifiability threshold need a finite sigma.
 NOISE_FLOOR: float = 1e-6
 #: Convergence on the step, in units of each parameter's scale (2e-9 mm for drho): five
-#: times the wander that the Jacobian's round-off leaves (see ``exact_model.FD_STEP``), so
-#: a converged fit is reproducible to ~1e-9 of each scale whatever batch it ran in.
+#: times the wander that the Jacobian's round-off leaves (see
+#: ``orthoglide_env.reading_model.FD_STEP``), so a converged fit is reproducible to ~1e-9
+#: of each scale whatever batch it ran in.
 STEP_TOL: float = 1e-9
 #: A predicted decrease below this many times the cost's round-off is not tested against
 #: the cost (see :meth:`_Problem.cost_resolution`).

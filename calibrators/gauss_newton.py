@@ -1,7 +1,7 @@
 """``gauss-newton``: any experiment's readings, fitted with the exact model.
 
 The paper linearises the gauge differences around the nominal machine and fits six
-parameters.  This strategy fits the exact model (:mod:`calibrators.exact_model`) with the
+parameters.  This strategy fits the exact model (:mod:`orthoglide_env.reading_model`) with the
 batched damped Gauss-Newton solver of :mod:`calibrators.estimator`, over any parameter
 selection (``paper6``, ``extended`` with the gauge stands, groups, names), with priors or
 base parameters, and reports what the data could and could not determine, a chi-square
@@ -14,9 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from orthoglide_env.reading_model import Design, predict
+
 from .base import Estimate, Measurements, register
 from .estimator import CHI2_LEVEL, NOISE_FLOOR, BatchFit, fit_batch
-from .exact_model import Design, predict
 from .paper import PaperCalibrator, split_repetitions
 from .parameters import (
     ParameterSpace,

@@ -214,7 +214,7 @@ def _posture(label: object, rho: Iterable[object] | None) -> tuple[str, tuple[fl
 @functools.lru_cache(maxsize=4096)
 def gauge_name(gauge: GaugeSpec) -> str:
     """A gauge's full name, place included, e.g. ``x-leg/y@0.5``: the default mounting."""
-    return sys.intern(f"{gauge.name}@{float(gauge.at)!r}")
+    return sys.intern(gauge.slot)
 
 
 @dataclass(frozen=True, slots=True)

@@ -25,18 +25,15 @@ paper's parameters, and none on the paper's model.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from orthoglide_env.gauges import GaugeSpec, stand_names
 from orthoglide_env.geometry import (
     DEFAULT_PRESET,
     ERROR_GROUPS,
     ERROR_NAMES,
     PRESETS,
-    error_group,
 )
+from orthoglide_env.reading_model import ParameterSpace
 
 PAPER6: tuple[str, ...] = ERROR_NAMES[:6]
 #: Selections by alias.
@@ -44,29 +41,6 @@ ALIASES: dict[str, str] = {"full": "paper6"}
 #: Scale of every parameter where no prior gives one: the default preset's sigma.  It
 #: makes the numerics unit-free (mm and rad) and sets the identifiability threshold.
 SCALE_PRESET: str = DEFAULT_PRESET
-
-
-@dataclass(frozen=True)
-class ParameterSpace:
-    """Every parameter a fit could estimate, for a given set of gauge mountings."""
-
-    mountings: tuple[str, ...] = ()
-    specs: tuple[GaugeSpec, ...] = ()
-
-    @property
-    def names(self) -> tuple[str, ...]:
-        return ERROR_NAMES + tuple(
-            n for m, s in zip(self.mountings, self.specs, strict=True) for n in stand_names(m, s)
-        )
-
-    @property
-    def groups(self) -> tuple[str, ...]:
-        """Group of every parameter: a machine-file key, ``stand_shift`` or ``stand_tilt``."""
-        stands = ("stand_shift",) * 2 + ("stand_tilt",) * 2
-        return tuple(error_group(n) for n in ERROR_NAMES) + stands * len(self.mountings)
-
-    def __len__(self) -> int:
-        return len(ERROR_NAMES) + 4 * len(self.mountings)
 
 
 def select(selection: str, space: ParameterSpace) -> np.ndarray:

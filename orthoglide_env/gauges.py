@@ -92,6 +92,11 @@ class GaugeSpec:
         return f"{LEG_NAMES[self.leg]}-leg/{AXIS_NAMES[self.axis]}"
 
     @property
+    def slot(self) -> str:
+        """The name with the place along the leg, e.g. ``x-leg/y@0.5``: unique per slot."""
+        return f"{self.name}@{float(self.at)!r}"
+
+    @property
     def local_axis(self) -> int:
         """1 when the gauge measures along the leg's local Y, 2 along local Z."""
         return 1 if self.axis == (self.leg + 1) % 3 else 2

@@ -9,7 +9,6 @@ import pytest
 import orthoglide_env
 from calibrators.base import get_strategy
 from calibrators.estimator import fit_batch, z_scores
-from calibrators.exact_model import parameters_of, predict
 from calibrators.gauss_newton import design_of
 from calibrators.parameters import (
     ParameterSpace,
@@ -36,6 +35,7 @@ from orthoglide_env.geometry import (
     random_machine,
 )
 from orthoglide_env.kinematics import PAPER_POSTURES, paper_posture
+from orthoglide_env.reading_model import parameters_of, predict
 
 TABLE1 = MachineParams(drho=[4.66, -5.36, 1.46], dL=[5.20, -5.96, 3.16])
 
@@ -127,13 +127,13 @@ def test_fd_jacobian_matches_central_differences() -> None:
     absolute tolerance (x10)."""
     data, truth, _ = experiment(None, 31)
     design, _ = design_of(data)
-    from calibrators.exact_model import jacobian
+    from orthoglide_env.reading_model import jacobian
 
     space = design.space
     free = select("extended", space)
     scale = scales(space, prior_sigmas("realistic", space, free))
     jac = jacobian(truth, design, free, scale)
-    from calibrators.exact_model import FD_STEP
+    from orthoglide_env.reading_model import FD_STEP
 
     for name in ("drho_y", "axis_tilt_y.x", "attach_z.x", space.names[-1]):
         k = space.names.index(name)

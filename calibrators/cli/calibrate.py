@@ -10,10 +10,10 @@ import numpy as np
 import orthoglide_env
 from orthoglide_env.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.geometry import DEFAULT_PRESET, PRESETS, MachineParams, random_machine
+from orthoglide_env.reading_model import parameters_of
 
 from ..base import Estimate, Measurements, get_strategy
 from ..estimator import z_scores
-from ..exact_model import parameters_of
 from ..gauss_newton import design_of
 from . import estimator_options
 from .output import emit, report

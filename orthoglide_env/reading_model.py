@@ -1,4 +1,4 @@
-"""The exact model of an experiment's gauge readings, batched over parameter vectors.
+"""The exact model of an experiment's readings, batched over parameter vectors.
 
 A *design* says where readings were taken: which gauge mountings (stand installations)
 and, for every reading, its mounting and the commanded posture.  The model reading of a
@@ -18,20 +18,43 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from orthoglide_env.gauges import (
+from .gauges import (
     Gauge,
     GaugeSpec,
     face_distances,
     ideal_rays,
     stand_errors,
+    stand_names,
     stand_rays,
 )
-from orthoglide_env.geometry import ERROR_NAMES, MachineParams
-
-from .measurements import gauge_name
-from .parameters import ParameterSpace
+from .geometry import ERROR_NAMES, MachineParams, error_group
 
 N_MACHINE: int = len(ERROR_NAMES)
+
+
+@dataclass(frozen=True)
+class ParameterSpace:
+    """Every parameter a fit could estimate for a set of gauge mountings: the 27 machine
+    errors in :data:`~orthoglide_env.geometry.ERROR_NAMES` order, then four stand
+    parameters per mounting (:data:`~orthoglide_env.gauges.STAND_PARAMS`)."""
+
+    mountings: tuple[str, ...] = ()
+    specs: tuple[GaugeSpec, ...] = ()
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return ERROR_NAMES + tuple(
+            n for m, s in zip(self.mountings, self.specs, strict=True) for n in stand_names(m, s)
+        )
+
+    @property
+    def groups(self) -> tuple[str, ...]:
+        """Group of every parameter: a machine-file key, ``stand_shift`` or ``stand_tilt``."""
+        stands = ("stand_shift",) * 2 + ("stand_tilt",) * 2
+        return tuple(error_group(n) for n in ERROR_NAMES) + stands * len(self.mountings)
+
+    def __len__(self) -> int:
+        return len(ERROR_NAMES) + 4 * len(self.mountings)
 
 
 @dataclass(frozen=True)
@@ -126,8 +149,8 @@ def parameters_of(design: Design, machine: MachineParams, gauges: list[Gauge]) -
     """The true parameter vector of a simulated experiment: the machine's errors and the
     stand parameters of its installed ``gauges`` (matched to the design's mountings by
     slot).  For scoring an estimate; an agent never sees it."""
-    by_slot = {gauge_name(g.spec): g for g in gauges}
-    slots = [gauge_name(spec) for spec in design.specs]
+    by_slot = {g.spec.slot: g for g in gauges}
+    slots = [spec.slot for spec in design.specs]
     missing = [m for m, slot in zip(design.mountings, slots, strict=True) if slot not in by_slot]
     if missing:
         raise ValueError(f"no installed gauge for mounting(s) {missing}")
