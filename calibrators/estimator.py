@@ -46,6 +46,10 @@ NOISE_FLOOR: float = 1e-6
 #: ``orthoglide_env.reading_model.FD_STEP``), so a converged fit is reproducible to ~1e-9
 #: of each scale whatever batch it ran in.
 STEP_TOL: float = 1e-9
+#: ... or when the cost decrease the Gauss-Newton step predicts (half its squared length in
+#: the metric of the normal matrix) is below this: the step is then under 1.5e-7 standard
+#: deviations along every direction, whatever the round-off floor of a given design.
+DECREMENT_TOL: float = 1e-14
 #: A predicted decrease below this many times the cost's round-off is not tested against
 #: the cost (see :meth:`_Problem.cost_resolution`).
 RESOLUTION_MARGIN: float = 100.0
@@ -235,7 +239,8 @@ def _damped_gauss_newton(problem: _Problem, theta: np.ndarray, max_iterations: i
         decrease = -0.5 * np.einsum("mf,mf->m", g, newton)
         untested = decrease <= problem.cost_resolution(cost)
         theta[rows[untested][:, None], idx] += newton[untested] * s
-        done[rows[np.max(np.abs(newton), axis=1, initial=0.0) < STEP_TOL]] = True
+        done[rows[(np.max(np.abs(newton), axis=1, initial=0.0) < STEP_TOL)
+                  | (decrease < DECREMENT_TOL)]] = True
         pending = ~untested
         while pending.any():
             sub = np.flatnonzero(pending)

@@ -14,7 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from orthoglide_env.reading_model import Design, predict
+from orthoglide_env.geometry import MachineParams
+from orthoglide_env.kinematics import direct
+from orthoglide_env.reading_model import Design, TrackerAxis, predict, station_of
+from orthoglide_env.scoring import best_rigid_motion
 
 from .base import Estimate, Measurements, register
 from .estimator import CHI2_LEVEL, NOISE_FLOOR, BatchFit, fit_batch
@@ -40,13 +43,44 @@ MAX_OUTLIER_FRACTION: float = 0.05
 
 
 def design_of(data: Measurements) -> tuple[Design, np.ndarray]:
-    """The design and the readings of ``data``."""
+    """The design and the readings of ``data``; tracker readings turned into the machine's
+    frame (:func:`align_tracker`)."""
     if not len(data):
         raise ValueError("no readings to fit")
-    mountings = [m.mounting for m in data.items]
-    design = Design.of(mountings, [m.gauge for m in data.items],
+    design = Design.of([m.mounting for m in data.items], [m.gauge for m in data.items],
                        np.array([m.rho for m in data.items], dtype=float))
-    return design, np.array([m.reading for m in data.items], dtype=float)
+    return design, align_tracker(design, np.array([m.reading for m in data.items], dtype=float))
+
+
+def align_tracker(design: Design, values: np.ndarray) -> np.ndarray:
+    """Tracker readings in the machine's frame, to within a small rotation: each station's
+    points are fitted (best rigid motion) to where the nominal machine puts the TCP, and
+    turned back by that fit.  What is left of the station's rotation is of the order of
+    the machine's errors over its workspace, a few mrad, which its three ``rot``
+    parameters then fit; its offset is the three coordinates' zeros."""
+    out = values.copy()
+    space = design.space
+    for station in space.stations:
+        rows = {c: np.flatnonzero(
+            [station_of(design.mountings[m]) == station
+             and isinstance(design.specs[m], TrackerAxis) and design.specs[m].component == c
+             for m in design.mounting]) for c in range(3)}
+        if len({len(r) for r in rows.values()}) != 1 or not np.array_equal(
+                design.rho[rows[0]], design.rho[rows[1]]) or not np.array_equal(
+                design.rho[rows[0]], design.rho[rows[2]]):
+            raise ValueError(f"tracker station '{station}': every point needs its x, y and z "
+                             "readings, in the same order")
+        measured = np.stack([values[rows[c]] for c in range(3)], axis=-1)
+        nominal = direct(MachineParams(), design.rho[rows[0]])
+        if np.linalg.matrix_rank(nominal - nominal.mean(axis=0), tol=1.0) < 2:
+            raise ValueError(f"tracker station '{station}': its points must span a plane "
+                             "(at least three postures off one line) to fix its frame")
+        rotation, translation = best_rigid_motion(nominal[None], measured[None],
+                                                  np.ones((1, len(nominal)), bool))
+        aligned = measured @ rotation[0].T + translation[0]
+        for c in range(3):
+            out[rows[c]] = aligned[:, c]
+    return out
 
 
 @register
@@ -205,7 +239,7 @@ def _holdout(design: Design, fraction: float, seed: int) -> np.ndarray:
 def _where(data: Measurements, k: int) -> str:
     m = data.items[k]
     place = f"line {m.line}" if m.line else f"reading {k + 1}"
-    return f"{place} ({m.gauge.name}@{m.gauge.at:g}, {m.posture}, repetition {m.repetition})"
+    return f"{place} ({m.gauge.slot}, {m.posture}, repetition {m.repetition})"
 
 
 __all__ = ["GaussNewtonCalibrator", "ParameterSpace", "design_of"]

@@ -36,7 +36,10 @@ column                        required  meaning
                                         ``x-leg/y@0.5``)
 ============================  ========  ================================================
 
-(a) the gauge either as ``gauge`` or as ``leg`` and ``axis`` (and ``at``), not both.
+(a) the gauge either as ``gauge`` or as ``leg`` and ``axis`` (and ``at``), not both.  A
+laser tracker's reading is three rows, one per coordinate of the reflector in the
+tracker's frame: ``gauge`` ``tracker/x`` (or ``leg`` ``tracker``, ``axis`` ``x``), within
++-:data:`MAX_TRACKER_MM`; its default mounting is ``tracker.x`` (station ``tracker``).
 (b) ``posture`` and/or the three ``rho_*`` columns; a row whose rho cells are empty
 names a paper posture, and a paper posture's rho, when given, is its own.
 
@@ -79,9 +82,12 @@ from typing import Any, BinaryIO
 from orthoglide_env.gauges import GaugeSpec, layout_from_names
 from orthoglide_env.geometry import AXIS_NAMES, LEG_NAMES, RHO_MAX, RHO_MIN
 from orthoglide_env.kinematics import PAPER_POSTURES, paper_posture
+from orthoglide_env.reading_model import TrackerAxis
 
 #: A dial gauge's travel is about 10 mm: a reading ten times that is a wrong unit or column.
 MAX_READING_MM: float = 100.0
+#: A laser tracker coordinate (mm): its range, about 40 m.
+MAX_TRACKER_MM: float = 40_000.0
 MAX_REPETITION: int = 1_000_000
 MAX_ROWS: int = 1_000_000
 #: Labels are names, not documents; the bound also keeps integer parsing cheap (CPython's
@@ -110,6 +116,7 @@ _PAPER_RHO: dict[str, tuple[float, ...]] = {
     name: tuple(float(v) for v in paper_posture(name)) for name in PAPER_POSTURES
 }
 _READING_RULE = "mm (a dial gauge's travel is about 10 mm)"
+_TRACKER_RULE = "mm (a laser tracker's range)"
 _RHO_RULE = "mm (the control limits)"
 
 
@@ -212,7 +219,15 @@ def _posture(label: object, rho: Iterable[object] | None) -> tuple[str, tuple[fl
 
 
 @functools.lru_cache(maxsize=4096)
-def gauge_name(gauge: GaugeSpec) -> str:
+def default_mounting(gauge: GaugeSpec | TrackerAxis) -> str:
+    """A reading's mounting when none is named: a gauge's slot (``x-leg/y@0.5``), or the
+    coordinate of the one tracker station (``tracker.x``)."""
+    if isinstance(gauge, TrackerAxis):
+        return f"tracker.{AXIS_NAMES[gauge.component]}"
+    return gauge_name(gauge)
+
+
+def gauge_name(gauge: GaugeSpec | TrackerAxis) -> str:
     """A gauge's full name, place included, e.g. ``x-leg/y@0.5``: the default mounting."""
     return sys.intern(gauge.slot)
 
@@ -231,7 +246,7 @@ class Measurement:
     :class:`FieldError` (a ValueError) naming the field.
     """
 
-    gauge: GaugeSpec
+    gauge: GaugeSpec | TrackerAxis
     posture: str
     repetition: int
     reading: float
@@ -241,10 +256,11 @@ class Measurement:
 
     def __post_init__(self) -> None:
         posture, rho = _posture(self.posture, self.rho)
-        mounting = gauge_name(self.gauge) if self.mounting == "" else _label(self.mounting,
-                                                                              "mounting")
-        reading = _real(self.reading, "reading_mm", -MAX_READING_MM, MAX_READING_MM,
-                        _READING_RULE)
+        mounting = default_mounting(self.gauge) if self.mounting == "" else _label(
+            self.mounting, "mounting")
+        limit, rule = ((MAX_TRACKER_MM, _TRACKER_RULE) if isinstance(self.gauge, TrackerAxis)
+                       else (MAX_READING_MM, _READING_RULE))
+        reading = _real(self.reading, "reading_mm", -limit, limit, rule)
         for name, value in (("posture", posture), ("rho", rho), ("mounting", mounting),
                             ("repetition", _repetition(self.repetition)),
                             ("reading", reading)):
@@ -256,8 +272,7 @@ class Measurement:
 
     def to_dict(self) -> dict[str, Any]:
         """The reading as a JSON object of the file format."""
-        return {"mounting": self.mounting, "leg": LEG_NAMES[self.gauge.leg],
-                "axis": AXIS_NAMES[self.gauge.axis], "at": float(self.gauge.at),
+        return {"mounting": self.mounting, "gauge": gauge_name(self.gauge),
                 "posture": self.posture, "rho": list(self.rho), "repetition": self.repetition,
                 "reading_mm": self.reading}
 
@@ -284,8 +299,12 @@ class Measurement:
     def csv_row(self) -> list[str]:
         """The reading as a row of :data:`COLUMNS`; numbers as their shortest round-trip
         ``repr``, so reading the file back gives the identical floats."""
-        return [self.mounting, LEG_NAMES[self.gauge.leg], AXIS_NAMES[self.gauge.axis],
-                repr(float(self.gauge.at)), self.posture, *(repr(v) for v in self.rho),
+        if isinstance(self.gauge, TrackerAxis):
+            leg, axis, at = "tracker", AXIS_NAMES[self.gauge.component], ""
+        else:
+            leg, axis = LEG_NAMES[self.gauge.leg], AXIS_NAMES[self.gauge.axis]
+            at = repr(float(self.gauge.at))
+        return [self.mounting, leg, axis, at, self.posture, *(repr(v) for v in self.rho),
                 str(self.repetition), repr(self.reading)]
 
 
@@ -327,7 +346,9 @@ _spec = functools.lru_cache(maxsize=4096)(GaugeSpec)
 
 
 @functools.lru_cache(maxsize=4096)
-def _named_gauge(name: str) -> GaugeSpec:
+def _named_gauge(name: str) -> GaugeSpec | TrackerAxis:
+    if name.startswith("tracker/") and name[len("tracker/"):] in AXIS_NAMES:
+        return TrackerAxis(AXIS_NAMES.index(name[len("tracker/"):]))
     try:
         return layout_from_names([name])[0]
     except ValueError as exc:
@@ -335,13 +356,15 @@ def _named_gauge(name: str) -> GaugeSpec:
                                   f"got {_show(name)}") from None
 
 
-def _gauge(fields: Mapping[str, object]) -> GaugeSpec:
+def _gauge(fields: Mapping[str, object]) -> GaugeSpec | TrackerAxis:
     if "gauge" in fields:
         name = _required(fields, "gauge")
         if not isinstance(name, str):
             raise FieldError("gauge", f"must be a gauge name, got {_show(name)}")
         return _named_gauge(name)
     leg, axis = _required(fields, "leg"), _required(fields, "axis")
+    if leg == "tracker" and axis in AXIS_NAMES and _given(fields, "at") is None:
+        return TrackerAxis(AXIS_NAMES.index(axis))
     if not isinstance(leg, str) or leg not in LEG_NAMES:
         raise FieldError("leg", f"must be one of {', '.join(LEG_NAMES)}, got {_show(leg)}")
     if not isinstance(axis, str) or axis not in AXIS_NAMES or axis == leg:

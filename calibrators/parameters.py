@@ -41,6 +41,10 @@ ALIASES: dict[str, str] = {"full": "paper6"}
 #: Scale of every parameter where no prior gives one: the default preset's sigma.  It
 #: makes the numerics unit-free (mm and rad) and sets the identifiability threshold.
 SCALE_PRESET: str = DEFAULT_PRESET
+#: Scale of a tracker frame's rotation (rad) once the readings are pre-aligned with the
+#: nominal model (:func:`calibrators.gauss_newton.align_tracker`): what is left is of the
+#: order of the machine's own errors over its workspace, ~1 mm over ~100 mm.
+TRACKER_ROTATION_SCALE: float = 1e-2
 
 
 def select(selection: str, space: ParameterSpace) -> np.ndarray:
@@ -70,6 +74,8 @@ def select(selection: str, space: ParameterSpace) -> np.ndarray:
                 f"({', '.join((*ERROR_GROUPS, 'stand_shift', 'stand_tilt'))}) or a name such "
                 f"as drho_x, attach_y.z or {names[-1] if len(names) > 27 else 'x-leg/y.tilt_x'}"
             )
+    # A tracker's frame is an instrument's unknown, like a gauge's zero: always estimated.
+    free |= np.array([g == "tracker_rotation" for g in groups], dtype=bool)
     return free
 
 
@@ -109,7 +115,9 @@ def _preset_sigmas(preset_name: str, space: ParameterSpace) -> np.ndarray:
                          f"({', '.join(sorted(PRESETS))}) or GROUP=SIGMA")
     preset = PRESETS[preset_name]
     stands = [preset.gauge_position] * 2 + [preset.gauge_tilt] * 2
-    return np.concatenate([preset.sigmas(), np.tile(stands, len(space.mountings))])
+    # A tracker's frame is unknown: no preset says how it was turned.
+    return np.concatenate([preset.sigmas(), np.tile(stands, len(space.gauges)),
+                           np.zeros(3 * len(space.stations))])
 
 
 def prior_sigmas(prior: str, space: ParameterSpace, free: np.ndarray) -> np.ndarray:
@@ -122,7 +130,8 @@ def prior_sigmas(prior: str, space: ParameterSpace, free: np.ndarray) -> np.ndar
         if token == "none":
             continue
         if token == "auto":
-            if free[6:].any():
+            beyond = [g not in ("drho", "dL", "tracker_rotation") for g in groups]
+            if free[beyond].any():
                 sigma = _preset_sigmas(SCALE_PRESET, space)
             continue
         if "=" not in token:
@@ -143,8 +152,10 @@ def prior_sigmas(prior: str, space: ParameterSpace, free: np.ndarray) -> np.ndar
 
 
 def scales(space: ParameterSpace, prior: np.ndarray) -> np.ndarray:
-    """Typical size of every parameter: its prior sigma, else the default preset's sigma."""
+    """Typical size of every parameter: its prior sigma, else the default preset's sigma
+    (:data:`TRACKER_ROTATION_SCALE` for a tracker's frame)."""
     default = _preset_sigmas(SCALE_PRESET, space)
+    default[[g == "tracker_rotation" for g in space.groups]] = TRACKER_ROTATION_SCALE
     return np.where(np.isfinite(prior), prior, np.where(default > 0, default, 1.0))
 
 

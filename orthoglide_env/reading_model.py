@@ -27,34 +27,74 @@ from .gauges import (
     stand_names,
     stand_rays,
 )
-from .geometry import ERROR_NAMES, MachineParams, error_group
+from .geometry import AXIS_NAMES, ERROR_NAMES, MachineParams, error_group
+from .kinematics import direct
 
 N_MACHINE: int = len(ERROR_NAMES)
 
 
 @dataclass(frozen=True)
+class TrackerAxis:
+    """One coordinate (0, 1, 2 for x, y, z) of a laser tracker's reading of the reflector
+    on the platform, in the tracker's own frame.  A tracker station's three coordinates are
+    three mountings named ``STATION.x``, ``.y``, ``.z``: each has its own unknown offset
+    (the station's position, eliminated like a gauge's zero), and the station has three
+    unknown rotations (``STATION.rot_x``, ...).  The reflector's place on the platform is an
+    offset too: the platform only translates."""
+
+    component: int
+
+    @property
+    def slot(self) -> str:
+        return f"tracker/{AXIS_NAMES[self.component]}"
+
+
+Spec = GaugeSpec | TrackerAxis
+
+
+def station_of(mounting: str) -> str:
+    """The tracker station a tracker mounting belongs to (``tracker.x`` -> ``tracker``)."""
+    return mounting.rsplit(".", 1)[0]
+
+
+@dataclass(frozen=True)
 class ParameterSpace:
-    """Every parameter a fit could estimate for a set of gauge mountings: the 27 machine
-    errors in :data:`~orthoglide_env.geometry.ERROR_NAMES` order, then four stand
-    parameters per mounting (:data:`~orthoglide_env.gauges.STAND_PARAMS`)."""
+    """Every parameter a fit could estimate for a set of mountings: the 27 machine errors in
+    :data:`~orthoglide_env.geometry.ERROR_NAMES` order, four stand parameters per gauge
+    mounting (:data:`~orthoglide_env.gauges.STAND_PARAMS`), then three rotations per
+    tracker station."""
 
     mountings: tuple[str, ...] = ()
-    specs: tuple[GaugeSpec, ...] = ()
+    specs: tuple[Spec, ...] = ()
+
+    @property
+    def gauges(self) -> list[int]:
+        """Indices of the gauge mountings."""
+        return [k for k, s in enumerate(self.specs) if isinstance(s, GaugeSpec)]
+
+    @property
+    def stations(self) -> list[str]:
+        """Tracker stations, in order of first appearance."""
+        return list(dict.fromkeys(station_of(m) for m, s in zip(self.mountings, self.specs,
+                                                                strict=True)
+                                  if isinstance(s, TrackerAxis)))
 
     @property
     def names(self) -> tuple[str, ...]:
-        return ERROR_NAMES + tuple(
-            n for m, s in zip(self.mountings, self.specs, strict=True) for n in stand_names(m, s)
-        )
+        stands = [n for k in self.gauges for n in stand_names(self.mountings[k], self.specs[k])]
+        rotations = [f"{st}.rot_{a}" for st in self.stations for a in AXIS_NAMES]
+        return ERROR_NAMES + tuple(stands) + tuple(rotations)
 
     @property
     def groups(self) -> tuple[str, ...]:
-        """Group of every parameter: a machine-file key, ``stand_shift`` or ``stand_tilt``."""
+        """Group of every parameter: a machine-file key, ``stand_shift``, ``stand_tilt`` or
+        ``tracker_rotation``."""
         stands = ("stand_shift",) * 2 + ("stand_tilt",) * 2
-        return tuple(error_group(n) for n in ERROR_NAMES) + stands * len(self.mountings)
+        return (tuple(error_group(n) for n in ERROR_NAMES) + stands * len(self.gauges)
+                + ("tracker_rotation",) * (3 * len(self.stations)))
 
     def __len__(self) -> int:
-        return len(ERROR_NAMES) + 4 * len(self.mountings)
+        return len(ERROR_NAMES) + 4 * len(self.gauges) + 3 * len(self.stations)
 
 
 @dataclass(frozen=True)
@@ -62,7 +102,7 @@ class Design:
     """Where an experiment's readings were taken."""
 
     mountings: tuple[str, ...]
-    specs: tuple[GaugeSpec, ...]  # one per mounting
+    specs: tuple[Spec, ...]  # one per mounting
     mounting: np.ndarray  # (N,) index of each reading's mounting
     rho: np.ndarray  # (N, 3) commanded posture of each reading, mm
 
@@ -85,20 +125,25 @@ class Design:
 
     @property
     def signs(self) -> np.ndarray:
-        """Reading sign of every mounting: +1 when its plunger points along the world axis."""
-        _, directions = ideal_rays(self.specs, MachineParams())
-        return np.sign(directions[np.arange(len(self.specs)), [s.axis for s in self.specs]])
+        """Reading sign of every mounting: +1 when a gauge's plunger points along the world
+        axis, and for a tracker coordinate."""
+        gauges = [s for s in self.specs if isinstance(s, GaugeSpec)]
+        signs = np.ones(len(self.specs))
+        if gauges:
+            _, directions = ideal_rays(gauges, MachineParams())
+            signs[self.space.gauges] = np.sign(
+                directions[np.arange(len(gauges)), [s.axis for s in gauges]])
+        return signs
 
     @classmethod
-    def of(cls, mountings: list[str], specs: list[GaugeSpec], rho: np.ndarray) -> Design:
-        """A design from each reading's mounting name and gauge spec, and its posture."""
+    def of(cls, mountings: list[str], specs: list[Spec], rho: np.ndarray) -> Design:
+        """A design from each reading's mounting name and spec, and its posture."""
         names = list(dict.fromkeys(mountings))
-        spec_of: dict[str, GaugeSpec] = {}
+        spec_of: dict[str, Spec] = {}
         for name, spec in zip(mountings, specs, strict=True):
             if spec_of.setdefault(name, spec) != spec:
-                raise ValueError(f"mounting '{name}' holds two different gauges "
-                                 f"({spec_of[name].name}@{spec_of[name].at:g} and "
-                                 f"{spec.name}@{spec.at:g})")
+                raise ValueError(f"mounting '{name}' holds two different instruments "
+                                 f"({spec_of[name].slot} and {spec.slot})")
         index = np.array([names.index(m) for m in mountings], dtype=int)
         return cls(tuple(names), tuple(spec_of[n] for n in names), index,
                    np.asarray(rho, dtype=float).reshape(-1, 3))
@@ -109,14 +154,43 @@ def predict(theta: np.ndarray, design: Design) -> np.ndarray:
     ``design`` for parameter vectors ``theta`` of shape ``(*batch, n)``: ``(*batch, N)``."""
     theta = np.asarray(theta, dtype=float)
     batch = theta.shape[:-1]
+    space = design.space
     machine = MachineParams.from_vector(theta[..., :N_MACHINE])
-    stand = theta[..., N_MACHINE:].reshape(*batch, len(design.specs), 4)
-    origins, directions = ideal_rays(design.specs, machine)
-    origins, directions = stand_rays(design.specs, origins, directions, stand)
     postures = design.postures.reshape((1,) * len(batch) + design.postures.shape)
-    t = face_distances(machine, design.specs, origins, directions, postures)  # (*b, P, K)
-    rows = t[..., design._posture_index, design.mounting]  # type: ignore[attr-defined]
+    values = np.zeros((*batch, len(design.postures), len(design.specs)))  # (*b, P, K)
+    gauges = space.gauges
+    if gauges:
+        specs = [design.specs[k] for k in gauges]
+        stand = theta[..., N_MACHINE:N_MACHINE + 4 * len(gauges)].reshape(*batch, -1, 4)
+        origins, directions = ideal_rays(specs, machine)
+        origins, directions = stand_rays(specs, origins, directions, stand)
+        values[..., gauges] = face_distances(machine, specs, origins, directions, postures)
+    stations = space.stations
+    if stations:
+        tcp = direct(machine, postures)  # (*b, P, 3)
+        start = N_MACHINE + 4 * len(gauges)
+        for k, station in enumerate(stations):
+            rotation = rotation_matrices(theta[..., start + 3 * k:start + 3 * k + 3])
+            seen = np.einsum("...ij,...pj->...pi", rotation, tcp)
+            for m, (name, spec) in enumerate(zip(design.mountings, design.specs, strict=True)):
+                if isinstance(spec, TrackerAxis) and station_of(name) == station:
+                    values[..., m] = seen[..., spec.component]
+    rows = values[..., design._posture_index, design.mounting]  # type: ignore[attr-defined]
     return design.signs[design.mounting] * rows
+
+
+def rotation_matrices(rotvec: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``(..., 3, 3)`` of rotation vectors ``(..., 3)`` (Rodrigues),
+    batched (scipy's Rotation holds one batch axis only)."""
+    rotvec = np.asarray(rotvec, dtype=float)
+    angle = np.linalg.norm(rotvec, axis=-1)[..., None, None]
+    k = np.zeros((*rotvec.shape[:-1], 3, 3))
+    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -rotvec[..., 2], rotvec[..., 1], -rotvec[..., 0]
+    k = k - np.swapaxes(k, -1, -2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        a = np.where(angle > 1e-8, np.sin(angle) / angle, 1.0 - angle**2 / 6)
+        b = np.where(angle > 1e-8, (1 - np.cos(angle)) / angle**2, 0.5 - angle**2 / 24)
+    return np.eye(3) + a * k + b * (k @ k)
 
 
 #: Central-difference step, in units of each parameter's scale (2 mm for drho, 2 mrad for

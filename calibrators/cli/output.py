@@ -32,7 +32,7 @@ def _residuals(est: Estimate) -> list[dict[str, Any]]:
     out = []
     if len(est.residuals) == len(est.readings):
         for k, (m, r) in enumerate(zip(est.readings.items, est.residuals, strict=True)):
-            item = {"posture": m.posture, "gauge": f"{m.gauge.name}@{m.gauge.at:g}",
+            item = {"posture": m.posture, "gauge": m.gauge.slot,
                     "repetition": m.repetition,
                     "residual_mm": None if not np.isfinite(r) else float(r),
                     "outlier": k in outliers}
@@ -43,7 +43,7 @@ def _residuals(est: Estimate) -> list[dict[str, Any]]:
     from ..differences import differences
 
     rows = differences(est.readings)
-    return [{"posture": p, "gauge": f"{g.name}@{g.at:g}", "residual_mm": float(r),
+    return [{"posture": p, "gauge": g.slot, "residual_mm": float(r),
              "outlier": False}
             for g, p, r in zip(rows.gauges, rows.postures, est.residuals, strict=True)]
 
