@@ -9,14 +9,16 @@ import pytest
 
 import orthoglide_env
 from calibrators.base import get_strategy
-from calibrators.prediction import (
-    motion_basis,
-    predicted_frame_errors,
-    predicted_tcp_error,
-)
+from calibrators.prediction import predicted_tcp_error
 from orthoglide_env.gauges import cross
 from orthoglide_env.geometry import MachineParams
-from orthoglide_env.scoring import FRAMES, score_batch, workspace_grid
+from orthoglide_env.scoring import (
+    FRAMES,
+    motion_basis,
+    predicted_frame_errors,
+    score_batch,
+    workspace_grid,
+)
 
 TABLE1 = {"drho": [4.66, -5.36, 1.46], "dL": [5.20, -5.96, 3.16]}
 #: A projection leaves round-off of a few ulps of the largest column (~100 mm for a
