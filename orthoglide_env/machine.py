@@ -138,12 +138,16 @@ class OrthoglideMachine:
         """Drive the carriages to control coordinates ``rho`` (mm) and settle."""
         rho = np.asarray(rho, dtype=float)
         check_motion_mode(mode)
+        # A posture the machine cannot be assembled in (beyond a singularity) raises
+        # UnreachableError before anything moves: the exact configuration is solved first
+        # (the motors alone would jam the mechanism against it).
         if mode == "quasi-static":
             self._place(rho)
             self._hold(rho)
             self.sim.step(QUASI_STATIC_STEPS)
             self.last_settle_steps = QUASI_STATIC_STEPS
         else:
+            direct(self.machine, rho)
             self._hold(rho)
             self.last_settle_steps = self._settle(rho)
 
