@@ -26,10 +26,17 @@ from scipy.spatial.transform import Rotation
 from .backend import check_motion_mode
 from .collisions import crash_pairs
 from .gauges import RAY_BACKOFF, Gauge, on_flat_face, ray_box_distance
-from .geometry import BAR_SECTION, D_NOMINAL, LEG_NAMES, R_LEG, MachineParams
-from .kinematics import direct, leg_angles
+from .geometry import BAR_SECTION, LEG_NAMES, MachineParams
+from .kinematics import direct
 from .simulator import PhysicsSettings, Simulator, pb
-from .urdf_writer import MM, bar_length, link_name, write_urdf
+from .urdf_writer import (
+    MM,
+    bar_length,
+    joint_positions,
+    link_name,
+    loop_closures,
+    write_urdf,
+)
 
 QUASI_STATIC_STEPS = 2  # steps after placement: enough for the solver to take hold
 SETTLE_TOL = 1e-8  # m and m/s: a settled carriage is within 0.01 µm of its target, at rest
@@ -61,10 +68,10 @@ class OrthoglideMachine:
         try:
             self.bc = self.sim.client
             self.body = self.sim.load_urdf_text(write_urdf(machine))
-            self._index = {
-                self.bc.getJointInfo(self.body, j)[12].decode(): j
-                for j in range(self.bc.getNumJoints(self.body))
-            }
+            info = [self.bc.getJointInfo(self.body, j)
+                    for j in range(self.bc.getNumJoints(self.body))]
+            self._index = {i[12].decode(): i[0] for i in info}  # by child link name
+            self._joints = {i[1].decode(): (i[0], i[2]) for i in info}  # index, type
             self._com = {
                 name: np.array(self.bc.getDynamicsInfo(self.body, j)[3]) / MM
                 for name, j in self._index.items()
@@ -91,30 +98,22 @@ class OrthoglideMachine:
         return list((np.asarray(point_mm) - self._com[link]) * MM)
 
     def _close_loops(self) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
-        closures = []
-        for i in range(3):
-            bar2, coupler = link_name(i, "bar2"), link_name(i, "coupler")
-            far_end = np.array([-self.machine.leg_lengths[i], 0.0, 0.0])
-            on_coupler = np.array([0.0, 0.0, -D_NOMINAL])
-            self.bc.createConstraint(
-                self.body, self._index[bar2], self.body, self._index[coupler],
-                pb.JOINT_POINT2POINT, [0, 0, 0],
-                self._pivot(bar2, far_end), self._pivot(coupler, on_coupler),
-            )
-            closures.append((bar2, coupler, far_end, on_coupler))
-        for i in (1, 2):
-            r2 = link_name(i, "r2")
-            attach = self.machine.attach_points[i]
-            quat = Rotation.from_matrix(R_LEG[i]).as_quat()
+        """Constraints for :func:`~orthoglide_env.urdf_writer.loop_closures`; returns each
+        closure's links and points, for :meth:`loop_residual`."""
+        closures = loop_closures(self.machine)
+        for c in closures:
+            a, b = self._index[c.link_a], self._index[c.link_b]
+            pivots = self._pivot(c.link_a, c.point_a), self._pivot(c.link_b, c.point_b)
+            if c.kind == "point":
+                self.bc.createConstraint(self.body, a, self.body, b, pb.JOINT_POINT2POINT,
+                                         [0, 0, 0], *pivots)
+                continue
             cid = self.bc.createConstraint(
-                self.body, self._index[r2], self.body, self.platform,
-                pb.JOINT_FIXED, [0, 0, 0],
-                self._pivot(r2, np.zeros(3)), self._pivot("platform", attach),
-                [0, 0, 0, 1], list(quat),
+                self.body, a, self.body, b, pb.JOINT_FIXED, [0, 0, 0], *pivots,
+                [0, 0, 0, 1], list(Rotation.from_matrix(c.rotation).as_quat()),
             )
             self.bc.changeConstraint(cid, maxForce=1e9)
-            closures.append((r2, "platform", np.zeros(3), attach))
-        return closures
+        return [(c.link_a, c.link_b, c.point_a, c.point_b) for c in closures]
 
     def _draw_stands(self) -> None:
         """Visual-only stands and plungers: rays hit collision shapes, and these have none."""
@@ -152,15 +151,10 @@ class OrthoglideMachine:
             self.last_settle_steps = self._settle(rho)
 
     def _place(self, rho: np.ndarray) -> None:
-        p = direct(self.machine, rho)
-        theta, beta = leg_angles(self.machine, rho, p)
-        for i in range(3):
-            values = {
-                "carriage": rho[i] * MM, "r1": theta[i], "bar1": beta[i],
-                "coupler": -beta[i], "r2": -theta[i], "bar2": beta[i],
-            }
-            for part, value in values.items():
-                self.bc.resetJointState(self.body, self._index[link_name(i, part)], value, 0.0)
+        for name, value in joint_positions(self.machine, rho).items():
+            j, kind = self._joints[name]
+            self.bc.resetJointState(self.body, j, value * MM if kind == pb.JOINT_PRISMATIC
+                                    else value, 0.0)
 
     def _hold(self, rho: np.ndarray) -> None:
         for i, j in enumerate(self.slides):
