@@ -266,7 +266,7 @@ _SHAPES: dict[str, tuple[int, ...]] = {
 #: * the limits: drho and dL at 5 standard deviations of the ``paper`` and ``realistic``
 #:   presets, the extended errors at 10 (so both presets lie well inside), each far
 #:   below its group's own breaking size;
-#: * every group at its limit at once, 150 machines (4500 postures): TCP within 0.22 µm,
+#: * every group at its limit at once, 150 machines (4500 postures): TCP within 0.3 µm,
 #:   gauge status identical everywhere, readings within 1 µm at every posture near Zero.
 #:   Far from Zero, 2 of the 2250 postures had a gauge whose ray grazes a bar's edge on
 #:   the way to its face, which PyBullet rounds: 5 and 10 µm there.
@@ -274,7 +274,7 @@ _SHAPES: dict[str, tuple[int, ...]] = {
 #: Outside this guarantee whatever the errors: the corner (60, 60, 60) of the joint cube
 #: lies near a singularity, where the simulated machine sags under gravity while the exact
 #: model is rigid (0.15 µm on the nominal machine, above 1 µm on 2 and 3 of 200 realistic
-#: and paper machines, about 10 µm at the corners of this range), and beyond which a
+#: and paper machines, up to 12 µm at the corners of this range), and beyond which a
 #: machine with long encoder offsets or short legs cannot be assembled (the env refuses
 #: such targets).
 VALIDITY_RANGE: dict[str, tuple[float, str]] = {
