@@ -68,10 +68,13 @@ class ExactMachine:
 
     def move(self, rho: np.ndarray, mode: str = "quasi-static") -> None:
         check_motion_mode(mode)
-        self._rho = np.array(rho, dtype=float)
-        self._tcp = direct(self.machine, self._rho)
-        # The geometry of a posture is computed once; every reading below uses it.
-        self._boxes = collision_boxes(self.machine, self._rho, self._tcp)
+        rho = np.array(rho, dtype=float)
+        # Solved before anything is stored: a posture the machine cannot be assembled in
+        # raises and leaves the machine where it was.  The geometry of a posture is computed
+        # once; every reading below uses it.
+        tcp = direct(self.machine, rho)
+        self._boxes = collision_boxes(self.machine, rho, tcp)
+        self._rho, self._tcp = rho, tcp
 
     def encoders(self) -> np.ndarray:
         return self._rho.copy()

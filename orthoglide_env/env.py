@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import numbers
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -9,28 +12,37 @@ import numpy as np
 from gymnasium import spaces
 
 from .backend import MOTION_MODES, ExactMachine, MachineBackend
+from .display import display_problem, require_display
 from .gauges import (
     DEFAULT_RESOLUTION,
     DEFAULT_SIGMA,
     DEFAULT_TRAVEL,
     PAPER_LAYOUT,
-    GaugeNoise,
+    Gauge,
     GaugeSpec,
     Status,
+    check_noise,
     install,
     layout_from_names,
     zero_gauges,
 )
-from .geometry import DEFAULT_PRESET, RHO_MAX, RHO_MIN, MachineParams, check_rho, get_preset
+from .geometry import (
+    DEFAULT_PRESET,
+    RHO_MAX,
+    RHO_MIN,
+    MachineParams,
+    check_rho,
+    check_validity,
+    get_preset,
+)
+from .kinematics import UnreachableError
 from .task import OVERTRAVEL_PENALTY, CalibrationTask, Reading
 
 BACKENDS: tuple[str, ...] = ("pybullet", "exact")
 #: Encoders may read a hair outside the control limits after settling (solver residue
 #: ~1e-9 mm); the observation box leaves this margin so an observation is always inside.
 ENCODER_MARGIN: float = 1.0
-#: Largest gauge noise accepted, as a fraction of the travel: it keeps a noisy reading
-#: inside the observation box (half a travel of margin is then >= 25 sigma).
-MAX_SIGMA_FRACTION: float = 1 / 50
+RESET_OPTIONS: tuple[str, ...] = ("machine", "gauges")
 
 
 class OrthoglideCalibrationEnv(gym.Env):
@@ -49,9 +61,12 @@ class OrthoglideCalibrationEnv(gym.Env):
     0, 1, 2     target control coordinates rho_x/y/z    mm          [-100, 60]
     ==========  ======================================  ==========  =========
 
-    A target outside the joint limits, NaN, inf or of the wrong shape raises
-    ``ValueError`` (a real controller refuses it) unless the env was built with
-    ``clip_actions=True``, which clips finite targets into the limits.
+    A target outside the joint limits, NaN, inf, of the wrong shape or not made of real
+    numbers (text, booleans, complex numbers) raises ``ValueError`` (a real controller
+    refuses it) unless the env was built with ``clip_actions=True``, which clips finite
+    targets into the limits.  So does a target at which this machine cannot be assembled
+    (beyond the singularity near the (60, 60, 60) corner, on machines far from nominal):
+    the machine stays where it was.
 
     Observation space (``Dict``)
     ----------------------------
@@ -93,12 +108,31 @@ class OrthoglideCalibrationEnv(gym.Env):
     Reset options
     -------------
     ``machine``: the true machine, a dict in the machine file schema
-    (:meth:`MachineParams.from_dict`) or a ``MachineParams``; default: drawn from the
-    ``errors`` preset with ``np_random``.  ``gauges``: the layout of this episode, names
-    such as ``"x-leg/y"`` or ``"z/x@0.3"`` or ``GaugeSpec`` objects; it must hold as many
-    gauges as the constructor's ``gauges`` (the observation space is fixed), otherwise
-    ``ValueError``.  Installation errors are drawn from the preset with ``np_random``; the
-    gauges are then set up at mid-travel and zeroed at the Zero posture.
+    (:meth:`MachineParams.from_dict`) or a ``MachineParams``, inside
+    :data:`~orthoglide_env.geometry.VALIDITY_RANGE`; left out or ``None`` (as ``seed=None``
+    means "none given"): drawn from the ``errors`` preset with ``np_random``.  Anything
+    else (a list, ``0``, ``""``, ``False``) raises ``ValueError``.  ``gauges``: the layout
+    of this episode, names such as ``"x-leg/y"`` or ``"z/x@0.3"`` or ``GaugeSpec``
+    objects (left out or ``None``: the constructor's); it must hold as many gauges as the
+    constructor's ``gauges`` (the observation space is fixed), otherwise ``ValueError``.
+    Installation errors are drawn from the preset with ``np_random``; the gauges are then
+    set up at mid-travel and zeroed at the Zero posture.
+
+    Refused input
+    -------------
+    A bad constructor argument, reset option, seed or action raises ``ValueError`` whose
+    one-line message names the input and the rule.  A refused ``reset`` or ``step``
+    changes nothing: the episode before it goes on (its machine, gauges, posture and
+    random stream), or, before the first good reset, every ``step`` still raises
+    ``RuntimeError``.
+
+    Render modes
+    ------------
+    ``rgb_array`` (TinyRenderer, no window) and ``human`` (a PyBullet GUI window), on the
+    ``pybullet`` backend only.  An instance's ``metadata["render_modes"]`` lists what it
+    can draw here: nothing on the ``exact`` backend, and ``human`` only where a display
+    is available; ``render_mode="human"`` without one raises ``ValueError`` (PyBullet's
+    GUI would end the process).
 
     Public attributes for calibrators: ``gauge_layout`` (this episode's tuple of
     ``GaugeSpec``), ``gauge_noise`` (the spec sheet's sigma and resolution), ``travel``.
@@ -129,32 +163,42 @@ class OrthoglideCalibrationEnv(gym.Env):
         render_mode: str | None = None,
         clip_actions: bool = False,
     ) -> None:
+        if not isinstance(errors, str):
+            raise ValueError(f"errors must be the name of an error preset, got {errors!r}")
         self.preset = get_preset(errors)
         if motion not in MOTION_MODES:
-            raise ValueError(f"unknown motion '{motion}'; choose from {list(MOTION_MODES)}")
+            raise ValueError(f"unknown motion {motion!r}; choose from {list(MOTION_MODES)}")
         if backend not in BACKENDS:
-            raise ValueError(f"unknown backend '{backend}'; choose from {list(BACKENDS)}")
+            raise ValueError(f"unknown backend {backend!r}; choose from {list(BACKENDS)}")
         if render_mode not in (None, *self.metadata["render_modes"]):
-            raise ValueError(f"unknown render_mode '{render_mode}'")
+            raise ValueError(f"unknown render_mode {render_mode!r}")
         if backend == "exact" and render_mode is not None:
             raise ValueError("the exact backend has no picture: use backend='pybullet' to render")
-        if max_episode_steps is not None and max_episode_steps < 1:
-            raise ValueError("max_episode_steps must be a positive integer")
-        if not travel > 0:
-            raise ValueError("gauge travel must be positive")
-        if gauge_sigma > travel * MAX_SIGMA_FRACTION:
-            raise ValueError(
-                f"gauge_sigma {gauge_sigma} mm is not a dial gauge's repeatability: it must be "
-                f"at most travel/{1 / MAX_SIGMA_FRACTION:g} = {travel * MAX_SIGMA_FRACTION:g} mm"
-            )
-        self.gauge_noise = GaugeNoise(gauge_sigma, gauge_resolution)
+        if render_mode == "human":
+            require_display("render_mode='human'", "render_mode='rgb_array'")
+        if max_episode_steps is not None and not (
+            isinstance(max_episode_steps, int | np.integer)
+            and not isinstance(max_episode_steps, bool) and max_episode_steps >= 1
+        ):
+            raise ValueError(f"max_episode_steps must be a positive integer or None, got "
+                             f"{max_episode_steps!r}")
+        if not isinstance(clip_actions, bool | np.bool_):
+            raise ValueError(f"clip_actions must be True or False, got {clip_actions!r}")
+        if isinstance(travel, bool) or not isinstance(travel, numbers.Real) or not (
+            np.isfinite(travel) and travel > 0
+        ):
+            raise ValueError(f"travel must be a positive finite number (mm), got {travel!r}")
+        self.gauge_noise = check_noise(gauge_sigma, gauge_resolution, travel)
         self._default_layout = _layout(gauges)
         self.gauge_layout = self._default_layout
         self.travel = float(travel)
         self.motion = motion
         self.backend_name = backend
         self.render_mode = render_mode
-        self.clip_actions = clip_actions
+        # What this instance can draw: the class lists every mode for gym.make; the exact
+        # backend draws nothing and a window needs a display.
+        self.metadata = {**self.metadata, "render_modes": _render_modes(backend)}
+        self.clip_actions = bool(clip_actions)
         self.max_episode_steps = max_episode_steps
         self.task = CalibrationTask(self.gauge_noise)
         n = len(self.gauge_layout)
@@ -162,7 +206,7 @@ class OrthoglideCalibrationEnv(gym.Env):
         self.observation_space = spaces.Dict(
             {
                 # A valid reading lies within +-travel/2 of its zero; the box leaves another
-                # travel/2 (>= 25 sigma, see MAX_SIGMA_FRACTION) for the noise.
+                # travel/2 (>= 25 sigma, see MAX_NOISE_FRACTION) for the noise.
                 "gauges": spaces.Box(-self.travel, self.travel, shape=(n,), dtype=np.float64),
                 "valid": spaces.MultiBinary(n),
                 "joints": spaces.Box(RHO_MIN - ENCODER_MARGIN, RHO_MAX + ENCODER_MARGIN,
@@ -187,43 +231,37 @@ class OrthoglideCalibrationEnv(gym.Env):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        _check_seed(seed)
+        machine, layout = self._reset_options(options)
+        saved = self._random_state()
         super().reset(seed=seed)
-        options = dict(options or {})
-        unknown = sorted(set(options) - {"machine", "gauges"})
-        if unknown:
-            raise ValueError(f"unknown reset option(s) {unknown}; allowed: machine, gauges")
-        machine = (
-            MachineParams.from_dict(options["machine"])
-            if isinstance(options.get("machine"), dict)
-            else options.get("machine") or self.preset.sample(self.np_random)
-        )
-        if not isinstance(machine, MachineParams):
-            raise ValueError("reset option 'machine' must be a dict in the machine file schema")
-        layout = _layout(options["gauges"]) if "gauges" in options else self._default_layout
-        if len(layout) != len(self._default_layout):
-            raise ValueError(
-                f"this env observes {len(self._default_layout)} gauges; a layout of "
-                f"{len(layout)} needs an env built with gauges=[...] of that size"
-            )
-        gauges = install(layout, machine, travel=self.travel, preset=self.preset,
-                         rng=self.np_random)
+        try:
+            episode = self._new_episode(machine, layout)
+        except BaseException:
+            # A refused reset leaves no trace: the previous episode (or none) goes on with
+            # the random stream it had.
+            self._np_random, self._np_random_seed = saved[0], saved[2]
+            if saved[0] is not None:
+                saved[0].bit_generator.state = saved[1]
+            raise
         if self._machine is not None:
             self._machine.close()
-        self._machine = self._build(machine, gauges)
-        self._machine.set_gauges(zero_gauges(gauges, self._machine.gauge_distances()))
-        self.gauge_layout = layout
+        self._machine, self.gauge_layout = episode.machine, episode.layout
         self._rho = np.zeros(3)
         self._steps = 0
-        reading = self.task.read(self._machine, self.np_random)
-        self._pressed = self.task.pressed(self._machine)
-        return self._observation(reading), self._info(reading, [], 0.0, "")
+        self._pressed = episode.pressed
+        return self._observation(episode.reading), self._info(episode.reading, [], 0.0, "")
 
     def step(
         self, action: np.ndarray
     ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         machine = self._require_machine()
         target = self._check_action(action)
-        machine.move(target, self.motion)
+        try:
+            machine.move(target, self.motion)
+        except UnreachableError as exc:
+            raise ValueError(f"action {target.tolist()} mm: {exc} on this machine; it stays "
+                             "where it was") from None
         reading = self.task.read(machine, self.np_random)
         pressed = self.task.pressed(machine)
         overtravel = self.task.new_overtravels(machine.gauges, self._pressed, pressed)
@@ -248,7 +286,54 @@ class OrthoglideCalibrationEnv(gym.Env):
             self._machine = None
 
     # -- helpers -------------------------------------------------------------------------------
-    def _build(self, machine: MachineParams, gauges: list) -> MachineBackend:
+    def _reset_options(
+        self, options: Any
+    ) -> tuple[MachineParams | None, tuple[GaugeSpec, ...]]:
+        """The validated reset options: the given machine (None: draw one) and the layout."""
+        if options is None:
+            options = {}
+        if not isinstance(options, Mapping):
+            raise ValueError(f"reset options must be a dict or None, got {options!r}")
+        unknown = [key for key in options if key not in RESET_OPTIONS]
+        if unknown:
+            raise ValueError(f"unknown reset option(s) {unknown}; allowed: "
+                             f"{', '.join(RESET_OPTIONS)}")
+        machine = _machine_option(options.get("machine"))
+        gauges = options.get("gauges")
+        layout = self._default_layout if gauges is None else _layout(gauges, "reset option "
+                                                                            "'gauges'")
+        if len(layout) != len(self._default_layout):
+            raise ValueError(
+                f"reset option 'gauges': this env observes {len(self._default_layout)} "
+                f"gauges; a layout of {len(layout)} needs an env built with gauges=[...] of "
+                "that size"
+            )
+        return machine, layout
+
+    def _random_state(self) -> tuple[np.random.Generator | None, dict | None, int | None]:
+        """The random stream as it stands: generator, its state and its seed."""
+        rng = self._np_random
+        return rng, (None if rng is None else rng.bit_generator.state), self._np_random_seed
+
+    def _new_episode(self, machine: MachineParams | None,
+                     layout: tuple[GaugeSpec, ...]) -> _Episode:
+        """Build a whole episode (machine, installed and zeroed gauges, first reading)
+        without touching the current one; nothing is left open when it fails."""
+        if machine is None:
+            machine = self.preset.sample(self.np_random)
+        gauges = install(layout, machine, travel=self.travel, preset=self.preset,
+                         rng=self.np_random)
+        built = self._build(machine, gauges)
+        try:
+            built.set_gauges(zero_gauges(gauges, built.gauge_distances()))
+            reading = self.task.read(built, self.np_random)
+            pressed = self.task.pressed(built)
+        except BaseException:
+            built.close()
+            raise
+        return _Episode(built, layout, reading, pressed)
+
+    def _build(self, machine: MachineParams, gauges: list[Gauge]) -> MachineBackend:
         if self.backend_name == "exact":
             return ExactMachine(machine, gauges)
         try:
@@ -266,9 +351,18 @@ class OrthoglideCalibrationEnv(gym.Env):
 
     def _check_action(self, action: Any) -> np.ndarray:
         try:
-            target = np.array(action, dtype=np.float64)
+            values = np.asarray(action)
         except (TypeError, ValueError):
-            raise ValueError(f"action must be 3 numbers (mm), got {action!r}") from None
+            values = np.asarray(None)
+        # Integer and float arrays only: numpy would also read booleans, numeric strings
+        # and complex numbers with a zero imaginary part as numbers, and turns a boolean
+        # among numbers in a list into a number silently.
+        elements = action if isinstance(action, list | tuple) else ()
+        if values.dtype.kind not in "iuf" or any(isinstance(v, bool | np.bool_)
+                                                 for v in elements):
+            raise ValueError(f"action must be 3 numbers (mm), not text, booleans, complex "
+                             f"numbers or objects; got {action!r}")
+        target = values.astype(np.float64)
         if target.shape != (3,):
             raise ValueError(f"action must have shape (3,), got {target.shape}")
         if self.clip_actions and np.all(np.isfinite(target)):
@@ -290,14 +384,66 @@ class OrthoglideCalibrationEnv(gym.Env):
         }
 
 
-def _layout(gauges: list[str] | tuple[GaugeSpec, ...] | None) -> tuple[GaugeSpec, ...]:
+@dataclass(frozen=True)
+class _Episode:
+    """Everything a reset builds, swapped in only once all of it stands."""
+
+    machine: MachineBackend
+    layout: tuple[GaugeSpec, ...]
+    reading: Reading
+    pressed: np.ndarray
+
+
+def _check_seed(seed: Any) -> None:
+    """Gymnasium's rule (None or an int >= 0), with booleans refused and a ValueError."""
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
+        raise ValueError(f"reset seed must be None or an integer >= 0, got {seed!r}")
+
+
+def _machine_option(value: Any) -> MachineParams | None:
+    """The ``machine`` reset option.  None, like leaving the key out, draws a machine from
+    the preset (as ``seed=None`` and ``options=None`` mean "nothing given" in Gymnasium);
+    anything else must be a dict in the machine file schema or a ``MachineParams``, inside
+    :data:`~orthoglide_env.geometry.VALIDITY_RANGE`."""
+    if value is None:
+        return None
+    try:
+        if isinstance(value, MachineParams):
+            check_validity(value)
+            return value
+        if isinstance(value, dict):
+            return MachineParams.from_dict(value)
+    except ValueError as exc:
+        raise ValueError(f"reset option 'machine': {exc}") from None
+    raise ValueError(
+        "reset option 'machine' must be a dict in the machine file schema, a MachineParams "
+        f"or None (draw one from the preset), got {type(value).__name__} {value!r}"
+    )
+
+
+def _layout(gauges: Any, name: str = "gauges") -> tuple[GaugeSpec, ...]:
+    """A gauge layout from names such as ``"x-leg/y"`` or ``GaugeSpec`` objects; None is
+    the paper's six gauges.  ``name``: what the caller calls the value, for errors."""
     if gauges is None:
         return PAPER_LAYOUT
-    gauges = list(gauges)
+    if not isinstance(gauges, list | tuple):
+        raise ValueError(f"{name} must be a list of gauge names or GaugeSpec objects, got "
+                         f"{gauges!r}")
     if not gauges:
-        raise ValueError("a gauge layout needs at least one gauge")
+        raise ValueError(f"{name}: a gauge layout needs at least one gauge")
     if all(isinstance(g, GaugeSpec) for g in gauges):
         return tuple(gauges)
     if all(isinstance(g, str) for g in gauges):
-        return layout_from_names(gauges)
-    raise ValueError("gauges must be names like 'x-leg/y' or GaugeSpec objects")
+        try:
+            return layout_from_names(list(gauges))
+        except ValueError as exc:
+            raise ValueError(f"{name}: {exc}") from None
+    raise ValueError(f"{name} must be names like 'x-leg/y' or GaugeSpec objects, got "
+                     f"{gauges!r}")
+
+
+def _render_modes(backend: str) -> list[str]:
+    """The render modes an instance on ``backend`` can produce here."""
+    if backend == "exact":
+        return []
+    return ["rgb_array"] + (["human"] if display_problem() is None else [])

@@ -22,6 +22,7 @@ and touches the bar at ``-d/2``.  Both are flat box faces, as DESIGN.md advises.
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, replace
 from enum import IntEnum
 
@@ -512,6 +513,39 @@ def model_gauges(
     """Ideal gauges installed and zeroed on ``machine``: what a calibrator's model assumes
     for its current estimate (it cannot know the installation errors)."""
     return installed_on(machine, install(specs, machine))
+
+
+#: A dial gauge's repeatability and display step are small against its travel: at most
+#: this fraction of it.  A noisy, quantised reading then stays inside the env's
+#: observation box (half a travel of margin is >= 25 sigma).
+MAX_NOISE_FRACTION: float = 1 / 50
+#: Finest display step accepted (mm): no dial gauge resolves a nanometre, and dividing a
+#: reading by a subnormal step overflows to infinity.
+MIN_RESOLUTION: float = 1e-6
+
+
+def check_noise(
+    sigma: object, resolution: object, travel: float = DEFAULT_TRAVEL, *,
+    names: tuple[str, str] = ("gauge_sigma", "gauge_resolution"),
+) -> GaugeNoise:
+    """The noise of a dial gauge with ``travel`` mm of travel, or ``ValueError`` naming the
+    bad value (``names``: what the caller calls sigma and resolution).
+
+    Repeatability ``sigma`` and display step ``resolution`` (mm, 0 = ideal) must be real
+    numbers in [0, travel * MAX_NOISE_FRACTION]; a non-zero step at least MIN_RESOLUTION.
+    """
+    limit = travel * MAX_NOISE_FRACTION
+    rule = (f"a dial gauge's repeatability and resolution lie in [0, travel/"
+            f"{1 / MAX_NOISE_FRACTION:g}] = [0, {limit:g}] mm")
+    for name, value in zip(names, (sigma, resolution), strict=True):
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            raise ValueError(f"{name} must be a number (mm), got {value!r}")
+        if not (np.isfinite(value) and 0 <= value <= limit):
+            raise ValueError(f"{name} {value:g} mm is out of range: {rule}")
+    if 0 < resolution < MIN_RESOLUTION:  # type: ignore[operator]
+        raise ValueError(f"{names[1]} {resolution:g} mm is finer than any dial gauge's: "
+                         f"use 0 (ideal) or at least {MIN_RESOLUTION:g} mm")
+    return GaugeNoise(float(sigma), float(resolution))  # type: ignore[arg-type]
 
 
 @dataclass(frozen=True)

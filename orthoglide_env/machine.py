@@ -25,11 +25,26 @@ from scipy.spatial.transform import Rotation
 
 from .backend import check_motion_mode
 from .collisions import crash_pairs
-from .gauges import RAY_BACKOFF, Gauge, on_flat_face, ray_box_distance
-from .geometry import BAR_SECTION, D_NOMINAL, LEG_NAMES, R_LEG, MachineParams
-from .kinematics import direct, leg_angles
+from .gauges import (
+    GAUGE_BODY_RADIUS,
+    RAY_BACKOFF,
+    STAND_LENGTH,
+    Gauge,
+    on_flat_face,
+    ray_box_distance,
+)
+from .geometry import BAR_SECTION, LEG_NAMES, MachineParams
+from .kinematics import direct
 from .simulator import PhysicsSettings, Simulator, pb
-from .urdf_writer import MM, bar_length, link_name, write_urdf
+from .urdf_writer import (
+    MM,
+    bar_length,
+    joint_positions,
+    link_name,
+    loop_closures,
+    rail_ends,
+    write_urdf,
+)
 
 QUASI_STATIC_STEPS = 2  # steps after placement: enough for the solver to take hold
 SETTLE_TOL = 1e-8  # m and m/s: a settled carriage is within 0.01 µm of its target, at rest
@@ -38,8 +53,14 @@ POSITION_GAIN = 0.3
 MOTOR_FORCE = 5000.0  # N, far above what gravity asks of the carriages
 STAND_COLOUR = (0.1, 0.6, 0.2, 1.0)
 CONTACT_QUERY = 1e-6  # m, query distance of the contact check
-CAMERA_EYE = np.array([800.0, 680.0, 620.0])  # mm
-CAMERA_TARGET = np.array([120.0, 120.0, 140.0])  # mm
+#: The default camera looks square-on along the machine's symmetry axis (1, 1, 1), where
+#: the three legs look alike, from this far (mm), and frames the base's rails with this
+#: margin around them.
+CAMERA_DISTANCE = 1400.0
+CAMERA_FOV = 50.0  # deg, for a camera placed by the caller
+CAMERA_MARGIN = 1.3
+ARM_RADIUS = 3.0  # mm, a stand's arm from its foot to the gauge body
+FOOT_SIZE = np.array([30.0, 30.0, 30.0])  # mm, a stand's magnetic foot on a rail
 
 
 class OrthoglideMachine:
@@ -61,10 +82,10 @@ class OrthoglideMachine:
         try:
             self.bc = self.sim.client
             self.body = self.sim.load_urdf_text(write_urdf(machine))
-            self._index = {
-                self.bc.getJointInfo(self.body, j)[12].decode(): j
-                for j in range(self.bc.getNumJoints(self.body))
-            }
+            info = [self.bc.getJointInfo(self.body, j)
+                    for j in range(self.bc.getNumJoints(self.body))]
+            self._index = {i[12].decode(): i[0] for i in info}  # by child link name
+            self._joints = {i[1].decode(): (i[0], i[2]) for i in info}  # index, type
             self._com = {
                 name: np.array(self.bc.getDynamicsInfo(self.body, j)[3]) / MM
                 for name, j in self._index.items()
@@ -91,72 +112,76 @@ class OrthoglideMachine:
         return list((np.asarray(point_mm) - self._com[link]) * MM)
 
     def _close_loops(self) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
-        closures = []
-        for i in range(3):
-            bar2, coupler = link_name(i, "bar2"), link_name(i, "coupler")
-            far_end = np.array([-self.machine.leg_lengths[i], 0.0, 0.0])
-            on_coupler = np.array([0.0, 0.0, -D_NOMINAL])
-            self.bc.createConstraint(
-                self.body, self._index[bar2], self.body, self._index[coupler],
-                pb.JOINT_POINT2POINT, [0, 0, 0],
-                self._pivot(bar2, far_end), self._pivot(coupler, on_coupler),
-            )
-            closures.append((bar2, coupler, far_end, on_coupler))
-        for i in (1, 2):
-            r2 = link_name(i, "r2")
-            attach = self.machine.attach_points[i]
-            quat = Rotation.from_matrix(R_LEG[i]).as_quat()
+        """Constraints for :func:`~orthoglide_env.urdf_writer.loop_closures`; returns each
+        closure's links and points, for :meth:`loop_residual`."""
+        closures = loop_closures(self.machine)
+        for c in closures:
+            a, b = self._index[c.link_a], self._index[c.link_b]
+            pivots = self._pivot(c.link_a, c.point_a), self._pivot(c.link_b, c.point_b)
+            if c.kind == "point":
+                self.bc.createConstraint(self.body, a, self.body, b, pb.JOINT_POINT2POINT,
+                                         [0, 0, 0], *pivots)
+                continue
             cid = self.bc.createConstraint(
-                self.body, self._index[r2], self.body, self.platform,
-                pb.JOINT_FIXED, [0, 0, 0],
-                self._pivot(r2, np.zeros(3)), self._pivot("platform", attach),
-                [0, 0, 0, 1], list(quat),
+                self.body, a, self.body, b, pb.JOINT_FIXED, [0, 0, 0], *pivots,
+                [0, 0, 0, 1], list(Rotation.from_matrix(c.rotation).as_quat()),
             )
             self.bc.changeConstraint(cid, maxForce=1e9)
-            closures.append((r2, "platform", np.zeros(3), attach))
-        return closures
+        return [(c.link_a, c.link_b, c.point_a, c.point_b) for c in closures]
 
     def _draw_stands(self) -> None:
-        """Visual-only stands and plungers: rays hit collision shapes, and these have none."""
+        """Draw each gauge: its body behind the tip, an arm, and its stand's magnetic foot
+        on the measured leg's rail, at the rail's end near the platform.  Visual shapes only:
+        rays hit collision shapes, and these have none."""
         for g in self.gauges:
-            length = 60.0
-            centre = (g.origin - g.direction * length / 2) * MM
-            shape = self.bc.createVisualShape(
-                pb.GEOM_CYLINDER, radius=6 * MM, length=length * MM, rgbaColor=STAND_COLOUR
-            )
-            z = np.array([0.0, 0.0, 1.0])
-            rot, _ = Rotation.align_vectors([g.direction], [z])
-            self._stand_ids.append(
-                self.bc.createMultiBody(
-                    baseMass=0, baseVisualShapeIndex=shape, basePosition=list(centre),
-                    baseOrientation=list(rot.as_quat()),
-                )
-            )
+            rear = g.origin - g.direction * STAND_LENGTH
+            foot = rail_ends()[g.spec.leg, 0]
+            self._stand_ids += [
+                self._rod(g.origin, rear, GAUGE_BODY_RADIUS),
+                self._rod(rear, foot, ARM_RADIUS),
+                self._visual(self.bc.createVisualShape(
+                    pb.GEOM_BOX, halfExtents=list(FOOT_SIZE / 2 * MM), rgbaColor=STAND_COLOUR,
+                ), foot, np.eye(3)),
+            ]
+
+    def _rod(self, a: np.ndarray, b: np.ndarray, radius: float) -> int:
+        """A visual cylinder from ``a`` to ``b`` (mm)."""
+        shape = self.bc.createVisualShape(pb.GEOM_CYLINDER, radius=radius * MM,
+                                          length=float(np.linalg.norm(b - a)) * MM,
+                                          rgbaColor=STAND_COLOUR)
+        rot, _ = Rotation.align_vectors([b - a], [[0.0, 0.0, 1.0]])
+        return self._visual(shape, (a + b) / 2, rot.as_matrix())
+
+    def _visual(self, shape: int, centre: np.ndarray, rot: np.ndarray) -> int:
+        """A massless body carrying only the visual ``shape`` at ``centre`` (mm)."""
+        return self.bc.createMultiBody(
+            baseMass=0, baseVisualShapeIndex=shape, basePosition=list(centre * MM),
+            baseOrientation=list(Rotation.from_matrix(rot).as_quat()),
+        )
 
     # -- motion -------------------------------------------------------------------------
     def move(self, rho: np.ndarray, mode: str = "quasi-static") -> None:
         """Drive the carriages to control coordinates ``rho`` (mm) and settle."""
         rho = np.asarray(rho, dtype=float)
         check_motion_mode(mode)
+        # A posture the machine cannot be assembled in (beyond a singularity) raises
+        # UnreachableError before anything moves: the exact configuration is solved first
+        # (the motors alone would jam the mechanism against it).
         if mode == "quasi-static":
             self._place(rho)
             self._hold(rho)
             self.sim.step(QUASI_STATIC_STEPS)
             self.last_settle_steps = QUASI_STATIC_STEPS
         else:
+            direct(self.machine, rho)
             self._hold(rho)
             self.last_settle_steps = self._settle(rho)
 
     def _place(self, rho: np.ndarray) -> None:
-        p = direct(self.machine, rho)
-        theta, beta = leg_angles(self.machine, rho, p)
-        for i in range(3):
-            values = {
-                "carriage": rho[i] * MM, "r1": theta[i], "bar1": beta[i],
-                "coupler": -beta[i], "r2": -theta[i], "bar2": beta[i],
-            }
-            for part, value in values.items():
-                self.bc.resetJointState(self.body, self._index[link_name(i, part)], value, 0.0)
+        for name, value in joint_positions(self.machine, rho).items():
+            j, kind = self._joints[name]
+            self.bc.resetJointState(self.body, j, value * MM if kind == pb.JOINT_PRISMATIC
+                                    else value, 0.0)
 
     def _hold(self, rho: np.ndarray) -> None:
         for i, j in enumerate(self.slides):
@@ -271,20 +296,23 @@ class OrthoglideMachine:
 
     def render(
         self, width: int = 640, height: int = 480, *, eye: np.ndarray | None = None,
-        target: np.ndarray | None = None, fov: float = 50.0,
+        target: np.ndarray | None = None, fov: float | None = None,
     ) -> np.ndarray:
         """An RGB image (height, width, 3) of the machine and its gauges, TinyRenderer.
 
-        ``eye`` and ``target``: camera position and aim point (mm, world); the default is a
-        three-quarter view from the side of the positive axes that shows every leg.
+        ``eye`` and ``target``: camera position and aim point (mm, world), ``fov`` its
+        vertical field of view (deg); by default the camera looks square-on along the
+        symmetry axis and frames the base (:func:`square_on_camera`).
         """
-        eye = CAMERA_EYE if eye is None else np.asarray(eye, dtype=float)
-        target = CAMERA_TARGET if target is None else np.asarray(target, dtype=float)
+        if eye is None or target is None:
+            eye, target, framing = square_on_camera(width / height)
+            fov = framing if fov is None else fov
         view = self.bc.computeViewMatrix(
             cameraEyePosition=list(eye * MM), cameraTargetPosition=list(target * MM),
             cameraUpVector=[0, 0, 1],
         )
-        proj = self.bc.computeProjectionMatrixFOV(fov=fov, aspect=width / height, nearVal=0.05,
+        proj = self.bc.computeProjectionMatrixFOV(fov=fov or CAMERA_FOV, aspect=width / height,
+                                                  nearVal=0.05,
                                                   farVal=5.0)
         img = self.bc.getCameraImage(width, height, view, proj, renderer=pb.ER_TINY_RENDERER)
         return np.reshape(np.asarray(img[2], dtype=np.uint8), (height, width, 4))[..., :3]
@@ -294,3 +322,22 @@ class OrthoglideMachine:
 
     def __repr__(self) -> str:
         return f"OrthoglideMachine(legs={LEG_NAMES}, gauges={len(self.gauges)})"
+
+
+def square_on_camera(aspect: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """Camera ``eye``, ``target`` (mm) and vertical field of view (deg) looking along the
+    machine's symmetry axis (1, 1, 1), world z up, framing the base's rails (and so the
+    platform, legs and gauge stands between them) for an image of ``aspect`` = width /
+    height."""
+    view = np.ones(3) / np.sqrt(3)
+    right = np.cross(-view, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, -view)
+    points = np.vstack([rail_ends().reshape(-1, 3), np.zeros((1, 3))])
+    x, y = points @ right, points @ up
+    target = (x.max() + x.min()) / 2 * right + (y.max() + y.min()) / 2 * up
+    # The rails' far ends are nearer the eye than the target: frame them at their depth.
+    nearest = CAMERA_DISTANCE - np.max(points @ view)
+    half_height = max(np.ptp(y), np.ptp(x) / aspect) / 2 * CAMERA_MARGIN
+    fov = float(2 * np.degrees(np.arctan(half_height / nearest)))
+    return target + CAMERA_DISTANCE * view, target, fov

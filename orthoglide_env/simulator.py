@@ -14,6 +14,8 @@ import tempfile
 from collections.abc import Iterator
 from dataclasses import dataclass
 
+from .display import require_display
+
 
 @contextlib.contextmanager
 def _c_output_silenced() -> Iterator[None]:
@@ -59,9 +61,15 @@ class PhysicsSettings:
 
 
 class Simulator:
-    """A PyBullet client in DIRECT mode (or GUI on request)."""
+    """A PyBullet client in DIRECT mode (or GUI on request).
+
+    ``gui=True`` without a display raises ``ValueError`` before PyBullet is asked: its GUI
+    connection would end the process.
+    """
 
     def __init__(self, *, gui: bool = False, settings: PhysicsSettings | None = None) -> None:
+        if gui:
+            require_display("gui=True", "gui=False")
         self.settings = settings or PhysicsSettings()
         self.gui = gui
         with _c_output_silenced():

@@ -17,7 +17,9 @@ Run ``python -m orthoglide_env.urdf_writer`` to regenerate the checked-in nomina
 
 from __future__ import annotations
 
+import functools
 import warnings
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
@@ -42,6 +44,7 @@ from .geometry import (
     URDF_RHO_MARGIN,
     MachineParams,
 )
+from .kinematics import direct, leg_angles
 
 MM = 1e-3  # URDF and PyBullet work in metres
 URDF_NAME = "orthoglide.urdf"
@@ -137,59 +140,194 @@ def bar_length(machine: MachineParams, leg: int) -> float:
     return float(machine.leg_lengths[leg] - 2 * BAR_CLEARANCE)
 
 
-def _leg(machine: MachineParams, i: int) -> list[str]:
-    frame = R_LEG[i]
+@dataclass(frozen=True)
+class JointOrigin:
+    """One joint of the URDF tree, in the workbench's units (mm, rad).
+
+    ``xyz`` (mm) and ``rotation`` (3x3, the joint frame's axes as columns) place the joint
+    frame in the parent link's frame; the child link's frame is the joint frame moved by
+    the joint value along (prismatic, mm) or about (revolute, rad) ``axis``, a unit vector
+    in the joint frame (zero for the fixed joint).  The URDF file holds the same numbers
+    in metres and roll-pitch-yaw angles.
+    """
+
+    name: str
+    kind: str  # "prismatic", "revolute" or "fixed"
+    parent: str
+    child: str
+    xyz: np.ndarray
+    rotation: np.ndarray
+    axis: np.ndarray
+
+
+def joint_origins(machine: MachineParams) -> dict[str, JointOrigin]:
+    """Where every joint of ``machine``'s URDF sits, by joint name, in the file's order.
+
+    The 18 moving joints are six per leg (``x_slide``, ``x_r1``, ``x_bar1_hinge``,
+    ``x_coupler_hinge``, ``x_r2``, ``x_bar2_hinge``, and the same for y and z); the fixed
+    ``platform_mount`` hangs the platform from the x leg's R2 body.  The machine's errors
+    enter here and nowhere else in the tree:
+
+    * ``<leg>_slide``: at ``o_i + (L + r + drho_i) u_i`` (actuator axis position and
+      encoder offset), in the leg frame ``R_LEG[i]``, moving along ``u_i`` (axis tilt);
+    * ``<leg>_coupler_hinge``: ``L + dL_i`` from the bar's first hinge (leg length);
+    * ``platform_mount``: ``-(r e_x + attach[0])`` from the x leg's R2 centre (the y and z
+      legs' attachments are loop closures, outside the tree: see
+      :mod:`orthoglide_env.machine`).
+
+    The other joints sit at the nominal ``d/2`` offsets of the parallelogram's hinges.
+    """
+    z, y, none = np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]), np.zeros(3)
+    same = np.eye(3)
+    up, down = np.array([0.0, 0.0, D_NOMINAL / 2]), np.array([0.0, 0.0, -D_NOMINAL / 2])
+    out: list[JointOrigin] = []
+    for i in range(3):
+        n = functools.partial(link_name, i)
+        slide = machine.axis_origins[i] + (L_NOMINAL + R_TOOL + machine.drho[i]) * (
+            machine.axis_directions[i]
+        )
+        bar_end = np.array([-machine.leg_lengths[i], 0.0, 0.0])
+        out += [
+            JointOrigin(n("slide"), "prismatic", "base", n("carriage"), slide, R_LEG[i],
+                        R_LEG[i].T @ machine.axis_directions[i]),
+            JointOrigin(n("r1"), "revolute", n("carriage"), n("r1"), none, same, z),
+            JointOrigin(n("bar1_hinge"), "revolute", n("r1"), n("bar1"), up, same, y),
+            JointOrigin(n("coupler_hinge"), "revolute", n("bar1"), n("coupler"), bar_end,
+                        same, y),
+            JointOrigin(n("r2"), "revolute", n("coupler"), n("r2"), down, same, z),
+            JointOrigin(n("bar2_hinge"), "revolute", n("r1"), n("bar2"), down, same, y),
+        ]
+    out.append(JointOrigin("platform_mount", "fixed", link_name(0, "r2"), "platform",
+                           -machine.attach_points[0], same, none))
+    return {j.name: j for j in out}
+
+
+@dataclass(frozen=True)
+class LoopClosure:
+    """A loop the URDF tree leaves open: ``point_a`` of link ``link_a`` coincides with
+    ``point_b`` of ``link_b`` (mm, each in its link's frame).  A ``fixed`` closure also
+    locks the orientation: ``link_a``'s frame axes are the columns of ``rotation`` in
+    ``link_b``'s frame."""
+
+    kind: str  # "point" or "fixed"
+    link_a: str
+    point_a: np.ndarray
+    link_b: str
+    point_b: np.ndarray
+    rotation: np.ndarray
+
+
+def loop_closures(machine: MachineParams) -> list[LoopClosure]:
+    """The five loops a simulator must close to make ``machine``'s URDF the machine.
+
+    Each parallelogram's second bar ends at its coupler's lower hinge (a point: the bar's
+    hinge axis is already fixed at its other end), and the y and z legs' R2 bodies are
+    welded to the platform at ``r e_i + attach[i]``, so these closures carry the y and z
+    attachment errors.
+    """
+    closures = [
+        LoopClosure("point", link_name(i, "bar2"),
+                    np.array([-machine.leg_lengths[i], 0.0, 0.0]), link_name(i, "coupler"),
+                    np.array([0.0, 0.0, -D_NOMINAL]), np.eye(3))
+        for i in range(3)
+    ]
+    closures += [
+        LoopClosure("fixed", link_name(i, "r2"), np.zeros(3), "platform",
+                    machine.attach_points[i], R_LEG[i])
+        for i in (1, 2)
+    ]
+    return closures
+
+
+def _closures_comment(machine: MachineParams) -> str:
+    lines = [
+        f"  {c.kind} {c.link_a} ({_xyz(c.point_a)}) = {c.link_b} ({_xyz(c.point_b)})"
+        + (f", {c.link_a} axes in {c.link_b} rpy ({_rpy(c.rotation)})" if c.kind == "fixed"
+           else "")
+        for c in loop_closures(machine)
+    ]
+    return ("<!-- Loops the tree leaves open, to close in the simulator (points in metres, "
+            "each in its link's frame):\n" + "\n".join(lines) + "\n-->\n")
+
+
+def joint_positions(machine: MachineParams, rho: np.ndarray) -> dict[str, float]:
+    """Values of the 18 moving joints (mm for the slides, rad) with the machine at control
+    coordinates ``rho``: the slides read ``rho``, the passive joints follow from the exact
+    closed configuration (:func:`~orthoglide_env.kinematics.leg_angles`).  With these, the
+    forward kinematics of the tree puts the platform at
+    :func:`~orthoglide_env.kinematics.direct`'s TCP and every loop closes."""
+    rho = np.asarray(rho, dtype=float)
+    theta, beta = leg_angles(machine, rho, direct(machine, rho))
+    out = {}
+    for i in range(3):
+        # The platform only translates: the coupler undoes the bars' turn, R2 undoes R1's.
+        values = {"slide": rho[i], "r1": theta[i], "bar1_hinge": beta[i],
+                  "coupler_hinge": -beta[i], "r2": -theta[i], "bar2_hinge": beta[i]}
+        out.update({link_name(i, part): float(v) for part, v in values.items()})
+    return out
+
+
+def _joint_xml(joint: JointOrigin) -> str:
+    """A joint element: the slides keep URDF limits wider than the control limits, the
+    passive joints turn freely."""
+    limits = {
+        "prismatic": (f'<limit lower="{(RHO_MIN - URDF_RHO_MARGIN) * MM:.6g}" '
+                      f'upper="{(RHO_MAX + URDF_RHO_MARGIN) * MM:.6g}" effort="1e6" '
+                      'velocity="10"/>'),
+        "revolute": '<limit lower="-3.14159" upper="3.14159" effort="0" velocity="100"/>',
+        "fixed": "",
+    }[joint.kind]
+    axis = "" if joint.kind == "fixed" else _xyz(joint.axis / MM)
+    return _joint(joint.name, joint.kind, joint.parent, joint.child,
+                  _origin(joint.xyz, joint.rotation), axis, limits)
+
+
+def _leg(machine: MachineParams, i: int, joints: dict[str, JointOrigin]) -> list[str]:
+    """The leg's links, each followed by the joint that carries it."""
     length = machine.leg_lengths[i]
-    u_local = frame.T @ machine.axis_directions[i]
-    slide_origin = machine.axis_origins[i] + (L_NOMINAL + R_TOOL + machine.drho[i]) * (
-        machine.axis_directions[i]
-    )
-    lo, hi = (RHO_MIN - URDF_RHO_MARGIN) * MM, (RHO_MAX + URDF_RHO_MARGIN) * MM
-    limit = f'<limit lower="{lo:.6g}" upper="{hi:.6g}" effort="1e6" velocity="10"/>'
-    free = '<limit lower="-3.14159" upper="3.14159" effort="0" velocity="100"/>'
     half_d = D_NOMINAL / 2
     bar = np.array([bar_length(machine, i), *BAR_SECTION])
     bar_mid = np.array([-length / 2, 0.0, 0.0])
     carriage = np.array(CARRIAGE_SIZE)
     short = np.array(SHORT_LINK_SIZE)
-    n = lambda part: link_name(i, part)  # noqa: E731
-    return [
-        _link(n("carriage"), _inertial(MASS["carriage"], np.zeros(3), carriage)
-              + _box(carriage, np.array([carriage[0] / 2 + CARRIAGE_SETBACK, 0, 0]), "carriage",
-                     collide=True)),
-        _joint(n("slide"), "prismatic", "base", n("carriage"), _origin(slide_origin, frame),
-               _xyz(u_local / MM), limit),
-        _link(n("r1"), _inertial(MASS["r1"], np.zeros(3), short)
-              + _box(short, np.zeros(3), "joint", collide=False)),
-        _joint(n("r1"), "revolute", n("carriage"), n("r1"), _origin(np.zeros(3)), "0 0 1", free),
-        _link(n("bar1"), _inertial(MASS["bar"], bar_mid, bar)
-              + _box(bar, bar_mid, "bar", collide=True) + _pin(30, np.zeros(3), "y")),
-        _joint(n("bar1_hinge"), "revolute", n("r1"), n("bar1"),
-               _origin(np.array([0, 0, half_d])), "0 1 0", free),
-        _link(n("coupler"), _inertial(MASS["coupler"], np.array([0, 0, -half_d]), short)
-              + _box(short, np.array([0, 0, -half_d]), "joint", collide=True)
-              + _pin(30, np.zeros(3), "y") + _pin(30, np.array([0, 0, -D_NOMINAL]), "y")),
-        _joint(n("coupler_hinge"), "revolute", n("bar1"), n("coupler"),
-               _origin(np.array([-length, 0, 0])), "0 1 0", free),
-        _link(n("r2"), _inertial(MASS["r2"], np.zeros(3), np.full(3, 20.0))
-              + _pin(24, np.zeros(3), "z")),
-        _joint(n("r2"), "revolute", n("coupler"), n("r2"),
-               _origin(np.array([0, 0, -half_d])), "0 0 1", free),
-        _link(n("bar2"), _inertial(MASS["bar"], bar_mid, bar)
-              + _box(bar, bar_mid, "bar", collide=True) + _pin(30, np.zeros(3), "y")),
-        _joint(n("bar2_hinge"), "revolute", n("r1"), n("bar2"),
-               _origin(np.array([0, 0, -half_d])), "0 1 0", free),
-    ]
+    bodies = {
+        "carriage": _inertial(MASS["carriage"], np.zeros(3), carriage)
+        + _box(carriage, np.array([carriage[0] / 2 + CARRIAGE_SETBACK, 0, 0]), "carriage",
+               collide=True),
+        "r1": _inertial(MASS["r1"], np.zeros(3), short)
+        + _box(short, np.zeros(3), "joint", collide=False),
+        "bar1": _inertial(MASS["bar"], bar_mid, bar)
+        + _box(bar, bar_mid, "bar", collide=True) + _pin(30, np.zeros(3), "y"),
+        "coupler": _inertial(MASS["coupler"], np.array([0, 0, -half_d]), short)
+        + _box(short, np.array([0, 0, -half_d]), "joint", collide=True)
+        + _pin(30, np.zeros(3), "y") + _pin(30, np.array([0, 0, -D_NOMINAL]), "y"),
+        "r2": _inertial(MASS["r2"], np.zeros(3), np.full(3, 20.0))
+        + _pin(24, np.zeros(3), "z"),
+        "bar2": _inertial(MASS["bar"], bar_mid, bar)
+        + _box(bar, bar_mid, "bar", collide=True) + _pin(30, np.zeros(3), "y"),
+    }
+    out = []
+    for joint in joints.values():
+        if joint.name.startswith(f"{LEG_NAMES[i]}_"):
+            out += [_link(joint.child, bodies[joint.child.split("_", 1)[1]]), _joint_xml(joint)]
+    return out
+
+
+def rail_ends() -> np.ndarray:
+    """Ends of each leg's rail on the base (mm, shape (3 legs, near/far end, 3)): beside
+    the nominal actuator axis, spanning the carriage's travel between the control limits.
+    The base is drawn only; the gauge stands stand on these rails."""
+    span = (L_NOMINAL + R_TOOL + RHO_MIN + CARRIAGE_SETBACK,
+            L_NOMINAL + R_TOOL + RHO_MAX + CARRIAGE_SETBACK + CARRIAGE_SIZE[0])
+    return np.array([[R_LEG[i][:, 0] * s - R_LEG[i][:, 1] * RAIL_BESIDE for s in span]
+                     for i in range(3)])
 
 
 def _base() -> str:
     body = _inertial(0.0, np.zeros(3), np.ones(3))
-    # Each rail spans the carriage's travel between the control limits, nominal axes.
-    start = L_NOMINAL + R_TOOL + RHO_MIN + CARRIAGE_SETBACK
-    end = L_NOMINAL + R_TOOL + RHO_MAX + CARRIAGE_SETBACK + CARRIAGE_SIZE[0]
-    for i in range(3):
-        centre = R_LEG[i][:, 0] * (start + end) / 2 - R_LEG[i][:, 1] * RAIL_BESIDE
-        size = np.abs(R_LEG[i] @ np.array([end - start, *RAIL_SECTION]))
+    for i, (start, end) in enumerate(rail_ends()):
+        centre = (start + end) / 2
+        size = np.abs(R_LEG[i] @ np.array([np.linalg.norm(end - start), *RAIL_SECTION]))
         # Drawn only: a rail beside the axis lies in the sweep of its own leg's bars ahead
         # of the carriage, where the prototype's guideways (not modelled) do not.
         body += _box(size, centre, "rail", collide=False)
@@ -202,11 +340,7 @@ def _platform(machine: MachineParams) -> list[str]:
     body += _box(size, np.zeros(3), "platform", collide=True)
     tool = np.array([8.0, 8.0, 40.0])
     body += _box(tool, np.array([0, 0, -20.0 - R_TOOL]), "joint", collide=False)
-    return [
-        _link("platform", body),
-        _joint("platform_mount", "fixed", link_name(0, "r2"), "platform",
-               _origin(-machine.attach_points[0])),
-    ]
+    return [_link("platform", body), _joint_xml(joint_origins(machine)["platform_mount"])]
 
 
 def write_urdf(machine: MachineParams) -> str:
@@ -216,13 +350,15 @@ def write_urdf(machine: MachineParams) -> str:
         for k, v in COLOURS.items()
     )
     parts = [_base()]
+    joints = joint_origins(machine)
     for i in range(3):
-        parts += _leg(machine, i)
+        parts += _leg(machine, i, joints)
     parts += _platform(machine)
     body = "\n  ".join([materials, *parts])
     return (
         '<?xml version="1.0"?>\n'
         "<!-- Generated by orthoglide_env.urdf_writer: do not edit. -->\n"
+        f"{_closures_comment(machine)}"
         f'<robot name="orthoglide">\n  {body}\n</robot>\n'
     )
 

@@ -134,7 +134,7 @@ def test_compare_writes_table_csv_and_plot(tmp_path, capsys) -> None:
         (["pose", "--machine", "MISSING", "--rho", "0", "0", "0"], "not found"),
         (["pose", "--machine", "BAD_KEY", "--rho", "0", "0", "0"], "unknown machine key"),
         (["pose", "--machine", "NOT_NUMBER", "--rho", "0", "0", "0"], "must hold numbers"),
-        (["pose", "--machine", "UNASSEMBLABLE", "--rho", "0", "0", "0"], "cannot be assembled"),
+        (["pose", "--machine", "UNASSEMBLABLE", "--rho", "0", "0", "0"], "validity range"),
         (["pose", "--machine", "GOOD", "--rho", "0", "0", "75"], "joint limits"),
         (["render", "--machine", "GOOD", "--rho", "0", "0", "0", "--out", "x.jpg"], ".png"),
         (["calibrate", "--strategy", "oracle"], "unknown strategy"),

@@ -42,7 +42,12 @@ def deadline(seconds: float) -> Iterator[None]:
 
 
 def acceptable(action: object) -> bool:
-    """What the issue specifies: exactly three finite numbers within the joint limits."""
+    """What the issue specifies: exactly three finite real numbers (no text, booleans or
+    complex numbers) within the joint limits."""
+    elements = list(action) if isinstance(action, list | tuple | np.ndarray) else [action]
+    if any(isinstance(e, bool | np.bool_ | str | complex | np.complexfloating)
+           for e in elements):
+        return False
     try:
         a = np.asarray(action, dtype=float)
     except (TypeError, ValueError):
@@ -61,7 +66,8 @@ def random_action(rng: np.random.Generator):
     if kind == 2:
         return rng.uniform(RHO_MIN, RHO_MAX, rng.choice([0, 1, 2, 4, 9]))
     if kind == 3:
-        return ["x", None, [1, 2], [[0, 0, 0]], {"a": 1}][rng.integers(5)]
+        return ["x", None, [1, 2], [[0, 0, 0]], {"a": 1}, ["1", "2", "3"], [1 + 0j, 2, 3],
+                [True, False, True], [0.0, 1.0, False]][rng.integers(9)]
     return rng.uniform(RHO_MIN, RHO_MAX, 3)  # valid
 
 

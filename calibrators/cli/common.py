@@ -3,12 +3,18 @@
 from __future__ import annotations
 
 import argparse
-from typing import NoReturn
+import json
+from typing import Any, NoReturn
 
 import numpy as np
 
-from orthoglide_env.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
-from orthoglide_env.geometry import MachineParams, check_rho, random_machine
+from orthoglide_env.gauges import (
+    DEFAULT_RESOLUTION,
+    DEFAULT_SIGMA,
+    DEFAULT_TRAVEL,
+    MAX_NOISE_FRACTION,
+)
+from orthoglide_env.geometry import RHO_MAX, RHO_MIN, MachineParams, check_rho, random_machine
 
 
 class UsageError(Exception):
@@ -42,14 +48,38 @@ def noise_of(args: argparse.Namespace) -> tuple[float, float]:
     return (DEFAULT_SIGMA if args.sigma is None else args.sigma), DEFAULT_RESOLUTION
 
 
+#: Largest sigma and resolution of the default gauges, as check_noise has it (mm).
+NOISE_LIMIT = (f"travel/{1 / MAX_NOISE_FRACTION:g} = "
+               f"{DEFAULT_TRAVEL * MAX_NOISE_FRACTION:g}")
+SIGMA_HELP = (f"gauge repeatability, standard deviation of a reading (mm, 0 to {NOISE_LIMIT};"
+              f" default {DEFAULT_SIGMA})")
+
+
 def add_noise_options(p: argparse.ArgumentParser) -> None:
     group = p.add_mutually_exclusive_group()
     group.add_argument("--noise-free", action="store_true", help="ideal gauges")
-    group.add_argument("--sigma", type=float, default=None,
-                       help=f"gauge repeatability (mm, default {DEFAULT_SIGMA})")
+    group.add_argument("--sigma", type=float, default=None, help=SIGMA_HELP)
 
 
 def add_machine_posture(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--machine", required=True, help="machine JSON file")
+    add_machine(p)
     p.add_argument("--rho", nargs=3, type=float, required=True, metavar=("X", "Y", "Z"),
-                   help="joint targets, control coordinates (mm)")
+                   help="joint targets, control coordinates (mm, 0 at the Zero posture, "
+                   f"each within the joint limits [{RHO_MIN:g}, {RHO_MAX:g}]; required)")
+
+
+def add_machine(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--machine", required=True, metavar="FILE",
+                   help="machine JSON file: errors in mm and rad, see the README's "
+                   "'Machine files' (required; a file holding {} is the nominal machine)")
+
+
+def print_json(data: Any) -> None:
+    """Print ``data`` as strict JSON: a NaN or an infinity is an error, never the
+    ``NaN``/``Infinity`` tokens that Python's json writes by default and no JSON reader
+    accepts."""
+    try:
+        text = json.dumps(data, indent=2, allow_nan=False)
+    except ValueError as exc:
+        raise RuntimeError(f"the report holds a number JSON cannot carry ({exc})") from None
+    print(text)

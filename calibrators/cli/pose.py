@@ -3,25 +3,24 @@
 from __future__ import annotations
 
 import argparse
-import json
 
 import numpy as np
 
-from orthoglide_env.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
+from orthoglide_env.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA, MIN_RESOLUTION
 from orthoglide_env.geometry import MachineParams
 
-from .common import add_machine_posture, rho_of, vec
+from .common import NOISE_LIMIT, SIGMA_HELP, add_machine_posture, print_json, rho_of, vec
 
 
 def run(args: argparse.Namespace) -> None:
     machine, rho = MachineParams.from_json(args.machine), rho_of(args.rho)
     from orthoglide_env.report import pose_report  # loads the simulator: after validation
 
+    sigma = DEFAULT_SIGMA if args.sigma is None else args.sigma
     report = pose_report(machine, rho, noise_free=args.noise_free, seed=args.seed,
-                         sigma=DEFAULT_SIGMA if args.sigma is None else args.sigma,
-                         resolution=args.resolution)
+                         sigma=sigma, resolution=args.resolution)
     if args.json:
-        print(json.dumps(report, indent=2))
+        print_json(report)
         return
     print(f"TCP simulated   {vec(report['tcp'], 6)} mm")
     print(f"TCP exact model {vec(report['tcp_model'], 6)} mm")
@@ -36,11 +35,13 @@ def add(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("pose", help="simulate one posture of a machine and read its gauges")
     add_machine_posture(p)
     p.add_argument("--noise-free", action="store_true", help="ideal gauges (no noise, no "
-                   "quantisation)")
-    p.add_argument("--sigma", type=float, default=None,
-                   help=f"gauge repeatability (mm, default {DEFAULT_SIGMA})")
+                   "quantisation; overrides --sigma and --resolution)")
+    p.add_argument("--sigma", type=float, default=None, help=SIGMA_HELP)
     p.add_argument("--resolution", type=float, default=DEFAULT_RESOLUTION,
-                   help=f"gauge display resolution (mm, default {DEFAULT_RESOLUTION})")
-    p.add_argument("--seed", type=int, default=None, help="seed of the gauge noise")
-    p.add_argument("--json", action="store_true")
+                   help="gauge display resolution, the step readings are rounded to (mm, 0 "
+                   f"for none, or {MIN_RESOLUTION:g} to {NOISE_LIMIT}; default %(default)s)")
+    p.add_argument("--seed", type=int, default=None, help="seed of the gauge noise "
+                   "(default: %(default)s, fresh noise on every run)")
+    p.add_argument("--json", action="store_true", help="print one JSON object (mm, rad) "
+                   "instead of a table")
     p.set_defaults(func=run)

@@ -20,5 +20,6 @@ def run(args: argparse.Namespace) -> None:
 def add(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("render", help="write a PNG picture of a machine at a posture")
     add_machine_posture(p)
-    p.add_argument("--out", required=True, help="PNG file to write")
+    p.add_argument("--out", required=True, metavar="FILE", help="PNG file to write, "
+                   "replaced if it exists (required)")
     p.set_defaults(func=run)
