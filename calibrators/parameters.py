@@ -33,18 +33,11 @@ from orthoglide_env.geometry import (
     ERROR_NAMES,
     PRESETS,
 )
-from orthoglide_env.reading_model import ParameterSpace
+from orthoglide_env.reading_model import ParameterSpace, default_scales, preset_sigmas
 
 PAPER6: tuple[str, ...] = ERROR_NAMES[:6]
 #: Selections by alias.
 ALIASES: dict[str, str] = {"full": "paper6"}
-#: Scale of every parameter where no prior gives one: the default preset's sigma.  It
-#: makes the numerics unit-free (mm and rad) and sets the identifiability threshold.
-SCALE_PRESET: str = DEFAULT_PRESET
-#: Scale of a tracker frame's rotation (rad) once the readings are pre-aligned with the
-#: nominal model (:func:`calibrators.gauss_newton.align_tracker`): what is left is of the
-#: order of the machine's own errors over its workspace, ~1 mm over ~100 mm.
-TRACKER_ROTATION_SCALE: float = 1e-2
 
 
 def select(selection: str, space: ParameterSpace) -> np.ndarray:
@@ -113,11 +106,7 @@ def _preset_sigmas(preset_name: str, space: ParameterSpace) -> np.ndarray:
     if preset_name not in PRESETS:
         raise ValueError(f"unknown prior '{preset_name}': use none, a preset "
                          f"({', '.join(sorted(PRESETS))}) or GROUP=SIGMA")
-    preset = PRESETS[preset_name]
-    stands = [preset.gauge_position] * 2 + [preset.gauge_tilt] * 2
-    # A tracker's frame is unknown: no preset says how it was turned.
-    return np.concatenate([preset.sigmas(), np.tile(stands, len(space.gauges)),
-                           np.zeros(3 * len(space.stations))])
+    return preset_sigmas(PRESETS[preset_name], space)
 
 
 def prior_sigmas(prior: str, space: ParameterSpace, free: np.ndarray) -> np.ndarray:
@@ -132,7 +121,7 @@ def prior_sigmas(prior: str, space: ParameterSpace, free: np.ndarray) -> np.ndar
         if token == "auto":
             beyond = [g not in ("drho", "dL", "tracker_rotation") for g in groups]
             if free[beyond].any():
-                sigma = _preset_sigmas(SCALE_PRESET, space)
+                sigma = _preset_sigmas(DEFAULT_PRESET, space)
             continue
         if "=" not in token:
             sigma = _preset_sigmas(token, space)
@@ -152,11 +141,9 @@ def prior_sigmas(prior: str, space: ParameterSpace, free: np.ndarray) -> np.ndar
 
 
 def scales(space: ParameterSpace, prior: np.ndarray) -> np.ndarray:
-    """Typical size of every parameter: its prior sigma, else the default preset's sigma
-    (:data:`TRACKER_ROTATION_SCALE` for a tracker's frame)."""
-    default = _preset_sigmas(SCALE_PRESET, space)
-    default[[g == "tracker_rotation" for g in space.groups]] = TRACKER_ROTATION_SCALE
-    return np.where(np.isfinite(prior), prior, np.where(default > 0, default, 1.0))
+    """Typical size of every parameter: its prior sigma, else its default scale
+    (:func:`orthoglide_env.reading_model.default_scales`)."""
+    return np.where(np.isfinite(prior), prior, default_scales(space))
 
 
 def describe(direction: np.ndarray, names: tuple[str, ...] | list[str],

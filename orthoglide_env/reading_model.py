@@ -27,7 +27,15 @@ from .gauges import (
     stand_names,
     stand_rays,
 )
-from .geometry import AXIS_NAMES, ERROR_NAMES, MachineParams, error_group
+from .geometry import (
+    AXIS_NAMES,
+    DEFAULT_PRESET,
+    ERROR_NAMES,
+    PRESETS,
+    ErrorPreset,
+    MachineParams,
+    error_group,
+)
 from .kinematics import direct
 
 N_MACHINE: int = len(ERROR_NAMES)
@@ -96,6 +104,30 @@ class ParameterSpace:
     def __len__(self) -> int:
         return len(ERROR_NAMES) + 4 * len(self.gauges) + 3 * len(self.stations)
 
+
+
+#: Scale of a tracker frame's rotation (rad) once its readings are turned into the
+#: machine's frame by a best fit to the nominal machine: what is left is of the order of
+#: the machine's own errors over its workspace, ~1 mm over ~100 mm.
+TRACKER_ROTATION_SCALE: float = 1e-2
+
+
+def preset_sigmas(preset: ErrorPreset, space: ParameterSpace) -> np.ndarray:
+    """A preset's sigma of every parameter of ``space``: the machine errors, each stand's
+    installation tolerance, and 0 for a tracker's frame (no preset says how it was
+    turned)."""
+    stands = [preset.gauge_position] * 2 + [preset.gauge_tilt] * 2
+    return np.concatenate([preset.sigmas(), np.tile(stands, len(space.gauges)),
+                           np.zeros(3 * len(space.stations))])
+
+
+def default_scales(space: ParameterSpace) -> np.ndarray:
+    """Typical size of every parameter: the default preset's sigma, and
+    :data:`TRACKER_ROTATION_SCALE` for a tracker's frame.  It makes the numerics unit-free
+    (mm and rad) and sets what "identified" means: known better than this."""
+    scale = preset_sigmas(PRESETS[DEFAULT_PRESET], space)
+    scale[[g == "tracker_rotation" for g in space.groups]] = TRACKER_ROTATION_SCALE
+    return np.where(scale > 0, scale, 1.0)
 
 @dataclass(frozen=True)
 class Design:

@@ -21,14 +21,12 @@ from .gauges import (
     readings_from_distances,
     status_of,
 )
+from .lab import TIME
 
-#: Drive speed of every carriage (mm/s); axes move together, so a move lasts
-#: ``max |delta rho| / DRIVE_SPEED``.  A slow, careful calibration move on the prototype.
-DRIVE_SPEED: float = 20.0
-#: Dwell per posture (s): the machine settles and the operator reads the dials.
-SETTLE_AND_READ: float = 5.0
-#: Extra cost (s) of an overtravel: the gauge must be checked, re-installed and re-zeroed.
-OVERTRAVEL_PENALTY: float = 120.0
+# The lab's time table (orthoglide_env/lab.py) prices every move.
+DRIVE_SPEED: float = TIME.drive_speed_mm_s
+SETTLE_AND_READ: float = TIME.settle_and_read_s
+OVERTRAVEL_PENALTY: float = TIME.overtravel_s
 
 
 @dataclass(frozen=True)
@@ -63,9 +61,7 @@ class CalibrationTask:
     @staticmethod
     def move_time(start: np.ndarray, target: np.ndarray) -> float:
         """Seconds a real machine spends driving from ``start`` to ``target`` and reading."""
-        return float(np.max(np.abs(np.asarray(target) - np.asarray(start)))) / DRIVE_SPEED + (
-            SETTLE_AND_READ
-        )
+        return TIME.move(start, target)
 
     @staticmethod
     def pressed(machine: MachineBackend) -> np.ndarray:
