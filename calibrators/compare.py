@@ -1,154 +1,196 @@
-"""Monte-Carlo comparison of strategies over many random machines.
+"""Monte-Carlo comparison of strategies: agents x estimators, on the same machines, at an
+equal time budget.
 
-Every machine is drawn from a seed; each strategy runs its own experiment on a fresh
-episode of that machine (same seed, so the same gauge installation and noise stream),
-and is scored against the truth.  Work is spread over processes; the results are the
-same whatever the number of processes.
+Machine ``i`` of a run is drawn from seed ``seed * 1_000_003 + i``: every agent works on
+the same machine (its gauge installations and noise then follow its own actions), with the
+same lab time budget.  Every estimator reads each agent's notebook, and each estimate is
+scored against the truth: the TCP error over the workspace grid in three frames (the
+rigid one is the headline), the z-scores of the estimate along the combinations of
+machine errors it determines (1 for honest error bars), and whether the error it
+predicts for itself meets the target.  Work is spread over processes; results do not
+depend on how many.  Each finished trial can be appended to a JSON-lines file as it
+ends, and a run can resume from it.
 """
 
 from __future__ import annotations
 
-import csv
+import json
 import os
-from collections.abc import Iterator
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable, Iterator
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from contextlib import contextmanager
-from dataclasses import dataclass, fields
+from dataclasses import asdict, dataclass, field
 from multiprocessing import get_context
-from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
-from tqdm import tqdm
 
 import orthoglide_env
-from orthoglide_env.scoring import FRAMES, ScoreReport, score
+from orthoglide_env.geometry import ERROR_NAMES, MachineParams
+from orthoglide_env.lab_env import Record
+from orthoglide_env.reading_model import ParameterSpace, default_scales
+from orthoglide_env.scoring import FRAMES, score
 
-from .base import PARAM_NAMES, PARAM_SETS, get_strategy
-from .differences import differences
-from .measurements import Measurements
+from .agents import get_agent
+from .base import Estimate
+from .experiment import estimate, get_estimator, measurements_of, run_episode
+from .prediction import predicted_tcp_error
 
-
-@dataclass(frozen=True)
-class Trial:
-    """One strategy on one machine."""
-
-    strategy: str
-    machine: int
-    param_error: np.ndarray  # (6,), estimate - truth, mm
-    crlb: np.ndarray  # (6,), mm (NaN for fixed parameters)
-    std: np.ndarray  # (6,), reported standard deviations, mm
-    residual_rms: float
-    nominal_residual_rms: float  # RMS of the differences: what the nominal model leaves
-    experiment_time_s: float
-    # TCP error RMS over the workspace grid (mm), uncompensated and compensated, in the
-    # three frames of the scoring; the rigid frame is the headline.
-    tcp_before_raw_rms: float
-    tcp_before_translation_rms: float
-    tcp_before_rigid_rms: float
-    tcp_after_raw_rms: float
-    tcp_after_translation_rms: float
-    tcp_after_rigid_rms: float
-    tcp_after_raw_max: float
-    tcp_after_rigid_max: float
-
-
-#: The TCP fields of a :class:`Trial`, in the order of its CSV columns.
-TCP_FIELDS: tuple[str, ...] = tuple(f.name for f in fields(Trial) if f.name.startswith("tcp_"))
-
-
-def _tcp_fields(report: ScoreReport) -> dict[str, float]:
-    """A score's values for :data:`TCP_FIELDS`."""
-    values = {f"tcp_{when}_{frame}_rms": getattr(frames, frame).rms
-              for when, frames in (("before", report.tcp_before), ("after", report.tcp_after))
-              for frame in FRAMES}
-    values.update(tcp_after_raw_max=report.tcp_after.raw.max,
-                  tcp_after_rigid_max=report.tcp_after.rigid.max)
-    return values
+#: Fractions of an episode's time at which the accuracy-versus-time curve re-estimates.
+CURVE_FRACTIONS: tuple[float, ...] = (0.25, 0.5, 0.75)
 
 
 @dataclass(frozen=True)
 class Config:
-    strategies: tuple[str, ...]
-    errors: str
-    sigma: float
-    resolution: float
-    backend: str
-    params: str
-    seed: int
+    """What a comparison runs."""
+
+    agents: tuple[str, ...]
+    estimators: tuple[str, ...]
+    budget_s: float = 3600.0
+    errors: str = "realistic"
+    sigma: float = 0.01
+    resolution: float = 0.01
+    backend: str = "exact"
+    seed: int = 0
+    target_mm: float = 0.01  # success: predicted TCP error after rigid motion at most this
+    #: The estimator re-run at fractions of each episode's time for the accuracy-versus-time
+    #: curve ("": no curve).
+    curve_estimator: str = ""
+
+    def machine_seed(self, index: int) -> int:
+        return self.seed * 1_000_003 + index
 
 
-def _failed(name: str, index: int) -> Trial:
-    nan6 = np.full(6, np.nan)
-    return Trial(name, index, nan6, nan6, nan6, *(np.nan,) * 3,
-                 **dict.fromkeys(TCP_FIELDS, np.nan))
+@dataclass(frozen=True)
+class Trial:
+    """One agent and one estimator on one machine."""
+
+    agent: str
+    estimator: str
+    machine: int
+    failed: str = ""  # why, when the estimate could not be made
+    time_s: float = float("nan")
+    readings: int = 0
+    tcp_before: dict[str, float] = field(default_factory=dict)  # frame -> RMS mm
+    tcp_after: dict[str, float] = field(default_factory=dict)
+    predicted_rigid_mm: float = float("nan")
+    z: list[float] = field(default_factory=list)
+    error: list[float] = field(default_factory=list)  # estimate - truth, 27 errors
+    std: list[float] = field(default_factory=list)  # reported, NaN where fixed
+    curve: list[list[float]] = field(default_factory=list)  # [seconds, rigid RMS mm]
+
+    @property
+    def key(self) -> tuple[str, str, int]:
+        return self.agent, self.estimator, self.machine
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), allow_nan=True)
+
+    @classmethod
+    def from_json(cls, line: str) -> Trial:
+        return cls(**json.loads(line))
 
 
-def run_machine(env: gym.Env, config: Config, index: int) -> list[Trial]:
-    """Every strategy on machine ``index`` of the run, in ``env``.
+def machine_z_scores(est: Estimate, truth: MachineParams) -> np.ndarray:
+    """(estimate - truth) / reported std along the combinations of the fitted machine
+    errors whose reported variance is at most half their a-priori size (the data know
+    them better than the prior): standard normal for honest error bars.  Only machine
+    errors: an instrument's nuisances (stands, a tracker's frame) have no truth the
+    comparison could hold them to in every lab."""
+    idx = [k for k, name in enumerate(est.names) if name in ERROR_NAMES]
+    machine = [ERROR_NAMES.index(est.names[k]) for k in idx]
+    scale = default_scales(ParameterSpace())[machine]
+    cov = est.covariance[np.ix_(idx, idx)] / np.outer(scale, scale)
+    err = (est.machine.to_vector()[machine] - truth.to_vector()[machine]) / scale
+    values, vectors = np.linalg.eigh(cov)
+    known = vectors[:, values <= 0.5].T
+    return known @ err / np.sqrt(np.einsum("kf,fg,kg->k", known, cov, known))
 
-    Strategies that share an experiment (``Calibrator.experiment_key``) share one
-    measurement of it: the same seed would give them the same readings anyway."""
-    seed = config.seed * 1_000_003 + index
-    env.reset(seed=seed)
-    sigma = env.unwrapped.gauge_noise.effective_sigma
-    truth = env.unwrapped.true_machine
-    fresh = True  # the episode has not moved yet
-    measured: dict[str, Measurements | None] = {}
+
+def _score(agent: str, name: str, index: int, records: list[Record], time_s: float,
+           sigma: float, truth: MachineParams, with_curve: bool) -> Trial:
+    """Estimate from an agent's notebook and score against the truth."""
+    data = measurements_of(records, time_s)
+    try:
+        est = estimate(data, name, sigma)
+    except (ValueError, RuntimeError, np.linalg.LinAlgError) as exc:
+        return Trial(agent, name, index, failed=str(exc).splitlines()[0] or type(exc).__name__,
+                     time_s=data.experiment_time_s, readings=len(data))
+    report = score(est.machine, truth)
+    std = np.full(len(ERROR_NAMES), np.nan)
+    for k, n in enumerate(est.names):
+        if n in ERROR_NAMES:
+            std[ERROR_NAMES.index(n)] = np.sqrt(est.covariance[k, k])
+    curve = []
+    if with_curve:
+        for fraction in CURVE_FRACTIONS:
+            until = fraction * data.experiment_time_s
+            try:
+                part = estimate(measurements_of(records, time_s, until_s=until), name, sigma)
+                curve.append([until, score(part.machine, truth).tcp_after.rigid.rms])
+            except (ValueError, RuntimeError, np.linalg.LinAlgError):
+                curve.append([until, report.tcp_before.rigid.rms])
+        curve.append([data.experiment_time_s, report.tcp_after.rigid.rms])
+    return Trial(
+        agent, name, index, time_s=data.experiment_time_s, readings=len(data),
+        tcp_before={f: getattr(report.tcp_before, f).rms for f in FRAMES},
+        tcp_after={f: getattr(report.tcp_after, f).rms for f in FRAMES},
+        predicted_rigid_mm=predicted_tcp_error(est).rigid.rms,
+        z=machine_z_scores(est, truth).tolist(),
+        error=(est.machine.to_vector() - truth.to_vector()).tolist(), std=std.tolist(),
+        curve=curve,
+    )
+
+
+def run_machine(config: Config, index: int, envs: dict[bool, gym.Env],
+                skip: set[tuple[str, str, int]]) -> list[Trial]:
+    """Every agent and estimator of ``config`` on machine ``index``."""
     trials = []
-    for name in config.strategies:
-        strategy = get_strategy(name)
-        try:
-            key = strategy.experiment_key
-            if key not in measured:
-                if not fresh:
-                    env.reset(seed=seed)  # same machine, gauges and noise stream
-                fresh = False
-                measured[key] = None  # a failed experiment fails every strategy sharing it
-                measured[key] = strategy.collect(env)
-            data = measured[key]
-            if data is None:
-                raise RuntimeError("the shared experiment failed")
-            est = strategy.estimate(data, config.params, sigma, verify=False)
-        except (RuntimeError, ValueError):
-            # A failed calibration is a result too: it counts, it does not stop the run.
-            trials.append(_failed(name, index))
+    for agent_name in config.agents:
+        todo = [e for e in config.estimators if (agent_name, e, index) not in skip]
+        if not todo:
             continue
-        report = score(est.machine, truth)
-        free = list(PARAM_SETS[config.params])
-        crlb, std = np.full(6, np.nan), np.full(6, np.nan)
-        crlb[free] = est.crlb
-        std[free] = np.sqrt(np.diag(est.covariance))
-        trials.append(Trial(
-            name, index, np.concatenate([est.drho - truth.drho, est.dL - truth.dL]),
-            crlb, std, est.residual_rms_mm,
-            float(np.sqrt(np.mean(differences(data).values ** 2))), est.experiment_time_s,
-            **_tcp_fields(report),
-        ))
+        agent = get_agent(agent_name)
+        env = envs[agent.needs_tracker]
+        seed = config.machine_seed(index)
+        data, _ = run_episode(env, agent, seed, np.random.default_rng([seed, 1]))
+        lab = env.unwrapped
+        for name in todo:
+            trials.append(_score(agent_name, name, index, list(lab.records),
+                                 data.experiment_time_s, lab.noise.effective_sigma,
+                                 lab.true_machine, name == config.curve_estimator))
     return trials
 
 
-def run_chunk(config: Config, indices: range) -> list[Trial]:
-    """Machines ``indices`` in one environment (building a PyBullet one costs ~70 ms)."""
-    env = gym.make(orthoglide_env.ENV_ID, errors=config.errors, gauge_sigma=config.sigma,
-                   gauge_resolution=config.resolution, backend=config.backend)
+def _envs(config: Config) -> dict[bool, gym.Env]:
+    return {tracker: gym.make(orthoglide_env.LAB_ENV_ID, errors=config.errors,
+                              gauge_sigma=config.sigma, gauge_resolution=config.resolution,
+                              backend=config.backend, tracker=tracker,
+                              budget_s=config.budget_s)
+            for tracker in (False, True)}
+
+
+def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]]
+              ) -> list[Trial]:
+    """Machines ``indices`` in one pair of lab envs (one without, one with a tracker)."""
+    envs = _envs(config)
     try:
-        return [t for i in indices for t in run_machine(env, config, i)]
+        return [t for i in indices for t in run_machine(config, i, envs, skip)]
     finally:
-        env.close()
+        for env in envs.values():
+            env.close()
 
 
 #: Thread pools of the numerical libraries, limited to one thread in each worker: a
-#: worker already has its core, and the pools' extra threads only spin on the other cores
-#: (measured on 2 cores: 100 machines in 9.6 s with them, 4.2 s without).
+#: worker already has its core, and the pools' extra threads only spin on the other cores.
 _THREAD_VARIABLES: tuple[str, ...] = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
                                       "MKL_NUM_THREADS")
 
 
 @contextmanager
 def _single_threaded() -> Iterator[None]:
-    """Environment under which freshly spawned workers start single-threaded pools (the
-    pools read it when numpy is first imported); a user's own setting wins."""
+    """Environment under which freshly spawned workers start single-threaded pools; a
+    user's own setting wins."""
     saved = {k: os.environ.get(k) for k in _THREAD_VARIABLES}
     for key in _THREAD_VARIABLES:
         os.environ.setdefault(key, "1")
@@ -162,115 +204,89 @@ def _single_threaded() -> Iterator[None]:
                 os.environ[key] = value
 
 
-#: Machines per task sent to a worker: large enough to amortise the env, small enough for
-#: a live progress bar and an even spread over the workers.
-CHUNK: int = 10
+#: Machines per task sent to a worker: enough to amortise building the envs, few enough
+#: for a live progress bar and little lost work on an interrupt.
+CHUNK: int = 2
 
 
-def run(config: Config, machines: int, jobs: int | None = None,
-        progress: bool = True) -> list[Trial]:
-    """Run the comparison; ``jobs`` processes (default: every core).  The trials come in
-    machine order, the same whatever ``jobs``."""
-    jobs = jobs or os.cpu_count() or 1
-    chunks = [range(i, min(i + CHUNK, machines)) for i in range(0, machines, CHUNK)]
-    trials: list[Trial] = []
-    bar = tqdm(total=machines, desc="machines", disable=not progress, unit="machine")
+def run(config: Config, machines: int, jobs: int = 1, done: list[Trial] | None = None,
+        on_trial: Callable[[Trial], None] | None = None,
+        progress: Callable[[int], None] | None = None) -> list[Trial]:
+    """Run the comparison over ``machines`` machines with ``jobs`` processes, skipping the
+    trials in ``done``; ``on_trial`` sees each new trial as it ends, ``progress`` the
+    number of machines finished.  Trials come back in (machine, agent, estimator) order,
+    the same whatever ``jobs``.  A KeyboardInterrupt stops the workers at once and is
+    raised again, every trial finished so far having gone to ``on_trial``."""
+    for name in config.agents:
+        get_agent(name)
+    for name in config.estimators:
+        get_estimator(name)
+    done = list(done or [])
+    skip = {t.key for t in done}
+    chunks = [list(range(i, min(i + CHUNK, machines))) for i in range(0, machines, CHUNK)]
+    trials = list(done)
+
+    def collect(new: list[Trial], count: int) -> None:
+        for trial in new:
+            trials.append(trial)
+            if on_trial:
+                on_trial(trial)
+        if progress:
+            progress(count)
+
     if jobs == 1:
         for chunk in chunks:
-            trials += run_chunk(config, chunk)
-            bar.update(len(chunk))
+            collect(run_chunk(config, chunk, skip), len(chunk))
     else:
-        with _single_threaded(), ProcessPoolExecutor(jobs, mp_context=get_context("spawn")
-                                                     ) as pool:
-            futures = [pool.submit(run_chunk, config, chunk) for chunk in chunks]
-            for chunk, future in zip(chunks, futures, strict=True):
-                trials += future.result()
-                bar.update(len(chunk))
-    bar.close()
-    return trials
+        with _single_threaded():
+            pool = ProcessPoolExecutor(jobs, mp_context=get_context("spawn"))
+        try:
+            pending = {pool.submit(run_chunk, config, chunk, skip): chunk for chunk in chunks}
+            while pending:
+                finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for future in finished:
+                    collect(future.result(), len(pending.pop(future)))
+        except BaseException:
+            for process in list(getattr(pool, "_processes", {}).values()):
+                process.terminate()
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        pool.shutdown()
+    order = {(a, e): k for k, (a, e) in enumerate(
+        (a, e) for a in config.agents for e in config.estimators)}
+    return sorted(trials, key=lambda t: (t.machine, order.get((t.agent, t.estimator), 0)))
 
 
-def summary(trials: list[Trial]) -> list[dict[str, float | str]]:
-    """Per strategy: median and 95th percentile of |parameter error| (over all freed
-    parameters), TCP error RMS before and after calibration (median in every frame, the
-    rigid one first, and its 95th percentile after), experiment time, and the ratio of the
-    RMS error of each parameter to its Cramér-Rao bound (worst parameter shown)."""
+def _stats(values: list[float]) -> dict[str, float | None]:
+    values = [v for v in values if np.isfinite(v)]
+    if not values:
+        return {"median": None, "p95": None}
+    return {"median": float(np.median(values)), "p95": float(np.percentile(values, 95))}
+
+
+def summary(trials: list[Trial], target_mm: float = 0.01) -> list[dict]:
+    """One row per agent x estimator, in the order they first appear; success: the error
+    an estimate predicts for itself (rigid frame) is at most ``target_mm``."""
     rows = []
-    for name in dict.fromkeys(t.strategy for t in trials):
-        everything = [t for t in trials if t.strategy == name]
-        mine = [t for t in everything if np.isfinite(t.tcp_after_rigid_rms)]
-        err = np.array([t.param_error for t in mine])
-        free = ~np.isnan(mine[0].crlb)
-        abs_err = np.abs(err[:, free])
-        rms = np.sqrt(np.mean(err[:, free] ** 2, axis=0))
-        crlb = np.sqrt(np.mean(np.array([t.crlb[free] for t in mine]) ** 2, axis=0))
-        after = np.array([t.tcp_after_rigid_rms for t in mine])
+    for agent, name in dict.fromkeys((t.agent, t.estimator) for t in trials):
+        mine = [t for t in trials if t.agent == agent and t.estimator == name]
+        ok = [t for t in mine if not t.failed]
+        z = np.concatenate([t.z for t in ok]) if ok else np.zeros(0)
+        times = [t.time_s for t in mine]
         rows.append({
-            "strategy": name,
-            "machines": len(everything),
-            "failed": len(everything) - len(mine),
-            "param_err_median_mm": float(np.median(abs_err)),
-            "param_err_p95_mm": float(np.percentile(abs_err, 95)),
-            **{f"tcp_{when}_{frame}_rms_median_mm":
-               float(np.median([getattr(t, f"tcp_{when}_{frame}_rms") for t in mine]))
-               for when in ("before", "after") for frame in reversed(FRAMES)},
-            "tcp_after_rigid_rms_p95_mm": float(np.percentile(after, 95)),
-            "residual_rms_median_mm": float(np.median([t.residual_rms for t in mine])),
-            "experiment_time_median_s": float(np.median([t.experiment_time_s for t in mine])),
-            "rms_over_crlb_worst": float(np.max(rms / crlb)),
-            "rms_over_crlb_best": float(np.min(rms / crlb)),
+            "agent": agent,
+            "estimator": name,
+            "machines": len(mine),
+            "failed": len(mine) - len(ok),
+            "failure": next((t.failed for t in mine if t.failed), ""),
+            "time_s": {"median": float(np.median(times)), "max": float(np.max(times))},
+            "readings_median": float(np.median([t.readings for t in mine])),
+            "tcp_before_mm": {f: _stats([t.tcp_before[f] for t in ok]) for f in FRAMES},
+            "tcp_after_mm": {f: _stats([t.tcp_after[f] for t in ok]) for f in FRAMES},
+            "predicted_rigid_mm": _stats([t.predicted_rigid_mm for t in ok]),
+            "z_rms": float(np.sqrt(np.mean(z**2))) if z.size else None,
+            "success_rate": (float(np.mean([t.predicted_rigid_mm <= target_mm for t in ok]))
+                             if ok else 0.0),
         })
     return rows
 
-
-def write_outputs(trials: list[Trial], rows: list[dict], out: Path) -> list[Path]:
-    """CSV of every trial and of the summary, and PNG plots, in ``out``."""
-    out.mkdir(parents=True, exist_ok=True)
-    trial_csv = out / "trials.csv"
-    with trial_csv.open("w", newline="") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(["strategy", "machine", *(f"err_{n}" for n in PARAM_NAMES),
-                         *(f"crlb_{n}" for n in PARAM_NAMES), *TCP_FIELDS, "residual_rms",
-                         "nominal_residual_rms", "experiment_time_s"])
-        for t in trials:
-            writer.writerow([t.strategy, t.machine, *t.param_error, *t.crlb,
-                             *(getattr(t, key) for key in TCP_FIELDS), t.residual_rms,
-                             t.nominal_residual_rms, t.experiment_time_s])
-    summary_csv = out / "summary.csv"
-    with summary_csv.open("w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-    return [trial_csv, summary_csv, *_plots(trials, out)]
-
-
-def _plots(trials: list[Trial], out: Path) -> list[Path]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    from matplotlib import pyplot as plt
-
-    names = list(dict.fromkeys(t.strategy for t in trials))
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
-    for name in names:
-        mine = [t for t in trials if t.strategy == name and np.isfinite(t.tcp_after_rigid_rms)]
-        err = np.array([t.param_error for t in mine])
-        axes[0].plot(PARAM_NAMES, np.sqrt(np.nanmean(err**2, axis=0)), "o-", label=f"{name} RMS")
-        crlb = np.sqrt(np.mean(np.array([t.crlb for t in mine]) ** 2, axis=0))
-        axes[0].plot(PARAM_NAMES, crlb, "x--", label=f"{name} CRLB")
-    axes[0].set_ylabel("parameter error (mm)")
-    axes[0].set_title("RMS parameter error vs Cramér-Rao bound")
-    axes[0].legend(fontsize=8)
-    before = [t.tcp_before_rigid_rms for t in trials if t.strategy == names[0]
-              and np.isfinite(t.tcp_before_rigid_rms)]
-    data = [before] + [[t.tcp_after_rigid_rms for t in trials if t.strategy == n
-                        and np.isfinite(t.tcp_after_rigid_rms)] for n in names]
-    axes[1].boxplot(data, tick_labels=["uncalibrated", *names])
-    axes[1].set_yscale("log")
-    axes[1].set_ylabel("TCP error RMS after best-fit rigid motion (mm)")
-    axes[1].set_title("Positioning accuracy")
-    fig.tight_layout()
-    path = out / "compare.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return [path]

@@ -77,7 +77,7 @@ class BatchFit:
     retained: np.ndarray  # (M,) directions moved by the fit
     converged: np.ndarray  # (M,) bool
     iterations: np.ndarray  # (M,)
-    sigma: float  # the gauge sigma the fit was weighted with (mm)
+    sigma: float | np.ndarray  # the noise each reading was weighted with (mm)
     #: (M, n, n) covariance of (estimate - truth) over every parameter, physical units,
     #: with the errors the model leaves out (see :func:`_model_error`).
     error_covariance: np.ndarray
@@ -160,7 +160,8 @@ def _centre(values: np.ndarray, mask: np.ndarray, onehot: np.ndarray) -> np.ndar
 class _Problem:
     """The least-squares problem of :func:`fit_batch`, for a subset ``rows`` of machines."""
 
-    def __init__(self, design: Design, values: np.ndarray, mask: np.ndarray, sigma: float,
+    def __init__(self, design: Design, values: np.ndarray, mask: np.ndarray,
+                 sigma: float | np.ndarray,
                  free: np.ndarray, prior: np.ndarray, scale: np.ndarray) -> None:
         self.design, self.values, self.mask, self.free, self.scale = (
             design, values, mask, free, scale)
@@ -169,7 +170,9 @@ class _Problem:
         with np.errstate(divide="ignore"):
             self.precision = np.where(np.isfinite(prior[self.idx]),
                                       (self.s / prior[self.idx]) ** 2, 0.0)
-        self.weight = 1.0 / max(sigma, NOISE_FLOOR)
+        # One instrument per mounting, so one weight per mounting: centring the weighted
+        # residuals of a mounting is then its weighted zero.
+        self.weight = 1.0 / np.maximum(np.broadcast_to(sigma, (len(design),)), NOISE_FLOOR)
         self.onehot = np.eye(len(design.mountings))[design.mounting]
 
     def residual(self, theta: np.ndarray, rows: np.ndarray,
@@ -185,13 +188,13 @@ class _Problem:
         """Whitened Jacobian over ``free`` (default: the free parameters), scaled units."""
         free = self.free if free is None else free
         jac = jacobian(theta, self.design, free, self.scale)
-        return _centre(jac * self.weight, self.mask[rows], self.onehot)
+        return _centre(jac * self.weight[:, None], self.mask[rows], self.onehot)
 
     def cost_resolution(self, cost: np.ndarray) -> np.ndarray:
         """What a cost comparison can resolve, with a safety factor: each reading's model
         carries round-off ~eps * L (positions of the order of the leg length), so the cost
         carries ~2 sqrt(cost) eps L / sigma."""
-        roundoff = np.finfo(float).eps * L_NOMINAL * self.weight
+        roundoff = np.finfo(float).eps * L_NOMINAL * np.max(self.weight)
         return RESOLUTION_MARGIN * 2 * (np.sqrt(cost) + 1.0) * roundoff
 
     def normal(self, jac: np.ndarray, r: np.ndarray, theta: np.ndarray
@@ -300,7 +303,7 @@ def _scipy_least_squares(problem: _Problem, theta: np.ndarray, max_iterations: i
 SOLVERS = {"gauss-newton": _damped_gauss_newton, "scipy": _scipy_least_squares}
 
 
-def fit_batch(design: Design, values: np.ndarray, mask: np.ndarray, sigma: float,
+def fit_batch(design: Design, values: np.ndarray, mask: np.ndarray, sigma: float | np.ndarray,
               free: np.ndarray, fixed: np.ndarray, prior: np.ndarray, scale: np.ndarray,
               max_iterations: int = MAX_ITERATIONS, unmodelled: np.ndarray | None = None,
               solver: str = "gauss-newton") -> BatchFit:
@@ -310,7 +313,8 @@ def fit_batch(design: Design, values: np.ndarray, mask: np.ndarray, sigma: float
     free ones, values of the others, prior sigmas or inf, scales).  The fit starts from
     nominal (the prior mean) for the free parameters.  ``unmodelled``: the parameters that
     are neither free nor known (the model leaves them out); their misfit goes into the
-    reported covariance (:func:`_model_error`).  ``solver``: one of :data:`SOLVERS`."""
+    reported covariance (:func:`_model_error`).  ``solver``: one of :data:`SOLVERS`.
+    ``sigma``: the noise of every reading (mm), or one for all."""
     if solver not in SOLVERS:
         raise ValueError(f"unknown solver '{solver}'; choose from {list(SOLVERS)}")
     values = np.atleast_2d(np.asarray(values, dtype=float))

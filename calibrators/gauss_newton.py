@@ -16,6 +16,7 @@ import numpy as np
 
 from orthoglide_env.geometry import MachineParams
 from orthoglide_env.kinematics import direct
+from orthoglide_env.lab import TRACKER_SIGMA
 from orthoglide_env.reading_model import Design, TrackerAxis, predict, station_of
 from orthoglide_env.scoring import best_rigid_motion
 
@@ -34,7 +35,7 @@ from .parameters import (
 )
 
 #: A reading is an outlier when its residual exceeds this many robust standard deviations
-#: (1.4826 x the median absolute residual, or the gauge sigma when larger): a normal
+#: (1.4826 x the median absolute residual, or its instrument's sigma when larger): a normal
 #: reading does so with probability 6e-5, so 60 readings flag a good one once in 270 fits.
 OUTLIER_K: float = 4.0
 #: At most this fraction of the readings is flagged; beyond it the model, not the
@@ -92,8 +93,10 @@ class GaussNewtonCalibrator(PaperCalibrator):
     def estimate(self, data: Measurements, params: str = "paper6", sigma: float = 0.01,
                  *, verify: bool = True, prior: str = "auto",
                  fix: dict[str, float] | None = None, keep_outliers: bool = False,
-                 holdout: float = 0.0, seed: int = 0, solver: str = "gauss-newton"
-                 ) -> Estimate:
+                 holdout: float = 0.0, seed: int = 0, solver: str = "gauss-newton",
+                 tracker_sigma: float = TRACKER_SIGMA) -> Estimate:
+        """Fit ``data``; ``sigma`` is a dial gauge's noise, ``tracker_sigma`` a laser
+        tracker coordinate's (mm)."""
         design, values = design_of(data)
         space = design.space
         free = select(params, space)
@@ -112,8 +115,11 @@ class GaussNewtonCalibrator(PaperCalibrator):
                              f"gauge zeros and the parameters without a prior: at least "
                              f"{needed} are needed")
 
+        noise = np.where([isinstance(design.specs[m], TrackerAxis) for m in design.mounting],
+                         tracker_sigma, sigma)
+
         def fit(mask: np.ndarray) -> BatchFit:
-            result = fit_batch(design, values[None], mask[None], sigma, free, fixed, priors,
+            result = fit_batch(design, values[None], mask[None], noise, free, fixed, priors,
                                scale, unmodelled=unmodelled, solver=solver)
             if not result.converged[0]:
                 raise RuntimeError("the exact-model fit did not converge")
@@ -125,10 +131,11 @@ class GaussNewtonCalibrator(PaperCalibrator):
         result = fit(mask)
         outliers: list[int] = []
         while len(outliers) < MAX_OUTLIER_FRACTION * len(values):
-            residual = np.abs(result.residuals[0])
+            # Residuals in units of their instrument's noise: gauges and a tracker differ.
+            residual = np.abs(result.residuals[0]) / np.maximum(noise, NOISE_FLOOR)
             robust = 1.4826 * np.nanmedian(residual)
             worst = int(np.nanargmax(residual))
-            if residual[worst] <= OUTLIER_K * max(sigma, robust, NOISE_FLOOR):
+            if residual[worst] <= OUTLIER_K * max(1.0, robust):
                 break
             outliers.append(worst)
             mask[worst] = False
@@ -157,7 +164,8 @@ class GaussNewtonCalibrator(PaperCalibrator):
         theta = result.theta[0]
         warnings = []
         if result.misfit[0]:
-            hint = ("try --params extended" if not result.free[6:].any() else
+            beyond = [g not in ("drho", "dL", "tracker_rotation") for g in space.groups]
+            hint = ("try --params extended" if not result.free[beyond].any() else
                     "look for outliers, a gauge that moved, or a slipping stand")
             warnings.append(
                 f"the model does not explain the readings: chi2/dof = "

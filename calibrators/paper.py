@@ -13,6 +13,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from orthoglide_env.gauges import GaugeSpec
+
 from .base import (
     PARAM_NAMES,
     PARAM_SETS,
@@ -105,6 +107,9 @@ class PaperCalibrator(Calibrator):
             raise ValueError(f"the paper's linear fit (eq. 10) estimates {list(PARAM_SETS)} "
                              f"only, not '{params}': use --strategy gauss-newton")
         free = check_params(params)
+        if any(not isinstance(m.gauge, GaugeSpec) for m in data.items):
+            raise ValueError("the paper's linear fit (eq. 10) reads dial gauges only: use "
+                             "--strategy gauss-newton for a tracker's readings")
         rows = differences(data)
         if len(rows) < len(free):
             raise ValueError(f"only {len(rows)} usable differences for {len(free)} parameters: "

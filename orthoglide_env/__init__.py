@@ -1,11 +1,14 @@
-"""Virtual Orthoglide: geometry, kinematics, PyBullet machine, gauges and Gymnasium env.
+"""Virtual Orthoglide: geometry, kinematics, PyBullet machine, gauges and Gymnasium envs.
 
-Importing the package registers ``OrthoglideCalibration-v0`` with Gymnasium.
+Importing the package registers ``OrthoglideCalibration-v0`` (move and read) and
+``OrthoglideLab-v0`` (the whole lab: gauge handling, stands, tracker, a clock) with
+Gymnasium.
 """
 
 import gymnasium
 
 ENV_ID = "OrthoglideCalibration-v0"
+LAB_ENV_ID = "OrthoglideLab-v0"
 
 if ENV_ID not in gymnasium.registry:
     gymnasium.register(
@@ -13,5 +16,8 @@ if ENV_ID not in gymnasium.registry:
         entry_point="orthoglide_env.env:OrthoglideCalibrationEnv",
         max_episode_steps=500,
     )
+if LAB_ENV_ID not in gymnasium.registry:
+    # No step limit: an episode ends on the agent's stop or the lab's time budget.
+    gymnasium.register(id=LAB_ENV_ID, entry_point="orthoglide_env.lab_env:OrthoglideLabEnv")
 
-__all__ = ["ENV_ID"]
+__all__ = ["ENV_ID", "LAB_ENV_ID"]

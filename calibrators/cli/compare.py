@@ -1,64 +1,235 @@
-"""``orthoglide compare``: Monte-Carlo comparison of strategies."""
+"""``orthoglide compare``: agents x estimators on the same random machines, equal budget."""
 
 from __future__ import annotations
 
 import argparse
+import csv
+import json
+import sys
 import time
 from pathlib import Path
 
+import numpy as np
+from tqdm import tqdm
+
+from orthoglide_env.gauges import check_noise
 from orthoglide_env.geometry import PRESETS
+from orthoglide_env.scoring import FRAMES
 
-from ..base import PARAM_SETS, get_strategy
-from .common import UsageError, add_noise_options, noise_of
+from ..agents import available as agents_available
+from ..compare import Config, Trial, run, summary
+from ..experiment import ESTIMATORS
+from .common import UsageError
+
+TRIALS_FILE = "trials.jsonl"
+#: Most processes a run may ask for: beyond the cores they only compete.
+MAX_JOBS = 256
 
 
-def run(args: argparse.Namespace) -> None:
-    from ..compare import Config, run, summary, write_outputs
+def _names(text: str, option: str) -> tuple[str, ...]:
+    names = tuple(dict.fromkeys(n.strip() for n in text.split(",") if n.strip()))
+    if not names:
+        raise UsageError(f"{option} needs at least one name")
+    return names
 
-    names = tuple(s.strip() for s in args.strategies.split(",") if s.strip())
-    for name in names:
-        get_strategy(name)  # fail before any work on a bad name
-    if args.machines < 1:
-        raise UsageError("--machines must be at least 1")
-    sigma, resolution = noise_of(args)
-    config = Config(names, args.errors, sigma, resolution, args.backend, args.params, args.seed)
+
+def _check(args: argparse.Namespace) -> Config:
+    agents = _names(args.agents, "--agents")
+    known = agents_available()
+    for name in agents:
+        if name not in known:
+            raise UsageError(f"unknown agent '{name}'; choose from {known}")
+    estimators = _names(args.estimators, "--estimators")
+    for name in estimators:
+        if name not in ESTIMATORS:
+            raise UsageError(f"unknown estimator '{name}'; choose from {list(ESTIMATORS)}")
+    if not 1 <= args.machines <= 1_000_000:
+        raise UsageError("--machines must be between 1 and 1000000")
+    if not 0 <= args.seed < 2**32:
+        raise UsageError("--seed must be between 0 and 2**32 - 1")
+    if not (np.isfinite(args.budget) and 0 < args.budget <= 1e6):
+        raise UsageError("--budget must be a number of seconds in (0, 1e6]")
+    if not (np.isfinite(args.target) and args.target > 0):
+        raise UsageError("--target must be a positive number of mm")
+    if not 1 <= args.jobs <= MAX_JOBS:
+        raise UsageError(f"--jobs must be between 1 and {MAX_JOBS}")
+    if args.resume and not args.out:
+        raise UsageError("--resume continues the run kept in --out: give --out")
+    sigma = 0.0 if args.noise_free else args.sigma
+    check_noise(sigma, 0.0 if args.noise_free else args.resolution, names=("--sigma",
+                                                                           "--resolution"))
+    return Config(agents, estimators, args.budget, args.errors, sigma,
+                  0.0 if args.noise_free else args.resolution, args.backend, args.seed,
+                  args.target, curve_estimator=_curve_estimator(estimators) if args.out else "")
+
+
+def _curve_estimator(estimators: tuple[str, ...]) -> str:
+    """The estimator of the accuracy-versus-time curve: ``extended`` reads every agent's
+    instruments, so it draws every curve; otherwise the first one."""
+    return "extended" if "extended" in estimators else estimators[0]
+
+
+def _prepare_out(args: argparse.Namespace, config: Config) -> tuple[Path | None, list[Trial]]:
+    """The output folder, checked before any work, and the trials a resumed run has."""
+    if not args.out:
+        return None, []
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {out} exists and is not a folder")
+    trials_path = out / TRIALS_FILE
+    config_path = out / "config.json"
+    if args.resume:
+        if not trials_path.exists():
+            raise UsageError(f"nothing to resume: {trials_path} does not exist")
+        saved = json.loads(config_path.read_text()) if config_path.exists() else None
+        if saved != _config_dict(config, args.machines):
+            raise UsageError(f"--resume needs the options of the run in {out} "
+                             f"({config_path}): they differ")
+        done = []
+        for n, line in enumerate(trials_path.read_text().splitlines(), start=1):
+            try:
+                done.append(Trial.from_json(line))
+            except (ValueError, TypeError):
+                # The last line of an interrupted run may be cut short: drop it.
+                if n < len(trials_path.read_text().splitlines()):
+                    raise UsageError(f"{trials_path}:{n}: not a trial") from None
+        return out, done
+    if trials_path.exists():
+        raise UsageError(f"{out} already holds a run: use --resume, or another --out")
+    out.mkdir(parents=True, exist_ok=True)
+    probe = out / ".writable"
+    probe.write_text("")
+    probe.unlink()
+    config_path.write_text(json.dumps(_config_dict(config, args.machines)) + "\n")
+    return out, []
+
+
+def _config_dict(config: Config, machines: int) -> dict:
+    data = dict(vars(config))
+    data.update(agents=list(config.agents), estimators=list(config.estimators),
+                machines=machines)
+    return data
+
+
+def run_command(args: argparse.Namespace) -> None:
+    config = _check(args)
+    out, done = _prepare_out(args, config)
+    handle = (out / TRIALS_FILE).open("a") if out else None
+
+    def keep(trial: Trial) -> None:
+        if handle:
+            handle.write(trial.to_json() + "\n")
+            handle.flush()
+
+    finished = {t.machine for t in done}
+    bar = tqdm(total=args.machines, initial=len(finished), desc="machines", unit="machine",
+               disable=args.quiet or args.json, file=sys.stderr)
     start = time.perf_counter()
-    trials = run(config, args.machines, args.jobs, progress=not args.quiet)
-    wall = time.perf_counter() - start
-    rows = summary(trials)
-    paths = write_outputs(trials, rows, Path(args.out)) if args.out else []
-    header = (f"{'strategy':14}{'param err med':>14}{'p95':>8}{'TCP before (rigid) med':>23}"
-              f"{'TCP after (rigid) med':>22}{'p95':>8}{'(raw) med':>10}{'resid':>8}"
-              f"{'time s':>8}{'RMS/CRLB':>15}")
-    print(f"{args.machines} machines ({args.errors} errors, sigma {sigma} mm, "
-          f"{args.backend} backend), {wall:.1f} s; errors in mm, TCP errors RMS over the "
-          "workspace after the best-fit rigid motion (raw: world frame)")
-    print(header)
+    collected: list[Trial] = list(done)
+    try:
+        trials = run(config, args.machines, args.jobs, done,
+                     on_trial=lambda t: (collected.append(t), keep(t)), progress=bar.update)
+    except KeyboardInterrupt:
+        bar.close()
+        if handle:
+            handle.close()
+        rows = summary(collected, config.target_mm)
+        print(f"orthoglide compare: interrupted after {len(collected)} trials"
+              + (f"; kept in {out / TRIALS_FILE}, continue with --resume" if out else ""),
+              file=sys.stderr)
+        _print(rows, config, len({t.machine for t in collected}), time.perf_counter() - start,
+               args.json)
+        raise SystemExit(130) from None
+    bar.close()
+    if handle:
+        handle.close()
+    rows = summary(trials, config.target_mm)
+    _print(rows, config, args.machines, time.perf_counter() - start, args.json)
+    if out:
+        for path in _write(trials, rows, out, config):
+            print(f"wrote {path}", file=sys.stderr if args.json else sys.stdout)
+
+
+def _print(rows: list[dict], config: Config, machines: int, seconds: float,
+           as_json: bool) -> None:
+    if as_json:
+        print(json.dumps({"config": _config_dict(config, machines), "rows": rows},
+                         allow_nan=False))
+        return
+    print(f"{machines} machines ({config.errors} errors, gauge sigma {config.sigma} mm, "
+          f"budget {config.budget_s:g} s, {config.backend} backend), {seconds:.1f} s. TCP error "
+          "RMS over the workspace after calibration (mm), median over machines; rigid = after "
+          "the best-fit rigid motion (the headline), raw = world frame")
+    print(f"{'agent':10}{'estimator':15}{'TCP after (rigid) med':>22}{'p95':>9}"
+          f"{'(raw) med':>11}{'time s med':>11}{'z-RMS':>8}{'success':>9}{'failed':>8}")
     for r in rows:
-        print(f"{r['strategy']:14}{r['param_err_median_mm']:14.4f}{r['param_err_p95_mm']:8.4f}"
-              f"{r['tcp_before_rigid_rms_median_mm']:23.4f}"
-              f"{r['tcp_after_rigid_rms_median_mm']:22.4f}{r['tcp_after_rigid_rms_p95_mm']:8.4f}"
-              f"{r['tcp_after_raw_rms_median_mm']:10.4f}{r['residual_rms_median_mm']:8.4f}"
-              f"{r['experiment_time_median_s']:8.0f}"
-              f"{r['rms_over_crlb_best']:7.2f}-{r['rms_over_crlb_worst']:<7.2f}")
+        rigid, raw = r["tcp_after_mm"]["rigid"], r["tcp_after_mm"]["raw"]
+
+        def show(value: float | None, width: int, digits: int) -> str:
+            return f"{value:{width}.{digits}f}" if value is not None else f"{'-':>{width}}"
+
+        print(f"{r['agent']:10}{r['estimator']:15}{show(rigid['median'], 22, 4)}"
+              f"{show(rigid['p95'], 9, 4)}{show(raw['median'], 11, 3)}"
+              f"{r['time_s']['median']:11.0f}{show(r['z_rms'], 8, 2)}"
+              f"{r['success_rate']:9.0%}{r['failed']:8d}")
     for r in rows:
         if r["failed"]:
-            print(f"{r['strategy']}: {r['failed']} of {r['machines']} calibrations failed")
-    for path in paths:
-        print(f"wrote {path}")
+            print(f"{r['agent']} x {r['estimator']}: {r['failed']} of {r['machines']} failed "
+                  f"({r['failure']})")
+
+
+def _write(trials: list[Trial], rows: list[dict], out: Path, config: Config) -> list[Path]:
+    summary_csv = out / "summary.csv"
+    with summary_csv.open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["agent", "estimator", "machines", "failed", "time_s_median",
+                         *(f"tcp_after_{f}_median_mm" for f in FRAMES),
+                         "tcp_after_rigid_p95_mm", "z_rms", "success_rate"])
+        for r in rows:
+            writer.writerow([r["agent"], r["estimator"], r["machines"], r["failed"],
+                             r["time_s"]["median"],
+                             *(r["tcp_after_mm"][f]["median"] for f in FRAMES),
+                             r["tcp_after_mm"]["rigid"]["p95"], r["z_rms"], r["success_rate"]])
+    from .plots import accuracy_vs_time, boxes
+
+    return [out / TRIALS_FILE, summary_csv, accuracy_vs_time(trials, config, out),
+            boxes(trials, config, out)]
 
 
 def add(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("compare", help="Monte-Carlo comparison of strategies")
-    p.add_argument("--strategies", default="paper,gauss-newton")
-    p.add_argument("--machines", type=int, default=100)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--jobs", type=int, default=None, help="processes (default: every core)")
-    p.add_argument("--out", default=None, help="folder for CSV files and PNG plots")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.add_argument("--params", choices=list(PARAM_SETS), default="paper6")
+    p = sub.add_parser("compare", help="agents x estimators on the same random machines, "
+                                       "at an equal time budget")
+    p.add_argument("--agents", default="paper,random,tracker",
+                   help=f"comma list of agents ({', '.join(agents_available())}) "
+                        "(default: %(default)s)")
+    p.add_argument("--estimators", default="paper,extended",
+                   help=f"comma list of estimators ({', '.join(ESTIMATORS)}) "
+                        "(default: %(default)s)")
+    p.add_argument("--budget", type=float, default=3600.0,
+                   help="lab time budget of every agent (s, default %(default)s)")
+    p.add_argument("--machines", type=int, default=20,
+                   help="random machines (default %(default)s)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the run (default %(default)s)")
     p.add_argument("--errors", choices=sorted(PRESETS), default="realistic",
-                   help="error preset of random machines")
-    p.add_argument("--backend", choices=["pybullet", "exact"], default="pybullet")
-    add_noise_options(p)
-    p.set_defaults(func=run)
+                   help="error preset of the machines and gauge stands (default %(default)s)")
+    group = p.add_mutually_exclusive_group()
+    group.add_argument("--sigma", type=float, default=0.01,
+                       help="gauge repeatability (mm, default %(default)s)")
+    group.add_argument("--noise-free", action="store_true", help="ideal gauges")
+    p.add_argument("--resolution", type=float, default=0.01,
+                   help="gauge display resolution (mm, default %(default)s)")
+    p.add_argument("--backend", choices=["exact", "pybullet"], default="exact",
+                   help="simulator (default %(default)s)")
+    p.add_argument("--target", type=float, default=0.01,
+                   help="success: predicted TCP error after rigid motion at most this "
+                        "(mm, default %(default)s)")
+    p.add_argument("--jobs", type=int, default=1,
+                   help="worker processes (default %(default)s)")
+    p.add_argument("--out", default=None,
+                   help="folder: every trial as it ends (trials.jsonl), summary.csv, plots")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the interrupted run kept in --out")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--json", action="store_true",
+                   help="print one JSON object: the config and one row per agent x estimator")
+    p.set_defaults(func=run_command)

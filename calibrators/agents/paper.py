@@ -1,0 +1,45 @@
+"""``paper``: the paper's procedure, as a technician does it.
+
+For each leg in turn: engage that leg's two gauges and lift the other four (so no bar
+pushes a gauge past its travel), then Zero -> Max -> Min three times and a last Zero,
+reading at every posture (section 4 of the paper).  Then stop.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from orthoglide_env.kinematics import paper_posture
+from orthoglide_env.lab import SLOTS, Op
+
+from ..paper import REPETITIONS, leg_sequence
+from .base import Agent, action, register
+
+
+@register
+class PaperAgent(Agent):
+    name = "paper"
+
+    def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
+              rng: np.random.Generator) -> None:
+        super().reset(env, observation, rng)
+        legs = [SLOTS[s].leg if s < len(SLOTS) else -1 for s in observation["slot"]]
+        engaged = [bool(e) for e in observation["engaged"]]
+        plan: list[dict[str, Any]] = []
+        for leg in range(3):
+            if leg not in legs:
+                raise ValueError(f"the paper's procedure needs a stand on the {'xyz'[leg]} leg")
+            for k, g in enumerate(legs):
+                want = g == leg
+                if g != -1 and engaged[k] != want:
+                    plan.append(action(Op.ENGAGE if want else Op.LIFT, stand=k))
+                    engaged[k] = want
+            plan += [action(Op.MOVE, paper_posture(p)) for p, _ in leg_sequence(leg, REPETITIONS)]
+        plan.append(action(Op.STOP))
+        self.plan = plan
+
+    def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
+        return self.plan.pop(0)

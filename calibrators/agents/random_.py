@@ -1,0 +1,87 @@
+"""``random``: random operations within the budget, kept safe by the nominal model.
+
+The floor any designed experiment must beat.  At every step it picks, at random, a move to
+a random posture of the joint cube (60 %), lifting or engaging a random stand (20 %), or
+re-mounting a random stand on a random free slot (20 %).  It uses what a careful
+technician knows, the nominal machine: a move is only made to a posture the nominal model
+reaches with every part clear of the others and no engaged gauge pressed within
+:data:`MARGIN` of its travel.  It works until the budget runs out.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from orthoglide_env.collisions import clearance
+from orthoglide_env.gauges import (
+    collision_boxes,
+    exact_ray_distances,
+    exact_target_boxes,
+    install,
+    installed_on,
+    pressed_past_travel,
+)
+from orthoglide_env.geometry import RHO_MAX, RHO_MIN, MachineParams
+from orthoglide_env.kinematics import UnreachableError, direct
+from orthoglide_env.lab import SLOTS, Op
+
+from .base import Agent, action, register
+
+#: A posture is safe for an engaged gauge when the nominal tip stays this far (mm) from
+#: the end of its travel: more than the machine errors move a bar at mid-leg.
+MARGIN: float = 2.0
+#: Closest two parts that must never meet may come, on the nominal model (mm).
+CLEARANCE: float = 3.0
+TRIES: int = 50
+
+
+def is_safe(rho: np.ndarray, slots: list[int]) -> bool:
+    """Whether the nominal machine reaches ``rho`` with parts apart and the gauges at
+    ``slots`` (engaged) neither pressed nor within the margin of being pressed."""
+    nominal = MachineParams()
+    try:
+        p = direct(nominal, rho)
+    except UnreachableError:
+        return False
+    boxes = collision_boxes(nominal, rho, p)
+    if clearance(nominal, rho, boxes) < CLEARANCE:
+        return False
+    if not slots:
+        return True
+    gauges = installed_on(nominal, install([SLOTS[s] for s in slots], nominal))
+    if pressed_past_travel(gauges, *exact_target_boxes(gauges, boxes)).any():
+        return False
+    t = exact_ray_distances(nominal, gauges, rho, boxes)
+    return not np.any(t < MARGIN)
+
+
+@register
+class RandomAgent(Agent):
+    name = "random"
+
+    def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
+              rng: np.random.Generator) -> None:
+        super().reset(env, observation, rng)
+        self.n_slots = len(SLOTS)
+
+    def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
+        slots = [int(s) for s in observation["slot"]]
+        engaged = [k for k, e in enumerate(observation["engaged"]) if e and slots[k] < len(SLOTS)]
+        choice = self.rng.random()
+        if choice < 0.6:
+            for _ in range(TRIES):
+                rho = self.rng.uniform(RHO_MIN, RHO_MAX, 3)
+                if is_safe(rho, [slots[k] for k in engaged]):
+                    return action(Op.MOVE, rho)
+        stand = int(self.rng.integers(len(slots)))
+        if choice < 0.8 and slots[stand] < len(SLOTS):
+            return action(Op.LIFT if stand in engaged else Op.ENGAGE, stand=stand)
+        free = sorted(set(range(len(SLOTS))) - set(slots))
+        slot = int(self.rng.choice(free))
+        if is_safe(np.zeros(3), [slots[k] for k in engaged if k != stand] + [slot]):
+            return action(Op.REMOUNT, stand=stand, slot=slot)
+        return action(Op.LIFT, stand=stand) if slots[stand] < len(SLOTS) else action(
+            Op.MOVE, np.zeros(3))

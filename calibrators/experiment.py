@@ -1,0 +1,91 @@
+"""Running an agent in the lab, and what its estimators make of the notebook.
+
+An experiment is an agent's episode in ``OrthoglideLab-v0``; its result is the lab
+notebook (``env.unwrapped.records``) as :class:`~calibrators.measurements.Measurements`,
+which any estimator reads exactly as it reads a measurement file.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import gymnasium as gym
+import numpy as np
+
+from orthoglide_env.geometry import MachineParams
+from orthoglide_env.kinematics import PAPER_POSTURES, paper_posture
+from orthoglide_env.lab_env import Record
+
+from .agents import Agent
+from .base import Estimate, get_strategy
+from .measurements import Measurement, Measurements
+
+#: Paper postures by their control coordinates, to label the notebook's readings.
+_PAPER_RHO: dict[tuple[float, ...], str] = {
+    tuple(float(v) for v in paper_posture(p)): p for p in PAPER_POSTURES}
+
+
+def measurements_of(records: list[Record], time_s: float = 0.0,
+                    until_s: float | None = None) -> Measurements:
+    """The notebook as measurements (only what was read by ``until_s`` seconds, if given).
+    A reading at a paper posture is labelled with its name."""
+    items = [Measurement(r.spec, _PAPER_RHO.get(r.rho, ""), 1, r.reading, r.rho, r.mounting)
+             for r in records if until_s is None or r.time_s <= until_s]
+    return Measurements(items, time_s if until_s is None else min(time_s, until_s))
+
+
+@dataclass(frozen=True)
+class EstimatorSpec:
+    """An estimator of the comparison: a strategy's estimate with its options."""
+
+    strategy: str
+    params: str
+    prior: str = "auto"
+
+
+#: The estimators ``compare`` offers, by name.
+ESTIMATORS: dict[str, EstimatorSpec] = {
+    "paper": EstimatorSpec("paper", "paper6", "none"),
+    "paper6": EstimatorSpec("gauss-newton", "paper6", "none"),
+    "extended": EstimatorSpec("gauss-newton", "extended", "auto"),
+    "extended-base": EstimatorSpec("gauss-newton", "extended", "none"),
+}
+
+
+def get_estimator(name: str) -> EstimatorSpec:
+    if name not in ESTIMATORS:
+        raise ValueError(f"unknown estimator '{name}'; choose from {list(ESTIMATORS)}")
+    return ESTIMATORS[name]
+
+
+def estimate(data: Measurements, name: str, sigma: float) -> Estimate:
+    """Estimate with the named estimator of :data:`ESTIMATORS`."""
+    spec = get_estimator(name)
+    return get_strategy(spec.strategy).estimate(data, spec.params, sigma, verify=False,
+                                                prior=spec.prior)
+
+
+def make_estimator(name: str = "extended") -> Callable[[list[Record], float], MachineParams]:
+    """The lab env's ``estimator`` for its accuracy reward: notebook and sigma to the
+    estimated machine."""
+    get_estimator(name)
+
+    def estimator(records: list[Record], sigma: float) -> MachineParams:
+        return estimate(measurements_of(records), name, sigma).machine
+
+    return estimator
+
+
+def run_episode(env: gym.Env, agent: Agent, seed: int, rng: np.random.Generator | None = None,
+                options: dict | None = None) -> tuple[Measurements, dict]:
+    """Reset ``env`` with ``seed`` (and ``options``), let ``agent`` work until the episode
+    ends, and return the notebook as measurements and the last step's info."""
+    observation, info = env.reset(seed=seed, options=options)
+    agent.reset(env, observation, rng if rng is not None else np.random.default_rng(seed))
+    while True:
+        observation, _, terminated, truncated, info = env.step(agent.act(observation, info))
+        if terminated or truncated:
+            break
+    lab = env.unwrapped
+    return measurements_of(lab.records, float(observation["time"][0])), info
