@@ -9,6 +9,7 @@ import gymnasium
 
 ENV_ID = "OrthoglideCalibration-v0"
 LAB_ENV_ID = "OrthoglideLab-v0"
+FLAT_LAB_ENV_ID = "OrthoglideLabFlat-v0"
 
 if ENV_ID not in gymnasium.registry:
     gymnasium.register(
@@ -19,5 +20,8 @@ if ENV_ID not in gymnasium.registry:
 if LAB_ENV_ID not in gymnasium.registry:
     # No step limit: an episode ends on the agent's stop or the lab's time budget.
     gymnasium.register(id=LAB_ENV_ID, entry_point="orthoglide_env.lab_env:OrthoglideLabEnv")
+if FLAT_LAB_ENV_ID not in gymnasium.registry:
+    # The lab with one Box of actions and one of observations, for off-the-shelf learners.
+    gymnasium.register(id=FLAT_LAB_ENV_ID, entry_point="orthoglide_env.wrappers:flat_lab_env")
 
-__all__ = ["ENV_ID", "LAB_ENV_ID"]
+__all__ = ["ENV_ID", "FLAT_LAB_ENV_ID", "LAB_ENV_ID"]

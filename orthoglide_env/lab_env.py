@@ -42,6 +42,7 @@ from .geometry import (
     check_validity,
     get_preset,
 )
+from .kinematics import UnreachableError, direct
 from .lab import (
     OP_NAMES,
     PAPER_SLOTS,
@@ -117,8 +118,10 @@ class OrthoglideLabEnv(gym.Env):
     overtravel). ``re-mount`` drives to Zero, moves the stand to the slot with new
     installation errors, sets the gauge at mid-travel and zeroes it, and reads at Zero
     (that reading opens the new mounting). An action outside its space raises
-    ``ValueError`` and changes nothing; so does lifting or engaging a stand that is not
-    mounted, and re-mounting onto a slot another stand holds.
+    ``ValueError`` and changes nothing.  A well-formed operation that cannot be done
+    (lifting or engaging a stand that is not mounted, re-mounting onto a slot another stand
+    holds, driving where the machine cannot assemble) is refused: it costs the 3 s of a
+    lever flick, changes nothing else, and ``info["refused"]`` says why.
 
     Observation space (``Dict``)
     ----------------------------
@@ -167,9 +170,10 @@ class OrthoglideLabEnv(gym.Env):
     Info
     ----
     ``op``, ``step_time_s``, ``overtravel`` (stands pushed past their travel on this step),
-    ``collision``; at the end also ``is_success`` (the predicted TCP error after the
-    best-fit rigid motion, from the records' information at the nominal machine, is at most
-    ``success_mm``) and ``predicted_tcp_rigid_mm``.
+    ``collision``, ``refused`` ("" or why the operation was refused); at the end also
+    ``is_success`` (the predicted TCP error after the best-fit rigid motion, from the
+    records' information at the nominal machine, is at most ``success_mm``) and
+    ``predicted_tcp_rigid_mm``.
 
     Kwargs: ``errors`` (preset), ``gauge_sigma``, ``gauge_resolution`` (mm), ``backend``
     (``exact`` or ``pybullet``), ``stands`` (default 6), ``tracker`` (a laser tracker on
@@ -309,7 +313,11 @@ class OrthoglideLabEnv(gym.Env):
         op, rho, stand, slot = self._check_action(action)
         overtravel: list[str] = []
         reading = None
-        if op == Op.MOVE:
+        refused = self._refusal(op, rho, stand, slot)
+        if refused:
+            # The technician sees it cannot be done: a moment lost, nothing changed.
+            seconds = TIME.lift_s
+        elif op == Op.MOVE:
             seconds = TIME.move(self._rho, rho) + (TIME.tracker_point_s if self.tracker else 0.0)
             machine.move(rho)
             self._rho = rho
@@ -324,24 +332,42 @@ class OrthoglideLabEnv(gym.Env):
             self._sync_gauges()
         else:
             seconds = 0.0
-        if op in (Op.MOVE, Op.ENGAGE, Op.REMOUNT):
+        if not refused and op in (Op.MOVE, Op.ENGAGE, Op.REMOUNT):
             overtravel = self._press()
             seconds += TIME.overtravel_s * len(overtravel)
-        if op in (Op.MOVE, Op.REMOUNT):
+        if not refused and op in (Op.MOVE, Op.REMOUNT):
             self._pending = seconds
             reading = self._read()
         self._time += seconds
         self._steps += 1
         collision = ", ".join(machine.collisions()) if op in (Op.MOVE, Op.REMOUNT) else ""
-        terminated = op == Op.STOP or bool(collision)
+        terminated = (op == Op.STOP and not refused) or bool(collision)
         truncated = not terminated and self._time >= self.budget_s
         reward = self._reward(seconds, terminated or truncated)
         info = self._info(OP_NAMES[op], seconds, overtravel, collision)
+        info["refused"] = refused
         if terminated or truncated:
             predicted = self.predicted_tcp_rigid_mm()
             info.update(is_success=bool(predicted <= self.success_mm),
                         predicted_tcp_rigid_mm=predicted)
         return self._observation(reading), reward, terminated, truncated, info
+
+    def _refusal(self, op: Op, rho: np.ndarray, stand: int, slot: int) -> str:
+        """Why a well-formed operation cannot be done here ("" when it can): a stand that
+        is not mounted cannot be lifted or engaged, a slot holds one stand, and the
+        machine cannot be driven where it cannot assemble."""
+        target = self._stands[stand]
+        if op in (Op.LIFT, Op.ENGAGE) and target.gauge is None:
+            return f"stand {stand} is not mounted"
+        if op == Op.REMOUNT and any(s.slot == slot for k, s in enumerate(self._stands)
+                                    if k != stand):
+            return f"slot {SLOT_NAMES[slot]} already holds a stand"
+        if op == Op.MOVE:
+            try:
+                direct(self._require().machine, rho)
+            except UnreachableError:
+                return f"the machine cannot assemble at rho = {rho.tolist()}"
+        return ""
 
     def close(self) -> None:
         if self._machine is not None:
@@ -511,12 +537,6 @@ class OrthoglideLabEnv(gym.Env):
             if rho.shape != (3,):
                 raise ValueError(f"action rho must have shape (3,), got {rho.shape}")
             rho = check_rho(rho)
-        target = self._stands[stand]
-        if op in (Op.LIFT, Op.ENGAGE) and target.gauge is None:
-            raise ValueError(f"stand {stand} is not mounted: re-mount it first")
-        if op == Op.REMOUNT and any(s.slot == slot for k, s in enumerate(self._stands)
-                                    if k != stand):
-            raise ValueError(f"slot {SLOT_NAMES[slot]} already holds a stand")
         return Op(op), rho, stand, slot
 
     def _observation(self, reading: np.ndarray | None) -> dict[str, np.ndarray]:

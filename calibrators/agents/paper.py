@@ -22,6 +22,7 @@ from .base import Agent, action, register
 @register
 class PaperAgent(Agent):
     name = "paper"
+    repetitions = REPETITIONS
 
     def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
               rng: np.random.Generator) -> None:
@@ -37,7 +38,8 @@ class PaperAgent(Agent):
                 if g != -1 and engaged[k] != want:
                     plan.append(action(Op.ENGAGE if want else Op.LIFT, stand=k))
                     engaged[k] = want
-            plan += [action(Op.MOVE, paper_posture(p)) for p, _ in leg_sequence(leg, REPETITIONS)]
+            plan += [action(Op.MOVE, paper_posture(p))
+                     for p, _ in leg_sequence(leg, self.repetitions)]
         plan.append(action(Op.STOP))
         self.plan = plan
 
