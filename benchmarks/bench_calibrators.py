@@ -1,10 +1,10 @@
-"""Wall time of one `paper` calibration episode and of a 1000-machine comparison.
+"""Wall time of one calibration episode in the lab, and of a comparison.
 
-    python benchmarks/bench_calibrators.py [--machines 1000]
+    python benchmarks/bench_calibrators.py [--machines 100]
 
-The comparison runs both strategies (paper, gauss-newton) on every machine, on every
-core; they share one experiment (the same postures and readings), so 1000 machines are
-1000 experiments and 2000 estimates.
+An episode is the lab's reset, the paper agent's experiment and one estimate.  The
+comparison runs the paper agent with the paper and extended estimators on every machine,
+in one process and in two.
 """
 
 from __future__ import annotations
@@ -16,17 +16,18 @@ import gymnasium as gym
 import numpy as np
 
 import orthoglide_env
-from calibrators.base import get_strategy
+from calibrators.agents import get_agent
 from calibrators.compare import Config, run
+from calibrators.experiment import estimate, run_episode
 
 
-def episode_times(backend: str, strategy: str, repeats: int = 20) -> np.ndarray:
-    env = gym.make(orthoglide_env.ENV_ID, backend=backend)
+def episode_times(backend: str, estimator: str, repeats: int = 10) -> np.ndarray:
+    env = gym.make(orthoglide_env.LAB_ENV_ID, backend=backend)
     out = []
     for seed in range(repeats):
         start = time.perf_counter()
-        env.reset(seed=seed)
-        get_strategy(strategy).run(env, verify=False)
+        data, _ = run_episode(env, get_agent("paper"), seed)
+        estimate(data, estimator, env.unwrapped.noise.effective_sigma)
         out.append(time.perf_counter() - start)
     env.close()
     return np.array(out)
@@ -34,20 +35,20 @@ def episode_times(backend: str, strategy: str, repeats: int = 20) -> np.ndarray:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--machines", type=int, default=1000)
+    parser.add_argument("--machines", type=int, default=100)
     args = parser.parse_args()
-    print("one calibration episode (reset + experiment + estimate), median of 20:")
+    print("one calibration episode (reset + paper agent + estimate), median of 10:")
     for backend in ("pybullet", "exact"):
-        for strategy in ("paper", "gauss-newton"):
-            t = episode_times(backend, strategy)
-            print(f"  {backend:9}{strategy:14}{1e3 * np.median(t):8.1f} ms")
-    for backend in ("exact", "pybullet"):
-        config = Config(("paper", "gauss-newton"), "realistic", 0.02, 0.01, backend, "full", 0)
+        for estimator in ("paper", "paper6", "extended"):
+            t = episode_times(backend, estimator)
+            print(f"  {backend:9}{estimator:10}{1e3 * np.median(t):8.1f} ms")
+    config = Config(("paper",), ("paper", "extended"))
+    for jobs in (1, 2):
         start = time.perf_counter()
-        run(config, args.machines, progress=False)
+        run(config, args.machines, jobs=jobs)
         wall = time.perf_counter() - start
-        print(f"compare --machines {args.machines} --backend {backend}: {wall:.1f} s "
-              f"({1e3 * wall / args.machines:.1f} ms per machine)")
+        print(f"compare --agents paper --estimators paper,extended --machines {args.machines} "
+              f"--jobs {jobs}: {wall:.1f} s ({1e3 * wall / args.machines:.1f} ms per machine)")
 
 
 if __name__ == "__main__":

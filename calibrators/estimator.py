@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
+from orthoglide_env.gauges import NOISE_FLOOR
 from orthoglide_env.geometry import L_NOMINAL
 from orthoglide_env.reading_model import Design, jacobian, predict
 
@@ -38,9 +39,6 @@ from orthoglide_env.reading_model import Design, jacobian, predict
 #: in scaled units is at least this: the data determine it at least as well as its
 #: a-priori scale does.
 RETAIN: float = 1.0
-#: A noise-free fit is weighted as if its gauges had this repeatability (mm): weights and
-#: the identifiability threshold need a finite sigma.
-NOISE_FLOOR: float = 1e-6
 #: Convergence on the step, in units of each parameter's scale (2e-9 mm for drho): five
 #: times the wander that the Jacobian's round-off leaves (see
 #: ``orthoglide_env.reading_model.FD_STEP``), so a converged fit is reproducible to ~1e-9

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from orthoglide_env.gauges import NOISE_FLOOR
 from orthoglide_env.geometry import MachineParams
 from orthoglide_env.kinematics import direct
 from orthoglide_env.lab import TRACKER_SIGMA
@@ -21,7 +22,7 @@ from orthoglide_env.reading_model import Design, TrackerAxis, predict, station_o
 from orthoglide_env.scoring import best_rigid_motion
 
 from .base import Estimate, Measurements, register
-from .estimator import CHI2_LEVEL, NOISE_FLOOR, BatchFit, fit_batch
+from .estimator import CHI2_LEVEL, BatchFit, fit_batch
 from .paper import PaperCalibrator, split_repetitions
 from .parameters import (
     ParameterSpace,

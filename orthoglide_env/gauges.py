@@ -45,6 +45,10 @@ from .kinematics import carriage_points, direct, leg_angles, platform_points
 DEFAULT_TRAVEL: float = 10.0  # mm
 DEFAULT_RESOLUTION: float = 0.01  # mm (paper, section 4)
 DEFAULT_SIGMA: float = 0.02  # mm, repeatability (paper, section 4)
+#: Readings of ideal (noise-free) gauges are weighted as if their repeatability were this
+#: (mm): weights and identifiability thresholds need a finite sigma, and a finer one lets
+#: the readings' own round-off (whitened) swamp the steps of an ill-conditioned fit.
+NOISE_FLOOR: float = 1e-4
 #: A reading is valid only where the contact ball (radius ~1.5 mm) sits wholly on the
 #: flat face: closer to an edge a real tip rolls over it, and PyBullet's boxes are
 #: rounded there by their collision margin (measured: exact again 1 mm from an edge).

@@ -21,6 +21,7 @@ from .gauges import (
     DEFAULT_RESOLUTION,
     DEFAULT_SIGMA,
     DEFAULT_TRAVEL,
+    NOISE_FLOOR,
     Gauge,
     Status,
     check_noise,
@@ -485,7 +486,7 @@ class OrthoglideLabEnv(gym.Env):
         scale = default_scales(space)
         row = jacobian(np.zeros(len(space)), design, np.ones(len(space), bool), scale)[0]
         sigma = self.tracker_sigma if isinstance(spec, TrackerAxis) else max(
-            self.noise.effective_sigma, 1e-6)
+            self.noise.effective_sigma, NOISE_FLOOR)
         row = row / sigma
         n, s1, s2, names = self._info_sums.get(mounting, (0, 0.0, 0.0, space.names))
         self._info_sums[mounting] = (n + 1, s1 + row, s2 + np.outer(row, row), names)

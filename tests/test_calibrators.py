@@ -3,8 +3,6 @@ Cramér-Rao bound, the measurement file and the registry."""
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -207,19 +205,6 @@ def test_readings_of_custom_postures_round_trip_through_the_csv(tmp_path) -> Non
         Measurement(GaugeSpec(0, 1), "probe", 1, 0.1)
 
 
-def test_strategies_sharing_an_experiment_measure_once() -> None:
-    """paper and gauss-newton run the same experiment: a comparison measures it once, and
-    gets exactly what two separate episodes of the same seed would have read."""
-    from calibrators.compare import Config, run_chunk
-
-    config = Config(("paper", "gauss-newton"), "realistic", 0.02, 0.01, "exact", "full", 5)
-    shared = run_chunk(config, range(2))
-    alone = run_chunk(replace(config, strategies=("gauss-newton",)), range(2))
-    for a, b in zip([t for t in shared if t.strategy == "gauss-newton"], alone, strict=True):
-        np.testing.assert_array_equal(a.param_error, b.param_error)
-        assert a.experiment_time_s == b.experiment_time_s
-
-
 def test_predictions_without_the_truth() -> None:
     """On a noise-free paper-model machine gauss-newton's estimate is the truth, so the
     predicted correction is the uncalibrated machine's real TCP error, in every frame; the
@@ -245,29 +230,6 @@ def test_predictions_without_the_truth() -> None:
     # The weak drho ~ dL directions barely move the TCP: it is known far better than the
     # parameters (~0.38 mm each at 0.01 mm gauges).
     assert predicted_tcp_error(noisy).raw.max < 0.1
-
-
-def test_a_new_strategy_is_one_registered_class() -> None:
-    """What docs/calibrators.md promises: a registered subclass is found by name, runs its
-    own experiment (here five repetitions instead of three) and goes through compare."""
-    from calibrators.base import register
-    from calibrators.compare import Config, run
-    from calibrators.paper import PaperCalibrator
-
-    if "paper-5" not in available():
-
-        @register
-        class FiveRepetitions(PaperCalibrator):
-            name = "paper-5"
-            experiment = "paper-sequence-5"
-            repetitions = 5
-
-    est = run_strategy_once("paper-5")
-    assert est.n_readings == 3 * 2 * (3 * 5 + 1)
-    trials = run(Config(("paper", "paper-5"), "paper", 0.02, 0.0, "exact", "full", 1), 2,
-                 jobs=1, progress=False)
-    times = {t.strategy: t.experiment_time_s for t in trials if t.machine == 0}
-    assert times["paper-5"] > times["paper"]
 
 
 def run_strategy_once(name: str):

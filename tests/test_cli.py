@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import csv
 import json
 import subprocess
 import sys
@@ -110,21 +109,21 @@ def test_saved_measurements_fit_to_the_same_estimate(tmp_path, capsys) -> None:
     assert all("line" in r for r in out["residuals"])
 
 
-def test_compare_writes_table_csv_and_plot(tmp_path, capsys) -> None:
-    assert main(["compare", "--machines", "4", "--backend", "exact", "--errors", "paper",
-                 "--jobs", "1", "--quiet", "--out", str(tmp_path)]) == 0
+def test_compare_writes_table_csv_and_plots(tmp_path, capsys) -> None:
+    assert main(["compare", "--machines", "2", "--agents", "paper,tracker", "--estimators",
+                 "paper,extended", "--quiet", "--out", str(tmp_path)]) == 0
     text = capsys.readouterr().out
-    assert "gauss-newton" in text and "paper" in text and "TCP after (rigid) med" in text
-    for name in ("trials.csv", "summary.csv", "compare.png"):
+    assert "TCP after (rigid) med" in text and "tracker x paper: 2 of 2 failed" in text
+    for name in ("trials.jsonl", "summary.csv", "accuracy_vs_time.png", "boxes.png"):
         assert (tmp_path / name).stat().st_size > 0
-    with (tmp_path / "trials.csv").open() as handle:
-        rows = list(csv.DictReader(handle))
-    for row in rows:
+    for line in (tmp_path / "trials.jsonl").read_text().splitlines():
+        trial = json.loads(line)
+        if trial["failed"]:
+            continue
         # Each best fit includes the one before it (a translation is a rigid motion), up
         # to the fits' round-off (~1e-13 mm, tests/test_scoring.py).
-        for when in ("before", "after"):
-            raw, translation, rigid = (float(row[f"tcp_{when}_{frame}_rms"])
-                                       for frame in ("raw", "translation", "rigid"))
+        for when in ("tcp_before", "tcp_after"):
+            raw, translation, rigid = (trial[when][f] for f in ("raw", "translation", "rigid"))
             assert rigid <= translation + 1e-11 and translation <= raw + 1e-11
 
 
@@ -149,7 +148,12 @@ def test_compare_writes_table_csv_and_plot(tmp_path, capsys) -> None:
         (["fit", "MISSING"], "not found"),
         (["fit", "BAD_CSV"], "column 5"),
         (["fit", "GOOD"], ".csv or .json"),
-        (["compare", "--strategies", "paper,oracle"], "unknown strategy"),
+        (["compare", "--agents", "paper,oracle"], "unknown agent 'oracle'"),
+        (["compare", "--agents", ","], "--agents needs"),
+        (["compare", "--estimators", "oracle"], "unknown estimator"),
+        (["compare", "--seed", "-1"], "--seed"),
+        (["compare", "--jobs", "0"], "--jobs"),
+        (["compare", "--resume"], "--resume"),
         (["compare", "--machines", "0"], "--machines"),
     ],
 )
