@@ -33,7 +33,7 @@ from orthoglide_env.scoring import FRAMES, score
 
 from .agents import get_agent
 from .base import Estimate
-from .experiment import estimate, get_estimator, measurements_of, run_episode
+from .experiment import estimate_many, get_estimator, measurements_of, run_episode
 from .prediction import predicted_tcp_error
 
 #: Fractions of an episode's time at which the accuracy-versus-time curve re-estimates.
@@ -107,58 +107,95 @@ def machine_z_scores(est: Estimate, truth: MachineParams) -> np.ndarray:
     return known @ err / np.sqrt(np.einsum("kf,fg,kg->k", known, cov, known))
 
 
-def _score(agent: str, name: str, index: int, records: list[Record], time_s: float,
-           sigma: float, truth: MachineParams, with_curve: bool) -> Trial:
-    """Estimate from an agent's notebook and score against the truth."""
-    data = measurements_of(records, time_s)
-    try:
-        est = estimate(data, name, sigma)
-    except (ValueError, RuntimeError, np.linalg.LinAlgError) as exc:
-        return Trial(agent, name, index, failed=str(exc).splitlines()[0] or type(exc).__name__,
-                     time_s=data.experiment_time_s, readings=len(data))
-    report = score(est.machine, truth)
+@dataclass
+class _Episode:
+    """What an agent left on one machine: the notebook, the time, the truth to score."""
+
+    agent: str
+    machine: int
+    records: list[Record]
+    time_s: float
+    sigma: float
+    truth: MachineParams
+
+
+def _trial(episode: _Episode, name: str, est: Estimate | Exception,
+           curve: list[list[float]]) -> Trial:
+    """Score one estimate against the truth."""
+    count = len(episode.records)
+    if isinstance(est, Exception):
+        return Trial(episode.agent, name, episode.machine,
+                     failed=str(est).splitlines()[0] or type(est).__name__,
+                     time_s=episode.time_s, readings=count)
+    report = score(est.machine, episode.truth)
     std = np.full(len(ERROR_NAMES), np.nan)
     for k, n in enumerate(est.names):
         if n in ERROR_NAMES:
             std[ERROR_NAMES.index(n)] = np.sqrt(est.covariance[k, k])
-    curve = []
-    if with_curve:
-        for fraction in CURVE_FRACTIONS:
-            until = fraction * data.experiment_time_s
-            try:
-                part = estimate(measurements_of(records, time_s, until_s=until), name, sigma)
-                curve.append([until, score(part.machine, truth).tcp_after.rigid.rms])
-            except (ValueError, RuntimeError, np.linalg.LinAlgError):
-                curve.append([until, report.tcp_before.rigid.rms])
-        curve.append([data.experiment_time_s, report.tcp_after.rigid.rms])
     return Trial(
-        agent, name, index, time_s=data.experiment_time_s, readings=len(data),
+        episode.agent, name, episode.machine, time_s=episode.time_s, readings=count,
         tcp_before={f: getattr(report.tcp_before, f).rms for f in FRAMES},
         tcp_after={f: getattr(report.tcp_after, f).rms for f in FRAMES},
         predicted_rigid_mm=predicted_tcp_error(est).rigid.rms,
-        z=machine_z_scores(est, truth).tolist(),
-        error=(est.machine.to_vector() - truth.to_vector()).tolist(), std=std.tolist(),
-        curve=curve,
+        z=machine_z_scores(est, episode.truth).tolist(),
+        error=(est.machine.to_vector() - episode.truth.to_vector()).tolist(),
+        std=std.tolist(), curve=curve,
     )
 
 
-def run_machine(config: Config, index: int, envs: dict[bool, gym.Env],
-                skip: set[tuple[str, str, int]]) -> list[Trial]:
-    """Every agent and estimator of ``config`` on machine ``index``."""
+def _curves(episodes: list[_Episode], name: str) -> list[list[list[float]]]:
+    """Accuracy against time for each episode: re-estimates from the readings taken by
+    :data:`CURVE_FRACTIONS` of its time (the uncalibrated error where there are too few),
+    then the full estimate."""
+    points: list[list[list[float]]] = [[] for _ in episodes]
+    for fraction in (*CURVE_FRACTIONS, 1.0):
+        datas = [measurements_of(e.records, e.time_s, until_s=fraction * e.time_s)
+                 for e in episodes]
+        for k, (episode, est) in enumerate(zip(episodes, estimate_many(
+                datas, name, episodes[0].sigma), strict=True)):
+            model = MachineParams() if isinstance(est, Exception) else est.machine
+            points[k].append([fraction * episode.time_s,
+                              score(model, episode.truth).tcp_after.rigid.rms])
+    return points
+
+
+def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]]
+              ) -> list[Trial]:
+    """Machines ``indices``: every agent's episode on each (in one pair of lab envs, one
+    without and one with a tracker), then every estimator over all of an agent's
+    notebooks at once (a fixed design is fitted in one batched solve)."""
+    envs = _envs(config)
     trials = []
-    for agent_name in config.agents:
-        todo = [e for e in config.estimators if (agent_name, e, index) not in skip]
-        if not todo:
-            continue
-        agent = get_agent(agent_name)
-        env = envs[agent.needs_tracker]
-        seed = config.machine_seed(index)
-        data, _ = run_episode(env, agent, seed, np.random.default_rng([seed, 1]))
-        lab = env.unwrapped
-        for name in todo:
-            trials.append(_score(agent_name, name, index, list(lab.records),
-                                 data.experiment_time_s, lab.noise.effective_sigma,
-                                 lab.true_machine, name == config.curve_estimator))
+    try:
+        for agent_name in config.agents:
+            todo = {i: [e for e in config.estimators if (agent_name, e, i) not in skip]
+                    for i in indices}
+            runs = [i for i in indices if todo[i]]
+            if not runs:
+                continue
+            episodes = []
+            for index in runs:
+                agent = get_agent(agent_name)
+                env = envs[agent.needs_tracker]
+                seed = config.machine_seed(index)
+                data, _ = run_episode(env, agent, seed, np.random.default_rng([seed, 1]))
+                lab = env.unwrapped
+                episodes.append(_Episode(agent_name, index, list(lab.records),
+                                         data.experiment_time_s, lab.noise.effective_sigma,
+                                         lab.true_machine))
+            for name in config.estimators:
+                mine = [e for e in episodes if name in todo[e.machine]]
+                if not mine:
+                    continue
+                datas = [measurements_of(e.records, e.time_s) for e in mine]
+                estimates = estimate_many(datas, name, mine[0].sigma)
+                curves = (_curves(mine, name) if name == config.curve_estimator
+                          else [[] for _ in mine])
+                trials += [_trial(e, name, est, c)
+                           for e, est, c in zip(mine, estimates, curves, strict=True)]
+    finally:
+        for env in envs.values():
+            env.close()
     return trials
 
 
@@ -168,17 +205,6 @@ def _envs(config: Config) -> dict[bool, gym.Env]:
                               backend=config.backend, tracker=tracker,
                               budget_s=config.budget_s)
             for tracker in (False, True)}
-
-
-def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]]
-              ) -> list[Trial]:
-    """Machines ``indices`` in one pair of lab envs (one without, one with a tracker)."""
-    envs = _envs(config)
-    try:
-        return [t for i in indices for t in run_machine(config, i, envs, skip)]
-    finally:
-        for env in envs.values():
-            env.close()
 
 
 #: Thread pools of the numerical libraries, limited to one thread in each worker: a
@@ -204,9 +230,9 @@ def _single_threaded() -> Iterator[None]:
                 os.environ[key] = value
 
 
-#: Machines per task sent to a worker: enough to amortise building the envs, few enough
-#: for a live progress bar and little lost work on an interrupt.
-CHUNK: int = 2
+#: Machines per task: enough for the batched fits of a fixed design to pay, few enough for
+#: a live progress bar and little lost work on an interrupt.
+CHUNK: int = 10
 
 
 def run(config: Config, machines: int, jobs: int = 1, done: list[Trial] | None = None,

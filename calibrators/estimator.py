@@ -26,7 +26,7 @@ scales its covariance by chi2/dof.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import stats
@@ -79,6 +79,19 @@ class BatchFit:
     #: (M, n, n) covariance of (estimate - truth) over every parameter, physical units,
     #: with the errors the model leaves out (see :func:`_model_error`).
     error_covariance: np.ndarray
+
+    def split(self) -> list[BatchFit]:
+        """One fit per machine (each a batch of one)."""
+        out = []
+        for m in range(len(self.theta)):
+            rows = slice(m, m + 1)
+            out.append(replace(
+                self, theta=self.theta[rows], covariance=self.covariance[rows],
+                information=self.information[rows], residuals=self.residuals[rows],
+                chi2=self.chi2[rows], dof=self.dof[rows], retained=self.retained[rows],
+                converged=self.converged[rows], iterations=self.iterations[rows],
+                error_covariance=self.error_covariance[rows]))
+        return out
 
     @property
     def chi2_dof(self) -> np.ndarray:

@@ -66,6 +66,25 @@ def estimate(data: Measurements, name: str, sigma: float) -> Estimate:
                                                 prior=spec.prior)
 
 
+def estimate_many(datas: list[Measurements], name: str, sigma: float
+                  ) -> list[Estimate | Exception]:
+    """:func:`estimate` of many experiments, batched where the estimator can (experiments
+    of one design are fitted together); a failure comes back in place of its estimate."""
+    spec = get_estimator(name)
+    strategy = get_strategy(spec.strategy)
+    if hasattr(strategy, "estimate_many"):
+        return strategy.estimate_many(datas, spec.params, sigma, verify=False,
+                                      prior=spec.prior)
+    out: list[Estimate | Exception] = []
+    for data in datas:
+        try:
+            out.append(strategy.estimate(data, spec.params, sigma, verify=False,
+                                         prior=spec.prior))
+        except (ValueError, RuntimeError, np.linalg.LinAlgError) as exc:
+            out.append(exc)
+    return out
+
+
 def make_estimator(name: str = "extended") -> Callable[[list[Record], float], MachineParams]:
     """The lab env's ``estimator`` for its accuracy reward: notebook and sigma to the
     estimated machine."""

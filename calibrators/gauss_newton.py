@@ -98,57 +98,122 @@ class GaussNewtonCalibrator(PaperCalibrator):
                  tracker_sigma: float = TRACKER_SIGMA) -> Estimate:
         """Fit ``data``; ``sigma`` is a dial gauge's noise, ``tracker_sigma`` a laser
         tracker coordinate's (mm)."""
-        design, values = design_of(data)
+        result = self.estimate_many([data], params, sigma, verify=verify, prior=prior, fix=fix,
+                                    keep_outliers=keep_outliers, holdout=holdout, seed=seed,
+                                    solver=solver, tracker_sigma=tracker_sigma)[0]
+        if isinstance(result, Exception):
+            raise result
+        return result
+
+    def estimate_many(self, datas: list[Measurements], params: str = "paper6",
+                      sigma: float = 0.01, *, verify: bool = True, prior: str = "auto",
+                      fix: dict[str, float] | None = None, keep_outliers: bool = False,
+                      holdout: float = 0.0, seed: int = 0, solver: str = "gauss-newton",
+                      tracker_sigma: float = TRACKER_SIGMA) -> list[Estimate | Exception]:
+        """:meth:`estimate` of many experiments: those of one design (the same readings
+        of the same mountings at the same postures, as a fixed agent takes them on every
+        machine) are fitted together, in one batched solve.  A failure is returned in
+        place of its estimate, not raised."""
+        out: list[Estimate | Exception] = [ValueError("not fitted")] * len(datas)
+        groups: dict[tuple, list[int]] = {}
+        prepared = []
+        for k, data in enumerate(datas):
+            try:
+                design, values = design_of(data)
+            except ValueError as exc:
+                out[k] = exc
+                prepared.append(None)
+                continue
+            prepared.append((design, values))
+            key = (design.mountings, design.specs, design.rho.tobytes(),
+                   design.mounting.tobytes())
+            groups.setdefault(key, []).append(k)
+        options = {"params": params, "prior": prior, "fix": fix or {}, "holdout": holdout,
+                   "seed": seed, "solver": solver, "keep_outliers": keep_outliers,
+                   "sigma": sigma, "tracker_sigma": tracker_sigma, "verify": verify}
+        for members in groups.values():
+            design = prepared[members[0]][0]
+            values = np.stack([prepared[k][1] for k in members])
+            try:
+                results = self._fit_group(design, values, [datas[k] for k in members],
+                                          **options)
+            except (ValueError, RuntimeError, np.linalg.LinAlgError) as exc:
+                results = [exc] * len(members)
+            for k, result in zip(members, results, strict=True):
+                out[k] = result
+        return out
+
+    def _fit_group(self, design: Design, values: np.ndarray, datas: list[Measurements], *,
+                   params: str, prior: str, fix: dict[str, float], holdout: float, seed: int,
+                   solver: str, keep_outliers: bool, sigma: float, tracker_sigma: float,
+                   verify: bool) -> list[Estimate | Exception]:
+        """Fit the experiments ``values`` (M, N) of one ``design`` together."""
         space = design.space
         free = select(params, space)
-        fixed = fixed_values(fix or {}, space)
-        for name in fix or {}:
+        fixed = fixed_values(fix, space)
+        for name in fix:
             free[space.names.index(name)] = False
         if not free.any():
             raise ValueError("every parameter of the selection is fixed: nothing to fit")
         unmodelled = ~free & ~np.isin(np.arange(len(space)),
-                                      [space.names.index(n) for n in fix or {}])
+                                      [space.names.index(n) for n in fix])
         priors = prior_sigmas(prior, space, free)
         scale = scales(space, priors)
         needed = len(design.mountings) + int(np.sum(~np.isfinite(priors[free]))) + 1
-        if len(values) < needed:
-            raise ValueError(f"{len(values)} readings cannot determine {len(design.mountings)} "
-                             f"gauge zeros and the parameters without a prior: at least "
-                             f"{needed} are needed")
-
+        if values.shape[1] < needed:
+            raise ValueError(f"{values.shape[1]} readings cannot determine "
+                             f"{len(design.mountings)} gauge zeros and the parameters "
+                             f"without a prior: at least {needed} are needed")
         noise = np.where([isinstance(design.specs[m], TrackerAxis) for m in design.mounting],
                          tracker_sigma, sigma)
 
-        def fit(mask: np.ndarray) -> BatchFit:
-            result = fit_batch(design, values[None], mask[None], noise, free, fixed, priors,
-                               scale, unmodelled=unmodelled, solver=solver)
-            if not result.converged[0]:
-                raise RuntimeError("the exact-model fit did not converge")
-            return result
+        def fit(rows: np.ndarray, mask: np.ndarray) -> BatchFit:
+            return fit_batch(design, values[rows], mask[rows], noise, free, fixed, priors,
+                             scale, unmodelled=unmodelled, solver=solver)
 
-        mask = np.ones(len(values), dtype=bool)
-        held = _holdout(design, holdout, seed) if holdout else np.zeros(len(values), bool)
-        mask &= ~held
-        result = fit(mask)
-        outliers: list[int] = []
-        while len(outliers) < MAX_OUTLIER_FRACTION * len(values):
-            # Residuals in units of their instrument's noise: gauges and a tracker differ.
-            residual = np.abs(result.residuals[0]) / np.maximum(noise, NOISE_FLOOR)
-            robust = 1.4826 * np.nanmedian(residual)
-            worst = int(np.nanargmax(residual))
-            if residual[worst] <= OUTLIER_K * max(1.0, robust):
-                break
-            outliers.append(worst)
-            mask[worst] = False
-            result = fit(mask)
-        if outliers and keep_outliers:
-            mask[outliers] = True
-            result = fit(mask)
-        if not len(result.identifiable(0)):
-            raise ValueError(f"the readings identify no combination of the parameters "
-                             f"'{params}' (every one is below its a-priori scale)")
-        return self._estimate(data, params, prior, sigma, design, values, result, mask, held,
-                              outliers, verify)
+        m_count = len(values)
+        held = _holdout(design, holdout, seed) if holdout else np.zeros(values.shape[1], bool)
+        mask = np.tile(~held, (m_count, 1))
+        results = fit(np.arange(m_count), mask).split()
+        outliers: list[list[int]] = [[] for _ in range(m_count)]
+        pending = np.arange(m_count)
+        while len(pending):
+            again = []
+            for m in pending:
+                if not results[m].converged[0] or len(outliers[m]) >= (
+                        MAX_OUTLIER_FRACTION * values.shape[1]):
+                    continue
+                # Residuals in units of their instrument's noise: gauges and a tracker differ.
+                residual = np.abs(results[m].residuals[0]) / np.maximum(noise, NOISE_FLOOR)
+                robust = 1.4826 * np.nanmedian(residual)
+                worst = int(np.nanargmax(residual))
+                if residual[worst] > OUTLIER_K * max(1.0, robust):
+                    outliers[m].append(worst)
+                    mask[m, worst] = False
+                    again.append(m)
+            pending = np.array(again, dtype=int)
+            if len(pending):
+                for m, result in zip(pending, fit(pending, mask).split(), strict=True):
+                    results[m] = result
+        if keep_outliers:
+            flagged = np.array([m for m in range(m_count) if outliers[m]], dtype=int)
+            for m in flagged:
+                mask[m, outliers[m]] = True
+            if len(flagged):
+                for m, result in zip(flagged, fit(flagged, mask).split(), strict=True):
+                    results[m] = result
+        out: list[Estimate | Exception] = []
+        for m, result in enumerate(results):
+            if not result.converged[0]:
+                out.append(RuntimeError("the exact-model fit did not converge"))
+            elif not len(result.identifiable(0)):
+                out.append(ValueError(f"the readings identify no combination of the "
+                                      f"parameters '{params}' (every one is below its "
+                                      "a-priori scale)"))
+            else:
+                out.append(self._estimate(datas[m], params, prior, sigma, design, values[m],
+                                          result, mask[m], held, outliers[m], verify))
+        return out
 
     def _estimate(self, data: Measurements, params: str, prior: str, sigma: float,
                   design: Design, values: np.ndarray, result: BatchFit, mask: np.ndarray,

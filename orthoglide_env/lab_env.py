@@ -54,7 +54,15 @@ from .lab import (
     TRACKER_SIGMA,
     Op,
 )
-from .reading_model import Design, ParameterSpace, Spec, TrackerAxis, default_scales, jacobian
+from .reading_model import (
+    Design,
+    ParameterSpace,
+    Spec,
+    TrackerAxis,
+    default_scales,
+    jacobian,
+    station_of,
+)
 from .scoring import predicted_tcp_frames, score
 
 REWARDS: tuple[str, ...] = ("time", "accuracy", "information")
@@ -476,26 +484,31 @@ class OrthoglideLabEnv(gym.Env):
             estimate = MachineParams()
         return score(estimate, truth).tcp_after.rigid.rms
 
-    def _add_information(self, record: Record) -> None:
-        """Add one reading's row of the Jacobian (at the nominal machine, per unit of each
-        parameter's scale, per unit of noise) to its mounting's sums: the information of a
-        mounting, its zero eliminated, is ``S2 - S1 S1^T / n``."""
-        spec, mounting = record.spec, record.mounting
-        design = Design.of([mounting], [spec], np.array([record.rho]))
+    def _add_information(self, records: list[Record]) -> None:
+        """Add the records' rows of the Jacobian (at the nominal machine, per unit of each
+        parameter's scale, per unit of noise; one batched call) to their mountings' sums:
+        the information of a mounting, its zero eliminated, is ``S2 - S1 S1^T / n``."""
+        design = Design.of([r.mounting for r in records], [r.spec for r in records],
+                           np.array([r.rho for r in records]))
         space = design.space
-        scale = default_scales(space)
-        row = jacobian(np.zeros(len(space)), design, np.ones(len(space), bool), scale)[0]
-        sigma = self.tracker_sigma if isinstance(spec, TrackerAxis) else max(
-            self.noise.effective_sigma, NOISE_FLOOR)
-        row = row / sigma
-        n, s1, s2, names = self._info_sums.get(mounting, (0, 0.0, 0.0, space.names))
-        self._info_sums[mounting] = (n + 1, s1 + row, s2 + np.outer(row, row), names)
+        rows = jacobian(np.zeros(len(space)), design, np.ones(len(space), bool),
+                        default_scales(space))
+        gauge_sigma = max(self.noise.effective_sigma, NOISE_FLOOR)
+        for record, row, m in zip(records, rows, design.mounting, strict=True):
+            sigma = self.tracker_sigma if isinstance(record.spec, TrackerAxis) else gauge_sigma
+            # The mounting's own columns: the machine's errors and its instrument's.
+            mine = _mounting_columns(space, m)
+            names = tuple(space.names[c] for c in mine)
+            row = row[mine] / sigma
+            n, s1, s2, _ = self._info_sums.get(record.mounting, (0, 0.0, 0.0, names))
+            self._info_sums[record.mounting] = (n + 1, s1 + row, s2 + np.outer(row, row),
+                                                names)
 
     def information(self) -> tuple[np.ndarray, list[str]]:
         """The records' information about every parameter they involve, in units of each
         parameter's scale (see ``information`` reward), and the parameters' names."""
-        for record in self.records[self._informed:]:
-            self._add_information(record)
+        if self._informed < len(self.records):
+            self._add_information(self.records[self._informed:])
         self._informed = len(self.records)
         names = list(ERROR_NAMES)
         for _, _, _, mine in self._info_sums.values():
@@ -562,6 +575,18 @@ class OrthoglideLabEnv(gym.Env):
               ) -> dict[str, Any]:
         return {"op": op, "step_time_s": seconds, "overtravel": overtravel,
                 "collision": collision}
+
+
+def _mounting_columns(space: ParameterSpace, mounting: int) -> list[int]:
+    """Columns of ``space`` a reading of ``mounting`` depends on: the machine's errors and
+    its own instrument's parameters (a stand's four, a tracker station's three)."""
+    names = space.names
+    prefix = space.mountings[mounting]
+    if isinstance(space.specs[mounting], TrackerAxis):
+        prefix = station_of(prefix)
+    return list(range(len(ERROR_NAMES))) + [
+        c for c in range(len(ERROR_NAMES), len(names))
+        if names[c].rsplit(".", 1)[0] == prefix]
 
 
 def _integer(value: Any, name: str, size: int) -> int:

@@ -15,6 +15,7 @@ or the perturbations of a finite-difference Jacobian), evaluated in one numpy pa
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -75,25 +76,25 @@ class ParameterSpace:
     mountings: tuple[str, ...] = ()
     specs: tuple[Spec, ...] = ()
 
-    @property
+    @cached_property
     def gauges(self) -> list[int]:
         """Indices of the gauge mountings."""
         return [k for k, s in enumerate(self.specs) if isinstance(s, GaugeSpec)]
 
-    @property
+    @cached_property
     def stations(self) -> list[str]:
         """Tracker stations, in order of first appearance."""
         return list(dict.fromkeys(station_of(m) for m, s in zip(self.mountings, self.specs,
                                                                 strict=True)
                                   if isinstance(s, TrackerAxis)))
 
-    @property
+    @cached_property
     def names(self) -> tuple[str, ...]:
         stands = [n for k in self.gauges for n in stand_names(self.mountings[k], self.specs[k])]
         rotations = [f"{st}.rot_{a}" for st in self.stations for a in AXIS_NAMES]
         return ERROR_NAMES + tuple(stands) + tuple(rotations)
 
-    @property
+    @cached_property
     def groups(self) -> tuple[str, ...]:
         """Group of every parameter: a machine-file key, ``stand_shift``, ``stand_tilt`` or
         ``tracker_rotation``."""
@@ -146,7 +147,7 @@ class Design:
     def __len__(self) -> int:
         return len(self.mounting)
 
-    @property
+    @cached_property
     def space(self) -> ParameterSpace:
         return ParameterSpace(self.mountings, self.specs)
 
@@ -155,7 +156,7 @@ class Design:
         """The distinct postures (P, 3)."""
         return self._postures  # type: ignore[attr-defined]
 
-    @property
+    @cached_property
     def signs(self) -> np.ndarray:
         """Reading sign of every mounting: +1 when a gauge's plunger points along the world
         axis, and for a tracker coordinate."""

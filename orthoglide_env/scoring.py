@@ -300,7 +300,8 @@ def predicted_frame_errors(targets: np.ndarray, jac: np.ndarray,
         basis = motion_basis(targets, frame)
         left = flat
         if basis.shape[1]:
-            left = flat - basis @ np.linalg.lstsq(basis, flat, rcond=None)[0]
+            q, _ = np.linalg.qr(basis)  # an orthonormal basis: the projection is q q^T
+            left = flat - q @ (q.T @ flat)
         per_target = np.einsum("rf,fg,rg->r", left, covariance, left).reshape(-1, 3).sum(-1)
         per_target = np.clip(per_target, 0.0, None)  # round-off of a PSD quadratic form
         stats.append(ErrorStats(float(np.sqrt(per_target.mean())),
