@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from contextlib import contextmanager
@@ -235,6 +236,12 @@ def _single_threaded() -> Iterator[None]:
 CHUNK: int = 10
 
 
+def _ignore_interrupts() -> None:
+    """Workers leave Ctrl-C to the main process, which stops them: a terminal sends it to
+    every process of the group, and each worker would print its own traceback."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def run(config: Config, machines: int, jobs: int = 1, done: list[Trial] | None = None,
         on_trial: Callable[[Trial], None] | None = None,
         progress: Callable[[int], None] | None = None) -> list[Trial]:
@@ -265,7 +272,8 @@ def run(config: Config, machines: int, jobs: int = 1, done: list[Trial] | None =
             collect(run_chunk(config, chunk, skip), len(chunk))
     else:
         with _single_threaded():
-            pool = ProcessPoolExecutor(jobs, mp_context=get_context("spawn"))
+            pool = ProcessPoolExecutor(jobs, mp_context=get_context("spawn"),
+                                       initializer=_ignore_interrupts)
         try:
             pending = {pool.submit(run_chunk, config, chunk, skip): chunk for chunk in chunks}
             while pending:

@@ -270,6 +270,8 @@ class GaussNewtonCalibrator(PaperCalibrator):
         zero from the rest); the RMS over every held-out reading (mm)."""
         reps = np.array([m.repetition for m in data.items])
         errors = []
+        if len(split_repetitions(data)) < 2:
+            return None  # nothing to hold out: one repetition is the whole experiment
         for rep in split_repetitions(data):
             test = mask & (reps == rep)
             train = mask & ~test
@@ -279,8 +281,10 @@ class GaussNewtonCalibrator(PaperCalibrator):
             except np.linalg.LinAlgError:
                 continue
             if fit.converged[0]:
-                errors.append(_held_out(design, values, fit.theta[0], train, test)[test])
-        return float(np.sqrt(np.mean(np.concatenate(errors) ** 2))) if errors else None
+                held = _held_out(design, values, fit.theta[0], train, test)[test]
+                errors.append(held[np.isfinite(held)])
+        errors = np.concatenate(errors) if errors else np.zeros(0)
+        return float(np.sqrt(np.mean(errors**2))) if errors.size else None
 
 
 def _held_out(design: Design, values: np.ndarray, theta: np.ndarray, train: np.ndarray,

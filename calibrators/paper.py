@@ -98,8 +98,11 @@ class PaperCalibrator(Calibrator):
 
     def estimate(self, data: Measurements, params: str = "paper6", sigma: float = 0.01,
                  *, verify: bool = True, **options: Any) -> Estimate:
-        used = {k: v for k, v in options.items() if v not in (None, False, 0, 0.0, {}, "",
-                                                               "auto", "none", "gauss-newton")}
+        used = [name for name, given in (
+            ("prior", options.get("prior", "none") not in ("auto", "none")),
+            ("fix", bool(options.get("fix"))), ("holdout", bool(options.get("holdout"))),
+            ("keep_outliers", bool(options.get("keep_outliers"))),
+            ("solver", options.get("solver", "gauss-newton") != "gauss-newton")) if given]
         if used:
             raise ValueError(f"the paper's linear fit (eq. 10) takes no {', '.join(used)}: "
                              "use --strategy gauss-newton")

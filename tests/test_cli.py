@@ -75,7 +75,7 @@ def test_calibrate_json_contract_and_exact_recovery(capsys, machine_file, solver
         assert out["tcp_error_after_mm"][frame]["max"] < 1e-5
         assert out["tcp_error_before_mm"][frame]["rms"] > 1e-3
     assert out["warnings"] == [] and len(out["identifiable"]) == 6
-    assert len(out["residuals"]) == 60
+    assert len(out["residuals"]) == 66  # the lab reads every gauge at reset, then the 60
     assert all(set(r) >= {"posture", "gauge", "residual_mm", "outlier"}
                for r in out["residuals"])
 
@@ -100,7 +100,7 @@ def test_saved_measurements_fit_to_the_same_estimate(tmp_path, capsys) -> None:
     assert path.read_text().splitlines()[0].split(",")[-1] == "reading_mm"
     sigma = ["--sigma", "0.02", "--resolution", "0.01"]
     out = run_json(capsys, ["fit", str(path), "--params", "extended", *sigma, "--json"])
-    assert "truth" not in out and "tcp_error_after_mm" not in out and out["n_readings"] == 60
+    assert "truth" not in out and "tcp_error_after_mm" not in out and out["n_readings"] == 66
     for group in ("drho", "dL", "attach"):
         np.testing.assert_allclose(out["estimate"][group], cal["estimate"][group], atol=1e-9)
     # Instead of errors against a truth: what the compensation will change, and how sure.

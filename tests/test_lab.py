@@ -258,3 +258,66 @@ def test_every_slot_can_be_mounted_and_reads_its_zero() -> None:
             continue
         obs, _, _, _, info = env.step(action(Op.REMOUNT, stand=0, slot=slot))
         assert not info["refused"] and obs["slot"][0] == slot and obs["valid"][0] == 1
+
+
+def test_calibrate_and_compare_run_the_same_experiment(capsys) -> None:
+    """`calibrate --seed S` on the lab draws the machine `compare` draws for that seed:
+    the paper agent's readings, and so the paper estimator's estimate, are the same."""
+    from calibrators.cli import main
+
+    config = Config(("paper",), ("paper",), seed=1, sigma=0.01)
+    trial = run_chunk(config, [0], set())[0]
+    assert main(["calibrate", "--backend", "exact", "--strategy", "paper", "--sigma", "0.01",
+                 "--seed", str(config.machine_seed(0)), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    error = np.subtract(out["estimate"]["drho"], out["truth"]["drho"])
+    np.testing.assert_allclose(error, trial.error[:3], rtol=0, atol=1e-9)
+    assert out["experiment_time_s"] == trial.time_s
+
+
+def test_pybullet_lab_reads_what_the_exact_lab_reads() -> None:
+    """Spot check of the two backends in the lab: the paper agent's notebook, ideal gauges,
+    agrees within 1 µm reading by reading."""
+    notebooks = []
+    for backend in ("exact", "pybullet"):
+        env = gym.make(LAB, backend=backend, gauge_sigma=0.0, gauge_resolution=0.0)
+        run_episode(env, get_agent("paper"), seed=21)
+        notebooks.append(env.unwrapped.records)
+        env.close()
+    exact, simulated = notebooks
+    assert [(r.mounting, r.rho) for r in exact] == [(r.mounting, r.rho) for r in simulated]
+    gap = max(abs(a.reading - b.reading) for a, b in zip(exact, simulated, strict=True))
+    assert gap < 1e-3
+
+
+def test_ctrl_c_keeps_the_finished_trials_and_resume_completes_the_table(tmp_path) -> None:
+    """Ctrl-C (SIGINT to the whole process group, as a terminal sends it) stops a two-job
+    run with one line and the partial table; --resume then ends with the table of an
+    uninterrupted run."""
+    import os
+    import signal
+    import time
+
+    out = tmp_path / "run"
+    argv = [sys.executable, "-m", "calibrators.cli", "compare", "--agents", "paper",
+            "--estimators", "paper6", "--machines", "60", "--seed", "2", "--jobs", "2",
+            "--quiet"]
+    proc = subprocess.Popen([*argv, "--out", str(out)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    trials = out / "trials.jsonl"
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not (trials.exists() and trials.read_text()):
+        time.sleep(0.2)
+    os.killpg(proc.pid, signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1 and "interrupted after" in lines[0] and "--resume" in lines[0]
+    assert "TCP after (rigid) med" in stdout
+    kept = len(trials.read_text().splitlines())
+    assert 0 < kept < 60
+    resumed = subprocess.run([*argv, "--out", str(out), "--resume", "--json"],
+                             capture_output=True, text=True, timeout=600)
+    whole = subprocess.run([*argv, "--json"], capture_output=True, text=True, timeout=600)
+    assert resumed.returncode == 0 and whole.returncode == 0, resumed.stderr
+    assert_close(json.loads(resumed.stdout)["rows"], json.loads(whole.stdout)["rows"])

@@ -1,4 +1,5 @@
-"""``orthoglide calibrate``: calibrate a virtual machine with one strategy."""
+"""``orthoglide calibrate``: calibrate a virtual machine: an agent works in the lab
+(``OrthoglideLab-v0``), then a strategy's estimator reads its notebook."""
 
 from __future__ import annotations
 
@@ -9,11 +10,14 @@ import numpy as np
 
 import orthoglide_env
 from orthoglide_env.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
-from orthoglide_env.geometry import DEFAULT_PRESET, PRESETS, MachineParams, random_machine
-from orthoglide_env.reading_model import parameters_of
+from orthoglide_env.geometry import DEFAULT_PRESET, PRESETS, MachineParams
+from orthoglide_env.reading_model import TrackerAxis, parameters_of
 
+from ..agents import available as agents_available
+from ..agents import get_agent
 from ..base import Estimate, Measurements, get_strategy
 from ..estimator import z_scores
+from ..experiment import run_episode
 from ..gauss_newton import design_of
 from . import estimator_options
 from .output import emit, report
@@ -31,7 +35,7 @@ def _setup(args: argparse.Namespace) -> tuple[MachineParams, str, float, float]:
         noisy = args.sigma is not None
     else:
         preset = args.errors or DEFAULT_PRESET
-        machine = random_machine(args.seed, preset)
+        machine = MachineParams()  # unused: the lab draws the machine from the seed
         noisy = not args.noise_free
     if not noisy:
         return machine, preset, 0.0, 0.0
@@ -42,7 +46,8 @@ def _setup(args: argparse.Namespace) -> tuple[MachineParams, str, float, float]:
 def _z_rms(est: Estimate, data: Measurements, env: gym.Env) -> float | None:
     """RMS of the z-scores of the identifiable combinations against the truth (exact-model
     estimates only: the paper's linear fit reports no information matrix)."""
-    if not est.information.size:
+    if not est.information.size or any(isinstance(m.gauge, TrackerAxis) for m in data.items):
+        # A tracker's frame has no truth the readings were aligned to: no full z here.
         return None
     design, _ = design_of(data)
     truth = parameters_of(design, env.unwrapped.true_machine, env.unwrapped.true_gauges)
@@ -53,24 +58,30 @@ def _z_rms(est: Estimate, data: Measurements, env: gym.Env) -> float | None:
 
 def run(args: argparse.Namespace) -> None:
     strategy = get_strategy(args.strategy)
+    agent = get_agent(args.agent)
     options = estimator_options.options(args)
     machine, preset, sigma, resolution = _setup(args)
-    env = gym.make(orthoglide_env.ENV_ID, errors=preset, gauge_sigma=sigma,
-                   gauge_resolution=resolution, backend=args.backend)
+    env = gym.make(orthoglide_env.LAB_ENV_ID, errors=preset, gauge_sigma=sigma,
+                   gauge_resolution=resolution, backend=args.backend,
+                   tracker=agent.needs_tracker, budget_s=args.budget)
     try:
-        env.reset(seed=args.seed, options={"machine": machine.to_dict()})
-        data = strategy.collect(env)
+        # A random machine is drawn by the lab from the seed, as ``compare`` draws it: the
+        # same seed gives the same machine, installation and readings there and here.
+        given = {"machine": machine.to_dict()} if args.machine else None
+        data, _ = run_episode(env, agent, args.seed, np.random.default_rng([args.seed, 1]),
+                              options=given)
         if args.save_measurements:
-            data.to_csv(args.save_measurements)
-        est = strategy.estimate(data, args.params, env.unwrapped.gauge_noise.effective_sigma,
-                                **options)
-        emit(report(est, env.unwrapped.true_machine, _z_rms(est, data, env)), args.json)
+            data.write(args.save_measurements)
+        lab = env.unwrapped
+        est = strategy.estimate(data, args.params, lab.noise.effective_sigma, **options)
+        emit(report(est, lab.true_machine, _z_rms(est, data, env)), args.json)
     finally:
         env.close()
 
 
 def add(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("calibrate", help="calibrate a virtual machine with one strategy")
+    p = sub.add_parser("calibrate", help="calibrate a virtual machine: an agent's experiment "
+                                         "in the lab, then one estimator")
     p.add_argument("--machine", help="machine JSON file: it defines every true error, and its "
                    "gauges are ideal unless --errors or --sigma ask for installation errors "
                    "or noise (default: a random machine drawn from --errors)")
@@ -90,6 +101,11 @@ def add(sub: argparse._SubParsersAction) -> None:
                        help=f"gauge repeatability (mm; default {DEFAULT_SIGMA} for a random "
                             f"machine, 0 with --machine), with a {DEFAULT_RESOLUTION} mm dial")
     estimator_options.add(p)
+    p.add_argument("--agent", default="paper",
+                   help=f"who works in the lab: {', '.join(agents_available())} "
+                        "(default: %(default)s)")
+    p.add_argument("--budget", type=float, default=3600.0,
+                   help="lab time budget (s, default %(default)s)")
     p.add_argument("--save-measurements", metavar="FILE.csv",
                    help="write the experiment's readings in the format that `fit` reads")
     p.add_argument("--json", action="store_true", help="print one JSON object")
