@@ -13,7 +13,9 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 run: $(STAMP)
-	$(BIN)/orthoglide compare --machines 50 --seed 1 --out results/compare
+	rm -rf results/compare
+	$(BIN)/orthoglide compare --agents paper,tracker,random --estimators paper,extended \
+		--machines 10 --seed 1 --jobs 2 --out results/compare
 
 test: $(STAMP)
 	$(BIN)/ruff check .
@@ -27,6 +29,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/realistic.py
 	$(BIN)/python benchmarks/bench_calibrators.py
 	$(BIN)/python benchmarks/bench_measurements.py
+	$(BIN)/python benchmarks/estimators.py
 
 clean:
 	rm -rf $(VENV) results .pytest_cache

@@ -321,3 +321,13 @@ def test_ctrl_c_keeps_the_finished_trials_and_resume_completes_the_table(tmp_pat
     whole = subprocess.run([*argv, "--json"], capture_output=True, text=True, timeout=600)
     assert resumed.returncode == 0 and whole.returncode == 0, resumed.stderr
     assert_close(json.loads(resumed.stdout)["rows"], json.loads(whole.stdout)["rows"])
+
+
+def test_stable_baselines3_trains_on_the_flat_variant_as_it_is() -> None:
+    """The optional learner: PPO's MlpPolicy on OrthoglideLabFlat-v0, no custom code."""
+    sb3 = pytest.importorskip("stable_baselines3")
+    env = gym.make(orthoglide_env.FLAT_LAB_ENV_ID, reward="information", budget_s=600.0)
+    model = sb3.PPO("MlpPolicy", env, n_steps=64, batch_size=32, n_epochs=1, seed=0)
+    model.learn(total_timesteps=128)
+    action, _ = model.predict(env.reset(seed=1)[0])
+    assert env.action_space.contains(action)

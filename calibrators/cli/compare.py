@@ -17,7 +17,7 @@ from orthoglide_env.geometry import PRESETS
 from orthoglide_env.scoring import FRAMES
 
 from ..agents import available as agents_available
-from ..compare import Config, Trial, run, summary
+from ..compare import Config, Trial, run, summary, verify_pybullet
 from ..experiment import ESTIMATORS
 from .common import UsageError
 
@@ -53,6 +53,8 @@ def _check(args: argparse.Namespace) -> Config:
         raise UsageError("--target must be a positive number of mm")
     if not 1 <= args.jobs <= MAX_JOBS:
         raise UsageError(f"--jobs must be between 1 and {MAX_JOBS}")
+    if not 0 <= args.verify_pybullet <= 1000:
+        raise UsageError("--verify-pybullet must be between 0 and 1000")
     if args.resume and not args.out:
         raise UsageError("--resume continues the run kept in --out: give --out")
     sigma = 0.0 if args.noise_free else args.sigma
@@ -145,6 +147,12 @@ def run_command(args: argparse.Namespace) -> None:
         handle.close()
     rows = summary(trials, config.target_mm)
     _print(rows, config, args.machines, time.perf_counter() - start, args.json)
+    if args.verify_pybullet:
+        gaps = verify_pybullet(config, min(args.verify_pybullet, args.machines))
+        print(f"PyBullet check of {min(args.verify_pybullet, args.machines)} machine(s), "
+              f"every agent, {gaps['steps']} steps with ideal gauges: largest reading "
+              f"difference {1e3 * gaps['reading_mm']:.3g} µm, TCP {1e3 * gaps['tcp_mm']:.3g} µm",
+              file=sys.stderr if args.json else sys.stdout)
     if out:
         for path in _write(trials, rows, out, config):
             print(f"wrote {path}", file=sys.stderr if args.json else sys.stdout)
@@ -229,6 +237,9 @@ def add(sub: argparse._SubParsersAction) -> None:
                    help="folder: every trial as it ends (trials.jsonl), summary.csv, plots")
     p.add_argument("--resume", action="store_true",
                    help="continue the interrupted run kept in --out")
+    p.add_argument("--verify-pybullet", type=int, default=0, metavar="K",
+                   help="re-run the first K machines on PyBullet in lockstep with the exact "
+                        "model and report the largest reading and TCP differences")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true",
                    help="print one JSON object: the config and one row per agent x estimator")
