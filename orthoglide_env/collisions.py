@@ -110,10 +110,22 @@ def clearance(
     return np.min(pair_gaps(machine, rho, boxes), axis=-1)
 
 
+def collision_mask(
+    machine: MachineParams, rho: np.ndarray, boxes: tuple[np.ndarray, ...] | None = None
+) -> np.ndarray:
+    """Which crash pairs of :data:`PAIR_NAMES` are in contact, shape ``(..., pairs)``: per
+    machine of a batch and per posture, as :func:`pair_gaps`."""
+    return pair_gaps(machine, rho, boxes) <= 0.0
+
+
+def collision_names(mask: np.ndarray) -> list[str]:
+    """Names (``"a/b"``) of the pairs a :func:`collision_mask` of one posture marks."""
+    return [name for name, hit in zip(PAIR_NAMES, mask, strict=True) if hit]
+
+
 def collisions(
     machine: MachineParams, rho: np.ndarray, boxes: tuple[np.ndarray, ...] | None = None
 ) -> list[str]:
     """Names (``"a/b"``, as the simulator names them) of the crash pairs in contact at one
-    posture ``rho`` (shape ``(3,)``)."""
-    gaps = pair_gaps(machine, rho, boxes)
-    return [name for name, gap in zip(PAIR_NAMES, gaps, strict=True) if gap <= 0.0]
+    posture ``rho`` (shape ``(3,)``) of one machine."""
+    return collision_names(collision_mask(machine, rho, boxes))

@@ -24,12 +24,13 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .backend import check_motion_mode
-from .collisions import crash_pairs
+from .collisions import collision_names, crash_pairs
 from .gauges import (
     GAUGE_BODY_RADIUS,
     RAY_BACKOFF,
     STAND_LENGTH,
     Gauge,
+    GaugeArray,
     on_flat_face,
     ray_box_distance,
 )
@@ -77,6 +78,7 @@ class OrthoglideMachine:
     ) -> None:
         self.machine = machine
         self.gauges = list(gauges)
+        self.gauge_array = GaugeArray.of(self.gauges)
         settings = settings or PhysicsSettings(gravity=-9.81 if gravity else 0.0)
         self.sim = Simulator(gui=gui, settings=settings)
         try:
@@ -277,21 +279,26 @@ class OrthoglideMachine:
         collision shape (its rails are drawn only), so it is not checked."""
         return [(self._index[a], self._index[b], f"{a}/{b}") for a, b in crash_pairs()]
 
-    def collisions(self) -> list[str]:
-        """Pairs of parts in contact that should never touch (see :meth:`_collision_pairs`)."""
+    def collision_mask(self) -> np.ndarray:
+        """Which pairs of :meth:`_collision_pairs` are in contact."""
         # getClosestPoints(distance=0) reports nothing, not even a deep penetration: ask
         # for a hair more and keep what touches.
-        return [
-            name for a, b, name in self._pairs
-            if any(pt[8] <= 0.0 for pt in
-                   self.bc.getClosestPoints(self.body, self.body, CONTACT_QUERY, a, b))
-        ]
+        return np.array([
+            any(pt[8] <= 0.0 for pt in
+                self.bc.getClosestPoints(self.body, self.body, CONTACT_QUERY, a, b))
+            for a, b, _ in self._pairs
+        ], dtype=bool)
+
+    def collisions(self) -> list[str]:
+        """Pairs of parts in contact that should never touch (see :meth:`_collision_pairs`)."""
+        return collision_names(self.collision_mask())
 
     def set_gauges(self, gauges: list[Gauge]) -> None:
         for sid in self._stand_ids:
             self.bc.removeBody(sid)
         self._stand_ids = []
         self.gauges = list(gauges)
+        self.gauge_array = GaugeArray.of(self.gauges)
         self._draw_stands()
 
     def render(
