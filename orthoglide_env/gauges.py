@@ -494,21 +494,55 @@ def _boxes(
     return centre, rot, half
 
 
+def to_box_frame(rot: np.ndarray, vector: np.ndarray) -> np.ndarray:
+    """``rot^T @ vector`` over the last axes, broadcast: a world vector in a box's frame.
+
+    Written out: on broadcast batches (rays against every box of thousands of machines)
+    this is several times faster than ``einsum``, and every element is summed in the same
+    order whatever the batch."""
+    rot, vector = np.asarray(rot), np.asarray(vector)
+    return (rot[..., 0, :] * vector[..., 0, None] + rot[..., 1, :] * vector[..., 1, None]
+            + rot[..., 2, :] * vector[..., 2, None])
+
+
 def ray_box_interval(
     origin: np.ndarray, direction: np.ndarray, centre: np.ndarray, rot: np.ndarray, half: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Where the line ``origin + t * direction`` enters and leaves a box (slab method);
-    ``t_in > t_out`` when it misses."""
-    o = np.einsum("...ji,...j->...i", rot, origin - centre)
-    d = np.einsum("...ji,...j->...i", rot, np.broadcast_to(direction, o.shape))
-    inside = np.abs(o) <= half
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t1 = (-half - o) / d
-        t2 = (half - o) / d
-    # A ray parallel to a slab is inside it everywhere or nowhere.
-    lo = np.where(d == 0, np.where(inside, -np.inf, np.inf), np.minimum(t1, t2))
-    hi = np.where(d == 0, np.where(inside, np.inf, -np.inf), np.maximum(t1, t2))
-    return np.max(lo, axis=-1), np.min(hi, axis=-1)
+    ``t_in > t_out`` when it misses.  Broadcast over leading dimensions."""
+    origin, direction = np.asarray(origin, dtype=float), np.asarray(direction, dtype=float)
+    centre, rot, half = (np.asarray(a, dtype=float) for a in (centre, rot, half))
+    shape = np.broadcast_shapes(origin.shape[:-1], direction.shape[:-1], centre.shape[:-1],
+                                rot.shape[:-2], half.shape[:-1])
+    # Coordinates first, each a contiguous array of the full shape: numpy then runs every
+    # operation below as one long loop instead of one loop per three numbers (rays
+    # against every box of thousands of machines is ~10x faster).  Same arithmetic, in
+    # the same order, as to_box_frame.
+    v = _components(origin - centre, shape)
+    d = _components(direction, shape)
+    r = np.ascontiguousarray(np.broadcast_to(np.moveaxis(rot, (-2, -1), (0, 1)), (3, 3, *shape)))
+    h = _components(half, shape)
+    t_in = t_out = None
+    for i in range(3):
+        o_i = r[0, i] * v[0] + r[1, i] * v[1] + r[2, i] * v[2]
+        d_i = r[0, i] * d[0] + r[1, i] * d[1] + r[2, i] * d[2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t1 = (-h[i] - o_i) / d_i
+            t2 = (h[i] - o_i) / d_i
+        # A ray parallel to a slab is inside it everywhere or nowhere.
+        inside = np.abs(o_i) <= h[i]
+        parallel = d_i == 0
+        lo = np.where(parallel, np.where(inside, -np.inf, np.inf), np.minimum(t1, t2))
+        hi = np.where(parallel, np.where(inside, np.inf, -np.inf), np.maximum(t1, t2))
+        t_in = lo if t_in is None else np.maximum(t_in, lo)
+        t_out = hi if t_out is None else np.minimum(t_out, hi)
+    return t_in, t_out  # type: ignore[return-value]
+
+
+def _components(vector: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """The three coordinates of ``vector`` (``(..., 3)``) as one contiguous array
+    ``(3, *shape)``."""
+    return np.ascontiguousarray(np.broadcast_to(np.moveaxis(vector, -1, 0), (3, *shape)))
 
 
 def ray_box_distance(
@@ -533,7 +567,7 @@ def on_flat_face(
     A gauge reads only on the face it is aimed at: near a bar's end its ray can enter
     through the end face at grazing incidence, where a real tip slides off the edge (and
     PyBullet's rounded box edges disagree with the sharp box by ~1 mm)."""
-    local = np.einsum("...ji,...j->...i", rot, point - centre)
+    local = to_box_frame(rot, point - centre)
     ratio = np.abs(local) / half
     touched = np.argmax(ratio, axis=-1)
     inner = np.abs(local) <= half - margin
@@ -644,7 +678,7 @@ def pressed_past_travel(
     ...)``; the result has shape ``(..., G)``."""
     g = as_gauge_array(gauges).for_postures(np.ndim(centre) - 2)
     # The body is a cylinder around the gauge axis: grow the box across the axis only.
-    along = np.einsum("...ji,...j->...i", rot, g.direction)
+    along = to_box_frame(rot, g.direction)
     grown = half + GAUGE_BODY_RADIUS * np.sqrt(np.clip(1 - along**2, 0.0, 1.0))
     t_in, t_out = ray_box_interval(g.origin, g.direction, centre, rot, grown)
     return (t_in <= t_out) & (t_in < 0) & (t_out > -STAND_LENGTH)

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from orthoglide_env.backend import ExactMachine
-from orthoglide_env.collisions import PAIR_NAMES, collision_mask, collisions
+from orthoglide_env.collisions import PAIR_NAMES, collision_mask, collisions, pair_gaps
 from orthoglide_env.gauges import (
     GaugeArray,
     GaugeSpec,
@@ -145,6 +145,13 @@ def test_overtravel_and_collision_flags_are_the_per_machine_ones(world: dict) ->
             assert collisions(machine, rho[k, p]) == list(np.array(PAIR_NAMES)[crashed[k, p]])
     assert 100 <= pressed.sum() <= pressed.size - 100
     assert crashed.any(axis=-1).sum() >= 20
+
+
+def test_the_bounding_box_cull_decides_as_the_separating_axis_test(world: dict) -> None:
+    # collision_mask sends only pairs whose bounding boxes overlap through the
+    # separating-axis test; pair_gaps runs it on every pair.
+    batch, rho = world["batch"], world["rho"]
+    np.testing.assert_array_equal(collision_mask(batch, rho), pair_gaps(batch, rho) <= 0.0)
 
 
 def test_batched_exact_machine_is_its_machines_one_by_one(world: dict) -> None:
