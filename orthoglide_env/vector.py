@@ -21,6 +21,16 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .backend import ExactMachine
+from .env import (
+    STATUS_LABELS,
+    EnvSettings,
+    check_actions,
+    check_seed,
+    collision_label,
+    observation,
+    overtravel_names,
+    reset_options,
+)
 from .gauges import (
     DEFAULT_RESOLUTION,
     DEFAULT_SIGMA,
@@ -34,18 +44,6 @@ from .gauges import (
 from .geometry import DEFAULT_PRESET, MachineParams
 from .kinematics import UnreachableError, direct
 from .task import CalibrationTask, Reading
-
-# The env module's checks, spaces, observation and info are this env's too.
-from .env import (  # isort: skip
-    STATUS_LABELS,
-    EnvSettings,
-    check_actions,
-    check_seed,
-    collision_label,
-    observation,
-    overtravel_names,
-    reset_options,
-)
 
 #: What ``options["reset_mask"]`` must be, as Gymnasium's vector envs take it.
 RESET_MASK = "reset_mask"
