@@ -10,7 +10,7 @@ from __future__ import annotations
 import numbers
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
@@ -45,6 +45,9 @@ from .geometry import (
 )
 from .kinematics import UnreachableError
 from .task import CalibrationTask, Reading
+
+if TYPE_CHECKING:  # PyBullet is imported only by the backend that needs it
+    from .simulator import Simulator
 
 BACKENDS: tuple[str, ...] = ("pybullet", "exact")
 #: Encoders may read a hair outside the control limits after settling (solver residue
@@ -198,6 +201,8 @@ class OrthoglideCalibrationEnv(gym.Env):
         self.task = CalibrationTask(self.gauge_noise)
         self.action_space, self.observation_space = settings.spaces()
         self._machine: MachineBackend | None = None
+        # The PyBullet client, made at the first reset and reused by every episode after.
+        self._sim: Simulator | None = None
         self._rho = np.zeros(3)
         self._steps = 0
         self._pressed = np.zeros(len(self.gauge_layout), dtype=bool)
@@ -223,10 +228,12 @@ class OrthoglideCalibrationEnv(gym.Env):
             episode = self._new_episode(machine, layout)
         except BaseException:
             # A refused reset leaves no trace: the previous episode (or none) goes on with
-            # the random stream it had.
+            # the random stream it had, and its machine, where the new one took its place
+            # in the shared client.
             self._np_random, self._np_random_seed = saved[0], saved[2]
             if saved[0] is not None:
                 saved[0].bit_generator.state = saved[1]
+            self._revive()
             raise
         if self._machine is not None:
             self._machine.close()
@@ -270,6 +277,9 @@ class OrthoglideCalibrationEnv(gym.Env):
         if self._machine is not None:
             self._machine.close()
             self._machine = None
+        if self._sim is not None:
+            self._sim.close()
+            self._sim = None
 
     # -- helpers -------------------------------------------------------------------------------
     def _random_state(self) -> tuple[np.random.Generator | None, dict | None, int | None]:
@@ -300,11 +310,22 @@ class OrthoglideCalibrationEnv(gym.Env):
             return ExactMachine(machine, gauges)
         try:
             from .machine import OrthoglideMachine
+            from .simulator import Simulator
         except ImportError as exc:
             raise ImportError(
                 f"the pybullet backend is not available ({exc}); use backend='exact'"
             ) from exc
-        return OrthoglideMachine(machine, gauges, gui=self.render_mode == "human")
+        if self._sim is None:
+            self._sim = Simulator(gui=self.render_mode == "human")
+        return OrthoglideMachine(machine, gauges, sim=self._sim)
+
+    def _revive(self) -> None:
+        """Build the episode's machine again if a refused reset replaced it in the shared
+        PyBullet client: at its posture, exactly as it was after a quasi-static move (a
+        dynamic one settles to within 1e-13 mm of that)."""
+        machine = self._machine
+        if machine is not None and not getattr(machine, "in_client", True):
+            machine.rebuild()  # type: ignore[attr-defined]
 
     def _require_machine(self) -> MachineBackend:
         if self._machine is None:
