@@ -115,6 +115,7 @@ def main() -> None:
              "native N=1024": 30000, "SyncVectorEnv x8": 1000, "AsyncVectorEnv x2": 1000}
     runners = {name: (n, make(steps_for(args.seconds, guess[name]) // n or 1))
                for name, (n, make) in configs.items()}
+    load = os.getloadavg()[0]
     for _, run in runners.values():
         run()  # warm-up: imports, caches, allocator pools
     rates: dict[str, list[float]] = {name: [] for name in runners}
@@ -122,9 +123,8 @@ def main() -> None:
         for name, (n, run) in runners.items():
             steps = steps_for(args.seconds, guess[name]) // n or 1
             rates[name].append(steps * n / run())
-    print(f"cpus: {os.cpu_count()}, load average before/after: see below; "
-          f"{args.rounds} interleaved rounds of ~{args.seconds:g} s each")
-    print(f"load average (1 min) after timing: {os.getloadavg()[0]:.2f}")
+    print(f"cpus: {os.cpu_count()}, load average (1 min) before/after timing: {load:.2f}/"
+          f"{os.getloadavg()[0]:.2f}; {args.rounds} interleaved rounds of ~{args.seconds:g} s")
     base = float(np.median(rates["single env"]))
     print(f"{'configuration':22}{'steps/s (median)':>18}{'min':>10}{'max':>10}"
           f"{'x single env':>14}")
