@@ -135,12 +135,14 @@ def test_overtravel_and_collision_flags_are_the_per_machine_ones(world: dict) ->
     boxes = collision_boxes(batch, rho, direct(batch, rho))
     pressed = pressed_past_travel(world["array"], *exact_target_boxes(world["array"], boxes))
     crashed = collision_mask(batch, rho)
-    assert crashed.shape == (len(world["machines"]), POSTURES, len(PAIR_NAMES))
+    gaps = pair_gaps(batch, rho)
+    assert crashed.shape == gaps.shape == (len(world["machines"]), POSTURES, len(PAIR_NAMES))
     for k, (machine, gauges) in enumerate(zip(world["machines"], world["gauges"], strict=True)):
         own = collision_boxes(machine, rho[k], direct(machine, rho[k]))
         np.testing.assert_array_equal(
             pressed[k], pressed_past_travel(gauges, *exact_target_boxes(gauges, own)))
         np.testing.assert_array_equal(crashed[k], collision_mask(machine, rho[k]))
+        np.testing.assert_array_equal(gaps[k], pair_gaps(machine, rho[k]))
         for p in range(POSTURES):
             assert collisions(machine, rho[k, p]) == list(np.array(PAIR_NAMES)[crashed[k, p]])
     assert 100 <= pressed.sum() <= pressed.size - 100
