@@ -70,6 +70,19 @@ class Status(IntEnum):
     MISSED = 3  # tip off the bar's flat face, or the ray meets something else first
 
 
+def local_axis(leg: np.ndarray | int, axis: np.ndarray | int) -> np.ndarray:
+    """The leg-frame axis a gauge on ``leg`` measuring along world ``axis`` measures along:
+    1 (local Y) or 2 (local Z); also the face of its bar it touches."""
+    return np.where(np.asarray(axis) == (np.asarray(leg) + 1) % 3, 1, 2)
+
+
+def target_index(leg: np.ndarray | int, face: np.ndarray | int) -> np.ndarray:
+    """Index in :data:`BOX_NAMES` of the bar a gauge on ``leg`` touching ``face`` touches:
+    the bar at +d/2 along local Z (measured along local Y, from the side) or the one at
+    -d/2 (measured along local Z, from below)."""
+    return 2 * np.asarray(leg) + (np.asarray(face) == 2)
+
+
 @dataclass(frozen=True)
 class GaugeSpec:
     """Where a gauge goes, nominally: which leg, which world axis, where along the leg.
@@ -102,7 +115,7 @@ class GaugeSpec:
     @property
     def local_axis(self) -> int:
         """1 when the gauge measures along the leg's local Y, 2 along local Z."""
-        return 1 if self.axis == (self.leg + 1) % 3 else 2
+        return int(local_axis(self.leg, self.axis))
 
     @property
     def bar(self) -> int:
@@ -210,15 +223,13 @@ class GaugeArray:
 
     @property
     def target(self) -> np.ndarray:
-        """Index in :data:`BOX_NAMES` of each gauge's target bar, ``(*batch, G)``: see
-        :func:`target_box`."""
-        return 2 * self.leg + (self.face == 2)
+        """Index in :data:`BOX_NAMES` of each gauge's target bar, ``(*batch, G)``."""
+        return target_index(self.leg, self.face)
 
     @property
     def face(self) -> np.ndarray:
-        """The target bar's face (box axis) each gauge touches, ``(*batch, G)``: see
-        :attr:`GaugeSpec.local_axis`."""
-        return np.where(self.axis == (self.leg + 1) % 3, 1, 2)
+        """The target bar's face (box axis) each gauge touches, ``(*batch, G)``."""
+        return local_axis(self.leg, self.axis)
 
     def for_postures(self, ndim: int) -> GaugeArray:
         """The fields reshaped to broadcast against arrays of ``ndim`` leading dimensions
@@ -241,10 +252,6 @@ class GaugeArray:
                 self.origin, self.direction, self.sign, self.travel, self.zero, self.leg,
                 self.axis, self.at, strict=True)
         ]
-
-    def names(self) -> list[str]:
-        """Names (``x-leg/y``) of one machine's gauges."""
-        return [g.spec.name for g in self.to_gauges()]
 
     def zeroed(self, t_at_zero: np.ndarray) -> GaugeArray:
         """The gauges set up at the Zero posture: see :func:`zero_gauges`."""
@@ -612,7 +619,7 @@ BOX_NAMES: tuple[str, ...] = tuple(
 
 def target_box(spec: GaugeSpec) -> int:
     """Index in :data:`BOX_NAMES` of the bar a gauge touches."""
-    return 2 * spec.leg + (0 if spec.bar > 0 else 1)
+    return int(target_index(spec.leg, spec.local_axis))
 
 
 def _pick(values: np.ndarray, index: np.ndarray, tail: int) -> np.ndarray:

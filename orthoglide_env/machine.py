@@ -103,9 +103,9 @@ class OrthoglideMachine:
             raise
 
     def _build(self) -> None:
-        """Load the tree, close the loops, draw the stands and place the machine at Zero,
-        in a client cleared first unless it is new."""
-        if self._built or not self._owns_sim:  # a new client of its own holds nothing yet
+        """Load the tree, close the loops and place the machine at Zero, in a client
+        cleared first."""
+        if self._built or not self._owns_sim:  # a new client of its own holds nothing
             self.sim.clear()
         self._built = True
         self._generation = self.sim.generation
