@@ -64,11 +64,11 @@ class OrthoglideCalibrationVectorEnv(VectorEnv):
 
     Action space
     ------------
-    ===========  =========================================  ====  ==========
-    index        meaning                                    unit  range
-    ===========  =========================================  ====  ==========
-    [i, 0:3]     env i's target control coordinates rho      mm    [-100, 60]
-    ===========  =========================================  ====  ==========
+    ========  ======================================  ====  ==========
+    index     meaning                                 unit  range
+    ========  ======================================  ====  ==========
+    [i, 0:3]  env i's target control coordinates rho  mm    [-100, 60]
+    ========  ======================================  ====  ==========
 
     A target that one env would refuse (outside the joint limits, not finite, not real
     numbers, wrong shape, or a posture that env's machine cannot be assembled in) raises
@@ -77,37 +77,37 @@ class OrthoglideCalibrationVectorEnv(VectorEnv):
 
     Observation space (``Dict``)
     ----------------------------
-    ==========  ==============================================  ======  ================
-    key         meaning                                         unit    range
-    ==========  ==============================================  ======  ================
-    gauges      (N, G) readings, in each env's layout order     mm      [-travel, travel]
-    valid       (N, G) 1 where the gauge touches its bar         -       {0, 1}
-    joints      (N, 3) encoder readings                          mm      [-101, 61]
-    ==========  ==============================================  ======  ================
+    ======  ===========================================  ====  =================
+    key     meaning                                      unit  range
+    ======  ===========================================  ====  =================
+    gauges  (N, G) readings, in each env's layout order  mm    [-travel, travel]
+    valid   (N, G) 1 where the gauge touches its bar     -     {0, 1}
+    joints  (N, 3) encoder readings                      mm    [-101, 61]
+    ======  ===========================================  ====  =================
 
     A gauge that is not valid reads 0.0: use ``valid``.
 
     Reward
     ------
-    ===================  ================================================  =========
-    term                 when                                              seconds
-    ===================  ================================================  =========
-    travel               every step: ``max |delta rho| / DRIVE_SPEED``     >= 0
-    settle and read      every step                                        5
-    overtravel           per gauge pushed past its travel on this move     120
-    ===================  ================================================  =========
+    ===============  =============================================  =======
+    term             when                                           seconds
+    ===============  =============================================  =======
+    travel           every step: ``max |delta rho| / DRIVE_SPEED``  >= 0
+    settle and read  every step                                     5
+    overtravel       per gauge pushed past its travel on this move  120
+    ===============  =============================================  =======
 
     The reward is minus the sum (:mod:`orthoglide_env.task`), and 0.0 on the step on
     which an env autoresets (``next-step`` mode).
 
     Termination and autoreset
     -------------------------
-    ===========  =========================================================================
-    flag         when
-    ===========  =========================================================================
-    terminated   moving parts that must never meet touch (``info["collision"]`` names them)
-    truncated    ``max_episode_steps`` steps since the env's reset (500 from ``make_vec``)
-    ===========  =========================================================================
+    ==========  ==========================================================================
+    flag        when
+    ==========  ==========================================================================
+    terminated  moving parts that must never meet touch (``info["collision"]`` names them)
+    truncated   ``max_episode_steps`` steps since the env's reset (500 from ``make_vec``)
+    ==========  ==========================================================================
 
     ``autoreset_mode`` (``metadata["autoreset_mode"]``) is Gymnasium's: ``NEXT_STEP``
     (default) resets an ended env on its next ``step``, which returns its first
