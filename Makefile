@@ -25,6 +25,8 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/fidelity.py --machines 200
 	$(BIN)/python benchmarks/bench_machine.py
 	$(BIN)/python benchmarks/bench_env.py
+	$(BIN)/python benchmarks/bench_vector.py
+	$(BIN)/python benchmarks/bench_build.py
 	$(BIN)/python benchmarks/statistics.py
 	$(BIN)/python benchmarks/realistic.py
 	$(BIN)/python benchmarks/bench_calibrators.py

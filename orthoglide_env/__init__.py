@@ -1,8 +1,9 @@
 """Virtual Orthoglide: geometry, kinematics, PyBullet machine, gauges and Gymnasium envs.
 
-Importing the package registers ``OrthoglideCalibration-v0`` (move and read) and
-``OrthoglideLab-v0`` (the whole lab: gauge handling, stands, tracker, a clock) with
-Gymnasium.
+Importing the package registers ``OrthoglideCalibration-v0`` (move and read), with a native
+vector env (``gymnasium.make_vec(..., vectorization_mode="vector_entry_point",
+backend="exact")``, :mod:`orthoglide_env.vector`), and ``OrthoglideLab-v0`` (the whole
+lab: gauge handling, stands, tracker, a clock) with Gymnasium.
 """
 
 import gymnasium
@@ -15,6 +16,7 @@ if ENV_ID not in gymnasium.registry:
     gymnasium.register(
         id=ENV_ID,
         entry_point="orthoglide_env.env:OrthoglideCalibrationEnv",
+        vector_entry_point="orthoglide_env.vector:OrthoglideCalibrationVectorEnv",
         max_episode_steps=500,
     )
 if LAB_ENV_ID not in gymnasium.registry:

@@ -12,8 +12,15 @@ from typing import Protocol
 
 import numpy as np
 
-from .collisions import collisions
-from .gauges import Gauge, collision_boxes, exact_ray_distances, exact_target_boxes
+from .collisions import collision_mask, collision_names
+from .gauges import (
+    Gauge,
+    GaugeArray,
+    as_gauge_array,
+    collision_boxes,
+    exact_ray_distances,
+    exact_target_boxes,
+)
 from .geometry import MachineParams
 from .kinematics import direct
 
@@ -29,7 +36,14 @@ class MachineBackend(Protocol):
     """A virtual Orthoglide with gauges installed on its base (ground truth inside)."""
 
     machine: MachineParams
-    gauges: list[Gauge]
+
+    @property
+    def gauges(self) -> list[Gauge]:
+        """The installed gauges."""
+
+    @property
+    def gauge_array(self) -> GaugeArray:
+        """The installed gauges as arrays (what the reading model computes with)."""
 
     def move(self, rho: np.ndarray, mode: str = "quasi-static") -> None:
         """Drive the three actuators to control coordinates ``rho`` (mm, already
@@ -48,6 +62,9 @@ class MachineBackend(Protocol):
     def collisions(self) -> list[str]:
         """Names of the pairs of moving parts in contact (empty when none)."""
 
+    def collision_mask(self) -> np.ndarray:
+        """Which pairs of :data:`~orthoglide_env.collisions.PAIR_NAMES` are in contact."""
+
     def target_boxes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Box of every gauge's target bar: centres (mm), rotations, half extents (mm)."""
 
@@ -59,16 +76,30 @@ class MachineBackend(Protocol):
 
 
 class ExactMachine:
-    """The machine as the exact kinematic model computes it (no dynamics, no solver)."""
+    """The machine as the exact kinematic model computes it (no dynamics, no solver).
 
-    def __init__(self, machine: MachineParams, gauges: list[Gauge]) -> None:
+    A batch of machines is one ``ExactMachine`` too: ``machine`` with a batch shape
+    (:attr:`MachineParams.batch_shape`) and ``gauges`` a :class:`GaugeArray` of that batch
+    shape; then ``rho`` and every reading carry the batch dimensions first.  One machine
+    is the batch of shape ``()``, computed by the same code.
+    """
+
+    def __init__(self, machine: MachineParams, gauges: list[Gauge] | GaugeArray,
+                 rho: np.ndarray | None = None) -> None:
+        """``rho``: the posture to start at (default Zero), as :meth:`move` takes it."""
         self.machine = machine
-        self.gauges = list(gauges)
-        self.move(np.zeros(3))
+        self.gauge_array = as_gauge_array(gauges)
+        self.move(np.zeros(3) if rho is None else rho)
+
+    @property
+    def gauges(self) -> list[Gauge]:
+        return self.gauge_array.to_gauges()
 
     def move(self, rho: np.ndarray, mode: str = "quasi-static") -> None:
+        """Go to control coordinates ``rho``, shape ``(*batch, 3)`` (or ``(3,)``: the same
+        posture on every machine)."""
         check_motion_mode(mode)
-        rho = np.array(rho, dtype=float)
+        rho = np.array(np.broadcast_to(rho, (*self.machine.batch_shape, 3)), dtype=float)
         # Solved before anything is stored: a posture the machine cannot be assembled in
         # raises and leaves the machine where it was.  The geometry of a posture is computed
         # once; every reading below uses it.
@@ -83,19 +114,22 @@ class ExactMachine:
         return self._tcp.copy()
 
     def gauge_distances(self) -> np.ndarray:
-        return exact_ray_distances(self.machine, self.gauges, self._rho, self._boxes)
+        return exact_ray_distances(self.machine, self.gauge_array, self._rho, self._boxes)
 
-    def collisions(self) -> list[str]:
+    def collision_mask(self) -> np.ndarray:
         # Within the joint limits the nearest crash pair stays millimetres apart on the
         # nominal and realistic machines (tests/test_collisions.py); the check is for
         # machines far from nominal, given through reset options.
-        return collisions(self.machine, self._rho, self._boxes)
+        return collision_mask(self.machine, self._rho, self._boxes)
+
+    def collisions(self) -> list[str]:
+        return collision_names(self.collision_mask())
 
     def target_boxes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return exact_target_boxes(self.gauges, self._boxes)
+        return exact_target_boxes(self.gauge_array, self._boxes)
 
-    def set_gauges(self, gauges: list[Gauge]) -> None:
-        self.gauges = list(gauges)
+    def set_gauges(self, gauges: list[Gauge] | GaugeArray) -> None:
+        self.gauge_array = as_gauge_array(gauges)
 
     def close(self) -> None:
         """Nothing to release."""

@@ -1,17 +1,23 @@
-"""Gymnasium environment: one episode is one calibration experiment on one machine."""
+"""Gymnasium environment: one episode is one calibration experiment on one machine.
+
+The pieces both envs use (this one and the vector env of :mod:`orthoglide_env.vector`)
+live here as functions: the checks of constructor arguments, reset options, seeds and
+actions, the spaces, the observation and the info.
+"""
 
 from __future__ import annotations
 
 import numbers
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
 from .backend import MOTION_MODES, ExactMachine, MachineBackend
+from .collisions import collision_names
 from .display import display_problem, require_display
 from .gauges import (
     DEFAULT_RESOLUTION,
@@ -19,6 +25,7 @@ from .gauges import (
     DEFAULT_TRAVEL,
     PAPER_LAYOUT,
     Gauge,
+    GaugeNoise,
     GaugeSpec,
     Status,
     check_noise,
@@ -30,19 +37,28 @@ from .geometry import (
     DEFAULT_PRESET,
     RHO_MAX,
     RHO_MIN,
+    ErrorPreset,
     MachineParams,
     check_rho,
     check_validity,
     get_preset,
 )
 from .kinematics import UnreachableError
-from .task import OVERTRAVEL_PENALTY, CalibrationTask, Reading
+from .task import CalibrationTask, Reading
+
+if TYPE_CHECKING:  # PyBullet is imported only by the backend that needs it
+    from .simulator import Simulator
 
 BACKENDS: tuple[str, ...] = ("pybullet", "exact")
 #: Encoders may read a hair outside the control limits after settling (solver residue
 #: ~1e-9 mm); the observation box leaves this margin so an observation is always inside.
 ENCODER_MARGIN: float = 1.0
 RESET_OPTIONS: tuple[str, ...] = ("machine", "gauges")
+#: How ``info["status"]`` names each :class:`~orthoglide_env.gauges.Status` code, indexed
+#: by the code.
+STATUS_LABELS: np.ndarray = np.array([s.name.lower().replace("_", "-") for s in Status])
+#: Render modes any instance may offer (an instance lists what it can draw here).
+RENDER_MODES: tuple[str, ...] = ("rgb_array", "human")
 
 
 class OrthoglideCalibrationEnv(gym.Env):
@@ -147,8 +163,7 @@ class OrthoglideCalibrationEnv(gym.Env):
     agents must not read it.
     """
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array", "human"],
-                                          "render_fps": 4}
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": list(RENDER_MODES), "render_fps": 4}
 
     def __init__(
         self,
@@ -163,60 +178,34 @@ class OrthoglideCalibrationEnv(gym.Env):
         render_mode: str | None = None,
         clip_actions: bool = False,
     ) -> None:
-        if not isinstance(errors, str):
-            raise ValueError(f"errors must be the name of an error preset, got {errors!r}")
-        self.preset = get_preset(errors)
-        if motion not in MOTION_MODES:
-            raise ValueError(f"unknown motion {motion!r}; choose from {list(MOTION_MODES)}")
-        if backend not in BACKENDS:
-            raise ValueError(f"unknown backend {backend!r}; choose from {list(BACKENDS)}")
-        if render_mode not in (None, *self.metadata["render_modes"]):
-            raise ValueError(f"unknown render_mode {render_mode!r}")
-        if backend == "exact" and render_mode is not None:
-            raise ValueError("the exact backend has no picture: use backend='pybullet' to render")
-        if render_mode == "human":
-            require_display("render_mode='human'", "render_mode='rgb_array'")
-        if max_episode_steps is not None and not (
-            isinstance(max_episode_steps, int | np.integer)
-            and not isinstance(max_episode_steps, bool) and max_episode_steps >= 1
-        ):
-            raise ValueError(f"max_episode_steps must be a positive integer or None, got "
-                             f"{max_episode_steps!r}")
-        if not isinstance(clip_actions, bool | np.bool_):
-            raise ValueError(f"clip_actions must be True or False, got {clip_actions!r}")
-        if isinstance(travel, bool) or not isinstance(travel, numbers.Real) or not (
-            np.isfinite(travel) and travel > 0
-        ):
-            raise ValueError(f"travel must be a positive finite number (mm), got {travel!r}")
-        self.gauge_noise = check_noise(gauge_sigma, gauge_resolution, travel)
-        self._default_layout = _layout(gauges)
-        self.gauge_layout = self._default_layout
-        self.travel = float(travel)
-        self.motion = motion
-        self.backend_name = backend
-        self.render_mode = render_mode
+        settings = EnvSettings.check(
+            errors=errors, gauge_sigma=gauge_sigma, gauge_resolution=gauge_resolution,
+            motion=motion, backend=backend, gauges=gauges, travel=travel,
+            max_episode_steps=max_episode_steps, render_mode=render_mode,
+            clip_actions=clip_actions,
+        )
+        self.settings = settings
+        self.preset = settings.preset
+        self.gauge_noise = settings.gauge_noise
+        self._default_layout = settings.layout
+        self.gauge_layout = settings.layout
+        self.travel = settings.travel
+        self.motion = settings.motion
+        self.backend_name = settings.backend
+        self.render_mode = settings.render_mode
         # What this instance can draw: the class lists every mode for gym.make; the exact
         # backend draws nothing and a window needs a display.
         self.metadata = {**self.metadata, "render_modes": _render_modes(backend)}
-        self.clip_actions = bool(clip_actions)
-        self.max_episode_steps = max_episode_steps
+        self.clip_actions = settings.clip_actions
+        self.max_episode_steps = settings.max_episode_steps
         self.task = CalibrationTask(self.gauge_noise)
-        n = len(self.gauge_layout)
-        self.action_space = spaces.Box(RHO_MIN, RHO_MAX, shape=(3,), dtype=np.float64)
-        self.observation_space = spaces.Dict(
-            {
-                # A valid reading lies within +-travel/2 of its zero; the box leaves another
-                # travel/2 (>= 25 sigma, see MAX_NOISE_FRACTION) for the noise.
-                "gauges": spaces.Box(-self.travel, self.travel, shape=(n,), dtype=np.float64),
-                "valid": spaces.MultiBinary(n),
-                "joints": spaces.Box(RHO_MIN - ENCODER_MARGIN, RHO_MAX + ENCODER_MARGIN,
-                                     shape=(3,), dtype=np.float64),
-            }
-        )
+        self.action_space, self.observation_space = settings.spaces()
         self._machine: MachineBackend | None = None
+        # The PyBullet client, made at the first reset and reused by every episode after.
+        self._sim: Simulator | None = None
         self._rho = np.zeros(3)
         self._steps = 0
-        self._pressed = np.zeros(n, dtype=bool)
+        self._pressed = np.zeros(len(self.gauge_layout), dtype=bool)
 
     # -- ground truth, for the scorer only --------------------------------------------------
     @property
@@ -231,18 +220,20 @@ class OrthoglideCalibrationEnv(gym.Env):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        _check_seed(seed)
-        machine, layout = self._reset_options(options)
+        check_seed(seed)
+        machine, layout = reset_options(options, self._default_layout)
         saved = self._random_state()
         super().reset(seed=seed)
         try:
             episode = self._new_episode(machine, layout)
         except BaseException:
             # A refused reset leaves no trace: the previous episode (or none) goes on with
-            # the random stream it had.
+            # the random stream it had, and its machine, where the new one took its place
+            # in the shared client.
             self._np_random, self._np_random_seed = saved[0], saved[2]
             if saved[0] is not None:
                 saved[0].bit_generator.state = saved[1]
+            self._revive()
             raise
         if self._machine is not None:
             self._machine.close()
@@ -250,13 +241,15 @@ class OrthoglideCalibrationEnv(gym.Env):
         self._rho = np.zeros(3)
         self._steps = 0
         self._pressed = episode.pressed
-        return self._observation(episode.reading), self._info(episode.reading, [], 0.0, "")
+        names = [g.name for g in self.gauge_layout]
+        return observation(episode.reading), step_info(names, episode.reading.status, [], 0.0,
+                                                       "")
 
     def step(
         self, action: np.ndarray
     ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         machine = self._require_machine()
-        target = self._check_action(action)
+        target = check_actions(action, (3,), self.clip_actions)
         try:
             machine.move(target, self.motion)
         except UnreachableError as exc:
@@ -264,15 +257,15 @@ class OrthoglideCalibrationEnv(gym.Env):
                              "where it was") from None
         reading = self.task.read(machine, self.np_random)
         pressed = self.task.pressed(machine)
-        overtravel = self.task.new_overtravels(machine.gauges, self._pressed, pressed)
-        step_time = self.task.move_time(self._rho, target) + OVERTRAVEL_PENALTY * len(overtravel)
-        collision = ", ".join(machine.collisions())
+        new = self.task.new_overtravels(self._pressed, pressed)
+        step_time = float(self.task.step_time(self._rho, target, new))
+        collision = collision_label(machine.collision_mask())
         self._rho, self._pressed = target, pressed
         self._steps += 1
         truncated = self.max_episode_steps is not None and self._steps >= self.max_episode_steps
-        obs = self._observation(reading)
-        return obs, -step_time, bool(collision), truncated, self._info(
-            reading, overtravel, step_time, collision
+        names = [g.name for g in self.gauge_layout]
+        return observation(reading), -step_time, bool(collision), truncated, step_info(
+            names, reading.status, overtravel_names(names, new), step_time, collision
         )
 
     def render(self) -> np.ndarray | None:
@@ -284,32 +277,11 @@ class OrthoglideCalibrationEnv(gym.Env):
         if self._machine is not None:
             self._machine.close()
             self._machine = None
+        if self._sim is not None:
+            self._sim.close()
+            self._sim = None
 
     # -- helpers -------------------------------------------------------------------------------
-    def _reset_options(
-        self, options: Any
-    ) -> tuple[MachineParams | None, tuple[GaugeSpec, ...]]:
-        """The validated reset options: the given machine (None: draw one) and the layout."""
-        if options is None:
-            options = {}
-        if not isinstance(options, Mapping):
-            raise ValueError(f"reset options must be a dict or None, got {options!r}")
-        unknown = [key for key in options if key not in RESET_OPTIONS]
-        if unknown:
-            raise ValueError(f"unknown reset option(s) {unknown}; allowed: "
-                             f"{', '.join(RESET_OPTIONS)}")
-        machine = _machine_option(options.get("machine"))
-        gauges = options.get("gauges")
-        layout = self._default_layout if gauges is None else _layout(gauges, "reset option "
-                                                                            "'gauges'")
-        if len(layout) != len(self._default_layout):
-            raise ValueError(
-                f"reset option 'gauges': this env observes {len(self._default_layout)} "
-                f"gauges; a layout of {len(layout)} needs an env built with gauges=[...] of "
-                "that size"
-            )
-        return machine, layout
-
     def _random_state(self) -> tuple[np.random.Generator | None, dict | None, int | None]:
         """The random stream as it stands: generator, its state and its seed."""
         rng = self._np_random
@@ -338,50 +310,27 @@ class OrthoglideCalibrationEnv(gym.Env):
             return ExactMachine(machine, gauges)
         try:
             from .machine import OrthoglideMachine
+            from .simulator import Simulator
         except ImportError as exc:
             raise ImportError(
                 f"the pybullet backend is not available ({exc}); use backend='exact'"
             ) from exc
-        return OrthoglideMachine(machine, gauges, gui=self.render_mode == "human")
+        if self._sim is None:
+            self._sim = Simulator(gui=self.render_mode == "human")
+        return OrthoglideMachine(machine, gauges, sim=self._sim)
+
+    def _revive(self) -> None:
+        """Build the episode's machine again if a refused reset replaced it in the shared
+        PyBullet client: at its posture, exactly as it was after a quasi-static move (a
+        dynamic one settles to within 1e-13 mm of that)."""
+        machine = self._machine
+        if machine is not None and not getattr(machine, "in_client", True):
+            machine.rebuild()  # type: ignore[attr-defined]
 
     def _require_machine(self) -> MachineBackend:
         if self._machine is None:
             raise RuntimeError("call reset() before using the environment")
         return self._machine
-
-    def _check_action(self, action: Any) -> np.ndarray:
-        try:
-            values = np.asarray(action)
-        except (TypeError, ValueError):
-            values = np.asarray(None)
-        # Integer and float arrays only: numpy would also read booleans, numeric strings
-        # and complex numbers with a zero imaginary part as numbers, and turns a boolean
-        # among numbers in a list into a number silently.
-        elements = action if isinstance(action, list | tuple) else ()
-        if values.dtype.kind not in "iuf" or any(isinstance(v, bool | np.bool_)
-                                                 for v in elements):
-            raise ValueError(f"action must be 3 numbers (mm), not text, booleans, complex "
-                             f"numbers or objects; got {action!r}")
-        target = values.astype(np.float64)
-        if target.shape != (3,):
-            raise ValueError(f"action must have shape (3,), got {target.shape}")
-        if self.clip_actions and np.all(np.isfinite(target)):
-            return np.clip(target, RHO_MIN, RHO_MAX)
-        return check_rho(target)
-
-    def _observation(self, reading: Reading) -> dict[str, np.ndarray]:
-        return {"gauges": reading.gauges.astype(np.float64), "valid": reading.valid,
-                "joints": reading.joints.astype(np.float64)}
-
-    def _info(self, reading: Reading, overtravel: list[str], step_time: float,
-              collision: str) -> dict[str, Any]:
-        return {
-            "gauge_names": [g.name for g in self.gauge_layout],
-            "status": [Status(s).name.lower().replace("_", "-") for s in reading.status],
-            "overtravel": overtravel,
-            "step_time_s": step_time,
-            "collision": collision,
-        }
 
 
 @dataclass(frozen=True)
@@ -394,10 +343,175 @@ class _Episode:
     pressed: np.ndarray
 
 
-def _check_seed(seed: Any) -> None:
+# -- what the single and the vector env share -------------------------------------------------
+@dataclass(frozen=True)
+class EnvSettings:
+    """The checked constructor arguments of an env (see the env's docstring)."""
+
+    preset: ErrorPreset
+    gauge_noise: GaugeNoise
+    layout: tuple[GaugeSpec, ...]
+    travel: float
+    motion: str
+    backend: str
+    render_mode: str | None
+    clip_actions: bool
+    max_episode_steps: int | None
+
+    @classmethod
+    def check(cls, *, errors: Any, gauge_sigma: Any, gauge_resolution: Any, motion: Any,
+              backend: Any, gauges: Any, travel: Any, max_episode_steps: Any,
+              render_mode: Any, clip_actions: Any) -> EnvSettings:
+        """The settings, or ``ValueError`` naming the first bad argument and its rule."""
+        if not isinstance(errors, str):
+            raise ValueError(f"errors must be the name of an error preset, got {errors!r}")
+        preset = get_preset(errors)
+        if motion not in MOTION_MODES:
+            raise ValueError(f"unknown motion {motion!r}; choose from {list(MOTION_MODES)}")
+        if backend not in BACKENDS:
+            raise ValueError(f"unknown backend {backend!r}; choose from {list(BACKENDS)}")
+        if render_mode not in (None, *RENDER_MODES):
+            raise ValueError(f"unknown render_mode {render_mode!r}")
+        if backend == "exact" and render_mode is not None:
+            raise ValueError("the exact backend has no picture: use backend='pybullet' to render")
+        if render_mode == "human":
+            require_display("render_mode='human'", "render_mode='rgb_array'")
+        if max_episode_steps is not None and not (
+            isinstance(max_episode_steps, int | np.integer)
+            and not isinstance(max_episode_steps, bool) and max_episode_steps >= 1
+        ):
+            raise ValueError(f"max_episode_steps must be a positive integer or None, got "
+                             f"{max_episode_steps!r}")
+        if not isinstance(clip_actions, bool | np.bool_):
+            raise ValueError(f"clip_actions must be True or False, got {clip_actions!r}")
+        if isinstance(travel, bool) or not isinstance(travel, numbers.Real) or not (
+            np.isfinite(travel) and travel > 0
+        ):
+            raise ValueError(f"travel must be a positive finite number (mm), got {travel!r}")
+        return cls(preset=preset, gauge_noise=check_noise(gauge_sigma, gauge_resolution, travel),
+                   layout=_layout(gauges), travel=float(travel), motion=motion,
+                   backend=backend, render_mode=render_mode, clip_actions=bool(clip_actions),
+                   max_episode_steps=(None if max_episode_steps is None
+                                      else int(max_episode_steps)))
+
+    def spaces(self) -> tuple[spaces.Box, spaces.Dict]:
+        """The action and observation spaces of one env."""
+        n = len(self.layout)
+        action = spaces.Box(RHO_MIN, RHO_MAX, shape=(3,), dtype=np.float64)
+        obs = spaces.Dict(
+            {
+                # A valid reading lies within +-travel/2 of its zero; the box leaves another
+                # travel/2 (>= 25 sigma, see MAX_NOISE_FRACTION) for the noise.
+                "gauges": spaces.Box(-self.travel, self.travel, shape=(n,), dtype=np.float64),
+                "valid": spaces.MultiBinary(n),
+                "joints": spaces.Box(RHO_MIN - ENCODER_MARGIN, RHO_MAX + ENCODER_MARGIN,
+                                     shape=(3,), dtype=np.float64),
+            }
+        )
+        return action, obs
+
+
+def observation(reading: Reading) -> dict[str, np.ndarray]:
+    """The observation of a reading (of one env, or of each env of a batch)."""
+    return {"gauges": reading.gauges.astype(np.float64), "valid": reading.valid,
+            "joints": reading.joints.astype(np.float64)}
+
+
+def step_info(names: list[str], status: np.ndarray, overtravel: list[str], step_time: float,
+              collision: str) -> dict[str, Any]:
+    """One env's info: gauge ``names``, their ``status`` codes, the gauges that went into
+    overtravel, the step's time and the collision label."""
+    return {
+        "gauge_names": list(names),
+        "status": STATUS_LABELS[status].tolist(),
+        "overtravel": overtravel,
+        "step_time_s": step_time,
+        "collision": collision,
+    }
+
+
+def overtravel_names(names: list[str], new: np.ndarray) -> list[str]:
+    """Names of the gauges a :meth:`CalibrationTask.new_overtravels` mask marks."""
+    return [name for name, hit in zip(names, new, strict=True) if hit]
+
+
+def collision_label(mask: np.ndarray) -> str:
+    """``info["collision"]``: the pairs in contact, comma separated (empty when none)."""
+    return ", ".join(collision_names(mask))
+
+
+def check_seed(seed: Any) -> None:
     """Gymnasium's rule (None or an int >= 0), with booleans refused and a ValueError."""
     if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
         raise ValueError(f"reset seed must be None or an integer >= 0, got {seed!r}")
+
+
+def reset_options(
+    options: Any, default_layout: tuple[GaugeSpec, ...]
+) -> tuple[MachineParams | None, tuple[GaugeSpec, ...]]:
+    """The validated reset options: the given machine (None: draw one) and the layout."""
+    if options is None:
+        options = {}
+    if not isinstance(options, Mapping):
+        raise ValueError(f"reset options must be a dict or None, got {options!r}")
+    unknown = [key for key in options if key not in RESET_OPTIONS]
+    if unknown:
+        raise ValueError(f"unknown reset option(s) {unknown}; allowed: "
+                         f"{', '.join(RESET_OPTIONS)}")
+    machine = _machine_option(options.get("machine"))
+    gauges = options.get("gauges")
+    layout = default_layout if gauges is None else _layout(gauges, "reset option 'gauges'")
+    if len(layout) != len(default_layout):
+        raise ValueError(
+            f"reset option 'gauges': this env observes {len(default_layout)} "
+            f"gauges; a layout of {len(layout)} needs an env built with gauges=[...] of "
+            "that size"
+        )
+    return machine, layout
+
+
+def check_actions(action: Any, shape: tuple[int, ...], clip: bool,
+                  rows: np.ndarray | None = None) -> np.ndarray:
+    """Joint targets (mm, float64) from an action of ``shape``: ``(3,)`` for one env,
+    ``(N, 3)`` for N, or ``ValueError`` naming the rule.  With ``clip`` finite targets are
+    clipped into the joint limits.  ``rows``: which rows must be valid targets (the others
+    are not used: their envs are being reset)."""
+    try:
+        values = np.asarray(action)
+    except (TypeError, ValueError):
+        values = np.asarray(None)
+    # Integer and float arrays only: numpy would also read booleans, numeric strings
+    # and complex numbers with a zero imaginary part as numbers, and turns a boolean
+    # among numbers in a list into a number silently.
+    if values.dtype.kind not in "iuf" or _holds_bool(action):
+        what = "3 numbers" if shape == (3,) else f"an array of shape {shape} of numbers"
+        raise ValueError(f"action must be {what} (mm), not text, booleans, complex "
+                         f"numbers or objects; got {action!r}")
+    target = values.astype(np.float64)
+    if target.shape != shape:
+        raise ValueError(f"action must have shape {shape}, got {target.shape}")
+    if clip:
+        finite = np.all(np.isfinite(target), axis=-1, keepdims=True)
+        target = np.where(finite, np.clip(target, RHO_MIN, RHO_MAX), target)
+    if target.ndim == 1:
+        return check_rho(target)
+    used = np.ones(len(target), dtype=bool) if rows is None else rows
+    bad = used & ~np.all(np.isfinite(target) & (target >= RHO_MIN) & (target <= RHO_MAX),
+                         axis=-1)
+    if bad.any():
+        env = int(np.flatnonzero(bad)[0])
+        try:
+            check_rho(target[env])
+        except ValueError as exc:
+            raise ValueError(f"action of env {env}: {exc}") from None
+    return target
+
+
+def _holds_bool(action: Any) -> bool:
+    """Whether a (nested) list or tuple action holds a boolean anywhere."""
+    if isinstance(action, list | tuple):
+        return any(isinstance(v, bool | np.bool_) or _holds_bool(v) for v in action)
+    return False
 
 
 def _machine_option(value: Any) -> MachineParams | None:

@@ -23,8 +23,10 @@ and touches the bar at ``-d/2``.  Both are flat box faces, as DESIGN.md advises.
 from __future__ import annotations
 
 import numbers
-from dataclasses import dataclass, replace
+from collections.abc import Sequence
+from dataclasses import dataclass, fields, replace
 from enum import IntEnum
+from typing import Any, overload
 
 import numpy as np
 
@@ -72,6 +74,19 @@ class Status(IntEnum):
     MISSED = 3  # tip off the bar's flat face, or the ray meets something else first
 
 
+def local_axis(leg: np.ndarray | int, axis: np.ndarray | int) -> np.ndarray:
+    """The leg-frame axis a gauge on ``leg`` measuring along world ``axis`` measures along:
+    1 (local Y) or 2 (local Z); also the face of its bar it touches."""
+    return np.where(np.asarray(axis) == (np.asarray(leg) + 1) % 3, 1, 2)
+
+
+def target_index(leg: np.ndarray | int, face: np.ndarray | int) -> np.ndarray:
+    """Index in :data:`BOX_NAMES` of the bar a gauge on ``leg`` touching ``face`` touches:
+    the bar at +d/2 along local Z (measured along local Y, from the side) or the one at
+    -d/2 (measured along local Z, from below)."""
+    return 2 * np.asarray(leg) + (np.asarray(face) == 2)
+
+
 @dataclass(frozen=True)
 class GaugeSpec:
     """Where a gauge goes, nominally: which leg, which world axis, where along the leg.
@@ -104,7 +119,7 @@ class GaugeSpec:
     @property
     def local_axis(self) -> int:
         """1 when the gauge measures along the leg's local Y, 2 along local Z."""
-        return 1 if self.axis == (self.leg + 1) % 3 else 2
+        return int(local_axis(self.leg, self.axis))
 
     @property
     def bar(self) -> int:
@@ -128,6 +143,141 @@ class Gauge:
     sign: float
     travel: float = DEFAULT_TRAVEL
     zero: float = DEFAULT_TRAVEL / 2
+
+
+@dataclass(frozen=True)
+class GaugeArray:
+    """Installed gauges as arrays: one gauge set (batch shape ``()``) or one set per machine
+    of a batch (:attr:`MachineParams.batch_shape`).
+
+    Every field has the batch dimensions first, then one entry per gauge ``G``: ``origin``
+    and ``direction`` ``(*batch, G, 3)``, the rest ``(*batch, G)``.  ``leg``, ``axis`` and
+    ``at`` are each gauge's :class:`GaugeSpec`, so a gauge set converts back to
+    :class:`Gauge` objects without loss (:meth:`to_gauges`).  Every function of this module
+    that takes a ``list[Gauge]`` also takes a ``GaugeArray``; the list is converted, so there
+    is one computation for one machine and for many.
+    """
+
+    origin: np.ndarray
+    direction: np.ndarray
+    sign: np.ndarray
+    travel: np.ndarray
+    zero: np.ndarray
+    leg: np.ndarray
+    axis: np.ndarray
+    at: np.ndarray
+
+    def __post_init__(self) -> None:
+        shape = np.shape(self.origin)
+        if len(shape) < 2 or shape[-1] != 3:
+            raise ValueError(f"gauge origins must have shape (*batch, G, 3), got {list(shape)}")
+        for name, tail, dtype in (("origin", (3,), float), ("direction", (3,), float),
+                                  ("sign", (), float), ("travel", (), float),
+                                  ("zero", (), float), ("leg", (), np.intp),
+                                  ("axis", (), np.intp), ("at", (), float)):
+            value = np.asarray(getattr(self, name), dtype=dtype)
+            object.__setattr__(self, name, np.broadcast_to(value, (*shape[:-1], *tail)))
+
+    @classmethod
+    def of(cls, gauges: Sequence[Gauge]) -> GaugeArray:
+        """The array form of one machine's gauges (batch shape ``()``)."""
+        specs = [g.spec for g in gauges]
+        return cls(
+            origin=np.array([g.origin for g in gauges], dtype=float).reshape(len(gauges), 3),
+            direction=np.array([g.direction for g in gauges], dtype=float).reshape(-1, 3),
+            sign=[g.sign for g in gauges], travel=[g.travel for g in gauges],
+            zero=[g.zero for g in gauges], leg=[s.leg for s in specs],
+            axis=[s.axis for s in specs], at=[s.at for s in specs],
+        )
+
+    @classmethod
+    def stack(cls, sets: Sequence[GaugeArray | Sequence[Gauge]]) -> GaugeArray:
+        """A batch of shape ``(len(sets),)`` from gauge sets of equal size."""
+        if not sets:
+            raise ValueError("cannot stack an empty list of gauge sets")
+        arrays = [as_gauge_array(s) for s in sets]
+        return cls(**{f.name: np.stack([getattr(a, f.name) for a in arrays])
+                      for f in fields(cls)})
+
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        """Leading shape of the batch of machines; ``()`` for one machine's gauges."""
+        return self.sign.shape[:-1]
+
+    @property
+    def count(self) -> int:
+        """Gauges per machine."""
+        return self.sign.shape[-1]
+
+    def __getitem__(self, index: Any) -> GaugeArray:
+        """One machine's gauges (or a sub-batch) of a batch."""
+        if not self.batch_shape:
+            raise IndexError("one machine's gauges have no batch axis to index")
+        return GaugeArray(**{f.name: getattr(self, f.name)[index] for f in fields(self)})
+
+    def with_rows(self, index: np.ndarray, rows: GaugeArray) -> GaugeArray:
+        """A copy of this batch whose machines ``index`` (along the first batch axis) carry
+        the gauge sets ``rows`` instead."""
+        out = {}
+        for f in fields(self):
+            value = np.array(getattr(self, f.name))
+            value[index] = getattr(rows, f.name)
+            out[f.name] = value
+        return GaugeArray(**out)
+
+    @property
+    def target(self) -> np.ndarray:
+        """Index in :data:`BOX_NAMES` of each gauge's target bar, ``(*batch, G)``."""
+        return target_index(self.leg, self.face)
+
+    @property
+    def face(self) -> np.ndarray:
+        """The target bar's face (box axis) each gauge touches, ``(*batch, G)``."""
+        return local_axis(self.leg, self.axis)
+
+    def for_postures(self, ndim: int) -> GaugeArray:
+        """The fields reshaped to broadcast against arrays of ``ndim`` leading dimensions
+        (the batch, then posture dimensions) before the gauge axis."""
+        batch = len(self.batch_shape)
+        extra = ndim - batch
+        if extra <= 0:
+            return self
+        return GaugeArray(**{f.name: _insert_axes(getattr(self, f.name), batch, extra)
+                             for f in fields(self)})
+
+    def to_gauges(self) -> list[Gauge]:
+        """One machine's gauges as :class:`Gauge` objects."""
+        if self.batch_shape:
+            raise ValueError("to_gauges() converts one machine's gauges: index the batch first")
+        return [
+            Gauge(GaugeSpec(int(leg), int(axis), float(at)), origin.copy(), direction.copy(),
+                  float(sign), float(travel), float(zero))
+            for origin, direction, sign, travel, zero, leg, axis, at in zip(
+                self.origin, self.direction, self.sign, self.travel, self.zero, self.leg,
+                self.axis, self.at, strict=True)
+        ]
+
+    def zeroed(self, t_at_zero: np.ndarray) -> GaugeArray:
+        """The gauges set up at the Zero posture: see :func:`zero_gauges`."""
+        t_at_zero = np.asarray(t_at_zero, dtype=float)
+        if np.isnan(t_at_zero).any():
+            names = [(f"machine {k[0] if len(k) == 2 else list(k[:-1])}: " if len(k) > 1
+                      else "") + f"{LEG_NAMES[self.leg[k]]}-leg/{AXIS_NAMES[self.axis[k]]}"
+                     for k in map(tuple, np.argwhere(np.isnan(t_at_zero)).tolist())]
+            raise ValueError(f"gauge(s) {names} do not touch their bar at the Zero posture")
+        half = self.travel / 2
+        return replace(self, origin=self.origin + (t_at_zero - half)[..., None] * self.direction,
+                       zero=half)
+
+
+def _insert_axes(value: np.ndarray, position: int, count: int) -> np.ndarray:
+    """``value`` with ``count`` singleton axes inserted before axis ``position``."""
+    return value.reshape(*value.shape[:position], *(1,) * count, *value.shape[position:])
+
+
+def as_gauge_array(gauges: GaugeArray | Sequence[Gauge]) -> GaugeArray:
+    """``gauges`` as a :class:`GaugeArray` (a list of one machine's gauges is converted)."""
+    return gauges if isinstance(gauges, GaugeArray) else GaugeArray.of(gauges)
 
 
 def layout_from_names(names: list[str]) -> tuple[GaugeSpec, ...]:
@@ -266,36 +416,66 @@ def install(
     if travel <= 0:
         raise ValueError("gauge travel must be positive")
     machine = machine if machine is not None else MachineParams()
-    gauges = []
     if not specs:
-        return gauges
-    for spec, origin, direction in zip(specs, *ideal_rays(specs, machine, travel), strict=True):
-        if preset is not None and rng is not None:
-            origin = origin + rng.normal(0.0, preset.gauge_position, 3)
-            tilt = rng.normal(0.0, preset.gauge_tilt, 3)
-            direction = direction + np.cross(tilt, direction)
-            direction /= np.linalg.norm(direction)
-        # The reading runs along the world axis, whichever side the stand is on.
-        sign = float(np.sign(direction[spec.axis]))
-        gauges.append(Gauge(spec, origin, direction, sign, travel))
-    return gauges
+        return []
+    errors = None
+    if preset is not None and rng is not None:
+        errors = installation_errors(len(specs), preset, rng)
+    return install_array(specs, machine, travel=travel, errors=errors).to_gauges()
 
 
-def zero_gauges(gauges: list[Gauge], t_at_zero: np.ndarray) -> list[Gauge]:
+def installation_errors(count: int, preset: ErrorPreset, rng: np.random.Generator
+                        ) -> np.ndarray:
+    """The preset's installation errors of ``count`` stands, drawn from ``rng`` stand by
+    stand (position, then tilt): shape ``(count, 2, 3)``, the stand's position error (mm)
+    and the rotation vector (rad) that tilts its measuring axis."""
+    draws = [[rng.normal(0.0, preset.gauge_position, 3), rng.normal(0.0, preset.gauge_tilt, 3)]
+             for _ in range(count)]
+    return np.array(draws, dtype=float).reshape(count, 2, 3)
+
+
+def install_array(
+    specs: tuple[GaugeSpec, ...] | list[GaugeSpec],
+    machine: MachineParams,
+    *,
+    travel: float = DEFAULT_TRAVEL,
+    errors: np.ndarray | None = None,
+) -> GaugeArray:
+    """:func:`install` for a batch of machines: the gauges of ``specs`` aimed at their bars
+    on every machine of ``machine``, moved by installation ``errors`` (shape
+    ``(*batch, G, 2, 3)``, see :func:`installation_errors`) when given."""
+    specs = list(specs)
+    origin, direction = ideal_rays(specs, machine, travel)
+    direction = np.broadcast_to(direction, origin.shape)
+    if errors is not None:
+        errors = np.asarray(errors, dtype=float)
+        origin = origin + errors[..., 0, :]
+        direction = direction + cross(errors[..., 1, :], direction)
+        direction = direction / np.linalg.norm(direction, axis=-1, keepdims=True)
+    axis = np.array([s.axis for s in specs], dtype=np.intp)
+    # The reading runs along the world axis, whichever side the stand is on.
+    sign = np.sign(direction[..., np.arange(len(specs)), axis])
+    return GaugeArray(origin=origin, direction=direction, sign=sign, travel=float(travel),
+                      zero=DEFAULT_TRAVEL / 2, leg=[s.leg for s in specs], axis=axis,
+                      at=[s.at for s in specs])
+
+
+@overload
+def zero_gauges(gauges: GaugeArray, t_at_zero: np.ndarray) -> GaugeArray: ...
+@overload
+def zero_gauges(gauges: list[Gauge], t_at_zero: np.ndarray) -> list[Gauge]: ...
+def zero_gauges(gauges: GaugeArray | list[Gauge], t_at_zero: np.ndarray
+                ) -> GaugeArray | list[Gauge]:
     """Set up each gauge at the Zero posture as a technician does: slide it in its holder
     until the plunger sits at mid-travel, then zero the dial there.
 
     ``t_at_zero`` are the ray distances measured at Zero before the adjustment; a gauge
-    whose ray misses its target (NaN) cannot be set up and raises ``ValueError``.
+    whose ray misses its target (NaN) cannot be set up and raises ``ValueError``.  The
+    result has the type of ``gauges`` (a list of one machine's, or a :class:`GaugeArray`).
     """
-    t_at_zero = np.asarray(t_at_zero, dtype=float)
-    if np.isnan(t_at_zero).any():
-        names = [g.spec.name for g, t in zip(gauges, t_at_zero, strict=True) if np.isnan(t)]
-        raise ValueError(f"gauge(s) {names} do not touch their bar at the Zero posture")
-    return [
-        replace(g, origin=g.origin + (t - g.travel / 2) * g.direction, zero=g.travel / 2)
-        for g, t in zip(gauges, t_at_zero, strict=True)
-    ]
+    if isinstance(gauges, GaugeArray):
+        return gauges.zeroed(t_at_zero)
+    return GaugeArray.of(gauges).zeroed(t_at_zero).to_gauges()
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -325,21 +505,55 @@ def _boxes(
     return centre, rot, half
 
 
+def to_box_frame(rot: np.ndarray, vector: np.ndarray) -> np.ndarray:
+    """``rot^T @ vector`` over the last axes, broadcast: a world vector in a box's frame.
+
+    Written out: on broadcast batches (rays against every box of thousands of machines)
+    this is several times faster than ``einsum``, and every element is summed in the same
+    order whatever the batch."""
+    rot, vector = np.asarray(rot), np.asarray(vector)
+    return (rot[..., 0, :] * vector[..., 0, None] + rot[..., 1, :] * vector[..., 1, None]
+            + rot[..., 2, :] * vector[..., 2, None])
+
+
 def ray_box_interval(
     origin: np.ndarray, direction: np.ndarray, centre: np.ndarray, rot: np.ndarray, half: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Where the line ``origin + t * direction`` enters and leaves a box (slab method);
-    ``t_in > t_out`` when it misses."""
-    o = np.einsum("...ji,...j->...i", rot, origin - centre)
-    d = np.einsum("...ji,...j->...i", rot, np.broadcast_to(direction, o.shape))
-    inside = np.abs(o) <= half
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t1 = (-half - o) / d
-        t2 = (half - o) / d
-    # A ray parallel to a slab is inside it everywhere or nowhere.
-    lo = np.where(d == 0, np.where(inside, -np.inf, np.inf), np.minimum(t1, t2))
-    hi = np.where(d == 0, np.where(inside, np.inf, -np.inf), np.maximum(t1, t2))
-    return np.max(lo, axis=-1), np.min(hi, axis=-1)
+    ``t_in > t_out`` when it misses.  Broadcast over leading dimensions."""
+    origin, direction = np.asarray(origin, dtype=float), np.asarray(direction, dtype=float)
+    centre, rot, half = (np.asarray(a, dtype=float) for a in (centre, rot, half))
+    shape = np.broadcast_shapes(origin.shape[:-1], direction.shape[:-1], centre.shape[:-1],
+                                rot.shape[:-2], half.shape[:-1])
+    # Coordinates first, each a contiguous array of the full shape: numpy then runs every
+    # operation below as one long loop instead of one loop per three numbers (rays
+    # against every box of thousands of machines is ~10x faster).  Same arithmetic, in
+    # the same order, as to_box_frame.
+    v = _components(origin - centre, shape)
+    d = _components(direction, shape)
+    r = np.ascontiguousarray(np.broadcast_to(np.moveaxis(rot, (-2, -1), (0, 1)), (3, 3, *shape)))
+    h = _components(half, shape)
+    t_in = t_out = None
+    for i in range(3):
+        o_i = r[0, i] * v[0] + r[1, i] * v[1] + r[2, i] * v[2]
+        d_i = r[0, i] * d[0] + r[1, i] * d[1] + r[2, i] * d[2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t1 = (-h[i] - o_i) / d_i
+            t2 = (h[i] - o_i) / d_i
+        # A ray parallel to a slab is inside it everywhere or nowhere.
+        inside = np.abs(o_i) <= h[i]
+        parallel = d_i == 0
+        lo = np.where(parallel, np.where(inside, -np.inf, np.inf), np.minimum(t1, t2))
+        hi = np.where(parallel, np.where(inside, np.inf, -np.inf), np.maximum(t1, t2))
+        t_in = lo if t_in is None else np.maximum(t_in, lo)
+        t_out = hi if t_out is None else np.minimum(t_out, hi)
+    return t_in, t_out  # type: ignore[return-value]
+
+
+def _components(vector: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """The three coordinates of ``vector`` (``(..., 3)``) as one contiguous array
+    ``(3, *shape)``."""
+    return np.ascontiguousarray(np.broadcast_to(np.moveaxis(vector, -1, 0), (3, *shape)))
 
 
 def ray_box_distance(
@@ -364,7 +578,7 @@ def on_flat_face(
     A gauge reads only on the face it is aimed at: near a bar's end its ray can enter
     through the end face at grazing incidence, where a real tip slides off the edge (and
     PyBullet's rounded box edges disagree with the sharp box by ~1 mm)."""
-    local = np.einsum("...ji,...j->...i", rot, point - centre)
+    local = to_box_frame(rot, point - centre)
     ratio = np.abs(local) / half
     touched = np.argmax(ratio, axis=-1)
     inner = np.abs(local) <= half - margin
@@ -409,14 +623,24 @@ BOX_NAMES: tuple[str, ...] = tuple(
 
 def target_box(spec: GaugeSpec) -> int:
     """Index in :data:`BOX_NAMES` of the bar a gauge touches."""
-    return 2 * spec.leg + (0 if spec.bar > 0 else 1)
+    return int(target_index(spec.leg, spec.local_axis))
+
+
+def _pick(values: np.ndarray, index: np.ndarray, tail: int) -> np.ndarray:
+    """``values[..., index, :, ...]`` with a different ``index`` per leading element:
+    ``values`` of shape ``(..., boxes, *tail)`` (``tail`` trailing axes) and ``index``
+    ``(..., G)``, broadcast against the leading dimensions, give ``(..., G, *tail)``."""
+    index = index.reshape(*index.shape, *(1,) * tail)
+    return np.take_along_axis(values, index, axis=-1 - tail)
 
 
 def exact_ray_distances(
-    machine: MachineParams, gauges: list[Gauge], rho: np.ndarray,
+    machine: MachineParams, gauges: GaugeArray | Sequence[Gauge], rho: np.ndarray,
     boxes: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
-    """Exact tip distances ``t`` of every gauge, shape ``(..., n_gauges)``.
+    """Exact tip distances ``t`` of every gauge, shape ``(*batch, *postures, G)`` for
+    ``rho`` of shape ``(*batch, *postures, 3)`` and gauges of batch shape ``batch`` (or one
+    gauge set, shared by every machine).
 
     NaN when the ray misses the bar's flat face, or when another part lies on the ray
     before the bar within the window a gauge can see (``-RAY_BACKOFF`` to
@@ -425,58 +649,56 @@ def exact_ray_distances(
     :func:`collision_boxes` at ``rho`` when already computed.
     """
     rho = np.asarray(rho, dtype=float)
-    if not gauges:
-        return np.empty((*rho.shape[:-1], 0))
-    origins = np.array([g.origin for g in gauges])[:, None, :]
-    directions = np.array([g.direction for g in gauges])[:, None, :]
-    target = np.array([target_box(g.spec) for g in gauges])
     centre, rot, half = boxes or collision_boxes(machine, rho, direct(machine, rho))
+    g = as_gauge_array(gauges).for_postures(centre.ndim - 2)
     t_in, t_out = ray_box_interval(
-        origins, directions, centre[..., None, :, :], rot[..., None, :, :, :],
-        half[..., None, :, :],
+        g.origin[..., None, :], g.direction[..., None, :], centre[..., None, :, :],
+        rot[..., None, :, :, :], half[..., None, :, :],
     )  # (..., gauges, boxes)
-    pick = (..., np.arange(len(gauges)), target)
-    t = np.where(t_out[pick] >= t_in[pick], t_in[pick], np.nan)
-    hit = origins[:, 0] + np.nan_to_num(t)[..., None] * directions[:, 0]
-    face = np.array([g.spec.local_axis for g in gauges])
-    t = np.where(on_flat_face(hit, centre[..., target, :], rot[..., target, :, :],
-                              half[..., target, :], face=face), t, np.nan)
-    others = np.arange(len(BOX_NAMES)) != target[:, None]
-    reach = np.array([g.travel for g in gauges]) + RAY_BACKOFF
+    target = g.target
+    t_in_target = _pick(t_in, target[..., None], 0)[..., 0]
+    t_out_target = _pick(t_out, target[..., None], 0)[..., 0]
+    t = np.where(t_out_target >= t_in_target, t_in_target, np.nan)
+    hit = g.origin + np.nan_to_num(t)[..., None] * g.direction
+    t = np.where(on_flat_face(hit, *exact_target_boxes(g, (centre, rot, half)), face=g.face),
+                 t, np.nan)
+    others = np.arange(len(BOX_NAMES)) != target[..., None]
+    reach = g.travel + RAY_BACKOFF
     in_window = (t_out >= -RAY_BACKOFF) & (t_in <= t_out) & (t_in < t[..., None])
     occluded = np.any(in_window & others, axis=-1) & (t >= 0)
     return np.where(occluded | (t > reach), np.nan, t)
 
 
 def exact_target_boxes(
-    gauges: list[Gauge], boxes: tuple[np.ndarray, np.ndarray, np.ndarray]
+    gauges: GaugeArray | Sequence[Gauge], boxes: tuple[np.ndarray, np.ndarray, np.ndarray]
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The box of every gauge's target bar among the :func:`collision_boxes` ``boxes``."""
+    """The box of every gauge's target bar among the :func:`collision_boxes` ``boxes``:
+    centres ``(..., G, 3)``, rotations ``(..., G, 3, 3)``, half extents ``(..., G, 3)``."""
     centre, rot, half = boxes
-    target = [target_box(g.spec) for g in gauges]
-    return centre[..., target, :], rot[..., target, :, :], half[..., target, :]
+    target = as_gauge_array(gauges).for_postures(centre.ndim - 2).target
+    return _pick(centre, target, 1), _pick(rot, target, 2), _pick(half, target, 1)
 
 
 def pressed_past_travel(
-    gauges: list[Gauge], centre: np.ndarray, rot: np.ndarray, half: np.ndarray
+    gauges: GaugeArray | Sequence[Gauge], centre: np.ndarray, rot: np.ndarray,
+    half: np.ndarray,
 ) -> np.ndarray:
     """Whether each gauge's target bar presses it past its travel: the bar's box, grown by
     the body radius, meets the gauge axis behind the fully pushed-in tip (``t < 0``) and
-    in front of the stand's end."""
-    if not gauges:
-        return np.zeros(0, dtype=bool)
-    origins = np.array([g.origin for g in gauges])
-    directions = np.array([g.direction for g in gauges])
+    in front of the stand's end.  The boxes are :func:`exact_target_boxes`, ``(..., G,
+    ...)``; the result has shape ``(..., G)``."""
+    g = as_gauge_array(gauges).for_postures(np.ndim(centre) - 2)
     # The body is a cylinder around the gauge axis: grow the box across the axis only.
-    along = np.einsum("...ji,...j->...i", rot, directions)
+    along = to_box_frame(rot, g.direction)
     grown = half + GAUGE_BODY_RADIUS * np.sqrt(np.clip(1 - along**2, 0.0, 1.0))
-    t_in, t_out = ray_box_interval(origins, directions, centre, rot, grown)
+    t_in, t_out = ray_box_interval(g.origin, g.direction, centre, rot, grown)
     return (t_in <= t_out) & (t_in < 0) & (t_out > -STAND_LENGTH)
 
 
-def status_of(gauges: list[Gauge], t: np.ndarray) -> np.ndarray:
-    """Status codes for ray distances ``t`` (NaN means the ray missed the target)."""
-    travel = np.array([g.travel for g in gauges])
+def status_of(gauges: GaugeArray | Sequence[Gauge], t: np.ndarray) -> np.ndarray:
+    """Status codes for ray distances ``t`` of shape ``(*batch, *postures, G)`` (NaN means
+    the ray missed the target)."""
+    travel = as_gauge_array(gauges).for_postures(np.ndim(t) - 1).travel
     status = np.full(np.shape(t), Status.VALID, dtype=np.int8)
     with np.errstate(invalid="ignore"):
         status[t > travel] = Status.NO_CONTACT
@@ -485,25 +707,30 @@ def status_of(gauges: list[Gauge], t: np.ndarray) -> np.ndarray:
     return status
 
 
-def readings_from_distances(gauges: list[Gauge], t: np.ndarray) -> np.ndarray:
+def readings_from_distances(gauges: GaugeArray | Sequence[Gauge], t: np.ndarray
+                            ) -> np.ndarray:
     """Ideal readings (mm) from ray distances; NaN where the gauge is not in contact."""
-    sign = np.array([g.sign for g in gauges])
-    zero = np.array([g.zero for g in gauges])
-    reading = sign * (t - zero)
-    return np.where(status_of(gauges, t) == Status.VALID, reading, np.nan)
+    return np.where(status_of(gauges, t) == Status.VALID, _reading(gauges, t), np.nan)
 
 
-def exact_readings(machine: MachineParams, gauges: list[Gauge], rho: np.ndarray) -> np.ndarray:
+def _reading(gauges: GaugeArray | Sequence[Gauge], t: np.ndarray) -> np.ndarray:
+    """``sign * (t - zero)`` of every gauge, whatever its status."""
+    g = as_gauge_array(gauges).for_postures(np.ndim(t) - 1)
+    return g.sign * (t - g.zero)
+
+
+def exact_readings(machine: MachineParams, gauges: GaugeArray | Sequence[Gauge],
+                   rho: np.ndarray) -> np.ndarray:
     """Ideal (noise-free, unquantised) readings of the exact model; NaN if not valid."""
     return readings_from_distances(gauges, exact_ray_distances(machine, gauges, rho))
 
 
-def model_readings(machine: MachineParams, gauges: list[Gauge], rho: np.ndarray) -> np.ndarray:
+def model_readings(machine: MachineParams, gauges: GaugeArray | Sequence[Gauge],
+                   rho: np.ndarray) -> np.ndarray:
     """Readings of the exact model *without* the travel limits (NaN only where the ray
     misses the bar): what a calibrator's model predicts while it iterates over estimates
     whose gauges would be out of travel."""
-    t = exact_ray_distances(machine, gauges, rho)
-    return np.array([g.sign for g in gauges]) * (t - np.array([g.zero for g in gauges]))
+    return _reading(gauges, exact_ray_distances(machine, gauges, rho))
 
 
 def installed_on(machine: MachineParams, gauges: list[Gauge]) -> list[Gauge]:
@@ -568,7 +795,16 @@ class GaugeNoise:
     def apply(self, readings: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Noisy, quantised readings (NaN stays NaN).  Noise is drawn for every gauge so
         the random stream does not depend on which readings are valid."""
-        draws = rng.normal(0.0, 1.0, np.shape(readings))
+        return self.applied(readings, self.draws(rng, np.shape(readings)))
+
+    @staticmethod
+    def draws(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
+        """Standard normal draws for readings of ``shape``, as :meth:`apply` takes them."""
+        return rng.normal(0.0, 1.0, shape)
+
+    def applied(self, readings: np.ndarray, draws: np.ndarray) -> np.ndarray:
+        """:meth:`apply` with the standard normal ``draws`` given: a batch of machines draws
+        from one stream per machine."""
         noisy = np.asarray(readings, dtype=float) + draws * self.sigma
         if self.resolution > 0:
             noisy = np.round(noisy / self.resolution) * self.resolution

@@ -47,9 +47,10 @@ class TimeTable:
     tracker_point_s: float = 3.0
     overtravel_s: float = 120.0
 
-    def move(self, start: np.ndarray, target: np.ndarray) -> float:
-        """Seconds to drive from ``start`` to ``target`` (axes together) and settle."""
-        travel = float(np.max(np.abs(np.asarray(target) - np.asarray(start))))
+    def move(self, start: np.ndarray, target: np.ndarray) -> np.ndarray:
+        """Seconds to drive from ``start`` to ``target`` (axes together) and settle; shapes
+        ``(..., 3)``, one time per leading index."""
+        travel = np.max(np.abs(np.asarray(target, float) - np.asarray(start, float)), axis=-1)
         return travel / self.drive_speed_mm_s + self.settle_and_read_s
 
 

@@ -24,12 +24,13 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .backend import check_motion_mode
-from .collisions import crash_pairs
+from .collisions import collision_names, crash_pairs
 from .gauges import (
     GAUGE_BODY_RADIUS,
     RAY_BACKOFF,
     STAND_LENGTH,
     Gauge,
+    GaugeArray,
     on_flat_face,
     ray_box_distance,
 )
@@ -74,37 +75,78 @@ class OrthoglideMachine:
         gui: bool = False,
         gravity: bool = True,
         settings: PhysicsSettings | None = None,
+        sim: Simulator | None = None,
     ) -> None:
+        """Build the machine in a new PyBullet client, or in ``sim``: a client that hosts
+        one machine after another (everything in it is removed first).  A machine in a
+        given client takes that client's settings, so ``gui``, ``gravity`` and ``settings``
+        are for a new client only."""
         self.machine = machine
         self.gauges = list(gauges)
-        settings = settings or PhysicsSettings(gravity=-9.81 if gravity else 0.0)
-        self.sim = Simulator(gui=gui, settings=settings)
+        self.gauge_array = GaugeArray.of(self.gauges)
+        self._rho = np.zeros(3)
+        if sim is not None and (gui or not gravity or settings is not None):
+            raise ValueError("a machine built in a given simulator takes its settings: give "
+                             "gui, gravity and settings to the Simulator")
+        self._owns_sim = sim is None
+        self._built = False
+        if sim is None:
+            settings = settings or PhysicsSettings(gravity=-9.81 if gravity else 0.0)
+            sim = Simulator(gui=gui, settings=settings)
+        self.sim = sim
         try:
-            self.bc = self.sim.client
-            self.body = self.sim.load_urdf_text(write_urdf(machine))
-            info = [self.bc.getJointInfo(self.body, j)
-                    for j in range(self.bc.getNumJoints(self.body))]
-            self._index = {i[12].decode(): i[0] for i in info}  # by child link name
-            self._joints = {i[1].decode(): (i[0], i[2]) for i in info}  # index, type
-            self._com = {
-                name: np.array(self.bc.getDynamicsInfo(self.body, j)[3]) / MM
-                for name, j in self._index.items()
-            }
-            self.slides = [self._index[link_name(i, "carriage")] for i in range(3)]
-            self.platform = self._index["platform"]
-            for j in range(self.bc.getNumJoints(self.body)):
-                # Passive joints come with a velocity motor that would brake the mechanism.
-                self.bc.setJointMotorControl2(self.body, j, pb.VELOCITY_CONTROL, force=0.0)
-            self._closures = self._close_loops()
-            self._pairs = self._collision_pairs()
-            self._stand_ids: list[int] = []
-            self._draw_stands()
-            self.last_settle_steps = 0
-            self.move(np.zeros(3))
+            self._build()
         except BaseException:
             # A machine that cannot be built must not leave its client behind.
-            self.sim.close()
+            if self._owns_sim:
+                self.sim.close()
             raise
+
+    def _build(self) -> None:
+        """Load the tree, close the loops and place the machine at Zero, in a client
+        cleared first."""
+        if self._built or not self._owns_sim:  # a new client of its own holds nothing
+            self.sim.clear()
+        self._built = True
+        self._generation = self.sim.generation
+        self.bc = self.sim.client
+        self.body = self.sim.load_urdf_text(write_urdf(self.machine))
+        info = [self.bc.getJointInfo(self.body, j)
+                for j in range(self.bc.getNumJoints(self.body))]
+        self._index = {i[12].decode(): i[0] for i in info}  # by child link name
+        self._joints = {i[1].decode(): (i[0], i[2]) for i in info}  # index, type
+        self._com = {
+            name: np.array(self.bc.getDynamicsInfo(self.body, j)[3]) / MM
+            for name, j in self._index.items()
+        }
+        self.slides = [self._index[link_name(i, "carriage")] for i in range(3)]
+        self.platform = self._index["platform"]
+        for j in range(self.bc.getNumJoints(self.body)):
+            # Passive joints come with a velocity motor that would brake the mechanism.
+            self.bc.setJointMotorControl2(self.body, j, pb.VELOCITY_CONTROL, force=0.0)
+        self._closures = self._close_loops()
+        self._pairs = self._collision_pairs()
+        # The stands are drawn when a picture needs them: their shapes cost PyBullet a
+        # fifth of a build, and a machine that is never looked at does not need them.
+        self._stands: int | None = None
+        if self.sim.gui:
+            self._draw_stands()
+        self.last_settle_steps = 0
+        self.move(np.zeros(3))
+
+    @property
+    def in_client(self) -> bool:
+        """Whether this machine is (still) what its client holds: another machine built in
+        the same client replaces it."""
+        return self.sim.connected and self.sim.generation == self._generation
+
+    def rebuild(self) -> None:
+        """Build this machine again in its client (after another one replaced it there) and
+        place it at the posture it was last moved to."""
+        rho = self._rho
+        self._build()
+        if np.any(rho != 0.0):
+            self.move(rho)
 
     # -- construction ----------------------------------------------------------------
     def _pivot(self, link: str, point_mm: np.ndarray) -> list[float]:
@@ -132,31 +174,36 @@ class OrthoglideMachine:
     def _draw_stands(self) -> None:
         """Draw each gauge: its body behind the tip, an arm, and its stand's magnetic foot
         on the measured leg's rail, at the rail's end near the platform.  Visual shapes only:
-        rays hit collision shapes, and these have none."""
+        rays hit collision shapes, and these have none.  All parts are links of one static
+        body, which goes as one when the gauges change."""
+        if self._stands is not None:
+            self.bc.removeBody(self._stands)
+            self._stands = None
+        if not self.gauges:
+            return
+        shapes, centres, axes = [], [], []
         for g in self.gauges:
             rear = g.origin - g.direction * STAND_LENGTH
             foot = rail_ends()[g.spec.leg, 0]
-            self._stand_ids += [
-                self._rod(g.origin, rear, GAUGE_BODY_RADIUS),
-                self._rod(rear, foot, ARM_RADIUS),
-                self._visual(self.bc.createVisualShape(
-                    pb.GEOM_BOX, halfExtents=list(FOOT_SIZE / 2 * MM), rgbaColor=STAND_COLOUR,
-                ), foot, np.eye(3)),
-            ]
-
-    def _rod(self, a: np.ndarray, b: np.ndarray, radius: float) -> int:
-        """A visual cylinder from ``a`` to ``b`` (mm)."""
-        shape = self.bc.createVisualShape(pb.GEOM_CYLINDER, radius=radius * MM,
-                                          length=float(np.linalg.norm(b - a)) * MM,
-                                          rgbaColor=STAND_COLOUR)
-        rot, _ = Rotation.align_vectors([b - a], [[0.0, 0.0, 1.0]])
-        return self._visual(shape, (a + b) / 2, rot.as_matrix())
-
-    def _visual(self, shape: int, centre: np.ndarray, rot: np.ndarray) -> int:
-        """A massless body carrying only the visual ``shape`` at ``centre`` (mm)."""
-        return self.bc.createMultiBody(
-            baseMass=0, baseVisualShapeIndex=shape, basePosition=list(centre * MM),
-            baseOrientation=list(Rotation.from_matrix(rot).as_quat()),
+            for a, b, radius in ((g.origin, rear, GAUGE_BODY_RADIUS), (rear, foot, ARM_RADIUS)):
+                shapes.append(self.bc.createVisualShape(
+                    pb.GEOM_CYLINDER, radius=radius * MM,
+                    length=float(np.linalg.norm(b - a)) * MM, rgbaColor=STAND_COLOUR))
+                centres.append((a + b) / 2)
+                axes.append(b - a)
+            shapes.append(self.bc.createVisualShape(
+                pb.GEOM_BOX, halfExtents=list(FOOT_SIZE / 2 * MM), rgbaColor=STAND_COLOUR))
+            centres.append(foot)
+            axes.append(np.array([0.0, 0.0, 1.0]))
+        n = len(shapes)
+        self._stands = self.bc.createMultiBody(
+            baseMass=0, linkMasses=[0.0] * n, linkCollisionShapeIndices=[-1] * n,
+            linkVisualShapeIndices=shapes, linkPositions=[list(c * MM) for c in centres],
+            linkOrientations=_z_turned_to(np.array(axes)).tolist(),
+            linkInertialFramePositions=[[0.0, 0.0, 0.0]] * n,
+            linkInertialFrameOrientations=[[0.0, 0.0, 0.0, 1.0]] * n,
+            linkParentIndices=[0] * n, linkJointTypes=[pb.JOINT_FIXED] * n,
+            linkJointAxis=[[0.0, 0.0, 1.0]] * n,
         )
 
     # -- motion -------------------------------------------------------------------------
@@ -176,6 +223,7 @@ class OrthoglideMachine:
             direct(self.machine, rho)
             self._hold(rho)
             self.last_settle_steps = self._settle(rho)
+        self._rho = rho.copy()
 
     def _place(self, rho: np.ndarray) -> None:
         for name, value in joint_positions(self.machine, rho).items():
@@ -277,22 +325,25 @@ class OrthoglideMachine:
         collision shape (its rails are drawn only), so it is not checked."""
         return [(self._index[a], self._index[b], f"{a}/{b}") for a, b in crash_pairs()]
 
-    def collisions(self) -> list[str]:
-        """Pairs of parts in contact that should never touch (see :meth:`_collision_pairs`)."""
+    def collision_mask(self) -> np.ndarray:
+        """Which pairs of :meth:`_collision_pairs` are in contact."""
         # getClosestPoints(distance=0) reports nothing, not even a deep penetration: ask
         # for a hair more and keep what touches.
-        return [
-            name for a, b, name in self._pairs
-            if any(pt[8] <= 0.0 for pt in
-                   self.bc.getClosestPoints(self.body, self.body, CONTACT_QUERY, a, b))
-        ]
+        return np.array([
+            any(pt[8] <= 0.0 for pt in
+                self.bc.getClosestPoints(self.body, self.body, CONTACT_QUERY, a, b))
+            for a, b, _ in self._pairs
+        ], dtype=bool)
+
+    def collisions(self) -> list[str]:
+        """Pairs of parts in contact that should never touch (see :meth:`_collision_pairs`)."""
+        return collision_names(self.collision_mask())
 
     def set_gauges(self, gauges: list[Gauge]) -> None:
-        for sid in self._stand_ids:
-            self.bc.removeBody(sid)
-        self._stand_ids = []
         self.gauges = list(gauges)
-        self._draw_stands()
+        self.gauge_array = GaugeArray.of(self.gauges)
+        if self.sim.gui or self._stands is not None:
+            self._draw_stands()
 
     def render(
         self, width: int = 640, height: int = 480, *, eye: np.ndarray | None = None,
@@ -304,6 +355,8 @@ class OrthoglideMachine:
         vertical field of view (deg); by default the camera looks square-on along the
         symmetry axis and frames the base (:func:`square_on_camera`).
         """
+        if self._stands is None and self.gauges:
+            self._draw_stands()
         if eye is None or target is None:
             eye, target, framing = square_on_camera(width / height)
             fov = framing if fov is None else fov
@@ -318,10 +371,25 @@ class OrthoglideMachine:
         return np.reshape(np.asarray(img[2], dtype=np.uint8), (height, width, 4))[..., :3]
 
     def close(self) -> None:
-        self.sim.close()
+        """Release the client if this machine made it; a client it was given belongs to the
+        caller (and may already hold the next machine)."""
+        if self._owns_sim:
+            self.sim.close()
 
     def __repr__(self) -> str:
         return f"OrthoglideMachine(legs={LEG_NAMES}, gauges={len(self.gauges)})"
+
+
+def _z_turned_to(axes: np.ndarray) -> np.ndarray:
+    """Quaternions (x, y, z, w) of rotations that turn the z axis along each of ``axes``
+    (n, 3), for cylinders, which PyBullet makes along z: the shortest turn, and none
+    for an axis along -z (a cylinder is the same either way up)."""
+    unit = axes / np.linalg.norm(axes, axis=-1, keepdims=True)
+    turn = np.cross([0.0, 0.0, 1.0], unit)
+    size = np.linalg.norm(turn, axis=-1, keepdims=True)
+    angle = np.arctan2(size, unit[:, 2:])
+    rotvec = np.where(size > 1e-12, turn / np.where(size > 1e-12, size, 1.0) * angle, 0.0)
+    return Rotation.from_rotvec(rotvec).as_quat()
 
 
 def square_on_camera(aspect: float) -> tuple[np.ndarray, np.ndarray, float]:

@@ -72,8 +72,14 @@ class Simulator:
             require_display("gui=True", "gui=False")
         self.settings = settings or PhysicsSettings()
         self.gui = gui
+        #: How many times the world was cleared: a machine built in it knows whether it
+        #: is still there.
+        self.generation = 0
         with _c_output_silenced():
             self.client = BulletClient(connection_mode=pb.GUI if gui else pb.DIRECT)
+        self._configure()
+
+    def _configure(self) -> None:
         s = self.settings
         self.client.setPhysicsEngineParameter(
             fixedTimeStep=s.time_step,
@@ -84,8 +90,21 @@ class Simulator:
             frictionERP=s.erp,
         )
         self.client.setGravity(0.0, 0.0, s.gravity)
-        if gui:
+        if self.gui:
             self.client.configureDebugVisualizer(pb.COV_ENABLE_GUI, 0)
+
+    def clear(self) -> None:
+        """Remove every body, constraint and shape, and set the solver up again, so that
+        the client hosts a new machine: cheaper than a new connection, and one client per
+        worker serves any number of machines in turn."""
+        self.client.resetSimulation()
+        # resetSimulation also resets gravity and solver parameters to PyBullet's defaults.
+        self._configure()
+        self.generation += 1
+
+    @property
+    def connected(self) -> bool:
+        return self.client._client >= 0
 
     def load_urdf_text(self, text: str) -> int:
         """Load a URDF given as a string; returns the body id (fixed base)."""
@@ -105,6 +124,6 @@ class Simulator:
 
     def close(self) -> None:
         """Disconnect; safe to call twice."""
-        if self.client._client >= 0:
+        if self.connected:
             self.client.disconnect()
             self.client._client = -1
