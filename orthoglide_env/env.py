@@ -241,7 +241,7 @@ class OrthoglideCalibrationEnv(gym.Env):
         self._rho = np.zeros(3)
         self._steps = 0
         self._pressed = episode.pressed
-        names = [g.name for g in self.gauge_layout]
+        names = [g.slot for g in self.gauge_layout]
         return observation(episode.reading), step_info(names, episode.reading.status, [], 0.0,
                                                        "")
 
@@ -263,7 +263,7 @@ class OrthoglideCalibrationEnv(gym.Env):
         self._rho, self._pressed = target, pressed
         self._steps += 1
         truncated = self.max_episode_steps is not None and self._steps >= self.max_episode_steps
-        names = [g.name for g in self.gauge_layout]
+        names = [g.slot for g in self.gauge_layout]
         return observation(reading), -step_time, bool(collision), truncated, step_info(
             names, reading.status, overtravel_names(names, new), step_time, collision
         )

@@ -194,7 +194,7 @@ class OrthoglideCalibrationVectorEnv(VectorEnv):
         self._machines: MachineParams | None = None
         self._gauges: GaugeArray | None = None
         self.gauge_layouts: list[tuple[GaugeSpec, ...]] = [settings.layout] * n
-        self._names = [[s.name for s in settings.layout]] * n
+        self._names = [[s.slot for s in settings.layout]] * n
         self._rho = np.zeros((n, 3))
         self._steps = np.zeros(n, dtype=np.int64)
         self._pressed = np.zeros((n, g), dtype=bool)
@@ -406,7 +406,7 @@ class OrthoglideCalibrationVectorEnv(VectorEnv):
             machines = MachineParams.from_vector(vector)
             gauges = self._require_episodes()[1].with_rows(rows, fresh.gauges)
         self._machines, self._gauges = machines, gauges
-        names = [s.name for s in fresh.layout]
+        names = [s.slot for s in fresh.layout]
         self.gauge_layouts = list(self.gauge_layouts)
         self._names = list(self._names)
         for i in rows:

@@ -154,6 +154,8 @@ def test_compare_writes_table_csv_and_plots(tmp_path, capsys) -> None:
         (["compare", "--seed", "-1"], "--seed"),
         (["compare", "--jobs", "0"], "--jobs"),
         (["compare", "--resume"], "--resume"),
+        # A bad --out is refused before any machine is run, not after the whole run.
+        (["compare", "--out", "GOOD"], "is not a folder"),
         (["compare", "--machines", "0"], "--machines"),
     ],
 )

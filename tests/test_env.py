@@ -111,7 +111,7 @@ def test_overtravel_is_reported_and_penalised(backend: str) -> None:
     for target in (np.array([0.0, -12.0, 0.0]), paper_posture("YMin")):
         env.reset(seed=0)
         _, reward, terminated, _, info = env.step(target)
-        assert "x-leg/y" in info["overtravel"] and not terminated
+        assert "x-leg/y@0.5" in info["overtravel"] and not terminated
         assert info["status"][0] in ("overtravel", "missed")
         assert reward <= -OVERTRAVEL_PENALTY
     # Staying in overtravel is not charged again; leaving and re-entering is.
@@ -119,7 +119,7 @@ def test_overtravel_is_reported_and_penalised(backend: str) -> None:
     assert reward == pytest.approx(-SETTLE_AND_READ)
     env.step(np.zeros(3))
     _, reward, _, _, info = env.step(np.array([0.0, -12.0, 0.0]))
-    assert "x-leg/y" in info["overtravel"]
+    assert "x-leg/y@0.5" in info["overtravel"]
     env.close()
 
 
@@ -219,10 +219,18 @@ def test_a_crash_ends_the_episode(backend: str) -> None:
 def test_episode_layout_is_public_and_named_in_info() -> None:
     env = make("exact", gauges=["x-leg/y", "y-leg/z"])
     _, info = env.reset(seed=0)
-    assert info["gauge_names"] == ["x-leg/y", "y-leg/z"]
+    assert info["gauge_names"] == ["x-leg/y@0.5", "y-leg/z@0.5"]
     _, info = env.reset(seed=0, options={"gauges": ["z/x", "x/z@0.3"]})
-    assert info["gauge_names"] == ["z-leg/x", "x-leg/z"]
+    assert info["gauge_names"] == ["z-leg/x@0.5", "x-leg/z@0.3"]
     assert [g.at for g in env.unwrapped.gauge_layout] == [0.5, 0.3]
     _, info = env.reset(seed=0)  # without the option: the constructor's layout again
-    assert info["gauge_names"] == ["x-leg/y", "y-leg/z"]
+    assert info["gauge_names"] == ["x-leg/y@0.5", "y-leg/z@0.5"]
+    env.close()
+
+
+def test_two_gauges_on_one_face_have_two_names() -> None:
+    """Two places on the same bar face are two gauges: info names each by its slot."""
+    env = make("exact", gauges=["x-leg/y@0.3", "x-leg/y@0.7"])
+    _, info = env.reset(seed=0)
+    assert info["gauge_names"] == ["x-leg/y@0.3", "x-leg/y@0.7"]
     env.close()
