@@ -807,7 +807,10 @@ class GaugeNoise:
         from one stream per machine."""
         noisy = np.asarray(readings, dtype=float) + draws * self.sigma
         if self.resolution > 0:
-            noisy = np.round(noisy / self.resolution) * self.resolution
+            # A dial shows a multiple of its step: 1.14, not 114 * 0.01 = 1.1400000000000001
+            # (rounding to 12 decimals gives the double nearest the shown decimal, far
+            # below any step a gauge has).
+            noisy = np.round(np.round(noisy / self.resolution) * self.resolution, 12)
         return noisy
 
     @property

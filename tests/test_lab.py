@@ -302,8 +302,11 @@ def test_ctrl_c_keeps_the_finished_trials_and_resume_completes_the_table(tmp_pat
     argv = [sys.executable, "-m", "calibrators.cli", "compare", "--agents", "paper",
             "--estimators", "paper6", "--machines", "60", "--seed", "2", "--jobs", "2",
             "--quiet"]
+    # A shell starts background jobs with SIGINT ignored, and children inherit that: give
+    # the run the default disposition a terminal's foreground job has.
     proc = subprocess.Popen([*argv, "--out", str(out)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+                            stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     trials = out / "trials.jsonl"
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and not (trials.exists() and trials.read_text()):
