@@ -14,9 +14,7 @@ package is imported by :func:`available`, so adding a strategy is adding one mod
 
 from __future__ import annotations
 
-import importlib
 import json
-import pkgutil
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, ClassVar
@@ -33,6 +31,7 @@ from orthoglide_env.geometry import (
 from orthoglide_env.kinematics import paper_posture
 
 from .measurements import Measurements
+from .registry import Registry
 
 PARAM_NAMES: tuple[str, ...] = ("drho_x", "drho_y", "drho_z", "dL_x", "dL_y", "dL_z")
 #: Which of the six paper parameters each ``--params`` choice frees (the others stay 0).
@@ -221,31 +220,11 @@ class Calibrator:
         return self.estimate(self.collect(env), params, sigma, verify=verify, **options)
 
 
-_REGISTRY: dict[str, type[Calibrator]] = {}
-
-
-def register(cls: type[Calibrator]) -> type[Calibrator]:
-    """Class decorator: make a strategy available by its ``name``."""
-    if not cls.name or cls.name in _REGISTRY:
-        raise ValueError(f"strategy name '{cls.name}' is empty or taken")
-    _REGISTRY[cls.name] = cls
-    return cls
-
-
-def available() -> list[str]:
-    """Names of every strategy (imports each module of this package once)."""
-    package = importlib.import_module("calibrators")
-    for module in pkgutil.iter_modules(package.__path__):
-        if module.name not in ("cli", "__main__"):
-            importlib.import_module(f"calibrators.{module.name}")
-    return sorted(_REGISTRY)
-
-
-def get_strategy(name: str) -> Calibrator:
-    names = available()
-    if name not in _REGISTRY:
-        raise ValueError(f"unknown strategy '{name}'; choose from {names}")
-    return _REGISTRY[name]()
+STRATEGIES: Registry[Calibrator] = Registry("strategy", "calibrators",
+                                           skip=("cli", "agents", "__main__"))
+register = STRATEGIES.register
+available = STRATEGIES.available
+get_strategy = STRATEGIES.get
 
 
 def check_params(params: str) -> tuple[int, ...]:

@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-import importlib
-import pkgutil
 from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
 
 from orthoglide_env.lab import Op
+
+from ..registry import Registry
 
 
 class Agent:
@@ -30,30 +30,21 @@ class Agent:
         raise NotImplementedError
 
 
-AGENTS: dict[str, type[Agent]] = {}
+class PlannedAgent(Agent):
+    """An agent whose whole experiment is decided at reset: ``plan`` (a list of actions,
+    set by ``reset``) is played in order."""
+
+    plan: list[dict[str, Any]]
+
+    def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
+        return self.plan.pop(0)
 
 
-def register(cls: type[Agent]) -> type[Agent]:
-    """Class decorator: make an agent available by its ``name``."""
-    if not cls.name or cls.name in AGENTS:
-        raise ValueError(f"agent name '{cls.name}' is empty or taken")
-    AGENTS[cls.name] = cls
-    return cls
-
-
-def available() -> list[str]:
-    """Names of every agent (imports each module of this package once)."""
-    package = importlib.import_module("calibrators.agents")
-    for module in pkgutil.iter_modules(package.__path__):
-        importlib.import_module(f"calibrators.agents.{module.name}")
-    return sorted(AGENTS)
-
-
-def get_agent(name: str) -> Agent:
-    names = available()
-    if name not in AGENTS:
-        raise ValueError(f"unknown agent '{name}'; choose from {names}")
-    return AGENTS[name]()
+AGENT_REGISTRY: Registry[Agent] = Registry("agent", "calibrators.agents")
+AGENTS = AGENT_REGISTRY.classes
+register = AGENT_REGISTRY.register
+available = AGENT_REGISTRY.available
+get_agent = AGENT_REGISTRY.get
 
 
 def action(op: Op, rho: np.ndarray | None = None, stand: int = 0, slot: int = 0

@@ -16,11 +16,11 @@ from orthoglide_env.kinematics import paper_posture
 from orthoglide_env.lab import SLOTS, Op
 
 from ..paper import REPETITIONS, leg_sequence
-from .base import Agent, action, register
+from .base import PlannedAgent, action, register
 
 
 @register
-class PaperAgent(Agent):
+class PaperAgent(PlannedAgent):
     name = "paper"
     repetitions = REPETITIONS
 
@@ -42,6 +42,3 @@ class PaperAgent(Agent):
                      for p, _ in leg_sequence(leg, self.repetitions)]
         plan.append(action(Op.STOP))
         self.plan = plan
-
-    def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
-        return self.plan.pop(0)

@@ -7,14 +7,12 @@ each, and stops.  The tracker's frame is unknown to the estimator, which fits it
 
 from __future__ import annotations
 
-from typing import Any
-
 import gymnasium as gym
 import numpy as np
 
 from orthoglide_env.lab import Op
 
-from .base import Agent, action, register
+from .base import PlannedAgent, action, register
 
 #: Grid levels of each joint (mm): the joint range less 10 mm at either end, which keeps
 #: clear of the near-singular (60, 60, 60) corner where some machines cannot assemble.
@@ -34,7 +32,7 @@ def serpentine_grid(levels: tuple[float, ...] = LEVELS) -> np.ndarray:
 
 
 @register
-class TrackerAgent(Agent):
+class TrackerAgent(PlannedAgent):
     name = "tracker"
     needs_tracker = True
 
@@ -44,6 +42,3 @@ class TrackerAgent(Agent):
         self.plan = [action(Op.LIFT, stand=k) for k, e in enumerate(observation["engaged"]) if e]
         self.plan += [action(Op.MOVE, rho) for rho in serpentine_grid()]
         self.plan.append(action(Op.STOP))
-
-    def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
-        return self.plan.pop(0)
