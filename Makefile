@@ -14,8 +14,8 @@ $(STAMP): pyproject.toml
 
 run: $(STAMP)
 	rm -rf results/compare
-	$(BIN)/orthoglide compare --agents paper,tracker,random --estimators paper,extended \
-		--machines 10 --seed 1 --jobs 2 --out results/compare
+	$(BIN)/orthoglide compare --agents paper,tracker --estimators paper,extended \
+		--machines 20 --seed 1 --jobs 2 --out results/compare
 
 test: $(STAMP)
 	$(BIN)/ruff check .

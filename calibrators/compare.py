@@ -256,7 +256,9 @@ def run(config: Config, machines: int, jobs: int = 1, done: list[Trial] | None =
         get_estimator(name)
     done = list(done or [])
     skip = {t.key for t in done}
-    chunks = [list(range(i, min(i + CHUNK, machines))) for i in range(0, machines, CHUNK)]
+    # Every worker gets work even on short runs.
+    size = max(1, min(CHUNK, -(-machines // jobs)))
+    chunks = [list(range(i, min(i + size, machines))) for i in range(0, machines, size)]
     trials = list(done)
 
     def collect(new: list[Trial], count: int) -> None:
