@@ -17,6 +17,7 @@ import numpy as np
 from gymnasium import spaces
 
 from .backend import ExactMachine, MachineBackend
+from .env import check_seed
 from .gauges import (
     DEFAULT_RESOLUTION,
     DEFAULT_SIGMA,
@@ -277,21 +278,25 @@ class OrthoglideLabEnv(gym.Env):
     # -- Gymnasium API --------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
               ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        super().reset(seed=seed)
+        # Every option is checked before anything changes: a refused reset leaves the
+        # episode (and its random stream) as it was.
+        check_seed(seed)
+        if not isinstance(options, dict | None):
+            raise ValueError("reset options must be a dict")
         options = dict(options or {})
         unknown = sorted(set(options) - {"machine"})
         if unknown:
             raise ValueError(f"unknown reset option(s) {unknown}; allowed: machine")
         given = options.get("machine")
-        if given is None:
-            machine = self.preset.sample(self.np_random)
-        elif isinstance(given, dict):
-            machine = MachineParams.from_dict(given)
+        if isinstance(given, dict):
+            given = MachineParams.from_dict(given)
         elif isinstance(given, MachineParams):
-            machine = check_validity(given)
-        else:
+            given = check_validity(given)
+        elif given is not None:
             raise ValueError("reset option 'machine' must be a dict in the machine file schema "
                              "or a MachineParams")
+        super().reset(seed=seed)
+        machine = self.preset.sample(self.np_random) if given is None else given
         rotation = _random_rotation(self.np_random)
         direction = self.np_random.normal(size=3)
         position = TRACKER_DISTANCE * direction / np.linalg.norm(direction)

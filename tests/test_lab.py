@@ -334,3 +334,20 @@ def test_stable_baselines3_trains_on_the_flat_variant_as_it_is() -> None:
     model.learn(total_timesteps=128)
     action, _ = model.predict(env.reset(seed=1)[0])
     assert env.action_space.contains(action)
+
+
+def test_a_refused_reset_leaves_the_episode_as_it_was() -> None:
+    env = lab()
+    env.reset(seed=4)
+    before = (env.unwrapped._time, len(env.unwrapped.records), env.unwrapped.true_machine)
+    for bad in ({"machine": []}, {"machine": {"drho": [50, 0, 0]}}, {"speed": 1}):
+        with pytest.raises(ValueError):
+            env.reset(seed=5, options=bad)
+    lab_env = env.unwrapped
+    assert (lab_env._time, len(lab_env.records), lab_env.true_machine) == before
+    # ... and its random stream: the next step reads what an untouched env reads.
+    twin = lab()
+    twin.reset(seed=4)
+    a = env.step(action(Op.MOVE, [10.0, 0.0, 0.0]))[0]["gauges"]
+    b = twin.step(action(Op.MOVE, [10.0, 0.0, 0.0]))[0]["gauges"]
+    np.testing.assert_array_equal(a, b)
