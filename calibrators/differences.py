@@ -92,7 +92,7 @@ def model_differences(theta: np.ndarray, rows: Differences) -> np.ndarray:
 
     Zeroing a gauge slides it along its own ray, which shifts every ray distance by one
     constant: a difference ``sign * (t - t_zero)`` does not depend on it, so the model
-    skips the zeroing (``gauges.model_gauges``) and reads one batch of postures, whose
+    skips the zeroing and reads one batch of postures, whose
     geometry is computed once."""
     machine = MachineParams(drho=theta[:3], dL=theta[3:])
     specs = sorted(set(rows.gauges), key=lambda g: (g.leg, g.axis, g.at))

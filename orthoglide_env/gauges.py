@@ -725,25 +725,9 @@ def exact_readings(machine: MachineParams, gauges: GaugeArray | Sequence[Gauge],
     return readings_from_distances(gauges, exact_ray_distances(machine, gauges, rho))
 
 
-def model_readings(machine: MachineParams, gauges: GaugeArray | Sequence[Gauge],
-                   rho: np.ndarray) -> np.ndarray:
-    """Readings of the exact model *without* the travel limits (NaN only where the ray
-    misses the bar): what a calibrator's model predicts while it iterates over estimates
-    whose gauges would be out of travel."""
-    return _reading(gauges, exact_ray_distances(machine, gauges, rho))
-
-
 def installed_on(machine: MachineParams, gauges: list[Gauge]) -> list[Gauge]:
     """The gauges set up and zeroed by the exact model at the Zero posture of ``machine``."""
     return zero_gauges(gauges, exact_ray_distances(machine, gauges, np.zeros(3)))
-
-
-def model_gauges(
-    machine: MachineParams, specs: tuple[GaugeSpec, ...] | list[GaugeSpec]
-) -> list[Gauge]:
-    """Ideal gauges installed and zeroed on ``machine``: what a calibrator's model assumes
-    for its current estimate (it cannot know the installation errors)."""
-    return installed_on(machine, install(specs, machine))
 
 
 #: A dial gauge's repeatability and display step are small against its travel: at most

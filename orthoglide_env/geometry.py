@@ -325,9 +325,6 @@ def _element_names(key: str) -> list[str]:
 
 #: The 27 errors of a machine, in :meth:`MachineParams.to_vector` order.
 ERROR_NAMES: tuple[str, ...] = tuple(n for key in ERROR_GROUPS for n in _element_names(key))
-#: Units of each group, for reports.
-ERROR_UNITS: dict[str, str] = {"drho": "mm", "dL": "mm", "axis_tilt": "rad",
-                               "axis_offset": "mm", "attach": "mm"}
 
 
 def error_group(name: str) -> str:

@@ -33,7 +33,6 @@ from enum import IntEnum
 import numpy as np
 
 from .gauges import PAPER_LAYOUT, GaugeSpec
-from .geometry import AXIS_NAMES
 
 
 @dataclass(frozen=True)
@@ -99,7 +98,3 @@ class Op(IntEnum):
 
 OP_NAMES: tuple[str, ...] = tuple(op.name.lower() for op in Op)
 
-
-def tracker_axes_names() -> tuple[str, ...]:
-    """Mounting names of the tracker's three coordinates."""
-    return tuple(f"tracker.{a}" for a in AXIS_NAMES)
