@@ -16,12 +16,8 @@ from __future__ import annotations
 import numpy as np
 
 from .gauges import BOX_NAMES, collision_boxes, to_box_frame
-from .geometry import CARRIAGE_SETBACK, CARRIAGE_SIZE, LEG_NAMES, R_LEG, MachineParams
-from .kinematics import carriage_points, direct
-
-#: Every moving box: the bars, couplers and platform of :data:`gauges.BOX_NAMES`, then
-#: the three carriages (named as the simulator's links).
-PART_NAMES: tuple[str, ...] = (*BOX_NAMES, *(f"{leg}_carriage" for leg in LEG_NAMES))
+from .geometry import LEG_NAMES, MachineParams
+from .kinematics import direct
 
 
 def crash_pairs() -> list[tuple[str, str]]:
@@ -36,7 +32,7 @@ def crash_pairs() -> list[tuple[str, str]]:
 
 
 def _pair_indices() -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
-    index = {name: k for k, name in enumerate(PART_NAMES)}
+    index = {name: k for k, name in enumerate(BOX_NAMES)}
     pairs = crash_pairs()
     first = np.array([index[a] for a, _ in pairs])
     second = np.array([index[b] for _, b in pairs])
@@ -44,26 +40,6 @@ def _pair_indices() -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
 
 
 PAIR_FIRST, PAIR_SECOND, PAIR_NAMES = _pair_indices()
-
-
-def part_boxes(
-    machine: MachineParams, rho: np.ndarray, boxes: tuple[np.ndarray, ...] | None = None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Boxes of :data:`PART_NAMES` at control coordinates ``rho`` (shape ``(..., 3)``):
-    centres ``(..., 13, 3)``, rotations ``(..., 13, 3, 3)``, half extents ``(..., 13, 3)``.
-    ``boxes``: the :func:`gauges.collision_boxes` at ``rho`` when already computed."""
-    rho = np.asarray(rho, dtype=float)
-    centre, rot, half = boxes or collision_boxes(machine, rho, direct(machine, rho))
-    # A carriage keeps its nominal orientation; it starts CARRIAGE_SETBACK ahead of R1.
-    ahead = CARRIAGE_SETBACK + CARRIAGE_SIZE[0] / 2
-    carriage_centre = carriage_points(machine, rho) + ahead * R_LEG[:, :, 0]
-    lead = centre.shape[:-2]
-    return (
-        np.concatenate([centre, carriage_centre], axis=-2),
-        np.concatenate([rot, np.broadcast_to(R_LEG, (*lead, 3, 3, 3))], axis=-3),
-        np.concatenate([half, np.broadcast_to(np.array(CARRIAGE_SIZE) / 2, (*lead, 3, 3))],
-                       axis=-2),
-    )
 
 
 #: Cyclic successors of a box axis: with right-handed axes, axis ``i`` crossed with axis
@@ -116,7 +92,8 @@ def pair_gaps(
     machine: MachineParams, rho: np.ndarray, boxes: tuple[np.ndarray, ...] | None = None
 ) -> np.ndarray:
     """Separating-axis gap (mm) of every pair of :data:`PAIR_NAMES`, shape ``(..., pairs)``."""
-    centre, rot, half = part_boxes(machine, rho, boxes)
+    rho = np.asarray(rho, dtype=float)
+    centre, rot, half = boxes or collision_boxes(machine, rho, direct(machine, rho))
     first, second = PAIR_FIRST, PAIR_SECOND
     return box_gap(centre[..., first, :], rot[..., first, :, :], half[..., first, :],
                    centre[..., second, :], rot[..., second, :, :], half[..., second, :])
@@ -139,7 +116,8 @@ def collision_mask(
     Two boxes whose axis-aligned bounding boxes are apart cannot touch, so only the other
     pairs go through the separating-axis test: at the postures of a calibration that is
     none of them, which keeps the check cheap on thousands of machines."""
-    centre, rot, half = part_boxes(machine, rho, boxes)
+    rho = np.asarray(rho, dtype=float)
+    centre, rot, half = boxes or collision_boxes(machine, rho, direct(machine, rho))
     size = np.abs(rot)
     # Half extents of the bounding boxes, and the test per world axis, written out: numpy
     # is slow on many short axes of three.

@@ -15,9 +15,26 @@ gauge's world measuring axis, relative to the gauge's zero, in mm::
 
 so the difference of two readings is the surface's displacement along that axis.
 
-Targets: a gauge measuring leg ``i`` along the leg's local Y touches the bar at
-``+d/2`` along local Z, at that height; one measuring along local Z comes from below
-and touches the bar at ``-d/2``.  Both are flat box faces, as DESIGN.md advises.
+Targets (:class:`Part`), every one a flat box face, as DESIGN.md advises:
+
+* a leg's **bar**: a gauge measuring leg ``i`` along the leg's local Y touches the bar at
+  ``+d/2`` along local Z, at that height; one measuring along local Z comes from below
+  and touches the bar at ``-d/2``.  The place along the bar is the slot's ``at``.
+* a leg's **carriage**, the block the drive moves and that carries R1: measured across
+  the drive, along local Y from the +Y side (the rail runs beside the carriage on its -Y
+  side) or along local Z from below, aimed at the middle of the face at Zero.  The
+  carriage moves along its guideway, so the face slides under the tip and the reading is
+  the guideway's sideways run: its direction error (``axis_tilt``) times the travel, seen
+  without the legs in between.  The tip stays on the 70 mm face for about +-33 mm of the
+  carriage's travel around Zero.  No gauge measures along the drive: it would read the
+  encoder's own travel (the tilt only to second order) and hold the carriage within its
+  10 mm of travel.
+* the **platform**: its face normal to x, y or z on the side away from the legs (the
+  -x, -y, -z faces; the +faces carry the legs' couplers), touched :data:`PLATFORM_AIM` off
+  the face's centre toward the negative of both other axes (the centre of the -z face
+  carries the tool; the same place on every face keeps the three slots alike under
+  x -> y -> z).  It reads the platform's displacement along that axis, so it only allows
+  moves within its travel toward the stand; across the axis the face slides under the tip.
 """
 
 from __future__ import annotations
@@ -34,6 +51,8 @@ from .geometry import (
     AXIS_NAMES,
     BAR_CLEARANCE,
     BAR_SECTION,
+    CARRIAGE_SETBACK,
+    CARRIAGE_SIZE,
     D_NOMINAL,
     LEG_NAMES,
     PLATFORM_SIZE,
@@ -65,6 +84,21 @@ STAND_LENGTH: float = 60.0
 RAY_BACKOFF: float = 30.0
 
 
+class Part(IntEnum):
+    """What a gauge touches."""
+
+    BAR = 0  # a leg's parallelogram bar
+    CARRIAGE = 1  # a leg's carriage (drive block carrying R1)
+    PLATFORM = 2  # a face of the platform
+
+
+#: The leg of a platform gauge: it has none.
+NO_LEG: int = -1
+#: A platform gauge touches its face this far (mm) off the face's centre, toward the
+#: negative of both other axes (see the module docstring).
+PLATFORM_AIM: float = 10.0
+
+
 class Status(IntEnum):
     """Why a reading is or is not valid."""
 
@@ -76,55 +110,107 @@ class Status(IntEnum):
 
 def local_axis(leg: np.ndarray | int, axis: np.ndarray | int) -> np.ndarray:
     """The leg-frame axis a gauge on ``leg`` measuring along world ``axis`` measures along:
-    1 (local Y) or 2 (local Z); also the face of its bar it touches."""
+    1 (local Y) or 2 (local Z)."""
     return np.where(np.asarray(axis) == (np.asarray(leg) + 1) % 3, 1, 2)
 
 
-def target_index(leg: np.ndarray | int, face: np.ndarray | int) -> np.ndarray:
-    """Index in :data:`BOX_NAMES` of the bar a gauge on ``leg`` touching ``face`` touches:
-    the bar at +d/2 along local Z (measured along local Y, from the side) or the one at
-    -d/2 (measured along local Z, from below)."""
-    return 2 * np.asarray(leg) + (np.asarray(face) == 2)
+def face_of(part: np.ndarray | int, leg: np.ndarray | int, axis: np.ndarray | int
+            ) -> np.ndarray:
+    """The axis of its target's box whose face a gauge touches: a bar's and a carriage's
+    box lie in the leg frame (local Y or Z: 1 or 2), the platform's in the world frame
+    (the measuring axis)."""
+    return np.where(np.asarray(part) == Part.PLATFORM, axis, local_axis(leg, axis))
+
+
+def target_index(part: np.ndarray | int, leg: np.ndarray | int, face: np.ndarray | int
+                 ) -> np.ndarray:
+    """Index in :data:`BOX_NAMES` of the box a gauge touches: the bar at +d/2 along local
+    Z (measured along local Y, from the side) or the one at -d/2 (along local Z, from
+    below), the leg's carriage, or the platform."""
+    part, leg = np.asarray(part), np.asarray(leg)
+    bar = 2 * leg + (np.asarray(face) == 2)
+    return np.where(part == Part.BAR, bar,
+                    np.where(part == Part.CARRIAGE, CARRIAGE_BOX + leg, PLATFORM_BOX))
 
 
 @dataclass(frozen=True)
 class GaugeSpec:
-    """Where a gauge goes, nominally: which leg, which world axis, where along the leg.
+    """Where a gauge goes, nominally: what it touches (``part``), which leg, which world
+    axis it measures along, where along the leg.
 
     ``at`` is the fraction of the leg from the platform end (0) to the carriage end (1) at
-    the Zero posture; the paper's gauges sit in the middle (0.5).
+    the Zero posture; the paper's gauges sit in the middle (0.5).  A carriage or platform
+    gauge has one place per face (``at`` stays 0.5); a platform gauge has no leg
+    (:data:`NO_LEG`).  :meth:`carriage` and :meth:`platform` make those.
     """
 
     leg: int
     axis: int
     at: float = 0.5
+    part: Part = Part.BAR
 
     def __post_init__(self) -> None:
-        if self.leg not in (0, 1, 2) or self.axis not in (0, 1, 2):
-            raise ValueError("gauge leg and axis must be 0, 1 or 2 (x, y, z)")
-        if self.leg == self.axis:
-            raise ValueError("a gauge measures a leg along one of the two axes normal to it")
-        if not 0.05 <= self.at <= 0.95:
+        if self.part not in tuple(Part):
+            raise ValueError(f"gauge part must be one of {[p.name.lower() for p in Part]}")
+        object.__setattr__(self, "part", Part(self.part))
+        if self.axis not in (0, 1, 2):
+            raise ValueError("gauge axis must be 0, 1 or 2 (x, y, z)")
+        if self.part == Part.PLATFORM:
+            if self.leg != NO_LEG:
+                raise ValueError(f"a platform gauge has no leg (leg {NO_LEG})")
+        elif self.leg not in (0, 1, 2):
+            raise ValueError("gauge leg must be 0, 1 or 2 (x, y, z)")
+        elif self.leg == self.axis:
+            raise ValueError(f"a gauge measures a {self.part.name.lower()} along one of the "
+                             "two axes normal to its leg")
+        if self.part == Part.BAR and not 0.05 <= self.at <= 0.95:
             raise ValueError("gauge position 'at' must lie in [0.05, 0.95] along the leg")
+        if self.part != Part.BAR and self.at != 0.5:
+            raise ValueError("a carriage or platform gauge has one place per face: 'at' is "
+                             "for bars")
+
+    @classmethod
+    def carriage(cls, leg: int, axis: int) -> GaugeSpec:
+        """A gauge on leg ``leg``'s carriage, measuring along world ``axis`` (across the
+        drive)."""
+        return cls(leg, axis, part=Part.CARRIAGE)
+
+    @classmethod
+    def platform(cls, axis: int) -> GaugeSpec:
+        """A gauge on the platform's face normal to world ``axis``."""
+        return cls(NO_LEG, axis, part=Part.PLATFORM)
 
     @property
     def name(self) -> str:
-        return f"{LEG_NAMES[self.leg]}-leg/{AXIS_NAMES[self.axis]}"
+        """``x-leg/y`` (a bar), ``x-carriage/y`` or ``platform/x``."""
+        axis = AXIS_NAMES[self.axis]
+        if self.part == Part.PLATFORM:
+            return f"platform/{axis}"
+        kind = "leg" if self.part == Part.BAR else "carriage"
+        return f"{LEG_NAMES[self.leg]}-{kind}/{axis}"
 
     @property
     def slot(self) -> str:
-        """The name with the place along the leg, e.g. ``x-leg/y@0.5``: unique per slot."""
-        return f"{self.name}@{float(self.at)!r}"
+        """The name with a bar gauge's place along the leg, e.g. ``x-leg/y@0.5``: unique per
+        slot (a carriage or platform face has one place: its name)."""
+        return f"{self.name}@{float(self.at)!r}" if self.part == Part.BAR else self.name
 
     @property
-    def local_axis(self) -> int:
-        """1 when the gauge measures along the leg's local Y, 2 along local Z."""
-        return int(local_axis(self.leg, self.axis))
+    def face(self) -> int:
+        """The axis of the target's box whose face the gauge touches (see :func:`face_of`)."""
+        return int(face_of(self.part, self.leg, self.axis))
+
+    @property
+    def approach(self) -> float:
+        """+1 when the plunger points along the world axis it measures along, -1 against
+        it: only a carriage gauge along local Y comes from the +Y side."""
+        return -1.0 if self.part == Part.CARRIAGE and self.face == 1 else 1.0
 
     @property
     def bar(self) -> int:
-        """+1: the bar at +d/2 along local Z; -1: the one at -d/2."""
-        return 1 if self.local_axis == 1 else -1
+        """The bar a bar gauge touches: +1 the bar at +d/2 along local Z, -1 the one at
+        -d/2."""
+        return 1 if self.face == 1 else -1
 
 
 #: The paper's layout: two gauges at the middle of each leg, in the documented order.
@@ -151,11 +237,12 @@ class GaugeArray:
     of a batch (:attr:`MachineParams.batch_shape`).
 
     Every field has the batch dimensions first, then one entry per gauge ``G``: ``origin``
-    and ``direction`` ``(*batch, G, 3)``, the rest ``(*batch, G)``.  ``leg``, ``axis`` and
-    ``at`` are each gauge's :class:`GaugeSpec`, so a gauge set converts back to
-    :class:`Gauge` objects without loss (:meth:`to_gauges`).  Every function of this module
-    that takes a ``list[Gauge]`` also takes a ``GaugeArray``; the list is converted, so there
-    is one computation for one machine and for many.
+    and ``direction`` ``(*batch, G, 3)``, the rest ``(*batch, G)``.  ``leg``, ``axis``,
+    ``at`` and ``part`` (bars unless given) are each gauge's :class:`GaugeSpec`, so a
+    gauge set converts back to :class:`Gauge` objects without loss (:meth:`to_gauges`).
+    Every function of this module that takes a ``list[Gauge]`` also takes a
+    ``GaugeArray``; the list is converted, so there is one computation for one machine and
+    for many.
     """
 
     origin: np.ndarray
@@ -166,6 +253,7 @@ class GaugeArray:
     leg: np.ndarray
     axis: np.ndarray
     at: np.ndarray
+    part: np.ndarray | int = Part.BAR
 
     def __post_init__(self) -> None:
         shape = np.shape(self.origin)
@@ -174,7 +262,8 @@ class GaugeArray:
         for name, tail, dtype in (("origin", (3,), float), ("direction", (3,), float),
                                   ("sign", (), float), ("travel", (), float),
                                   ("zero", (), float), ("leg", (), np.intp),
-                                  ("axis", (), np.intp), ("at", (), float)):
+                                  ("axis", (), np.intp), ("at", (), float),
+                                  ("part", (), np.intp)):
             value = np.asarray(getattr(self, name), dtype=dtype)
             object.__setattr__(self, name, np.broadcast_to(value, (*shape[:-1], *tail)))
 
@@ -188,6 +277,7 @@ class GaugeArray:
             sign=[g.sign for g in gauges], travel=[g.travel for g in gauges],
             zero=[g.zero for g in gauges], leg=[s.leg for s in specs],
             axis=[s.axis for s in specs], at=[s.at for s in specs],
+            part=[s.part for s in specs],
         )
 
     @classmethod
@@ -227,13 +317,19 @@ class GaugeArray:
 
     @property
     def target(self) -> np.ndarray:
-        """Index in :data:`BOX_NAMES` of each gauge's target bar, ``(*batch, G)``."""
-        return target_index(self.leg, self.face)
+        """Index in :data:`BOX_NAMES` of each gauge's target box, ``(*batch, G)``."""
+        return target_index(self.part, self.leg, self.face)
 
     @property
     def face(self) -> np.ndarray:
-        """The target bar's face (box axis) each gauge touches, ``(*batch, G)``."""
-        return local_axis(self.leg, self.axis)
+        """The target box's face (box axis) each gauge touches, ``(*batch, G)``."""
+        return face_of(self.part, self.leg, self.axis)
+
+    def spec(self, index: tuple[int, ...]) -> GaugeSpec:
+        """The :class:`GaugeSpec` of the gauge at ``index`` (batch indices, then the
+        gauge's)."""
+        return GaugeSpec(int(self.leg[index]), int(self.axis[index]), float(self.at[index]),
+                         Part(int(self.part[index])))
 
     def for_postures(self, ndim: int) -> GaugeArray:
         """The fields reshaped to broadcast against arrays of ``ndim`` leading dimensions
@@ -250,11 +346,10 @@ class GaugeArray:
         if self.batch_shape:
             raise ValueError("to_gauges() converts one machine's gauges: index the batch first")
         return [
-            Gauge(GaugeSpec(int(leg), int(axis), float(at)), origin.copy(), direction.copy(),
-                  float(sign), float(travel), float(zero))
-            for origin, direction, sign, travel, zero, leg, axis, at in zip(
-                self.origin, self.direction, self.sign, self.travel, self.zero, self.leg,
-                self.axis, self.at, strict=True)
+            Gauge(self.spec((k,)), origin.copy(), direction.copy(), float(sign), float(travel),
+                  float(zero))
+            for k, (origin, direction, sign, travel, zero) in enumerate(zip(
+                self.origin, self.direction, self.sign, self.travel, self.zero, strict=True))
         ]
 
     def zeroed(self, t_at_zero: np.ndarray) -> GaugeArray:
@@ -262,9 +357,9 @@ class GaugeArray:
         t_at_zero = np.asarray(t_at_zero, dtype=float)
         if np.isnan(t_at_zero).any():
             names = [(f"machine {k[0] if len(k) == 2 else list(k[:-1])}: " if len(k) > 1
-                      else "") + f"{LEG_NAMES[self.leg[k]]}-leg/{AXIS_NAMES[self.axis[k]]}"
+                      else "") + self.spec(k).name
                      for k in map(tuple, np.argwhere(np.isnan(t_at_zero)).tolist())]
-            raise ValueError(f"gauge(s) {names} do not touch their bar at the Zero posture")
+            raise ValueError(f"gauge(s) {names} do not touch their target at the Zero posture")
         half = self.travel / 2
         return replace(self, origin=self.origin + (t_at_zero - half)[..., None] * self.direction,
                        zero=half)
@@ -281,37 +376,65 @@ def as_gauge_array(gauges: GaugeArray | Sequence[Gauge]) -> GaugeArray:
 
 
 def layout_from_names(names: list[str]) -> tuple[GaugeSpec, ...]:
-    """Parse names such as ``"x-leg/y"`` or ``"x/y@0.3"`` into gauge specs."""
+    """Parse names such as ``"x-leg/y"``, ``"x/y@0.3"``, ``"x-carriage/y"`` or
+    ``"platform/x"`` into gauge specs."""
     specs = []
     for raw in names:
         body, _, at = raw.partition("@")
-        leg, _, axis = body.replace("-leg", "").partition("/")
-        if leg not in LEG_NAMES or axis not in AXIS_NAMES:
-            raise ValueError(f"bad gauge name '{raw}': expected like 'x-leg/y' or 'x/y@0.5'")
+        where, _, axis = body.partition("/")
+        leg, _, kind = where.partition("-")
+        part = {"": Part.BAR, "leg": Part.BAR, "carriage": Part.CARRIAGE}.get(kind)
+        if where == "platform" and not at:
+            leg, part = LEG_NAMES[0], Part.PLATFORM
+        if leg not in LEG_NAMES or axis not in AXIS_NAMES or part is None or (
+                at and part != Part.BAR):
+            raise ValueError(f"bad gauge name '{raw}': expected like 'x-leg/y', 'x/y@0.5', "
+                             "'x-carriage/y' or 'platform/x'")
+        axis_index = AXIS_NAMES.index(axis)
         specs.append(
-            GaugeSpec(LEG_NAMES.index(leg), AXIS_NAMES.index(axis), float(at) if at else 0.5)
+            GaugeSpec.platform(axis_index) if part == Part.PLATFORM
+            else GaugeSpec(LEG_NAMES.index(leg), axis_index, float(at) if at else 0.5, part)
         )
     return tuple(specs)
+
+
+def _spec_arrays(specs: Sequence[GaugeSpec]) -> GaugeArray:
+    """The specs of ``specs`` as the index fields of a :class:`GaugeArray` (its rays are
+    placeholders)."""
+    n = len(specs)
+    return GaugeArray(origin=np.zeros((n, 3)), direction=np.zeros((n, 3)), sign=0.0,
+                      travel=0.0, zero=0.0, leg=[s.leg for s in specs],
+                      axis=[s.axis for s in specs], at=[s.at for s in specs],
+                      part=[s.part for s in specs])
 
 
 def ideal_rays(
     specs: tuple[GaugeSpec, ...] | list[GaugeSpec], machine: MachineParams,
     travel: float = DEFAULT_TRAVEL,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Rays of perfectly installed gauges: each aimed at the middle of its bar's face at the
-    Zero posture of ``machine``, the plunger at mid-travel.  Origins ``(*batch, n, 3)``
-    and directions ``(n, 3)`` (a stand's nominal direction is a world axis)."""
+    """Rays of perfectly installed gauges: each aimed at its place on its target's face at
+    the Zero posture of ``machine`` (a bar's ``at``, a carriage face's middle, the
+    platform face's :data:`PLATFORM_AIM`), the plunger at mid-travel.  Origins
+    ``(*batch, n, 3)`` and directions ``(n, 3)`` (a stand's nominal direction is a world
+    axis)."""
     zero = np.zeros(3)
-    centre, rot, half = collision_boxes(machine, zero, direct(machine, zero))
-    target = [target_box(s) for s in specs]
-    centre, rot, half = centre[..., target, :], rot[..., target, :, :], half[..., target, :]
-    axis = np.array([s.local_axis for s in specs])
-    direction = R_LEG[[s.leg for s in specs], :, axis]
-    # Along the bar from its platform end (at=0) to its carriage end (at=1).
-    at = np.array([s.at for s in specs])
-    along = ((at - 0.5) * 2 * (half[..., 0] + BAR_CLEARANCE))[..., None] * -rot[..., :, 0]
-    face = centre + along - direction * half[..., np.arange(len(specs)), axis][..., None]
-    return face - direction * (travel / 2), direction
+    g = _spec_arrays(specs)
+    centre, rot, half = exact_target_boxes(g, collision_boxes(machine, zero, direct(machine,
+                                                                                     zero)))
+    n = len(specs)
+    face = g.face
+    direction = np.array([s.approach for s in specs])[:, None] * np.eye(3)[g.axis]
+    # The place on the face, in the box's frame: along a bar from its platform end
+    # (at=0) to its carriage end (at=1); off a platform face's centre; a carriage face's
+    # middle.
+    along = np.where(g.part == Part.BAR, (0.5 - g.at) * 2 * (half[..., 0] + BAR_CLEARANCE), 0.0)
+    aside = np.where((np.arange(3) != face[:, None]) & (g.part == Part.PLATFORM)[:, None],
+                     -PLATFORM_AIM, 0.0)
+    local = aside + along[..., None] * np.eye(3)[0]
+    place = rot[..., 0] * local[..., 0, None] + rot[..., 1] * local[..., 1, None] + (
+        rot[..., 2] * local[..., 2, None])
+    point = centre + place - direction * half[..., np.arange(n), face][..., None]
+    return point - direction * (travel / 2), direction
 
 
 # --- the stand's installation, as an estimator sees it ------------------------------------
@@ -381,13 +504,9 @@ def face_distances(
     (no edges, no occlusion, no travel), and on a valid reading it is exactly the
     simulator's ray distance (the tip sits on that face)."""
     rho = np.asarray(rho, dtype=float)
-    p = direct(machine, rho)
-    legs = np.array([s.leg for s in specs])
-    bars = np.array([s.bar for s in specs])
-    a = carriage_points(machine, rho)[..., legs, :]
-    c = platform_points(machine, p)[..., legs, :]
-    centre, rot, half = _boxes(a, c, legs, bars)
-    face = np.array([s.local_axis for s in specs])
+    g = _spec_arrays(specs)
+    centre, rot, half = target_boxes(machine, g, rho, direct(machine, rho))
+    face = g.face
     normal = np.einsum("...gjk,gk->...gj", rot, np.eye(3)[face])
     thickness = half[..., np.arange(len(specs)), face]
     extra = centre.ndim - 2 - (np.ndim(origins) - 2)
@@ -397,6 +516,47 @@ def face_distances(
                                                                   np.shape(origins))), shape)
     nd = np.sum(normal * d, axis=-1)
     return (np.sum(normal * (centre - o), axis=-1) - thickness * np.sign(nd)) / nd
+
+
+def target_boxes(
+    machine: MachineParams, gauges: GaugeArray, rho: np.ndarray, p: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The box each of ``gauges`` (one set, batch shape ``()``) touches, at control
+    coordinates ``rho`` with the TCP at ``p``: centres ``(..., G, 3)``, rotations
+    ``(..., G, 3, 3)``, half extents ``(..., G, 3)``.  What :func:`exact_target_boxes`
+    picks out of :func:`collision_boxes`, made from the same pieces for these boxes only
+    (an estimator's model evaluates it for thousands of parameter vectors)."""
+    # A platform gauge has no leg: the x leg's boxes stand in for its unused ones.
+    legs = np.maximum(gauges.leg, 0)
+    a = carriage_points(machine, rho)[..., legs, :]
+    bars = _boxes(a, platform_points(machine, p)[..., legs, :], legs,
+                  np.where(gauges.face == 1, 1, -1))
+    carriages = _carriage_boxes(a, legs)
+    platform = _platform_box(np.asarray(p)[..., None, :])
+    part = gauges.part
+    return tuple(  # type: ignore[return-value]
+        np.where((part == Part.BAR).reshape(-1, *(1,) * tail), b,
+                 np.where((part == Part.CARRIAGE).reshape(-1, *(1,) * tail), c, f))
+        for b, c, f, tail in zip(bars, carriages, platform, (1, 2, 1), strict=True))
+
+
+def _carriage_boxes(a: np.ndarray, legs: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Carriage boxes of ``legs`` from their R1 centres ``a`` (``(..., n, 3)``): a carriage
+    keeps its nominal orientation and starts CARRIAGE_SETBACK behind R1 (away from the
+    platform)."""
+    rot = R_LEG[legs]
+    centre = a + (CARRIAGE_SETBACK + CARRIAGE_SIZE[0] / 2) * rot[..., 0]
+    lead = centre.shape[:-1]
+    return (centre, np.broadcast_to(rot, (*lead, 3, 3)),
+            np.broadcast_to(np.array(CARRIAGE_SIZE) / 2, (*lead, 3)))
+
+
+def _platform_box(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The platform's box with the TCP at ``p`` (``(..., 3)``): it only translates."""
+    lead = np.shape(p)[:-1]
+    return (np.asarray(p), np.broadcast_to(np.eye(3), (*lead, 3, 3)),
+            np.broadcast_to(np.full(3, PLATFORM_SIZE / 2), (*lead, 3)))
 
 
 def install(
@@ -457,7 +617,7 @@ def install_array(
     sign = np.sign(direction[..., np.arange(len(specs)), axis])
     return GaugeArray(origin=origin, direction=direction, sign=sign, travel=float(travel),
                       zero=DEFAULT_TRAVEL / 2, leg=[s.leg for s in specs], axis=axis,
-                      at=[s.at for s in specs])
+                      at=[s.at for s in specs], part=[s.part for s in specs])
 
 
 @overload
@@ -589,8 +749,8 @@ def on_flat_face(
 def collision_boxes(
     machine: MachineParams, rho: np.ndarray, p: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Every moving collision box, in the order of :data:`BOX_NAMES`: centres
-    ``(..., 10, 3)``, rotations ``(..., 10, 3, 3)``, half extents ``(..., 10, 3)``."""
+    """Every moving box, in the order of :data:`BOX_NAMES`: centres ``(..., 13, 3)``,
+    rotations ``(..., 13, 3, 3)``, half extents ``(..., 13, 3)``."""
     legs = np.repeat(np.arange(3), 2)
     bars = np.tile([1, -1], 3)
     a = carriage_points(machine, rho)
@@ -603,27 +763,26 @@ def collision_boxes(
                    np.stack([zeros, zeros, ones], -1)], -2)
     coupler_rot = R_LEG @ rz
     shape = (*np.shape(theta)[:-1], 3, 3)
-    centres = np.concatenate([centre, c, np.asarray(p)[..., None, :]], axis=-2)
-    rots = np.concatenate([rot, coupler_rot, np.broadcast_to(np.eye(3), (*shape[:-2], 1, 3, 3))],
-                          axis=-3)
+    platform = _platform_box(np.asarray(p)[..., None, :])
+    carriages = _carriage_boxes(a, np.arange(3))
+    centres = np.concatenate([centre, c, platform[0], carriages[0]], axis=-2)
+    rots = np.concatenate([rot, coupler_rot, platform[1], carriages[1]], axis=-3)
     halves = np.concatenate([
-        half,
-        np.broadcast_to(np.array(SHORT_LINK_SIZE) / 2, shape),
-        np.broadcast_to(np.full(3, PLATFORM_SIZE / 2), (*shape[:-2], 1, 3)),
+        half, np.broadcast_to(np.array(SHORT_LINK_SIZE) / 2, shape), platform[2], carriages[2],
     ], axis=-2)
     return centres, rots, halves
 
 
-#: Names of the moving collision boxes (the simulator's link names).
+#: Names of the moving boxes (the simulator's link names): the bars, the couplers, the
+#: platform and the carriages.
 BOX_NAMES: tuple[str, ...] = tuple(
     [f"{leg}_{bar}" for leg in LEG_NAMES for bar in ("bar1", "bar2")]
     + [f"{leg}_coupler" for leg in LEG_NAMES] + ["platform"]
+    + [f"{leg}_carriage" for leg in LEG_NAMES]
 )
-
-
-def target_box(spec: GaugeSpec) -> int:
-    """Index in :data:`BOX_NAMES` of the bar a gauge touches."""
-    return int(target_index(spec.leg, spec.local_axis))
+PLATFORM_BOX: int = BOX_NAMES.index("platform")
+#: Index of the x leg's carriage; the y and z legs' follow.
+CARRIAGE_BOX: int = BOX_NAMES.index("x_carriage")
 
 
 def _pick(values: np.ndarray, index: np.ndarray, tail: int) -> np.ndarray:
@@ -672,7 +831,7 @@ def exact_ray_distances(
 def exact_target_boxes(
     gauges: GaugeArray | Sequence[Gauge], boxes: tuple[np.ndarray, np.ndarray, np.ndarray]
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The box of every gauge's target bar among the :func:`collision_boxes` ``boxes``:
+    """The box of every gauge's target among the :func:`collision_boxes` ``boxes``:
     centres ``(..., G, 3)``, rotations ``(..., G, 3, 3)``, half extents ``(..., G, 3)``."""
     centre, rot, half = boxes
     target = as_gauge_array(gauges).for_postures(centre.ndim - 2).target
@@ -683,7 +842,7 @@ def pressed_past_travel(
     gauges: GaugeArray | Sequence[Gauge], centre: np.ndarray, rot: np.ndarray,
     half: np.ndarray,
 ) -> np.ndarray:
-    """Whether each gauge's target bar presses it past its travel: the bar's box, grown by
+    """Whether each gauge's target presses it past its travel: the target's box, grown by
     the body radius, meets the gauge axis behind the fully pushed-in tip (``t < 0``) and
     in front of the stand's end.  The boxes are :func:`exact_target_boxes`, ``(..., G,
     ...)``; the result has shape ``(..., G)``."""

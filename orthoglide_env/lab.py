@@ -58,22 +58,34 @@ TIME = TimeTable()
 #: Places along a bar (fraction from the platform end) where a stand can aim.  Closer to
 #: either end the tip leaves the bar's flat face as the leg turns.
 SLOT_POSITIONS: tuple[float, ...] = (0.2, 0.35, 0.5, 0.65, 0.8)
-#: The slot catalogue: every bar (leg), both measuring axes across it, every position.
-SLOTS: tuple[GaugeSpec, ...] = tuple(
-    GaugeSpec(leg, axis, at)
-    for leg in range(3) for axis in range(3) if axis != leg for at in SLOT_POSITIONS
+#: The slot catalogue (kinds of target in :mod:`orthoglide_env.gauges`):
+#:
+#: * every bar (leg), both measuring axes across it, every position (``x-leg/y@0.5``);
+#: * every carriage, both measuring axes across its drive (``x-carriage/y``);
+#: * the platform's three faces (``platform/x``).
+#:
+#: The bar slots come first, in their historical order, so their indices are stable.
+SLOTS: tuple[GaugeSpec, ...] = (
+    tuple(GaugeSpec(leg, axis, at)
+          for leg in range(3) for axis in range(3) if axis != leg for at in SLOT_POSITIONS)
+    + tuple(GaugeSpec.carriage(leg, axis) for leg in range(3) for axis in range(3)
+            if axis != leg)
+    + tuple(GaugeSpec.platform(axis) for axis in range(3))
 )
 SLOT_NAMES: tuple[str, ...] = tuple(s.slot for s in SLOTS)
 
 
 def slot_index(name_or_spec: str | GaugeSpec) -> int:
-    """Index in :data:`SLOTS` of a slot given by name (``x-leg/y@0.5``) or spec."""
+    """Index in :data:`SLOTS` of a slot given by name (``x-leg/y@0.5``, ``x-carriage/y``,
+    ``platform/x``) or spec."""
     key = name_or_spec if isinstance(name_or_spec, str) else name_or_spec.slot
     try:
         return SLOT_NAMES.index(key)
     except ValueError:
-        raise ValueError(f"no slot '{key}'; slots are bars x/y/z, measuring axes across "
-                         f"them, at {SLOT_POSITIONS}, e.g. '{SLOT_NAMES[0]}'") from None
+        raise ValueError(f"no slot '{key}'; slots are bars x/y/z with a measuring axis across "
+                         f"them at {SLOT_POSITIONS} (e.g. '{SLOT_NAMES[0]}'), carriages with "
+                         "an axis across their drive (e.g. 'x-carriage/y') and platform faces "
+                         "(e.g. 'platform/x')") from None
 
 
 #: The stands of the paper's experiment, mounted at the start of an episode.

@@ -31,10 +31,19 @@ from .gauges import (
     STAND_LENGTH,
     Gauge,
     GaugeArray,
+    GaugeSpec,
+    Part,
     on_flat_face,
     ray_box_distance,
 )
-from .geometry import BAR_SECTION, LEG_NAMES, MachineParams
+from .geometry import (
+    BAR_SECTION,
+    CARRIAGE_SETBACK,
+    CARRIAGE_SIZE,
+    LEG_NAMES,
+    PLATFORM_SIZE,
+    MachineParams,
+)
 from .kinematics import direct
 from .simulator import PhysicsSettings, Simulator, pb
 from .urdf_writer import (
@@ -184,7 +193,9 @@ class OrthoglideMachine:
         shapes, centres, axes = [], [], []
         for g in self.gauges:
             rear = g.origin - g.direction * STAND_LENGTH
-            foot = rail_ends()[g.spec.leg, 0]
+            # A platform gauge has no leg: its stand stands behind it.
+            foot = (rear - g.direction * STAND_LENGTH if g.spec.part == Part.PLATFORM
+                    else rail_ends()[g.spec.leg, 0])
             for a, b, radius in ((g.origin, rear, GAUGE_BODY_RADIUS), (rear, foot, ARM_RADIUS)):
                 shapes.append(self.bc.createVisualShape(
                     pb.GEOM_CYLINDER, radius=radius * MM,
@@ -282,8 +293,8 @@ class OrthoglideMachine:
         return float(max(gaps))
 
     def gauge_distances(self) -> np.ndarray:
-        """Ray distance of each gauge's tip to its target bar (mm); NaN if the first thing
-        the ray meets is not the target bar."""
+        """Ray distance of each gauge's tip to its target (mm); NaN if the first thing the
+        ray meets is not the target."""
         if not self.gauges:
             return np.empty(0)
         starts = np.array([g.origin - RAY_BACKOFF * g.direction for g in self.gauges])
@@ -291,33 +302,38 @@ class OrthoglideMachine:
         hits = self.bc.rayTestBatch(list(starts * MM), list(ends * MM))
         out = np.full(len(self.gauges), np.nan)
         for k, (g, hit) in enumerate(zip(self.gauges, hits, strict=True)):
-            bar = link_name(g.spec.leg, "bar1" if g.spec.bar > 0 else "bar2")
-            box = self._bar_box(g.spec.leg, bar)
-            if hit[0] == self.body and hit[1] == self._index[bar] and hit[2] > 0:
+            link = target_link(g.spec)
+            box = self._target_box(g.spec)
+            if hit[0] == self.body and hit[1] == self._index[link] and hit[2] > 0:
                 t = float(np.dot(np.array(hit[3]) / MM - g.origin, g.direction))
             else:
-                # Another part first: in front of the tip it blocks the plunger, but a bar
-                # behind the tip presses the gauge whatever else the ray meets (or the ray
-                # starts inside it and Bullet reports nothing useful); the simulated bar
-                # pose still shows where it is.
+                # Another part first: in front of the tip it blocks the plunger, but a
+                # target behind the tip presses the gauge whatever else the ray meets (or
+                # the ray starts inside it and Bullet reports nothing useful); the
+                # simulated target pose still shows where it is.
                 t = float(ray_box_distance(g.origin, g.direction, *box))
                 if not t < 0:
                     continue
-            if on_flat_face(g.origin + t * g.direction, *box, face=g.spec.local_axis):
+            if on_flat_face(g.origin + t * g.direction, *box, face=g.spec.face):
                 out[k] = t
         return out
 
     def target_boxes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Box of every gauge's target bar as simulated: centres, rotations, half extents."""
-        boxes = [self._bar_box(g.spec.leg, link_name(g.spec.leg, "bar1" if g.spec.bar > 0
-                                                     else "bar2")) for g in self.gauges]
+        """Box of every gauge's target as simulated: centres, rotations, half extents."""
+        boxes = [self._target_box(g.spec) for g in self.gauges]
         return tuple(np.array(part) for part in zip(*boxes, strict=True))  # type: ignore[return-value]
 
-    def _bar_box(self, leg: int, bar: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Centre (mm), rotation and half extents (mm) of a bar's box, as simulated."""
-        pos, rot = self._link_pose(bar)
-        length = self.machine.leg_lengths[leg]
-        half = np.array([bar_length(self.machine, leg) / 2, *(np.array(BAR_SECTION) / 2)])
+    def _target_box(self, spec: GaugeSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Centre (mm), rotation and half extents (mm) of a gauge's target box, as
+        simulated: where the URDF puts each box in its link's frame."""
+        pos, rot = self._link_pose(target_link(spec))
+        if spec.part == Part.PLATFORM:
+            return pos, rot, np.full(3, PLATFORM_SIZE / 2)
+        if spec.part == Part.CARRIAGE:
+            ahead = np.array([CARRIAGE_SETBACK + CARRIAGE_SIZE[0] / 2, 0.0, 0.0])
+            return pos + rot @ ahead, rot, np.array(CARRIAGE_SIZE) / 2
+        length = self.machine.leg_lengths[spec.leg]
+        half = np.array([bar_length(self.machine, spec.leg) / 2, *(np.array(BAR_SECTION) / 2)])
         return pos + rot @ np.array([-length / 2, 0.0, 0.0]), rot, half
 
     def _collision_pairs(self) -> list[tuple[int, int, str]]:
@@ -378,6 +394,16 @@ class OrthoglideMachine:
 
     def __repr__(self) -> str:
         return f"OrthoglideMachine(legs={LEG_NAMES}, gauges={len(self.gauges)})"
+
+
+def target_link(spec: GaugeSpec) -> str:
+    """The link a gauge touches: a bar (``x_bar1`` at +d/2, ``x_bar2`` at -d/2), a
+    carriage (``x_carriage``) or the platform."""
+    if spec.part == Part.PLATFORM:
+        return "platform"
+    if spec.part == Part.CARRIAGE:
+        return link_name(spec.leg, "carriage")
+    return link_name(spec.leg, "bar1" if spec.bar > 0 else "bar2")
 
 
 def _z_turned_to(axes: np.ndarray) -> np.ndarray:

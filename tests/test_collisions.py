@@ -10,14 +10,14 @@ from scipy.spatial.transform import Rotation
 
 from orthoglide_env.collisions import (
     PAIR_NAMES,
-    PART_NAMES,
     box_gap,
     clearance,
     collisions,
     pair_gaps,
-    part_boxes,
 )
+from orthoglide_env.gauges import BOX_NAMES, collision_boxes
 from orthoglide_env.geometry import RHO_MAX, RHO_MIN, MachineParams, random_machine
+from orthoglide_env.kinematics import direct
 
 #: x-leg's R2 moved 8 mm toward the y axis: clear at Zero (2.5 mm), crashed at (60, 60, 60).
 CRASHING = MachineParams(attach=[[-8.0, 8.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
@@ -78,9 +78,9 @@ def test_pairs_are_named_as_in_the_simulator() -> None:
         assert [name for *_, name in sim._pairs] == list(PAIR_NAMES)
         rho = np.array([30.0, -70.0, 10.0])
         sim.move(rho)
-        centre, rot, _ = part_boxes(MachineParams(), rho)
+        centre, rot, _ = collision_boxes(MachineParams(), rho, direct(MachineParams(), rho))
         for leg in "xyz":
-            k = PART_NAMES.index(f"{leg}_carriage")
+            k = BOX_NAMES.index(f"{leg}_carriage")
             pos, frame = sim._link_pose(f"{leg}_carriage")
             np.testing.assert_allclose(pos + frame @ [45.0, 0.0, 0.0], centre[k], atol=1e-6)
             np.testing.assert_allclose(frame, rot[k], atol=1e-9)
