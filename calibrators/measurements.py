@@ -1,7 +1,8 @@
 """Gauge readings of one experiment, and their files (CSV or JSON).
 
-A :class:`Measurement` is one dial reading: which gauge (leg, axis, place ``at`` along the
-leg), in which mounting of its stand, at which posture, in which repetition.
+A :class:`Measurement` is one dial reading: which gauge (what it touches, the axis it
+measures along, a bar gauge's place ``at`` along the leg), in which mounting of its stand,
+at which posture, in which repetition.
 :class:`Measurements` holds an experiment's readings; :meth:`Measurements.read` and
 :meth:`Measurements.write` choose the format by the file's extension, ``.csv`` or
 ``.json``.
@@ -18,12 +19,17 @@ case of this format.
 column                        required  meaning
 ============================  ========  ================================================
 ``reading_mm``                yes       the dial reading (mm), positive along the axis
-``gauge``                     (a)       a gauge name: ``x-leg/y``, ``x/y@0.3``
-``leg``, ``axis``             (a)       the leg touched (x, y, z) and the world axis
-                                        measured along, one of the two normal to it
-``at``                        no        with ``leg``, ``axis``: the gauge's place along
-                                        the leg, 0.05 .. 0.95 from the platform end
-                                        (default 0.5, the middle, as in the paper)
+``gauge``                     (a)       a gauge name: ``x-leg/y``, ``x/y@0.3`` (a bar),
+                                        ``x-carriage/y`` (a carriage), ``platform/x``
+``leg``, ``axis``             (a)       what the gauge touches: a leg's bar (``x``,
+                                        ``y``, ``z``), a carriage (``x-carriage``, ...)
+                                        or ``platform``; and the world axis measured
+                                        along (for a bar or a carriage one of the two
+                                        normal to its leg)
+``at``                        no        with a bar's ``leg``, ``axis``: the gauge's place
+                                        along the leg, 0.05 .. 0.95 from the platform
+                                        end (default 0.5, the middle, as in the paper);
+                                        empty for a carriage or the platform
 ``posture``                   (b)       a paper posture (Zero, XMax, XMin, YMax, YMin,
                                         ZMax, ZMin), or any label when rho is given
 ``rho_x``, ``rho_y``,         (b)       the commanded posture, control coordinates (mm);
@@ -79,7 +85,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
 
-from orthoglide_env.gauges import GaugeSpec, layout_from_names
+from orthoglide_env.gauges import NO_LEG, GaugeSpec, Part, layout_from_names
 from orthoglide_env.geometry import AXIS_NAMES, LEG_NAMES, RHO_MAX, RHO_MIN
 from orthoglide_env.kinematics import PAPER_POSTURES, paper_posture
 from orthoglide_env.reading_model import TrackerAxis
@@ -302,8 +308,8 @@ class Measurement:
         if isinstance(self.gauge, TrackerAxis):
             leg, axis, at = "tracker", AXIS_NAMES[self.gauge.component], ""
         else:
-            leg, axis = LEG_NAMES[self.gauge.leg], AXIS_NAMES[self.gauge.axis]
-            at = repr(float(self.gauge.at))
+            leg, axis = part_label(self.gauge), AXIS_NAMES[self.gauge.axis]
+            at = repr(float(self.gauge.at)) if self.gauge.part == Part.BAR else ""
         return [self.mounting, leg, axis, at, self.posture, *(repr(v) for v in self.rho),
                 str(self.repetition), repr(self.reading)]
 
@@ -341,6 +347,18 @@ def _required(fields: Mapping[str, object], name: str) -> Any:
     return value
 
 
+#: The ``leg`` column of a carriage gauge: its leg's name with this suffix.
+CARRIAGE_SUFFIX: str = "-carriage"
+
+
+def part_label(gauge: GaugeSpec) -> str:
+    """The ``leg`` column of a gauge: its bar's leg (``x``), its carriage (``x-carriage``)
+    or ``platform``."""
+    if gauge.part == Part.PLATFORM:
+        return "platform"
+    return LEG_NAMES[gauge.leg] + (CARRIAGE_SUFFIX if gauge.part == Part.CARRIAGE else "")
+
+
 #: A file names a few gauges many times.
 _spec = functools.lru_cache(maxsize=4096)(GaugeSpec)
 
@@ -352,7 +370,8 @@ def _named_gauge(name: str) -> GaugeSpec | TrackerAxis:
     try:
         return layout_from_names([name])[0]
     except ValueError as exc:
-        raise FieldError("gauge", f"must name a gauge like 'x-leg/y' or 'x/y@0.3' ({exc}), "
+        raise FieldError("gauge", f"must name a gauge like 'x-leg/y', 'x/y@0.3', "
+                                  f"'x-carriage/y' or 'platform/x' ({exc}), "
                                   f"got {_show(name)}") from None
 
 
@@ -363,14 +382,30 @@ def _gauge(fields: Mapping[str, object]) -> GaugeSpec | TrackerAxis:
             raise FieldError("gauge", f"must be a gauge name, got {_show(name)}")
         return _named_gauge(name)
     leg, axis = _required(fields, "leg"), _required(fields, "axis")
-    if leg == "tracker" and axis in AXIS_NAMES and _given(fields, "at") is None:
-        return TrackerAxis(AXIS_NAMES.index(axis))
-    if not isinstance(leg, str) or leg not in LEG_NAMES:
-        raise FieldError("leg", f"must be one of {', '.join(LEG_NAMES)}, got {_show(leg)}")
-    if not isinstance(axis, str) or axis not in AXIS_NAMES or axis == leg:
-        raise FieldError("axis", f"must be one of the two axes normal to the {leg} leg, "
-                                 f"got {_show(axis)}")
     at = _given(fields, "at")
+    if leg == "tracker" and axis in AXIS_NAMES and at is None:
+        return TrackerAxis(AXIS_NAMES.index(axis))
+    if leg == "platform":
+        if not isinstance(axis, str) or axis not in AXIS_NAMES:
+            raise FieldError("axis", f"must be one of {', '.join(AXIS_NAMES)}, got "
+                                     f"{_show(axis)}")
+        if at is not None:
+            raise FieldError("at", "a platform gauge has one place per face: leave 'at' "
+                                   "empty")
+        return _spec(NO_LEG, AXIS_NAMES.index(axis), part=Part.PLATFORM)
+    carriage = isinstance(leg, str) and leg.endswith(CARRIAGE_SUFFIX)
+    name = leg.removesuffix(CARRIAGE_SUFFIX) if carriage else leg
+    if not isinstance(leg, str) or name not in LEG_NAMES:
+        raise FieldError("leg", f"must be one of {', '.join(LEG_NAMES)} (a bar), "
+                                f"{', '.join(n + CARRIAGE_SUFFIX for n in LEG_NAMES)}, platform "
+                                f"or tracker, got {_show(leg)}")
+    if not isinstance(axis, str) or axis not in AXIS_NAMES or axis == name:
+        raise FieldError("axis", f"must be one of the two axes normal to the {name} leg, "
+                                 f"got {_show(axis)}")
+    if carriage:
+        if at is not None:
+            raise FieldError("at", "a carriage gauge has one place: leave 'at' empty")
+        return _spec(LEG_NAMES.index(name), AXIS_NAMES.index(axis), part=Part.CARRIAGE)
     at = 0.5 if at is None else _real(at, "at", 0.0, 1.0, "(a fraction of the leg)")
     try:
         return _spec(LEG_NAMES.index(leg), AXIS_NAMES.index(axis), at)

@@ -29,9 +29,10 @@ from calibrators.measurements import (
     gauge_name,
 )
 from calibrators.paper import MAX_FOLDS, folds
-from orthoglide_env.gauges import GaugeSpec
+from orthoglide_env.gauges import GaugeSpec, Part
 from orthoglide_env.geometry import RHO_MAX, RHO_MIN
 from orthoglide_env.kinematics import PAPER_POSTURES, paper_posture
+from orthoglide_env.lab import SLOTS
 
 OLD_HEADER = "leg,axis,posture,repetition,reading_mm"
 TABLE1 = {"drho": [4.66, -5.36, 1.46], "dL": [5.20, -5.96, 3.16]}
@@ -43,11 +44,14 @@ labels = st.text(st.characters(categories=("L", "M", "N", "P", "S"), include_cha
 
 @st.composite
 def readings(draw: st.DrawFn) -> Measurement:
-    """Any reading of any experiment: any gauge place, a paper posture or one given by
-    rho (labelled or not), any mounting (named after its gauge, so that it holds one)."""
+    """Any reading of any experiment: any gauge place (a bar anywhere, a carriage, the
+    platform), a paper posture or one given by rho (labelled or not), any mounting (named
+    after its gauge, so that it holds one)."""
     leg = draw(st.integers(0, 2))
-    gauge = GaugeSpec(leg, draw(st.sampled_from([a for a in range(3) if a != leg])),
-                      draw(st.floats(0.05, 0.95)))
+    gauge = draw(st.one_of(
+        st.builds(GaugeSpec, st.just(leg), st.sampled_from([a for a in range(3) if a != leg]),
+                  st.floats(0.05, 0.95)),
+        st.sampled_from([s for s in SLOTS if s.part != Part.BAR])))
     if draw(st.booleans()):
         posture, rho = draw(st.sampled_from(PAPER_POSTURES)), None
     else:
@@ -256,6 +260,36 @@ def test_the_gauges_place_along_its_leg(tmp_path) -> None:
     refused(tmp_path / "m.csv", csv_file("q,y,0.5,Zero,0.1", header=header),
             ":2: column 1 (leg): must be one of x, y, z")
     refused(tmp_path / "m.csv", csv_file("x/y@0.99,Zero,0.1", header="gauge,posture,reading_mm"),
+            ":2: column 1 (gauge): must name a gauge like")
+
+
+def test_carriage_and_platform_gauges_are_named_in_the_leg_column(tmp_path) -> None:
+    """A carriage is its leg's name with ``-carriage``, the platform ``platform``; neither
+    has a place along a leg, and a carriage measures across its drive."""
+    data = Measurements([Measurement(GaugeSpec.carriage(1, 2), "Zero", 1, 0.0),
+                         Measurement(GaugeSpec.platform(0), "probe", 1, -0.25, (1.0, 0.0, 0.0))])
+    path = tmp_path / "m.csv"
+    data.to_csv(path)
+    assert path.read_text().splitlines()[1:] == [
+        "y-carriage/z,y-carriage,z,,Zero,0.0,0.0,0.0,1,0.0",
+        "platform/x,platform,x,,probe,1.0,0.0,0.0,1,-0.25",
+    ]
+    assert Measurements.read(path).items == data.items
+    named = _written(tmp_path, csv_file(
+        "y-carriage/z,Zero,0,0,0,0.0", "platform/x,probe,1,0,0,-0.25",
+        header="gauge,posture,rho_x,rho_y,rho_z,reading_mm"))
+    assert [m.gauge for m in Measurements.read(named).items] == [m.gauge for m in data.items]
+    header = "leg,axis,at,posture,reading_mm"
+    refused(tmp_path / "m.csv", csv_file("x-carriage,y,0.5,Zero,0.1", header=header),
+            ":2: column 3 (at): a carriage gauge has one place")
+    refused(tmp_path / "m.csv", csv_file("x-carriage,x,,Zero,0.1", header=header),
+            ":2: column 2 (axis): must be one of the two axes normal to the x leg")
+    refused(tmp_path / "m.csv", csv_file("platform,y,0.5,Zero,0.1", header=header),
+            ":2: column 3 (at): a platform gauge has one place per face")
+    refused(tmp_path / "m.csv", csv_file("platform,w,,Zero,0.1", header=header),
+            ":2: column 2 (axis): must be one of x, y, z")
+    refused(tmp_path / "m.csv", csv_file("x-carriage/y@0.5,Zero,0.1",
+                                         header="gauge,posture,reading_mm"),
             ":2: column 1 (gauge): must name a gauge like")
 
 
