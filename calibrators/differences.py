@@ -14,7 +14,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from orthoglide_env.gauges import GaugeSpec, collision_boxes, exact_ray_distances, install
+from orthoglide_env.gauges import (
+    GaugeSpec,
+    Part,
+    collision_boxes,
+    exact_ray_distances,
+    install,
+)
 from orthoglide_env.geometry import L_NOMINAL, RHO_MAX, RHO_MIN, MachineParams
 from orthoglide_env.kinematics import direct
 
@@ -131,7 +137,7 @@ def paper_matrix(rows: Differences) -> np.ndarray:
     ``a = sin(alpha)``, ``b = (1/2 + a) tan(alpha)``, ``c = (1/2 + a) / cos(alpha) - 1/2``."""
     out = np.zeros((len(rows), 6))
     for r, (g, posture) in enumerate(zip(rows.gauges, rows.postures, strict=True)):
-        if posture[0] != "XYZ"[g.leg]:
+        if g.part != Part.BAR or posture[0] != "XYZ"[g.leg]:
             raise ValueError(f"eq. (10) has no row for gauge {g.name} at posture {posture}")
         limit = RHO_MAX if posture.endswith("Max") else RHO_MIN
         alpha = np.arcsin(limit / L_NOMINAL)

@@ -5,7 +5,10 @@ a random posture of the joint cube (60 %), lifting or engaging a random stand (2
 re-mounting a random stand on a random free slot (20 %).  It uses what a careful
 technician knows, the nominal machine: a move is only made to a posture the nominal model
 reaches with every part clear of the others and no engaged gauge pressed within
-:data:`MARGIN` of its travel.  It works until the budget runs out.
+:data:`MARGIN` of its travel, and a gauge is only engaged where that holds.  An engaged
+platform gauge allows only postures where it reads (within its travel of where it was
+zeroed): past its face the whole platform would run into it.  It works until the budget
+runs out.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ import numpy as np
 
 from orthoglide_env.collisions import clearance
 from orthoglide_env.gauges import (
+    Part,
     collision_boxes,
     exact_ray_distances,
     exact_target_boxes,
@@ -31,7 +35,8 @@ from orthoglide_env.lab import SLOTS, Op
 from .base import Agent, action, register
 
 #: A posture is safe for an engaged gauge when the nominal tip stays this far (mm) from
-#: the end of its travel: more than the machine errors move a bar at mid-leg.
+#: the end of its travel, and its target this far from pressing it: more than the
+#: machine errors move a bar at mid-leg.
 MARGIN: float = 2.0
 #: Closest two parts that must never meet may come, on the nominal model (mm).
 CLEARANCE: float = 3.0
@@ -40,7 +45,8 @@ TRIES: int = 50
 
 def is_safe(rho: np.ndarray, slots: list[int]) -> bool:
     """Whether the nominal machine reaches ``rho`` with parts apart and the gauges at
-    ``slots`` (engaged) neither pressed nor within the margin of being pressed."""
+    ``slots`` (engaged) neither pressed nor within the margin of being pressed, the
+    platform gauges on their faces within their travel."""
     nominal = MachineParams()
     try:
         p = direct(nominal, rho)
@@ -52,10 +58,13 @@ def is_safe(rho: np.ndarray, slots: list[int]) -> bool:
     if not slots:
         return True
     gauges = installed_on(nominal, install([SLOTS[s] for s in slots], nominal))
-    if pressed_past_travel(gauges, *exact_target_boxes(gauges, boxes)).any():
+    centre, rot, half = exact_target_boxes(gauges, boxes)
+    if pressed_past_travel(gauges, centre, rot, half + MARGIN).any():
         return False
     t = exact_ray_distances(nominal, gauges, rho, boxes)
-    return not np.any(t < MARGIN)
+    platform = np.array([SLOTS[s].part == Part.PLATFORM for s in slots])
+    travel = np.array([g.travel for g in gauges])
+    return not (np.any(t < MARGIN) or np.any(platform & ~(t <= travel)))
 
 
 @register
@@ -78,7 +87,10 @@ class RandomAgent(Agent):
                     return action(Op.MOVE, rho)
         stand = int(self.rng.integers(len(slots)))
         if choice < 0.8 and slots[stand] < len(SLOTS):
-            return action(Op.LIFT if stand in engaged else Op.ENGAGE, stand=stand)
+            if stand in engaged:
+                return action(Op.LIFT, stand=stand)
+            if is_safe(observation["joints"], [slots[k] for k in [*engaged, stand]]):
+                return action(Op.ENGAGE, stand=stand)
         free = sorted(set(range(len(SLOTS))) - set(slots))
         slot = int(self.rng.choice(free))
         if is_safe(np.zeros(3), [slots[k] for k in engaged if k != stand] + [slot]):
