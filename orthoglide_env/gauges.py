@@ -2,10 +2,10 @@
 
 A gauge is a plunger on a magnetic stand fixed to the base.  Its ray starts at
 ``origin`` (the tip when the plunger is pushed fully in) and runs along ``direction``
-(toward the target); the tip touches the first face of the target bar at distance
+(toward the target); the tip touches the first face of the target at distance
 ``t``.  The plunger can extend by ``travel`` mm, so the gauge is in contact when
 ``0 <= t <= travel``.  ``t > travel``: the tip hangs in the air (no contact); ``t < 0``:
-the bar has pushed the plunger past its travel toward the stand (overtravel, which
+the target has pushed the plunger past its travel toward the stand (overtravel, which
 would damage a real gauge).
 
 Reading convention (DESIGN.md): the coordinate of the touched surface point along the
@@ -105,7 +105,7 @@ class Status(IntEnum):
     VALID = 0
     NO_CONTACT = 1  # tip extended fully without touching
     OVERTRAVEL = 2  # plunger pushed in past its travel
-    MISSED = 3  # tip off the bar's flat face, or the ray meets something else first
+    MISSED = 3  # tip off the target's flat face, or the ray meets something else first
 
 
 def local_axis(leg: np.ndarray | int, axis: np.ndarray | int) -> np.ndarray:
@@ -568,7 +568,7 @@ def install(
     rng: np.random.Generator | None = None,
 ) -> list[Gauge]:
     """Install gauges on ``machine`` (default nominal) as the paper does: each aimed at
-    the middle of its bar's face at the Zero posture, plus the preset's installation
+    its place on its target's face at the Zero posture, plus the preset's installation
     errors (stand position and tilt) when ``preset`` and ``rng`` are given.
 
     The zero is provisional; :func:`zero_gauges` sets the gauges up at the Zero posture.
@@ -601,7 +601,7 @@ def install_array(
     travel: float = DEFAULT_TRAVEL,
     errors: np.ndarray | None = None,
 ) -> GaugeArray:
-    """:func:`install` for a batch of machines: the gauges of ``specs`` aimed at their bars
+    """:func:`install` for a batch of machines: the gauges of ``specs`` aimed at their targets
     on every machine of ``machine``, moved by installation ``errors`` (shape
     ``(*batch, G, 2, 3)``, see :func:`installation_errors`) when given."""
     specs = list(specs)
@@ -801,9 +801,9 @@ def exact_ray_distances(
     ``rho`` of shape ``(*batch, *postures, 3)`` and gauges of batch shape ``batch`` (or one
     gauge set, shared by every machine).
 
-    NaN when the ray misses the bar's flat face, or when another part lies on the ray
-    before the bar within the window a gauge can see (``-RAY_BACKOFF`` to
-    ``travel + RAY_BACKOFF``).  A bar behind the tip (``t < 0``) is an overtravel
+    NaN when the ray misses the target's flat face, or when another part lies on the ray
+    before the target within the window a gauge can see (``-RAY_BACKOFF`` to
+    ``travel + RAY_BACKOFF``).  A target behind the tip (``t < 0``) is an overtravel
     whatever else is on the ray: it presses the gauge.  ``boxes``: the
     :func:`collision_boxes` at ``rho`` when already computed.
     """

@@ -123,6 +123,10 @@ class OrthoglideLabEnv(gym.Env):
     =====  ===========================  =====================================  ==========
 
     ``move`` drives to ``rho``, settles and reads every engaged gauge and the tracker.
+    A slot is a place on a bar, on a carriage (across its drive) or on a face of the
+    platform (:data:`~orthoglide_env.lab.SLOTS`); a platform gauge reads the platform's
+    displacement, so it allows moves toward its stand only within its travel: lift it
+    before larger ones.
     ``lift`` raises a plunger by its lever: no reading, nothing can press it, and its zero
     is kept. ``engage`` lets it down again (a bar pressing it past its travel there is an
     overtravel). ``re-mount`` drives to Zero, moves the stand to the slot with new
