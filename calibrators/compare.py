@@ -7,21 +7,19 @@ same lab time budget.  Every estimator reads each agent's notebook, and each est
 scored against the truth: the TCP error over the workspace grid in three frames (the
 rigid one is the headline), the z-scores of the estimate along the combinations of
 machine errors it determines (1 for honest error bars), and whether the error it
-predicts for itself meets the target.  Work is spread over processes; results do not
-depend on how many.  Each finished trial can be appended to a JSON-lines file as it
-ends, and a run can resume from it.
+predicts for itself meets the target.  Work is spread over processes, local or on a Ray
+cluster (:mod:`calibrators.engines`); results depend on neither how many nor where.
+Each finished trial can be appended to a JSON-lines file as it ends, and a run can
+resume from it.
 """
 
 from __future__ import annotations
 
 import json
-import os
-import signal
-from collections.abc import Callable, Iterator
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from contextlib import contextmanager
+from collections.abc import Callable
+from contextlib import closing
 from dataclasses import asdict, dataclass, field
-from multiprocessing import get_context
+from functools import partial
 
 import gymnasium as gym
 import numpy as np
@@ -34,6 +32,7 @@ from orthoglide_env.scoring import FRAMES, score
 
 from .agents import get_agent
 from .base import Estimate
+from .engines import results
 from .experiment import estimate_many, get_estimator, measurements_of, run_episode
 from .prediction import predicted_tcp_error
 
@@ -208,48 +207,22 @@ def _envs(config: Config) -> dict[bool, gym.Env]:
             for tracker in (False, True)}
 
 
-#: Thread pools of the numerical libraries, limited to one thread in each worker: a
-#: worker already has its core, and the pools' extra threads only spin on the other cores.
-_THREAD_VARIABLES: tuple[str, ...] = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
-                                      "MKL_NUM_THREADS")
-
-
-@contextmanager
-def _single_threaded() -> Iterator[None]:
-    """Environment under which freshly spawned workers start single-threaded pools; a
-    user's own setting wins."""
-    saved = {k: os.environ.get(k) for k in _THREAD_VARIABLES}
-    for key in _THREAD_VARIABLES:
-        os.environ.setdefault(key, "1")
-    try:
-        yield
-    finally:
-        for key, value in saved.items():
-            if value is None:
-                os.environ.pop(key, None)
-            else:
-                os.environ[key] = value
-
-
 #: Machines per task: enough for the batched fits of a fixed design to pay, few enough for
 #: a live progress bar and little lost work on an interrupt.
 CHUNK: int = 10
 
 
-def _ignore_interrupts() -> None:
-    """Workers leave Ctrl-C to the main process, which stops them: a terminal sends it to
-    every process of the group, and each worker would print its own traceback."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
 def run(config: Config, machines: int, jobs: int = 1, done: list[Trial] | None = None,
         on_trial: Callable[[Trial], None] | None = None,
-        progress: Callable[[int], None] | None = None) -> list[Trial]:
-    """Run the comparison over ``machines`` machines with ``jobs`` processes, skipping the
-    trials in ``done``; ``on_trial`` sees each new trial as it ends, ``progress`` the
-    number of machines finished.  Trials come back in (machine, agent, estimator) order,
-    the same whatever ``jobs``.  A KeyboardInterrupt stops the workers at once and is
-    raised again, every trial finished so far having gone to ``on_trial``."""
+        progress: Callable[[int], None] | None = None, engine: str = "local",
+        address: str | None = None) -> list[Trial]:
+    """Run the comparison over ``machines`` machines in chunks spread over ``jobs``
+    workers of ``engine`` (:func:`calibrators.engines.results`: ``local`` processes, or
+    ``ray`` at ``address``), skipping the trials in ``done``; ``on_trial`` sees each new
+    trial as it ends, ``progress`` the number of machines finished.  Trials come back in
+    (machine, agent, estimator) order, the same whatever ``jobs`` and ``engine``.  A
+    KeyboardInterrupt stops the workers at once and is raised again, every trial
+    finished so far having gone to ``on_trial``."""
     for name in config.agents:
         get_agent(name)
     for name in config.estimators:
@@ -260,34 +233,15 @@ def run(config: Config, machines: int, jobs: int = 1, done: list[Trial] | None =
     size = max(1, min(CHUNK, -(-machines // jobs)))
     chunks = [list(range(i, min(i + size, machines))) for i in range(0, machines, size)]
     trials = list(done)
-
-    def collect(new: list[Trial], count: int) -> None:
-        for trial in new:
-            trials.append(trial)
-            if on_trial:
-                on_trial(trial)
-        if progress:
-            progress(count)
-
-    if jobs == 1:
-        for chunk in chunks:
-            collect(run_chunk(config, chunk, skip), len(chunk))
-    else:
-        with _single_threaded():
-            pool = ProcessPoolExecutor(jobs, mp_context=get_context("spawn"),
-                                       initializer=_ignore_interrupts)
-        try:
-            pending = {pool.submit(run_chunk, config, chunk, skip): chunk for chunk in chunks}
-            while pending:
-                finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-                for future in finished:
-                    collect(future.result(), len(pending.pop(future)))
-        except BaseException:
-            for process in list(getattr(pool, "_processes", {}).values()):
-                process.terminate()
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
-        pool.shutdown()
+    with closing(results(partial(run_chunk, config, skip=skip), chunks, jobs, engine,
+                         address)) as finished:
+        for chunk, new in finished:
+            for trial in new:
+                trials.append(trial)
+                if on_trial:
+                    on_trial(trial)
+            if progress:
+                progress(len(chunk))
     order = {(a, e): k for k, (a, e) in enumerate(
         (a, e) for a in config.agents for e in config.estimators)}
     return sorted(trials, key=lambda t: (t.machine, order.get((t.agent, t.estimator), 0)))

@@ -157,6 +157,7 @@ def test_compare_writes_table_csv_and_plots(tmp_path, capsys) -> None:
         # A bad --out is refused before any machine is run, not after the whole run.
         (["compare", "--out", "GOOD"], "is not a folder"),
         (["compare", "--machines", "0"], "--machines"),
+        (["compare", "--address", "auto"], "--engine ray"),
     ],
 )
 def test_bad_input_gives_one_line_and_status_2(tmp_path, argv, fragment: str) -> None:

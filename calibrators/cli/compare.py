@@ -18,6 +18,7 @@ from orthoglide_env.scoring import FRAMES
 
 from ..agents import available as agents_available
 from ..compare import Config, Trial, run, summary, verify_pybullet
+from ..engines import ENGINES, RAY_INSTALL_HINT, ray_available
 from ..experiment import ESTIMATORS
 from .common import UsageError
 
@@ -55,6 +56,10 @@ def _check(args: argparse.Namespace) -> Config:
         raise UsageError(f"--jobs must be between 1 and {MAX_JOBS}")
     if not 0 <= args.verify_pybullet <= 1000:
         raise UsageError("--verify-pybullet must be between 0 and 1000")
+    if args.engine == "ray" and not ray_available():
+        raise UsageError(f"--engine ray needs Ray: {RAY_INSTALL_HINT}")
+    if args.address and args.engine != "ray":
+        raise UsageError("--address is the Ray cluster of --engine ray")
     if args.resume and not args.out:
         raise UsageError("--resume continues the run kept in --out: give --out")
     sigma = 0.0 if args.noise_free else args.sigma
@@ -130,7 +135,8 @@ def run_command(args: argparse.Namespace) -> None:
     collected: list[Trial] = list(done)
     try:
         trials = run(config, args.machines, args.jobs, done,
-                     on_trial=lambda t: (collected.append(t), keep(t)), progress=bar.update)
+                     on_trial=lambda t: (collected.append(t), keep(t)), progress=bar.update,
+                     engine=args.engine, address=args.address)
     except KeyboardInterrupt:
         bar.close()
         if handle:
@@ -232,7 +238,14 @@ def add(sub: argparse._SubParsersAction) -> None:
                    help="success: predicted TCP error after rigid motion at most this "
                         "(mm, default %(default)s)")
     p.add_argument("--jobs", type=int, default=1,
-                   help="worker processes (default %(default)s)")
+                   help="worker processes; with --engine ray and no cluster address, the "
+                        "CPUs of the local Ray instance (default %(default)s)")
+    p.add_argument("--engine", choices=ENGINES, default=ENGINES[0],
+                   help="where the workers run: local processes, or Ray tasks (extra "
+                        "'ray') on a cluster (default %(default)s)")
+    p.add_argument("--address", default=None,
+                   help="Ray cluster of --engine ray: host:port, ray://host:port or auto "
+                        "(default: $RAY_ADDRESS, else a local instance of --jobs CPUs)")
     p.add_argument("--out", default=None,
                    help="folder: every trial as it ends (trials.jsonl), summary.csv, plots")
     p.add_argument("--resume", action="store_true",

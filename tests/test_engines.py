@@ -1,0 +1,39 @@
+"""Engines of the comparison: a Ray cluster computes what the local pool computes."""
+
+from __future__ import annotations
+
+import sys
+
+import pytest
+
+from calibrators.cli import main
+from calibrators.compare import Config, run
+
+
+def test_ray_engine_gives_the_local_engines_trials(monkeypatch) -> None:
+    """Four machines in two chunks as Ray tasks on the local Ray instance a run starts
+    when given no cluster (two CPUs, shut down at the end): the same trials, bit for bit,
+    as the default engine (here in this process, one chunk), each streamed once as it
+    ends, with progress over every machine."""
+    ray = pytest.importorskip("ray")
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    config = Config(("paper",), ("paper",), budget_s=900.0, seed=5)
+    local = run(config, 4)
+    streamed, progress = [], []
+    remote = run(config, 4, jobs=2, engine="ray", on_trial=streamed.append,
+                 progress=progress.append)
+    assert not ray.is_initialized()
+    # JSON lines, as a run keeps them: NaN (a fixed parameter's std) equals itself there.
+    assert [t.to_json() for t in remote] == [t.to_json() for t in local]
+    assert sorted(t.machine for t in streamed) == [0, 1, 2, 3]
+    assert progress == [2, 2]
+    assert not any(t.failed for t in local)
+
+
+def test_ray_engine_without_ray_is_one_line_and_status_2(monkeypatch, capsys) -> None:
+    # A None entry in sys.modules is how Python marks a module as not importable.
+    monkeypatch.setitem(sys.modules, "ray", None)
+    assert main(["compare", "--machines", "1", "--engine", "ray"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == ("orthoglide compare: error: --engine ray needs Ray: install the extra: "
+                   "pip install '.[ray]'")
