@@ -1,0 +1,154 @@
+"""``active``: sequential Bayesian design, one operation at a time.
+
+The agent keeps the linearised extended estimator as a filter (:class:`calibrators.design.
+Planner` with :meth:`~calibrators.design.Planner.observe`): the 27 machine errors and each
+mounting's stand and zero, with the estimators' priors, updated in closed form after every
+reading.  Before each move it prices every candidate move by the expected fall of the predicted TCP
+error after the best-fit rigid motion per second, and takes the best.  Its stands move
+when and where the ``optimal`` plan moves them: which slot is worth a stand is a
+property of the design, the same on every machine to first order, and weighing every
+re-mount against staying is the costly part of planning (seconds per decision).
+
+What its feedback buys: from its estimate it predicts every gauge's next reading to
+microns where a fixed plan knows it only to about a millimetre a priori, so it lets a
+plunger down wherever the tip stays three of *its* standard deviations inside the
+travel: more postures read each gauge, and more gauges read each posture.
+
+Every :data:`REFIT_S` seconds of lab time the full (non-linear) extended estimator refits
+the whole notebook and its estimate replaces the filter's mean: a poor early estimate
+(the first readings pin down little, and the filter is linearised at the nominal
+machine) is corrected from all the data, so it cannot lock the design.  It stops when
+the predicted error reaches :attr:`ActiveAgent.target_mm` or the budget is spent.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from orthoglide_env.gauges import stand_names
+from orthoglide_env.geometry import ERROR_NAMES
+from orthoglide_env.lab import SLOTS, Op
+from orthoglide_env.reading_model import ParameterSpace, default_scales
+
+from ..design import N_MACHINE, N_STAND, ZERO_SCALE, Planner, Step
+from .base import Agent, action, register
+from .optimal import fixed_plan, lab_setup
+
+#: Seconds of lab time between two full refits of the notebook.
+REFIT_S: float = 600.0
+
+
+@register
+class ActiveAgent(Agent):
+    name = "active"
+    criterion = "I"
+    #: Stop once the predicted TCP error after rigid motion is at most this (mm); 0: use
+    #: the whole budget.
+    target_mm: float = 0.0
+
+    def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
+              rng: np.random.Generator) -> None:
+        super().reset(env, observation, rng)
+        setup = lab_setup(self.env, observation)
+        slots, engaged, sigma, budget = setup
+        self.planner = Planner(list(slots), list(engaged), sigma,
+                               budget + float(observation["time"][0]), criterion=self.criterion)
+        steps, _ = fixed_plan(*setup, criterion=self.criterion)
+        self.remounts = [s for s in steps if s.op == Op.REMOUNT]
+        self.planner.mean = np.zeros(len(self.planner.covariance))
+        self.readings: dict[int, list[tuple[int, float]]] = {k: [] for k in range(len(slots))}
+        self.queue: list[Step] = []
+        self.last: Step | None = None
+        self.fitted = float(observation["time"][0])
+        self._observe(observation, {})
+
+    def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
+        if self.last is not None and not info.get("refused"):
+            self._observe(observation, info)
+        step = self._next(float(observation["time"][0]))
+        self.last = step
+        return action(step.op, step.rho, step.stand, step.slot)
+
+    # -- what was seen -------------------------------------------------------------------
+    def _observe(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> None:
+        """Take in the readings of the last move or re-mount (or of the reset)."""
+        planner = self.planner
+        planner.time_s = float(observation["time"][0])
+        for text in info.get("overtravel", []):
+            # A stand pushed past its travel reads nothing until it is re-mounted.
+            planner.retire(int(text.split()[1]))
+        if self.last is not None and self.last.op not in (Op.MOVE, Op.REMOUNT):
+            return
+        if self.last is not None and self.last.op == Op.REMOUNT:
+            self.readings[self.last.stand] = []
+        stands = [k for k in range(len(planner.slots))
+                  if observation["valid"][k] and planner.slots[k] >= 0]
+        values = [float(observation["gauges"][k]) for k in stands]
+        planner.observe(stands, values)
+        for k, value in zip(stands, values, strict=True):
+            self.readings[k].append((planner.here, value))
+
+    # -- what to do next -------------------------------------------------------------------
+    def _next(self, now: float) -> Step:
+        planner = self.planner
+        if self.queue:
+            return self.queue.pop(0)
+        if now - self.fitted >= REFIT_S:
+            self._refit()
+            self.fitted = now
+        if self.target_mm > 0 and planner.predicted_rigid_mm() <= self.target_mm:
+            return Step(Op.STOP)
+        start = len(planner.steps)
+        if self.remounts and self.remounts[0].time_s <= now:
+            remount = self.remounts.pop(0)
+            planner.remount(remount.stand, remount.slot)
+        else:
+            options = planner.options()
+            rate = planner.affordable_rates(options)
+            best = int(np.argmax(rate))
+            if not rate[best] > 0:
+                return Step(Op.STOP)
+            planner.move(best, options)
+        self.queue = list(planner.steps[start:])
+        return self.queue.pop(0)
+
+    def _refit(self) -> None:
+        """Replace the filter's mean by the extended estimator's fit of the notebook."""
+        from ..experiment import estimate, measurements_of
+
+        records = self.env.records
+        planner = self.planner
+        try:
+            est = estimate(measurements_of(records), "extended", planner.sigma)
+        except (ValueError, RuntimeError, np.linalg.LinAlgError):
+            return  # the filter goes on alone; the next refit has more data
+        theta = dict(zip(est.space, est.theta, strict=True))
+        mean = planner.mean.copy()
+        mean[:N_MACHINE] = est.theta[:N_MACHINE] / default_scales(ParameterSpace())
+        for k, slot in enumerate(planner.slots):
+            mounting = self._mounting(k)
+            if slot < 0 or mounting is None:
+                continue
+            names = stand_names(mounting, SLOTS[slot])
+            space = ParameterSpace((mounting,), (SLOTS[slot],))
+            cols = N_MACHINE + N_STAND * k + np.arange(4)
+            mean[cols] = [theta.get(n, 0.0) for n in names] / default_scales(space)[
+                len(ERROR_NAMES):]
+            # The zero that makes the stand's readings agree with the new mean on average.
+            rows = np.array([planner.rows[k, p] for p, _ in self.readings[k]])
+            mean[cols[-1] + 1] = 0.0
+            if len(rows):
+                values = np.array([v for _, v in self.readings[k]])
+                nominal = np.array([planner.nominal_reading(slot, p)
+                                    for p, _ in self.readings[k]])
+                mean[cols[-1] + 1] = np.mean(values - nominal - rows @ mean) / ZERO_SCALE
+        planner.mean = mean
+
+    def _mounting(self, stand: int) -> str | None:
+        """The name the notebook gives the stand's present mounting (its latest record at
+        the stand's slot)."""
+        spec = SLOTS[self.planner.slots[stand]]
+        return next((r.mounting for r in reversed(self.env.records) if r.spec == spec), None)

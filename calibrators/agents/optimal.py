@@ -1,0 +1,65 @@
+"""``optimal``: a fixed experiment designed before the first reading.
+
+The plan is made on the nominal machine by :func:`calibrators.design.greedy_plan`: from
+the stands where they stand, the move (with the lifts and engages it needs) or the
+re-mount that buys the most fall of the predicted TCP error after the best-fit rigid
+motion per second of lab time, again and again until the budget is spent.  A plan knows
+no reading, so every plunger keeps three a-priori standard deviations of its reading
+clear of the pushed-in end.  ``optimal-d`` plans for the D criterion instead (the
+information about every unknown).  The plan depends only on the lab's set-up (stands,
+noise, budget), so it is made once per process and replayed on every machine.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import gymnasium as gym
+import numpy as np
+
+from orthoglide_env.gauges import NOISE_FLOOR
+from orthoglide_env.lab import SLOTS
+
+from ..design import Planner, Step, greedy_plan
+from .base import PlannedAgent, action, register
+
+
+@lru_cache(maxsize=8)
+def fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
+               budget_s: float, criterion: str = "I") -> tuple[tuple[Step, ...], float]:
+    """The greedy plan from stands at ``slots`` (-1: none) with plungers ``engaged``, and
+    the TCP error after rigid motion it predicts (mm)."""
+    planner = Planner(list(slots), list(engaged), sigma, budget_s, criterion=criterion)
+    down, chance = planner.reading_here()  # the lab reads every stand as the episode opens
+    planner.expect_readings(down, chance)
+    steps = greedy_plan(planner)
+    return tuple(steps), planner.predicted_rigid_mm()
+
+
+def lab_setup(env: gym.Env, observation: dict[str, np.ndarray]
+              ) -> tuple[tuple[int, ...], tuple[bool, ...], float, float]:
+    """What a planner needs to know of the lab: each stand's slot (-1: none), whose
+    plunger is down, a reading's sigma and the time budget."""
+    slots = tuple(int(s) if s < len(SLOTS) else -1 for s in observation["slot"])
+    engaged = tuple(bool(e) for e in observation["engaged"])
+    sigma = max(float(env.noise.effective_sigma), NOISE_FLOOR)
+    return slots, engaged, sigma, float(env.budget_s) - float(observation["time"][0])
+
+
+@register
+class OptimalAgent(PlannedAgent):
+    name = "optimal"
+    criterion = "I"
+
+    def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
+              rng: np.random.Generator) -> None:
+        super().reset(env, observation, rng)
+        steps, self.predicted_rigid_mm = fixed_plan(*lab_setup(self.env, observation),
+                                                    criterion=self.criterion)
+        self.plan = [action(s.op, s.rho, s.stand, s.slot) for s in steps]
+
+
+@register
+class OptimalDAgent(OptimalAgent):
+    name = "optimal-d"
+    criterion = "D"
