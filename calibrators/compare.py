@@ -353,7 +353,7 @@ def verify_pybullet(config: Config, machines: int) -> dict[str, float]:
                     done = terminated or truncated
                     both = (observation["valid"] == 1) & (other["valid"] == 1)
                     gap = np.abs(observation["gauges"] - other["gauges"])[both]
-                    tcp = [env.unwrapped._require().tcp() for env in envs]
+                    tcp = [env.unwrapped.tcp() for env in envs]
                     worst["reading_mm"] = max(worst["reading_mm"], float(gap.max(initial=0)))
                     worst["tcp_mm"] = max(worst["tcp_mm"], float(np.abs(tcp[0] - tcp[1]).max()))
                     worst["steps"] += 1
