@@ -34,7 +34,14 @@ from orthoglide_env.scoring import FRAMES, score
 
 from .agents import get_agent
 from .base import Estimate
-from .experiment import estimate_many, get_estimator, measurements_of, run_episode
+from .experiment import (
+    Episode,
+    estimate_many,
+    get_estimator,
+    measurements_of,
+    run_episode,
+    run_episodes,
+)
 from .prediction import predicted_tcp_error
 
 #: Fractions of an episode's time at which the accuracy-versus-time curve re-estimates.
@@ -160,52 +167,63 @@ def _curves(episodes: list[_Episode], name: str) -> list[list[list[float]]]:
     return points
 
 
-def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]]
-              ) -> list[Trial]:
-    """Machines ``indices``: every agent's episode on each (in one pair of lab envs, one
-    without and one with a tracker), then every estimator over all of an agent's
-    notebooks at once (a fixed design is fitted in one batched solve)."""
-    envs = _envs(config)
+def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]],
+              batched: bool = True) -> list[Trial]:
+    """Machines ``indices``: every agent's episode on each, then every estimator over all
+    of an agent's notebooks at once (a fixed design is fitted in one batched solve).
+    ``batched``: the episodes of an agent run together in the lab's native vector env (on
+    the exact backend); else one machine at a time in a lone lab, step by step (the
+    reference path, same numbers)."""
     trials = []
-    try:
-        for agent_name in config.agents:
-            todo = {i: [e for e in config.estimators if (agent_name, e, i) not in skip]
-                    for i in indices}
-            runs = [i for i in indices if todo[i]]
-            if not runs:
+    for agent_name in config.agents:
+        todo = {i: [e for e in config.estimators if (agent_name, e, i) not in skip]
+                for i in indices}
+        runs = [i for i in indices if todo[i]]
+        if not runs:
+            continue
+        episodes = _episodes(config, agent_name, runs, batched)
+        for name in config.estimators:
+            mine = [e for e in episodes if name in todo[e.machine]]
+            if not mine:
                 continue
-            episodes = []
-            for index in runs:
-                agent = get_agent(agent_name)
-                env = envs[agent.needs_tracker]
-                seed = config.machine_seed(index)
-                data, _ = run_episode(env, agent, seed, np.random.default_rng([seed, 1]))
-                lab = env.unwrapped
-                episodes.append(_Episode(agent_name, index, list(lab.records),
-                                         data.experiment_time_s, lab.noise.effective_sigma,
-                                         lab.true_machine))
-            for name in config.estimators:
-                mine = [e for e in episodes if name in todo[e.machine]]
-                if not mine:
-                    continue
-                datas = [measurements_of(e.records, e.time_s) for e in mine]
-                estimates = estimate_many(datas, name, mine[0].sigma)
-                curves = (_curves(mine, name) if name == config.curve_estimator
-                          else [[] for _ in mine])
-                trials += [_trial(e, name, est, c)
-                           for e, est, c in zip(mine, estimates, curves, strict=True)]
-    finally:
-        for env in envs.values():
-            env.close()
+            datas = [measurements_of(e.records, e.time_s) for e in mine]
+            estimates = estimate_many(datas, name, mine[0].sigma)
+            curves = (_curves(mine, name) if name == config.curve_estimator
+                      else [[] for _ in mine])
+            trials += [_trial(e, name, est, c)
+                       for e, est, c in zip(mine, estimates, curves, strict=True)]
     return trials
 
 
-def _envs(config: Config) -> dict[bool, gym.Env]:
-    return {tracker: gym.make(orthoglide_env.LAB_ENV_ID, errors=config.errors,
-                              gauge_sigma=config.sigma, gauge_resolution=config.resolution,
-                              backend=config.backend, tracker=tracker,
-                              budget_s=config.budget_s)
-            for tracker in (False, True)}
+def _episodes(config: Config, agent_name: str, runs: list[int], batched: bool
+              ) -> list[_Episode]:
+    """The agent's episode on each machine of ``runs`` (machine ``i`` from its seed, the
+    agent's own choices from ``[seed, 1]``)."""
+    seeds = [config.machine_seed(i) for i in runs]
+    rngs = [np.random.default_rng([seed, 1]) for seed in seeds]
+    kwargs = {"errors": config.errors, "gauge_sigma": config.sigma,
+              "gauge_resolution": config.resolution, "backend": config.backend,
+              "tracker": get_agent(agent_name).needs_tracker, "budget_s": config.budget_s}
+    if batched and config.backend == "exact":
+        envs = gym.make_vec(orthoglide_env.LAB_ENV_ID, num_envs=len(runs),
+                            vectorization_mode="vector_entry_point", **kwargs)
+        try:
+            done = run_episodes(envs, agent_name, seeds, rngs)
+        finally:
+            envs.close()
+    else:
+        env = gym.make(orthoglide_env.LAB_ENV_ID, **kwargs)
+        done = []
+        try:
+            for seed, rng in zip(seeds, rngs, strict=True):
+                data, _ = run_episode(env, get_agent(agent_name), seed, rng)
+                lab = env.unwrapped
+                done.append(Episode(list(lab.records), data.experiment_time_s,
+                                    lab.noise.effective_sigma, lab.true_machine))
+        finally:
+            env.close()
+    return [_Episode(agent_name, index, e.records, e.time_s, e.sigma, e.truth)
+            for index, e in zip(runs, done, strict=True)]
 
 
 #: Thread pools of the numerical libraries, limited to one thread in each worker: a
@@ -231,9 +249,11 @@ def _single_threaded() -> Iterator[None]:
                 os.environ[key] = value
 
 
-#: Machines per task: enough for the batched fits of a fixed design to pay, few enough for
-#: a live progress bar and little lost work on an interrupt.
-CHUNK: int = 10
+#: Machines per task: their episodes run in one lab vector env and a fixed design's fits
+#: in one batched solve, which pay up to a few hundred machines (the fits' working arrays
+#: grow with the chunk); few enough for a live progress bar and little lost work on an
+#: interrupt.
+CHUNK: int = 200
 
 
 def _ignore_interrupts() -> None:

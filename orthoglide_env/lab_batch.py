@@ -600,7 +600,9 @@ class LabBatch:
         self.time[rows] += seconds
         self.steps[rows] += 1
         collision = [""] * len(rows)
-        for r in np.flatnonzero(looks & np.isin(op, _READS)):
+        crashed = np.zeros(len(rows), dtype=bool)
+        crashed[looks] = sight.crashed.any(axis=-1)
+        for r in np.flatnonzero(crashed & np.isin(op, _READS)):
             collision[r] = ", ".join(collision_names(sight.crashed[at[r]]))
         terminated = (op == Op.STOP) | np.array([bool(c) for c in collision], dtype=bool)
         truncated = ~terminated & (self.time[rows] >= settings.budget_s)
@@ -678,6 +680,8 @@ class LabBatch:
             stands = self.settings.stands
             return Sight(np.zeros((0, stands)), np.zeros((0, stands), dtype=bool),
                          np.zeros((0, len(PAIR_NAMES)), dtype=bool), np.zeros((0, 3)))
+        if len(rows) == self.size:  # every episode: no copies
+            return self.backend.look(rows, self.require(), self.gauges, self.rho)
         return self.backend.look(rows, self.require()[rows], self.gauges[rows], self.rho[rows])
 
     def _read(self, rows: np.ndarray, pending: np.ndarray, sight: Sight) -> np.ndarray:
@@ -685,32 +689,41 @@ class LabBatch:
         stand, NaN where there is none; every reading goes to the notebooks.  ``pending``:
         the seconds of the step so far (the readings are written at its end)."""
         settings = self.settings
-        gauges = self.gauges[rows]
+        gauges = self.gauges if len(rows) == self.size else self.gauges[rows]
         mounted = self.slot[rows] >= 0
         ideal = readings_from_distances(gauges, sight.t)
         good = status_of(gauges, sight.t) == Status.VALID
         draws = np.zeros(ideal.shape)
-        for r, i in enumerate(rows):
+        counts, full = mounted.sum(axis=1).tolist(), mounted.all(axis=1).tolist()
+        for r, i in enumerate(rows.tolist()):
             # A lone lab draws one number per mounted gauge, then the tracker's three.
-            draws[r, mounted[r]] = settings.noise.draws(self.streams[i], (int(mounted[r].sum()),))
+            stream = self.streams[i]
+            drawn = settings.noise.draws(stream, (counts[r],))  # type: ignore[arg-type]
+            if full[r]:
+                draws[r] = drawn
+            else:
+                draws[r, mounted[r]] = drawn
             if settings.tracker:
-                noise = self.streams[i].normal(0.0, settings.tracker_sigma, 3)
+                noise = stream.normal(0.0, settings.tracker_sigma, 3)  # type: ignore[union-attr]
                 self.tracker_reading[i] = (self.tracker_rotation[i] @ sight.tcp[r]
                                            + self.tracker_position[i] + noise)
         noisy = settings.noise.applied(ideal, draws)
         valid = good & mounted & self.engaged[rows] & ~self.faulted[rows]
         values = np.where(valid, noisy, np.nan)
-        stamp = self.time[rows] + pending
-        for r, i in enumerate(rows):
-            book, rho = self.notebooks[i], tuple(float(v) for v in self.rho[i])
-            step, when = int(self.steps[i]), float(stamp[r])
-            for k in np.flatnonzero(valid[r]):
-                book.records.append(Record(SLOTS[self.slot[i, k]], self.mounting[i][k], rho,
-                                           float(values[r, k]), step, when))
-            if settings.tracker:
-                for c in range(3):
-                    book.records.append(Record(TrackerAxis(c), f"tracker.{AXIS_NAMES[c]}", rho,
-                                               float(self.tracker_reading[i, c]), step, when))
+        # The notebooks, written from plain lists (one Record per reading).
+        index, rho = rows.tolist(), [tuple(p) for p in self.rho[rows].tolist()]
+        steps, stamps = self.steps[rows].tolist(), (self.time[rows] + pending).tolist()
+        read, slots = values.tolist(), self.slot[rows].tolist()
+        for r, k in zip(*(part.tolist() for part in np.nonzero(valid)), strict=True):
+            i = index[r]
+            self.notebooks[i].records.append(Record(SLOTS[slots[r][k]], self.mounting[i][k],
+                                                    rho[r], read[r][k], steps[r], stamps[r]))
+        if settings.tracker:
+            tracker = self.tracker_reading[rows].tolist()
+            for r, i in enumerate(index):
+                self.notebooks[i].records.extend(
+                    Record(TrackerAxis(c), f"tracker.{AXIS_NAMES[c]}", rho[r], tracker[r][c],
+                           steps[r], stamps[r]) for c in range(3))
         return values
 
     # -- rewards and observations --------------------------------------------------------------

@@ -11,6 +11,7 @@ from gymnasium.vector import AutoresetMode
 from test_vector_env import CRASHING, assert_same
 
 import orthoglide_env
+from calibrators.compare import Config, run_chunk
 from calibrators.experiment import make_estimator
 from orthoglide_env.geometry import RHO_MAX, RHO_MIN
 from orthoglide_env.lab import PAPER_SLOTS, SLOTS, Op
@@ -142,3 +143,16 @@ def test_lab_vector_env_checks_like_the_single_lab() -> None:
     assert [list(r) for r in envs.records] == before  # no env stepped
     with pytest.raises(ValueError, match="exact"):
         gym.make_vec(LAB, num_envs=2, backend="pybullet")
+
+
+def test_batched_compare_gives_the_per_machine_trials() -> None:
+    """compare's batched path (each agent's episodes in one lab vector env) and its
+    per-machine path (one lone lab at a time) give the same trials to the last bit: the
+    same notebooks, so the same estimates and scores.  A planned agent, one with a
+    tracker, and one that acts on its own readings and spends the whole budget."""
+    config = Config(("paper", "tracker", "random"), ("paper", "paper6"), budget_s=600.0,
+                    seed=2)
+    batched = run_chunk(config, [0, 1, 2], set(), batched=True)
+    alone = run_chunk(config, [0, 1, 2], set(), batched=False)
+    assert [t.to_json() for t in batched] == [t.to_json() for t in alone]
+    assert len(batched) == 3 * 2 * 3 and any(not t.failed for t in batched)
