@@ -30,7 +30,7 @@ import orthoglide_env
 from orthoglide_env.geometry import ERROR_NAMES, MachineParams
 from orthoglide_env.lab_env import Record
 from orthoglide_env.reading_model import ParameterSpace, default_scales
-from orthoglide_env.scoring import FRAMES, score
+from orthoglide_env.scoring import FRAMES, score_batch
 
 from .agents import get_agent
 from .base import Estimate
@@ -42,7 +42,7 @@ from .experiment import (
     run_episode,
     run_episodes,
 )
-from .prediction import predicted_tcp_error
+from .prediction import predicted_tcp_errors
 
 #: Fractions of an episode's time at which the accuracy-versus-time curve re-estimates.
 CURVE_FRACTIONS: tuple[float, ...] = (0.25, 0.5, 0.75)
@@ -127,28 +127,38 @@ class _Episode:
     truth: MachineParams
 
 
-def _trial(episode: _Episode, name: str, est: Estimate | Exception,
-           curve: list[list[float]]) -> Trial:
-    """Score one estimate against the truth."""
-    count = len(episode.records)
-    if isinstance(est, Exception):
-        return Trial(episode.agent, name, episode.machine,
-                     failed=str(est).splitlines()[0] or type(est).__name__,
-                     time_s=episode.time_s, readings=count)
-    report = score(est.machine, episode.truth)
-    std = np.full(len(ERROR_NAMES), np.nan)
-    for k, n in enumerate(est.names):
-        if n in ERROR_NAMES:
-            std[ERROR_NAMES.index(n)] = np.sqrt(est.covariance[k, k])
-    return Trial(
-        episode.agent, name, episode.machine, time_s=episode.time_s, readings=count,
-        tcp_before={f: getattr(report.tcp_before, f).rms for f in FRAMES},
-        tcp_after={f: getattr(report.tcp_after, f).rms for f in FRAMES},
-        predicted_rigid_mm=predicted_tcp_error(est).rigid.rms,
-        z=machine_z_scores(est, episode.truth).tolist(),
-        error=(est.machine.to_vector() - episode.truth.to_vector()).tolist(),
-        std=std.tolist(), curve=curve,
-    )
+def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exception],
+            curves: list[list[list[float]]]) -> list[Trial]:
+    """Score each estimate against its machine's truth (the kinematics of every score and
+    predicted error in one batched solve)."""
+    good = [k for k, est in enumerate(estimates) if not isinstance(est, Exception)]
+    fitted = [estimates[k] for k in good]
+    reports = iter(score_batch([e.machine for e in fitted],  # type: ignore[union-attr]
+                               [episodes[k].truth for k in good]) if good else [])
+    predicted = iter(predicted_tcp_errors(fitted))  # type: ignore[arg-type]
+    out = []
+    for episode, est, curve in zip(episodes, estimates, curves, strict=True):
+        count = len(episode.records)
+        if isinstance(est, Exception):
+            out.append(Trial(episode.agent, name, episode.machine,
+                             failed=str(est).splitlines()[0] or type(est).__name__,
+                             time_s=episode.time_s, readings=count))
+            continue
+        report = next(reports)
+        std = np.full(len(ERROR_NAMES), np.nan)
+        for k, n in enumerate(est.names):
+            if n in ERROR_NAMES:
+                std[ERROR_NAMES.index(n)] = np.sqrt(est.covariance[k, k])
+        out.append(Trial(
+            episode.agent, name, episode.machine, time_s=episode.time_s, readings=count,
+            tcp_before={f: getattr(report.tcp_before, f).rms for f in FRAMES},
+            tcp_after={f: getattr(report.tcp_after, f).rms for f in FRAMES},
+            predicted_rigid_mm=next(predicted).rigid.rms,
+            z=machine_z_scores(est, episode.truth).tolist(),
+            error=(est.machine.to_vector() - episode.truth.to_vector()).tolist(),
+            std=std.tolist(), curve=curve,
+        ))
+    return out
 
 
 def _curves(episodes: list[_Episode], name: str) -> list[list[list[float]]]:
@@ -159,11 +169,11 @@ def _curves(episodes: list[_Episode], name: str) -> list[list[list[float]]]:
     for fraction in (*CURVE_FRACTIONS, 1.0):
         datas = [measurements_of(e.records, e.time_s, until_s=fraction * e.time_s)
                  for e in episodes]
-        for k, (episode, est) in enumerate(zip(episodes, estimate_many(
-                datas, name, episodes[0].sigma), strict=True)):
-            model = MachineParams() if isinstance(est, Exception) else est.machine
-            points[k].append([fraction * episode.time_s,
-                              score(model, episode.truth).tcp_after.rigid.rms])
+        models = [MachineParams() if isinstance(est, Exception) else est.machine
+                  for est in estimate_many(datas, name, episodes[0].sigma)]
+        reports = score_batch(models, [e.truth for e in episodes])
+        for k, (episode, report) in enumerate(zip(episodes, reports, strict=True)):
+            points[k].append([fraction * episode.time_s, report.tcp_after.rigid.rms])
     return points
 
 
@@ -190,8 +200,7 @@ def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]
             estimates = estimate_many(datas, name, mine[0].sigma)
             curves = (_curves(mine, name) if name == config.curve_estimator
                       else [[] for _ in mine])
-            trials += [_trial(e, name, est, c)
-                       for e, est, c in zip(mine, estimates, curves, strict=True)]
+            trials += _trials(mine, name, estimates, curves)
     return trials
 
 

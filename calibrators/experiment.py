@@ -71,12 +71,14 @@ def estimate(data: Measurements, name: str, sigma: float) -> Estimate:
 def estimate_many(datas: list[Measurements], name: str, sigma: float
                   ) -> list[Estimate | Exception]:
     """:func:`estimate` of many experiments, batched where the estimator can (experiments
-    of one design are fitted together); a failure comes back in place of its estimate."""
+    of one design are fitted together, without the words on what the data determine); a
+    failure comes back in place of its estimate."""
     spec = get_estimator(name)
     strategy = get_strategy(spec.strategy)
     if hasattr(strategy, "estimate_many"):
+        # A comparison scores estimates; it has no reader for their words.
         return strategy.estimate_many(datas, spec.params, sigma, verify=False,
-                                      prior=spec.prior)
+                                      prior=spec.prior, explain=False)
     out: list[Estimate | Exception] = []
     for data in datas:
         try:
