@@ -161,16 +161,19 @@ def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
     return out
 
 
-def _curves(episodes: list[_Episode], name: str) -> list[list[list[float]]]:
+def _curves(episodes: list[_Episode], name: str, estimates: list[Estimate | Exception]
+            ) -> list[list[list[float]]]:
     """Accuracy against time for each episode: re-estimates from the readings taken by
     :data:`CURVE_FRACTIONS` of its time (the uncalibrated error where there are too few),
-    then the full estimate."""
+    then the full estimate (``estimates``: the fits of the whole episodes)."""
     points: list[list[list[float]]] = [[] for _ in episodes]
     for fraction in (*CURVE_FRACTIONS, 1.0):
         datas = [measurements_of(e.records, e.time_s, until_s=fraction * e.time_s)
                  for e in episodes]
+        fitted = estimates if fraction == 1.0 else estimate_many(datas, name,
+                                                                 episodes[0].sigma)
         models = [MachineParams() if isinstance(est, Exception) else est.machine
-                  for est in estimate_many(datas, name, episodes[0].sigma)]
+                  for est in fitted]
         reports = score_batch(models, [e.truth for e in episodes])
         for k, (episode, report) in enumerate(zip(episodes, reports, strict=True)):
             points[k].append([fraction * episode.time_s, report.tcp_after.rigid.rms])
@@ -198,7 +201,7 @@ def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]
                 continue
             datas = [measurements_of(e.records, e.time_s) for e in mine]
             estimates = estimate_many(datas, name, mine[0].sigma)
-            curves = (_curves(mine, name) if name == config.curve_estimator
+            curves = (_curves(mine, name, estimates) if name == config.curve_estimator
                       else [[] for _ in mine])
             trials += _trials(mine, name, estimates, curves)
     return trials

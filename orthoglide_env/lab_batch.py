@@ -448,7 +448,7 @@ class StepResult:
     collision: list[str]
     refused: list[str]
     predicted: np.ndarray  # predicted TCP error at the end, NaN where the episode goes on
-    success_mm: float
+    success: np.ndarray  # at the end: the predicted error meets the lab's target
 
     def info(self, i: int) -> dict[str, Any]:
         """Row ``i``'s info, as the lab env gives it."""
@@ -456,9 +456,8 @@ class StepResult:
                          self.collision[i])
         info["refused"] = self.refused[i]
         if self.terminated[i] or self.truncated[i]:
-            predicted = float(self.predicted[i])
-            info.update(is_success=bool(predicted <= self.success_mm),
-                        predicted_tcp_rigid_mm=predicted)
+            info.update(is_success=bool(self.success[i]),
+                        predicted_tcp_rigid_mm=float(self.predicted[i]))
         return info
 
 
@@ -614,7 +613,7 @@ class LabBatch:
         fresh[reads] = True
         return StepResult(self.observation(rows, values, fresh), reward, terminated, truncated,
                           op, seconds, overtravel, collision, refused, predicted,
-                          settings.success_mm)
+                          ended & (predicted <= settings.success_mm))
 
     def _refusals(self, rows: np.ndarray, op: np.ndarray, rho: np.ndarray, stand: np.ndarray,
                   slot: np.ndarray) -> list[str]:

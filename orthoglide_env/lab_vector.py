@@ -305,6 +305,5 @@ def _add_step_infos(info: dict[str, Any], n: int, rows: np.ndarray, result: Step
         values = getattr(result, key)
         _add(info, n, key, mine, [values[r] for r in np.flatnonzero(keep)])
     ended = keep & (result.terminated | result.truncated)
-    predicted = result.predicted[ended]
-    _add(info, n, "is_success", rows[ended], predicted <= result.success_mm)
-    _add(info, n, "predicted_tcp_rigid_mm", rows[ended], predicted)
+    _add(info, n, "is_success", rows[ended], result.success[ended])
+    _add(info, n, "predicted_tcp_rigid_mm", rows[ended], result.predicted[ended])
