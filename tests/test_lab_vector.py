@@ -128,8 +128,11 @@ def test_lab_vector_env_checks_like_the_single_lab() -> None:
         envs.step(envs.action_space.sample())
     obs, info = envs.reset(seed=0)
     assert envs.observation_space.contains(obs) and list(info["op"]) == ["reset"] * 3
-    for _ in range(5):
-        obs, reward, *_ = envs.step(envs.action_space.sample())
+    # Moves and lever flicks (no stop: every env goes on, so every row is checked below).
+    ops = np.array([[0, 1, 2], [2, 0, 1], [0, 0, 0]])
+    for op in ops:
+        obs, reward, *_ = envs.step({"op": op, "rho": np.full((3, 3), 5.0),
+                                     "stand": np.arange(3), "slot": np.zeros(3, int)})
         assert envs.observation_space.contains(obs) and reward.dtype == np.float64
     bad = {"op": np.array([0, 7, 0]), "rho": np.zeros((3, 3)), "stand": np.zeros(3, int),
            "slot": np.zeros(3, int)}
