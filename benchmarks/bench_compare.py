@@ -1,6 +1,6 @@
 """compare's batched pipeline against its per-machine path, and its memory.
 
-    python benchmarks/bench_compare.py [--machines 1000] [--per-machine 1000]
+    python benchmarks/bench_compare.py [--machines 1000] [--per-machine 100]
         [--estimators paper,paper6,extended] [--memory-machines 10000]
 
 For each estimator, the paper agent on ``--machines`` realistic machines (exact backend,
@@ -96,7 +96,7 @@ print(len(trials), time.perf_counter() - start,
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--machines", type=int, default=1000)
-    parser.add_argument("--per-machine", type=int, default=1000,
+    parser.add_argument("--per-machine", type=int, default=100,
                         help="machines the per-machine path runs (the first ones)")
     parser.add_argument("--estimators", default="paper,paper6,extended")
     parser.add_argument("--memory-machines", type=int, default=10000)
