@@ -609,9 +609,7 @@ class LabBatch:
         reward = self._rewards(rows, seconds, ended)
         predicted = np.full(len(rows), np.nan)
         predicted[ended] = predicted_many([self.notebooks[i] for i in rows[ended]])
-        fresh = np.zeros(len(rows), dtype=bool)
-        fresh[reads] = True
-        return StepResult(self.observation(rows, values, fresh), reward, terminated, truncated,
+        return StepResult(self.observation(rows, values, reads), reward, terminated, truncated,
                           op, seconds, overtravel, collision, refused, predicted,
                           ended & (predicted <= settings.success_mm))
 
