@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml
 run: $(STAMP)
 	rm -rf results/compare
 	$(BIN)/orthoglide compare --agents paper,tracker --estimators paper,extended \
-		--machines 20 --seed 1 --jobs 2 --out results/compare
+		--machines 40 --seed 1 --jobs 2 --out results/compare
 
 test: $(STAMP)
 	$(BIN)/ruff check .
@@ -26,10 +26,12 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_machine.py
 	$(BIN)/python benchmarks/bench_env.py
 	$(BIN)/python benchmarks/bench_vector.py
+	$(BIN)/python benchmarks/bench_lab_vector.py
 	$(BIN)/python benchmarks/bench_build.py
 	$(BIN)/python benchmarks/statistics.py
 	$(BIN)/python benchmarks/realistic.py
 	$(BIN)/python benchmarks/bench_calibrators.py
+	$(BIN)/python benchmarks/bench_compare.py
 	$(BIN)/python benchmarks/bench_measurements.py
 	$(BIN)/python benchmarks/estimators.py
 

@@ -28,13 +28,20 @@ import orthoglide_env
 from orthoglide_env.geometry import ERROR_NAMES, MachineParams
 from orthoglide_env.lab_env import Record
 from orthoglide_env.reading_model import ParameterSpace, default_scales
-from orthoglide_env.scoring import FRAMES, score
+from orthoglide_env.scoring import FRAMES, score_batch
 
 from .agents import get_agent
 from .base import Estimate
 from .engines import results
-from .experiment import estimate_many, get_estimator, measurements_of, run_episode
-from .prediction import predicted_tcp_error
+from .experiment import (
+    Episode,
+    estimate_many,
+    get_estimator,
+    measurements_of,
+    run_episode,
+    run_episodes,
+)
+from .prediction import predicted_tcp_errors
 
 #: Fractions of an episode's time at which the accuracy-versus-time curve re-estimates.
 CURVE_FRACTIONS: tuple[float, ...] = (0.25, 0.5, 0.75)
@@ -119,97 +126,122 @@ class _Episode:
     truth: MachineParams
 
 
-def _trial(episode: _Episode, name: str, est: Estimate | Exception,
-           curve: list[list[float]]) -> Trial:
-    """Score one estimate against the truth."""
-    count = len(episode.records)
-    if isinstance(est, Exception):
-        return Trial(episode.agent, name, episode.machine,
-                     failed=str(est).splitlines()[0] or type(est).__name__,
-                     time_s=episode.time_s, readings=count)
-    report = score(est.machine, episode.truth)
-    std = np.full(len(ERROR_NAMES), np.nan)
-    for k, n in enumerate(est.names):
-        if n in ERROR_NAMES:
-            std[ERROR_NAMES.index(n)] = np.sqrt(est.covariance[k, k])
-    return Trial(
-        episode.agent, name, episode.machine, time_s=episode.time_s, readings=count,
-        tcp_before={f: getattr(report.tcp_before, f).rms for f in FRAMES},
-        tcp_after={f: getattr(report.tcp_after, f).rms for f in FRAMES},
-        predicted_rigid_mm=predicted_tcp_error(est).rigid.rms,
-        z=machine_z_scores(est, episode.truth).tolist(),
-        error=(est.machine.to_vector() - episode.truth.to_vector()).tolist(),
-        std=std.tolist(), curve=curve,
-    )
+def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exception],
+            curves: list[list[list[float]]]) -> list[Trial]:
+    """Score each estimate against its machine's truth (the kinematics of every score and
+    predicted error in one batched solve)."""
+    good = [k for k, est in enumerate(estimates) if not isinstance(est, Exception)]
+    fitted = [estimates[k] for k in good]
+    reports = iter(score_batch([e.machine for e in fitted],  # type: ignore[union-attr]
+                               [episodes[k].truth for k in good]) if good else [])
+    predicted = iter(predicted_tcp_errors(fitted))  # type: ignore[arg-type]
+    out = []
+    for episode, est, curve in zip(episodes, estimates, curves, strict=True):
+        count = len(episode.records)
+        if isinstance(est, Exception):
+            out.append(Trial(episode.agent, name, episode.machine,
+                             failed=str(est).splitlines()[0] or type(est).__name__,
+                             time_s=episode.time_s, readings=count))
+            continue
+        report = next(reports)
+        std = np.full(len(ERROR_NAMES), np.nan)
+        for k, n in enumerate(est.names):
+            if n in ERROR_NAMES:
+                std[ERROR_NAMES.index(n)] = np.sqrt(est.covariance[k, k])
+        out.append(Trial(
+            episode.agent, name, episode.machine, time_s=episode.time_s, readings=count,
+            tcp_before={f: getattr(report.tcp_before, f).rms for f in FRAMES},
+            tcp_after={f: getattr(report.tcp_after, f).rms for f in FRAMES},
+            predicted_rigid_mm=next(predicted).rigid.rms,
+            z=machine_z_scores(est, episode.truth).tolist(),
+            error=(est.machine.to_vector() - episode.truth.to_vector()).tolist(),
+            std=std.tolist(), curve=curve,
+        ))
+    return out
 
 
-def _curves(episodes: list[_Episode], name: str) -> list[list[list[float]]]:
+def _curves(episodes: list[_Episode], name: str, estimates: list[Estimate | Exception]
+            ) -> list[list[list[float]]]:
     """Accuracy against time for each episode: re-estimates from the readings taken by
     :data:`CURVE_FRACTIONS` of its time (the uncalibrated error where there are too few),
-    then the full estimate."""
+    then the full estimate (``estimates``: the fits of the whole episodes)."""
     points: list[list[list[float]]] = [[] for _ in episodes]
     for fraction in (*CURVE_FRACTIONS, 1.0):
         datas = [measurements_of(e.records, e.time_s, until_s=fraction * e.time_s)
                  for e in episodes]
-        for k, (episode, est) in enumerate(zip(episodes, estimate_many(
-                datas, name, episodes[0].sigma), strict=True)):
-            model = MachineParams() if isinstance(est, Exception) else est.machine
-            points[k].append([fraction * episode.time_s,
-                              score(model, episode.truth).tcp_after.rigid.rms])
+        fitted = estimates if fraction == 1.0 else estimate_many(datas, name,
+                                                                 episodes[0].sigma)
+        models = [MachineParams() if isinstance(est, Exception) else est.machine
+                  for est in fitted]
+        reports = score_batch(models, [e.truth for e in episodes])
+        for k, (episode, report) in enumerate(zip(episodes, reports, strict=True)):
+            points[k].append([fraction * episode.time_s, report.tcp_after.rigid.rms])
     return points
 
 
-def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]]
-              ) -> list[Trial]:
-    """Machines ``indices``: every agent's episode on each (in one pair of lab envs, one
-    without and one with a tracker), then every estimator over all of an agent's
-    notebooks at once (a fixed design is fitted in one batched solve)."""
-    envs = _envs(config)
+def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]],
+              batched: bool = True) -> list[Trial]:
+    """Machines ``indices``: every agent's episode on each, then every estimator over all
+    of an agent's notebooks at once (a fixed design is fitted in one batched solve).
+    ``batched``: the episodes of an agent run together in the lab's native vector env (on
+    the exact backend); else one machine at a time in a lone lab, step by step (the
+    reference path, same numbers)."""
     trials = []
-    try:
-        for agent_name in config.agents:
-            todo = {i: [e for e in config.estimators if (agent_name, e, i) not in skip]
-                    for i in indices}
-            runs = [i for i in indices if todo[i]]
-            if not runs:
+    for agent_name in config.agents:
+        todo = {i: [e for e in config.estimators if (agent_name, e, i) not in skip]
+                for i in indices}
+        runs = [i for i in indices if todo[i]]
+        if not runs:
+            continue
+        episodes = _episodes(config, agent_name, runs, batched)
+        for name in config.estimators:
+            mine = [e for e in episodes if name in todo[e.machine]]
+            if not mine:
                 continue
-            episodes = []
-            for index in runs:
-                agent = get_agent(agent_name)
-                env = envs[agent.needs_tracker]
-                seed = config.machine_seed(index)
-                data, _ = run_episode(env, agent, seed, np.random.default_rng([seed, 1]))
-                lab = env.unwrapped
-                episodes.append(_Episode(agent_name, index, list(lab.records),
-                                         data.experiment_time_s, lab.noise.effective_sigma,
-                                         lab.true_machine))
-            for name in config.estimators:
-                mine = [e for e in episodes if name in todo[e.machine]]
-                if not mine:
-                    continue
-                datas = [measurements_of(e.records, e.time_s) for e in mine]
-                estimates = estimate_many(datas, name, mine[0].sigma)
-                curves = (_curves(mine, name) if name == config.curve_estimator
-                          else [[] for _ in mine])
-                trials += [_trial(e, name, est, c)
-                           for e, est, c in zip(mine, estimates, curves, strict=True)]
-    finally:
-        for env in envs.values():
-            env.close()
+            datas = [measurements_of(e.records, e.time_s) for e in mine]
+            estimates = estimate_many(datas, name, mine[0].sigma)
+            curves = (_curves(mine, name, estimates) if name == config.curve_estimator
+                      else [[] for _ in mine])
+            trials += _trials(mine, name, estimates, curves)
     return trials
 
 
-def _envs(config: Config) -> dict[bool, gym.Env]:
-    return {tracker: gym.make(orthoglide_env.LAB_ENV_ID, errors=config.errors,
-                              gauge_sigma=config.sigma, gauge_resolution=config.resolution,
-                              backend=config.backend, tracker=tracker,
-                              budget_s=config.budget_s)
-            for tracker in (False, True)}
+def _episodes(config: Config, agent_name: str, runs: list[int], batched: bool
+              ) -> list[_Episode]:
+    """The agent's episode on each machine of ``runs`` (machine ``i`` from its seed, the
+    agent's own choices from ``[seed, 1]``)."""
+    seeds = [config.machine_seed(i) for i in runs]
+    rngs = [np.random.default_rng([seed, 1]) for seed in seeds]
+    kwargs = {"errors": config.errors, "gauge_sigma": config.sigma,
+              "gauge_resolution": config.resolution, "backend": config.backend,
+              "tracker": get_agent(agent_name).needs_tracker, "budget_s": config.budget_s}
+    if batched and config.backend == "exact":
+        envs = gym.make_vec(orthoglide_env.LAB_ENV_ID, num_envs=len(runs),
+                            vectorization_mode="vector_entry_point", **kwargs)
+        try:
+            done = run_episodes(envs, agent_name, seeds, rngs)
+        finally:
+            envs.close()
+    else:
+        env = gym.make(orthoglide_env.LAB_ENV_ID, **kwargs)
+        done = []
+        try:
+            for seed, rng in zip(seeds, rngs, strict=True):
+                data, _ = run_episode(env, get_agent(agent_name), seed, rng)
+                lab = env.unwrapped
+                done.append(Episode(list(lab.records), data.experiment_time_s,
+                                    lab.noise.effective_sigma, lab.true_machine))
+        finally:
+            env.close()
+    return [_Episode(agent_name, index, e.records, e.time_s, e.sigma, e.truth)
+            for index, e in zip(runs, done, strict=True)]
 
 
-#: Machines per task: enough for the batched fits of a fixed design to pay, few enough for
-#: a live progress bar and little lost work on an interrupt.
-CHUNK: int = 10
+#: Machines per task: their episodes run in one lab vector env and a fixed design's fits
+#: in one batched solve, which pay up to a few hundred machines (the fits' working arrays
+#: grow with the chunk); few enough for a live progress bar and little lost work on an
+#: interrupt.
+CHUNK: int = 200
 
 
 def run(config: Config, machines: int, jobs: int = 1, done: list[Trial] | None = None,
@@ -307,7 +339,7 @@ def verify_pybullet(config: Config, machines: int) -> dict[str, float]:
                     done = terminated or truncated
                     both = (observation["valid"] == 1) & (other["valid"] == 1)
                     gap = np.abs(observation["gauges"] - other["gauges"])[both]
-                    tcp = [env.unwrapped._require().tcp() for env in envs]
+                    tcp = [env.unwrapped.tcp() for env in envs]
                     worst["reading_mm"] = max(worst["reading_mm"], float(gap.max(initial=0)))
                     worst["tcp_mm"] = max(worst["tcp_mm"], float(np.abs(tcp[0] - tcp[1]).max()))
                     worst["steps"] += 1

@@ -7,17 +7,19 @@ which any estimator reads exactly as it reads a measurement file.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
 from orthoglide_env.geometry import MachineParams
 from orthoglide_env.kinematics import PAPER_POSTURES, paper_posture
+from orthoglide_env.lab import Op
 from orthoglide_env.lab_env import Record
 
-from .agents import Agent
+from .agents import Agent, get_agent
 from .base import Estimate, get_strategy
 from .measurements import Measurement, Measurements
 
@@ -69,12 +71,14 @@ def estimate(data: Measurements, name: str, sigma: float) -> Estimate:
 def estimate_many(datas: list[Measurements], name: str, sigma: float
                   ) -> list[Estimate | Exception]:
     """:func:`estimate` of many experiments, batched where the estimator can (experiments
-    of one design are fitted together); a failure comes back in place of its estimate."""
+    of one design are fitted together, without the words on what the data determine); a
+    failure comes back in place of its estimate."""
     spec = get_estimator(name)
     strategy = get_strategy(spec.strategy)
     if hasattr(strategy, "estimate_many"):
+        # A comparison scores estimates; it has no reader for their words.
         return strategy.estimate_many(datas, spec.params, sigma, verify=False,
-                                      prior=spec.prior)
+                                      prior=spec.prior, explain=False)
     out: list[Estimate | Exception] = []
     for data in datas:
         try:
@@ -94,6 +98,70 @@ def make_estimator(name: str = "extended") -> Callable[[list[Record], float], Ma
         return estimate(measurements_of(records), name, sigma).machine
 
     return estimator
+
+
+@dataclass(frozen=True)
+class Episode:
+    """What an agent left in one lab: the notebook, the time used, and (for scoring only)
+    the machine's truth."""
+
+    records: list[Record]
+    time_s: float
+    sigma: float  # effective noise of a gauge reading (mm)
+    truth: MachineParams
+
+
+def run_episodes(envs: gym.vector.VectorEnv, agent: str, seeds: list[int],
+                 rngs: list[np.random.Generator]) -> list[Episode]:
+    """One episode of the named agent in each env of a lab vector env (autoreset
+    ``NEXT_STEP``), env ``i`` reset with ``seeds[i]``: each env has its own agent, which
+    acts on its own observation with ``rngs[i]``, exactly as :func:`run_episode` runs it
+    in a lone lab.  An env whose episode has ended is kept busy with lever flicks (never
+    refused: stand 0 is always mounted) until every episode has ended."""
+    lab = envs.unwrapped
+    observation, info = envs.reset(seed=list(seeds))
+    first = get_agent(agent)
+    agents = [first] + [type(first)() for _ in seeds[1:]]
+    for i, (one, rng) in enumerate(zip(agents, rngs, strict=True)):
+        one.reset(lab.sub_env(i), _row(observation, i), rng)
+    idle = {"op": int(Op.LIFT), "rho": np.zeros(3), "stand": 0, "slot": 0}
+    out: list[Episode | None] = [None] * len(seeds)
+    while True:
+        moves = [idle if out[i] is not None else agents[i].act(_row(observation, i),
+                                                               _InfoRow(info, i))
+                 for i in range(len(seeds))]
+        actions = {key: np.array([m[key] for m in moves]) for key in idle}
+        observation, _, terminated, truncated, info = envs.step(actions)
+        for i in np.flatnonzero(terminated | truncated):
+            if out[i] is None:
+                out[i] = Episode(list(lab.records[i]), float(observation["time"][i, 0]),
+                                 lab.noise.effective_sigma, lab.true_machines[i])
+        if all(e is not None for e in out):
+            return out  # type: ignore[return-value]
+
+
+def _row(observation: dict[str, np.ndarray], i: int) -> dict[str, np.ndarray]:
+    """Env ``i``'s observation of a vector env's."""
+    return {key: value[i] for key, value in observation.items()}
+
+
+class _InfoRow(Mapping[str, Any]):
+    """Env ``i``'s info of a vector env's (Gymnasium's vector form: an array and a mask
+    per key), read only where an agent reads it."""
+
+    def __init__(self, info: dict[str, Any], i: int) -> None:
+        self._info, self._i = info, i
+
+    def __getitem__(self, key: str) -> Any:
+        if key.startswith("_") or not self._info[f"_{key}"][self._i]:
+            raise KeyError(key)
+        return self._info[key][self._i]
+
+    def __iter__(self) -> Iterator[str]:
+        return (k for k in self._info if not k.startswith("_") and self._info[f"_{k}"][self._i])
+
+    def __len__(self) -> int:
+        return sum(1 for _ in self)
 
 
 def run_episode(env: gym.Env, agent: Agent, seed: int, rng: np.random.Generator | None = None,

@@ -109,11 +109,14 @@ class GaussNewtonCalibrator(PaperCalibrator):
                       sigma: float = 0.01, *, verify: bool = True, prior: str = "auto",
                       fix: dict[str, float] | None = None, keep_outliers: bool = False,
                       holdout: float = 0.0, seed: int = 0, solver: str = "gauss-newton",
-                      tracker_sigma: float = TRACKER_SIGMA) -> list[Estimate | Exception]:
+                      tracker_sigma: float = TRACKER_SIGMA, explain: bool = True
+                      ) -> list[Estimate | Exception]:
         """:meth:`estimate` of many experiments: those of one design (the same readings
         of the same mountings at the same postures, as a fixed agent takes them on every
         machine) are fitted together, in one batched solve.  A failure is returned in
-        place of its estimate, not raised."""
+        place of its estimate, not raised.  ``explain=False`` leaves out the words on
+        which combinations the data determine and which not (``identifiable``,
+        ``unidentifiable``), which cost more than the fit on large designs."""
         out: list[Estimate | Exception] = [ValueError("not fitted")] * len(datas)
         groups: dict[tuple, list[int]] = {}
         prepared = []
@@ -130,7 +133,8 @@ class GaussNewtonCalibrator(PaperCalibrator):
             groups.setdefault(key, []).append(k)
         options = {"params": params, "prior": prior, "fix": fix or {}, "holdout": holdout,
                    "seed": seed, "solver": solver, "keep_outliers": keep_outliers,
-                   "sigma": sigma, "tracker_sigma": tracker_sigma, "verify": verify}
+                   "sigma": sigma, "tracker_sigma": tracker_sigma, "verify": verify,
+                   "explain": explain}
         for members in groups.values():
             design = prepared[members[0]][0]
             values = np.stack([prepared[k][1] for k in members])
@@ -146,7 +150,7 @@ class GaussNewtonCalibrator(PaperCalibrator):
     def _fit_group(self, design: Design, values: np.ndarray, datas: list[Measurements], *,
                    params: str, prior: str, fix: dict[str, float], holdout: float, seed: int,
                    solver: str, keep_outliers: bool, sigma: float, tracker_sigma: float,
-                   verify: bool) -> list[Estimate | Exception]:
+                   verify: bool, explain: bool) -> list[Estimate | Exception]:
         """Fit the experiments ``values`` (M, N) of one ``design`` together."""
         space = design.space
         free = select(params, space)
@@ -212,12 +216,14 @@ class GaussNewtonCalibrator(PaperCalibrator):
                                       "a-priori scale)"))
             else:
                 out.append(self._estimate(datas[m], params, prior, sigma, design, values[m],
-                                          result, mask[m], held, outliers[m], verify))
+                                          result, mask[m], held, outliers[m], verify,
+                                          explain))
         return out
 
     def _estimate(self, data: Measurements, params: str, prior: str, sigma: float,
                   design: Design, values: np.ndarray, result: BatchFit, mask: np.ndarray,
-                  held: np.ndarray, outliers: list[int], verify: bool) -> Estimate:
+                  held: np.ndarray, outliers: list[int], verify: bool, explain: bool
+                  ) -> Estimate:
         space = design.space
         names = [n for n, f in zip(space.names, result.free, strict=True) if f]
         idx = np.flatnonzero(result.free)
@@ -257,9 +263,9 @@ class GaussNewtonCalibrator(PaperCalibrator):
             readings=data, names=names, space=list(space.names), theta=theta, prior=prior,
             chi2=float(result.chi2[0]), dof=int(result.dof[0]),
             covariance_scale=float(result.covariance_scale[0]), warnings=warnings,
-            identifiable=[describe(d, names) for d in result.identifiable(0)],
+            identifiable=[describe(d, names) for d in result.identifiable(0)] if explain else [],
             unidentifiable=[act_together(d, names)
-                            for d in sparse_basis(result.unidentifiable(0))],
+                            for d in sparse_basis(result.unidentifiable(0))] if explain else [],
             outliers=outliers, information=info, scale=s, error_covariance=error_cov,
             holdout_rms_mm=float(np.sqrt(np.mean(residuals[held] ** 2))) if held.any() else None,
         )

@@ -16,7 +16,7 @@ from orthoglide_env.geometry import ERROR_NAMES, MachineParams
 from orthoglide_env.scoring import (
     FrameErrors,
     frame_errors,
-    predicted_tcp_frames,
+    predicted_tcp_frames_many,
     tcp_error_vectors,
     workspace_grid,
 )
@@ -34,10 +34,17 @@ def predicted_correction(est: Estimate, grid: np.ndarray | None = None) -> Frame
 
 
 def predicted_tcp_error(est: Estimate, grid: np.ndarray | None = None) -> FrameErrors:
+    """:func:`predicted_tcp_errors` of one estimate."""
+    return predicted_tcp_errors([est], grid)[0]
+
+
+def predicted_tcp_errors(ests: list[Estimate], grid: np.ndarray | None = None
+                         ) -> list[FrameErrors]:
     """Expected error (mm) of the compensated tool position over the workspace grid, in
     the three frames, from the covariance of the estimate's error over the machine's
     errors (with the errors its model leaves out, when it says so): the raw RMS is the 3-D standard
     deviation (square root of the trace of the position covariance) averaged over the
     grid in the mean-square sense."""
     n = len(ERROR_NAMES)
-    return predicted_tcp_frames(est.machine, est.error_covariance[:n, :n], grid)
+    return predicted_tcp_frames_many([e.machine for e in ests],
+                                     [e.error_covariance[:n, :n] for e in ests], grid)

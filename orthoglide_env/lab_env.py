@@ -8,96 +8,32 @@ lab's time table (:mod:`orthoglide_env.lab`).
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 
-from .backend import ExactMachine, MachineBackend
 from .env import check_seed
-from .gauges import (
-    DEFAULT_RESOLUTION,
-    DEFAULT_SIGMA,
-    DEFAULT_TRAVEL,
-    NOISE_FLOOR,
-    Gauge,
-    Status,
-    check_noise,
-    exact_ray_distances,
-    install,
-    pressed_past_travel,
-    readings_from_distances,
-    status_of,
-    zero_gauges,
+from .gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA, DEFAULT_TRAVEL, Gauge
+from .geometry import DEFAULT_PRESET, MachineParams, check_validity
+from .lab import PAPER_SLOTS, TRACKER_SIGMA
+from .lab_batch import (
+    ACCURACY_UNIT_MM,
+    REWARDS,
+    Estimator,
+    ExactMachines,
+    LabBatch,
+    LabSettings,
+    Record,
+    SimulatedMachine,
+    check_actions,
+    step_info,
 )
-from .geometry import (
-    AXIS_NAMES,
-    DEFAULT_PRESET,
-    ERROR_NAMES,
-    RHO_MAX,
-    RHO_MIN,
-    MachineParams,
-    check_rho,
-    check_validity,
-    get_preset,
-)
-from .kinematics import UnreachableError, direct
-from .lab import (
-    OP_NAMES,
-    PAPER_SLOTS,
-    SLOT_NAMES,
-    SLOTS,
-    TIME,
-    TRACKER_DISTANCE,
-    TRACKER_SIGMA,
-    Op,
-)
-from .reading_model import (
-    Design,
-    ParameterSpace,
-    Spec,
-    TrackerAxis,
-    default_scales,
-    jacobian,
-    station_of,
-)
-from .scoring import predicted_tcp_frames, score
 
-REWARDS: tuple[str, ...] = ("time", "accuracy", "information")
-#: The accuracy reward counts the final TCP error (after the best-fit rigid motion) in
-#: units of this many mm, and time in hours: -error/unit - time_weight * hours.
-ACCURACY_UNIT_MM: float = 0.01
-ENCODER_MARGIN: float = 1.0
+__all__ = ["ACCURACY_UNIT_MM", "REWARDS", "Estimator", "OrthoglideLabEnv", "Record"]
 
-
-@dataclass(frozen=True)
-class Record:
-    """One reading the lab wrote down: which instrument, which mounting, where, what."""
-
-    spec: Spec  # a gauge's slot, or one coordinate of the tracker
-    mounting: str
-    rho: tuple[float, float, float]
-    reading: float
-    step: int
-    time_s: float  # lab time when it was read
-
-
-@dataclass
-class Stand:
-    """A gauge stand: where it is mounted, whether its plunger is down, its installation."""
-
-    slot: int = -1  # index in SLOTS, -1: not mounted
-    engaged: bool = False
-    faulted: bool = False  # pushed past its travel: reads nothing until re-mounted
-    mounting: str = ""
-    gauge: Gauge | None = None
-    count: int = 0  # how many times this stand was mounted
-
-
-Estimator = Callable[[list[Record], float], MachineParams]
+#: The one episode of a lone lab, in its batch.
+_ROW = np.zeros(1, dtype=np.intp)
 
 
 class OrthoglideLabEnv(gym.Env):
@@ -214,70 +150,53 @@ class OrthoglideLabEnv(gym.Env):
         success_mm: float = 0.01,
         travel: float = DEFAULT_TRAVEL,
     ) -> None:
-        self.preset = get_preset(errors)
-        if backend not in ("exact", "pybullet"):
-            raise ValueError(f"unknown backend '{backend}'; choose from ['exact', 'pybullet']")
-        if reward not in REWARDS:
-            raise ValueError(f"unknown reward '{reward}'; choose from {list(REWARDS)}")
-        if reward == "accuracy" and estimator is None:
-            raise ValueError("reward 'accuracy' needs an estimator: records -> machine, e.g. "
-                             "calibrators.lab.make_estimator()")
-        if not 1 <= int(stands) <= len(SLOTS):
-            raise ValueError(f"stands must be between 1 and {len(SLOTS)}, got {stands}")
-        for name, value in (("budget_s", budget_s), ("success_mm", success_mm),
-                            ("tracker_sigma", tracker_sigma), ("travel", travel)):
-            if not (np.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be a positive number, got {value}")
-        if not (np.isfinite(time_weight) and time_weight >= 0):
-            raise ValueError(f"time_weight must be a number >= 0, got {time_weight}")
-        self.noise = check_noise(gauge_sigma, gauge_resolution, travel)
-        self.backend_name, self.n_stands, self.tracker = backend, int(stands), bool(tracker)
+        settings = LabSettings.check(errors, gauge_sigma, gauge_resolution, backend, stands,
+                                     tracker, tracker_sigma, budget_s, reward, estimator,
+                                     time_weight, success_mm, travel)
+        self.settings = settings
+        self.preset, self.noise = settings.preset, settings.noise
+        self.backend_name, self.n_stands, self.tracker = backend, settings.stands, settings.tracker
         self.tracker_sigma, self.budget_s, self.reward_mode = tracker_sigma, budget_s, reward
         self.estimator, self.time_weight, self.success_mm = estimator, time_weight, success_mm
-        self.travel = float(travel)
-        n = self.n_stands
-        self.action_space = spaces.Dict({
-            "op": spaces.Discrete(len(Op)),
-            "rho": spaces.Box(RHO_MIN, RHO_MAX, shape=(3,), dtype=np.float64),
-            "stand": spaces.Discrete(n),
-            "slot": spaces.Discrete(len(SLOTS)),
-        })
-        self.observation_space = spaces.Dict({
-            "gauges": spaces.Box(-self.travel, self.travel, shape=(n,), dtype=np.float64),
-            "valid": spaces.MultiBinary(n),
-            "engaged": spaces.MultiBinary(n),
-            "slot": spaces.MultiDiscrete([len(SLOTS) + 1] * n),
-            "mounting": spaces.Box(0.0, 1e6, shape=(n,), dtype=np.float64),
-            "joints": spaces.Box(RHO_MIN - ENCODER_MARGIN, RHO_MAX + ENCODER_MARGIN, shape=(3,),
-                                 dtype=np.float64),
-            "tracker": spaces.Box(-1e5, 1e5, shape=(3,), dtype=np.float64),
-            "tracker_valid": spaces.MultiBinary(1),
-            "time": spaces.Box(0.0, budget_s + self._longest_step(), shape=(1,),
-                               dtype=np.float64),
-        })
-        self._machine: MachineBackend | None = None
-        self.records: list[Record] = []
+        self.travel = settings.travel
+        self.action_space, self.observation_space = settings.spaces()
+        # The lab's rules live in the batch (orthoglide_env.lab_batch): one lab is a batch
+        # of one episode, the native vector env a batch of many.
+        self._batch = LabBatch(settings, 1, ExactMachines() if backend == "exact"
+                               else SimulatedMachine())
+        self._started = False
 
-    def _longest_step(self) -> float:
-        """The most one operation can cost (a re-mount from the far corner, the tracker, and
-        every stand pushed past its travel): the clock never passes budget + this."""
-        far = TIME.move(np.full(3, RHO_MIN), np.full(3, RHO_MAX))
-        return far + TIME.remount_s + TIME.tracker_point_s + TIME.overtravel_s * self.n_stands
+    # -- the episode, as the lab's notebook and clock show it -------------------------------
+    @property
+    def records(self) -> list[Record]:
+        """The lab notebook: every reading of the episode, in order."""
+        return self._batch.notebooks[0].records
+
+    @property
+    def _time(self) -> float:
+        """Seconds used so far."""
+        return float(self._batch.time[0])
 
     # -- ground truth, for the scorer only -------------------------------------------------
     @property
     def true_machine(self) -> MachineParams:
-        return self._require().machine
+        return self._require()[0]
 
     @property
     def true_gauges(self) -> list[Gauge]:
         """Every installation of the episode, in mounting order (scoring only)."""
-        return list(self._installed.values())
+        return self._batch.true_gauges(0)
 
     @property
     def true_tracker_frame(self) -> tuple[np.ndarray, np.ndarray]:
         """The tracker station's rotation and position (scoring only)."""
-        return self._tracker_rotation, self._tracker_position
+        return self._batch.tracker_rotation[0].copy(), self._batch.tracker_position[0].copy()
+
+    def tcp(self) -> np.ndarray:
+        """The true TCP (mm), as the machine shows it (scoring and fidelity checks only)."""
+        batch = self._batch
+        self._require()
+        return batch.backend.look(_ROW, batch.machines, batch.gauges[_ROW], batch.rho[_ROW]).tcp[0]
 
     # -- Gymnasium API --------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -287,330 +206,63 @@ class OrthoglideLabEnv(gym.Env):
         check_seed(seed)
         if not isinstance(options, dict | None):
             raise ValueError("reset options must be a dict")
-        options = dict(options or {})
-        unknown = sorted(set(options) - {"machine"})
-        if unknown:
-            raise ValueError(f"unknown reset option(s) {unknown}; allowed: machine")
-        given = options.get("machine")
-        if isinstance(given, dict):
-            given = MachineParams.from_dict(given)
-        elif isinstance(given, MachineParams):
-            given = check_validity(given)
-        elif given is not None:
-            raise ValueError("reset option 'machine' must be a dict in the machine file schema "
-                             "or a MachineParams")
+        given = reset_machine(options)
         super().reset(seed=seed)
-        machine = self.preset.sample(self.np_random) if given is None else given
-        rotation = _random_rotation(self.np_random)
-        direction = self.np_random.normal(size=3)
-        position = TRACKER_DISTANCE * direction / np.linalg.norm(direction)
-        if self._machine is not None:
-            self._machine.close()
-        self._machine = self._build(machine)
-        self._tracker_rotation, self._tracker_position = rotation, position
-        self._rho = np.zeros(3)
-        self._time = 0.0
-        self._pending = 0.0
-        self._steps = 0
-        self._mounts = 0
-        self._installed: dict[str, Gauge] = {}
-        self._info_sums: dict[str, tuple[int, Any, Any, tuple[str, ...]]] = {}
-        self._informed = 0  # records already in the information sums
-        self._logdet = 0.0
-        self.records = []
-        self._stands = [Stand() for _ in range(self.n_stands)]
-        for k, slot in enumerate(PAPER_SLOTS[: self.n_stands]):
-            self._mount(k, slot, name=SLOT_NAMES[slot])
-        self._sync_gauges()
-        reading = self._read()
-        return self._observation(reading), self._info("reset", 0.0, [], "")
+        obs = self._batch.reset(_ROW, [self.np_random], given)
+        self._started = True
+        return _first(obs), step_info("reset", 0.0, [], "")
 
     def step(self, action: dict[str, Any]
              ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
-        machine = self._require()
-        op, rho, stand, slot = self._check_action(action)
-        overtravel: list[str] = []
-        reading = None
-        refused = self._refusal(op, rho, stand, slot)
-        if refused:
-            # The technician sees it cannot be done: a moment lost, nothing changed.
-            seconds = TIME.lift_s
-        elif op == Op.MOVE:
-            seconds = TIME.move(self._rho, rho) + (TIME.tracker_point_s if self.tracker else 0.0)
-            machine.move(rho)
-            self._rho = rho
-        elif op in (Op.LIFT, Op.ENGAGE):
-            seconds = TIME.lift_s
-            self._stands[stand].engaged = op == Op.ENGAGE
-        elif op == Op.REMOUNT:
-            seconds = TIME.move(self._rho, np.zeros(3)) + TIME.remount_s
-            machine.move(np.zeros(3))
-            self._rho = np.zeros(3)
-            self._mount(stand, slot)
-            self._sync_gauges()
-        else:
-            seconds = 0.0
-        if not refused and op in (Op.MOVE, Op.ENGAGE, Op.REMOUNT):
-            overtravel = self._press()
-            seconds += TIME.overtravel_s * len(overtravel)
-        if not refused and op in (Op.MOVE, Op.REMOUNT):
-            self._pending = seconds
-            reading = self._read()
-        self._time += seconds
-        self._steps += 1
-        collision = ", ".join(machine.collisions()) if op in (Op.MOVE, Op.REMOUNT) else ""
-        terminated = (op == Op.STOP and not refused) or bool(collision)
-        truncated = not terminated and self._time >= self.budget_s
-        reward = self._reward(seconds, terminated or truncated)
-        info = self._info(OP_NAMES[op], seconds, overtravel, collision)
-        info["refused"] = refused
-        if terminated or truncated:
-            predicted = self.predicted_tcp_rigid_mm()
-            info.update(is_success=bool(predicted <= self.success_mm),
-                        predicted_tcp_rigid_mm=predicted)
-        return self._observation(reading), reward, terminated, truncated, info
-
-    def _refusal(self, op: Op, rho: np.ndarray, stand: int, slot: int) -> str:
-        """Why a well-formed operation cannot be done here ("" when it can): a stand that
-        is not mounted cannot be lifted or engaged, a slot holds one stand, and the
-        machine cannot be driven where it cannot assemble."""
-        target = self._stands[stand]
-        if op in (Op.LIFT, Op.ENGAGE) and target.gauge is None:
-            return f"stand {stand} is not mounted"
-        if op == Op.REMOUNT and any(s.slot == slot for k, s in enumerate(self._stands)
-                                    if k != stand):
-            return f"slot {SLOT_NAMES[slot]} already holds a stand"
-        if op == Op.MOVE:
-            try:
-                direct(self._require().machine, rho)
-            except UnreachableError:
-                return f"the machine cannot assemble at rho = {rho.tolist()}"
-        return ""
+        self._require()
+        op, rho, stand, slot = (part[None] for part in check_actions(action, (), self.n_stands))
+        result = self._batch.step(_ROW, op, rho, stand, slot)
+        return (_first(result.obs), float(result.reward[0]), bool(result.terminated[0]),
+                bool(result.truncated[0]), result.info(0))
 
     def close(self) -> None:
-        if self._machine is not None:
-            self._machine.close()
-            self._machine = None
+        self._batch.backend.close()
 
-    # -- the lab's bookkeeping ----------------------------------------------------------------
-    def _build(self, machine: MachineParams) -> MachineBackend:
-        if self.backend_name == "exact":
-            return ExactMachine(machine, [])
-        from .machine import OrthoglideMachine
-
-        return OrthoglideMachine(machine, [])
-
-    def _require(self) -> MachineBackend:
-        if self._machine is None:
+    def _require(self) -> MachineParams:
+        if not self._started:
             raise RuntimeError("call reset() before using the environment")
-        return self._machine
+        return self._batch.require()
 
-    def _mount(self, stand: int, slot: int, name: str = "") -> None:
-        """Install stand ``stand`` at ``slot`` on the true machine (at Zero) with the
-        preset's installation errors, slid to mid-travel and zeroed."""
-        machine = self._require().machine
-        gauge = install([SLOTS[slot]], machine, travel=self.travel, preset=self.preset,
-                        rng=self.np_random)[0]
-        t = exact_ray_distances(machine, [gauge], np.zeros(3))
-        if not np.isfinite(t).all():
-            raise ValueError(f"slot {SLOT_NAMES[slot]} cannot be reached on this machine")
-        gauge = zero_gauges([gauge], t)[0]
-        self._mounts += 1
-        mounting = name or f"{SLOT_NAMES[slot]}#{self._mounts}"
-        count = self._stands[stand].count + 1
-        self._stands[stand] = Stand(slot, True, False, mounting, gauge, count)
-        self._installed[mounting] = gauge
-
-    def _sync_gauges(self) -> None:
-        """Hand the machine the gauges of every mounted stand (the simulator reads them)."""
-        self._require().set_gauges([s.gauge for s in self._stands if s.gauge is not None])
-
-    def _mounted(self) -> list[int]:
-        return [k for k, s in enumerate(self._stands) if s.gauge is not None]
-
-    def _press(self) -> list[str]:
-        """Stands whose engaged plunger a bar now pushes past its travel: they fault."""
-        machine = self._require()
-        mounted = self._mounted()
-        if not mounted:
-            return []
-        pressed = pressed_past_travel(machine.gauges, *machine.target_boxes())
-        faulted = []
-        for k, p in zip(mounted, pressed, strict=True):
-            stand = self._stands[k]
-            if p and stand.engaged and not stand.faulted:
-                stand.faulted = True
-                faulted.append(f"stand {k} ({stand.mounting})")
-        return faulted
-
-    def _read(self) -> np.ndarray:
-        """Read every engaged, working gauge (and the tracker): noisy values per stand, NaN
-        where there is none; every reading goes to ``records``."""
-        machine = self._require()
-        values = np.full(self.n_stands, np.nan)
-        mounted = self._mounted()
-        if mounted:
-            t = machine.gauge_distances()
-            ideal = readings_from_distances(machine.gauges, t)
-            ok = status_of(machine.gauges, t) == Status.VALID
-            noisy = self.noise.apply(ideal, self.np_random)
-            for k, value, good in zip(mounted, noisy, ok, strict=True):
-                stand = self._stands[k]
-                if good and stand.engaged and not stand.faulted:
-                    values[k] = value
-                    self._record(SLOTS[stand.slot], stand.mounting, value)
-        if self.tracker:
-            point = (self._tracker_rotation @ machine.tcp() + self._tracker_position
-                     + self.np_random.normal(0.0, self.tracker_sigma, 3))
-            self._tracker_reading = point
-            for c in range(3):
-                self._record(TrackerAxis(c), f"tracker.{AXIS_NAMES[c]}", point[c])
-        return values
-
-    def _record(self, spec: Spec, mounting: str, value: float) -> None:
-        self.records.append(Record(spec, mounting, tuple(float(v) for v in self._rho),
-                                   float(value), self._steps, self._time + self._pending))
-
-    # -- rewards --------------------------------------------------------------------------------
-    def _reward(self, seconds: float, done: bool) -> float:
-        if self.reward_mode == "time":
-            return -seconds
-        if self.reward_mode == "information":
-            gain = self._update_logdet()
-            return gain / seconds if seconds > 0 else 0.0
-        reward = -self.time_weight * seconds / 3600.0
-        if done:
-            reward -= self.final_tcp_rigid_mm() / ACCURACY_UNIT_MM
-        return reward
-
+    # -- what the records say ------------------------------------------------------------------
     def final_tcp_rigid_mm(self) -> float:
         """TCP error RMS after the best-fit rigid motion of the machine the episode's
         estimator makes of its records (scoring against the truth)."""
-        truth = self.true_machine
-        try:
-            estimate = self.estimator(self.records, self.noise.effective_sigma)
-        except (ValueError, RuntimeError, np.linalg.LinAlgError):
-            estimate = MachineParams()
-        return score(estimate, truth).tcp_after.rigid.rms
-
-    def _add_information(self, records: list[Record]) -> None:
-        """Add the records' rows of the Jacobian (at the nominal machine, per unit of each
-        parameter's scale, per unit of noise; one batched call) to their mountings' sums:
-        the information of a mounting, its zero eliminated, is ``S2 - S1 S1^T / n``."""
-        design = Design.of([r.mounting for r in records], [r.spec for r in records],
-                           np.array([r.rho for r in records]))
-        space = design.space
-        rows = jacobian(np.zeros(len(space)), design, np.ones(len(space), bool),
-                        default_scales(space))
-        gauge_sigma = max(self.noise.effective_sigma, NOISE_FLOOR)
-        for record, row, m in zip(records, rows, design.mounting, strict=True):
-            sigma = self.tracker_sigma if isinstance(record.spec, TrackerAxis) else gauge_sigma
-            # The mounting's own columns: the machine's errors and its instrument's.
-            mine = _mounting_columns(space, m)
-            names = tuple(space.names[c] for c in mine)
-            row = row[mine] / sigma
-            n, s1, s2, _ = self._info_sums.get(record.mounting, (0, 0.0, 0.0, names))
-            self._info_sums[record.mounting] = (n + 1, s1 + row, s2 + np.outer(row, row),
-                                                names)
+        self._require()
+        return self._batch.final_tcp_rigid_mm(0)
 
     def information(self) -> tuple[np.ndarray, list[str]]:
         """The records' information about every parameter they involve, in units of each
         parameter's scale (see ``information`` reward), and the parameters' names."""
-        if self._informed < len(self.records):
-            self._add_information(self.records[self._informed:])
-        self._informed = len(self.records)
-        names = list(ERROR_NAMES)
-        for _, _, _, mine in self._info_sums.values():
-            names += [n for n in mine if n not in names]
-        info = np.zeros((len(names), len(names)))
-        for n, s1, s2, mine in self._info_sums.values():
-            idx = [names.index(x) for x in mine]
-            info[np.ix_(idx, idx)] += s2 - np.outer(s1, s1) / n
-        return info, names
-
-    def _update_logdet(self) -> float:
-        info, _ = self.information()
-        logdet = float(np.linalg.slogdet(np.eye(len(info)) + info)[1])
-        gain, self._logdet = logdet - self._logdet, logdet
-        return gain
+        return self._batch.notebooks[0].information()
 
     def predicted_tcp_rigid_mm(self) -> float:
         """TCP error RMS after the best-fit rigid motion that the records' information
         predicts (at the nominal machine, a priori sizes from the realistic preset)."""
-        info, names = self.information()
-        space = ParameterSpace()
-        scale = np.concatenate([default_scales(space), np.ones(len(names) - len(ERROR_NAMES))])
-        posterior = np.linalg.inv(np.eye(len(info)) + info)[:27, :27]
-        covariance = posterior * np.outer(scale[:27], scale[:27])
-        return predicted_tcp_frames(MachineParams(), covariance).rigid.rms
-
-    # -- actions and observations ------------------------------------------------------------
-    def _check_action(self, action: Any) -> tuple[Op, np.ndarray, int, int]:
-        if not isinstance(action, dict) or set(action) != {"op", "rho", "stand", "slot"}:
-            raise ValueError("action must be a dict with keys op, rho, stand, slot")
-        op = _integer(action["op"], "op", len(Op))
-        stand = _integer(action["stand"], "stand", self.n_stands)
-        slot = _integer(action["slot"], "slot", len(SLOTS))
-        rho = action["rho"]
-        if op == Op.MOVE:
-            try:
-                rho = np.array(rho, dtype=np.float64)
-            except (TypeError, ValueError):
-                raise ValueError(f"action rho must be 3 numbers (mm), got {rho!r}") from None
-            if rho.shape != (3,):
-                raise ValueError(f"action rho must have shape (3,), got {rho.shape}")
-            rho = check_rho(rho)
-        return Op(op), rho, stand, slot
-
-    def _observation(self, reading: np.ndarray | None) -> dict[str, np.ndarray]:
-        values = np.full(self.n_stands, np.nan) if reading is None else reading
-        valid = np.isfinite(values)
-        tracker = getattr(self, "_tracker_reading", np.zeros(3)) if self.tracker else np.zeros(3)
-        fresh = reading is not None and self.tracker
-        return {
-            "gauges": np.where(valid, values, 0.0),
-            "valid": valid.astype(np.int8),
-            "engaged": np.array([s.engaged and not s.faulted for s in self._stands], np.int8),
-            "slot": np.array([s.slot if s.slot >= 0 else len(SLOTS) for s in self._stands],
-                             dtype=np.int64),
-            "mounting": np.array([float(s.count) for s in self._stands]),
-            "joints": self._require().encoders().astype(np.float64),
-            "tracker": np.asarray(tracker if fresh else np.zeros(3), dtype=np.float64),
-            "tracker_valid": np.array([int(fresh)], dtype=np.int8),
-            "time": np.array([self._time]),
-        }
-
-    def _info(self, op: str, seconds: float, overtravel: list[str], collision: str
-              ) -> dict[str, Any]:
-        return {"op": op, "step_time_s": seconds, "overtravel": overtravel,
-                "collision": collision}
+        return self._batch.notebooks[0].predicted_tcp_rigid_mm()
 
 
-def _mounting_columns(space: ParameterSpace, mounting: int) -> list[int]:
-    """Columns of ``space`` a reading of ``mounting`` depends on: the machine's errors and
-    its own instrument's parameters (a stand's four, a tracker station's three)."""
-    names = space.names
-    prefix = space.mountings[mounting]
-    if isinstance(space.specs[mounting], TrackerAxis):
-        prefix = station_of(prefix)
-    return list(range(len(ERROR_NAMES))) + [
-        c for c in range(len(ERROR_NAMES), len(names))
-        if names[c].rsplit(".", 1)[0] == prefix]
+def reset_machine(options: dict[str, Any] | None) -> MachineParams | None:
+    """The machine of a lab's reset options (None: draw one), or ``ValueError``."""
+    options = dict(options or {})
+    unknown = sorted(set(options) - {"machine"})
+    if unknown:
+        raise ValueError(f"unknown reset option(s) {unknown}; allowed: machine")
+    given = options.get("machine")
+    if isinstance(given, dict):
+        return MachineParams.from_dict(given)
+    if isinstance(given, MachineParams):
+        return check_validity(given)
+    if given is not None:
+        raise ValueError("reset option 'machine' must be a dict in the machine file schema "
+                         "or a MachineParams")
+    return None
 
 
-def _integer(value: Any, name: str, size: int) -> int:
-    if isinstance(value, bool | np.bool_) or not isinstance(value, int | np.integer) or (
-            not 0 <= int(value) < size):
-        raise ValueError(f"action {name} must be an integer in [0, {size}), got {value!r}")
-    return int(value)
-
-
-def _random_rotation(rng: np.random.Generator) -> np.ndarray:
-    """A uniformly random rotation matrix (a normalised normal quaternion)."""
-    q = rng.normal(size=4)
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-
-
+def _first(obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The lone episode's row of a batch's observation."""
+    return {key: value[0] for key, value in obs.items()}

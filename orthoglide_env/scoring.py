@@ -119,11 +119,35 @@ def tcp_error_vectors(model: MachineParams, truth: MachineParams,
     true machine commanded with ``model``; NaN rows where ``model`` has no command within
     the control limits."""
     targets = np.asarray(targets, dtype=float)
-    rho = commands(model, targets).reshape(-1, 3)
+    return tcp_error_vectors_many([model], [truth], targets.reshape(-1, 3))[0].reshape(
+        targets.shape)
+
+
+def tcp_error_vectors_many(models: Sequence[MachineParams], truths: Sequence[MachineParams],
+                           targets: np.ndarray) -> np.ndarray:
+    """:func:`tcp_error_vectors` of many pairs over the targets (n, 3): (M, n, 3).  The
+    true machines reach their commands in one batched solve; each machine's numbers are
+    those it gets alone."""
+    rho = np.stack([commands(m, targets) for m in models])  # (M, n, 3)
     inside = np.isfinite(rho).all(axis=-1)
-    reached = np.full(rho.shape, np.nan)
-    reached[inside] = _rowwise(lambda r: direct(truth, r), rho[inside])
-    return reached.reshape(targets.shape) - targets
+
+    def alone(m: int) -> np.ndarray:
+        out = np.full(rho[m].shape, np.nan)
+        out[inside[m]] = _rowwise(lambda r: direct(truths[m], r), rho[m][inside[m]])
+        return out
+
+    # Rows without a command are solved at Zero (any posture will do) and dropped.
+    reached = _direct_many(list(truths), np.where(inside[..., None], rho, 0.0), alone)
+    return np.where(inside[..., None], reached, np.nan) - targets
+
+
+def _direct_many(machines: list[MachineParams], rho: np.ndarray,
+                 alone: Callable[[int], np.ndarray]) -> np.ndarray:
+    """``direct(machines[m], rho[m])`` for each machine (``rho`` (M, ..., 3)) in one
+    batched solve, or, when a posture cannot be assembled, ``alone(m)`` for each."""
+    with contextlib.suppress(UnreachableError):
+        return direct(MachineParams.stack(machines), rho)
+    return np.stack([alone(m) for m in range(len(machines))])
 
 
 def tcp_errors(model: MachineParams, truth: MachineParams, targets: np.ndarray) -> np.ndarray:
@@ -214,14 +238,12 @@ def score_batch(
 ) -> list[ScoreReport]:
     """Score each estimate against its true machine (see :func:`score`).
 
-    The kinematics run machine by machine (``MachineParams`` holds one machine); the
-    frame fits run once over the whole batch."""
+    The kinematics and the frame fits run once over the whole batch."""
     if len(estimates) != len(truths) or not truths:
         raise ValueError("score_batch needs as many estimates as true machines, at least one")
     targets = workspace_grid() if grid is None else np.asarray(grid, dtype=float)
-    before = np.stack([tcp_error_vectors(MachineParams(), t, targets) for t in truths])
-    after = np.stack([tcp_error_vectors(e, t, targets)
-                      for e, t in zip(estimates, truths, strict=True)])
+    before = tcp_error_vectors_many([MachineParams()] * len(truths), truths, targets)
+    after = tcp_error_vectors_many(estimates, truths, targets)
     usable = np.isfinite(before).all(axis=-1) & np.isfinite(after).all(axis=-1)
     empty = np.flatnonzero(~usable.any(axis=-1))
     if empty.size:
@@ -261,14 +283,33 @@ def tcp_jacobian(model: MachineParams, grid: np.ndarray | None = None
     and the derivative of the TCP reached at those commands over the machine's 27 errors
     (m, 3, 27), all perturbations in one batched solve: to first order the error of a
     machine compensated with ``model`` is ``jac @ (theta - theta_model)``."""
+    return tcp_jacobians([model], grid)[0]
+
+
+def tcp_jacobians(models: Sequence[MachineParams], grid: np.ndarray | None = None
+                  ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """:func:`tcp_jacobian` of each model, every perturbation of every model in one
+    batched solve (each model's numbers are those it gets alone)."""
+    if not models:
+        return []
     targets = workspace_grid() if grid is None else np.asarray(grid, dtype=float)
-    rho = commands(model, targets)
+    rho = np.stack([commands(m, targets) for m in models])  # (M, n, 3)
     usable = np.isfinite(rho).all(axis=-1)
-    rho = rho[usable]
-    theta = model.to_vector()
+    theta = np.stack([m.to_vector() for m in models])[:, None, :]
     steps = TCP_FD_STEP * np.eye(len(ERROR_NAMES))
-    moved = direct(MachineParams.from_vector(np.vstack([theta, theta + steps])), rho[None])
-    return targets[usable], np.moveaxis((moved[1:] - moved[0]) / TCP_FD_STEP, 0, -1)
+    perturbed = [MachineParams.from_vector(t) for t in np.concatenate([theta, theta + steps],
+                                                                      axis=1)]
+
+    def alone(m: int) -> np.ndarray:
+        out = np.zeros((len(ERROR_NAMES) + 1, *rho[m].shape))
+        out[:, usable[m]] = direct(perturbed[m], rho[m][usable[m]][None])
+        return out
+
+    # Targets without a command are solved at Zero (any posture will do) and dropped.
+    moved = _direct_many(perturbed, np.where(usable[:, None, :, None], rho[:, None], 0.0),
+                         alone)  # (M, 28, n, 3)
+    jac = np.moveaxis((moved[:, 1:] - moved[:, :1]) / TCP_FD_STEP, 1, -1)
+    return [(targets[u], j[u]) for u, j in zip(usable, jac, strict=True)]
 
 
 def motion_basis(targets: np.ndarray, frame: str) -> np.ndarray:
@@ -313,5 +354,12 @@ def predicted_tcp_frames(model: MachineParams, covariance: np.ndarray,
                          grid: np.ndarray | None = None) -> FrameErrors:
     """Expected TCP error over the grid, in the three frames, of a machine compensated with
     ``model`` whose 27 errors are off by ``N(0, covariance)``."""
-    targets, jac = tcp_jacobian(model, grid)
-    return predicted_frame_errors(targets, jac, covariance)
+    return predicted_tcp_frames_many([model], [covariance], grid)[0]
+
+
+def predicted_tcp_frames_many(models: Sequence[MachineParams],
+                              covariances: Sequence[np.ndarray],
+                              grid: np.ndarray | None = None) -> list[FrameErrors]:
+    """:func:`predicted_tcp_frames` of each model and covariance (the kinematics batched)."""
+    return [predicted_frame_errors(targets, jac, cov) for (targets, jac), cov in zip(
+        tcp_jacobians(models, grid), covariances, strict=True)]

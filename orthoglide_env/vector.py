@@ -49,7 +49,122 @@ from .task import CalibrationTask, Reading
 RESET_MASK = "reset_mask"
 
 
-class OrthoglideCalibrationVectorEnv(VectorEnv):
+def check_num_envs(num_envs: Any) -> int:
+    """``num_envs`` as a positive int, or ``ValueError``."""
+    if isinstance(num_envs, bool) or not isinstance(num_envs, numbers.Integral) or (
+        num_envs < 1
+    ):
+        raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
+    return int(num_envs)
+
+
+def check_autoreset_mode(mode: str | AutoresetMode) -> AutoresetMode:
+    """Gymnasium's autoreset mode named by ``mode``, or ``ValueError``."""
+    try:
+        return AutoresetMode(mode)
+    except ValueError:
+        raise ValueError(f"unknown autoreset_mode {mode!r}; choose from "
+                         f"{[m.value for m in AutoresetMode]}") from None
+
+
+class SeededVectorEnv(VectorEnv):
+    """What the native vector envs share: one random stream per env, spread and seeded as
+    ``SyncVectorEnv`` seeds its envs, saved and restored around a failed reset, and
+    Gymnasium's reset mask.  A subclass sets ``num_envs`` and calls :meth:`_init_streams`,
+    and says with :attr:`_started` whether every env has been reset."""
+
+    num_envs: int
+
+    def _init_streams(self) -> None:
+        self._streams: list[np.random.Generator | None] = [None] * self.num_envs
+        self._seeds: list[int | None] = [None] * self.num_envs
+
+    @property
+    def _started(self) -> bool:
+        raise NotImplementedError
+
+    @property
+    def np_random(self) -> tuple[np.random.Generator, ...]:  # type: ignore[override]
+        """Every env's random stream (as ``SyncVectorEnv.np_random``)."""
+        return tuple(self._stream(i) for i in range(self.num_envs))
+
+    @property
+    def np_random_seed(self) -> tuple[int | None, ...]:  # type: ignore[override]
+        """The seed of every env's random stream."""
+        for i in range(self.num_envs):
+            self._stream(i)  # a stream not yet drawn gets its random seed here
+        return tuple(self._seeds)
+
+    def _stream(self, i: int) -> np.random.Generator:
+        """Env ``i``'s random stream; like ``gym.Env.np_random`` it is seeded at random when
+        first needed without a seed."""
+        stream = self._streams[i]
+        if stream is None:
+            stream, self._seeds[i] = seeding.np_random()
+            self._streams[i] = stream
+        return stream
+
+    def _new_streams(self, rows: np.ndarray, seeds: list[int | None]
+                     ) -> tuple[list[np.random.Generator], list[int | None]]:
+        """The streams the envs ``rows`` reset with: a new one per seed given, else their
+        own; and their seeds.  Nothing is stored (see :meth:`_keep_streams`)."""
+        streams, used = [], []
+        for i, seed in zip(rows, seeds, strict=True):
+            if seed is None:
+                streams.append(self._stream(int(i)))
+                used.append(self._seeds[i])
+            else:
+                stream, value = seeding.np_random(seed)
+                streams.append(stream)
+                used.append(value)
+        return streams, used
+
+    def _keep_streams(self, rows: np.ndarray, streams: list[np.random.Generator],
+                      seeds: list[int | None]) -> None:
+        for i, stream, seed in zip(rows, streams, seeds, strict=True):
+            self._streams[i], self._seeds[i] = stream, seed
+
+    def _saved_streams(self, rows: np.ndarray) -> list[tuple[int, np.random.Generator | None,
+                                                             dict | None, int | None]]:
+        """The streams of envs ``rows`` as they stand, for :meth:`_restore_streams`."""
+        return [(int(i), self._streams[i],
+                 None if self._streams[i] is None else self._streams[i].bit_generator.state,
+                 self._seeds[i]) for i in rows]
+
+    def _restore_streams(self, saved: list) -> None:
+        for i, stream, state, seed in saved:
+            self._streams[i], self._seeds[i] = stream, seed
+            if stream is not None:
+                stream.bit_generator.state = state
+
+    def _seed_list(self, seed: Any) -> list[int | None]:
+        """One seed per env from ``reset``'s ``seed`` (as ``SyncVectorEnv`` spreads it)."""
+        if seed is None:
+            return [None] * self.num_envs
+        if isinstance(seed, int) and not isinstance(seed, bool):
+            check_seed(seed)
+            return [seed + i for i in range(self.num_envs)]
+        if not isinstance(seed, list | tuple) or len(seed) != self.num_envs:
+            raise ValueError(f"reset seed must be None, an integer >= 0 or a list of "
+                             f"{self.num_envs} such values, got {seed!r}")
+        for value in seed:
+            check_seed(value)
+        return list(seed)
+
+    def _reset_mask(self, mask: Any) -> np.ndarray:
+        """Which envs a reset resets: all, or ``options["reset_mask"]``."""
+        if mask is None:
+            return np.ones(self.num_envs, dtype=bool)
+        if not (isinstance(mask, np.ndarray) and mask.dtype == np.bool_
+                and mask.shape == (self.num_envs,) and mask.any()):
+            raise ValueError(f"reset option 'reset_mask' must be a numpy boolean array of "
+                             f"shape ({self.num_envs},) with at least one True, got {mask!r}")
+        if not self._started and not mask.all():
+            raise RuntimeError("call reset() for every env before resetting a few")
+        return mask
+
+
+class OrthoglideCalibrationVectorEnv(SeededVectorEnv):
     """``num_envs`` calibration experiments on virtual Orthoglides, stepped together.
 
     Env ``i`` behaves exactly as one :class:`~orthoglide_env.env.OrthoglideCalibrationEnv`
@@ -160,15 +275,8 @@ class OrthoglideCalibrationVectorEnv(VectorEnv):
         if backend == "pybullet":
             raise ValueError("the native vector env runs backend='exact' only; for PyBullet "
                              "machines use vectorization_mode='sync' or 'async'")
-        if isinstance(num_envs, bool) or not isinstance(num_envs, numbers.Integral) or (
-            num_envs < 1
-        ):
-            raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
-        try:
-            self.autoreset_mode = AutoresetMode(autoreset_mode)
-        except ValueError:
-            raise ValueError(f"unknown autoreset_mode {autoreset_mode!r}; choose from "
-                             f"{[m.value for m in AutoresetMode]}") from None
+        num_envs = check_num_envs(num_envs)
+        self.autoreset_mode = check_autoreset_mode(autoreset_mode)
         settings = EnvSettings.check(
             errors=errors, gauge_sigma=gauge_sigma, gauge_resolution=gauge_resolution,
             motion=motion, backend=backend, gauges=gauges, travel=travel,
@@ -189,8 +297,7 @@ class OrthoglideCalibrationVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         n, g = self.num_envs, len(settings.layout)
-        self._streams: list[np.random.Generator | None] = [None] * n
-        self._seeds: list[int | None] = [None] * n
+        self._init_streams()
         self._machines: MachineParams | None = None
         self._gauges: GaugeArray | None = None
         self.gauge_layouts: list[tuple[GaugeSpec, ...]] = [settings.layout] * n
@@ -212,40 +319,9 @@ class OrthoglideCalibrationVectorEnv(VectorEnv):
         gauges = self._require_episodes()[1]
         return [gauges[i].to_gauges() for i in range(self.num_envs)]
 
-    # -- random streams -------------------------------------------------------------------------
     @property
-    def np_random(self) -> tuple[np.random.Generator, ...]:  # type: ignore[override]
-        """Every env's random stream (as ``SyncVectorEnv.np_random``)."""
-        return tuple(self._stream(i) for i in range(self.num_envs))
-
-    @property
-    def np_random_seed(self) -> tuple[int | None, ...]:  # type: ignore[override]
-        """The seed of every env's random stream."""
-        for i in range(self.num_envs):
-            self._stream(i)  # a stream not yet drawn gets its random seed here
-        return tuple(self._seeds)
-
-    def _stream(self, i: int) -> np.random.Generator:
-        """Env ``i``'s random stream; like ``gym.Env.np_random`` it is seeded at random when
-        first needed without a seed."""
-        stream = self._streams[i]
-        if stream is None:
-            stream, self._seeds[i] = seeding.np_random()
-            self._streams[i] = stream
-        return stream
-
-    def _saved_streams(self, rows: np.ndarray) -> list[tuple[int, np.random.Generator | None,
-                                                             dict | None, int | None]]:
-        """The streams of envs ``rows`` as they stand, for :meth:`_restore_streams`."""
-        return [(int(i), self._streams[i],
-                 None if self._streams[i] is None else self._streams[i].bit_generator.state,
-                 self._seeds[i]) for i in rows]
-
-    def _restore_streams(self, saved: list) -> None:
-        for i, stream, state, seed in saved:
-            self._streams[i], self._seeds[i] = stream, seed
-            if stream is not None:
-                stream.bit_generator.state = state
+    def _started(self) -> bool:
+        return self._machines is not None
 
     # -- Gymnasium API --------------------------------------------------------------------------
     def reset(
@@ -359,16 +435,7 @@ class OrthoglideCalibrationVectorEnv(VectorEnv):
         """New episodes for envs ``rows``, drawn as each env's single counterpart draws its
         own (machine, gauge installation, first reading's noise): nothing is stored, but
         the streams of existing envs advance (the caller restores them on failure)."""
-        streams = []
-        seeds_used = []
-        for i, seed in zip(rows, seeds, strict=True):
-            if seed is None:
-                streams.append(self._stream(int(i)))
-                seeds_used.append(self._seeds[i])
-            else:
-                stream, used = seeding.np_random(seed)
-                streams.append(stream)
-                seeds_used.append(used)
+        streams, seeds_used = self._new_streams(rows, seeds)
         if not len(rows):
             return _Fresh(rows, streams, seeds_used, None, None, layout, None, None)
         machines = MachineParams.stack([machine if machine is not None
@@ -396,8 +463,7 @@ class OrthoglideCalibrationVectorEnv(VectorEnv):
         rows = fresh.rows
         if not len(rows):
             return
-        for i, stream, seed in zip(rows, fresh.streams, fresh.seeds, strict=True):
-            self._streams[i], self._seeds[i] = stream, seed
+        self._keep_streams(rows, fresh.streams, fresh.seeds)
         if len(rows) == self.num_envs:
             machines, gauges = fresh.machines, fresh.gauges
         else:
@@ -422,32 +488,6 @@ class OrthoglideCalibrationVectorEnv(VectorEnv):
         if self._machines is None or self._gauges is None:
             raise RuntimeError("call reset() before using the environment")
         return self._machines, self._gauges
-
-    def _seed_list(self, seed: Any) -> list[int | None]:
-        """One seed per env from ``reset``'s ``seed`` (as ``SyncVectorEnv`` spreads it)."""
-        if seed is None:
-            return [None] * self.num_envs
-        if isinstance(seed, int) and not isinstance(seed, bool):
-            check_seed(seed)
-            return [seed + i for i in range(self.num_envs)]
-        if not isinstance(seed, list | tuple) or len(seed) != self.num_envs:
-            raise ValueError(f"reset seed must be None, an integer >= 0 or a list of "
-                             f"{self.num_envs} such values, got {seed!r}")
-        for value in seed:
-            check_seed(value)
-        return list(seed)
-
-    def _reset_mask(self, mask: Any) -> np.ndarray:
-        """Which envs a reset resets: all, or ``options["reset_mask"]``."""
-        if mask is None:
-            return np.ones(self.num_envs, dtype=bool)
-        if not (isinstance(mask, np.ndarray) and mask.dtype == np.bool_
-                and mask.shape == (self.num_envs,) and mask.any()):
-            raise ValueError(f"reset option 'reset_mask' must be a numpy boolean array of "
-                             f"shape ({self.num_envs},) with at least one True, got {mask!r}")
-        if self._machines is None and not mask.all():
-            raise RuntimeError("call reset() for every env before resetting a few")
-        return mask
 
     def _infos(self, present: np.ndarray, names: list[list[str]], status: Sequence,
                overtravel: Sequence, step_time: np.ndarray, collision: Sequence
