@@ -129,9 +129,11 @@ def test_remounts_are_taken_when_they_pay() -> None:
 
 def test_active_agents_filter_follows_the_estimator_and_presses_nothing() -> None:
     """The active agent's filter is the extended estimator linearised at the nominal
-    machine: after an episode its mean machine moves the tool within a few microns of
-    where the full non-linear fit of the same notebook puts it (second-order terms of
-    ~2 mm errors over 310 mm legs), and its feedback never presses a gauge."""
+    machine: after an episode its mean machine puts the tool where the full non-linear fit
+    of the same notebook puts it, up to the second-order terms the linearisation drops
+    (~delta^2 / L: 2 mm errors over 310 mm legs give 0.013 mm; 0.05 mm is 4 mm errors,
+    two sigmas of the realistic preset), against 0.7 mm before calibration; and its
+    feedback never presses a gauge."""
     env = gym.make(orthoglide_env.LAB_ENV_ID, gauge_sigma=SIGMA, budget_s=600.0)
     agent = get_agent("active")
     observation, info = env.reset(seed=4)
@@ -149,5 +151,5 @@ def test_active_agents_filter_follows_the_estimator_and_presses_nothing() -> Non
         agent.planner.mean[:N_MACHINE] * default_scales(ParameterSpace()))
     gap = score(filtered, est.machine).tcp_after.rigid.rms
     error = score(est.machine, lab.true_machine).tcp_after.rigid.rms
-    assert gap < 0.005
+    assert gap < 0.05
     assert error < 0.05
