@@ -44,7 +44,18 @@ AGENT_REGISTRY: Registry[Agent] = Registry("agent", "calibrators.agents")
 AGENTS = AGENT_REGISTRY.classes
 register = AGENT_REGISTRY.register
 available = AGENT_REGISTRY.available
-get_agent = AGENT_REGISTRY.get
+#: ``get_agent(POLICY_PREFIX + path)`` plays the learned policy saved in ``path``.
+POLICY_PREFIX: str = "policy:"
+
+
+def get_agent(name: str) -> Agent:
+    """A new agent: one registered by ``name``, or ``policy:PATH``, the learned policy saved
+    in the file PATH (:mod:`calibrators.agents.policy`)."""
+    if name.startswith(POLICY_PREFIX):
+        from .policy import PolicyAgent
+
+        return PolicyAgent(name[len(POLICY_PREFIX):])
+    return AGENT_REGISTRY.get(name)
 
 
 def action(op: Op, rho: np.ndarray | None = None, stand: int = 0, slot: int = 0

@@ -17,6 +17,7 @@ from orthoglide_env.geometry import PRESETS
 from orthoglide_env.scoring import FRAMES
 
 from ..agents import available as agents_available
+from ..agents import get_agent
 from ..compare import Config, Trial, run, summary, verify_pybullet
 from ..engines import ENGINES, RAY_INSTALL_HINT, ray_available
 from ..experiment import ESTIMATORS
@@ -36,10 +37,8 @@ def _names(text: str, option: str) -> tuple[str, ...]:
 
 def _check(args: argparse.Namespace) -> Config:
     agents = _names(args.agents, "--agents")
-    known = agents_available()
     for name in agents:
-        if name not in known:
-            raise UsageError(f"unknown agent '{name}'; choose from {known}")
+        get_agent(name)  # a ValueError names the known agents, or why a policy cannot run
     estimators = _names(args.estimators, "--estimators")
     for name in estimators:
         if name not in ESTIMATORS:
@@ -214,8 +213,8 @@ def add(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("compare", help="agents x estimators on the same random machines, "
                                        "at an equal time budget")
     p.add_argument("--agents", default="paper,random,tracker",
-                   help=f"comma list of agents ({', '.join(agents_available())}) "
-                        "(default: %(default)s)")
+                   help=f"comma list of agents ({', '.join(agents_available())}, or "
+                        "policy:FILE, a learned policy) (default: %(default)s)")
     p.add_argument("--estimators", default="paper,extended",
                    help=f"comma list of estimators ({', '.join(ESTIMATORS)}) "
                         "(default: %(default)s)")

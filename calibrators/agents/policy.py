@@ -1,0 +1,203 @@
+"""``policy:FILE``: a learned policy, trained with stable-baselines3 on the flat lab env.
+
+A policy file is the zip stable-baselines3 saves, with one more entry,
+:data:`SPEC_ENTRY`: what the policy was trained on (the slot catalogue, the operations,
+the sizes of the flat observation and action, the lab time of a training episode) and
+the observation normalisation it learned behind (``VecNormalize``'s running mean and
+variance).  The agent wraps its lab env in the training env's mapping
+(:class:`~orthoglide_env.wrappers.FlatLabActions` and ``FlattenObservation``), normalises
+each observation as training did, and draws its action from the policy's distribution
+with the agent's own random stream (seeded per machine by ``compare``: an episode is
+reproducible) until it has used the lab time of a training episode; then it stops, since
+beyond that time the policy has never acted.  It sees what every agent sees, never the
+machine's truth.
+
+Why draw and not play the mean action: the lab's information reward pays for readings at
+new postures, and a policy learns them as the spread of its actions around a mean that
+barely moves; played alone, the mean drives to one posture and reads it again and again
+(one policy of ``examples/train_policy.py``: 0.137 mm with its mean action, 0.054 mm
+drawing, median over four held-out machines).
+
+A file trained on another lab (a slot catalogue that has grown since, another number of
+stands) is refused with the reason, before any episode: the policy's inputs and outputs
+would mean other things.  ``examples/train_policy.py`` trains and saves one.
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from dataclasses import asdict, dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.wrappers import FlattenObservation
+
+from orthoglide_env.lab import OP_NAMES, SLOT_NAMES, Op
+from orthoglide_env.wrappers import FlatLabActions
+
+from .base import Agent, action
+
+#: The entry of the policy zip that holds the :class:`PolicySpec` (JSON).
+SPEC_ENTRY: str = "orthoglide_policy.json"
+#: Version of that entry's layout: a file of another version is refused.
+SPEC_VERSION: int = 1
+INSTALL_HINT: str = "install the extra: pip install '.[rl]'"
+
+
+@dataclass(frozen=True)
+class PolicySpec:
+    """What a saved policy was trained on, and how its observations were normalised."""
+
+    algorithm: str  # the stable-baselines3 class, e.g. "PPO"
+    slots: tuple[str, ...]  # SLOT_NAMES of the training lab
+    ops: tuple[str, ...]  # OP_NAMES of the training lab
+    stands: int
+    observation_size: int
+    action_size: int
+    budget_s: float  # lab time of a training episode
+    env: dict[str, Any]  # the lab env's keyword arguments in training (for the record)
+    #: VecNormalize's running statistics of the flat observation (empty: not normalised).
+    obs_mean: tuple[float, ...] = ()
+    obs_var: tuple[float, ...] = ()
+    clip_obs: float = 10.0
+    epsilon: float = 1e-8
+    version: int = SPEC_VERSION
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self))
+
+    @classmethod
+    def from_json(cls, text: str) -> PolicySpec:
+        data = json.loads(text)
+        for key in ("slots", "ops", "obs_mean", "obs_var"):
+            data[key] = tuple(data.get(key, ()))
+        return cls(**data)
+
+    def normalise(self, flat: np.ndarray) -> np.ndarray:
+        """The observation as the policy saw it in training: VecNormalize's formula with
+        its frozen statistics."""
+        if not self.obs_mean:
+            return flat
+        scaled = (flat - np.asarray(self.obs_mean)) / np.sqrt(np.asarray(self.obs_var)
+                                                              + self.epsilon)
+        return np.clip(scaled, -self.clip_obs, self.clip_obs)
+
+
+def spec_of(env: gym.Env, algorithm: str, env_kwargs: dict[str, Any],
+            normaliser: Any | None = None) -> PolicySpec:
+    """The spec of a policy trained on the flat lab ``env`` (``normaliser``: the training
+    VecNormalize, or None)."""
+    lab = env.unwrapped
+    rms = getattr(normaliser, "obs_rms", None)
+    return PolicySpec(
+        algorithm=algorithm, slots=SLOT_NAMES, ops=OP_NAMES, stands=int(lab.n_stands),
+        observation_size=int(env.observation_space.shape[0]),
+        action_size=int(env.action_space.shape[0]), budget_s=float(lab.budget_s),
+        env=dict(env_kwargs),
+        obs_mean=tuple(float(v) for v in rms.mean) if rms is not None else (),
+        obs_var=tuple(float(v) for v in rms.var) if rms is not None else (),
+        clip_obs=float(getattr(normaliser, "clip_obs", 10.0)),
+        epsilon=float(getattr(normaliser, "epsilon", 1e-8)),
+    )
+
+
+def save_policy(model: Any, path: str | Path, spec: PolicySpec) -> Path:
+    """Save the stable-baselines3 ``model`` to ``path`` (a zip, the name as given) with
+    ``spec`` inside it."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("wb") as handle:
+        model.save(handle)
+    with zipfile.ZipFile(path, "a") as archive:
+        archive.writestr(SPEC_ENTRY, spec.to_json())
+    return path
+
+
+def read_spec(path: str | Path) -> PolicySpec:
+    """The spec of the policy file ``path``, checked against this lab (no learning library
+    needed): ``ValueError`` saying why it cannot run here."""
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"no policy file '{path}' (train one: python examples/train_policy.py "
+                         f"--out {path})")
+    try:
+        with zipfile.ZipFile(path) as archive:
+            spec = PolicySpec.from_json(archive.read(SPEC_ENTRY).decode())
+    except (zipfile.BadZipFile, KeyError, TypeError, ValueError):
+        raise ValueError(f"'{path}' is not a policy file of this workbench (a zip saved by "
+                         "examples/train_policy.py)") from None
+    if spec.version != SPEC_VERSION:
+        raise ValueError(f"policy file '{path}' has layout version {spec.version}, this "
+                         f"workbench reads {SPEC_VERSION}: retrain it")
+    if spec.slots != SLOT_NAMES or spec.ops != OP_NAMES:
+        raise ValueError(
+            f"policy file '{path}' was trained on a lab with {len(spec.slots)} slots and "
+            f"operations {list(spec.ops)}; this lab has {len(SLOT_NAMES)} slots and "
+            f"{list(OP_NAMES)}: its actions and observations mean other things here, "
+            "retrain it (examples/train_policy.py)")
+    return spec
+
+
+@lru_cache(maxsize=4)
+def _load_model(path: str, modified_ns: int, algorithm: str) -> Any:
+    """The stable-baselines3 model in ``path``, loaded once per file version (an agent is
+    made for every episode of a comparison)."""
+    try:
+        import stable_baselines3
+    except ImportError:
+        raise RuntimeError(f"running a learned policy needs stable-baselines3: "
+                           f"{INSTALL_HINT}") from None
+    cls = getattr(stable_baselines3, algorithm, None)
+    if cls is None:
+        raise ValueError(f"policy file '{path}' names an unknown algorithm '{algorithm}'")
+    return cls.load(path, device="cpu")
+
+
+class PolicyAgent(Agent):
+    """Plays the policy saved in ``path`` (see the module); not in the registry, made by
+    ``get_agent("policy:PATH")``."""
+
+    name = "policy"
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self.spec = read_spec(self.path)
+        self.model = _load_model(str(self.path.resolve()), self.path.stat().st_mtime_ns,
+                                 self.spec.algorithm)
+        sizes = (self.model.observation_space.shape, self.model.action_space.shape)
+        if sizes != ((self.spec.observation_size,), (self.spec.action_size,)):
+            raise ValueError(f"policy file '{self.path}': the network's spaces {sizes} differ "
+                             "from its spec: the file is damaged")
+
+    def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
+              rng: np.random.Generator) -> None:
+        super().reset(env, observation, rng)
+        self.flat = FlattenObservation(FlatLabActions(self.env))
+        sizes = (self.flat.observation_space.shape[0], self.flat.action_space.shape[0])
+        if sizes != (self.spec.observation_size, self.spec.action_size):
+            raise ValueError(
+                f"policy file '{self.path}' was trained on a lab of {self.spec.stands} "
+                f"stands with {self.spec.observation_size} observations and "
+                f"{self.spec.action_size} actions; this lab ({self.env.n_stands} stands, "
+                f"tracker {'on' if self.env.tracker else 'off'}) has {sizes[0]} and "
+                f"{sizes[1]}")
+
+    def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
+        if observation["time"][0] >= self.spec.budget_s:
+            return action(Op.STOP)
+        mean, std = self._distribution(self.spec.normalise(self.flat.observation(observation)))
+        # Clipped to the Box by the mapping, as stable-baselines3 clipped it in training.
+        return self.flat.env.action(mean + std * self.rng.standard_normal(mean.shape))
+
+    def _distribution(self, flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Mean and standard deviation of the policy's (diagonal Gaussian) action."""
+        import torch
+
+        with torch.no_grad():
+            tensor, _ = self.model.policy.obs_to_tensor(flat)
+            normal = self.model.policy.get_distribution(tensor).distribution
+            return normal.mean.numpy()[0], normal.stddev.numpy()[0]

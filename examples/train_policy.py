@@ -1,0 +1,294 @@
+"""Train a learned calibration agent with stable-baselines3 and compare it on held-out
+machines.
+
+    pip install -e '.[rl]'
+    python examples/train_policy.py [--steps 120000] [--envs 8] [--reward information]
+        [--budget 600] [--out results/policy.zip] [--machines 20]
+    orthoglide compare --agents policy:results/policy.zip,random,paper --estimators extended
+
+PPO learns on ``OrthoglideLab-v0`` through its flat view (one Box of actions, one of
+observations, :mod:`orthoglide_env.wrappers`), several envs in parallel, observations
+normalised by ``VecNormalize`` (its statistics are saved with the policy: the agent
+``policy:FILE`` normalises as training did).  Every ``--every`` steps the policy so far
+is saved and played on the first ``--curve-machines`` held-out machines, scored by
+:func:`calibrators.compare.run` exactly as ``orthoglide compare`` scores any agent; the
+learning curve goes to ``<out>.curve.csv`` and ``<out>.curve.png``.  At the end the
+policy is compared with ``random``, ``paper`` and every other designed agent that is
+registered on ``--machines`` held-out machines.
+
+Why PPO: the CPU is the limit (an env step costs ~3 ms), and PPO's updates cost little per
+step, where SAC or TD3 take a gradient step per env step; the information reward is dense
+enough for an on-policy learner.
+
+Held-out machines: comparison machine ``i`` of seed ``s`` is drawn from seed
+``s * 1000003 + i``; training machines come from each env's own stream, seeded
+``--seed + rank`` once, so with ``--eval-seed`` >= 1 no held-out machine is a training
+machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from calibrators import compare
+from calibrators.agents import available
+from calibrators.agents.base import POLICY_PREFIX
+from calibrators.agents.policy import PolicySpec, save_policy, spec_of
+from calibrators.experiment import make_estimator
+from orthoglide_env.geometry import RHO_MAX, RHO_MIN
+from orthoglide_env.lab import Op
+from orthoglide_env.wrappers import flat_lab_env
+
+#: The estimator that scores every evaluation (the comparison's headline).
+ESTIMATOR: str = "extended"
+#: The untrained policy (:func:`start_near_zero`): log standard deviation of its actions,
+#: the bias of ``move`` in the operation block (another operation wins an untrained step's
+#: arg-max about once in 30 steps), and the spread of its joint targets around Zero (mm;
+#: every paper gauge reads within about 5 mm of Zero).
+LOG_STD_INIT: float = -1.0
+MOVE_BIAS: float = 0.6
+RHO_SPREAD_MM: float = 5.0
+#: Agents of the final table besides the policy, when registered (``optimal`` and
+#: ``active`` are designed experiments; ``tracker`` reads another instrument).
+BASELINES: tuple[str, ...] = ("random", "paper", "optimal", "active")
+
+
+@dataclass(frozen=True)
+class Lab:
+    """The lab of training and of every evaluation (the comparison's defaults: one hour
+    for every agent; the policy stops after its training episodes' time)."""
+
+    errors: str = "realistic"
+    sigma: float = 0.01
+    budget_s: float = 3600.0
+
+    def env_kwargs(self, reward: str, budget_s: float) -> dict[str, Any]:
+        """Keyword arguments of the training lab env, episodes of ``budget_s``."""
+        kwargs: dict[str, Any] = {"errors": self.errors, "gauge_sigma": self.sigma,
+                                  "budget_s": budget_s, "reward": reward}
+        if reward == "accuracy":
+            kwargs["estimator"] = make_estimator(ESTIMATOR)
+        return kwargs
+
+    def config(self, agents: tuple[str, ...], seed: int) -> compare.Config:
+        return compare.Config(agents, (ESTIMATOR,), budget_s=self.budget_s, errors=self.errors,
+                              sigma=self.sigma, seed=seed)
+
+
+def start_near_zero(model: Any) -> None:
+    """Start from small moves around Zero.  The untrained policy's mean action is 0: every
+    operation as likely (a fifth of the steps stop the episode) and every move to the
+    middle of the joint range, where the bars push most engaged gauges past their travel
+    (they fault, and read nothing more).  Its first episodes would teach little.  Biasing
+    the operation block towards ``move`` (:data:`MOVE_BIAS` against the spread
+    ``exp(LOG_STD_INIT)``) and centring the joint targets on Zero with a spread of
+    :data:`RHO_SPREAD_MM`, inside the travel of the gauges, makes them experiments that
+    read; training then learns where to go, and whether to lift, re-mount or stop."""
+    import torch
+
+    middle, half = (RHO_MAX + RHO_MIN) / 2, (RHO_MAX - RHO_MIN) / 2
+    bias, log_std = model.policy.action_net.bias, model.policy.log_std
+    with torch.no_grad():
+        bias[:3] = (0.0 - middle) / half
+        log_std[:3] = float(np.log(RHO_SPREAD_MM / half))
+        bias[3:3 + len(Op)] = -MOVE_BIAS
+        bias[3 + Op.MOVE] = MOVE_BIAS
+
+
+def make_vec_env(n_envs: int, env_kwargs: dict[str, Any], seed: int, subprocesses: bool
+                 ) -> Any:
+    """``n_envs`` flat lab envs as a stable-baselines3 ``VecEnv``, env ``k`` seeded
+    ``seed + k``, each in a ``Monitor`` (episode rewards for the curve).
+
+    The one place the training envs are made: a native lab vector env (all machines
+    stepped as arrays in one process) plugs in here behind stable-baselines3's
+    ``VecEnv`` interface, and nothing else changes."""
+    from stable_baselines3.common.monitor import Monitor
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    def factory() -> Any:
+        return Monitor(flat_lab_env(**env_kwargs))
+
+    vec = (SubprocVecEnv([factory] * n_envs, start_method="spawn") if subprocesses
+           else DummyVecEnv([factory] * n_envs))
+    vec.seed(seed)
+    return vec
+
+
+def evaluate(path: Path, lab: Lab, seed: int, machines: int) -> list[dict]:
+    """``compare``'s summary of the policy in ``path`` on held-out machines."""
+    config = lab.config((POLICY_PREFIX + str(path),), seed)
+    return compare.summary(compare.run(config, machines), config.target_mm)
+
+
+def median_rigid(row: dict) -> float:
+    value = row["tcp_after_mm"]["rigid"]["median"]
+    return float("nan") if value is None else value
+
+
+def make_curve_callback(lab: Lab, out: Path, env_kwargs: dict[str, Any], every: int,
+                        seed: int, machines: int, max_minutes: float) -> Any:
+    """A callback that, every ``every`` steps, saves the policy to ``<out>.last.zip``,
+    scores it on ``machines`` held-out machines and appends a row to ``<out>.curve.csv``:
+    steps, minutes of training, mean reward of the last 100 episodes, median TCP error.
+    It ends training after ``max_minutes`` (0: no limit)."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class Curve(BaseCallback):
+        def _on_training_start(self) -> None:
+            self.start = time.perf_counter()
+            self.next = 0
+            self.rows: list[dict[str, float]] = []
+            self.path = out.with_suffix(".last.zip")
+
+        def _on_step(self) -> bool:
+            if self.num_timesteps >= self.next:
+                self.next += every
+                self.record()
+            minutes = (time.perf_counter() - self.start) / 60
+            return not 0 < max_minutes <= minutes
+
+        def _on_training_end(self) -> None:
+            self.record()
+
+        def record(self) -> None:
+            minutes = (time.perf_counter() - self.start) / 60
+            rewards = [e["r"] for e in self.model.ep_info_buffer]
+            save_policy(self.model, self.path,
+                        policy_spec(env_kwargs, self.model.get_vec_normalize_env()))
+            row = evaluate(self.path, lab, seed, machines)[0]
+            self.rows.append({"steps": self.num_timesteps, "minutes": round(minutes, 2),
+                              "mean_episode_reward": float(np.mean(rewards)) if rewards
+                              else float("nan"),
+                              "tcp_rigid_median_mm": median_rigid(row)})
+            write_curve(self.rows, out.with_suffix(".curve.csv"))
+            r = self.rows[-1]
+            print(f"{r['steps']:>8d} steps {r['minutes']:6.1f} min  mean episode reward "
+                  f"{r['mean_episode_reward']:8.3f}  held-out TCP (rigid) median "
+                  f"{r['tcp_rigid_median_mm']:.4f} mm", flush=True)
+
+    return Curve()
+
+
+def policy_spec(env_kwargs: dict[str, Any], normaliser: Any) -> PolicySpec:
+    """What a PPO policy trained on the flat lab of ``env_kwargs`` is saved with: the
+    lab's sizes, the env's keyword arguments a JSON file can keep (not the estimator) and
+    ``normaliser``'s statistics."""
+    recordable = {k: v for k, v in env_kwargs.items() if k != "estimator"}
+    return spec_of(flat_lab_env(**env_kwargs), "PPO", recordable, normaliser)
+
+
+def write_curve(rows: list[dict[str, float]], path: Path) -> None:
+    with path.open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def plot_curve(rows: list[dict[str, float]], baselines: list[dict], path: Path) -> Path:
+    """Mean episode reward and held-out TCP error against training steps; the baselines'
+    medians (on the final table's machines) as horizontal lines."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    steps = [r["steps"] for r in rows]
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
+    top.plot(steps, [r["mean_episode_reward"] for r in rows], marker="o")
+    top.set_ylabel("mean episode reward")
+    bottom.plot(steps, [r["tcp_rigid_median_mm"] for r in rows], marker="o", color="k",
+                label="policy (curve machines)")
+    for row in baselines:
+        bottom.axhline(median_rigid(row), linestyle="--", linewidth=1,
+                       label=f"{row['agent']} ({row['machines']} machines)",
+                       color=f"C{1 + baselines.index(row)}")
+    bottom.set_yscale("log")
+    bottom.set_ylabel("TCP error after rigid motion,\nmedian (mm)")
+    bottom.set_xlabel("training steps")
+    bottom.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def print_table(rows: list[dict], minutes: float, steps: int) -> None:
+    print(f"\nheld-out machines, estimator {ESTIMATOR}; policy trained {steps} steps in "
+          f"{minutes:.1f} min")
+    print(f"{'agent':34}{'TCP rigid med mm':>17}{'p95':>9}{'time med min':>13}"
+          f"{'readings':>10}{'failed':>8}")
+    for r in rows:
+        rigid = r["tcp_after_mm"]["rigid"]
+        p95 = float("nan") if rigid["p95"] is None else rigid["p95"]
+        print(f"{r['agent']:34}{median_rigid(r):17.4f}{p95:9.4f}"
+              f"{r['time_s']['median'] / 60:13.1f}{r['readings_median']:10.0f}{r['failed']:8d}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=120_000, help="training steps")
+    parser.add_argument("--max-minutes", type=float, default=0.0,
+                        help="end training after this many minutes, evaluations included "
+                             "(0: no limit; the curve says how many steps were done)")
+    parser.add_argument("--envs", type=int, default=8, help="envs stepped in parallel")
+    parser.add_argument("--subprocesses", action="store_true",
+                        help="one process per env (SubprocVecEnv) instead of one for all")
+    parser.add_argument("--reward", default="information",
+                        choices=["information", "accuracy"])
+    parser.add_argument("--budget", type=float, default=600.0,
+                        help="lab seconds of a training episode; the policy stops there")
+    parser.add_argument("--seed", type=int, default=0, help="seed of training")
+    parser.add_argument("--eval-seed", type=int, default=1,
+                        help="comparison seed of the held-out machines (>= 1)")
+    parser.add_argument("--every", type=int, default=20_000,
+                        help="steps between two points of the learning curve")
+    parser.add_argument("--curve-machines", type=int, default=6,
+                        help="held-out machines of each learning-curve point")
+    parser.add_argument("--machines", type=int, default=20,
+                        help="held-out machines of the final table")
+    parser.add_argument("--jobs", type=int, default=1, help="processes of the final table")
+    parser.add_argument("--out", type=Path, default=Path("results/policy.zip"))
+    args = parser.parse_args()
+    if args.eval_seed < 1:
+        parser.error("--eval-seed must be >= 1: seed 0's machines include training machines")
+    # One thread each: the learner shares the cores with the envs (and other jobs).
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    torch.set_num_threads(1)
+    lab = Lab()
+    env_kwargs = lab.env_kwargs(args.reward, args.budget)
+    vec = VecNormalize(make_vec_env(args.envs, env_kwargs, args.seed, args.subprocesses),
+                       norm_obs=True, norm_reward=True, gamma=0.99)
+    model = PPO("MlpPolicy", vec, n_steps=128, batch_size=256, gamma=0.99, seed=args.seed,
+                policy_kwargs={"log_std_init": LOG_STD_INIT}, verbose=0)
+    start_near_zero(model)
+    curve = make_curve_callback(lab, args.out, env_kwargs, args.every, args.eval_seed,
+                                args.curve_machines, args.max_minutes)
+    start = time.perf_counter()
+    model.learn(total_timesteps=args.steps, callback=curve)
+    minutes = (time.perf_counter() - start) / 60
+    save_policy(model, args.out, policy_spec(env_kwargs, vec))
+    vec.close()
+    print(f"wrote {args.out}")
+    known = available()
+    agents = (POLICY_PREFIX + str(args.out), *(a for a in BASELINES if a in known))
+    config = lab.config(agents, args.eval_seed)
+    rows = compare.summary(compare.run(config, args.machines, args.jobs), config.target_mm)
+    print_table(rows, minutes, model.num_timesteps)
+    print(f"wrote {plot_curve(curve.rows, rows[1:], args.out.with_suffix('.curve.png'))}")
+
+
+if __name__ == "__main__":
+    main()
