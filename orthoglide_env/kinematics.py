@@ -166,6 +166,37 @@ def direct(
     raise UnreachableError("direct kinematics did not converge: posture near a singularity")
 
 
+#: Central-difference step of :func:`tcp_sensitivity`, in mm or rad.  The loop closure is
+#: a quadratic in the lengths and positions (no truncation error) and smooth in the tilts
+#: (truncation ~step^2 = 1e-6 relative); round-off (~eps * L^2 / step) is ~1e-13.
+CLOSURE_STEP: float = 1e-3
+
+
+def tcp_sensitivity(machine: MachineParams, rho: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Derivative of the TCP over the machine's 27 errors at fixed commands ``rho``, the
+    TCP being ``p = direct(machine, rho)``: shape ``(*batch, *postures, 3, 27)``.
+
+    By the implicit function theorem on the loop closure ``f_i = |C_i - A_i|^2 - L_i^2 =
+    0``: ``dp/dtheta = -(df/dp)^-1 df/dtheta`` with ``df/dp = 2 (C_i - A_i)`` and
+    ``df/dtheta`` by central differences of the closure at fixed ``p``: one 3 x 3 solve
+    per posture instead of a Newton solve per error."""
+    rho = np.asarray(rho, dtype=float)
+    p = np.asarray(p, dtype=float)
+    at = len(machine.batch_shape)
+    theta = machine.to_vector()
+    count = theta.shape[-1]
+    steps = CLOSURE_STEP * np.eye(count)
+    moved = MachineParams.from_vector(theta[..., None, :] + np.concatenate([steps, -steps]))
+    rho_moved, p_moved = np.expand_dims(rho, at), np.expand_dims(p, at)
+    v = leg_vectors(moved, rho_moved, p_moved)
+    lengths, _ = geometry(moved, p_moved)
+    closure = np.sum(v**2, axis=-1) - lengths.lengths**2  # (*batch, 2n, *postures, 3)
+    plus = np.take(closure, np.arange(count), axis=at)
+    minus = np.take(closure, np.arange(count, 2 * count), axis=at)
+    dtheta = np.moveaxis(plus - minus, at, -1) / (2 * CLOSURE_STEP)  # (..., 3, n)
+    return -np.linalg.solve(2 * leg_vectors(machine, rho, p), dtheta)
+
+
 def leg_vectors(machine: MachineParams, rho: np.ndarray, p: np.ndarray) -> np.ndarray:
     """Vectors A_i -> C_i (carriage to platform) in world, shape ``(..., 3, 3)``."""
     return platform_points(machine, p) - carriage_points(machine, rho)

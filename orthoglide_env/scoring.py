@@ -25,8 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .gauges import cross
-from .geometry import ERROR_NAMES, RHO_MAX, RHO_MIN, MachineParams
-from .kinematics import UnreachableError, direct, inverse
+from .geometry import RHO_MAX, RHO_MIN, MachineParams
+from .kinematics import UnreachableError, direct, inverse, tcp_sensitivity
 
 #: TCP targets of the scoring grid span this cube (mm): inside the workspace that the
 #: nominal model reaches within the control limits.
@@ -271,44 +271,35 @@ def score(
 
 
 # --- predicted errors, from a covariance ----------------------------------------------
-#: Step of the finite differences of the TCP over the machine's errors (mm or rad): the
-#: TCP is smooth in them on a scale of the leg length (or a radian), so the truncation is
-#: ~1e-4 / 310 relative, and the round-off ~eps * 310 mm / 1e-4 ~ 1e-9 mm per mm.
-TCP_FD_STEP: float = 1e-4
-
-
 def tcp_jacobian(model: MachineParams, grid: np.ndarray | None = None
                  ) -> tuple[np.ndarray, np.ndarray]:
     """The targets of the grid that ``model`` commands within the control limits (m, 3),
     and the derivative of the TCP reached at those commands over the machine's 27 errors
-    (m, 3, 27), all perturbations in one batched solve: to first order the error of a
-    machine compensated with ``model`` is ``jac @ (theta - theta_model)``."""
+    (m, 3, 27): to first order the error of a machine compensated with ``model`` is
+    ``jac @ (theta - theta_model)``."""
     return tcp_jacobians([model], grid)[0]
 
 
 def tcp_jacobians(models: Sequence[MachineParams], grid: np.ndarray | None = None
                   ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """:func:`tcp_jacobian` of each model, every perturbation of every model in one
-    batched solve (each model's numbers are those it gets alone)."""
+    """:func:`tcp_jacobian` of each model, every model in one batched solve (each model's
+    numbers are those it gets alone), the derivatives by the implicit function theorem
+    (:func:`~orthoglide_env.kinematics.tcp_sensitivity`)."""
     if not models:
         return []
     targets = workspace_grid() if grid is None else np.asarray(grid, dtype=float)
     rho = np.stack([commands(m, targets) for m in models])  # (M, n, 3)
     usable = np.isfinite(rho).all(axis=-1)
-    theta = np.stack([m.to_vector() for m in models])[:, None, :]
-    steps = TCP_FD_STEP * np.eye(len(ERROR_NAMES))
-    perturbed = [MachineParams.from_vector(t) for t in np.concatenate([theta, theta + steps],
-                                                                      axis=1)]
+    # Targets without a command are solved at Zero (any posture will do) and dropped.
+    rho = np.where(usable[..., None], rho, 0.0)
 
     def alone(m: int) -> np.ndarray:
-        out = np.zeros((len(ERROR_NAMES) + 1, *rho[m].shape))
-        out[:, usable[m]] = direct(perturbed[m], rho[m][usable[m]][None])
+        out = np.zeros(rho[m].shape)
+        out[usable[m]] = direct(models[m], rho[m][usable[m]])
         return out
 
-    # Targets without a command are solved at Zero (any posture will do) and dropped.
-    moved = _direct_many(perturbed, np.where(usable[:, None, :, None], rho[:, None], 0.0),
-                         alone)  # (M, 28, n, 3)
-    jac = np.moveaxis((moved[:, 1:] - moved[:, :1]) / TCP_FD_STEP, 1, -1)
+    p = _direct_many(list(models), rho, alone)  # (M, n, 3)
+    jac = tcp_sensitivity(MachineParams.stack(list(models)), rho, p)  # (M, n, 3, 27)
     return [(targets[u], j[u]) for u, j in zip(usable, jac, strict=True)]
 
 
