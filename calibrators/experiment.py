@@ -120,8 +120,7 @@ def run_episodes(envs: gym.vector.VectorEnv, agent: str, seeds: list[int],
     refused: stand 0 is always mounted) until every episode has ended."""
     lab = envs.unwrapped
     observation, info = envs.reset(seed=list(seeds))
-    first = get_agent(agent)
-    agents = [first] + [type(first)() for _ in seeds[1:]]
+    agents = [get_agent(agent) for _ in seeds]
     for i, (one, rng) in enumerate(zip(agents, rngs, strict=True)):
         one.reset(lab.sub_env(i), _row(observation, i), rng)
     idle = {"op": int(Op.LIFT), "rho": np.zeros(3), "stand": 0, "slot": 0}

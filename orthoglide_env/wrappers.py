@@ -25,20 +25,29 @@ class FlatLabActions(gym.ActionWrapper):
 
     def __init__(self, env: gym.Env) -> None:
         super().__init__(env)
-        inner = env.action_space
-        self.sizes = (int(inner["op"].n), int(inner["stand"].n), int(inner["slot"].n))
-        self.action_space = spaces.Box(-1.0, 1.0, shape=(3 + sum(self.sizes),),
-                                       dtype=np.float32)
+        self.action_space = flat_action_space(env.action_space)
 
     def action(self, action: np.ndarray) -> dict[str, Any]:
-        action = np.asarray(action, dtype=np.float64)
-        if action.shape != self.action_space.shape or not np.all(np.isfinite(action)):
-            raise ValueError(f"a flat lab action is {self.action_space.shape[0]} finite numbers")
-        action = np.clip(action, -1.0, 1.0)
-        middle, half = (RHO_MAX + RHO_MIN) / 2, (RHO_MAX - RHO_MIN) / 2
-        blocks = np.split(action[3:], np.cumsum(self.sizes)[:-1])
-        op, stand, slot = (int(np.argmax(b)) for b in blocks)
-        return {"op": op, "rho": middle + half * action[:3], "stand": stand, "slot": slot}
+        return lab_action(self.env.action_space, action)
+
+
+def flat_action_space(lab_actions: spaces.Dict) -> spaces.Box:
+    """The flat Box of the lab's ``Dict`` action space."""
+    sizes = (int(lab_actions["op"].n), int(lab_actions["stand"].n), int(lab_actions["slot"].n))
+    return spaces.Box(-1.0, 1.0, shape=(3 + sum(sizes),), dtype=np.float32)
+
+
+def lab_action(lab_actions: spaces.Dict, action: np.ndarray) -> dict[str, Any]:
+    """The lab action (of space ``lab_actions``) that a flat one stands for."""
+    sizes = (int(lab_actions["op"].n), int(lab_actions["stand"].n), int(lab_actions["slot"].n))
+    action = np.asarray(action, dtype=np.float64)
+    if action.shape != (3 + sum(sizes),) or not np.all(np.isfinite(action)):
+        raise ValueError(f"a flat lab action is {3 + sum(sizes)} finite numbers")
+    action = np.clip(action, -1.0, 1.0)
+    middle, half = (RHO_MAX + RHO_MIN) / 2, (RHO_MAX - RHO_MIN) / 2
+    blocks = np.split(action[3:], np.cumsum(sizes)[:-1])
+    op, stand, slot = (int(np.argmax(b)) for b in blocks)
+    return {"op": op, "rho": middle + half * action[:3], "stand": stand, "slot": slot}
 
 
 def flat_lab_env(**kwargs: Any) -> gym.Env:

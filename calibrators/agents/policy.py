@@ -34,10 +34,10 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from gymnasium.wrappers import FlattenObservation
+from gymnasium.spaces import flatten, flatten_space
 
 from orthoglide_env.lab import OP_NAMES, SLOT_NAMES, Op
-from orthoglide_env.wrappers import FlatLabActions
+from orthoglide_env.wrappers import flat_action_space, lab_action
 
 from .base import Agent, action
 
@@ -176,8 +176,9 @@ class PolicyAgent(Agent):
     def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
               rng: np.random.Generator) -> None:
         super().reset(env, observation, rng)
-        self.flat = FlattenObservation(FlatLabActions(self.env))
-        sizes = (self.flat.observation_space.shape[0], self.flat.action_space.shape[0])
+        # The spaces alone: a lab in a vector env is no gymnasium.Env to wrap.
+        self.spaces = (self.env.observation_space, self.env.action_space)
+        sizes = (flatten_space(self.spaces[0]).shape[0], flat_action_space(self.spaces[1]).shape[0])
         if sizes != (self.spec.observation_size, self.spec.action_size):
             raise ValueError(
                 f"policy file '{self.path}' was trained on a lab of {self.spec.stands} "
@@ -189,9 +190,10 @@ class PolicyAgent(Agent):
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
         if observation["time"][0] >= self.spec.budget_s:
             return action(Op.STOP)
-        mean, std = self._distribution(self.spec.normalise(self.flat.observation(observation)))
+        flat = flatten(self.spaces[0], observation)
+        mean, std = self._distribution(self.spec.normalise(flat))
         # Clipped to the Box by the mapping, as stable-baselines3 clipped it in training.
-        return self.flat.env.action(mean + std * self.rng.standard_normal(mean.shape))
+        return lab_action(self.spaces[1], mean + std * self.rng.standard_normal(mean.shape))
 
     def _distribution(self, flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Mean and standard deviation of the policy's (diagonal Gaussian) action."""
