@@ -14,19 +14,20 @@ from __future__ import annotations
 
 import argparse
 import os
-import time
 from collections.abc import Callable
 
 import gymnasium as gym
 import numpy as np
+from throughput import interleaved_rates, print_rates, single_runner, vector_runner
 
 import orthoglide_env
 
 ID = orthoglide_env.LAB_ENV_ID
 
 
-def actions(rng: np.random.Generator, steps: int, n: int) -> list[dict[str, np.ndarray]]:
+def plan(steps: int, n: int) -> list[dict[str, np.ndarray]]:
     """``steps`` batched lab actions for ``n`` labs."""
+    rng = np.random.default_rng(0)
     out = []
     for _ in range(steps):
         flick = rng.random(n) < 0.2
@@ -34,38 +35,6 @@ def actions(rng: np.random.Generator, steps: int, n: int) -> list[dict[str, np.n
                     "rho": rng.uniform(-8, 8, (n, 3)), "stand": rng.integers(6, size=n),
                     "slot": np.zeros(n, dtype=np.int64)})
     return out
-
-
-def single_runner(steps: int) -> Callable[[], float]:
-    """One lab, reset whenever its episode ends; returns the seconds of ``steps`` steps."""
-    env = gym.make(ID)
-    env.reset(seed=0)
-    plan = [{key: value[0] for key, value in a.items()}
-            for a in actions(np.random.default_rng(0), steps, 1)]
-
-    def run() -> float:
-        start = time.perf_counter()
-        for a in plan:
-            _, _, terminated, truncated, _ = env.step(a)
-            if terminated or truncated:
-                env.reset()
-        return time.perf_counter() - start
-
-    return run
-
-
-def vector_runner(envs: gym.vector.VectorEnv, steps: int) -> Callable[[], float]:
-    """A vector env (autoreset on); returns the seconds of ``steps`` vector steps."""
-    envs.reset(seed=0)
-    plan = actions(np.random.default_rng(0), steps, envs.num_envs)
-
-    def run() -> float:
-        start = time.perf_counter()
-        for a in plan:
-            envs.step(a)
-        return time.perf_counter() - start
-
-    return run
 
 
 def main() -> None:
@@ -76,34 +45,24 @@ def main() -> None:
     args = parser.parse_args()
     # Rough rates (steps/s) only size the rounds; the table is measured below.
     configs: dict[str, tuple[int, int, Callable[[int], Callable[[], float]]]] = {
-        "single lab": (1, 300, single_runner),
-        "native N=1": (1, 300, lambda s: vector_runner(gym.make_vec(ID, num_envs=1), s)),
-        "native N=64": (64, 8000, lambda s: vector_runner(gym.make_vec(ID, num_envs=64), s)),
-        "native N=1024": (1024, 20000,
-                          lambda s: vector_runner(gym.make_vec(ID, num_envs=1024), s)),
+        "single lab": (1, 300, lambda s: single_runner(gym.make(ID), [
+            {key: value[0] for key, value in a.items()} for a in plan(s, 1)])),
+        "native N=1": (1, 300, lambda s: vector_runner(gym.make_vec(ID, num_envs=1),
+                                                       plan(s, 1))),
+        "native N=64": (64, 8000, lambda s: vector_runner(gym.make_vec(ID, num_envs=64),
+                                                          plan(s, 64))),
+        "native N=1024": (1024, 20000, lambda s: vector_runner(
+            gym.make_vec(ID, num_envs=1024), plan(s, 1024))),
         "AsyncVectorEnv x2": (2, 300, lambda s: vector_runner(gym.make_vec(
-            ID, num_envs=2, vectorization_mode="async"), s)),
+            ID, num_envs=2, vectorization_mode="async"), plan(s, 2))),
     }
-    steps = {name: max(3, int(args.seconds * guess) // n) for name, (n, guess, _) in
-             configs.items()}
-    runners = {name: (n, make(steps[name])) for name, (n, _, make) in configs.items()}
+    runners = {}
+    for name, (n, guess, make) in configs.items():
+        steps = max(3, int(args.seconds * guess) // n)
+        runners[name] = (n, steps, make(steps))
     load = os.getloadavg()[0]
-    for _, run in runners.values():
-        run()  # warm-up: imports, caches, allocator pools
-    rates: dict[str, list[float]] = {name: [] for name in runners}
-    for _ in range(args.rounds):
-        for name, (n, run) in runners.items():
-            rates[name].append(steps[name] * n / run())
-    print(f"cpus: {os.cpu_count()}, load average (1 min) before/after timing: {load:.2f}/"
-          f"{os.getloadavg()[0]:.2f}; {args.rounds} interleaved rounds of ~{args.seconds:g} s")
-    base = float(np.median(rates["single lab"]))
-    print(f"{'configuration':22}{'steps/s (median)':>18}{'min':>10}{'max':>10}"
-          f"{'x single lab':>14}")
-    for name, values in rates.items():
-        median = float(np.median(values))
-        print(f"{name:22}{median:18.0f}{min(values):10.0f}{max(values):10.0f}"
-              f"{median / base:14.1f}")
-
+    rates = interleaved_rates(runners, args.rounds)
+    print_rates(rates, "single lab", load, args.rounds, args.seconds)
 
 if __name__ == "__main__":
     main()

@@ -19,47 +19,23 @@ from __future__ import annotations
 import argparse
 import gc
 import os
-import time
 import tracemalloc
 from collections.abc import Callable
 
 import gymnasium as gym
 import numpy as np
+from throughput import interleaved_rates, print_rates, single_runner, vector_runner
 
 import orthoglide_env
 
 ID = orthoglide_env.ENV_ID
 
 
-def single_runner(steps: int) -> Callable[[], float]:
-    """One env, reset whenever its episode ends; returns the seconds of ``steps`` steps."""
-    env = gym.make(ID, backend="exact")
-    env.reset(seed=0)
-    actions = np.random.default_rng(0).uniform(-8, 8, (steps, 3))
-
-    def run() -> float:
-        start = time.perf_counter()
-        for a in actions:
-            _, _, terminated, truncated, _ = env.step(a)
-            if terminated or truncated:
-                env.reset()
-        return time.perf_counter() - start
-
-    return run
-
-
-def vector_runner(envs: gym.vector.VectorEnv, steps: int) -> Callable[[], float]:
-    """A vector env (autoreset on); returns the seconds of ``steps`` vector steps."""
-    envs.reset(seed=0)
-    actions = np.random.default_rng(0).uniform(-8, 8, (steps, envs.num_envs, 3))
-
-    def run() -> float:
-        start = time.perf_counter()
-        for a in actions:
-            envs.step(a)
-        return time.perf_counter() - start
-
-    return run
+def plan(steps: int, n: int | None) -> np.ndarray:
+    """Small random moves around Zero, as in a calibration: ``steps`` actions of one env
+    (``n`` None) or vector actions of ``n`` envs."""
+    shape = (steps, 3) if n is None else (steps, n, 3)
+    return np.random.default_rng(0).uniform(-8, 8, shape)
 
 
 def native(n: int) -> gym.vector.VectorEnv:
@@ -101,37 +77,24 @@ def main() -> None:
                         help="length of one timed round of each configuration")
     args = parser.parse_args()
     # Rough rates (steps/s) only size the rounds; the table is measured below.
-    configs: dict[str, tuple[int, Callable[[int], Callable[[], float]]]] = {
-        "single env": (1, single_runner),
-        "native N=1": (1, lambda s: vector_runner(native(1), s)),
-        "native N=64": (64, lambda s: vector_runner(native(64), s)),
-        "native N=1024": (1024, lambda s: vector_runner(native(1024), s)),
-        "SyncVectorEnv x8": (8, lambda s: vector_runner(gym.make_vec(
-            ID, num_envs=8, vectorization_mode="sync", backend="exact"), s)),
-        "AsyncVectorEnv x2": (2, lambda s: vector_runner(gym.make_vec(
-            ID, num_envs=2, vectorization_mode="async", backend="exact"), s)),
+    configs: dict[str, tuple[int, int, Callable[[int], Callable[[], float]]]] = {
+        "single env": (1, 1000, lambda s: single_runner(gym.make(ID, backend="exact"),
+                                                        plan(s, None))),
+        "native N=1": (1, 1000, lambda s: vector_runner(native(1), plan(s, 1))),
+        "native N=64": (64, 20000, lambda s: vector_runner(native(64), plan(s, 64))),
+        "native N=1024": (1024, 30000, lambda s: vector_runner(native(1024), plan(s, 1024))),
+        "SyncVectorEnv x8": (8, 1000, lambda s: vector_runner(gym.make_vec(
+            ID, num_envs=8, vectorization_mode="sync", backend="exact"), plan(s, 8))),
+        "AsyncVectorEnv x2": (2, 1000, lambda s: vector_runner(gym.make_vec(
+            ID, num_envs=2, vectorization_mode="async", backend="exact"), plan(s, 2))),
     }
-    guess = {"single env": 1000, "native N=1": 1000, "native N=64": 20000,
-             "native N=1024": 30000, "SyncVectorEnv x8": 1000, "AsyncVectorEnv x2": 1000}
-    runners = {name: (n, make(steps_for(args.seconds, guess[name]) // n or 1))
-               for name, (n, make) in configs.items()}
+    runners = {}
+    for name, (n, guess, make) in configs.items():
+        steps = steps_for(args.seconds, guess) // n or 1
+        runners[name] = (n, steps, make(steps))
     load = os.getloadavg()[0]
-    for _, run in runners.values():
-        run()  # warm-up: imports, caches, allocator pools
-    rates: dict[str, list[float]] = {name: [] for name in runners}
-    for _ in range(args.rounds):
-        for name, (n, run) in runners.items():
-            steps = steps_for(args.seconds, guess[name]) // n or 1
-            rates[name].append(steps * n / run())
-    print(f"cpus: {os.cpu_count()}, load average (1 min) before/after timing: {load:.2f}/"
-          f"{os.getloadavg()[0]:.2f}; {args.rounds} interleaved rounds of ~{args.seconds:g} s")
-    base = float(np.median(rates["single env"]))
-    print(f"{'configuration':22}{'steps/s (median)':>18}{'min':>10}{'max':>10}"
-          f"{'x single env':>14}")
-    for name, values in rates.items():
-        median = float(np.median(values))
-        print(f"{name:22}{median:18.0f}{min(values):10.0f}{max(values):10.0f}"
-              f"{median / base:14.1f}")
+    rates = interleaved_rates(runners, args.rounds)
+    print_rates(rates, "single env", load, args.rounds, args.seconds)
     print(f"{'memory per 1000 machines':28}{'state MB':>10}{'step peak MB':>14}")
     for name, (state, peak) in memory_per_thousand().items():
         print(f"{name:28}{state:10.1f}{peak:14.1f}")

@@ -372,14 +372,9 @@ class Planner:
         if index is None:
             raise ValueError(f"posture {self.rho.tolist()} is not a candidate posture")
         rows = self.rows[stands_, index] / self.sigma
-        nominal = np.array([self.nominal_reading(self.slots[k], index) for k in stands_])
+        nominal = self.table.reading[[self.slots[k] for k in stands_], index]
         predicted = nominal + self.rows[stands_, index] @ self.mean
         self._add(rows, (np.asarray(values, dtype=float) - predicted) / self.sigma)
-
-    def nominal_reading(self, slot: int, posture: int) -> float:
-        """Reading (mm) of a gauge at ``slot`` at candidate ``posture`` on the nominal
-        machine, zeroed at Zero."""
-        return float(self.table.reading[slot, posture])
 
     def retire(self, stand: int) -> None:
         """A stand that reads no more (pushed past its travel) until it is re-mounted."""
@@ -463,15 +458,20 @@ class Planner:
             return float(np.linalg.slogdet(self.covariance)[1])
         return self.predicted_rigid_mm() ** 2
 
-    def greedy_move(self) -> bool:
-        """Take the affordable move with the most gain per second (readings expected);
-        False when none is left."""
+    def best_move(self) -> tuple[int, Options] | None:
+        """The affordable move with the most gain per second (and every move priced), or
+        None when no move gains anything within the budget."""
         options = self.options()
         rate = self.affordable_rates(options)
         best = int(np.argmax(rate))
-        if not rate[best] > 0:
+        return (best, options) if rate[best] > 0 else None
+
+    def greedy_move(self) -> bool:
+        """Take :meth:`best_move`, its readings expected; False when there is none."""
+        choice = self.best_move()
+        if choice is None:
             return False
-        self.move(best, options)
+        self.move(*choice)
         down, chance = self.reading_here()
         self.expect_readings(down, chance)
         return True

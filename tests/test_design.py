@@ -10,7 +10,7 @@ import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.agents.optimal import fixed_plan
 from calibrators.design import N_MACHINE, Planner, greedy_plan, rigid_weight, slot_table
-from calibrators.experiment import estimate, run_episode
+from calibrators.experiment import estimate, measurements_of, run_episode
 from orthoglide_env.geometry import MachineParams
 from orthoglide_env.lab import PAPER_SLOTS, Op
 from orthoglide_env.reading_model import ParameterSpace, default_scales
@@ -144,8 +144,6 @@ def test_active_agents_filter_follows_the_estimator_and_presses_nothing() -> Non
         if terminated or truncated:
             break
     lab = env.unwrapped
-    from calibrators.experiment import measurements_of
-
     est = estimate(measurements_of(lab.records), "extended", lab.noise.effective_sigma)
     filtered = MachineParams.from_vector(
         agent.planner.mean[:N_MACHINE] * default_scales(ParameterSpace()))
@@ -164,8 +162,6 @@ def test_a_wrong_start_does_not_lock_the_active_agent() -> None:
     3x of the untouched agent's on the same machine (one machine: not a tie; when
     written, the wrong start moved the predicted tips by up to 1 mm and the two episodes
     still took the same steps: the data decide the mean where the margins are narrow)."""
-    from calibrators.experiment import measurements_of
-
     results = []
     for corrupt in (False, True):
         env = gym.make(orthoglide_env.LAB_ENV_ID, gauge_sigma=SIGMA, budget_s=700.0)

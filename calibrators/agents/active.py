@@ -106,17 +106,16 @@ class ActiveAgent(Agent):
             remount = self.remounts.pop(0)
             planner.remount(remount.stand, remount.slot)
         else:
-            options = planner.options()
-            rate = planner.affordable_rates(options)
-            best = int(np.argmax(rate))
-            if not rate[best] > 0:
+            choice = planner.best_move()
+            if choice is None:
                 return Step(Op.STOP)
-            planner.move(best, options)
+            planner.move(*choice)
         self.queue = list(planner.steps[start:])
         return self.queue.pop(0)
 
     def _refit(self) -> None:
         """Replace the filter's mean by the extended estimator's fit of the notebook."""
+        # Imported here: the experiment module imports the agents package.
         from ..experiment import estimate, measurements_of
 
         records = self.env.records
@@ -138,13 +137,13 @@ class ActiveAgent(Agent):
             mean[cols] = [theta.get(n, 0.0) for n in names] / default_scales(space)[
                 len(ERROR_NAMES):]
             # The zero that makes the stand's readings agree with the new mean on average.
-            rows = np.array([planner.rows[k, p] for p, _ in self.readings[k]])
             mean[cols[-1] + 1] = 0.0
-            if len(rows):
+            if self.readings[k]:
+                postures = [p for p, _ in self.readings[k]]
                 values = np.array([v for _, v in self.readings[k]])
-                nominal = np.array([planner.nominal_reading(slot, p)
-                                    for p, _ in self.readings[k]])
-                mean[cols[-1] + 1] = np.mean(values - nominal - rows @ mean) / ZERO_SCALE
+                nominal = planner.table.reading[slot, postures]
+                residual = values - nominal - planner.rows[k, postures] @ mean
+                mean[cols[-1] + 1] = np.mean(residual) / ZERO_SCALE
         planner.mean = mean
 
     def _mounting(self, stand: int) -> str | None:
