@@ -113,13 +113,16 @@ def test_the_designed_plan_beats_the_papers_experiment_at_equal_time() -> None:
 
 
 def test_remounts_are_taken_when_they_pay() -> None:
-    """A plan may move stands: each re-mount is a new mounting with fresh unknowns (the
-    covariance block reset to the prior, no correlation with the rest)."""
-    p = planner(budget_s=1200.0)
-    steps = greedy_plan(p)
-    remounts = [s for s in steps if s.op == Op.REMOUNT]
-    for s in remounts:
-        assert s.slot not in PAPER_SLOTS or s.slot != PAPER_SLOTS[s.stand]
+    """A plan moves stands when that buys accuracy: over 20 minutes it re-mounts at least
+    once, and ends with a smaller predicted error than the same greedy plan that may not
+    (deterministic, on the nominal model: 0.0076 against 0.0081 mm when written).  Each
+    re-mount is a new mounting with fresh unknowns (the covariance block reset to the
+    prior, no correlation with the rest)."""
+    moving, staying = planner(budget_s=1200.0), planner(budget_s=1200.0)
+    steps = greedy_plan(moving)
+    greedy_plan(staying, remounts=False)
+    assert any(s.op == Op.REMOUNT for s in steps)
+    assert moving.predicted_rigid_mm() < staying.predicted_rigid_mm()
     q = planner()
     q.remount(0, len(slot_table().tip) - 1)
     block = q.covariance[N_MACHINE:N_MACHINE + 5]
