@@ -37,7 +37,7 @@ from calibrators.compare import CHUNK, Config, Trial, run_chunk  # noqa: E402
 from calibrators.experiment import run_episode, run_episodes  # noqa: E402
 
 #: Machines per chunk of the per-machine path (what compare ran before it was batched).
-PER_MACHINE_CHUNK: int = 10
+PER_MACHINE_CHUNK: int = 1
 
 
 def timed(config: Config, machines: int, batched: bool) -> tuple[float, list[Trial]]:

@@ -39,10 +39,10 @@ from orthoglide_env.reading_model import Design, jacobian, predict
 #: in scaled units is at least this: the data determine it at least as well as its
 #: a-priori scale does.
 RETAIN: float = 1.0
-#: Convergence on the step, in units of each parameter's scale (2e-9 mm for drho): five
-#: times the wander that the Jacobian's round-off leaves (see
-#: ``orthoglide_env.reading_model.FD_STEP``), so a converged fit is reproducible to ~1e-9
-#: of each scale whatever batch it ran in.
+#: Convergence on the step, in units of each parameter's scale (2e-9 mm for drho): above
+#: the wander that round-off leaves (the readings carry ~eps * L ~ 7e-14 mm, the
+#: closed-form Jacobian ~eps relative), so a converged fit is reproducible to ~1e-9 of
+#: each scale whatever batch it ran in.
 STEP_TOL: float = 1e-9
 #: ... or when the cost decrease the Gauss-Newton step predicts (half its squared length in
 #: the metric of the normal matrix) is below this: the step is then under 1.5e-7 standard

@@ -398,7 +398,7 @@ def layout_from_names(names: list[str]) -> tuple[GaugeSpec, ...]:
     return tuple(specs)
 
 
-def _spec_arrays(specs: Sequence[GaugeSpec]) -> GaugeArray:
+def spec_arrays(specs: Sequence[GaugeSpec]) -> GaugeArray:
     """The specs of ``specs`` as the index fields of a :class:`GaugeArray` (its rays are
     placeholders)."""
     n = len(specs)
@@ -418,7 +418,7 @@ def ideal_rays(
     ``(*batch, n, 3)`` and directions ``(n, 3)`` (a stand's nominal direction is a world
     axis)."""
     zero = np.zeros(3)
-    g = _spec_arrays(specs)
+    g = spec_arrays(specs)
     centre, rot, half = exact_target_boxes(g, collision_boxes(machine, zero, direct(machine,
                                                                                      zero)))
     n = len(specs)
@@ -458,7 +458,7 @@ def stand_names(mounting: str, spec: GaugeSpec) -> list[str]:
             f"{mounting}.tilt_{a}", f"{mounting}.tilt_{b}"]
 
 
-def _across(specs: tuple[GaugeSpec, ...] | list[GaugeSpec]) -> np.ndarray:
+def across_axes(specs: tuple[GaugeSpec, ...] | list[GaugeSpec]) -> np.ndarray:
     """Unit vectors of the two cross axes of each gauge, shape (n, 2, 3)."""
     return np.stack([np.eye(3)[list(stand_axes(s))] for s in specs])
 
@@ -469,7 +469,7 @@ def stand_rays(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Rays of stands installed with errors ``stand`` (shape ``(*batch, n, 4)``, in
     :data:`STAND_PARAMS` order) from the ideal ``origins`` and ``directions``."""
-    across = _across(specs)
+    across = across_axes(specs)
     stand = np.asarray(stand, dtype=float)
     origin = origins + np.einsum("...gk,gkj->...gj", stand[..., :2], across)
     direction = directions + np.einsum("...gk,gkj->...gj", stand[..., 2:], across)
@@ -483,7 +483,7 @@ def stand_errors(
     """The stand parameters (n, 4) of installed rays relative to ideal ones: the inverse of
     :func:`stand_rays` (the shift is measured where the ray crosses the plane through the
     ideal origin normal to the ideal direction).  For scoring against the truth only."""
-    across = _across(specs)
+    across = across_axes(specs)
     d0 = ideal_directions
     slope = np.sum(directions * d0, axis=-1, keepdims=True)
     s = np.sum((ideal_origins - origins) * d0, axis=-1, keepdims=True) / slope
@@ -504,18 +504,31 @@ def face_distances(
     (no edges, no occlusion, no travel), and on a valid reading it is exactly the
     simulator's ray distance (the tip sits on that face)."""
     rho = np.asarray(rho, dtype=float)
-    g = _spec_arrays(specs)
+    g = spec_arrays(specs)
     centre, rot, half = target_boxes(machine, g, rho, direct(machine, rho))
-    face = g.face
-    normal = np.einsum("...gjk,gk->...gj", rot, np.eye(3)[face])
-    thickness = half[..., np.arange(len(specs)), face]
     extra = centre.ndim - 2 - (np.ndim(origins) - 2)
     shape = (*np.shape(origins)[:-2], *(1,) * extra, len(specs), 3)
     o = np.reshape(origins, shape)
     d = np.reshape(np.broadcast_to(directions, np.broadcast_shapes(np.shape(directions),
                                                                   np.shape(origins))), shape)
-    nd = np.sum(normal * d, axis=-1)
-    return (np.sum(normal * (centre - o), axis=-1) - thickness * np.sign(nd)) / nd
+    return plane_distances(centre, rot, half, g.face, o, d)
+
+
+def plane_distances(centre: np.ndarray, rot: np.ndarray, half: np.ndarray, face: np.ndarray,
+                    origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """Distance along each ray ``origins + t directions`` (``(..., G, 3)``) to the plane of
+    face ``face`` (box axis, ``(G,)``) of its box (centres ``(..., G, 3)``, rotations
+    ``(..., G, 3, 3)``, half extents ``(..., G, 3)``), on the side the ray comes from."""
+    normal = face_normals(rot, face)
+    thickness = half[..., np.arange(len(face)), face]
+    nd = np.sum(normal * directions, axis=-1)
+    return (np.sum(normal * (centre - origins), axis=-1) - thickness * np.sign(nd)) / nd
+
+
+def face_normals(rot: np.ndarray, face: np.ndarray) -> np.ndarray:
+    """The normal of face ``face`` (box axis, ``(G,)``) of each box (rotations
+    ``(..., G, 3, 3)``): ``(..., G, 3)``."""
+    return np.einsum("...gjk,gk->...gj", rot, np.eye(3)[face])
 
 
 def target_boxes(
@@ -526,18 +539,53 @@ def target_boxes(
     ``(..., G, 3, 3)``, half extents ``(..., G, 3)``.  What :func:`exact_target_boxes`
     picks out of :func:`collision_boxes`, made from the same pieces for these boxes only
     (an estimator's model evaluates it for thousands of parameter vectors)."""
-    # A platform gauge has no leg: the x leg's boxes stand in for its unused ones.
     legs = np.maximum(gauges.leg, 0)
-    a = carriage_points(machine, rho)[..., legs, :]
-    bars = _boxes(a, platform_points(machine, p)[..., legs, :], legs,
-                  np.where(gauges.face == 1, 1, -1))
+    return boxes_at(gauges, carriage_points(machine, rho)[..., legs, :],
+                    platform_points(machine, p)[..., legs, :], np.asarray(p)[..., None, :])
+
+
+def boxes_at(gauges: GaugeArray, a: np.ndarray, c: np.ndarray, p: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The box each of ``gauges`` (``(G,)``) touches, from the R1 centre ``a`` and R2
+    centre ``c`` of its leg (``(..., G, 3)``; a platform gauge has no leg, any leg's will
+    do) and the TCP ``p`` (broadcasting to them): see :func:`target_boxes`."""
+    legs = np.maximum(gauges.leg, 0)
+    bars = _boxes(a, c, legs, np.where(gauges.face == 1, 1, -1))
     carriages = _carriage_boxes(a, legs)
-    platform = _platform_box(np.asarray(p)[..., None, :])
+    platform = _platform_box(np.broadcast_to(p, np.broadcast_shapes(np.shape(p), np.shape(a))))
     part = gauges.part
     return tuple(  # type: ignore[return-value]
         np.where((part == Part.BAR).reshape(-1, *(1,) * tail), b,
                  np.where((part == Part.CARRIAGE).reshape(-1, *(1,) * tail), c, f))
         for b, c, f, tail in zip(bars, carriages, platform, (1, 2, 1), strict=True))
+
+
+def bar_normal_derivatives(a: np.ndarray, c: np.ndarray, legs: np.ndarray, face: np.ndarray
+                           ) -> np.ndarray:
+    """Derivative of a bar box's face normal (face 1: the hinge axis, 2: the normal of
+    :func:`_boxes`) over ``v = c - a``: ``(..., 3, 3)``.  With ``a = v / |v|``, ``h =
+    w / |w|``, ``w = r x a`` and ``m = a x h``: ``dh = (I - h h^T) [r]x da / |w|``,
+    ``da = (I - a a^T) dv / |v|`` and ``dm = -[h]x da + [a]x dh``."""
+    r_axis = R_LEG[legs][..., :, 2]
+    v = c - a
+    length = np.linalg.norm(v, axis=-1)[..., None, None]
+    along = v / length[..., 0]
+    w = cross(r_axis, along)
+    size = np.linalg.norm(w, axis=-1)[..., None, None]
+    hinge = w / size[..., 0]
+    eye = np.eye(3)
+    d_along = (eye - along[..., :, None] * along[..., None, :]) / length
+    d_hinge = (eye - hinge[..., :, None] * hinge[..., None, :]) @ skew(r_axis) @ d_along / size
+    d_normal = -skew(hinge) @ d_along + skew(along) @ d_hinge
+    return np.where((np.asarray(face) == 1)[..., None, None], d_hinge, d_normal)
+
+
+def skew(x: np.ndarray) -> np.ndarray:
+    """Matrices ``[x]x`` (``(..., 3, 3)``) with ``[x]x y = x cross y``."""
+    x = np.asarray(x, dtype=float)
+    out = np.zeros((*x.shape, 3))
+    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -x[..., 2], x[..., 1], -x[..., 0]
+    return out - np.swapaxes(out, -1, -2)
 
 
 def _carriage_boxes(a: np.ndarray, legs: np.ndarray

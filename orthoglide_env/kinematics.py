@@ -166,10 +166,54 @@ def direct(
     raise UnreachableError("direct kinematics did not converge: posture near a singularity")
 
 
-#: Central-difference step of :func:`tcp_sensitivity`, in mm or rad.  The loop closure is
-#: a quadratic in the lengths and positions (no truncation error) and smooth in the tilts
-#: (truncation ~step^2 = 1e-6 relative); round-off (~eps * L^2 / step) is ~1e-13.
-CLOSURE_STEP: float = 1e-3
+#: Columns of the 27 errors (:data:`~orthoglide_env.geometry.ERROR_NAMES`) that move leg
+#: ``i``: its encoder offset, length, the two tilts and two offsets of its actuator axis,
+#: and the three coordinates of its R2 centre on the platform.
+DRHO_COLUMN, LENGTH_COLUMN, TILT_COLUMN, OFFSET_COLUMN, ATTACH_COLUMN = 0, 3, 6, 12, 18
+
+
+def axis_direction_derivatives(machine: MachineParams) -> np.ndarray:
+    """Derivative of each actuator direction ``u_i`` over its two tilts, in closed form:
+    ``(*batch, 3 legs, 2, 3)``.  With ``u_i = R_LEG[i] l_i`` and ``l_i = (1, tan a, tan b)
+    / N``: ``dl/da = (I - l l^T) e_1 sec^2(a) / N`` (``b`` with ``e_2``)."""
+    tilt = machine.axis_tilt  # (*batch, 3, 2)
+    tan = np.tan(tilt)
+    local = np.concatenate([np.ones((*tan.shape[:-1], 1)), tan], axis=-1)
+    norm = np.linalg.norm(local, axis=-1, keepdims=True)
+    local = local / norm
+    dlocal = (np.eye(3)[1:] - local[..., None, :] * local[..., 1:, None]) * (
+        1.0 / (np.cos(tilt) ** 2 * norm))[..., None]
+    return np.einsum("ijk,...ilk->...ilj", R_LEG, dlocal)
+
+
+def carriage_gradients(machine: MachineParams, rho: np.ndarray, weights: np.ndarray,
+                       legs: np.ndarray) -> np.ndarray:
+    """``weights . dA/dtheta`` for the R1 centre ``A`` of leg ``legs`` at commands ``rho``
+    (``(*batch, *postures, 3)``), over the 27 errors at fixed commands: ``weights``
+    ``(..., K, 3)`` and ``legs`` ``(..., K)`` broadcast against the batch and postures
+    (``legs = [0, 1, 2]``: every leg at every posture; ``rho`` ``(..., R, 3)`` with ``legs``
+    ``(R, 1)``: one leg per posture), giving ``(..., K, 27)``.
+
+    ``A_i = o_i + (L + r + drho_i + rho_i) u_i`` moves with five errors of its leg, each
+    column in closed form (the rest are zero)."""
+    g, rho = geometry(machine, rho)
+    weights = np.asarray(weights, dtype=float)
+    legs = np.broadcast_to(legs, np.broadcast_shapes(weights.shape[:-1], np.shape(legs)))
+    s = np.take_along_axis(L_NOMINAL + R_TOOL + g.drho + rho, legs, axis=-1)
+    u = np.take_along_axis(g.u, legs[..., None], axis=-2)
+    extra = rho.ndim - 1 - len(machine.batch_shape)
+    du = np.take_along_axis(axis_direction_derivatives(machine).reshape(
+        *machine.batch_shape, *(1,) * extra, 3, 2, 3), legs[..., None, None], axis=-3)
+    across = np.swapaxes(R_LEG[legs][..., 1:], -1, -2)  # (..., K, 2, 3)
+    out = np.zeros((*np.broadcast_shapes(weights.shape, u.shape)[:-1], 27))
+    pair = 2 * legs[..., None] + np.arange(2)
+    np.put_along_axis(out, DRHO_COLUMN + legs[..., None],
+                      np.sum(weights * u, axis=-1)[..., None], axis=-1)
+    np.put_along_axis(out, TILT_COLUMN + pair,
+                      s[..., None] * np.sum(weights[..., None, :] * du, axis=-1), axis=-1)
+    np.put_along_axis(out, OFFSET_COLUMN + pair,
+                      np.sum(weights[..., None, :] * across, axis=-1), axis=-1)
+    return out
 
 
 def tcp_sensitivity(machine: MachineParams, rho: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -177,24 +221,27 @@ def tcp_sensitivity(machine: MachineParams, rho: np.ndarray, p: np.ndarray) -> n
     TCP being ``p = direct(machine, rho)``: shape ``(*batch, *postures, 3, 27)``.
 
     By the implicit function theorem on the loop closure ``f_i = |C_i - A_i|^2 - L_i^2 =
-    0``: ``dp/dtheta = -(df/dp)^-1 df/dtheta`` with ``df/dp = 2 (C_i - A_i)`` and
-    ``df/dtheta`` by central differences of the closure at fixed ``p``: one 3 x 3 solve
-    per posture instead of a Newton solve per error."""
+    0``: ``dp/dtheta = -(df/dp)^-1 df/dtheta`` with ``df/dp = 2 (C_i - A_i)`` and, at
+    fixed ``p``, ``df/dtheta = 2 (C_i - A_i) . (dC_i - dA_i) - 2 L_i dL_i``, every column
+    in closed form: one 3 x 3 solve per posture, no iteration."""
     rho = np.asarray(rho, dtype=float)
     p = np.asarray(p, dtype=float)
-    at = len(machine.batch_shape)
-    theta = machine.to_vector()
-    count = theta.shape[-1]
-    steps = CLOSURE_STEP * np.eye(count)
-    moved = MachineParams.from_vector(theta[..., None, :] + np.concatenate([steps, -steps]))
-    rho_moved, p_moved = np.expand_dims(rho, at), np.expand_dims(p, at)
-    v = leg_vectors(moved, rho_moved, p_moved)
-    lengths, _ = geometry(moved, p_moved)
-    closure = np.sum(v**2, axis=-1) - lengths.lengths**2  # (*batch, 2n, *postures, 3)
-    plus = np.take(closure, np.arange(count), axis=at)
-    minus = np.take(closure, np.arange(count, 2 * count), axis=at)
-    dtheta = np.moveaxis(plus - minus, at, -1) / (2 * CLOSURE_STEP)  # (..., 3, n)
-    return -np.linalg.solve(2 * leg_vectors(machine, rho, p), dtheta)
+    v = leg_vectors(machine, rho, p)  # (..., 3 legs, 3)
+    g, _ = geometry(machine, p)
+    legs = np.arange(3)
+    dtheta = -2 * carriage_gradients(machine, rho, v, legs)
+    dtheta[..., legs, LENGTH_COLUMN + legs] = -2 * np.broadcast_to(g.lengths, v.shape[:-1])
+    dtheta[..., legs[:, None], ATTACH_COLUMN + 3 * legs[:, None] + legs] = 2 * v
+    return -inverse_3x3(2 * v) @ dtheta
+
+
+def inverse_3x3(m: np.ndarray) -> np.ndarray:
+    """Inverses of 3 x 3 matrices ``(..., 3, 3)`` by their adjugates: the columns are the
+    cross products of the rows over the determinant (a batched LAPACK solve costs ~3x more
+    on tens of thousands of small systems with many right-hand sides)."""
+    r0, r1, r2 = m[..., 0, :], m[..., 1, :], m[..., 2, :]
+    adjugate = np.stack([np.cross(r1, r2), np.cross(r2, r0), np.cross(r0, r1)], axis=-1)
+    return adjugate / np.sum(r0 * adjugate[..., :, 0], axis=-1)[..., None, None]
 
 
 def leg_vectors(machine: MachineParams, rho: np.ndarray, p: np.ndarray) -> np.ndarray:

@@ -22,8 +22,16 @@ import numpy as np
 from .gauges import (
     Gauge,
     GaugeSpec,
+    Part,
+    across_axes,
+    bar_normal_derivatives,
+    boxes_at,
     face_distances,
+    face_normals,
     ideal_rays,
+    plane_distances,
+    skew,
+    spec_arrays,
     stand_errors,
     stand_names,
     stand_rays,
@@ -37,7 +45,14 @@ from .geometry import (
     MachineParams,
     error_group,
 )
-from .kinematics import direct
+from .kinematics import (
+    ATTACH_COLUMN,
+    carriage_gradients,
+    carriage_points,
+    direct,
+    platform_points,
+    tcp_sensitivity,
+)
 
 N_MACHINE: int = len(ERROR_NAMES)
 
@@ -226,30 +241,139 @@ def rotation_matrices(rotvec: np.ndarray) -> np.ndarray:
     return np.eye(3) + a * k + b * (k @ k)
 
 
-#: Central-difference step, in units of each parameter's scale (2 mm for drho, 2 mrad for
-#: a tilt, ...).  Gauss-Newton stops where ``J^T r = 0`` with the ``J`` it uses, so the
-#: Jacobian's round-off makes the last steps wander and its truncation moves the fixed
-#: point.  The model computes positions of the order of L = 310 mm, so a reading's
-#: round-off is ~eps * L ~ 7e-14 mm, and divided by the step it is the Jacobian's noise:
-#: at 1e-2 of a scale, ~3.5e-12 mm per scale unit, a wander of ~2e-10 of a scale.  The
-#: truncation, relative ~ (step * scale / L)^2 < 5e-9 (the model bends on the scale of
-#: the leg length, and of a radian for tilts), is smooth: it moves the fixed point by less
-#: than the gauge noise's millionth and the same way in any batch.  (Forward differences at
-#: 1e-6 left the fixed point ~1e-6 of a scale off; central ones at 1e-5 wandered at 1e-7.)
-FD_STEP: float = 1e-2
+def rotated_derivatives(rotvec: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Derivative of ``R(rotvec) @ points`` over the rotation vector, premultiplied by
+    ``R^T``: ``-[p]x J_r(rotvec)`` with the right Jacobian of SO(3), ``J_r = I - (1 - cos
+    a) / a^2 [w]x + (a - sin a) / a^3 [w]x^2`` (``a = |w|``), ``(..., 3, 3)``."""
+    rotvec = np.asarray(rotvec, dtype=float)
+    angle = np.linalg.norm(rotvec, axis=-1)[..., None, None]
+    k = skew(rotvec)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        a = np.where(angle > 1e-2, (1 - np.cos(angle)) / angle**2, 0.5 - angle**2 / 24)
+        b = np.where(angle > 1e-2, (angle - np.sin(angle)) / angle**3, 1 / 6 - angle**2 / 120)
+    right = np.eye(3) - a * k + b * (k @ k)
+    return -skew(points) @ right
 
 
 def jacobian(theta: np.ndarray, design: Design, free: np.ndarray, scale: np.ndarray
              ) -> np.ndarray:
-    """Central-difference Jacobian of :func:`predict` over the ``free`` parameters, per unit
-    of their ``scale``: ``(*batch, N, n_free)``.  All perturbations go through one call."""
+    """Derivative of :func:`predict` over the ``free`` parameters, per unit of their
+    ``scale``: ``(*batch, N, n_free)``.
+
+    By the chain rule, each reading's kinematics solved once: a reading ``t = (n . (c -
+    o) - h sign(n . d)) / (n . d)`` depends on the machine through its target box (the
+    leg's R1 and R2 centres, or the TCP: their derivatives in closed form, the TCP's by the
+    implicit function theorem) and its stand's ideal ray, and on the stand parameters
+    through its ray alone."""
     theta = np.asarray(theta, dtype=float)
+    batch = theta.shape[:-1]
+    flat = theta.reshape(-1, theta.shape[-1])
     idx = np.flatnonzero(free)
-    steps = np.zeros((len(idx), theta.shape[-1]))
-    steps[np.arange(len(idx)), idx] = FD_STEP * scale[idx]
-    moved = predict(theta[..., None, :] + np.concatenate([steps, -steps]), design)
-    forward, backward = moved[..., : len(idx), :], moved[..., len(idx):, :]
-    return np.swapaxes((forward - backward) / (2 * FD_STEP), -1, -2)
+    full = _derivatives(flat, design)
+    return (full[..., idx] * scale[idx]).reshape(*batch, len(design), len(idx))
+
+
+def _derivatives(theta: np.ndarray, design: Design) -> np.ndarray:
+    """Derivative of every reading over every parameter, ``(B, N, n)`` for ``theta``
+    ``(B, n)``."""
+    space = design.space
+    machine = MachineParams.from_vector(theta[:, :N_MACHINE])
+    postures = design.postures[None]
+    p = direct(machine, postures)  # (B, P, 3)
+    dp = tcp_sensitivity(machine, postures, p)  # (B, P, 3, 27)
+    out = np.zeros((len(theta), len(design), theta.shape[-1]))
+    at = design._posture_index  # type: ignore[attr-defined]
+    gauges = space.gauges
+    if gauges:
+        where = np.full(len(design.specs), -1)
+        where[gauges] = np.arange(len(gauges))
+        rows = np.flatnonzero(where[design.mounting] >= 0)
+        _gauge_derivatives(theta, design, machine, p, dp, rows,
+                           where[design.mounting[rows]], at[rows], out)
+    start = N_MACHINE + 4 * len(gauges)
+    for k, station in enumerate(space.stations):
+        rows = np.flatnonzero([isinstance(design.specs[m], TrackerAxis)
+                               and station_of(design.mountings[m]) == station
+                               for m in design.mounting])
+        component = np.array([design.specs[m].component for m in design.mounting[rows]])
+        columns = slice(start + 3 * k, start + 3 * k + 3)
+        rotation = rotation_matrices(theta[:, columns])
+        seen = np.einsum("bij,brjk->brik", rotation, dp[:, at[rows]])
+        out[:, rows, :N_MACHINE] = seen[:, np.arange(len(rows)), component]
+        turned = np.einsum("bij,brjk->brik", rotation, rotated_derivatives(
+            theta[:, None, columns], p[:, at[rows]]))
+        out[:, rows, columns] = turned[:, np.arange(len(rows)), component]
+    return out
+
+
+def _gauge_derivatives(theta: np.ndarray, design: Design, machine: MachineParams,
+                       p: np.ndarray, dp: np.ndarray, rows: np.ndarray,
+                       gauge: np.ndarray, at: np.ndarray, out: np.ndarray) -> None:
+    """Fill ``out[:, rows]``: the derivatives of the gauge readings ``rows`` (their gauge
+    among the design's gauges, their posture index ``at``)."""
+    space = design.space
+    specs = [design.specs[k] for k in space.gauges]
+    count = len(specs)
+    stand = theta[:, N_MACHINE:N_MACHINE + 4 * count].reshape(-1, count, 4)
+    ideal, aim = ideal_rays(specs, machine)
+    origins, directions = stand_rays(specs, ideal, aim, stand)
+    g = spec_arrays([specs[j] for j in gauge])
+    legs = np.maximum(g.leg, 0)
+    postures = design.postures[at]
+    each = np.arange(len(rows))
+    a = carriage_points(machine, postures[None])[:, each, legs]
+    c = platform_points(machine, p[:, at])[:, each, legs]
+    centre, rot, half = boxes_at(g, a, c, p[:, at])
+    o, d = origins[:, gauge], directions[:, gauge]
+    t = plane_distances(centre, rot, half, g.face, o, d)
+    normal = face_normals(rot, g.face)
+    nd = np.sum(normal * d, axis=-1)[..., None]
+    towards_centre = normal / nd  # dt/dc, and -dt/do
+    # dt/dn = (c - hit) / (n . d) through the bar's normal, which turns with v = c - a.
+    turn = np.einsum("brj,brjk->brk", (centre - o - t[..., None] * d) / nd,
+                     bar_normal_derivatives(a, c, legs, g.face))
+    bar = (g.part == Part.BAR)[:, None]
+    d_a = np.where(bar, towards_centre / 2 - turn,
+                   np.where((g.part == Part.CARRIAGE)[:, None], towards_centre, 0.0))
+    d_c = np.where(bar, towards_centre / 2 + turn, 0.0)
+    d_p = np.where((g.part == Part.PLATFORM)[:, None], towards_centre, 0.0)
+    # The machine moves the target through A, C and p at the posture, and the ray's
+    # origin (aimed at Zero) through the same points at Zero: on a bar at ``at * A + (1 -
+    # at) * C``, on a carriage with A, on the platform with p.
+    zero = np.zeros((1, 1, 3))
+    p_zero = direct(machine, zero)
+    aimed = [np.where(bar, g.at[:, None], np.where((g.part == Part.CARRIAGE)[:, None], 1.0, 0.0)),
+             np.where(bar, 1 - g.at[:, None], 0.0),
+             np.where((g.part == Part.PLATFORM)[:, None], 1.0, 0.0)]
+    machine_part = (
+        _through_leg(machine, postures[None], dp[:, at], legs, d_a, d_c, d_p)
+        - _through_leg(machine, zero, tcp_sensitivity(machine, zero, p_zero), legs,
+                       *(w * towards_centre for w in aimed)))
+    sign = design.signs[design.mounting[rows]]
+    out[:, rows, :N_MACHINE] = sign[:, None] * machine_part
+    # Stand parameters move the ray only: shifts its origin across the measuring axis,
+    # tilts its direction d = (d0 + tilt . across) / |...|.
+    across = across_axes(specs)[gauge]  # (R, 2, 3)
+    raw = aim[gauge] + np.einsum("brk,rkj->brj", stand[:, gauge, 2:], across)
+    size = np.linalg.norm(raw, axis=-1)[..., None, None]
+    turned = (across - d[..., None, :] * np.einsum("brj,rkj->brk", d, across)[..., None]) / size
+    shifts = -np.einsum("brj,rkj->brk", towards_centre, across)
+    tilts = -t[..., None] * np.einsum("brj,brkj->brk", towards_centre, turned)
+    columns = N_MACHINE + 4 * gauge[:, None] + np.arange(4)
+    out[:, rows[:, None], columns] = sign[:, None] * np.concatenate([shifts, tilts], axis=-1)
+
+
+def _through_leg(machine: MachineParams, rho: np.ndarray, dp: np.ndarray, legs: np.ndarray,
+                 d_a: np.ndarray, d_c: np.ndarray, d_p: np.ndarray) -> np.ndarray:
+    """``d_a . dA/dtheta + d_c . dC/dtheta + d_p . dp/dtheta`` over the 27 errors, for the
+    R1 centre A and R2 centre C of leg ``legs`` (``(R,)``) and the TCP p at commands
+    ``rho`` (``(..., R, 3)``, or one posture for all), the TCP's derivative ``dp``
+    ``(B, R, 3, 27)``: ``(B, R, 27)``."""
+    out = carriage_gradients(machine, rho, d_a[..., None, :], legs[:, None])[..., 0, :]
+    out += ((d_c + d_p)[..., None, :] @ dp)[..., 0, :]
+    each = np.arange(len(legs))[:, None]
+    out[:, each, ATTACH_COLUMN + 3 * legs[:, None] + np.arange(3)] += d_c
+    return out
 
 
 def parameters_of(design: Design, machine: MachineParams, gauges: list[Gauge]) -> np.ndarray:

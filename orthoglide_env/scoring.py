@@ -128,7 +128,7 @@ def tcp_error_vectors_many(models: Sequence[MachineParams], truths: Sequence[Mac
     """:func:`tcp_error_vectors` of many pairs over the targets (n, 3): (M, n, 3).  The
     true machines reach their commands in one batched solve; each machine's numbers are
     those it gets alone."""
-    rho = np.stack([commands(m, targets) for m in models])  # (M, n, 3)
+    rho = commands_many(models, targets)  # (M, n, 3)
     inside = np.isfinite(rho).all(axis=-1)
 
     def alone(m: int) -> np.ndarray:
@@ -139,6 +139,17 @@ def tcp_error_vectors_many(models: Sequence[MachineParams], truths: Sequence[Mac
     # Rows without a command are solved at Zero (any posture will do) and dropped.
     reached = _direct_many(list(truths), np.where(inside[..., None], rho, 0.0), alone)
     return np.where(inside[..., None], reached, np.nan) - targets
+
+
+def commands_many(models: Sequence[MachineParams], targets: np.ndarray) -> np.ndarray:
+    """:func:`commands` of each model for the targets (n, 3): (M, n, 3), in one batched
+    solve unless a model cannot reach some target (then model by model, row by row)."""
+    try:
+        rho = inverse(MachineParams.stack(list(models)), np.asarray(targets, dtype=float)[None])
+    except UnreachableError:
+        return np.stack([commands(m, targets) for m in models])
+    inside = np.all((rho >= RHO_MIN) & (rho <= RHO_MAX), axis=-1)
+    return np.where(inside[..., None], rho, np.nan)
 
 
 def _direct_many(machines: list[MachineParams], rho: np.ndarray,
@@ -288,17 +299,14 @@ def tcp_jacobians(models: Sequence[MachineParams], grid: np.ndarray | None = Non
     if not models:
         return []
     targets = workspace_grid() if grid is None else np.asarray(grid, dtype=float)
-    rho = np.stack([commands(m, targets) for m in models])  # (M, n, 3)
+    rho = commands_many(models, targets)  # (M, n, 3)
     usable = np.isfinite(rho).all(axis=-1)
-    # Targets without a command are solved at Zero (any posture will do) and dropped.
+    # A model's commands put its own TCP on the target exactly (the inverse is closed
+    # form), so the target is the TCP the derivative is taken at.  Targets without a
+    # command are taken at Zero, TCP at the origin (any well-posed point will do), and
+    # dropped.
     rho = np.where(usable[..., None], rho, 0.0)
-
-    def alone(m: int) -> np.ndarray:
-        out = np.zeros(rho[m].shape)
-        out[usable[m]] = direct(models[m], rho[m][usable[m]])
-        return out
-
-    p = _direct_many(list(models), rho, alone)  # (M, n, 3)
+    p = np.where(usable[..., None], targets, 0.0)
     jac = tcp_sensitivity(MachineParams.stack(list(models)), rho, p)  # (M, n, 3, 27)
     return [(targets[u], j[u]) for u, j in zip(usable, jac, strict=True)]
 
@@ -334,7 +342,7 @@ def predicted_frame_errors(targets: np.ndarray, jac: np.ndarray,
         if basis.shape[1]:
             q, _ = np.linalg.qr(basis)  # an orthonormal basis: the projection is q q^T
             left = flat - q @ (q.T @ flat)
-        per_target = np.einsum("rf,fg,rg->r", left, covariance, left).reshape(-1, 3).sum(-1)
+        per_target = np.sum((left @ covariance) * left, axis=1).reshape(-1, 3).sum(-1)
         per_target = np.clip(per_target, 0.0, None)  # round-off of a PSD quadratic form
         stats.append(ErrorStats(float(np.sqrt(per_target.mean())),
                                 float(np.sqrt(per_target.max()))))

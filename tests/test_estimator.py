@@ -29,7 +29,6 @@ from orthoglide_env.gauges import (
 )
 from orthoglide_env.geometry import (
     ERROR_NAMES,
-    L_NOMINAL,
     PRESETS,
     MachineParams,
     random_machine,
@@ -120,29 +119,41 @@ def test_a_gauge_zero_is_eliminated() -> None:
     np.testing.assert_allclose(moved.theta, est.theta, atol=1e-8)
 
 
-def test_fd_jacobian_matches_central_differences() -> None:
-    """The forward-difference Jacobian of the batched model equals central differences:
-    truncation ~ step * curvature (relative 1e-6 * scale / L), round-off ~ eps * L / step
-    (the model computes positions of the order of the leg length L), which sets the
-    absolute tolerance (x10)."""
-    data, truth, _ = experiment(None, 31)
-    design, _ = design_of(data)
-    from orthoglide_env.reading_model import jacobian
+def test_jacobian_equals_central_differences_on_every_target_and_the_tracker() -> None:
+    """The chain-rule Jacobian of the reading model (closed-form geometry and rotations,
+    the TCP's derivative by the implicit function theorem) equals central differences of
+    ``predict`` at 1e-3 of each scale, for every parameter of a design that reads bars,
+    carriages, the platform and a tracker station at random postures, on random
+    parameter vectors.  Central differences there carry truncation ~(1e-3 scale / L)^2
+    relative (< 1e-10 on entries up to ~2) and round-off ~eps * L / 1e-3 ~ 7e-11 mm per
+    scale unit on readings of the order of L = 310 mm, times the few operations a
+    reading takes: the bar is 1e-9 mm per scale unit."""
+    from orthoglide_env.gauges import layout_from_names
+    from orthoglide_env.reading_model import Design, TrackerAxis, default_scales, jacobian
 
-    space = design.space
-    free = select("extended", space)
-    scale = scales(space, prior_sigmas("realistic", space, free))
-    jac = jacobian(truth, design, free, scale)
-    from orthoglide_env.reading_model import FD_STEP
-
-    for name in ("drho_y", "axis_tilt_y.x", "attach_z.x", space.names[-1]):
-        k = space.names.index(name)
-        h = 1e-3 * scale[k]
-        step = np.zeros(len(space))
-        step[k] = h
-        central = (predict(truth + step, design) - predict(truth - step, design)) / (2 * h)
-        roundoff = 10 * np.finfo(float).eps * L_NOMINAL / (FD_STEP * scale[k])
-        np.testing.assert_allclose(jac[:, k] / scale[k], central, rtol=1e-4, atol=roundoff)
+    rng = np.random.default_rng(0)
+    names = ["x-leg/y", "y/z@0.3", "z-leg/x", "x-carriage/y", "y-carriage/z", "platform/x"]
+    specs = [*layout_from_names(names), TrackerAxis(0), TrackerAxis(1), TrackerAxis(2)]
+    names += ["tracker.x", "tracker.y", "tracker.z"]
+    mountings, chosen, rho = [], [], []
+    for posture in rng.uniform(-20.0, 20.0, (6, 3)):
+        for name, spec in zip(names, specs, strict=True):
+            if rng.random() < 0.8:
+                mountings.append(name)
+                chosen.append(spec)
+                rho.append(posture)
+    design = Design.of(mountings, chosen, np.array(rho))
+    count = len(design.space)
+    scale = default_scales(design.space)
+    theta = rng.normal(0.0, 1.0, (3, count)) * scale
+    theta[0, -3:] = [1e-3, -2e-3, 5e-4]  # a tracker frame turned by a few mrad
+    jac = jacobian(theta, design, np.ones(count, bool), scale)
+    for k in range(count):
+        step = np.zeros(count)
+        step[k] = 1e-3 * scale[k]
+        central = (predict(theta + step, design) - predict(theta - step, design)) / 2e-3
+        np.testing.assert_allclose(jac[..., k], central, rtol=0, atol=1e-9,
+                                   err_msg=design.space.names[k])
 
 
 def test_parameter_selection_and_prior_errors() -> None:
