@@ -6,9 +6,9 @@
 For each estimator, the paper agent on ``--machines`` realistic machines (exact backend,
 one process): the batched path (``run_chunk(batched=True)`` in compare's chunks: every
 agent's episodes of a chunk in the lab vector env, the fits and scores batched) and the
-per-machine path (``run_chunk(batched=False)`` in chunks of 10: one lone lab per machine,
-step by step; the fits and scores batched per chunk) on the first ``--per-machine``
-machines, in the same run; the time per machine of each, their ratio, and the largest
+per-machine path (``run_chunk(batched=False)`` one machine at a time: its episode in a
+lone lab step by step, then its fit and its scores, each a batch of one) on the first
+``--per-machine`` machines, in the same run, both after a warm-up on another machine; the time per machine of each, their ratio, and the largest
 difference between the two paths' trials on the machines both ran (parameters, scores,
 predicted errors, mm).  Then the episodes alone (the agent in the lab, no estimate).
 Last, the peak resident memory (``getrusage`` max RSS) of a fresh process that runs
@@ -36,7 +36,7 @@ from calibrators.agents import get_agent  # noqa: E402
 from calibrators.compare import CHUNK, Config, Trial, run_chunk  # noqa: E402
 from calibrators.experiment import run_episode, run_episodes  # noqa: E402
 
-#: Machines per chunk of the per-machine path (what compare ran before it was batched).
+#: Machines per chunk of the per-machine path: one, every stage a batch of one.
 PER_MACHINE_CHUNK: int = 1
 
 
@@ -109,6 +109,9 @@ def main() -> None:
           f"{'ratio':>8}{'largest gap mm':>16}")
     for name in args.estimators.split(","):
         config = Config(("paper",), (name,))
+        # Warm up both paths (imports, cached tables) on machines outside the timed ones.
+        for batched in (True, False):
+            run_chunk(config, [args.machines + 1], set(), batched=batched)
         fast, batched = timed(config, args.machines, True)
         slow, alone = timed(config, args.per_machine, False)
         fast_ms, slow_ms = 1e3 * fast / args.machines, 1e3 * slow / args.per_machine

@@ -41,7 +41,7 @@ from .experiment import (
     run_episode,
     run_episodes,
 )
-from .prediction import predicted_tcp_errors
+from .prediction import predicted_rigid_mm
 
 #: Fractions of an episode's time at which the accuracy-versus-time curve re-estimates.
 CURVE_FRACTIONS: tuple[float, ...] = (0.25, 0.5, 0.75)
@@ -134,7 +134,7 @@ def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
     fitted = [estimates[k] for k in good]
     reports = iter(score_batch([e.machine for e in fitted],  # type: ignore[union-attr]
                                [episodes[k].truth for k in good]) if good else [])
-    predicted = iter(predicted_tcp_errors(fitted))  # type: ignore[arg-type]
+    predicted = iter(predicted_rigid_mm(fitted).tolist())  # type: ignore[arg-type]
     out = []
     for episode, est, curve in zip(episodes, estimates, curves, strict=True):
         count = len(episode.records)
@@ -152,7 +152,7 @@ def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
             episode.agent, name, episode.machine, time_s=episode.time_s, readings=count,
             tcp_before={f: getattr(report.tcp_before, f).rms for f in FRAMES},
             tcp_after={f: getattr(report.tcp_after, f).rms for f in FRAMES},
-            predicted_rigid_mm=next(predicted).rigid.rms,
+            predicted_rigid_mm=next(predicted),
             z=machine_z_scores(est, episode.truth).tolist(),
             error=(est.machine.to_vector() - episode.truth.to_vector()).tolist(),
             std=std.tolist(), curve=curve,

@@ -61,7 +61,7 @@ from orthoglide_env.reading_model import (
     jacobian,
     predict,
 )
-from orthoglide_env.scoring import motion_basis, tcp_jacobian
+from orthoglide_env.scoring import rigid_weights
 
 N_MACHINE = len(ERROR_NAMES)
 #: Unknowns of one mounting besides the machine's: four of its stand, then its zero.
@@ -192,11 +192,8 @@ def rigid_weight() -> np.ndarray:
     scoring grid after the best-fit rigid motion (mm^2) for machine errors off by
     ``N(0, C)`` in units of their scale (the quadratic form of
     :func:`orthoglide_env.scoring.predicted_frame_errors`)."""
-    targets, jac = tcp_jacobian(MachineParams())
-    flat = jac.reshape(-1, N_MACHINE) * default_scales(ParameterSpace())
-    q, _ = np.linalg.qr(motion_basis(targets, "rigid"))
-    left = flat - q @ (q.T @ flat)
-    return left.T @ left / len(targets)
+    scale = default_scales(ParameterSpace())
+    return rigid_weights([MachineParams()])[0] * np.outer(scale, scale)
 
 
 class Step(NamedTuple):

@@ -20,6 +20,7 @@ from orthoglide_env.lab import Op
 from orthoglide_env.lab_env import Record
 
 from .agents import Agent, get_agent
+from .agents.base import PlannedAgent
 from .base import Estimate, get_strategy
 from .measurements import Measurement, Measurements
 
@@ -124,19 +125,38 @@ def run_episodes(envs: gym.vector.VectorEnv, agent: str, seeds: list[int],
     for i, (one, rng) in enumerate(zip(agents, rngs, strict=True)):
         one.reset(lab.sub_env(i), _row(observation, i), rng)
     idle = {"op": int(Op.LIFT), "rho": np.zeros(3), "stand": 0, "slot": 0}
+    # Plans decided at reset are played as arrays, every machine's step t at once.
+    plans = (_plan_arrays([a.plan for a in agents], idle)  # type: ignore[attr-defined]
+             if all(type(a).act is PlannedAgent.act for a in agents) else None)
     out: list[Episode | None] = [None] * len(seeds)
+    step = 0
     while True:
-        moves = [idle if out[i] is not None else agents[i].act(_row(observation, i),
-                                                               _InfoRow(info, i))
-                 for i in range(len(seeds))]
-        actions = {key: np.array([m[key] for m in moves]) for key in idle}
+        if plans is not None:
+            if step >= len(plans["op"][0]):
+                raise RuntimeError(f"agent '{agent}' ran out of plan before its episode ended")
+            actions = {key: value[:, step] for key, value in plans.items()}
+        else:
+            moves = [idle if out[i] is not None else agents[i].act(_row(observation, i),
+                                                                   _InfoRow(info, i))
+                     for i in range(len(seeds))]
+            actions = {key: np.array([m[key] for m in moves]) for key in idle}
         observation, _, terminated, truncated, info = envs.step(actions)
+        step += 1
         for i in np.flatnonzero(terminated | truncated):
             if out[i] is None:
                 out[i] = Episode(list(lab.records[i]), float(observation["time"][i, 0]),
                                  lab.noise.effective_sigma, lab.true_machines[i])
         if all(e is not None for e in out):
             return out  # type: ignore[return-value]
+
+
+def _plan_arrays(plans: list[list[dict[str, Any]]], idle: dict[str, Any]
+                 ) -> dict[str, np.ndarray]:
+    """Every machine's plan as arrays ``(machines, steps, ...)`` per action field, a short
+    plan padded with ``idle`` (what an ended episode is kept busy with)."""
+    length = max(len(plan) for plan in plans)
+    return {key: np.array([[a[key] for a in plan] + [idle[key]] * (length - len(plan))
+                           for plan in plans]) for key in idle}
 
 
 def _row(observation: dict[str, np.ndarray], i: int) -> dict[str, np.ndarray]:

@@ -17,6 +17,7 @@ from orthoglide_env.scoring import (
     FrameErrors,
     frame_errors,
     predicted_tcp_frames_many,
+    rigid_weights,
     tcp_error_vectors,
     workspace_grid,
 )
@@ -36,6 +37,15 @@ def predicted_correction(est: Estimate, grid: np.ndarray | None = None) -> Frame
 def predicted_tcp_error(est: Estimate, grid: np.ndarray | None = None) -> FrameErrors:
     """:func:`predicted_tcp_errors` of one estimate."""
     return predicted_tcp_errors([est], grid)[0]
+
+
+def predicted_rigid_mm(ests: list[Estimate]) -> np.ndarray:
+    """The rigid-frame RMS of :func:`predicted_tcp_errors` of each estimate (mm), alone:
+    ``sqrt(trace(W C))`` (:func:`~orthoglide_env.scoring.rigid_weights`)."""
+    n = len(ERROR_NAMES)
+    weights = rigid_weights([e.machine for e in ests])
+    covariances = np.array([e.error_covariance[:n, :n] for e in ests]).reshape(-1, n, n)
+    return np.sqrt(np.clip(np.einsum("mij,mji->m", weights, covariances), 0.0, None))
 
 
 def predicted_tcp_errors(ests: list[Estimate], grid: np.ndarray | None = None

@@ -47,9 +47,11 @@ from .geometry import (
 )
 from .kinematics import (
     ATTACH_COLUMN,
+    CARRIAGE_COLUMNS,
     carriage_gradients,
     carriage_points,
     direct,
+    dot,
     platform_points,
     tcp_sensitivity,
 )
@@ -327,7 +329,7 @@ def _gauge_derivatives(theta: np.ndarray, design: Design, machine: MachineParams
     o, d = origins[:, gauge], directions[:, gauge]
     t = plane_distances(centre, rot, half, g.face, o, d)
     normal = face_normals(rot, g.face)
-    nd = np.sum(normal * d, axis=-1)[..., None]
+    nd = dot(normal, d)[..., None]
     towards_centre = normal / nd  # dt/dc, and -dt/do
     # dt/dn = (c - hit) / (n . d) through the bar's normal, which turns with v = c - a.
     turn = np.einsum("brj,brjk->brk", (centre - o - t[..., None] * d) / nd,
@@ -369,9 +371,10 @@ def _through_leg(machine: MachineParams, rho: np.ndarray, dp: np.ndarray, legs: 
     R1 centre A and R2 centre C of leg ``legs`` (``(R,)``) and the TCP p at commands
     ``rho`` (``(..., R, 3)``, or one posture for all), the TCP's derivative ``dp``
     ``(B, R, 3, 27)``: ``(B, R, 27)``."""
-    out = carriage_gradients(machine, rho, d_a[..., None, :], legs[:, None])[..., 0, :]
-    out += ((d_c + d_p)[..., None, :] @ dp)[..., 0, :]
     each = np.arange(len(legs))[:, None]
+    out = ((d_c + d_p)[..., None, :] @ dp)[..., 0, :]
+    out[:, each, CARRIAGE_COLUMNS[legs]] += carriage_gradients(
+        machine, rho, d_a[..., None, :], legs[:, None])[..., 0, :]
     out[:, each, ATTACH_COLUMN + 3 * legs[:, None] + np.arange(3)] += d_c
     return out
 

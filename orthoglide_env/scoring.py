@@ -26,7 +26,7 @@ import numpy as np
 
 from .gauges import cross
 from .geometry import RHO_MAX, RHO_MIN, MachineParams
-from .kinematics import UnreachableError, direct, inverse, tcp_sensitivity
+from .kinematics import UnreachableError, direct, dot, inverse, tcp_sensitivity
 
 #: TCP targets of the scoring grid span this cube (mm): inside the workspace that the
 #: nominal model reaches within the control limits.
@@ -220,7 +220,8 @@ def remove_rigid(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray) -> 
 
 def _stats(errors: np.ndarray, mask: np.ndarray) -> list[ErrorStats]:
     """RMS and max of the lengths of error vectors (B, n, 3) over ``mask`` (B, n)."""
-    length2 = np.sum(np.where(mask[..., None], errors, 0.0) ** 2, axis=-1)
+    kept = np.where(mask[..., None], errors, 0.0)
+    length2 = dot(kept, kept)
     rms = np.sqrt(length2.sum(axis=-1) / mask.sum(axis=-1))
     worst = np.sqrt(np.max(length2, axis=-1))
     return [ErrorStats(float(r), float(m)) for r, m in zip(rms, worst, strict=True)]
@@ -299,6 +300,14 @@ def tcp_jacobians(models: Sequence[MachineParams], grid: np.ndarray | None = Non
     if not models:
         return []
     targets = workspace_grid() if grid is None else np.asarray(grid, dtype=float)
+    usable, jac = _tcp_jacobian_arrays(models, targets)
+    return [(targets[u], j[u]) for u, j in zip(usable, jac, strict=True)]
+
+
+def _tcp_jacobian_arrays(models: Sequence[MachineParams], targets: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """Which targets (n, 3) each model commands within the control limits (M, n), and the
+    derivatives of :func:`tcp_jacobian` at every target (M, n, 3, 27)."""
     rho = commands_many(models, targets)  # (M, n, 3)
     usable = np.isfinite(rho).all(axis=-1)
     # A model's commands put its own TCP on the target exactly (the inverse is closed
@@ -307,8 +316,7 @@ def tcp_jacobians(models: Sequence[MachineParams], grid: np.ndarray | None = Non
     # dropped.
     rho = np.where(usable[..., None], rho, 0.0)
     p = np.where(usable[..., None], targets, 0.0)
-    jac = tcp_sensitivity(MachineParams.stack(list(models)), rho, p)  # (M, n, 3, 27)
-    return [(targets[u], j[u]) for u, j in zip(usable, jac, strict=True)]
+    return usable, tcp_sensitivity(MachineParams.stack(list(models)), rho, p)
 
 
 def motion_basis(targets: np.ndarray, frame: str) -> np.ndarray:
@@ -334,7 +342,14 @@ def predicted_frame_errors(targets: np.ndarray, jac: np.ndarray,
     The best fit of a frame is, to first order, the least-squares projection ``P`` off
     its :func:`motion_basis`; the RMS is ``sqrt(trace(P J C J^T P) / m)`` and the max is
     the largest per-target root of the expected squared error."""
-    flat = jac.reshape(-1, jac.shape[-1])
+    return _predicted_frames(targets, jac[None], covariance[None])[0]
+
+
+def _predicted_frames(targets: np.ndarray, jac: np.ndarray, covariance: np.ndarray
+                      ) -> list[FrameErrors]:
+    """:func:`predicted_frame_errors` of many error models over the same ``targets``:
+    ``jac`` (k, m, 3, p), ``covariance`` (k, p, p)."""
+    flat = jac.reshape(len(jac), -1, jac.shape[-1])
     stats = []
     for frame in FRAMES:
         basis = motion_basis(targets, frame)
@@ -342,11 +357,37 @@ def predicted_frame_errors(targets: np.ndarray, jac: np.ndarray,
         if basis.shape[1]:
             q, _ = np.linalg.qr(basis)  # an orthonormal basis: the projection is q q^T
             left = flat - q @ (q.T @ flat)
-        per_target = np.sum((left @ covariance) * left, axis=1).reshape(-1, 3).sum(-1)
+        per_target = np.sum((left @ covariance) * left, axis=-1).reshape(
+            len(jac), -1, 3).sum(-1)
         per_target = np.clip(per_target, 0.0, None)  # round-off of a PSD quadratic form
-        stats.append(ErrorStats(float(np.sqrt(per_target.mean())),
-                                float(np.sqrt(per_target.max()))))
-    return FrameErrors(*stats)
+        stats.append([ErrorStats(float(r), float(m)) for r, m in zip(
+            np.sqrt(per_target.mean(axis=-1)), np.sqrt(per_target.max(axis=-1)), strict=True)])
+    return [FrameErrors(*frames) for frames in zip(*stats, strict=True)]
+
+
+def rigid_weights(models: Sequence[MachineParams], grid: np.ndarray | None = None
+                  ) -> np.ndarray:
+    """``W`` (M, 27, 27) of each model: ``trace(W C)`` is the mean square over the grid of
+    the expected TCP error after the best-fit rigid motion (mm^2) for a machine compensated
+    with the model whose errors are off by ``N(0, C)``, i.e. the square of
+    :func:`predicted_tcp_frames`' rigid RMS: ``W = J^T P J / m``, one matrix product per
+    model instead of a quadratic form per target."""
+    if not models:
+        return np.zeros((0, 27, 27))
+    targets = workspace_grid() if grid is None else np.asarray(grid, dtype=float)
+    usable, jac = _tcp_jacobian_arrays(models, targets)
+    out = np.zeros((len(models), jac.shape[-1], jac.shape[-1]))
+    masks, group = np.unique(usable, axis=0, return_inverse=True)
+    for k, mask in enumerate(masks):
+        members = np.flatnonzero(np.ravel(group) == k)
+        # The common case, every model reaching every target, without copies.
+        mine = jac if len(masks) == 1 else jac[members]
+        flat = (mine if mask.all() else mine[:, mask]).reshape(len(members), -1, jac.shape[-1])
+        q, _ = np.linalg.qr(motion_basis(targets[mask], "rigid"))
+        moved = q.T @ flat  # what the rigid fit takes out, (k, 6, 27)
+        out[members] = (np.swapaxes(flat, -1, -2) @ flat
+                        - np.swapaxes(moved, -1, -2) @ moved) / mask.sum()
+    return out
 
 
 def predicted_tcp_frames(model: MachineParams, covariance: np.ndarray,
@@ -359,6 +400,18 @@ def predicted_tcp_frames(model: MachineParams, covariance: np.ndarray,
 def predicted_tcp_frames_many(models: Sequence[MachineParams],
                               covariances: Sequence[np.ndarray],
                               grid: np.ndarray | None = None) -> list[FrameErrors]:
-    """:func:`predicted_tcp_frames` of each model and covariance (the kinematics batched)."""
-    return [predicted_frame_errors(targets, jac, cov) for (targets, jac), cov in zip(
-        tcp_jacobians(models, grid), covariances, strict=True)]
+    """:func:`predicted_tcp_frames` of each model and covariance (the kinematics batched,
+    and the frames of the models that reach the same targets)."""
+    if not models:
+        return []
+    targets = workspace_grid() if grid is None else np.asarray(grid, dtype=float)
+    usable, jac = _tcp_jacobian_arrays(models, targets)
+    covariances = np.asarray(covariances, dtype=float)
+    out: list[FrameErrors | None] = [None] * len(models)
+    masks, group = np.unique(usable, axis=0, return_inverse=True)
+    for k, mask in enumerate(masks):
+        members = np.flatnonzero(np.ravel(group) == k)
+        frames = _predicted_frames(targets[mask], jac[members][:, mask], covariances[members])
+        for m, frame in zip(members, frames, strict=True):
+            out[m] = frame
+    return out  # type: ignore[return-value]

@@ -54,6 +54,24 @@ def test_a_small_rotation_is_predicted_away_only_by_the_rigid_frame() -> None:
     assert frames.translation.rms > 1.0 and frames.raw.rms >= frames.translation.rms
 
 
+def test_rigid_weights_give_the_rigid_frames_mean_square() -> None:
+    """``trace(W C)`` of :func:`rigid_weights` is the square of the rigid RMS the per-target
+    quadratic forms give, model by model: on realistic models, one of them with targets out
+    of its reach (a shorter batch of targets), for random covariances; the two sum the same
+    terms in another order (relative round-off ~1e-13)."""
+    from orthoglide_env.geometry import get_preset
+    from orthoglide_env.scoring import predicted_tcp_frames_many, rigid_weights
+
+    rng = np.random.default_rng(4)
+    models = [get_preset("realistic").sample(rng) for _ in range(3)]
+    models.append(MachineParams(drho=[40.0, 0.0, 0.0]))  # loses the far targets along x
+    covariances = [random_covariance(rng, 27) * 1e-6 for _ in models]
+    weights = rigid_weights(models)
+    frames = predicted_tcp_frames_many(models, covariances)
+    for w, cov, frame in zip(weights, covariances, frames, strict=True):
+        assert np.trace(w @ cov) == pytest.approx(frame.rigid.rms**2, rel=1e-10)
+
+
 def test_the_rigid_basis_spans_six_motions() -> None:
     targets = workspace_grid()
     assert motion_basis(targets, "raw").shape == (3 * len(targets), 0)
