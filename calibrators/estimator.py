@@ -29,7 +29,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy import stats
+from scipy import special
 
 from orthoglide_env.gauges import NOISE_FLOOR
 from orthoglide_env.geometry import L_NOMINAL
@@ -101,7 +101,10 @@ class BatchFit:
     @property
     def misfit(self) -> np.ndarray:
         """(M,) bool: the chi-square test rejects the model at :data:`CHI2_LEVEL`."""
-        return (self.dof > 0) & (stats.chi2.sf(self.chi2, np.maximum(self.dof, 1)) < CHI2_LEVEL)
+        # The chi-square survival function itself (what scipy.stats.chi2.sf evaluates,
+        # without its per-call overhead: this runs once per machine of a sweep).
+        survival = special.chdtrc(np.maximum(self.dof, 1), self.chi2)
+        return (self.dof > 0) & (survival < CHI2_LEVEL)
 
     @property
     def covariance_scale(self) -> np.ndarray:
@@ -216,9 +219,11 @@ class _Problem:
         return a, g
 
 
-def _step(a: np.ndarray, g: np.ndarray, damping: np.ndarray) -> np.ndarray:
-    """Damped Gauss-Newton step in the retained directions of the normal matrix ``a``."""
-    lam, vec = np.linalg.eigh(a)
+def _step(eigen: tuple[np.ndarray, np.ndarray], g: np.ndarray, damping: np.ndarray
+          ) -> np.ndarray:
+    """Damped Gauss-Newton step in the retained directions of the normal matrix, given by
+    its eigen-decomposition ``eigen`` (computed once for every damping tried)."""
+    lam, vec = eigen
     keep = lam >= RETAIN * (1 - 1e-9)
     inv = np.where(keep, 1.0 / (np.where(keep, lam, 1.0) + damping[:, None]), 0.0)
     return -(vec @ (inv * (_t(vec) @ g[..., None])[..., 0])[..., None])[..., 0]
@@ -256,7 +261,8 @@ def _damped_gauss_newton(problem: _Problem, theta: np.ndarray, max_iterations: i
         # taken untested; convergence is on the step size alone (the Gauss-Newton rate is
         # only linear where residuals and curvature meet, so a small predicted decrease
         # does not yet mean a converged parameter).
-        newton = _step(a, g, np.zeros(len(rows)))
+        eigen = np.linalg.eigh(a)
+        newton = _step(eigen, g, np.zeros(len(rows)))
         decrease = -0.5 * np.einsum("mf,mf->m", g, newton)
         untested = decrease <= problem.cost_resolution(cost)
         theta[rows[untested][:, None], idx] += newton[untested] * s
@@ -265,7 +271,7 @@ def _damped_gauss_newton(problem: _Problem, theta: np.ndarray, max_iterations: i
         pending = ~untested
         while pending.any():
             sub = np.flatnonzero(pending)
-            step = _step(a[sub], g[sub], damping[rows[sub]])
+            step = _step((eigen[0][sub], eigen[1][sub]), g[sub], damping[rows[sub]])
             trial = th[sub].copy()
             trial[:, idx] += step * s
             _, trial_cost = problem.residual(trial, rows[sub])

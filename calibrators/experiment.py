@@ -33,7 +33,8 @@ def measurements_of(records: list[Record], time_s: float = 0.0,
                     until_s: float | None = None) -> Measurements:
     """The notebook as measurements (only what was read by ``until_s`` seconds, if given).
     A reading at a paper posture is labelled with its name."""
-    items = [Measurement(r.spec, _PAPER_RHO.get(r.rho, ""), 1, r.reading, r.rho, r.mounting)
+    items = [Measurement.recorded(r.spec, _PAPER_RHO.get(r.rho, ""), r.reading, r.rho,
+                                  r.mounting)
              for r in records if until_s is None or r.time_s <= until_s]
     return Measurements(items, time_s if until_s is None else min(time_s, until_s))
 

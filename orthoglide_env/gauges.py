@@ -560,24 +560,29 @@ def boxes_at(gauges: GaugeArray, a: np.ndarray, c: np.ndarray, p: np.ndarray
         for b, c, f, tail in zip(bars, carriages, platform, (1, 2, 1), strict=True))
 
 
-def bar_normal_derivatives(a: np.ndarray, c: np.ndarray, legs: np.ndarray, face: np.ndarray
-                           ) -> np.ndarray:
-    """Derivative of a bar box's face normal (face 1: the hinge axis, 2: the normal of
-    :func:`_boxes`) over ``v = c - a``: ``(..., 3, 3)``.  With ``a = v / |v|``, ``h =
-    w / |w|``, ``w = r x a`` and ``m = a x h``: ``dh = (I - h h^T) [r]x da / |w|``,
-    ``da = (I - a a^T) dv / |v|`` and ``dm = -[h]x da + [a]x dh``."""
+def bar_normal_pullback(weights: np.ndarray, a: np.ndarray, c: np.ndarray, legs: np.ndarray,
+                        face: np.ndarray) -> np.ndarray:
+    """``weights . dn/dv``: the derivative of a bar box's face normal ``n`` (face 1: the
+    hinge axis, 2: the normal of :func:`_boxes`) over ``v = c - a``, pulled back along
+    ``weights`` (``(..., 3)``), without forming the 3 x 3 derivatives.  With ``u = v / |v|``,
+    ``h = w / |w|``, ``w = r x u`` and ``m = u x h``: ``du = (I - u u^T) dv / |v|``, ``dh =
+    (I - h h^T) [r]x du / |w|``, ``dm = -[h]x du + [u]x dh``, and ``z^T [x]x = (z x x)^T``."""
     r_axis = R_LEG[legs][..., :, 2]
     v = c - a
-    length = np.linalg.norm(v, axis=-1)[..., None, None]
-    along = v / length[..., 0]
+    length = np.sqrt(dot(v, v))[..., None]
+    along = v / length
     w = cross(r_axis, along)
-    size = np.linalg.norm(w, axis=-1)[..., None, None]
-    hinge = w / size[..., 0]
-    eye = np.eye(3)
-    d_along = (eye - along[..., :, None] * along[..., None, :]) / length
-    d_hinge = (eye - hinge[..., :, None] * hinge[..., None, :]) @ skew(r_axis) @ d_along / size
-    d_normal = -skew(hinge) @ d_along + skew(along) @ d_hinge
-    return np.where((np.asarray(face) == 1)[..., None, None], d_hinge, d_normal)
+    size = np.sqrt(dot(w, w))[..., None]
+    hinge = w / size
+
+    def through_along(z: np.ndarray) -> np.ndarray:
+        return (z - dot(z, along)[..., None] * along) / length
+
+    def through_hinge(z: np.ndarray) -> np.ndarray:
+        return through_along(cross(z - dot(z, hinge)[..., None] * hinge, r_axis)) / size
+
+    normal = through_hinge(cross(weights, along)) - through_along(cross(weights, hinge))
+    return np.where((np.asarray(face) == 1)[..., None], through_hinge(weights), normal)
 
 
 def skew(x: np.ndarray) -> np.ndarray:

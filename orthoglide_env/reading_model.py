@@ -24,7 +24,7 @@ from .gauges import (
     GaugeSpec,
     Part,
     across_axes,
-    bar_normal_derivatives,
+    bar_normal_pullback,
     boxes_at,
     face_distances,
     face_normals,
@@ -272,7 +272,11 @@ def jacobian(theta: np.ndarray, design: Design, free: np.ndarray, scale: np.ndar
     flat = theta.reshape(-1, theta.shape[-1])
     idx = np.flatnonzero(free)
     full = _derivatives(flat, design)
-    return (full[..., idx] * scale[idx]).reshape(*batch, len(design), len(idx))
+    if len(idx) == full.shape[-1]:
+        full *= scale
+    else:
+        full = full[..., idx] * scale[idx]
+    return full.reshape(*batch, len(design), len(idx))
 
 
 def _derivatives(theta: np.ndarray, design: Design) -> np.ndarray:
@@ -332,8 +336,7 @@ def _gauge_derivatives(theta: np.ndarray, design: Design, machine: MachineParams
     nd = dot(normal, d)[..., None]
     towards_centre = normal / nd  # dt/dc, and -dt/do
     # dt/dn = (c - hit) / (n . d) through the bar's normal, which turns with v = c - a.
-    turn = np.einsum("brj,brjk->brk", (centre - o - t[..., None] * d) / nd,
-                     bar_normal_derivatives(a, c, legs, g.face))
+    turn = bar_normal_pullback((centre - o - t[..., None] * d) / nd, a, c, legs, g.face)
     bar = (g.part == Part.BAR)[:, None]
     d_a = np.where(bar, towards_centre / 2 - turn,
                    np.where((g.part == Part.CARRIAGE)[:, None], towards_centre, 0.0))
@@ -356,11 +359,12 @@ def _gauge_derivatives(theta: np.ndarray, design: Design, machine: MachineParams
     # Stand parameters move the ray only: shifts its origin across the measuring axis,
     # tilts its direction d = (d0 + tilt . across) / |...|.
     across = across_axes(specs)[gauge]  # (R, 2, 3)
-    raw = aim[gauge] + np.einsum("brk,rkj->brj", stand[:, gauge, 2:], across)
-    size = np.linalg.norm(raw, axis=-1)[..., None, None]
-    turned = (across - d[..., None, :] * np.einsum("brj,rkj->brk", d, across)[..., None]) / size
-    shifts = -np.einsum("brj,rkj->brk", towards_centre, across)
-    tilts = -t[..., None] * np.einsum("brj,brkj->brk", towards_centre, turned)
+    tilt = stand[:, gauge, 2:]
+    raw = aim[gauge] + tilt[..., 0, None] * across[:, 0] + tilt[..., 1, None] * across[:, 1]
+    size = np.sqrt(dot(raw, raw))[..., None, None]
+    turned = (across - d[..., None, :] * dot(d[..., None, :], across)[..., None]) / size
+    shifts = -dot(towards_centre[..., None, :], across)
+    tilts = -t[..., None] * dot(towards_centre[..., None, :], turned)
     columns = N_MACHINE + 4 * gauge[:, None] + np.arange(4)
     out[:, rows[:, None], columns] = sign[:, None] * np.concatenate([shifts, tilts], axis=-1)
 
@@ -372,7 +376,9 @@ def _through_leg(machine: MachineParams, rho: np.ndarray, dp: np.ndarray, legs: 
     ``rho`` (``(..., R, 3)``, or one posture for all), the TCP's derivative ``dp``
     ``(B, R, 3, 27)``: ``(B, R, 27)``."""
     each = np.arange(len(legs))[:, None]
-    out = ((d_c + d_p)[..., None, :] @ dp)[..., 0, :]
+    through_p = d_c + d_p
+    out = (through_p[..., 0, None] * dp[..., 0, :] + through_p[..., 1, None] * dp[..., 1, :]
+           + through_p[..., 2, None] * dp[..., 2, :])
     out[:, each, CARRIAGE_COLUMNS[legs]] += carriage_gradients(
         machine, rho, d_a[..., None, :], legs[:, None])[..., 0, :]
     out[:, each, ATTACH_COLUMN + 3 * legs[:, None] + np.arange(3)] += d_c
