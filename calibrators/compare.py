@@ -108,7 +108,7 @@ def machine_z_scores(est: Estimate, truth: MachineParams) -> np.ndarray:
     machine = [ERROR_NAMES.index(est.names[k]) for k in idx]
     scale = default_scales(ParameterSpace())[machine]
     cov = est.covariance[np.ix_(idx, idx)] / np.outer(scale, scale)
-    err = (est.machine.to_vector()[machine] - truth.to_vector()[machine]) / scale
+    err = (est.theta[machine] - truth.to_vector()[machine]) / scale
     values, vectors = np.linalg.eigh(cov)
     known = vectors[:, values <= 0.5].T
     return known @ err / np.sqrt(np.einsum("kf,fg,kg->k", known, cov, known))
@@ -154,7 +154,7 @@ def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
             tcp_after={f: getattr(report.tcp_after, f).rms for f in FRAMES},
             predicted_rigid_mm=next(predicted),
             z=machine_z_scores(est, episode.truth).tolist(),
-            error=(est.machine.to_vector() - episode.truth.to_vector()).tolist(),
+            error=(est.theta[:len(ERROR_NAMES)] - episode.truth.to_vector()).tolist(),
             std=std.tolist(), curve=curve,
         ))
     return out

@@ -188,6 +188,9 @@ class _Problem:
         # residuals of a mounting is then its weighted zero.
         self.weight = 1.0 / np.maximum(np.broadcast_to(sigma, (len(design),)), NOISE_FLOOR)
         self.onehot = np.eye(len(design.mountings))[design.mounting]
+        # A prior that alone keeps every direction of the normal matrix at or above RETAIN
+        # (as the extended fit's does) leaves none to truncate: a step is a linear solve.
+        self.full_rank = bool(np.all(self.precision >= RETAIN * (1 - 1e-9)))
 
     def residual(self, theta: np.ndarray, rows: np.ndarray,
                  model: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -219,10 +222,14 @@ class _Problem:
         return a, g
 
 
-def _step(eigen: tuple[np.ndarray, np.ndarray], g: np.ndarray, damping: np.ndarray
-          ) -> np.ndarray:
-    """Damped Gauss-Newton step in the retained directions of the normal matrix, given by
-    its eigen-decomposition ``eigen`` (computed once for every damping tried)."""
+def _step(a: np.ndarray, g: np.ndarray, damping: np.ndarray,
+          eigen: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
+    """Damped Gauss-Newton step in the retained directions of the normal matrix ``a``: from
+    its eigen-decomposition ``eigen`` (computed once for every damping tried), or by a
+    linear solve where every direction is retained (``eigen`` None)."""
+    if eigen is None:
+        damped = a + damping[:, None, None] * np.eye(a.shape[-1])
+        return -np.linalg.solve(damped, g[..., None])[..., 0]
     lam, vec = eigen
     keep = lam >= RETAIN * (1 - 1e-9)
     inv = np.where(keep, 1.0 / (np.where(keep, lam, 1.0) + damping[:, None]), 0.0)
@@ -261,8 +268,8 @@ def _damped_gauss_newton(problem: _Problem, theta: np.ndarray, max_iterations: i
         # taken untested; convergence is on the step size alone (the Gauss-Newton rate is
         # only linear where residuals and curvature meet, so a small predicted decrease
         # does not yet mean a converged parameter).
-        eigen = np.linalg.eigh(a)
-        newton = _step(eigen, g, np.zeros(len(rows)))
+        eigen = None if problem.full_rank else np.linalg.eigh(a)
+        newton = _step(a, g, np.zeros(len(rows)), eigen)
         decrease = -0.5 * np.einsum("mf,mf->m", g, newton)
         untested = decrease <= problem.cost_resolution(cost)
         theta[rows[untested][:, None], idx] += newton[untested] * s
@@ -271,7 +278,8 @@ def _damped_gauss_newton(problem: _Problem, theta: np.ndarray, max_iterations: i
         pending = ~untested
         while pending.any():
             sub = np.flatnonzero(pending)
-            step = _step((eigen[0][sub], eigen[1][sub]), g[sub], damping[rows[sub]])
+            step = _step(a[sub], g[sub], damping[rows[sub]],
+                         None if eigen is None else (eigen[0][sub], eigen[1][sub]))
             trial = th[sub].copy()
             trial[:, idx] += step * s
             _, trial_cost = problem.residual(trial, rows[sub])

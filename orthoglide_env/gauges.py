@@ -419,8 +419,7 @@ def ideal_rays(
     axis)."""
     zero = np.zeros(3)
     g = spec_arrays(specs)
-    centre, rot, half = exact_target_boxes(g, collision_boxes(machine, zero, direct(machine,
-                                                                                     zero)))
+    centre, rot, half = target_boxes(machine, g, zero, direct(machine, zero))
     n = len(specs)
     face = g.face
     direction = np.array([s.approach for s in specs])[:, None] * np.eye(3)[g.axis]

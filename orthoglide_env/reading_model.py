@@ -271,7 +271,7 @@ def jacobian(theta: np.ndarray, design: Design, free: np.ndarray, scale: np.ndar
     batch = theta.shape[:-1]
     flat = theta.reshape(-1, theta.shape[-1])
     idx = np.flatnonzero(free)
-    full = _derivatives(flat, design)
+    full = _derivatives(flat, design, np.asarray(free, dtype=bool))
     if len(idx) == full.shape[-1]:
         full *= scale
     else:
@@ -279,9 +279,9 @@ def jacobian(theta: np.ndarray, design: Design, free: np.ndarray, scale: np.ndar
     return full.reshape(*batch, len(design), len(idx))
 
 
-def _derivatives(theta: np.ndarray, design: Design) -> np.ndarray:
+def _derivatives(theta: np.ndarray, design: Design, wanted: np.ndarray) -> np.ndarray:
     """Derivative of every reading over every parameter, ``(B, N, n)`` for ``theta``
-    ``(B, n)``."""
+    ``(B, n)``; the stands' columns are left at zero unless one of them is ``wanted``."""
     space = design.space
     machine = MachineParams.from_vector(theta[:, :N_MACHINE])
     postures = design.postures[None]
@@ -295,7 +295,8 @@ def _derivatives(theta: np.ndarray, design: Design) -> np.ndarray:
         where[gauges] = np.arange(len(gauges))
         rows = np.flatnonzero(where[design.mounting] >= 0)
         _gauge_derivatives(theta, design, machine, p, dp, rows,
-                           where[design.mounting[rows]], at[rows], out)
+                           where[design.mounting[rows]], at[rows], out,
+                           stands=bool(wanted[N_MACHINE:N_MACHINE + 4 * len(gauges)].any()))
     start = N_MACHINE + 4 * len(gauges)
     for k, station in enumerate(space.stations):
         rows = np.flatnonzero([isinstance(design.specs[m], TrackerAxis)
@@ -314,9 +315,11 @@ def _derivatives(theta: np.ndarray, design: Design) -> np.ndarray:
 
 def _gauge_derivatives(theta: np.ndarray, design: Design, machine: MachineParams,
                        p: np.ndarray, dp: np.ndarray, rows: np.ndarray,
-                       gauge: np.ndarray, at: np.ndarray, out: np.ndarray) -> None:
+                       gauge: np.ndarray, at: np.ndarray, out: np.ndarray, stands: bool
+                       ) -> None:
     """Fill ``out[:, rows]``: the derivatives of the gauge readings ``rows`` (their gauge
-    among the design's gauges, their posture index ``at``)."""
+    among the design's gauges, their posture index ``at``) over the machine's errors, and
+    over the stand parameters when ``stands``."""
     space = design.space
     specs = [design.specs[k] for k in space.gauges]
     count = len(specs)
@@ -356,6 +359,8 @@ def _gauge_derivatives(theta: np.ndarray, design: Design, machine: MachineParams
                        *(w * towards_centre for w in aimed)))
     sign = design.signs[design.mounting[rows]]
     out[:, rows, :N_MACHINE] = sign[:, None] * machine_part
+    if not stands:
+        return
     # Stand parameters move the ray only: shifts its origin across the measuring axis,
     # tilts its direction d = (d0 + tilt . across) / |...|.
     across = across_axes(specs)[gauge]  # (R, 2, 3)
