@@ -19,7 +19,7 @@ import json
 from collections.abc import Callable
 from contextlib import closing
 from dataclasses import asdict, dataclass, field
-from functools import partial
+from functools import cache, partial
 
 import gymnasium as gym
 import numpy as np
@@ -98,6 +98,12 @@ class Trial:
         return cls(**json.loads(line))
 
 
+@cache
+def _machine_scales() -> np.ndarray:
+    """The default scale of each of the 27 machine errors."""
+    return default_scales(ParameterSpace())
+
+
 def machine_z_scores(est: Estimate, truth: MachineParams) -> np.ndarray:
     """(estimate - truth) / reported std along the combinations of the fitted machine
     errors whose reported variance is at most half their a-priori size (the data know
@@ -106,7 +112,7 @@ def machine_z_scores(est: Estimate, truth: MachineParams) -> np.ndarray:
     comparison could hold them to in every lab."""
     idx = [k for k, name in enumerate(est.names) if name in ERROR_NAMES]
     machine = [ERROR_NAMES.index(est.names[k]) for k in idx]
-    scale = default_scales(ParameterSpace())[machine]
+    scale = _machine_scales()[machine]
     cov = est.covariance[np.ix_(idx, idx)] / np.outer(scale, scale)
     err = (est.theta[machine] - truth.to_vector()[machine]) / scale
     values, vectors = np.linalg.eigh(cov)

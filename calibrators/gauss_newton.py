@@ -22,7 +22,7 @@ from orthoglide_env.reading_model import Design, TrackerAxis, predict, station_o
 from orthoglide_env.scoring import best_rigid_motion
 
 from .base import Estimate, Measurements, register
-from .estimator import CHI2_LEVEL, BatchFit, fit_batch
+from .estimator import CHI2_LEVEL, RETAIN, BatchFit, fit_batch
 from .paper import PaperCalibrator, split_repetitions
 from .parameters import (
     ParameterSpace,
@@ -207,29 +207,31 @@ class GaussNewtonCalibrator(PaperCalibrator):
                 for m, result in zip(flagged, fit(flagged, mask).split(), strict=True):
                     results[m] = result
         out: list[Estimate | Exception] = []
+        # The information's eigenvalues, most first, of every machine in one call.
+        eigenvalues = np.linalg.eigvalsh(np.concatenate([r.information for r in results]))
+        eigenvalues = eigenvalues[:, ::-1]
         for m, result in enumerate(results):
             if not result.converged[0]:
                 out.append(RuntimeError("the exact-model fit did not converge"))
-            elif not len(result.identifiable(0)):
+            elif not (eigenvalues[m] >= RETAIN).any():
                 out.append(ValueError(f"the readings identify no combination of the "
                                       f"parameters '{params}' (every one is below its "
                                       "a-priori scale)"))
             else:
                 out.append(self._estimate(datas[m], params, prior, sigma, design, values[m],
-                                          result, mask[m], held, outliers[m], verify,
-                                          explain))
+                                          result, eigenvalues[m], mask[m], held, outliers[m],
+                                          verify, explain))
         return out
 
     def _estimate(self, data: Measurements, params: str, prior: str, sigma: float,
-                  design: Design, values: np.ndarray, result: BatchFit, mask: np.ndarray,
-                  held: np.ndarray, outliers: list[int], verify: bool, explain: bool
-                  ) -> Estimate:
+                  design: Design, values: np.ndarray, result: BatchFit,
+                  eigenvalues: np.ndarray, mask: np.ndarray, held: np.ndarray,
+                  outliers: list[int], verify: bool, explain: bool) -> Estimate:
         space = design.space
         names = [n for n, f in zip(space.names, result.free, strict=True) if f]
         idx = np.flatnonzero(result.free)
         s = result.scale[idx]
         info = result.information[0]
-        eig = np.sort(np.linalg.eigvalsh(info))[::-1]
         cov = result.scaled_covariance[0]
         error_cov = result.error_covariance[0].copy()
         error_cov[np.ix_(idx, idx)] = cov
@@ -252,7 +254,7 @@ class GaussNewtonCalibrator(PaperCalibrator):
             residuals = np.where(held, _held_out(design, values, theta, mask, held), residuals)
         return Estimate(
             strategy=self.name, params=params, drho=theta[:3], dL=theta[3:6], covariance=cov,
-            residuals=residuals, singular_values=np.sqrt(np.clip(eig, 0, None)),
+            residuals=residuals, singular_values=np.sqrt(np.clip(eigenvalues, 0, None)),
             crlb=np.sqrt(np.diag(result.covariance[0])), weak_directions=[],
             n_readings=int(mask.sum()), experiment_time_s=data.experiment_time_s,
             verification_rms_mm=self._verify(design, values, result, mask, data)

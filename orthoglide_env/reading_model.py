@@ -271,11 +271,15 @@ def jacobian(theta: np.ndarray, design: Design, free: np.ndarray, scale: np.ndar
     batch = theta.shape[:-1]
     flat = theta.reshape(-1, theta.shape[-1])
     idx = np.flatnonzero(free)
-    full = _derivatives(flat, design, np.asarray(free, dtype=bool))
+    # Every fit of a batch starts at the same point (nominal): one evaluation serves all.
+    same = len(flat) > 1 and bool((flat == flat[0]).all())
+    full = _derivatives(flat[:1] if same else flat, design, np.asarray(free, dtype=bool))
     if len(idx) == full.shape[-1]:
         full *= scale
     else:
         full = full[..., idx] * scale[idx]
+    if same:
+        full = np.repeat(full, len(flat), axis=0)
     return full.reshape(*batch, len(design), len(idx))
 
 
