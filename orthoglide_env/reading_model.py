@@ -168,6 +168,17 @@ class Design:
     def space(self) -> ParameterSpace:
         return ParameterSpace(self.mountings, self.specs)
 
+    @cached_property
+    def distinct(self) -> tuple[Design, np.ndarray]:
+        """The design with each mounting read once at each of its postures, and every
+        reading's row in it: repeated readings share their model and its derivatives."""
+        key = self._posture_index * len(self.specs) + self.mounting  # type: ignore[attr-defined]
+        _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+        if len(first) == len(self):
+            return self, np.arange(len(self))
+        return (Design(self.mountings, self.specs, self.mounting[first], self.rho[first]),
+                np.ravel(inverse))
+
     @property
     def postures(self) -> np.ndarray:
         """The distinct postures (P, 3)."""
@@ -273,11 +284,13 @@ def jacobian(theta: np.ndarray, design: Design, free: np.ndarray, scale: np.ndar
     idx = np.flatnonzero(free)
     # Every fit of a batch starts at the same point (nominal): one evaluation serves all.
     same = len(flat) > 1 and bool((flat == flat[0]).all())
-    full = _derivatives(flat[:1] if same else flat, design, np.asarray(free, dtype=bool))
+    distinct, rows = design.distinct
+    full = _derivatives(flat[:1] if same else flat, distinct, np.asarray(free, dtype=bool))
     if len(idx) == full.shape[-1]:
         full *= scale
     else:
         full = full[..., idx] * scale[idx]
+    full = full[:, rows]
     if same:
         full = np.repeat(full, len(flat), axis=0)
     return full.reshape(*batch, len(design), len(idx))

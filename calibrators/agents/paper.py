@@ -7,6 +7,7 @@ reading at every posture (section 4 of the paper).  Then stop.
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Any
 
 import gymnasium as gym
@@ -27,18 +28,26 @@ class PaperAgent(PlannedAgent):
     def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
               rng: np.random.Generator) -> None:
         super().reset(env, observation, rng)
-        legs = [SLOTS[s].leg if s < len(SLOTS) else -1 for s in observation["slot"]]
-        engaged = [bool(e) for e in observation["engaged"]]
-        plan: list[dict[str, Any]] = []
-        for leg in range(3):
-            if leg not in legs:
-                raise ValueError(f"the paper's procedure needs a stand on the {'xyz'[leg]} leg")
-            for k, g in enumerate(legs):
-                want = g == leg
-                if g != -1 and engaged[k] != want:
-                    plan.append(action(Op.ENGAGE if want else Op.LIFT, stand=k))
-                    engaged[k] = want
-            plan += [action(Op.MOVE, paper_posture(p))
-                     for p, _ in leg_sequence(leg, self.repetitions)]
-        plan.append(action(Op.STOP))
-        self.plan = plan
+        legs = tuple(SLOTS[s].leg if s < len(SLOTS) else -1 for s in observation["slot"])
+        engaged = tuple(bool(e) for e in observation["engaged"])
+        self.plan = [dict(a) for a in paper_plan(legs, engaged, self.repetitions)]
+
+
+@lru_cache(maxsize=64)
+def paper_plan(legs: tuple[int, ...], engaged: tuple[bool, ...], repetitions: int
+               ) -> tuple[dict[str, Any], ...]:
+    """The paper's procedure for stands on ``legs`` (-1: none) engaged as ``engaged``: the
+    same on every machine of a sweep, so made once."""
+    current = list(engaged)
+    plan: list[dict[str, Any]] = []
+    for leg in range(3):
+        if leg not in legs:
+            raise ValueError(f"the paper's procedure needs a stand on the {'xyz'[leg]} leg")
+        for k, g in enumerate(legs):
+            want = g == leg
+            if g != -1 and current[k] != want:
+                plan.append(action(Op.ENGAGE if want else Op.LIFT, stand=k))
+                current[k] = want
+        plan += [action(Op.MOVE, paper_posture(p)) for p, _ in leg_sequence(leg, repetitions)]
+    plan.append(action(Op.STOP))
+    return tuple(plan)
