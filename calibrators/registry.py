@@ -35,7 +35,8 @@ class Registry(Generic[T]):
 
     def get(self, name: str) -> T:
         """A new instance of the class registered as ``name``."""
-        names = self.available()
-        if name not in self.classes:
-            raise ValueError(f"unknown {self.kind} '{name}'; choose from {names}")
+        if name not in self.classes:  # not imported yet, or unknown
+            names = self.available()
+            if name not in self.classes:
+                raise ValueError(f"unknown {self.kind} '{name}'; choose from {names}")
         return self.classes[name]()
