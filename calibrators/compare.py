@@ -28,7 +28,7 @@ import orthoglide_env
 from orthoglide_env.geometry import ERROR_NAMES, MachineParams
 from orthoglide_env.lab_env import Record
 from orthoglide_env.reading_model import ParameterSpace, default_scales
-from orthoglide_env.scoring import FRAMES, score_batch
+from orthoglide_env.scoring import FRAMES, score_batch, uncalibrated_errors
 
 from .agents import get_agent
 from .base import Estimate
@@ -130,6 +130,9 @@ class _Episode:
     time_s: float
     sigma: float
     truth: MachineParams
+    #: The truth's TCP error vectors under the nominal model's commands over the scoring
+    #: grid: the same for every agent and estimator on this machine, so computed once.
+    before: np.ndarray | None = None
 
 
 def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exception],
@@ -139,7 +142,8 @@ def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
     good = [k for k, est in enumerate(estimates) if not isinstance(est, Exception)]
     fitted = [estimates[k] for k in good]
     reports = iter(score_batch([e.machine for e in fitted],  # type: ignore[union-attr]
-                               [episodes[k].truth for k in good]) if good else [])
+                               [episodes[k].truth for k in good],
+                               before=_before([episodes[k] for k in good])) if good else [])
     predicted = iter(predicted_rigid_mm(fitted).tolist())  # type: ignore[arg-type]
     out = []
     for episode, est, curve in zip(episodes, estimates, curves, strict=True):
@@ -179,10 +183,21 @@ def _curves(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
                                                                  episodes[0].sigma)
         models = [MachineParams() if isinstance(est, Exception) else est.machine
                   for est in fitted]
-        reports = score_batch(models, [e.truth for e in episodes])
+        reports = score_batch(models, [e.truth for e in episodes], before=_before(episodes))
         for k, (episode, report) in enumerate(zip(episodes, reports, strict=True)):
             points[k].append([fraction * episode.time_s, report.tcp_after.rigid.rms])
     return points
+
+
+def _before(episodes: list[_Episode]) -> np.ndarray:
+    """The uncalibrated error vectors of the episodes' machines, each computed once (one
+    batched solve for those not known yet)."""
+    new = [e for e in episodes if e.before is None]
+    if new:
+        for episode, vectors in zip(new, uncalibrated_errors([e.truth for e in new]),
+                                    strict=True):
+            episode.before = vectors
+    return np.stack([e.before for e in episodes])  # type: ignore[misc]
 
 
 def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]],
@@ -193,6 +208,7 @@ def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]
     the exact backend); else one machine at a time in a lone lab, step by step (the
     reference path, same numbers)."""
     trials = []
+    uncalibrated: dict[int, np.ndarray] = {}  # a machine's, whichever agent worked on it
     for agent_name in config.agents:
         todo = {i: [e for e in config.estimators if (agent_name, e, i) not in skip]
                 for i in indices}
@@ -200,6 +216,8 @@ def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]
         if not runs:
             continue
         episodes = _episodes(config, agent_name, runs, batched)
+        for episode in episodes:
+            episode.before = uncalibrated.get(episode.machine)
         for name in config.estimators:
             mine = [e for e in episodes if name in todo[e.machine]]
             if not mine:
@@ -209,6 +227,7 @@ def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]
             curves = (_curves(mine, name, estimates) if name == config.curve_estimator
                       else [[] for _ in mine])
             trials += _trials(mine, name, estimates, curves)
+        uncalibrated.update((e.machine, e.before) for e in episodes if e.before is not None)
     return trials
 
 

@@ -244,17 +244,28 @@ def frame_errors(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray) -> 
     return [FrameErrors(*frames) for frames in zip(raw, translation, rigid, strict=True)]
 
 
+def uncalibrated_errors(truths: Sequence[MachineParams], grid: np.ndarray | None = None
+                        ) -> np.ndarray:
+    """TCP error vectors (M, n, 3) over the grid of each true machine commanded with the
+    nominal model: what :func:`score_batch` compares a compensation with."""
+    targets = workspace_grid() if grid is None else np.asarray(grid, dtype=float)
+    return tcp_error_vectors_many([MachineParams()] * len(truths), truths, targets)
+
+
 def score_batch(
     estimates: Sequence[MachineParams], truths: Sequence[MachineParams],
-    grid: np.ndarray | None = None,
+    grid: np.ndarray | None = None, before: np.ndarray | None = None,
 ) -> list[ScoreReport]:
-    """Score each estimate against its true machine (see :func:`score`).
+    """Score each estimate against its true machine (see :func:`score`); ``before``: the
+    :func:`uncalibrated_errors` of ``truths``, when already known (they depend on the
+    machines only, not on the estimates).
 
     The kinematics and the frame fits run once over the whole batch."""
     if len(estimates) != len(truths) or not truths:
         raise ValueError("score_batch needs as many estimates as true machines, at least one")
     targets = workspace_grid() if grid is None else np.asarray(grid, dtype=float)
-    before = tcp_error_vectors_many([MachineParams()] * len(truths), truths, targets)
+    if before is None:
+        before = uncalibrated_errors(truths, targets)
     after = tcp_error_vectors_many(estimates, truths, targets)
     usable = np.isfinite(before).all(axis=-1) & np.isfinite(after).all(axis=-1)
     empty = np.flatnonzero(~usable.any(axis=-1))
