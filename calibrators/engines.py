@@ -93,11 +93,13 @@ def _in_process(function: Callable[[Item], Result], items: list[Item]
 
 def _pool(function: Callable[[Item], Result], items: list[Item], jobs: int
           ) -> Iterator[tuple[Item, Result]]:
-    with _single_threaded():
-        pool = ProcessPoolExecutor(jobs, mp_context=get_context("spawn"),
-                                   initializer=_ignore_interrupts)
+    pool = ProcessPoolExecutor(jobs, mp_context=get_context("spawn"),
+                               initializer=_ignore_interrupts)
     try:
-        pending = {pool.submit(function, item): item for item in items}
+        # The workers are spawned by the first submission, not by the constructor: their
+        # environment is the one around the submissions.
+        with _single_threaded():
+            pending = {pool.submit(function, item): item for item in items}
         while pending:
             finished, _ = wait(pending, return_when=FIRST_COMPLETED)
             for future in finished:

@@ -37,3 +37,28 @@ def test_ray_engine_without_ray_is_one_line_and_status_2(monkeypatch, capsys) ->
     err = capsys.readouterr().err.strip()
     assert err == ("orthoglide compare: error: --engine ray needs Ray: install the extra: "
                    "pip install '.[ray]'")
+
+
+def _thread_settings(_: int) -> tuple[str | None, ...]:
+    """What a worker sees of the numerical libraries' thread variables."""
+    import os
+
+    from calibrators.engines import _THREAD_VARIABLES
+
+    return tuple(os.environ.get(key) for key in _THREAD_VARIABLES)
+
+
+def test_local_workers_start_single_threaded(monkeypatch) -> None:
+    """Spawned workers get one thread per numerical library (or the user's setting): two
+    workers with a multi-threaded BLAS each on two cores spin against each other (a
+    comparison ran 2.5x slower).  The pool spawns its workers at the first submission, so
+    this checks the environment there, not where the pool was built."""
+    from calibrators.engines import _THREAD_VARIABLES, results
+
+    for key in _THREAD_VARIABLES:
+        monkeypatch.delenv(key, raising=False)
+    seen = [value for _, value in results(_thread_settings, [0, 1, 2, 3], jobs=2)]
+    assert seen == [("1",) * len(_THREAD_VARIABLES)] * 4
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "3")
+    seen = [value for _, value in results(_thread_settings, [0, 1], jobs=2)]
+    assert all(value[_THREAD_VARIABLES.index("OPENBLAS_NUM_THREADS")] == "3" for value in seen)
