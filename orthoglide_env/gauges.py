@@ -43,6 +43,7 @@ import numbers
 from collections.abc import Sequence
 from dataclasses import dataclass, fields, replace
 from enum import IntEnum
+from functools import lru_cache
 from typing import Any, overload
 
 import numpy as np
@@ -400,7 +401,12 @@ def layout_from_names(names: list[str]) -> tuple[GaugeSpec, ...]:
 
 def spec_arrays(specs: Sequence[GaugeSpec]) -> GaugeArray:
     """The specs of ``specs`` as the index fields of a :class:`GaugeArray` (its rays are
-    placeholders)."""
+    placeholders); made once per set of specs (an estimator's model asks at every step)."""
+    return _spec_arrays(tuple(specs))
+
+
+@lru_cache(maxsize=256)
+def _spec_arrays(specs: tuple[GaugeSpec, ...]) -> GaugeArray:
     n = len(specs)
     return GaugeArray(origin=np.zeros((n, 3)), direction=np.zeros((n, 3)), sign=0.0,
                       travel=0.0, zero=0.0, leg=[s.leg for s in specs],
@@ -458,8 +464,16 @@ def stand_names(mounting: str, spec: GaugeSpec) -> list[str]:
 
 
 def across_axes(specs: tuple[GaugeSpec, ...] | list[GaugeSpec]) -> np.ndarray:
-    """Unit vectors of the two cross axes of each gauge, shape (n, 2, 3)."""
-    return np.stack([np.eye(3)[list(stand_axes(s))] for s in specs])
+    """Unit vectors of the two cross axes of each gauge, shape (n, 2, 3) (read-only: made
+    once per set of specs)."""
+    return _across_axes(tuple(specs))
+
+
+@lru_cache(maxsize=256)
+def _across_axes(specs: tuple[GaugeSpec, ...]) -> np.ndarray:
+    out = np.stack([np.eye(3)[list(stand_axes(s))] for s in specs]).reshape(len(specs), 2, 3)
+    out.setflags(write=False)
+    return out
 
 
 def stand_rays(
