@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml
 run: $(STAMP)
 	rm -rf results/compare
 	$(BIN)/orthoglide compare --agents paper,tracker --estimators paper,extended \
-		--machines 40 --seed 1 --jobs 2 --out results/compare
+		--machines 200 --seed 1 --jobs 2 --out results/compare
 
 test: $(STAMP)
 	$(BIN)/ruff check .
