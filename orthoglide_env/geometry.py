@@ -43,6 +43,8 @@ from __future__ import annotations
 import json
 import numbers
 import re
+from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -209,18 +211,14 @@ class MachineParams:
 
     @property
     def axis_directions(self) -> np.ndarray:
-        """Unit actuator travel directions u_i in world, shape (*batch, 3, 3) (row i = leg i)."""
-        tilt = np.tan(self.axis_tilt)
-        local = np.concatenate([np.ones((*tilt.shape[:-1], 1)), tilt], axis=-1)
-        local /= np.linalg.norm(local, axis=-1, keepdims=True)
-        return np.einsum("ijk,...ik->...ij", R_LEG, local)
+        """Unit actuator travel directions u_i in world, shape (*batch, 3, 3) (row i = leg i),
+        read-only."""
+        return _axis_directions(self.axis_tilt)
 
     @property
     def axis_origins(self) -> np.ndarray:
-        """Points o_i of the actuator axes in world, shape (*batch, 3, 3)."""
-        offset = self.axis_offset
-        local = np.concatenate([np.zeros((*offset.shape[:-1], 1)), offset], axis=-1)
-        return np.einsum("ijk,...ik->...ij", R_LEG, local)
+        """Points o_i of the actuator axes in world, shape (*batch, 3, 3), read-only."""
+        return _axis_origins(self.axis_offset)
 
     @property
     def attach_points(self) -> np.ndarray:
@@ -307,6 +305,41 @@ _SHAPES: dict[str, tuple[int, ...]] = {
     "axis_offset": (3, 2),
     "attach": (3, 3),
 }
+
+def _by_value(function: Callable[[np.ndarray], np.ndarray]
+              ) -> Callable[[np.ndarray], np.ndarray]:
+    """``function`` of one array, remembered for the last few arrays by their contents (a
+    fit asks the same machines for their geometry a dozen times per step); the results are
+    read-only, so no caller can change what the next one gets."""
+    cache: OrderedDict[tuple, np.ndarray] = OrderedDict()
+
+    def remembered(value: np.ndarray) -> np.ndarray:
+        key = (value.shape, value.tobytes())
+        out = cache.get(key)
+        if out is None:
+            out = function(value)
+            out.setflags(write=False)
+            cache[key] = out
+            if len(cache) > 16:
+                cache.popitem(last=False)
+        return out
+
+    return remembered
+
+
+@_by_value
+def _axis_directions(axis_tilt: np.ndarray) -> np.ndarray:
+    tilt = np.tan(axis_tilt)
+    local = np.concatenate([np.ones((*tilt.shape[:-1], 1)), tilt], axis=-1)
+    local /= np.linalg.norm(local, axis=-1, keepdims=True)
+    return np.einsum("ijk,...ik->...ij", R_LEG, local)
+
+
+@_by_value
+def _axis_origins(axis_offset: np.ndarray) -> np.ndarray:
+    local = np.concatenate([np.zeros((*axis_offset.shape[:-1], 1)), axis_offset], axis=-1)
+    return np.einsum("ijk,...ik->...ij", R_LEG, local)
+
 
 #: Error groups of a machine file, in schema order.
 ERROR_GROUPS: tuple[str, ...] = tuple(_SHAPES)
