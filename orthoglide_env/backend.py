@@ -85,25 +85,27 @@ class ExactMachine:
     """
 
     def __init__(self, machine: MachineParams, gauges: list[Gauge] | GaugeArray,
-                 rho: np.ndarray | None = None) -> None:
-        """``rho``: the posture to start at (default Zero), as :meth:`move` takes it."""
+                 rho: np.ndarray | None = None, tcp: np.ndarray | None = None) -> None:
+        """``rho``: the posture to start at (default Zero), as :meth:`move` takes it;
+        ``tcp``: the TCP there, when already solved."""
         self.machine = machine
         self.gauge_array = as_gauge_array(gauges)
-        self.move(np.zeros(3) if rho is None else rho)
+        self.move(np.zeros(3) if rho is None else rho, tcp=tcp)
 
     @property
     def gauges(self) -> list[Gauge]:
         return self.gauge_array.to_gauges()
 
-    def move(self, rho: np.ndarray, mode: str = "quasi-static") -> None:
+    def move(self, rho: np.ndarray, mode: str = "quasi-static", tcp: np.ndarray | None = None
+             ) -> None:
         """Go to control coordinates ``rho``, shape ``(*batch, 3)`` (or ``(3,)``: the same
-        posture on every machine)."""
+        posture on every machine); ``tcp``: the TCP there, when already solved."""
         check_motion_mode(mode)
         rho = np.array(np.broadcast_to(rho, (*self.machine.batch_shape, 3)), dtype=float)
         # Solved before anything is stored: a posture the machine cannot be assembled in
         # raises and leaves the machine where it was.  The geometry of a posture is computed
         # once; every reading below uses it.
-        tcp = direct(self.machine, rho)
+        tcp = direct(self.machine, rho) if tcp is None else np.asarray(tcp, dtype=float)
         self._boxes = collision_boxes(self.machine, rho, tcp)
         self._rho, self._tcp = rho, tcp
 

@@ -13,6 +13,7 @@ a batch of one).
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields
 from typing import Any, NamedTuple, Protocol
@@ -233,8 +234,9 @@ class Notebook:
         self._logdet = 0.0
 
     def design_key(self) -> tuple:
-        """What the information depends on: every record's instrument, mounting, posture."""
-        return tuple((r.mounting, r.spec, r.rho) for r in self.records)
+        """What the information depends on: every record's mounting and posture (a lab's
+        mounting name holds its slot, hence its instrument)."""
+        return tuple((r.mounting, r.rho) for r in self.records)
 
     def _add_information(self, records: list[Record]) -> None:
         """Add the records' rows of the Jacobian (at the nominal machine, per unit of each
@@ -352,9 +354,10 @@ class LabMachines(Protocol):
         """The gauges (R, stands) of the episodes ``rows``, those ``mounted`` in place."""
 
     def look(self, rows: np.ndarray, machines: MachineParams, gauges: GaugeArray,
-             rho: np.ndarray) -> Sight:
+             rho: np.ndarray, tcp: np.ndarray) -> Sight:
         """What the machines of ``rows`` (errors ``machines``, gauges ``gauges`` of batch
-        shape (R,), postures ``rho``) show."""
+        shape (R,), postures ``rho``) show; ``tcp``: their TCPs where the exact model
+        already solved them (NaN rows where not)."""
 
     def encoders(self, rows: np.ndarray, rho: np.ndarray) -> np.ndarray:
         """Encoder readings (R, 3) of the machines of ``rows`` (commanded at ``rho``)."""
@@ -377,8 +380,9 @@ class ExactMachines:
         """Nothing to install: the batch keeps the gauges."""
 
     def look(self, rows: np.ndarray, machines: MachineParams, gauges: GaugeArray,
-             rho: np.ndarray) -> Sight:
-        built = ExactMachine(machines, gauges, rho)
+             rho: np.ndarray, tcp: np.ndarray) -> Sight:
+        built = ExactMachine(machines, gauges, rho,
+                             tcp=tcp if np.isfinite(tcp).all() else None)
         return Sight(built.gauge_distances(), pressed_past_travel(gauges, *built.target_boxes()),
                      built.collision_mask(), built.tcp())
 
@@ -409,7 +413,7 @@ class SimulatedMachine:
                                                        strict=True) if on])
 
     def look(self, rows: np.ndarray, machines: MachineParams, gauges: GaugeArray,
-             rho: np.ndarray) -> Sight:
+             rho: np.ndarray, tcp: np.ndarray) -> Sight:
         machine = self._require()
         mounted = np.isfinite(gauges.origin[0, :, 0])  # the simulator holds these, in order
         t = np.full(mounted.shape, np.nan)
@@ -479,6 +483,7 @@ class LabBatch:
         self.streams: list[np.random.Generator | None] = [None] * n
         self.machines: MachineParams | None = None
         self.rho = np.zeros((n, 3))
+        self.tcp = np.full((n, 3), np.nan)  # the TCP at ``rho`` where solved, else NaN
         self.time = np.zeros(n)
         self.steps = np.zeros(n, dtype=np.int64)
         self.mounts = np.zeros(n, dtype=np.int64)  # mountings so far (names new ones)
@@ -526,6 +531,7 @@ class LabBatch:
         for i, stream in zip(rows, streams, strict=True):
             self.streams[i] = stream
         self.rho[rows] = 0.0
+        self.tcp[rows] = np.nan
         self.time[rows] = 0.0
         self.steps[rows] = 0
         self.mounts[rows] = len(first)
@@ -557,7 +563,7 @@ class LabBatch:
         """Apply each row's checked action (see :func:`check_actions`) to its episode."""
         settings = self.settings
         self.require()
-        refused = self._refusals(rows, op, rho, stand, slot)
+        refused, reached = self._refusals(rows, op, rho, stand, slot)
         ok = np.array([not r for r in refused], dtype=bool)
         moves, remounts = ok & (op == Op.MOVE), ok & (op == Op.REMOUNT)
         flicks = ok & ((op == Op.LIFT) | (op == Op.ENGAGE))
@@ -570,11 +576,13 @@ class LabBatch:
             tracker = TIME.tracker_point_s if settings.tracker else 0.0
             seconds[moves] = TIME.move(self.rho[rows[moves]], rho[moves]) + tracker
             self.rho[rows[moves]] = rho[moves]
+            self.tcp[rows[moves]] = reached[moves]
             self.backend.move(rows[moves], rho[moves])
         self.engaged[rows[flicks], stand[flicks]] = op[flicks] == Op.ENGAGE
         if remounts.any():
             seconds[remounts] = TIME.move(self.rho[rows[remounts]], np.zeros(3)) + TIME.remount_s
             self.rho[rows[remounts]] = 0.0
+            self.tcp[rows[remounts]] = np.nan
             self.backend.move(rows[remounts], self.rho[rows[remounts]])
             self._mount(rows[remounts], stand[remounts], slot[remounts], mounted)
             self._sync(rows[remounts])
@@ -614,11 +622,13 @@ class LabBatch:
                           ended & (predicted <= settings.success_mm))
 
     def _refusals(self, rows: np.ndarray, op: np.ndarray, rho: np.ndarray, stand: np.ndarray,
-                  slot: np.ndarray) -> list[str]:
+                  slot: np.ndarray) -> tuple[list[str], np.ndarray]:
         """Why each well-formed operation cannot be done ("" when it can): a stand that is
         not mounted cannot be lifted or engaged, a slot holds one stand, and the machine
-        cannot be driven where it cannot assemble."""
+        cannot be driven where it cannot assemble; and the TCP (R, 3) where each move
+        takes it (NaN where none), solved to know that."""
         out = [""] * len(rows)
+        reached = np.full((len(rows), 3), np.nan)
         stands = self.slot[rows]
         flick = (op == Op.LIFT) | (op == Op.ENGAGE)
         for r in np.flatnonzero(flick & (stands[np.arange(len(rows)), stand] < 0)):
@@ -628,10 +638,10 @@ class LabBatch:
             out[r] = f"slot {SLOT_NAMES[slot[r]]} already holds a stand"
         moves = np.flatnonzero(op == Op.MOVE)
         if len(moves):
-            reach = reachable(self.require()[rows[moves]], rho[moves])
-            for r in moves[~reach]:
+            reached[moves] = assembled(self.require()[rows[moves]], rho[moves])
+            for r in moves[np.isnan(reached[moves, 0])]:
                 out[r] = f"the machine cannot assemble at rho = {rho[r].tolist()}"
-        return out
+        return out, reached
 
     def _installations(self, rows: np.ndarray, stand: np.ndarray, slot: np.ndarray
                        ) -> GaugeArray | None:
@@ -678,8 +688,12 @@ class LabBatch:
             return Sight(np.zeros((0, stands)), np.zeros((0, stands), dtype=bool),
                          np.zeros((0, len(PAIR_NAMES)), dtype=bool), np.zeros((0, 3)))
         if len(rows) == self.size:  # every episode: no copies
-            return self.backend.look(rows, self.require(), self.gauges, self.rho)
-        return self.backend.look(rows, self.require()[rows], self.gauges[rows], self.rho[rows])
+            sight = self.backend.look(rows, self.require(), self.gauges, self.rho, self.tcp)
+        else:
+            sight = self.backend.look(rows, self.require()[rows], self.gauges[rows],
+                                      self.rho[rows], self.tcp[rows])
+        self.tcp[rows] = sight.tcp
+        return sight
 
     def _read(self, rows: np.ndarray, pending: np.ndarray, sight: Sight) -> np.ndarray:
         """Read every engaged, working gauge (and the tracker) of ``rows``: noisy values per
@@ -774,19 +788,17 @@ class LabBatch:
         return list(self.notebooks[row].installed.values())
 
 
-def reachable(machines: MachineParams, rho: np.ndarray) -> np.ndarray:
-    """Whether each machine of a batch can be assembled at its ``rho`` (R, 3)."""
+def assembled(machines: MachineParams, rho: np.ndarray) -> np.ndarray:
+    """The TCP (R, 3) of each machine of a batch at its ``rho`` (R, 3); NaN rows where it
+    cannot be assembled."""
     try:
-        direct(machines, rho)
-        return np.ones(len(rho), dtype=bool)
+        return direct(machines, rho)
     except UnreachableError:
         pass
-    out = np.ones(len(rho), dtype=bool)
+    out = np.full((len(rho), 3), np.nan)
     for r in range(len(rho)):
-        try:
-            direct(machines[r], rho[r])
-        except UnreachableError:
-            out[r] = False
+        with contextlib.suppress(UnreachableError):
+            out[r] = direct(machines[r], rho[r])
     return out
 
 

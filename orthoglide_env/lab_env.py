@@ -196,7 +196,8 @@ class OrthoglideLabEnv(gym.Env):
         """The true TCP (mm), as the machine shows it (scoring and fidelity checks only)."""
         batch = self._batch
         self._require()
-        return batch.backend.look(_ROW, batch.machines, batch.gauges[_ROW], batch.rho[_ROW]).tcp[0]
+        return batch.backend.look(_ROW, batch.machines, batch.gauges[_ROW], batch.rho[_ROW],
+                                  batch.tcp[_ROW]).tcp[0]
 
     # -- Gymnasium API --------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
