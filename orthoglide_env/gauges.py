@@ -306,6 +306,12 @@ class GaugeArray:
             raise IndexError("one machine's gauges have no batch axis to index")
         return GaugeArray(**{f.name: getattr(self, f.name)[index] for f in fields(self)})
 
+    def columns(self, index: np.ndarray) -> GaugeArray:
+        """The gauges ``index`` of every set (along the gauge axis)."""
+        at = len(self.batch_shape)
+        return GaugeArray(**{f.name: np.take(getattr(self, f.name), index, axis=at)
+                             for f in fields(self)})
+
     def with_rows(self, index: np.ndarray, rows: GaugeArray) -> GaugeArray:
         """A copy of this batch whose machines ``index`` (along the first batch axis) carry
         the gauge sets ``rows`` instead."""

@@ -354,10 +354,12 @@ class LabMachines(Protocol):
         """The gauges (R, stands) of the episodes ``rows``, those ``mounted`` in place."""
 
     def look(self, rows: np.ndarray, machines: MachineParams, gauges: GaugeArray,
-             rho: np.ndarray, tcp: np.ndarray) -> Sight:
+             rho: np.ndarray, tcp: np.ndarray, engaged: np.ndarray) -> Sight:
         """What the machines of ``rows`` (errors ``machines``, gauges ``gauges`` of batch
         shape (R,), postures ``rho``) show; ``tcp``: their TCPs where the exact model
-        already solved them (NaN rows where not)."""
+        already solved them (NaN rows where not); ``engaged`` (R, stands): the gauges whose
+        tips are down (a lifted one reads nothing and cannot be pressed, so it may come
+        back NaN and unpressed)."""
 
     def encoders(self, rows: np.ndarray, rho: np.ndarray) -> np.ndarray:
         """Encoder readings (R, 3) of the machines of ``rows`` (commanded at ``rho``)."""
@@ -380,11 +382,20 @@ class ExactMachines:
         """Nothing to install: the batch keeps the gauges."""
 
     def look(self, rows: np.ndarray, machines: MachineParams, gauges: GaugeArray,
-             rho: np.ndarray, tcp: np.ndarray) -> Sight:
-        built = ExactMachine(machines, gauges, rho,
+             rho: np.ndarray, tcp: np.ndarray, engaged: np.ndarray) -> Sight:
+        # Only the stands engaged on some machine are traced (the paper's procedure keeps
+        # two of six down): their rays against every box are most of a look's arithmetic.
+        down = np.flatnonzero(engaged.any(axis=0))
+        if not len(down):
+            down = np.arange(1)  # the machines' boxes still need a gauge set to be built
+        traced = gauges.columns(down)
+        built = ExactMachine(machines, traced, rho,
                              tcp=tcp if np.isfinite(tcp).all() else None)
-        return Sight(built.gauge_distances(), pressed_past_travel(gauges, *built.target_boxes()),
-                     built.collision_mask(), built.tcp())
+        t = np.full(engaged.shape, np.nan)
+        pressed = np.zeros(engaged.shape, dtype=bool)
+        t[:, down] = built.gauge_distances()
+        pressed[:, down] = pressed_past_travel(traced, *built.target_boxes())
+        return Sight(t, pressed, built.collision_mask(), built.tcp())
 
     def encoders(self, rows: np.ndarray, rho: np.ndarray) -> np.ndarray:
         return rho.copy()
@@ -413,7 +424,7 @@ class SimulatedMachine:
                                                        strict=True) if on])
 
     def look(self, rows: np.ndarray, machines: MachineParams, gauges: GaugeArray,
-             rho: np.ndarray, tcp: np.ndarray) -> Sight:
+             rho: np.ndarray, tcp: np.ndarray, engaged: np.ndarray) -> Sight:
         machine = self._require()
         mounted = np.isfinite(gauges.origin[0, :, 0])  # the simulator holds these, in order
         t = np.full(mounted.shape, np.nan)
@@ -688,10 +699,11 @@ class LabBatch:
             return Sight(np.zeros((0, stands)), np.zeros((0, stands), dtype=bool),
                          np.zeros((0, len(PAIR_NAMES)), dtype=bool), np.zeros((0, 3)))
         if len(rows) == self.size:  # every episode: no copies
-            sight = self.backend.look(rows, self.require(), self.gauges, self.rho, self.tcp)
+            sight = self.backend.look(rows, self.require(), self.gauges, self.rho, self.tcp,
+                                      self.engaged)
         else:
             sight = self.backend.look(rows, self.require()[rows], self.gauges[rows],
-                                      self.rho[rows], self.tcp[rows])
+                                      self.rho[rows], self.tcp[rows], self.engaged[rows])
         self.tcp[rows] = sight.tcp
         return sight
 

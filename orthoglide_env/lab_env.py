@@ -197,7 +197,7 @@ class OrthoglideLabEnv(gym.Env):
         batch = self._batch
         self._require()
         return batch.backend.look(_ROW, batch.machines, batch.gauges[_ROW], batch.rho[_ROW],
-                                  batch.tcp[_ROW]).tcp[0]
+                                  batch.tcp[_ROW], batch.engaged[_ROW]).tcp[0]
 
     # -- Gymnasium API --------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None

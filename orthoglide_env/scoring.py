@@ -143,7 +143,12 @@ def tcp_error_vectors_many(models: Sequence[MachineParams], truths: Sequence[Mac
 
 def commands_many(models: Sequence[MachineParams], targets: np.ndarray) -> np.ndarray:
     """:func:`commands` of each model for the targets (n, 3): (M, n, 3), in one batched
-    solve unless a model cannot reach some target (then model by model, row by row)."""
+    solve unless a model cannot reach some target (then model by model, row by row); once
+    when every model is the same (the nominal model of every uncalibrated machine)."""
+    first = models[0].to_vector()
+    if all(np.array_equal(m.to_vector(), first) for m in models[1:]):
+        rho = commands(models[0], targets)
+        return np.broadcast_to(rho, (len(models), *rho.shape)).copy()
     try:
         rho = inverse(MachineParams.stack(list(models)), np.asarray(targets, dtype=float)[None])
     except UnreachableError:
