@@ -104,20 +104,32 @@ def _machine_scales() -> np.ndarray:
     return default_scales(ParameterSpace())
 
 
-def machine_z_scores(est: Estimate, truth: MachineParams) -> np.ndarray:
-    """(estimate - truth) / reported std along the combinations of the fitted machine
-    errors whose reported variance is at most half their a-priori size (the data know
-    them better than the prior): standard normal for honest error bars.  Only machine
-    errors: an instrument's nuisances (stands, a tracker's frame) have no truth the
-    comparison could hold them to in every lab."""
-    idx = [k for k, name in enumerate(est.names) if name in ERROR_NAMES]
-    machine = [ERROR_NAMES.index(est.names[k]) for k in idx]
-    scale = _machine_scales()[machine]
-    cov = est.covariance[np.ix_(idx, idx)] / np.outer(scale, scale)
-    err = (est.theta[machine] - truth.to_vector()[machine]) / scale
-    values, vectors = np.linalg.eigh(cov)
-    known = vectors[:, values <= 0.5].T
-    return known @ err / np.sqrt(np.einsum("kf,fg,kg->k", known, cov, known))
+def machine_z_scores(ests: list[Estimate], truths: list[MachineParams]) -> list[np.ndarray]:
+    """(estimate - truth) / reported std of each estimate, along the combinations of the
+    fitted machine errors whose reported variance is at most half their a-priori size (the
+    data know them better than the prior): standard normal for honest error bars.  Only
+    machine errors: an instrument's nuisances (stands, a tracker's frame) have no truth the
+    comparison could hold them to in every lab.  The eigen-decompositions of estimates
+    over the same parameters run in one call."""
+    out: list[np.ndarray] = [np.zeros(0)] * len(ests)
+    groups: dict[tuple[str, ...], list[int]] = {}
+    for k, est in enumerate(ests):
+        groups.setdefault(tuple(est.names), []).append(k)
+    for names, members in groups.items():
+        idx = [k for k, name in enumerate(names) if name in ERROR_NAMES]
+        machine = [ERROR_NAMES.index(names[k]) for k in idx]
+        scale = _machine_scales()[machine]
+        cov = np.stack([ests[m].covariance[np.ix_(idx, idx)] for m in members]) / np.outer(
+            scale, scale)
+        err = np.stack([(ests[m].theta[machine] - truths[m].to_vector()[machine]) / scale
+                        for m in members])
+        values, vectors = np.linalg.eigh(cov)
+        # Along an eigenvector the reported variance is its eigenvalue.
+        along = (np.swapaxes(vectors, -1, -2) @ err[..., None])[..., 0]
+        for m, value, z in zip(members, values, along, strict=True):
+            known = value <= 0.5
+            out[m] = z[known] / np.sqrt(value[known])
+    return out
 
 
 @dataclass
@@ -141,6 +153,7 @@ def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
     predicted error in one batched solve)."""
     good = [k for k, est in enumerate(estimates) if not isinstance(est, Exception)]
     fitted = [estimates[k] for k in good]
+    z_scores = iter(machine_z_scores(fitted, [episodes[k].truth for k in good]))  # type: ignore[arg-type]
     reports = iter(score_batch([e.machine for e in fitted],  # type: ignore[union-attr]
                                [episodes[k].truth for k in good],
                                before=_before([episodes[k] for k in good])) if good else [])
@@ -163,7 +176,7 @@ def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
             tcp_before={f: getattr(report.tcp_before, f).rms for f in FRAMES},
             tcp_after={f: getattr(report.tcp_after, f).rms for f in FRAMES},
             predicted_rigid_mm=next(predicted),
-            z=machine_z_scores(est, episode.truth).tolist(),
+            z=next(z_scores).tolist(),
             error=(est.theta[:len(ERROR_NAMES)] - episode.truth.to_vector()).tolist(),
             std=std.tolist(), curve=curve,
         ))
