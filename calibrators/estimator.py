@@ -244,16 +244,18 @@ def _t(matrices: np.ndarray) -> np.ndarray:
 
 
 def _damped_gauss_newton(problem: _Problem, theta: np.ndarray, max_iterations: int
-                         ) -> tuple[np.ndarray, np.ndarray]:
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Levenberg-damped Gauss-Newton, each machine with its own damping: a step that does
     not lower the cost is retried with ten times the damping.  Updates ``theta`` in place;
-    returns (converged, iterations) per machine."""
+    returns (converged, iterations) per machine and each machine's Jacobian at its last
+    iterate (for a converged one, within a step of 1e-9 of a scale of its solution)."""
     m_count = len(theta)
     idx, s = problem.idx, problem.s
     done = np.zeros(m_count, dtype=bool)
     failed = np.zeros(m_count, dtype=bool)
     iterations = np.zeros(m_count, dtype=int)
     damping = np.zeros(m_count)
+    last: np.ndarray | None = None
     for _ in range(max_iterations):
         rows = np.flatnonzero(~done & ~failed)
         if not len(rows):
@@ -261,7 +263,11 @@ def _damped_gauss_newton(problem: _Problem, theta: np.ndarray, max_iterations: i
         th = theta[rows]
         model = predict(th, problem.design)
         r, cost = problem.residual(th, rows, model)
-        a, g = problem.normal(problem.jacobian(th, rows), r, th)
+        jac = problem.jacobian(th, rows)
+        if last is None:
+            last = np.empty((m_count, *jac.shape[1:]))
+        last[rows] = jac
+        a, g = problem.normal(jac, r, th)
         iterations[rows] += 1
         # Near the solution the cost cannot resolve a step (its round-off, ~1e-16 of it,
         # exceeds the decrease g A^-1 g / 2 a step brings), so there the undamped step is
@@ -294,14 +300,15 @@ def _damped_gauss_newton(problem: _Problem, theta: np.ndarray, max_iterations: i
             give_up = grow[damping[rows[grow]] > DAMPING_MAX]
             failed[rows[give_up]] = True
             pending[give_up] = False
-    return done & ~failed, iterations
+    return done & ~failed, iterations, last
 
 
 def _scipy_least_squares(problem: _Problem, theta: np.ndarray, max_iterations: int
-                         ) -> tuple[np.ndarray, np.ndarray]:
+                         ) -> tuple[np.ndarray, np.ndarray, None]:
     """The same cost minimised by ``scipy.optimize.least_squares`` (trust-region
     reflective), one machine at a time: a cross-check of the batched solver.  It does not
-    truncate unidentifiable directions, so use it with a prior or a full-rank selection."""
+    truncate unidentifiable directions, so use it with a prior or a full-rank selection.
+    Its Jacobians are not kept."""
     from scipy.optimize import least_squares
 
     idx, s = problem.idx, problem.s
@@ -329,7 +336,7 @@ def _scipy_least_squares(problem: _Problem, theta: np.ndarray, max_iterations: i
         theta[m, idx] = out.x * s
         converged[m] = out.status > 0
         iterations[m] = out.nfev
-    return converged, iterations
+    return converged, iterations, None
 
 
 SOLVERS = {"gauss-newton": _damped_gauss_newton, "scipy": _scipy_least_squares}
@@ -358,13 +365,16 @@ def fit_batch(design: Design, values: np.ndarray, mask: np.ndarray, sigma: float
     idx, s = problem.idx, problem.s
     theta = np.tile(np.asarray(fixed, dtype=float), (m_count, 1))
     theta[:, idx] = 0.0
-    converged, iterations = SOLVERS[solver](problem, theta, max_iterations)
+    converged, iterations, last = SOLVERS[solver](problem, theta, max_iterations)
 
     # The covariance and information at the solution.
     rows = np.arange(m_count)
     model = predict(theta, design)
     _, cost = problem.residual(theta, rows, model)
-    jac = problem.jacobian(theta, rows)
+    # A converged fit's last Jacobian is its solution's to ~1e-11 (the last step is below
+    # 1e-9 of each scale; the model bends on the scale of the leg length).
+    jac = (last if last is not None and converged.all()
+           else problem.jacobian(theta, rows))
     info = _t(jac) @ jac
     lam, vec = np.linalg.eigh(info + np.eye(len(idx)) * problem.precision)
     keep = lam >= RETAIN * (1 - 1e-9)
