@@ -12,13 +12,18 @@ N labs counts N) and its ratio to the single lab's median of the same run.
 
 from __future__ import annotations
 
-import argparse
 import os
 from collections.abc import Callable
 
 import gymnasium as gym
 import numpy as np
-from throughput import interleaved_rates, print_rates, single_runner, vector_runner
+from throughput import (
+    interleaved_rates,
+    print_rates,
+    round_arguments,
+    single_runner,
+    vector_runner,
+)
 
 import orthoglide_env
 
@@ -38,11 +43,7 @@ def plan(steps: int, n: int) -> list[dict[str, np.ndarray]]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rounds", type=int, default=5)
-    parser.add_argument("--seconds", type=float, default=1.0,
-                        help="length of one timed round of each configuration")
-    args = parser.parse_args()
+    args = round_arguments(__doc__.splitlines()[0])
     # Rough rates (steps/s) only size the rounds; the table is measured below.
     configs: dict[str, tuple[int, int, Callable[[int], Callable[[], float]]]] = {
         "single lab": (1, 300, lambda s: single_runner(gym.make(ID), [

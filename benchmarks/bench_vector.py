@@ -16,7 +16,6 @@ for 1000 separate single envs.
 
 from __future__ import annotations
 
-import argparse
 import gc
 import os
 import tracemalloc
@@ -24,7 +23,13 @@ from collections.abc import Callable
 
 import gymnasium as gym
 import numpy as np
-from throughput import interleaved_rates, print_rates, single_runner, vector_runner
+from throughput import (
+    interleaved_rates,
+    print_rates,
+    round_arguments,
+    single_runner,
+    vector_runner,
+)
 
 import orthoglide_env
 
@@ -71,11 +76,7 @@ def memory_per_thousand() -> dict[str, tuple[float, float]]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rounds", type=int, default=5)
-    parser.add_argument("--seconds", type=float, default=1.0,
-                        help="length of one timed round of each configuration")
-    args = parser.parse_args()
+    args = round_arguments(__doc__.splitlines()[0])
     # Rough rates (steps/s) only size the rounds; the table is measured below.
     configs: dict[str, tuple[int, int, Callable[[int], Callable[[], float]]]] = {
         "single env": (1, 1000, lambda s: single_runner(gym.make(ID, backend="exact"),

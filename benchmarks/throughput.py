@@ -7,6 +7,7 @@ change of load on the machine hits every configuration alike.
 
 from __future__ import annotations
 
+import argparse
 import os
 import time
 from collections.abc import Callable, Sequence
@@ -14,6 +15,15 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+
+
+def round_arguments(description: str) -> argparse.Namespace:
+    """The options every throughput benchmark takes: ``--rounds`` and ``--seconds``."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--seconds", type=float, default=1.0,
+                        help="length of one timed round of each configuration")
+    return parser.parse_args()
 
 
 def single_runner(env: gym.Env, plan: Sequence[Any]) -> Callable[[], float]:

@@ -381,6 +381,13 @@ def _predicted_frames(targets: np.ndarray, jac: np.ndarray, covariance: np.ndarr
     return [FrameErrors(*frames) for frames in zip(*stats, strict=True)]
 
 
+def _same_targets(usable: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The models (rows of ``usable``, (M, n)) grouped by the targets they reach: each
+    distinct mask with the indices of its models."""
+    masks, group = np.unique(usable, axis=0, return_inverse=True)
+    return [(mask, np.flatnonzero(np.ravel(group) == k)) for k, mask in enumerate(masks)]
+
+
 def rigid_weights(models: Sequence[MachineParams], grid: np.ndarray | None = None
                   ) -> np.ndarray:
     """``W`` (M, 27, 27) of each model: ``trace(W C)`` is the mean square over the grid of
@@ -393,11 +400,10 @@ def rigid_weights(models: Sequence[MachineParams], grid: np.ndarray | None = Non
     targets = workspace_grid() if grid is None else np.asarray(grid, dtype=float)
     usable, jac = _tcp_jacobian_arrays(models, targets)
     out = np.zeros((len(models), jac.shape[-1], jac.shape[-1]))
-    masks, group = np.unique(usable, axis=0, return_inverse=True)
-    for k, mask in enumerate(masks):
-        members = np.flatnonzero(np.ravel(group) == k)
+    groups = _same_targets(usable)
+    for mask, members in groups:
         # The common case, every model reaching every target, without copies.
-        mine = jac if len(masks) == 1 else jac[members]
+        mine = jac if len(groups) == 1 else jac[members]
         flat = (mine if mask.all() else mine[:, mask]).reshape(len(members), -1, jac.shape[-1])
         q, _ = np.linalg.qr(motion_basis(targets[mask], "rigid"))
         moved = q.T @ flat  # what the rigid fit takes out, (k, 6, 27)
@@ -424,9 +430,7 @@ def predicted_tcp_frames_many(models: Sequence[MachineParams],
     usable, jac = _tcp_jacobian_arrays(models, targets)
     covariances = np.asarray(covariances, dtype=float)
     out: list[FrameErrors | None] = [None] * len(models)
-    masks, group = np.unique(usable, axis=0, return_inverse=True)
-    for k, mask in enumerate(masks):
-        members = np.flatnonzero(np.ravel(group) == k)
+    for mask, members in _same_targets(usable):
         frames = _predicted_frames(targets[mask], jac[members][:, mask], covariances[members])
         for m, frame in zip(members, frames, strict=True):
             out[m] = frame

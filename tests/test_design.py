@@ -141,19 +141,25 @@ def test_active_agents_filter_follows_the_estimator_and_presses_nothing() -> Non
     agent = get_agent("active")
     observation, info = env.reset(seed=4)
     agent.reset(env, observation, np.random.default_rng(4))
-    while True:
-        observation, _, terminated, truncated, info = env.step(agent.act(observation, info))
-        assert not info["overtravel"] and not info["refused"]
-        if terminated or truncated:
-            break
-    lab = env.unwrapped
-    est = estimate(measurements_of(lab.records), "extended", lab.noise.effective_sigma)
+    lab, est = play_without_faults(env, agent, observation, info)
     filtered = MachineParams.from_vector(
         agent.planner.mean[:N_MACHINE] * default_scales(ParameterSpace()))
     gap = score(filtered, est.machine).tcp_after.rigid.rms
     error = score(est.machine, lab.true_machine).tcp_after.rigid.rms
     assert gap < 0.05
     assert error < 0.05
+
+
+def play_without_faults(env, agent, observation, info):
+    """Let ``agent`` finish its episode, asserting that no step presses a gauge or is
+    refused; the lab and its notebook's extended estimate."""
+    while True:
+        observation, _, terminated, truncated, info = env.step(agent.act(observation, info))
+        assert not info["overtravel"] and not info["refused"]
+        if terminated or truncated:
+            break
+    lab = env.unwrapped
+    return lab, estimate(measurements_of(lab.records), "extended", lab.noise.effective_sigma)
 
 
 def test_a_wrong_start_does_not_lock_the_active_agent() -> None:
@@ -176,12 +182,6 @@ def test_a_wrong_start_does_not_lock_the_active_agent() -> None:
             agent.planner.mean[:N_MACHINE] = np.random.default_rng(1).normal(size=N_MACHINE)
             after, _ = agent.planner.tips()
             assert np.nanmax(np.abs(after - before)) > 0.5  # a wrong start, in mm of tip
-        while True:
-            observation, _, terminated, truncated, info = env.step(agent.act(observation, info))
-            assert not info["overtravel"] and not info["refused"]
-            if terminated or truncated:
-                break
-        lab = env.unwrapped
-        est = estimate(measurements_of(lab.records), "extended", lab.noise.effective_sigma)
+        lab, est = play_without_faults(env, agent, observation, info)
         results.append(score(est.machine, lab.true_machine).tcp_after.rigid.rms)
     assert results[1] < 3 * results[0]
