@@ -154,10 +154,10 @@ def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
     good = [k for k, est in enumerate(estimates) if not isinstance(est, Exception)]
     fitted = [estimates[k] for k in good]
     z_scores = iter(machine_z_scores(fitted, [episodes[k].truth for k in good]))  # type: ignore[arg-type]
-    reports = iter(score_batch([e.machine for e in fitted],  # type: ignore[union-attr]
-                               [episodes[k].truth for k in good],
+    machines = [e.machine for e in fitted]  # type: ignore[union-attr]
+    reports = iter(score_batch(machines, [episodes[k].truth for k in good],
                                before=_before([episodes[k] for k in good])) if good else [])
-    predicted = iter(predicted_rigid_mm(fitted).tolist())  # type: ignore[arg-type]
+    predicted = iter(predicted_rigid_mm(fitted, machines).tolist())  # type: ignore[arg-type]
     out = []
     for episode, est, curve in zip(episodes, estimates, curves, strict=True):
         count = len(episode.records)
@@ -276,10 +276,11 @@ def _episodes(config: Config, agent_name: str, runs: list[int], batched: bool
 
 
 #: Machines per task: their episodes run in one lab vector env and a fixed design's fits
-#: in one batched solve, which pay up to a few hundred machines (the fits' working arrays
-#: grow with the chunk); few enough for a live progress bar and little lost work on an
-#: interrupt.
-CHUNK: int = 200
+#: in one batched solve, whose fixed costs per step and per iteration (the outlier refits
+#: of a few machines above all) are still paid down up to about 500 machines; the scoring
+#: works through them in cache-sized blocks (:data:`~orthoglide_env.scoring.BLOCK`).  Few
+#: enough for a live progress bar and little lost work on an interrupt.
+CHUNK: int = 500
 
 
 def run(config: Config, machines: int, jobs: int = 1, done: list[Trial] | None = None,

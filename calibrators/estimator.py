@@ -95,8 +95,9 @@ class BatchFit:
 
     @property
     def chi2_dof(self) -> np.ndarray:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return np.where(self.dof > 0, self.chi2 / self.dof, np.nan)
+        """(M,) chi2/dof, NaN without degrees of freedom."""
+        return np.divide(self.chi2, self.dof, out=np.full(np.shape(self.chi2), np.nan),
+                         where=self.dof > 0)
 
     @property
     def misfit(self) -> np.ndarray:
@@ -161,14 +162,22 @@ def z_scores(estimate: np.ndarray, truth: np.ndarray, covariance: np.ndarray,
 
 def _centre(values: np.ndarray, mask: np.ndarray, onehot: np.ndarray) -> np.ndarray:
     """Subtract each mounting's mean over its used readings (axis 1 of ``values``, which
-    may carry a trailing parameter axis); unused readings become 0."""
+    may carry a trailing parameter axis); unused readings become 0.  ``values`` is
+    overwritten (the fits' arrays are large, and fresh): it is returned."""
     weights = mask.astype(float)
     counts = np.maximum(weights @ onehot, 1.0)  # (M, K)
+    mounting = np.argmax(onehot, axis=1)
+    if values.ndim == 3:
+        weights = weights[..., None]
+        counts = counts[..., None]
+    values *= weights
     if values.ndim == 2:
-        mean = ((values * weights) @ onehot) / counts
-        return (values - mean @ onehot.T) * weights
-    mean = (onehot.T @ (values * weights[..., None])) / counts[..., None]
-    return (values - onehot @ mean) * weights[..., None]
+        mean = (values @ onehot) / counts
+    else:
+        mean = (onehot.T @ values) / counts
+    values -= mean[:, mounting]
+    values *= weights
+    return values
 
 
 class _Problem:
@@ -205,7 +214,8 @@ class _Problem:
         """Whitened Jacobian over ``free`` (default: the free parameters), scaled units."""
         free = self.free if free is None else free
         jac = jacobian(theta, self.design, free, self.scale)
-        return _centre(jac * self.weight[:, None], self.mask[rows], self.onehot)
+        jac *= self.weight[:, None]
+        return _centre(jac, self.mask[rows], self.onehot)
 
     def cost_resolution(self, cost: np.ndarray) -> np.ndarray:
         """What a cost comparison can resolve, with a safety factor: each reading's model
@@ -256,12 +266,18 @@ def _damped_gauss_newton(problem: _Problem, theta: np.ndarray, max_iterations: i
     iterations = np.zeros(m_count, dtype=int)
     damping = np.zeros(m_count)
     last: np.ndarray | None = None
+    # The model readings at each machine's theta when known: an accepted trial step's.
+    models = np.empty((m_count, len(problem.design)))
+    known = np.zeros(m_count, dtype=bool)
     for _ in range(max_iterations):
         rows = np.flatnonzero(~done & ~failed)
         if not len(rows):
             break
         th = theta[rows]
-        model = predict(th, problem.design)
+        unknown = rows[~known[rows]]
+        if len(unknown):
+            models[unknown] = predict(theta[unknown], problem.design)
+        model = models[rows]
         r, cost = problem.residual(th, rows, model)
         jac = problem.jacobian(th, rows)
         if last is None:
@@ -279,19 +295,28 @@ def _damped_gauss_newton(problem: _Problem, theta: np.ndarray, max_iterations: i
         decrease = -0.5 * np.einsum("mf,mf->m", g, newton)
         untested = decrease <= problem.cost_resolution(cost)
         theta[rows[untested][:, None], idx] += newton[untested] * s
+        known[rows[untested]] = False
         done[rows[(np.max(np.abs(newton), axis=1, initial=0.0) < STEP_TOL)
                   | (decrease < DECREMENT_TOL)]] = True
         pending = ~untested
         while pending.any():
             sub = np.flatnonzero(pending)
-            step = _step(a[sub], g[sub], damping[rows[sub]],
-                         None if eigen is None else (eigen[0][sub], eigen[1][sub]))
+            # Undamped, the step is the Newton step already solved for.
+            step = newton[sub]
+            damped = np.flatnonzero(damping[rows[sub]] > 0)
+            if len(damped):
+                step[damped] = _step(a[sub[damped]], g[sub[damped]], damping[rows[sub[damped]]],
+                                     None if eigen is None else (eigen[0][sub[damped]],
+                                                                 eigen[1][sub[damped]]))
             trial = th[sub].copy()
             trial[:, idx] += step * s
-            _, trial_cost = problem.residual(trial, rows[sub])
+            trial_model = predict(trial, problem.design)
+            _, trial_cost = problem.residual(trial, rows[sub], trial_model)
             accept = trial_cost <= cost[sub]
             ok = sub[accept]
             theta[rows[ok]] = trial[accept]
+            models[rows[ok]] = trial_model[accept]
+            known[rows[ok]] = True
             damping[rows[ok]] = np.where(damping[rows[ok]] > DAMPING_START,
                                          damping[rows[ok]] / 10, 0.0)
             pending[ok] = False
@@ -370,22 +395,29 @@ def fit_batch(design: Design, values: np.ndarray, mask: np.ndarray, sigma: float
     # The covariance and information at the solution.
     rows = np.arange(m_count)
     model = predict(theta, design)
-    _, cost = problem.residual(theta, rows, model)
+    r, cost = problem.residual(theta, rows, model)
     # A converged fit's last Jacobian is its solution's to ~1e-11 (the last step is below
     # 1e-9 of each scale; the model bends on the scale of the leg length).
     jac = (last if last is not None and converged.all()
            else problem.jacobian(theta, rows))
     info = _t(jac) @ jac
-    lam, vec = np.linalg.eigh(info + np.eye(len(idx)) * problem.precision)
-    keep = lam >= RETAIN * (1 - 1e-9)
-    # Directions the fit did not move keep their a-priori scale (1 in scaled units).
-    inv = np.where(keep, 1.0 / np.where(keep, lam, 1.0), 1.0)
-    cov_scaled = (vec * inv[:, None, :]) @ _t(vec)
+    normal = info + np.eye(len(idx)) * problem.precision
+    if problem.full_rank:
+        # Every direction is retained: the covariance is the inverse (a third of the
+        # eigen-decomposition's cost), and the gain's matrix is the same.
+        cov_scaled = gain_matrix = np.linalg.inv(normal)
+        retained = np.full(m_count, len(idx))
+    else:
+        lam, vec = np.linalg.eigh(normal)
+        keep = lam >= RETAIN * (1 - 1e-9)
+        # Directions the fit did not move keep their a-priori scale (1 in scaled units).
+        inv = np.where(keep, 1.0 / np.where(keep, lam, 1.0), 1.0)
+        cov_scaled = (vec * inv[:, None, :]) @ _t(vec)
+        gain_matrix = (vec * np.where(keep, inv, 0.0)[:, None, :]) @ _t(vec)
+        retained = keep.sum(axis=1)
     mountings_used = (mask.astype(float) @ problem.onehot > 0).sum(axis=1)
-    retained = keep.sum(axis=1)
     priored = int(np.sum(problem.precision > 0))
     dof = mask.sum(axis=1) - mountings_used - np.maximum(retained - priored, 0)
-    r, _ = problem.residual(theta, rows, model)
     fit = BatchFit(
         theta=theta, free=problem.free, scale=problem.scale,
         prior=np.asarray(prior, dtype=float), covariance=cov_scaled * np.outer(s, s),
@@ -393,13 +425,12 @@ def fit_batch(design: Design, values: np.ndarray, mask: np.ndarray, sigma: float
         dof=dof, retained=retained, converged=converged, iterations=iterations, sigma=sigma,
         error_covariance=np.zeros((m_count, len(free), len(free))),
     )
-    gain = ((vec * np.where(keep, inv, 0.0)[:, None, :]) @ _t(vec)) @ _t(jac)
-    _model_error(fit, problem, jac, gain,
+    _model_error(fit, problem, jac, gain_matrix,
                  np.zeros(len(free), dtype=bool) if unmodelled is None else unmodelled)
     return fit
 
 
-def _model_error(fit: BatchFit, problem: _Problem, jac: np.ndarray, gain: np.ndarray,
+def _model_error(fit: BatchFit, problem: _Problem, jac: np.ndarray, gain_matrix: np.ndarray,
                  unmodelled: np.ndarray) -> None:
     """Fill ``fit.error_covariance``: the covariance of (estimate - truth) over every
     parameter, including the ``unmodelled`` ones the fit kept at nominal.
@@ -424,7 +455,9 @@ def _model_error(fit: BatchFit, problem: _Problem, jac: np.ndarray, gain: np.nda
     if not len(out) or not len(rows):
         return
     ju = problem.jacobian(fit.theta[rows], rows, free=unmodelled)  # (m, N, n_out)
-    propagated = gain[rows] @ ju  # gain J_u
+    # gain J_u, the gain being ``gain_matrix @ J^T`` (the pseudo-inverse over the retained
+    # directions times the Jacobian).
+    propagated = gain_matrix[rows] @ (_t(jac[rows]) @ ju)
     left = ju - jac[rows] @ propagated
     excess = np.maximum(fit.chi2[rows] - fit.dof[rows], 0.0)
     kappa = excess / np.maximum(np.einsum("mnu,mnu->m", left, left), 1e-300)

@@ -39,11 +39,13 @@ def predicted_tcp_error(est: Estimate, grid: np.ndarray | None = None) -> FrameE
     return predicted_tcp_errors([est], grid)[0]
 
 
-def predicted_rigid_mm(ests: list[Estimate]) -> np.ndarray:
+def predicted_rigid_mm(ests: list[Estimate], machines: list[MachineParams] | None = None
+                       ) -> np.ndarray:
     """The rigid-frame RMS of :func:`predicted_tcp_errors` of each estimate (mm), alone:
-    ``sqrt(trace(W C))`` (:func:`~orthoglide_env.scoring.rigid_weights`)."""
+    ``sqrt(trace(W C))`` (:func:`~orthoglide_env.scoring.rigid_weights`).  ``machines``:
+    the estimates' machines, when the caller has them already."""
     n = len(ERROR_NAMES)
-    weights = rigid_weights([e.machine for e in ests])
+    weights = rigid_weights([e.machine for e in ests] if machines is None else machines)
     covariances = np.array([e.error_covariance[:n, :n] for e in ests]).reshape(-1, n, n)
     return np.sqrt(np.clip(np.einsum("mij,mji->m", weights, covariances), 0.0, None))
 

@@ -110,6 +110,26 @@ def read_user_file(path: Path, kind: str, error: type[ValueError]) -> str:
         raise error(f"cannot read {kind} {path}: {reason}") from None
 
 
+def _validated(values: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """A machine's fields ``values`` checked (each field's shape after its batch axes,
+    finite numbers, a batch shape they share) and broadcast to that batch shape."""
+    for key, value in values.items():
+        shape = _SHAPES[key]
+        if value.shape[value.ndim - len(shape):] != shape or value.ndim < len(shape):
+            raise MachineFileError(
+                f"machine key '{key}' must have shape {list(shape)}, got {list(value.shape)}")
+        if not np.all(np.isfinite(value)):
+            raise MachineFileError(f"machine key '{key}' holds a non-finite number")
+    try:
+        batch = np.broadcast_shapes(
+            *(v.shape[: v.ndim - len(_SHAPES[k])] for k, v in values.items()))
+    except ValueError:
+        raise MachineFileError("machine keys have different batch shapes") from None
+    return {key: value if value.shape == (*batch, *_SHAPES[key])
+            else np.broadcast_to(value, (*batch, *_SHAPES[key])).copy()
+            for key, value in values.items()}
+
+
 @dataclass
 class MachineParams:
     """Geometric errors of one Orthoglide, relative to the nominal prototype.
@@ -133,27 +153,14 @@ class MachineParams:
     attach: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
 
     def __post_init__(self) -> None:
-        values = {}
-        for f in fields(self):
-            shape = _SHAPES[f.name]
-            value = np.array(getattr(self, f.name), dtype=float)
-            if value.shape[value.ndim - len(shape):] != shape or value.ndim < len(shape):
-                raise MachineFileError(
-                    f"machine key '{f.name}' must have shape {list(shape)}, got {list(value.shape)}"
-                )
-            if not np.all(np.isfinite(value)):
-                raise MachineFileError(f"machine key '{f.name}' holds a non-finite number")
-            values[f.name] = value
-        try:
-            batch = np.broadcast_shapes(
-                *(v.shape[: v.ndim - len(_SHAPES[k])] for k, v in values.items())
-            )
-        except ValueError:
-            raise MachineFileError("machine keys have different batch shapes") from None
+        values = {key: np.array(getattr(self, key), dtype=float) for key in _SHAPES}
+        # One machine with every field in shape, by far the common case (the kinematics'
+        # callers build them by the thousand), needs only its numbers checked.
+        single = all(values[key].shape == shape for key, shape in _SHAPES.items())
+        if not (single and np.isfinite(np.concatenate([v.ravel() for v in values.values()])
+                                       ).all()):
+            values = _validated(values)
         for key, value in values.items():
-            shape = (*batch, *_SHAPES[key])
-            if value.shape != shape:
-                value = np.broadcast_to(value, shape).copy()
             setattr(self, key, value)
         if np.any(L_NOMINAL + self.dL <= D_NOMINAL / 2):
             raise MachineFileError(f"leg length L + dL must exceed {D_NOMINAL / 2} mm")

@@ -261,6 +261,18 @@ def tcp_sensitivity(machine: MachineParams, rho: np.ndarray, p: np.ndarray) -> n
     fixed ``p``, ``df/dtheta = 2 (C_i - A_i) . (dC_i - dA_i) - 2 L_i dL_i``, every column
     in closed form.  Each error is in one leg's loop (:data:`ERROR_LEGS`), so ``df/dtheta``
     has one entry per column and the solve is a column of the inverse times it."""
+    inverse, row = tcp_sensitivity_factors(machine, rho, p)
+    out = np.take(inverse, ERROR_LEGS, axis=-1)
+    out *= row[..., None, :]
+    return out
+
+
+def tcp_sensitivity_factors(machine: MachineParams, rho: np.ndarray, p: np.ndarray
+                            ) -> tuple[np.ndarray, np.ndarray]:
+    """The factors of :func:`tcp_sensitivity`: ``(df/dp)^-1`` (``(..., 3, 3)``) and the
+    entry of ``-df/dtheta`` of each error in its leg's row (``(..., 27)``); column ``e`` of
+    the sensitivity is column ``ERROR_LEGS[e]`` of the first times entry ``e`` of the
+    second.  Products with the sensitivity can use them without its 27 columns of 3."""
     rho = np.asarray(rho, dtype=float)
     p = np.asarray(p, dtype=float)
     v = leg_vectors(machine, rho, p)  # (..., 3 legs, 3)
@@ -270,8 +282,19 @@ def tcp_sensitivity(machine: MachineParams, rho: np.ndarray, p: np.ndarray) -> n
     row[..., CARRIAGE_COLUMNS] = 2 * carriage_gradients(machine, rho, v)
     row[..., LENGTH_COLUMN + legs] = 2 * g.lengths
     row[..., ATTACH_COLUMN + 3 * legs[:, None] + legs] = -2 * v
-    out = np.take(inverse_3x3(2 * v), ERROR_LEGS, axis=-1)
-    out *= row[..., None, :]
+    return inverse_3x3(2 * v), row
+
+
+def sensitivity_along(inverse: np.ndarray, row: np.ndarray, weights: np.ndarray
+                      ) -> np.ndarray:
+    """``weights . dp/dtheta`` (``(..., 27)``) from the :func:`tcp_sensitivity_factors`
+    ``inverse`` and ``row`` and the ``weights`` (``(..., 3)``) of the TCP's coordinates:
+    the weights go through the 3 x 3 inverse first, so the 27 columns are formed once,
+    not three times."""
+    through = (weights[..., 0, None] * inverse[..., 0, :] + weights[..., 1, None]
+               * inverse[..., 1, :] + weights[..., 2, None] * inverse[..., 2, :])
+    out = np.take(through, ERROR_LEGS, axis=-1)
+    out *= row
     return out
 
 

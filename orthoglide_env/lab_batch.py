@@ -225,13 +225,30 @@ class Notebook:
 
     def __init__(self, gauge_sigma: float, tracker_sigma: float) -> None:
         self.records: list[Record] = []
-        self.installed: dict[str, Gauge] = {}
+        self._installed: dict[str, Gauge] = {}
+        #: The first installations, as mounting names and the row of a batch of gauge sets:
+        #: turned into gauges when asked for (a sweep's scoring never asks).
+        self._first: tuple[list[str], GaugeArray, int] | None = None
         self._gauge_sigma = max(gauge_sigma, NOISE_FLOOR)
         self._tracker_sigma = tracker_sigma
         # Per mounting: count, sum and sum of outer products of its Jacobian rows, names.
         self._sums: dict[str, tuple[int, Any, Any, tuple[str, ...]]] = {}
         self._informed = 0  # records already in the sums
         self._logdet = 0.0
+
+    def install(self, names: list[str], gauges: GaugeArray, row: int) -> None:
+        """The episode's first installations: ``names``' gauges are row ``row`` of
+        ``gauges``."""
+        self._installed, self._first = {}, (names, gauges, row)
+
+    @property
+    def installed(self) -> dict[str, Gauge]:
+        """Every installation by mounting name, in mounting order (truth, for scoring)."""
+        if self._first is not None:
+            names, gauges, row = self._first
+            self._first = None
+            self._installed = dict(zip(names, gauges[row].to_gauges(), strict=True))
+        return self._installed
 
     def design_key(self) -> tuple:
         """What the information depends on: every record's mounting and posture (a lab's
@@ -560,7 +577,7 @@ class LabBatch:
         for r, i in enumerate(rows):
             self.mounting[i] = names + [""] * (settings.stands - len(first))
             book = self._notebook()
-            book.installed = dict(zip(names, installed[r].to_gauges(), strict=True))
+            book.install(names, installed, r)
             self.notebooks[i] = book
         self.tracker_rotation[rows] = rotations
         self.tracker_position[rows] = positions

@@ -53,7 +53,8 @@ from .kinematics import (
     direct,
     dot,
     platform_points,
-    tcp_sensitivity,
+    sensitivity_along,
+    tcp_sensitivity_factors,
 )
 
 N_MACHINE: int = len(ERROR_NAMES)
@@ -156,10 +157,11 @@ class Design:
     mounting: np.ndarray  # (N,) index of each reading's mounting
     rho: np.ndarray  # (N, 3) commanded posture of each reading, mm
 
-    def __post_init__(self) -> None:
+    @cached_property
+    def _unique_postures(self) -> tuple[np.ndarray, np.ndarray]:
+        # On first use: of a sweep's many identical designs, only the one fitted needs it.
         postures, index = np.unique(self.rho, axis=0, return_inverse=True)
-        object.__setattr__(self, "_postures", postures)
-        object.__setattr__(self, "_posture_index", np.ravel(index))
+        return postures, np.ravel(index)
 
     def __len__(self) -> int:
         return len(self.mounting)
@@ -172,7 +174,7 @@ class Design:
     def distinct(self) -> tuple[Design, np.ndarray]:
         """The design with each mounting read once at each of its postures, and every
         reading's row in it: repeated readings share their model and its derivatives."""
-        key = self._posture_index * len(self.specs) + self.mounting  # type: ignore[attr-defined]
+        key = self.posture_index * len(self.specs) + self.mounting
         _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
         if len(first) == len(self):
             return self, np.arange(len(self))
@@ -182,7 +184,12 @@ class Design:
     @property
     def postures(self) -> np.ndarray:
         """The distinct postures (P, 3)."""
-        return self._postures  # type: ignore[attr-defined]
+        return self._unique_postures[0]
+
+    @property
+    def posture_index(self) -> np.ndarray:
+        """Each reading's row in :attr:`postures` (N,)."""
+        return self._unique_postures[1]
 
     @cached_property
     def signs(self) -> np.ndarray:
@@ -199,13 +206,15 @@ class Design:
     @classmethod
     def of(cls, mountings: list[str], specs: list[Spec], rho: np.ndarray) -> Design:
         """A design from each reading's mounting name and spec, and its posture."""
-        names = list(dict.fromkeys(mountings))
         spec_of: dict[str, Spec] = {}
         for name, spec in zip(mountings, specs, strict=True):
-            if spec_of.setdefault(name, spec) != spec:
+            known = spec_of.setdefault(name, spec)
+            if known is not spec and known != spec:
                 raise ValueError(f"mounting '{name}' holds two different instruments "
-                                 f"({spec_of[name].slot} and {spec.slot})")
-        index = np.array([names.index(m) for m in mountings], dtype=int)
+                                 f"({known.slot} and {spec.slot})")
+        names = list(spec_of)
+        position = {name: k for k, name in enumerate(names)}
+        index = np.array([position[m] for m in mountings], dtype=int)
         return cls(tuple(names), tuple(spec_of[n] for n in names), index,
                    np.asarray(rho, dtype=float).reshape(-1, 3))
 
@@ -215,6 +224,10 @@ def predict(theta: np.ndarray, design: Design) -> np.ndarray:
     ``design`` for parameter vectors ``theta`` of shape ``(*batch, n)``: ``(*batch, N)``."""
     theta = np.asarray(theta, dtype=float)
     batch = theta.shape[:-1]
+    flat = theta.reshape(-1, theta.shape[-1])
+    if len(flat) > 1 and bool((flat == flat[0]).all()):
+        # Every fit of a batch starts at the same point (nominal): one evaluation serves all.
+        return np.broadcast_to(predict(flat[0], design), (*batch, len(design))).copy()
     space = design.space
     machine = MachineParams.from_vector(theta[..., :N_MACHINE])
     postures = design.postures.reshape((1,) * len(batch) + design.postures.shape)
@@ -236,7 +249,7 @@ def predict(theta: np.ndarray, design: Design) -> np.ndarray:
             for m, (name, spec) in enumerate(zip(design.mountings, design.specs, strict=True)):
                 if isinstance(spec, TrackerAxis) and station_of(name) == station:
                     values[..., m] = seen[..., spec.component]
-    rows = values[..., design._posture_index, design.mounting]  # type: ignore[attr-defined]
+    rows = values[..., design.posture_index, design.mounting]
     return design.signs[design.mounting] * rows
 
 
@@ -303,15 +316,16 @@ def _derivatives(theta: np.ndarray, design: Design, wanted: np.ndarray) -> np.nd
     machine = MachineParams.from_vector(theta[:, :N_MACHINE])
     postures = design.postures[None]
     p = direct(machine, postures)  # (B, P, 3)
-    dp = tcp_sensitivity(machine, postures, p)  # (B, P, 3, 27)
+    # The TCP's derivative (B, P, 3, 27) as its factors (B, P, 3, 3) and (B, P, 27).
+    inv, row = tcp_sensitivity_factors(machine, postures, p)
     out = np.zeros((len(theta), len(design), theta.shape[-1]))
-    at = design._posture_index  # type: ignore[attr-defined]
+    at = design.posture_index
     gauges = space.gauges
     if gauges:
         where = np.full(len(design.specs), -1)
         where[gauges] = np.arange(len(gauges))
         rows = np.flatnonzero(where[design.mounting] >= 0)
-        _gauge_derivatives(theta, design, machine, p, dp, rows,
+        _gauge_derivatives(theta, design, machine, p, (inv, row), rows,
                            where[design.mounting[rows]], at[rows], out,
                            stands=bool(wanted[N_MACHINE:N_MACHINE + 4 * len(gauges)].any()))
     start = N_MACHINE + 4 * len(gauges)
@@ -322,8 +336,9 @@ def _derivatives(theta: np.ndarray, design: Design, wanted: np.ndarray) -> np.nd
         component = np.array([design.specs[m].component for m in design.mounting[rows]])
         columns = slice(start + 3 * k, start + 3 * k + 3)
         rotation = rotation_matrices(theta[:, columns])
-        seen = np.einsum("bij,brjk->brik", rotation, dp[:, at[rows]])
-        out[:, rows, :N_MACHINE] = seen[:, np.arange(len(rows)), component]
+        # Component i of R p moves with row i of R.
+        out[:, rows, :N_MACHINE] = sensitivity_along(inv[:, at[rows]], row[:, at[rows]],
+                                                     rotation[:, component])
         turned = np.einsum("bij,brjk->brik", rotation, rotated_derivatives(
             theta[:, None, columns], p[:, at[rows]]))
         out[:, rows, columns] = turned[:, np.arange(len(rows)), component]
@@ -331,7 +346,7 @@ def _derivatives(theta: np.ndarray, design: Design, wanted: np.ndarray) -> np.nd
 
 
 def _gauge_derivatives(theta: np.ndarray, design: Design, machine: MachineParams,
-                       p: np.ndarray, dp: np.ndarray, rows: np.ndarray,
+                       p: np.ndarray, dp: tuple[np.ndarray, np.ndarray], rows: np.ndarray,
                        gauge: np.ndarray, at: np.ndarray, out: np.ndarray, stands: bool
                        ) -> None:
     """Fill ``out[:, rows]``: the derivatives of the gauge readings ``rows`` (their gauge
@@ -371,8 +386,9 @@ def _gauge_derivatives(theta: np.ndarray, design: Design, machine: MachineParams
              np.where(bar, 1 - g.at[:, None], 0.0),
              np.where((g.part == Part.PLATFORM)[:, None], 1.0, 0.0)]
     machine_part = (
-        _through_leg(machine, postures[None], dp[:, at], legs, d_a, d_c, d_p)
-        - _through_leg(machine, zero, tcp_sensitivity(machine, zero, p_zero), legs,
+        _through_leg(machine, postures[None], (dp[0][:, at], dp[1][:, at]), legs, d_a, d_c,
+                     d_p)
+        - _through_leg(machine, zero, tcp_sensitivity_factors(machine, zero, p_zero), legs,
                        *(w * towards_centre for w in aimed)))
     sign = design.signs[design.mounting[rows]]
     out[:, rows, :N_MACHINE] = sign[:, None] * machine_part
@@ -391,16 +407,16 @@ def _gauge_derivatives(theta: np.ndarray, design: Design, machine: MachineParams
     out[:, rows[:, None], columns] = sign[:, None] * np.concatenate([shifts, tilts], axis=-1)
 
 
-def _through_leg(machine: MachineParams, rho: np.ndarray, dp: np.ndarray, legs: np.ndarray,
-                 d_a: np.ndarray, d_c: np.ndarray, d_p: np.ndarray) -> np.ndarray:
+def _through_leg(machine: MachineParams, rho: np.ndarray, dp: tuple[np.ndarray, np.ndarray],
+                 legs: np.ndarray, d_a: np.ndarray, d_c: np.ndarray, d_p: np.ndarray
+                 ) -> np.ndarray:
     """``d_a . dA/dtheta + d_c . dC/dtheta + d_p . dp/dtheta`` over the 27 errors, for the
     R1 centre A and R2 centre C of leg ``legs`` (``(R,)``) and the TCP p at commands
-    ``rho`` (``(..., R, 3)``, or one posture for all), the TCP's derivative ``dp``
-    ``(B, R, 3, 27)``: ``(B, R, 27)``."""
+    ``rho`` (``(..., R, 3)``, or one posture for all), the TCP's derivative ``dp`` as its
+    :func:`~orthoglide_env.kinematics.tcp_sensitivity_factors` (``(B, R, 3, 3)``, ``(B, R,
+    27)``, or one posture for all): ``(B, R, 27)``."""
     each = np.arange(len(legs))[:, None]
-    through_p = d_c + d_p
-    out = (through_p[..., 0, None] * dp[..., 0, :] + through_p[..., 1, None] * dp[..., 1, :]
-           + through_p[..., 2, None] * dp[..., 2, :])
+    out = sensitivity_along(*dp, d_c + d_p)
     out[:, each, CARRIAGE_COLUMNS[legs]] += carriage_gradients(
         machine, rho, d_a[..., None, :], legs[:, None])[..., 0, :]
     out[:, each, ATTACH_COLUMN + 3 * legs[:, None] + np.arange(3)] += d_c

@@ -26,7 +26,15 @@ import numpy as np
 
 from .gauges import cross
 from .geometry import RHO_MAX, RHO_MIN, MachineParams
-from .kinematics import UnreachableError, direct, dot, inverse, tcp_sensitivity
+from .kinematics import (
+    ERROR_LEGS,
+    UnreachableError,
+    direct,
+    dot,
+    inverse,
+    tcp_sensitivity,
+    tcp_sensitivity_factors,
+)
 
 #: TCP targets of the scoring grid span this cube (mm): inside the workspace that the
 #: nominal model reaches within the control limits.
@@ -34,6 +42,15 @@ GRID_RANGE: tuple[float, float] = (-80.0, 50.0)
 GRID_POINTS: int = 7
 #: The frames a TCP error is reported in, headline last.
 FRAMES: tuple[str, ...] = ("raw", "translation", "rigid")
+#: Machines per pass of the batched scoring.  The arrays of a pass over the grid stay in
+#: the processor's cache for 100 machines (~1 MB per array of points); 500 machines at
+#: once run at memory speed, ~1.4x slower per machine.
+BLOCK: int = 100
+
+
+def _blocks(count: int) -> list[slice]:
+    """Consecutive slices of at most :data:`BLOCK` machines that cover ``count``."""
+    return [slice(i, min(i + BLOCK, count)) for i in range(0, count, BLOCK)]
 
 
 @dataclass(frozen=True)
@@ -128,6 +145,9 @@ def tcp_error_vectors_many(models: Sequence[MachineParams], truths: Sequence[Mac
     """:func:`tcp_error_vectors` of many pairs over the targets (n, 3): (M, n, 3).  The
     true machines reach their commands in one batched solve; each machine's numbers are
     those it gets alone."""
+    if len(models) > BLOCK:
+        return np.concatenate([tcp_error_vectors_many(models[b], truths[b], targets)
+                               for b in _blocks(len(models))])
     rho = commands_many(models, targets)  # (M, n, 3)
     inside = np.isfinite(rho).all(axis=-1)
 
@@ -243,6 +263,9 @@ def frame_errors(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray) -> 
         raise ValueError("frame_errors needs reached (B, n, 3) and mask (B, n)")
     if not mask.any(axis=-1).all():
         raise ValueError("every machine needs at least one usable target")
+    if len(reached) > BLOCK:
+        return [frames for b in _blocks(len(reached))
+                for frames in frame_errors(targets[b], reached[b], mask[b])]
     raw = _stats(reached - targets, mask)
     translation = _stats(remove_translation(targets, reached, mask), mask)
     rigid = _stats(remove_rigid(targets, reached, mask), mask)
@@ -324,15 +347,23 @@ def _tcp_jacobian_arrays(models: Sequence[MachineParams], targets: np.ndarray
                          ) -> tuple[np.ndarray, np.ndarray]:
     """Which targets (n, 3) each model commands within the control limits (M, n), and the
     derivatives of :func:`tcp_jacobian` at every target (M, n, 3, 27)."""
+    usable, machines, rho, p = _commanded(models, targets)
+    return usable, tcp_sensitivity(machines, rho, p)
+
+
+def _commanded(models: Sequence[MachineParams], targets: np.ndarray
+               ) -> tuple[np.ndarray, MachineParams, np.ndarray, np.ndarray]:
+    """Which targets (n, 3) each model commands within the control limits (M, n), the
+    models stacked, and the commands and TCPs (M, n, 3) to take derivatives at.
+
+    A model's commands put its own TCP on the target exactly (the inverse is closed form),
+    so the target is the TCP.  Targets without a command are taken at Zero, TCP at the
+    origin (any well-posed point will do), for the callers to drop."""
     rho = commands_many(models, targets)  # (M, n, 3)
     usable = np.isfinite(rho).all(axis=-1)
-    # A model's commands put its own TCP on the target exactly (the inverse is closed
-    # form), so the target is the TCP the derivative is taken at.  Targets without a
-    # command are taken at Zero, TCP at the origin (any well-posed point will do), and
-    # dropped.
     rho = np.where(usable[..., None], rho, 0.0)
     p = np.where(usable[..., None], targets, 0.0)
-    return usable, tcp_sensitivity(MachineParams.stack(list(models)), rho, p)
+    return usable, MachineParams.stack(list(models)), rho, p
 
 
 def motion_basis(targets: np.ndarray, frame: str) -> np.ndarray:
@@ -394,22 +425,48 @@ def rigid_weights(models: Sequence[MachineParams], grid: np.ndarray | None = Non
     the expected TCP error after the best-fit rigid motion (mm^2) for a machine compensated
     with the model whose errors are off by ``N(0, C)``, i.e. the square of
     :func:`predicted_tcp_frames`' rigid RMS: ``W = J^T P J / m``, one matrix product per
-    model instead of a quadratic form per target."""
+    model instead of a quadratic form per target.
+
+    ``J`` is never formed: at each target its column ``e`` is column ``leg(e)`` of a 3 x 3
+    inverse ``A`` times a scalar ``r_e`` (:func:`~orthoglide_env.kinematics.
+    tcp_sensitivity_factors`), so ``J^T J`` has the blocks ``sum_t r_a (A^T A)_ab r_b^T``
+    of each pair of legs, and the rigid fit's part ``Q^T J`` has the blocks
+    ``sum_t (Q_t^T A)_a r_a^T``: a third of the memory and of the products."""
     if not models:
         return np.zeros((0, 27, 27))
     targets = workspace_grid() if grid is None else np.asarray(grid, dtype=float)
-    usable, jac = _tcp_jacobian_arrays(models, targets)
-    out = np.zeros((len(models), jac.shape[-1], jac.shape[-1]))
-    groups = _same_targets(usable)
-    for mask, members in groups:
-        # The common case, every model reaching every target, without copies.
-        mine = jac if len(groups) == 1 else jac[members]
-        flat = (mine if mask.all() else mine[:, mask]).reshape(len(members), -1, jac.shape[-1])
-        q, _ = np.linalg.qr(motion_basis(targets[mask], "rigid"))
-        moved = q.T @ flat  # what the rigid fit takes out, (k, 6, 27)
-        out[members] = (np.swapaxes(flat, -1, -2) @ flat
-                        - np.swapaxes(moved, -1, -2) @ moved) / mask.sum()
-    return out
+    if len(models) > BLOCK:
+        return np.concatenate([rigid_weights(models[b], targets) for b in _blocks(len(models))])
+    usable, machines, rho, p = _commanded(models, targets)
+    inv, row = tcp_sensitivity_factors(machines, rho, p)
+    row = np.where(usable[..., None], row, 0.0)  # unreachable targets count for nothing
+    # The rigid fit's orthonormal basis over each distinct set of reachable targets, zero
+    # on the others: one set in the common case, shared by every model.
+    masks, group = np.unique(usable, axis=0, return_inverse=True)
+    basis = np.zeros((len(masks), len(targets), 3, 6))
+    for k, mask in enumerate(masks):
+        basis[k, mask] = np.linalg.qr(motion_basis(targets[mask], "rigid"))[0].reshape(
+            -1, 3, 6)
+    basis = basis if len(masks) == 1 else basis[np.ravel(group)]
+    columns = [np.flatnonzero(ERROR_LEGS == leg) for leg in range(3)]
+    rows = [row[..., c] for c in columns]  # (M, n, 9) each
+    # Products of 3 x 3 matrices written out: a stack of tens of thousands of small
+    # matmuls costs several times more.
+    legs = [inv[..., a] for a in range(3)]  # (M, n, 3): the inverse's column of each leg
+    out = np.empty((len(models), 27, 27))
+    for a, ca in enumerate(columns):
+        for b, cb in enumerate(columns[a:], start=a):
+            block = np.swapaxes(rows[a] * dot(legs[a], legs[b])[..., None], -1, -2) @ rows[b]
+            out[:, ca[:, None], cb] = block
+            out[:, cb[:, None], ca] = np.swapaxes(block, -1, -2)
+    # Q_t^T A's column of leg a, (M, n, 6), against that leg's entries.
+    taken = np.concatenate([np.swapaxes(
+        basis[..., 0, :] * legs[a][..., 0, None] + basis[..., 1, :] * legs[a][..., 1, None]
+        + basis[..., 2, :] * legs[a][..., 2, None], -1, -2) @ rows[a] for a in range(3)],
+        axis=-1)  # (M, 6, 27) in the order of ``columns``
+    order = np.concatenate(columns)
+    out[:, order[:, None], order] -= np.swapaxes(taken, -1, -2) @ taken
+    return out / usable.sum(axis=-1)[:, None, None]
 
 
 def predicted_tcp_frames(model: MachineParams, covariance: np.ndarray,

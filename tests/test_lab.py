@@ -293,17 +293,20 @@ def test_pybullet_lab_reads_what_the_exact_lab_reads() -> None:
 def test_ctrl_c_keeps_the_finished_trials_and_resume_completes_the_table(tmp_path) -> None:
     """Ctrl-C (SIGINT to the whole process group, as a terminal sends it) stops a two-job
     run with one line and the partial table; --resume then ends with the table of an
-    uninterrupted run.  800 machines make four chunks of 200, so the interrupt, sent when
-    the first chunk's trials are written, lands while the third and fourth are pending
-    (the two workers can finish two chunks at once)."""
+    uninterrupted run.  Four chunks' worth of machines, so the interrupt, sent when the
+    first chunk's trials are written, lands while the third and fourth are pending (the
+    two workers can finish two chunks at once)."""
     import os
     import signal
     import time
 
+    from calibrators.compare import CHUNK
+
+    machines = 4 * CHUNK
     out = tmp_path / "run"
     argv = [sys.executable, "-m", "calibrators.cli", "compare", "--agents", "paper",
-            "--estimators", "paper6", "--machines", "800", "--seed", "2", "--jobs", "2",
-            "--quiet"]
+            "--estimators", "paper6", "--machines", str(machines), "--seed", "2", "--jobs",
+            "2", "--quiet"]
     # A shell starts background jobs with SIGINT ignored, and children inherit that: give
     # the run the default disposition a terminal's foreground job has.
     proc = subprocess.Popen([*argv, "--out", str(out)], stdout=subprocess.PIPE,
@@ -320,7 +323,7 @@ def test_ctrl_c_keeps_the_finished_trials_and_resume_completes_the_table(tmp_pat
     assert len(lines) == 1 and "interrupted after" in lines[0] and "--resume" in lines[0]
     assert "TCP after (rigid) med" in stdout
     kept = len(trials.read_text().splitlines())
-    assert 0 < kept < 800
+    assert 0 < kept < machines
     resumed = subprocess.run([*argv, "--out", str(out), "--resume", "--json"],
                              capture_output=True, text=True, timeout=600)
     whole = subprocess.run([*argv, "--json"], capture_output=True, text=True, timeout=600)
