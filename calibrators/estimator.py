@@ -160,13 +160,14 @@ def z_scores(estimate: np.ndarray, truth: np.ndarray, covariance: np.ndarray,
     return dirs @ err / np.sqrt(np.einsum("kf,fg,kg->k", dirs, cov, dirs))
 
 
-def _centre(values: np.ndarray, mask: np.ndarray, onehot: np.ndarray) -> np.ndarray:
+def _centre(values: np.ndarray, mask: np.ndarray, onehot: np.ndarray,
+            mounting: np.ndarray) -> np.ndarray:
     """Subtract each mounting's mean over its used readings (axis 1 of ``values``, which
-    may carry a trailing parameter axis); unused readings become 0.  ``values`` is
-    overwritten (the fits' arrays are large, and fresh): it is returned."""
+    may carry a trailing parameter axis; ``onehot`` (N, K) and ``mounting`` (N,): each
+    reading's mounting); unused readings become 0.  ``values`` is overwritten (the fits'
+    arrays are large, and fresh): it is returned."""
     weights = mask.astype(float)
     counts = np.maximum(weights @ onehot, 1.0)  # (M, K)
-    mounting = np.argmax(onehot, axis=1)
     if values.ndim == 3:
         weights = weights[..., None]
         counts = counts[..., None]
@@ -205,7 +206,8 @@ class _Problem:
                  model: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Whitened data residuals (zeros eliminated) and the total cost with the prior."""
         model = predict(theta, self.design) if model is None else model
-        r = _centre((model - self.values[rows]) * self.weight, self.mask[rows], self.onehot)
+        r = _centre((model - self.values[rows]) * self.weight, self.mask[rows], self.onehot,
+                    self.design.mounting)
         phi = theta[:, self.idx] / self.s
         return r, np.sum(r**2, axis=1) + np.sum(self.precision * phi**2, axis=1)
 
@@ -215,7 +217,7 @@ class _Problem:
         free = self.free if free is None else free
         jac = jacobian(theta, self.design, free, self.scale)
         jac *= self.weight[:, None]
-        return _centre(jac, self.mask[rows], self.onehot)
+        return _centre(jac, self.mask[rows], self.onehot, self.design.mounting)
 
     def cost_resolution(self, cost: np.ndarray) -> np.ndarray:
         """What a cost comparison can resolve, with a safety factor: each reading's model

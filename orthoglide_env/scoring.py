@@ -161,16 +161,19 @@ def tcp_error_vectors_many(models: Sequence[MachineParams], truths: Sequence[Mac
     return np.where(inside[..., None], reached, np.nan) - targets
 
 
-def commands_many(models: Sequence[MachineParams], targets: np.ndarray) -> np.ndarray:
+def commands_many(models: Sequence[MachineParams], targets: np.ndarray,
+                  stacked: MachineParams | None = None) -> np.ndarray:
     """:func:`commands` of each model for the targets (n, 3): (M, n, 3), in one batched
     solve unless a model cannot reach some target (then model by model, row by row); once
-    when every model is the same (the nominal model of every uncalibrated machine)."""
-    first = models[0].to_vector()
-    if all(np.array_equal(m.to_vector(), first) for m in models[1:]):
+    when every model is the same (the nominal model of every uncalibrated machine).
+    ``stacked``: the models as one batch, when the caller has it."""
+    stacked = MachineParams.stack(list(models)) if stacked is None else stacked
+    vectors = stacked.to_vector()
+    if (vectors == vectors[0]).all():
         rho = commands(models[0], targets)
         return np.broadcast_to(rho, (len(models), *rho.shape)).copy()
     try:
-        rho = inverse(MachineParams.stack(list(models)), np.asarray(targets, dtype=float)[None])
+        rho = inverse(stacked, np.asarray(targets, dtype=float)[None])
     except UnreachableError:
         return np.stack([commands(m, targets) for m in models])
     inside = np.all((rho >= RHO_MIN) & (rho <= RHO_MAX), axis=-1)
@@ -359,11 +362,12 @@ def _commanded(models: Sequence[MachineParams], targets: np.ndarray
     A model's commands put its own TCP on the target exactly (the inverse is closed form),
     so the target is the TCP.  Targets without a command are taken at Zero, TCP at the
     origin (any well-posed point will do), for the callers to drop."""
-    rho = commands_many(models, targets)  # (M, n, 3)
+    machines = MachineParams.stack(list(models))
+    rho = commands_many(models, targets, machines)  # (M, n, 3)
     usable = np.isfinite(rho).all(axis=-1)
     rho = np.where(usable[..., None], rho, 0.0)
     p = np.where(usable[..., None], targets, 0.0)
-    return usable, MachineParams.stack(list(models)), rho, p
+    return usable, machines, rho, p
 
 
 def motion_basis(targets: np.ndarray, frame: str) -> np.ndarray:
@@ -443,10 +447,11 @@ def rigid_weights(models: Sequence[MachineParams], grid: np.ndarray | None = Non
     # The rigid fit's orthonormal basis over each model's reachable targets, zero on the
     # others: in the common case one set of targets, one basis shared by every model.
     groups = _same_targets(usable)
-    basis = np.zeros((1 if len(groups) == 1 else len(models), len(targets), 3, 6))
+    shared = len(groups) == 1
+    basis = np.zeros((1 if shared else len(models), len(targets), 3, 6))
     for mask, members in groups:
         q = np.linalg.qr(motion_basis(targets[mask], "rigid"))[0].reshape(-1, 3, 6)
-        basis[np.ix_(np.arange(1) if len(groups) == 1 else members, np.flatnonzero(mask))] = q
+        basis[np.ix_([0] if shared else members, np.flatnonzero(mask))] = q
     columns = [np.flatnonzero(ERROR_LEGS == leg) for leg in range(3)]
     rows = [row[..., c] for c in columns]  # (M, n, 9) each
     # Products of 3 x 3 matrices written out: a stack of tens of thousands of small
