@@ -22,10 +22,10 @@ import gymnasium as gym
 import numpy as np
 
 import orthoglide_env
-from orthoglide_env.gauges import PAPER_LAYOUT, install, installed_on
-from orthoglide_env.geometry import PRESETS, random_machine
-from orthoglide_env.machine import OrthoglideMachine
-from orthoglide_env.simulator import Simulator
+from orthoglide_env.instruments.gauges import PAPER_LAYOUT, install, installed_on
+from orthoglide_env.model.errors import PRESETS, random_machine
+from orthoglide_env.sim.pybullet import OrthoglideMachine
+from orthoglide_env.sim.simulator import Simulator
 
 
 def per_call(fn: Callable[[], object], calls: int) -> float:

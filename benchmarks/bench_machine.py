@@ -11,10 +11,10 @@ from collections.abc import Callable
 
 import numpy as np
 
-from orthoglide_env.backend import ExactMachine
-from orthoglide_env.gauges import PAPER_LAYOUT, install, installed_on
-from orthoglide_env.geometry import PRESETS, RHO_MAX, RHO_MIN, random_machine
-from orthoglide_env.machine import OrthoglideMachine
+from orthoglide_env.envs.backend import ExactMachine
+from orthoglide_env.instruments.gauges import PAPER_LAYOUT, install, installed_on
+from orthoglide_env.model.errors import PRESETS, RHO_MAX, RHO_MIN, random_machine
+from orthoglide_env.sim.pybullet import OrthoglideMachine
 
 
 def timed(fn: Callable[[], object], repeats: int) -> np.ndarray:

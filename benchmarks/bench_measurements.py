@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calibrators.differences import differences
+from calibrators.estimators.differences import differences
 from calibrators.measurements import Measurements
 
 

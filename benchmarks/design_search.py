@@ -29,9 +29,9 @@ import numpy as np
 
 import orthoglide_env
 from calibrators.agents import get_agent
-from calibrators.design import Planner, greedy_plan, slot_table
+from calibrators.design.planner import Planner, greedy_plan, slot_table
 from calibrators.experiment import run_episode
-from orthoglide_env.lab import PAPER_SLOTS, Op
+from orthoglide_env.lab.operations import PAPER_SLOTS, Op
 
 SIGMA = float(np.hypot(0.01, 0.01 / np.sqrt(12)))
 

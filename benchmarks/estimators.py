@@ -35,11 +35,11 @@ import gymnasium as gym
 import numpy as np
 
 import orthoglide_env
-from calibrators.base import get_strategy
-from calibrators.estimator import z_scores
-from calibrators.gauss_newton import design_of
-from calibrators.prediction import predicted_tcp_error
-from orthoglide_env.reading_model import parameters_of
+from calibrators.estimators.base import get_strategy
+from calibrators.estimators.exact_fit import z_scores
+from calibrators.estimators.gauss_newton import design_of
+from calibrators.estimators.prediction import predicted_tcp_error
+from orthoglide_env.model.reading_model import parameters_of
 from orthoglide_env.scoring import FRAMES, score
 
 ESTIMATORS: dict[str, tuple[str, str, str]] = {

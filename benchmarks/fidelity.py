@@ -14,11 +14,16 @@ import argparse
 import numpy as np
 from tqdm import tqdm
 
-from orthoglide_env.gauges import PAPER_LAYOUT, exact_ray_distances, install, installed_on
-from orthoglide_env.geometry import PRESETS, RHO_MAX, RHO_MIN, random_machine
-from orthoglide_env.kinematics import direct
-from orthoglide_env.machine import OrthoglideMachine
-from orthoglide_env.simulator import PhysicsSettings
+from orthoglide_env.instruments.gauges import (
+    PAPER_LAYOUT,
+    exact_ray_distances,
+    install,
+    installed_on,
+)
+from orthoglide_env.model.errors import PRESETS, RHO_MAX, RHO_MIN, random_machine
+from orthoglide_env.model.kinematics import direct
+from orthoglide_env.sim.pybullet import OrthoglideMachine
+from orthoglide_env.sim.simulator import PhysicsSettings
 
 
 def measure(preset: str, n: int, seed: int) -> dict[str, dict[str, np.ndarray]]:

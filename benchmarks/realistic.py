@@ -20,7 +20,7 @@ import numpy as np
 
 import orthoglide_env
 from calibrators.agents import get_agent
-from calibrators.differences import differences
+from calibrators.estimators.differences import differences
 from calibrators.experiment import estimate, run_episode
 from orthoglide_env.scoring import FRAMES, score
 

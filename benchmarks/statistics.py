@@ -15,7 +15,7 @@ import argparse
 import numpy as np
 
 from calibrators.compare import Config, run
-from orthoglide_env.geometry import ERROR_NAMES
+from orthoglide_env.model.errors import ERROR_NAMES
 
 
 def main() -> None:

@@ -7,7 +7,7 @@ postures across the joint cube and near Zero, and at the cube's corners: TCP, ga
 status (valid, no contact, overtravel, missed) and the readings (differences from Zero)
 where both call them valid.  With ``--all`` every group sits at its size from ``--sizes``
 at once (the corners of a candidate validity box).  The validity range of
-``orthoglide_env.geometry.VALIDITY_RANGE`` was chosen from this output.
+``orthoglide_env.model.errors.VALIDITY_RANGE`` was chosen from this output.
 
     python benchmarks/validity.py [--machines 10] [--groups drho,dL] [--sizes 1,5,10]
     python benchmarks/validity.py --all --sizes drho=15,dL=15,axis_tilt=0.02,...
@@ -20,10 +20,16 @@ import itertools
 
 import numpy as np
 
-from orthoglide_env.gauges import PAPER_LAYOUT, Status, exact_ray_distances, install, status_of
-from orthoglide_env.geometry import RHO_MAX, RHO_MIN, MachineParams
-from orthoglide_env.kinematics import UnreachableError, direct
-from orthoglide_env.machine import OrthoglideMachine
+from orthoglide_env.instruments.gauges import (
+    PAPER_LAYOUT,
+    Status,
+    exact_ray_distances,
+    install,
+    status_of,
+)
+from orthoglide_env.model.errors import RHO_MAX, RHO_MIN, MachineParams
+from orthoglide_env.model.kinematics import UnreachableError, direct
+from orthoglide_env.sim.pybullet import OrthoglideMachine
 
 #: Sizes tried per group when none are given (mm; rad for the tilts).
 DEFAULT_SIZES: dict[str, tuple[float, ...]] = {

@@ -25,15 +25,11 @@ import gymnasium as gym
 import numpy as np
 
 import orthoglide_env
-from orthoglide_env.geometry import ERROR_NAMES, MachineParams
-from orthoglide_env.lab_env import Record
-from orthoglide_env.reading_model import ParameterSpace, default_scales
-from orthoglide_env.scoring import FRAMES, score_batch, uncalibrated_errors
-
-from .agents import get_agent
-from .base import Estimate
-from .engines import results
-from .experiment import (
+from calibrators.agents import get_agent
+from calibrators.engines import results
+from calibrators.estimators.base import Estimate
+from calibrators.estimators.prediction import predicted_rigid_mm
+from calibrators.experiment import (
     Episode,
     estimate_many,
     get_estimator,
@@ -41,7 +37,10 @@ from .experiment import (
     run_episode,
     run_episodes,
 )
-from .prediction import predicted_rigid_mm
+from orthoglide_env.envs.lab import Record
+from orthoglide_env.model.errors import ERROR_NAMES, MachineParams
+from orthoglide_env.model.reading_model import ParameterSpace, default_scales
+from orthoglide_env.scoring import FRAMES, score_batch, uncalibrated_errors
 
 #: Fractions of an episode's time at which the accuracy-versus-time curve re-estimates.
 CURVE_FRACTIONS: tuple[float, ...] = (0.25, 0.5, 0.75)

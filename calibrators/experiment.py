@@ -14,15 +14,14 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from orthoglide_env.geometry import MachineParams
-from orthoglide_env.kinematics import PAPER_POSTURES, paper_posture
-from orthoglide_env.lab import Op
-from orthoglide_env.lab_env import Record
-
-from .agents import Agent, get_agent
-from .agents.base import PlannedAgent
-from .base import Estimate, get_strategy
-from .measurements import Measurement, Measurements
+from calibrators.agents import Agent, get_agent
+from calibrators.agents.base import PlannedAgent
+from calibrators.estimators.base import Estimate, get_strategy
+from calibrators.measurements import Measurement, Measurements
+from orthoglide_env.envs.lab import Record
+from orthoglide_env.lab.operations import Op
+from orthoglide_env.model.errors import MachineParams
+from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture
 
 #: Paper postures by their control coordinates, to label the notebook's readings.
 _PAPER_RHO: dict[tuple[float, ...], str] = {

@@ -85,10 +85,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
 
-from orthoglide_env.gauges import NO_LEG, GaugeSpec, Part, layout_from_names
-from orthoglide_env.geometry import AXIS_NAMES, LEG_NAMES, RHO_MAX, RHO_MIN
-from orthoglide_env.kinematics import PAPER_POSTURES, paper_posture
-from orthoglide_env.reading_model import TrackerAxis
+from orthoglide_env.instruments.gauges import NO_LEG, GaugeSpec, Part, layout_from_names
+from orthoglide_env.model.errors import AXIS_NAMES, LEG_NAMES, RHO_MAX, RHO_MIN
+from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture
+from orthoglide_env.model.reading_model import TrackerAxis
 
 #: A dial gauge's travel is about 10 mm: a reading ten times that is a wrong unit or column.
 MAX_READING_MM: float = 100.0

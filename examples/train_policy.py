@@ -7,7 +7,7 @@ machines.
     orthoglide compare --agents policy:results/policy.zip,random,paper --estimators extended
 
 PPO learns on ``OrthoglideLab-v0`` through its flat view (one Box of actions, one of
-observations, :mod:`orthoglide_env.wrappers`), several envs in parallel, observations
+observations, :mod:`orthoglide_env.envs.wrappers`), several envs in parallel, observations
 normalised by ``VecNormalize`` (its statistics are saved with the policy: the agent
 ``policy:FILE`` normalises as training did).  Every ``--every`` steps the policy so far
 is saved and played on the first ``--curve-machines`` held-out machines, scored by
@@ -43,9 +43,9 @@ from calibrators.agents import available
 from calibrators.agents.base import POLICY_PREFIX
 from calibrators.agents.policy import PolicySpec, save_policy, spec_of
 from calibrators.experiment import make_estimator
-from orthoglide_env.geometry import RHO_MAX, RHO_MIN
-from orthoglide_env.lab import Op
-from orthoglide_env.wrappers import flat_lab_env
+from orthoglide_env.envs.wrappers import flat_lab_env
+from orthoglide_env.lab.operations import Op
+from orthoglide_env.model.errors import RHO_MAX, RHO_MIN
 
 #: The estimator that scores every evaluation (the comparison's headline).
 ESTIMATOR: str = "extended"

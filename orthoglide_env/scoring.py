@@ -24,9 +24,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .gauges import cross
-from .geometry import RHO_MAX, RHO_MIN, MachineParams
-from .kinematics import (
+from orthoglide_env.instruments.gauges import cross
+from orthoglide_env.model.errors import RHO_MAX, RHO_MIN, MachineParams
+from orthoglide_env.model.kinematics import (
     ERROR_LEGS,
     UnreachableError,
     direct,
@@ -338,7 +338,7 @@ def tcp_jacobians(models: Sequence[MachineParams], grid: np.ndarray | None = Non
                   ) -> list[tuple[np.ndarray, np.ndarray]]:
     """:func:`tcp_jacobian` of each model, every model in one batched solve (each model's
     numbers are those it gets alone), the derivatives by the implicit function theorem
-    (:func:`~orthoglide_env.kinematics.tcp_sensitivity`)."""
+    (:func:`~orthoglide_env.model.kinematics.tcp_sensitivity`)."""
     if not models:
         return []
     targets = workspace_grid() if grid is None else np.asarray(grid, dtype=float)
@@ -432,7 +432,7 @@ def rigid_weights(models: Sequence[MachineParams], grid: np.ndarray | None = Non
     model instead of a quadratic form per target.
 
     ``J`` is never formed: at each target its column ``e`` is column ``leg(e)`` of a 3 x 3
-    inverse ``A`` times a scalar ``r_e`` (:func:`~orthoglide_env.kinematics.
+    inverse ``A`` times a scalar ``r_e`` (:func:`~orthoglide_env.model.kinematics.
     tcp_sensitivity_factors`), so ``J^T J`` has the blocks ``sum_t r_a (A^T A)_ab r_b^T``
     of each pair of legs, and the rigid fit's part ``Q^T J`` has the blocks
     ``sum_t (Q_t^T A)_a r_a^T``: a third of the memory and of the products."""

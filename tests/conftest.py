@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from orthoglide_env.geometry import L_NOMINAL, RHO_MAX, RHO_MIN
+from orthoglide_env.model.errors import L_NOMINAL, RHO_MAX, RHO_MIN
 
 #: Rows of eq. (10) as (posture, index of the gauge in the paper layout).  The paper's
 #: labels of rows 9-12 are misprinted (DESIGN.md); these are the physical ones.

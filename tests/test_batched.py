@@ -14,9 +14,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from orthoglide_env.backend import ExactMachine
-from orthoglide_env.collisions import PAIR_NAMES, collision_mask, collisions, pair_gaps
-from orthoglide_env.gauges import (
+from orthoglide_env.envs.backend import ExactMachine
+from orthoglide_env.instruments.gauges import (
     GaugeArray,
     GaugeSpec,
     Status,
@@ -31,7 +30,8 @@ from orthoglide_env.gauges import (
     status_of,
     zero_gauges,
 )
-from orthoglide_env.geometry import (
+from orthoglide_env.model.collisions import PAIR_NAMES, collision_mask, collisions, pair_gaps
+from orthoglide_env.model.errors import (
     PRESETS,
     RHO_MAX,
     RHO_MIN,
@@ -39,7 +39,7 @@ from orthoglide_env.geometry import (
     MachineParams,
     random_machine,
 )
-from orthoglide_env.kinematics import UnreachableError, direct
+from orthoglide_env.model.kinematics import UnreachableError, direct
 
 GAUGES = 6
 POSTURES = 12

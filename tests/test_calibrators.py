@@ -9,10 +9,10 @@ import pytest
 from conftest import paper_matrix as eq10
 
 import orthoglide_env
-from calibrators.base import Estimate, available, get_strategy
-from calibrators.differences import differences, paper_matrix
+from calibrators.estimators.base import Estimate, available, get_strategy
+from calibrators.estimators.differences import differences, paper_matrix
 from calibrators.measurements import Measurement, MeasurementFileError, Measurements
-from orthoglide_env.gauges import GaugeSpec
+from orthoglide_env.instruments.gauges import GaugeSpec
 
 TABLE1 = {"drho": [4.66, -5.36, 1.46], "dL": [5.20, -5.96, 3.16]}
 
@@ -209,7 +209,7 @@ def test_predictions_without_the_truth() -> None:
     """On a noise-free paper-model machine gauss-newton's estimate is the truth, so the
     predicted correction is the uncalibrated machine's real TCP error, in every frame; the
     predicted error of the compensated TCP scales with the gauge noise assumed."""
-    from calibrators.prediction import predicted_correction, predicted_tcp_error
+    from calibrators.estimators.prediction import predicted_correction, predicted_tcp_error
     from orthoglide_env.scoring import FRAMES, score
 
     est, truth = run("gauss-newton", "full", TABLE1, gauge_sigma=0.0, gauge_resolution=0.0)

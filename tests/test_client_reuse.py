@@ -10,10 +10,10 @@ import pybullet as pb
 import pytest
 
 import orthoglide_env
-from orthoglide_env.gauges import PAPER_LAYOUT, install, installed_on
-from orthoglide_env.geometry import PRESETS, RHO_MAX, RHO_MIN, random_machine
-from orthoglide_env.machine import OrthoglideMachine
-from orthoglide_env.simulator import PhysicsSettings, Simulator
+from orthoglide_env.instruments.gauges import PAPER_LAYOUT, install, installed_on
+from orthoglide_env.model.errors import PRESETS, RHO_MAX, RHO_MIN, random_machine
+from orthoglide_env.sim.pybullet import OrthoglideMachine
+from orthoglide_env.sim.simulator import PhysicsSettings, Simulator
 
 #: A client that kept anything of an earlier machine (warm-started constraint impulses,
 #: contacts) would show at the solver's residue after its two steps, ~1e-8 mm (the loop

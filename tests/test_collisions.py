@@ -8,16 +8,16 @@ import pytest
 from scipy.optimize import linprog, minimize
 from scipy.spatial.transform import Rotation
 
-from orthoglide_env.collisions import (
+from orthoglide_env.instruments.gauges import BOX_NAMES, collision_boxes
+from orthoglide_env.model.collisions import (
     PAIR_NAMES,
     box_gap,
     clearance,
     collisions,
     pair_gaps,
 )
-from orthoglide_env.gauges import BOX_NAMES, collision_boxes
-from orthoglide_env.geometry import RHO_MAX, RHO_MIN, MachineParams, random_machine
-from orthoglide_env.kinematics import direct
+from orthoglide_env.model.errors import RHO_MAX, RHO_MIN, MachineParams, random_machine
+from orthoglide_env.model.kinematics import direct
 
 #: x-leg's R2 moved 8 mm toward the y axis: clear at Zero (2.5 mm), crashed at (60, 60, 60).
 CRASHING = MachineParams(attach=[[-8.0, 8.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
@@ -72,7 +72,7 @@ def test_gap_sign_agrees_with_a_linear_program_on_random_boxes() -> None:
 
 
 def test_pairs_are_named_as_in_the_simulator() -> None:
-    machine_module = pytest.importorskip("orthoglide_env.machine")
+    machine_module = pytest.importorskip("orthoglide_env.sim.pybullet")
     sim = machine_module.OrthoglideMachine(MachineParams(), [])
     try:
         assert [name for *_, name in sim._pairs] == list(PAIR_NAMES)
@@ -120,7 +120,7 @@ def test_a_machine_far_from_nominal_crashes_its_couplers() -> None:
 
 @pytest.mark.parametrize("machine", [CRASHING, random_machine(4, "realistic")])
 def test_agrees_with_the_simulators_contact_check(machine: MachineParams) -> None:
-    machine_module = pytest.importorskip("orthoglide_env.machine")
+    machine_module = pytest.importorskip("orthoglide_env.sim.pybullet")
     axis = np.linspace(RHO_MIN, RHO_MAX, 5)
     grid = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
     gaps = pair_gaps(machine, grid)

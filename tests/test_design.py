@@ -9,11 +9,11 @@ import pytest
 import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.agents.optimal import fixed_plan
-from calibrators.design import N_MACHINE, Planner, greedy_plan, rigid_weight, slot_table
+from calibrators.design.planner import N_MACHINE, Planner, greedy_plan, rigid_weight, slot_table
 from calibrators.experiment import estimate, measurements_of, run_episode
-from orthoglide_env.geometry import MachineParams
-from orthoglide_env.lab import PAPER_SLOTS, Op
-from orthoglide_env.reading_model import ParameterSpace, default_scales
+from orthoglide_env.lab.operations import PAPER_SLOTS, Op
+from orthoglide_env.model.errors import MachineParams
+from orthoglide_env.model.reading_model import ParameterSpace, default_scales
 from orthoglide_env.scoring import predicted_tcp_frames, score
 
 SIGMA = 0.01

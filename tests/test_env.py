@@ -12,14 +12,14 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import orthoglide_env
-from orthoglide_env.gauges import exact_readings
-from orthoglide_env.geometry import MachineParams
-from orthoglide_env.kinematics import PAPER_POSTURES, paper_posture
-from orthoglide_env.task import DRIVE_SPEED, OVERTRAVEL_PENALTY, SETTLE_AND_READ
+from orthoglide_env.envs.task import DRIVE_SPEED, OVERTRAVEL_PENALTY, SETTLE_AND_READ
+from orthoglide_env.instruments.gauges import exact_readings
+from orthoglide_env.model.errors import MachineParams
+from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture
 
 #: The PyBullet machine is built separately; its tests skip until it can be imported.
-HAVE_PYBULLET = importlib.util.find_spec("orthoglide_env.machine") is not None
-needs_pybullet = pytest.mark.skipif(not HAVE_PYBULLET, reason="orthoglide_env.machine absent")
+HAVE_PYBULLET = importlib.util.find_spec("orthoglide_env.sim.pybullet") is not None
+needs_pybullet = pytest.mark.skipif(not HAVE_PYBULLET, reason="orthoglide_env.sim.pybullet absent")
 BACKENDS = ("exact", pytest.param("pybullet", marks=needs_pybullet))
 #: Errors at the validity range's limits (or zero), in the combination a search over their
 #: signs found to bring two couplers deepest together: clear at (30, 30, 30), the x and y

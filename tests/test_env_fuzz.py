@@ -17,11 +17,11 @@ import pybullet as pb
 import pytest
 
 import orthoglide_env
-from orthoglide_env.geometry import RHO_MAX, RHO_MIN
+from orthoglide_env.model.errors import RHO_MAX, RHO_MIN
 
 needs_pybullet = pytest.mark.skipif(
-    importlib.util.find_spec("orthoglide_env.machine") is None,
-    reason="orthoglide_env.machine absent",
+    importlib.util.find_spec("orthoglide_env.sim.pybullet") is None,
+    reason="orthoglide_env.sim.pybullet absent",
 )
 
 

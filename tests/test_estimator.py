@@ -7,17 +7,17 @@ import numpy as np
 import pytest
 
 import orthoglide_env
-from calibrators.base import get_strategy
-from calibrators.estimator import fit_batch, z_scores
-from calibrators.gauss_newton import design_of
-from calibrators.parameters import (
+from calibrators.estimators.base import get_strategy
+from calibrators.estimators.exact_fit import fit_batch, z_scores
+from calibrators.estimators.gauss_newton import design_of
+from calibrators.estimators.parameters import (
     ParameterSpace,
     fixed_values,
     prior_sigmas,
     scales,
     select,
 )
-from orthoglide_env.gauges import (
+from orthoglide_env.instruments.gauges import (
     PAPER_LAYOUT,
     exact_ray_distances,
     face_distances,
@@ -27,14 +27,14 @@ from orthoglide_env.gauges import (
     stand_errors,
     stand_rays,
 )
-from orthoglide_env.geometry import (
+from orthoglide_env.model.errors import (
     ERROR_NAMES,
     PRESETS,
     MachineParams,
     random_machine,
 )
-from orthoglide_env.kinematics import PAPER_POSTURES, paper_posture
-from orthoglide_env.reading_model import parameters_of, predict
+from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture
+from orthoglide_env.model.reading_model import parameters_of, predict
 
 TABLE1 = MachineParams(drho=[4.66, -5.36, 1.46], dL=[5.20, -5.96, 3.16])
 
@@ -128,8 +128,8 @@ def test_jacobian_equals_central_differences_on_every_target_and_the_tracker() -
     relative (< 1e-10 on entries up to ~2) and round-off ~eps * L / 1e-3 ~ 7e-11 mm per
     scale unit on readings of the order of L = 310 mm, times the few operations a
     reading takes: the bar is 1e-9 mm per scale unit."""
-    from orthoglide_env.gauges import layout_from_names
-    from orthoglide_env.reading_model import Design, TrackerAxis, default_scales, jacobian
+    from orthoglide_env.instruments.gauges import layout_from_names
+    from orthoglide_env.model.reading_model import Design, TrackerAxis, default_scales, jacobian
 
     rng = np.random.default_rng(0)
     names = ["x-leg/y", "y/z@0.3", "z-leg/x", "x-carriage/y", "y-carriage/z", "platform/x"]

@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 from conftest import EQ10_ROWS, paper_matrix
 
-from orthoglide_env import geometry, kinematics
-from orthoglide_env.gauges import (
+from orthoglide_env.instruments.gauges import (
     PAPER_LAYOUT,
     GaugeNoise,
     GaugeSpec,
@@ -19,8 +18,10 @@ from orthoglide_env.gauges import (
     ray_box_distance,
     status_of,
 )
-from orthoglide_env.geometry import MachineParams, random_machine
-from orthoglide_env.kinematics import PAPER_POSTURES, paper_posture
+from orthoglide_env.model import errors as geometry
+from orthoglide_env.model import kinematics
+from orthoglide_env.model.errors import MachineParams, random_machine
+from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture
 
 
 def eq10_differences(theta: np.ndarray) -> np.ndarray:

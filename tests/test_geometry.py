@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from orthoglide_env.geometry import (
+from orthoglide_env.model.errors import (
     PRESETS,
     R_LEG,
     MachineFileError,

@@ -17,11 +17,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import orthoglide_env
-from orthoglide_env import env as env_module
-from orthoglide_env.geometry import RHO_MAX, RHO_MIN, MachineParams
+from orthoglide_env.envs import calibration as env_module
+from orthoglide_env.model.errors import RHO_MAX, RHO_MIN, MachineParams
 
-HAVE_PYBULLET = importlib.util.find_spec("orthoglide_env.machine") is not None
-needs_pybullet = pytest.mark.skipif(not HAVE_PYBULLET, reason="orthoglide_env.machine absent")
+HAVE_PYBULLET = importlib.util.find_spec("orthoglide_env.sim.pybullet") is not None
+needs_pybullet = pytest.mark.skipif(not HAVE_PYBULLET, reason="orthoglide_env.sim.pybullet absent")
 BACKENDS = ("exact", pytest.param("pybullet", marks=needs_pybullet))
 #: check_env recommends actions normalised to [-1, 1]; ours are joint targets in mm
 #: (tests/test_env.py says why), so that warning is the one expected.

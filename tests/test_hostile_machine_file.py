@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from orthoglide_env.geometry import (
+from orthoglide_env.model.errors import (
     PRESETS,
     VALIDITY_RANGE,
     MachineFileError,
@@ -151,15 +151,15 @@ def test_machines_at_the_limits_are_simulated_faithfully() -> None:
     # says it was chosen: the TCP across the joint cube (up to 50 mm: the singular corner
     # (60, 60, 60) is outside the guarantee) and the readings at the postures calibration
     # experiments read at (near Zero and the paper's) within 1 µm; gauge status identical.
-    machine_module = pytest.importorskip("orthoglide_env.machine")
-    from orthoglide_env.gauges import (
+    machine_module = pytest.importorskip("orthoglide_env.sim.pybullet")
+    from orthoglide_env.instruments.gauges import (
         PAPER_LAYOUT,
         Status,
         exact_ray_distances,
         install,
         status_of,
     )
-    from orthoglide_env.kinematics import direct, paper_posture
+    from orthoglide_env.model.kinematics import direct, paper_posture
 
     rng = np.random.default_rng(7)
     paper = [paper_posture(name) for name in ("XMax", "XMin", "YMax", "YMin", "ZMax", "ZMin")]

@@ -9,11 +9,11 @@ import pytest
 from conftest import paper_matrix as eq10
 
 import orthoglide_env
-from calibrators.base import get_strategy
-from calibrators.differences import differences
-from calibrators.identifiability import analyse, of_design
+from calibrators.estimators.base import get_strategy
+from calibrators.estimators.differences import differences
+from calibrators.estimators.identifiability import analyse, of_design
 from calibrators.measurements import Measurement, Measurements
-from orthoglide_env.gauges import PAPER_LAYOUT
+from orthoglide_env.instruments.gauges import PAPER_LAYOUT
 
 
 @pytest.fixture(scope="module")

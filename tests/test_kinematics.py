@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from orthoglide_env.geometry import L_NOMINAL, RHO_MAX, MachineParams, random_machine
-from orthoglide_env.kinematics import (
+from orthoglide_env.model.errors import L_NOMINAL, RHO_MAX, MachineParams, random_machine
+from orthoglide_env.model.kinematics import (
     UnreachableError,
     carriage_points,
     check_reachable,
@@ -103,7 +103,7 @@ def test_jacobian_at_zero_and_xmax_are_eq6_and_eq8() -> None:
 
 
 def test_leg_angles_rebuild_the_leg_vectors(joint_samples: np.ndarray) -> None:
-    from orthoglide_env.geometry import R_LEG
+    from orthoglide_env.model.errors import R_LEG
 
     machine = random_machine(9, "realistic")
     p = direct(machine, joint_samples)
@@ -139,8 +139,8 @@ def test_tcp_sensitivity_is_the_derivative_of_the_direct_kinematics() -> None:
     differences of Newton-solved direct kinematics (step 1e-4 mm or rad: truncation
     ~(1e-4)^2 relative, round-off ~eps * 310 mm / 1e-4 ~ 1e-9), on a batch of two
     realistic machines at postures over the workspace."""
-    from orthoglide_env.geometry import get_preset
-    from orthoglide_env.kinematics import tcp_sensitivity
+    from orthoglide_env.model.errors import get_preset
+    from orthoglide_env.model.kinematics import tcp_sensitivity
 
     rng = np.random.default_rng(3)
     machines = MachineParams.stack([get_preset("realistic").sample(rng) for _ in range(2)])

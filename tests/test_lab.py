@@ -18,7 +18,7 @@ from calibrators.agents.base import action
 from calibrators.agents.paper import PaperAgent
 from calibrators.compare import Config, run, run_chunk, summary
 from calibrators.experiment import estimate, make_estimator, measurements_of, run_episode
-from orthoglide_env.lab import SLOTS, TIME, Op, slot_index
+from orthoglide_env.lab.operations import SLOTS, TIME, Op, slot_index
 from orthoglide_env.scoring import score
 
 LAB = orthoglide_env.LAB_ENV_ID

@@ -13,9 +13,9 @@ from test_vector_env import CRASHING, assert_same
 import orthoglide_env
 from calibrators.compare import Config, run_chunk
 from calibrators.experiment import make_estimator
-from orthoglide_env.geometry import RHO_MAX, RHO_MIN
-from orthoglide_env.lab import PAPER_SLOTS, SLOTS, Op
-from orthoglide_env.lab_vector import OrthoglideLabVectorEnv
+from orthoglide_env.envs.lab_vector import OrthoglideLabVectorEnv
+from orthoglide_env.lab.operations import PAPER_SLOTS, SLOTS, Op
+from orthoglide_env.model.errors import RHO_MAX, RHO_MIN
 
 N = 4
 LAB = orthoglide_env.LAB_ENV_ID

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from orthoglide_env.gauges import (
+from orthoglide_env.instruments.gauges import (
     PAPER_LAYOUT,
     Status,
     exact_ray_distances,
@@ -18,9 +18,9 @@ from orthoglide_env.gauges import (
     installed_on,
     status_of,
 )
-from orthoglide_env.geometry import PRESETS, RHO_MAX, RHO_MIN, MachineParams, random_machine
-from orthoglide_env.kinematics import direct, paper_posture
-from orthoglide_env.machine import OrthoglideMachine
+from orthoglide_env.model.errors import PRESETS, RHO_MAX, RHO_MIN, MachineParams, random_machine
+from orthoglide_env.model.kinematics import direct, paper_posture
+from orthoglide_env.sim.pybullet import OrthoglideMachine
 
 FIDELITY = 1e-3  # mm
 MODES = ("quasi-static", "dynamic")

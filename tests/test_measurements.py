@@ -14,11 +14,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import orthoglide_env
-from calibrators import differences as differences_module
 from calibrators import measurements
-from calibrators.base import get_strategy
 from calibrators.cli import main
-from calibrators.differences import MissingZeroError, differences
+from calibrators.estimators import differences as differences_module
+from calibrators.estimators.base import get_strategy
+from calibrators.estimators.differences import MissingZeroError, differences
+from calibrators.estimators.paper_linear import MAX_FOLDS, folds
 from calibrators.measurements import (
     MAX_FIELD_CHARS,
     MAX_LINE_BYTES,
@@ -28,11 +29,10 @@ from calibrators.measurements import (
     Measurements,
     gauge_name,
 )
-from calibrators.paper import MAX_FOLDS, folds
-from orthoglide_env.gauges import GaugeSpec, Part
-from orthoglide_env.geometry import RHO_MAX, RHO_MIN
-from orthoglide_env.kinematics import PAPER_POSTURES, paper_posture
-from orthoglide_env.lab import SLOTS
+from orthoglide_env.instruments.gauges import GaugeSpec, Part
+from orthoglide_env.lab.operations import SLOTS
+from orthoglide_env.model.errors import RHO_MAX, RHO_MIN
+from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture
 
 OLD_HEADER = "leg,axis,posture,repetition,reading_mm"
 TABLE1 = {"drho": [4.66, -5.36, 1.46], "dL": [5.20, -5.96, 3.16]}

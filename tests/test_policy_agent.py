@@ -18,8 +18,8 @@ from calibrators.agents import get_agent
 from calibrators.agents.policy import SPEC_ENTRY, PolicySpec, _load_model, save_policy, spec_of
 from calibrators.cli import main
 from calibrators.experiment import run_episode
-from orthoglide_env.lab import SLOT_NAMES
-from orthoglide_env.wrappers import flat_lab_env
+from orthoglide_env.envs.wrappers import flat_lab_env
+from orthoglide_env.lab.operations import SLOT_NAMES
 
 LAB = {"errors": "realistic", "gauge_sigma": 0.01, "budget_s": 600.0}
 

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 import orthoglide_env
-from calibrators.base import get_strategy
-from calibrators.prediction import predicted_tcp_error
-from orthoglide_env.gauges import cross
-from orthoglide_env.geometry import MachineParams
+from calibrators.estimators.base import get_strategy
+from calibrators.estimators.prediction import predicted_tcp_error
+from orthoglide_env.instruments.gauges import cross
+from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.scoring import (
     FRAMES,
     motion_basis,
@@ -59,7 +59,7 @@ def test_rigid_weights_give_the_rigid_frames_mean_square() -> None:
     quadratic forms give, model by model: on realistic models, one of them with targets out
     of its reach (a shorter batch of targets), for random covariances; the two sum the same
     terms in another order (relative round-off ~1e-13)."""
-    from orthoglide_env.geometry import get_preset
+    from orthoglide_env.model.errors import get_preset
     from orthoglide_env.scoring import predicted_tcp_frames_many, rigid_weights
 
     rng = np.random.default_rng(4)

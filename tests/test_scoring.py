@@ -10,8 +10,8 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy.spatial.transform import Rotation
 
-from orthoglide_env.geometry import RHO_MAX, RHO_MIN, MachineParams, random_machine
-from orthoglide_env.kinematics import inverse
+from orthoglide_env.model.errors import RHO_MAX, RHO_MIN, MachineParams, random_machine
+from orthoglide_env.model.kinematics import inverse
 from orthoglide_env.scoring import (
     FRAMES,
     best_rigid_motion,

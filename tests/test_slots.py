@@ -10,11 +10,11 @@ import pytest
 import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.agents.base import action
-from calibrators.base import get_strategy
-from calibrators.differences import differences, paper_matrix
-from calibrators.gauss_newton import design_of
+from calibrators.estimators.base import get_strategy
+from calibrators.estimators.differences import differences, paper_matrix
+from calibrators.estimators.gauss_newton import design_of
 from calibrators.measurements import Measurement, Measurements
-from orthoglide_env.gauges import (
+from orthoglide_env.instruments.gauges import (
     GaugeSpec,
     Part,
     collision_boxes,
@@ -30,10 +30,17 @@ from orthoglide_env.gauges import (
     stand_rays,
     status_of,
 )
-from orthoglide_env.geometry import ERROR_NAMES, PRESETS, MachineParams, random_machine
-from orthoglide_env.kinematics import direct
-from orthoglide_env.lab import PAPER_SLOTS, SLOT_NAMES, SLOT_POSITIONS, SLOTS, Op, slot_index
-from orthoglide_env.reading_model import parameters_of, predict
+from orthoglide_env.lab.operations import (
+    PAPER_SLOTS,
+    SLOT_NAMES,
+    SLOT_POSITIONS,
+    SLOTS,
+    Op,
+    slot_index,
+)
+from orthoglide_env.model.errors import ERROR_NAMES, PRESETS, MachineParams, random_machine
+from orthoglide_env.model.kinematics import direct
+from orthoglide_env.model.reading_model import parameters_of, predict
 
 #: The slots this file is about: every carriage face and platform face of the catalogue.
 NEW_SLOTS: tuple[GaugeSpec, ...] = tuple(s for s in SLOTS if s.part != Part.BAR)
@@ -82,7 +89,7 @@ def test_pybullet_reads_carriages_and_platform_as_the_exact_model(seed: int) -> 
     """The simulator's ray on the carriage and platform links gives the exact model's
     distances within the fidelity bar, the same status everywhere (valid, off the face,
     pressed past travel) and the same pressed-past-travel flags."""
-    machine_module = pytest.importorskip("orthoglide_env.machine")
+    machine_module = pytest.importorskip("orthoglide_env.sim.pybullet")
     rng = np.random.default_rng(seed)
     machine = random_machine(rng, "realistic")
     gauges = installed(machine, seed)

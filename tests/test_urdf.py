@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import pybullet as pb
 
-from orthoglide_env.geometry import RHO_MAX, RHO_MIN, MachineParams, random_machine
-from orthoglide_env.simulator import Simulator
-from orthoglide_env.urdf_writer import LINKS_PER_LEG, MM, link_name, nominal_urdf_path, write_urdf
+from orthoglide_env.model.errors import RHO_MAX, RHO_MIN, MachineParams, random_machine
+from orthoglide_env.sim.simulator import Simulator
+from orthoglide_env.sim.urdf import LINKS_PER_LEG, MM, link_name, nominal_urdf_path, write_urdf
 
 
 def test_checked_in_urdf_is_current() -> None:
     assert nominal_urdf_path().read_text() == write_urdf(MachineParams()), (
-        "urdf/orthoglide.urdf is stale: run `python -m orthoglide_env.urdf_writer`"
+        "urdf/orthoglide.urdf is stale: run `python -m orthoglide_env.sim.urdf`"
     )
 
 

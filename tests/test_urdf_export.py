@@ -16,9 +16,9 @@ import sys
 import numpy as np
 import pytest
 
-from orthoglide_env.geometry import RHO_MAX, RHO_MIN, MachineParams, random_machine
-from orthoglide_env.kinematics import direct
-from orthoglide_env.urdf_writer import (
+from orthoglide_env.model.errors import RHO_MAX, RHO_MIN, MachineParams, random_machine
+from orthoglide_env.model.kinematics import direct
+from orthoglide_env.sim.urdf import (
     MM,
     joint_origins,
     joint_positions,

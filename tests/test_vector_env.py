@@ -9,9 +9,9 @@ import pytest
 from gymnasium.vector import AutoresetMode
 
 import orthoglide_env
-from orthoglide_env.geometry import RHO_MAX, RHO_MIN, MachineParams
-from orthoglide_env.kinematics import paper_posture
-from orthoglide_env.vector import OrthoglideCalibrationVectorEnv
+from orthoglide_env.envs.calibration_vector import OrthoglideCalibrationVectorEnv
+from orthoglide_env.model.errors import RHO_MAX, RHO_MIN, MachineParams
+from orthoglide_env.model.kinematics import paper_posture
 
 N = 5
 #: Short episodes, so that a few hundred steps truncate each env many times.

@@ -8,6 +8,6 @@ this package.  :func:`calibrators.experiment.run_episode` runs one on a reset en
 
 from __future__ import annotations
 
-from .base import AGENTS, Agent, available, get_agent, register
+from calibrators.agents.base import AGENTS, Agent, available, get_agent, register
 
 __all__ = ["AGENTS", "Agent", "available", "get_agent", "register"]

@@ -7,9 +7,8 @@ from typing import Any, ClassVar
 import gymnasium as gym
 import numpy as np
 
-from orthoglide_env.lab import Op
-
-from ..registry import Registry
+from calibrators.registry import Registry
+from orthoglide_env.lab.operations import Op
 
 
 class Agent:
@@ -52,7 +51,7 @@ def get_agent(name: str) -> Agent:
     """A new agent: one registered by ``name``, or ``policy:PATH``, the learned policy saved
     in the file PATH (:mod:`calibrators.agents.policy`)."""
     if name.startswith(POLICY_PREFIX):
-        from .policy import PolicyAgent
+        from calibrators.agents.policy import PolicyAgent
 
         return PolicyAgent(name[len(POLICY_PREFIX):])
     return AGENT_REGISTRY.get(name)

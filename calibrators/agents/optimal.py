@@ -1,6 +1,6 @@
 """``optimal``: a fixed experiment designed before the first reading.
 
-The plan is made on the nominal machine by :func:`calibrators.design.greedy_plan`: from
+The plan is made on the nominal machine by :func:`calibrators.design.planner.greedy_plan`: from
 the stands where they stand, the move (with the lifts and engages it needs) or the
 re-mount that buys the most fall of the predicted TCP error after the best-fit rigid
 motion per second of lab time, again and again until the budget is spent.  A plan knows
@@ -17,11 +17,10 @@ from functools import lru_cache
 import gymnasium as gym
 import numpy as np
 
-from orthoglide_env.gauges import NOISE_FLOOR
-from orthoglide_env.lab import SLOTS
-
-from ..design import Planner, Step, greedy_plan
-from .base import PlannedAgent, action, register
+from calibrators.agents.base import PlannedAgent, action, register
+from calibrators.design.planner import Planner, Step, greedy_plan
+from orthoglide_env.instruments.gauges import NOISE_FLOOR
+from orthoglide_env.lab.operations import SLOTS
 
 
 @lru_cache(maxsize=8)

@@ -13,11 +13,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from orthoglide_env.kinematics import paper_posture
-from orthoglide_env.lab import SLOTS, Op
-
-from ..paper import REPETITIONS, leg_sequence
-from .base import PlannedAgent, action, register
+from calibrators.agents.base import PlannedAgent, action, register
+from calibrators.estimators.paper_linear import REPETITIONS, leg_sequence
+from orthoglide_env.lab.operations import SLOTS, Op
+from orthoglide_env.model.kinematics import paper_posture
 
 
 @register

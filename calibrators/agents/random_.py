@@ -18,8 +18,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from orthoglide_env.collisions import clearance
-from orthoglide_env.gauges import (
+from calibrators.agents.base import Agent, action, register
+from orthoglide_env.instruments.gauges import (
     Part,
     collision_boxes,
     exact_ray_distances,
@@ -28,11 +28,10 @@ from orthoglide_env.gauges import (
     installed_on,
     pressed_past_travel,
 )
-from orthoglide_env.geometry import RHO_MAX, RHO_MIN, MachineParams
-from orthoglide_env.kinematics import UnreachableError, direct
-from orthoglide_env.lab import SLOTS, Op
-
-from .base import Agent, action, register
+from orthoglide_env.lab.operations import SLOTS, Op
+from orthoglide_env.model.collisions import clearance
+from orthoglide_env.model.errors import RHO_MAX, RHO_MIN, MachineParams
+from orthoglide_env.model.kinematics import UnreachableError, direct
 
 #: A posture is safe for an engaged gauge when the nominal tip stays this far (mm) from
 #: the end of its travel, and its target this far from pressing it: more than the

@@ -10,9 +10,8 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 
-from orthoglide_env.lab import Op
-
-from .base import PlannedAgent, action, register
+from calibrators.agents.base import PlannedAgent, action, register
+from orthoglide_env.lab.operations import Op
 
 #: Grid levels of each joint (mm): the joint range less 10 mm at either end, which keeps
 #: clear of the near-singular (60, 60, 60) corner where some machines cannot assemble.

@@ -13,10 +13,9 @@ import os
 import sys
 from importlib import metadata
 
-from orthoglide_env.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA, check_noise
-
-from . import calibrate, compare, fit, pose, render, urdf
-from .common import Parser, UsageError
+from calibrators.cli import calibrate, compare, fit, pose, render, urdf
+from calibrators.cli.common import Parser, UsageError
+from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA, check_noise
 
 COMMANDS = (pose, render, urdf, calibrate, fit, compare)
 #: The distribution whose metadata carries the version.

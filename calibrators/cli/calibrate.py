@@ -9,18 +9,17 @@ import gymnasium as gym
 import numpy as np
 
 import orthoglide_env
-from orthoglide_env.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
-from orthoglide_env.geometry import DEFAULT_PRESET, PRESETS, MachineParams
-from orthoglide_env.reading_model import TrackerAxis, parameters_of
-
-from ..agents import available as agents_available
-from ..agents import get_agent
-from ..base import Estimate, Measurements, get_strategy
-from ..estimator import z_scores
-from ..experiment import run_episode
-from ..gauss_newton import design_of
-from . import estimator_options
-from .output import emit, report
+from calibrators.agents import available as agents_available
+from calibrators.agents import get_agent
+from calibrators.cli import estimator_options
+from calibrators.cli.output import emit, report
+from calibrators.estimators.base import Estimate, Measurements, get_strategy
+from calibrators.estimators.exact_fit import z_scores
+from calibrators.estimators.gauss_newton import design_of
+from calibrators.experiment import run_episode
+from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
+from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS, MachineParams
+from orthoglide_env.model.reading_model import TrackerAxis, parameters_of
 
 
 def _setup(args: argparse.Namespace) -> tuple[MachineParams, str, float, float]:

@@ -8,13 +8,13 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from orthoglide_env.gauges import (
+from orthoglide_env.instruments.gauges import (
     DEFAULT_RESOLUTION,
     DEFAULT_SIGMA,
     DEFAULT_TRAVEL,
     MAX_NOISE_FRACTION,
 )
-from orthoglide_env.geometry import RHO_MAX, RHO_MIN, MachineParams, check_rho, random_machine
+from orthoglide_env.model.errors import RHO_MAX, RHO_MIN, MachineParams, check_rho, random_machine
 
 
 class UsageError(Exception):

@@ -12,16 +12,15 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from orthoglide_env.gauges import check_noise
-from orthoglide_env.geometry import PRESETS
+from calibrators.agents import available as agents_available
+from calibrators.agents import get_agent
+from calibrators.cli.common import UsageError
+from calibrators.compare import Config, Trial, run, summary, verify_pybullet
+from calibrators.engines import ENGINES, RAY_INSTALL_HINT, ray_available
+from calibrators.experiment import ESTIMATORS
+from orthoglide_env.instruments.gauges import check_noise
+from orthoglide_env.model.errors import PRESETS
 from orthoglide_env.scoring import FRAMES
-
-from ..agents import available as agents_available
-from ..agents import get_agent
-from ..compare import Config, Trial, run, summary, verify_pybullet
-from ..engines import ENGINES, RAY_INSTALL_HINT, ray_available
-from ..experiment import ESTIMATORS
-from .common import UsageError
 
 TRIALS_FILE = "trials.jsonl"
 #: Most processes a run may ask for: beyond the cores they only compete.
@@ -203,7 +202,7 @@ def _write(trials: list[Trial], rows: list[dict], out: Path, config: Config) -> 
                              r["time_s"]["median"],
                              *(r["tcp_after_mm"][f]["median"] for f in FRAMES),
                              r["tcp_after_mm"]["rigid"]["p95"], r["z_rms"], r["success_rate"]])
-    from .plots import accuracy_vs_time, boxes
+    from calibrators.cli.plots import accuracy_vs_time, boxes
 
     return [out / TRIALS_FILE, summary_csv, accuracy_vs_time(trials, config, out),
             boxes(trials, config, out)]

@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ..estimator import SOLVERS
-from ..gauss_newton import MAX_OUTLIER_FRACTION, OUTLIER_K
-from ..parameters import parse_assignments
+from calibrators.estimators.exact_fit import SOLVERS
+from calibrators.estimators.gauss_newton import MAX_OUTLIER_FRACTION, OUTLIER_K
+from calibrators.estimators.parameters import parse_assignments
 
 DEFAULT_STRATEGY = "gauss-newton"
 

@@ -6,13 +6,12 @@ import argparse
 
 import numpy as np
 
-from orthoglide_env.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
-
-from ..base import get_strategy
-from ..measurements import Measurements
-from . import estimator_options
-from .common import UsageError
-from .output import emit, report
+from calibrators.cli import estimator_options
+from calibrators.cli.common import UsageError
+from calibrators.cli.output import emit, report
+from calibrators.estimators.base import get_strategy
+from calibrators.measurements import Measurements
+from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 
 #: Largest repeatability accepted (mm): a dial gauge that scatters by more than this is
 #: not measuring, and the weights would say nothing.

@@ -16,11 +16,10 @@ from typing import Any
 
 import numpy as np
 
-from orthoglide_env.geometry import ERROR_GROUPS, MachineParams
+from calibrators.estimators.base import Estimate
+from calibrators.estimators.prediction import predicted_correction, predicted_tcp_error
+from orthoglide_env.model.errors import ERROR_GROUPS, MachineParams
 from orthoglide_env.scoring import FRAMES, score
-
-from ..base import Estimate
-from ..prediction import predicted_correction, predicted_tcp_error
 
 #: How many combinations a table lists before it only counts them (JSON lists all).
 LISTED: int = 6
@@ -40,7 +39,7 @@ def _residuals(est: Estimate) -> list[dict[str, Any]]:
                 item["line"] = m.line
             out.append(item)
         return out
-    from ..differences import differences
+    from calibrators.estimators.differences import differences
 
     rows = differences(est.readings)
     return [{"posture": p, "gauge": g.slot, "residual_mm": float(r),
@@ -97,7 +96,7 @@ def print_table(data: dict[str, Any]) -> None:
     free = set(data["free"])
     print(f"{'':16}{'estimate':>10}{'std':>9}" + (f"{'truth':>10}{'error':>10}"
                                                    if "truth" in data else ""))
-    from orthoglide_env.geometry import ERROR_NAMES, error_group
+    from orthoglide_env.model.errors import ERROR_NAMES, error_group
 
     for group in ERROR_GROUPS:
         names = [n for n in ERROR_NAMES if error_group(n) == group]

@@ -6,15 +6,21 @@ import argparse
 
 import numpy as np
 
-from orthoglide_env.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA, MIN_RESOLUTION
-from orthoglide_env.geometry import MachineParams
-
-from .common import NOISE_LIMIT, SIGMA_HELP, add_machine_posture, print_json, rho_of, vec
+from calibrators.cli.common import (
+    NOISE_LIMIT,
+    SIGMA_HELP,
+    add_machine_posture,
+    print_json,
+    rho_of,
+    vec,
+)
+from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA, MIN_RESOLUTION
+from orthoglide_env.model.errors import MachineParams
 
 
 def run(args: argparse.Namespace) -> None:
     machine, rho = MachineParams.from_json(args.machine), rho_of(args.rho)
-    from orthoglide_env.report import pose_report  # loads the simulator: after validation
+    from orthoglide_env.sim.report import pose_report  # loads the simulator: after validation
 
     sigma = DEFAULT_SIGMA if args.sigma is None else args.sigma
     report = pose_report(machine, rho, noise_free=args.noise_free, seed=args.seed,

@@ -4,14 +4,13 @@ from __future__ import annotations
 
 import argparse
 
-from orthoglide_env.geometry import MachineParams
-
-from .common import add_machine_posture, rho_of
+from calibrators.cli.common import add_machine_posture, rho_of
+from orthoglide_env.model.errors import MachineParams
 
 
 def run(args: argparse.Namespace) -> None:
     machine, rho = MachineParams.from_json(args.machine), rho_of(args.rho)
-    from orthoglide_env.report import render_png
+    from orthoglide_env.sim.report import render_png
 
     path = render_png(machine, rho, args.out)
     print(f"wrote {path}")

@@ -6,10 +6,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from orthoglide_env.geometry import MachineParams
-from orthoglide_env.urdf_writer import write_urdf
-
-from .common import add_machine
+from calibrators.cli.common import add_machine
+from orthoglide_env.model.errors import MachineParams
+from orthoglide_env.sim.urdf import write_urdf
 
 #: ``-o -`` writes to standard output.
 STDOUT = "-"

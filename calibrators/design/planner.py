@@ -1,0 +1,527 @@
+"""Experiment design on the linearised model: which readings, at what price in lab time,
+tell the most about the tool's accuracy.
+
+The unknowns are Gaussian, each in units of its a-priori size: the machine's 27 errors
+and each stand's installation (the realistic preset's sigmas, the estimators' priors),
+and each dial's zero (:data:`ZERO_SCALE`, diffuse: the estimators eliminate it).  A
+reading is a row of derivatives at the nominal machine divided by the gauge's sigma, so
+the covariance after any set of readings follows by Bayesian (Woodbury) updates: the
+error a design leaves is known before anything is read.  Two criteria:
+
+============  ==================================================================
+criterion     the gain of a set of readings
+============  ==================================================================
+I (default)   the fall of the predicted mean-square TCP error over the scoring
+              grid after the best-fit rigid motion (what a user has after
+              touching off the workpiece; :mod:`orthoglide_env.scoring`)
+D             the rise of log det of the information about every unknown, in
+              units of its a-priori size (the lab env's ``information`` reward)
+============  ==================================================================
+
+:class:`Planner` holds an experiment being designed (where each stand is, whose plunger
+is down, the posture, the clock, the covariance) and prices every candidate operation
+with the lab's time table (:data:`~orthoglide_env.lab.operations.TIME`): a move costs its drive and
+settle, and a lever flick for every plunger lifted first (a bar could press it past its
+travel there) or let down (safe both here and there); a re-mount costs its two minutes.
+A reading counts with the probability that the tip touches (it may leave the bar's reach
+at the far end of the travel); a plunger goes down only where the tip stays
+:data:`SAFETY_SIGMAS` of its predicted spread plus :data:`END_GAP` off the pushed-in end.
+A fixed plan knows each reading only a priori, so its margins are wide (up to ~3 mm);
+a planner that has seen readings (:meth:`Planner.observe`) predicts them to microns and
+may use the whole travel: that is what the ``active`` agent buys with its feedback.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+from functools import cached_property, lru_cache
+from typing import NamedTuple
+
+import numpy as np
+from scipy.special import ndtr
+
+from orthoglide_env.instruments.gauges import (
+    DEFAULT_TRAVEL,
+    collision_boxes,
+    exact_ray_distances,
+    exact_target_boxes,
+    install,
+    installed_on,
+    pressed_past_travel,
+)
+from orthoglide_env.lab.operations import SLOTS, TIME, Op
+from orthoglide_env.model.collisions import clearance
+from orthoglide_env.model.errors import ERROR_NAMES, RHO_MAX, RHO_MIN, MachineParams
+from orthoglide_env.model.kinematics import direct
+from orthoglide_env.model.reading_model import (
+    Design,
+    ParameterSpace,
+    default_scales,
+    jacobian,
+    predict,
+)
+from orthoglide_env.scoring import rigid_weights
+
+N_MACHINE = len(ERROR_NAMES)
+#: Unknowns of one mounting besides the machine's: four of its stand, then its zero.
+N_STAND = 5
+#: A dial's zero, a priori (mm): wide enough to be eliminated by the first reading, as the
+#: estimators do exactly.
+ZERO_SCALE: float = 10.0
+#: A plunger goes down only where its tip's predicted distance from the pushed-in end is
+#: at least this many standard deviations of the prediction plus :data:`END_GAP` (mm):
+#: a fault costs two minutes and the stand's readings until it is re-mounted, so the risk
+#: is kept below ~1e-3 per engaged posture.
+SAFETY_SIGMAS: float = 3.0
+END_GAP: float = 0.5
+#: Where the tip misses its bar, a plunger may stay down only if the bar, grown by this
+#: much (mm) all round, would still not press it: ~3 sigma of how far the machine errors
+#: move a bar.
+PRESS_MARGIN: float = 3.0
+#: Closest two parts that must never meet may come at a candidate posture, on the
+#: nominal model (mm): more than the machine errors move them.
+CLEARANCE: float = 3.0
+CRITERIA: tuple[str, ...] = ("I", "D")
+#: Re-mounts are weighed against staying every this many seconds of the plan, each option
+#: by the gain per second of its next :data:`LOOKAHEAD_MOVES` moves (after the re-mount).
+REMOUNT_CHECK_S: float = 300.0
+LOOKAHEAD_MOVES: int = 24
+SCREENED: int = 6
+
+
+def candidate_postures() -> np.ndarray:
+    """Postures a design may visit (P, 3): a 20 mm grid of the joint cube, and denser
+    tubes along each axis (20 mm along it, 10 mm across from -40 to +20 mm), where the
+    gauges on that axis's bars stay within their travel."""
+    along = np.arange(RHO_MIN, RHO_MAX + 1e-9, 20.0)
+    side = np.arange(-40.0, 20.0 + 1e-9, 10.0)
+    points = [np.stack(np.meshgrid(along, along, along, indexing="ij"), -1).reshape(-1, 3)]
+    for axis in range(3):
+        a, b, c = np.meshgrid(along, side, side, indexing="ij")
+        tube = np.zeros((*a.shape, 3))
+        tube[..., axis], tube[..., (axis + 1) % 3], tube[..., (axis + 2) % 3] = a, b, c
+        points.append(tube.reshape(-1, 3))
+    return np.unique(np.vstack(points), axis=0)
+
+
+@dataclass(frozen=True)
+class SlotTable:
+    """What a gauge at each slot of the catalogue would do at each candidate posture on
+    the nominal machine (installed as a technician does, zeroed at Zero): ``S`` slots,
+    ``P`` postures.  ``change`` is the derivative of its reading's change since Zero over
+    the 27 machine errors and its stand's 4 unknowns, per unit of their scale (mm)."""
+
+    postures: np.ndarray  # (P, 3)
+    zero: int  # index of the Zero posture
+    tip: np.ndarray  # (S, P) nominal tip distance, mm (NaN: the tip misses the bar)
+    pressed: np.ndarray  # (S, P) a bar would press the gauge past its travel
+    near: np.ndarray  # (S, P) ... if it were PRESS_MARGIN larger all round
+    change: np.ndarray  # (S, P, 31)
+    sign: np.ndarray  # (S,) reading = sign * (tip - tip at Zero)
+    reading: np.ndarray  # (S, P) nominal reading, zeroed at Zero, of the reading model
+    travel: float = DEFAULT_TRAVEL
+
+    @cached_property
+    def prior_spread(self) -> np.ndarray:
+        """(S, P) standard deviation of the tip's change since Zero, a priori (mm)."""
+        return np.sqrt(np.sum(self.change**2, axis=-1))
+
+    @cached_property
+    def prior_reach(self) -> tuple[np.ndarray, np.ndarray]:
+        """(S, P) ``safe`` and ``contact`` of :func:`reach` a priori (what a plan knows)."""
+        return reach(self, np.arange(len(self.tip)), self.tip, self.prior_spread)
+
+    def index(self, rho: np.ndarray) -> int | None:
+        """Index of candidate posture ``rho``, or None."""
+        hit = np.flatnonzero(np.all(np.abs(self.postures - rho) < 1e-9, axis=1))
+        return int(hit[0]) if hit.size else None
+
+
+def reach(table: SlotTable, slots: np.ndarray, tip: np.ndarray, spread: np.ndarray,
+          postures: np.ndarray | slice = slice(None)) -> tuple[np.ndarray, np.ndarray]:
+    """For gauges at ``slots`` (K,) whose tips are predicted at ``tip`` give or take
+    ``spread`` (K, P') at ``postures``, mm: ``safe`` (K, P'), the plunger may be down
+    there, and ``contact`` (K, P'), the probability that the tip then touches (0 where
+    it misses).
+
+    Where the tip is on its bar, the tip must be :data:`SAFETY_SIGMAS` of its spread plus
+    :data:`END_GAP` off the pushed-in end; where it misses, the bar must be
+    :data:`PRESS_MARGIN` clear of pressing the gauge's body."""
+    missed = np.isnan(tip)
+    with np.errstate(invalid="ignore"):
+        safe = np.where(missed, ~table.near[slots][:, postures],
+                        ~table.pressed[slots][:, postures]
+                        & (tip - SAFETY_SIGMAS * spread >= END_GAP))
+        within = ndtr((table.travel - tip) / np.maximum(spread, 1e-9))
+    return safe, np.where(safe & ~missed, within, 0.0)
+
+
+@lru_cache(maxsize=1)
+def slot_table() -> SlotTable:
+    """The :class:`SlotTable` of every slot over the :func:`candidate_postures` the nominal
+    machine reaches with its parts :data:`CLEARANCE` apart (once per process: seconds)."""
+    nominal = MachineParams()
+    postures = candidate_postures()
+    boxes = collision_boxes(nominal, postures, direct(nominal, postures))
+    keep = clearance(nominal, postures, boxes) >= CLEARANCE
+    postures = postures[keep]
+    boxes = tuple(b[keep] for b in boxes)
+    gauges = installed_on(nominal, install(list(SLOTS), nominal))
+    tip = np.moveaxis(exact_ray_distances(nominal, gauges, postures, boxes), -1, 0)
+    centre, rot, half = exact_target_boxes(gauges, boxes)
+    pressed = np.moveaxis(pressed_past_travel(gauges, centre, rot, half), -1, 0)
+    near = np.moveaxis(pressed_past_travel(gauges, centre, rot, half + PRESS_MARGIN), -1, 0)
+    zero = int(np.flatnonzero(np.all(postures == 0.0, axis=1))[0])
+    change = np.zeros((len(SLOTS), len(postures), N_MACHINE + 4))
+    reading = np.zeros((len(SLOTS), len(postures)))
+    for k, spec in enumerate(SLOTS):
+        design = Design(("m",), (spec,), np.zeros(len(postures), dtype=int), postures)
+        scale = default_scales(design.space)
+        rows = jacobian(np.zeros(len(scale)), design, np.ones(len(scale), bool), scale)
+        change[k] = rows - rows[zero]
+        values = predict(np.zeros(len(scale)), design)
+        reading[k] = values - values[zero]
+    sign = np.array([g.sign for g in gauges], dtype=float)
+    return SlotTable(postures, zero, tip, pressed, near, change, sign, reading)
+
+
+@lru_cache(maxsize=1)
+def rigid_weight() -> np.ndarray:
+    """``W`` (27, 27): ``trace(W C)`` is the predicted mean-square TCP error over the
+    scoring grid after the best-fit rigid motion (mm^2) for machine errors off by
+    ``N(0, C)`` in units of their scale (the quadratic form of
+    :func:`orthoglide_env.scoring.predicted_frame_errors`)."""
+    scale = default_scales(ParameterSpace())
+    return rigid_weights([MachineParams()])[0] * np.outer(scale, scale)
+
+
+class Step(NamedTuple):
+    """One lab operation of a plan (the fields of the lab env's action) and the lab time
+    at which the plan starts it."""
+
+    op: Op
+    rho: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    stand: int = 0
+    slot: int = 0
+    time_s: float = 0.0
+
+
+class Options(NamedTuple):
+    """Every candidate move priced (P postures, K stands)."""
+
+    gain: np.ndarray  # (P,)
+    seconds: np.ndarray  # (P,)
+    engaged: np.ndarray  # (K, P) plungers down after the move
+    reads: np.ndarray  # (K, P) probability that each of them reads there
+
+
+@dataclass
+class Planner:
+    """An experiment being designed: stands, plungers, posture, clock, and the covariance
+    (in units of each unknown's scale) of the 27 machine errors, then :data:`N_STAND`
+    unknowns per stand's current mounting (a mounting left behind by a re-mount is
+    marginalised out: nothing reads it again).
+
+    ``slots``: each stand's index in :data:`~orthoglide_env.lab.operations.SLOTS` (-1: none);
+    ``engaged``: whose plunger is down; ``sigma``: a reading's standard deviation (mm).
+    ``observe`` turns it into a filter: it then also holds the mean of the unknowns and
+    predicts the tips from them."""
+
+    slots: list[int]
+    engaged: list[bool]
+    sigma: float
+    budget_s: float
+    criterion: str = "I"
+    rho: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    time_s: float = 0.0
+    table: SlotTable = field(default_factory=slot_table)
+    steps: list[Step] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        if self.criterion not in CRITERIA:
+            raise ValueError(f"unknown criterion '{self.criterion}'; choose from {CRITERIA}")
+        if not (np.isfinite(self.sigma) and self.sigma > 0):
+            raise ValueError(f"sigma must be a positive number, got {self.sigma}")
+        self.slots = [int(s) for s in self.slots]
+        self.engaged = [bool(e) and s >= 0 for s, e in zip(self.slots, self.engaged,
+                                                           strict=True)]
+        self.rho = np.asarray(self.rho, dtype=float)
+        n = N_MACHINE + N_STAND * len(self.slots)
+        self.covariance = np.eye(n)
+        self.mean: np.ndarray | None = None  # set by observe()
+        self.here = self.table.index(self.rho)
+        self.rows = np.stack([self.rows_of(k) for k in range(len(self.slots))])
+        # Where an engaged gauge was seen not to read (its tip beyond the travel): it will
+        # not read there again until its stand moves.
+        self.silent = np.zeros((len(self.slots), len(self.table.postures)), dtype=bool)
+
+    @property
+    def weight(self) -> np.ndarray:
+        return rigid_weight()
+
+    # -- the model of a reading -----------------------------------------------------------
+    def _columns(self, stand: int) -> np.ndarray:
+        start = N_MACHINE + N_STAND * stand
+        return np.r_[0:N_MACHINE, start:start + N_STAND]
+
+    def rows_of(self, stand: int) -> np.ndarray:
+        """Rows (P, n) in mm per unit scale of a reading of ``stand`` at every posture."""
+        out = np.zeros((len(self.table.postures), len(self.covariance)))
+        if self.slots[stand] >= 0:
+            out[:, self._columns(stand)[:-1]] = self.table.change[self.slots[stand]]
+            out[:, self._columns(stand)[-1]] = ZERO_SCALE
+        return out
+
+    def tips(self, postures: np.ndarray | slice = slice(None)
+             ) -> tuple[np.ndarray, np.ndarray]:
+        """Predicted tip distance of every stand's gauge at ``postures`` and its standard
+        deviation (K, P'), mm: a priori for a plan, from the mean and covariance once
+        readings were observed.  (An empty stand gets slot 0's: it is masked later.)"""
+        slots = np.maximum(np.array(self.slots), 0)
+        tip = self.table.tip[slots][:, postures]
+        if self.mean is None:
+            return tip, self.table.prior_spread[slots][:, postures]
+        cols = np.array([self._columns(k)[:-1] for k in range(len(slots))])  # (K, 31)
+        change = self.table.change[slots][:, postures]  # (K, P', 31)
+        mean = self.mean[cols]
+        cov = self.covariance[cols[:, :, None], cols[:, None, :]]  # (K, 31, 31)
+        tip = tip + self.table.sign[slots][:, None] * (change @ mean[:, :, None])[..., 0]
+        spread = np.sqrt(np.clip(np.sum((change @ cov) * change, axis=-1), 0.0, None))
+        return tip, spread
+
+    def _reach(self, postures: np.ndarray | slice = slice(None)
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`reach` of every stand at ``postures`` (nothing for an empty stand, no
+        contact where it was seen not to read)."""
+        slots = np.array(self.slots)
+        mounted = (slots >= 0)[:, None]
+        if self.mean is None:
+            safe, contact = (a[np.maximum(slots, 0)][:, postures]
+                             for a in self.table.prior_reach)
+        else:
+            safe, contact = reach(self.table, np.maximum(slots, 0), *self.tips(postures),
+                                  postures)
+        return safe & mounted, np.where(self.silent[:, postures], 0.0, contact) * mounted
+
+    # -- pricing --------------------------------------------------------------------------
+    def options(self) -> Options:
+        """Every candidate move priced: its gain, its seconds, the plungers down after it
+        and how likely each reads.  A plunger is let down only where it is safe both here
+        and there (let down here, it reads there), and lifted where it is not safe there."""
+        safe, contact = self._reach()
+        here = (safe[:, self.here] if self.here is not None
+                else np.zeros(len(self.slots), dtype=bool))
+        engaged = np.array(self.engaged, dtype=bool)
+        after = safe & (engaged | here)[:, None]
+        reads = np.where(after, contact, 0.0)
+        rows = np.swapaxes(self.rows, 0, 1) * np.sqrt(reads.T)[:, :, None] / self.sigma
+        flicks = np.sum(after != engaged[:, None], axis=0)
+        seconds = TIME.move(self.rho[None], self.table.postures) + TIME.lift_s * flicks
+        return Options(self._gains(rows), seconds, after, reads)
+
+    def _gains(self, rows: np.ndarray) -> np.ndarray:
+        """Gain of adding each batch of whitened rows (B, K, n) to the covariance."""
+        b = rows @ self.covariance
+        m = np.eye(rows.shape[1]) + rows @ np.swapaxes(b, 1, 2)
+        if self.criterion == "D":
+            return np.linalg.slogdet(m)[1]
+        bm = b[..., :N_MACHINE]
+        return np.trace(np.linalg.solve(m, (bm @ self.weight) @ np.swapaxes(bm, 1, 2)),
+                        axis1=1, axis2=2)
+
+    def predicted_rigid_mm(self) -> float:
+        """Predicted TCP error RMS after the best-fit rigid motion (mm)."""
+        n = N_MACHINE
+        return float(np.sqrt(max(np.trace(self.weight @ self.covariance[:n, :n]), 0.0)))
+
+    # -- taking operations ----------------------------------------------------------------
+    def _add(self, rows: np.ndarray, innovations: np.ndarray | None = None) -> None:
+        """Bayesian update with whitened ``rows`` (R, n) (and, when filtering, their
+        whitened innovations)."""
+        if len(rows) == 0:
+            return
+        b = self.covariance @ rows.T
+        m = np.eye(len(rows)) + rows @ b
+        gain = np.linalg.solve(m, b.T).T  # (n, R)
+        if self.mean is not None and innovations is not None:
+            self.mean = self.mean + gain @ innovations
+        self.covariance = self.covariance - gain @ b.T
+        self.covariance = (self.covariance + self.covariance.T) / 2
+
+    def expect_readings(self, stands: np.ndarray, weights: np.ndarray) -> None:
+        """Count readings of ``stands`` here, each with its probability (a plan's)."""
+        rows = self.rows[stands, self.here] * np.sqrt(weights)[:, None] / self.sigma
+        self._add(rows)
+
+    def observe(self, stands: list[int], values: list[float]) -> None:
+        """Readings (mm) of ``stands`` taken here (every other engaged stand read nothing):
+        update the mean and the covariance."""
+        if self.mean is None:
+            self.mean = np.zeros(len(self.covariance))
+        if self.here is not None:
+            quiet = [k for k, down in enumerate(self.engaged) if down and k not in stands]
+            self.silent[quiet, self.here] = True
+        stands_ = np.asarray(stands, dtype=int)
+        if not stands_.size:
+            return
+        index = self.here
+        if index is None:
+            raise ValueError(f"posture {self.rho.tolist()} is not a candidate posture")
+        rows = self.rows[stands_, index] / self.sigma
+        nominal = self.table.reading[[self.slots[k] for k in stands_], index]
+        predicted = nominal + self.rows[stands_, index] @ self.mean
+        self._add(rows, (np.asarray(values, dtype=float) - predicted) / self.sigma)
+
+    def retire(self, stand: int) -> None:
+        """A stand that reads no more (pushed past its travel) until it is re-mounted."""
+        self.slots[stand] = -1
+        self.engaged[stand] = False
+        self.rows[stand] = self.rows_of(stand)
+
+    def move(self, posture: int, options: Options) -> np.ndarray:
+        """Take candidate move ``posture``: the steps, the clock; returns which stands are
+        down there.  (The readings are added by the caller: expected or observed.)"""
+        after = options.engaged[:, posture]
+        clock = self.time_s
+        for k, down in enumerate(after):
+            if bool(down) != self.engaged[k]:
+                self.steps.append(Step(Op.ENGAGE if down else Op.LIFT, stand=k, time_s=clock))
+                clock += TIME.lift_s
+        rho = self.table.postures[posture]
+        self.steps.append(Step(Op.MOVE, tuple(float(v) for v in rho), time_s=clock))
+        self.engaged = [bool(v) for v in after]
+        self.rho, self.here = rho.copy(), posture
+        self.time_s += float(options.seconds[posture])
+        return after
+
+    def remount(self, stand: int, slot: int) -> None:
+        """Move ``stand`` to ``slot`` (the machine drives to Zero first): a new mounting
+        with fresh unknowns, its plunger down."""
+        if slot in self.slots:
+            raise ValueError(f"slot {slot} already holds a stand")
+        self.steps.append(Step(Op.REMOUNT, stand=stand, slot=slot, time_s=self.time_s))
+        self.time_s += float(TIME.move(self.rho, np.zeros(3))) + TIME.remount_s
+        self.rho, self.here = np.zeros(3), self.table.zero
+        cols = self._columns(stand)[N_MACHINE:]
+        self.covariance[cols, :] = 0.0
+        self.covariance[:, cols] = 0.0
+        self.covariance[cols, cols] = 1.0
+        if self.mean is not None:
+            self.mean[cols] = 0.0
+        self.slots[stand] = slot
+        self.engaged[stand] = True
+        self.rows[stand] = self.rows_of(stand)
+        self.silent[stand] = False
+
+    def reading_here(self) -> tuple[np.ndarray, np.ndarray]:
+        """Stands down here and the probability that each reads."""
+        _, contact = self._reach(np.array([self.here]))
+        down = np.flatnonzero(self.engaged)
+        return down, contact[down, 0]
+
+    # -- choosing ---------------------------------------------------------------------------
+    def fork(self) -> Planner:
+        """A copy to try operations on (the table is shared, the state copied)."""
+        trial = copy.copy(self)
+        trial.slots, trial.engaged, trial.steps = list(self.slots), list(self.engaged), []
+        trial.covariance, trial.rows = self.covariance.copy(), self.rows.copy()
+        trial.silent = self.silent.copy()
+        trial.mean = None if self.mean is None else self.mean.copy()
+        return trial
+
+    def affordable_rates(self, options: Options) -> np.ndarray:
+        """Gain per second of every move that fits in the budget (-inf otherwise)."""
+        fits = self.time_s + options.seconds <= self.budget_s
+        return np.where(fits, options.gain / options.seconds, -np.inf)
+
+    def lookahead_rate(self, start: float | None = None, start_s: float | None = None
+                       ) -> float:
+        """Gain per second, since criterion value ``start`` at ``start_s`` (default now),
+        of the next :data:`LOOKAHEAD_MOVES` greedy moves (readings expected), on a copy."""
+        trial = self.fork()
+        start = trial._criterion_value() if start is None else start
+        start_s = trial.time_s if start_s is None else start_s
+        for _ in range(LOOKAHEAD_MOVES):
+            if not trial.greedy_move():
+                break
+        spent = trial.time_s - start_s
+        return (start - trial._criterion_value()) / spent if spent > 0 else 0.0
+
+    def _criterion_value(self) -> float:
+        """What the plan drives down: the predicted mean-square TCP error (I), or the log
+        det of the covariance (D)."""
+        if self.criterion == "D":
+            return float(np.linalg.slogdet(self.covariance)[1])
+        return self.predicted_rigid_mm() ** 2
+
+    def best_move(self) -> tuple[int, Options] | None:
+        """The affordable move with the most gain per second (and every move priced), or
+        None when no move gains anything within the budget."""
+        options = self.options()
+        rate = self.affordable_rates(options)
+        best = int(np.argmax(rate))
+        return (best, options) if rate[best] > 0 else None
+
+    def greedy_move(self) -> bool:
+        """Take :meth:`best_move`, its readings expected; False when there is none."""
+        choice = self.best_move()
+        if choice is None:
+            return False
+        self.move(*choice)
+        down, chance = self.reading_here()
+        self.expect_readings(down, chance)
+        return True
+
+    def _remounted(self, stand: int, slot: int) -> Planner:
+        trial = self.fork()
+        trial.remount(stand, slot)
+        down, chance = trial.reading_here()
+        trial.expect_readings(down, chance)
+        return trial
+
+    def best_remount(self, screened: int | None = SCREENED) -> tuple[int, int] | None:
+        """The re-mount (stand, slot) whose next moves gain more per second, re-mount
+        included, than the next moves of the present configuration, or None.  Every
+        re-mount is screened by the best :data:`LOOKAHEAD_MOVES` moves it opens, each
+        priced alone; the ``screened`` best (None: all) are then played out greedily."""
+        start = self._criterion_value()
+        candidates = []
+        for stand in range(len(self.slots)):
+            for slot in range(len(SLOTS)):
+                if slot in self.slots:
+                    continue
+                trial = self._remounted(stand, slot)
+                options = trial.options()
+                top = np.argsort(trial.affordable_rates(options))[-LOOKAHEAD_MOVES:]
+                gain = start - trial._criterion_value() + options.gain[top].sum()
+                spent = trial.time_s - self.time_s + options.seconds[top].sum()
+                candidates.append((gain / spent, stand, slot))
+        best, best_rate = None, self.lookahead_rate()
+        ranked = sorted(candidates)
+        for _, stand, slot in ranked[-screened:] if screened else ranked:
+            rate = self._remounted(stand, slot).lookahead_rate(start, self.time_s)
+            if rate > best_rate:
+                best, best_rate = (stand, slot), rate
+        return best
+
+
+def greedy_plan(planner: Planner, remounts: bool = True, screened: int | None = SCREENED
+                ) -> list[Step]:
+    """Spend the planner's budget greedily, the operation with the most gain per second
+    first (re-mounts weighed every :data:`REMOUNT_CHECK_S`, the ``screened`` most
+    promising played out: see :meth:`Planner.best_remount`), and end with a stop."""
+    checked = -np.inf
+    while True:
+        if remounts and planner.time_s - checked >= REMOUNT_CHECK_S:
+            checked = planner.time_s
+            choice = planner.best_remount(screened)
+            if choice is not None:
+                planner.remount(*choice)
+                down, chance = planner.reading_here()
+                planner.expect_readings(down, chance)
+                continue
+        if not planner.greedy_move():
+            break
+    planner.steps.append(Step(Op.STOP, time_s=planner.time_s))
+    return planner.steps

@@ -1,0 +1,1 @@
+"""Estimators: what is fitted to an experiment's readings (model, parameter set, solver)."""

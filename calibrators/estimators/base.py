@@ -1,0 +1,240 @@
+"""The calibrator interface: estimates and the registry of strategies.
+
+A strategy has two halves, kept apart so a real machine's measured readings (a file) go
+through the same estimator as a virtual experiment:
+
+* ``collect(env)``: drives the environment through its public API only (actions in,
+  observations out) and returns the :class:`~calibrators.measurements.Measurements` it
+  read and the time spent;
+* ``estimate(measurements, params, sigma)``: turns readings into an :class:`Estimate`.
+
+Strategies register themselves by name with :func:`register`; every module of this
+package is imported by :func:`available`, so adding a strategy is adding one module.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+
+from calibrators.measurements import Measurements
+from calibrators.registry import Registry
+from orthoglide_env.model.errors import (
+    ERROR_GROUPS,
+    ERROR_NAMES,
+    MachineParams,
+    error_group,
+)
+from orthoglide_env.model.kinematics import paper_posture
+
+PARAM_NAMES: tuple[str, ...] = ("drho_x", "drho_y", "drho_z", "dL_x", "dL_y", "dL_z")
+#: Which of the six paper parameters each ``--params`` choice frees (the others stay 0).
+PARAM_SETS: dict[str, tuple[int, ...]] = {
+    "paper6": (0, 1, 2, 3, 4, 5),
+    "full": (0, 1, 2, 3, 4, 5),
+    "drho": (0, 1, 2),
+    "dL": (3, 4, 5),
+}
+
+
+@dataclass
+class Estimate:
+    """A calibration result with its uncertainty and identifiability.
+
+    ``covariance``, ``fisher`` (for readings of unit variance: divide by sigma^2) and
+    ``crlb`` are over the free parameters, named in ``names``; ``theta`` holds every
+    parameter of the fit (the 27 machine errors, then four per stand mounting, named in
+    ``space``).  ``residuals`` are per reading for exact-model fits (``reading -
+    model - zero``, mm) and per difference for the paper's linear fit.  ``readings`` are
+    the readings the estimate was computed from.
+    """
+
+    strategy: str
+    params: str
+    drho: np.ndarray
+    dL: np.ndarray
+    covariance: np.ndarray
+    residuals: np.ndarray
+    singular_values: np.ndarray
+    crlb: np.ndarray
+    weak_directions: list[dict[str, float]]
+    n_readings: int
+    experiment_time_s: float
+    verification_rms_mm: float | None = None
+    iterations: int = 0
+    sigma: float = 0.0
+    fisher: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    readings: Measurements = field(default_factory=Measurements)
+    names: list[str] = field(default_factory=list)
+    space: list[str] = field(default_factory=list)
+    theta: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    prior: str = "none"
+    chi2: float | None = None
+    dof: int | None = None
+    covariance_scale: float = 1.0
+    warnings: list[str] = field(default_factory=list)
+    identifiable: list[str] = field(default_factory=list)
+    unidentifiable: list[str] = field(default_factory=list)
+    outliers: list[int] = field(default_factory=list)
+    holdout_rms_mm: float | None = None
+    #: Data information over the free parameters in units of their ``scale`` (the
+    #: identifiability analysis of exact-model fits).
+    information: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    scale: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: Covariance of (estimate - truth) over every parameter of ``space``, with the errors
+    #: the model leaves out when the data show them (what a TCP prediction needs).
+    error_covariance: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+
+    def __post_init__(self) -> None:
+        if not self.names:
+            self.names = [PARAM_NAMES[k] for k in PARAM_SETS[self.params]]
+        if not len(self.theta):
+            self.space = list(ERROR_NAMES)
+            self.theta = np.concatenate([self.drho, self.dL, np.zeros(len(ERROR_NAMES) - 6)])
+        if not self.error_covariance.size:
+            # A fit that does not say otherwise takes its model to be the machine.
+            idx = [self.space.index(n) for n in self.names]
+            self.error_covariance = np.zeros((len(self.space), len(self.space)))
+            self.error_covariance[np.ix_(idx, idx)] = self.covariance
+
+    @property
+    def std(self) -> dict[str, Any]:
+        """Standard deviation of every parameter in the machine-file schema (``None`` for
+        the ones the fit kept fixed), stands under ``"stands"``."""
+        full: list[float | None] = [None] * len(self.space)
+        for k, name in enumerate(self.names):
+            full[self.space.index(name)] = float(np.sqrt(max(self.covariance[k, k], 0.0)))
+        return schema(full, self.space)
+
+    @property
+    def estimate(self) -> dict[str, Any]:
+        """Every parameter's value in the machine-file schema, stands under ``"stands"``."""
+        return schema(self.theta.tolist(), self.space)
+
+    @property
+    def residual_rms_mm(self) -> float:
+        return float(np.sqrt(np.nanmean(self.residuals**2))) if self.residuals.size else 0.0
+
+    @property
+    def condition_number(self) -> float:
+        sv = self.singular_values
+        return float(sv[0] / sv[-1]) if sv.size and sv[-1] > 0 else float("inf")
+
+    @property
+    def machine(self) -> MachineParams:
+        """The estimated machine (every machine error the fit has)."""
+        return MachineParams.from_vector(self.theta[: len(ERROR_NAMES)])
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready; the derived ``std``, ``residual_rms_mm`` and ``condition_number``
+        are included for readers and ignored by :meth:`from_dict`."""
+        data = {f.name: getattr(self, f.name) for f in fields(self)}
+        for key, value in data.items():
+            if isinstance(value, np.ndarray):
+                data[key] = value.tolist()
+        data.update(readings=self.readings.to_dict(), std=self.std,
+                    residual_rms_mm=self.residual_rms_mm, condition_number=self.condition_number)
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Estimate:
+        kwargs = {f.name: data[f.name] for f in fields(cls) if f.name in data}
+        for key in _ARRAY_FIELDS:
+            if key in kwargs:
+                kwargs[key] = np.array(kwargs[key], dtype=float)
+        for key in ("covariance", "fisher", "information", "error_covariance"):
+            if key in kwargs and kwargs[key].size == 0:
+                kwargs[key] = np.zeros((0, 0))  # an empty matrix comes back from JSON as []
+        if "readings" in kwargs:
+            kwargs["readings"] = Measurements.from_dict(kwargs["readings"])
+        return cls(**kwargs)
+
+    def to_json(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+
+    @classmethod
+    def from_json(cls, path: str | Path) -> Estimate:
+        return cls.from_dict(json.loads(Path(path).read_text()))
+
+
+def schema(values: list, space: list[str]) -> dict[str, Any]:
+    """Per-parameter ``values`` (in the order of the names ``space``) in the machine-file
+    schema; stand parameters go under ``"stands"`` keyed by mounting."""
+    n = len(ERROR_NAMES)
+    out: dict[str, Any] = {}
+    start = 0
+    for key in ERROR_GROUPS:
+        size = len([name for name in ERROR_NAMES if error_group(name) == key])
+        block = values[start:start + size]
+        out[key] = block if key in ("drho", "dL") else [block[i:i + len(block) // 3]
+                                                       for i in range(0, size, size // 3)]
+        start += size
+    stands: dict[str, list] = {}
+    for name, value in zip(space[n:], values[n:], strict=True):
+        mounting = name.rsplit(".", 1)[0]
+        stands.setdefault(mounting, []).append(value)
+    if stands:
+        out["stands"] = stands
+    return out
+
+
+_ARRAY_FIELDS: tuple[str, ...] = ("drho", "dL", "covariance", "residuals", "singular_values",
+                                  "crlb", "fisher", "theta", "information", "scale",
+                                  "error_covariance")
+
+
+class Calibrator:
+    """Base class of strategies: ``collect`` then ``estimate``."""
+
+    name: ClassVar[str] = ""
+    #: Strategies with the same (non-empty) experiment key run the same experiment, so a
+    #: comparison may measure once and hand the readings to each estimator.
+    experiment: ClassVar[str] = ""
+
+    @property
+    def experiment_key(self) -> str:
+        """What identifies this strategy's experiment (its name unless it shares one)."""
+        return self.experiment or self.name
+
+    def collect(self, env: gym.Env) -> Measurements:
+        raise NotImplementedError
+
+    def estimate(self, data: Measurements, params: str = "paper6", sigma: float = 0.01,
+                 *, verify: bool = True, **options: Any) -> Estimate:
+        """Estimate from ``data``; ``options`` are the estimator's own (see
+        :meth:`calibrators.estimators.gauss_newton.GaussNewtonCalibrator.estimate`)."""
+        raise NotImplementedError
+
+    def run(self, env: gym.Env, params: str = "paper6", sigma: float | None = None,
+            *, verify: bool = True, **options: Any) -> Estimate:
+        """Run one experiment on ``env`` (already reset) and estimate.  ``sigma`` defaults
+        to the gauges' spec-sheet noise (``env.unwrapped.gauge_noise``)."""
+        if sigma is None:
+            sigma = env.unwrapped.gauge_noise.effective_sigma
+        return self.estimate(self.collect(env), params, sigma, verify=verify, **options)
+
+
+STRATEGIES: Registry[Calibrator] = Registry("strategy", "calibrators.estimators")
+register = STRATEGIES.register
+available = STRATEGIES.available
+get_strategy = STRATEGIES.get
+
+
+def check_params(params: str) -> tuple[int, ...]:
+    if params not in PARAM_SETS:
+        raise ValueError(f"unknown parameter set '{params}'; choose from {list(PARAM_SETS)}")
+    return PARAM_SETS[params]
+
+
+def move_and_read(env: gym.Env, posture: str) -> tuple[dict[str, np.ndarray], float]:
+    """Drive to a paper posture; returns the observation and the time it cost (s)."""
+    obs, reward, terminated, truncated, info = env.step(paper_posture(posture))
+    if terminated or truncated:
+        reason = info.get("collision") or "the episode's step limit"
+        raise RuntimeError(f"experiment stopped at {posture}: {reason}")
+    return obs, -float(reward)

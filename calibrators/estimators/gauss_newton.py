@@ -1,0 +1,330 @@
+"""``gauss-newton``: any experiment's readings, fitted with the exact model.
+
+The paper linearises the gauge differences around the nominal machine and fits six
+parameters.  This strategy fits the exact model (:mod:`orthoglide_env.model.reading_model`) with the
+batched damped Gauss-Newton solver of :mod:`calibrators.estimators.exact_fit`, over any parameter
+selection (``paper6``, ``extended`` with the gauge stands, groups, names), with priors or
+base parameters, and reports what the data could and could not determine, a chi-square
+test of the model, per-reading residuals with outliers flagged, and optional held-out
+readings.  Its experiment is the paper's (it shares ``collect``); its estimator reads any
+measurement file.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from calibrators.estimators.base import Estimate, Measurements, register
+from calibrators.estimators.exact_fit import CHI2_LEVEL, RETAIN, BatchFit, fit_batch
+from calibrators.estimators.paper_linear import PaperCalibrator, split_repetitions
+from calibrators.estimators.parameters import (
+    ParameterSpace,
+    act_together,
+    describe,
+    fixed_values,
+    prior_sigmas,
+    scales,
+    select,
+    sparse_basis,
+)
+from orthoglide_env.instruments.gauges import NOISE_FLOOR
+from orthoglide_env.lab.operations import TRACKER_SIGMA
+from orthoglide_env.model.errors import MachineParams
+from orthoglide_env.model.kinematics import direct
+from orthoglide_env.model.reading_model import Design, TrackerAxis, predict, station_of
+from orthoglide_env.scoring import best_rigid_motion
+
+#: A reading is an outlier when its residual exceeds this many robust standard deviations
+#: (1.4826 x the median absolute residual, or its instrument's sigma when larger): a normal
+#: reading does so with probability 6e-5, so 60 readings flag a good one once in 270 fits.
+OUTLIER_K: float = 4.0
+#: At most this fraction of the readings is flagged; beyond it the model, not the
+#: readings, is wrong, and the warning says so.
+MAX_OUTLIER_FRACTION: float = 0.05
+
+
+def design_of(data: Measurements) -> tuple[Design, np.ndarray]:
+    """The design and the readings of ``data``; tracker readings turned into the machine's
+    frame (:func:`align_tracker`)."""
+    if not len(data):
+        raise ValueError("no readings to fit")
+    design = Design.of([m.mounting for m in data.items], [m.gauge for m in data.items],
+                       np.array([m.rho for m in data.items], dtype=float))
+    return design, align_tracker(design, np.array([m.reading for m in data.items], dtype=float))
+
+
+def align_tracker(design: Design, values: np.ndarray) -> np.ndarray:
+    """Tracker readings in the machine's frame, to within a small rotation: each station's
+    points are fitted (best rigid motion) to where the nominal machine puts the TCP, and
+    turned back by that fit.  What is left of the station's rotation is of the order of
+    the machine's errors over its workspace, a few mrad, which its three ``rot``
+    parameters then fit; its offset is the three coordinates' zeros."""
+    out = values.copy()
+    space = design.space
+    for station in space.stations:
+        rows = {c: np.flatnonzero(
+            [station_of(design.mountings[m]) == station
+             and isinstance(design.specs[m], TrackerAxis) and design.specs[m].component == c
+             for m in design.mounting]) for c in range(3)}
+        if len({len(r) for r in rows.values()}) != 1 or not np.array_equal(
+                design.rho[rows[0]], design.rho[rows[1]]) or not np.array_equal(
+                design.rho[rows[0]], design.rho[rows[2]]):
+            raise ValueError(f"tracker station '{station}': every point needs its x, y and z "
+                             "readings, in the same order")
+        measured = np.stack([values[rows[c]] for c in range(3)], axis=-1)
+        nominal = direct(MachineParams(), design.rho[rows[0]])
+        if np.linalg.matrix_rank(nominal - nominal.mean(axis=0), tol=1.0) < 2:
+            raise ValueError(f"tracker station '{station}': its points must span a plane "
+                             "(at least three postures off one line) to fix its frame")
+        rotation, translation = best_rigid_motion(nominal[None], measured[None],
+                                                  np.ones((1, len(nominal)), bool))
+        aligned = measured @ rotation[0].T + translation[0]
+        for c in range(3):
+            out[rows[c]] = aligned[:, c]
+    return out
+
+
+@register
+class GaussNewtonCalibrator(PaperCalibrator):
+    """Same experiment as ``paper``; exact model, any parameter set."""
+
+    name = "gauss-newton"
+
+    def estimate(self, data: Measurements, params: str = "paper6", sigma: float = 0.01,
+                 *, verify: bool = True, prior: str = "auto",
+                 fix: dict[str, float] | None = None, keep_outliers: bool = False,
+                 holdout: float = 0.0, seed: int = 0, solver: str = "gauss-newton",
+                 tracker_sigma: float = TRACKER_SIGMA) -> Estimate:
+        """Fit ``data``; ``sigma`` is a dial gauge's noise, ``tracker_sigma`` a laser
+        tracker coordinate's (mm)."""
+        result = self.estimate_many([data], params, sigma, verify=verify, prior=prior, fix=fix,
+                                    keep_outliers=keep_outliers, holdout=holdout, seed=seed,
+                                    solver=solver, tracker_sigma=tracker_sigma)[0]
+        if isinstance(result, Exception):
+            raise result
+        return result
+
+    def estimate_many(self, datas: list[Measurements], params: str = "paper6",
+                      sigma: float = 0.01, *, verify: bool = True, prior: str = "auto",
+                      fix: dict[str, float] | None = None, keep_outliers: bool = False,
+                      holdout: float = 0.0, seed: int = 0, solver: str = "gauss-newton",
+                      tracker_sigma: float = TRACKER_SIGMA, explain: bool = True
+                      ) -> list[Estimate | Exception]:
+        """:meth:`estimate` of many experiments: those of one design (the same readings
+        of the same mountings at the same postures, as a fixed agent takes them on every
+        machine) are fitted together, in one batched solve.  A failure is returned in
+        place of its estimate, not raised.  ``explain=False`` leaves out the words on
+        which combinations the data determine and which not (``identifiable``,
+        ``unidentifiable``), which cost more than the fit on large designs."""
+        out: list[Estimate | Exception] = [ValueError("not fitted")] * len(datas)
+        groups: dict[tuple, list[int]] = {}
+        prepared = []
+        for k, data in enumerate(datas):
+            try:
+                design, values = design_of(data)
+            except ValueError as exc:
+                out[k] = exc
+                prepared.append(None)
+                continue
+            prepared.append((design, values))
+            key = (design.mountings, design.specs, design.rho.tobytes(),
+                   design.mounting.tobytes())
+            groups.setdefault(key, []).append(k)
+        options = {"params": params, "prior": prior, "fix": fix or {}, "holdout": holdout,
+                   "seed": seed, "solver": solver, "keep_outliers": keep_outliers,
+                   "sigma": sigma, "tracker_sigma": tracker_sigma, "verify": verify,
+                   "explain": explain}
+        for members in groups.values():
+            design = prepared[members[0]][0]
+            values = np.stack([prepared[k][1] for k in members])
+            try:
+                results = self._fit_group(design, values, [datas[k] for k in members],
+                                          **options)
+            except (ValueError, RuntimeError, np.linalg.LinAlgError) as exc:
+                results = [exc] * len(members)
+            for k, result in zip(members, results, strict=True):
+                out[k] = result
+        return out
+
+    def _fit_group(self, design: Design, values: np.ndarray, datas: list[Measurements], *,
+                   params: str, prior: str, fix: dict[str, float], holdout: float, seed: int,
+                   solver: str, keep_outliers: bool, sigma: float, tracker_sigma: float,
+                   verify: bool, explain: bool) -> list[Estimate | Exception]:
+        """Fit the experiments ``values`` (M, N) of one ``design`` together."""
+        space = design.space
+        free = select(params, space)
+        fixed = fixed_values(fix, space)
+        for name in fix:
+            free[space.names.index(name)] = False
+        if not free.any():
+            raise ValueError("every parameter of the selection is fixed: nothing to fit")
+        unmodelled = ~free & ~np.isin(np.arange(len(space)),
+                                      [space.names.index(n) for n in fix])
+        priors = prior_sigmas(prior, space, free)
+        scale = scales(space, priors)
+        needed = len(design.mountings) + int(np.sum(~np.isfinite(priors[free]))) + 1
+        if values.shape[1] < needed:
+            raise ValueError(f"{values.shape[1]} readings cannot determine "
+                             f"{len(design.mountings)} gauge zeros and the parameters "
+                             f"without a prior: at least {needed} are needed")
+        noise = np.where([isinstance(design.specs[m], TrackerAxis) for m in design.mounting],
+                         tracker_sigma, sigma)
+
+        def fit(rows: np.ndarray, mask: np.ndarray) -> BatchFit:
+            return fit_batch(design, values[rows], mask[rows], noise, free, fixed, priors,
+                             scale, unmodelled=unmodelled, solver=solver)
+
+        m_count = len(values)
+        held = _holdout(design, holdout, seed) if holdout else np.zeros(values.shape[1], bool)
+        mask = np.tile(~held, (m_count, 1))
+        results = fit(np.arange(m_count), mask).split()
+        outliers: list[list[int]] = [[] for _ in range(m_count)]
+        pending = np.arange(m_count)
+        while len(pending):
+            again = []
+            for m in pending:
+                if not results[m].converged[0] or len(outliers[m]) >= (
+                        MAX_OUTLIER_FRACTION * values.shape[1]):
+                    continue
+                # Residuals in units of their instrument's noise: gauges and a tracker differ.
+                residual = np.abs(results[m].residuals[0]) / np.maximum(noise, NOISE_FLOOR)
+                robust = 1.4826 * np.nanmedian(residual)
+                worst = int(np.nanargmax(residual))
+                if residual[worst] > OUTLIER_K * max(1.0, robust):
+                    outliers[m].append(worst)
+                    mask[m, worst] = False
+                    again.append(m)
+            pending = np.array(again, dtype=int)
+            if len(pending):
+                for m, result in zip(pending, fit(pending, mask).split(), strict=True):
+                    results[m] = result
+        if keep_outliers:
+            flagged = np.array([m for m in range(m_count) if outliers[m]], dtype=int)
+            for m in flagged:
+                mask[m, outliers[m]] = True
+            if len(flagged):
+                for m, result in zip(flagged, fit(flagged, mask).split(), strict=True):
+                    results[m] = result
+        out: list[Estimate | Exception] = []
+        # The information's eigenvalues, most first, of every machine in one call.
+        eigenvalues = np.linalg.eigvalsh(np.concatenate([r.information for r in results]))
+        eigenvalues = eigenvalues[:, ::-1]
+        for m, result in enumerate(results):
+            if not result.converged[0]:
+                out.append(RuntimeError("the exact-model fit did not converge"))
+            elif not (eigenvalues[m] >= RETAIN).any():
+                out.append(ValueError(f"the readings identify no combination of the "
+                                      f"parameters '{params}' (every one is below its "
+                                      "a-priori scale)"))
+            else:
+                out.append(self._estimate(datas[m], params, prior, sigma, design, values[m],
+                                          result, eigenvalues[m], mask[m], held, outliers[m],
+                                          verify, explain))
+        return out
+
+    def _estimate(self, data: Measurements, params: str, prior: str, sigma: float,
+                  design: Design, values: np.ndarray, result: BatchFit,
+                  eigenvalues: np.ndarray, mask: np.ndarray, held: np.ndarray,
+                  outliers: list[int], verify: bool, explain: bool) -> Estimate:
+        space = design.space
+        names = [n for n, f in zip(space.names, result.free, strict=True) if f]
+        idx = np.flatnonzero(result.free)
+        s = result.scale[idx]
+        info = result.information[0]
+        cov = result.scaled_covariance[0]
+        error_cov = result.error_covariance[0].copy()
+        error_cov[np.ix_(idx, idx)] = cov
+        theta = result.theta[0]
+        warnings = []
+        if result.misfit[0]:
+            beyond = [g not in ("drho", "dL", "tracker_rotation") for g in space.groups]
+            hint = ("try --params extended" if not result.free[beyond].any() else
+                    "look for outliers, a gauge that moved, or a slipping stand")
+            warnings.append(
+                f"the model does not explain the readings: chi2/dof = "
+                f"{result.chi2_dof[0]:.1f} (chi-square test at {CHI2_LEVEL:g}); error bars "
+                f"are scaled by sqrt(chi2/dof) = {np.sqrt(result.chi2_dof[0]):.2f}; {hint}")
+        if outliers:
+            where = ", ".join(_where(data, k) for k in outliers)
+            warnings.append(f"{len(outliers)} outlier reading(s) "
+                            f"{'kept' if mask[outliers].all() else 'left out'}: {where}")
+        residuals = result.residuals[0]
+        if held.any():
+            residuals = np.where(held, _held_out(design, values, theta, mask, held), residuals)
+        return Estimate(
+            strategy=self.name, params=params, drho=theta[:3], dL=theta[3:6], covariance=cov,
+            residuals=residuals, singular_values=np.sqrt(np.clip(eigenvalues, 0, None)),
+            crlb=np.sqrt(np.diag(result.covariance[0])), weak_directions=[],
+            n_readings=int(mask.sum()), experiment_time_s=data.experiment_time_s,
+            verification_rms_mm=self._verify(design, values, result, mask, data)
+            if verify else None,
+            iterations=int(result.iterations[0]), sigma=sigma,
+            # Physical units, for readings of unit variance (as the paper's fit reports it).
+            fisher=info / np.outer(s, s) * max(sigma, NOISE_FLOOR) ** 2,
+            readings=data, names=names, space=list(space.names), theta=theta, prior=prior,
+            chi2=float(result.chi2[0]), dof=int(result.dof[0]),
+            covariance_scale=float(result.covariance_scale[0]), warnings=warnings,
+            identifiable=[describe(d, names) for d in result.identifiable(0)] if explain else [],
+            unidentifiable=[act_together(d, names)
+                            for d in sparse_basis(result.unidentifiable(0))] if explain else [],
+            outliers=outliers, information=info, scale=s, error_covariance=error_cov,
+            holdout_rms_mm=float(np.sqrt(np.mean(residuals[held] ** 2))) if held.any() else None,
+        )
+
+    def _verify(self, design: Design, values: np.ndarray, result: BatchFit, mask: np.ndarray,
+                data: Measurements) -> float | None:
+        """Leave one repetition out: fit without it, predict its readings (each mounting's
+        zero from the rest); the RMS over every held-out reading (mm)."""
+        reps = np.array([m.repetition for m in data.items])
+        errors = []
+        if len(split_repetitions(data)) < 2:
+            return None  # nothing to hold out: one repetition is the whole experiment
+        for rep in split_repetitions(data):
+            test = mask & (reps == rep)
+            train = mask & ~test
+            try:
+                fit = fit_batch(design, values[None], train[None], result.sigma,
+                                result.free, result.theta[0], result.prior, result.scale)
+            except np.linalg.LinAlgError:
+                continue
+            if fit.converged[0]:
+                held = _held_out(design, values, fit.theta[0], train, test)[test]
+                errors.append(held[np.isfinite(held)])
+        errors = np.concatenate(errors) if errors else np.zeros(0)
+        return float(np.sqrt(np.mean(errors**2))) if errors.size else None
+
+
+def _held_out(design: Design, values: np.ndarray, theta: np.ndarray, train: np.ndarray,
+              test: np.ndarray) -> np.ndarray:
+    """Residuals of the ``test`` readings predicted by ``theta``, each mounting's zero taken
+    from its ``train`` readings (NaN where a mounting has none)."""
+    raw = values - predict(theta, design)
+    out = np.full(len(values), np.nan)
+    for k in range(len(design.mountings)):
+        mine = design.mounting == k
+        if (mine & train).any():
+            out[mine & test] = raw[mine & test] - raw[mine & train].mean()
+    return out
+
+
+def _holdout(design: Design, fraction: float, seed: int) -> np.ndarray:
+    """A random ``fraction`` of the readings, never a mounting's last remaining one."""
+    if not 0 < fraction < 1:
+        raise ValueError(f"--holdout must be a fraction in (0, 1), got {fraction:g}")
+    rng = np.random.default_rng(seed)
+    held = np.zeros(len(design), dtype=bool)
+    held[rng.permutation(len(design))[: round(fraction * len(design))]] = True
+    for k in range(len(design.mountings)):
+        mine = np.flatnonzero(design.mounting == k)
+        if held[mine].all():
+            held[mine[0]] = False
+    return held
+
+
+def _where(data: Measurements, k: int) -> str:
+    m = data.items[k]
+    place = f"line {m.line}" if m.line else f"reading {k + 1}"
+    return f"{place} ({m.gauge.slot}, {m.posture}, repetition {m.repetition})"
+
+
+__all__ = ["GaussNewtonCalibrator", "ParameterSpace", "design_of"]

@@ -1,0 +1,157 @@
+"""``paper``: the fixed-posture method of the paper, exactly.
+
+For each leg: Zero -> Max -> Min, three times, and a last Zero (section 4); the leg's two
+gauges are read at every posture.  The repetitions are averaged, the twelve differences
+(Max - Zero and Min - Zero of six gauges) form the linear system of eq. (10), solved with
+the Moore-Penrose pseudo-inverse for the full set or for drho or dL alone.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from calibrators.estimators.base import (
+    PARAM_NAMES,
+    PARAM_SETS,
+    Calibrator,
+    Estimate,
+    check_params,
+    move_and_read,
+    register,
+)
+from calibrators.estimators.differences import (
+    Differences,
+    MissingZeroError,
+    differences,
+    paper_matrix,
+)
+from calibrators.estimators.identifiability import analyse
+from calibrators.measurements import Measurement, Measurements
+from orthoglide_env.instruments.gauges import GaugeSpec
+
+REPETITIONS: int = 3
+#: Held-out sets of the verification: up to this many repetitions each is one; beyond,
+#: this many runs of consecutive ones, so that its cost stays linear in the readings.
+MAX_FOLDS: int = 10
+
+
+def leg_sequence(leg: int, repetitions: int = REPETITIONS) -> list[tuple[str, int]]:
+    """(posture, repetition) of the paper's sequence for one leg."""
+    name = "XYZ"[leg]
+    seq = [(p, r) for r in range(1, repetitions + 1) for p in ("Zero", f"{name}Max", f"{name}Min")]
+    return [*seq, ("Zero", repetitions + 1)]
+
+
+def split_repetitions(data: Measurements) -> list[int]:
+    """Repetitions that have Max/Min readings (the last Zero opens none)."""
+    return sorted({m.repetition for m in data.items if not m.is_zero})
+
+
+def folds(data: Measurements) -> list[set[int]]:
+    """The held-out sets of repetitions of the verification (see :data:`MAX_FOLDS`)."""
+    reps = split_repetitions(data)
+    if not reps:
+        return []
+    return [set(run.tolist()) for run in np.array_split(np.array(reps, dtype=int),
+                                                         min(len(reps), MAX_FOLDS))]
+
+
+@register
+class PaperCalibrator(Calibrator):
+    """The paper's procedure and its linear least-squares solution."""
+
+    name = "paper"
+    experiment = "paper-sequence"
+    repetitions = REPETITIONS
+
+    def collect(self, env: gym.Env) -> Measurements:
+        layout = env.unwrapped.gauge_layout
+        data = Measurements()
+        for leg in range(3):
+            gauges = [k for k, g in enumerate(layout) if g.leg == leg]
+            if not gauges:
+                raise ValueError(f"the paper's method needs gauges on the {'xyz'[leg]} leg")
+            for posture, rep in leg_sequence(leg, self.repetitions):
+                obs, seconds = move_and_read(env, posture)
+                data.experiment_time_s += seconds
+                data.items += [
+                    Measurement(layout[k], posture, rep, float(obs["gauges"][k]))
+                    for k in gauges if obs["valid"][k]
+                ]
+        return data
+
+    def solve(self, rows: Differences, free: tuple[int, ...], sigma: float
+              ) -> tuple[np.ndarray, np.ndarray, int]:
+        """Parameters (all six, fixed ones 0), their covariance over the free ones, and the
+        iteration count (0: a direct solve)."""
+        jac = paper_matrix(rows)[:, list(free)]
+        pinv = np.linalg.pinv(jac)
+        theta = np.zeros(6)
+        theta[list(free)] = pinv @ rows.values
+        return theta, sigma**2 * pinv @ rows.cov_unit @ pinv.T, 0
+
+    def jacobian(self, rows: Differences, theta: np.ndarray, free: tuple[int, ...]) -> np.ndarray:
+        """The identification Jacobian of the data, over the free parameters."""
+        return paper_matrix(rows)[:, list(free)]
+
+    def predict(self, rows: Differences, theta: np.ndarray) -> np.ndarray:
+        return paper_matrix(rows) @ theta
+
+    def estimate(self, data: Measurements, params: str = "paper6", sigma: float = 0.01,
+                 *, verify: bool = True, **options: Any) -> Estimate:
+        used = [name for name, given in (
+            ("prior", options.get("prior", "none") not in ("auto", "none")),
+            ("fix", bool(options.get("fix"))), ("holdout", bool(options.get("holdout"))),
+            ("keep_outliers", bool(options.get("keep_outliers"))),
+            ("solver", options.get("solver", "gauss-newton") != "gauss-newton")) if given]
+        if used:
+            raise ValueError(f"the paper's linear fit (eq. 10) takes no {', '.join(used)}: "
+                             "use --strategy gauss-newton")
+        if params not in PARAM_SETS:
+            raise ValueError(f"the paper's linear fit (eq. 10) estimates {list(PARAM_SETS)} "
+                             f"only, not '{params}': use --strategy gauss-newton")
+        free = check_params(params)
+        if any(not isinstance(m.gauge, GaugeSpec) for m in data.items):
+            raise ValueError("the paper's linear fit (eq. 10) reads dial gauges only: use "
+                             "--strategy gauss-newton for a tracker's readings")
+        rows = differences(data)
+        if len(rows) < len(free):
+            raise ValueError(f"only {len(rows)} usable differences for {len(free)} parameters: "
+                             "too many readings were not valid")
+        theta, cov, iterations = self.solve(rows, free, sigma)
+        ident = analyse(self.jacobian(rows, theta, free), rows.cov_unit, sigma,
+                        tuple(PARAM_NAMES[k] for k in free))
+        return Estimate(
+            strategy=self.name, params=params, drho=theta[:3], dL=theta[3:], covariance=cov,
+            residuals=rows.values - self.predict(rows, theta),
+            singular_values=ident.singular_values, crlb=ident.crlb,
+            weak_directions=ident.weak_directions, n_readings=len(data),
+            experiment_time_s=data.experiment_time_s,
+            verification_rms_mm=self.verify(data, free, sigma) if verify else None,
+            iterations=iterations, sigma=sigma, fisher=ident.fisher, readings=data,
+        )
+
+    def verify(self, data: Measurements, free: tuple[int, ...], sigma: float) -> float | None:
+        """Leave-one-repetition-out (runs of repetitions beyond :data:`MAX_FOLDS`): fit
+        without them, predict their differences; the RMS over every held-out difference
+        (mm).  None with fewer than two repetitions.  A held-out set that cannot be fitted
+        or predicted (too few rows, a mounting without its Zero) is skipped."""
+        held_out = folds(data)
+        if len(held_out) < 2:
+            return None
+        occurring = {m.repetition for m in data.items}
+        errors = []
+        for held in held_out:
+            try:
+                train = differences(data, occurring - held)
+                test = differences(data, held)
+            except MissingZeroError:
+                continue
+            if len(train) < len(free) or not len(test):
+                continue
+            theta, _, _ = self.solve(train, free, sigma)
+            errors.append(test.values - self.predict(test, theta))
+        return float(np.sqrt(np.mean(np.concatenate(errors) ** 2))) if errors else None

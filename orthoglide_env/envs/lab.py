@@ -1,0 +1,274 @@
+"""The lab as a Gymnasium environment: an episode is a whole calibration experiment.
+
+Where ``OrthoglideCalibration-v0`` only moves the machine, ``OrthoglideLab-v0`` lets an
+agent do what a technician does: move and read, lift and engage gauges, re-mount a stand
+at another slot, read a laser tracker, and say when it is done, each at the cost of the
+lab's time table (:mod:`orthoglide_env.lab.operations`).
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+
+from orthoglide_env.envs.calibration import check_seed
+from orthoglide_env.instruments.gauges import (
+    DEFAULT_RESOLUTION,
+    DEFAULT_SIGMA,
+    DEFAULT_TRAVEL,
+    Gauge,
+)
+from orthoglide_env.lab.engine import (
+    ACCURACY_UNIT_MM,
+    REWARDS,
+    Estimator,
+    ExactMachines,
+    LabBatch,
+    LabSettings,
+    Record,
+    SimulatedMachine,
+    check_actions,
+    step_info,
+)
+from orthoglide_env.lab.operations import PAPER_SLOTS, TRACKER_SIGMA
+from orthoglide_env.model.errors import DEFAULT_PRESET, MachineParams, check_validity
+
+__all__ = ["ACCURACY_UNIT_MM", "REWARDS", "Estimator", "OrthoglideLabEnv", "Record"]
+
+#: The one episode of a lone lab, in its batch.
+_ROW = np.zeros(1, dtype=np.intp)
+
+
+class OrthoglideLabEnv(gym.Env):
+    """A calibration lab around a virtual Orthoglide: gauge stands, a tracker, a clock.
+
+    Each episode draws a machine (or takes one from ``reset(options={"machine": ...})``)
+    and starts at the Zero posture with ``stands`` gauge stands mounted at the paper's
+    slots (mid-leg, both axes of each leg; installed with the preset's errors, zeroed at
+    Zero), plunger down.  The agent then works until it stops or the time budget runs out.
+
+    Action space (``Dict``)
+    -----------------------
+    =====  ===========================  =====================================  ==========
+    key    space                        meaning                                used by
+    =====  ===========================  =====================================  ==========
+    op     Discrete(5)                  0 move, 1 lift, 2 engage, 3 re-mount,  every step
+                                        4 stop (:class:`~orthoglide_env.lab.operations.Op`)
+    rho    Box([-100, 60] mm, (3,))     joint targets, control coordinates     move
+    stand  Discrete(stands)             which stand                            lift, engage,
+                                                                               re-mount
+    slot   Discrete(len(SLOTS))         where to (:data:`~orthoglide_env.lab.operations.  re-mount
+                                        SLOTS`, names in ``SLOT_NAMES``)
+    =====  ===========================  =====================================  ==========
+
+    ``move`` drives to ``rho``, settles and reads every engaged gauge and the tracker.
+    A slot is a place on a bar, on a carriage (across its drive) or on a face of the
+    platform (:data:`~orthoglide_env.lab.operations.SLOTS`); a platform gauge reads the platform's
+    displacement, so it allows moves toward its stand only within its travel: lift it
+    before larger ones.
+    ``lift`` raises a plunger by its lever: no reading, nothing can press it, and its zero
+    is kept. ``engage`` lets it down again (a bar pressing it past its travel there is an
+    overtravel). ``re-mount`` drives to Zero, moves the stand to the slot with new
+    installation errors, sets the gauge at mid-travel and zeroes it, and reads at Zero
+    (that reading opens the new mounting). An action outside its space raises
+    ``ValueError`` and changes nothing.  A well-formed operation that cannot be done
+    (lifting or engaging a stand that is not mounted, re-mounting onto a slot another stand
+    holds, driving where the machine cannot assemble) is refused: it costs the 3 s of a
+    lever flick, changes nothing else, and ``info["refused"]`` says why.
+
+    Observation space (``Dict``)
+    ----------------------------
+    =============  ==================================  ====  ============================
+    key            meaning                             unit  range
+    =============  ==================================  ====  ============================
+    gauges         reading of each stand's gauge        mm   [-travel, travel]
+    valid          1 where that reading is valid        -    {0, 1}
+    engaged        1 where the plunger is down          -    {0, 1}
+    slot           slot index of each stand, or        -    {0 .. len(SLOTS)}
+                   len(SLOTS) when not mounted
+    mounting       how many times the stand was         -    [0, 1e6]
+                   mounted (a new zero each time)
+    joints         encoder readings                     mm   [-101, 61]
+    tracker        reflector in the tracker's frame     mm   [-1e5, 1e5] (0 without one)
+    tracker_valid  1 when the tracker read              -    {0, 1}
+    time           seconds used so far                  s    [0, inf)
+    =============  ==================================  ====  ============================
+
+    A reading that is not valid is 0.0: use ``valid``.  Every reading is also written to
+    ``records`` (the lab notebook: instrument, mounting, posture, value), which agents and
+    estimators read; the machine's truth stays on ``true_machine`` for scoring only.
+
+    Reward (``reward=`` at construction)
+    ------------------------------------
+    ============  ==============================================================
+    mode          reward
+    ============  ==============================================================
+    time          minus the seconds of the step
+    accuracy      minus ``time_weight`` per hour on every step; at the end, minus
+                  the TCP error RMS after the best-fit rigid motion (over the
+                  scoring grid) of the machine the ``estimator`` makes of the
+                  episode's records, in units of 0.01 mm (the nominal machine's
+                  error when the estimator fails)
+    information   the gain in log det(I + F) of the step, per second of it, where F
+                  is the information of the records about every parameter in units
+                  of its a-priori size (the design's Bayesian D-criterion at the
+                  nominal machine: combinations the records cannot see add nothing)
+    ============  ==============================================================
+
+    Termination and truncation
+    --------------------------
+    ``terminated`` on ``stop``, or when moving parts that must never meet touch
+    (``info["collision"]``).  ``truncated`` once the time used reaches ``budget_s``.
+
+    Info
+    ----
+    ``op``, ``step_time_s``, ``overtravel`` (stands pushed past their travel on this step),
+    ``collision``, ``refused`` ("" or why the operation was refused); at the end also
+    ``is_success`` (the predicted TCP error after the best-fit rigid motion, from the
+    records' information at the nominal machine, is at most ``success_mm``) and
+    ``predicted_tcp_rigid_mm``.
+
+    Kwargs: ``errors`` (preset), ``gauge_sigma``, ``gauge_resolution`` (mm), ``backend``
+    (``exact`` or ``pybullet``), ``stands`` (default 6), ``tracker`` (a laser tracker on
+    the platform, read at every move), ``tracker_sigma`` (mm), ``budget_s``, ``reward``,
+    ``estimator`` (for ``accuracy``: records and sigma to a ``MachineParams``, e.g.
+    ``calibrators.lab.make_estimator()``), ``time_weight``, ``success_mm``, ``travel``.
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
+
+    def __init__(
+        self,
+        errors: str = DEFAULT_PRESET,
+        gauge_sigma: float = DEFAULT_SIGMA,
+        gauge_resolution: float = DEFAULT_RESOLUTION,
+        backend: str = "exact",
+        stands: int = len(PAPER_SLOTS),
+        tracker: bool = False,
+        tracker_sigma: float = TRACKER_SIGMA,
+        budget_s: float = 3600.0,
+        reward: str = "time",
+        estimator: Estimator | None = None,
+        time_weight: float = 1.0,
+        success_mm: float = 0.01,
+        travel: float = DEFAULT_TRAVEL,
+    ) -> None:
+        settings = LabSettings.check(errors, gauge_sigma, gauge_resolution, backend, stands,
+                                     tracker, tracker_sigma, budget_s, reward, estimator,
+                                     time_weight, success_mm, travel)
+        self.settings = settings
+        self.preset, self.noise = settings.preset, settings.noise
+        self.backend_name, self.n_stands, self.tracker = backend, settings.stands, settings.tracker
+        self.tracker_sigma, self.budget_s, self.reward_mode = tracker_sigma, budget_s, reward
+        self.estimator, self.time_weight, self.success_mm = estimator, time_weight, success_mm
+        self.travel = settings.travel
+        self.action_space, self.observation_space = settings.spaces()
+        # The lab's rules live in the batch (orthoglide_env.lab.engine): one lab is a batch
+        # of one episode, the native vector env a batch of many.
+        self._batch = LabBatch(settings, 1, ExactMachines() if backend == "exact"
+                               else SimulatedMachine())
+        self._started = False
+
+    # -- the episode, as the lab's notebook and clock show it -------------------------------
+    @property
+    def records(self) -> list[Record]:
+        """The lab notebook: every reading of the episode, in order."""
+        return self._batch.notebooks[0].records
+
+    @property
+    def _time(self) -> float:
+        """Seconds used so far."""
+        return float(self._batch.time[0])
+
+    # -- ground truth, for the scorer only -------------------------------------------------
+    @property
+    def true_machine(self) -> MachineParams:
+        return self._require()[0]
+
+    @property
+    def true_gauges(self) -> list[Gauge]:
+        """Every installation of the episode, in mounting order (scoring only)."""
+        return self._batch.true_gauges(0)
+
+    @property
+    def true_tracker_frame(self) -> tuple[np.ndarray, np.ndarray]:
+        """The tracker station's rotation and position (scoring only)."""
+        return self._batch.tracker_rotation[0].copy(), self._batch.tracker_position[0].copy()
+
+    def tcp(self) -> np.ndarray:
+        """The true TCP (mm), as the machine shows it (scoring and fidelity checks only)."""
+        batch = self._batch
+        self._require()
+        return batch.backend.look(_ROW, batch.machines, batch.gauges[_ROW], batch.rho[_ROW],
+                                  batch.tcp[_ROW], batch.engaged[_ROW]).tcp[0]
+
+    # -- Gymnasium API --------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
+              ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        # Every option is checked before anything changes: a refused reset leaves the
+        # episode (and its random stream) as it was.
+        check_seed(seed)
+        if not isinstance(options, dict | None):
+            raise ValueError("reset options must be a dict")
+        given = reset_machine(options)
+        super().reset(seed=seed)
+        obs = self._batch.reset(_ROW, [self.np_random], given)
+        self._started = True
+        return _first(obs), step_info("reset", 0.0, [], "")
+
+    def step(self, action: dict[str, Any]
+             ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        self._require()
+        op, rho, stand, slot = (part[None] for part in check_actions(action, (), self.n_stands))
+        result = self._batch.step(_ROW, op, rho, stand, slot)
+        return (_first(result.obs), float(result.reward[0]), bool(result.terminated[0]),
+                bool(result.truncated[0]), result.info(0))
+
+    def close(self) -> None:
+        self._batch.backend.close()
+
+    def _require(self) -> MachineParams:
+        if not self._started:
+            raise RuntimeError("call reset() before using the environment")
+        return self._batch.require()
+
+    # -- what the records say ------------------------------------------------------------------
+    def final_tcp_rigid_mm(self) -> float:
+        """TCP error RMS after the best-fit rigid motion of the machine the episode's
+        estimator makes of its records (scoring against the truth)."""
+        self._require()
+        return self._batch.final_tcp_rigid_mm(0)
+
+    def information(self) -> tuple[np.ndarray, list[str]]:
+        """The records' information about every parameter they involve, in units of each
+        parameter's scale (see ``information`` reward), and the parameters' names."""
+        return self._batch.notebooks[0].information()
+
+    def predicted_tcp_rigid_mm(self) -> float:
+        """TCP error RMS after the best-fit rigid motion that the records' information
+        predicts (at the nominal machine, a priori sizes from the realistic preset)."""
+        return self._batch.notebooks[0].predicted_tcp_rigid_mm()
+
+
+def reset_machine(options: dict[str, Any] | None) -> MachineParams | None:
+    """The machine of a lab's reset options (None: draw one), or ``ValueError``."""
+    options = dict(options or {})
+    unknown = sorted(set(options) - {"machine"})
+    if unknown:
+        raise ValueError(f"unknown reset option(s) {unknown}; allowed: machine")
+    given = options.get("machine")
+    if isinstance(given, dict):
+        return MachineParams.from_dict(given)
+    if isinstance(given, MachineParams):
+        return check_validity(given)
+    if given is not None:
+        raise ValueError("reset option 'machine' must be a dict in the machine file schema "
+                         "or a MachineParams")
+    return None
+
+
+def _first(obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The lone episode's row of a batch's observation."""
+    return {key: value[0] for key, value in obs.items()}

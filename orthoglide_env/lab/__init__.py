@@ -1,0 +1,1 @@
+"""The lab: its operations and time table, and the engine that runs them on arrays."""

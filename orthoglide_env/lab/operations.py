@@ -1,0 +1,112 @@
+"""The lab: what a technician can do around the machine, and what each thing costs.
+
+One place for the facts of the calibration lab:
+
+* :data:`TIME`: the seconds every operation takes (the time table);
+* :data:`SLOTS`: where a gauge stand can be mounted (the slot catalogue);
+* :class:`Op`: the operations of the lab env's action;
+* the laser tracker's specification.
+
+The numbers are those a lab would recognise for a small prototype; change them here and
+every env, agent and benchmark follows.
+
+======================  ========  ==========================================================
+operation               seconds   why
+======================  ========  ==========================================================
+drive                   |drho|/20 carriages move together at a careful 20 mm/s
+settle and read         5         the machine settles, the operator reads the dials
+lift / engage a gauge   3         one flick of the plunger's lever
+re-mount a stand        120       loosen the magnetic base, move it, aim at the bar at the
+                                  Zero posture (the machine drives there first), slide the
+                                  gauge to mid-travel, zero the dial
+tracker point           3         the tracker's averaged reading of the settled reflector
+overtravel              120       an engaged gauge pushed past its travel: check it,
+                                  re-install and re-zero it (it reads nothing until then)
+======================  ========  ==========================================================
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+
+from orthoglide_env.instruments.gauges import PAPER_LAYOUT, GaugeSpec
+
+
+@dataclass(frozen=True)
+class TimeTable:
+    """Seconds of every lab operation (see the module's table)."""
+
+    drive_speed_mm_s: float = 20.0
+    settle_and_read_s: float = 5.0
+    lift_s: float = 3.0
+    remount_s: float = 120.0
+    tracker_point_s: float = 3.0
+    overtravel_s: float = 120.0
+
+    def move(self, start: np.ndarray, target: np.ndarray) -> np.ndarray:
+        """Seconds to drive from ``start`` to ``target`` (axes together) and settle; shapes
+        ``(..., 3)``, one time per leading index."""
+        travel = np.max(np.abs(np.asarray(target, float) - np.asarray(start, float)), axis=-1)
+        return travel / self.drive_speed_mm_s + self.settle_and_read_s
+
+
+TIME = TimeTable()
+
+#: Places along a bar (fraction from the platform end) where a stand can aim.  Closer to
+#: either end the tip leaves the bar's flat face as the leg turns.
+SLOT_POSITIONS: tuple[float, ...] = (0.2, 0.35, 0.5, 0.65, 0.8)
+#: The slot catalogue (kinds of target in :mod:`orthoglide_env.instruments.gauges`):
+#:
+#: * every bar (leg), both measuring axes across it, every position (``x-leg/y@0.5``);
+#: * every carriage, both measuring axes across its drive (``x-carriage/y``);
+#: * the platform's three faces (``platform/x``).
+#:
+#: The bar slots come first, in their historical order, so their indices are stable.
+SLOTS: tuple[GaugeSpec, ...] = (
+    tuple(GaugeSpec(leg, axis, at)
+          for leg in range(3) for axis in range(3) if axis != leg for at in SLOT_POSITIONS)
+    + tuple(GaugeSpec.carriage(leg, axis) for leg in range(3) for axis in range(3)
+            if axis != leg)
+    + tuple(GaugeSpec.platform(axis) for axis in range(3))
+)
+SLOT_NAMES: tuple[str, ...] = tuple(s.slot for s in SLOTS)
+
+
+def slot_index(name_or_spec: str | GaugeSpec) -> int:
+    """Index in :data:`SLOTS` of a slot given by name (``x-leg/y@0.5``, ``x-carriage/y``,
+    ``platform/x``) or spec."""
+    key = name_or_spec if isinstance(name_or_spec, str) else name_or_spec.slot
+    try:
+        return SLOT_NAMES.index(key)
+    except ValueError:
+        raise ValueError(f"no slot '{key}'; slots are bars x/y/z with a measuring axis across "
+                         f"them at {SLOT_POSITIONS} (e.g. '{SLOT_NAMES[0]}'), carriages with "
+                         "an axis across their drive (e.g. 'x-carriage/y') and platform faces "
+                         "(e.g. 'platform/x')") from None
+
+
+#: The stands of the paper's experiment, mounted at the start of an episode.
+PAPER_SLOTS: tuple[int, ...] = tuple(slot_index(s) for s in PAPER_LAYOUT)
+
+#: Laser tracker: repeatability of a coordinate (mm), and how its station is placed
+#: relative to the machine (unknown to the lab: 6 nuisance parameters): any rotation,
+#: and a position about two metres off.
+TRACKER_SIGMA: float = 0.005
+TRACKER_DISTANCE: float = 2000.0
+
+
+class Op(IntEnum):
+    """Operations of the lab env's action."""
+
+    MOVE = 0  # drive to ``rho``, settle, read every engaged gauge (and the tracker)
+    LIFT = 1  # lift gauge ``stand``'s plunger: it reads nothing and cannot be pressed
+    ENGAGE = 2  # let it down on its bar again (same zero: the stand did not move)
+    REMOUNT = 3  # move stand ``stand`` to ``slot`` (at Zero), new installation, new zero
+    STOP = 4  # the experiment is over
+
+
+OP_NAMES: tuple[str, ...] = tuple(op.name.lower() for op in Op)
+

@@ -1,0 +1,1 @@
+"""The machine's model: nominal design, geometric errors, exact kinematics, collisions."""

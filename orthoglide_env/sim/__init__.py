@@ -1,0 +1,1 @@
+"""The simulator: the URDF writer and the PyBullet closed-chain machine."""
