@@ -32,9 +32,10 @@ def add(p: argparse.ArgumentParser) -> None:
                    help="batched damped Gauss-Newton, or scipy's least_squares as a cross-check "
                         "(default: %(default)s)")
     p.add_argument("--keep-outliers", action="store_true",
+                   # argparse %-formats help text: a percent sign is written twice.
                    help=f"flag readings beyond {OUTLIER_K:g} robust sigma but keep them in the "
                         f"fit (default: leave them out, at most "
-                        f"{MAX_OUTLIER_FRACTION:.0%} of the readings)")
+                        f"{100 * MAX_OUTLIER_FRACTION:g}%% of the readings)")
     p.add_argument("--holdout", type=float, default=0.0, metavar="FRACTION",
                    help="fit on the other readings and report the prediction residual of this "
                         "random fraction (default: none)")
