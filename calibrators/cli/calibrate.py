@@ -56,9 +56,9 @@ def _z_rms(est: Estimate, data: Measurements, env: gym.Env) -> float | None:
 
 
 def run(args: argparse.Namespace) -> None:
-    strategy = get_strategy(args.strategy)
+    get_strategy(args.strategy)  # an unknown one is refused before the experiment
     agent = get_agent(args.agent)
-    options = estimator_options.options(args)
+    estimator_options.options(args)  # and so are bad options
     machine, preset, sigma, resolution = _setup(args)
     env = gym.make(orthoglide_env.LAB_ENV_ID, errors=preset, gauge_sigma=sigma,
                    gauge_resolution=resolution, backend=args.backend,
@@ -72,7 +72,7 @@ def run(args: argparse.Namespace) -> None:
         if args.save_measurements:
             data.write(args.save_measurements)
         lab = env.unwrapped
-        est = strategy.estimate(data, args.params, lab.noise.effective_sigma, **options)
+        est = estimator_options.estimate(args, data, lab.noise.effective_sigma)
         emit(report(est, lab.true_machine, _z_rms(est, data, env)), args.json)
     finally:
         env.close()

@@ -15,6 +15,7 @@ from tqdm import tqdm
 from calibrators.agents import available as agents_available
 from calibrators.agents import get_agent
 from calibrators.cli.common import UsageError
+from calibrators.cli.estimator_options import DEFAULT_STRATEGY
 from calibrators.compare import Config, Trial, run, summary, verify_pybullet
 from calibrators.engines import ENGINES, RAY_INSTALL_HINT, ray_available
 from calibrators.experiment import ESTIMATORS
@@ -188,6 +189,10 @@ def _print(rows: list[dict], config: Config, machines: int, seconds: float,
         if r["failed"]:
             print(f"{r['agent']} x {r['estimator']}: {r['failed']} of {r['machines']} failed "
                   f"({r['failure']})")
+    exact = [name for name, spec in ESTIMATORS.items() if spec.strategy == DEFAULT_STRATEGY]
+    if any(r["failed"] and r["estimator"] not in exact for r in rows):
+        print(f"the exact-model estimators read any agent's readings: --estimators "
+              f"{','.join(exact)}")
 
 
 def _write(trials: list[Trial], rows: list[dict], out: Path, config: Config) -> list[Path]:

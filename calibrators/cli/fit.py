@@ -9,7 +9,6 @@ import numpy as np
 from calibrators.cli import estimator_options
 from calibrators.cli.common import UsageError
 from calibrators.cli.output import emit, report
-from calibrators.estimators.base import get_strategy
 from calibrators.measurements import Measurements
 from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 
@@ -27,8 +26,7 @@ def run(args: argparse.Namespace) -> None:
     if args.to_csv:
         data.to_csv(args.to_csv)
     sigma = float(np.hypot(args.sigma, args.resolution / np.sqrt(12)))
-    est = get_strategy(args.strategy).estimate(data, args.params, sigma,
-                                               **estimator_options.options(args))
+    est = estimator_options.estimate(args, data, sigma)
     emit(report(est, None), args.json)
 
 

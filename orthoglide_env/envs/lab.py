@@ -134,7 +134,7 @@ class OrthoglideLabEnv(gym.Env):
     (``exact`` or ``pybullet``), ``stands`` (default 6), ``tracker`` (a laser tracker on
     the platform, read at every move), ``tracker_sigma`` (mm), ``budget_s``, ``reward``,
     ``estimator`` (for ``accuracy``: records and sigma to a ``MachineParams``, e.g.
-    ``calibrators.lab.make_estimator()``), ``time_weight``, ``success_mm``, ``travel``.
+    ``calibrators.experiment.make_estimator()``), ``time_weight``, ``success_mm``, ``travel``.
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": []}

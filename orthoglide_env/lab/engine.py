@@ -122,7 +122,7 @@ class LabSettings:
             raise ValueError(f"unknown reward '{reward}'; choose from {list(REWARDS)}")
         if reward == "accuracy" and estimator is None:
             raise ValueError("reward 'accuracy' needs an estimator: records -> machine, e.g. "
-                             "calibrators.lab.make_estimator()")
+                             "calibrators.experiment.make_estimator()")
         if not 1 <= int(stands) <= len(SLOTS):
             raise ValueError(f"stands must be between 1 and {len(SLOTS)}, got {stands}")
         for name, value in (("budget_s", budget_s), ("success_mm", success_mm),
