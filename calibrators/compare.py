@@ -20,6 +20,7 @@ from collections.abc import Callable
 from contextlib import closing
 from dataclasses import asdict, dataclass, field
 from functools import cache, partial
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -89,12 +90,50 @@ class Trial:
     def key(self) -> tuple[str, str, int]:
         return self.agent, self.estimator, self.machine
 
+    @property
+    def names(self) -> tuple[str, ...]:
+        """The machine errors that ``error`` and ``std`` hold, in order (none if failed)."""
+        return ERROR_NAMES if self.error else ()
+
     def to_json(self) -> str:
-        return json.dumps(asdict(self), allow_nan=True)
+        """One line of strict JSON: ``names`` beside ``error`` and ``std``, and ``null``
+        where a number is not one (NaN: the std of an error the fit held fixed, or what a
+        failed trial never had)."""
+        return json.dumps(_null_for_nan({**asdict(self), "names": list(self.names)}),
+                          allow_nan=False)
 
     @classmethod
     def from_json(cls, line: str) -> Trial:
-        return cls(**json.loads(line))
+        """A line of :meth:`to_json`, or of an earlier version (NaN for null, no
+        ``names``)."""
+        data = json.loads(line)
+        names = data.pop("names", None)
+        trial = cls(**_nan_for_null(data))
+        if names is not None and tuple(names) != trial.names:
+            raise ValueError("the trial's error names are not this version's machine errors")
+        return trial
+
+
+def _null_for_nan(value: Any) -> Any:
+    """``value`` with every NaN float, at any depth, replaced by ``None``."""
+    if isinstance(value, float):
+        return None if value != value else value
+    if isinstance(value, dict):
+        return {k: _null_for_nan(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_null_for_nan(v) for v in value]
+    return value
+
+
+def _nan_for_null(value: Any) -> Any:
+    """The inverse of :func:`_null_for_nan`: a trial holds ``None`` nowhere else."""
+    if value is None:
+        return float("nan")
+    if isinstance(value, dict):
+        return {k: _nan_for_null(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_nan_for_null(v) for v in value]
+    return value
 
 
 @cache
