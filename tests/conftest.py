@@ -8,7 +8,7 @@ import pytest
 from orthoglide_env.model.errors import L_NOMINAL, RHO_MAX, RHO_MIN
 
 #: Rows of eq. (10) as (posture, index of the gauge in the paper layout).  The paper's
-#: labels of rows 9-12 are misprinted (DESIGN.md); these are the physical ones.
+#: labels of rows 9-12 are misprinted (docs/calibrators.md); these are the physical ones.
 EQ10_ROWS: tuple[tuple[str, int], ...] = (
     ("YMax", 2), ("XMax", 0), ("YMin", 2), ("XMin", 0),
     ("ZMax", 5), ("YMax", 3), ("ZMin", 5), ("YMin", 3),

@@ -26,8 +26,8 @@ from orthoglide_env.model.errors import L_NOMINAL, RHO_MAX, RHO_MIN, MachinePara
 from orthoglide_env.model.kinematics import direct
 
 #: Differences share a dense covariance (estimators whiten with its Cholesky factor): this
-#: many rows take 130 MB and seconds; a design needs a few hundred (DESIGN.md: 40
-#: mountings of 15 postures).
+#: many rows take 130 MB and seconds; a design needs a few hundred (40 mountings of 15
+#: postures: 600).
 MAX_DIFFERENCES: int = 4096
 
 
