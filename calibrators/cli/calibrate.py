@@ -101,8 +101,8 @@ def add(sub: argparse._SubParsersAction) -> None:
                             f"machine, 0 with --machine), with a {DEFAULT_RESOLUTION} mm dial")
     estimator_options.add(p)
     p.add_argument("--agent", default="paper",
-                   help=f"who works in the lab: {', '.join(agents_available())} "
-                        "(default: %(default)s)")
+                   help=f"who works in the lab: {', '.join(agents_available())}, or "
+                        "policy:FILE, a learned policy (default: %(default)s)")
     p.add_argument("--budget", type=float, default=3600.0,
                    help="lab time budget (s, default %(default)s)")
     p.add_argument("--save-measurements", metavar="FILE.csv",
