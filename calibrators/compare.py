@@ -39,6 +39,7 @@ from calibrators.experiment import (
     run_episodes,
 )
 from orthoglide_env.envs.lab import Record
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import ERROR_NAMES, MachineParams
 from orthoglide_env.model.reading_model import ParameterSpace, default_scales
 from orthoglide_env.scoring import FRAMES, score_batch, uncalibrated_errors
@@ -63,6 +64,8 @@ class Config:
     #: The estimator re-run at fractions of each episode's time for the accuracy-versus-time
     #: curve ("": no curve).
     curve_estimator: str = ""
+    #: The machines' design.
+    design: MachineDesign = PROTOTYPE
 
     def machine_seed(self, index: int) -> int:
         return self.seed * 1_000_003 + index
@@ -228,12 +231,13 @@ def _curves(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
     then the full estimate (``estimates``: the fits of the whole episodes)."""
     points: list[list[list[float]]] = [[] for _ in episodes]
     for fraction in (*CURVE_FRACTIONS, 1.0):
-        datas = [measurements_of(e.records, e.time_s, until_s=fraction * e.time_s)
+        datas = [measurements_of(e.records, e.time_s, until_s=fraction * e.time_s,
+                                 design=e.truth.design)
                  for e in episodes]
         fitted = estimates if fraction == 1.0 else estimate_many(datas, name,
                                                                  episodes[0].sigma)
-        models = [MachineParams() if isinstance(est, Exception) else est.machine
-                  for est in fitted]
+        models = [MachineParams(design=e.truth.design) if isinstance(est, Exception)
+                  else est.machine for e, est in zip(episodes, fitted, strict=True)]
         reports = score_batch(models, [e.truth for e in episodes], before=_before(episodes))
         for k, (episode, report) in enumerate(zip(episodes, reports, strict=True)):
             points[k].append([fraction * episode.time_s, report.tcp_after.rigid.rms])
@@ -273,7 +277,7 @@ def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]
             mine = [e for e in episodes if name in todo[e.machine]]
             if not mine:
                 continue
-            datas = [measurements_of(e.records, e.time_s) for e in mine]
+            datas = [measurements_of(e.records, e.time_s, design=e.truth.design) for e in mine]
             estimates = estimate_many(datas, name, mine[0].sigma)
             curves = (_curves(mine, name, estimates) if name == config.curve_estimator
                       else [[] for _ in mine])
@@ -290,7 +294,8 @@ def _episodes(config: Config, agent_name: str, runs: list[int], batched: bool
     rngs = [np.random.default_rng([seed, 1]) for seed in seeds]
     kwargs = {"errors": config.errors, "gauge_sigma": config.sigma,
               "gauge_resolution": config.resolution, "backend": config.backend,
-              "tracker": get_agent(agent_name).needs_tracker, "budget_s": config.budget_s}
+              "tracker": get_agent(agent_name).needs_tracker, "budget_s": config.budget_s,
+              "design": config.design}
     if batched and config.backend == "exact":
         envs = gym.make_vec(orthoglide_env.LAB_ENV_ID, num_envs=len(runs),
                             vectorization_mode="vector_entry_point", **kwargs)
@@ -402,7 +407,8 @@ def verify_pybullet(config: Config, machines: int) -> dict[str, float]:
             agent = get_agent(name)
             envs = [gym.make(orthoglide_env.LAB_ENV_ID, errors=config.errors, gauge_sigma=0.0,
                              gauge_resolution=0.0, backend=backend, tracker=agent.needs_tracker,
-                             budget_s=config.budget_s) for backend in ("exact", "pybullet")]
+                             budget_s=config.budget_s, design=config.design)
+                    for backend in ("exact", "pybullet")]
             try:
                 seed = config.machine_seed(index)
                 observation, info = envs[0].reset(seed=seed)

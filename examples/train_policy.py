@@ -45,7 +45,7 @@ from calibrators.agents.policy import PolicySpec, save_policy, spec_of
 from calibrators.experiment import make_estimator
 from orthoglide_env.envs.wrappers import flat_lab_env
 from orthoglide_env.lab.operations import Op
-from orthoglide_env.model.errors import RHO_MAX, RHO_MIN
+from orthoglide_env.model.design import PROTOTYPE
 
 #: The estimator that scores every evaluation (the comparison's headline).
 ESTIMATOR: str = "extended"
@@ -94,7 +94,8 @@ def start_near_zero(model: Any) -> None:
     read; training then learns where to go, and whether to lift, re-mount or stop."""
     import torch
 
-    middle, half = (RHO_MAX + RHO_MIN) / 2, (RHO_MAX - RHO_MIN) / 2
+    low, high = PROTOTYPE.rho_min, PROTOTYPE.rho_max
+    middle, half = (high + low) / 2, (high - low) / 2
     bias, log_std = model.policy.action_net.bias, model.policy.log_std
     with torch.no_grad():
         bias[:3] = (0.0 - middle) / half

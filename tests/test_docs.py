@@ -215,8 +215,9 @@ def _cannot_run_here(argv: list[str]) -> str:
 
 
 def _tiny(argv: list[str]) -> list[str]:
-    """``argv`` cut down (:data:`TINY`), a policy file found from the repository."""
-    out = list(argv)
+    """``argv`` cut down (:data:`TINY`); a policy or example file (the documents give
+    paths from the repository's top) found from the repository."""
+    out = [str(ROOT / w) if "/" in w and (ROOT / w).is_file() else w for w in argv]
     for k, word in enumerate(argv[:-1]):
         if word in TINY and int(argv[k + 1]) > int(TINY[word]):
             out[k + 1] = TINY[word]

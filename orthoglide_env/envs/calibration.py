@@ -34,10 +34,9 @@ from orthoglide_env.instruments.gauges import (
     zero_gauges,
 )
 from orthoglide_env.model.collisions import collision_names
+from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import (
     DEFAULT_PRESET,
-    RHO_MAX,
-    RHO_MIN,
     ErrorPreset,
     MachineParams,
     check_rho,
@@ -127,8 +126,8 @@ class OrthoglideCalibrationEnv(gym.Env):
     -------------
     ``machine``: the true machine, a dict in the machine file schema
     (:meth:`MachineParams.from_dict`) or a ``MachineParams``, inside
-    :data:`~orthoglide_env.model.errors.VALIDITY_RANGE`; left out or ``None`` (as ``seed=None``
-    means "none given"): drawn from the ``errors`` preset with ``np_random``.  Anything
+    the prototype's validity range; left out or ``None`` (as ``seed=None`` means "none
+    given"): drawn from the ``errors`` preset with ``np_random``.  Anything
     else (a list, ``0``, ``""``, ``False``) raises ``ValueError``.  ``gauges``: the layout
     of this episode, names such as ``"x-leg/y"`` or ``"z/x@0.3"`` or ``GaugeSpec``
     objects (left out or ``None``: the constructor's); it must hold as many gauges as the
@@ -399,14 +398,15 @@ class EnvSettings:
     def spaces(self) -> tuple[spaces.Box, spaces.Dict]:
         """The action and observation spaces of one env."""
         n = len(self.layout)
-        action = spaces.Box(RHO_MIN, RHO_MAX, shape=(3,), dtype=np.float64)
+        action = spaces.Box(PROTOTYPE.rho_min, PROTOTYPE.rho_max, shape=(3,), dtype=np.float64)
         obs = spaces.Dict(
             {
                 # A valid reading lies within +-travel/2 of its zero; the box leaves another
                 # travel/2 (>= 25 sigma, see MAX_NOISE_FRACTION) for the noise.
                 "gauges": spaces.Box(-self.travel, self.travel, shape=(n,), dtype=np.float64),
                 "valid": spaces.MultiBinary(n),
-                "joints": spaces.Box(RHO_MIN - ENCODER_MARGIN, RHO_MAX + ENCODER_MARGIN,
+                "joints": spaces.Box(PROTOTYPE.rho_min - ENCODER_MARGIN,
+                                     PROTOTYPE.rho_max + ENCODER_MARGIN,
                                      shape=(3,), dtype=np.float64),
             }
         )
@@ -494,12 +494,12 @@ def check_actions(action: Any, shape: tuple[int, ...], clip: bool,
         raise ValueError(f"action must have shape {shape}, got {target.shape}")
     if clip:
         finite = np.all(np.isfinite(target), axis=-1, keepdims=True)
-        target = np.where(finite, np.clip(target, RHO_MIN, RHO_MAX), target)
+        target = np.where(finite, np.clip(target, PROTOTYPE.rho_min, PROTOTYPE.rho_max), target)
     if target.ndim == 1:
         return check_rho(target)
     used = np.ones(len(target), dtype=bool) if rows is None else rows
-    bad = used & ~np.all(np.isfinite(target) & (target >= RHO_MIN) & (target <= RHO_MAX),
-                         axis=-1)
+    low, high = PROTOTYPE.rho_min, PROTOTYPE.rho_max
+    bad = used & ~np.all(np.isfinite(target) & (target >= low) & (target <= high), axis=-1)
     if bad.any():
         env = int(np.flatnonzero(bad)[0])
         try:
@@ -520,7 +520,7 @@ def _machine_option(value: Any) -> MachineParams | None:
     """The ``machine`` reset option.  None, like leaving the key out, draws a machine from
     the preset (as ``seed=None`` and ``options=None`` mean "nothing given" in Gymnasium);
     anything else must be a dict in the machine file schema or a ``MachineParams``, inside
-    :data:`~orthoglide_env.model.errors.VALIDITY_RANGE`."""
+    :attr:`~orthoglide_env.model.design.MachineDesign.validity_range`."""
     if value is None:
         return None
     try:

@@ -17,7 +17,6 @@ from orthoglide_env.envs.calibration import check_seed
 from orthoglide_env.instruments.gauges import (
     DEFAULT_RESOLUTION,
     DEFAULT_SIGMA,
-    DEFAULT_TRAVEL,
     Gauge,
 )
 from orthoglide_env.lab.engine import (
@@ -33,6 +32,7 @@ from orthoglide_env.lab.engine import (
     step_info,
 )
 from orthoglide_env.lab.operations import PAPER_SLOTS, TRACKER_SIGMA
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import DEFAULT_PRESET, MachineParams, check_validity
 
 __all__ = ["ACCURACY_UNIT_MM", "REWARDS", "Estimator", "OrthoglideLabEnv", "Record"]
@@ -134,7 +134,10 @@ class OrthoglideLabEnv(gym.Env):
     (``exact`` or ``pybullet``), ``stands`` (default 6), ``tracker`` (a laser tracker on
     the platform, read at every move), ``tracker_sigma`` (mm), ``budget_s``, ``reward``,
     ``estimator`` (for ``accuracy``: records and sigma to a ``MachineParams``, e.g.
-    ``calibrators.experiment.make_estimator()``), ``time_weight``, ``success_mm``, ``travel``.
+    ``calibrators.experiment.make_estimator()``), ``time_weight``, ``success_mm``, ``travel``
+    (default: the design's gauge travel), ``design`` (the machines'
+    :class:`~orthoglide_env.model.design.MachineDesign`, default the prototype: its
+    control limits bound ``rho``, its errors' validity range the machines).
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
@@ -153,12 +156,14 @@ class OrthoglideLabEnv(gym.Env):
         estimator: Estimator | None = None,
         time_weight: float = 1.0,
         success_mm: float = 0.01,
-        travel: float = DEFAULT_TRAVEL,
+        travel: float | None = None,
+        design: MachineDesign | None = None,
     ) -> None:
         settings = LabSettings.check(errors, gauge_sigma, gauge_resolution, backend, stands,
                                      tracker, tracker_sigma, budget_s, reward, estimator,
-                                     time_weight, success_mm, travel)
+                                     time_weight, success_mm, travel, design)
         self.settings = settings
+        self.design = settings.design
         self.preset, self.noise = settings.preset, settings.noise
         self.backend_name, self.n_stands, self.tracker = backend, settings.stands, settings.tracker
         self.tracker_sigma, self.budget_s, self.reward_mode = tracker_sigma, budget_s, reward
@@ -212,7 +217,7 @@ class OrthoglideLabEnv(gym.Env):
         check_seed(seed)
         if not isinstance(options, dict | None):
             raise ValueError("reset options must be a dict")
-        given = reset_machine(options)
+        given = reset_machine(options, self.design)
         super().reset(seed=seed)
         obs = self._batch.reset(_ROW, [self.np_random], given)
         self._started = True
@@ -221,7 +226,8 @@ class OrthoglideLabEnv(gym.Env):
     def step(self, action: dict[str, Any]
              ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         self._require()
-        op, rho, stand, slot = (part[None] for part in check_actions(action, (), self.n_stands))
+        op, rho, stand, slot = (part[None] for part in check_actions(
+            action, (), self.n_stands, design=self.design))
         result = self._batch.step(_ROW, op, rho, stand, slot)
         return (_first(result.obs), float(result.reward[0]), bool(result.terminated[0]),
                 bool(result.truncated[0]), result.info(0))
@@ -252,15 +258,17 @@ class OrthoglideLabEnv(gym.Env):
         return self._batch.notebooks[0].predicted_tcp_rigid_mm()
 
 
-def reset_machine(options: dict[str, Any] | None) -> MachineParams | None:
-    """The machine of a lab's reset options (None: draw one), or ``ValueError``."""
+def reset_machine(options: dict[str, Any] | None, design: MachineDesign | None = None
+                  ) -> MachineParams | None:
+    """The machine of a lab's reset options (None: draw one), or ``ValueError``; a dict
+    without a ``design`` key is a machine of ``design``."""
     options = dict(options or {})
     unknown = sorted(set(options) - {"machine"})
     if unknown:
         raise ValueError(f"unknown reset option(s) {unknown}; allowed: machine")
     given = options.get("machine")
     if isinstance(given, dict):
-        return MachineParams.from_dict(given)
+        return MachineParams.from_dict(given, design=design)
     if isinstance(given, MachineParams):
         return check_validity(given)
     if given is not None:

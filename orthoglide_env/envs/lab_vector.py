@@ -29,7 +29,6 @@ from orthoglide_env.envs.lab import reset_machine
 from orthoglide_env.instruments.gauges import (
     DEFAULT_RESOLUTION,
     DEFAULT_SIGMA,
-    DEFAULT_TRAVEL,
     Gauge,
     GaugeNoise,
 )
@@ -43,6 +42,7 @@ from orthoglide_env.lab.engine import (
     check_actions,
 )
 from orthoglide_env.lab.operations import OP_NAMES, PAPER_SLOTS, TRACKER_SIGMA, Op
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import DEFAULT_PRESET, MachineParams
 
 #: Info keys of a lab step, and the dtype of their vector form (as ``SyncVectorEnv``
@@ -109,7 +109,8 @@ class OrthoglideLabVectorEnv(SeededVectorEnv):
         estimator: Estimator | None = None,
         time_weight: float = 1.0,
         success_mm: float = 0.01,
-        travel: float = DEFAULT_TRAVEL,
+        travel: float | None = None,
+        design: MachineDesign | None = None,
         autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
     ) -> None:
         if backend == "pybullet":
@@ -119,7 +120,8 @@ class OrthoglideLabVectorEnv(SeededVectorEnv):
         self.autoreset_mode = check_autoreset_mode(autoreset_mode)
         self.settings = LabSettings.check(errors, gauge_sigma, gauge_resolution, backend, stands,
                                           tracker, tracker_sigma, budget_s, reward, estimator,
-                                          time_weight, success_mm, travel)
+                                          time_weight, success_mm, travel, design)
+        self.design = self.settings.design
         self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
         self.render_mode = None
         self.single_action_space, self.single_observation_space = self.settings.spaces()
@@ -175,7 +177,7 @@ class OrthoglideLabVectorEnv(SeededVectorEnv):
             raise ValueError(f"reset options must be a dict or None, got {options!r}")
         options = dict(options or {})
         mask = self._reset_mask(options.pop(RESET_MASK, None))
-        machine = reset_machine(options)
+        machine = reset_machine(options, self.design)
         rows = np.flatnonzero(mask)
         obs = self._copy_obs()
         self._start(rows, [seeds[i] for i in rows], machine, obs)
@@ -195,7 +197,7 @@ class OrthoglideLabVectorEnv(SeededVectorEnv):
         resetting = self._ended if self.autoreset_mode == AutoresetMode.NEXT_STEP else (
             np.zeros(n, dtype=bool))
         op, rho, stand, slot = check_actions(actions, (n,), self.settings.stands,
-                                             rows=~resetting)
+                                             rows=~resetting, design=self.design)
         rows = np.flatnonzero(~resetting)
         # Only a re-mount can fail once the actions are checked (a slot its machine cannot
         # reach): then no env has stepped and no stream has moved.
@@ -262,13 +264,15 @@ class OrthoglideLabVectorEnv(SeededVectorEnv):
 
 class SubLab:
     """One env of a lab vector env as an agent sees a lone lab: ``unwrapped`` (itself),
-    the notebook ``records``, the ``noise`` and the lab's settings and spaces; no truth."""
+    the notebook ``records``, the ``noise``, the machines' ``design`` and the lab's settings
+    and spaces; no truth."""
 
     def __init__(self, envs: OrthoglideLabVectorEnv, index: int) -> None:
         self._envs, self.index = envs, index
         settings = envs.settings
         self.noise, self.n_stands, self.tracker = settings.noise, settings.stands, settings.tracker
         self.budget_s, self.travel = settings.budget_s, settings.travel
+        self.design = settings.design
         self.action_space: spaces.Dict = envs.single_action_space
         self.observation_space: spaces.Dict = envs.single_observation_space
 

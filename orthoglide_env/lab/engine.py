@@ -46,11 +46,10 @@ from orthoglide_env.lab.operations import (
     Op,
 )
 from orthoglide_env.model.collisions import PAIR_NAMES, collision_names
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import (
     AXIS_NAMES,
     ERROR_NAMES,
-    RHO_MAX,
-    RHO_MIN,
     ErrorPreset,
     MachineParams,
     check_rho,
@@ -108,13 +107,22 @@ class LabSettings:
     time_weight: float
     success_mm: float
     travel: float
+    design: MachineDesign = PROTOTYPE
 
     @classmethod
     def check(cls, errors: str, gauge_sigma: float, gauge_resolution: float, backend: str,
               stands: int, tracker: bool, tracker_sigma: float, budget_s: float, reward: str,
               estimator: Estimator | None, time_weight: float, success_mm: float,
-              travel: float) -> LabSettings:
-        """The settings, or ``ValueError`` naming the first bad argument."""
+              travel: float | None, design: MachineDesign | None = None) -> LabSettings:
+        """The settings, or ``ValueError`` naming the first bad argument.  ``design``: the
+        machines' design (default the prototype); ``travel`` None: its gauge travel."""
+        design = PROTOTYPE if design is None else design
+        if not isinstance(design, MachineDesign):
+            raise ValueError(f"design must be a MachineDesign, got {type(design).__name__}")
+        if design.slot_positions != PROTOTYPE.slot_positions:
+            raise ValueError("the lab's slot indices are the prototype's slot catalogue: a "
+                             f"design's slot_positions must be {list(PROTOTYPE.slot_positions)}")
+        travel = design.gauge_travel if travel is None else travel
         preset = get_preset(errors)
         if backend not in ("exact", "pybullet"):
             raise ValueError(f"unknown backend '{backend}'; choose from ['exact', 'pybullet']")
@@ -133,14 +141,15 @@ class LabSettings:
             raise ValueError(f"time_weight must be a number >= 0, got {time_weight}")
         noise = check_noise(gauge_sigma, gauge_resolution, travel)
         return cls(preset, noise, backend, int(stands), bool(tracker), tracker_sigma, budget_s,
-                   reward, estimator, time_weight, success_mm, float(travel))
+                   reward, estimator, time_weight, success_mm, float(travel), design)
 
     def spaces(self) -> tuple[spaces.Dict, spaces.Dict]:
         """One lab's action and observation spaces."""
         n = self.stands
         action_space = spaces.Dict({
             "op": spaces.Discrete(len(Op)),
-            "rho": spaces.Box(RHO_MIN, RHO_MAX, shape=(3,), dtype=np.float64),
+            "rho": spaces.Box(self.design.rho_min, self.design.rho_max, shape=(3,),
+                              dtype=np.float64),
             "stand": spaces.Discrete(n),
             "slot": spaces.Discrete(len(SLOTS)),
         })
@@ -150,7 +159,8 @@ class LabSettings:
             "engaged": spaces.MultiBinary(n),
             "slot": spaces.MultiDiscrete([len(SLOTS) + 1] * n),
             "mounting": spaces.Box(0.0, 1e6, shape=(n,), dtype=np.float64),
-            "joints": spaces.Box(RHO_MIN - ENCODER_MARGIN, RHO_MAX + ENCODER_MARGIN, shape=(3,),
+            "joints": spaces.Box(self.design.rho_min - ENCODER_MARGIN,
+                                 self.design.rho_max + ENCODER_MARGIN, shape=(3,),
                                  dtype=np.float64),
             "tracker": spaces.Box(-1e5, 1e5, shape=(3,), dtype=np.float64),
             "tracker_valid": spaces.MultiBinary(1),
@@ -162,17 +172,18 @@ class LabSettings:
     def longest_step(self) -> float:
         """The most one operation can cost (a re-mount from the far corner, the tracker, and
         every stand pushed past its travel): the clock never passes budget + this."""
-        far = TIME.move(np.full(3, RHO_MIN), np.full(3, RHO_MAX))
+        far = TIME.move(np.full(3, self.design.rho_min), np.full(3, self.design.rho_max))
         return far + TIME.remount_s + TIME.tracker_point_s + TIME.overtravel_s * self.stands
 
 
 # -- actions -------------------------------------------------------------------------------
 def check_actions(action: Any, shape: tuple[int, ...], stands: int,
-                  rows: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
+                  rows: np.ndarray | None = None, design: MachineDesign = PROTOTYPE
+                  ) -> tuple[np.ndarray, ...]:
     """``op``, ``rho``, ``stand``, ``slot`` of a lab action (``shape ()``) or of a batch of
     them (``shape (N,)``, each field with the batch axis first), as arrays, or
     ``ValueError`` naming the field (and the env).  ``rows``: the envs whose action is used
-    (the others are not checked)."""
+    (the others are not checked); ``design``: whose control limits bound ``rho``."""
     if not isinstance(action, dict) or set(action) != {"op", "rho", "stand", "slot"}:
         raise ValueError("action must be a dict with keys op, rho, stand, slot")
     used = np.ones(shape, dtype=bool) if rows is None else np.asarray(rows, dtype=bool)
@@ -191,18 +202,19 @@ def check_actions(action: Any, shape: tuple[int, ...], stands: int,
             raise ValueError(f"action rho must have shape {(*shape, 3)}, got {given.shape}")
         rho[moving] = given[moving]
         try:
-            check_rho(rho[moving])
+            check_rho(rho[moving], design=design)
         except ValueError as exc:
             if shape:
-                bad = next(i for i in np.flatnonzero(moving) if not _valid_rho(rho[i]))
+                bad = next(i for i in np.flatnonzero(moving)
+                           if not _valid_rho(rho[i], design))
                 raise ValueError(f"action rho of env {bad}: {exc}") from None
             raise
     return op, rho, stand, slot
 
 
-def _valid_rho(rho: np.ndarray) -> bool:
+def _valid_rho(rho: np.ndarray, design: MachineDesign) -> bool:
     try:
-        check_rho(rho)
+        check_rho(rho, design=design)
     except ValueError:
         return False
     return True
@@ -231,8 +243,10 @@ class Notebook:
     """One episode's lab notebook: its records, every installation (truth, for scoring),
     and the information the records carry about the machine's errors."""
 
-    def __init__(self, gauge_sigma: float, tracker_sigma: float) -> None:
+    def __init__(self, gauge_sigma: float, tracker_sigma: float,
+                 design: MachineDesign = PROTOTYPE) -> None:
         self.records: list[Record] = []
+        self._design = design
         self._installed: dict[str, Gauge] = {}
         #: The first installations, as mounting names and the row of a batch of gauge sets:
         #: turned into gauges when asked for (a sweep's scoring never asks).
@@ -268,7 +282,7 @@ class Notebook:
         parameter's scale, per unit of noise; one batched call) to their mountings' sums:
         the information of a mounting, its zero eliminated, is ``S2 - S1 S1^T / n``."""
         design = Design.of([r.mounting for r in records], [r.spec for r in records],
-                           np.array([r.rho for r in records]))
+                           np.array([r.rho for r in records]), self._design)
         space = design.space
         rows = jacobian(np.zeros(len(space)), design, np.ones(len(space), bool),
                         default_scales(space))
@@ -319,7 +333,7 @@ class Notebook:
         scale = np.concatenate([default_scales(space), np.ones(len(names) - n)])
         posterior = np.linalg.inv(np.eye(len(info)) + info)[:n, :n]
         covariance = posterior * np.outer(scale[:n], scale[:n])
-        return predicted_tcp_frames(MachineParams(), covariance).rigid.rms
+        return predicted_tcp_frames(MachineParams(design=self._design), covariance).rigid.rms
 
 
 def _mounting_columns(space: ParameterSpace, mounting: int) -> list[int]:
@@ -535,7 +549,8 @@ class LabBatch:
         self.tracker_reading = np.zeros((n, 3))
 
     def _notebook(self) -> Notebook:
-        return Notebook(self.settings.noise.effective_sigma, self.settings.tracker_sigma)
+        return Notebook(self.settings.noise.effective_sigma, self.settings.tracker_sigma,
+                        self.settings.design)
 
     def require(self) -> MachineParams:
         if self.machines is None:
@@ -552,11 +567,15 @@ class LabBatch:
         first = [int(s) for s in PAPER_SLOTS[: settings.stands]]
         drawn, rotations, positions, errors = [], [], [], []
         for stream in streams:
-            drawn.append(settings.preset.sample(stream) if machine is None else machine)
+            drawn.append(settings.preset.sample(stream, settings.design) if machine is None
+                         else machine)
             rotations.append(_random_rotation(stream))
             direction = stream.normal(size=3)
             positions.append(TRACKER_DISTANCE * direction / np.linalg.norm(direction))
             errors.append(installation_errors(len(first), settings.preset, stream))
+        if machine is not None and machine.design != settings.design:
+            raise ValueError("the machine's design is not the lab's: give the lab the design "
+                             "(design=...) and the machine a design of the same numbers")
         machines = MachineParams.stack(drawn)
         installed = _installed(machines, [SLOTS[s] for s in first], settings.travel,
                                np.stack(errors))
@@ -797,7 +816,7 @@ class LabBatch:
             estimate = self.settings.estimator(self.notebooks[row].records,  # type: ignore[misc]
                                                self.settings.noise.effective_sigma)
         except (ValueError, RuntimeError, np.linalg.LinAlgError):
-            estimate = MachineParams()
+            estimate = MachineParams(design=truth.design)
         return score(estimate, truth).tcp_after.rigid.rms
 
     def observation(self, rows: np.ndarray, values: np.ndarray,
@@ -870,7 +889,7 @@ def _with_gauges(array: GaugeArray, rows: np.ndarray, columns: np.ndarray, new: 
 def _with_rows(machines: MachineParams, rows: np.ndarray, new: MachineParams) -> MachineParams:
     vector = machines.to_vector()
     vector[rows] = new.to_vector()
-    return MachineParams.from_vector(vector)
+    return MachineParams.from_vector(vector, machines.design)
 
 
 def _random_rotation(rng: np.random.Generator) -> np.ndarray:
