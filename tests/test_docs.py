@@ -261,3 +261,19 @@ def test_a_documented_command_works(where: str, line: str, argv: list[str], runn
         status = ended.code
     out = capsys.readouterr()
     assert status == 0, f"{where}: orthoglide {' '.join(argv)}: {out.err}"
+
+
+#: The repository's folders (the README's layout): a documented path that starts with one
+#: names a file of the repository.  Others (``results/``) are what commands write.
+FOLDERS = ("orthoglide_env", "calibrators", "tests", "benchmarks", "examples", "docs", "urdf")
+
+
+@pytest.mark.parametrize("document", DOCUMENTS, ids=lambda p: p.name)
+def test_every_repository_path_a_document_names_exists(document: Path) -> None:
+    text = document.read_text()
+    spans = re.findall(r"`([\w./-]+)`", text) + re.findall(r"\]\(([^)#\s]+)", text)
+    named = {p for p in spans if p.split("/")[0] in FOLDERS and "/" in p}
+    assert named, document  # the pattern still finds the document's paths
+    missing = sorted(p for p in named if not (document.parent / p).exists()
+                     and not (ROOT / p).exists())
+    assert not missing, f"{document.name} names files that do not exist: {missing}"
