@@ -127,14 +127,16 @@ def _values(words: list[str]) -> list[list[str]]:
 
 def _option_of(parser: argparse.ArgumentParser, argv: list[str], k: int
                ) -> argparse.Action | None:
-    """The option whose value ``argv[k]`` is, if any."""
+    """The option whose value ``argv[k]`` is, if any (``-20`` is a number, not an option)."""
     for j in range(k - 1, -1, -1):
         if argv[j].startswith("-") and not re.fullmatch(r"-\d.*", argv[j]):
             action = parser._option_string_actions.get(argv[j])
             if action is None or action.nargs == 0:
                 return None
-            span = {None: 1, "?": 1}.get(action.nargs, action.nargs)  # type: ignore[arg-type]
-            return action if isinstance(span, str) or k - j <= span else None
+            if action.nargs in ("*", "+"):
+                return action
+            takes = action.nargs if isinstance(action.nargs, int) else 1
+            return action if k - j <= takes else None
     return None
 
 
