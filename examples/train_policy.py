@@ -1,6 +1,7 @@
 """Train a learned calibration agent with stable-baselines3 and compare it on held-out
 machines.
 
+    pip install torch --index-url https://download.pytorch.org/whl/cpu  # CPU-only: not GBs
     pip install -e '.[rl]'
     python examples/train_policy.py [--steps 120000] [--envs 8] [--reward information]
         [--budget 600] [--out results/policy.zip] [--machines 20]

@@ -180,6 +180,19 @@ def test_a_trial_line_reads_back_and_earlier_lines_still_read() -> None:
         Trial.from_json(line.replace('"drho_x"', '"drho_q"'))
 
 
+def test_resume_refuses_a_trial_of_other_error_names_in_one_line(tmp_path, capsys) -> None:
+    argv = ["compare", "--machines", "2", "--agents", "paper", "--estimators", "paper6",
+            "--quiet", "--out", str(tmp_path)]
+    assert main(argv) == 0
+    trials = tmp_path / "trials.jsonl"
+    lines = trials.read_text().splitlines()
+    trials.write_text("\n".join([lines[0].replace('"drho_x"', '"drho_q"'), *lines[1:]]) + "\n")
+    capsys.readouterr()
+    assert main([*argv, "--resume"]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and f"{trials}:1: not a trial (the trial's error names" in err[0], err
+
+
 @pytest.mark.parametrize(
     ("argv", "fragment"),
     [

@@ -127,14 +127,16 @@ def _values(words: list[str]) -> list[list[str]]:
 
 def _option_of(parser: argparse.ArgumentParser, argv: list[str], k: int
                ) -> argparse.Action | None:
-    """The option whose value ``argv[k]`` is, if any."""
+    """The option whose value ``argv[k]`` is, if any (``-20`` is a number, not an option)."""
     for j in range(k - 1, -1, -1):
         if argv[j].startswith("-") and not re.fullmatch(r"-\d.*", argv[j]):
             action = parser._option_string_actions.get(argv[j])
             if action is None or action.nargs == 0:
                 return None
-            span = {None: 1, "?": 1}.get(action.nargs, action.nargs)  # type: ignore[arg-type]
-            return action if isinstance(span, str) or k - j <= span else None
+            if action.nargs in ("*", "+"):
+                return action
+            takes = action.nargs if isinstance(action.nargs, int) else 1
+            return action if k - j <= takes else None
     return None
 
 
@@ -262,3 +264,19 @@ def test_a_documented_command_works(where: str, line: str, argv: list[str], runn
         status = ended.code
     out = capsys.readouterr()
     assert status == 0, f"{where}: orthoglide {' '.join(argv)}: {out.err}"
+
+
+#: The repository's folders (the README's layout): a documented path that starts with one
+#: names a file of the repository.  Others (``results/``) are what commands write.
+FOLDERS = ("orthoglide_env", "calibrators", "tests", "benchmarks", "examples", "docs", "urdf")
+
+
+@pytest.mark.parametrize("document", DOCUMENTS, ids=lambda p: p.name)
+def test_every_repository_path_a_document_names_exists(document: Path) -> None:
+    text = document.read_text()
+    spans = re.findall(r"`([\w./-]+)`", text) + re.findall(r"\]\(([^)#\s]+)", text)
+    named = {p for p in spans if p.split("/")[0] in FOLDERS and "/" in p}
+    assert named, document  # the pattern still finds the document's paths
+    missing = sorted(p for p in named if not (document.parent / p).exists()
+                     and not (ROOT / p).exists())
+    assert not missing, f"{document.name} names files that do not exist: {missing}"

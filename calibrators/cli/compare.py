@@ -97,10 +97,10 @@ def _prepare_out(args: argparse.Namespace, config: Config) -> tuple[Path | None,
         for n, line in enumerate(trials_path.read_text().splitlines(), start=1):
             try:
                 done.append(Trial.from_json(line))
-            except (ValueError, TypeError):
+            except (ValueError, TypeError) as exc:
                 # The last line of an interrupted run may be cut short: drop it.
                 if n < len(trials_path.read_text().splitlines()):
-                    raise UsageError(f"{trials_path}:{n}: not a trial") from None
+                    raise UsageError(f"{trials_path}:{n}: not a trial ({exc})") from None
         return out, done
     if trials_path.exists():
         raise UsageError(f"{out} already holds a run: use --resume, or another --out")
