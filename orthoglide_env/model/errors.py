@@ -263,7 +263,8 @@ class MachineParams:
             named = _design_of(data["design"], folder)
             if design is not None and named != design:
                 raise MachineFileError("machine key 'design' names another design than the "
-                                       "one given (--design)", key="design")
+                                       "one given (a command's --design, an env's design)",
+                                       key="design")
             design = named
         design = PROTOTYPE if design is None else design
         kwargs = {key: _numbers(key, value) for key, value in data.items() if key != "design"}
