@@ -167,10 +167,11 @@ class MachineParams:
         """A batch of shape ``(len(machines),)`` from single machines of one design."""
         if not machines:
             raise ValueError("cannot stack an empty list of machines")
-        if any(m.design != machines[0].design for m in machines):
+        design = machines[0].design
+        if any(m.design is not design and m.design != design for m in machines):
             raise ValueError("a batch of machines shares one design")
         return cls(**{key: np.stack([getattr(m, key) for m in machines]) for key in _SHAPES},
-                   design=machines[0].design)
+                   design=design)
 
     def to_vector(self) -> np.ndarray:
         """The 27 errors as one vector in :data:`ERROR_NAMES` order, shape ``(*batch, 27)``."""
