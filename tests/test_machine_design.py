@@ -240,3 +240,34 @@ def test_urdf_of_the_small_design_loads_and_closes(tmp_path, capsys, small_machi
             a, b = urdf.get_transform(c.link_a, "base"), urdf.get_transform(c.link_b, "base")
             np.testing.assert_allclose((a[:3, :3] @ c.point_a * MM + a[:3, 3]) / MM,
                                        (b[:3, :3] @ c.point_b * MM + b[:3, 3]) / MM, atol=1e-6)
+
+
+def test_the_lab_takes_its_design_limits_and_machines() -> None:
+    import gymnasium as gym
+
+    import orthoglide_env
+
+    env = gym.make(orthoglide_env.LAB_ENV_ID, design=SMALL, errors="paper")
+    try:
+        lab = env.unwrapped
+        box = env.action_space["rho"]
+        assert (box.low.min(), box.high.max()) == (SMALL.rho_min, SMALL.rho_max)
+        env.reset(seed=1)
+        assert lab.true_machine.design == SMALL
+        assert lab.travel == SMALL.gauge_travel
+        move = {"op": 0, "rho": np.array([0.0, 0.0, 55.0]), "stand": 0, "slot": 0}
+        with pytest.raises(ValueError, match=r"outside the joint limits \[-80, 50\] mm"):
+            env.step(move)
+        with pytest.raises(ValueError, match="machine key 'design' names another design"):
+            env.reset(options={"machine": {"design": PROTOTYPE.to_dict()}})
+        state = lab.np_random.bit_generator.state
+        with pytest.raises(ValueError, match="the machine's design is not the lab's"):
+            env.reset(options={"machine": MachineParams()})
+        assert lab.np_random.bit_generator.state == state  # a refused reset changes nothing
+    finally:
+        env.close()
+    with pytest.raises(ValueError, match="design must be a MachineDesign, got str"):
+        gym.make(orthoglide_env.LAB_ENV_ID, design=str(SMALL_FILE))
+    with pytest.raises(ValueError, match="slot_positions must be"):
+        gym.make(orthoglide_env.LAB_ENV_ID,
+                 design=MachineDesign.from_dict({"slot_positions": [0.3, 0.5]}))

@@ -525,10 +525,13 @@ def _machine_option(value: Any) -> MachineParams | None:
         return None
     try:
         if isinstance(value, MachineParams):
+            if value.design != PROTOTYPE:
+                raise ValueError("this env runs the prototype's design; another design's "
+                                 "machine goes to OrthoglideLab-v0 (design=...)")
             check_validity(value)
             return value
         if isinstance(value, dict):
-            return MachineParams.from_dict(value)
+            return MachineParams.from_dict(value, design=PROTOTYPE)
     except ValueError as exc:
         raise ValueError(f"reset option 'machine': {exc}") from None
     raise ValueError(

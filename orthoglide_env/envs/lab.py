@@ -270,6 +270,9 @@ def reset_machine(options: dict[str, Any] | None, design: MachineDesign | None =
     if isinstance(given, dict):
         return MachineParams.from_dict(given, design=design)
     if isinstance(given, MachineParams):
+        if design is not None and given.design != design:
+            raise ValueError("reset option 'machine': the machine's design is not the lab's "
+                             "(give the lab its design: design=...)")
         return check_validity(given)
     if given is not None:
         raise ValueError("reset option 'machine' must be a dict in the machine file schema "

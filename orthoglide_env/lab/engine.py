@@ -573,9 +573,6 @@ class LabBatch:
             direction = stream.normal(size=3)
             positions.append(TRACKER_DISTANCE * direction / np.linalg.norm(direction))
             errors.append(installation_errors(len(first), settings.preset, stream))
-        if machine is not None and machine.design != settings.design:
-            raise ValueError("the machine's design is not the lab's: give the lab the design "
-                             "(design=...) and the machine a design of the same numbers")
         machines = MachineParams.stack(drawn)
         installed = _installed(machines, [SLOTS[s] for s in first], settings.travel,
                                np.stack(errors))

@@ -15,19 +15,22 @@ prototype's values, except that validity lengths left out scale with ``L``.  Eve
     {
       "L": 250.0, "d": 60.0, "r": 25.0,          leg length, width, tool offset (mm)
       "rho_min": -80.0, "rho_max": 50.0,          control limits (mm, 0 at Zero)
-      "urdf_margin": 50.0,                        URDF prismatic limits beyond them (mm)
+      "urdf_margin": 50.0,                        URDF prismatic limits beyond them (mm):
+                                                  PyBullet's motors clamp targets to them
       "bar_section": [10.0, 10.0],                bar cross-section (hinge, normal) (mm)
       "bar_clearance": 10.0,                      bar box stops short of each hinge (mm)
       "short_link_size": [20, 20, 100],           parallelogram short links (leg frame, mm)
       "carriage_size": [70, 60, 110],             carriage box (leg frame, mm)
-      "carriage_setback": 10.0,                   carriage starts this far behind R1 (mm)
+      "carriage_setback": 10.0,                   carriage starts this far behind R1 (mm):
+                                                  it and its guideway stay behind R1 at any
+                                                  travel, clear of the bars leaving R1
       "platform_size": 55.0,                      platform cube's edge (mm)
       "gauge_travel": 10.0,                       dial gauges' plunger travel (mm)
       "slot_positions": [0.2, 0.35, 0.5, 0.65, 0.8],  bar slots, fraction from the platform
                                                   (the lab's are the prototype's)
       "grid_range": [-80.0, 50.0],                TCP cube of the scoring grid, each axis (mm)
       "validity": {"drho": 10, "dL": 10, "axis_tilt": 0.02, "axis_offset": 5, "attach": 3}
-    }
+    }                                             (the prototype's: see VALIDITY_UNITS)
 
 Every key's type and range is checked in one place (:data:`RULES`, :data:`VALIDITY_RULE`,
 :func:`_relations`); a refusal is one line naming the key and the rule, and from a file the
@@ -375,7 +378,8 @@ def _prototype() -> MachineDesign:
     return MachineDesign(**data)
 
 
-#: The prototype of the paper (Pashkevich et al., section 2), the default design.
+#: The prototype of the paper, the default design (dimensions: section 2.1 of Pashkevich et
+#: al.; control limits: section 2.3).
 PROTOTYPE: MachineDesign = _prototype()
 
 

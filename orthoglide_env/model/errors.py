@@ -167,10 +167,11 @@ class MachineParams:
         """A batch of shape ``(len(machines),)`` from single machines of one design."""
         if not machines:
             raise ValueError("cannot stack an empty list of machines")
-        if any(m.design != machines[0].design for m in machines):
+        design = machines[0].design
+        if any(m.design is not design and m.design != design for m in machines):
             raise ValueError("a batch of machines shares one design")
         return cls(**{key: np.stack([getattr(m, key) for m in machines]) for key in _SHAPES},
-                   design=machines[0].design)
+                   design=design)
 
     def to_vector(self) -> np.ndarray:
         """The 27 errors as one vector in :data:`ERROR_NAMES` order, shape ``(*batch, 27)``."""
@@ -263,7 +264,8 @@ class MachineParams:
             named = _design_of(data["design"], folder)
             if design is not None and named != design:
                 raise MachineFileError("machine key 'design' names another design than the "
-                                       "one given (--design)", key="design")
+                                       "one given (a command's --design, an env's design)",
+                                       key="design")
             design = named
         design = PROTOTYPE if design is None else design
         kwargs = {key: _numbers(key, value) for key, value in data.items() if key != "design"}
