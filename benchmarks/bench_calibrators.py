@@ -26,8 +26,8 @@ def episode_times(backend: str, estimator: str, repeats: int = 10) -> np.ndarray
     out = []
     for seed in range(repeats):
         start = time.perf_counter()
-        data, _ = run_episode(env, get_agent("paper"), seed)
-        estimate(data, estimator, env.unwrapped.noise.effective_sigma)
+        episode = run_episode(env, get_agent("paper"), seed)
+        estimate(episode.measurements, estimator, episode.sigma)
         out.append(time.perf_counter() - start)
     env.close()
     return np.array(out)

@@ -74,13 +74,13 @@ def episodes_only(machines: int, per_machine: int) -> tuple[float, float]:
     for first in range(0, machines, CHUNK):
         chunk = seeds[first:first + CHUNK]
         envs = gym.make_vec(orthoglide_env.LAB_ENV_ID, num_envs=len(chunk), gauge_sigma=0.01)
-        run_episodes(envs, "paper", chunk, [np.random.default_rng([s, 1]) for s in chunk])
+        run_episodes(envs, [get_agent("paper") for _ in chunk], chunk)
         envs.close()
     batched = (time.perf_counter() - start) / machines
     env = gym.make(orthoglide_env.LAB_ENV_ID, gauge_sigma=0.01)
     start = time.perf_counter()
     for seed in seeds[:per_machine]:
-        run_episode(env, get_agent("paper"), seed, np.random.default_rng([seed, 1]))
+        run_episode(env, get_agent("paper"), seed)
     return batched, (time.perf_counter() - start) / per_machine
 
 

@@ -30,7 +30,7 @@ import numpy as np
 import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.design.planner import Planner, greedy_plan, slot_table
-from calibrators.experiment import run_episode
+from calibrators.experiment import DEFAULT_BUDGET_S, run_episode
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op
 
 SIGMA = float(np.hypot(0.01, 0.01 / np.sqrt(12)))
@@ -63,7 +63,7 @@ def informed(budget: float, remounts: list) -> Planner:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--budget", type=float, default=3600.0)
+    parser.add_argument("--budget", type=float, default=DEFAULT_BUDGET_S)
     parser.add_argument("--no-exhaustive", action="store_true",
                         help="skip the slow search (minutes)")
     args = parser.parse_args()

@@ -3,8 +3,9 @@
     python benchmarks/estimators.py [--machines 50] [--seed 0] [--write-readme]
 
 Realistic machines (27 errors), gauges with sigma 0.01 mm and a 0.01 mm dial, installed
-with the preset's stand errors; the paper's experiment (7 postures, 6 mid-leg gauges, 3
-repetitions) run on the exact backend.  Four estimators read the same readings:
+with the preset's stand errors; the paper's experiment (the ``paper`` agent: 7 postures, 6
+mid-leg gauges, 3 repetitions) in the lab on the exact backend.  Four estimators read the
+same readings:
 
 * ``paper eq. 10``: the paper's linear fit of drho and dL;
 * ``paper6 exact``: the exact model, drho and dL (Gauss-Newton);
@@ -35,10 +36,12 @@ import gymnasium as gym
 import numpy as np
 
 import orthoglide_env
+from calibrators.agents import get_agent
 from calibrators.estimators.base import get_strategy
 from calibrators.estimators.exact_fit import z_scores
 from calibrators.estimators.gauss_newton import design_of
 from calibrators.estimators.prediction import predicted_tcp_error
+from calibrators.experiment import run_episode
 from orthoglide_env.model.reading_model import parameters_of
 from orthoglide_env.scoring import FRAMES, score
 
@@ -52,14 +55,12 @@ MARK = "<!-- estimators table -->"
 
 
 def run(machines: int, seed: int) -> dict[str, dict[str, list[float]]]:
-    env = gym.make(orthoglide_env.ENV_ID, errors="realistic", gauge_sigma=0.01,
+    env = gym.make(orthoglide_env.LAB_ENV_ID, errors="realistic", gauge_sigma=0.01,
                    gauge_resolution=0.01, backend="exact")
-    sigma = env.unwrapped.gauge_noise.effective_sigma
     results: dict[str, dict[str, list[float]]] = {name: {} for name in ESTIMATORS}
     for k in range(machines):
-        env.reset(seed=seed * 100_003 + k)
-        data = get_strategy("paper").collect(env)
-        truth_machine = env.unwrapped.true_machine
+        episode = run_episode(env, get_agent("paper"), seed * 100_003 + k)
+        data, truth_machine, sigma = episode.measurements, episode.truth, episode.sigma
         design, _ = design_of(data)
         truth = parameters_of(design, truth_machine, env.unwrapped.true_gauges)
         for name, (strategy, params, prior) in ESTIMATORS.items():

@@ -35,8 +35,8 @@ def main() -> None:
     nominal, residual = [], []
     tcp: dict[str, list] = {name: [] for name in ("uncalibrated", *ESTIMATORS)}
     for k in range(args.machines):
-        data, _ = run_episode(env, get_agent("paper"), 7_000_000 + k)
-        truth = env.unwrapped.true_machine
+        episode = run_episode(env, get_agent("paper"), 7_000_000 + k)
+        data, truth = episode.measurements, episode.truth
         nominal.append(np.sqrt(np.mean(differences(data).values ** 2)))
         for name in ESTIMATORS:
             est = estimate(data, name, 0.0)

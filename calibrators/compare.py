@@ -31,16 +31,18 @@ from calibrators.engines import results
 from calibrators.estimators.base import Estimate
 from calibrators.estimators.prediction import predicted_rigid_mm
 from calibrators.experiment import (
+    DEFAULT_BUDGET_S,
     Episode,
     estimate_many,
     get_estimator,
+    machine_seed,
     measurements_of,
     run_episode,
     run_episodes,
 )
-from orthoglide_env.envs.lab import Record
+from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
-from orthoglide_env.model.errors import ERROR_NAMES, MachineParams
+from orthoglide_env.model.errors import DEFAULT_PRESET, ERROR_NAMES, MachineParams
 from orthoglide_env.model.reading_model import ParameterSpace, default_scales
 from orthoglide_env.scoring import FRAMES, score_batch, uncalibrated_errors
 
@@ -54,10 +56,10 @@ class Config:
 
     agents: tuple[str, ...]
     estimators: tuple[str, ...]
-    budget_s: float = 3600.0
-    errors: str = "realistic"
-    sigma: float = 0.01
-    resolution: float = 0.01
+    budget_s: float = DEFAULT_BUDGET_S
+    errors: str = DEFAULT_PRESET
+    sigma: float = DEFAULT_SIGMA
+    resolution: float = DEFAULT_RESOLUTION
     backend: str = "exact"
     seed: int = 0
     target_mm: float = 0.01  # success: predicted TCP error after rigid motion at most this
@@ -68,7 +70,13 @@ class Config:
     design: MachineDesign = PROTOTYPE
 
     def machine_seed(self, index: int) -> int:
-        return self.seed * 1_000_003 + index
+        return machine_seed(self.seed, index)
+
+    def lab_kwargs(self, tracker: bool) -> dict[str, Any]:
+        """The lab env's arguments of this comparison (``tracker``: the agent needs one)."""
+        return {"errors": self.errors, "gauge_sigma": self.sigma,
+                "gauge_resolution": self.resolution, "backend": self.backend,
+                "tracker": tracker, "budget_s": self.budget_s, "design": self.design}
 
 
 @dataclass(frozen=True)
@@ -175,14 +183,11 @@ def machine_z_scores(ests: list[Estimate], truths: list[MachineParams]) -> list[
 
 @dataclass
 class _Episode:
-    """What an agent left on one machine: the notebook, the time, the truth to score."""
+    """The agent's episode on machine ``machine`` of the run, to score."""
 
     agent: str
     machine: int
-    records: list[Record]
-    time_s: float
-    sigma: float
-    truth: MachineParams
+    run: Episode
     #: The truth's TCP error vectors under the nominal model's commands over the scoring
     #: grid: the same for every agent and estimator on this machine, so computed once.
     before: np.ndarray | None = None
@@ -194,18 +199,18 @@ def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
     predicted error in one batched solve)."""
     good = [k for k, est in enumerate(estimates) if not isinstance(est, Exception)]
     fitted = [estimates[k] for k in good]
-    z_scores = iter(machine_z_scores(fitted, [episodes[k].truth for k in good]))  # type: ignore[arg-type]
+    z_scores = iter(machine_z_scores(fitted, [episodes[k].run.truth for k in good]))  # type: ignore[arg-type]
     machines = [e.machine for e in fitted]  # type: ignore[union-attr]
-    reports = iter(score_batch(machines, [episodes[k].truth for k in good],
+    reports = iter(score_batch(machines, [episodes[k].run.truth for k in good],
                                before=_before([episodes[k] for k in good])) if good else [])
     predicted = iter(predicted_rigid_mm(fitted, machines).tolist())  # type: ignore[arg-type]
     out = []
     for episode, est, curve in zip(episodes, estimates, curves, strict=True):
-        count = len(episode.records)
+        run, count = episode.run, len(episode.run.records)
         if isinstance(est, Exception):
             out.append(Trial(episode.agent, name, episode.machine,
                              failed=str(est).splitlines()[0] or type(est).__name__,
-                             time_s=episode.time_s, readings=count))
+                             time_s=run.time_s, readings=count))
             continue
         report = next(reports)
         std = np.full(len(ERROR_NAMES), np.nan)
@@ -213,12 +218,12 @@ def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
             if n in ERROR_NAMES:
                 std[ERROR_NAMES.index(n)] = np.sqrt(est.covariance[k, k])
         out.append(Trial(
-            episode.agent, name, episode.machine, time_s=episode.time_s, readings=count,
+            episode.agent, name, episode.machine, time_s=run.time_s, readings=count,
             tcp_before={f: getattr(report.tcp_before, f).rms for f in FRAMES},
             tcp_after={f: getattr(report.tcp_after, f).rms for f in FRAMES},
             predicted_rigid_mm=next(predicted),
             z=next(z_scores).tolist(),
-            error=(est.theta[:len(ERROR_NAMES)] - episode.truth.to_vector()).tolist(),
+            error=(est.theta[:len(ERROR_NAMES)] - run.truth.to_vector()).tolist(),
             std=std.tolist(), curve=curve,
         ))
     return out
@@ -231,16 +236,17 @@ def _curves(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
     then the full estimate (``estimates``: the fits of the whole episodes)."""
     points: list[list[list[float]]] = [[] for _ in episodes]
     for fraction in (*CURVE_FRACTIONS, 1.0):
-        datas = [measurements_of(e.records, e.time_s, until_s=fraction * e.time_s,
-                                 design=e.truth.design)
+        datas = [measurements_of(e.run.records, e.run.time_s, until_s=fraction * e.run.time_s,
+                                 design=e.run.truth.design)
                  for e in episodes]
         fitted = estimates if fraction == 1.0 else estimate_many(datas, name,
-                                                                 episodes[0].sigma)
-        models = [MachineParams(design=e.truth.design) if isinstance(est, Exception)
+                                                                 episodes[0].run.sigma)
+        models = [MachineParams(design=e.run.truth.design) if isinstance(est, Exception)
                   else est.machine for e, est in zip(episodes, fitted, strict=True)]
-        reports = score_batch(models, [e.truth for e in episodes], before=_before(episodes))
+        reports = score_batch(models, [e.run.truth for e in episodes],
+                              before=_before(episodes))
         for k, (episode, report) in enumerate(zip(episodes, reports, strict=True)):
-            points[k].append([fraction * episode.time_s, report.tcp_after.rigid.rms])
+            points[k].append([fraction * episode.run.time_s, report.tcp_after.rigid.rms])
     return points
 
 
@@ -249,7 +255,7 @@ def _before(episodes: list[_Episode]) -> np.ndarray:
     batched solve for those not known yet)."""
     new = [e for e in episodes if e.before is None]
     if new:
-        for episode, vectors in zip(new, uncalibrated_errors([e.truth for e in new]),
+        for episode, vectors in zip(new, uncalibrated_errors([e.run.truth for e in new]),
                                     strict=True):
             episode.before = vectors
     return np.stack([e.before for e in episodes])  # type: ignore[misc]
@@ -270,15 +276,15 @@ def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]
         runs = [i for i in indices if todo[i]]
         if not runs:
             continue
-        episodes = _episodes(config, agent_name, runs, batched)
+        episodes = agent_episodes(config, agent_name, runs, batched)
         for episode in episodes:
             episode.before = uncalibrated.get(episode.machine)
         for name in config.estimators:
             mine = [e for e in episodes if name in todo[e.machine]]
             if not mine:
                 continue
-            datas = [measurements_of(e.records, e.time_s, design=e.truth.design) for e in mine]
-            estimates = estimate_many(datas, name, mine[0].sigma)
+            estimates = estimate_many([e.run.measurements for e in mine], name,
+                                      mine[0].run.sigma)
             curves = (_curves(mine, name, estimates) if name == config.curve_estimator
                       else [[] for _ in mine])
             trials += _trials(mine, name, estimates, curves)
@@ -286,36 +292,25 @@ def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]
     return trials
 
 
-def _episodes(config: Config, agent_name: str, runs: list[int], batched: bool
-              ) -> list[_Episode]:
-    """The agent's episode on each machine of ``runs`` (machine ``i`` from its seed, the
-    agent's own choices from ``[seed, 1]``)."""
+def agent_episodes(config: Config, agent_name: str, runs: list[int], batched: bool = True
+                   ) -> list[_Episode]:
+    """The agent's episode on each machine of ``runs`` (machine ``i`` from its seed)."""
     seeds = [config.machine_seed(i) for i in runs]
-    rngs = [np.random.default_rng([seed, 1]) for seed in seeds]
-    kwargs = {"errors": config.errors, "gauge_sigma": config.sigma,
-              "gauge_resolution": config.resolution, "backend": config.backend,
-              "tracker": get_agent(agent_name).needs_tracker, "budget_s": config.budget_s,
-              "design": config.design}
+    kwargs = config.lab_kwargs(get_agent(agent_name).needs_tracker)
     if batched and config.backend == "exact":
         envs = gym.make_vec(orthoglide_env.LAB_ENV_ID, num_envs=len(runs),
                             vectorization_mode="vector_entry_point", **kwargs)
         try:
-            done = run_episodes(envs, agent_name, seeds, rngs)
+            done = run_episodes(envs, [get_agent(agent_name) for _ in runs], seeds)
         finally:
             envs.close()
     else:
         env = gym.make(orthoglide_env.LAB_ENV_ID, **kwargs)
-        done = []
         try:
-            for seed, rng in zip(seeds, rngs, strict=True):
-                data, _ = run_episode(env, get_agent(agent_name), seed, rng)
-                lab = env.unwrapped
-                done.append(Episode(list(lab.records), data.experiment_time_s,
-                                    lab.noise.effective_sigma, lab.true_machine))
+            done = [run_episode(env, get_agent(agent_name), seed) for seed in seeds]
         finally:
             env.close()
-    return [_Episode(agent_name, index, e.records, e.time_s, e.sigma, e.truth)
-            for index, e in zip(runs, done, strict=True)]
+    return [_Episode(agent_name, index, e) for index, e in zip(runs, done, strict=True)]
 
 
 #: Machines per task: their episodes run in one lab vector env and a fixed design's fits
@@ -405,28 +400,27 @@ def verify_pybullet(config: Config, machines: int) -> dict[str, float]:
     for index in range(machines):
         for name in config.agents:
             agent = get_agent(name)
-            envs = [gym.make(orthoglide_env.LAB_ENV_ID, errors=config.errors, gauge_sigma=0.0,
-                             gauge_resolution=0.0, backend=backend, tracker=agent.needs_tracker,
-                             budget_s=config.budget_s, design=config.design)
-                    for backend in ("exact", "pybullet")]
+            kwargs = {**config.lab_kwargs(agent.needs_tracker), "gauge_sigma": 0.0,
+                      "gauge_resolution": 0.0}
+            envs = gym.vector.SyncVectorEnv([
+                partial(gym.make, orthoglide_env.LAB_ENV_ID, **{**kwargs, "backend": backend})
+                for backend in ("exact", "pybullet")])
+            seed = config.machine_seed(index)
             try:
-                seed = config.machine_seed(index)
-                observation, info = envs[0].reset(seed=seed)
-                envs[1].reset(seed=seed)
-                agent.reset(envs[0], observation, np.random.default_rng([seed, 1]))
-                done = False
-                while not done:
-                    step = agent.act(observation, info)
-                    observation, _, terminated, truncated, info = envs[0].step(step)
-                    other, *_ = envs[1].step(step)
-                    done = terminated or truncated
-                    both = (observation["valid"] == 1) & (other["valid"] == 1)
-                    gap = np.abs(observation["gauges"] - other["gauges"])[both]
-                    tcp = [env.unwrapped.tcp() for env in envs]
-                    worst["reading_mm"] = max(worst["reading_mm"], float(gap.max(initial=0)))
-                    worst["tcp_mm"] = max(worst["tcp_mm"], float(np.abs(tcp[0] - tcp[1]).max()))
-                    worst["steps"] += 1
+                run_episodes(envs, [agent], [seed, seed], lockstep=True,
+                             on_step=partial(_widen_gaps, worst, envs))
             finally:
-                for env in envs:
-                    env.close()
+                envs.close()
     return worst
+
+
+def _widen_gaps(worst: dict[str, float], envs: gym.vector.SyncVectorEnv,
+                observation: dict[str, np.ndarray]) -> None:
+    """Widen ``worst`` to this step's reading and TCP differences between the two labs of
+    ``envs``; count the step."""
+    both = (observation["valid"] == 1).all(axis=0)
+    gap = np.abs(observation["gauges"][0] - observation["gauges"][1])[both]
+    tcp = [env.unwrapped.tcp() for env in envs.envs]
+    worst["reading_mm"] = max(worst["reading_mm"], float(gap.max(initial=0)))
+    worst["tcp_mm"] = max(worst["tcp_mm"], float(np.abs(tcp[0] - tcp[1]).max()))
+    worst["steps"] += 1

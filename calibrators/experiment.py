@@ -1,8 +1,12 @@
-"""Running an agent in the lab, and what its estimators make of the notebook.
+"""Running agents in the lab, and what estimators make of their notebooks.
 
 An experiment is an agent's episode in ``OrthoglideLab-v0``; its result is the lab
 notebook (``env.unwrapped.records``) as :class:`~calibrators.measurements.Measurements`,
-which any estimator reads exactly as it reads a measurement file.
+which any estimator reads exactly as it reads a measurement file.  :func:`run_episodes`
+is the one episode runner: on a lab vector env (many machines stepped together) or, by
+:func:`run_episode`, on a lone lab as a batch of one.  Every command draws machine ``i``
+of seed ``s`` from :func:`machine_seed` and its agent's choices from :func:`agent_rng`,
+so ``calibrate --seed s`` runs the experiment of ``compare --seed s``'s first machine.
 """
 
 from __future__ import annotations
@@ -14,10 +18,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from calibrators.agents import Agent, get_agent
+from calibrators.agents import Agent
 from calibrators.agents.base import PlannedAgent
 from calibrators.estimators.base import Estimate, get_strategy
-from calibrators.measurements import Measurement, Measurements
+from calibrators.measurements import ZERO_RHO, Measurement, Measurements
 from orthoglide_env.envs.lab import Record
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
@@ -34,10 +38,19 @@ def measurements_of(records: list[Record], time_s: float = 0.0,
                     ) -> Measurements:
     """The notebook as measurements (only what was read by ``until_s`` seconds, if given)
     of a machine of ``design``.  A reading at a paper posture of the prototype is labelled
-    with its name (a measurement file's paper postures are the prototype's)."""
+    with its name (a measurement file's paper postures are the prototype's); each Zero
+    reading of a mounting opens its next repetition (the file format's meaning), so the
+    paper's procedure is numbered as the paper numbers it."""
     labels = _PAPER_RHO if design == PROTOTYPE else {}
-    items = [Measurement.recorded(r.spec, labels.get(r.rho, ""), r.reading, r.rho, r.mounting)
-             for r in records if until_s is None or r.time_s <= until_s]
+    zeros: dict[str, int] = {}
+    items = []
+    for r in records:
+        if until_s is not None and r.time_s > until_s:
+            continue
+        if r.rho == ZERO_RHO:
+            zeros[r.mounting] = zeros.get(r.mounting, 0) + 1
+        items.append(Measurement.recorded(r.spec, labels.get(r.rho, ""), r.reading, r.rho,
+                                          r.mounting, max(zeros.get(r.mounting, 0), 1)))
     return Measurements(items, time_s if until_s is None else min(time_s, until_s), design)
 
 
@@ -105,29 +118,58 @@ def make_estimator(name: str = "extended", design: MachineDesign = PROTOTYPE
     return estimator
 
 
+#: The lab time every command gives an agent unless told otherwise (s): an hour, the
+#: comparison's equal budget.
+DEFAULT_BUDGET_S: float = 3600.0
+
+
+def machine_seed(seed: int, index: int) -> int:
+    """The lab's reset seed of machine ``index`` of a run seeded ``seed``: every command
+    and agent of that run works on the machine it draws."""
+    return seed * 1_000_003 + index
+
+
+def agent_rng(seed: int) -> np.random.Generator:
+    """The stream of an agent's own choices in the episode reset with ``seed``."""
+    return np.random.default_rng([seed, 1])
+
+
 @dataclass(frozen=True)
 class Episode:
-    """What an agent left in one lab: the notebook, the time used, and (for scoring only)
-    the machine's truth."""
+    """What an agent left in one lab: the notebook, the time used, the last step's info,
+    and (for scoring only) the machine's truth."""
 
     records: list[Record]
     time_s: float
     sigma: float  # effective noise of a gauge reading (mm)
     truth: MachineParams
+    info: dict[str, Any]
+
+    @property
+    def measurements(self) -> Measurements:
+        """The notebook as an estimator reads it."""
+        return measurements_of(self.records, self.time_s, design=self.truth.design)
 
 
-def run_episodes(envs: gym.vector.VectorEnv, agent: str, seeds: list[int],
-                 rngs: list[np.random.Generator]) -> list[Episode]:
-    """One episode of the named agent in each env of a lab vector env (autoreset
-    ``NEXT_STEP``), env ``i`` reset with ``seeds[i]``: each env has its own agent, which
-    acts on its own observation with ``rngs[i]``, exactly as :func:`run_episode` runs it
-    in a lone lab.  An env whose episode has ended is kept busy with lever flicks (never
-    refused: stand 0 is always mounted) until every episode has ended."""
-    lab = envs.unwrapped
-    observation, info = envs.reset(seed=list(seeds))
-    agents = [get_agent(agent) for _ in seeds]
-    for i, (one, rng) in enumerate(zip(agents, rngs, strict=True)):
-        one.reset(lab.sub_env(i), _row(observation, i), rng)
+def run_episodes(envs: gym.vector.VectorEnv, agents: list[Agent], seeds: list[int],
+                 options: dict | None = None, *, lockstep: bool = False,
+                 on_step: Callable[[dict[str, np.ndarray]], None] | None = None
+                 ) -> list[Episode]:
+    """One episode in each env of a lab vector env (autoreset ``NEXT_STEP``; the native
+    one, or ``SyncVectorEnv`` of lone labs), env ``i`` reset with ``seeds[i]`` (and
+    ``options``) and worked by ``agents[i]``, which acts on its own observation with
+    :func:`agent_rng` of its seed.  ``lockstep``: ``agents[0]`` alone decides, on env 0's
+    observation, and every env takes its action (labs compared step by step).
+    ``on_step`` sees every step's observations.  An env whose episode has ended is kept
+    busy with lever flicks (never refused: stand 0 is always mounted) until every
+    episode has ended."""
+    if len(agents) != (1 if lockstep else len(seeds)):
+        raise ValueError(f"{len(agents)} agents for {len(seeds)} labs"
+                         + (" in lockstep (one decides)" if lockstep else ""))
+    observation, info = envs.reset(seed=list(seeds), options=options)
+    labs = _labs(envs)
+    for i, agent in enumerate(agents):
+        agent.reset(labs[i], _row(observation, i), agent_rng(seeds[i]))
     idle = {"op": int(Op.LIFT), "rho": np.zeros(3), "stand": 0, "slot": 0}
     # Plans decided at reset are played as arrays, every machine's step t at once.
     plans = (_plan_arrays([a.plan for a in agents], idle)  # type: ignore[attr-defined]
@@ -137,21 +179,50 @@ def run_episodes(envs: gym.vector.VectorEnv, agent: str, seeds: list[int],
     while True:
         if plans is not None:
             if step >= len(plans["op"][0]):
-                raise RuntimeError(f"agent '{agent}' ran out of plan before its episode ended")
+                raise RuntimeError(f"agent '{agents[0].name}' ran out of plan before its "
+                                   "episode ended")
             actions = {key: value[:, step] for key, value in plans.items()}
         else:
-            moves = [idle if out[i] is not None else agents[i].act(_row(observation, i),
-                                                                   _InfoRow(info, i))
-                     for i in range(len(seeds))]
+            moves = [idle if out[i] is not None else agent.act(_row(observation, i),
+                                                               _InfoRow(info, i))
+                     for i, agent in enumerate(agents)]
             actions = {key: np.array([m[key] for m in moves]) for key in idle}
+        if lockstep:
+            actions = {key: np.repeat(value[:1], len(seeds), axis=0)
+                       for key, value in actions.items()}
         observation, _, terminated, truncated, info = envs.step(actions)
         step += 1
+        if on_step is not None:
+            on_step(observation)
         for i in np.flatnonzero(terminated | truncated):
             if out[i] is None:
-                out[i] = Episode(list(lab.records[i]), float(observation["time"][i, 0]),
-                                 lab.noise.effective_sigma, lab.true_machines[i])
+                lab = labs[i].unwrapped
+                out[i] = Episode(list(lab.records), float(observation["time"][i, 0]),
+                                 lab.noise.effective_sigma, _truth(envs, i),
+                                 dict(_InfoRow(info, i)))
         if all(e is not None for e in out):
             return out  # type: ignore[return-value]
+
+
+def run_episode(env: gym.Env, agent: Agent, seed: int, options: dict | None = None
+                ) -> Episode:
+    """:func:`run_episodes` on a lone lab ``env``, a batch of one: reset with ``seed``
+    (and ``options``), worked by ``agent`` until the episode ends."""
+    return run_episodes(gym.vector.SyncVectorEnv([lambda: env]), [agent], [seed], options)[0]
+
+
+def _labs(envs: gym.vector.VectorEnv) -> list[Any]:
+    """Each env of ``envs`` as its agent sees a lone lab."""
+    if isinstance(envs, gym.vector.SyncVectorEnv):
+        return list(envs.envs)
+    return [envs.unwrapped.sub_env(i) for i in range(envs.num_envs)]
+
+
+def _truth(envs: gym.vector.VectorEnv, i: int) -> MachineParams:
+    """Env ``i``'s true machine (scoring only)."""
+    if isinstance(envs, gym.vector.SyncVectorEnv):
+        return envs.envs[i].unwrapped.true_machine
+    return envs.unwrapped.true_machines[i]
 
 
 def _plan_arrays(plans: list[list[dict[str, Any]]], idle: dict[str, Any]
@@ -185,18 +256,3 @@ class _InfoRow(Mapping[str, Any]):
 
     def __len__(self) -> int:
         return sum(1 for _ in self)
-
-
-def run_episode(env: gym.Env, agent: Agent, seed: int, rng: np.random.Generator | None = None,
-                options: dict | None = None) -> tuple[Measurements, dict]:
-    """Reset ``env`` with ``seed`` (and ``options``), let ``agent`` work until the episode
-    ends, and return the notebook as measurements and the last step's info."""
-    observation, info = env.reset(seed=seed, options=options)
-    agent.reset(env, observation, rng if rng is not None else np.random.default_rng(seed))
-    while True:
-        observation, _, terminated, truncated, info = env.step(agent.act(observation, info))
-        if terminated or truncated:
-            break
-    lab = env.unwrapped
-    return measurements_of(lab.records, float(observation["time"][0]),
-                           design=lab.design), info

@@ -275,14 +275,15 @@ class Measurement:
 
     @classmethod
     def recorded(cls, gauge: GaugeSpec | TrackerAxis, posture: str, reading: float,
-                 rho: tuple[float, float, float], mounting: str) -> Measurement:
-        """A reading the lab wrote in its notebook (repetition 1), taken as it is: the lab
-        only records finite readings of its own gauges at postures it reached, so the
-        checks a reading from a file needs (a tenth of a millisecond each on a large
-        sweep's notebooks) would find nothing."""
+                 rho: tuple[float, float, float], mounting: str, repetition: int
+                 ) -> Measurement:
+        """A reading the lab wrote in its notebook, taken as it is: the lab only records
+        finite readings of its own gauges at postures it reached, so the checks a reading
+        from a file needs (a tenth of a millisecond each on a large sweep's notebooks)
+        would find nothing."""
         out = object.__new__(cls)
         for name, value in (("gauge", gauge), ("posture", posture or rho_label(rho)),
-                            ("repetition", 1), ("reading", reading), ("rho", rho),
+                            ("repetition", repetition), ("reading", reading), ("rho", rho),
                             ("mounting", mounting), ("line", None)):
             object.__setattr__(out, name, value)
         return out

@@ -43,10 +43,11 @@ from calibrators import compare
 from calibrators.agents import available
 from calibrators.agents.base import POLICY_PREFIX
 from calibrators.agents.policy import PolicySpec, save_policy, spec_of
-from calibrators.experiment import make_estimator
+from calibrators.experiment import DEFAULT_BUDGET_S, make_estimator
 from orthoglide_env.envs.wrappers import flat_lab_env
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.model.design import PROTOTYPE
+from orthoglide_env.model.errors import DEFAULT_PRESET
 
 #: The estimator that scores every evaluation (the comparison's headline).
 ESTIMATOR: str = "extended"
@@ -64,12 +65,13 @@ BASELINES: tuple[str, ...] = ("random", "paper", "optimal", "active")
 
 @dataclass(frozen=True)
 class Lab:
-    """The lab of training and of every evaluation (the comparison's defaults: one hour
-    for every agent; the policy stops after its training episodes' time)."""
+    """The lab of training and of every evaluation (the README's comparison: gauges of
+    sigma 0.01 mm, the default hour for every agent; the policy stops after its training
+    episodes' time)."""
 
-    errors: str = "realistic"
+    errors: str = DEFAULT_PRESET
     sigma: float = 0.01
-    budget_s: float = 3600.0
+    budget_s: float = DEFAULT_BUDGET_S
 
     def env_kwargs(self, reward: str, budget_s: float) -> dict[str, Any]:
         """Keyword arguments of the training lab env, episodes of ``budget_s``."""

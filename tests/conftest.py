@@ -1,10 +1,17 @@
-"""Shared fixtures: seeded machines and the paper's row order of eq. (10)."""
+"""Shared fixtures: seeded machines, the paper's row order of eq. (10) and its
+experiment in the lab."""
 
 from __future__ import annotations
 
+from typing import Any
+
+import gymnasium as gym
 import numpy as np
 import pytest
 
+import orthoglide_env
+from calibrators.agents import get_agent
+from calibrators.experiment import Episode, run_episode
 from orthoglide_env.model.design import PROTOTYPE
 
 #: Rows of eq. (10) as (posture, index of the gauge in the paper layout).  The paper's
@@ -45,3 +52,17 @@ def rng() -> np.random.Generator:
 def joint_samples(rng: np.random.Generator) -> np.ndarray:
     """Random control coordinates across the whole joint range."""
     return rng.uniform(PROTOTYPE.rho_min, PROTOTYPE.rho_max, (500, 3))
+
+
+def paper_experiment(machine: dict | None = None, seed: int = 0, **lab: Any
+                     ) -> tuple[Episode, Any]:
+    """The ``paper`` agent's episode in an exact-backend lab (``lab``: the lab's other
+    arguments) on ``machine`` (a machine-file dict; default: drawn from the seed), and the
+    lab it left (for its truth)."""
+    env = gym.make(orthoglide_env.LAB_ENV_ID, backend="exact", **lab)
+    try:
+        episode = run_episode(env, get_agent("paper"), seed,
+                              None if machine is None else {"machine": machine})
+    finally:
+        env.close()
+    return episode, env.unwrapped

@@ -6,24 +6,25 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import paper_experiment
 from conftest import paper_matrix as eq10
 
 import orthoglide_env
+from calibrators.agents import get_agent
 from calibrators.estimators.base import Estimate, available, get_strategy
 from calibrators.estimators.differences import differences, paper_matrix
+from calibrators.experiment import run_episode
 from calibrators.measurements import Measurement, MeasurementFileError, Measurements
 from orthoglide_env.instruments.gauges import GaugeSpec
 
 TABLE1 = {"drho": [4.66, -5.36, 1.46], "dL": [5.20, -5.96, 3.16]}
 
 
-def run(strategy: str, params: str, machine: dict, **env_kwargs):
-    env = gym.make(orthoglide_env.ENV_ID, backend="exact", errors="paper", **env_kwargs)
-    env.reset(seed=0, options={"machine": machine})
-    est = get_strategy(strategy).run(env, params)
-    truth = env.unwrapped.true_machine
-    env.close()
-    return est, truth
+def run(strategy: str, params: str, machine: dict, **lab):
+    """The paper's experiment on ``machine`` in the lab, and the strategy's estimate."""
+    episode, _ = paper_experiment(machine, errors="paper", **lab)
+    return get_strategy(strategy).estimate(episode.measurements, params,
+                                           episode.sigma), episode.truth
 
 
 def test_registry_finds_every_strategy() -> None:
@@ -69,10 +70,11 @@ def test_paper_design_matches_eq10_and_its_conditioning() -> None:
 
 
 def test_crlb_of_the_paper_design_is_about_43_sigma() -> None:
-    """docs/calibrators.md: with independent noise sigma on each of the twelve differences, each
-    parameter's std is ~43 sigma.  Our differences average 3 repetitions against 4 Zero
-    readings, so their variance is sigma^2 (1/3 + 1/4) with covariance sigma^2/4 within
-    a gauge; the bound follows from the same matrix."""
+    """docs/calibrators.md: with independent noise sigma on each of the twelve differences,
+    each parameter's std is ~43 sigma.  Our differences average 3 repetitions against 5
+    Zero readings (the lab reads every gauge as the episode opens, then at the leg's 4
+    Zero visits), so their variance is sigma^2 (1/3 + 1/5) with covariance sigma^2/5
+    within a gauge; the bound follows from the same matrix."""
     ones = np.linalg.inv(eq10().T @ eq10())
     assert np.sqrt(np.diag(ones)) == pytest.approx(np.full(6, 43.0), rel=0.05)
     sigma = 0.01
@@ -85,19 +87,19 @@ def test_crlb_of_the_paper_design_is_about_43_sigma() -> None:
 
 
 def est_items(machine: dict) -> list[Measurement]:
-    env = gym.make(orthoglide_env.ENV_ID, backend="exact", errors="paper", gauge_sigma=0.0,
-                   gauge_resolution=0.0)
-    env.reset(seed=0, options={"machine": machine})
-    data = get_strategy("paper").collect(env)
-    env.close()
-    return data.items
+    episode, _ = paper_experiment(machine, errors="paper", gauge_sigma=0.0,
+                                  gauge_resolution=0.0)
+    return episode.measurements.items
 
 
 def test_experiment_is_the_papers_sequence() -> None:
+    """The lab reads every gauge as it opens, then each leg's gauges through the paper's
+    sequence, numbered as the paper numbers its repetitions."""
     items = est_items(TABLE1)
-    postures = [m.posture for m in items if m.gauge == GaugeSpec(0, 1)]
-    assert postures == ["Zero", "XMax", "XMin"] * 3 + ["Zero"]
-    assert len(items) == 60  # 3 legs x 2 gauges x 10 postures, all valid
+    mine = [m for m in items if m.gauge == GaugeSpec(0, 1)]
+    assert [m.posture for m in mine] == ["Zero"] + ["Zero", "XMax", "XMin"] * 3 + ["Zero"]
+    assert [m.repetition for m in mine] == [1] + [2] * 3 + [3] * 3 + [4] * 3 + [5]
+    assert len(items) == 66  # 3 legs x 2 gauges x (1 + 10) postures, all valid
 
 
 @pytest.mark.slow
@@ -111,14 +113,14 @@ def test_statistics_against_the_cramer_rao_bound(strategy: str) -> None:
     order: on machines with 2 mm errors its mean error is systematically off (measured
     -0.14 to -0.21 mm, 4-6 standard errors), so its RMS exceeds its bound; it must never
     beat the bound by more than the sampling band."""
-    env = gym.make(orthoglide_env.ENV_ID, backend="exact", errors="paper", gauge_sigma=0.01,
+    env = gym.make(orthoglide_env.LAB_ENV_ID, backend="exact", errors="paper", gauge_sigma=0.01,
                    gauge_resolution=0.0)
     calibrator = get_strategy(strategy)
     errors, stds, crlbs = [], [], []
     for seed in range(200):
-        env.reset(seed=seed)
-        est = calibrator.run(env, "full", verify=False)
-        truth = env.unwrapped.true_machine
+        episode = run_episode(env, get_agent("paper"), seed)
+        est = calibrator.estimate(episode.measurements, "full", episode.sigma, verify=False)
+        truth = episode.truth
         errors.append(np.concatenate([est.drho - truth.drho, est.dL - truth.dL]))
         stds.append(np.sqrt(np.diag(est.covariance)))
         crlbs.append(est.crlb)
@@ -181,7 +183,7 @@ def test_estimate_json_round_trip(tmp_path) -> None:
     est.to_json(path)
     again = Estimate.from_json(path)
     assert again.to_dict() == est.to_dict()
-    assert again.readings.items == est.readings.items and len(again.readings) == 60
+    assert again.readings.items == est.readings.items and len(again.readings) == 66
     assert again.std["dL"] == [None, None, None]
 
 
@@ -228,13 +230,5 @@ def test_predictions_without_the_truth() -> None:
         assert getattr(predicted_tcp_error(twice), frame).rms == pytest.approx(
             2 * getattr(predicted_tcp_error(noisy), frame).rms, rel=1e-6)
     # The weak drho ~ dL directions barely move the TCP: it is known far better than the
-    # parameters (~0.38 mm each at 0.01 mm gauges).
+    # parameters (~0.36 mm each at 0.01 mm gauges).
     assert predicted_tcp_error(noisy).raw.max < 0.1
-
-
-def run_strategy_once(name: str):
-    env = gym.make(orthoglide_env.ENV_ID, backend="exact", errors="paper")
-    env.reset(seed=0)
-    est = get_strategy(name).run(env, "full", verify=False)
-    env.close()
-    return est

@@ -3,13 +3,11 @@ paper's procedure, and the weak drho ~ dL directions."""
 
 from __future__ import annotations
 
-import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import paper_experiment
 from conftest import paper_matrix as eq10
 
-import orthoglide_env
-from calibrators.estimators.base import get_strategy
 from calibrators.estimators.differences import differences
 from calibrators.estimators.identifiability import analyse, of_design
 from calibrators.measurements import Measurement, Measurements
@@ -20,12 +18,8 @@ from orthoglide_env.instruments.gauges import PAPER_LAYOUT
 def paper_design() -> Measurements:
     """The paper's readings on a nominal machine with ideal gauges (values do not matter
     to identifiability, only where and how often the gauges are read)."""
-    env = gym.make(orthoglide_env.ENV_ID, backend="exact", errors="nominal", gauge_sigma=0.0,
-                   gauge_resolution=0.0)
-    env.reset(seed=0)
-    data = get_strategy("paper").collect(env)
-    env.close()
-    return data
+    episode, _ = paper_experiment(errors="nominal", gauge_sigma=0.0, gauge_resolution=0.0)
+    return episode.measurements
 
 
 def test_eq10_singular_values_and_condition() -> None:
@@ -52,24 +46,25 @@ def test_crlb_is_43_sigma_for_independent_differences() -> None:
 
 
 def test_crlb_of_the_averaged_differences(paper_design) -> None:
-    """The paper's procedure reads Max and Min 3 times and Zero 4 times per gauge, so each
-    difference has variance sigma^2 (1/3 + 1/4) and the Max and Min differences of one
-    gauge share the Zero mean (covariance sigma^2 / 4).  The bound is computed here from
-    that covariance, built by hand, and is 38.4 sigma: better than 43 sigma per single
-    reading because of the averaging, worse than 43 * sqrt(7/12) = 32.8 sigma because the
-    shared Zero mean is not independent noise."""
+    """The paper's procedure in the lab reads Max and Min 3 times and Zero 5 times per
+    gauge (the lab reads every gauge as the episode opens, then at the leg's 4 Zero
+    visits), so each difference has variance sigma^2 (1/3 + 1/5) and the Max and Min
+    differences of one gauge share the Zero mean (covariance sigma^2 / 5).  The bound is
+    computed here from that covariance, built by hand, and is 36.1 sigma: better than 43
+    sigma per single reading because of the averaging, worse than 43 * sqrt(8/15) = 31.4
+    sigma because the shared Zero mean is not independent noise."""
     sigma = 0.01
     rows = differences(paper_design)
     assert len(rows) == 12
-    block = np.array([[1 / 3 + 1 / 4, 1 / 4], [1 / 4, 1 / 3 + 1 / 4]])
+    block = np.array([[1 / 3 + 1 / 5, 1 / 5], [1 / 5, 1 / 3 + 1 / 5]])
     cov = np.zeros((12, 12))
     for g in set(rows.gauges):
         idx = [k for k, h in enumerate(rows.gauges) if h == g]
         cov[np.ix_(idx, idx)] = block
     np.testing.assert_allclose(rows.cov_unit, cov, atol=1e-15)
     ident = of_design(paper_design, "full", sigma)
-    np.testing.assert_allclose(ident.crlb / sigma, 38.4, rtol=0.01)
-    assert np.all(ident.crlb / sigma > 43 * np.sqrt(7 / 12))
+    np.testing.assert_allclose(ident.crlb / sigma, 36.1, rtol=0.01)
+    assert np.all(ident.crlb / sigma > 43 * np.sqrt(8 / 15))
 
 
 def test_fisher_information_scales_with_repetitions(paper_design) -> None:

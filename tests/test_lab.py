@@ -18,7 +18,7 @@ import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.agents.base import action
 from calibrators.agents.paper import PaperAgent
-from calibrators.compare import Config, run, run_chunk, summary
+from calibrators.compare import Config, agent_episodes, run, run_chunk, summary
 from calibrators.experiment import estimate, make_estimator, measurements_of, run_episode
 from orthoglide_env.lab.operations import SLOTS, TIME, Op, slot_index
 from orthoglide_env.scoring import score
@@ -46,7 +46,8 @@ def test_paper_agent_lifts_instead_of_pressing_and_takes_minutes() -> None:
     """The paper's procedure done as a technician does it: one leg's gauges down at a
     time, so no bar presses a gauge; 90 moves of the sequence plus 12 lever flicks."""
     env = lab()
-    data, info = run_episode(env, get_agent("paper"), seed=3)
+    episode = run_episode(env, get_agent("paper"), seed=3)
+    data, info = episode.measurements, episode.info
     assert info["overtravel"] == [] and not info["refused"]
     assert data.experiment_time_s <= 15 * 60
     # Per leg: Zero (5 s), then three times Max (8), Min (13), Zero (10): drives at 20 mm/s
@@ -263,18 +264,44 @@ def test_every_slot_can_be_mounted_and_reads_its_zero() -> None:
 
 
 def test_calibrate_and_compare_run_the_same_experiment(capsys) -> None:
-    """`calibrate --seed S` on the lab draws the machine `compare` draws for that seed:
+    """`calibrate --seed S` on the lab draws the machine `compare --seed S` draws first:
     the paper agent's readings, and so the paper estimator's estimate, are the same."""
     from calibrators.cli import main
 
     config = Config(("paper",), ("paper",), seed=1, sigma=0.01)
     trial = run_chunk(config, [0], set())[0]
     assert main(["calibrate", "--backend", "exact", "--strategy", "paper", "--sigma", "0.01",
-                 "--seed", str(config.machine_seed(0)), "--json"]) == 0
+                 "--seed", str(config.seed), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     error = np.subtract(out["estimate"]["drho"], out["truth"]["drho"])
     np.testing.assert_allclose(error, trial.error[:3], rtol=0, atol=1e-9)
     assert out["experiment_time_s"] == trial.time_s
+
+
+
+def test_calibrate_and_compare_without_options_run_the_same_experiment(tmp_path, capsys
+                                                                      ) -> None:
+    """Given only a seed, `calibrate` (the paper agent, on PyBullet) and `compare` (its
+    first machine, on the exact model) run one experiment: the same machine, gauges,
+    noise, budget and actions, so the same notebook.  The simulators agree within 1 µm,
+    below the dial's step, so the displayed readings are the same (a reading within 1 µm
+    of a rounding boundary could tip by one step: none did in 660 over seeds 0-9)."""
+    from calibrators.cli import build_parser, main
+    from calibrators.cli.compare import _check
+    from calibrators.measurements import Measurements
+
+    seed, path = 5, tmp_path / "readings.csv"
+    assert main(["calibrate", "--seed", str(seed), "--json", "--save-measurements",
+                 str(path)]) == 0
+    calibrated = json.loads(capsys.readouterr().out)
+    config = _check(build_parser().parse_args(["compare", "--seed", str(seed)]))
+    assert "paper" in config.agents
+    compared = agent_episodes(config, "paper", [0])[0].run
+    assert calibrated["truth"] == compared.truth.to_dict()
+    assert calibrated["experiment_time_s"] == compared.time_s
+    mine, theirs = Measurements.read(path).items, compared.measurements.items
+    assert [(m.mounting, m.gauge, m.rho, m.repetition, m.reading) for m in mine] == [
+        (m.mounting, m.gauge, m.rho, m.repetition, m.reading) for m in theirs]
 
 
 def test_pybullet_lab_reads_what_the_exact_lab_reads() -> None:

@@ -7,13 +7,12 @@ import json
 import tracemalloc
 from pathlib import Path
 
-import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import paper_experiment
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import orthoglide_env
 from calibrators import measurements
 from calibrators.cli import main
 from calibrators.estimators import differences as differences_module
@@ -528,18 +527,15 @@ def test_more_differences_than_an_estimate_can_weigh(monkeypatch) -> None:
 
 @pytest.fixture(scope="module")
 def noisy_paper_data() -> Measurements:
-    env = gym.make(orthoglide_env.ENV_ID, backend="exact", errors="paper", gauge_sigma=0.02,
-                   gauge_resolution=0.01)
-    env.reset(seed=0, options={"machine": TABLE1})
-    data = get_strategy("paper").collect(env)
-    env.close()
-    return data
+    episode, _ = paper_experiment(TABLE1, errors="paper", gauge_sigma=0.02,
+                                  gauge_resolution=0.01)
+    return episode.measurements
 
 
 def test_verification_does_not_depend_on_how_repetitions_are_numbered(noisy_paper_data) -> None:
     """The held-out sets are the repetitions that occur, whatever their numbers (a huge
     number once made it build a set of every number up to it)."""
-    renumber = {1: 1, 2: 10, 3: 1000, 4: MAX_REPETITION}
+    renumber = {1: 1, 2: 10, 3: 100, 4: 1000, 5: MAX_REPETITION}
     renumbered = Measurements([
         Measurement(m.gauge, m.posture, renumber[m.repetition], m.reading, m.rho)
         for m in noisy_paper_data.items])
@@ -595,5 +591,5 @@ def test_fit_reads_json_as_it_reads_csv(tmp_path, capsys, noisy_paper_data) -> N
     assert csv_time == 0.0 and json_time == noisy_paper_data.experiment_time_s > 0
     # A CSV reading knows its line; a JSON one has no line to name.
     lines = [r.pop("line") for r in estimates[0]["residuals"]]
-    assert lines == list(range(2, 62))
-    assert estimates[0] == estimates[1] and estimates[0]["n_readings"] == 60
+    assert lines == list(range(2, 68))
+    assert estimates[0] == estimates[1] and estimates[0]["n_readings"] == 66

@@ -106,11 +106,11 @@ def test_the_policy_plays_deterministic_episodes_in_the_lab(trained: tuple[Path,
     notebooks = []
     for _ in range(2):
         env = gym.make(orthoglide_env.LAB_ENV_ID, **LAB)
-        data, _ = run_episode(env, get_agent(f"policy:{path}"), seed=11)
+        episode = run_episode(env, get_agent(f"policy:{path}"), seed=11)
         notebooks.append([(r.mounting, r.rho, r.reading) for r in env.unwrapped.records])
         env.close()
     assert notebooks[0] == notebooks[1]
-    assert data.experiment_time_s > 0
+    assert episode.time_s > 0
 
 
 def test_a_lab_of_other_sizes_is_refused_at_reset(trained: tuple[Path, object]) -> None:

@@ -3,11 +3,10 @@ toys, and a Monte-Carlo check against the scorer on sampled true machines."""
 
 from __future__ import annotations
 
-import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import paper_experiment
 
-import orthoglide_env
 from calibrators.estimators.base import get_strategy
 from calibrators.estimators.prediction import predicted_tcp_error
 from orthoglide_env.instruments.gauges import cross
@@ -85,11 +84,9 @@ def test_predicted_rms_matches_sampled_true_machines() -> None:
     """Sample true machines theta_hat + delta, delta ~ N(0, C) of a gauss-newton estimate,
     score the estimate against each: the mean square of the scored RMS is the prediction,
     in every frame."""
-    env = gym.make(orthoglide_env.ENV_ID, backend="exact", errors="paper", gauge_sigma=0.0,
-                   gauge_resolution=0.0)
-    env.reset(seed=0, options={"machine": TABLE1})
-    readings = get_strategy("paper").collect(env)
-    env.close()
+    episode, _ = paper_experiment(TABLE1, errors="paper", gauge_sigma=0.0,
+                                  gauge_resolution=0.0)
+    readings = episode.measurements
     # With 1e-4 mm gauges the parameters wander ~4e-3 mm (43 sigma), so the second-order
     # TCP error, ~|delta|^2 / L ~ 4e-7 mm, is ~1e-3 of the first-order one (~5e-4 mm);
     # its share of the mean square is ~1e-6, far below the sampling error.

@@ -19,7 +19,7 @@ import numpy as np
 
 from calibrators.agents.base import PlannedAgent, action, register
 from calibrators.design.planner import Planner, Step, greedy_plan
-from orthoglide_env.instruments.gauges import NOISE_FLOOR
+from calibrators.estimators.exact_fit import weighting_sigma
 from orthoglide_env.lab.operations import SLOTS
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 
@@ -44,7 +44,7 @@ def lab_setup(env: gym.Env, observation: dict[str, np.ndarray]
     plunger is down, a reading's sigma, the time budget and the machine's design."""
     slots = tuple(int(s) if s < len(SLOTS) else -1 for s in observation["slot"])
     engaged = tuple(bool(e) for e in observation["engaged"])
-    sigma = max(float(env.noise.effective_sigma), NOISE_FLOOR)
+    sigma = weighting_sigma(float(env.noise.effective_sigma))
     return (slots, engaged, sigma, float(env.budget_s) - float(observation["time"][0]),
             env.design)
 

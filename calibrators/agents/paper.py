@@ -14,10 +14,19 @@ import gymnasium as gym
 import numpy as np
 
 from calibrators.agents.base import PlannedAgent, action, register
-from calibrators.estimators.paper_linear import REPETITIONS, leg_sequence
 from orthoglide_env.lab.operations import SLOTS, Op
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.kinematics import paper_posture
+
+#: Times each leg's Zero -> Max -> Min is gone through (section 4 of the paper).
+REPETITIONS: int = 3
+
+
+def leg_sequence(leg: int, repetitions: int = REPETITIONS) -> list[str]:
+    """The paper's postures for one leg: Zero -> Max -> Min ``repetitions`` times, then
+    Zero."""
+    name = "XYZ"[leg]
+    return [*(("Zero", f"{name}Max", f"{name}Min") * repetitions), "Zero"]
 
 
 @register
@@ -51,6 +60,6 @@ def paper_plan(legs: tuple[int, ...], engaged: tuple[bool, ...], repetitions: in
                 plan.append(action(Op.ENGAGE if want else Op.LIFT, stand=k))
                 current[k] = want
         plan += [action(Op.MOVE, paper_posture(p, design))
-                 for p, _ in leg_sequence(leg, repetitions)]
+                 for p in leg_sequence(leg, repetitions)]
     plan.append(action(Op.STOP))
     return tuple(plan)

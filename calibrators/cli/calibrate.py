@@ -17,7 +17,7 @@ from calibrators.cli.output import emit, report
 from calibrators.estimators.base import Estimate, Measurements, get_strategy
 from calibrators.estimators.exact_fit import z_scores
 from calibrators.estimators.gauss_newton import design_of
-from calibrators.experiment import run_episode
+from calibrators.experiment import DEFAULT_BUDGET_S, machine_seed, run_episode
 from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.model.design import load_design
 from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS, MachineParams
@@ -69,16 +69,15 @@ def run(args: argparse.Namespace) -> None:
                    tracker=agent.needs_tracker, budget_s=args.budget,
                    design=machine.design)
     try:
-        # A random machine is drawn by the lab from the seed, as ``compare`` draws it: the
-        # same seed gives the same machine, installation and readings there and here.
+        # A random machine is drawn by the lab from the seed, as ``compare`` draws its first
+        # one: the same seed gives the same machine, installation and readings there and here.
         given = {"machine": machine.to_dict()} if args.machine else None
-        data, _ = run_episode(env, agent, args.seed, np.random.default_rng([args.seed, 1]),
-                              options=given)
+        episode = run_episode(env, agent, machine_seed(args.seed, 0), options=given)
+        data = episode.measurements
         if args.save_measurements:
             data.write(args.save_measurements)
-        lab = env.unwrapped
-        est = estimator_options.estimate(args, data, lab.noise.effective_sigma)
-        emit(report(est, lab.true_machine, _z_rms(est, data, env)), args.json)
+        est = estimator_options.estimate(args, data, episode.sigma)
+        emit(report(est, episode.truth, _z_rms(est, data, env)), args.json)
     finally:
         env.close()
 
@@ -109,7 +108,7 @@ def add(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--agent", default="paper",
                    help=f"who works in the lab: {', '.join(agents_available())}, or "
                         "policy:FILE, a learned policy (default: %(default)s)")
-    p.add_argument("--budget", type=float, default=3600.0,
+    p.add_argument("--budget", type=float, default=DEFAULT_BUDGET_S,
                    help="lab time budget (s, default %(default)s)")
     p.add_argument("--save-measurements", metavar="FILE.csv",
                    help="write the experiment's readings in the format that `fit` reads")

@@ -18,10 +18,10 @@ from calibrators.cli.common import UsageError, add_design, design_of
 from calibrators.cli.estimator_options import DEFAULT_STRATEGY
 from calibrators.compare import Config, Trial, run, summary, verify_pybullet
 from calibrators.engines import ENGINES, RAY_INSTALL_HINT, ray_available
-from calibrators.experiment import ESTIMATORS
-from orthoglide_env.instruments.gauges import check_noise
+from calibrators.experiment import DEFAULT_BUDGET_S, ESTIMATORS
+from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA, check_noise
 from orthoglide_env.model.design import PROTOTYPE
-from orthoglide_env.model.errors import PRESETS
+from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS
 from orthoglide_env.scoring import FRAMES
 
 TRIALS_FILE = "trials.jsonl"
@@ -228,18 +228,18 @@ def add(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--estimators", default="paper,extended",
                    help=f"comma list of estimators ({', '.join(ESTIMATORS)}) "
                         "(default: %(default)s)")
-    p.add_argument("--budget", type=float, default=3600.0,
+    p.add_argument("--budget", type=float, default=DEFAULT_BUDGET_S,
                    help="lab time budget of every agent (s, default %(default)s)")
     p.add_argument("--machines", type=int, default=20,
                    help="random machines (default %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="seed of the run (default %(default)s)")
-    p.add_argument("--errors", choices=sorted(PRESETS), default="realistic",
+    p.add_argument("--errors", choices=sorted(PRESETS), default=DEFAULT_PRESET,
                    help="error preset of the machines and gauge stands (default %(default)s)")
     group = p.add_mutually_exclusive_group()
-    group.add_argument("--sigma", type=float, default=0.01,
+    group.add_argument("--sigma", type=float, default=DEFAULT_SIGMA,
                        help="gauge repeatability (mm, default %(default)s)")
     group.add_argument("--noise-free", action="store_true", help="ideal gauges")
-    p.add_argument("--resolution", type=float, default=0.01,
+    p.add_argument("--resolution", type=float, default=DEFAULT_RESOLUTION,
                    help="gauge display resolution (mm, default %(default)s)")
     add_design(p)
     p.add_argument("--backend", choices=["exact", "pybullet"], default="exact",

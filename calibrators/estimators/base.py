@@ -1,12 +1,8 @@
-"""The calibrator interface: estimates and the registry of strategies.
+"""The estimator interface: estimates and the registry of strategies.
 
-A strategy has two halves, kept apart so a real machine's measured readings (a file) go
-through the same estimator as a virtual experiment:
-
-* ``collect(env)``: drives the environment through its public API only (actions in,
-  observations out) and returns the :class:`~calibrators.measurements.Measurements` it
-  read and the time spent;
-* ``estimate(measurements, params, sigma)``: turns readings into an :class:`Estimate`.
+A strategy's ``estimate(measurements, params, sigma)`` turns readings into an
+:class:`Estimate`.  It reads a lab notebook (an agent's experiment,
+:mod:`calibrators.experiment`) exactly as it reads a real machine's measurement file.
 
 Strategies register themselves by name with :func:`register`; every module of this
 package is imported by :func:`available`, so adding a strategy is adding one module.
@@ -19,7 +15,6 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, ClassVar
 
-import gymnasium as gym
 import numpy as np
 
 from calibrators.measurements import Measurements
@@ -30,7 +25,6 @@ from orthoglide_env.model.errors import (
     MachineParams,
     error_group,
 )
-from orthoglide_env.model.kinematics import paper_posture
 
 PARAM_NAMES: tuple[str, ...] = ("drho_x", "drho_y", "drho_z", "dL_x", "dL_y", "dL_z")
 #: Which of the six paper parameters each ``--params`` choice frees (the others stay 0).
@@ -190,34 +184,15 @@ _ARRAY_FIELDS: tuple[str, ...] = ("drho", "dL", "covariance", "residuals", "sing
 
 
 class Calibrator:
-    """Base class of strategies: ``collect`` then ``estimate``."""
+    """Base class of strategies: an estimator of readings."""
 
     name: ClassVar[str] = ""
-    #: Strategies with the same (non-empty) experiment key run the same experiment, so a
-    #: comparison may measure once and hand the readings to each estimator.
-    experiment: ClassVar[str] = ""
-
-    @property
-    def experiment_key(self) -> str:
-        """What identifies this strategy's experiment (its name unless it shares one)."""
-        return self.experiment or self.name
-
-    def collect(self, env: gym.Env) -> Measurements:
-        raise NotImplementedError
 
     def estimate(self, data: Measurements, params: str = "paper6", sigma: float = 0.01,
                  *, verify: bool = True, **options: Any) -> Estimate:
         """Estimate from ``data``; ``options`` are the estimator's own (see
         :meth:`calibrators.estimators.gauss_newton.GaussNewtonCalibrator.estimate`)."""
         raise NotImplementedError
-
-    def run(self, env: gym.Env, params: str = "paper6", sigma: float | None = None,
-            *, verify: bool = True, **options: Any) -> Estimate:
-        """Run one experiment on ``env`` (already reset) and estimate.  ``sigma`` defaults
-        to the gauges' spec-sheet noise (``env.unwrapped.gauge_noise``)."""
-        if sigma is None:
-            sigma = env.unwrapped.gauge_noise.effective_sigma
-        return self.estimate(self.collect(env), params, sigma, verify=verify, **options)
 
 
 STRATEGIES: Registry[Calibrator] = Registry("strategy", "calibrators.estimators")
@@ -231,11 +206,3 @@ def check_params(params: str) -> tuple[int, ...]:
         raise ValueError(f"unknown parameter set '{params}'; choose from {list(PARAM_SETS)}")
     return PARAM_SETS[params]
 
-
-def move_and_read(env: gym.Env, posture: str) -> tuple[dict[str, np.ndarray], float]:
-    """Drive to a paper posture; returns the observation and the time it cost (s)."""
-    obs, reward, terminated, truncated, info = env.step(paper_posture(posture))
-    if terminated or truncated:
-        reason = info.get("collision") or "the episode's step limit"
-        raise RuntimeError(f"experiment stopped at {posture}: {reason}")
-    return obs, -float(reward)

@@ -58,6 +58,14 @@ DAMPING_MAX: float = 1e10
 CHI2_LEVEL: float = 1e-3
 
 
+def weighting_sigma(sigma: float | np.ndarray) -> float | np.ndarray:
+    """The noise a reading is weighted with (mm): its instrument's, or
+    :data:`~orthoglide_env.instruments.gauges.NOISE_FLOOR` for an ideal one (every weight,
+    information and plan of the estimators and agents takes it from here)."""
+    floored = np.maximum(sigma, NOISE_FLOOR)
+    return float(floored) if np.ndim(floored) == 0 else floored
+
+
 @dataclass
 class BatchFit:
     """The result of fitting M machines of one design."""
@@ -195,7 +203,7 @@ class _Problem:
                                       (self.s / prior[self.idx]) ** 2, 0.0)
         # One instrument per mounting, so one weight per mounting: centring the weighted
         # residuals of a mounting is then its weighted zero.
-        self.weight = 1.0 / np.maximum(np.broadcast_to(sigma, (len(design),)), NOISE_FLOOR)
+        self.weight = 1.0 / weighting_sigma(np.broadcast_to(sigma, (len(design),)))
         self.onehot = np.eye(len(design.mountings))[design.mounting]
         # A prior that alone keeps every direction of the normal matrix at or above RETAIN
         # (as the extended fit's does) leaves none to truncate: a step is a linear solve.

@@ -6,17 +6,22 @@ batched damped Gauss-Newton solver of :mod:`calibrators.estimators.exact_fit`, o
 selection (``paper6``, ``extended`` with the gauge stands, groups, names), with priors or
 base parameters, and reports what the data could and could not determine, a chi-square
 test of the model, per-reading residuals with outliers flagged, and optional held-out
-readings.  Its experiment is the paper's (it shares ``collect``); its estimator reads any
-measurement file.
+readings.  It reads any experiment's notebook or measurement file.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from calibrators.estimators.base import Estimate, Measurements, register
-from calibrators.estimators.exact_fit import CHI2_LEVEL, RETAIN, BatchFit, fit_batch
-from calibrators.estimators.paper_linear import PaperCalibrator, split_repetitions
+from calibrators.estimators.base import Calibrator, Estimate, Measurements, register
+from calibrators.estimators.exact_fit import (
+    CHI2_LEVEL,
+    RETAIN,
+    BatchFit,
+    fit_batch,
+    weighting_sigma,
+)
+from calibrators.estimators.paper_linear import split_repetitions
 from calibrators.estimators.parameters import (
     ParameterSpace,
     act_together,
@@ -27,7 +32,6 @@ from calibrators.estimators.parameters import (
     select,
     sparse_basis,
 )
-from orthoglide_env.instruments.gauges import NOISE_FLOOR
 from orthoglide_env.lab.operations import TRACKER_SIGMA
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import direct
@@ -85,8 +89,8 @@ def align_tracker(design: Design, values: np.ndarray) -> np.ndarray:
 
 
 @register
-class GaussNewtonCalibrator(PaperCalibrator):
-    """Same experiment as ``paper``; exact model, any parameter set."""
+class GaussNewtonCalibrator(Calibrator):
+    """The exact model, any parameter set."""
 
     name = "gauss-newton"
 
@@ -187,7 +191,7 @@ class GaussNewtonCalibrator(PaperCalibrator):
                         MAX_OUTLIER_FRACTION * values.shape[1]):
                     continue
                 # Residuals in units of their instrument's noise: gauges and a tracker differ.
-                residual = np.abs(results[m].residuals[0]) / np.maximum(noise, NOISE_FLOOR)
+                residual = np.abs(results[m].residuals[0]) / weighting_sigma(noise)
                 robust = 1.4826 * np.nanmedian(residual)
                 worst = int(np.nanargmax(residual))
                 if residual[worst] > OUTLIER_K * max(1.0, robust):
@@ -260,7 +264,7 @@ class GaussNewtonCalibrator(PaperCalibrator):
             if verify else None,
             iterations=int(result.iterations[0]), sigma=sigma,
             # Physical units, for readings of unit variance (as the paper's fit reports it).
-            fisher=info / np.outer(s, s) * max(sigma, NOISE_FLOOR) ** 2,
+            fisher=info / np.outer(s, s) * weighting_sigma(sigma) ** 2,
             readings=data, names=names, space=list(space.names), theta=theta, prior=prior,
             chi2=float(result.chi2[0]), dof=int(result.dof[0]),
             covariance_scale=float(result.covariance_scale[0]), warnings=warnings,

@@ -1,16 +1,15 @@
-"""``paper``: the fixed-posture method of the paper, exactly.
+"""``paper``: the paper's linear estimator, eq. (10).
 
-For each leg: Zero -> Max -> Min, three times, and a last Zero (section 4); the leg's two
-gauges are read at every posture.  The repetitions are averaged, the twelve differences
-(Max - Zero and Min - Zero of six gauges) form the linear system of eq. (10), solved with
-the Moore-Penrose pseudo-inverse for the full set or for drho or dL alone.
+The readings of the paper's procedure (the ``paper`` agent: for each leg Zero -> Max ->
+Min three times and a last Zero, section 4) are averaged per posture, and the twelve
+differences (Max - Zero and Min - Zero of six gauges) form the linear system of eq. (10),
+solved with the Moore-Penrose pseudo-inverse for the full set or for drho or dL alone.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
 from calibrators.estimators.base import (
@@ -19,7 +18,6 @@ from calibrators.estimators.base import (
     Calibrator,
     Estimate,
     check_params,
-    move_and_read,
     register,
 )
 from calibrators.estimators.differences import (
@@ -29,10 +27,9 @@ from calibrators.estimators.differences import (
     paper_matrix,
 )
 from calibrators.estimators.identifiability import analyse
-from calibrators.measurements import Measurement, Measurements
+from calibrators.measurements import Measurements
 from orthoglide_env.instruments.gauges import GaugeSpec
 
-REPETITIONS: int = 3
 #: Held-out sets of the verification: up to this many repetitions each is one; beyond,
 #: this many runs of consecutive ones, so that its cost stays linear in the readings.
 MAX_FOLDS: int = 10
@@ -41,13 +38,6 @@ MAX_FOLDS: int = 10
 class NeedsExactFit(ValueError):
     """Readings or options the linear fit cannot take and the exact-model fit can.  The
     message names no option: each command says how its user reaches that fit."""
-
-
-def leg_sequence(leg: int, repetitions: int = REPETITIONS) -> list[tuple[str, int]]:
-    """(posture, repetition) of the paper's sequence for one leg."""
-    name = "XYZ"[leg]
-    seq = [(p, r) for r in range(1, repetitions + 1) for p in ("Zero", f"{name}Max", f"{name}Min")]
-    return [*seq, ("Zero", repetitions + 1)]
 
 
 def split_repetitions(data: Measurements) -> list[int]:
@@ -66,27 +56,9 @@ def folds(data: Measurements) -> list[set[int]]:
 
 @register
 class PaperCalibrator(Calibrator):
-    """The paper's procedure and its linear least-squares solution."""
+    """The paper's linear least-squares solution of eq. (10)."""
 
     name = "paper"
-    experiment = "paper-sequence"
-    repetitions = REPETITIONS
-
-    def collect(self, env: gym.Env) -> Measurements:
-        layout = env.unwrapped.gauge_layout
-        data = Measurements()
-        for leg in range(3):
-            gauges = [k for k, g in enumerate(layout) if g.leg == leg]
-            if not gauges:
-                raise ValueError(f"the paper's method needs gauges on the {'xyz'[leg]} leg")
-            for posture, rep in leg_sequence(leg, self.repetitions):
-                obs, seconds = move_and_read(env, posture)
-                data.experiment_time_s += seconds
-                data.items += [
-                    Measurement(layout[k], posture, rep, float(obs["gauges"][k]))
-                    for k in gauges if obs["valid"][k]
-                ]
-        return data
 
     def solve(self, rows: Differences, free: tuple[int, ...], sigma: float
               ) -> tuple[np.ndarray, np.ndarray, int]:
