@@ -59,7 +59,9 @@ each reading an object whose keys are the CSV's column names, numbers as JSON nu
 Rules of both formats (a file that breaks one is refused with one line naming the file,
 the line and column of a CSV, or the index, from 0, of a JSON reading, and the rule):
 numbers are finite; a reading lies within +-:data:`MAX_READING_MM` (a dial gauge's
-travel is about 10 mm); rho lies within the prototype's control limits; a
+travel is about 10 mm); rho lies within the control limits of the experiment's design (a
+JSON file's ``design``, else the one the reader is given, else the prototype's), and a
+paper posture is that design's; a
 repetition is an integer 1 .. :data:`MAX_REPETITION`; a posture label or mounting is 1 ..
 :data:`MAX_FIELD_CHARS` printable characters without surrounding blanks; a mounting
 holds one gauge; a file holds 1 .. :data:`MAX_ROWS` readings (so at most that many
@@ -81,7 +83,7 @@ import sys
 from collections import Counter
 from collections.abc import Collection, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import KW_ONLY, InitVar, dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
 
@@ -119,9 +121,16 @@ NUMBER_FIELDS: frozenset[str] = frozenset({"at", *RHO_FIELDS, "repetition", "rea
 JSON_KEYS: tuple[str, ...] = ("readings", "experiment_time_s", "design")
 
 ZERO_RHO: tuple[float, float, float] = (0.0, 0.0, 0.0)
-_PAPER_RHO: dict[str, tuple[float, ...]] = {
-    name: tuple(float(v) for v in paper_posture(name)) for name in PAPER_POSTURES
-}
+
+
+@functools.lru_cache(maxsize=64)
+def paper_rhos(design: MachineDesign) -> dict[str, tuple[float, ...]]:
+    """Each paper posture's rho on ``design`` (they depend on L and the control limits)."""
+    return {name: tuple(float(v) for v in paper_posture(name, design))
+            for name in PAPER_POSTURES}
+
+
+_PAPER_RHO: dict[str, tuple[float, ...]] = paper_rhos(PROTOTYPE)
 _READING_RULE = "mm (a dial gauge's travel is about 10 mm)"
 _TRACKER_RULE = "mm (a laser tracker's range)"
 _RHO_RULE = "mm (the control limits)"
@@ -193,29 +202,32 @@ def rho_label(rho: Sequence[float]) -> str:
     return "rho(" + ",".join(_compact(v) for v in rho) + ")"
 
 
-def _posture(label: object, rho: Iterable[object] | None) -> tuple[str, tuple[float, ...]]:
-    """A reading's posture label and rho: a paper posture's rho is filled in (and checked
-    when given); a label of one's own needs its rho; no label with a rho gets one made."""
+def _posture(label: object, rho: Iterable[object] | None, design: MachineDesign
+             ) -> tuple[str, tuple[float, ...]]:
+    """A reading's posture label and rho on ``design``: a paper posture's rho (``design``'s)
+    is filled in (and checked when given); a label of one's own needs its rho, within
+    ``design``'s control limits; no label with a rho gets one made."""
+    papers = _PAPER_RHO if design is PROTOTYPE else paper_rhos(design)
     if rho is None:
-        if type(label) is str and label in _PAPER_RHO:  # the common case, fast
-            return label, _PAPER_RHO[label]
+        if type(label) is str and label in papers:  # the common case, fast
+            return label, papers[label]
         label = _label(label, "posture")
-        if label not in _PAPER_RHO:
+        if label not in papers:
             raise FieldError("posture", f"must be a paper posture ({', '.join(PAPER_POSTURES)})"
                                         f" unless rho is given, got {_show(label)}")
-        return label, _PAPER_RHO[label]
+        return label, papers[label]
     try:
         components = [] if isinstance(rho, (str, bytes, Mapping)) else list(rho)
     except TypeError:  # not a sequence at all
         components = []
     if len(components) != 3:
         raise FieldError("rho", f"must have 3 components, got {_show(rho)}")
-    values = tuple(_real(v, name, PROTOTYPE.rho_min, PROTOTYPE.rho_max, _RHO_RULE)
+    values = tuple(_real(v, name, design.rho_min, design.rho_max, _RHO_RULE)
                    for v, name in zip(components, RHO_FIELDS, strict=True))
     if label == "":
         return rho_label(values), values
     label = _label(label, "posture")
-    paper = _PAPER_RHO.get(label)
+    paper = papers.get(label)
     if paper is None:
         return label, values
     if max(abs(a - b) for a, b in zip(values, paper, strict=True)) > PAPER_RHO_TOLERANCE:
@@ -243,9 +255,10 @@ def gauge_name(gauge: GaugeSpec | TrackerAxis) -> str:
 class Measurement:
     """One gauge reading: which gauge, in which mounting, at which posture and repetition.
 
-    ``rho`` is the commanded posture (control coordinates, mm); ``posture`` its label, a
-    paper posture name (whose ``rho`` is filled in when not given) or any other label for
-    a posture given by its ``rho`` ("" makes one from the rho).  ``mounting`` names one
+    ``rho`` is the commanded posture (control coordinates, mm, within the control limits
+    of ``design``, the machine's design: default the prototype); ``posture`` its label, a
+    paper posture name (whose rho on ``design`` is filled in when not given) or any other
+    label for a posture given by its ``rho`` ("" makes one from the rho).  ``mounting`` names one
     installation of the gauge's stand ("": the gauge's name): each has its own zero, and
     differences are taken against its readings at ``rho = (0, 0, 0)``.  ``line`` is where
     the reading came from in a file (not part of the reading: equality ignores it).  The
@@ -260,9 +273,11 @@ class Measurement:
     rho: tuple[float, float, float] | None = None
     mounting: str = ""
     line: int | None = field(default=None, compare=False)
+    _: KW_ONLY
+    design: InitVar[MachineDesign] = PROTOTYPE
 
-    def __post_init__(self) -> None:
-        posture, rho = _posture(self.posture, self.rho)
+    def __post_init__(self, design: MachineDesign) -> None:
+        posture, rho = _posture(self.posture, self.rho, design)
         mounting = default_mounting(self.gauge) if self.mounting == "" else _label(
             self.mounting, "mounting")
         limit, rule = ((MAX_TRACKER_MM, _TRACKER_RULE) if isinstance(self.gauge, TrackerAxis)
@@ -299,8 +314,9 @@ class Measurement:
                 "reading_mm": self.reading}
 
     @classmethod
-    def from_dict(cls, data: object) -> Measurement:
-        """A reading from a JSON object of the file format (:class:`FieldError` if bad)."""
+    def from_dict(cls, data: object, design: MachineDesign = PROTOTYPE) -> Measurement:
+        """A reading on a machine of ``design`` from a JSON object of the file format
+        (:class:`FieldError` if bad)."""
         if not isinstance(data, dict):
             raise FieldError(None, f"must be a JSON object, got {_show(data)}")
         if getattr(data, "duplicates", ()):
@@ -316,7 +332,7 @@ class Measurement:
         problem = _fields_problem(fields, "key")
         if problem:
             raise FieldError(None, problem)
-        return _measurement(fields, None)
+        return _measurement(fields, None, design)
 
     def csv_row(self) -> list[str]:
         """The reading as a row of :data:`COLUMNS`; numbers as their shortest round-trip
@@ -429,7 +445,8 @@ def _gauge(fields: Mapping[str, object]) -> GaugeSpec | TrackerAxis:
         raise FieldError("at", str(exc)) from None
 
 
-def _measurement(fields: Mapping[str, object], line: int | None) -> Measurement:
+def _measurement(fields: Mapping[str, object], line: int | None, design: MachineDesign
+                 ) -> Measurement:
     """One reading from its fields: a CSV row's cells (numbers parsed) or a JSON object."""
     reading = _required(fields, "reading_mm")
     gauge = _gauge(fields)
@@ -445,7 +462,7 @@ def _measurement(fields: Mapping[str, object], line: int | None) -> Measurement:
     repetition, mounting = _given(fields, "repetition"), _given(fields, "mounting")
     return Measurement(gauge, "" if posture is None else posture,
                        1 if repetition is None else repetition, reading, rho,
-                       "" if mounting is None else mounting, line)
+                       "" if mounting is None else mounting, line, design=design)
 
 
 class _Readings:
@@ -518,7 +535,7 @@ def _records(handle: BinaryIO, path: Path) -> Iterator[tuple[int, list[str]]]:
             yield start, cells
 
 
-def _read_csv(handle: BinaryIO, path: Path) -> list[Measurement]:
+def _read_csv(handle: BinaryIO, path: Path, design: MachineDesign) -> list[Measurement]:
     records = _records(handle, path)
     first = next(records, None)
     if first is None:
@@ -538,7 +555,7 @@ def _read_csv(handle: BinaryIO, path: Path) -> list[Measurement]:
         try:
             fields = {name: _cell_value(name, text)
                       for name, text in zip(header, cells, strict=True)}
-            readings.add(_measurement(fields, line), f"line {line}")
+            readings.add(_measurement(fields, line, design), f"line {line}")
         except FieldError as exc:
             place = (f"column {header.index(exc.field) + 1} ({exc.field}): "
                      if exc.field in header else "")
@@ -621,8 +638,11 @@ class Measurements:
         return out
 
     @classmethod
-    def from_dict(cls, data: object, source: str = "readings") -> Measurements:
-        """Readings from the JSON document; ``source`` names it in error messages."""
+    def from_dict(cls, data: object, source: str = "readings",
+                  design: MachineDesign | None = None) -> Measurements:
+        """Readings from the JSON document; ``source`` names it in error messages.  The
+        readings are checked on the document's design, else ``design`` (None: the
+        prototype); a document naming another design than ``design`` is refused."""
         if not isinstance(data, dict):
             raise MeasurementFileError(f"{source}: must be a JSON object with 'readings'")
         if getattr(data, "duplicates", ()):
@@ -643,23 +663,30 @@ class Measurements:
         except FieldError as exc:
             raise MeasurementFileError(f"{source}: {exc}") from None
         try:
-            design = MachineDesign.from_dict(data["design"]) if "design" in data else PROTOTYPE
+            named = MachineDesign.from_dict(data["design"]) if "design" in data else None
         except DesignError as exc:
             raise MeasurementFileError(f"{source}: {exc}") from None
+        if named is not None and design is not None and named != design:
+            keys = [k for k, v in named.to_dict().items() if design.to_dict()[k] != v]
+            raise MeasurementFileError(f"{source}: the file's design differs from the one "
+                                       f"given (in {', '.join(keys)})")
+        design = named or design or PROTOTYPE
         readings = _Readings()
         for index, item in enumerate(items):
             try:
-                readings.add(Measurement.from_dict(item), f"reading {index}")
+                readings.add(Measurement.from_dict(item, design), f"reading {index}")
             except FieldError as exc:
                 raise MeasurementFileError(f"{source}: reading {index}: {exc}") from None
         return cls(readings.items, seconds, design)
 
     def check(self) -> None:
         """Refuse (ValueError naming the reading's index) what a file could not hold, so
-        that whatever is written reads back."""
+        that whatever is written reads back: on :attr:`design`, each rho within its
+        control limits and each paper posture at its rho."""
         readings = _Readings()
         for index, m in enumerate(self.items):
             try:
+                _posture(m.posture, m.rho, self.design)
                 readings.add(m, f"reading {index}")
             except FieldError as exc:
                 raise ValueError(f"reading {index}: {exc}") from None
@@ -674,11 +701,12 @@ class Measurements:
                               f'{design} "readings": [\n{body}\n]}}\n', encoding="utf-8")
 
     @classmethod
-    def from_json(cls, path: str | Path) -> Measurements:
+    def from_json(cls, path: str | Path, design: MachineDesign | None = None) -> Measurements:
+        """Read a JSON file (``design`` as in :meth:`from_dict`)."""
         path = Path(path)
         with _opened(path) as handle:
             data = _load_json(handle, path)
-        result = cls.from_dict(data, str(path))
+        result = cls.from_dict(data, str(path), design)
         if not result.items:
             raise MeasurementFileError(f"{path}: no readings")
         return result
@@ -692,10 +720,13 @@ class Measurements:
             writer.writerows(m.csv_row() for m in self.items)
 
     @classmethod
-    def from_csv(cls, path: str | Path) -> Measurements:
+    def from_csv(cls, path: str | Path, design: MachineDesign | None = None) -> Measurements:
+        """Read a CSV file of readings on a machine of ``design`` (None: the prototype):
+        a CSV has no place to name its design."""
         path = Path(path)
+        design = PROTOTYPE if design is None else design
         with _opened(path) as handle:
-            return cls(_read_csv(handle, path))
+            return cls(_read_csv(handle, path, design), design=design)
 
     def write(self, path: str | Path) -> None:
         """Write ``path`` in the format its extension names (.csv or .json)."""
@@ -703,7 +734,9 @@ class Measurements:
         (self.to_json if _suffix(path) == ".json" else self.to_csv)(path)
 
     @classmethod
-    def read(cls, path: str | Path) -> Measurements:
-        """Read ``path`` in the format its extension names (.csv or .json)."""
+    def read(cls, path: str | Path, design: MachineDesign | None = None) -> Measurements:
+        """Read ``path`` in the format its extension names (.csv or .json), its readings
+        checked on the file's design, else ``design``, else the prototype (a JSON file
+        naming another design than ``design`` is refused)."""
         path = Path(path)
-        return (cls.from_json if _suffix(path) == ".json" else cls.from_csv)(path)
+        return (cls.from_json if _suffix(path) == ".json" else cls.from_csv)(path, design)

@@ -30,7 +30,7 @@ from calibrators.measurements import (
 )
 from orthoglide_env.instruments.gauges import GaugeSpec, Part
 from orthoglide_env.lab.operations import SLOTS
-from orthoglide_env.model.design import PROTOTYPE
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture
 
 OLD_HEADER = "leg,axis,posture,repetition,reading_mm"
@@ -593,3 +593,68 @@ def test_fit_reads_json_as_it_reads_csv(tmp_path, capsys, noisy_paper_data) -> N
     lines = [r.pop("line") for r in estimates[0]["residuals"]]
     assert lines == list(range(2, 68))
     assert estimates[0] == estimates[1] and estimates[0]["n_readings"] == 66
+
+
+def _csv(tmp_path: Path, header: str, *rows: str) -> Path:
+    path = tmp_path / "r.csv"
+    path.write_text("\n".join([header, *rows]) + "\n")
+    return path
+
+
+SMALL_FILE = Path(__file__).resolve().parents[1] / "examples" / "designs" / "small.json"
+
+
+def test_readings_are_checked_on_the_design_of_their_experiment(tmp_path) -> None:
+    # Wider limits than the prototype's: a reading there is the design's, not a fault.
+    wide = MachineDesign.from_dict({"rho_min": -120.0, "rho_max": 80.0})
+    path = _csv(tmp_path, "leg,axis,rho_x,rho_y,rho_z,reading_mm", "x,y,70,-110,0,0.1")
+    with pytest.raises(MeasurementFileError, match=r"r.csv:2: column 3 \(rho_x\): must lie "
+                                                   r"in \[-100, 60\] mm"):
+        Measurements.read(path)
+    data = Measurements.read(path, wide)
+    assert data.design == wide and data.items[0].rho == (70.0, -110.0, 0.0)
+    # The design's own limits refuse in the same words, with its numbers.
+    beyond = _csv(tmp_path, "leg,axis,rho_x,rho_y,rho_z,reading_mm", "x,y,90,0,0,0.1")
+    with pytest.raises(MeasurementFileError, match=r"r.csv:2: column 3 \(rho_x\): must lie "
+                                                   r"in \[-120, 80\] mm .*got '90'"):
+        Measurements.read(beyond, wide)
+    # A JSON file names its design, and what it names is what its readings are checked on.
+    data.write(tmp_path / "wide.json")
+    assert Measurements.read(tmp_path / "wide.json") == data
+    with pytest.raises(MeasurementFileError, match=r"wide.json: the file's design differs "
+                                                   r"from the one given \(in rho_min, rho_max"):
+        Measurements.read(tmp_path / "wide.json", PROTOTYPE)
+    # Whatever cannot be read back on the design is not written.
+    with pytest.raises(ValueError, match=r"reading 0: rho_x: must lie in \[-100, 60\]"):
+        Measurements(data.items).write(tmp_path / "proto.csv")
+
+
+def test_paper_postures_are_the_designs(tmp_path) -> None:
+    small = MachineDesign.from_file(SMALL_FILE)
+    xmax = paper_posture("XMax", small)
+    rho = ",".join(repr(float(v)) for v in xmax)
+    path = _csv(tmp_path, "leg,axis,posture,rho_x,rho_y,rho_z,reading_mm",
+                f"x,y,XMax,{rho},0.1", "x,y,XMin,,,,0.2")
+    with pytest.raises(MeasurementFileError, match=r"r.csv:2: column 3 \(posture\): XMax is "
+                                                   r"the paper posture at rho"):
+        Measurements.read(path)
+    data = Measurements.read(path, small)
+    assert [m.posture for m in data.items] == ["XMax", "XMin"]
+    assert data.items[0].rho == tuple(xmax)
+    assert data.items[1].rho == tuple(paper_posture("XMin", small))
+    assert data.items[1].rho != tuple(paper_posture("XMin"))
+
+
+def test_fit_recovers_a_small_machine_from_its_saved_readings(tmp_path, capsys) -> None:
+    machine = tmp_path / "m.json"
+    machine.write_text('{"drho": [0.5, -0.3, 0.2], "dL": [-0.4, 0.6, 0.1]}')
+    saved = tmp_path / "r.csv"
+    design = ["--design", str(SMALL_FILE)]
+    assert main(["calibrate", "--machine", str(machine), *design, "--backend", "exact",
+                 "--save-measurements", str(saved), "--json"]) == 0
+    truth = json.loads(capsys.readouterr().out)["truth"]
+    assert main(["fit", str(saved), *design, "--sigma", "0", "--resolution", "0",
+                 "--json"]) == 0
+    estimate = json.loads(capsys.readouterr().out)["estimate"]
+    for key in ("drho", "dL"):
+        np.testing.assert_allclose(estimate[key], truth[key], atol=1e-6)

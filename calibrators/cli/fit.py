@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 
 import numpy as np
 
@@ -12,7 +11,6 @@ from calibrators.cli.common import UsageError, design_of
 from calibrators.cli.output import emit, report
 from calibrators.measurements import Measurements
 from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
-from orthoglide_env.model.design import PROTOTYPE
 
 #: Largest repeatability accepted (mm): a dial gauge that scatters by more than this is
 #: not measuring, and the weights would say nothing.
@@ -24,12 +22,7 @@ def run(args: argparse.Namespace) -> None:
         value = getattr(args, name)
         if not 0 <= value <= MAX_SIGMA:
             raise UsageError(f"--{name} must be between 0 and {MAX_SIGMA:g} mm, got {value:g}")
-    data = Measurements.read(args.file)
-    if args.design:
-        design = design_of(args)
-        if data.design not in (PROTOTYPE, design):
-            raise UsageError(f"{args.file} names another design than --design {args.design}")
-        data = replace(data, design=design)
+    data = Measurements.read(args.file, design_of(args) if args.design else None)
     if args.to_csv:
         data.to_csv(args.to_csv)
     sigma = float(np.hypot(args.sigma, args.resolution / np.sqrt(12)))
