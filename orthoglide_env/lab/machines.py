@@ -23,7 +23,7 @@ from orthoglide_env.instruments.gauges import (
     exact_target_boxes,
     pressed_past_travel,
 )
-from orthoglide_env.model.collisions import collision_mask, collision_names
+from orthoglide_env.model.collisions import collision_mask
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import direct
 
@@ -55,10 +55,6 @@ class ExactMachine:
         self.machine = machine
         self.gauge_array = as_gauge_array(gauges)
         self.move(np.zeros(3) if rho is None else rho, tcp=tcp)
-
-    @property
-    def gauges(self) -> list[Gauge]:
-        return self.gauge_array.to_gauges()
 
     def move(self, rho: np.ndarray, mode: str = "quasi-static", tcp: np.ndarray | None = None
              ) -> None:
@@ -92,15 +88,9 @@ class ExactMachine:
         machines far from nominal, given through reset options."""
         return collision_mask(self.machine, self._rho, self._boxes)
 
-    def collisions(self) -> list[str]:
-        return collision_names(self.collision_mask())
-
     def target_boxes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Box of every gauge's target: centres (mm), rotations, half extents (mm)."""
         return exact_target_boxes(self.gauge_array, self._boxes)
-
-    def set_gauges(self, gauges: list[Gauge] | GaugeArray) -> None:
-        self.gauge_array = as_gauge_array(gauges)
 
 
 class Sight(NamedTuple):

@@ -12,7 +12,7 @@ settings' (:mod:`orthoglide_env.lab.settings`).
 from __future__ import annotations
 
 import numbers
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -106,17 +106,6 @@ class Integer(Arg):
 
 
 @dataclass(frozen=True)
-class Flag(Arg):
-    rule: str = "True or False"
-
-    def accepts(self, value: Any) -> bool:
-        return isinstance(value, bool | np.bool_)
-
-    def convert(self, value: Any) -> bool:
-        return bool(value)
-
-
-@dataclass(frozen=True)
 class Choice(Arg):
     """One of ``options`` (compared as they are: ``1`` is not ``'1'``)."""
 
@@ -132,11 +121,29 @@ class Choice(Arg):
 
 
 @dataclass(frozen=True)
-class Function(Arg):
-    rule: str = "a function (records, sigma) -> MachineParams, or None"
+class Kind(Arg):
+    """A value that ``test`` accepts, in the canonical form ``make`` makes of it."""
+
+    rule: str = ""
+    test: Callable[[Any], bool] = bool
+    make: Callable[[Any], Any] | None = None
 
     def accepts(self, value: Any) -> bool:
-        return value is None or callable(value)
+        return self.test(value)
+
+    def convert(self, value: Any) -> Any:
+        return value if self.make is None else self.make(value)
+
+
+def _autoreset_mode(value: Any) -> bool:
+    return isinstance(value, AutoresetMode) or (
+        isinstance(value, str) and value in {m.value for m in AutoresetMode})
+
+
+FLAG = Kind("True or False", lambda v: isinstance(v, bool | np.bool_), bool)
+FUNCTION = Kind("a function (records, sigma) -> MachineParams, or None",
+                lambda v: v is None or callable(v))
+AUTORESET = Kind(f"one of {[m.value for m in AutoresetMode]}", _autoreset_mode, AutoresetMode)
 
 
 @dataclass(frozen=True)
@@ -165,21 +172,6 @@ class Layout(Arg):
             raise ValueError(f"{name}: {exc}") from None
 
 
-@dataclass(frozen=True)
-class Autoreset(Arg):
-    rule: str = f"one of {[m.value for m in AutoresetMode]}"
-
-    def accepts(self, value: Any) -> bool:
-        try:
-            AutoresetMode(value)
-        except (ValueError, TypeError):
-            return False
-        return True
-
-    def convert(self, value: Any) -> AutoresetMode:
-        return AutoresetMode(value)
-
-
 PRESET = Choice(tuple(sorted(PRESETS)), "the name of an error preset, one of")
 NOISE = Number("mm", 0.0)  # the range that depends on the travel: check_noise
 SHARED: dict[str, Arg] = {
@@ -190,17 +182,17 @@ SHARED: dict[str, Arg] = {
 #: ``OrthoglideCalibration-v0``'s arguments.
 CALIBRATION: dict[str, Arg] = {
     **SHARED, "motion": Choice(MOTION_MODES), "gauges": Layout(),
-    "max_episode_steps": Integer(1, optional=True), "clip_actions": Flag(),
+    "max_episode_steps": Integer(1, optional=True), "clip_actions": FLAG,
 }
 #: ``OrthoglideLab-v0``'s arguments.
 LAB: dict[str, Arg] = {
-    **SHARED, "stands": Integer(1, len(SLOTS)), "tracker": Flag(),
+    **SHARED, "stands": Integer(1, len(SLOTS)), "tracker": FLAG,
     "tracker_sigma": Number("mm", 0.0, open=True), "budget_s": Number("s", 0.0, open=True),
-    "reward": Choice(REWARDS), "estimator": Function(), "time_weight": Number("", 0.0),
+    "reward": Choice(REWARDS), "estimator": FUNCTION, "time_weight": Number("", 0.0),
     "success_mm": Number("mm", 0.0, open=True),
 }
 #: What a native vector env takes besides its single env's arguments.
-VECTOR: dict[str, Arg] = {"num_envs": Integer(1), "autoreset_mode": Autoreset()}
+VECTOR: dict[str, Arg] = {"num_envs": Integer(1), "autoreset_mode": AUTORESET}
 
 
 def check_arguments(spec: Mapping[str, Arg], values: Mapping[str, Any]) -> dict[str, Any]:
