@@ -13,7 +13,8 @@ import numpy as np
 
 from orthoglide_env.instruments.gauges import PAPER_LAYOUT, install, installed_on
 from orthoglide_env.lab.machines import ExactMachine
-from orthoglide_env.model.errors import PRESETS, RHO_MAX, RHO_MIN, random_machine
+from orthoglide_env.model.design import PROTOTYPE
+from orthoglide_env.model.errors import PRESETS, random_machine
 from orthoglide_env.sim.pybullet import OrthoglideMachine
 
 
@@ -34,7 +35,7 @@ def main() -> None:
     machine = random_machine(rng, "realistic")
     gauges = installed_on(machine, install(PAPER_LAYOUT, machine, preset=PRESETS["realistic"],
                                            rng=rng))
-    targets = rng.uniform(RHO_MIN, RHO_MAX, (args.postures, 3))
+    targets = rng.uniform(PROTOTYPE.rho_min, PROTOTYPE.rho_max, (args.postures, 3))
     build = timed(lambda: OrthoglideMachine(machine, gauges).close(), 20)
     sim, exact = OrthoglideMachine(machine, gauges), ExactMachine(machine, gauges)
     results = {}

@@ -20,7 +20,8 @@ from orthoglide_env.instruments.gauges import (
     install,
     installed_on,
 )
-from orthoglide_env.model.errors import PRESETS, RHO_MAX, RHO_MIN, random_machine
+from orthoglide_env.model.design import PROTOTYPE
+from orthoglide_env.model.errors import PRESETS, random_machine
 from orthoglide_env.model.kinematics import direct
 from orthoglide_env.sim.pybullet import OrthoglideMachine
 from orthoglide_env.sim.simulator import PhysicsSettings
@@ -39,7 +40,8 @@ def measure(preset: str, n: int, seed: int) -> dict[str, dict[str, np.ndarray]]:
                                                rng=rng))
         sim = OrthoglideMachine(machine, gauges)
         # Half the postures near Zero (gauges in contact), half anywhere in the range.
-        rho = rng.uniform(-8, 8, 3) if rng.random() < 0.5 else rng.uniform(RHO_MIN, RHO_MAX, 3)
+        rho = (rng.uniform(-8, 8, 3) if rng.random() < 0.5
+               else rng.uniform(PROTOTYPE.rho_min, PROTOTYPE.rho_max, 3))
         exact_t = exact_ray_distances(machine, gauges, rho) - exact_ray_distances(
             machine, gauges, np.zeros(3))
         for mode, stats in out.items():

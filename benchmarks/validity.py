@@ -6,8 +6,8 @@ largest), the other groups zero, and compares the simulator with the exact model
 postures across the joint cube and near Zero, and at the cube's corners: TCP, gauge
 status (valid, no contact, overtravel, missed) and the readings (differences from Zero)
 where both call them valid.  With ``--all`` every group sits at its size from ``--sizes``
-at once (the corners of a candidate validity box).  The validity range of
-``orthoglide_env.model.errors.VALIDITY_RANGE`` was chosen from this output.
+at once (the corners of a candidate validity box).  The prototype's validity range
+(``orthoglide_env/model/prototype.json``) was chosen from this output.
 
     python benchmarks/validity.py [--machines 10] [--groups drho,dL] [--sizes 1,5,10]
     python benchmarks/validity.py --all --sizes drho=15,dL=15,axis_tilt=0.02,...
@@ -27,7 +27,8 @@ from orthoglide_env.instruments.gauges import (
     install,
     status_of,
 )
-from orthoglide_env.model.errors import RHO_MAX, RHO_MIN, MachineParams
+from orthoglide_env.model.design import PROTOTYPE
+from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import UnreachableError, direct
 from orthoglide_env.sim.pybullet import OrthoglideMachine
 
@@ -44,12 +45,13 @@ SHAPES = {k: np.shape(v) for k, v in MachineParams().to_dict().items()}
 
 #: The corners of the joint cube, reported apart: (60, 60, 60) lies near a singularity of
 #: the machine, where the PyBullet machine sags under gravity while the exact model is rigid.
-CORNERS = np.array(list(itertools.product((RHO_MIN, RHO_MAX), repeat=3)), dtype=float)
+CORNERS = np.array(list(itertools.product((PROTOTYPE.rho_min, PROTOTYPE.rho_max), repeat=3)),
+                   dtype=float)
 
 
 def postures(rng: np.random.Generator, n_random: int) -> np.ndarray:
     """Random postures across the joint cube and near Zero (where the gauges read)."""
-    return np.vstack([rng.uniform(RHO_MIN, RHO_MAX, (n_random, 3)),
+    return np.vstack([rng.uniform(PROTOTYPE.rho_min, PROTOTYPE.rho_max, (n_random, 3)),
                       rng.uniform(-8, 8, (n_random, 3))])
 
 

@@ -20,6 +20,7 @@ from collections.abc import Callable
 from contextlib import closing
 from dataclasses import asdict, dataclass, field
 from functools import cache, partial
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -38,6 +39,7 @@ from calibrators.experiment import (
     run_episodes,
 )
 from orthoglide_env.envs.lab import Record
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import ERROR_NAMES, MachineParams
 from orthoglide_env.model.reading_model import ParameterSpace, default_scales
 from orthoglide_env.scoring import FRAMES, score_batch, uncalibrated_errors
@@ -62,6 +64,8 @@ class Config:
     #: The estimator re-run at fractions of each episode's time for the accuracy-versus-time
     #: curve ("": no curve).
     curve_estimator: str = ""
+    #: The machines' design.
+    design: MachineDesign = PROTOTYPE
 
     def machine_seed(self, index: int) -> int:
         return self.seed * 1_000_003 + index
@@ -89,12 +93,50 @@ class Trial:
     def key(self) -> tuple[str, str, int]:
         return self.agent, self.estimator, self.machine
 
+    @property
+    def names(self) -> tuple[str, ...]:
+        """The machine errors that ``error`` and ``std`` hold, in order (none if failed)."""
+        return ERROR_NAMES if self.error else ()
+
     def to_json(self) -> str:
-        return json.dumps(asdict(self), allow_nan=True)
+        """One line of strict JSON: ``names`` beside ``error`` and ``std``, and ``null``
+        where a number is not one (NaN: the std of an error the fit held fixed, or what a
+        failed trial never had)."""
+        return json.dumps(_null_for_nan({**asdict(self), "names": list(self.names)}),
+                          allow_nan=False)
 
     @classmethod
     def from_json(cls, line: str) -> Trial:
-        return cls(**json.loads(line))
+        """A line of :meth:`to_json`, or of an earlier version (NaN for null, no
+        ``names``)."""
+        data = json.loads(line)
+        names = data.pop("names", None)
+        trial = cls(**_nan_for_null(data))
+        if names is not None and tuple(names) != trial.names:
+            raise ValueError("the trial's error names are not this version's machine errors")
+        return trial
+
+
+def _null_for_nan(value: Any) -> Any:
+    """``value`` with every NaN float, at any depth, replaced by ``None``."""
+    if isinstance(value, float):
+        return None if value != value else value
+    if isinstance(value, dict):
+        return {k: _null_for_nan(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_null_for_nan(v) for v in value]
+    return value
+
+
+def _nan_for_null(value: Any) -> Any:
+    """The inverse of :func:`_null_for_nan`: a trial holds ``None`` nowhere else."""
+    if value is None:
+        return float("nan")
+    if isinstance(value, dict):
+        return {k: _nan_for_null(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_nan_for_null(v) for v in value]
+    return value
 
 
 @cache
@@ -189,12 +231,13 @@ def _curves(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
     then the full estimate (``estimates``: the fits of the whole episodes)."""
     points: list[list[list[float]]] = [[] for _ in episodes]
     for fraction in (*CURVE_FRACTIONS, 1.0):
-        datas = [measurements_of(e.records, e.time_s, until_s=fraction * e.time_s)
+        datas = [measurements_of(e.records, e.time_s, until_s=fraction * e.time_s,
+                                 design=e.truth.design)
                  for e in episodes]
         fitted = estimates if fraction == 1.0 else estimate_many(datas, name,
                                                                  episodes[0].sigma)
-        models = [MachineParams() if isinstance(est, Exception) else est.machine
-                  for est in fitted]
+        models = [MachineParams(design=e.truth.design) if isinstance(est, Exception)
+                  else est.machine for e, est in zip(episodes, fitted, strict=True)]
         reports = score_batch(models, [e.truth for e in episodes], before=_before(episodes))
         for k, (episode, report) in enumerate(zip(episodes, reports, strict=True)):
             points[k].append([fraction * episode.time_s, report.tcp_after.rigid.rms])
@@ -234,7 +277,7 @@ def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]
             mine = [e for e in episodes if name in todo[e.machine]]
             if not mine:
                 continue
-            datas = [measurements_of(e.records, e.time_s) for e in mine]
+            datas = [measurements_of(e.records, e.time_s, design=e.truth.design) for e in mine]
             estimates = estimate_many(datas, name, mine[0].sigma)
             curves = (_curves(mine, name, estimates) if name == config.curve_estimator
                       else [[] for _ in mine])
@@ -251,7 +294,8 @@ def _episodes(config: Config, agent_name: str, runs: list[int], batched: bool
     rngs = [np.random.default_rng([seed, 1]) for seed in seeds]
     kwargs = {"errors": config.errors, "gauge_sigma": config.sigma,
               "gauge_resolution": config.resolution, "backend": config.backend,
-              "tracker": get_agent(agent_name).needs_tracker, "budget_s": config.budget_s}
+              "tracker": get_agent(agent_name).needs_tracker, "budget_s": config.budget_s,
+              "design": config.design}
     if batched and config.backend == "exact":
         envs = gym.make_vec(orthoglide_env.LAB_ENV_ID, num_envs=len(runs),
                             vectorization_mode="vector_entry_point", **kwargs)
@@ -363,7 +407,8 @@ def verify_pybullet(config: Config, machines: int) -> dict[str, float]:
             agent = get_agent(name)
             envs = [gym.make(orthoglide_env.LAB_ENV_ID, errors=config.errors, gauge_sigma=0.0,
                              gauge_resolution=0.0, backend=backend, tracker=agent.needs_tracker,
-                             budget_s=config.budget_s) for backend in ("exact", "pybullet")]
+                             budget_s=config.budget_s, design=config.design)
+                    for backend in ("exact", "pybullet")]
             try:
                 seed = config.machine_seed(index)
                 observation, info = envs[0].reset(seed=seed)

@@ -20,6 +20,7 @@ from calibrators.estimators.base import Estimate, get_strategy
 from calibrators.measurements import Measurement, Measurements
 from orthoglide_env.envs.lab import Record
 from orthoglide_env.lab.operations import Op
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture
 
@@ -29,13 +30,15 @@ _PAPER_RHO: dict[tuple[float, ...], str] = {
 
 
 def measurements_of(records: list[Record], time_s: float = 0.0,
-                    until_s: float | None = None) -> Measurements:
-    """The notebook as measurements (only what was read by ``until_s`` seconds, if given).
-    A reading at a paper posture is labelled with its name."""
-    items = [Measurement.recorded(r.spec, _PAPER_RHO.get(r.rho, ""), r.reading, r.rho,
-                                  r.mounting)
+                    until_s: float | None = None, design: MachineDesign = PROTOTYPE
+                    ) -> Measurements:
+    """The notebook as measurements (only what was read by ``until_s`` seconds, if given)
+    of a machine of ``design``.  A reading at a paper posture of the prototype is labelled
+    with its name (a measurement file's paper postures are the prototype's)."""
+    labels = _PAPER_RHO if design == PROTOTYPE else {}
+    items = [Measurement.recorded(r.spec, labels.get(r.rho, ""), r.reading, r.rho, r.mounting)
              for r in records if until_s is None or r.time_s <= until_s]
-    return Measurements(items, time_s if until_s is None else min(time_s, until_s))
+    return Measurements(items, time_s if until_s is None else min(time_s, until_s), design)
 
 
 @dataclass(frozen=True)
@@ -90,13 +93,14 @@ def estimate_many(datas: list[Measurements], name: str, sigma: float
     return out
 
 
-def make_estimator(name: str = "extended") -> Callable[[list[Record], float], MachineParams]:
+def make_estimator(name: str = "extended", design: MachineDesign = PROTOTYPE
+                   ) -> Callable[[list[Record], float], MachineParams]:
     """The lab env's ``estimator`` for its accuracy reward: notebook and sigma to the
-    estimated machine."""
+    estimated machine (of ``design``)."""
     get_estimator(name)
 
     def estimator(records: list[Record], sigma: float) -> MachineParams:
-        return estimate(measurements_of(records), name, sigma).machine
+        return estimate(measurements_of(records, design=design), name, sigma).machine
 
     return estimator
 
@@ -194,4 +198,5 @@ def run_episode(env: gym.Env, agent: Agent, seed: int, rng: np.random.Generator 
         if terminated or truncated:
             break
     lab = env.unwrapped
-    return measurements_of(lab.records, float(observation["time"][0])), info
+    return measurements_of(lab.records, float(observation["time"][0]),
+                           design=lab.design), info

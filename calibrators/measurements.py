@@ -59,7 +59,7 @@ each reading an object whose keys are the CSV's column names, numbers as JSON nu
 Rules of both formats (a file that breaks one is refused with one line naming the file,
 the line and column of a CSV, or the index, from 0, of a JSON reading, and the rule):
 numbers are finite; a reading lies within +-:data:`MAX_READING_MM` (a dial gauge's
-travel is about 10 mm); rho lies within the control limits ``RHO_MIN .. RHO_MAX``; a
+travel is about 10 mm); rho lies within the prototype's control limits; a
 repetition is an integer 1 .. :data:`MAX_REPETITION`; a posture label or mounting is 1 ..
 :data:`MAX_FIELD_CHARS` printable characters without surrounding blanks; a mounting
 holds one gauge; a file holds 1 .. :data:`MAX_ROWS` readings (so at most that many
@@ -86,7 +86,8 @@ from pathlib import Path
 from typing import Any, BinaryIO
 
 from orthoglide_env.instruments.gauges import NO_LEG, GaugeSpec, Part, layout_from_names
-from orthoglide_env.model.errors import AXIS_NAMES, LEG_NAMES, RHO_MAX, RHO_MIN
+from orthoglide_env.model.design import PROTOTYPE, DesignError, MachineDesign
+from orthoglide_env.model.errors import AXIS_NAMES, LEG_NAMES
 from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture
 from orthoglide_env.model.reading_model import TrackerAxis
 
@@ -115,7 +116,7 @@ RHO_FIELDS: tuple[str, str, str] = ("rho_x", "rho_y", "rho_z")
 #: Every name a CSV column or a JSON reading's key may have.
 FIELDS: tuple[str, ...] = (*COLUMNS, "gauge")
 NUMBER_FIELDS: frozenset[str] = frozenset({"at", *RHO_FIELDS, "repetition", "reading_mm"})
-JSON_KEYS: tuple[str, ...] = ("readings", "experiment_time_s")
+JSON_KEYS: tuple[str, ...] = ("readings", "experiment_time_s", "design")
 
 ZERO_RHO: tuple[float, float, float] = (0.0, 0.0, 0.0)
 _PAPER_RHO: dict[str, tuple[float, ...]] = {
@@ -209,7 +210,7 @@ def _posture(label: object, rho: Iterable[object] | None) -> tuple[str, tuple[fl
         components = []
     if len(components) != 3:
         raise FieldError("rho", f"must have 3 components, got {_show(rho)}")
-    values = tuple(_real(v, name, RHO_MIN, RHO_MAX, _RHO_RULE)
+    values = tuple(_real(v, name, PROTOTYPE.rho_min, PROTOTYPE.rho_max, _RHO_RULE)
                    for v, name in zip(components, RHO_FIELDS, strict=True))
     if label == "":
         return rho_label(values), values
@@ -599,18 +600,24 @@ def _suffix(path: Path) -> str:
 
 @dataclass
 class Measurements:
-    """The readings of one experiment, plus the experiment time it cost (s)."""
+    """The readings of one experiment, plus the experiment time it cost (s), on a machine
+    of ``design`` (a JSON file's optional ``design`` key: an object of design keys; left
+    out, the prototype)."""
 
     items: list[Measurement] = field(default_factory=list)
     experiment_time_s: float = 0.0
+    design: MachineDesign = PROTOTYPE
 
     def __len__(self) -> int:
         return len(self.items)
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON document of the file format."""
-        return {"experiment_time_s": self.experiment_time_s,
-                "readings": [m.to_dict() for m in self.items]}
+        out: dict[str, Any] = {"experiment_time_s": self.experiment_time_s,
+                               "readings": [m.to_dict() for m in self.items]}
+        if self.design != PROTOTYPE:
+            out["design"] = self.design.to_dict()
+        return out
 
     @classmethod
     def from_dict(cls, data: object, source: str = "readings") -> Measurements:
@@ -634,13 +641,17 @@ class Measurements:
                             MAX_EXPERIMENT_TIME_S, "s")
         except FieldError as exc:
             raise MeasurementFileError(f"{source}: {exc}") from None
+        try:
+            design = MachineDesign.from_dict(data["design"]) if "design" in data else PROTOTYPE
+        except DesignError as exc:
+            raise MeasurementFileError(f"{source}: {exc}") from None
         readings = _Readings()
         for index, item in enumerate(items):
             try:
                 readings.add(Measurement.from_dict(item), f"reading {index}")
             except FieldError as exc:
                 raise MeasurementFileError(f"{source}: reading {index}: {exc}") from None
-        return cls(readings.items, seconds)
+        return cls(readings.items, seconds, design)
 
     def check(self) -> None:
         """Refuse (ValueError naming the reading's index) what a file could not hold, so
@@ -656,8 +667,10 @@ class Measurements:
         """Write the JSON format, one reading per line."""
         self.check()
         body = ",\n".join(json.dumps(m.to_dict()) for m in self.items)
+        design = ("" if self.design == PROTOTYPE
+                  else f' "design": {json.dumps(self.design.to_dict())},')
         Path(path).write_text(f'{{"experiment_time_s": {json.dumps(self.experiment_time_s)},'
-                              f' "readings": [\n{body}\n]}}\n', encoding="utf-8")
+                              f'{design} "readings": [\n{body}\n]}}\n', encoding="utf-8")
 
     @classmethod
     def from_json(cls, path: str | Path) -> Measurements:

@@ -1,6 +1,7 @@
 """Train a learned calibration agent with stable-baselines3 and compare it on held-out
 machines.
 
+    pip install torch --index-url https://download.pytorch.org/whl/cpu  # CPU-only: not GBs
     pip install -e '.[rl]'
     python examples/train_policy.py [--steps 120000] [--envs 8] [--reward information]
         [--budget 600] [--out results/policy.zip] [--machines 20]
@@ -45,7 +46,7 @@ from calibrators.agents.policy import PolicySpec, save_policy, spec_of
 from calibrators.experiment import make_estimator
 from orthoglide_env.envs.wrappers import flat_lab_env
 from orthoglide_env.lab.operations import Op
-from orthoglide_env.model.errors import RHO_MAX, RHO_MIN
+from orthoglide_env.model.design import PROTOTYPE
 
 #: The estimator that scores every evaluation (the comparison's headline).
 ESTIMATOR: str = "extended"
@@ -94,7 +95,8 @@ def start_near_zero(model: Any) -> None:
     read; training then learns where to go, and whether to lift, re-mount or stop."""
     import torch
 
-    middle, half = (RHO_MAX + RHO_MIN) / 2, (RHO_MAX - RHO_MIN) / 2
+    low, high = PROTOTYPE.rho_min, PROTOTYPE.rho_max
+    middle, half = (high + low) / 2, (high - low) / 2
     bias, log_std = model.policy.action_net.bias, model.policy.log_std
     with torch.no_grad():
         bias[:3] = (0.0 - middle) / half

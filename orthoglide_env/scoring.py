@@ -25,7 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from orthoglide_env.instruments.gauges import cross
-from orthoglide_env.model.errors import RHO_MAX, RHO_MIN, MachineParams
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import (
     ERROR_LEGS,
     UnreachableError,
@@ -36,9 +37,9 @@ from orthoglide_env.model.kinematics import (
     tcp_sensitivity_factors,
 )
 
-#: TCP targets of the scoring grid span this cube (mm): inside the workspace that the
-#: nominal model reaches within the control limits.
-GRID_RANGE: tuple[float, float] = (-80.0, 50.0)
+#: Points along each axis of the scoring grid, whose TCP targets span the design's
+#: ``grid_range`` cube (mm), inside the workspace its nominal model reaches within the
+#: control limits.
 GRID_POINTS: int = 7
 #: The frames a TCP error is reported in, headline last.
 FRAMES: tuple[str, ...] = ("raw", "translation", "rigid")
@@ -96,12 +97,24 @@ class ScoreReport:
                 "n_targets": self.n_targets, "n_skipped": self.n_skipped}
 
 
-def workspace_grid(points: int = GRID_POINTS) -> np.ndarray:
-    """TCP targets (mm) on a cubic grid whose nominal commands respect the control limits."""
-    axis = np.linspace(*GRID_RANGE, points)
+def workspace_grid(points: int = GRID_POINTS, design: MachineDesign = PROTOTYPE) -> np.ndarray:
+    """TCP targets (mm) on a cubic grid over ``design``'s ``grid_range`` whose nominal
+    commands respect its control limits."""
+    axis = np.linspace(*design.grid_range, points)
     grid = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
-    rho = inverse(MachineParams(), grid)
-    return grid[np.all((rho >= RHO_MIN) & (rho <= RHO_MAX), axis=-1)]
+    return grid[within_limits(inverse(MachineParams(design=design), grid), design)]
+
+
+def within_limits(rho: np.ndarray, design: MachineDesign) -> np.ndarray:
+    """Whether each command ``rho`` (..., 3) lies within ``design``'s control limits."""
+    return np.all((rho >= design.rho_min) & (rho <= design.rho_max), axis=-1)
+
+
+def _targets(grid: np.ndarray | None, machines: Sequence[MachineParams]) -> np.ndarray:
+    """The TCP targets ``grid``, or the scoring grid of the machines' design."""
+    if grid is not None:
+        return np.asarray(grid, dtype=float)
+    return workspace_grid(design=machines[0].design if len(machines) else PROTOTYPE)
 
 
 def _rowwise(solve: Callable[[np.ndarray], np.ndarray], points: np.ndarray) -> np.ndarray:
@@ -125,7 +138,7 @@ def commands(model: MachineParams, targets: np.ndarray) -> np.ndarray:
     targets = np.asarray(targets, dtype=float)
     rho = _rowwise(lambda p: inverse(model, p), targets.reshape(-1, 3))
     with np.errstate(invalid="ignore"):
-        inside = np.all((rho >= RHO_MIN) & (rho <= RHO_MAX), axis=-1)
+        inside = within_limits(rho, model.design)
     rho[~inside] = np.nan
     return rho.reshape(targets.shape)
 
@@ -176,7 +189,7 @@ def commands_many(models: Sequence[MachineParams], targets: np.ndarray,
         rho = inverse(stacked, np.asarray(targets, dtype=float)[None])
     except UnreachableError:
         return np.stack([commands(m, targets) for m in models])
-    inside = np.all((rho >= RHO_MIN) & (rho <= RHO_MAX), axis=-1)
+    inside = within_limits(rho, stacked.design)
     return np.where(inside[..., None], rho, np.nan)
 
 
@@ -279,8 +292,9 @@ def uncalibrated_errors(truths: Sequence[MachineParams], grid: np.ndarray | None
                         ) -> np.ndarray:
     """TCP error vectors (M, n, 3) over the grid of each true machine commanded with the
     nominal model: what :func:`score_batch` compares a compensation with."""
-    targets = workspace_grid() if grid is None else np.asarray(grid, dtype=float)
-    return tcp_error_vectors_many([MachineParams()] * len(truths), truths, targets)
+    targets = _targets(grid, truths)
+    nominal = MachineParams(design=truths[0].design) if len(truths) else MachineParams()
+    return tcp_error_vectors_many([nominal] * len(truths), truths, targets)
 
 
 def score_batch(
@@ -294,7 +308,7 @@ def score_batch(
     The kinematics and the frame fits run once over the whole batch."""
     if len(estimates) != len(truths) or not truths:
         raise ValueError("score_batch needs as many estimates as true machines, at least one")
-    targets = workspace_grid() if grid is None else np.asarray(grid, dtype=float)
+    targets = _targets(grid, truths)
     if before is None:
         before = uncalibrated_errors(truths, targets)
     after = tcp_error_vectors_many(estimates, truths, targets)
@@ -341,7 +355,7 @@ def tcp_jacobians(models: Sequence[MachineParams], grid: np.ndarray | None = Non
     (:func:`~orthoglide_env.model.kinematics.tcp_sensitivity`)."""
     if not models:
         return []
-    targets = workspace_grid() if grid is None else np.asarray(grid, dtype=float)
+    targets = _targets(grid, models)
     usable, jac = _tcp_jacobian_arrays(models, targets)
     return [(targets[u], j[u]) for u, j in zip(usable, jac, strict=True)]
 
@@ -438,7 +452,7 @@ def rigid_weights(models: Sequence[MachineParams], grid: np.ndarray | None = Non
     ``sum_t (Q_t^T A)_a r_a^T``: a third of the memory and of the products."""
     if not models:
         return np.zeros((0, 27, 27))
-    targets = workspace_grid() if grid is None else np.asarray(grid, dtype=float)
+    targets = _targets(grid, models)
     if len(models) > BLOCK:
         return np.concatenate([rigid_weights(models[b], targets) for b in _blocks(len(models))])
     usable, machines, rho, p = _commanded(models, targets)
@@ -487,7 +501,7 @@ def predicted_tcp_frames_many(models: Sequence[MachineParams],
     and the frames of the models that reach the same targets)."""
     if not models:
         return []
-    targets = workspace_grid() if grid is None else np.asarray(grid, dtype=float)
+    targets = _targets(grid, models)
     usable, jac = _tcp_jacobian_arrays(models, targets)
     covariances = np.asarray(covariances, dtype=float)
     out: list[FrameErrors | None] = [None] * len(models)

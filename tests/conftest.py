@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from orthoglide_env.model.errors import L_NOMINAL, RHO_MAX, RHO_MIN
+from orthoglide_env.model.design import PROTOTYPE
 
 #: Rows of eq. (10) as (posture, index of the gauge in the paper layout).  The paper's
-#: labels of rows 9-12 are misprinted (DESIGN.md); these are the physical ones.
+#: labels of rows 9-12 are misprinted (docs/calibrators.md); these are the physical ones.
 EQ10_ROWS: tuple[tuple[str, int], ...] = (
     ("YMax", 2), ("XMax", 0), ("YMin", 2), ("XMin", 0),
     ("ZMax", 5), ("YMax", 3), ("ZMin", 5), ("YMin", 3),
@@ -19,8 +19,8 @@ EQ10_ROWS: tuple[tuple[str, int], ...] = (
 def paper_matrix() -> np.ndarray:
     """Eq. (10)'s 12x6 matrix, written from the paper's a_i, b_i, c_i formulas."""
     coef = []
-    for limit in (RHO_MAX, RHO_MIN):
-        alpha = np.arcsin(limit / L_NOMINAL)
+    for limit in (PROTOTYPE.rho_max, PROTOTYPE.rho_min):
+        alpha = np.arcsin(limit / PROTOTYPE.L)
         s, t, c = np.sin(alpha), np.tan(alpha), np.cos(alpha)
         coef.append((s, (0.5 + s) * t, (0.5 + s) / c - 0.5))
     (a1, b1, c1), (a2, b2, c2) = coef
@@ -44,4 +44,4 @@ def rng() -> np.random.Generator:
 @pytest.fixture
 def joint_samples(rng: np.random.Generator) -> np.ndarray:
     """Random control coordinates across the whole joint range."""
-    return rng.uniform(RHO_MIN, RHO_MAX, (500, 3))
+    return rng.uniform(PROTOTYPE.rho_min, PROTOTYPE.rho_max, (500, 3))

@@ -31,11 +31,9 @@ from orthoglide_env.instruments.gauges import (
 )
 from orthoglide_env.lab.machines import ExactMachine
 from orthoglide_env.model.collisions import PAIR_NAMES, collision_mask, collisions, pair_gaps
+from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import (
     PRESETS,
-    RHO_MAX,
-    RHO_MIN,
-    VALIDITY_RANGE,
     MachineParams,
     random_machine,
 )
@@ -72,7 +70,8 @@ def far_machine(rng: np.random.Generator) -> MachineParams:
         for key, shape, (limit, _) in zip(
             ("drho", "dL", "axis_tilt", "axis_offset", "attach"),
             ((3,), (3,), (3, 2), (3, 2), (3, 3)),
-            (VALIDITY_RANGE[k] for k in ("drho", "dL", "axis_tilt", "axis_offset", "attach")),
+            (PROTOTYPE.validity_range[k]
+             for k in ("drho", "dL", "axis_tilt", "axis_offset", "attach")),
             strict=True)
     })
 
@@ -81,8 +80,9 @@ def reachable_postures(machine: MachineParams, rng: np.random.Generator) -> np.n
     """Small moves (gauges in contact or just past their travel), moves across the whole
     joint cube (gauges off their bars) and the crash corner; a posture the machine cannot
     be assembled in is replaced by Zero (the batch must be solvable as a whole)."""
-    rho = np.vstack([rng.uniform(-15, 15, (5, 3)), rng.uniform(RHO_MIN, RHO_MAX, (4, 3)),
-                     rng.uniform(40, RHO_MAX, (3, 3))])
+    rho = np.vstack([rng.uniform(-15, 15, (5, 3)),
+                     rng.uniform(PROTOTYPE.rho_min, PROTOTYPE.rho_max, (4, 3)),
+                     rng.uniform(40, PROTOTYPE.rho_max, (3, 3))])
     for k, r in enumerate(rho):
         try:
             direct(machine, r)

@@ -69,7 +69,7 @@ def test_paper_design_matches_eq10_and_its_conditioning() -> None:
 
 
 def test_crlb_of_the_paper_design_is_about_43_sigma() -> None:
-    """DESIGN.md: with independent noise sigma on each of the twelve differences, each
+    """docs/calibrators.md: with independent noise sigma on each of the twelve differences, each
     parameter's std is ~43 sigma.  Our differences average 3 repetitions against 4 Zero
     readings, so their variance is sigma^2 (1/3 + 1/4) with covariance sigma^2/4 within
     a gauge; the bound follows from the same matrix."""

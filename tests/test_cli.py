@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
+import argparse
+import dataclasses
 import json
+import re
 import subprocess
 import sys
 
 import numpy as np
 import pytest
 
-from calibrators.cli import main
+from calibrators.cli import build_parser, main
+from calibrators.compare import Trial
+from orthoglide_env.model.errors import ERROR_NAMES, error_group
 
 TABLE1 = '{"drho": [4.66, -5.36, 1.46], "dL": [5.20, -5.96, 3.16]}'
 
@@ -109,22 +114,83 @@ def test_saved_measurements_fit_to_the_same_estimate(tmp_path, capsys) -> None:
     assert all("line" in r for r in out["residuals"])
 
 
+def strict_json(text: str) -> object:
+    """``text`` parsed as strict JSON: ``NaN`` and ``Infinity`` are refused."""
+    def refuse(token: str) -> None:
+        raise AssertionError(f"{token} is not JSON")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def options_of(command: str) -> set[str]:
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return {o for a in sub.choices[command]._actions for o in a.option_strings}
+
+
 def test_compare_writes_table_csv_and_plots(tmp_path, capsys) -> None:
     assert main(["compare", "--machines", "2", "--agents", "paper,tracker", "--estimators",
-                 "paper,extended", "--quiet", "--out", str(tmp_path)]) == 0
+                 "paper,paper6,extended", "--quiet", "--out", str(tmp_path)]) == 0
     text = capsys.readouterr().out
     assert "TCP after (rigid) med" in text and "tracker x paper: 2 of 2 failed" in text
+    # What a failure suggests exists.
+    named = set(re.findall(r"--[a-z][\w-]*", text))
+    assert "--estimators" in named and named <= options_of("compare"), named
     for name in ("trials.jsonl", "summary.csv", "accuracy_vs_time.png", "boxes.png"):
         assert (tmp_path / name).stat().st_size > 0
-    for line in (tmp_path / "trials.jsonl").read_text().splitlines():
-        trial = json.loads(line)
+    lines = (tmp_path / "trials.jsonl").read_text().splitlines()
+    assert len(lines) == 2 * 2 * 3
+    for line in lines:
+        trial = strict_json(line)
         if trial["failed"]:
+            assert trial["names"] == trial["error"] == trial["std"] == []
+            assert trial["predicted_rigid_mm"] is None
             continue
+        assert trial["names"] == list(ERROR_NAMES)
+        assert len(trial["error"]) == len(trial["std"]) == len(ERROR_NAMES)
+        # The paper's six-parameter fits hold every other error fixed: no std, null.
+        fixed = [n for n, std in zip(trial["names"], trial["std"], strict=True) if std is None]
+        if trial["estimator"] in ("paper", "paper6"):
+            assert fixed == [n for n in ERROR_NAMES if error_group(n) not in ("drho", "dL")]
+        else:
+            assert fixed == []
         # Each best fit includes the one before it (a translation is a rigid motion), up
         # to the fits' round-off (~1e-13 mm, tests/test_scoring.py).
         for when in ("tcp_before", "tcp_after"):
             raw, translation, rigid = (trial[when][f] for f in ("raw", "translation", "rigid"))
             assert rigid <= translation + 1e-11 and translation <= raw + 1e-11
+
+
+def test_a_trial_line_reads_back_and_earlier_lines_still_read() -> None:
+    nan = float("nan")
+    trial = Trial("paper", "paper6", 3, time_s=330.0, readings=66,
+                  tcp_before={"rigid": 0.6}, tcp_after={"rigid": 0.02},
+                  predicted_rigid_mm=0.03, z=[0.5, -1.2], error=[0.1] * len(ERROR_NAMES),
+                  std=[0.2] * 6 + [nan] * (len(ERROR_NAMES) - 6), curve=[[82.5, 0.1]])
+    line = trial.to_json()
+    assert strict_json(line)["std"][6] is None
+    assert Trial.from_json(line).to_json() == line
+    assert np.isnan(Trial.from_json(line).std[6])
+    # Lines written before the names and nulls: NaN tokens, no names.
+    earlier = json.dumps(dataclasses.asdict(trial), allow_nan=True)
+    assert "NaN" in earlier and Trial.from_json(earlier).to_json() == line
+    failed = Trial("tracker", "paper", 3, failed="reads dial gauges only", time_s=330.0)
+    assert strict_json(failed.to_json())["predicted_rigid_mm"] is None
+    assert Trial.from_json(failed.to_json()).to_json() == failed.to_json()
+    with pytest.raises(ValueError, match="error names"):
+        Trial.from_json(line.replace('"drho_x"', '"drho_q"'))
+
+
+def test_resume_refuses_a_trial_of_other_error_names_in_one_line(tmp_path, capsys) -> None:
+    argv = ["compare", "--machines", "2", "--agents", "paper", "--estimators", "paper6",
+            "--quiet", "--out", str(tmp_path)]
+    assert main(argv) == 0
+    trials = tmp_path / "trials.jsonl"
+    lines = trials.read_text().splitlines()
+    trials.write_text("\n".join([lines[0].replace('"drho_x"', '"drho_q"'), *lines[1:]]) + "\n")
+    capsys.readouterr()
+    assert main([*argv, "--resume"]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and f"{trials}:1: not a trial (the trial's error names" in err[0], err
 
 
 @pytest.mark.parametrize(
@@ -148,6 +214,13 @@ def test_compare_writes_table_csv_and_plots(tmp_path, capsys) -> None:
         (["fit", "MISSING"], "not found"),
         (["fit", "BAD_CSV"], "column 5"),
         (["fit", "GOOD"], ".csv or .json"),
+        # What only the exact-model fit can do names the option that chooses it.
+        (["calibrate", "--strategy", "paper", "--agent", "tracker", "--backend", "exact"],
+         "reads dial gauges only; the exact-model fit reads a tracker's readings too: use "
+         "--strategy gauss-newton"),
+        (["fit", "GOOD_CSV", "--strategy", "paper", "--params", "extended"],
+         "not 'extended'; the exact-model fit estimates any parameters: use --strategy "
+         "gauss-newton"),
         (["compare", "--agents", "paper,oracle"], "unknown agent 'oracle'"),
         (["compare", "--agents", ","], "--agents needs"),
         (["compare", "--estimators", "oracle"], "unknown estimator"),

@@ -31,6 +31,33 @@ def test_version_comes_from_the_package_metadata() -> None:
     assert proc.stdout == f"orthoglide {metadata.version('orthoglide-workbench')}\n"
 
 
+def _listed_commands() -> list[str]:
+    """The sub-commands ``orthoglide --help`` lists (its ``{pose,render,...}`` line), so a
+    command added later is tested without being named here."""
+    text = build_parser().format_help()
+    listed = re.search(r"\{([\w,-]+)\}", text)
+    assert listed, text
+    return listed.group(1).split(",")
+
+
+def test_the_help_lists_every_command_module() -> None:
+    assert set(_listed_commands()) == {m.__name__.rsplit(".", 1)[1] for m in COMMANDS}
+
+
+@pytest.mark.parametrize("command", _listed_commands())
+def test_every_command_has_a_working_help(command: str, capsys) -> None:
+    with pytest.raises(SystemExit) as ended:
+        main([command, "--help"])
+    assert ended.value.code == 0
+    out = capsys.readouterr()
+    assert out.err == "" and out.out.startswith(f"usage: orthoglide {command}")
+    # Every option the parser knows is explained in the text the user reads.
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    for action in sub.choices[command]._actions:
+        for option in action.option_strings:
+            assert option in out.out, (command, option)
+
+
 @pytest.mark.parametrize(("argv", "status"), [
     # argparse prints help and version itself and ignores a failed write to stdout.
     (["--help"], 0), (["--version"], 0),

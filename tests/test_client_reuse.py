@@ -11,7 +11,8 @@ import pytest
 
 import orthoglide_env
 from orthoglide_env.instruments.gauges import PAPER_LAYOUT, install, installed_on
-from orthoglide_env.model.errors import PRESETS, RHO_MAX, RHO_MIN, random_machine
+from orthoglide_env.model.design import PROTOTYPE
+from orthoglide_env.model.errors import PRESETS, random_machine
 from orthoglide_env.sim.pybullet import OrthoglideMachine
 from orthoglide_env.sim.simulator import PhysicsSettings, Simulator
 
@@ -45,7 +46,8 @@ def readings(sim: OrthoglideMachine, postures: np.ndarray, mode: str) -> np.ndar
 @pytest.mark.parametrize("mode", ["quasi-static", "dynamic"])
 def test_a_reused_client_reads_what_a_new_one_reads(mode: str) -> None:
     rng = np.random.default_rng(5)
-    postures = np.vstack([rng.uniform(-15, 15, (3, 3)), rng.uniform(RHO_MIN, RHO_MAX, (2, 3))])
+    postures = np.vstack([rng.uniform(-15, 15, (3, 3)),
+                          rng.uniform(PROTOTYPE.rho_min, PROTOTYPE.rho_max, (2, 3))])
     shared = Simulator()
     try:
         for seed in range(4):  # each machine replaces the one before in the shared client

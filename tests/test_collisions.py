@@ -16,7 +16,8 @@ from orthoglide_env.model.collisions import (
     collisions,
     pair_gaps,
 )
-from orthoglide_env.model.errors import RHO_MAX, RHO_MIN, MachineParams, random_machine
+from orthoglide_env.model.design import PROTOTYPE
+from orthoglide_env.model.errors import MachineParams, random_machine
 from orthoglide_env.model.kinematics import direct
 
 #: x-leg's R2 moved 8 mm toward the y axis: clear at Zero (2.5 mm), crashed at (60, 60, 60).
@@ -91,13 +92,13 @@ def test_pairs_are_named_as_in_the_simulator() -> None:
 def worst_posture(machine: MachineParams, points: int) -> tuple[float, np.ndarray]:
     """Smallest clearance over the joint cube: a grid, then a local search from its worst
     nodes (the clearance is piecewise smooth, so the grid alone could step over a dip)."""
-    axis = np.linspace(RHO_MIN, RHO_MAX, points)
+    axis = np.linspace(PROTOTYPE.rho_min, PROTOTYPE.rho_max, points)
     grid = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
     values = clearance(machine, grid)
     best, where = np.inf, grid[0]
     for start in grid[np.argsort(values)[:4]]:
         result = minimize(lambda r: float(clearance(machine, r)), start, method="Powell",
-                          bounds=[(RHO_MIN, RHO_MAX)] * 3)
+                          bounds=[(PROTOTYPE.rho_min, PROTOTYPE.rho_max)] * 3)
         if result.fun < best:
             best, where = float(result.fun), result.x
     return best, where
@@ -114,14 +115,14 @@ def test_no_crash_is_possible_within_the_joint_limits(machine: MachineParams) ->
 
 def test_a_machine_far_from_nominal_crashes_its_couplers() -> None:
     assert clearance(CRASHING, np.zeros(3)) > 2.0
-    assert collisions(CRASHING, np.full(3, RHO_MAX)) == ["x_coupler/y_coupler",
+    assert collisions(CRASHING, np.full(3, PROTOTYPE.rho_max)) == ["x_coupler/y_coupler",
                                                           "x_coupler/z_coupler"]
 
 
 @pytest.mark.parametrize("machine", [CRASHING, random_machine(4, "realistic")])
 def test_agrees_with_the_simulators_contact_check(machine: MachineParams) -> None:
     machine_module = pytest.importorskip("orthoglide_env.sim.pybullet")
-    axis = np.linspace(RHO_MIN, RHO_MAX, 5)
+    axis = np.linspace(PROTOTYPE.rho_min, PROTOTYPE.rho_max, 5)
     grid = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
     gaps = pair_gaps(machine, grid)
     sim = machine_module.OrthoglideMachine(machine, [])

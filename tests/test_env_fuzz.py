@@ -17,7 +17,7 @@ import pybullet as pb
 import pytest
 
 import orthoglide_env
-from orthoglide_env.model.errors import RHO_MAX, RHO_MIN
+from orthoglide_env.model.design import PROTOTYPE
 
 needs_pybullet = pytest.mark.skipif(
     importlib.util.find_spec("orthoglide_env.sim.pybullet") is None,
@@ -52,23 +52,24 @@ def acceptable(action: object) -> bool:
         a = np.asarray(action, dtype=float)
     except (TypeError, ValueError):
         return False
-    return a.shape == (3,) and bool(np.all(np.isfinite(a) & (a >= RHO_MIN) & (a <= RHO_MAX)))
+    return a.shape == (3,) and bool(np.all(np.isfinite(a) & (a >= PROTOTYPE.rho_min)
+                                           & (a <= PROTOTYPE.rho_max)))
 
 
 def random_action(rng: np.random.Generator):
     kind = rng.integers(6)
     if kind == 0:
-        return rng.uniform(RHO_MIN - 50, RHO_MAX + 50, 3)  # often out of range
+        return rng.uniform(PROTOTYPE.rho_min - 50, PROTOTYPE.rho_max + 50, 3)  # often out of range
     if kind == 1:
-        a = rng.uniform(RHO_MIN, RHO_MAX, 3)
+        a = rng.uniform(PROTOTYPE.rho_min, PROTOTYPE.rho_max, 3)
         a[rng.integers(3)] = rng.choice([np.nan, np.inf, -np.inf])
         return a
     if kind == 2:
-        return rng.uniform(RHO_MIN, RHO_MAX, rng.choice([0, 1, 2, 4, 9]))
+        return rng.uniform(PROTOTYPE.rho_min, PROTOTYPE.rho_max, rng.choice([0, 1, 2, 4, 9]))
     if kind == 3:
         return ["x", None, [1, 2], [[0, 0, 0]], {"a": 1}, ["1", "2", "3"], [1 + 0j, 2, 3],
                 [True, False, True], [0.0, 1.0, False]][rng.integers(9)]
-    return rng.uniform(RHO_MIN, RHO_MAX, 3)  # valid
+    return rng.uniform(PROTOTYPE.rho_min, PROTOTYPE.rho_max, 3)  # valid
 
 
 def fuzz(env: gym.Env, steps: int, seed: int) -> tuple[int, int]:

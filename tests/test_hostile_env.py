@@ -18,7 +18,8 @@ from hypothesis import strategies as st
 
 import orthoglide_env
 from orthoglide_env.envs import calibration as env_module
-from orthoglide_env.model.errors import RHO_MAX, RHO_MIN, MachineParams
+from orthoglide_env.model.design import PROTOTYPE
+from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.sim.pybullet import OrthoglideMachine
 
 HAVE_PYBULLET = importlib.util.find_spec("orthoglide_env.sim.pybullet") is not None
@@ -156,11 +157,12 @@ def test_actions_must_be_real_numbers(backend: str, action: object) -> None:
 def _is_accepted(values: list) -> bool:
     """The rule: three ints or floats (never booleans), finite, inside the joint limits."""
     return all(isinstance(v, int | float) and not isinstance(v, bool)
-               and np.isfinite(v) and RHO_MIN <= v <= RHO_MAX for v in values)
+               and np.isfinite(v) and PROTOTYPE.rho_min <= v <= PROTOTYPE.rho_max for v in values)
 
 
 ELEMENTS = st.one_of(
-    st.floats(RHO_MIN - 20, RHO_MAX + 20), st.floats(allow_nan=True, allow_infinity=True),
+    st.floats(PROTOTYPE.rho_min - 20, PROTOTYPE.rho_max + 20),
+    st.floats(allow_nan=True, allow_infinity=True),
     st.integers(-150, 100), st.booleans(), st.text(max_size=3),
     st.from_regex(r"-?[0-9]{1,2}(\.[0-9])?", fullmatch=True), st.complex_numbers(),
     st.none(),

@@ -12,9 +12,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import (
     PRESETS,
-    VALIDITY_RANGE,
     MachineFileError,
     MachineParams,
     check_validity,
@@ -76,7 +76,7 @@ def test_the_command_line_reports_the_same_one_line(tmp_path) -> None:
 
 
 def _element(key: str) -> st.SearchStrategy:
-    limit = VALIDITY_RANGE[key][0]
+    limit = PROTOTYPE.validity_range[key][0]
     return st.one_of(st.floats(-2 * limit, 2 * limit), st.integers(-30, 30), st.booleans(),
                      st.text(max_size=2), st.none())
 
@@ -92,7 +92,7 @@ def _is_machine(data: dict) -> bool:
     for key, value in data.items():
         flat = np.ravel(np.array(value, dtype=object))
         if not all(isinstance(v, int | float) and not isinstance(v, bool)
-                   and abs(v) <= VALIDITY_RANGE[key][0] for v in flat):
+                   and abs(v) <= PROTOTYPE.validity_range[key][0] for v in flat):
             return False
     return True
 
@@ -113,7 +113,7 @@ def test_a_dict_is_a_machine_exactly_when_it_holds_numbers_in_range(data: dict) 
 @pytest.mark.parametrize("preset", ["paper", "realistic"])
 def test_presets_lie_well_inside_the_validity_range(preset: str) -> None:
     sigmas = PRESETS[preset]
-    for key, (limit, _) in VALIDITY_RANGE.items():
+    for key, (limit, _) in PROTOTYPE.validity_range.items():
         # 5 standard deviations: a drawn machine leaves the range with odds below 1e-5.
         assert 5 * getattr(sigmas, key) <= limit, key
     rng = np.random.default_rng(0)
@@ -124,7 +124,8 @@ def test_presets_lie_well_inside_the_validity_range(preset: str) -> None:
 def test_machines_given_as_objects_are_held_to_the_range() -> None:
     with pytest.raises(MachineFileError, match="'attach' element"):
         check_validity(MachineParams(attach=np.full((3, 3), 40.0)))
-    limits = {key: np.full(SHAPES[key], limit) for key, (limit, _) in VALIDITY_RANGE.items()}
+    limits = {key: np.full(SHAPES[key], limit)
+              for key, (limit, _) in PROTOTYPE.validity_range.items()}
     assert check_validity(MachineParams(**limits)) == MachineParams(**limits)
 
 
@@ -147,7 +148,7 @@ def test_equality_sees_shapes() -> None:
 
 
 def test_machines_at_the_limits_are_simulated_faithfully() -> None:
-    # The corners of the validity box (every error at +-limit), checked as VALIDITY_RANGE
+    # The corners of the validity box (every error at +-limit), checked as PROTOTYPE.validity_range
     # says it was chosen: the TCP across the joint cube (up to 50 mm: the singular corner
     # (60, 60, 60) is outside the guarantee) and the readings at the postures calibration
     # experiments read at (near Zero and the paper's) within 1 µm; gauge status identical.
@@ -165,7 +166,7 @@ def test_machines_at_the_limits_are_simulated_faithfully() -> None:
     paper = [paper_posture(name) for name in ("XMax", "XMin", "YMax", "YMin", "ZMax", "ZMin")]
     for _ in range(4):
         machine = MachineParams(**{key: limit * rng.choice([-1.0, 1.0], SHAPES[key])
-                                   for key, (limit, _) in VALIDITY_RANGE.items()})
+                                   for key, (limit, _) in PROTOTYPE.validity_range.items()})
         gauges = install(PAPER_LAYOUT, machine)
         sim = machine_module.OrthoglideMachine(machine, gauges)
         try:

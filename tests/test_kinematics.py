@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from orthoglide_env.model.errors import L_NOMINAL, RHO_MAX, MachineParams, random_machine
+from orthoglide_env.model.design import PROTOTYPE
+from orthoglide_env.model.errors import MachineParams, random_machine
 from orthoglide_env.model.kinematics import (
     UnreachableError,
     carriage_points,
@@ -51,15 +52,15 @@ def test_paper_closed_forms_match_general_model(joint_samples: np.ndarray) -> No
 
 def test_direct_paper_picks_the_assembly_mode_at_zero() -> None:
     # At Zero the quadratic's roots are t = 0 (this mode) and t = 2 L^2 / 3 (the other).
-    np.testing.assert_allclose(direct_paper(np.zeros(3), np.zeros(3), np.full(3, L_NOMINAL)),
+    np.testing.assert_allclose(direct_paper(np.zeros(3), np.zeros(3), np.full(3, PROTOTYPE.L)),
                                0.0, atol=1e-12)
 
 
 def test_paper_postures_put_the_tcp_on_the_axes() -> None:
     nominal = MachineParams()
-    alpha = np.arcsin(RHO_MAX / L_NOMINAL)
+    alpha = np.arcsin(PROTOTYPE.rho_max / PROTOTYPE.L)
     np.testing.assert_allclose(direct(nominal, paper_posture("YMax")),
-                               [0, L_NOMINAL * np.sin(alpha), 0], atol=EXACT)
+                               [0, PROTOTYPE.L * np.sin(alpha), 0], atol=EXACT)
     np.testing.assert_allclose(direct(nominal, paper_posture("ZMin")), [0, 0, -100], atol=EXACT)
     with pytest.raises(ValueError, match="unknown posture"):
         paper_posture("WMax")
@@ -70,7 +71,7 @@ def test_zero_posture_follows_eq7() -> None:
     # |dp|^2 / L (the other coordinates shorten the leg's projection), bounded below.
     machine = MachineParams(drho=[1e-3, -2e-3, 3e-3], dL=[2e-3, 1e-3, -1e-3])
     dp = machine.drho - machine.dL
-    second_order = 3 * np.max(np.abs(dp)) ** 2 / L_NOMINAL
+    second_order = 3 * np.max(np.abs(dp)) ** 2 / PROTOTYPE.L
     np.testing.assert_allclose(direct(machine, np.zeros(3)), dp, atol=second_order, rtol=0)
 
 
@@ -91,10 +92,10 @@ def test_jacobian_equals_finite_differences(joint_samples: np.ndarray) -> None:
 
 
 def test_jacobian_at_zero_and_xmax_are_eq6_and_eq8() -> None:
-    lengths = np.full(3, L_NOMINAL)
+    lengths = np.full(3, PROTOTYPE.L)
     j0 = jacobian_paper(np.zeros(3), np.zeros(3), np.zeros(3), lengths)
     np.testing.assert_allclose(j0, np.hstack([np.eye(3), -np.eye(3)]), atol=1e-12)
-    alpha = np.arcsin(RHO_MAX / L_NOMINAL)
+    alpha = np.arcsin(PROTOTYPE.rho_max / PROTOTYPE.L)
     t, c = np.tan(alpha), np.cos(alpha)
     rho = paper_posture("XMax")
     jx = jacobian_paper(direct_paper(rho, np.zeros(3), lengths), rho, np.zeros(3), lengths)
@@ -120,7 +121,7 @@ def test_leg_angles_rebuild_the_leg_vectors(joint_samples: np.ndarray) -> None:
 def test_points_at_zero_are_nominal() -> None:
     nominal = MachineParams()
     np.testing.assert_allclose(carriage_points(nominal, np.zeros(3)),
-                               (L_NOMINAL + 31.0) * np.eye(3))
+                               (PROTOTYPE.L + 31.0) * np.eye(3))
     np.testing.assert_allclose(platform_points(nominal, np.zeros(3)), 31.0 * np.eye(3))
 
 

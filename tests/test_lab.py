@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import importlib
 import json
+import re
 import subprocess
 import sys
 import warnings
@@ -356,3 +358,13 @@ def test_a_refused_reset_leaves_the_episode_as_it_was() -> None:
     a = env.step(action(Op.MOVE, [10.0, 0.0, 0.0]))[0]["gauges"]
     b = twin.step(action(Op.MOVE, [10.0, 0.0, 0.0]))[0]["gauges"]
     np.testing.assert_array_equal(a, b)
+
+
+def test_the_accuracy_reward_without_an_estimator_names_a_function_that_exists() -> None:
+    with pytest.raises(ValueError, match="needs an estimator") as refused:
+        gym.make(LAB, reward="accuracy")
+    named = re.search(r"([\w.]+)\.(\w+)\(\)", str(refused.value))
+    assert named, refused.value
+    module = importlib.import_module(named.group(1))
+    estimator = getattr(module, named.group(2))()
+    assert gym.make(LAB, reward="accuracy", estimator=estimator).reset(seed=0)

@@ -15,7 +15,7 @@ from calibrators.compare import Config, run_chunk
 from calibrators.experiment import make_estimator
 from orthoglide_env.envs.lab_vector import OrthoglideLabVectorEnv
 from orthoglide_env.lab.operations import PAPER_SLOTS, SLOTS, Op
-from orthoglide_env.model.errors import RHO_MAX, RHO_MIN
+from orthoglide_env.model.design import PROTOTYPE
 
 N = 4
 LAB = orthoglide_env.LAB_ENV_ID
@@ -30,9 +30,9 @@ def random_actions(rng: np.random.Generator, stands: int) -> dict[str, np.ndarra
     op = rng.choice(len(Op), size=N, p=[0.6, 0.12, 0.12, 0.12, 0.04])
     kind = rng.integers(10, size=N)
     rho = rng.uniform(-15, 15, (N, 3))
-    rho[kind >= 6] = rng.uniform(RHO_MIN, RHO_MAX, (int(np.sum(kind >= 6)), 3))
+    rho[kind >= 6] = rng.uniform(PROTOTYPE.rho_min, PROTOTYPE.rho_max, (int(np.sum(kind >= 6)), 3))
     rho[kind == 5] = PRESSING
-    rho[(kind == 4) | (kind == 3)] = RHO_MAX
+    rho[(kind == 4) | (kind == 3)] = PROTOTYPE.rho_max
     # Half the re-mounts aim at the paper's slots, where stands stand at the start.
     slot = np.where(rng.random(N) < 0.5, rng.choice(PAPER_SLOTS, size=N),
                     rng.integers(len(SLOTS), size=N))

@@ -18,7 +18,8 @@ from orthoglide_env.instruments.gauges import (
     installed_on,
     status_of,
 )
-from orthoglide_env.model.errors import PRESETS, RHO_MAX, RHO_MIN, MachineParams, random_machine
+from orthoglide_env.model.design import PROTOTYPE
+from orthoglide_env.model.errors import PRESETS, MachineParams, random_machine
 from orthoglide_env.model.kinematics import direct, paper_posture
 from orthoglide_env.sim.pybullet import OrthoglideMachine
 
@@ -37,7 +38,8 @@ def postures(seed: int) -> np.ndarray:
     """Paper postures, small moves (gauges in contact) and moves across the whole range."""
     rng = np.random.default_rng(seed)
     paper = [paper_posture(n) for n in ("XMax", "YMin", "ZMax")]
-    return np.vstack([paper, rng.uniform(-8, 8, (3, 3)), rng.uniform(RHO_MIN, RHO_MAX, (3, 3))])
+    return np.vstack([paper, rng.uniform(-8, 8, (3, 3)),
+                      rng.uniform(PROTOTYPE.rho_min, PROTOTYPE.rho_max, (3, 3))])
 
 
 @pytest.mark.parametrize(("seed", "preset"), [(1, "realistic"), (2, "realistic"), (3, "paper")])
@@ -117,7 +119,7 @@ def test_rejects_unknown_motion_mode() -> None:
 def test_no_collision_anywhere_in_the_joint_cube() -> None:
     # The exact backend reports no collision at all (backend.ExactMachine): this is the
     # simulator's evidence for it, on a grid with the cube's corners.
-    grid = np.linspace(RHO_MIN, RHO_MAX, 4)
+    grid = np.linspace(PROTOTYPE.rho_min, PROTOTYPE.rho_max, 4)
     for seed in (8, 9):
         sim = build(seed, "realistic")
         try:
@@ -157,7 +159,8 @@ def test_ray_through_a_bar_end_is_missed_by_both_backends() -> None:
         machine = random_machine(rng, "realistic")
         gauges = installed_on(machine, install(PAPER_LAYOUT, machine,
                                                preset=PRESETS["realistic"], rng=rng))
-        rho = rng.uniform(-8, 8, 3) if rng.random() < 0.5 else rng.uniform(RHO_MIN, RHO_MAX, 3)
+        rho = (rng.uniform(-8, 8, 3) if rng.random() < 0.5
+               else rng.uniform(PROTOTYPE.rho_min, PROTOTYPE.rho_max, 3))
     assert np.isnan(exact_ray_distances(machine, gauges, rho)[5])
     sim = OrthoglideMachine(machine, gauges)
     try:

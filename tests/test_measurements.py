@@ -31,7 +31,7 @@ from calibrators.measurements import (
 )
 from orthoglide_env.instruments.gauges import GaugeSpec, Part
 from orthoglide_env.lab.operations import SLOTS
-from orthoglide_env.model.errors import RHO_MAX, RHO_MIN
+from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture
 
 OLD_HEADER = "leg,axis,posture,repetition,reading_mm"
@@ -55,7 +55,7 @@ def readings(draw: st.DrawFn) -> Measurement:
     if draw(st.booleans()):
         posture, rho = draw(st.sampled_from(PAPER_POSTURES)), None
     else:
-        rho = tuple(draw(st.floats(RHO_MIN, RHO_MAX)) for _ in range(3))
+        rho = tuple(draw(st.floats(PROTOTYPE.rho_min, PROTOTYPE.rho_max)) for _ in range(3))
         posture = draw(st.one_of(st.just(""), labels))
     mounting = draw(st.one_of(st.just(""), labels.map(lambda s: f"{s} {gauge_name(gauge)}")))
     return Measurement(gauge, posture, draw(st.integers(1, MAX_REPETITION)),
@@ -245,8 +245,8 @@ def test_readings_beyond_100_mm_are_refused(tmp_path) -> None:
 
 def test_rho_outside_the_control_limits_is_refused(tmp_path) -> None:
     header = "leg,axis,rho_x,rho_y,rho_z,reading_mm"
-    assert Measurements.read(_written(tmp_path, csv_file(f"x,y,{RHO_MAX},{RHO_MIN},0,0.1",
-                                                         header=header))).items
+    row = f"x,y,{PROTOTYPE.rho_max},{PROTOTYPE.rho_min},0,0.1"
+    assert Measurements.read(_written(tmp_path, csv_file(row, header=header))).items
     refused(tmp_path / "m.csv", csv_file("x,y,0,0,60.001,0.1", header=header),
             ":2: column 5 (rho_z): must lie in [-100, 60] mm (the control limits)")
 

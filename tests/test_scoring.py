@@ -10,7 +10,8 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy.spatial.transform import Rotation
 
-from orthoglide_env.model.errors import RHO_MAX, RHO_MIN, MachineParams, random_machine
+from orthoglide_env.model.design import PROTOTYPE
+from orthoglide_env.model.errors import MachineParams, random_machine
 from orthoglide_env.model.kinematics import inverse
 from orthoglide_env.scoring import (
     FRAMES,
@@ -33,7 +34,7 @@ FIT_ROUND_OFF: float = 1e-11
 def test_grid_commands_respect_the_limits() -> None:
     grid = workspace_grid()
     rho = inverse(MachineParams(), grid)
-    assert len(grid) > 200 and np.all((rho >= RHO_MIN) & (rho <= RHO_MAX))
+    assert len(grid) > 200 and np.all((rho >= PROTOTYPE.rho_min) & (rho <= PROTOTYPE.rho_max))
 
 
 def test_compensating_with_the_truth_leaves_no_error() -> None:

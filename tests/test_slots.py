@@ -33,11 +33,11 @@ from orthoglide_env.instruments.gauges import (
 from orthoglide_env.lab.operations import (
     PAPER_SLOTS,
     SLOT_NAMES,
-    SLOT_POSITIONS,
     SLOTS,
     Op,
     slot_index,
 )
+from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import ERROR_NAMES, PRESETS, MachineParams, random_machine
 from orthoglide_env.model.kinematics import direct
 from orthoglide_env.model.reading_model import parameters_of, predict
@@ -52,7 +52,7 @@ LAB = orthoglide_env.LAB_ENV_ID
 
 def test_the_catalogue_appends_carriages_and_platform_faces_to_the_bars() -> None:
     bars = [GaugeSpec(leg, axis, at) for leg in range(3) for axis in range(3) if axis != leg
-            for at in SLOT_POSITIONS]
+            for at in PROTOTYPE.slot_positions]
     assert list(SLOTS[:len(bars)]) == bars  # the bar slots keep their indices
     assert PAPER_SLOTS == (2, 7, 12, 17, 22, 27)
     assert SLOT_NAMES[len(bars):] == (

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pybullet as pb
 
-from orthoglide_env.model.errors import RHO_MAX, RHO_MIN, MachineParams, random_machine
+from orthoglide_env.model.design import PROTOTYPE
+from orthoglide_env.model.errors import MachineParams, random_machine
 from orthoglide_env.sim.simulator import Simulator
 from orthoglide_env.sim.urdf import LINKS_PER_LEG, MM, link_name, nominal_urdf_path, write_urdf
 
@@ -31,7 +32,7 @@ def test_urdf_loads_with_the_expected_tree() -> None:
     for leg in range(3):
         lower, upper = links[link_name(leg, "carriage")][8:10]
         # URDF limits must be wider than the control limits: PyBullet clamps silently.
-        assert lower < RHO_MIN * MM and upper > RHO_MAX * MM
+        assert lower < PROTOTYPE.rho_min * MM and upper > PROTOTYPE.rho_max * MM
 
 
 def test_machine_errors_change_the_urdf() -> None:

@@ -16,7 +16,8 @@ import sys
 import numpy as np
 import pytest
 
-from orthoglide_env.model.errors import RHO_MAX, RHO_MIN, MachineParams, random_machine
+from orthoglide_env.model.design import PROTOTYPE
+from orthoglide_env.model.errors import MachineParams, random_machine
 from orthoglide_env.model.kinematics import direct
 from orthoglide_env.sim.urdf import (
     MM,
@@ -79,7 +80,7 @@ def _pose(urdf: yourdfpy.URDF, link: str) -> tuple[np.ndarray, np.ndarray]:
 def test_forward_kinematics_of_the_export_matches_the_exact_model(exported) -> None:
     rng = np.random.default_rng(12)
     kinds = {name: j.type for name, j in exported.joint_map.items()}
-    for rho in rng.uniform(RHO_MIN, RHO_MAX, (100, 3)):
+    for rho in rng.uniform(PROTOTYPE.rho_min, PROTOTYPE.rho_max, (100, 3)):
         values = joint_positions(MACHINE, rho)
         assert len(values) == 18
         exported.update_cfg({name: v * MM if kinds[name] == "prismatic" else v

@@ -10,7 +10,8 @@ from gymnasium.vector import AutoresetMode
 
 import orthoglide_env
 from orthoglide_env.envs.calibration_vector import OrthoglideCalibrationVectorEnv
-from orthoglide_env.model.errors import RHO_MAX, RHO_MIN, MachineParams
+from orthoglide_env.model.design import PROTOTYPE
+from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import paper_posture
 
 N = 5
@@ -66,8 +67,9 @@ def random_actions(rng: np.random.Generator) -> np.ndarray:
     the joint cube (gauges lose their bars), the crash corner and the paper's postures."""
     kind = rng.integers(10, size=N)
     actions = rng.uniform(-15, 15, (N, 3))
-    actions[kind >= 6] = rng.uniform(RHO_MIN, RHO_MAX, (int(np.sum(kind >= 6)), 3))
-    actions[kind == 5] = RHO_MAX
+    actions[kind >= 6] = rng.uniform(PROTOTYPE.rho_min, PROTOTYPE.rho_max,
+                                     (int(np.sum(kind >= 6)), 3))
+    actions[kind == 5] = PROTOTYPE.rho_max
     for i in np.flatnonzero(kind == 4):
         actions[i] = paper_posture(str(rng.choice(["XMin", "YMax", "ZMin", "YMin"])))
     return actions
@@ -193,7 +195,7 @@ def test_a_posture_one_machine_cannot_reach_names_that_env() -> None:
     envs.reset(seed=0, options={"machine": {"dL": [-10.0, -10.0, -10.0],
                                             "drho": [10.0, 10.0, 10.0]}})
     actions = np.zeros((N, 3))
-    actions[2] = RHO_MAX
+    actions[2] = PROTOTYPE.rho_max
     with pytest.raises(ValueError, match=r"env 2 .* no env moves"):
         envs.step(actions)
     envs.close()

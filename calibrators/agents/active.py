@@ -52,9 +52,10 @@ class ActiveAgent(Agent):
               rng: np.random.Generator) -> None:
         super().reset(env, observation, rng)
         setup = lab_setup(self.env, observation)
-        slots, engaged, sigma, budget = setup
+        slots, engaged, sigma, budget, design = setup
         self.planner = Planner(list(slots), list(engaged), sigma,
-                               budget + float(observation["time"][0]), criterion=self.criterion)
+                               budget + float(observation["time"][0]), criterion=self.criterion,
+                               design=design)
         steps, _ = fixed_plan(*setup, criterion=self.criterion)
         self.remounts = [s for s in steps if s.op == Op.REMOUNT]
         self.planner.mean = np.zeros(len(self.planner.covariance))
@@ -120,7 +121,8 @@ class ActiveAgent(Agent):
         records = self.env.records
         planner = self.planner
         try:
-            est = estimate(measurements_of(records), "extended", planner.sigma)
+            est = estimate(measurements_of(records, design=planner.design), "extended",
+                           planner.sigma)
         except (ValueError, RuntimeError, np.linalg.LinAlgError):
             return  # the filter goes on alone; the next refit has more data
         theta = dict(zip(est.space, est.theta, strict=True))

@@ -21,14 +21,17 @@ from calibrators.agents.base import PlannedAgent, action, register
 from calibrators.design.planner import Planner, Step, greedy_plan
 from orthoglide_env.instruments.gauges import NOISE_FLOOR
 from orthoglide_env.lab.operations import SLOTS
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 
 
 @lru_cache(maxsize=8)
 def fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
-               budget_s: float, criterion: str = "I") -> tuple[tuple[Step, ...], float]:
-    """The greedy plan from stands at ``slots`` (-1: none) with plungers ``engaged``, and
-    the TCP error after rigid motion it predicts (mm)."""
-    planner = Planner(list(slots), list(engaged), sigma, budget_s, criterion=criterion)
+               budget_s: float, design: MachineDesign = PROTOTYPE, criterion: str = "I"
+               ) -> tuple[tuple[Step, ...], float]:
+    """The greedy plan from stands at ``slots`` (-1: none) with plungers ``engaged`` on a
+    machine of ``design``, and the TCP error after rigid motion it predicts (mm)."""
+    planner = Planner(list(slots), list(engaged), sigma, budget_s, criterion=criterion,
+                      design=design)
     down, chance = planner.reading_here()  # the lab reads every stand as the episode opens
     planner.expect_readings(down, chance)
     steps = greedy_plan(planner)
@@ -36,13 +39,14 @@ def fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
 
 
 def lab_setup(env: gym.Env, observation: dict[str, np.ndarray]
-              ) -> tuple[tuple[int, ...], tuple[bool, ...], float, float]:
+              ) -> tuple[tuple[int, ...], tuple[bool, ...], float, float, MachineDesign]:
     """What a planner needs to know of the lab: each stand's slot (-1: none), whose
-    plunger is down, a reading's sigma and the time budget."""
+    plunger is down, a reading's sigma, the time budget and the machine's design."""
     slots = tuple(int(s) if s < len(SLOTS) else -1 for s in observation["slot"])
     engaged = tuple(bool(e) for e in observation["engaged"])
     sigma = max(float(env.noise.effective_sigma), NOISE_FLOOR)
-    return slots, engaged, sigma, float(env.budget_s) - float(observation["time"][0])
+    return (slots, engaged, sigma, float(env.budget_s) - float(observation["time"][0]),
+            env.design)
 
 
 @register

@@ -16,6 +16,7 @@ import numpy as np
 from calibrators.agents.base import PlannedAgent, action, register
 from calibrators.estimators.paper_linear import REPETITIONS, leg_sequence
 from orthoglide_env.lab.operations import SLOTS, Op
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.kinematics import paper_posture
 
 
@@ -29,14 +30,16 @@ class PaperAgent(PlannedAgent):
         super().reset(env, observation, rng)
         legs = tuple(SLOTS[s].leg if s < len(SLOTS) else -1 for s in observation["slot"])
         engaged = tuple(bool(e) for e in observation["engaged"])
-        self.plan = [dict(a) for a in paper_plan(legs, engaged, self.repetitions)]
+        self.plan = [dict(a) for a in paper_plan(legs, engaged, self.repetitions,
+                                                 self.env.design)]
 
 
 @lru_cache(maxsize=64)
-def paper_plan(legs: tuple[int, ...], engaged: tuple[bool, ...], repetitions: int
-               ) -> tuple[dict[str, Any], ...]:
-    """The paper's procedure for stands on ``legs`` (-1: none) engaged as ``engaged``: the
-    same on every machine of a sweep, so made once."""
+def paper_plan(legs: tuple[int, ...], engaged: tuple[bool, ...], repetitions: int,
+               design: MachineDesign = PROTOTYPE) -> tuple[dict[str, Any], ...]:
+    """The paper's procedure for stands on ``legs`` (-1: none) engaged as ``engaged``, at
+    the paper postures of ``design``: the same on every machine of a sweep, so made
+    once."""
     current = list(engaged)
     plan: list[dict[str, Any]] = []
     for leg in range(3):
@@ -47,6 +50,7 @@ def paper_plan(legs: tuple[int, ...], engaged: tuple[bool, ...], repetitions: in
             if g != -1 and current[k] != want:
                 plan.append(action(Op.ENGAGE if want else Op.LIFT, stand=k))
                 current[k] = want
-        plan += [action(Op.MOVE, paper_posture(p)) for p, _ in leg_sequence(leg, repetitions)]
+        plan += [action(Op.MOVE, paper_posture(p, design))
+                 for p, _ in leg_sequence(leg, repetitions)]
     plan.append(action(Op.STOP))
     return tuple(plan)

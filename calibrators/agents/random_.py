@@ -30,7 +30,8 @@ from orthoglide_env.instruments.gauges import (
 )
 from orthoglide_env.lab.operations import SLOTS, Op
 from orthoglide_env.model.collisions import clearance
-from orthoglide_env.model.errors import RHO_MAX, RHO_MIN, MachineParams
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import UnreachableError, direct
 
 #: A posture is safe for an engaged gauge when the nominal tip stays this far (mm) from
@@ -42,11 +43,11 @@ CLEARANCE: float = 3.0
 TRIES: int = 50
 
 
-def is_safe(rho: np.ndarray, slots: list[int]) -> bool:
-    """Whether the nominal machine reaches ``rho`` with parts apart and the gauges at
-    ``slots`` (engaged) neither pressed nor within the margin of being pressed, the
-    platform gauges on their faces within their travel."""
-    nominal = MachineParams()
+def is_safe(rho: np.ndarray, slots: list[int], design: MachineDesign = PROTOTYPE) -> bool:
+    """Whether the nominal machine of ``design`` reaches ``rho`` with parts apart and the
+    gauges at ``slots`` (engaged) neither pressed nor within the margin of being pressed,
+    the platform gauges on their faces within their travel."""
+    nominal = MachineParams(design=design)
     try:
         p = direct(nominal, rho)
     except UnreachableError:
@@ -79,20 +80,21 @@ class RandomAgent(Agent):
         slots = [int(s) for s in observation["slot"]]
         engaged = [k for k, e in enumerate(observation["engaged"]) if e and slots[k] < len(SLOTS)]
         choice = self.rng.random()
+        design = self.env.design
         if choice < 0.6:
             for _ in range(TRIES):
-                rho = self.rng.uniform(RHO_MIN, RHO_MAX, 3)
-                if is_safe(rho, [slots[k] for k in engaged]):
+                rho = self.rng.uniform(design.rho_min, design.rho_max, 3)
+                if is_safe(rho, [slots[k] for k in engaged], design):
                     return action(Op.MOVE, rho)
         stand = int(self.rng.integers(len(slots)))
         if choice < 0.8 and slots[stand] < len(SLOTS):
             if stand in engaged:
                 return action(Op.LIFT, stand=stand)
-            if is_safe(observation["joints"], [slots[k] for k in [*engaged, stand]]):
+            if is_safe(observation["joints"], [slots[k] for k in [*engaged, stand]], design):
                 return action(Op.ENGAGE, stand=stand)
         free = sorted(set(range(len(SLOTS))) - set(slots))
         slot = int(self.rng.choice(free))
-        if is_safe(np.zeros(3), [slots[k] for k in engaged if k != stand] + [slot]):
+        if is_safe(np.zeros(3), [slots[k] for k in engaged if k != stand] + [slot], design):
             return action(Op.REMOUNT, stand=stand, slot=slot)
         return action(Op.LIFT, stand=stand) if slots[stand] < len(SLOTS) else action(
             Op.MOVE, np.zeros(3))

@@ -12,13 +12,21 @@ import numpy as np
 
 from calibrators.agents.base import PlannedAgent, action, register
 from orthoglide_env.lab.operations import Op
+from orthoglide_env.model.design import MachineDesign
 
-#: Grid levels of each joint (mm): the joint range less 10 mm at either end, which keeps
-#: clear of the near-singular (60, 60, 60) corner where some machines cannot assemble.
-LEVELS: tuple[float, ...] = (-90.0, -20.0, 50.0)
+#: The grid keeps this far (mm) inside the joint range at either end: clear of the
+#: near-singular corner (the prototype's (60, 60, 60)) where some machines cannot assemble.
+INSET: float = 10.0
 
 
-def serpentine_grid(levels: tuple[float, ...] = LEVELS) -> np.ndarray:
+def levels_of(design: MachineDesign) -> tuple[float, float, float]:
+    """Grid levels of each joint (mm): ``design``'s joint range less :data:`INSET` at either
+    end, and its middle (the prototype's: -90, -20, 50)."""
+    low, high = design.rho_min + INSET, design.rho_max - INSET
+    return low, (low + high) / 2, high
+
+
+def serpentine_grid(levels: tuple[float, ...]) -> np.ndarray:
     """Every combination of ``levels`` on three joints, each row reversing the last so
     consecutive postures differ in one joint."""
     points = []
@@ -39,5 +47,5 @@ class TrackerAgent(PlannedAgent):
               rng: np.random.Generator) -> None:
         super().reset(env, observation, rng)
         self.plan = [action(Op.LIFT, stand=k) for k, e in enumerate(observation["engaged"]) if e]
-        self.plan += [action(Op.MOVE, rho) for rho in serpentine_grid()]
+        self.plan += [action(Op.MOVE, rho) for rho in serpentine_grid(levels_of(self.env.design))]
         self.plan.append(action(Op.STOP))

@@ -13,11 +13,11 @@ import os
 import sys
 from importlib import metadata
 
-from calibrators.cli import calibrate, compare, fit, pose, render, urdf
+from calibrators.cli import calibrate, compare, design, fit, pose, render, urdf
 from calibrators.cli.common import Parser, UsageError
 from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA, check_noise
 
-COMMANDS = (pose, render, urdf, calibrate, fit, compare)
+COMMANDS = (pose, render, urdf, calibrate, fit, compare, design)
 #: The distribution whose metadata carries the version.
 DISTRIBUTION = "orthoglide-workbench"
 

@@ -12,12 +12,14 @@ import orthoglide_env
 from calibrators.agents import available as agents_available
 from calibrators.agents import get_agent
 from calibrators.cli import estimator_options
+from calibrators.cli.common import add_design
 from calibrators.cli.output import emit, report
 from calibrators.estimators.base import Estimate, Measurements, get_strategy
 from calibrators.estimators.exact_fit import z_scores
 from calibrators.estimators.gauss_newton import design_of
 from calibrators.experiment import run_episode
 from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
+from orthoglide_env.model.design import load_design
 from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS, MachineParams
 from orthoglide_env.model.reading_model import TrackerAxis, parameters_of
 
@@ -28,13 +30,15 @@ def _setup(args: argparse.Namespace) -> tuple[MachineParams, str, float, float]:
     A machine file defines every true error: its gauges are installed perfectly and read
     without noise unless ``--errors`` or ``--sigma`` ask for them.  A random machine is
     drawn from ``--errors`` (default realistic) with its gauge errors and noise."""
+    design = load_design(args.design)
     if args.machine:
-        machine = MachineParams.from_json(args.machine)
+        machine = MachineParams.from_json(args.machine, design)
         preset = args.errors or "nominal"
         noisy = args.sigma is not None
     else:
         preset = args.errors or DEFAULT_PRESET
-        machine = MachineParams()  # unused: the lab draws the machine from the seed
+        # Unused but for its design: the lab draws the machine from the seed.
+        machine = MachineParams(design=design)
         noisy = not args.noise_free
     if not noisy:
         return machine, preset, 0.0, 0.0
@@ -56,13 +60,14 @@ def _z_rms(est: Estimate, data: Measurements, env: gym.Env) -> float | None:
 
 
 def run(args: argparse.Namespace) -> None:
-    strategy = get_strategy(args.strategy)
+    get_strategy(args.strategy)  # an unknown one is refused before the experiment
     agent = get_agent(args.agent)
-    options = estimator_options.options(args)
+    estimator_options.options(args)  # and so are bad options
     machine, preset, sigma, resolution = _setup(args)
     env = gym.make(orthoglide_env.LAB_ENV_ID, errors=preset, gauge_sigma=sigma,
                    gauge_resolution=resolution, backend=args.backend,
-                   tracker=agent.needs_tracker, budget_s=args.budget)
+                   tracker=agent.needs_tracker, budget_s=args.budget,
+                   design=machine.design)
     try:
         # A random machine is drawn by the lab from the seed, as ``compare`` draws it: the
         # same seed gives the same machine, installation and readings there and here.
@@ -72,7 +77,7 @@ def run(args: argparse.Namespace) -> None:
         if args.save_measurements:
             data.write(args.save_measurements)
         lab = env.unwrapped
-        est = strategy.estimate(data, args.params, lab.noise.effective_sigma, **options)
+        est = estimator_options.estimate(args, data, lab.noise.effective_sigma)
         emit(report(est, lab.true_machine, _z_rms(est, data, env)), args.json)
     finally:
         env.close()
@@ -91,6 +96,7 @@ def add(sub: argparse._SubParsersAction) -> None:
                    help="error preset: of the random machine and its gauges; with --machine, "
                         "of the gauge installation only (default: realistic, or none with "
                         "--machine)")
+    add_design(p)
     p.add_argument("--backend", choices=["pybullet", "exact"], default="pybullet",
                    help="simulator of the virtual machine (default: %(default)s)")
     group = p.add_mutually_exclusive_group()
@@ -101,8 +107,8 @@ def add(sub: argparse._SubParsersAction) -> None:
                             f"machine, 0 with --machine), with a {DEFAULT_RESOLUTION} mm dial")
     estimator_options.add(p)
     p.add_argument("--agent", default="paper",
-                   help=f"who works in the lab: {', '.join(agents_available())} "
-                        "(default: %(default)s)")
+                   help=f"who works in the lab: {', '.join(agents_available())}, or "
+                        "policy:FILE, a learned policy (default: %(default)s)")
     p.add_argument("--budget", type=float, default=3600.0,
                    help="lab time budget (s, default %(default)s)")
     p.add_argument("--save-measurements", metavar="FILE.csv",

@@ -14,7 +14,13 @@ from orthoglide_env.instruments.gauges import (
     DEFAULT_TRAVEL,
     MAX_NOISE_FRACTION,
 )
-from orthoglide_env.model.errors import RHO_MAX, RHO_MIN, MachineParams, check_rho, random_machine
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign, load_design
+from orthoglide_env.model.errors import MachineParams, check_rho, random_machine
+
+#: Help of ``--design``, on every command that builds a machine.
+DESIGN_HELP = ("machine design file, JSON or TOML: the nominal dimensions, joint limits and "
+               "link shapes (see the README's 'Machine designs'; keys left out take the "
+               "prototype's values; default: the prototype)")
 
 
 class UsageError(Exception):
@@ -28,14 +34,22 @@ class Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
+def design_of(args: argparse.Namespace) -> MachineDesign:
+    """The design of ``--design FILE``, or the prototype."""
+    return load_design(getattr(args, "design", None))
+
+
 def machine_of(args: argparse.Namespace) -> MachineParams:
+    """The machine of ``--machine FILE`` (its design: the file's, else ``--design``'s),
+    else a random machine of ``--design`` drawn from ``--seed`` and ``--errors``."""
+    design = design_of(args)
     if getattr(args, "machine", None):
-        return MachineParams.from_json(args.machine)
-    return random_machine(args.seed, args.errors)
+        return MachineParams.from_json(args.machine, design)
+    return random_machine(args.seed, args.errors, design)
 
 
-def rho_of(values: list[float]) -> np.ndarray:
-    return check_rho(np.array(values, dtype=float))
+def rho_of(values: list[float], design: MachineDesign) -> np.ndarray:
+    return check_rho(np.array(values, dtype=float), design=design)
 
 
 def vec(values: list[float], digits: int) -> str:
@@ -65,13 +79,19 @@ def add_machine_posture(p: argparse.ArgumentParser) -> None:
     add_machine(p)
     p.add_argument("--rho", nargs=3, type=float, required=True, metavar=("X", "Y", "Z"),
                    help="joint targets, control coordinates (mm, 0 at the Zero posture, "
-                   f"each within the joint limits [{RHO_MIN:g}, {RHO_MAX:g}]; required)")
+                   "each within the design's joint limits, the prototype's "
+                   f"[{PROTOTYPE.rho_min:g}, {PROTOTYPE.rho_max:g}]; required)")
+
+
+def add_design(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--design", metavar="FILE", help=DESIGN_HELP)
 
 
 def add_machine(p: argparse.ArgumentParser) -> None:
     p.add_argument("--machine", required=True, metavar="FILE",
                    help="machine JSON file: errors in mm and rad, see the README's "
                    "'Machine files' (required; a file holding {} is the nominal machine)")
+    add_design(p)
 
 
 def print_json(data: Any) -> None:

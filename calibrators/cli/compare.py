@@ -14,11 +14,13 @@ from tqdm import tqdm
 
 from calibrators.agents import available as agents_available
 from calibrators.agents import get_agent
-from calibrators.cli.common import UsageError
+from calibrators.cli.common import UsageError, add_design, design_of
+from calibrators.cli.estimator_options import DEFAULT_STRATEGY
 from calibrators.compare import Config, Trial, run, summary, verify_pybullet
 from calibrators.engines import ENGINES, RAY_INSTALL_HINT, ray_available
 from calibrators.experiment import ESTIMATORS
 from orthoglide_env.instruments.gauges import check_noise
+from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import PRESETS
 from orthoglide_env.scoring import FRAMES
 
@@ -65,7 +67,8 @@ def _check(args: argparse.Namespace) -> Config:
                                                                            "--resolution"))
     return Config(agents, estimators, args.budget, args.errors, sigma,
                   0.0 if args.noise_free else args.resolution, args.backend, args.seed,
-                  args.target, curve_estimator=_curve_estimator(estimators) if args.out else "")
+                  args.target, curve_estimator=_curve_estimator(estimators) if args.out else "",
+                  design=design_of(args))
 
 
 def _curve_estimator(estimators: tuple[str, ...]) -> str:
@@ -94,10 +97,10 @@ def _prepare_out(args: argparse.Namespace, config: Config) -> tuple[Path | None,
         for n, line in enumerate(trials_path.read_text().splitlines(), start=1):
             try:
                 done.append(Trial.from_json(line))
-            except (ValueError, TypeError):
+            except (ValueError, TypeError) as exc:
                 # The last line of an interrupted run may be cut short: drop it.
                 if n < len(trials_path.read_text().splitlines()):
-                    raise UsageError(f"{trials_path}:{n}: not a trial") from None
+                    raise UsageError(f"{trials_path}:{n}: not a trial ({exc})") from None
         return out, done
     if trials_path.exists():
         raise UsageError(f"{out} already holds a run: use --resume, or another --out")
@@ -113,6 +116,10 @@ def _config_dict(config: Config, machines: int) -> dict:
     data = dict(vars(config))
     data.update(agents=list(config.agents), estimators=list(config.estimators),
                 machines=machines)
+    # The prototype is left out, so that the runs kept before designs existed resume.
+    design = data.pop("design")
+    if design != PROTOTYPE:
+        data["design"] = design.to_dict()
     return data
 
 
@@ -188,6 +195,10 @@ def _print(rows: list[dict], config: Config, machines: int, seconds: float,
         if r["failed"]:
             print(f"{r['agent']} x {r['estimator']}: {r['failed']} of {r['machines']} failed "
                   f"({r['failure']})")
+    exact = [name for name, spec in ESTIMATORS.items() if spec.strategy == DEFAULT_STRATEGY]
+    if any(r["failed"] and r["estimator"] not in exact for r in rows):
+        print(f"the exact-model estimators read any agent's readings: --estimators "
+              f"{','.join(exact)}")
 
 
 def _write(trials: list[Trial], rows: list[dict], out: Path, config: Config) -> list[Path]:
@@ -230,6 +241,7 @@ def add(sub: argparse._SubParsersAction) -> None:
     group.add_argument("--noise-free", action="store_true", help="ideal gauges")
     p.add_argument("--resolution", type=float, default=0.01,
                    help="gauge display resolution (mm, default %(default)s)")
+    add_design(p)
     p.add_argument("--backend", choices=["exact", "pybullet"], default="exact",
                    help="simulator (default %(default)s)")
     p.add_argument("--target", type=float, default=0.01,

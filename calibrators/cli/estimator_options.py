@@ -5,9 +5,13 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from calibrators.cli.common import UsageError
+from calibrators.estimators.base import Estimate, get_strategy
 from calibrators.estimators.exact_fit import SOLVERS
 from calibrators.estimators.gauss_newton import MAX_OUTLIER_FRACTION, OUTLIER_K
+from calibrators.estimators.paper_linear import NeedsExactFit
 from calibrators.estimators.parameters import parse_assignments
+from calibrators.measurements import Measurements
 
 DEFAULT_STRATEGY = "gauss-newton"
 
@@ -32,9 +36,10 @@ def add(p: argparse.ArgumentParser) -> None:
                    help="batched damped Gauss-Newton, or scipy's least_squares as a cross-check "
                         "(default: %(default)s)")
     p.add_argument("--keep-outliers", action="store_true",
+                   # argparse %-formats help text: a percent sign is written twice.
                    help=f"flag readings beyond {OUTLIER_K:g} robust sigma but keep them in the "
                         f"fit (default: leave them out, at most "
-                        f"{MAX_OUTLIER_FRACTION:.0%} of the readings)")
+                        f"{100 * MAX_OUTLIER_FRACTION:g}%% of the readings)")
     p.add_argument("--holdout", type=float, default=0.0, metavar="FRACTION",
                    help="fit on the other readings and report the prediction residual of this "
                         "random fraction (default: none)")
@@ -45,3 +50,12 @@ def options(args: argparse.Namespace) -> dict[str, Any]:
     return {"prior": args.prior, "fix": parse_assignments(args.fix, "--fix"),
             "keep_outliers": args.keep_outliers, "holdout": args.holdout,
             "seed": args.seed if args.seed is not None else 0, "solver": args.solver}
+
+
+def estimate(args: argparse.Namespace, data: Measurements, sigma: float) -> Estimate:
+    """The estimate of ``--strategy`` with the parsed options; what only the exact-model fit
+    can do is refused with the option that asks for it."""
+    try:
+        return get_strategy(args.strategy).estimate(data, args.params, sigma, **options(args))
+    except NeedsExactFit as exc:
+        raise UsageError(f"{exc}: use --strategy {DEFAULT_STRATEGY}") from None

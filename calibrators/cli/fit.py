@@ -3,15 +3,16 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 
 import numpy as np
 
 from calibrators.cli import estimator_options
-from calibrators.cli.common import UsageError
+from calibrators.cli.common import UsageError, design_of
 from calibrators.cli.output import emit, report
-from calibrators.estimators.base import get_strategy
 from calibrators.measurements import Measurements
 from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
+from orthoglide_env.model.design import PROTOTYPE
 
 #: Largest repeatability accepted (mm): a dial gauge that scatters by more than this is
 #: not measuring, and the weights would say nothing.
@@ -24,11 +25,15 @@ def run(args: argparse.Namespace) -> None:
         if not 0 <= value <= MAX_SIGMA:
             raise UsageError(f"--{name} must be between 0 and {MAX_SIGMA:g} mm, got {value:g}")
     data = Measurements.read(args.file)
+    if args.design:
+        design = design_of(args)
+        if data.design not in (PROTOTYPE, design):
+            raise UsageError(f"{args.file} names another design than --design {args.design}")
+        data = replace(data, design=design)
     if args.to_csv:
         data.to_csv(args.to_csv)
     sigma = float(np.hypot(args.sigma, args.resolution / np.sqrt(12)))
-    est = get_strategy(args.strategy).estimate(data, args.params, sigma,
-                                               **estimator_options.options(args))
+    est = estimator_options.estimate(args, data, sigma)
     emit(report(est, None), args.json)
 
 
@@ -41,6 +46,9 @@ def add(sub: argparse._SubParsersAction) -> None:
                    help="gauge display resolution (mm, default %(default)s)")
     p.add_argument("--seed", type=int, default=0,
                    help="seed of the --holdout draw (default: %(default)s)")
+    p.add_argument("--design", metavar="FILE", help="design of the machine the readings come "
+                   "from, JSON or TOML (see the README's 'Machine designs'; default: the "
+                   "readings file's, else the prototype)")
     estimator_options.add(p)
     p.add_argument("--to-csv", metavar="FILE.csv",
                    help="also write the readings as CSV (shortest round-trip numbers)")

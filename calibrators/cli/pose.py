@@ -10,16 +10,17 @@ from calibrators.cli.common import (
     NOISE_LIMIT,
     SIGMA_HELP,
     add_machine_posture,
+    machine_of,
     print_json,
     rho_of,
     vec,
 )
 from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA, MIN_RESOLUTION
-from orthoglide_env.model.errors import MachineParams
 
 
 def run(args: argparse.Namespace) -> None:
-    machine, rho = MachineParams.from_json(args.machine), rho_of(args.rho)
+    machine = machine_of(args)
+    rho = rho_of(args.rho, machine.design)
     from orthoglide_env.sim.report import pose_report  # loads the simulator: after validation
 
     sigma = DEFAULT_SIGMA if args.sigma is None else args.sigma

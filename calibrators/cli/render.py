@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import argparse
 
-from calibrators.cli.common import add_machine_posture, rho_of
-from orthoglide_env.model.errors import MachineParams
+from calibrators.cli.common import add_machine_posture, machine_of, rho_of
 
 
 def run(args: argparse.Namespace) -> None:
-    machine, rho = MachineParams.from_json(args.machine), rho_of(args.rho)
+    machine = machine_of(args)
+    rho = rho_of(args.rho, machine.design)
     from orthoglide_env.sim.report import render_png
 
     path = render_png(machine, rho, args.out)

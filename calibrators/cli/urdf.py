@@ -6,8 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from calibrators.cli.common import add_machine
-from orthoglide_env.model.errors import MachineParams
+from calibrators.cli.common import add_machine, machine_of
 from orthoglide_env.sim.urdf import write_urdf
 
 #: ``-o -`` writes to standard output.
@@ -15,7 +14,7 @@ STDOUT = "-"
 
 
 def run(args: argparse.Namespace) -> None:
-    text = write_urdf(MachineParams.from_json(args.machine))
+    text = write_urdf(machine_of(args))
     if args.out == STDOUT:
         sys.stdout.write(text)
         return

@@ -52,7 +52,8 @@ from orthoglide_env.instruments.gauges import (
 )
 from orthoglide_env.lab.operations import SLOTS, TIME, Op
 from orthoglide_env.model.collisions import clearance
-from orthoglide_env.model.errors import ERROR_NAMES, RHO_MAX, RHO_MIN, MachineParams
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.errors import ERROR_NAMES, MachineParams
 from orthoglide_env.model.kinematics import direct
 from orthoglide_env.model.reading_model import (
     Design,
@@ -90,11 +91,11 @@ LOOKAHEAD_MOVES: int = 24
 SCREENED: int = 6
 
 
-def candidate_postures() -> np.ndarray:
-    """Postures a design may visit (P, 3): a 20 mm grid of the joint cube, and denser
-    tubes along each axis (20 mm along it, 10 mm across from -40 to +20 mm), where the
-    gauges on that axis's bars stay within their travel."""
-    along = np.arange(RHO_MIN, RHO_MAX + 1e-9, 20.0)
+def candidate_postures(design: MachineDesign = PROTOTYPE) -> np.ndarray:
+    """Postures an experiment may visit (P, 3): a 20 mm grid of the machine design's joint
+    cube, and denser tubes along each axis (20 mm along it, 10 mm across from -40 to +20
+    mm), where the gauges on that axis's bars stay within their travel."""
+    along = np.arange(design.rho_min, design.rho_max + 1e-9, 20.0)
     side = np.arange(-40.0, 20.0 + 1e-9, 10.0)
     points = [np.stack(np.meshgrid(along, along, along, indexing="ij"), -1).reshape(-1, 3)]
     for axis in range(3):
@@ -157,12 +158,13 @@ def reach(table: SlotTable, slots: np.ndarray, tip: np.ndarray, spread: np.ndarr
     return safe, np.where(safe & ~missed, within, 0.0)
 
 
-@lru_cache(maxsize=1)
-def slot_table() -> SlotTable:
+@lru_cache(maxsize=2)
+def slot_table(machine_design: MachineDesign = PROTOTYPE) -> SlotTable:
     """The :class:`SlotTable` of every slot over the :func:`candidate_postures` the nominal
-    machine reaches with its parts :data:`CLEARANCE` apart (once per process: seconds)."""
-    nominal = MachineParams()
-    postures = candidate_postures()
+    machine of ``machine_design`` reaches with its parts :data:`CLEARANCE` apart (once per
+    process and design: seconds)."""
+    nominal = MachineParams(design=machine_design)
+    postures = candidate_postures(machine_design)
     boxes = collision_boxes(nominal, postures, direct(nominal, postures))
     keep = clearance(nominal, postures, boxes) >= CLEARANCE
     postures = postures[keep]
@@ -176,24 +178,26 @@ def slot_table() -> SlotTable:
     change = np.zeros((len(SLOTS), len(postures), N_MACHINE + 4))
     reading = np.zeros((len(SLOTS), len(postures)))
     for k, spec in enumerate(SLOTS):
-        design = Design(("m",), (spec,), np.zeros(len(postures), dtype=int), postures)
+        design = Design(("m",), (spec,), np.zeros(len(postures), dtype=int), postures,
+                        machine_design)
         scale = default_scales(design.space)
         rows = jacobian(np.zeros(len(scale)), design, np.ones(len(scale), bool), scale)
         change[k] = rows - rows[zero]
         values = predict(np.zeros(len(scale)), design)
         reading[k] = values - values[zero]
     sign = np.array([g.sign for g in gauges], dtype=float)
-    return SlotTable(postures, zero, tip, pressed, near, change, sign, reading)
+    return SlotTable(postures, zero, tip, pressed, near, change, sign, reading,
+                     machine_design.gauge_travel)
 
 
-@lru_cache(maxsize=1)
-def rigid_weight() -> np.ndarray:
+@lru_cache(maxsize=2)
+def rigid_weight(design: MachineDesign = PROTOTYPE) -> np.ndarray:
     """``W`` (27, 27): ``trace(W C)`` is the predicted mean-square TCP error over the
     scoring grid after the best-fit rigid motion (mm^2) for machine errors off by
     ``N(0, C)`` in units of their scale (the quadratic form of
     :func:`orthoglide_env.scoring.predicted_frame_errors`)."""
     scale = default_scales(ParameterSpace())
-    return rigid_weights([MachineParams()])[0] * np.outer(scale, scale)
+    return rigid_weights([MachineParams(design=design)])[0] * np.outer(scale, scale)
 
 
 class Step(NamedTuple):
@@ -226,7 +230,8 @@ class Planner:
     ``slots``: each stand's index in :data:`~orthoglide_env.lab.operations.SLOTS` (-1: none);
     ``engaged``: whose plunger is down; ``sigma``: a reading's standard deviation (mm).
     ``observe`` turns it into a filter: it then also holds the mean of the unknowns and
-    predicts the tips from them."""
+    predicts the tips from them.  ``design``: the machine's design (its candidate postures,
+    slot table and scoring grid)."""
 
     slots: list[int]
     engaged: list[bool]
@@ -235,10 +240,13 @@ class Planner:
     criterion: str = "I"
     rho: np.ndarray = field(default_factory=lambda: np.zeros(3))
     time_s: float = 0.0
-    table: SlotTable = field(default_factory=slot_table)
+    design: MachineDesign = PROTOTYPE
+    table: SlotTable = None  # type: ignore[assignment]  # default: the design's slot table
     steps: list[Step] = field(default_factory=list)
 
     def __post_init__(self) -> None:
+        if self.table is None:
+            self.table = slot_table(self.design)
         if self.criterion not in CRITERIA:
             raise ValueError(f"unknown criterion '{self.criterion}'; choose from {CRITERIA}")
         if not (np.isfinite(self.sigma) and self.sigma > 0):
@@ -258,7 +266,7 @@ class Planner:
 
     @property
     def weight(self) -> np.ndarray:
-        return rigid_weight()
+        return rigid_weight(self.design)
 
     # -- the model of a reading -----------------------------------------------------------
     def _columns(self, stand: int) -> np.ndarray:

@@ -127,8 +127,9 @@ class Estimate:
 
     @property
     def machine(self) -> MachineParams:
-        """The estimated machine (every machine error the fit has)."""
-        return MachineParams.from_vector(self.theta[: len(ERROR_NAMES)])
+        """The estimated machine (every machine error the fit has), of the readings'
+        design."""
+        return MachineParams.from_vector(self.theta[: len(ERROR_NAMES)], self.readings.design)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready; the derived ``std``, ``residual_rms_mm`` and ``condition_number``

@@ -22,12 +22,13 @@ from orthoglide_env.instruments.gauges import (
     exact_ray_distances,
     install,
 )
-from orthoglide_env.model.errors import L_NOMINAL, RHO_MAX, RHO_MIN, MachineParams
-from orthoglide_env.model.kinematics import direct
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.errors import MachineParams
+from orthoglide_env.model.kinematics import PAPER_POSTURES, direct, paper_posture
 
 #: Differences share a dense covariance (estimators whiten with its Cholesky factor): this
-#: many rows take 130 MB and seconds; a design needs a few hundred (DESIGN.md: 40
-#: mountings of 15 postures).
+#: many rows take 130 MB and seconds; a design needs a few hundred (40 mountings of 15
+#: postures: 600).
 MAX_DIFFERENCES: int = 4096
 
 
@@ -45,6 +46,7 @@ class Differences:
     values: np.ndarray  # mm
     cov_unit: np.ndarray  # covariance of ``values`` for readings of unit variance
     mountings: tuple[str, ...] = ()
+    design: MachineDesign = PROTOTYPE  # the design of the machine read
 
     def __len__(self) -> int:
         return len(self.values)
@@ -88,7 +90,7 @@ def differences(data: Measurements, repetitions: Collection[int] | None = None) 
            + np.diag([1 / len(groups[k]) for k in keys]))
     rho = np.array([k[2] for k in keys], dtype=float).reshape(-1, 3)
     return Differences(tuple(k[1] for k in keys), tuple(labels[k[2]] for k in keys), rho,
-                       values, cov, tuple(k[0] for k in keys))
+                       values, cov, tuple(k[0] for k in keys), data.design)
 
 
 def model_differences(theta: np.ndarray, rows: Differences) -> np.ndarray:
@@ -99,7 +101,7 @@ def model_differences(theta: np.ndarray, rows: Differences) -> np.ndarray:
     constant: a difference ``sign * (t - t_zero)`` does not depend on it, so the model
     skips the zeroing and reads one batch of postures, whose
     geometry is computed once."""
-    machine = MachineParams(drho=theta[:3], dL=theta[3:])
+    machine = MachineParams(drho=theta[:3], dL=theta[3:], design=rows.design)
     specs = sorted(set(rows.gauges), key=lambda g: (g.leg, g.axis, g.at))
     gauges = install(specs, machine)
     postures, row = np.unique(rows.rho, axis=0, return_inverse=True)
@@ -134,12 +136,18 @@ def paper_matrix(rows: Differences) -> np.ndarray:
     """Eq. (10)'s rows for these differences: leg ``k`` measured along axis ``m`` at the
     leg's Max (or Min) posture reads ``b drho_k + a drho_m - b dL_k - c dL_m`` with
     ``a = sin(alpha)``, ``b = (1/2 + a) tan(alpha)``, ``c = (1/2 + a) / cos(alpha) - 1/2``."""
+    design = rows.design
+    # Another design's paper postures are told by their rho (a file's labels name the
+    # prototype's).
+    names = {tuple(paper_posture(p, design)): p for p in PAPER_POSTURES}
     out = np.zeros((len(rows), 6))
-    for r, (g, posture) in enumerate(zip(rows.gauges, rows.postures, strict=True)):
-        if g.part != Part.BAR or posture[0] != "XYZ"[g.leg]:
-            raise ValueError(f"eq. (10) has no row for gauge {g.name} at posture {posture}")
-        limit = RHO_MAX if posture.endswith("Max") else RHO_MIN
-        alpha = np.arcsin(limit / L_NOMINAL)
+    for r, (g, label, rho) in enumerate(zip(rows.gauges, rows.postures, rows.rho,
+                                            strict=True)):
+        posture = names.get(tuple(rho), label)
+        if g.part != Part.BAR or posture not in PAPER_POSTURES or posture[0] != "XYZ"[g.leg]:
+            raise ValueError(f"eq. (10) has no row for gauge {g.name} at posture {label}")
+        limit = design.rho_max if posture.endswith("Max") else design.rho_min
+        alpha = np.arcsin(limit / design.L)
         a = np.sin(alpha)
         b = (0.5 + a) * np.tan(alpha)
         c = (0.5 + a) / np.cos(alpha) - 0.5

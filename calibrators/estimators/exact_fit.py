@@ -32,7 +32,6 @@ import numpy as np
 from scipy import special
 
 from orthoglide_env.instruments.gauges import NOISE_FLOOR
-from orthoglide_env.model.errors import L_NOMINAL
 from orthoglide_env.model.reading_model import Design, jacobian, predict
 
 #: A combination is identifiable (and moved by a base-parameter fit) when its information
@@ -223,7 +222,7 @@ class _Problem:
         """What a cost comparison can resolve, with a safety factor: each reading's model
         carries round-off ~eps * L (positions of the order of the leg length), so the cost
         carries ~2 sqrt(cost) eps L / sigma."""
-        roundoff = np.finfo(float).eps * L_NOMINAL * np.max(self.weight)
+        roundoff = np.finfo(float).eps * self.design.machine_design.L * np.max(self.weight)
         return RESOLUTION_MARGIN * 2 * (np.sqrt(cost) + 1.0) * roundoff
 
     def normal(self, jac: np.ndarray, r: np.ndarray, theta: np.ndarray

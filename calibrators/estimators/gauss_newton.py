@@ -49,7 +49,7 @@ def design_of(data: Measurements) -> tuple[Design, np.ndarray]:
     if not len(data):
         raise ValueError("no readings to fit")
     design = Design.of([m.mounting for m in data.items], [m.gauge for m in data.items],
-                       np.array([m.rho for m in data.items], dtype=float))
+                       np.array([m.rho for m in data.items], dtype=float), data.design)
     return design, align_tracker(design, np.array([m.reading for m in data.items], dtype=float))
 
 
@@ -72,7 +72,7 @@ def align_tracker(design: Design, values: np.ndarray) -> np.ndarray:
             raise ValueError(f"tracker station '{station}': every point needs its x, y and z "
                              "readings, in the same order")
         measured = np.stack([values[rows[c]] for c in range(3)], axis=-1)
-        nominal = direct(MachineParams(), design.rho[rows[0]])
+        nominal = direct(MachineParams(design=design.machine_design), design.rho[rows[0]])
         if np.linalg.matrix_rank(nominal - nominal.mean(axis=0), tol=1.0) < 2:
             raise ValueError(f"tracker station '{station}': its points must span a plane "
                              "(at least three postures off one line) to fix its frame")

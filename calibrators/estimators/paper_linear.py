@@ -38,6 +38,11 @@ REPETITIONS: int = 3
 MAX_FOLDS: int = 10
 
 
+class NeedsExactFit(ValueError):
+    """Readings or options the linear fit cannot take and the exact-model fit can.  The
+    message names no option: each command says how its user reaches that fit."""
+
+
 def leg_sequence(leg: int, repetitions: int = REPETITIONS) -> list[tuple[str, int]]:
     """(posture, repetition) of the paper's sequence for one leg."""
     name = "XYZ"[leg]
@@ -108,15 +113,16 @@ class PaperCalibrator(Calibrator):
             ("keep_outliers", bool(options.get("keep_outliers"))),
             ("solver", options.get("solver", "gauss-newton") != "gauss-newton")) if given]
         if used:
-            raise ValueError(f"the paper's linear fit (eq. 10) takes no {', '.join(used)}: "
-                             "use --strategy gauss-newton")
+            raise NeedsExactFit(f"the paper's linear fit (eq. 10) takes no "
+                                f"{', '.join(used)}; the exact-model fit does")
         if params not in PARAM_SETS:
-            raise ValueError(f"the paper's linear fit (eq. 10) estimates {list(PARAM_SETS)} "
-                             f"only, not '{params}': use --strategy gauss-newton")
+            raise NeedsExactFit(f"the paper's linear fit (eq. 10) estimates "
+                                f"{list(PARAM_SETS)} only, not '{params}'; the exact-model "
+                                "fit estimates any parameters")
         free = check_params(params)
         if any(not isinstance(m.gauge, GaugeSpec) for m in data.items):
-            raise ValueError("the paper's linear fit (eq. 10) reads dial gauges only: use "
-                             "--strategy gauss-newton for a tracker's readings")
+            raise NeedsExactFit("the paper's linear fit (eq. 10) reads dial gauges only; "
+                                "the exact-model fit reads a tracker's readings too")
         rows = differences(data)
         if len(rows) < len(free):
             raise ValueError(f"only {len(rows)} usable differences for {len(free)} parameters: "

@@ -27,8 +27,10 @@ from orthoglide_env.scoring import (
 def predicted_correction(est: Estimate, grid: np.ndarray | None = None) -> FrameErrors:
     """How far, over the workspace grid, the estimated machine puts the tool from its
     target under the nominal model's commands: what compensation takes out."""
-    targets = workspace_grid() if grid is None else np.asarray(grid, dtype=float)
-    errors = tcp_error_vectors(MachineParams(), est.machine, targets)
+    machine = est.machine
+    targets = workspace_grid(design=machine.design) if grid is None else np.asarray(
+        grid, dtype=float)
+    errors = tcp_error_vectors(MachineParams(design=machine.design), machine, targets)
     return frame_errors(targets, (targets + errors)[None],
                         np.isfinite(errors).all(axis=-1)[None])[0]
 

@@ -18,6 +18,7 @@ from orthoglide_env.lab.engine import LabBatch
 from orthoglide_env.lab.machines import ExactMachines, LabMachines, SimulatedMachine
 from orthoglide_env.lab.settings import LabSettings, render_modes
 from orthoglide_env.lab.spec import Layout
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import MachineParams, check_validity
 
 #: The one episode of a lone env, in its batch.
@@ -30,11 +31,11 @@ def check_seed(seed: Any) -> None:
         raise ValueError(f"reset seed must be None or an integer >= 0, got {seed!r}")
 
 
-def reset_options(options: Any, stands: int | None = None
+def reset_options(options: Any, design: MachineDesign, stands: int | None = None
                   ) -> tuple[MachineParams | None, tuple[GaugeSpec, ...] | None]:
-    """The checked reset options: the given machine (None: draw one) and, where the env
-    takes a ``gauges`` option (``stands``: how many gauges it observes), the layout (None:
-    the constructor's)."""
+    """The checked reset options: the given machine of ``design`` (None: draw one) and,
+    where the env takes a ``gauges`` option (``stands``: how many gauges it observes), the
+    layout (None: the constructor's)."""
     allowed = ("machine",) if stands is None else ("machine", "gauges")
     if options is None:
         options = {}
@@ -47,21 +48,25 @@ def reset_options(options: Any, stands: int | None = None
     if layout is not None and len(layout) != stands:
         raise ValueError(f"reset option 'gauges': this env observes {stands} gauges; a layout "
                          f"of {len(layout)} needs an env built with gauges=[...] of that size")
-    return _machine_option(options.get("machine")), layout
+    return _machine_option(options.get("machine"), design), layout
 
 
-def _machine_option(value: Any) -> MachineParams | None:
+def _machine_option(value: Any, design: MachineDesign) -> MachineParams | None:
     """The ``machine`` reset option.  None, like leaving the key out, draws a machine from
     the preset (as ``seed=None`` and ``options=None`` mean "nothing given" in Gymnasium);
-    anything else must be a dict in the machine file schema or a ``MachineParams``, inside
-    :data:`~orthoglide_env.model.errors.VALIDITY_RANGE`."""
+    anything else must be a dict in the machine file schema (a machine of ``design``
+    unless it names its own) or a ``MachineParams`` of ``design``, inside the design's
+    validity range."""
     if value is None:
         return None
     try:
         if isinstance(value, MachineParams):
+            if value.design != design:
+                raise ValueError("the machine's design is not the lab's (give the lab its "
+                                 "design: OrthoglideLab-v0, design=...)")
             return check_validity(value)
         if isinstance(value, dict):
-            return MachineParams.from_dict(value)
+            return MachineParams.from_dict(value, design=design)
     except ValueError as exc:
         raise ValueError(f"reset option 'machine': {exc}") from None
     raise ValueError(

@@ -97,8 +97,8 @@ class OrthoglideCalibrationEnv(EngineEnv):
     -------------
     ``machine``: the true machine, a dict in the machine file schema
     (:meth:`MachineParams.from_dict`) or a ``MachineParams``, inside
-    :data:`~orthoglide_env.model.errors.VALIDITY_RANGE`; left out or ``None`` (as ``seed=None``
-    means "none given"): drawn from the ``errors`` preset with ``np_random``.  Anything
+    the prototype's validity range; left out or ``None`` (as ``seed=None`` means "none
+    given"): drawn from the ``errors`` preset with ``np_random``.  Anything
     else (a list, ``0``, ``""``, ``False``) raises ``ValueError``.  ``gauges``: the layout
     of this episode, names such as ``"x-leg/y"`` or ``"z/x@0.3"`` or ``GaugeSpec``
     objects (left out or ``None``: the constructor's); it must hold as many gauges as the
@@ -179,7 +179,7 @@ class OrthoglideCalibrationEnv(EngineEnv):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         check_seed(seed)
-        machine, layout = reset_options(options, self.settings.stands)
+        machine, layout = reset_options(options, self.settings.design, self.settings.stands)
         obs = self._reset_engine(seed, machine, layout)
         self.gauge_layout = self.settings.layout if layout is None else layout
         return observed(obs), calibration_info(gauge_names(self.gauge_layout),
@@ -189,7 +189,8 @@ class OrthoglideCalibrationEnv(EngineEnv):
         self, action: np.ndarray
     ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         self._require()
-        target = check_targets(action, (3,), clip=self.clip_actions)
+        target = check_targets(action, (3,), clip=self.clip_actions,
+                               design=self.settings.design)
         result = self._batch.step(ROW, np.full(1, Op.MOVE), target[None], np.zeros(1, int),
                                   np.zeros(1, int))
         return (observed({key: value[0] for key, value in result.obs.items()}),

@@ -99,7 +99,8 @@ class OrthoglideCalibrationVectorEnv(EngineVectorEnv):
     # -- the calibration env's face -----------------------------------------------------------
     def _actions(self, actions: Any, used: np.ndarray) -> tuple[np.ndarray, ...]:
         n = self.num_envs
-        rho = check_targets(actions, (n, 3), clip=self.clip_actions, rows=used)
+        rho = check_targets(actions, (n, 3), clip=self.clip_actions, rows=used,
+                            design=self.settings.design)
         zeros = np.zeros(n, dtype=np.int64)
         return np.full(n, Op.MOVE), rho, zeros, zeros
 

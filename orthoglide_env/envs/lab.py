@@ -13,13 +13,14 @@ from typing import Any, ClassVar
 import numpy as np
 
 from orthoglide_env.envs.base import ROW, EngineEnv, check_seed, first, reset_options
-from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA, DEFAULT_TRAVEL
+from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.lab.actions import check_lab_actions
 from orthoglide_env.lab.engine import ACCURACY_UNIT_MM, StepResult
 from orthoglide_env.lab.notebook import Estimator, Record
 from orthoglide_env.lab.operations import OP_NAMES, PAPER_SLOTS, TRACKER_SIGMA
 from orthoglide_env.lab.settings import lab_settings, lab_spaces
 from orthoglide_env.lab.spec import LAB, RENDER_MODES, REWARDS, arguments_of
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import DEFAULT_PRESET
 
 __all__ = ["ACCURACY_UNIT_MM", "REWARDS", "Estimator", "OrthoglideLabEnv", "Record"]
@@ -137,7 +138,10 @@ class OrthoglideLabEnv(EngineEnv):
     move), ``tracker_sigma`` (mm), ``budget_s``, ``reward``, ``estimator`` (for
     ``accuracy``: records and sigma to a ``MachineParams``, e.g.
     ``calibrators.experiment.make_estimator()``), ``time_weight``, ``success_mm``,
-    ``travel``, ``render_mode``.  A bad argument raises ``ValueError`` naming it and its
+    ``travel`` (default: the design's gauge travel), ``design`` (the machines'
+    :class:`~orthoglide_env.model.design.MachineDesign`, default the prototype: its
+    control limits bound ``rho``, its errors' validity range the machines),
+    ``render_mode``.  A bad argument raises ``ValueError`` naming it and its
     rule.
     """
 
@@ -157,10 +161,12 @@ class OrthoglideLabEnv(EngineEnv):
         estimator: Estimator | None = None,
         time_weight: float = 1.0,
         success_mm: float = 0.01,
-        travel: float = DEFAULT_TRAVEL,
+        travel: float | None = None,
+        design: MachineDesign | None = None,
         render_mode: str | None = None,
     ) -> None:
         settings = lab_settings(arguments_of(LAB, locals()))
+        self.design = settings.design
         self.preset, self.noise = settings.preset, settings.noise
         self.backend_name, self.n_stands, self.tracker = backend, settings.stands, settings.tracker
         self.tracker_sigma, self.budget_s = settings.tracker_sigma, settings.budget_s
@@ -202,14 +208,15 @@ class OrthoglideLabEnv(EngineEnv):
         # Every option is checked before anything changes: a refused reset leaves the
         # episode (and its random stream) as it was.
         check_seed(seed)
-        machine, _ = reset_options(options)
+        machine, _ = reset_options(options, self.design)
         return self._reset_engine(seed, machine, None), RESET_INFO | {"overtravel": []}
 
     def step(self, action: dict[str, Any]
              ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         self._require()
         op, rho, stand, slot = (part[None]
-                                for part in check_lab_actions(action, (), self.n_stands))
+                                for part in check_lab_actions(action, (), self.n_stands,
+                                                              design=self.design))
         result = self._batch.step(ROW, op, rho, stand, slot)
         return (first(result.obs), float(result.reward[0]), bool(result.terminated[0]),
                 bool(result.truncated[0]), step_info(result, 0))

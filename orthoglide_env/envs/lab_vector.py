@@ -22,7 +22,6 @@ from orthoglide_env.envs.vector import EngineVectorEnv
 from orthoglide_env.instruments.gauges import (
     DEFAULT_RESOLUTION,
     DEFAULT_SIGMA,
-    DEFAULT_TRAVEL,
     Gauge,
     GaugeNoise,
 )
@@ -32,6 +31,7 @@ from orthoglide_env.lab.notebook import Estimator, Record
 from orthoglide_env.lab.operations import PAPER_SLOTS, TRACKER_SIGMA
 from orthoglide_env.lab.settings import lab_settings, lab_spaces
 from orthoglide_env.lab.spec import LAB, VECTOR, arguments_of
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import DEFAULT_PRESET, MachineParams
 
 
@@ -70,11 +70,13 @@ class OrthoglideLabVectorEnv(EngineVectorEnv):
         estimator: Estimator | None = None,
         time_weight: float = 1.0,
         success_mm: float = 0.01,
-        travel: float = DEFAULT_TRAVEL,
+        travel: float | None = None,
+        design: MachineDesign | None = None,
         autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
     ) -> None:
         args = arguments_of(VECTOR, locals())
         settings = lab_settings(arguments_of(LAB, locals()))
+        self.design = settings.design
         self._start_engine(settings, args["num_envs"], args["autoreset_mode"],
                            lab_spaces(settings))
 
@@ -110,7 +112,8 @@ class OrthoglideLabVectorEnv(EngineVectorEnv):
 
     # -- the lab's face ------------------------------------------------------------------------
     def _actions(self, actions: Any, used: np.ndarray) -> tuple[np.ndarray, ...]:
-        return check_lab_actions(actions, (self.num_envs,), self.settings.stands, rows=used)
+        return check_lab_actions(actions, (self.num_envs,), self.settings.stands, rows=used,
+                                 design=self.design)
 
     def _step_info(self, result: StepResult, r: int, i: int) -> dict[str, Any]:
         return step_info(result, r)
@@ -128,6 +131,7 @@ class SubLab:
         settings = envs.settings
         self.noise, self.n_stands, self.tracker = settings.noise, settings.stands, settings.tracker
         self.budget_s, self.travel = settings.budget_s, settings.travel
+        self.design = settings.design
         self.action_space: spaces.Dict = envs.single_action_space
         self.observation_space: spaces.Dict = envs.single_observation_space
 

@@ -114,8 +114,8 @@ class EngineVectorEnv(VectorEnv):
             raise ValueError(f"reset options must be a dict or None, got {options!r}")
         options = dict(options or {})
         mask = self._reset_mask(options.pop(RESET_MASK, None))
-        machine, layout = reset_options(
-            options, self.settings.stands if self.LAYOUT_OPTION else None)
+        machine, layout = reset_options(options, self.settings.design,
+                                        self.settings.stands if self.LAYOUT_OPTION else None)
         rows = np.flatnonzero(mask)
         obs = self._copy_obs()
         self._start(rows, [seeds[i] for i in rows], machine, layout, obs)

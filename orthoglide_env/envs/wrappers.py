@@ -17,8 +17,6 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.wrappers import FlattenObservation
 
-from orthoglide_env.model.errors import RHO_MAX, RHO_MIN
-
 
 class FlatLabActions(gym.ActionWrapper):
     """``Box(-1, 1, (3 + ops + stands + slots,))`` actions for the lab env's ``Dict``."""
@@ -44,7 +42,9 @@ def lab_action(lab_actions: spaces.Dict, action: np.ndarray) -> dict[str, Any]:
     if action.shape != (3 + sum(sizes),) or not np.all(np.isfinite(action)):
         raise ValueError(f"a flat lab action is {3 + sum(sizes)} finite numbers")
     action = np.clip(action, -1.0, 1.0)
-    middle, half = (RHO_MAX + RHO_MIN) / 2, (RHO_MAX - RHO_MIN) / 2
+    # The joint targets span the rho Box, the machine design's control limits.
+    low, high = lab_actions["rho"].low, lab_actions["rho"].high
+    middle, half = (high + low) / 2, (high - low) / 2
     blocks = np.split(action[3:], np.cumsum(sizes)[:-1])
     op, stand, slot = (int(np.argmax(b)) for b in blocks)
     return {"op": op, "rho": middle + half * action[:3], "stand": stand, "slot": slot}

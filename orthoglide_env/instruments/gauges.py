@@ -48,17 +48,11 @@ from typing import Any, overload
 
 import numpy as np
 
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import (
     AXIS_NAMES,
-    BAR_CLEARANCE,
-    BAR_SECTION,
-    CARRIAGE_SETBACK,
-    CARRIAGE_SIZE,
-    D_NOMINAL,
     LEG_NAMES,
-    PLATFORM_SIZE,
     R_LEG,
-    SHORT_LINK_SIZE,
     ErrorPreset,
     MachineParams,
 )
@@ -71,7 +65,8 @@ from orthoglide_env.model.kinematics import (
     platform_points,
 )
 
-DEFAULT_TRAVEL: float = 10.0  # mm
+#: The prototype's gauges' travel (mm), the default where no design says otherwise.
+DEFAULT_TRAVEL: float = PROTOTYPE.gauge_travel
 DEFAULT_RESOLUTION: float = 0.01  # mm (paper, section 4)
 DEFAULT_SIGMA: float = 0.02  # mm, repeatability (paper, section 4)
 #: Readings of ideal (noise-free) gauges are weighted as if their repeatability were this
@@ -445,7 +440,8 @@ def ideal_rays(
     # The place on the face, in the box's frame: along a bar from its platform end
     # (at=0) to its carriage end (at=1); off a platform face's centre; a carriage face's
     # middle.
-    along = np.where(g.part == Part.BAR, (0.5 - g.at) * 2 * (half[..., 0] + BAR_CLEARANCE), 0.0)
+    clearance = machine.design.bar_clearance
+    along = np.where(g.part == Part.BAR, (0.5 - g.at) * 2 * (half[..., 0] + clearance), 0.0)
     aside = np.where((np.arange(3) != face[:, None]) & (g.part == Part.PLATFORM)[:, None],
                      -PLATFORM_AIM, 0.0)
     local = aside + along[..., None] * np.eye(3)[0]
@@ -567,18 +563,21 @@ def target_boxes(
     (an estimator's model evaluates it for thousands of parameter vectors)."""
     legs = np.maximum(gauges.leg, 0)
     return boxes_at(gauges, carriage_points(machine, rho)[..., legs, :],
-                    platform_points(machine, p)[..., legs, :], np.asarray(p)[..., None, :])
+                    platform_points(machine, p)[..., legs, :], np.asarray(p)[..., None, :],
+                    machine.design)
 
 
-def boxes_at(gauges: GaugeArray, a: np.ndarray, c: np.ndarray, p: np.ndarray
-             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def boxes_at(gauges: GaugeArray, a: np.ndarray, c: np.ndarray, p: np.ndarray,
+             design: MachineDesign) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The box each of ``gauges`` (``(G,)``) touches, from the R1 centre ``a`` and R2
     centre ``c`` of its leg (``(..., G, 3)``; a platform gauge has no leg, any leg's will
-    do) and the TCP ``p`` (broadcasting to them): see :func:`target_boxes`."""
+    do) and the TCP ``p`` (broadcasting to them), the links shaped as ``design`` says: see
+    :func:`target_boxes`."""
     legs = np.maximum(gauges.leg, 0)
-    bars = _boxes(a, c, legs, np.where(gauges.face == 1, 1, -1))
-    carriages = _carriage_boxes(a, legs)
-    platform = _platform_box(np.broadcast_to(p, np.broadcast_shapes(np.shape(p), np.shape(a))))
+    bars = _boxes(a, c, legs, np.where(gauges.face == 1, 1, -1), design)
+    carriages = _carriage_boxes(a, legs, design)
+    platform = _platform_box(np.broadcast_to(p, np.broadcast_shapes(np.shape(p), np.shape(a))),
+                             design)
     part = gauges.part
     return tuple(  # type: ignore[return-value]
         np.where((part == Part.BAR).reshape(-1, *(1,) * tail), b,
@@ -619,30 +618,31 @@ def skew(x: np.ndarray) -> np.ndarray:
     return out - np.swapaxes(out, -1, -2)
 
 
-def _carriage_boxes(a: np.ndarray, legs: np.ndarray
+def _carriage_boxes(a: np.ndarray, legs: np.ndarray, design: MachineDesign
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Carriage boxes of ``legs`` from their R1 centres ``a`` (``(..., n, 3)``): a carriage
-    keeps its nominal orientation and starts CARRIAGE_SETBACK behind R1 (away from the
-    platform)."""
+    keeps its nominal orientation and starts the design's ``carriage_setback`` behind R1
+    (away from the platform)."""
     rot = R_LEG[legs]
-    centre = a + (CARRIAGE_SETBACK + CARRIAGE_SIZE[0] / 2) * rot[..., 0]
+    centre = a + (design.carriage_setback + design.carriage_size[0] / 2) * rot[..., 0]
     lead = centre.shape[:-1]
     return (centre, np.broadcast_to(rot, (*lead, 3, 3)),
-            np.broadcast_to(np.array(CARRIAGE_SIZE) / 2, (*lead, 3)))
+            np.broadcast_to(np.array(design.carriage_size) / 2, (*lead, 3)))
 
 
-def _platform_box(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _platform_box(p: np.ndarray, design: MachineDesign
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The platform's box with the TCP at ``p`` (``(..., 3)``): it only translates."""
     lead = np.shape(p)[:-1]
     return (np.asarray(p), np.broadcast_to(np.eye(3), (*lead, 3, 3)),
-            np.broadcast_to(np.full(3, PLATFORM_SIZE / 2), (*lead, 3)))
+            np.broadcast_to(np.full(3, design.platform_size / 2), (*lead, 3)))
 
 
 def install(
     specs: tuple[GaugeSpec, ...] | list[GaugeSpec],
     machine: MachineParams | None = None,
     *,
-    travel: float = DEFAULT_TRAVEL,
+    travel: float | None = None,
     preset: ErrorPreset | None = None,
     rng: np.random.Generator | None = None,
 ) -> list[Gauge]:
@@ -651,10 +651,12 @@ def install(
     errors (stand position and tilt) when ``preset`` and ``rng`` are given.
 
     The zero is provisional; :func:`zero_gauges` sets the gauges up at the Zero posture.
+    ``travel``: default the machine design's gauge travel.
     """
+    machine = machine if machine is not None else MachineParams()
+    travel = machine.design.gauge_travel if travel is None else travel
     if travel <= 0:
         raise ValueError("gauge travel must be positive")
-    machine = machine if machine is not None else MachineParams()
     if not specs:
         return []
     errors = None
@@ -677,12 +679,14 @@ def install_array(
     specs: tuple[GaugeSpec, ...] | list[GaugeSpec],
     machine: MachineParams,
     *,
-    travel: float = DEFAULT_TRAVEL,
+    travel: float | None = None,
     errors: np.ndarray | None = None,
 ) -> GaugeArray:
     """:func:`install` for a batch of machines: the gauges of ``specs`` aimed at their targets
     on every machine of ``machine``, moved by installation ``errors`` (shape
-    ``(*batch, G, 2, 3)``, see :func:`installation_errors`) when given."""
+    ``(*batch, G, 2, 3)``, see :func:`installation_errors`) when given.  ``travel``:
+    default the machine design's gauge travel."""
+    travel = machine.design.gauge_travel if travel is None else travel
     specs = list(specs)
     origin, direction = ideal_rays(specs, machine, travel)
     direction = np.broadcast_to(direction, origin.shape)
@@ -695,7 +699,7 @@ def install_array(
     # The reading runs along the world axis, whichever side the stand is on.
     sign = np.sign(direction[..., np.arange(len(specs)), axis])
     return GaugeArray(origin=origin, direction=direction, sign=sign, travel=float(travel),
-                      zero=DEFAULT_TRAVEL / 2, leg=[s.leg for s in specs], axis=axis,
+                      zero=travel / 2, leg=[s.leg for s in specs], axis=axis,
                       at=[s.at for s in specs], part=[s.part for s in specs])
 
 
@@ -718,9 +722,10 @@ def zero_gauges(gauges: GaugeArray | list[Gauge], t_at_zero: np.ndarray
 
 
 def _boxes(
-    a: np.ndarray, c: np.ndarray, legs: np.ndarray, bars: np.ndarray
+    a: np.ndarray, c: np.ndarray, legs: np.ndarray, bars: np.ndarray, design: MachineDesign
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Bar boxes from the joint centres ``a`` (carriage) and ``c`` (platform) of their legs."""
+    """Bar boxes from the joint centres ``a`` (carriage) and ``c`` (platform) of their legs,
+    shaped as ``design`` says."""
     r_axis = R_LEG[legs][..., :, 2]
     v = c - a
     length = np.sqrt(dot(v, v))
@@ -729,10 +734,9 @@ def _boxes(
     hinge /= np.sqrt(dot(hinge, hinge))[..., None]
     normal = cross(along, hinge)
     rot = np.stack([along, hinge, normal], axis=-1)
-    half = np.stack(
-        [length / 2 - BAR_CLEARANCE, *(np.full_like(length, s / 2) for s in BAR_SECTION)], axis=-1
-    )
-    centre = (a + c) / 2 + (bars * D_NOMINAL / 2)[..., None] * r_axis
+    half = np.stack([length / 2 - design.bar_clearance,
+                     *(np.full_like(length, s / 2) for s in design.bar_section)], axis=-1)
+    centre = (a + c) / 2 + (bars * design.d / 2)[..., None] * r_axis
     return centre, rot, half
 
 
@@ -826,7 +830,8 @@ def collision_boxes(
     bars = np.tile([1, -1], 3)
     a = carriage_points(machine, rho)
     c = platform_points(machine, p)
-    centre, rot, half = _boxes(a[..., legs, :], c[..., legs, :], legs, bars)
+    design = machine.design
+    centre, rot, half = _boxes(a[..., legs, :], c[..., legs, :], legs, bars, design)
     theta, _ = leg_angles(machine, rho, p)
     cos, sin = np.cos(theta), np.sin(theta)
     zeros, ones = np.zeros_like(theta), np.ones_like(theta)
@@ -834,12 +839,13 @@ def collision_boxes(
                    np.stack([zeros, zeros, ones], -1)], -2)
     coupler_rot = R_LEG @ rz
     shape = (*np.shape(theta)[:-1], 3, 3)
-    platform = _platform_box(np.asarray(p)[..., None, :])
-    carriages = _carriage_boxes(a, np.arange(3))
+    platform = _platform_box(np.asarray(p)[..., None, :], design)
+    carriages = _carriage_boxes(a, np.arange(3), design)
     centres = np.concatenate([centre, c, platform[0], carriages[0]], axis=-2)
     rots = np.concatenate([rot, coupler_rot, platform[1], carriages[1]], axis=-3)
     halves = np.concatenate([
-        half, np.broadcast_to(np.array(SHORT_LINK_SIZE) / 2, shape), platform[2], carriages[2],
+        half, np.broadcast_to(np.array(design.short_link_size) / 2, shape), platform[2],
+        carriages[2],
     ], axis=-2)
     return centres, rots, halves
 

@@ -12,15 +12,18 @@ from typing import Any
 import numpy as np
 
 from orthoglide_env.lab.operations import SLOTS, Op
-from orthoglide_env.model.errors import RHO_MAX, RHO_MIN, check_rho
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.errors import check_rho
 
 
 def check_targets(value: Any, shape: tuple[int, ...], *, clip: bool = False,
-                  rows: np.ndarray | None = None, name: str = "action") -> np.ndarray:
+                  rows: np.ndarray | None = None, name: str = "action",
+                  design: MachineDesign = PROTOTYPE) -> np.ndarray:
     """Joint targets (mm, float64) from ``value`` of ``shape``: ``(3,)`` for one env,
     ``(N, 3)`` for N, or ``ValueError`` naming the rule.  With ``clip`` finite targets are
     clipped into the joint limits.  ``rows``: which rows must be valid targets (the others
-    are not used); ``name``: what the caller calls the value."""
+    are not used); ``name``: what the caller calls the value; ``design``: whose control
+    limits bound the targets."""
     try:
         values = np.asarray(value)
     except (TypeError, ValueError):
@@ -37,16 +40,16 @@ def check_targets(value: Any, shape: tuple[int, ...], *, clip: bool = False,
         raise ValueError(f"{name} must have shape {shape}, got {target.shape}")
     if clip:
         finite = np.all(np.isfinite(target), axis=-1, keepdims=True)
-        target = np.where(finite, np.clip(target, RHO_MIN, RHO_MAX), target)
+        target = np.where(finite, np.clip(target, design.rho_min, design.rho_max), target)
     if target.ndim == 1:
-        return check_rho(target)
+        return check_rho(target, design=design)
     used = np.ones(len(target), dtype=bool) if rows is None else rows
-    bad = used & ~np.all(np.isfinite(target) & (target >= RHO_MIN) & (target <= RHO_MAX),
-                         axis=-1)
+    low, high = design.rho_min, design.rho_max
+    bad = used & ~np.all(np.isfinite(target) & (target >= low) & (target <= high), axis=-1)
     if bad.any():
         env = int(np.flatnonzero(bad)[0])
         try:
-            check_rho(target[env])
+            check_rho(target[env], design=design)
         except ValueError as exc:
             raise ValueError(f"{name} of env {env}: {exc}") from None
     return target
@@ -60,7 +63,8 @@ def _holds_bool(value: Any) -> bool:
 
 
 def check_lab_actions(action: Any, shape: tuple[int, ...], stands: int,
-                      rows: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
+                      rows: np.ndarray | None = None, design: MachineDesign = PROTOTYPE
+                      ) -> tuple[np.ndarray, ...]:
     """``op``, ``rho``, ``stand``, ``slot`` of a lab action (``shape ()``) or of a batch of
     them (``shape (N,)``, each field with the batch axis first), as arrays, or
     ``ValueError`` naming the field (and the env).  ``rows``: the envs whose action is used
@@ -75,7 +79,7 @@ def check_lab_actions(action: Any, shape: tuple[int, ...], stands: int,
     rho = np.zeros((*shape, 3))
     if moving.any():
         given = check_targets(action["rho"], (*shape, 3), rows=moving if shape else None,
-                              name="action rho")
+                              name="action rho", design=design)
         rho[moving] = given[moving]
     return op, rho, stand, slot
 

@@ -123,7 +123,8 @@ class LabBatch:
         return index
 
     def _notebook(self) -> Notebook:
-        return Notebook(self.settings.noise.effective_sigma, self.settings.tracker_sigma)
+        return Notebook(self.settings.noise.effective_sigma, self.settings.tracker_sigma,
+                        self.settings.design)
 
     def require(self) -> MachineParams:
         if self.machines is None:
@@ -142,7 +143,8 @@ class LabBatch:
         first = [self.place(spec) for spec in specs]
         drawn, rotations, positions, errors = [], [], [], []
         for stream in streams:
-            drawn.append(settings.preset.sample(stream) if machine is None else machine)
+            drawn.append(settings.preset.sample(stream, settings.design) if machine is None
+                         else machine)
             if settings.station:
                 rotations.append(_random_rotation(stream))
                 direction = stream.normal(size=3)
@@ -435,7 +437,7 @@ class LabBatch:
             estimate = self.settings.estimator(self.notebooks[row].records,  # type: ignore[misc]
                                                self.settings.noise.effective_sigma)
         except (ValueError, RuntimeError, np.linalg.LinAlgError):
-            estimate = MachineParams()
+            estimate = MachineParams(design=truth.design)
         return score(estimate, truth).tcp_after.rigid.rms
 
     def observation(self, rows: np.ndarray, values: np.ndarray,
@@ -509,7 +511,7 @@ def _with_gauges(array: GaugeArray, rows: np.ndarray, columns: np.ndarray, new: 
 def _with_rows(machines: MachineParams, rows: np.ndarray, new: MachineParams) -> MachineParams:
     vector = machines.to_vector()
     vector[rows] = new.to_vector()
-    return MachineParams.from_vector(vector)
+    return MachineParams.from_vector(vector, machines.design)
 
 
 def _random_rotation(rng: np.random.Generator) -> np.ndarray:

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from orthoglide_env.instruments.gauges import NOISE_FLOOR, Gauge, GaugeArray
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import ERROR_NAMES, MachineParams
 from orthoglide_env.model.reading_model import (
     Design,
@@ -48,8 +49,10 @@ class Notebook:
     """One episode's lab notebook: its records, every installation (truth, for scoring),
     and the information the records carry about the machine's errors."""
 
-    def __init__(self, gauge_sigma: float, tracker_sigma: float) -> None:
+    def __init__(self, gauge_sigma: float, tracker_sigma: float,
+                 design: MachineDesign = PROTOTYPE) -> None:
         self.records: list[Record] = []
+        self._design = design
         self._installed: dict[str, Gauge] = {}
         #: The first installations, as mounting names and the row of a batch of gauge sets:
         #: turned into gauges when asked for (a sweep's scoring never asks).
@@ -85,7 +88,7 @@ class Notebook:
         parameter's scale, per unit of noise; one batched call) to their mountings' sums:
         the information of a mounting, its zero eliminated, is ``S2 - S1 S1^T / n``."""
         design = Design.of([r.mounting for r in records], [r.spec for r in records],
-                           np.array([r.rho for r in records]))
+                           np.array([r.rho for r in records]), self._design)
         space = design.space
         rows = jacobian(np.zeros(len(space)), design, np.ones(len(space), bool),
                         default_scales(space))
@@ -136,7 +139,7 @@ class Notebook:
         scale = np.concatenate([default_scales(space), np.ones(len(names) - n)])
         posterior = np.linalg.inv(np.eye(len(info)) + info)[:n, :n]
         covariance = posterior * np.outer(scale[:n], scale[:n])
-        return predicted_tcp_frames(MachineParams(), covariance).rigid.rms
+        return predicted_tcp_frames(MachineParams(design=self._design), covariance).rigid.rms
 
 
 def _mounting_columns(space: ParameterSpace, mounting: int) -> list[int]:

@@ -33,6 +33,7 @@ from enum import IntEnum
 import numpy as np
 
 from orthoglide_env.instruments.gauges import PAPER_LAYOUT, GaugeSpec
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 
 
 @dataclass(frozen=True)
@@ -55,23 +56,28 @@ class TimeTable:
 
 TIME = TimeTable()
 
-#: Places along a bar (fraction from the platform end) where a stand can aim.  Closer to
-#: either end the tip leaves the bar's flat face as the leg turns.
-SLOT_POSITIONS: tuple[float, ...] = (0.2, 0.35, 0.5, 0.65, 0.8)
-#: The slot catalogue (kinds of target in :mod:`orthoglide_env.instruments.gauges`):
-#:
-#: * every bar (leg), both measuring axes across it, every position (``x-leg/y@0.5``);
-#: * every carriage, both measuring axes across its drive (``x-carriage/y``);
-#: * the platform's three faces (``platform/x``).
-#:
-#: The bar slots come first, in their historical order, so their indices are stable.
-SLOTS: tuple[GaugeSpec, ...] = (
-    tuple(GaugeSpec(leg, axis, at)
-          for leg in range(3) for axis in range(3) if axis != leg for at in SLOT_POSITIONS)
-    + tuple(GaugeSpec.carriage(leg, axis) for leg in range(3) for axis in range(3)
-            if axis != leg)
-    + tuple(GaugeSpec.platform(axis) for axis in range(3))
-)
+def slot_catalogue(design: MachineDesign) -> tuple[GaugeSpec, ...]:
+    """The slot catalogue of a design (kinds of target in
+    :mod:`orthoglide_env.instruments.gauges`):
+
+    * every bar (leg), both measuring axes across it, at every place of the design's
+      ``slot_positions`` (fractions from the platform end; closer to either end the tip
+      leaves the bar's flat face as the leg turns) (``x-leg/y@0.5``);
+    * every carriage, both measuring axes across its drive (``x-carriage/y``);
+    * the platform's three faces (``platform/x``).
+
+    The bar slots come first, in their historical order, so their indices are stable."""
+    return (
+        tuple(GaugeSpec(leg, axis, at) for leg in range(3) for axis in range(3) if axis != leg
+              for at in design.slot_positions)
+        + tuple(GaugeSpec.carriage(leg, axis) for leg in range(3) for axis in range(3)
+                if axis != leg)
+        + tuple(GaugeSpec.platform(axis) for axis in range(3))
+    )
+
+
+#: The prototype's slot catalogue: the lab's slot indices.
+SLOTS: tuple[GaugeSpec, ...] = slot_catalogue(PROTOTYPE)
 SLOT_NAMES: tuple[str, ...] = tuple(s.slot for s in SLOTS)
 
 
@@ -83,9 +89,9 @@ def slot_index(name_or_spec: str | GaugeSpec) -> int:
         return SLOT_NAMES.index(key)
     except ValueError:
         raise ValueError(f"no slot '{key}'; slots are bars x/y/z with a measuring axis across "
-                         f"them at {SLOT_POSITIONS} (e.g. '{SLOT_NAMES[0]}'), carriages with "
-                         "an axis across their drive (e.g. 'x-carriage/y') and platform faces "
-                         "(e.g. 'platform/x')") from None
+                         f"them at {PROTOTYPE.slot_positions} (e.g. '{SLOT_NAMES[0]}'), "
+                         "carriages with an axis across their drive (e.g. 'x-carriage/y') and "
+                         "platform faces (e.g. 'platform/x')") from None
 
 
 #: The stands of the paper's experiment, mounted at the start of an episode.

@@ -21,7 +21,8 @@ from gymnasium import spaces
 from orthoglide_env.instruments.gauges import PAPER_LAYOUT, GaugeNoise, GaugeSpec, check_noise
 from orthoglide_env.lab.notebook import Estimator
 from orthoglide_env.lab.operations import PAPER_SLOTS, SLOTS, TIME, TRACKER_SIGMA, Op
-from orthoglide_env.model.errors import RHO_MAX, RHO_MIN, ErrorPreset, get_preset
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.errors import ErrorPreset, get_preset
 from orthoglide_env.sim.display import display_problem, require_display
 
 #: Encoders may read a hair outside the control limits after settling (solver residue
@@ -56,11 +57,12 @@ class LabSettings:
     notebook: bool = True  # every reading is written into the episode's notebook
     motion: str = "quasi-static"
     render_mode: str | None = None
+    design: MachineDesign = PROTOTYPE  # the machines' design: control limits, validity
 
     def longest_step(self) -> float:
         """The most one operation can cost (a re-mount from the far corner, the tracker, and
         every stand pushed past its travel): the clock never passes budget + this."""
-        far = TIME.move(np.full(3, RHO_MIN), np.full(3, RHO_MAX))
+        far = TIME.move(np.full(3, self.design.rho_min), np.full(3, self.design.rho_max))
         return far + TIME.remount_s + TIME.tracker_point_s + TIME.overtravel_s * self.stands
 
 
@@ -86,12 +88,17 @@ def lab_settings(args: dict[str, Any]) -> LabSettings:
         raise ValueError("reward 'accuracy' needs an estimator: records -> machine, e.g. "
                          "calibrators.experiment.make_estimator()")
     _picture(args["backend"], args.get("render_mode"))
+    design = args["design"] or PROTOTYPE
+    if design.slot_positions != PROTOTYPE.slot_positions:
+        raise ValueError("the lab's slot indices are the prototype's slot catalogue: a "
+                         f"design's slot_positions must be {list(PROTOTYPE.slot_positions)}")
+    travel = design.gauge_travel if args["travel"] is None else args["travel"]
     stands = args["stands"]
     return LabSettings(
         preset=get_preset(args["errors"]),
-        noise=check_noise(args["gauge_sigma"], args["gauge_resolution"], args["travel"]),
-        backend=args["backend"], stands=stands,
-        layout=tuple(SLOTS[s] for s in PAPER_SLOTS[:stands]), travel=args["travel"],
+        noise=check_noise(args["gauge_sigma"], args["gauge_resolution"], travel),
+        backend=args["backend"], stands=stands, design=design,
+        layout=tuple(SLOTS[s] for s in PAPER_SLOTS[:stands]), travel=travel,
         tracker=args["tracker"], tracker_sigma=args["tracker_sigma"],
         budget_s=args["budget_s"], reward=args["reward"], estimator=args["estimator"],
         time_weight=args["time_weight"], success_mm=args["success_mm"],
@@ -104,19 +111,24 @@ def calibration_settings(args: dict[str, Any]) -> LabSettings:
     (:data:`orthoglide_env.lab.spec.CALIBRATION`)."""
     _picture(args["backend"], args["render_mode"])
     layout = args["gauges"] or PAPER_LAYOUT
+    travel = PROTOTYPE.gauge_travel if args["travel"] is None else args["travel"]
     return LabSettings(
         preset=get_preset(args["errors"]),
-        noise=check_noise(args["gauge_sigma"], args["gauge_resolution"], args["travel"]),
-        backend=args["backend"], stands=len(layout), layout=layout, travel=args["travel"],
+        noise=check_noise(args["gauge_sigma"], args["gauge_resolution"], travel),
+        backend=args["backend"], stands=len(layout), layout=layout, travel=travel,
         station=False, max_steps=args["max_episode_steps"], overtravel="momentary",
         strict_moves=True, notebook=False, motion=args["motion"],
         render_mode=args["render_mode"],
     )
 
 
-def _joints() -> spaces.Box:
-    return spaces.Box(RHO_MIN - ENCODER_MARGIN, RHO_MAX + ENCODER_MARGIN, shape=(3,),
-                      dtype=np.float64)
+def _joints(design: MachineDesign) -> spaces.Box:
+    return spaces.Box(design.rho_min - ENCODER_MARGIN, design.rho_max + ENCODER_MARGIN,
+                      shape=(3,), dtype=np.float64)
+
+
+def _targets(design: MachineDesign) -> spaces.Box:
+    return spaces.Box(design.rho_min, design.rho_max, shape=(3,), dtype=np.float64)
 
 
 def _gauges(settings: LabSettings) -> spaces.Box:
@@ -131,7 +143,7 @@ def lab_spaces(settings: LabSettings) -> tuple[spaces.Dict, spaces.Dict]:
     n = settings.stands
     action_space = spaces.Dict({
         "op": spaces.Discrete(len(Op)),
-        "rho": spaces.Box(RHO_MIN, RHO_MAX, shape=(3,), dtype=np.float64),
+        "rho": _targets(settings.design),
         "stand": spaces.Discrete(n),
         "slot": spaces.Discrete(len(SLOTS)),
     })
@@ -142,7 +154,7 @@ def lab_spaces(settings: LabSettings) -> tuple[spaces.Dict, spaces.Dict]:
         "faulted": spaces.MultiBinary(n),
         "slot": spaces.MultiDiscrete([len(SLOTS) + 1] * n),
         "mounting": spaces.Box(0.0, 1e6, shape=(n,), dtype=np.float64),
-        "joints": _joints(),
+        "joints": _joints(settings.design),
         "tracker": spaces.Box(-1e5, 1e5, shape=(3,), dtype=np.float64),
         "tracker_valid": spaces.MultiBinary(1),
         "time": spaces.Box(0.0, settings.budget_s + settings.longest_step(), shape=(1,),
@@ -153,7 +165,6 @@ def lab_spaces(settings: LabSettings) -> tuple[spaces.Dict, spaces.Dict]:
 
 def calibration_spaces(settings: LabSettings) -> tuple[spaces.Box, spaces.Dict]:
     """``OrthoglideCalibration-v0``'s action and observation spaces."""
-    action = spaces.Box(RHO_MIN, RHO_MAX, shape=(3,), dtype=np.float64)
-    return action, spaces.Dict({"gauges": _gauges(settings),
-                                "valid": spaces.MultiBinary(settings.stands),
-                                "joints": _joints()})
+    return _targets(settings.design), spaces.Dict({
+        "gauges": _gauges(settings), "valid": spaces.MultiBinary(settings.stands),
+        "joints": _joints(settings.design)})

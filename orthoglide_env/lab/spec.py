@@ -22,6 +22,7 @@ from gymnasium.vector import AutoresetMode
 from orthoglide_env.instruments.gauges import GaugeSpec, layout_from_names
 from orthoglide_env.lab.machines import MOTION_MODES
 from orthoglide_env.lab.operations import SLOTS
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import PRESETS
 
 BACKENDS: tuple[str, ...] = ("pybullet", "exact")
@@ -60,6 +61,7 @@ class Number(Arg):
     low: float | None = None
     open: bool = False
     high: float | None = None
+    optional: bool = False  # None is accepted too (the default it stands for)
 
     @property
     def rule(self) -> str:  # type: ignore[override]
@@ -70,16 +72,18 @@ class Number(Arg):
             bounds = f" {'>' if self.open else '>='} {self.low:g}"
         else:
             bounds = ""
-        return f"a number{unit}{bounds}"
+        return f"a number{unit}{bounds}" + (" or None" if self.optional else "")
 
     def accepts(self, value: Any) -> bool:
+        if value is None:
+            return self.optional
         if not _is_real(value):
             return False
         above = self.low is None or (value > self.low if self.open else value >= self.low)
         return above and (self.high is None or value <= self.high)
 
-    def convert(self, value: Any) -> float:
-        return float(value)
+    def convert(self, value: Any) -> float | None:
+        return None if value is None else float(value)
 
 
 @dataclass(frozen=True)
@@ -172,12 +176,23 @@ class Layout(Arg):
             raise ValueError(f"{name}: {exc}") from None
 
 
+@dataclass(frozen=True)
+class Design(Arg):
+    """The machines' :class:`~orthoglide_env.model.design.MachineDesign`, or None (the
+    prototype)."""
+
+    def check(self, name: str, value: Any) -> Any:
+        if value is not None and not isinstance(value, MachineDesign):
+            raise ValueError(f"{name} must be a MachineDesign, got {type(value).__name__}")
+        return value
+
+
 PRESET = Choice(tuple(sorted(PRESETS)), "the name of an error preset, one of")
 NOISE = Number("mm", 0.0)  # the range that depends on the travel: check_noise
 SHARED: dict[str, Arg] = {
     "errors": PRESET, "gauge_sigma": NOISE, "gauge_resolution": NOISE,
-    "backend": Choice(BACKENDS), "travel": Number("mm", 0.0, open=True),
-    "render_mode": Choice((None, *RENDER_MODES)),
+    "backend": Choice(BACKENDS), "render_mode": Choice((None, *RENDER_MODES)),
+    "travel": Number("mm", 0.0, open=True, optional=True),
 }
 #: ``OrthoglideCalibration-v0``'s arguments.
 CALIBRATION: dict[str, Arg] = {
@@ -186,7 +201,7 @@ CALIBRATION: dict[str, Arg] = {
 }
 #: ``OrthoglideLab-v0``'s arguments.
 LAB: dict[str, Arg] = {
-    **SHARED, "stands": Integer(1, len(SLOTS)), "tracker": FLAG,
+    **SHARED, "design": Design(), "stands": Integer(1, len(SLOTS)), "tracker": FLAG,
     "tracker_sigma": Number("mm", 0.0, open=True), "budget_s": Number("s", 0.0, open=True),
     "reward": Choice(REWARDS), "estimator": FUNCTION, "time_weight": Number("", 0.0),
     "success_mm": Number("mm", 0.0, open=True),

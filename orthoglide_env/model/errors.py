@@ -1,8 +1,9 @@
-"""Nominal geometry, joint limits, machine parameter sets and error presets.
+"""Machine parameter sets (geometric errors relative to a design) and error presets.
 
-This module is the one source of truth for every number that describes an Orthoglide:
-the URDF writer, the PyBullet machine, the exact kinematic model and the calibrators all
-read it.  Units: millimetres and radians.
+The nominal dimensions of a machine are its design
+(:class:`~orthoglide_env.model.design.MachineDesign`, default the prototype); this module
+holds the frames and the errors of one machine (or a batch) relative to it.  Units:
+millimetres and radians.
 
 Frames
 ------
@@ -42,38 +43,22 @@ from __future__ import annotations
 
 import json
 import numbers
-import re
 from collections import OrderedDict
 from collections.abc import Callable
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-# --- nominal prototype (paper, section 2.1) -------------------------------------------
-L_NOMINAL: float = 310.25  # parallelogram length, mm
-D_NOMINAL: float = 80.0  # parallelogram width (hinge spacing along the R axes), mm
-R_TOOL: float = 31.0  # distance from the R2 centre C_i to the TCP, mm
-
-# --- control limits (paper, section 2.3) ---------------------------------------------
-RHO_MIN: float = -100.0
-RHO_MAX: float = 60.0
-#: The URDF's prismatic limits are wider than the control limits because PyBullet's
-#: position motors silently clamp targets to URDF limits; control limits are enforced in
-#: code, where a violation can be reported.
-URDF_RHO_MARGIN: float = 50.0
-
-# --- link shapes (for the URDF, the gauges' targets and pictures) --------------------
-BAR_SECTION: tuple[float, float] = (12.0, 12.0)  # bar cross-section along (hinge, normal), mm
-BAR_CLEARANCE: float = 10.0  # bar box stops this far short of each hinge centre, mm
-#: Short links of the parallelogram (local X, Y, Z of the leg frame), centred on the R axis.
-SHORT_LINK_SIZE: tuple[float, float, float] = (20.0, 20.0, 100.0)
-#: Carriage box (leg frame, mm) and how far behind the R1 centre it starts: the carriage
-#: and its guideway stay behind R1 at any travel, clear of the bars that leave R1 forward.
-CARRIAGE_SIZE: tuple[float, float, float] = (70.0, 60.0, 110.0)
-CARRIAGE_SETBACK: float = 10.0
-PLATFORM_SIZE: float = 55.0  # edge of the platform cube centred on the TCP, mm
+from orthoglide_env.model.design import PROTOTYPE, DesignError, MachineDesign
+from orthoglide_env.model.userfile import (
+    UserFileError,
+    line_of_key,
+    read_user_file,
+    unique_keys,
+)
 
 LEG_NAMES: tuple[str, str, str] = ("x", "y", "z")
 AXIS_NAMES: tuple[str, str, str] = ("x", "y", "z")
@@ -85,29 +70,13 @@ R_LEG: np.ndarray = np.stack(
 )
 
 
-class MachineFileError(ValueError):
+class MachineFileError(UserFileError):
     """A machine description (JSON file or dict) that does not describe a machine.
 
     ``key``: the machine key at fault, when there is one (a file reader turns it into a
     line number); ``occurrence``: which appearance of the key in the file (2 for the
     second of two duplicate keys).
     """
-
-    def __init__(self, message: str, key: str | None = None, occurrence: int = 1) -> None:
-        super().__init__(message)
-        self.key = key
-        self.occurrence = occurrence
-
-
-def read_user_file(path: Path, kind: str, error: type[ValueError]) -> str:
-    """A user's text file, or ``error`` with a one-line message naming the file."""
-    try:
-        return path.read_text()
-    except FileNotFoundError:
-        raise error(f"{kind} not found: {path}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        reason = getattr(exc, "strerror", None) or str(exc)
-        raise error(f"cannot read {kind} {path}: {reason}") from None
 
 
 def _validated(values: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -143,7 +112,14 @@ class MachineParams:
           "axis_tilt":   [3][2]  actuator direction, tilt toward local Y and local Z
           "axis_offset": [3][2]  actuator axis position along local Y and local Z
           "attach":      [3][3]  R2 centre on the platform, world-frame offset
+          "design":      {...} or "FILE"  the machine's nominal design (see
+                         :class:`~orthoglide_env.model.design.MachineDesign`): an object of
+                         design keys, or the path of a design file (relative to the
+                         machine file's folder); left out: the prototype
         }
+
+    The errors are relative to the machine's ``design`` (default: the prototype), whose
+    validity range bounds them.  A batch of machines shares one design.
     """
 
     drho: np.ndarray = field(default_factory=lambda: np.zeros((3,)))
@@ -151,6 +127,7 @@ class MachineParams:
     axis_tilt: np.ndarray = field(default_factory=lambda: np.zeros((3, 2)))
     axis_offset: np.ndarray = field(default_factory=lambda: np.zeros((3, 2)))
     attach: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
+    design: MachineDesign = PROTOTYPE
 
     def __post_init__(self) -> None:
         values = {key: np.array(getattr(self, key), dtype=float) for key in _SHAPES}
@@ -162,8 +139,11 @@ class MachineParams:
             values = _validated(values)
         for key, value in values.items():
             setattr(self, key, value)
-        if np.any(L_NOMINAL + self.dL <= D_NOMINAL / 2):
-            raise MachineFileError(f"leg length L + dL must exceed {D_NOMINAL / 2} mm")
+        if not isinstance(self.design, MachineDesign):
+            raise MachineFileError(f"a machine's design must be a MachineDesign, got "
+                                   f"{type(self.design).__name__}", key="design")
+        if np.any(self.design.L + self.dL <= self.design.d / 2):
+            raise MachineFileError(f"leg length L + dL must exceed {self.design.d / 2} mm")
 
     # -- batches of machines ----------------------------------------------------------------
     @property
@@ -179,26 +159,32 @@ class MachineParams:
         """One machine (or a sub-batch) of a batch."""
         if not self.batch_shape:
             raise IndexError("a single machine has no batch axis to index")
-        return MachineParams(**{f.name: getattr(self, f.name)[index] for f in fields(self)})
+        return MachineParams(**{key: getattr(self, key)[index] for key in _SHAPES},
+                             design=self.design)
 
     @classmethod
     def stack(cls, machines: list[MachineParams]) -> MachineParams:
-        """A batch of shape ``(len(machines),)`` from single machines."""
+        """A batch of shape ``(len(machines),)`` from single machines of one design."""
         if not machines:
             raise ValueError("cannot stack an empty list of machines")
-        return cls(**{f.name: np.stack([getattr(m, f.name) for m in machines])
-                      for f in fields(cls)})
+        design = machines[0].design
+        if any(m.design is not design and m.design != design for m in machines):
+            raise ValueError("a batch of machines shares one design")
+        return cls(**{key: np.stack([getattr(m, key) for m in machines]) for key in _SHAPES},
+                   design=design)
 
     def to_vector(self) -> np.ndarray:
         """The 27 errors as one vector in :data:`ERROR_NAMES` order, shape ``(*batch, 27)``."""
         batch = self.batch_shape
         return np.concatenate(
-            [getattr(self, f.name).reshape(*batch, -1) for f in fields(self)], axis=-1
+            [getattr(self, key).reshape(*batch, -1) for key in _SHAPES], axis=-1
         )
 
     @classmethod
-    def from_vector(cls, vector: np.ndarray) -> MachineParams:
-        """Inverse of :meth:`to_vector` (leading dimensions are batch dimensions)."""
+    def from_vector(cls, vector: np.ndarray, design: MachineDesign = PROTOTYPE
+                    ) -> MachineParams:
+        """Inverse of :meth:`to_vector` (leading dimensions are batch dimensions), machines of
+        ``design``."""
         vector = np.asarray(vector, dtype=float)
         if vector.shape[-1:] != (len(ERROR_NAMES),):
             raise ValueError(f"a machine vector has {len(ERROR_NAMES)} entries, "
@@ -208,13 +194,13 @@ class MachineParams:
             size = int(np.prod(shape))
             kwargs[key] = vector[..., start:start + size].reshape(*batch, *shape)
             start += size
-        return cls(**kwargs)
+        return cls(**kwargs, design=design)
 
     # -- derived geometry, used by the kinematics and the URDF writer ------------------
     @property
     def leg_lengths(self) -> np.ndarray:
         """True leg lengths L + dL, shape (3,)."""
-        return L_NOMINAL + self.dL
+        return self.design.L + self.dL
 
     @property
     def axis_directions(self) -> np.ndarray:
@@ -230,7 +216,7 @@ class MachineParams:
     @property
     def attach_points(self) -> np.ndarray:
         """R2 centres C_i relative to the TCP, in world, shape (*batch, 3, 3)."""
-        return R_TOOL * np.eye(3) + self.attach
+        return self.design.r * np.eye(3) + self.attach
 
     @property
     def is_paper_model(self) -> bool:
@@ -238,59 +224,80 @@ class MachineParams:
         return not (self.axis_tilt.any() or self.axis_offset.any() or self.attach.any())
 
     def __eq__(self, other: object) -> bool:
-        """Equal when every field holds the same numbers in the same shape (the generated
-        dataclass comparison would ask numpy for the truth value of an array)."""
+        """Equal when of one design and every field holds the same numbers in the same shape
+        (the generated dataclass comparison would ask numpy for the truth value of an
+        array)."""
         if not isinstance(other, MachineParams):
             return NotImplemented
-        return all(np.array_equal(getattr(self, f.name), getattr(other, f.name))
-                   for f in fields(self))
+        return self.design == other.design and all(
+            np.array_equal(getattr(self, key), getattr(other, key)) for key in _SHAPES)
 
     # -- (de)serialisation ---------------------------------------------------------------
-    def to_dict(self) -> dict[str, list]:
-        return {f.name: getattr(self, f.name).tolist() for f in fields(self)}
+    def to_dict(self) -> dict[str, Any]:
+        """The machine as a JSON-ready dict; its ``design`` (every key) only when it is not
+        the prototype."""
+        out: dict[str, Any] = {key: getattr(self, key).tolist() for key in _SHAPES}
+        if self.design != PROTOTYPE:
+            out["design"] = self.design.to_dict()
+        return out
 
     @classmethod
-    def from_dict(cls, data: Any) -> MachineParams:
+    def from_dict(cls, data: Any, design: MachineDesign | None = None,
+                  folder: Path | None = None) -> MachineParams:
         """Build from a JSON-like dict; missing keys are zero, unknown keys an error.
 
         Values are (nested) lists of numbers: booleans, strings and integers no float can
-        hold are refused, and the machine must lie inside :data:`VALIDITY_RANGE`.
+        hold are refused, and the machine must lie inside its design's validity range.  The
+        design is the dict's ``design`` (an object of design keys, or a design file's path
+        relative to ``folder``, default the working directory; refused when ``design`` is
+        given and differs), else ``design``, else the prototype.
         """
         if not isinstance(data, dict):
             raise MachineFileError("a machine must be a JSON object")
-        unknown = [key for key in data if key not in _SHAPES]
+        unknown = [key for key in data if key not in (*_SHAPES, "design")]
         if unknown:
             raise MachineFileError(
                 f"unknown machine key(s) {sorted(map(str, unknown))}; allowed: "
-                f"{sorted(_SHAPES)}", key=str(unknown[0]),
+                f"{[*sorted(_SHAPES), 'design']}", key=str(unknown[0]),
             )
-        kwargs = {key: _numbers(key, value) for key, value in data.items()}
+        if "design" in data:
+            named = _design_of(data["design"], folder)
+            if design is not None and named != design:
+                raise MachineFileError("machine key 'design' names another design than the "
+                                       "one given (a command's --design, an env's design)",
+                                       key="design")
+            design = named
+        design = PROTOTYPE if design is None else design
+        kwargs = {key: _numbers(key, value) for key, value in data.items() if key != "design"}
         for key, value in kwargs.items():
             # The dataclass checks every field; building with one key at a time tells which
             # key (and so which line of a file) breaks its rules.
             try:
-                cls(**{key: value})
+                cls(**{key: value}, design=design)
             except MachineFileError as exc:
                 raise MachineFileError(str(exc), key=key) from None
-        return check_validity(cls(**kwargs))
+        return check_validity(cls(**kwargs, design=design))
 
     def to_json(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
 
     @classmethod
-    def from_json(cls, path: str | Path) -> MachineParams:
+    def from_json(cls, path: str | Path, design: MachineDesign | None = None) -> MachineParams:
         """Read a machine file (a JSON object, see :meth:`from_dict`; a key given twice is
-        an error).  Errors name the file, and the line of the key at fault."""
+        an error); ``design``: the machine's design when the file names none (a file that
+        names another is refused).  Errors name the file, and the line of the key at
+        fault."""
         path = Path(path)
         text = read_user_file(path, "machine file", MachineFileError)
         try:
-            return cls.from_dict(json.loads(text, object_pairs_hook=_unique_keys))
+            return cls.from_dict(json.loads(text, object_pairs_hook=partial(
+                unique_keys, kind="machine", error=MachineFileError)), design, path.parent)
         except json.JSONDecodeError as exc:
             raise MachineFileError(
                 f"{path}:{exc.lineno}: not valid JSON (column {exc.colno}: {exc.msg})"
             ) from None
         except MachineFileError as exc:
-            line = _line_of_key(text, exc.key, exc.occurrence)
+            line = line_of_key(text, exc.key, exc.occurrence)
             raise MachineFileError(f"{path}{'' if line is None else f':{line}'}: {exc}",
                                    key=exc.key) from None
         except (ValueError, RecursionError) as exc:
@@ -300,9 +307,9 @@ class MachineParams:
 
     def with_paper_params(self, drho: np.ndarray, dL: np.ndarray) -> MachineParams:
         """A copy whose paper parameters are replaced (extended errors kept)."""
-        data = self.to_dict()
+        data = {key: getattr(self, key).tolist() for key in _SHAPES}
         data["drho"], data["dL"] = np.asarray(drho).tolist(), np.asarray(dL).tolist()
-        return MachineParams.from_dict(data)
+        return MachineParams.from_dict(data, design=self.design)
 
 
 _SHAPES: dict[str, tuple[int, ...]] = {
@@ -373,45 +380,11 @@ def error_group(name: str) -> str:
         name.split("_")[:2])
 
 
-#: The machines this workbench simulates faithfully: every error of a group lies within
-#: +-limit (unit).  Beyond it the PyBullet machine and the exact model part, and more and
-#: more of the joint cube cannot be assembled at all.
-#:
-#: How the limits were chosen (``benchmarks/validity.py``; 15 random postures across the
-#: joint cube and 15 within 8 mm of Zero per machine; gauges compared where both sides
-#: call them valid):
-#:
-#: * one group at a time, 20 machines per size with every error of the group at +-size
-#:   (random signs), the first size at which the backends part by more than 1 µm:
-#:   drho 50 mm (readings 950 µm apart), dL 30 mm (200 µm), axis_offset 30 mm (47 µm),
-#:   attach 20 mm (117 µm); axis_tilt still agrees at 0.1 rad (0.4 µm);
-#: * the limits: drho and dL at 5 standard deviations of the ``paper`` and ``realistic``
-#:   presets, the extended errors at 10 (so both presets lie well inside), each far
-#:   below its group's own breaking size;
-#: * every group at its limit at once, 150 machines (4500 postures): TCP within 0.3 µm,
-#:   gauge status identical everywhere, readings within 1 µm at every posture near Zero.
-#:   Far from Zero, 2 of the 2250 postures had a gauge whose ray grazes a bar's edge on
-#:   the way to its face, which PyBullet rounds: 5 and 10 µm there.
-#:
-#: Outside this guarantee whatever the errors: the corner (60, 60, 60) of the joint cube
-#: lies near a singularity, where the simulated machine sags under gravity while the exact
-#: model is rigid (0.15 µm on the nominal machine, above 1 µm on 2 and 3 of 200 realistic
-#: and paper machines, up to 12 µm at the corners of this range), and beyond which a
-#: machine with long encoder offsets or short legs cannot be assembled (the env refuses
-#: such targets).
-VALIDITY_RANGE: dict[str, tuple[float, str]] = {
-    "drho": (10.0, "mm"),
-    "dL": (10.0, "mm"),
-    "axis_tilt": (0.02, "rad"),
-    "axis_offset": (5.0, "mm"),
-    "attach": (3.0, "mm"),
-}
-
-
 def check_validity(machine: MachineParams) -> MachineParams:
-    """``machine`` itself when every error lies inside :data:`VALIDITY_RANGE`, otherwise
-    ``MachineFileError`` naming the key, the element, its value and the range."""
-    for key, (limit, unit) in VALIDITY_RANGE.items():
+    """``machine`` itself when every error lies inside its design's validity range (see
+    :attr:`MachineDesign.validity_range`), otherwise ``MachineFileError`` naming the key, the
+    element, its value and the range."""
+    for key, (limit, unit) in machine.design.validity_range.items():
         values = getattr(machine, key)
         outside = np.argwhere(np.abs(values) > limit)
         if len(outside):
@@ -422,6 +395,20 @@ def check_validity(machine: MachineParams) -> MachineParams:
                 "simulator and the exact model agree)", key=key,
             )
     return machine
+
+
+def _design_of(value: Any, folder: Path | None) -> MachineDesign:
+    """The design under a machine's ``design`` key: a design object, or a design file's path
+    (relative to ``folder``)."""
+    try:
+        if isinstance(value, str):
+            return MachineDesign.from_file((folder or Path()) / value)
+        if isinstance(value, MachineDesign):
+            return value
+        return MachineDesign.from_dict(value)
+    except DesignError as exc:
+        key = "design" if isinstance(value, str) or exc.key is None else exc.key
+        raise MachineFileError(str(exc), key=key) from None
 
 
 def _numbers(key: str, value: Any) -> np.ndarray:
@@ -458,28 +445,6 @@ def _short(value: Any) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
-def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    """A JSON object's pairs as a dict, refusing a key given twice (``json`` would keep
-    the last one silently)."""
-    out: dict[str, Any] = {}
-    for key, value in pairs:
-        if key in out:
-            raise MachineFileError(f"machine key '{key}' is given twice", key=key,
-                                   occurrence=2)
-        out[key] = value
-    return out
-
-
-def _line_of_key(text: str, key: str | None, occurrence: int = 1) -> int | None:
-    """Line (1-based) of the ``occurrence``-th ``"key":`` in a JSON text, if found."""
-    if key is None:
-        return None
-    matches = list(re.finditer(rf'"{re.escape(key)}"\s*:', text))
-    if len(matches) < occurrence:
-        return None
-    return text.count("\n", 0, matches[occurrence - 1].start()) + 1
-
-
 @dataclass(frozen=True)
 class ErrorPreset:
     """Standard deviations of zero-mean normal errors of a random machine and its gauges.
@@ -502,14 +467,17 @@ class ErrorPreset:
         """Standard deviation of each of the 27 errors, in :data:`ERROR_NAMES` order."""
         return np.array([getattr(self, error_group(n)) for n in ERROR_NAMES], dtype=float)
 
-    def sample(self, rng: np.random.Generator) -> MachineParams:
-        """Draw one machine (the gauge installation errors are drawn by the gauges)."""
+    def sample(self, rng: np.random.Generator, design: MachineDesign = PROTOTYPE
+               ) -> MachineParams:
+        """Draw one machine of ``design`` (the gauge installation errors are drawn by the
+        gauges)."""
         return MachineParams(
             drho=rng.normal(0.0, self.drho, 3),
             dL=rng.normal(0.0, self.dL, 3),
             axis_tilt=rng.normal(0.0, self.axis_tilt, (3, 2)),
             axis_offset=rng.normal(0.0, self.axis_offset, (3, 2)),
             attach=rng.normal(0.0, self.attach, (3, 3)),
+            design=design,
         )
 
 
@@ -555,20 +523,23 @@ def get_preset(name: str) -> ErrorPreset:
 
 
 def random_machine(
-    seed: int | np.random.Generator | None, preset: str = DEFAULT_PRESET
+    seed: int | np.random.Generator | None, preset: str = DEFAULT_PRESET,
+    design: MachineDesign = PROTOTYPE,
 ) -> MachineParams:
-    """A seeded random machine drawn from a named preset."""
-    return get_preset(preset).sample(np.random.default_rng(seed))
+    """A seeded random machine of ``design`` drawn from a named preset."""
+    return get_preset(preset).sample(np.random.default_rng(seed), design)
 
 
-def check_rho(rho: np.ndarray, *, margin: float = 0.0) -> np.ndarray:
-    """Validate control coordinates (shape (..., 3), finite, within the control limits)."""
+def check_rho(rho: np.ndarray, *, margin: float = 0.0, design: MachineDesign = PROTOTYPE
+              ) -> np.ndarray:
+    """Validate control coordinates (shape (..., 3), finite, within ``design``'s control
+    limits)."""
     rho = np.asarray(rho, dtype=float)
     if rho.shape[-1:] != (3,):
         raise ValueError(f"joint targets must have 3 components, got shape {list(rho.shape)}")
     if not np.all(np.isfinite(rho)):
         raise ValueError("joint targets must be finite numbers")
-    lo, hi = RHO_MIN - margin, RHO_MAX + margin
+    lo, hi = design.rho_min - margin, design.rho_max + margin
     bad = (rho < lo) | (rho > hi)
     if np.any(bad):
         value = rho[bad].flat[0]

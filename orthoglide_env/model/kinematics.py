@@ -21,7 +21,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from orthoglide_env.model.errors import L_NOMINAL, R_LEG, R_TOOL, RHO_MAX, RHO_MIN, MachineParams
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.errors import R_LEG, MachineParams
 
 
 class UnreachableError(ValueError):
@@ -59,31 +60,34 @@ def geometry(machine: MachineParams, points: np.ndarray) -> tuple[Geometry, np.n
 
 
 # --- the paper's model ---------------------------------------------------------------
-def inverse_paper(p: np.ndarray, drho: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+def inverse_paper(p: np.ndarray, drho: np.ndarray, lengths: np.ndarray,
+                  nominal: float = PROTOTYPE.L) -> np.ndarray:
     """Eq. (3): control coordinates ``rho`` (mm) placing the TCP at ``p``.
 
     ``rho_i = p_i + sqrt(L_i^2 - p_j^2 - p_k^2) - drho_i - L`` (the configuration index
     s_i = +1 of the prototype's assembly mode; ``-L`` converts the paper's joint variable
-    into control coordinates).
+    into control coordinates; ``nominal``: the design's L).
     """
     p = np.asarray(p, dtype=float)
     sq = dot(p, p)[..., None]
     disc = np.asarray(lengths) ** 2 - (sq - p**2)
     _require(disc >= 0, "the TCP is farther from an actuator axis than the leg length")
-    return p + np.sqrt(disc) - np.asarray(drho) - L_NOMINAL
+    return p + np.sqrt(disc) - np.asarray(drho) - nominal
 
 
-def direct_paper(rho: np.ndarray, drho: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+def direct_paper(rho: np.ndarray, drho: np.ndarray, lengths: np.ndarray,
+                 nominal: float = PROTOTYPE.L) -> np.ndarray:
     """Eq. (4): TCP position from control coordinates, the assembly mode's root.
 
-    With ``q = L + rho + drho``, subtracting the equations (2) pairwise gives
+    With ``q = L + rho + drho`` (``L``: the design's, ``nominal``), subtracting the
+    equations (2) pairwise gives
     ``p_i = a_i + t / q_i`` with ``a_i = (q_i^2 - L_i^2) / (2 q_i)`` and ``t = |p|^2 / 2``;
     ``|p|^2 = 2t`` is then quadratic in ``t``.  The prototype's assembly mode is the
     *smaller* root (at Zero the roots are ``0`` and ``2L^2/3``; the root printed in the
     paper, with ``+sqrt``, is the other mode), computed in the cancellation-free form
     ``t = 2c / (-b + sqrt(b^2 - 4ac))``.
     """
-    q = L_NOMINAL + np.asarray(rho, dtype=float) + np.asarray(drho)
+    q = nominal + np.asarray(rho, dtype=float) + np.asarray(drho)
     lengths = np.asarray(lengths, dtype=float)
     _require(np.abs(q) > 1e-9, "an actuator carriage sits at the axis intersection")
     a_vec = (q**2 - lengths**2) / (2 * q)
@@ -98,7 +102,8 @@ def direct_paper(rho: np.ndarray, drho: np.ndarray, lengths: np.ndarray) -> np.n
 
 
 def jacobian_paper(
-    p: np.ndarray, rho: np.ndarray, drho: np.ndarray, lengths: np.ndarray
+    p: np.ndarray, rho: np.ndarray, drho: np.ndarray, lengths: np.ndarray,
+    nominal: float = PROTOTYPE.L,
 ) -> np.ndarray:
     """Eq. (5): ``dp / d(drho, L)``, shape ``(..., 3, 6)``.
 
@@ -106,7 +111,7 @@ def jacobian_paper(
     ``M dp/dL = diag(L_i)`` with ``M[i] = p - q_i e_i``.
     """
     p = np.asarray(p, dtype=float)
-    q = L_NOMINAL + np.asarray(rho, dtype=float) + np.asarray(drho)
+    q = nominal + np.asarray(rho, dtype=float) + np.asarray(drho)
     lengths = np.broadcast_to(np.asarray(lengths, dtype=float), q.shape)
     m = p[..., None, :] - q[..., :, None] * np.eye(3)
     diag_p = np.eye(3) * (p - q)[..., None, :]
@@ -118,7 +123,7 @@ def jacobian_paper(
 def carriage_points(machine: MachineParams, rho: np.ndarray) -> np.ndarray:
     """Centres A_i of the R1 joints, shape ``(..., 3 legs, 3)``."""
     g, rho = geometry(machine, rho)
-    s = L_NOMINAL + R_TOOL + g.drho + rho
+    s = _slide(machine) + g.drho + rho
     return g.o + s[..., :, None] * g.u
 
 
@@ -135,7 +140,7 @@ def inverse(machine: MachineParams, p: np.ndarray) -> np.ndarray:
     checked here (see :func:`check_reachable`).
     """
     g, p = geometry(machine, p)
-    w = p[..., None, :] + g.attach - g.o - (L_NOMINAL + R_TOOL + g.drho)[..., None] * g.u
+    w = p[..., None, :] + g.attach - g.o - (_slide(machine) + g.drho)[..., None] * g.u
     uw = dot(w, g.u)
     disc = uw**2 - dot(w, w) + g.lengths**2
     _require(disc >= 0, "the TCP is out of reach of a leg")
@@ -147,10 +152,10 @@ def direct(
 ) -> np.ndarray:
     """TCP position (mm) for control coordinates ``rho``, exactly (Newton to ``tol`` mm)."""
     g, rho = geometry(machine, rho)
-    p = direct_paper(rho, g.drho, g.lengths)
+    p = direct_paper(rho, g.drho, g.lengths, machine.design.L)
     if machine.is_paper_model:
         return p
-    a = g.o + (L_NOMINAL + R_TOOL + g.drho + rho)[..., :, None] * g.u
+    a = g.o + (_slide(machine) + g.drho + rho)[..., :, None] * g.u
     shape = p.shape[:-1]
     # Every coordinate of every leg as one contiguous array over the whole batch: numpy then
     # runs each operation below as one long loop (a third faster on a sweep's scoring
@@ -233,7 +238,7 @@ def carriage_gradients(machine: MachineParams, rho: np.ndarray, weights: np.ndar
     g, rho = geometry(machine, rho)
     weights = np.asarray(weights, dtype=float)
     extra = rho.ndim - 1 - len(machine.batch_shape)
-    s = L_NOMINAL + R_TOOL + g.drho + rho
+    s = _slide(machine) + g.drho + rho
     u = g.u
     du = axis_direction_derivatives(machine).reshape(*machine.batch_shape, *(1,) * extra,
                                                      3, 2, 3)
@@ -346,11 +351,12 @@ def leg_angles(
 def check_reachable(machine: MachineParams, p: np.ndarray) -> np.ndarray:
     """Inverse kinematics that also enforces the control limits; returns ``rho``."""
     rho = inverse(machine, p)
-    bad = (rho < RHO_MIN) | (rho > RHO_MAX)
+    design = machine.design
+    bad = (rho < design.rho_min) | (rho > design.rho_max)
     if np.any(bad):
         raise UnreachableError(
             f"TCP needs joint coordinate {rho[bad].flat[0]:.3f} mm, outside the control "
-            f"limits [{RHO_MIN:g}, {RHO_MAX:g}] mm"
+            f"limits [{design.rho_min:g}, {design.rho_max:g}] mm"
         )
     return rho
 
@@ -359,9 +365,9 @@ def check_reachable(machine: MachineParams, p: np.ndarray) -> np.ndarray:
 PAPER_POSTURES: tuple[str, ...] = ("Zero", "XMax", "XMin", "YMax", "YMin", "ZMax", "ZMin")
 
 
-def paper_posture(name: str) -> np.ndarray:
-    """Control coordinates of a paper posture, computed on the nominal model (as the
-    controller does: it only knows the nominal geometry).
+def paper_posture(name: str, design: MachineDesign = PROTOTYPE) -> np.ndarray:
+    """Control coordinates of a paper posture, computed on ``design``'s nominal model (as
+    the controller does: it only knows the nominal geometry).
 
     ``XMax``: TCP at ``(L sin a, 0, 0)`` with ``a = asin(rho_max / L)``, so
     ``rho = (L sin a, L cos a - L, L cos a - L)``; likewise ``Min`` with ``rho_min`` and
@@ -372,11 +378,16 @@ def paper_posture(name: str) -> np.ndarray:
     if name not in PAPER_POSTURES:
         raise ValueError(f"unknown posture '{name}'; choose from {list(PAPER_POSTURES)}")
     leg = "XYZ".index(name[0])
-    limit = RHO_MAX if name.endswith("Max") else RHO_MIN
-    alpha = np.arcsin(limit / L_NOMINAL)
-    rho = np.full(3, L_NOMINAL * np.cos(alpha) - L_NOMINAL)
-    rho[leg] = L_NOMINAL * np.sin(alpha)
+    limit = design.rho_max if name.endswith("Max") else design.rho_min
+    alpha = np.arcsin(limit / design.L)
+    rho = np.full(3, design.L * np.cos(alpha) - design.L)
+    rho[leg] = design.L * np.sin(alpha)
     return rho
+
+
+def _slide(machine: MachineParams) -> float:
+    """Distance ``L + r`` from an actuator axis's origin to its R1 centre at Zero."""
+    return machine.design.L + machine.design.r
 
 
 def _require(condition: np.ndarray, message: str) -> None:

@@ -36,6 +36,7 @@ from orthoglide_env.instruments.gauges import (
     stand_names,
     stand_rays,
 )
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import (
     AXIS_NAMES,
     DEFAULT_PRESET,
@@ -156,6 +157,7 @@ class Design:
     specs: tuple[Spec, ...]  # one per mounting
     mounting: np.ndarray  # (N,) index of each reading's mounting
     rho: np.ndarray  # (N, 3) commanded posture of each reading, mm
+    machine_design: MachineDesign = PROTOTYPE  # the design of the machine read
 
     @cached_property
     def _unique_postures(self) -> tuple[np.ndarray, np.ndarray]:
@@ -178,8 +180,8 @@ class Design:
         _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
         if len(first) == len(self):
             return self, np.arange(len(self))
-        return (Design(self.mountings, self.specs, self.mounting[first], self.rho[first]),
-                np.ravel(inverse))
+        return (Design(self.mountings, self.specs, self.mounting[first], self.rho[first],
+                       self.machine_design), np.ravel(inverse))
 
     @property
     def postures(self) -> np.ndarray:
@@ -198,14 +200,16 @@ class Design:
         gauges = [s for s in self.specs if isinstance(s, GaugeSpec)]
         signs = np.ones(len(self.specs))
         if gauges:
-            _, directions = ideal_rays(gauges, MachineParams())
+            _, directions = ideal_rays(gauges, MachineParams(design=self.machine_design))
             signs[self.space.gauges] = np.sign(
                 directions[np.arange(len(gauges)), [s.axis for s in gauges]])
         return signs
 
     @classmethod
-    def of(cls, mountings: list[str], specs: list[Spec], rho: np.ndarray) -> Design:
-        """A design from each reading's mounting name and spec, and its posture."""
+    def of(cls, mountings: list[str], specs: list[Spec], rho: np.ndarray,
+           machine_design: MachineDesign = PROTOTYPE) -> Design:
+        """A design from each reading's mounting name and spec, and its posture, on a
+        machine of ``machine_design``."""
         spec_of: dict[str, Spec] = {}
         for name, spec in zip(mountings, specs, strict=True):
             known = spec_of.setdefault(name, spec)
@@ -216,7 +220,7 @@ class Design:
         position = {name: k for k, name in enumerate(names)}
         index = np.array([position[m] for m in mountings], dtype=int)
         return cls(tuple(names), tuple(spec_of[n] for n in names), index,
-                   np.asarray(rho, dtype=float).reshape(-1, 3))
+                   np.asarray(rho, dtype=float).reshape(-1, 3), machine_design)
 
 
 def predict(theta: np.ndarray, design: Design) -> np.ndarray:
@@ -229,7 +233,7 @@ def predict(theta: np.ndarray, design: Design) -> np.ndarray:
         # Every fit of a batch starts at the same point (nominal): one evaluation serves all.
         return np.broadcast_to(predict(flat[0], design), (*batch, len(design))).copy()
     space = design.space
-    machine = MachineParams.from_vector(theta[..., :N_MACHINE])
+    machine = MachineParams.from_vector(theta[..., :N_MACHINE], design.machine_design)
     postures = design.postures.reshape((1,) * len(batch) + design.postures.shape)
     values = np.zeros((*batch, len(design.postures), len(design.specs)))  # (*b, P, K)
     gauges = space.gauges
@@ -313,7 +317,7 @@ def _derivatives(theta: np.ndarray, design: Design, wanted: np.ndarray) -> np.nd
     """Derivative of every reading over every parameter, ``(B, N, n)`` for ``theta``
     ``(B, n)``; the stands' columns are left at zero unless one of them is ``wanted``."""
     space = design.space
-    machine = MachineParams.from_vector(theta[:, :N_MACHINE])
+    machine = MachineParams.from_vector(theta[:, :N_MACHINE], design.machine_design)
     postures = design.postures[None]
     p = direct(machine, postures)  # (B, P, 3)
     # The TCP's derivative (B, P, 3, 27) as its factors (B, P, 3, 3) and (B, P, 27).
@@ -364,7 +368,7 @@ def _gauge_derivatives(theta: np.ndarray, design: Design, machine: MachineParams
     each = np.arange(len(rows))
     a = carriage_points(machine, postures[None])[:, each, legs]
     c = platform_points(machine, p[:, at])[:, each, legs]
-    centre, rot, half = boxes_at(g, a, c, p[:, at])
+    centre, rot, half = boxes_at(g, a, c, p[:, at], machine.design)
     o, d = origins[:, gauge], directions[:, gauge]
     t = plane_distances(centre, rot, half, g.face, o, d)
     normal = face_normals(rot, g.face)

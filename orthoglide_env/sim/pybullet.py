@@ -36,14 +36,8 @@ from orthoglide_env.instruments.gauges import (
 )
 from orthoglide_env.lab.machines import check_motion_mode
 from orthoglide_env.model.collisions import collision_names, crash_pairs
-from orthoglide_env.model.errors import (
-    BAR_SECTION,
-    CARRIAGE_SETBACK,
-    CARRIAGE_SIZE,
-    LEG_NAMES,
-    PLATFORM_SIZE,
-    MachineParams,
-)
+from orthoglide_env.model.design import MachineDesign
+from orthoglide_env.model.errors import LEG_NAMES, MachineParams
 from orthoglide_env.model.kinematics import direct
 from orthoglide_env.sim.simulator import PhysicsSettings, Simulator, pb
 from orthoglide_env.sim.urdf import (
@@ -195,7 +189,7 @@ class OrthoglideMachine:
             rear = g.origin - g.direction * STAND_LENGTH
             # A platform gauge has no leg: its stand stands behind it.
             foot = (rear - g.direction * STAND_LENGTH if g.spec.part == Part.PLATFORM
-                    else rail_ends()[g.spec.leg, 0])
+                    else rail_ends(self.machine.design)[g.spec.leg, 0])
             for a, b, radius in ((g.origin, rear, GAUGE_BODY_RADIUS), (rear, foot, ARM_RADIUS)):
                 shapes.append(self.bc.createVisualShape(
                     pb.GEOM_CYLINDER, radius=radius * MM,
@@ -327,13 +321,15 @@ class OrthoglideMachine:
         """Centre (mm), rotation and half extents (mm) of a gauge's target box, as
         simulated: where the URDF puts each box in its link's frame."""
         pos, rot = self._link_pose(target_link(spec))
+        design = self.machine.design
         if spec.part == Part.PLATFORM:
-            return pos, rot, np.full(3, PLATFORM_SIZE / 2)
+            return pos, rot, np.full(3, design.platform_size / 2)
         if spec.part == Part.CARRIAGE:
-            ahead = np.array([CARRIAGE_SETBACK + CARRIAGE_SIZE[0] / 2, 0.0, 0.0])
-            return pos + rot @ ahead, rot, np.array(CARRIAGE_SIZE) / 2
+            ahead = np.array([design.carriage_setback + design.carriage_size[0] / 2, 0.0, 0.0])
+            return pos + rot @ ahead, rot, np.array(design.carriage_size) / 2
         length = self.machine.leg_lengths[spec.leg]
-        half = np.array([bar_length(self.machine, spec.leg) / 2, *(np.array(BAR_SECTION) / 2)])
+        half = np.array([bar_length(self.machine, spec.leg) / 2,
+                         *(np.array(design.bar_section) / 2)])
         return pos + rot @ np.array([-length / 2, 0.0, 0.0]), rot, half
 
     def _collision_pairs(self) -> list[tuple[int, int, str]]:
@@ -374,7 +370,7 @@ class OrthoglideMachine:
         if self._stands is None and self.gauges:
             self._draw_stands()
         if eye is None or target is None:
-            eye, target, framing = square_on_camera(width / height)
+            eye, target, framing = square_on_camera(width / height, self.machine.design)
             fov = framing if fov is None else fov
         view = self.bc.computeViewMatrix(
             cameraEyePosition=list(eye * MM), cameraTargetPosition=list(target * MM),
@@ -418,7 +414,8 @@ def _z_turned_to(axes: np.ndarray) -> np.ndarray:
     return Rotation.from_rotvec(rotvec).as_quat()
 
 
-def square_on_camera(aspect: float) -> tuple[np.ndarray, np.ndarray, float]:
+def square_on_camera(aspect: float, design: MachineDesign
+                     ) -> tuple[np.ndarray, np.ndarray, float]:
     """Camera ``eye``, ``target`` (mm) and vertical field of view (deg) looking along the
     machine's symmetry axis (1, 1, 1), world z up, framing the base's rails (and so the
     platform, legs and gauge stands between them) for an image of ``aspect`` = width /
@@ -427,7 +424,7 @@ def square_on_camera(aspect: float) -> tuple[np.ndarray, np.ndarray, float]:
     right = np.cross(-view, [0.0, 0.0, 1.0])
     right /= np.linalg.norm(right)
     up = np.cross(right, -view)
-    points = np.vstack([rail_ends().reshape(-1, 3), np.zeros((1, 3))])
+    points = np.vstack([rail_ends(design).reshape(-1, 3), np.zeros((1, 3))])
     x, y = points @ right, points @ up
     target = (x.max() + x.min()) / 2 * right + (y.max() + y.min()) / 2 * up
     # The rails' far ends are nearer the eye than the target: frame them at their depth.

@@ -48,7 +48,7 @@ def pose_report(
     ``platform_rotation_rad``, ``gauges``: list of ``{"leg", "axis", "reading", "valid",
     "status"}`` (reading in mm, ``None`` when not valid).
     """
-    rho = check_rho(rho)
+    rho = check_rho(rho, design=machine.design)
     tcp_model = direct(machine, rho)
     sim = _machine_with_gauges(machine)
     try:
@@ -95,7 +95,7 @@ def render_png(
     matplotlib.use("Agg")
     from matplotlib import image
 
-    rho = check_rho(rho)
+    rho = check_rho(rho, design=machine.design)
     out_path = Path(out_path)
     if out_path.suffix.lower() != ".png":
         raise ValueError(f"render output must be a .png file, got '{out_path}'")

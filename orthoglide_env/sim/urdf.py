@@ -27,23 +27,8 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from orthoglide_env.model.errors import (
-    BAR_CLEARANCE,
-    BAR_SECTION,
-    CARRIAGE_SETBACK,
-    CARRIAGE_SIZE,
-    D_NOMINAL,
-    L_NOMINAL,
-    LEG_NAMES,
-    PLATFORM_SIZE,
-    R_LEG,
-    R_TOOL,
-    RHO_MAX,
-    RHO_MIN,
-    SHORT_LINK_SIZE,
-    URDF_RHO_MARGIN,
-    MachineParams,
-)
+from orthoglide_env.model.design import MachineDesign
+from orthoglide_env.model.errors import LEG_NAMES, R_LEG, MachineParams
 from orthoglide_env.model.kinematics import direct, leg_angles
 
 MM = 1e-3  # URDF and PyBullet work in metres
@@ -137,7 +122,7 @@ def _joint(name: str, kind: str, parent: str, child: str, origin: str, axis: str
 
 def bar_length(machine: MachineParams, leg: int) -> float:
     """Length of the bar box (hinge to hinge, less the clearance at both ends), mm."""
-    return float(machine.leg_lengths[leg] - 2 * BAR_CLEARANCE)
+    return float(machine.leg_lengths[leg] - 2 * machine.design.bar_clearance)
 
 
 @dataclass(frozen=True)
@@ -179,11 +164,12 @@ def joint_origins(machine: MachineParams) -> dict[str, JointOrigin]:
     """
     z, y, none = np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]), np.zeros(3)
     same = np.eye(3)
-    up, down = np.array([0.0, 0.0, D_NOMINAL / 2]), np.array([0.0, 0.0, -D_NOMINAL / 2])
+    design = machine.design
+    up, down = np.array([0.0, 0.0, design.d / 2]), np.array([0.0, 0.0, -design.d / 2])
     out: list[JointOrigin] = []
     for i in range(3):
         n = functools.partial(link_name, i)
-        slide = machine.axis_origins[i] + (L_NOMINAL + R_TOOL + machine.drho[i]) * (
+        slide = machine.axis_origins[i] + (design.L + design.r + machine.drho[i]) * (
             machine.axis_directions[i]
         )
         bar_end = np.array([-machine.leg_lengths[i], 0.0, 0.0])
@@ -228,7 +214,7 @@ def loop_closures(machine: MachineParams) -> list[LoopClosure]:
     closures = [
         LoopClosure("point", link_name(i, "bar2"),
                     np.array([-machine.leg_lengths[i], 0.0, 0.0]), link_name(i, "coupler"),
-                    np.array([0.0, 0.0, -D_NOMINAL]), np.eye(3))
+                    np.array([0.0, 0.0, -machine.design.d]), np.eye(3))
         for i in range(3)
     ]
     closures += [
@@ -267,12 +253,14 @@ def joint_positions(machine: MachineParams, rho: np.ndarray) -> dict[str, float]
     return out
 
 
-def _joint_xml(joint: JointOrigin) -> str:
-    """A joint element: the slides keep URDF limits wider than the control limits, the
-    passive joints turn freely."""
+def _joint_xml(joint: JointOrigin, design: MachineDesign) -> str:
+    """A joint element: the slides keep URDF limits wider than ``design``'s control limits
+    (PyBullet's position motors silently clamp targets to URDF limits; the control limits
+    are enforced in code, where a violation can be reported), the passive joints turn
+    freely."""
     limits = {
-        "prismatic": (f'<limit lower="{(RHO_MIN - URDF_RHO_MARGIN) * MM:.6g}" '
-                      f'upper="{(RHO_MAX + URDF_RHO_MARGIN) * MM:.6g}" effort="1e6" '
+        "prismatic": (f'<limit lower="{(design.rho_min - design.urdf_margin) * MM:.6g}" '
+                      f'upper="{(design.rho_max + design.urdf_margin) * MM:.6g}" effort="1e6" '
                       'velocity="10"/>'),
         "revolute": '<limit lower="-3.14159" upper="3.14159" effort="0" velocity="100"/>',
         "fixed": "",
@@ -284,15 +272,16 @@ def _joint_xml(joint: JointOrigin) -> str:
 
 def _leg(machine: MachineParams, i: int, joints: dict[str, JointOrigin]) -> list[str]:
     """The leg's links, each followed by the joint that carries it."""
+    design = machine.design
     length = machine.leg_lengths[i]
-    half_d = D_NOMINAL / 2
-    bar = np.array([bar_length(machine, i), *BAR_SECTION])
+    half_d = design.d / 2
+    bar = np.array([bar_length(machine, i), *design.bar_section])
     bar_mid = np.array([-length / 2, 0.0, 0.0])
-    carriage = np.array(CARRIAGE_SIZE)
-    short = np.array(SHORT_LINK_SIZE)
+    carriage = np.array(design.carriage_size)
+    short = np.array(design.short_link_size)
     bodies = {
         "carriage": _inertial(MASS["carriage"], np.zeros(3), carriage)
-        + _box(carriage, np.array([carriage[0] / 2 + CARRIAGE_SETBACK, 0, 0]), "carriage",
+        + _box(carriage, np.array([carriage[0] / 2 + design.carriage_setback, 0, 0]), "carriage",
                collide=True),
         "r1": _inertial(MASS["r1"], np.zeros(3), short)
         + _box(short, np.zeros(3), "joint", collide=False),
@@ -300,7 +289,7 @@ def _leg(machine: MachineParams, i: int, joints: dict[str, JointOrigin]) -> list
         + _box(bar, bar_mid, "bar", collide=True) + _pin(30, np.zeros(3), "y"),
         "coupler": _inertial(MASS["coupler"], np.array([0, 0, -half_d]), short)
         + _box(short, np.array([0, 0, -half_d]), "joint", collide=True)
-        + _pin(30, np.zeros(3), "y") + _pin(30, np.array([0, 0, -D_NOMINAL]), "y"),
+        + _pin(30, np.zeros(3), "y") + _pin(30, np.array([0, 0, -design.d]), "y"),
         "r2": _inertial(MASS["r2"], np.zeros(3), np.full(3, 20.0))
         + _pin(24, np.zeros(3), "z"),
         "bar2": _inertial(MASS["bar"], bar_mid, bar)
@@ -309,23 +298,25 @@ def _leg(machine: MachineParams, i: int, joints: dict[str, JointOrigin]) -> list
     out = []
     for joint in joints.values():
         if joint.name.startswith(f"{LEG_NAMES[i]}_"):
-            out += [_link(joint.child, bodies[joint.child.split("_", 1)[1]]), _joint_xml(joint)]
+            out += [_link(joint.child, bodies[joint.child.split("_", 1)[1]]),
+                    _joint_xml(joint, design)]
     return out
 
 
-def rail_ends() -> np.ndarray:
+def rail_ends(design: MachineDesign) -> np.ndarray:
     """Ends of each leg's rail on the base (mm, shape (3 legs, near/far end, 3)): beside
     the nominal actuator axis, spanning the carriage's travel between the control limits.
     The base is drawn only; the gauge stands stand on these rails."""
-    span = (L_NOMINAL + R_TOOL + RHO_MIN + CARRIAGE_SETBACK,
-            L_NOMINAL + R_TOOL + RHO_MAX + CARRIAGE_SETBACK + CARRIAGE_SIZE[0])
+    slide = design.L + design.r
+    span = (slide + design.rho_min + design.carriage_setback,
+            slide + design.rho_max + design.carriage_setback + design.carriage_size[0])
     return np.array([[R_LEG[i][:, 0] * s - R_LEG[i][:, 1] * RAIL_BESIDE for s in span]
                      for i in range(3)])
 
 
-def _base() -> str:
+def _base(design: MachineDesign) -> str:
     body = _inertial(0.0, np.zeros(3), np.ones(3))
-    for i, (start, end) in enumerate(rail_ends()):
+    for i, (start, end) in enumerate(rail_ends(design)):
         centre = (start + end) / 2
         size = np.abs(R_LEG[i] @ np.array([np.linalg.norm(end - start), *RAIL_SECTION]))
         # Drawn only: a rail beside the axis lies in the sweep of its own leg's bars ahead
@@ -335,12 +326,14 @@ def _base() -> str:
 
 
 def _platform(machine: MachineParams) -> list[str]:
-    size = np.full(3, PLATFORM_SIZE)
+    design = machine.design
+    size = np.full(3, design.platform_size)
     body = _inertial(MASS["platform"], np.zeros(3), size)
     body += _box(size, np.zeros(3), "platform", collide=True)
     tool = np.array([8.0, 8.0, 40.0])
-    body += _box(tool, np.array([0, 0, -20.0 - R_TOOL]), "joint", collide=False)
-    return [_link("platform", body), _joint_xml(joint_origins(machine)["platform_mount"])]
+    body += _box(tool, np.array([0, 0, -20.0 - design.r]), "joint", collide=False)
+    return [_link("platform", body),
+            _joint_xml(joint_origins(machine)["platform_mount"], design)]
 
 
 def write_urdf(machine: MachineParams) -> str:
@@ -349,7 +342,7 @@ def write_urdf(machine: MachineParams) -> str:
         f'<material name="{k}"><color rgba="{" ".join(map(str, v))}"/></material>'
         for k, v in COLOURS.items()
     )
-    parts = [_base()]
+    parts = [_base(machine.design)]
     joints = joint_origins(machine)
     for i in range(3):
         parts += _leg(machine, i, joints)

@@ -1,0 +1,39 @@
+"""``orthoglide design``: a machine design as JSON, every key given (the prototype's, or a
+design file's completed with the prototype's values)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from calibrators.cli.common import design_of
+
+#: ``-o -`` writes to standard output.
+STDOUT = "-"
+
+
+def run(args: argparse.Namespace) -> None:
+    text = design_of(args).to_json()
+    if args.out == STDOUT:
+        sys.stdout.write(text)
+        return
+    path = Path(args.out)
+    if path.is_dir():
+        raise ValueError(f"-o {path}: is a directory; give the design file to write")
+    path.write_text(text)
+    print(f"wrote {path}")
+
+
+def add(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "design", help="print a machine design as JSON (default: the prototype's)",
+        description="Print a machine design as JSON, every key given: the prototype's, or "
+        "with --design the file's, its left-out keys filled in. A copy is a starting point "
+        "for a design file of another machine (see the README's 'Machine designs').")
+    p.add_argument("--design", metavar="FILE",
+                   help="design file (JSON or TOML) to complete and print instead")
+    p.add_argument("-o", "--out", default=STDOUT, metavar="FILE",
+                   help=f"JSON file to write, replaced if it exists (default '{STDOUT}': "
+                   "standard output)")
+    p.set_defaults(func=run)

@@ -1,0 +1,273 @@
+"""Machine designs: the description as data, its file's rigour, and a second design
+(``examples/designs/small.json``: L = 250 mm, d = 60 mm, r = 25 mm, limits -80 .. +50 mm,
+10 x 10 mm bars) through the whole pipeline of the command line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calibrators.cli import main
+from orthoglide_env import MachineDesign
+from orthoglide_env.model.design import PROTOTYPE, RULES, DesignError
+from orthoglide_env.model.errors import MachineFileError, MachineParams, check_validity
+from orthoglide_env.model.kinematics import direct, paper_posture
+
+SMALL_FILE = Path(__file__).resolve().parents[1] / "examples" / "designs" / "small.json"
+SMALL = MachineDesign.from_file(SMALL_FILE)
+PROTOTYPE_FILE = (Path(__file__).resolve().parents[1] / "orthoglide_env" / "model"
+                  / "prototype.json")
+
+
+def test_the_example_is_the_second_design_and_the_rest_is_the_prototype() -> None:
+    assert (SMALL.L, SMALL.d, SMALL.r, SMALL.rho_min, SMALL.rho_max, SMALL.bar_section) == (
+        250.0, 60.0, 25.0, -80.0, 50.0, (10.0, 10.0))
+    given = set(json.loads(SMALL_FILE.read_text()))
+    for key in set(RULES) - given:
+        assert getattr(SMALL, key) == getattr(PROTOTYPE, key), key
+    # The validity range's lengths scale with L when the file leaves it out; angles stay.
+    for key, (limit, unit) in SMALL.validity_range.items():
+        scale = SMALL.L / PROTOTYPE.L if unit == "mm" else 1.0
+        assert limit == pytest.approx(PROTOTYPE.validity_range[key][0] * scale, rel=1e-15)
+
+
+def test_the_prototype_lives_in_its_file_and_round_trips() -> None:
+    assert PROTOTYPE.to_dict() == json.loads(PROTOTYPE_FILE.read_text())
+    assert MachineDesign.from_dict({}) == PROTOTYPE
+    assert MachineDesign.from_dict(SMALL.to_dict()) == SMALL
+    assert MachineDesign.from_dict(json.loads(SMALL.to_json())) == SMALL
+    # The paper's numbers, as DESIGN.md has them.
+    assert (PROTOTYPE.L, PROTOTYPE.d, PROTOTYPE.r, PROTOTYPE.rho_min, PROTOTYPE.rho_max) == (
+        310.25, 80.0, 31.0, -100.0, 60.0)
+
+
+def test_a_250_mm_leg_is_a_design_and_its_errors_are_relative_to_it() -> None:
+    machine = MachineParams(dL=[1.0, -2.0, 0.5], design=SMALL)
+    np.testing.assert_array_equal(machine.leg_lengths, [251.0, 248.0, 250.5])
+    assert machine.with_paper_params(np.zeros(3), np.zeros(3)).design == SMALL
+    assert MachineParams.from_vector(machine.to_vector(), SMALL) == machine
+    assert machine != MachineParams(dL=[1.0, -2.0, 0.5])  # the prototype's
+    with pytest.raises(MachineFileError, match=r"\[-8.05802, 8.05802\] mm"):
+        check_validity(MachineParams(dL=[9.0, 0.0, 0.0], design=SMALL))
+    check_validity(MachineParams(dL=[9.0, 0.0, 0.0]))  # within the prototype's 10 mm
+    with pytest.raises(ValueError, match="shares one design"):
+        MachineParams.stack([machine, MachineParams()])
+
+
+def test_the_paper_postures_follow_L_and_the_limits() -> None:
+    for name in ("XMax", "YMin"):
+        rho = paper_posture(name, SMALL)
+        tcp = direct(MachineParams(design=SMALL), rho)
+        limit = SMALL.rho_max if name.endswith("Max") else SMALL.rho_min
+        leg = "XYZ".index(name[0])
+        # The TCP on the leg's axis at L sin(alpha), sin(alpha) = limit / L.
+        np.testing.assert_allclose(tcp, limit * np.eye(3)[leg], atol=1e-9)
+        assert SMALL.rho_min <= rho.min() and rho.max() <= SMALL.rho_max
+
+
+def _write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize(("name", "text", "message"), [
+    ("unknown.json", '{\n  "L": 250,\n  "legs": 3\n}', ":3: unknown design key(s) ['legs']"),
+    ("type.json", '{\n  "d": "60"\n}',
+     ":2: design key 'd' must be a number, > 0 (mm), got '60' (str)"),
+    ("bool.json", '{\n  "L": 250,\n  "r": true\n}',
+     ":3: design key 'r' must be a number, >= 0 (mm), got True (bool)"),
+    ("range.json", '{\n  "rho_max": -5\n}', ":2: design key 'rho_max' must be a number, > 0"),
+    ("shape.json", '{\n  "bar_section": [10]\n}',
+     ":2: design key 'bar_section' must be a list of 2 numbers, each > 0 (mm), got [10]"),
+    ("twice.json", '{\n  "L": 250,\n  "L": 260\n}', ":3: design key 'L' is given twice"),
+    ("relation.json", '{\n  "L": 250,\n  "rho_max": 300\n}',
+     ":3: design: rho_max (300 mm) must be below L (250 mm)"),
+    ("validity.json", '{\n  "validity": {"dL": 0}\n}',
+     ":2: design key 'validity.dL' must be a number, > 0"),
+    ("syntax.json", '{\n  "L": 250,\n}', ":3: not valid JSON"),
+    ("unknown.toml", 'L = 250\nlegs = 3\n', ":2: unknown design key(s) ['legs']"),
+    ("bool.toml", 'L = 250\nd = true\n', ":2: design key 'd' must be a number"),
+    ("twice.toml", 'L = 250\nL = 260\n', ":2: not valid TOML (Cannot overwrite a value)"),
+    ("range.toml", 'L = 250\n\n[validity]\ndrho = -1\n', ":3: design key 'validity.drho'"),
+])
+def test_a_bad_design_file_is_refused_with_its_line_and_rule(tmp_path, name: str, text: str,
+                                                             message: str) -> None:
+    path = _write(tmp_path / name, text)
+    with pytest.raises(DesignError) as caught:
+        MachineDesign.from_file(path)
+    assert str(caught.value).startswith(f"{path}{message}"), str(caught.value)
+    assert "\n" not in str(caught.value)
+
+
+def test_a_toml_design_reads_as_its_json(tmp_path) -> None:
+    lines = [f"{k} = {json.dumps(v)}" for k, v in json.loads(SMALL_FILE.read_text()).items()]
+    assert MachineDesign.from_file(_write(tmp_path / "small.toml", "\n".join(lines))) == SMALL
+
+
+def test_machine_files_name_their_design(tmp_path) -> None:
+    _write(tmp_path / "small.json", SMALL_FILE.read_text())
+    by_path = _write(tmp_path / "by_path.json", '{"dL": [1, 0, 0], "design": "small.json"}')
+    by_object = _write(tmp_path / "by_object.json",
+                       json.dumps({"dL": [1, 0, 0], "design": {"L": 250, "d": 60, "r": 25,
+                                                                "rho_min": -80, "rho_max": 50,
+                                                                "bar_section": [10, 10]}}))
+    for path in (by_path, by_object):
+        assert MachineParams.from_json(path) == MachineParams(dL=[1, 0, 0], design=SMALL)
+        assert MachineParams.from_json(path, SMALL).design == SMALL
+    with pytest.raises(MachineFileError, match=r"by_path.json:1: machine key 'design' names "
+                                               r"another design"):
+        MachineParams.from_json(by_path, PROTOTYPE)
+    # What a machine writes reads back, design included; the prototype's is left out.
+    machine = MachineParams(drho=[0.5, 0, 0], design=SMALL)
+    machine.to_json(tmp_path / "out.json")
+    assert MachineParams.from_json(tmp_path / "out.json") == machine
+    assert "design" not in MachineParams().to_dict()
+    bad = _write(tmp_path / "bad.json", '{\n  "drho": [0, 0, 0],\n  "design": {"d": -1}\n}')
+    with pytest.raises(MachineFileError, match=r"bad.json:3: design key 'd' must be a number"):
+        MachineParams.from_json(bad)
+
+
+def test_orthoglide_design_prints_the_prototype_and_writes_a_file(tmp_path, capsys) -> None:
+    assert main(["design"]) == 0
+    assert json.loads(capsys.readouterr().out) == json.loads(PROTOTYPE_FILE.read_text())
+    out = tmp_path / "d.json"
+    assert main(["design", "--design", str(SMALL_FILE), "-o", str(out)]) == 0
+    assert MachineDesign.from_file(out) == SMALL
+    assert main(["pose", "--machine", str(_write(tmp_path / "m.json", "{}")), "--design",
+                 str(_write(tmp_path / "bad.json", '{"L": 0}')), "--rho", "0", "0", "0"]) == 2
+    assert "bad.json:1: design key 'L' must be a number, > 0 (mm), got 0" in (
+        capsys.readouterr().err)
+
+
+# -- the second design through the command line ----------------------------------------------
+@pytest.fixture
+def small_machine(tmp_path) -> str:
+    """A machine of the small design with every kind of error (a file naming no design)."""
+    machine = {"drho": [0.5, -0.3, 0.2], "dL": [-0.4, 0.6, 0.1],
+               "axis_tilt": [[1e-3, 0], [0, -2e-3], [1e-3, 1e-3]],
+               "axis_offset": [[0.2, 0], [0, 0.3], [-0.1, 0]],
+               "attach": [[0.1, 0, 0], [0, 0.2, 0], [0, 0, -0.1]]}
+    return str(_write(tmp_path / "machine.json", json.dumps(machine)))
+
+
+def _json(capsys, argv: list[str]) -> dict:
+    assert main(argv) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_pose_of_the_small_design_pybullet_against_exact(capsys, small_machine) -> None:
+    design = ["--machine", small_machine, "--design", str(SMALL_FILE), "--noise-free", "--json"]
+    for rho in (["3", "-4", "2"], ["30", "-50", "20"], ["-70", "40", "-10"]):
+        report = _json(capsys, ["pose", *design, "--rho", *rho])
+        gap = np.linalg.norm(np.subtract(report["tcp"], report["tcp_model"]))
+        assert gap < 1e-3, rho  # 1 µm
+        assert report["loop_residual_mm"] < 1e-3
+    # Near Zero the gauges touch their bars of the small design (mid-travel at Zero).
+    near = _json(capsys, ["pose", *design, "--rho", "1", "-1", "1"])
+    assert all(g["valid"] and abs(g["reading"]) < 3.0 for g in near["gauges"])
+    # The design's limits are the command's: 55 mm is beyond the small machine's +50.
+    assert main(["pose", *design, "--rho", "55", "0", "0"]) == 2
+    assert "outside the joint limits [-80, 50] mm" in capsys.readouterr().err
+
+
+def test_calibrate_paper_on_the_small_design_recovers_the_paper_parameters(
+        tmp_path, capsys) -> None:
+    path = _write(tmp_path / "paper.json", '{"drho": [0.5, -0.3, 0.2], "dL": [-0.4, 0.6, 0.1]}')
+    report = _json(capsys, ["calibrate", "--machine", str(path), "--design", str(SMALL_FILE),
+                            "--agent", "paper", "--json"])
+    for key in ("drho", "dL"):
+        np.testing.assert_allclose(report["estimate"][key], report["truth"][key], atol=1e-6)
+    assert report["experiment_time_s"] > 0
+
+
+def test_fit_reads_the_design_of_a_json_readings_file_or_takes_it_from_the_command(
+        tmp_path, capsys) -> None:
+    path = _write(tmp_path / "paper.json", '{"drho": [0.5, -0.3, 0.2], "dL": [-0.4, 0.6, 0.1]}')
+    common = ["--machine", str(path), "--design", str(SMALL_FILE), "--backend", "exact",
+              "--json"]
+    fits = {}
+    for suffix in ("json", "csv"):
+        saved = tmp_path / f"readings.{suffix}"
+        _json(capsys, ["calibrate", *common, "--save-measurements", str(saved)])
+        noise = ["--sigma", "0", "--resolution", "0", "--json"]
+        fits[suffix] = _json(capsys, ["fit", str(saved), *noise])["estimate"]["dL"]
+        fits[f"{suffix} --design"] = _json(capsys, ["fit", str(saved), "--design",
+                                                    str(SMALL_FILE), *noise])["estimate"]["dL"]
+    for key in ("json", "json --design", "csv --design"):
+        np.testing.assert_allclose(fits[key], [-0.4, 0.6, 0.1], atol=1e-6)
+    # Read as the prototype's, the CSV's legs are 60.25 mm shorter: what L = 250 mm is.
+    np.testing.assert_allclose(fits["csv"], np.add([-0.4, 0.6, 0.1], SMALL.L - PROTOTYPE.L),
+                               atol=0.5)
+
+
+def test_compare_on_the_small_design(tmp_path, capsys) -> None:
+    assert main(["compare", "--design", str(SMALL_FILE), "--machines", "1", "--agents",
+                 "paper,optimal,tracker", "--estimators", "paper,extended", "--budget", "600",
+                 "--quiet", "--out", str(tmp_path)]) == 0
+    trials = [json.loads(line) for line in (tmp_path / "trials.jsonl").read_text().splitlines()]
+    fitted = {(t["agent"], t["estimator"]) for t in trials if not t["failed"]}
+    assert {("paper", "paper"), ("paper", "extended"), ("optimal", "extended"),
+            ("tracker", "extended")} <= fitted
+    for trial in trials:
+        if not trial["failed"]:
+            # Calibration helps, over the small design's own scoring grid.
+            assert trial["tcp_after"]["rigid"] < trial["tcp_before"]["rigid"]
+    assert json.loads((tmp_path / "config.json").read_text())["design"] == SMALL.to_dict()
+
+
+def test_urdf_of_the_small_design_loads_and_closes(tmp_path, capsys, small_machine) -> None:
+    yourdfpy = pytest.importorskip("yourdfpy")
+    from orthoglide_env.sim.urdf import MM, joint_positions, loop_closures
+
+    out = tmp_path / "small.urdf"
+    assert main(["urdf", "--machine", small_machine, "--design", str(SMALL_FILE), "-o",
+                 str(out)]) == 0
+    machine = MachineParams.from_json(small_machine, SMALL)
+    urdf = yourdfpy.URDF.load(str(out), load_meshes=False, build_collision_scene_graph=False)
+    kinds = {name: j.type for name, j in urdf.joint_map.items()}
+    limits = urdf.joint_map["x_slide"].limit
+    assert (limits.lower / MM, limits.upper / MM) == pytest.approx(
+        (SMALL.rho_min - SMALL.urdf_margin, SMALL.rho_max + SMALL.urdf_margin))
+    for rho in np.random.default_rng(4).uniform(SMALL.rho_min, SMALL.rho_max, (20, 3)):
+        values = joint_positions(machine, rho)
+        urdf.update_cfg({n: v * MM if kinds[n] == "prismatic" else v for n, v in values.items()})
+        tcp = urdf.get_transform("platform", "base")[:3, 3] / MM
+        np.testing.assert_allclose(tcp, direct(machine, rho), atol=1e-6)
+        for c in loop_closures(machine):
+            a, b = urdf.get_transform(c.link_a, "base"), urdf.get_transform(c.link_b, "base")
+            np.testing.assert_allclose((a[:3, :3] @ c.point_a * MM + a[:3, 3]) / MM,
+                                       (b[:3, :3] @ c.point_b * MM + b[:3, 3]) / MM, atol=1e-6)
+
+
+def test_the_lab_takes_its_design_limits_and_machines() -> None:
+    import gymnasium as gym
+
+    import orthoglide_env
+
+    env = gym.make(orthoglide_env.LAB_ENV_ID, design=SMALL, errors="paper")
+    try:
+        lab = env.unwrapped
+        box = env.action_space["rho"]
+        assert (box.low.min(), box.high.max()) == (SMALL.rho_min, SMALL.rho_max)
+        env.reset(seed=1)
+        assert lab.true_machine.design == SMALL
+        assert lab.travel == SMALL.gauge_travel
+        move = {"op": 0, "rho": np.array([0.0, 0.0, 55.0]), "stand": 0, "slot": 0}
+        with pytest.raises(ValueError, match=r"outside the joint limits \[-80, 50\] mm"):
+            env.step(move)
+        with pytest.raises(ValueError, match="machine key 'design' names another design"):
+            env.reset(options={"machine": {"design": PROTOTYPE.to_dict()}})
+        state = lab.np_random.bit_generator.state
+        with pytest.raises(ValueError, match="the machine's design is not the lab's"):
+            env.reset(options={"machine": MachineParams()})
+        assert lab.np_random.bit_generator.state == state  # a refused reset changes nothing
+    finally:
+        env.close()
+    with pytest.raises(ValueError, match="design must be a MachineDesign, got str"):
+        gym.make(orthoglide_env.LAB_ENV_ID, design=str(SMALL_FILE))
+    with pytest.raises(ValueError, match="slot_positions must be"):
+        gym.make(orthoglide_env.LAB_ENV_ID,
+                 design=MachineDesign.from_dict({"slot_positions": [0.3, 0.5]}))
