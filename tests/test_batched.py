@@ -14,7 +14,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from orthoglide_env.envs.backend import ExactMachine
 from orthoglide_env.instruments.gauges import (
     GaugeArray,
     GaugeSpec,
@@ -30,6 +29,7 @@ from orthoglide_env.instruments.gauges import (
     status_of,
     zero_gauges,
 )
+from orthoglide_env.lab.machines import ExactMachine
 from orthoglide_env.model.collisions import PAIR_NAMES, collision_mask, collisions, pair_gaps
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import (

@@ -130,14 +130,14 @@ def test_an_env_keeps_one_client_over_200_resets() -> None:
     env = gym.make(orthoglide_env.ENV_ID, backend="pybullet", render_mode="rgb_array")
     try:
         env.reset(seed=0)
-        client = env.unwrapped._sim.client
+        client = env.unwrapped._batch.backend.sim.client
         for seed in range(1, 201):
             env.reset(seed=seed)
             if seed % 7 == 0:
                 env.step(np.array([5.0, -3.0, 2.0]))
             if seed % 10 == 0:
                 env.render()
-            assert env.unwrapped._sim.client is client
+            assert env.unwrapped._batch.backend.sim.client is client
             assert client.getNumBodies() == (DRAWN if seed % 10 == 0 else BODIES)
             assert client.getNumConstraints() == CONSTRAINTS
         assert _connected_clients() == base + 1

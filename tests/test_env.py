@@ -12,8 +12,8 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import orthoglide_env
-from orthoglide_env.envs.task import DRIVE_SPEED, OVERTRAVEL_PENALTY, SETTLE_AND_READ
 from orthoglide_env.instruments.gauges import exact_readings
+from orthoglide_env.lab.operations import TIME
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture
 
@@ -99,7 +99,7 @@ def test_reward_is_the_experiment_time() -> None:
     env = make("exact")
     env.reset(seed=0)
     _, reward, *_ = env.step(np.array([40.0, -10.0, 0.0]))
-    assert reward == pytest.approx(-(40.0 / DRIVE_SPEED + SETTLE_AND_READ))
+    assert reward == pytest.approx(-(40.0 / TIME.drive_speed_mm_s + TIME.settle_and_read_s))
     env.close()
 
 
@@ -113,10 +113,10 @@ def test_overtravel_is_reported_and_penalised(backend: str) -> None:
         _, reward, terminated, _, info = env.step(target)
         assert "x-leg/y@0.5" in info["overtravel"] and not terminated
         assert info["status"][0] in ("overtravel", "missed")
-        assert reward <= -OVERTRAVEL_PENALTY
+        assert reward <= -TIME.overtravel_s
     # Staying in overtravel is not charged again; leaving and re-entering is.
     _, reward, *_ = env.step(paper_posture("YMin"))
-    assert reward == pytest.approx(-SETTLE_AND_READ)
+    assert reward == pytest.approx(-TIME.settle_and_read_s)
     env.step(np.zeros(3))
     _, reward, _, _, info = env.step(np.array([0.0, -12.0, 0.0]))
     assert "x-leg/y@0.5" in info["overtravel"]

@@ -20,6 +20,7 @@ import orthoglide_env
 from orthoglide_env.envs import calibration as env_module
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import MachineParams
+from orthoglide_env.sim.pybullet import OrthoglideMachine
 
 HAVE_PYBULLET = importlib.util.find_spec("orthoglide_env.sim.pybullet") is not None
 needs_pybullet = pytest.mark.skipif(not HAVE_PYBULLET, reason="orthoglide_env.sim.pybullet absent")
@@ -105,13 +106,23 @@ def test_failure_while_building_releases_the_new_machine(monkeypatch) -> None:
         e.reset(seed=1)
     clients = _connected_clients()
 
-    def refuse(*args: object) -> None:
-        raise ValueError("gauge(s) ['x-leg/y'] do not touch their bar at the Zero posture")
+    close_loops = OrthoglideMachine._close_loops
+    calls: list[object] = []
 
-    monkeypatch.setattr(env_module, "zero_gauges", refuse)
-    with pytest.raises(ValueError, match="do not touch"):
+    def refuse_once(machine: OrthoglideMachine) -> list:
+        calls.append(machine)
+        if len(calls) == 1:
+            raise ValueError("the loops do not close")
+        return close_loops(machine)
+
+    # Half way through building the new machine in the env's client (once: the old
+    # machine is then built again in its place).
+    monkeypatch.setattr(OrthoglideMachine, "_close_loops", refuse_once)
+    with pytest.raises(ValueError, match="do not close"):
         env.reset(seed=2)
+    assert len(calls) == 2
     assert _connected_clients() == clients
+    assert env._batch.backend.sim.client.getNumBodies() == 1  # the old machine, built again
     assert repr(env.step(FIRST)) == repr(untouched.step(FIRST))
     env.close()
     untouched.close()

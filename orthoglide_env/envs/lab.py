@@ -10,38 +10,23 @@ from __future__ import annotations
 
 from typing import Any, ClassVar
 
-import gymnasium as gym
 import numpy as np
 
-from orthoglide_env.envs.calibration import check_seed
-from orthoglide_env.instruments.gauges import (
-    DEFAULT_RESOLUTION,
-    DEFAULT_SIGMA,
-    Gauge,
-)
-from orthoglide_env.lab.engine import (
-    ACCURACY_UNIT_MM,
-    REWARDS,
-    Estimator,
-    ExactMachines,
-    LabBatch,
-    LabSettings,
-    Record,
-    SimulatedMachine,
-    check_actions,
-    step_info,
-)
-from orthoglide_env.lab.operations import PAPER_SLOTS, TRACKER_SIGMA
+from orthoglide_env.envs.base import ROW, EngineEnv, check_seed, first, reset_options
+from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
+from orthoglide_env.lab.actions import check_lab_actions
+from orthoglide_env.lab.engine import ACCURACY_UNIT_MM, StepResult
+from orthoglide_env.lab.notebook import Estimator, Record
+from orthoglide_env.lab.operations import OP_NAMES, PAPER_SLOTS, TRACKER_SIGMA
+from orthoglide_env.lab.settings import lab_settings, lab_spaces
+from orthoglide_env.lab.spec import LAB, RENDER_MODES, REWARDS, arguments_of
 from orthoglide_env.model.design import MachineDesign
-from orthoglide_env.model.errors import DEFAULT_PRESET, MachineParams, check_validity
+from orthoglide_env.model.errors import DEFAULT_PRESET
 
 __all__ = ["ACCURACY_UNIT_MM", "REWARDS", "Estimator", "OrthoglideLabEnv", "Record"]
 
-#: The one episode of a lone lab, in its batch.
-_ROW = np.zeros(1, dtype=np.intp)
 
-
-class OrthoglideLabEnv(gym.Env):
+class OrthoglideLabEnv(EngineEnv):
     """A calibration lab around a virtual Orthoglide: gauge stands, a tracker, a clock.
 
     Each episode draws a machine (or takes one from ``reset(options={"machine": ...})``)
@@ -85,7 +70,11 @@ class OrthoglideLabEnv(gym.Env):
     =============  ==================================  ====  ============================
     gauges         reading of each stand's gauge        mm   [-travel, travel]
     valid          1 where that reading is valid        -    {0, 1}
-    engaged        1 where the plunger is down          -    {0, 1}
+    engaged        1 where the plunger is down and      -    {0, 1}
+                   the gauge in service
+    faulted        1 where the gauge was pushed past    -    {0, 1}
+                   its travel: out of service until
+                   re-mounted (a lifted one is 0)
     slot           slot index of each stand, or        -    {0 .. len(SLOTS)}
                    len(SLOTS) when not mounted
     mounting       how many times the stand was         -    [0, 1e6]
@@ -93,12 +82,18 @@ class OrthoglideLabEnv(gym.Env):
     joints         encoder readings                     mm   [-101, 61]
     tracker        reflector in the tracker's frame     mm   [-1e5, 1e5] (0 without one)
     tracker_valid  1 when the tracker read              -    {0, 1}
-    time           seconds used so far                  s    [0, inf)
+    time           seconds used so far                  s    [0, budget_s + longest
+                                                             step] (see below)
     =============  ==================================  ====  ============================
 
-    A reading that is not valid is 0.0: use ``valid``.  Every reading is also written to
-    ``records`` (the lab notebook: instrument, mounting, posture, value), which agents and
-    estimators read; the machine's truth stays on ``true_machine`` for scoring only.
+    A reading that is not valid is 0.0: use ``valid``.  A stand that is not engaged is
+    lifted (``faulted`` 0) or out of service (``faulted`` 1).  The clock stops at the first
+    step that reaches ``budget_s``, so it never passes ``budget_s`` plus the longest step
+    (a re-mount from the far corner with the tracker and every stand pushed past its
+    travel: :meth:`~orthoglide_env.lab.settings.LabSettings.longest_step`).  Every reading
+    is also written to ``records`` (the lab notebook: instrument, mounting, posture,
+    value), which agents and estimators read; the machine's truth stays on
+    ``true_machine`` for scoring only.
 
     Reward (``reward=`` at construction)
     ------------------------------------
@@ -130,17 +125,27 @@ class OrthoglideLabEnv(gym.Env):
     records' information at the nominal machine, is at most ``success_mm``) and
     ``predicted_tcp_rigid_mm``.
 
-    Kwargs: ``errors`` (preset), ``gauge_sigma``, ``gauge_resolution`` (mm), ``backend``
-    (``exact`` or ``pybullet``), ``stands`` (default 6), ``tracker`` (a laser tracker on
-    the platform, read at every move), ``tracker_sigma`` (mm), ``budget_s``, ``reward``,
-    ``estimator`` (for ``accuracy``: records and sigma to a ``MachineParams``, e.g.
-    ``calibrators.experiment.make_estimator()``), ``time_weight``, ``success_mm``, ``travel``
-    (default: the design's gauge travel), ``design`` (the machines'
+    Render modes
+    ------------
+    ``rgb_array`` (PyBullet's TinyRenderer in DIRECT mode, no window) and ``human`` (a
+    PyBullet GUI window), on the ``pybullet`` backend only; ``metadata["render_modes"]``
+    of an instance lists what it can draw here.  ``render_mode="human"`` without a display
+    raises ``ValueError`` (PyBullet's GUI would end the process).
+
+    Kwargs (types and ranges: :data:`orthoglide_env.lab.spec.LAB`): ``errors`` (preset),
+    ``gauge_sigma``, ``gauge_resolution`` (mm), ``backend`` (``exact`` or ``pybullet``),
+    ``stands`` (default 6), ``tracker`` (a laser tracker on the platform, read at every
+    move), ``tracker_sigma`` (mm), ``budget_s``, ``reward``, ``estimator`` (for
+    ``accuracy``: records and sigma to a ``MachineParams``, e.g.
+    ``calibrators.experiment.make_estimator()``), ``time_weight``, ``success_mm``,
+    ``travel`` (default: the design's gauge travel), ``design`` (the machines'
     :class:`~orthoglide_env.model.design.MachineDesign`, default the prototype: its
-    control limits bound ``rho``, its errors' validity range the machines).
+    control limits bound ``rho``, its errors' validity range the machines),
+    ``render_mode``.  A bad argument raises ``ValueError`` naming it and its
+    rule.
     """
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": list(RENDER_MODES), "render_fps": 4}
 
     def __init__(
         self,
@@ -158,23 +163,20 @@ class OrthoglideLabEnv(gym.Env):
         success_mm: float = 0.01,
         travel: float | None = None,
         design: MachineDesign | None = None,
+        render_mode: str | None = None,
     ) -> None:
-        settings = LabSettings.check(errors, gauge_sigma, gauge_resolution, backend, stands,
-                                     tracker, tracker_sigma, budget_s, reward, estimator,
-                                     time_weight, success_mm, travel, design)
-        self.settings = settings
+        settings = lab_settings(arguments_of(LAB, locals()))
         self.design = settings.design
         self.preset, self.noise = settings.preset, settings.noise
         self.backend_name, self.n_stands, self.tracker = backend, settings.stands, settings.tracker
-        self.tracker_sigma, self.budget_s, self.reward_mode = tracker_sigma, budget_s, reward
-        self.estimator, self.time_weight, self.success_mm = estimator, time_weight, success_mm
+        self.tracker_sigma, self.budget_s = settings.tracker_sigma, settings.budget_s
+        self.reward_mode, self.estimator = reward, estimator
+        self.time_weight, self.success_mm = settings.time_weight, settings.success_mm
         self.travel = settings.travel
-        self.action_space, self.observation_space = settings.spaces()
-        # The lab's rules live in the batch (orthoglide_env.lab.engine): one lab is a batch
+        self.action_space, self.observation_space = lab_spaces(settings)
+        # The lab's rules live in the engine (orthoglide_env.lab.engine): one lab is a batch
         # of one episode, the native vector env a batch of many.
-        self._batch = LabBatch(settings, 1, ExactMachines() if backend == "exact"
-                               else SimulatedMachine())
-        self._started = False
+        self._start_engine(settings)
 
     # -- the episode, as the lab's notebook and clock show it -------------------------------
     @property
@@ -189,15 +191,6 @@ class OrthoglideLabEnv(gym.Env):
 
     # -- ground truth, for the scorer only -------------------------------------------------
     @property
-    def true_machine(self) -> MachineParams:
-        return self._require()[0]
-
-    @property
-    def true_gauges(self) -> list[Gauge]:
-        """Every installation of the episode, in mounting order (scoring only)."""
-        return self._batch.true_gauges(0)
-
-    @property
     def true_tracker_frame(self) -> tuple[np.ndarray, np.ndarray]:
         """The tracker station's rotation and position (scoring only)."""
         return self._batch.tracker_rotation[0].copy(), self._batch.tracker_position[0].copy()
@@ -206,8 +199,8 @@ class OrthoglideLabEnv(gym.Env):
         """The true TCP (mm), as the machine shows it (scoring and fidelity checks only)."""
         batch = self._batch
         self._require()
-        return batch.backend.look(_ROW, batch.machines, batch.gauges[_ROW], batch.rho[_ROW],
-                                  batch.tcp[_ROW], batch.engaged[_ROW]).tcp[0]
+        return batch.backend.look(ROW, batch.machines, batch.gauges[ROW], batch.rho[ROW],
+                                  batch.tcp[ROW], batch.engaged[ROW]).tcp[0]
 
     # -- Gymnasium API --------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -215,30 +208,18 @@ class OrthoglideLabEnv(gym.Env):
         # Every option is checked before anything changes: a refused reset leaves the
         # episode (and its random stream) as it was.
         check_seed(seed)
-        if not isinstance(options, dict | None):
-            raise ValueError("reset options must be a dict")
-        given = reset_machine(options, self.design)
-        super().reset(seed=seed)
-        obs = self._batch.reset(_ROW, [self.np_random], given)
-        self._started = True
-        return _first(obs), step_info("reset", 0.0, [], "")
+        machine, _ = reset_options(options, self.design)
+        return self._reset_engine(seed, machine, None), RESET_INFO | {"overtravel": []}
 
     def step(self, action: dict[str, Any]
              ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         self._require()
-        op, rho, stand, slot = (part[None] for part in check_actions(
-            action, (), self.n_stands, design=self.design))
-        result = self._batch.step(_ROW, op, rho, stand, slot)
-        return (_first(result.obs), float(result.reward[0]), bool(result.terminated[0]),
-                bool(result.truncated[0]), result.info(0))
-
-    def close(self) -> None:
-        self._batch.backend.close()
-
-    def _require(self) -> MachineParams:
-        if not self._started:
-            raise RuntimeError("call reset() before using the environment")
-        return self._batch.require()
+        op, rho, stand, slot = (part[None]
+                                for part in check_lab_actions(action, (), self.n_stands,
+                                                              design=self.design))
+        result = self._batch.step(ROW, op, rho, stand, slot)
+        return (first(result.obs), float(result.reward[0]), bool(result.terminated[0]),
+                bool(result.truncated[0]), step_info(result, 0))
 
     # -- what the records say ------------------------------------------------------------------
     def final_tcp_rigid_mm(self) -> float:
@@ -258,28 +239,16 @@ class OrthoglideLabEnv(gym.Env):
         return self._batch.notebooks[0].predicted_tcp_rigid_mm()
 
 
-def reset_machine(options: dict[str, Any] | None, design: MachineDesign | None = None
-                  ) -> MachineParams | None:
-    """The machine of a lab's reset options (None: draw one), or ``ValueError``; a dict
-    without a ``design`` key is a machine of ``design``."""
-    options = dict(options or {})
-    unknown = sorted(set(options) - {"machine"})
-    if unknown:
-        raise ValueError(f"unknown reset option(s) {unknown}; allowed: machine")
-    given = options.get("machine")
-    if isinstance(given, dict):
-        return MachineParams.from_dict(given, design=design)
-    if isinstance(given, MachineParams):
-        if design is not None and given.design != design:
-            raise ValueError("reset option 'machine': the machine's design is not the lab's "
-                             "(give the lab its design: design=...)")
-        return check_validity(given)
-    if given is not None:
-        raise ValueError("reset option 'machine' must be a dict in the machine file schema "
-                         "or a MachineParams")
-    return None
+#: The info of a reset (with a fresh ``overtravel`` list).
+RESET_INFO: dict[str, Any] = {"op": "reset", "step_time_s": 0.0, "collision": ""}
 
 
-def _first(obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """The lone episode's row of a batch's observation."""
-    return {key: value[0] for key, value in obs.items()}
+def step_info(result: StepResult, i: int) -> dict[str, Any]:
+    """Row ``i``'s info of an engine step, as the lab env gives it."""
+    info = {"op": OP_NAMES[result.op[i]], "step_time_s": float(result.seconds[i]),
+            "overtravel": result.overtravel[i], "collision": result.collision[i],
+            "refused": result.refused[i]}
+    if result.terminated[i] or result.truncated[i]:
+        info.update(is_success=bool(result.success[i]),
+                    predicted_tcp_rigid_mm=float(result.predicted[i]))
+    return info

@@ -1,493 +1,52 @@
-"""The lab's rules on a batch of episodes: one implementation for one lab and for many.
+"""The lab's rules on a batch of episodes: one implementation for every face of the lab.
 
-``OrthoglideLab-v0`` (:mod:`orthoglide_env.envs.lab`, whose docstring is the spec) runs a
-:class:`LabBatch` of one episode; its native vector env (:mod:`orthoglide_env.envs.lab_vector`)
-runs one of N.  Every rule (refusals, the time table, gauge handling, overtravel,
-readings, the tracker, collisions, termination, rewards) is written once here, on arrays
-whose first axis is the episode, and every random draw comes from the episode's own
-stream in the order a lone lab draws it: the batched numbers equal the lone lab's to the
-last bit.  The machines themselves are behind :class:`LabMachines`: the exact model
-(:class:`ExactMachines`, any batch) or a PyBullet machine (:class:`SimulatedMachine`,
-a batch of one).
+``OrthoglideLab-v0`` (:mod:`orthoglide_env.envs.lab`) and ``OrthoglideCalibration-v0``
+(:mod:`orthoglide_env.envs.calibration`) run a :class:`LabBatch` of one episode; their
+native vector envs run one of N.  Every rule (refusals, the time table, gauge handling,
+overtravel, readings, the tracker, collisions, termination, rewards) is written once here,
+on arrays whose first axis is the episode, and every random draw comes from the episode's
+own stream in the order a lone lab draws it: the batched numbers equal the lone lab's to
+the last bit.  What differs between the faces is in their :class:`~orthoglide_env.lab.
+settings.LabSettings`; the machines are behind :class:`~orthoglide_env.lab.machines.
+LabMachines`.
 """
 
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields
-from typing import Any, NamedTuple, Protocol
+from typing import Any
 
 import numpy as np
-from gymnasium import spaces
 
-from orthoglide_env.envs.backend import ExactMachine, MachineBackend
 from orthoglide_env.instruments.gauges import (
     DEFAULT_TRAVEL,
-    NOISE_FLOOR,
     Gauge,
     GaugeArray,
-    GaugeNoise,
+    GaugeSpec,
     Status,
-    check_noise,
     install_array,
     installation_errors,
-    pressed_past_travel,
     readings_from_distances,
     status_of,
 )
-from orthoglide_env.lab.operations import (
-    OP_NAMES,
-    PAPER_SLOTS,
-    SLOT_NAMES,
-    SLOTS,
-    TIME,
-    TRACKER_DISTANCE,
-    Op,
-)
+from orthoglide_env.lab.machines import ExactMachine, LabMachines, Sight
+from orthoglide_env.lab.notebook import Notebook, Record, predicted_many
+from orthoglide_env.lab.operations import OP_NAMES, SLOTS, TIME, TRACKER_DISTANCE, Op
+from orthoglide_env.lab.settings import LabSettings
 from orthoglide_env.model.collisions import PAIR_NAMES, collision_names
-from orthoglide_env.model.design import PROTOTYPE, MachineDesign
-from orthoglide_env.model.errors import (
-    AXIS_NAMES,
-    ERROR_NAMES,
-    ErrorPreset,
-    MachineParams,
-    check_rho,
-    get_preset,
-)
+from orthoglide_env.model.errors import AXIS_NAMES, MachineParams
 from orthoglide_env.model.kinematics import UnreachableError, direct
-from orthoglide_env.model.reading_model import (
-    Design,
-    ParameterSpace,
-    Spec,
-    TrackerAxis,
-    default_scales,
-    jacobian,
-    station_of,
-)
-from orthoglide_env.scoring import predicted_tcp_frames, score
+from orthoglide_env.model.reading_model import TrackerAxis
+from orthoglide_env.scoring import score
 
-REWARDS: tuple[str, ...] = ("time", "accuracy", "information")
 #: The accuracy reward counts the final TCP error (after the best-fit rigid motion) in
 #: units of this many mm, and time in hours: -error/unit - time_weight * hours.
 ACCURACY_UNIT_MM: float = 0.01
-ENCODER_MARGIN: float = 1.0
 #: Operations that put the machine somewhere and read it.
 _READS: tuple[Op, ...] = (Op.MOVE, Op.REMOUNT)
 
 
-@dataclass(frozen=True)
-class Record:
-    """One reading the lab wrote down: which instrument, which mounting, where, what."""
-
-    spec: Spec  # a gauge's slot, or one coordinate of the tracker
-    mounting: str
-    rho: tuple[float, float, float]
-    reading: float
-    step: int
-    time_s: float  # lab time when it was read
-
-
-Estimator = Callable[[list[Record], float], MachineParams]
-
-
-@dataclass(frozen=True)
-class LabSettings:
-    """A lab's checked construction arguments (see the lab env's docstring)."""
-
-    preset: ErrorPreset
-    noise: GaugeNoise
-    backend: str
-    stands: int
-    tracker: bool
-    tracker_sigma: float
-    budget_s: float
-    reward: str
-    estimator: Estimator | None
-    time_weight: float
-    success_mm: float
-    travel: float
-    design: MachineDesign = PROTOTYPE
-
-    @classmethod
-    def check(cls, errors: str, gauge_sigma: float, gauge_resolution: float, backend: str,
-              stands: int, tracker: bool, tracker_sigma: float, budget_s: float, reward: str,
-              estimator: Estimator | None, time_weight: float, success_mm: float,
-              travel: float | None, design: MachineDesign | None = None) -> LabSettings:
-        """The settings, or ``ValueError`` naming the first bad argument.  ``design``: the
-        machines' design (default the prototype); ``travel`` None: its gauge travel."""
-        design = PROTOTYPE if design is None else design
-        if not isinstance(design, MachineDesign):
-            raise ValueError(f"design must be a MachineDesign, got {type(design).__name__}")
-        if design.slot_positions != PROTOTYPE.slot_positions:
-            raise ValueError("the lab's slot indices are the prototype's slot catalogue: a "
-                             f"design's slot_positions must be {list(PROTOTYPE.slot_positions)}")
-        travel = design.gauge_travel if travel is None else travel
-        preset = get_preset(errors)
-        if backend not in ("exact", "pybullet"):
-            raise ValueError(f"unknown backend '{backend}'; choose from ['exact', 'pybullet']")
-        if reward not in REWARDS:
-            raise ValueError(f"unknown reward '{reward}'; choose from {list(REWARDS)}")
-        if reward == "accuracy" and estimator is None:
-            raise ValueError("reward 'accuracy' needs an estimator: records -> machine, e.g. "
-                             "calibrators.experiment.make_estimator()")
-        if not 1 <= int(stands) <= len(SLOTS):
-            raise ValueError(f"stands must be between 1 and {len(SLOTS)}, got {stands}")
-        for name, value in (("budget_s", budget_s), ("success_mm", success_mm),
-                            ("tracker_sigma", tracker_sigma), ("travel", travel)):
-            if not (np.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be a positive number, got {value}")
-        if not (np.isfinite(time_weight) and time_weight >= 0):
-            raise ValueError(f"time_weight must be a number >= 0, got {time_weight}")
-        noise = check_noise(gauge_sigma, gauge_resolution, travel)
-        return cls(preset, noise, backend, int(stands), bool(tracker), tracker_sigma, budget_s,
-                   reward, estimator, time_weight, success_mm, float(travel), design)
-
-    def spaces(self) -> tuple[spaces.Dict, spaces.Dict]:
-        """One lab's action and observation spaces."""
-        n = self.stands
-        action_space = spaces.Dict({
-            "op": spaces.Discrete(len(Op)),
-            "rho": spaces.Box(self.design.rho_min, self.design.rho_max, shape=(3,),
-                              dtype=np.float64),
-            "stand": spaces.Discrete(n),
-            "slot": spaces.Discrete(len(SLOTS)),
-        })
-        observation_space = spaces.Dict({
-            "gauges": spaces.Box(-self.travel, self.travel, shape=(n,), dtype=np.float64),
-            "valid": spaces.MultiBinary(n),
-            "engaged": spaces.MultiBinary(n),
-            "slot": spaces.MultiDiscrete([len(SLOTS) + 1] * n),
-            "mounting": spaces.Box(0.0, 1e6, shape=(n,), dtype=np.float64),
-            "joints": spaces.Box(self.design.rho_min - ENCODER_MARGIN,
-                                 self.design.rho_max + ENCODER_MARGIN, shape=(3,),
-                                 dtype=np.float64),
-            "tracker": spaces.Box(-1e5, 1e5, shape=(3,), dtype=np.float64),
-            "tracker_valid": spaces.MultiBinary(1),
-            "time": spaces.Box(0.0, self.budget_s + self.longest_step(), shape=(1,),
-                               dtype=np.float64),
-        })
-        return action_space, observation_space
-
-    def longest_step(self) -> float:
-        """The most one operation can cost (a re-mount from the far corner, the tracker, and
-        every stand pushed past its travel): the clock never passes budget + this."""
-        far = TIME.move(np.full(3, self.design.rho_min), np.full(3, self.design.rho_max))
-        return far + TIME.remount_s + TIME.tracker_point_s + TIME.overtravel_s * self.stands
-
-
-# -- actions -------------------------------------------------------------------------------
-def check_actions(action: Any, shape: tuple[int, ...], stands: int,
-                  rows: np.ndarray | None = None, design: MachineDesign = PROTOTYPE
-                  ) -> tuple[np.ndarray, ...]:
-    """``op``, ``rho``, ``stand``, ``slot`` of a lab action (``shape ()``) or of a batch of
-    them (``shape (N,)``, each field with the batch axis first), as arrays, or
-    ``ValueError`` naming the field (and the env).  ``rows``: the envs whose action is used
-    (the others are not checked); ``design``: whose control limits bound ``rho``."""
-    if not isinstance(action, dict) or set(action) != {"op", "rho", "stand", "slot"}:
-        raise ValueError("action must be a dict with keys op, rho, stand, slot")
-    used = np.ones(shape, dtype=bool) if rows is None else np.asarray(rows, dtype=bool)
-    op = _integers(action["op"], "op", len(Op), shape, used)
-    stand = _integers(action["stand"], "stand", stands, shape, used)
-    slot = _integers(action["slot"], "slot", len(SLOTS), shape, used)
-    moving = used & (op == Op.MOVE)
-    rho = np.zeros((*shape, 3))
-    if moving.any():
-        raw = action["rho"]
-        try:
-            given = np.array(raw, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError(f"action rho must be 3 numbers (mm), got {raw!r}") from None
-        if given.shape != (*shape, 3):
-            raise ValueError(f"action rho must have shape {(*shape, 3)}, got {given.shape}")
-        rho[moving] = given[moving]
-        try:
-            check_rho(rho[moving], design=design)
-        except ValueError as exc:
-            if shape:
-                bad = next(i for i in np.flatnonzero(moving)
-                           if not _valid_rho(rho[i], design))
-                raise ValueError(f"action rho of env {bad}: {exc}") from None
-            raise
-    return op, rho, stand, slot
-
-
-def _valid_rho(rho: np.ndarray, design: MachineDesign) -> bool:
-    try:
-        check_rho(rho, design=design)
-    except ValueError:
-        return False
-    return True
-
-
-def _integers(value: Any, name: str, size: int, shape: tuple[int, ...], used: np.ndarray
-              ) -> np.ndarray:
-    """An action's integer field: integers (not booleans) in ``[0, size)`` of ``shape``."""
-    array = np.asarray(value) if isinstance(value, int | np.integer | np.ndarray) else None
-    if array is None or array.dtype.kind not in "iu" or array.shape != shape:
-        if shape:
-            raise ValueError(f"action {name} must be an integer array of shape {shape}, got "
-                             f"{value!r}")
-        raise ValueError(f"action {name} must be an integer in [0, {size}), got {value!r}")
-    bad = used & ((array < 0) | (array >= size))
-    if bad.any():
-        where = f" of env {np.flatnonzero(bad)[0]}" if shape else ""
-        shown = array[np.flatnonzero(bad)[0]] if shape else value
-        raise ValueError(f"action {name}{where} must be an integer in [0, {size}), got "
-                         f"{shown!r}")
-    return np.where(used, array, 0).astype(np.int64)
-
-
-# -- the notebook and its information ---------------------------------------------------------
-class Notebook:
-    """One episode's lab notebook: its records, every installation (truth, for scoring),
-    and the information the records carry about the machine's errors."""
-
-    def __init__(self, gauge_sigma: float, tracker_sigma: float,
-                 design: MachineDesign = PROTOTYPE) -> None:
-        self.records: list[Record] = []
-        self._design = design
-        self._installed: dict[str, Gauge] = {}
-        #: The first installations, as mounting names and the row of a batch of gauge sets:
-        #: turned into gauges when asked for (a sweep's scoring never asks).
-        self._first: tuple[list[str], GaugeArray, int] | None = None
-        self._gauge_sigma = max(gauge_sigma, NOISE_FLOOR)
-        self._tracker_sigma = tracker_sigma
-        # Per mounting: count, sum and sum of outer products of its Jacobian rows, names.
-        self._sums: dict[str, tuple[int, Any, Any, tuple[str, ...]]] = {}
-        self._informed = 0  # records already in the sums
-        self._logdet = 0.0
-
-    def install(self, names: list[str], gauges: GaugeArray, row: int) -> None:
-        """The episode's first installations: ``names``' gauges are row ``row`` of
-        ``gauges``."""
-        self._installed, self._first = {}, (names, gauges, row)
-
-    @property
-    def installed(self) -> dict[str, Gauge]:
-        """Every installation by mounting name, in mounting order (truth, for scoring)."""
-        if self._first is not None:
-            names, gauges, row = self._first
-            self._first = None
-            self._installed = dict(zip(names, gauges[row].to_gauges(), strict=True))
-        return self._installed
-
-    def design_key(self) -> tuple:
-        """What the information depends on: every record's mounting and posture (a lab's
-        mounting name holds its slot, hence its instrument)."""
-        return tuple((r.mounting, r.rho) for r in self.records)
-
-    def _add_information(self, records: list[Record]) -> None:
-        """Add the records' rows of the Jacobian (at the nominal machine, per unit of each
-        parameter's scale, per unit of noise; one batched call) to their mountings' sums:
-        the information of a mounting, its zero eliminated, is ``S2 - S1 S1^T / n``."""
-        design = Design.of([r.mounting for r in records], [r.spec for r in records],
-                           np.array([r.rho for r in records]), self._design)
-        space = design.space
-        rows = jacobian(np.zeros(len(space)), design, np.ones(len(space), bool),
-                        default_scales(space))
-        for record, row, m in zip(records, rows, design.mounting, strict=True):
-            sigma = (self._tracker_sigma if isinstance(record.spec, TrackerAxis)
-                     else self._gauge_sigma)
-            # The mounting's own columns: the machine's errors and its instrument's.
-            mine = _mounting_columns(space, m)
-            names = tuple(space.names[c] for c in mine)
-            row = row[mine] / sigma
-            n, s1, s2, _ = self._sums.get(record.mounting, (0, 0.0, 0.0, names))
-            self._sums[record.mounting] = (n + 1, s1 + row, s2 + np.outer(row, row), names)
-
-    def information(self) -> tuple[np.ndarray, list[str]]:
-        """The records' information about every parameter they involve, in units of each
-        parameter's scale, and the parameters' names."""
-        if self._informed < len(self.records):
-            self._add_information(self.records[self._informed:])
-        self._informed = len(self.records)
-        names = list(ERROR_NAMES)
-        for _, _, _, mine in self._sums.values():
-            names += [n for n in mine if n not in names]
-        info = np.zeros((len(names), len(names)))
-        for n, s1, s2, mine in self._sums.values():
-            idx = [names.index(x) for x in mine]
-            info[np.ix_(idx, idx)] += s2 - np.outer(s1, s1) / n
-        return info, names
-
-    def share_information(self, other: Notebook) -> None:
-        """Take the information sums of ``other``, whose records read what this notebook's
-        read where they read it (:meth:`design_key`), both summed in one go: the same
-        numbers, computed once."""
-        self._sums, self._informed = dict(other._sums), other._informed
-
-    def update_logdet(self) -> float:
-        """The gain in log det(I + F) since the last call."""
-        info, _ = self.information()
-        logdet = float(np.linalg.slogdet(np.eye(len(info)) + info)[1])
-        gain, self._logdet = logdet - self._logdet, logdet
-        return gain
-
-    def predicted_tcp_rigid_mm(self) -> float:
-        """TCP error RMS after the best-fit rigid motion that the records' information
-        predicts (at the nominal machine, a priori sizes from the realistic preset)."""
-        info, names = self.information()
-        space = ParameterSpace()
-        n = len(ERROR_NAMES)
-        scale = np.concatenate([default_scales(space), np.ones(len(names) - n)])
-        posterior = np.linalg.inv(np.eye(len(info)) + info)[:n, :n]
-        covariance = posterior * np.outer(scale[:n], scale[:n])
-        return predicted_tcp_frames(MachineParams(design=self._design), covariance).rigid.rms
-
-
-def _mounting_columns(space: ParameterSpace, mounting: int) -> list[int]:
-    """Columns of ``space`` a reading of ``mounting`` depends on: the machine's errors and
-    its own instrument's parameters (a stand's four, a tracker station's three)."""
-    names = space.names
-    prefix = space.mountings[mounting]
-    if isinstance(space.specs[mounting], TrackerAxis):
-        prefix = station_of(prefix)
-    return list(range(len(ERROR_NAMES))) + [
-        c for c in range(len(ERROR_NAMES), len(names))
-        if names[c].rsplit(".", 1)[0] == prefix]
-
-
-def predicted_many(notebooks: Sequence[Notebook]) -> list[float]:
-    """:meth:`Notebook.predicted_tcp_rigid_mm` of each notebook; notebooks whose
-    information is not summed yet and whose records share a design share one computation
-    (a fixed plan on many machines reads the same design on each)."""
-    out: list[float] = []
-    done: dict[tuple, tuple[Notebook, float]] = {}
-    for book in notebooks:
-        if book._informed:
-            out.append(book.predicted_tcp_rigid_mm())
-            continue
-        key = book.design_key()
-        if key in done:
-            first, value = done[key]
-            book.share_information(first)
-        else:
-            value = book.predicted_tcp_rigid_mm()
-            done[key] = (book, value)
-        out.append(value)
-    return out
-
-
-# -- the machines -------------------------------------------------------------------------------
-class Sight(NamedTuple):
-    """What the machines of some episodes show at their postures (one row per episode)."""
-
-    t: np.ndarray  # (R, stands) ray distance of each stand's gauge; NaN where none
-    pressed: np.ndarray  # (R, stands) the target bar presses the gauge past its travel
-    crashed: np.ndarray  # (R, pairs) crash pairs in contact
-    tcp: np.ndarray  # (R, 3) true TCP
-
-
-class LabMachines(Protocol):
-    """The machines of a batch of lab episodes.  The batch keeps the machines' errors,
-    postures and gauges; a backend with machines of its own follows every change."""
-
-    def start(self, rows: np.ndarray, machines: MachineParams) -> None:
-        """New machines for episodes ``rows``, at Zero."""
-
-    def move(self, rows: np.ndarray, rho: np.ndarray) -> None:
-        """Drive the machines of ``rows`` to ``rho`` (R, 3), reachable and in limits."""
-
-    def set_gauges(self, rows: np.ndarray, gauges: GaugeArray, mounted: np.ndarray) -> None:
-        """The gauges (R, stands) of the episodes ``rows``, those ``mounted`` in place."""
-
-    def look(self, rows: np.ndarray, machines: MachineParams, gauges: GaugeArray,
-             rho: np.ndarray, tcp: np.ndarray, engaged: np.ndarray) -> Sight:
-        """What the machines of ``rows`` (errors ``machines``, gauges ``gauges`` of batch
-        shape (R,), postures ``rho``) show; ``tcp``: their TCPs where the exact model
-        already solved them (NaN rows where not); ``engaged`` (R, stands): the gauges whose
-        tips are down (a lifted one reads nothing and cannot be pressed, so it may come
-        back NaN and unpressed)."""
-
-    def encoders(self, rows: np.ndarray, rho: np.ndarray) -> np.ndarray:
-        """Encoder readings (R, 3) of the machines of ``rows`` (commanded at ``rho``)."""
-
-    def close(self) -> None:
-        """Release every resource."""
-
-
-class ExactMachines:
-    """The exact model: a machine is its errors and posture, so there is nothing to keep
-    in step; one :class:`~orthoglide_env.envs.backend.ExactMachine` computes any batch."""
-
-    def start(self, rows: np.ndarray, machines: MachineParams) -> None:
-        """Nothing to build."""
-
-    def move(self, rows: np.ndarray, rho: np.ndarray) -> None:
-        """Nothing to drive: the batch keeps the postures."""
-
-    def set_gauges(self, rows: np.ndarray, gauges: GaugeArray, mounted: np.ndarray) -> None:
-        """Nothing to install: the batch keeps the gauges."""
-
-    def look(self, rows: np.ndarray, machines: MachineParams, gauges: GaugeArray,
-             rho: np.ndarray, tcp: np.ndarray, engaged: np.ndarray) -> Sight:
-        # Only the stands engaged on some machine are traced (the paper's procedure keeps
-        # two of six down): their rays against every box are most of a look's arithmetic.
-        down = np.flatnonzero(engaged.any(axis=0))
-        if not len(down):
-            down = np.arange(1)  # the machines' boxes still need a gauge set to be built
-        traced = gauges.columns(down)
-        built = ExactMachine(machines, traced, rho,
-                             tcp=tcp if np.isfinite(tcp).all() else None)
-        t = np.full(engaged.shape, np.nan)
-        pressed = np.zeros(engaged.shape, dtype=bool)
-        t[:, down] = built.gauge_distances()
-        pressed[:, down] = pressed_past_travel(traced, *built.target_boxes())
-        return Sight(t, pressed, built.collision_mask(), built.tcp())
-
-    def encoders(self, rows: np.ndarray, rho: np.ndarray) -> np.ndarray:
-        return rho.copy()
-
-    def close(self) -> None:
-        """Nothing to release."""
-
-
-class SimulatedMachine:
-    """One PyBullet machine (a batch of one episode)."""
-
-    def __init__(self) -> None:
-        self.machine: MachineBackend | None = None
-
-    def start(self, rows: np.ndarray, machines: MachineParams) -> None:
-        from orthoglide_env.sim.pybullet import OrthoglideMachine
-
-        self.close()
-        self.machine = OrthoglideMachine(machines[0], [])
-
-    def move(self, rows: np.ndarray, rho: np.ndarray) -> None:
-        self._require().move(rho[0])
-
-    def set_gauges(self, rows: np.ndarray, gauges: GaugeArray, mounted: np.ndarray) -> None:
-        self._require().set_gauges([g for g, on in zip(gauges[0].to_gauges(), mounted[0],
-                                                       strict=True) if on])
-
-    def look(self, rows: np.ndarray, machines: MachineParams, gauges: GaugeArray,
-             rho: np.ndarray, tcp: np.ndarray, engaged: np.ndarray) -> Sight:
-        machine = self._require()
-        mounted = np.isfinite(gauges.origin[0, :, 0])  # the simulator holds these, in order
-        t = np.full(mounted.shape, np.nan)
-        pressed = np.zeros(mounted.shape, dtype=bool)
-        if mounted.any():
-            t[mounted] = machine.gauge_distances()
-            pressed[mounted] = pressed_past_travel(machine.gauges, *machine.target_boxes())
-        return Sight(t[None], pressed[None], machine.collision_mask()[None], machine.tcp()[None])
-
-    def encoders(self, rows: np.ndarray, rho: np.ndarray) -> np.ndarray:
-        return np.asarray(self._require().encoders(), dtype=np.float64)[None]
-
-    def _require(self) -> MachineBackend:
-        if self.machine is None:
-            raise RuntimeError("call reset() before using the environment")
-        return self.machine
-
-    def close(self) -> None:
-        if self.machine is not None:
-            self.machine.close()
-            self.machine = None
-
-
-# -- the batch ----------------------------------------------------------------------------------
 @dataclass
 class StepResult:
     """One step of episodes ``rows`` (one entry per row)."""
@@ -499,6 +58,7 @@ class StepResult:
     op: np.ndarray
     seconds: np.ndarray
     overtravel: list[list[str]]
+    new_overtravel: np.ndarray  # (R, stands) the stands pushed past their travel
     collision: list[str]
     refused: list[str]
     predicted: np.ndarray  # predicted TCP error at the end, NaN where the episode goes on
@@ -539,7 +99,9 @@ class LabBatch:
         self.mounts = np.zeros(n, dtype=np.int64)  # mountings so far (names new ones)
         self.slot = np.full((n, s), -1, dtype=np.int64)  # -1: not mounted
         self.engaged = np.zeros((n, s), dtype=bool)
-        self.faulted = np.zeros((n, s), dtype=bool)  # pushed past its travel
+        self.faulted = np.zeros((n, s), dtype=bool)  # pushed past its travel: out of service
+        self.pressed = np.zeros((n, s), dtype=bool)  # pressed past its travel at the last look
+        self.status = np.zeros((n, s), dtype=np.int64)  # Status of each reading at the last
         self.count = np.zeros((n, s), dtype=np.int64)  # times each stand was mounted
         self.mounting: list[list[str]] = [[""] * s for _ in range(n)]
         self.gauges = _unmounted((n, s), settings.travel)
@@ -547,6 +109,18 @@ class LabBatch:
         self.tracker_rotation = np.zeros((n, 3, 3))
         self.tracker_position = np.zeros((n, 3))
         self.tracker_reading = np.zeros((n, 3))
+        # The slots stands can be at, by name: the catalogue, and any other place a layout
+        # names (its index then lies past the catalogue's).
+        self.places: list[GaugeSpec] = list(SLOTS)
+        self._place_index = {spec.slot: k for k, spec in enumerate(SLOTS)}
+
+    def place(self, spec: GaugeSpec) -> int:
+        """The index of ``spec`` in :attr:`places` (added when new)."""
+        index = self._place_index.get(spec.slot)
+        if index is None:
+            index = self._place_index[spec.slot] = len(self.places)
+            self.places.append(spec)
+        return index
 
     def _notebook(self) -> Notebook:
         return Notebook(self.settings.noise.effective_sigma, self.settings.tracker_sigma,
@@ -559,27 +133,29 @@ class LabBatch:
 
     # -- reset --------------------------------------------------------------------------------
     def reset(self, rows: np.ndarray, streams: list[np.random.Generator],
-              machine: MachineParams | None = None) -> dict[str, np.ndarray]:
+              machine: MachineParams | None = None,
+              layout: tuple[GaugeSpec, ...] | None = None) -> dict[str, np.ndarray]:
         """New episodes for ``rows`` (each drawing from its stream in ``streams``, or on
-        ``machine`` when given): the stands at the paper's slots, zeroed at Zero, and the
-        first reading.  Their observation rows."""
+        ``machine`` when given): the stands at the slots of ``layout`` (default the
+        settings'), zeroed at Zero, and the first reading.  Their observation rows."""
         settings = self.settings
-        first = [int(s) for s in PAPER_SLOTS[: settings.stands]]
+        specs = settings.layout if layout is None else layout
+        first = [self.place(spec) for spec in specs]
         drawn, rotations, positions, errors = [], [], [], []
         for stream in streams:
             drawn.append(settings.preset.sample(stream, settings.design) if machine is None
                          else machine)
-            rotations.append(_random_rotation(stream))
-            direction = stream.normal(size=3)
-            positions.append(TRACKER_DISTANCE * direction / np.linalg.norm(direction))
+            if settings.station:
+                rotations.append(_random_rotation(stream))
+                direction = stream.normal(size=3)
+                positions.append(TRACKER_DISTANCE * direction / np.linalg.norm(direction))
             errors.append(installation_errors(len(first), settings.preset, stream))
         machines = MachineParams.stack(drawn)
-        installed = _installed(machines, [SLOTS[s] for s in first], settings.travel,
-                               np.stack(errors))
+        installed = _installed(machines, list(specs), settings.travel, np.stack(errors))
         # Nothing above is stored: a failure leaves every episode as it was.
+        self.backend.start(rows, machines)
         self.machines = machines if self.machines is None or len(rows) == self.size else (
             _with_rows(self.machines, rows, machines))
-        self.backend.start(rows, machines)
         for i, stream in zip(rows, streams, strict=True):
             self.streams[i] = stream
         self.rho[rows] = 0.0
@@ -592,30 +168,37 @@ class LabBatch:
         self.engaged[rows] = False
         self.engaged[rows, : len(first)] = True
         self.faulted[rows] = False
+        self.pressed[rows] = False
         self.count[rows] = 0
         self.count[rows, : len(first)] = 1
         self.gauges = _with_gauges(self.gauges, rows[:, None], np.arange(settings.stands),
                                    _unmounted((len(rows), settings.stands), settings.travel))
         self.gauges = _with_gauges(self.gauges, rows[:, None], np.arange(len(first)), installed)
-        names = [SLOT_NAMES[s] for s in first]
+        names = [spec.slot for spec in specs]
         for r, i in enumerate(rows):
             self.mounting[i] = names + [""] * (settings.stands - len(first))
             book = self._notebook()
             book.install(names, installed, r)
             self.notebooks[i] = book
-        self.tracker_rotation[rows] = rotations
-        self.tracker_position[rows] = positions
+        if settings.station:
+            self.tracker_rotation[rows] = rotations
+            self.tracker_position[rows] = positions
         self._sync(rows)
-        values = self._read(rows, np.zeros(len(rows)), self._look(rows))
+        sight = self._look(rows)
+        self.pressed[rows] = sight.pressed & self.engaged[rows]
+        values = self._read(rows, np.zeros(len(rows)), sight)
         return self.observation(rows, values)
 
     # -- step ---------------------------------------------------------------------------------
     def step(self, rows: np.ndarray, op: np.ndarray, rho: np.ndarray, stand: np.ndarray,
              slot: np.ndarray) -> StepResult:
-        """Apply each row's checked action (see :func:`check_actions`) to its episode."""
+        """Apply each row's checked action (see
+        :func:`~orthoglide_env.lab.actions.check_lab_actions`) to its episode."""
         settings = self.settings
         self.require()
         refused, reached = self._refusals(rows, op, rho, stand, slot)
+        if settings.strict_moves:
+            self._raise_unreachable(rows, op, rho, reached)
         ok = np.array([not r for r in refused], dtype=bool)
         moves, remounts = ok & (op == Op.MOVE), ok & (op == Op.REMOUNT)
         flicks = ok & ((op == Op.LIFT) | (op == Op.ENGAGE))
@@ -644,10 +227,19 @@ class LabBatch:
         sight = self._look(rows[looks])
         at = np.cumsum(looks) - 1  # row of each looked-at episode in ``sight``
         overtravel: list[list[str]] = [[] for _ in rows]
+        new_overtravel = np.zeros((len(rows), settings.stands), dtype=bool)
         if presses.any():
-            new = (sight.pressed[at[presses]] & self.engaged[rows[presses]]
-                   & ~self.faulted[rows[presses]] & (self.slot[rows[presses]] >= 0))
-            self.faulted[rows[presses]] |= new
+            pressing = rows[presses]
+            pressed = (sight.pressed[at[presses]] & self.engaged[pressing]
+                       & (self.slot[pressing] >= 0))
+            # A fault lasts until the stand is re-mounted; a momentary overtravel while the
+            # bar presses (staying pressed is not a new one).
+            before = self.faulted if settings.overtravel == "fault" else self.pressed
+            new = pressed & ~before[pressing]
+            if settings.overtravel == "fault":
+                self.faulted[pressing] |= new
+            self.pressed[pressing] = pressed
+            new_overtravel[presses] = new
             seconds[presses] += TIME.overtravel_s * np.count_nonzero(new, axis=-1)
             for r, hit in zip(np.flatnonzero(presses), new, strict=True):
                 overtravel[r] = [f"stand {k} ({self.mounting[rows[r]][k]})"
@@ -665,13 +257,35 @@ class LabBatch:
             collision[r] = ", ".join(collision_names(sight.crashed[at[r]]))
         terminated = (op == Op.STOP) | np.array([bool(c) for c in collision], dtype=bool)
         truncated = ~terminated & (self.time[rows] >= settings.budget_s)
+        if settings.max_steps is not None:  # a step limit ends a crashed episode too
+            truncated |= self.steps[rows] >= settings.max_steps
         ended = terminated | truncated
         reward = self._rewards(rows, seconds, ended)
         predicted = np.full(len(rows), np.nan)
         predicted[ended] = predicted_many([self.notebooks[i] for i in rows[ended]])
         return StepResult(self.observation(rows, values, reads), reward, terminated, truncated,
-                          op, seconds, overtravel, collision, refused, predicted,
+                          op, seconds, overtravel, new_overtravel, collision, refused,
+                          predicted,
                           ended & (predicted <= settings.success_mm))
+
+    def _raise_unreachable(self, rows: np.ndarray, op: np.ndarray, rho: np.ndarray,
+                           reached: np.ndarray) -> None:
+        """``ValueError`` for the first move its machine cannot be assembled at (naming its
+        env in a batch of many), before anything changes."""
+        bad = np.flatnonzero((op == Op.MOVE) & np.isnan(reached[:, 0]))
+        if not len(bad):
+            return
+        r = int(bad[0])
+        try:
+            direct(self.require()[rows[r]], rho[r])
+        except UnreachableError as exc:
+            reason = str(exc)
+        else:  # solved alone, not in the batch: the batch's reason is all there is
+            reason = "the machine cannot be assembled there"
+        where, after = ((f" of env {rows[r]}", "no env moves") if self.size > 1
+                        else ("", "it stays where it was"))
+        raise ValueError(f"action{where} {rho[r].tolist()} mm: {reason} on this machine; "
+                         f"{after}")
 
     def _refusals(self, rows: np.ndarray, op: np.ndarray, rho: np.ndarray, stand: np.ndarray,
                   slot: np.ndarray) -> tuple[list[str], np.ndarray]:
@@ -687,7 +301,7 @@ class LabBatch:
             out[r] = f"stand {stand[r]} is not mounted"
         others = (stands == slot[:, None]) & (np.arange(self.settings.stands) != stand[:, None])
         for r in np.flatnonzero((op == Op.REMOUNT) & others.any(axis=-1)):
-            out[r] = f"slot {SLOT_NAMES[slot[r]]} already holds a stand"
+            out[r] = f"slot {self.places[slot[r]].slot} already holds a stand"
         moves = np.flatnonzero(op == Op.MOVE)
         if len(moves):
             reached[moves] = assembled(self.require()[rows[moves]], rho[moves])
@@ -707,10 +321,10 @@ class LabBatch:
         for value in np.unique(slot):
             mine = np.flatnonzero(slot == value)
             try:
-                part = _installed(self.require()[rows[mine]], [SLOTS[value]],
+                part = _installed(self.require()[rows[mine]], [self.places[value]],
                                   self.settings.travel, errors[mine])
             except ValueError:
-                raise ValueError(f"slot {SLOT_NAMES[value]} cannot be reached on this "
+                raise ValueError(f"slot {self.places[value].slot} cannot be reached on this "
                                  "machine") from None
             for j, r in enumerate(mine):
                 per_row[r] = part[j]
@@ -724,9 +338,10 @@ class LabBatch:
         self.slot[rows, stand] = slot
         self.engaged[rows, stand] = True
         self.faulted[rows, stand] = False
+        self.pressed[rows, stand] = False
         self.count[rows, stand] += 1
         for r, (i, k, s) in enumerate(zip(rows, stand, slot, strict=True)):
-            name = f"{SLOT_NAMES[s]}#{self.mounts[i]}"
+            name = f"{self.places[s].slot}#{self.mounts[i]}"
             self.mounting[i][k] = name
             self.notebooks[i].installed[name] = gauges[r].to_gauges()[0]
 
@@ -756,7 +371,9 @@ class LabBatch:
         gauges = self.gauges if len(rows) == self.size else self.gauges[rows]
         mounted = self.slot[rows] >= 0
         ideal = readings_from_distances(gauges, sight.t)
-        good = status_of(gauges, sight.t) == Status.VALID
+        status = status_of(gauges, sight.t)
+        self.status[rows] = status
+        good = status == Status.VALID
         draws = np.zeros(ideal.shape)
         counts, full = mounted.sum(axis=1).tolist(), mounted.all(axis=1).tolist()
         for r, i in enumerate(rows.tolist()):
@@ -774,13 +391,21 @@ class LabBatch:
         noisy = settings.noise.applied(ideal, draws)
         valid = good & mounted & self.engaged[rows] & ~self.faulted[rows]
         values = np.where(valid, noisy, np.nan)
-        # The notebooks, written from plain lists (one Record per reading).
+        if settings.notebook:
+            self._write(rows, pending, valid, values)
+        return values
+
+    def _write(self, rows: np.ndarray, pending: np.ndarray, valid: np.ndarray,
+               values: np.ndarray) -> None:
+        """Write the ``valid`` gauge ``values`` (and the tracker's) of ``rows`` into their
+        notebooks, from plain lists (one Record per reading)."""
+        settings = self.settings
         index, rho = rows.tolist(), [tuple(p) for p in self.rho[rows].tolist()]
         steps, stamps = self.steps[rows].tolist(), (self.time[rows] + pending).tolist()
         read, slots = values.tolist(), self.slot[rows].tolist()
         for r, k in zip(*(part.tolist() for part in np.nonzero(valid)), strict=True):
             i = index[r]
-            self.notebooks[i].records.append(Record(SLOTS[slots[r][k]], self.mounting[i][k],
+            self.notebooks[i].records.append(Record(self.places[slots[r][k]], self.mounting[i][k],
                                                     rho[r], read[r][k], steps[r], stamps[r]))
         if settings.tracker:
             tracker = self.tracker_reading[rows].tolist()
@@ -788,7 +413,6 @@ class LabBatch:
                 self.notebooks[i].records.extend(
                     Record(TrackerAxis(c), f"tracker.{AXIS_NAMES[c]}", rho[r], tracker[r][c],
                            steps[r], stamps[r]) for c in range(3))
-        return values
 
     # -- rewards and observations --------------------------------------------------------------
     def _rewards(self, rows: np.ndarray, seconds: np.ndarray, ended: np.ndarray) -> np.ndarray:
@@ -828,6 +452,7 @@ class LabBatch:
             "gauges": np.where(valid, values, 0.0),
             "valid": valid.astype(np.int8),
             "engaged": (self.engaged[rows] & ~self.faulted[rows]).astype(np.int8),
+            "faulted": self.faulted[rows].astype(np.int8),
             "slot": np.where(slot >= 0, slot, len(SLOTS)).astype(np.int64),
             "mounting": self.count[rows].astype(np.float64),
             "joints": self.backend.encoders(rows, self.rho[rows]),

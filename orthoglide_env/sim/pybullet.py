@@ -23,7 +23,6 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from orthoglide_env.envs.backend import check_motion_mode
 from orthoglide_env.instruments.gauges import (
     GAUGE_BODY_RADIUS,
     RAY_BACKOFF,
@@ -35,6 +34,7 @@ from orthoglide_env.instruments.gauges import (
     on_flat_face,
     ray_box_distance,
 )
+from orthoglide_env.lab.machines import check_motion_mode
 from orthoglide_env.model.collisions import collision_names, crash_pairs
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import LEG_NAMES, MachineParams

@@ -1,0 +1,146 @@
+"""What both envs share: a lone episode of the lab engine, its reset options and seeds.
+
+``OrthoglideLab-v0`` and ``OrthoglideCalibration-v0`` are faces of one engine
+(:mod:`orthoglide_env.lab.engine`): each is an :class:`EngineEnv`, a batch of one episode
+with the env's settings, and says only how its actions, observations and infos look.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from orthoglide_env.instruments.gauges import Gauge, GaugeSpec
+from orthoglide_env.lab.engine import LabBatch
+from orthoglide_env.lab.machines import ExactMachines, LabMachines, SimulatedMachine
+from orthoglide_env.lab.settings import LabSettings, render_modes
+from orthoglide_env.lab.spec import Layout
+from orthoglide_env.model.design import MachineDesign
+from orthoglide_env.model.errors import MachineParams, check_validity
+
+#: The one episode of a lone env, in its batch.
+ROW = np.zeros(1, dtype=np.intp)
+
+
+def check_seed(seed: Any) -> None:
+    """Gymnasium's rule (None or an int >= 0), with booleans refused and a ValueError."""
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
+        raise ValueError(f"reset seed must be None or an integer >= 0, got {seed!r}")
+
+
+def reset_options(options: Any, design: MachineDesign, stands: int | None = None
+                  ) -> tuple[MachineParams | None, tuple[GaugeSpec, ...] | None]:
+    """The checked reset options: the given machine of ``design`` (None: draw one) and,
+    where the env takes a ``gauges`` option (``stands``: how many gauges it observes), the
+    layout (None: the constructor's)."""
+    allowed = ("machine",) if stands is None else ("machine", "gauges")
+    if options is None:
+        options = {}
+    if not isinstance(options, Mapping):
+        raise ValueError(f"reset options must be a dict or None, got {options!r}")
+    unknown = [key for key in options if key not in allowed]
+    if unknown:
+        raise ValueError(f"unknown reset option(s) {unknown}; allowed: {', '.join(allowed)}")
+    layout = Layout().check("reset option 'gauges'", options.get("gauges"))
+    if layout is not None and len(layout) != stands:
+        raise ValueError(f"reset option 'gauges': this env observes {stands} gauges; a layout "
+                         f"of {len(layout)} needs an env built with gauges=[...] of that size")
+    return _machine_option(options.get("machine"), design), layout
+
+
+def _machine_option(value: Any, design: MachineDesign) -> MachineParams | None:
+    """The ``machine`` reset option.  None, like leaving the key out, draws a machine from
+    the preset (as ``seed=None`` and ``options=None`` mean "nothing given" in Gymnasium);
+    anything else must be a dict in the machine file schema (a machine of ``design``
+    unless it names its own) or a ``MachineParams`` of ``design``, inside the design's
+    validity range."""
+    if value is None:
+        return None
+    try:
+        if isinstance(value, MachineParams):
+            if value.design != design:
+                raise ValueError("the machine's design is not the lab's (give the lab its "
+                                 "design: OrthoglideLab-v0, design=...)")
+            return check_validity(value)
+        if isinstance(value, dict):
+            return MachineParams.from_dict(value, design=design)
+    except ValueError as exc:
+        raise ValueError(f"reset option 'machine': {exc}") from None
+    raise ValueError(
+        "reset option 'machine' must be a dict in the machine file schema, a MachineParams "
+        f"or None (draw one from the preset), got {type(value).__name__} {value!r}"
+    )
+
+
+def machines_for(settings: LabSettings) -> LabMachines:
+    """The machine back-end of an env with ``settings``."""
+    if settings.backend == "exact":
+        return ExactMachines()
+    return SimulatedMachine(settings.motion, gui=settings.render_mode == "human")
+
+
+def first(obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The lone episode's row of a batch's observation."""
+    return {key: value[0] for key, value in obs.items()}
+
+
+class EngineEnv(gym.Env):
+    """One episode of the lab engine with ``settings`` (a subclass sets its spaces).
+
+    A refused reset changes nothing: the episode before it goes on (machine, gauges,
+    posture and random stream), or, before the first good reset, every ``step`` still
+    raises ``RuntimeError``."""
+
+    def _start_engine(self, settings: LabSettings) -> None:
+        self.settings = settings
+        self.render_mode = settings.render_mode
+        # What this instance can draw: the class lists every mode for gym.make; the exact
+        # backend draws nothing and a window needs a display.
+        self.metadata = {**self.metadata, "render_modes": render_modes(settings.backend)}
+        self._batch = LabBatch(settings, 1, machines_for(settings))
+        self._started = False
+
+    def _reset_engine(self, seed: int | None, machine: MachineParams | None,
+                      layout: tuple[GaugeSpec, ...] | None) -> dict[str, np.ndarray]:
+        """A new episode (the checked ``seed`` and reset options); its first observation
+        (the batch's row)."""
+        rng = self._np_random
+        saved = (rng, None if rng is None else rng.bit_generator.state, self._np_random_seed)
+        super().reset(seed=seed)
+        try:
+            obs = self._batch.reset(ROW, [self.np_random], machine, layout)
+        except BaseException:
+            self._np_random, self._np_random_seed = saved[0], saved[2]
+            if saved[0] is not None:
+                saved[0].bit_generator.state = saved[1]
+            raise
+        self._started = True
+        return first(obs)
+
+    # -- ground truth, for the scorer only --------------------------------------------------
+    @property
+    def true_machine(self) -> MachineParams:
+        return self._require()[0]
+
+    @property
+    def true_gauges(self) -> list[Gauge]:
+        """Every installation of the episode, in mounting order (scoring only)."""
+        self._require()
+        return self._batch.true_gauges(0)
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode == "rgb_array":
+            self._require()
+            return self._batch.backend.render()
+        return None
+
+    def close(self) -> None:
+        self._batch.backend.close()
+
+    def _require(self) -> MachineParams:
+        if not self._started:
+            raise RuntimeError("call reset() before using the environment")
+        return self._batch.require()

@@ -1,0 +1,175 @@
+"""A lab episode's notebook: every reading written down, and the information it carries.
+
+:class:`Record` is one reading (instrument, mounting, posture, value, when); a
+:class:`Notebook` holds an episode's records, every installation (the truth, for scoring)
+and the information sums of the records about the machine's errors, which the lab's
+``information`` reward and its predicted TCP error (``info["predicted_tcp_rigid_mm"]``)
+are made of.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from orthoglide_env.instruments.gauges import NOISE_FLOOR, Gauge, GaugeArray
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.errors import ERROR_NAMES, MachineParams
+from orthoglide_env.model.reading_model import (
+    Design,
+    ParameterSpace,
+    Spec,
+    TrackerAxis,
+    default_scales,
+    jacobian,
+    station_of,
+)
+from orthoglide_env.scoring import predicted_tcp_frames
+
+
+@dataclass(frozen=True)
+class Record:
+    """One reading the lab wrote down: which instrument, which mounting, where, what."""
+
+    spec: Spec  # a gauge's slot, or one coordinate of the tracker
+    mounting: str
+    rho: tuple[float, float, float]
+    reading: float
+    step: int
+    time_s: float  # lab time when it was read
+
+
+Estimator = Callable[[list[Record], float], MachineParams]
+
+
+class Notebook:
+    """One episode's lab notebook: its records, every installation (truth, for scoring),
+    and the information the records carry about the machine's errors."""
+
+    def __init__(self, gauge_sigma: float, tracker_sigma: float,
+                 design: MachineDesign = PROTOTYPE) -> None:
+        self.records: list[Record] = []
+        self._design = design
+        self._installed: dict[str, Gauge] = {}
+        #: The first installations, as mounting names and the row of a batch of gauge sets:
+        #: turned into gauges when asked for (a sweep's scoring never asks).
+        self._first: tuple[list[str], GaugeArray, int] | None = None
+        self._gauge_sigma = max(gauge_sigma, NOISE_FLOOR)
+        self._tracker_sigma = tracker_sigma
+        # Per mounting: count, sum and sum of outer products of its Jacobian rows, names.
+        self._sums: dict[str, tuple[int, Any, Any, tuple[str, ...]]] = {}
+        self._informed = 0  # records already in the sums
+        self._logdet = 0.0
+
+    def install(self, names: list[str], gauges: GaugeArray, row: int) -> None:
+        """The episode's first installations: ``names``' gauges are row ``row`` of
+        ``gauges``."""
+        self._installed, self._first = {}, (names, gauges, row)
+
+    @property
+    def installed(self) -> dict[str, Gauge]:
+        """Every installation by mounting name, in mounting order (truth, for scoring)."""
+        if self._first is not None:
+            names, gauges, row = self._first
+            self._first = None
+            self._installed = dict(zip(names, gauges[row].to_gauges(), strict=True))
+        return self._installed
+
+    def design_key(self) -> tuple:
+        """What the information depends on: every record's mounting and posture (a lab's
+        mounting name holds its slot, hence its instrument)."""
+        return tuple((r.mounting, r.rho) for r in self.records)
+
+    def _add_information(self, records: list[Record]) -> None:
+        """Add the records' rows of the Jacobian (at the nominal machine, per unit of each
+        parameter's scale, per unit of noise; one batched call) to their mountings' sums:
+        the information of a mounting, its zero eliminated, is ``S2 - S1 S1^T / n``."""
+        design = Design.of([r.mounting for r in records], [r.spec for r in records],
+                           np.array([r.rho for r in records]), self._design)
+        space = design.space
+        rows = jacobian(np.zeros(len(space)), design, np.ones(len(space), bool),
+                        default_scales(space))
+        for record, row, m in zip(records, rows, design.mounting, strict=True):
+            sigma = (self._tracker_sigma if isinstance(record.spec, TrackerAxis)
+                     else self._gauge_sigma)
+            # The mounting's own columns: the machine's errors and its instrument's.
+            mine = _mounting_columns(space, m)
+            names = tuple(space.names[c] for c in mine)
+            row = row[mine] / sigma
+            n, s1, s2, _ = self._sums.get(record.mounting, (0, 0.0, 0.0, names))
+            self._sums[record.mounting] = (n + 1, s1 + row, s2 + np.outer(row, row), names)
+
+    def information(self) -> tuple[np.ndarray, list[str]]:
+        """The records' information about every parameter they involve, in units of each
+        parameter's scale, and the parameters' names."""
+        if self._informed < len(self.records):
+            self._add_information(self.records[self._informed:])
+        self._informed = len(self.records)
+        names = list(ERROR_NAMES)
+        for _, _, _, mine in self._sums.values():
+            names += [n for n in mine if n not in names]
+        info = np.zeros((len(names), len(names)))
+        for n, s1, s2, mine in self._sums.values():
+            idx = [names.index(x) for x in mine]
+            info[np.ix_(idx, idx)] += s2 - np.outer(s1, s1) / n
+        return info, names
+
+    def share_information(self, other: Notebook) -> None:
+        """Take the information sums of ``other``, whose records read what this notebook's
+        read where they read it (:meth:`design_key`), both summed in one go: the same
+        numbers, computed once."""
+        self._sums, self._informed = dict(other._sums), other._informed
+
+    def update_logdet(self) -> float:
+        """The gain in log det(I + F) since the last call."""
+        info, _ = self.information()
+        logdet = float(np.linalg.slogdet(np.eye(len(info)) + info)[1])
+        gain, self._logdet = logdet - self._logdet, logdet
+        return gain
+
+    def predicted_tcp_rigid_mm(self) -> float:
+        """TCP error RMS after the best-fit rigid motion that the records' information
+        predicts (at the nominal machine, a priori sizes from the realistic preset)."""
+        info, names = self.information()
+        space = ParameterSpace()
+        n = len(ERROR_NAMES)
+        scale = np.concatenate([default_scales(space), np.ones(len(names) - n)])
+        posterior = np.linalg.inv(np.eye(len(info)) + info)[:n, :n]
+        covariance = posterior * np.outer(scale[:n], scale[:n])
+        return predicted_tcp_frames(MachineParams(design=self._design), covariance).rigid.rms
+
+
+def _mounting_columns(space: ParameterSpace, mounting: int) -> list[int]:
+    """Columns of ``space`` a reading of ``mounting`` depends on: the machine's errors and
+    its own instrument's parameters (a stand's four, a tracker station's three)."""
+    names = space.names
+    prefix = space.mountings[mounting]
+    if isinstance(space.specs[mounting], TrackerAxis):
+        prefix = station_of(prefix)
+    return list(range(len(ERROR_NAMES))) + [
+        c for c in range(len(ERROR_NAMES), len(names))
+        if names[c].rsplit(".", 1)[0] == prefix]
+
+
+def predicted_many(notebooks: Sequence[Notebook]) -> list[float]:
+    """:meth:`Notebook.predicted_tcp_rigid_mm` of each notebook; notebooks whose
+    information is not summed yet and whose records share a design share one computation
+    (a fixed plan on many machines reads the same design on each)."""
+    out: list[float] = []
+    done: dict[tuple, tuple[Notebook, float]] = {}
+    for book in notebooks:
+        if book._informed:
+            out.append(book.predicted_tcp_rigid_mm())
+            continue
+        key = book.design_key()
+        if key in done:
+            first, value = done[key]
+            book.share_information(first)
+        else:
+            value = book.predicted_tcp_rigid_mm()
+            done[key] = (book, value)
+        out.append(value)
+    return out

@@ -1,0 +1,170 @@
+"""The settings of a lab engine, made from an env's checked arguments, and the env's spaces.
+
+:class:`LabSettings` holds everything the engine's rules depend on.  Both envs are faces
+of the same engine: ``OrthoglideLab-v0`` (:func:`lab_settings`) and
+``OrthoglideCalibration-v0`` (:func:`calibration_settings`: stands at the layout's
+slots, all engaged; every action a move; an overtravel that lasts only while the bar
+presses; a move the machine cannot assemble refused with ``ValueError``; no tracker
+station and no notebook: its readings are its observations).  Each builder takes the
+arguments its env's table in :mod:`orthoglide_env.lab.spec` checked and adds the checks
+that tie arguments together.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from orthoglide_env.instruments.gauges import PAPER_LAYOUT, GaugeNoise, GaugeSpec, check_noise
+from orthoglide_env.lab.notebook import Estimator
+from orthoglide_env.lab.operations import PAPER_SLOTS, SLOTS, TIME, TRACKER_SIGMA, Op
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.errors import ErrorPreset, get_preset
+from orthoglide_env.sim.display import display_problem, require_display
+
+#: Encoders may read a hair outside the control limits after settling (solver residue
+#: ~1e-9 mm); the observation box leaves this margin so an observation is always inside.
+ENCODER_MARGIN: float = 1.0
+#: Overtravel rules: a ``fault`` puts the gauge out of service until it is re-mounted; a
+#: ``momentary`` one lasts while the bar presses it (and is charged on entering only).
+OVERTRAVEL_RULES: tuple[str, ...] = ("fault", "momentary")
+
+
+@dataclass(frozen=True)
+class LabSettings:
+    """What a lab engine's rules depend on (see the envs' docstrings)."""
+
+    preset: ErrorPreset
+    noise: GaugeNoise
+    backend: str
+    stands: int
+    layout: tuple[GaugeSpec, ...]  # mounted on stands 0, 1, ... at every reset
+    travel: float
+    tracker: bool = False  # the tracker is read at every move
+    tracker_sigma: float = TRACKER_SIGMA
+    station: bool = True  # a tracker station stands in the lab (its frame drawn at reset)
+    budget_s: float = np.inf
+    max_steps: int | None = None
+    reward: str = "time"
+    estimator: Estimator | None = None
+    time_weight: float = 1.0
+    success_mm: float = 0.01
+    overtravel: str = "fault"
+    strict_moves: bool = False  # a move the machine cannot assemble raises ValueError
+    notebook: bool = True  # every reading is written into the episode's notebook
+    motion: str = "quasi-static"
+    render_mode: str | None = None
+    design: MachineDesign = PROTOTYPE  # the machines' design: control limits, validity
+
+    def longest_step(self) -> float:
+        """The most one operation can cost (a re-mount from the far corner, the tracker, and
+        every stand pushed past its travel): the clock never passes budget + this."""
+        far = TIME.move(np.full(3, self.design.rho_min), np.full(3, self.design.rho_max))
+        return far + TIME.remount_s + TIME.tracker_point_s + TIME.overtravel_s * self.stands
+
+
+def _picture(backend: str, render_mode: str | None) -> None:
+    """Refuse a picture the backend cannot draw, and a window where none can open."""
+    if backend == "exact" and render_mode is not None:
+        raise ValueError("the exact backend has no picture: use backend='pybullet' to render")
+    if render_mode == "human":
+        require_display("render_mode='human'", "render_mode='rgb_array'")
+
+
+def render_modes(backend: str) -> list[str]:
+    """The render modes an instance on ``backend`` can produce here."""
+    if backend == "exact":
+        return []
+    return ["rgb_array"] + (["human"] if display_problem() is None else [])
+
+
+def lab_settings(args: dict[str, Any]) -> LabSettings:
+    """The settings of ``OrthoglideLab-v0`` from its checked arguments
+    (:data:`orthoglide_env.lab.spec.LAB`)."""
+    if args["reward"] == "accuracy" and args["estimator"] is None:
+        raise ValueError("reward 'accuracy' needs an estimator: records -> machine, e.g. "
+                         "calibrators.experiment.make_estimator()")
+    _picture(args["backend"], args.get("render_mode"))
+    design = args["design"] or PROTOTYPE
+    if design.slot_positions != PROTOTYPE.slot_positions:
+        raise ValueError("the lab's slot indices are the prototype's slot catalogue: a "
+                         f"design's slot_positions must be {list(PROTOTYPE.slot_positions)}")
+    travel = design.gauge_travel if args["travel"] is None else args["travel"]
+    stands = args["stands"]
+    return LabSettings(
+        preset=get_preset(args["errors"]),
+        noise=check_noise(args["gauge_sigma"], args["gauge_resolution"], travel),
+        backend=args["backend"], stands=stands, design=design,
+        layout=tuple(SLOTS[s] for s in PAPER_SLOTS[:stands]), travel=travel,
+        tracker=args["tracker"], tracker_sigma=args["tracker_sigma"],
+        budget_s=args["budget_s"], reward=args["reward"], estimator=args["estimator"],
+        time_weight=args["time_weight"], success_mm=args["success_mm"],
+        render_mode=args.get("render_mode"),
+    )
+
+
+def calibration_settings(args: dict[str, Any]) -> LabSettings:
+    """The settings of ``OrthoglideCalibration-v0`` from its checked arguments
+    (:data:`orthoglide_env.lab.spec.CALIBRATION`)."""
+    _picture(args["backend"], args["render_mode"])
+    layout = args["gauges"] or PAPER_LAYOUT
+    travel = PROTOTYPE.gauge_travel if args["travel"] is None else args["travel"]
+    return LabSettings(
+        preset=get_preset(args["errors"]),
+        noise=check_noise(args["gauge_sigma"], args["gauge_resolution"], travel),
+        backend=args["backend"], stands=len(layout), layout=layout, travel=travel,
+        station=False, max_steps=args["max_episode_steps"], overtravel="momentary",
+        strict_moves=True, notebook=False, motion=args["motion"],
+        render_mode=args["render_mode"],
+    )
+
+
+def _joints(design: MachineDesign) -> spaces.Box:
+    return spaces.Box(design.rho_min - ENCODER_MARGIN, design.rho_max + ENCODER_MARGIN,
+                      shape=(3,), dtype=np.float64)
+
+
+def _targets(design: MachineDesign) -> spaces.Box:
+    return spaces.Box(design.rho_min, design.rho_max, shape=(3,), dtype=np.float64)
+
+
+def _gauges(settings: LabSettings) -> spaces.Box:
+    # A valid reading lies within +-travel/2 of its zero; the box leaves another travel/2
+    # (>= 25 sigma, see MAX_NOISE_FRACTION) for the noise.
+    return spaces.Box(-settings.travel, settings.travel, shape=(settings.stands,),
+                      dtype=np.float64)
+
+
+def lab_spaces(settings: LabSettings) -> tuple[spaces.Dict, spaces.Dict]:
+    """``OrthoglideLab-v0``'s action and observation spaces."""
+    n = settings.stands
+    action_space = spaces.Dict({
+        "op": spaces.Discrete(len(Op)),
+        "rho": _targets(settings.design),
+        "stand": spaces.Discrete(n),
+        "slot": spaces.Discrete(len(SLOTS)),
+    })
+    observation_space = spaces.Dict({
+        "gauges": _gauges(settings),
+        "valid": spaces.MultiBinary(n),
+        "engaged": spaces.MultiBinary(n),
+        "faulted": spaces.MultiBinary(n),
+        "slot": spaces.MultiDiscrete([len(SLOTS) + 1] * n),
+        "mounting": spaces.Box(0.0, 1e6, shape=(n,), dtype=np.float64),
+        "joints": _joints(settings.design),
+        "tracker": spaces.Box(-1e5, 1e5, shape=(3,), dtype=np.float64),
+        "tracker_valid": spaces.MultiBinary(1),
+        "time": spaces.Box(0.0, settings.budget_s + settings.longest_step(), shape=(1,),
+                           dtype=np.float64),
+    })
+    return action_space, observation_space
+
+
+def calibration_spaces(settings: LabSettings) -> tuple[spaces.Box, spaces.Dict]:
+    """``OrthoglideCalibration-v0``'s action and observation spaces."""
+    return _targets(settings.design), spaces.Dict({
+        "gauges": _gauges(settings), "valid": spaces.MultiBinary(settings.stands),
+        "joints": _joints(settings.design)})

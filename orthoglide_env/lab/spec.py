@@ -1,0 +1,225 @@
+"""Every constructor argument of the envs, declared once: its type, its range, its words.
+
+Each env (and its native vector env) lists its arguments here as a table of
+:class:`Arg` objects; :func:`check_arguments` checks a call against the table, so the
+same argument is refused in the same words by every env that takes it.  A number is a
+real number (``int`` or ``float``, numpy's too), finite, never a boolean or text; an
+integer likewise; a flag is ``True`` or ``False``.  The checks that tie two arguments
+together (the noise against the travel, a picture against the backend) are the
+settings' (:mod:`orthoglide_env.lab.settings`).
+"""
+
+from __future__ import annotations
+
+import numbers
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from gymnasium.vector import AutoresetMode
+
+from orthoglide_env.instruments.gauges import GaugeSpec, layout_from_names
+from orthoglide_env.lab.machines import MOTION_MODES
+from orthoglide_env.lab.operations import SLOTS
+from orthoglide_env.model.design import MachineDesign
+from orthoglide_env.model.errors import PRESETS
+
+BACKENDS: tuple[str, ...] = ("pybullet", "exact")
+RENDER_MODES: tuple[str, ...] = ("rgb_array", "human")
+REWARDS: tuple[str, ...] = ("time", "accuracy", "information")
+
+
+class Arg:
+    """One argument's rule: :meth:`check` returns the value in its canonical type, or
+    raises ``ValueError`` with ``"<name> must be <rule>, got <value>"``."""
+
+    rule: str = ""
+
+    def check(self, name: str, value: Any) -> Any:
+        if not self.accepts(value):
+            raise ValueError(f"{name} must be {self.rule}, got {value!r}")
+        return self.convert(value)
+
+    def accepts(self, value: Any) -> bool:
+        raise NotImplementedError
+
+    def convert(self, value: Any) -> Any:
+        return value
+
+
+def _is_real(value: Any) -> bool:
+    return (isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
+            and bool(np.isfinite(value)))
+
+
+@dataclass(frozen=True)
+class Number(Arg):
+    """A finite real number, above ``low`` (``open``: strictly) and at most ``high``."""
+
+    unit: str = ""
+    low: float | None = None
+    open: bool = False
+    high: float | None = None
+    optional: bool = False  # None is accepted too (the default it stands for)
+
+    @property
+    def rule(self) -> str:  # type: ignore[override]
+        unit = f" ({self.unit})" if self.unit else ""
+        if self.low is not None and self.high is not None:
+            bounds = f" in {'(' if self.open else '['}{self.low:g}, {self.high:g}]"
+        elif self.low is not None:
+            bounds = f" {'>' if self.open else '>='} {self.low:g}"
+        else:
+            bounds = ""
+        return f"a number{unit}{bounds}" + (" or None" if self.optional else "")
+
+    def accepts(self, value: Any) -> bool:
+        if value is None:
+            return self.optional
+        if not _is_real(value):
+            return False
+        above = self.low is None or (value > self.low if self.open else value >= self.low)
+        return above and (self.high is None or value <= self.high)
+
+    def convert(self, value: Any) -> float | None:
+        return None if value is None else float(value)
+
+
+@dataclass(frozen=True)
+class Integer(Arg):
+    """An integer (not a boolean) in ``[low, high]``; with ``optional`` also None."""
+
+    low: int = 1
+    high: int | None = None
+    optional: bool = False
+
+    @property
+    def rule(self) -> str:  # type: ignore[override]
+        bounds = f" >= {self.low}" if self.high is None else f" in [{self.low}, {self.high}]"
+        return f"an integer{bounds}" + (" or None" if self.optional else "")
+
+    def accepts(self, value: Any) -> bool:
+        if value is None:
+            return self.optional
+        return (isinstance(value, numbers.Integral) and not isinstance(value, bool | np.bool_)
+                and self.low <= value and (self.high is None or value <= self.high))
+
+    def convert(self, value: Any) -> int | None:
+        return None if value is None else int(value)
+
+
+@dataclass(frozen=True)
+class Choice(Arg):
+    """One of ``options`` (compared as they are: ``1`` is not ``'1'``)."""
+
+    options: tuple[Any, ...] = ()
+    what: str = ""
+
+    @property
+    def rule(self) -> str:  # type: ignore[override]
+        return f"{self.what or 'one of'} {list(self.options)}"
+
+    def accepts(self, value: Any) -> bool:
+        return any(type(value) is type(o) and value == o for o in self.options)
+
+
+@dataclass(frozen=True)
+class Kind(Arg):
+    """A value that ``test`` accepts, in the canonical form ``make`` makes of it."""
+
+    rule: str = ""
+    test: Callable[[Any], bool] = bool
+    make: Callable[[Any], Any] | None = None
+
+    def accepts(self, value: Any) -> bool:
+        return self.test(value)
+
+    def convert(self, value: Any) -> Any:
+        return value if self.make is None else self.make(value)
+
+
+def _autoreset_mode(value: Any) -> bool:
+    return isinstance(value, AutoresetMode) or (
+        isinstance(value, str) and value in {m.value for m in AutoresetMode})
+
+
+FLAG = Kind("True or False", lambda v: isinstance(v, bool | np.bool_), bool)
+FUNCTION = Kind("a function (records, sigma) -> MachineParams, or None",
+                lambda v: v is None or callable(v))
+AUTORESET = Kind(f"one of {[m.value for m in AutoresetMode]}", _autoreset_mode, AutoresetMode)
+
+
+@dataclass(frozen=True)
+class Layout(Arg):
+    """A gauge layout: names such as ``"x-leg/y"`` or ``"z/x@0.3"``, or ``GaugeSpec``
+    objects (not both); None is the paper's six gauges (``default``)."""
+
+    rule: str = "a list of gauge names like 'x-leg/y' or of GaugeSpec objects, or None"
+
+    def accepts(self, value: Any) -> bool:
+        return value is None or (isinstance(value, list | tuple) and len(value) > 0 and (
+            all(isinstance(g, GaugeSpec) for g in value)
+            or all(isinstance(g, str) for g in value)))
+
+    def convert(self, value: Any) -> tuple[GaugeSpec, ...] | None:
+        if value is None or all(isinstance(g, GaugeSpec) for g in value):
+            return None if value is None else tuple(value)
+        return layout_from_names(list(value))
+
+    def check(self, name: str, value: Any) -> Any:
+        if not self.accepts(value):
+            raise ValueError(f"{name} must be {self.rule}, got {value!r}")
+        try:
+            return self.convert(value)
+        except ValueError as exc:
+            raise ValueError(f"{name}: {exc}") from None
+
+
+@dataclass(frozen=True)
+class Design(Arg):
+    """The machines' :class:`~orthoglide_env.model.design.MachineDesign`, or None (the
+    prototype)."""
+
+    def check(self, name: str, value: Any) -> Any:
+        if value is not None and not isinstance(value, MachineDesign):
+            raise ValueError(f"{name} must be a MachineDesign, got {type(value).__name__}")
+        return value
+
+
+PRESET = Choice(tuple(sorted(PRESETS)), "the name of an error preset, one of")
+NOISE = Number("mm", 0.0)  # the range that depends on the travel: check_noise
+SHARED: dict[str, Arg] = {
+    "errors": PRESET, "gauge_sigma": NOISE, "gauge_resolution": NOISE,
+    "backend": Choice(BACKENDS), "render_mode": Choice((None, *RENDER_MODES)),
+    "travel": Number("mm", 0.0, open=True, optional=True),
+}
+#: ``OrthoglideCalibration-v0``'s arguments.
+CALIBRATION: dict[str, Arg] = {
+    **SHARED, "motion": Choice(MOTION_MODES), "gauges": Layout(),
+    "max_episode_steps": Integer(1, optional=True), "clip_actions": FLAG,
+}
+#: ``OrthoglideLab-v0``'s arguments.
+LAB: dict[str, Arg] = {
+    **SHARED, "design": Design(), "stands": Integer(1, len(SLOTS)), "tracker": FLAG,
+    "tracker_sigma": Number("mm", 0.0, open=True), "budget_s": Number("s", 0.0, open=True),
+    "reward": Choice(REWARDS), "estimator": FUNCTION, "time_weight": Number("", 0.0),
+    "success_mm": Number("mm", 0.0, open=True),
+}
+#: What a native vector env takes besides its single env's arguments.
+VECTOR: dict[str, Arg] = {"num_envs": Integer(1), "autoreset_mode": AUTORESET}
+
+
+def check_arguments(spec: Mapping[str, Arg], values: Mapping[str, Any]) -> dict[str, Any]:
+    """``values`` checked against ``spec`` (one entry per argument), in canonical types,
+    or ``ValueError`` naming the first bad argument and its rule."""
+    unknown = sorted(set(values) - set(spec))
+    if unknown:
+        raise ValueError(f"unknown argument(s) {unknown}; allowed: {', '.join(spec)}")
+    return {name: spec[name].check(name, value) for name, value in values.items()}
+
+
+def arguments_of(spec: Mapping[str, Arg], local: Mapping[str, Any]) -> dict[str, Any]:
+    """The arguments of ``spec`` among a constructor's ``local`` variables, checked."""
+    return check_arguments(spec, {name: local[name] for name in spec if name in local})
+
