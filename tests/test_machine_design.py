@@ -39,7 +39,7 @@ def test_the_prototype_lives_in_its_file_and_round_trips() -> None:
     assert MachineDesign.from_dict({}) == PROTOTYPE
     assert MachineDesign.from_dict(SMALL.to_dict()) == SMALL
     assert MachineDesign.from_dict(json.loads(SMALL.to_json())) == SMALL
-    # The paper's numbers, as DESIGN.md has them.
+    # The paper's numbers, section 2.1 of the paper.
     assert (PROTOTYPE.L, PROTOTYPE.d, PROTOTYPE.r, PROTOTYPE.rho_min, PROTOTYPE.rho_max) == (
         310.25, 80.0, 31.0, -100.0, 60.0)
 

@@ -8,14 +8,14 @@ A gauge is a plunger on a magnetic stand fixed to the base.  Its ray starts at
 the target has pushed the plunger past its travel toward the stand (overtravel, which
 would damage a real gauge).
 
-Reading convention (DESIGN.md): the coordinate of the touched surface point along the
+Reading convention (the README's Conventions): the coordinate of the touched surface point along the
 gauge's world measuring axis, relative to the gauge's zero, in mm::
 
     reading = sign * (t - zero),  sign = direction . e_axis  (+1 or -1 nominally)
 
 so the difference of two readings is the surface's displacement along that axis.
 
-Targets (:class:`Part`), every one a flat box face, as DESIGN.md advises:
+Targets (:class:`Part`), every one a flat box face (a ray against a box face is exact to round-off):
 
 * a leg's **bar**: a gauge measuring leg ``i`` along the leg's local Y touches the bar at
   ``+d/2`` along local Z, at that height; one measuring along local Z comes from below
