@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
+from pathlib import Path
 from typing import Any, NoReturn
 
 import numpy as np
@@ -103,3 +105,20 @@ def print_json(data: Any) -> None:
     except ValueError as exc:
         raise RuntimeError(f"the report holds a number JSON cannot carry ({exc})") from None
     print(text)
+
+
+#: The ``-o`` value that means standard output.
+STDOUT = "-"
+
+
+def write_output(out: str, text: str, kind: str) -> None:
+    """``text`` to standard output (``out`` is :data:`STDOUT`) or to the file ``out``, which
+    it replaces; a folder is refused, naming the ``kind`` of file wanted."""
+    if out == STDOUT:
+        sys.stdout.write(text)
+        return
+    path = Path(out)
+    if path.is_dir():
+        raise ValueError(f"-o {path}: is a directory; give the {kind} file to write")
+    path.write_text(text)
+    print(f"wrote {path}")

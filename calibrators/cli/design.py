@@ -4,25 +4,13 @@ design file's completed with the prototype's values)."""
 from __future__ import annotations
 
 import argparse
-import sys
-from pathlib import Path
 
-from calibrators.cli.common import design_of
-
-#: ``-o -`` writes to standard output.
-STDOUT = "-"
+from calibrators.cli.common import STDOUT, design_of, write_output
 
 
 def run(args: argparse.Namespace) -> None:
     text = design_of(args).to_json()
-    if args.out == STDOUT:
-        sys.stdout.write(text)
-        return
-    path = Path(args.out)
-    if path.is_dir():
-        raise ValueError(f"-o {path}: is a directory; give the design file to write")
-    path.write_text(text)
-    print(f"wrote {path}")
+    write_output(args.out, text, "design")
 
 
 def add(sub: argparse._SubParsersAction) -> None:

@@ -3,26 +3,14 @@
 from __future__ import annotations
 
 import argparse
-import sys
-from pathlib import Path
 
-from calibrators.cli.common import add_machine, machine_of
+from calibrators.cli.common import STDOUT, add_machine, machine_of, write_output
 from orthoglide_env.sim.urdf import write_urdf
-
-#: ``-o -`` writes to standard output.
-STDOUT = "-"
 
 
 def run(args: argparse.Namespace) -> None:
     text = write_urdf(machine_of(args))
-    if args.out == STDOUT:
-        sys.stdout.write(text)
-        return
-    path = Path(args.out)
-    if path.is_dir():
-        raise ValueError(f"-o {path}: is a directory; give the URDF file to write")
-    path.write_text(text)
-    print(f"wrote {path}")
+    write_output(args.out, text, "URDF")
 
 
 def add(sub: argparse._SubParsersAction) -> None:
