@@ -10,11 +10,13 @@ from __future__ import annotations
 
 import os
 import signal
+import traceback
 from collections.abc import Callable, Iterator
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from contextlib import contextmanager
 from importlib.util import find_spec
 from multiprocessing import get_context
+from multiprocessing.connection import Connection, wait
+from multiprocessing.process import BaseProcess
 from typing import TypeVar
 
 #: The engines, the first the default.
@@ -30,6 +32,9 @@ _THREAD_VARIABLES: tuple[str, ...] = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
 
 Item = TypeVar("Item")
 Result = TypeVar("Result")
+
+#: Marks the end of the items (an item may be None).
+_NONE = object()
 
 
 def ray_available() -> bool:
@@ -93,24 +98,83 @@ def _in_process(function: Callable[[Item], Result], items: list[Item]
 
 def _pool(function: Callable[[Item], Result], items: list[Item], jobs: int
           ) -> Iterator[tuple[Item, Result]]:
-    pool = ProcessPoolExecutor(jobs, mp_context=get_context("spawn"),
-                               initializer=_ignore_interrupts)
+    """A pool of spawned workers, each with a pipe of its own.
+
+    Not :class:`concurrent.futures.ProcessPoolExecutor`: an interrupted comparison
+    sometimes hung at exit in its threads and shared queues.  Here the parent alone
+    talks to each worker, so stopping the workers and closing their pipes is the whole
+    of the clean-up.
+    """
+    context = get_context("spawn")
+    workers: list[tuple[BaseProcess, Connection]] = []
+    todo = iter(items)
+    busy: dict[Connection, Item] = {}
     try:
-        # The workers are spawned by the first submission, not by the constructor: their
-        # environment is the one around the submissions.
         with _single_threaded():
-            pending = {pool.submit(function, item): item for item in items}
-        while pending:
-            finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-            for future in finished:
-                yield pending.pop(future), future.result()
+            for _ in range(min(jobs, len(items))):
+                mine, theirs = context.Pipe()
+                process = context.Process(target=_serve, args=(function, theirs), daemon=True)
+                process.start()
+                theirs.close()
+                workers.append((process, mine))
+        for _, connection in workers:
+            _hand(connection, todo, busy)
+        while busy:
+            for connection in wait(list(busy)):
+                item = busy.pop(connection)
+                try:
+                    done, value = connection.recv()
+                except EOFError:
+                    raise RuntimeError("a worker process ended without an answer") from None
+                if not done:
+                    error, remote = value
+                    raise error from RemoteTraceback(remote)
+                # The worker starts on its next item while this one is consumed.
+                _hand(connection, todo, busy)
+                yield item, value
     except BaseException:
         # Includes the consumer going away (GeneratorExit): no worker outlives the run.
-        for process in list(getattr(pool, "_processes", {}).values()):
+        for process, _ in workers:
             process.terminate()
-        pool.shutdown(wait=False, cancel_futures=True)
         raise
-    pool.shutdown()
+    finally:
+        for process, connection in workers:
+            connection.close()
+            process.join()
+
+
+def _hand(connection: Connection, todo: Iterator[Item], busy: dict[Connection, Item]
+          ) -> None:
+    """Send the worker at ``connection`` the next item, if any is left."""
+    item = next(todo, _NONE)
+    if item is not _NONE:
+        connection.send(item)
+        busy[connection] = item
+
+
+def _serve(function: Callable[[Item], Result], connection: Connection) -> None:
+    """A worker's loop: answer each item with ``(True, result)`` or ``(False, (error,
+    its traceback))`` until the parent closes the pipe."""
+    _ignore_interrupts()
+    while True:
+        try:
+            item = connection.recv()
+        except EOFError:
+            return
+        try:
+            answer = (True, function(item))
+        except Exception as error:
+            # A traceback does not pickle: its text goes along.
+            answer = (False, (error, traceback.format_exc()))
+        connection.send(answer)
+
+
+class RemoteTraceback(Exception):
+    """The traceback of an error raised in a worker, shown as the cause of the error the
+    parent raises again."""
+
+    def __str__(self) -> str:
+        return "\n" + self.args[0]
 
 
 def _ray(function: Callable[[Item], Result], items: list[Item], jobs: int,

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import signal
+import subprocess
 import sys
 
 import pytest
@@ -51,8 +53,8 @@ def _thread_settings(_: int) -> tuple[str | None, ...]:
 def test_local_workers_start_single_threaded(monkeypatch) -> None:
     """Spawned workers get one thread per numerical library (or the user's setting): two
     workers with a multi-threaded BLAS each on two cores spin against each other (a
-    comparison ran 2.5x slower).  The pool spawns its workers at the first submission, so
-    this checks the environment there, not where the pool was built."""
+    comparison ran 2.5x slower).  The pool spawns its workers when the first result is
+    asked for, so this checks the environment there, not where the generator was made."""
     from calibrators.engines import _THREAD_VARIABLES, results
 
     for key in _THREAD_VARIABLES:
@@ -62,3 +64,54 @@ def test_local_workers_start_single_threaded(monkeypatch) -> None:
     monkeypatch.setenv("OPENBLAS_NUM_THREADS", "3")
     seen = [value for _, value in results(_thread_settings, [0, 1], jobs=2)]
     assert all(value[_THREAD_VARIABLES.index("OPENBLAS_NUM_THREADS")] == "3" for value in seen)
+
+
+def _fail_on_two(item: int) -> int:
+    if item == 2:
+        raise ValueError(f"item {item} is refused")
+    return item
+
+
+def test_a_worker_error_reaches_the_caller_with_its_traceback() -> None:
+    """The worker's exception is raised in the parent, of its own type, and the worker's
+    traceback goes with it as its cause."""
+    from calibrators.engines import RemoteTraceback, results
+
+    with pytest.raises(ValueError, match="item 2 is refused") as caught:
+        list(results(_fail_on_two, [0, 1, 2, 3], jobs=2))
+    assert isinstance(caught.value.__cause__, RemoteTraceback)
+    assert "_fail_on_two" in str(caught.value.__cause__)
+
+
+_INTERRUPTED_RUN = """
+import time
+from contextlib import closing
+from calibrators.engines import results
+
+def answer(item):
+    # The second worker answers with 200 MB, far more than a pipe holds: it is still
+    # sending when the run is interrupted.
+    if item:
+        time.sleep(0.3)
+        return bytes(200_000_000)
+    return b""
+
+if __name__ == "__main__":
+    with closing(results(answer, [0, 1], jobs=2)) as stream:
+        for item, _ in stream:
+            time.sleep(1.0)
+            raise KeyboardInterrupt
+"""
+
+
+def test_an_interrupt_while_a_worker_sends_its_answer_ends_the_program(tmp_path) -> None:
+    """Stopping a run while a worker is halfway through sending a large answer ends the
+    program at once: nothing waits for the rest of the answer of a worker that was
+    stopped.  (Behind a pool with threads of its own, a comparison interrupted this way
+    once hung at exit.)  60 s is ten times what the run takes on two busy cores."""
+    script = tmp_path / "interrupted.py"
+    script.write_text(_INTERRUPTED_RUN)
+    run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                         timeout=60)
+    # An uncaught KeyboardInterrupt ends Python by the signal itself.
+    assert run.returncode == -signal.SIGINT and "KeyboardInterrupt" in run.stderr
