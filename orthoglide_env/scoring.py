@@ -24,12 +24,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from orthoglide_env.instruments.gauges import cross
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import (
     ERROR_LEGS,
     UnreachableError,
+    cross,
     direct,
     dot,
     inverse,

@@ -31,7 +31,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import special
 
-from orthoglide_env.instruments.gauges import NOISE_FLOOR
+from orthoglide_env.instruments.dial import NOISE_FLOOR
 from orthoglide_env.model.reading_model import Design, jacobian, predict
 
 #: A combination is identifiable (and moved by a base-parameter fit) when its information
@@ -60,7 +60,7 @@ CHI2_LEVEL: float = 1e-3
 
 def weighting_sigma(sigma: float | np.ndarray) -> float | np.ndarray:
     """The noise a reading is weighted with (mm): its instrument's, or
-    :data:`~orthoglide_env.instruments.gauges.NOISE_FLOOR` for an ideal one (every weight,
+    :data:`~orthoglide_env.instruments.dial.NOISE_FLOOR` for an ideal one (every weight,
     information and plan of the estimators and agents takes it from here)."""
     floored = np.maximum(sigma, NOISE_FLOOR)
     return float(floored) if np.ndim(floored) == 0 else floored

@@ -28,7 +28,7 @@ from calibrators.estimators.differences import (
 )
 from calibrators.estimators.identifiability import analyse
 from calibrators.measurements import Measurements
-from orthoglide_env.instruments.gauges import GaugeSpec
+from orthoglide_env.instruments.slots import GaugeSpec
 
 #: Held-out sets of the verification: up to this many repetitions each is one; beyond,
 #: this many runs of consecutive ones, so that its cost stays linear in the readings.

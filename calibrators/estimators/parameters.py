@@ -2,7 +2,7 @@
 
 The parameter vector of a fit is the machine's 27 errors in
 :data:`~orthoglide_env.model.errors.ERROR_NAMES` order, then four stand parameters per gauge
-mounting (:data:`~orthoglide_env.instruments.gauges.STAND_PARAMS`: shift and tilt across the
+mounting (:data:`~orthoglide_env.instruments.stands.STAND_PARAMS`: shift and tilt across the
 measuring axis).  A *selection* names the free ones, by comma-separated tokens:
 
 ==============  ==============================================================

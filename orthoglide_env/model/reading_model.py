@@ -3,7 +3,7 @@
 A *design* says where readings were taken: which gauge mountings (stand installations)
 and, for every reading, its mounting and the commanded posture.  The model reading of a
 mounting at a posture is ``sign * t`` with ``t`` the distance along the stand's ray to the
-plane of the bar face it is aimed at (:func:`orthoglide_env.instruments.gauges.face_distances`); the
+plane of the bar face it is aimed at (:func:`orthoglide_env.instruments.rays.face_distances`); the
 gauge's zero is one unknown constant per mounting, which estimators eliminate, so the
 model leaves it out.
 
@@ -19,23 +19,17 @@ from functools import cached_property
 
 import numpy as np
 
-from orthoglide_env.instruments.gauges import (
-    Gauge,
-    GaugeSpec,
-    Part,
+from orthoglide_env.instruments.gauges import Gauge, spec_arrays
+from orthoglide_env.instruments.rays import boxes_at, face_distances, face_normals, plane_distances
+from orthoglide_env.instruments.slots import GaugeSpec, Part
+from orthoglide_env.instruments.stands import (
     across_axes,
-    bar_normal_pullback,
-    boxes_at,
-    face_distances,
-    face_normals,
     ideal_rays,
-    plane_distances,
-    skew,
-    spec_arrays,
     stand_errors,
     stand_names,
     stand_rays,
 )
+from orthoglide_env.model.boxes import bar_normal_pullback
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import (
     AXIS_NAMES,
@@ -55,6 +49,7 @@ from orthoglide_env.model.kinematics import (
     dot,
     platform_points,
     sensitivity_along,
+    skew,
     tcp_sensitivity_factors,
 )
 
@@ -89,7 +84,7 @@ def station_of(mounting: str) -> str:
 class ParameterSpace:
     """Every parameter a fit could estimate for a set of mountings: the 27 machine errors in
     :data:`~orthoglide_env.model.errors.ERROR_NAMES` order, four stand parameters per gauge
-    mounting (:data:`~orthoglide_env.instruments.gauges.STAND_PARAMS`), then three rotations per
+    mounting (:data:`~orthoglide_env.instruments.stands.STAND_PARAMS`), then three rotations per
     tracker station."""
 
     mountings: tuple[str, ...] = ()

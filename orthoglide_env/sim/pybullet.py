@@ -23,17 +23,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from orthoglide_env.instruments.gauges import (
-    GAUGE_BODY_RADIUS,
-    RAY_BACKOFF,
-    STAND_LENGTH,
-    Gauge,
-    GaugeArray,
-    GaugeSpec,
-    Part,
-    on_flat_face,
-    ray_box_distance,
-)
+from orthoglide_env.instruments.dial import GAUGE_BODY_RADIUS, STAND_LENGTH
+from orthoglide_env.instruments.gauges import Gauge, GaugeArray
+from orthoglide_env.instruments.rays import RAY_BACKOFF, on_flat_face, ray_box_distance
+from orthoglide_env.instruments.slots import GaugeSpec, Part
 from orthoglide_env.lab.machines import check_motion_mode
 from orthoglide_env.model.collisions import collision_names, crash_pairs
 from orthoglide_env.model.design import MachineDesign
