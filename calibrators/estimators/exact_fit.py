@@ -26,7 +26,7 @@ scales its covariance by chi2/dof.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 from scipy import special
@@ -89,16 +89,10 @@ class BatchFit:
 
     def split(self) -> list[BatchFit]:
         """One fit per machine (each a batch of one)."""
-        out = []
-        for m in range(len(self.theta)):
-            rows = slice(m, m + 1)
-            out.append(replace(
-                self, theta=self.theta[rows], covariance=self.covariance[rows],
-                information=self.information[rows], residuals=self.residuals[rows],
-                chi2=self.chi2[rows], dof=self.dof[rows], retained=self.retained[rows],
-                converged=self.converged[rows], iterations=self.iterations[rows],
-                error_covariance=self.error_covariance[rows]))
-        return out
+        shared = ("free", "scale", "prior", "sigma")
+        return [replace(self, **{f.name: getattr(self, f.name)[m:m + 1] for f in fields(self)
+                                 if f.name not in shared})
+                for m in range(len(self.theta))]
 
     @property
     def chi2_dof(self) -> np.ndarray:

@@ -35,7 +35,6 @@ from orthoglide_env.model.errors import (
 )
 from orthoglide_env.model.reading_model import ParameterSpace, default_scales, preset_sigmas
 
-PAPER6: tuple[str, ...] = ERROR_NAMES[:6]
 #: Selections by alias.
 ALIASES: dict[str, str] = {"full": "paper6"}
 
