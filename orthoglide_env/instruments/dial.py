@@ -59,14 +59,10 @@ def status_of(gauges: GaugeArray | Sequence[Gauge], t: np.ndarray) -> np.ndarray
 
 def readings_from_distances(gauges: GaugeArray | Sequence[Gauge], t: np.ndarray
                             ) -> np.ndarray:
-    """Ideal readings (mm) from ray distances; NaN where the gauge is not in contact."""
-    return np.where(status_of(gauges, t) == Status.VALID, _reading(gauges, t), np.nan)
-
-
-def _reading(gauges: GaugeArray | Sequence[Gauge], t: np.ndarray) -> np.ndarray:
-    """``sign * (t - zero)`` of every gauge, whatever its status."""
+    """Ideal readings ``sign * (t - zero)`` (mm) from ray distances; NaN where the gauge is
+    not in contact."""
     g = as_gauge_array(gauges).for_postures(np.ndim(t) - 1)
-    return g.sign * (t - g.zero)
+    return np.where(status_of(g, t) == Status.VALID, g.sign * (t - g.zero), np.nan)
 
 
 def exact_readings(machine: MachineParams, gauges: GaugeArray | Sequence[Gauge],
@@ -132,10 +128,9 @@ class GaugeNoise:
     resolution: float = DEFAULT_RESOLUTION
 
     def __post_init__(self) -> None:
-        if not (np.isfinite(self.sigma) and self.sigma >= 0):
-            raise ValueError("gauge sigma must be a finite number >= 0")
-        if not (np.isfinite(self.resolution) and self.resolution >= 0):
-            raise ValueError("gauge resolution must be a finite number >= 0")
+        for name in ("sigma", "resolution"):
+            if not (np.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
+                raise ValueError(f"gauge {name} must be a finite number >= 0")
 
     def apply(self, readings: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Noisy, quantised readings (NaN stays NaN).  Noise is drawn for every gauge so

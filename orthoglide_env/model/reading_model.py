@@ -257,9 +257,7 @@ def rotation_matrices(rotvec: np.ndarray) -> np.ndarray:
     batched (scipy's Rotation holds one batch axis only)."""
     rotvec = np.asarray(rotvec, dtype=float)
     angle = np.linalg.norm(rotvec, axis=-1)[..., None, None]
-    k = np.zeros((*rotvec.shape[:-1], 3, 3))
-    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -rotvec[..., 2], rotvec[..., 1], -rotvec[..., 0]
-    k = k - np.swapaxes(k, -1, -2)
+    k = skew(rotvec)
     with np.errstate(invalid="ignore", divide="ignore"):
         a = np.where(angle > 1e-8, np.sin(angle) / angle, 1.0 - angle**2 / 6)
         b = np.where(angle > 1e-8, (1 - np.cos(angle)) / angle**2, 0.5 - angle**2 / 24)

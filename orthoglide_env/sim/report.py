@@ -73,15 +73,11 @@ def pose_report(
                 "axis": AXIS_NAMES[g.spec.axis],
                 "reading": None if np.isnan(r) else float(r),
                 "valid": bool(np.isfinite(r)),
-                "status": _status_name(s),
+                "status": Status(s).name.lower().replace("_", "-"),
             }
             for g, r, s in zip(gauges, readings, status, strict=True)
         ],
     }
-
-
-def _status_name(code: int) -> str:
-    return Status(code).name.lower().replace("_", "-")
 
 
 def render_png(

@@ -279,21 +279,21 @@ def _leg(machine: MachineParams, i: int, joints: dict[str, JointOrigin]) -> list
     bar_mid = np.array([-length / 2, 0.0, 0.0])
     carriage = np.array(design.carriage_size)
     short = np.array(design.short_link_size)
+    bar_body = (_inertial(MASS["bar"], bar_mid, bar) + _box(bar, bar_mid, "bar", collide=True)
+                + _pin(30, np.zeros(3), "y"))
     bodies = {
         "carriage": _inertial(MASS["carriage"], np.zeros(3), carriage)
         + _box(carriage, np.array([carriage[0] / 2 + design.carriage_setback, 0, 0]), "carriage",
                collide=True),
         "r1": _inertial(MASS["r1"], np.zeros(3), short)
         + _box(short, np.zeros(3), "joint", collide=False),
-        "bar1": _inertial(MASS["bar"], bar_mid, bar)
-        + _box(bar, bar_mid, "bar", collide=True) + _pin(30, np.zeros(3), "y"),
+        "bar1": bar_body,
         "coupler": _inertial(MASS["coupler"], np.array([0, 0, -half_d]), short)
         + _box(short, np.array([0, 0, -half_d]), "joint", collide=True)
         + _pin(30, np.zeros(3), "y") + _pin(30, np.array([0, 0, -design.d]), "y"),
         "r2": _inertial(MASS["r2"], np.zeros(3), np.full(3, 20.0))
         + _pin(24, np.zeros(3), "z"),
-        "bar2": _inertial(MASS["bar"], bar_mid, bar)
-        + _box(bar, bar_mid, "bar", collide=True) + _pin(30, np.zeros(3), "y"),
+        "bar2": bar_body,
     }
     out = []
     for joint in joints.values():
