@@ -25,7 +25,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
-from orthoglide_env.model.errors import MachineParams
+from orthoglide_env.model.errors import MachineParams, within_limits
 from orthoglide_env.model.kinematics import (
     ERROR_LEGS,
     UnreachableError,
@@ -100,12 +100,7 @@ def workspace_grid(points: int = GRID_POINTS, design: MachineDesign = PROTOTYPE)
     commands respect its control limits."""
     axis = np.linspace(*design.grid_range, points)
     grid = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
-    return grid[within_limits(inverse(MachineParams(design=design), grid), design)]
-
-
-def within_limits(rho: np.ndarray, design: MachineDesign) -> np.ndarray:
-    """Whether each command ``rho`` (..., 3) lies within ``design``'s control limits."""
-    return np.all((rho >= design.rho_min) & (rho <= design.rho_max), axis=-1)
+    return grid[within_limits(inverse(MachineParams(design=design), grid), design).all(axis=-1)]
 
 
 def _targets(grid: np.ndarray | None, machines: Sequence[MachineParams]) -> np.ndarray:
@@ -136,7 +131,7 @@ def commands(model: MachineParams, targets: np.ndarray) -> np.ndarray:
     targets = np.asarray(targets, dtype=float)
     rho = _rowwise(lambda p: inverse(model, p), targets.reshape(-1, 3))
     with np.errstate(invalid="ignore"):
-        inside = within_limits(rho, model.design)
+        inside = within_limits(rho, model.design).all(axis=-1)
     rho[~inside] = np.nan
     return rho.reshape(targets.shape)
 
@@ -187,7 +182,7 @@ def commands_many(models: Sequence[MachineParams], targets: np.ndarray,
         rho = inverse(stacked, np.asarray(targets, dtype=float)[None])
     except UnreachableError:
         return np.stack([commands(m, targets) for m in models])
-    inside = within_limits(rho, stacked.design)
+    inside = within_limits(rho, stacked.design).all(axis=-1)
     return np.where(inside[..., None], rho, np.nan)
 
 

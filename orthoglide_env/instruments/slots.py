@@ -50,18 +50,13 @@ NO_LEG: int = -1
 PLATFORM_AIM: float = 10.0
 
 
-def local_axis(leg: np.ndarray | int, axis: np.ndarray | int) -> np.ndarray:
-    """The leg-frame axis a gauge on ``leg`` measuring along world ``axis`` measures along:
-    1 (local Y) or 2 (local Z)."""
-    return np.where(np.asarray(axis) == (np.asarray(leg) + 1) % 3, 1, 2)
-
-
 def face_of(part: np.ndarray | int, leg: np.ndarray | int, axis: np.ndarray | int
             ) -> np.ndarray:
     """The axis of its target's box whose face a gauge touches: a bar's and a carriage's
-    box lie in the leg frame (local Y or Z: 1 or 2), the platform's in the world frame
-    (the measuring axis)."""
-    return np.where(np.asarray(part) == Part.PLATFORM, axis, local_axis(leg, axis))
+    box lie in the leg frame (the world axis after the leg's is its local Y: 1, the other
+    local Z: 2), the platform's in the world frame (the measuring axis)."""
+    local = np.where(np.asarray(axis) == (np.asarray(leg) + 1) % 3, 1, 2)
+    return np.where(np.asarray(part) == Part.PLATFORM, axis, local)
 
 
 def target_index(part: np.ndarray | int, leg: np.ndarray | int, face: np.ndarray | int

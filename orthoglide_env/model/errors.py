@@ -512,11 +512,17 @@ def check_rho(rho: np.ndarray, *, margin: float = 0.0, design: MachineDesign = P
         raise ValueError(f"joint targets must have 3 components, got shape {list(rho.shape)}")
     if not np.all(np.isfinite(rho)):
         raise ValueError("joint targets must be finite numbers")
-    lo, hi = design.rho_min - margin, design.rho_max + margin
-    bad = (rho < lo) | (rho > hi)
+    bad = ~within_limits(rho, design, margin)
     if np.any(bad):
-        value = rho[bad].flat[0]
-        raise ValueError(
-            f"joint target {value:g} mm is outside the joint limits [{lo:g}, {hi:g}] mm"
-        )
+        lo, hi = design.rho_min - margin, design.rho_max + margin
+        raise ValueError(f"joint target {rho[bad].flat[0]:g} mm is outside the joint limits "
+                         f"[{lo:g}, {hi:g}] mm")
     return rho
+
+
+def within_limits(rho: np.ndarray, design: MachineDesign = PROTOTYPE, margin: float = 0.0
+                  ) -> np.ndarray:
+    """Which coordinates of the commands ``rho`` (..., 3) lie within ``design``'s control
+    limits, widened by ``margin`` (mm); NaN lies outside.  Every check of the limits asks
+    this."""
+    return (rho >= design.rho_min - margin) & (rho <= design.rho_max + margin)

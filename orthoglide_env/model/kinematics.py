@@ -22,7 +22,7 @@ from typing import NamedTuple
 import numpy as np
 
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
-from orthoglide_env.model.errors import R_LEG, MachineParams
+from orthoglide_env.model.errors import R_LEG, MachineParams, within_limits
 
 
 class UnreachableError(ValueError):
@@ -360,7 +360,7 @@ def check_reachable(machine: MachineParams, p: np.ndarray) -> np.ndarray:
     """Inverse kinematics that also enforces the control limits; returns ``rho``."""
     rho = inverse(machine, p)
     design = machine.design
-    bad = (rho < design.rho_min) | (rho > design.rho_max)
+    bad = ~within_limits(rho, design)
     if np.any(bad):
         raise UnreachableError(
             f"TCP needs joint coordinate {rho[bad].flat[0]:.3f} mm, outside the control "
