@@ -69,13 +69,12 @@ def align_tracker(design: Design, values: np.ndarray) -> np.ndarray:
     out = values.copy()
     space = design.space
     for station in space.stations:
-        rows = {c: np.flatnonzero(
+        rows = [np.flatnonzero(
             [station_of(design.mountings[m]) == station
              and isinstance(design.specs[m], TrackerAxis) and design.specs[m].component == c
-             for m in design.mounting]) for c in range(3)}
-        if len({len(r) for r in rows.values()}) != 1 or not np.array_equal(
-                design.rho[rows[0]], design.rho[rows[1]]) or not np.array_equal(
-                design.rho[rows[0]], design.rho[rows[2]]):
+             for m in design.mounting]) for c in range(3)]
+        # Equal postures in equal order (array_equal also tells unequal counts).
+        if any(not np.array_equal(design.rho[rows[0]], design.rho[r]) for r in rows[1:]):
             raise ValueError(f"tracker station '{station}': every point needs its x, y and z "
                              "readings, in the same order")
         measured = np.stack([values[rows[c]] for c in range(3)], axis=-1)

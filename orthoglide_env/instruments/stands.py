@@ -130,9 +130,8 @@ def install(
         raise ValueError("gauge travel must be positive")
     if not specs:
         return []
-    errors = None
-    if preset is not None and rng is not None:
-        errors = installation_errors(len(specs), preset, rng)
+    errors = (installation_errors(len(specs), preset, rng)
+              if preset is not None and rng is not None else None)
     return install_array(specs, machine, travel=travel, errors=errors).to_gauges()
 
 

@@ -111,15 +111,6 @@ def _link(name: str, body: str) -> str:
     return f'<link name="{name}">{body}</link>'
 
 
-def _joint(name: str, kind: str, parent: str, child: str, origin: str, axis: str = "",
-           limits: str = "") -> str:
-    axis_xml = f'<axis xyz="{axis}"/>' if axis else ""
-    return (
-        f'<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
-        f"{origin}{axis_xml}{limits}</joint>"
-    )
-
-
 def bar_length(machine: MachineParams, leg: int) -> float:
     """Length of the bar box (hinge to hinge, less the clearance at both ends), mm."""
     return float(machine.leg_lengths[leg] - 2 * machine.design.bar_clearance)
@@ -265,9 +256,10 @@ def _joint_xml(joint: JointOrigin, design: MachineDesign) -> str:
         "revolute": '<limit lower="-3.14159" upper="3.14159" effort="0" velocity="100"/>',
         "fixed": "",
     }[joint.kind]
-    axis = "" if joint.kind == "fixed" else _xyz(joint.axis / MM)
-    return _joint(joint.name, joint.kind, joint.parent, joint.child,
-                  _origin(joint.xyz, joint.rotation), axis, limits)
+    axis = "" if joint.kind == "fixed" else f'<axis xyz="{_xyz(joint.axis / MM)}"/>'
+    return (f'<joint name="{joint.name}" type="{joint.kind}"><parent link="{joint.parent}"/>'
+            f'<child link="{joint.child}"/>{_origin(joint.xyz, joint.rotation)}{axis}{limits}'
+            "</joint>")
 
 
 def _leg(machine: MachineParams, i: int, joints: dict[str, JointOrigin]) -> list[str]:
