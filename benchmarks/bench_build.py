@@ -22,7 +22,8 @@ import gymnasium as gym
 import numpy as np
 
 import orthoglide_env
-from orthoglide_env.instruments.gauges import PAPER_LAYOUT, install, installed_on
+from orthoglide_env.instruments.slots import PAPER_LAYOUT
+from orthoglide_env.instruments.stands import install, installed_on
 from orthoglide_env.model.errors import PRESETS, random_machine
 from orthoglide_env.sim.pybullet import OrthoglideMachine
 from orthoglide_env.sim.simulator import Simulator

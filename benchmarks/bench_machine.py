@@ -11,7 +11,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from orthoglide_env.instruments.gauges import PAPER_LAYOUT, install, installed_on
+from orthoglide_env.instruments.slots import PAPER_LAYOUT
+from orthoglide_env.instruments.stands import install, installed_on
 from orthoglide_env.lab.machines import ExactMachine
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import PRESETS, random_machine

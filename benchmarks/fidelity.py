@@ -14,12 +14,9 @@ import argparse
 import numpy as np
 from tqdm import tqdm
 
-from orthoglide_env.instruments.gauges import (
-    PAPER_LAYOUT,
-    exact_ray_distances,
-    install,
-    installed_on,
-)
+from orthoglide_env.instruments.rays import exact_ray_distances
+from orthoglide_env.instruments.slots import PAPER_LAYOUT
+from orthoglide_env.instruments.stands import install, installed_on
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import PRESETS, random_machine
 from orthoglide_env.model.kinematics import direct

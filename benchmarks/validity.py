@@ -20,13 +20,10 @@ import itertools
 
 import numpy as np
 
-from orthoglide_env.instruments.gauges import (
-    PAPER_LAYOUT,
-    Status,
-    exact_ray_distances,
-    install,
-    status_of,
-)
+from orthoglide_env.instruments.dial import Status, status_of
+from orthoglide_env.instruments.rays import exact_ray_distances
+from orthoglide_env.instruments.slots import PAPER_LAYOUT
+from orthoglide_env.instruments.stands import install
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import UnreachableError, direct

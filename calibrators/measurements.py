@@ -87,7 +87,7 @@ from dataclasses import KW_ONLY, InitVar, dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
 
-from orthoglide_env.instruments.gauges import NO_LEG, GaugeSpec, Part, layout_from_names
+from orthoglide_env.instruments.slots import NO_LEG, GaugeSpec, Part, layout_from_names
 from orthoglide_env.model.design import PROTOTYPE, DesignError, MachineDesign
 from orthoglide_env.model.errors import AXIS_NAMES, LEG_NAMES
 from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture

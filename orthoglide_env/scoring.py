@@ -20,16 +20,16 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from orthoglide_env.instruments.gauges import cross
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
-from orthoglide_env.model.errors import MachineParams
+from orthoglide_env.model.errors import MachineParams, within_limits
 from orthoglide_env.model.kinematics import (
     ERROR_LEGS,
     UnreachableError,
+    cross,
     direct,
     dot,
     inverse,
@@ -62,7 +62,7 @@ class ErrorStats:
     max: float
 
     def to_dict(self) -> dict[str, float]:
-        return {"rms": self.rms, "max": self.max}
+        return asdict(self)
 
 
 @dataclass(frozen=True)
@@ -76,7 +76,7 @@ class FrameErrors:
     def to_dict(self) -> dict[str, dict[str, float]]:
         """``{"raw": {"rms", "max"}, "translation": {...}, "rigid": {...}}`` in mm: the
         shape scripts read."""
-        return {frame: getattr(self, frame).to_dict() for frame in FRAMES}
+        return asdict(self)
 
 
 @dataclass(frozen=True)
@@ -92,9 +92,7 @@ class ScoreReport:
     n_skipped: int
 
     def to_dict(self) -> dict:
-        return {"drho_error": self.drho_error, "dL_error": self.dL_error,
-                "tcp_before": self.tcp_before.to_dict(), "tcp_after": self.tcp_after.to_dict(),
-                "n_targets": self.n_targets, "n_skipped": self.n_skipped}
+        return asdict(self)
 
 
 def workspace_grid(points: int = GRID_POINTS, design: MachineDesign = PROTOTYPE) -> np.ndarray:
@@ -102,12 +100,7 @@ def workspace_grid(points: int = GRID_POINTS, design: MachineDesign = PROTOTYPE)
     commands respect its control limits."""
     axis = np.linspace(*design.grid_range, points)
     grid = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
-    return grid[within_limits(inverse(MachineParams(design=design), grid), design)]
-
-
-def within_limits(rho: np.ndarray, design: MachineDesign) -> np.ndarray:
-    """Whether each command ``rho`` (..., 3) lies within ``design``'s control limits."""
-    return np.all((rho >= design.rho_min) & (rho <= design.rho_max), axis=-1)
+    return grid[within_limits(inverse(MachineParams(design=design), grid), design).all(axis=-1)]
 
 
 def _targets(grid: np.ndarray | None, machines: Sequence[MachineParams]) -> np.ndarray:
@@ -138,7 +131,7 @@ def commands(model: MachineParams, targets: np.ndarray) -> np.ndarray:
     targets = np.asarray(targets, dtype=float)
     rho = _rowwise(lambda p: inverse(model, p), targets.reshape(-1, 3))
     with np.errstate(invalid="ignore"):
-        inside = within_limits(rho, model.design)
+        inside = within_limits(rho, model.design).all(axis=-1)
     rho[~inside] = np.nan
     return rho.reshape(targets.shape)
 
@@ -189,7 +182,7 @@ def commands_many(models: Sequence[MachineParams], targets: np.ndarray,
         rho = inverse(stacked, np.asarray(targets, dtype=float)[None])
     except UnreachableError:
         return np.stack([commands(m, targets) for m in models])
-    inside = within_limits(rho, stacked.design)
+    inside = within_limits(rho, stacked.design).all(axis=-1)
     return np.where(inside[..., None], rho, np.nan)
 
 
@@ -339,31 +332,13 @@ def score(
 
 
 # --- predicted errors, from a covariance ----------------------------------------------
-def tcp_jacobian(model: MachineParams, grid: np.ndarray | None = None
-                 ) -> tuple[np.ndarray, np.ndarray]:
-    """The targets of the grid that ``model`` commands within the control limits (m, 3),
-    and the derivative of the TCP reached at those commands over the machine's 27 errors
-    (m, 3, 27): to first order the error of a machine compensated with ``model`` is
-    ``jac @ (theta - theta_model)``."""
-    return tcp_jacobians([model], grid)[0]
-
-
-def tcp_jacobians(models: Sequence[MachineParams], grid: np.ndarray | None = None
-                  ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """:func:`tcp_jacobian` of each model, every model in one batched solve (each model's
-    numbers are those it gets alone), the derivatives by the implicit function theorem
-    (:func:`~orthoglide_env.model.kinematics.tcp_sensitivity`)."""
-    if not models:
-        return []
-    targets = _targets(grid, models)
-    usable, jac = _tcp_jacobian_arrays(models, targets)
-    return [(targets[u], j[u]) for u, j in zip(usable, jac, strict=True)]
-
-
 def _tcp_jacobian_arrays(models: Sequence[MachineParams], targets: np.ndarray
                          ) -> tuple[np.ndarray, np.ndarray]:
     """Which targets (n, 3) each model commands within the control limits (M, n), and the
-    derivatives of :func:`tcp_jacobian` at every target (M, n, 3, 27)."""
+    derivative of the TCP reached at every target's command over the machine's 27 errors
+    (M, n, 3, 27), by the implicit function theorem
+    (:func:`~orthoglide_env.model.kinematics.tcp_sensitivity`): to first order the error
+    of a machine compensated with a model is ``jac @ (theta - theta_model)``."""
     usable, machines, rho, p = _commanded(models, targets)
     return usable, tcp_sensitivity(machines, rho, p)
 

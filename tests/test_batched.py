@@ -14,22 +14,23 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from orthoglide_env.instruments.gauges import (
-    GaugeArray,
-    GaugeSpec,
+from orthoglide_env.instruments.dial import (
     Status,
-    collision_boxes,
-    exact_ray_distances,
-    exact_target_boxes,
-    install,
-    install_array,
-    installation_errors,
     pressed_past_travel,
     readings_from_distances,
     status_of,
+)
+from orthoglide_env.instruments.gauges import GaugeArray
+from orthoglide_env.instruments.rays import exact_ray_distances, exact_target_boxes
+from orthoglide_env.instruments.slots import GaugeSpec
+from orthoglide_env.instruments.stands import (
+    install,
+    install_array,
+    installation_errors,
     zero_gauges,
 )
 from orthoglide_env.lab.machines import ExactMachine
+from orthoglide_env.model.boxes import collision_boxes
 from orthoglide_env.model.collisions import PAIR_NAMES, collision_mask, collisions, pair_gaps
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import (

@@ -15,7 +15,7 @@ from calibrators.estimators.base import Estimate, available, get_strategy
 from calibrators.estimators.differences import differences, paper_matrix
 from calibrators.experiment import run_episode
 from calibrators.measurements import Measurement, MeasurementFileError, Measurements
-from orthoglide_env.instruments.gauges import GaugeSpec
+from orthoglide_env.instruments.slots import GaugeSpec
 
 TABLE1 = {"drho": [4.66, -5.36, 1.46], "dL": [5.20, -5.96, 3.16]}
 

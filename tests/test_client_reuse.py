@@ -10,7 +10,8 @@ import pybullet as pb
 import pytest
 
 import orthoglide_env
-from orthoglide_env.instruments.gauges import PAPER_LAYOUT, install, installed_on
+from orthoglide_env.instruments.slots import PAPER_LAYOUT
+from orthoglide_env.instruments.stands import install, installed_on
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import PRESETS, random_machine
 from orthoglide_env.sim.pybullet import OrthoglideMachine

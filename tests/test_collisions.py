@@ -8,7 +8,7 @@ import pytest
 from scipy.optimize import linprog, minimize
 from scipy.spatial.transform import Rotation
 
-from orthoglide_env.instruments.gauges import BOX_NAMES, collision_boxes
+from orthoglide_env.model.boxes import BOX_NAMES, collision_boxes
 from orthoglide_env.model.collisions import (
     PAIR_NAMES,
     box_gap,

@@ -12,7 +12,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import orthoglide_env
-from orthoglide_env.instruments.gauges import exact_readings
+from orthoglide_env.instruments.dial import exact_readings
 from orthoglide_env.lab.operations import TIME
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture

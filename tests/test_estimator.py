@@ -16,10 +16,9 @@ from calibrators.estimators.parameters import (
     scales,
     select,
 )
-from orthoglide_env.instruments.gauges import (
-    PAPER_LAYOUT,
-    exact_ray_distances,
-    face_distances,
+from orthoglide_env.instruments.rays import exact_ray_distances, face_distances
+from orthoglide_env.instruments.slots import PAPER_LAYOUT
+from orthoglide_env.instruments.stands import (
     ideal_rays,
     install,
     installed_on,
@@ -126,7 +125,7 @@ def test_jacobian_equals_central_differences_on_every_target_and_the_tracker() -
     relative (< 1e-10 on entries up to ~2) and round-off ~eps * L / 1e-3 ~ 7e-11 mm per
     scale unit on readings of the order of L = 310 mm, times the few operations a
     reading takes: the bar is 1e-9 mm per scale unit."""
-    from orthoglide_env.instruments.gauges import layout_from_names
+    from orthoglide_env.instruments.slots import layout_from_names
     from orthoglide_env.model.reading_model import Design, TrackerAxis, default_scales, jacobian
 
     rng = np.random.default_rng(0)

@@ -6,18 +6,10 @@ import numpy as np
 import pytest
 from conftest import EQ10_ROWS, paper_matrix
 
-from orthoglide_env.instruments.gauges import (
-    PAPER_LAYOUT,
-    GaugeNoise,
-    GaugeSpec,
-    Status,
-    exact_readings,
-    install,
-    installed_on,
-    layout_from_names,
-    ray_box_distance,
-    status_of,
-)
+from orthoglide_env.instruments.dial import GaugeNoise, Status, exact_readings, status_of
+from orthoglide_env.instruments.rays import ray_box_distance
+from orthoglide_env.instruments.slots import PAPER_LAYOUT, GaugeSpec, layout_from_names
+from orthoglide_env.instruments.stands import install, installed_on
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import MachineParams, random_machine
 from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture

@@ -153,13 +153,10 @@ def test_machines_at_the_limits_are_simulated_faithfully() -> None:
     # (60, 60, 60) is outside the guarantee) and the readings at the postures calibration
     # experiments read at (near Zero and the paper's) within 1 µm; gauge status identical.
     machine_module = pytest.importorskip("orthoglide_env.sim.pybullet")
-    from orthoglide_env.instruments.gauges import (
-        PAPER_LAYOUT,
-        Status,
-        exact_ray_distances,
-        install,
-        status_of,
-    )
+    from orthoglide_env.instruments.dial import Status, status_of
+    from orthoglide_env.instruments.rays import exact_ray_distances
+    from orthoglide_env.instruments.slots import PAPER_LAYOUT
+    from orthoglide_env.instruments.stands import install
     from orthoglide_env.model.kinematics import direct, paper_posture
 
     rng = np.random.default_rng(7)

@@ -11,7 +11,7 @@ from conftest import paper_matrix as eq10
 from calibrators.estimators.differences import differences
 from calibrators.estimators.identifiability import analyse, of_design
 from calibrators.measurements import Measurement, Measurements
-from orthoglide_env.instruments.gauges import PAPER_LAYOUT
+from orthoglide_env.instruments.slots import PAPER_LAYOUT
 
 
 @pytest.fixture(scope="module")

@@ -10,14 +10,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from orthoglide_env.instruments.gauges import (
-    PAPER_LAYOUT,
-    Status,
-    exact_ray_distances,
-    install,
-    installed_on,
-    status_of,
-)
+from orthoglide_env.instruments.dial import Status, status_of
+from orthoglide_env.instruments.rays import exact_ray_distances
+from orthoglide_env.instruments.slots import PAPER_LAYOUT
+from orthoglide_env.instruments.stands import install, installed_on
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import PRESETS, MachineParams, random_machine
 from orthoglide_env.model.kinematics import direct, paper_posture

@@ -28,7 +28,7 @@ from calibrators.measurements import (
     Measurements,
     gauge_name,
 )
-from orthoglide_env.instruments.gauges import GaugeSpec, Part
+from orthoglide_env.instruments.slots import GaugeSpec, Part
 from orthoglide_env.lab.operations import SLOTS
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture

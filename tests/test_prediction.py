@@ -9,8 +9,8 @@ from conftest import paper_experiment
 
 from calibrators.estimators.base import get_strategy
 from calibrators.estimators.prediction import predicted_tcp_error
-from orthoglide_env.instruments.gauges import cross
 from orthoglide_env.model.errors import MachineParams
+from orthoglide_env.model.kinematics import cross
 from orthoglide_env.scoring import (
     FRAMES,
     motion_basis,

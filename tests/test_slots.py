@@ -14,21 +14,15 @@ from calibrators.estimators.base import get_strategy
 from calibrators.estimators.differences import differences, paper_matrix
 from calibrators.estimators.gauss_newton import design_of
 from calibrators.measurements import Measurement, Measurements
-from orthoglide_env.instruments.gauges import (
-    GaugeSpec,
-    Part,
-    collision_boxes,
-    exact_ray_distances,
-    exact_readings,
-    exact_target_boxes,
+from orthoglide_env.instruments.dial import exact_readings, pressed_past_travel, status_of
+from orthoglide_env.instruments.rays import exact_ray_distances, exact_target_boxes
+from orthoglide_env.instruments.slots import GaugeSpec, Part, layout_from_names
+from orthoglide_env.instruments.stands import (
     ideal_rays,
     install,
     installed_on,
-    layout_from_names,
-    pressed_past_travel,
     stand_errors,
     stand_rays,
-    status_of,
 )
 from orthoglide_env.lab.operations import (
     PAPER_SLOTS,
@@ -37,6 +31,7 @@ from orthoglide_env.lab.operations import (
     Op,
     slot_index,
 )
+from orthoglide_env.model.boxes import collision_boxes
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import ERROR_NAMES, PRESETS, MachineParams, random_machine
 from orthoglide_env.model.kinematics import direct

@@ -31,7 +31,7 @@ import numpy as np
 from calibrators.agents.base import Agent, action, register
 from calibrators.agents.optimal import fixed_plan, lab_setup
 from calibrators.design.planner import N_MACHINE, N_STAND, ZERO_SCALE, Planner, Step
-from orthoglide_env.instruments.gauges import stand_names
+from orthoglide_env.instruments.stands import stand_names
 from orthoglide_env.lab.operations import SLOTS, Op
 from orthoglide_env.model.errors import ERROR_NAMES
 from orthoglide_env.model.reading_model import ParameterSpace, default_scales

@@ -19,16 +19,12 @@ import gymnasium as gym
 import numpy as np
 
 from calibrators.agents.base import Agent, action, register
-from orthoglide_env.instruments.gauges import (
-    Part,
-    collision_boxes,
-    exact_ray_distances,
-    exact_target_boxes,
-    install,
-    installed_on,
-    pressed_past_travel,
-)
+from orthoglide_env.instruments.dial import pressed_past_travel
+from orthoglide_env.instruments.rays import exact_ray_distances, exact_target_boxes
+from orthoglide_env.instruments.slots import Part
+from orthoglide_env.instruments.stands import install, installed_on
 from orthoglide_env.lab.operations import SLOTS, Op
+from orthoglide_env.model.boxes import collision_boxes
 from orthoglide_env.model.collisions import clearance
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import MachineParams

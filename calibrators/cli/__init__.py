@@ -15,7 +15,7 @@ from importlib import metadata
 
 from calibrators.cli import calibrate, compare, design, fit, pose, render, urdf
 from calibrators.cli.common import Parser, UsageError
-from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA, check_noise
+from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA, check_noise
 
 COMMANDS = (pose, render, urdf, calibrate, fit, compare, design)
 #: The distribution whose metadata carries the version.

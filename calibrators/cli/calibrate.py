@@ -18,7 +18,7 @@ from calibrators.estimators.base import Estimate, Measurements, get_strategy
 from calibrators.estimators.exact_fit import z_scores
 from calibrators.estimators.gauss_newton import design_of
 from calibrators.experiment import DEFAULT_BUDGET_S, machine_seed, run_episode
-from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
+from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.model.design import load_design
 from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS, MachineParams
 from orthoglide_env.model.reading_model import TrackerAxis, parameters_of

@@ -10,12 +10,8 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from orthoglide_env.instruments.gauges import (
-    DEFAULT_RESOLUTION,
-    DEFAULT_SIGMA,
-    DEFAULT_TRAVEL,
-    MAX_NOISE_FRACTION,
-)
+from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA, MAX_NOISE_FRACTION
+from orthoglide_env.instruments.gauges import DEFAULT_TRAVEL
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign, load_design
 from orthoglide_env.model.errors import MachineParams, check_rho, random_machine
 

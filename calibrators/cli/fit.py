@@ -10,7 +10,7 @@ from calibrators.cli import estimator_options
 from calibrators.cli.common import UsageError, design_of
 from calibrators.cli.output import emit, report
 from calibrators.measurements import Measurements
-from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
+from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 
 #: Largest repeatability accepted (mm): a dial gauge that scatters by more than this is
 #: not measuring, and the weights would say nothing.

@@ -15,7 +15,7 @@ from calibrators.cli.common import (
     rho_of,
     vec,
 )
-from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA, MIN_RESOLUTION
+from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA, MIN_RESOLUTION
 
 
 def run(args: argparse.Namespace) -> None:

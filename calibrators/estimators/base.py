@@ -19,6 +19,7 @@ import numpy as np
 
 from calibrators.measurements import Measurements
 from calibrators.registry import Registry
+from orthoglide_env.instruments.dial import DEFAULT_SIGMA
 from orthoglide_env.model.errors import (
     ERROR_GROUPS,
     ERROR_NAMES,
@@ -188,10 +189,12 @@ class Calibrator:
 
     name: ClassVar[str] = ""
 
-    def estimate(self, data: Measurements, params: str = "paper6", sigma: float = 0.01,
+    def estimate(self, data: Measurements, params: str = "paper6",
+                 sigma: float = DEFAULT_SIGMA,
                  *, verify: bool = True, **options: Any) -> Estimate:
         """Estimate from ``data``; ``options`` are the estimator's own (see
-        :meth:`calibrators.estimators.gauss_newton.GaussNewtonCalibrator.estimate`)."""
+        :meth:`calibrators.estimators.gauss_newton.GaussNewtonCalibrator.estimate_many`);
+        ``sigma``: a dial gauge's repeatability (mm)."""
         raise NotImplementedError
 
 

@@ -15,13 +15,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from calibrators.measurements import ZERO_RHO, Measurement, Measurements, gauge_name
-from orthoglide_env.instruments.gauges import (
-    GaugeSpec,
-    Part,
-    collision_boxes,
-    exact_ray_distances,
-    install,
-)
+from orthoglide_env.instruments.rays import exact_ray_distances
+from orthoglide_env.instruments.slots import GaugeSpec, Part
+from orthoglide_env.instruments.stands import install
+from orthoglide_env.model.boxes import collision_boxes
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import PAPER_POSTURES, direct, paper_posture

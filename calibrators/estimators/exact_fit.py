@@ -26,12 +26,12 @@ scales its covariance by chi2/dof.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 from scipy import special
 
-from orthoglide_env.instruments.gauges import NOISE_FLOOR
+from orthoglide_env.instruments.dial import NOISE_FLOOR
 from orthoglide_env.model.reading_model import Design, jacobian, predict
 
 #: A combination is identifiable (and moved by a base-parameter fit) when its information
@@ -60,7 +60,7 @@ CHI2_LEVEL: float = 1e-3
 
 def weighting_sigma(sigma: float | np.ndarray) -> float | np.ndarray:
     """The noise a reading is weighted with (mm): its instrument's, or
-    :data:`~orthoglide_env.instruments.gauges.NOISE_FLOOR` for an ideal one (every weight,
+    :data:`~orthoglide_env.instruments.dial.NOISE_FLOOR` for an ideal one (every weight,
     information and plan of the estimators and agents takes it from here)."""
     floored = np.maximum(sigma, NOISE_FLOOR)
     return float(floored) if np.ndim(floored) == 0 else floored
@@ -89,16 +89,10 @@ class BatchFit:
 
     def split(self) -> list[BatchFit]:
         """One fit per machine (each a batch of one)."""
-        out = []
-        for m in range(len(self.theta)):
-            rows = slice(m, m + 1)
-            out.append(replace(
-                self, theta=self.theta[rows], covariance=self.covariance[rows],
-                information=self.information[rows], residuals=self.residuals[rows],
-                chi2=self.chi2[rows], dof=self.dof[rows], retained=self.retained[rows],
-                converged=self.converged[rows], iterations=self.iterations[rows],
-                error_covariance=self.error_covariance[rows]))
-        return out
+        shared = ("free", "scale", "prior", "sigma")
+        return [replace(self, **{f.name: getattr(self, f.name)[m:m + 1] for f in fields(self)
+                                 if f.name not in shared})
+                for m in range(len(self.theta))]
 
     @property
     def chi2_dof(self) -> np.ndarray:

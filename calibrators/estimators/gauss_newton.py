@@ -11,6 +11,8 @@ readings.  It reads any experiment's notebook or measurement file.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from calibrators.estimators.base import Calibrator, Estimate, Measurements, register
@@ -32,6 +34,7 @@ from calibrators.estimators.parameters import (
     select,
     sparse_basis,
 )
+from orthoglide_env.instruments.dial import DEFAULT_SIGMA
 from orthoglide_env.lab.operations import TRACKER_SIGMA
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import direct
@@ -66,13 +69,12 @@ def align_tracker(design: Design, values: np.ndarray) -> np.ndarray:
     out = values.copy()
     space = design.space
     for station in space.stations:
-        rows = {c: np.flatnonzero(
+        rows = [np.flatnonzero(
             [station_of(design.mountings[m]) == station
              and isinstance(design.specs[m], TrackerAxis) and design.specs[m].component == c
-             for m in design.mounting]) for c in range(3)}
-        if len({len(r) for r in rows.values()}) != 1 or not np.array_equal(
-                design.rho[rows[0]], design.rho[rows[1]]) or not np.array_equal(
-                design.rho[rows[0]], design.rho[rows[2]]):
+             for m in design.mounting]) for c in range(3)]
+        # Equal postures in equal order (array_equal also tells unequal counts).
+        if any(not np.array_equal(design.rho[rows[0]], design.rho[r]) for r in rows[1:]):
             raise ValueError(f"tracker station '{station}': every point needs its x, y and z "
                              "readings, in the same order")
         measured = np.stack([values[rows[c]] for c in range(3)], axis=-1)
@@ -94,29 +96,26 @@ class GaussNewtonCalibrator(Calibrator):
 
     name = "gauss-newton"
 
-    def estimate(self, data: Measurements, params: str = "paper6", sigma: float = 0.01,
-                 *, verify: bool = True, prior: str = "auto",
-                 fix: dict[str, float] | None = None, keep_outliers: bool = False,
-                 holdout: float = 0.0, seed: int = 0, solver: str = "gauss-newton",
-                 tracker_sigma: float = TRACKER_SIGMA) -> Estimate:
-        """Fit ``data``; ``sigma`` is a dial gauge's noise, ``tracker_sigma`` a laser
-        tracker coordinate's (mm)."""
-        result = self.estimate_many([data], params, sigma, verify=verify, prior=prior, fix=fix,
-                                    keep_outliers=keep_outliers, holdout=holdout, seed=seed,
-                                    solver=solver, tracker_sigma=tracker_sigma)[0]
+    def estimate(self, data: Measurements, params: str = "paper6",
+                 sigma: float = DEFAULT_SIGMA, *, verify: bool = True,
+                 **options: Any) -> Estimate:
+        """Fit ``data``; ``sigma`` is a dial gauge's noise (mm), ``options`` those of
+        :meth:`estimate_many`."""
+        result = self.estimate_many([data], params, sigma, verify=verify, **options)[0]
         if isinstance(result, Exception):
             raise result
         return result
 
     def estimate_many(self, datas: list[Measurements], params: str = "paper6",
-                      sigma: float = 0.01, *, verify: bool = True, prior: str = "auto",
+                      sigma: float = DEFAULT_SIGMA, *, verify: bool = True, prior: str = "auto",
                       fix: dict[str, float] | None = None, keep_outliers: bool = False,
                       holdout: float = 0.0, seed: int = 0, solver: str = "gauss-newton",
                       tracker_sigma: float = TRACKER_SIGMA, explain: bool = True
                       ) -> list[Estimate | Exception]:
-        """:meth:`estimate` of many experiments: those of one design (the same readings
-        of the same mountings at the same postures, as a fixed agent takes them on every
-        machine) are fitted together, in one batched solve.  A failure is returned in
+        """:meth:`estimate` of many experiments; ``tracker_sigma``: a laser tracker
+        coordinate's noise (mm).  Those of one design (the same readings of the same
+        mountings at the same postures, as a fixed agent takes them on every machine) are
+        fitted together, in one batched solve.  A failure is returned in
         place of its estimate, not raised.  ``explain=False`` leaves out the words on
         which combinations the data determine and which not (``identifiable``,
         ``unidentifiable``), which cost more than the fit on large designs."""

@@ -18,6 +18,7 @@ import numpy as np
 from calibrators.estimators.base import PARAM_NAMES, check_params
 from calibrators.estimators.differences import differences, model_jacobian
 from calibrators.measurements import Measurements
+from orthoglide_env.instruments.dial import DEFAULT_SIGMA
 
 #: A direction is reported as weak when its singular value is below this fraction of the
 #: largest (the paper's design: 0.0164 / 1.01 ~ 0.016 for the drho ~ dL directions).
@@ -56,7 +57,7 @@ def analyse(jac: np.ndarray, cov_unit: np.ndarray, sigma: float,
     return Identifiability(fisher, crlb, sv, weak)
 
 
-def of_design(data: Measurements, params: str = "full", sigma: float = 0.01,
+def of_design(data: Measurements, params: str = "full", sigma: float = DEFAULT_SIGMA,
               theta: np.ndarray | None = None) -> Identifiability:
     """Identifiability of any strategy's readings (its design): the exact gauge model's
     Jacobian of the averaged differences at the machine ``theta`` (drho, dL; default

@@ -28,7 +28,8 @@ from calibrators.estimators.differences import (
 )
 from calibrators.estimators.identifiability import analyse
 from calibrators.measurements import Measurements
-from orthoglide_env.instruments.gauges import GaugeSpec
+from orthoglide_env.instruments.dial import DEFAULT_SIGMA
+from orthoglide_env.instruments.slots import GaugeSpec
 
 #: Held-out sets of the verification: up to this many repetitions each is one; beyond,
 #: this many runs of consecutive ones, so that its cost stays linear in the readings.
@@ -61,23 +62,14 @@ class PaperCalibrator(Calibrator):
     name = "paper"
 
     def solve(self, rows: Differences, free: tuple[int, ...], sigma: float
-              ) -> tuple[np.ndarray, np.ndarray, int]:
-        """Parameters (all six, fixed ones 0), their covariance over the free ones, and the
-        iteration count (0: a direct solve)."""
-        jac = paper_matrix(rows)[:, list(free)]
-        pinv = np.linalg.pinv(jac)
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """Parameters (all six, fixed ones 0) and their covariance over the free ones."""
+        pinv = np.linalg.pinv(paper_matrix(rows)[:, list(free)])
         theta = np.zeros(6)
         theta[list(free)] = pinv @ rows.values
-        return theta, sigma**2 * pinv @ rows.cov_unit @ pinv.T, 0
+        return theta, sigma**2 * pinv @ rows.cov_unit @ pinv.T
 
-    def jacobian(self, rows: Differences, theta: np.ndarray, free: tuple[int, ...]) -> np.ndarray:
-        """The identification Jacobian of the data, over the free parameters."""
-        return paper_matrix(rows)[:, list(free)]
-
-    def predict(self, rows: Differences, theta: np.ndarray) -> np.ndarray:
-        return paper_matrix(rows) @ theta
-
-    def estimate(self, data: Measurements, params: str = "paper6", sigma: float = 0.01,
+    def estimate(self, data: Measurements, params: str = "paper6", sigma: float = DEFAULT_SIGMA,
                  *, verify: bool = True, **options: Any) -> Estimate:
         used = [name for name, given in (
             ("prior", options.get("prior", "none") not in ("auto", "none")),
@@ -99,17 +91,17 @@ class PaperCalibrator(Calibrator):
         if len(rows) < len(free):
             raise ValueError(f"only {len(rows)} usable differences for {len(free)} parameters: "
                              "too many readings were not valid")
-        theta, cov, iterations = self.solve(rows, free, sigma)
-        ident = analyse(self.jacobian(rows, theta, free), rows.cov_unit, sigma,
+        theta, cov = self.solve(rows, free, sigma)
+        ident = analyse(paper_matrix(rows)[:, list(free)], rows.cov_unit, sigma,
                         tuple(PARAM_NAMES[k] for k in free))
         return Estimate(
             strategy=self.name, params=params, drho=theta[:3], dL=theta[3:], covariance=cov,
-            residuals=rows.values - self.predict(rows, theta),
+            residuals=rows.values - paper_matrix(rows) @ theta,
             singular_values=ident.singular_values, crlb=ident.crlb,
             weak_directions=ident.weak_directions, n_readings=len(data),
             experiment_time_s=data.experiment_time_s,
             verification_rms_mm=self.verify(data, free, sigma) if verify else None,
-            iterations=iterations, sigma=sigma, fisher=ident.fisher, readings=data,
+            sigma=sigma, fisher=ident.fisher, readings=data,
         )
 
     def verify(self, data: Measurements, free: tuple[int, ...], sigma: float) -> float | None:
@@ -130,6 +122,6 @@ class PaperCalibrator(Calibrator):
                 continue
             if len(train) < len(free) or not len(test):
                 continue
-            theta, _, _ = self.solve(train, free, sigma)
-            errors.append(test.values - self.predict(test, theta))
+            theta, _ = self.solve(train, free, sigma)
+            errors.append(test.values - paper_matrix(test) @ theta)
         return float(np.sqrt(np.mean(np.concatenate(errors) ** 2))) if errors else None

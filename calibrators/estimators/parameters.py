@@ -2,7 +2,7 @@
 
 The parameter vector of a fit is the machine's 27 errors in
 :data:`~orthoglide_env.model.errors.ERROR_NAMES` order, then four stand parameters per gauge
-mounting (:data:`~orthoglide_env.instruments.gauges.STAND_PARAMS`: shift and tilt across the
+mounting (:data:`~orthoglide_env.instruments.stands.STAND_PARAMS`: shift and tilt across the
 measuring axis).  A *selection* names the free ones, by comma-separated tokens:
 
 ==============  ==============================================================
@@ -35,9 +35,12 @@ from orthoglide_env.model.errors import (
 )
 from orthoglide_env.model.reading_model import ParameterSpace, default_scales, preset_sigmas
 
-PAPER6: tuple[str, ...] = ERROR_NAMES[:6]
 #: Selections by alias.
 ALIASES: dict[str, str] = {"full": "paper6"}
+#: The selections that free a run of the parameter vector.
+SPANS: dict[str, slice] = {"paper6": slice(6), "extended": slice(None),
+                           "machine": slice(len(ERROR_NAMES)),
+                           "stands": slice(len(ERROR_NAMES), None)}
 
 
 def select(selection: str, space: ParameterSpace) -> np.ndarray:
@@ -49,14 +52,8 @@ def select(selection: str, space: ParameterSpace) -> np.ndarray:
         raise ValueError("the parameter selection is empty")
     for token in tokens:
         token = ALIASES.get(token, token)
-        if token == "paper6":
-            free[:6] = True
-        elif token == "extended":
-            free[:] = True
-        elif token == "machine":
-            free[: len(ERROR_NAMES)] = True
-        elif token == "stands":
-            free[len(ERROR_NAMES):] = True
+        if token in SPANS:
+            free[SPANS[token]] = True
         elif token in groups:
             free |= np.array([g == token for g in groups])
         elif token in names:

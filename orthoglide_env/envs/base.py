@@ -13,7 +13,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from orthoglide_env.instruments.gauges import Gauge, GaugeSpec
+from orthoglide_env.instruments.gauges import Gauge
+from orthoglide_env.instruments.slots import GaugeSpec
 from orthoglide_env.lab.engine import LabBatch
 from orthoglide_env.lab.machines import ExactMachines, LabMachines, SimulatedMachine
 from orthoglide_env.lab.settings import LabSettings, render_modes

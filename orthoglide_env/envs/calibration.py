@@ -12,13 +12,9 @@ from typing import Any, ClassVar
 import numpy as np
 
 from orthoglide_env.envs.base import ROW, EngineEnv, check_seed, reset_options
-from orthoglide_env.instruments.gauges import (
-    DEFAULT_RESOLUTION,
-    DEFAULT_SIGMA,
-    DEFAULT_TRAVEL,
-    GaugeSpec,
-    Status,
-)
+from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA, Status
+from orthoglide_env.instruments.gauges import DEFAULT_TRAVEL
+from orthoglide_env.instruments.slots import GaugeSpec
 from orthoglide_env.lab.actions import check_targets
 from orthoglide_env.lab.engine import StepResult
 from orthoglide_env.lab.operations import Op
@@ -26,7 +22,7 @@ from orthoglide_env.lab.settings import calibration_settings, calibration_spaces
 from orthoglide_env.lab.spec import CALIBRATION, RENDER_MODES, arguments_of
 from orthoglide_env.model.errors import DEFAULT_PRESET
 
-#: How ``info["status"]`` names each :class:`~orthoglide_env.instruments.gauges.Status` code,
+#: How ``info["status"]`` names each :class:`~orthoglide_env.instruments.dial.Status` code,
 #: indexed by the code.
 STATUS_LABELS: np.ndarray = np.array([s.name.lower().replace("_", "-") for s in Status])
 #: The observation keys of this env, among the lab engine's.

@@ -17,12 +17,9 @@ from gymnasium.vector import AutoresetMode
 
 from orthoglide_env.envs.calibration import calibration_info, gauge_names, step_info
 from orthoglide_env.envs.vector import EngineVectorEnv
-from orthoglide_env.instruments.gauges import (
-    DEFAULT_RESOLUTION,
-    DEFAULT_SIGMA,
-    DEFAULT_TRAVEL,
-    GaugeSpec,
-)
+from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
+from orthoglide_env.instruments.gauges import DEFAULT_TRAVEL
+from orthoglide_env.instruments.slots import GaugeSpec
 from orthoglide_env.lab.actions import check_targets
 from orthoglide_env.lab.engine import StepResult
 from orthoglide_env.lab.operations import Op

@@ -13,7 +13,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from orthoglide_env.envs.base import ROW, EngineEnv, check_seed, first, reset_options
-from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
+from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.lab.actions import check_lab_actions
 from orthoglide_env.lab.engine import ACCURACY_UNIT_MM, StepResult
 from orthoglide_env.lab.notebook import Estimator, Record

@@ -19,12 +19,8 @@ from gymnasium.vector import AutoresetMode
 
 from orthoglide_env.envs.lab import RESET_INFO, step_info
 from orthoglide_env.envs.vector import EngineVectorEnv
-from orthoglide_env.instruments.gauges import (
-    DEFAULT_RESOLUTION,
-    DEFAULT_SIGMA,
-    Gauge,
-    GaugeNoise,
-)
+from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA, GaugeNoise
+from orthoglide_env.instruments.gauges import Gauge
 from orthoglide_env.lab.actions import check_lab_actions
 from orthoglide_env.lab.engine import StepResult
 from orthoglide_env.lab.notebook import Estimator, Record

@@ -21,7 +21,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from orthoglide_env.envs.base import check_seed, reset_options
-from orthoglide_env.instruments.gauges import GaugeSpec
+from orthoglide_env.instruments.slots import GaugeSpec
 from orthoglide_env.lab.engine import LabBatch, StepResult
 from orthoglide_env.lab.machines import ExactMachines
 from orthoglide_env.lab.operations import Op

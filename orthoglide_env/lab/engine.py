@@ -19,17 +19,10 @@ from typing import Any
 
 import numpy as np
 
-from orthoglide_env.instruments.gauges import (
-    DEFAULT_TRAVEL,
-    Gauge,
-    GaugeArray,
-    GaugeSpec,
-    Status,
-    install_array,
-    installation_errors,
-    readings_from_distances,
-    status_of,
-)
+from orthoglide_env.instruments.dial import Status, readings_from_distances, status_of
+from orthoglide_env.instruments.gauges import DEFAULT_TRAVEL, Gauge, GaugeArray
+from orthoglide_env.instruments.slots import GaugeSpec
+from orthoglide_env.instruments.stands import install_array, installation_errors
 from orthoglide_env.lab.machines import ExactMachine, LabMachines, Sight
 from orthoglide_env.lab.notebook import Notebook, Record, predicted_many
 from orthoglide_env.lab.operations import OP_NAMES, SLOTS, TIME, TRACKER_DISTANCE, Op

@@ -14,15 +14,10 @@ from typing import TYPE_CHECKING, NamedTuple, Protocol
 
 import numpy as np
 
-from orthoglide_env.instruments.gauges import (
-    Gauge,
-    GaugeArray,
-    as_gauge_array,
-    collision_boxes,
-    exact_ray_distances,
-    exact_target_boxes,
-    pressed_past_travel,
-)
+from orthoglide_env.instruments.dial import pressed_past_travel
+from orthoglide_env.instruments.gauges import Gauge, GaugeArray, as_gauge_array
+from orthoglide_env.instruments.rays import exact_ray_distances, exact_target_boxes
+from orthoglide_env.model.boxes import collision_boxes
 from orthoglide_env.model.collisions import collision_mask
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import direct

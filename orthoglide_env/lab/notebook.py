@@ -15,7 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from orthoglide_env.instruments.gauges import NOISE_FLOOR, Gauge, GaugeArray
+from orthoglide_env.instruments.dial import NOISE_FLOOR
+from orthoglide_env.instruments.gauges import Gauge, GaugeArray
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import ERROR_NAMES, MachineParams
 from orthoglide_env.model.reading_model import (

@@ -32,7 +32,7 @@ from enum import IntEnum
 
 import numpy as np
 
-from orthoglide_env.instruments.gauges import PAPER_LAYOUT, GaugeSpec
+from orthoglide_env.instruments.slots import PAPER_LAYOUT, GaugeSpec
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 
 
@@ -58,7 +58,7 @@ TIME = TimeTable()
 
 def slot_catalogue(design: MachineDesign) -> tuple[GaugeSpec, ...]:
     """The slot catalogue of a design (kinds of target in
-    :mod:`orthoglide_env.instruments.gauges`):
+    :mod:`orthoglide_env.instruments.slots`):
 
     * every bar (leg), both measuring axes across it, at every place of the design's
       ``slot_positions`` (fractions from the platform end; closer to either end the tip

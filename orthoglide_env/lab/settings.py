@@ -18,7 +18,8 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from orthoglide_env.instruments.gauges import PAPER_LAYOUT, GaugeNoise, GaugeSpec, check_noise
+from orthoglide_env.instruments.dial import GaugeNoise, check_noise
+from orthoglide_env.instruments.slots import PAPER_LAYOUT, GaugeSpec
 from orthoglide_env.lab.notebook import Estimator
 from orthoglide_env.lab.operations import PAPER_SLOTS, SLOTS, TIME, TRACKER_SIGMA, Op
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign

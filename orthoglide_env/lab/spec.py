@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 from gymnasium.vector import AutoresetMode
 
-from orthoglide_env.instruments.gauges import GaugeSpec, layout_from_names
+from orthoglide_env.instruments.slots import GaugeSpec, layout_from_names
 from orthoglide_env.lab.machines import MOTION_MODES
 from orthoglide_env.lab.operations import SLOTS
 from orthoglide_env.model.design import MachineDesign

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from orthoglide_env.instruments.gauges import BOX_NAMES, collision_boxes, to_box_frame
+from orthoglide_env.model.boxes import BOX_NAMES, collision_boxes, to_box_frame
 from orthoglide_env.model.errors import LEG_NAMES, MachineParams
 from orthoglide_env.model.kinematics import direct
 

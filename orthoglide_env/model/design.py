@@ -43,19 +43,16 @@ import itertools
 import json
 import math
 import numbers
-import re
-import sys
 from dataclasses import dataclass, fields
-from functools import partial
 from pathlib import Path
 from typing import Any
 
-from orthoglide_env.model.userfile import UserFileError, line_of_key, read_user_file, unique_keys
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - the project's dependency on Python 3.10
-    import tomli as tomllib
+from orthoglide_env.model.userfile import (
+    UserFileError,
+    load_user_file,
+    read_user_file,
+    short_repr,
+)
 
 
 class DesignError(UserFileError):
@@ -274,44 +271,15 @@ class MachineDesign:
         """Read a design file: TOML when its name ends in ``.toml``, JSON otherwise (a key
         given twice is an error).  Refusals name the file, and the line of the key at
         fault."""
-        path = Path(path)
-        text = read_user_file(path, "design file", DesignError)
-        toml = path.suffix.lower() == ".toml"
-        try:
-            if toml:
-                data = tomllib.loads(text)
-            else:
-                data = json.loads(text, object_pairs_hook=partial(
-                    unique_keys, kind="design", error=DesignError))
-            return cls.from_dict(data, base)
-        except json.JSONDecodeError as exc:
-            raise DesignError(f"{path}:{exc.lineno}: not valid JSON (column {exc.colno}: "
-                              f"{exc.msg})") from None
-        except tomllib.TOMLDecodeError as exc:
-            found = re.search(r"\(at line (\d+), column (\d+)\)", str(exc))
-            where = f":{found[1]}" if found else ""
-            raise DesignError(f"{path}{where}: not valid TOML "
-                              f"({str(exc).split(' (at line')[0]})") from None
-        except DesignError as exc:
-            line = line_of_key(text, exc.key, exc.occurrence, toml=toml)
-            raise DesignError(f"{path}{'' if line is None else f':{line}'}: {exc}",
-                              key=exc.key) from None
-        except (ValueError, RecursionError) as exc:
-            # The JSON reader's own limits: integers of thousands of digits, deep nesting.
-            reason = str(exc).split(";")[0].splitlines()[0]
-            raise DesignError(f"{path}: not a design file ({reason})") from None
-
-
-def _short(value: Any) -> str:
-    text = repr(value)
-    return text if len(text) <= 40 else text[:37] + "..."
+        return load_user_file(path, "design", DesignError, lambda data: cls.from_dict(data, base),
+                              toml=Path(path).suffix.lower() == ".toml")
 
 
 def _number(key: str, value: Any, rule: Rule) -> float:
     """One number under a design key: an int or a float a float can hold (not a boolean,
     not a string), finite and within the rule."""
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise DesignError(f"design key '{key}' must be {rule.text()}, got {_short(value)} "
+        raise DesignError(f"design key '{key}' must be {rule.text()}, got {short_repr(value)} "
                           f"({type(value).__name__})", key=key)
     try:
         number = float(value)
@@ -329,7 +297,7 @@ def _numbers(key: str, value: Any, rule: Rule) -> float | tuple[float, ...]:
         return _number(key, value, rule)
     if not isinstance(value, list | tuple) or (
             len(value) != rule.size if rule.size else not value):
-        raise DesignError(f"design key '{key}' must be {rule.text()}, got {_short(value)}",
+        raise DesignError(f"design key '{key}' must be {rule.text()}, got {short_repr(value)}",
                           key=key)
     return tuple(_number(key, element, rule) for element in value)
 
@@ -337,7 +305,7 @@ def _numbers(key: str, value: Any, rule: Rule) -> float | tuple[float, ...]:
 def _validity_object(value: Any) -> dict[str, float]:
     """A validity object's limits, by machine key (keys left out are left out)."""
     if not isinstance(value, dict):
-        raise DesignError(f"design key 'validity' must be {VALIDITY_RULE}, got {_short(value)}",
+        raise DesignError(f"design key 'validity' must be {VALIDITY_RULE}, got {short_repr(value)}",
                           key="validity")
     unknown = [key for key in value if key not in VALIDITY_UNITS]
     if unknown:

@@ -46,19 +46,13 @@ import numbers
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from orthoglide_env.model.design import PROTOTYPE, DesignError, MachineDesign
-from orthoglide_env.model.userfile import (
-    UserFileError,
-    line_of_key,
-    read_user_file,
-    unique_keys,
-)
+from orthoglide_env.model.userfile import UserFileError, load_user_file, short_repr
 
 LEG_NAMES: tuple[str, str, str] = ("x", "y", "z")
 AXIS_NAMES: tuple[str, str, str] = ("x", "y", "z")
@@ -287,23 +281,8 @@ class MachineParams:
         an error); ``design``: the machine's design when the file names none (a file that
         names another is refused).  Errors name the file, and the line of the key at
         fault."""
-        path = Path(path)
-        text = read_user_file(path, "machine file", MachineFileError)
-        try:
-            return cls.from_dict(json.loads(text, object_pairs_hook=partial(
-                unique_keys, kind="machine", error=MachineFileError)), design, path.parent)
-        except json.JSONDecodeError as exc:
-            raise MachineFileError(
-                f"{path}:{exc.lineno}: not valid JSON (column {exc.colno}: {exc.msg})"
-            ) from None
-        except MachineFileError as exc:
-            line = line_of_key(text, exc.key, exc.occurrence)
-            raise MachineFileError(f"{path}{'' if line is None else f':{line}'}: {exc}",
-                                   key=exc.key) from None
-        except (ValueError, RecursionError) as exc:
-            # The JSON reader's own limits: integers of thousands of digits, deep nesting.
-            reason = str(exc).split(";")[0].splitlines()[0]
-            raise MachineFileError(f"{path}: not a machine file ({reason})") from None
+        return load_user_file(path, "machine", MachineFileError,
+                              lambda data: cls.from_dict(data, design, Path(path).parent))
 
     def with_paper_params(self, drho: np.ndarray, dL: np.ndarray) -> MachineParams:
         """A copy whose paper parameters are replaced (extended errors kept)."""
@@ -425,7 +404,7 @@ def _numbers(key: str, value: Any) -> np.ndarray:
             continue
         if isinstance(item, bool | np.bool_) or not isinstance(item, numbers.Real):
             raise MachineFileError(f"machine key '{key}' must hold numbers, got "
-                                   f"{_short(item)} ({type(item).__name__})", key=key)
+                                   f"{short_repr(item)} ({type(item).__name__})", key=key)
         try:
             float(item)
         except OverflowError:
@@ -437,12 +416,6 @@ def _numbers(key: str, value: Any) -> np.ndarray:
     except ValueError:
         raise MachineFileError(f"machine key '{key}' must have shape {list(_SHAPES[key])}, "
                                f"got rows of different lengths", key=key) from None
-
-
-def _short(value: Any) -> str:
-    """A value's repr for a one-line message, cut short."""
-    text = repr(value)
-    return text if len(text) <= 40 else text[:37] + "..."
 
 
 @dataclass(frozen=True)
@@ -539,11 +512,17 @@ def check_rho(rho: np.ndarray, *, margin: float = 0.0, design: MachineDesign = P
         raise ValueError(f"joint targets must have 3 components, got shape {list(rho.shape)}")
     if not np.all(np.isfinite(rho)):
         raise ValueError("joint targets must be finite numbers")
-    lo, hi = design.rho_min - margin, design.rho_max + margin
-    bad = (rho < lo) | (rho > hi)
+    bad = ~within_limits(rho, design, margin)
     if np.any(bad):
-        value = rho[bad].flat[0]
-        raise ValueError(
-            f"joint target {value:g} mm is outside the joint limits [{lo:g}, {hi:g}] mm"
-        )
+        lo, hi = design.rho_min - margin, design.rho_max + margin
+        raise ValueError(f"joint target {rho[bad].flat[0]:g} mm is outside the joint limits "
+                         f"[{lo:g}, {hi:g}] mm")
     return rho
+
+
+def within_limits(rho: np.ndarray, design: MachineDesign = PROTOTYPE, margin: float = 0.0
+                  ) -> np.ndarray:
+    """Which coordinates of the commands ``rho`` (..., 3) lie within ``design``'s control
+    limits, widened by ``margin`` (mm); NaN lies outside.  Every check of the limits asks
+    this."""
+    return (rho >= design.rho_min - margin) & (rho <= design.rho_max + margin)

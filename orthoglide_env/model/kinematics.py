@@ -22,7 +22,7 @@ from typing import NamedTuple
 import numpy as np
 
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
-from orthoglide_env.model.errors import R_LEG, MachineParams
+from orthoglide_env.model.errors import R_LEG, MachineParams, within_limits
 
 
 class UnreachableError(ValueError):
@@ -326,6 +326,14 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
                      a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
 
 
+def skew(x: np.ndarray) -> np.ndarray:
+    """Matrices ``[x]x`` (``(..., 3, 3)``) with ``[x]x y = x cross y``."""
+    x = np.asarray(x, dtype=float)
+    out = np.zeros((*x.shape, 3))
+    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -x[..., 2], x[..., 1], -x[..., 0]
+    return out - np.swapaxes(out, -1, -2)
+
+
 def leg_vectors(machine: MachineParams, rho: np.ndarray, p: np.ndarray) -> np.ndarray:
     """Vectors A_i -> C_i (carriage to platform) in world, shape ``(..., 3, 3)``."""
     return platform_points(machine, p) - carriage_points(machine, rho)
@@ -352,7 +360,7 @@ def check_reachable(machine: MachineParams, p: np.ndarray) -> np.ndarray:
     """Inverse kinematics that also enforces the control limits; returns ``rho``."""
     rho = inverse(machine, p)
     design = machine.design
-    bad = (rho < design.rho_min) | (rho > design.rho_max)
+    bad = ~within_limits(rho, design)
     if np.any(bad):
         raise UnreachableError(
             f"TCP needs joint coordinate {rho[bad].flat[0]:.3f} mm, outside the control "

@@ -3,7 +3,7 @@
 A *design* says where readings were taken: which gauge mountings (stand installations)
 and, for every reading, its mounting and the commanded posture.  The model reading of a
 mounting at a posture is ``sign * t`` with ``t`` the distance along the stand's ray to the
-plane of the bar face it is aimed at (:func:`orthoglide_env.instruments.gauges.face_distances`); the
+plane of the bar face it is aimed at (:func:`orthoglide_env.instruments.rays.face_distances`); the
 gauge's zero is one unknown constant per mounting, which estimators eliminate, so the
 model leaves it out.
 
@@ -19,23 +19,17 @@ from functools import cached_property
 
 import numpy as np
 
-from orthoglide_env.instruments.gauges import (
-    Gauge,
-    GaugeSpec,
-    Part,
+from orthoglide_env.instruments.gauges import Gauge, spec_arrays
+from orthoglide_env.instruments.rays import boxes_at, face_distances, face_normals, plane_distances
+from orthoglide_env.instruments.slots import GaugeSpec, Part
+from orthoglide_env.instruments.stands import (
     across_axes,
-    bar_normal_pullback,
-    boxes_at,
-    face_distances,
-    face_normals,
     ideal_rays,
-    plane_distances,
-    skew,
-    spec_arrays,
     stand_errors,
     stand_names,
     stand_rays,
 )
+from orthoglide_env.model.boxes import bar_normal_pullback
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import (
     AXIS_NAMES,
@@ -55,6 +49,7 @@ from orthoglide_env.model.kinematics import (
     dot,
     platform_points,
     sensitivity_along,
+    skew,
     tcp_sensitivity_factors,
 )
 
@@ -89,7 +84,7 @@ def station_of(mounting: str) -> str:
 class ParameterSpace:
     """Every parameter a fit could estimate for a set of mountings: the 27 machine errors in
     :data:`~orthoglide_env.model.errors.ERROR_NAMES` order, four stand parameters per gauge
-    mounting (:data:`~orthoglide_env.instruments.gauges.STAND_PARAMS`), then three rotations per
+    mounting (:data:`~orthoglide_env.instruments.stands.STAND_PARAMS`), then three rotations per
     tracker station."""
 
     mountings: tuple[str, ...] = ()
@@ -262,9 +257,7 @@ def rotation_matrices(rotvec: np.ndarray) -> np.ndarray:
     batched (scipy's Rotation holds one batch axis only)."""
     rotvec = np.asarray(rotvec, dtype=float)
     angle = np.linalg.norm(rotvec, axis=-1)[..., None, None]
-    k = np.zeros((*rotvec.shape[:-1], 3, 3))
-    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -rotvec[..., 2], rotvec[..., 1], -rotvec[..., 0]
-    k = k - np.swapaxes(k, -1, -2)
+    k = skew(rotvec)
     with np.errstate(invalid="ignore", divide="ignore"):
         a = np.where(angle > 1e-8, np.sin(angle) / angle, 1.0 - angle**2 / 6)
         b = np.where(angle > 1e-8, (1 - np.cos(angle)) / angle**2, 0.5 - angle**2 / 24)

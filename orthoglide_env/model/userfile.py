@@ -3,9 +3,20 @@ file, the line of the key at fault and the rule."""
 
 from __future__ import annotations
 
+import json
 import re
+import sys
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - the project's dependency on Python 3.10
+    import tomli as tomllib
+
+T = TypeVar("T")
 
 
 class UserFileError(ValueError):
@@ -31,6 +42,44 @@ def read_user_file(path: Path, kind: str, error: type[ValueError]) -> str:
     except (OSError, UnicodeDecodeError) as exc:
         reason = getattr(exc, "strerror", None) or str(exc)
         raise error(f"cannot read {kind} {path}: {reason}") from None
+
+
+def load_user_file(path: str | Path, kind: str, error: type[UserFileError],
+                   build: Callable[[Any], T], *, toml: bool = False) -> T:
+    """``build`` of the document in the user's ``kind`` file ``path``: JSON (a key given
+    twice is an error), or TOML when ``toml``.  Every refusal is ``error`` naming the file,
+    and the line of the key at fault when there is one."""
+    path = Path(path)
+    text = read_user_file(path, f"{kind} file", error)
+    try:
+        if toml:
+            data = tomllib.loads(text)
+        else:
+            data = json.loads(text, object_pairs_hook=partial(unique_keys, kind=kind,
+                                                              error=error))
+        return build(data)
+    except json.JSONDecodeError as exc:
+        raise error(f"{path}:{exc.lineno}: not valid JSON (column {exc.colno}: "
+                    f"{exc.msg})") from None
+    except tomllib.TOMLDecodeError as exc:
+        found = re.search(r"\(at line (\d+), column (\d+)\)", str(exc))
+        where = f":{found[1]}" if found else ""
+        raise error(f"{path}{where}: not valid TOML "
+                    f"({str(exc).split(' (at line')[0]})") from None
+    except error as exc:
+        line = line_of_key(text, exc.key, exc.occurrence, toml=toml)
+        raise error(f"{path}{'' if line is None else f':{line}'}: {exc}",
+                    key=exc.key) from None
+    except (ValueError, RecursionError) as exc:
+        # The JSON reader's own limits: integers of thousands of digits, deep nesting.
+        reason = str(exc).split(";")[0].splitlines()[0]
+        raise error(f"{path}: not a {kind} file ({reason})") from None
+
+
+def short_repr(value: Any) -> str:
+    """A value's repr for a one-line message, cut short."""
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
 
 
 def unique_keys(pairs: list[tuple[str, Any]], kind: str, error: type[UserFileError]

@@ -23,17 +23,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from orthoglide_env.instruments.gauges import (
-    GAUGE_BODY_RADIUS,
-    RAY_BACKOFF,
-    STAND_LENGTH,
-    Gauge,
-    GaugeArray,
-    GaugeSpec,
-    Part,
-    on_flat_face,
-    ray_box_distance,
-)
+from orthoglide_env.instruments.dial import GAUGE_BODY_RADIUS, STAND_LENGTH
+from orthoglide_env.instruments.gauges import Gauge, GaugeArray
+from orthoglide_env.instruments.rays import RAY_BACKOFF, on_flat_face, ray_box_distance
+from orthoglide_env.instruments.slots import GaugeSpec, Part
 from orthoglide_env.lab.machines import check_motion_mode
 from orthoglide_env.model.collisions import collision_names, crash_pairs
 from orthoglide_env.model.design import MachineDesign
@@ -42,6 +35,7 @@ from orthoglide_env.model.kinematics import direct
 from orthoglide_env.sim.simulator import PhysicsSettings, Simulator, pb
 from orthoglide_env.sim.urdf import (
     MM,
+    LoopClosure,
     bar_length,
     joint_positions,
     link_name,
@@ -156,9 +150,9 @@ class OrthoglideMachine:
         """A point given in a link's URDF frame, expressed in its COM frame (metres)."""
         return list((np.asarray(point_mm) - self._com[link]) * MM)
 
-    def _close_loops(self) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
-        """Constraints for :func:`~orthoglide_env.sim.urdf.loop_closures`; returns each
-        closure's links and points, for :meth:`loop_residual`."""
+    def _close_loops(self) -> list[LoopClosure]:
+        """Constraints for :func:`~orthoglide_env.sim.urdf.loop_closures`; returns the
+        closures, for :meth:`loop_residual`."""
         closures = loop_closures(self.machine)
         for c in closures:
             a, b = self._index[c.link_a], self._index[c.link_b]
@@ -172,7 +166,7 @@ class OrthoglideMachine:
                 [0, 0, 0, 1], list(Rotation.from_matrix(c.rotation).as_quat()),
             )
             self.bc.changeConstraint(cid, maxForce=1e9)
-        return [(c.link_a, c.link_b, c.point_a, c.point_b) for c in closures]
+        return closures
 
     def _draw_stands(self) -> None:
         """Draw each gauge: its body behind the tip, an arm, and its stand's magnetic foot
@@ -280,11 +274,9 @@ class OrthoglideMachine:
 
     def loop_residual(self) -> float:
         """The worst gap (mm) between the two sides of any loop closure."""
-        gaps = [
-            np.linalg.norm(self._point(a, pa) - self._point(b, pb_))
-            for a, b, pa, pb_ in self._closures
-        ]
-        return float(max(gaps))
+        return float(max(np.linalg.norm(self._point(c.link_a, c.point_a)
+                                        - self._point(c.link_b, c.point_b))
+                         for c in self._closures))
 
     def gauge_distances(self) -> np.ndarray:
         """Ray distance of each gauge's tip to its target (mm); NaN if the first thing the
@@ -377,8 +369,7 @@ class OrthoglideMachine:
             cameraUpVector=[0, 0, 1],
         )
         proj = self.bc.computeProjectionMatrixFOV(fov=fov or CAMERA_FOV, aspect=width / height,
-                                                  nearVal=0.05,
-                                                  farVal=5.0)
+                                                  nearVal=0.05, farVal=5.0)
         img = self.bc.getCameraImage(width, height, view, proj, renderer=pb.ER_TINY_RENDERER)
         return np.reshape(np.asarray(img[2], dtype=np.uint8), (height, width, 4))[..., :3]
 

@@ -6,17 +6,16 @@ from pathlib import Path
 
 import numpy as np
 
-from orthoglide_env.instruments.gauges import (
+from orthoglide_env.instruments.dial import (
     DEFAULT_RESOLUTION,
     DEFAULT_SIGMA,
-    PAPER_LAYOUT,
     GaugeNoise,
     Status,
-    install,
     readings_from_distances,
     status_of,
-    zero_gauges,
 )
+from orthoglide_env.instruments.slots import PAPER_LAYOUT
+from orthoglide_env.instruments.stands import install, zero_gauges
 from orthoglide_env.model.errors import AXIS_NAMES, LEG_NAMES, MachineParams, check_rho
 from orthoglide_env.model.kinematics import direct
 from orthoglide_env.sim.pybullet import OrthoglideMachine
@@ -74,15 +73,11 @@ def pose_report(
                 "axis": AXIS_NAMES[g.spec.axis],
                 "reading": None if np.isnan(r) else float(r),
                 "valid": bool(np.isfinite(r)),
-                "status": _status_name(s),
+                "status": Status(s).name.lower().replace("_", "-"),
             }
             for g, r, s in zip(gauges, readings, status, strict=True)
         ],
     }
-
-
-def _status_name(code: int) -> str:
-    return Status(code).name.lower().replace("_", "-")
 
 
 def render_png(

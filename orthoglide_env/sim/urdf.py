@@ -111,15 +111,6 @@ def _link(name: str, body: str) -> str:
     return f'<link name="{name}">{body}</link>'
 
 
-def _joint(name: str, kind: str, parent: str, child: str, origin: str, axis: str = "",
-           limits: str = "") -> str:
-    axis_xml = f'<axis xyz="{axis}"/>' if axis else ""
-    return (
-        f'<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
-        f"{origin}{axis_xml}{limits}</joint>"
-    )
-
-
 def bar_length(machine: MachineParams, leg: int) -> float:
     """Length of the bar box (hinge to hinge, less the clearance at both ends), mm."""
     return float(machine.leg_lengths[leg] - 2 * machine.design.bar_clearance)
@@ -265,9 +256,10 @@ def _joint_xml(joint: JointOrigin, design: MachineDesign) -> str:
         "revolute": '<limit lower="-3.14159" upper="3.14159" effort="0" velocity="100"/>',
         "fixed": "",
     }[joint.kind]
-    axis = "" if joint.kind == "fixed" else _xyz(joint.axis / MM)
-    return _joint(joint.name, joint.kind, joint.parent, joint.child,
-                  _origin(joint.xyz, joint.rotation), axis, limits)
+    axis = "" if joint.kind == "fixed" else f'<axis xyz="{_xyz(joint.axis / MM)}"/>'
+    return (f'<joint name="{joint.name}" type="{joint.kind}"><parent link="{joint.parent}"/>'
+            f'<child link="{joint.child}"/>{_origin(joint.xyz, joint.rotation)}{axis}{limits}'
+            "</joint>")
 
 
 def _leg(machine: MachineParams, i: int, joints: dict[str, JointOrigin]) -> list[str]:
@@ -279,21 +271,21 @@ def _leg(machine: MachineParams, i: int, joints: dict[str, JointOrigin]) -> list
     bar_mid = np.array([-length / 2, 0.0, 0.0])
     carriage = np.array(design.carriage_size)
     short = np.array(design.short_link_size)
+    bar_body = (_inertial(MASS["bar"], bar_mid, bar) + _box(bar, bar_mid, "bar", collide=True)
+                + _pin(30, np.zeros(3), "y"))
     bodies = {
         "carriage": _inertial(MASS["carriage"], np.zeros(3), carriage)
         + _box(carriage, np.array([carriage[0] / 2 + design.carriage_setback, 0, 0]), "carriage",
                collide=True),
         "r1": _inertial(MASS["r1"], np.zeros(3), short)
         + _box(short, np.zeros(3), "joint", collide=False),
-        "bar1": _inertial(MASS["bar"], bar_mid, bar)
-        + _box(bar, bar_mid, "bar", collide=True) + _pin(30, np.zeros(3), "y"),
+        "bar1": bar_body,
         "coupler": _inertial(MASS["coupler"], np.array([0, 0, -half_d]), short)
         + _box(short, np.array([0, 0, -half_d]), "joint", collide=True)
         + _pin(30, np.zeros(3), "y") + _pin(30, np.array([0, 0, -design.d]), "y"),
         "r2": _inertial(MASS["r2"], np.zeros(3), np.full(3, 20.0))
         + _pin(24, np.zeros(3), "z"),
-        "bar2": _inertial(MASS["bar"], bar_mid, bar)
-        + _box(bar, bar_mid, "bar", collide=True) + _pin(30, np.zeros(3), "y"),
+        "bar2": bar_body,
     }
     out = []
     for joint in joints.values():
