@@ -12,19 +12,12 @@ from typing import Any, ClassVar
 import numpy as np
 
 from orthoglide_env.envs.base import ROW, EngineEnv, check_seed, reset_options
-from orthoglide_env.instruments.gauges import (
-    DEFAULT_RESOLUTION,
-    DEFAULT_SIGMA,
-    DEFAULT_TRAVEL,
-    GaugeSpec,
-    Status,
-)
+from orthoglide_env.instruments.gauges import GaugeSpec, Status
 from orthoglide_env.lab.actions import check_targets
 from orthoglide_env.lab.engine import StepResult
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.lab.settings import calibration_settings, calibration_spaces
-from orthoglide_env.lab.spec import CALIBRATION, RENDER_MODES, arguments_of
-from orthoglide_env.model.errors import DEFAULT_PRESET
+from orthoglide_env.lab.spec import CALIBRATION, RENDER_MODES, check_arguments, signature
 
 #: How ``info["status"]`` names each :class:`~orthoglide_env.instruments.gauges.Status` code,
 #: indexed by the code.
@@ -108,12 +101,12 @@ class OrthoglideCalibrationEnv(EngineEnv):
 
     Refused input
     -------------
-    A bad constructor argument (types and ranges: :data:`orthoglide_env.lab.spec.
-    CALIBRATION`), reset option, seed or action raises ``ValueError`` whose one-line
-    message names the input and the rule.  A refused ``reset`` or ``step``
-    changes nothing: the episode before it goes on (its machine, gauges, posture and
-    random stream), or, before the first good reset, every ``step`` still raises
-    ``RuntimeError``.
+    A bad or unknown constructor argument (defaults, types and ranges:
+    :data:`orthoglide_env.lab.spec.CALIBRATION`), reset option, seed or action raises
+    ``ValueError`` whose one-line message names the input and the rule.  A refused
+    ``reset`` or ``step`` changes nothing: the episode before it goes on (its machine,
+    gauges, posture and random stream), or, before the first good reset, every ``step``
+    still raises ``RuntimeError``.
 
     Render modes
     ------------
@@ -147,30 +140,21 @@ class OrthoglideCalibrationEnv(EngineEnv):
       exact model's ray distances (as the lab's are), not the simulator's: the installed
       gauges (``true_gauges``) move by ~1e-13 mm, below the readings' last bit in the
       runs compared.  Constructor arguments are checked by the table of
-      :mod:`orthoglide_env.lab.spec`, whose words both envs share.
+      :mod:`orthoglide_env.lab.spec`, whose words both envs share; it holds their defaults
+      too, and an unknown argument raises ``ValueError`` (was ``TypeError``).
     * v0 (first release): move and read, on its own implementation.
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": list(RENDER_MODES), "render_fps": 4}
+    __signature__ = signature(CALIBRATION)
 
-    def __init__(
-        self,
-        errors: str = DEFAULT_PRESET,
-        gauge_sigma: float = DEFAULT_SIGMA,
-        gauge_resolution: float = DEFAULT_RESOLUTION,
-        motion: str = "quasi-static",
-        backend: str = "pybullet",
-        gauges: list[str] | tuple[GaugeSpec, ...] | None = None,
-        travel: float = DEFAULT_TRAVEL,
-        max_episode_steps: int | None = None,
-        render_mode: str | None = None,
-        clip_actions: bool = False,
-    ) -> None:
-        settings = calibration_settings(arguments_of(CALIBRATION, locals()))
+    def __init__(self, **kwargs: Any) -> None:
+        args = check_arguments(CALIBRATION, kwargs)
+        settings = calibration_settings(args)
         self.preset, self.gauge_noise = settings.preset, settings.noise
-        self.gauge_layout = settings.layout
-        self.travel, self.motion, self.backend_name = settings.travel, motion, backend
-        self.clip_actions = bool(clip_actions)
+        self.gauge_layout, self.travel = settings.layout, settings.travel
+        self.motion, self.backend_name = settings.motion, settings.backend
+        self.clip_actions = args["clip_actions"]
         self.max_episode_steps = settings.max_steps
         self.action_space, self.observation_space = calibration_spaces(settings)
         self._start_engine(settings)

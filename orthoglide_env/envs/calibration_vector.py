@@ -13,22 +13,15 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from gymnasium.vector import AutoresetMode
 
 from orthoglide_env.envs.calibration import calibration_info, gauge_names, step_info
 from orthoglide_env.envs.vector import EngineVectorEnv
-from orthoglide_env.instruments.gauges import (
-    DEFAULT_RESOLUTION,
-    DEFAULT_SIGMA,
-    DEFAULT_TRAVEL,
-    GaugeSpec,
-)
 from orthoglide_env.lab.actions import check_targets
 from orthoglide_env.lab.engine import StepResult
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.lab.settings import calibration_settings, calibration_spaces
-from orthoglide_env.lab.spec import CALIBRATION, VECTOR, arguments_of
-from orthoglide_env.model.errors import DEFAULT_PRESET, MachineParams
+from orthoglide_env.lab.spec import CALIBRATION_VECTOR, check_arguments, signature
+from orthoglide_env.model.errors import MachineParams
 
 
 class OrthoglideCalibrationVectorEnv(EngineVectorEnv):
@@ -62,26 +55,14 @@ class OrthoglideCalibrationVectorEnv(EngineVectorEnv):
     """
 
     LAYOUT_OPTION = True
+    __signature__ = signature(CALIBRATION_VECTOR)
 
-    def __init__(
-        self,
-        num_envs: int = 1,
-        errors: str = DEFAULT_PRESET,
-        gauge_sigma: float = DEFAULT_SIGMA,
-        gauge_resolution: float = DEFAULT_RESOLUTION,
-        motion: str = "quasi-static",
-        backend: str = "pybullet",
-        gauges: list[str] | tuple[GaugeSpec, ...] | None = None,
-        travel: float = DEFAULT_TRAVEL,
-        max_episode_steps: int | None = None,
-        render_mode: str | None = None,
-        clip_actions: bool = False,
-        autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
-    ) -> None:
-        args = arguments_of(VECTOR, locals())
-        settings = calibration_settings(arguments_of(CALIBRATION, locals()))
-        self.preset, self.gauge_noise, self.travel = settings.preset, settings.noise, travel
-        self.clip_actions, self.max_episode_steps = bool(clip_actions), settings.max_steps
+    def __init__(self, **kwargs: Any) -> None:
+        args = check_arguments(CALIBRATION_VECTOR, kwargs)
+        settings = calibration_settings(args)
+        self.preset, self.gauge_noise = settings.preset, settings.noise
+        self.travel = settings.travel
+        self.clip_actions, self.max_episode_steps = args["clip_actions"], settings.max_steps
         self._start_engine(settings, args["num_envs"], args["autoreset_mode"],
                            calibration_spaces(settings))
 

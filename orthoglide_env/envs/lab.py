@@ -13,15 +13,12 @@ from typing import Any, ClassVar
 import numpy as np
 
 from orthoglide_env.envs.base import ROW, EngineEnv, check_seed, first, reset_options
-from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.lab.actions import check_lab_actions
 from orthoglide_env.lab.engine import ACCURACY_UNIT_MM, StepResult
 from orthoglide_env.lab.notebook import Estimator, Record
-from orthoglide_env.lab.operations import OP_NAMES, PAPER_SLOTS, TRACKER_SIGMA
+from orthoglide_env.lab.operations import OP_NAMES
 from orthoglide_env.lab.settings import lab_settings, lab_spaces
-from orthoglide_env.lab.spec import LAB, RENDER_MODES, REWARDS, arguments_of
-from orthoglide_env.model.design import MachineDesign
-from orthoglide_env.model.errors import DEFAULT_PRESET
+from orthoglide_env.lab.spec import LAB, RENDER_MODES, REWARDS, check_arguments, signature
 
 __all__ = ["ACCURACY_UNIT_MM", "REWARDS", "Estimator", "OrthoglideLabEnv", "Record"]
 
@@ -132,7 +129,7 @@ class OrthoglideLabEnv(EngineEnv):
     of an instance lists what it can draw here.  ``render_mode="human"`` without a display
     raises ``ValueError`` (PyBullet's GUI would end the process).
 
-    Kwargs (types and ranges: :data:`orthoglide_env.lab.spec.LAB`): ``errors`` (preset),
+    Kwargs (defaults, types, ranges: :data:`orthoglide_env.lab.spec.LAB`): ``errors`` (preset),
     ``gauge_sigma``, ``gauge_resolution`` (mm), ``backend`` (``exact`` or ``pybullet``),
     ``stands`` (default 6), ``tracker`` (a laser tracker on the platform, read at every
     move), ``tracker_sigma`` (mm), ``budget_s``, ``reward``, ``estimator`` (for
@@ -146,31 +143,16 @@ class OrthoglideLabEnv(EngineEnv):
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": list(RENDER_MODES), "render_fps": 4}
+    __signature__ = signature(LAB)
 
-    def __init__(
-        self,
-        errors: str = DEFAULT_PRESET,
-        gauge_sigma: float = DEFAULT_SIGMA,
-        gauge_resolution: float = DEFAULT_RESOLUTION,
-        backend: str = "exact",
-        stands: int = len(PAPER_SLOTS),
-        tracker: bool = False,
-        tracker_sigma: float = TRACKER_SIGMA,
-        budget_s: float = 3600.0,
-        reward: str = "time",
-        estimator: Estimator | None = None,
-        time_weight: float = 1.0,
-        success_mm: float = 0.01,
-        travel: float | None = None,
-        design: MachineDesign | None = None,
-        render_mode: str | None = None,
-    ) -> None:
-        settings = lab_settings(arguments_of(LAB, locals()))
+    def __init__(self, **kwargs: Any) -> None:
+        settings = lab_settings(check_arguments(LAB, kwargs))
         self.design = settings.design
         self.preset, self.noise = settings.preset, settings.noise
-        self.backend_name, self.n_stands, self.tracker = backend, settings.stands, settings.tracker
-        self.tracker_sigma, self.budget_s = settings.tracker_sigma, settings.budget_s
-        self.reward_mode, self.estimator = reward, estimator
+        self.backend_name, self.n_stands = settings.backend, settings.stands
+        self.tracker, self.tracker_sigma = settings.tracker, settings.tracker_sigma
+        self.budget_s, self.reward_mode = settings.budget_s, settings.reward
+        self.estimator = settings.estimator
         self.time_weight, self.success_mm = settings.time_weight, settings.success_mm
         self.travel = settings.travel
         self.action_space, self.observation_space = lab_spaces(settings)

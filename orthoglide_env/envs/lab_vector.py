@@ -15,24 +15,16 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
-from gymnasium.vector import AutoresetMode
 
 from orthoglide_env.envs.lab import RESET_INFO, step_info
 from orthoglide_env.envs.vector import EngineVectorEnv
-from orthoglide_env.instruments.gauges import (
-    DEFAULT_RESOLUTION,
-    DEFAULT_SIGMA,
-    Gauge,
-    GaugeNoise,
-)
+from orthoglide_env.instruments.gauges import Gauge, GaugeNoise
 from orthoglide_env.lab.actions import check_lab_actions
 from orthoglide_env.lab.engine import StepResult
-from orthoglide_env.lab.notebook import Estimator, Record
-from orthoglide_env.lab.operations import PAPER_SLOTS, TRACKER_SIGMA
+from orthoglide_env.lab.notebook import Record
 from orthoglide_env.lab.settings import lab_settings, lab_spaces
-from orthoglide_env.lab.spec import LAB, VECTOR, arguments_of
-from orthoglide_env.model.design import MachineDesign
-from orthoglide_env.model.errors import DEFAULT_PRESET, MachineParams
+from orthoglide_env.lab.spec import LAB_VECTOR, check_arguments, signature
+from orthoglide_env.model.errors import MachineParams
 
 
 class OrthoglideLabVectorEnv(EngineVectorEnv):
@@ -55,27 +47,11 @@ class OrthoglideLabVectorEnv(EngineVectorEnv):
     of ``info["predicted_tcp_rigid_mm"]`` is computed once per distinct design.
     """
 
-    def __init__(
-        self,
-        num_envs: int = 1,
-        errors: str = DEFAULT_PRESET,
-        gauge_sigma: float = DEFAULT_SIGMA,
-        gauge_resolution: float = DEFAULT_RESOLUTION,
-        backend: str = "exact",
-        stands: int = len(PAPER_SLOTS),
-        tracker: bool = False,
-        tracker_sigma: float = TRACKER_SIGMA,
-        budget_s: float = 3600.0,
-        reward: str = "time",
-        estimator: Estimator | None = None,
-        time_weight: float = 1.0,
-        success_mm: float = 0.01,
-        travel: float | None = None,
-        design: MachineDesign | None = None,
-        autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
-    ) -> None:
-        args = arguments_of(VECTOR, locals())
-        settings = lab_settings(arguments_of(LAB, locals()))
+    __signature__ = signature(LAB_VECTOR)
+
+    def __init__(self, **kwargs: Any) -> None:
+        args = check_arguments(LAB_VECTOR, kwargs)
+        settings = lab_settings(args)
         self.design = settings.design
         self._start_engine(settings, args["num_envs"], args["autoreset_mode"],
                            lab_spaces(settings))

@@ -28,6 +28,9 @@ from orthoglide_env.sim.display import display_problem, require_display
 #: Encoders may read a hair outside the control limits after settling (solver residue
 #: ~1e-9 mm); the observation box leaves this margin so an observation is always inside.
 ENCODER_MARGIN: float = 1.0
+#: The lab time an experiment has unless told otherwise (s): an hour, the comparison's
+#: equal budget for every agent.
+DEFAULT_BUDGET_S: float = 3600.0
 #: Overtravel rules: a ``fault`` puts the gauge out of service until it is re-mounted; a
 #: ``momentary`` one lasts while the bar presses it (and is charged on entering only).
 OVERTRAVEL_RULES: tuple[str, ...] = ("fault", "momentary")
