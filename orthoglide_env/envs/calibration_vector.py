@@ -12,19 +12,14 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-
-from orthoglide_env.envs.calibration import calibration_info, gauge_names, step_info
+from orthoglide_env.envs.calibration import CalibrationFace
 from orthoglide_env.envs.vector import EngineVectorEnv
-from orthoglide_env.lab.actions import check_targets
-from orthoglide_env.lab.engine import StepResult
-from orthoglide_env.lab.operations import Op
+from orthoglide_env.instruments.gauges import Gauge
 from orthoglide_env.lab.settings import calibration_settings, calibration_spaces
 from orthoglide_env.lab.spec import CALIBRATION_VECTOR, check_arguments, signature
-from orthoglide_env.model.errors import MachineParams
 
 
-class OrthoglideCalibrationVectorEnv(EngineVectorEnv):
+class OrthoglideCalibrationVectorEnv(CalibrationFace, EngineVectorEnv):
     """``num_envs`` calibration experiments (``OrthoglideCalibration-v0``, whose docstring
     is the spec) on the exact backend, stepped together as
     :class:`~orthoglide_env.envs.vector.EngineVectorEnv` says: env ``i`` is one
@@ -54,7 +49,6 @@ class OrthoglideCalibrationVectorEnv(EngineVectorEnv):
     and ``travel`` are public as on the single env.
     """
 
-    LAYOUT_OPTION = True
     __signature__ = signature(CALIBRATION_VECTOR)
 
     def __init__(self, **kwargs: Any) -> None:
@@ -66,30 +60,8 @@ class OrthoglideCalibrationVectorEnv(EngineVectorEnv):
         self._start_engine(settings, args["num_envs"], args["autoreset_mode"],
                            calibration_spaces(settings))
 
-    # -- ground truth, for the scorer only --------------------------------------------------
     @property
-    def true_machines(self) -> MachineParams:
-        self._require()
-        return self._batch.require()
-
-    @property
-    def true_gauges(self) -> list[list]:
+    def true_gauges(self) -> list[list[Gauge]]:
+        """Every env's installations, in mounting order (scoring only)."""
         self._require()
         return [self._batch.true_gauges(i) for i in range(self.num_envs)]
-
-    # -- the calibration env's face -----------------------------------------------------------
-    def _actions(self, actions: Any, used: np.ndarray) -> tuple[np.ndarray, ...]:
-        n = self.num_envs
-        rho = check_targets(actions, (n, 3), clip=self.clip_actions, rows=used,
-                            design=self.settings.design)
-        zeros = np.zeros(n, dtype=np.int64)
-        return np.full(n, Op.MOVE), rho, zeros, zeros
-
-    def _names(self, i: int) -> list[str]:
-        return gauge_names(self.gauge_layouts[i])
-
-    def _step_info(self, result: StepResult, r: int, i: int) -> dict[str, Any]:
-        return step_info(self._names(i), self._batch.status[i], result, r)
-
-    def _reset_info(self, i: int) -> dict[str, Any]:
-        return calibration_info(self._names(i), self._batch.status[i], [], 0.0, "")

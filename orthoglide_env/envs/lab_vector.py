@@ -16,18 +16,15 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from orthoglide_env.envs.lab import RESET_INFO, step_info
+from orthoglide_env.envs.lab import LabFace
 from orthoglide_env.envs.vector import EngineVectorEnv
 from orthoglide_env.instruments.gauges import Gauge, GaugeNoise
-from orthoglide_env.lab.actions import check_lab_actions
-from orthoglide_env.lab.engine import StepResult
 from orthoglide_env.lab.notebook import Record
 from orthoglide_env.lab.settings import lab_settings, lab_spaces
 from orthoglide_env.lab.spec import LAB_VECTOR, check_arguments, signature
-from orthoglide_env.model.errors import MachineParams
 
 
-class OrthoglideLabVectorEnv(EngineVectorEnv):
+class OrthoglideLabVectorEnv(LabFace, EngineVectorEnv):
     """``num_envs`` calibration labs (``OrthoglideLab-v0``, whose docstring is the spec) on
     the exact backend, stepped together as :class:`~orthoglide_env.envs.vector.
     EngineVectorEnv` says: env ``i`` is one ``gym.make("OrthoglideLab-v0", ...)`` reset
@@ -70,11 +67,6 @@ class OrthoglideLabVectorEnv(EngineVectorEnv):
         """Env ``i`` as an agent sees a lone lab (see :class:`SubLab`)."""
         return SubLab(self, i)
 
-    @property
-    def true_machines(self) -> MachineParams:
-        self._require()
-        return self._batch.require()
-
     def true_gauges(self, i: int) -> list[Gauge]:
         """Every installation of env ``i``'s episode, in mounting order (scoring only)."""
         self._require()
@@ -85,17 +77,6 @@ class OrthoglideLabVectorEnv(EngineVectorEnv):
         """Every env's tracker rotation (N, 3, 3) and position (N, 3) (scoring only)."""
         self._require()
         return self._batch.tracker_rotation.copy(), self._batch.tracker_position.copy()
-
-    # -- the lab's face ------------------------------------------------------------------------
-    def _actions(self, actions: Any, used: np.ndarray) -> tuple[np.ndarray, ...]:
-        return check_lab_actions(actions, (self.num_envs,), self.settings.stands, rows=used,
-                                 design=self.design)
-
-    def _step_info(self, result: StepResult, r: int, i: int) -> dict[str, Any]:
-        return step_info(result, r)
-
-    def _reset_info(self, i: int) -> dict[str, Any]:
-        return RESET_INFO | {"overtravel": []}
 
 
 class SubLab:

@@ -20,9 +20,9 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from orthoglide_env.envs.base import check_seed, reset_options
+from orthoglide_env.envs.base import Face, check_seed
 from orthoglide_env.instruments.gauges import GaugeSpec
-from orthoglide_env.lab.engine import LabBatch, StepResult
+from orthoglide_env.lab.engine import LabBatch
 from orthoglide_env.lab.machines import ExactMachines
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.lab.settings import LabSettings
@@ -32,7 +32,7 @@ from orthoglide_env.model.errors import MachineParams
 RESET_MASK = "reset_mask"
 
 
-class EngineVectorEnv(VectorEnv):
+class EngineVectorEnv(Face, VectorEnv):
     """``num_envs`` episodes of the lab engine on the exact backend, stepped together.
 
     Env ``i`` behaves exactly as one single env of the same arguments reset with seed
@@ -61,11 +61,9 @@ class EngineVectorEnv(VectorEnv):
     form (``VectorEnv._add_info``, as ``SyncVectorEnv`` builds it: an array and a ``_key``
     mask per key).
 
-    A face calls :meth:`_start_engine` and gives :meth:`_actions`, :meth:`_step_info` and
-    :meth:`_reset_info`; ``gauges`` reset options are taken where :attr:`LAYOUT_OPTION`
-    is true."""
+    A subclass, with its :class:`~orthoglide_env.envs.base.Face`, calls
+    :meth:`_start_engine`."""
 
-    LAYOUT_OPTION: ClassVar[bool] = False
     metadata: ClassVar[dict[str, Any]] = {"render_modes": [],
                                           "autoreset_mode": AutoresetMode.NEXT_STEP}
 
@@ -85,25 +83,10 @@ class EngineVectorEnv(VectorEnv):
         self._seeds: list[int | None] = [None] * num_envs
         self._batch = LabBatch(settings, num_envs, ExactMachines())
         self._batch.streams = self._streams  # the batch draws from the envs' streams
-        #: Each env's gauge layout in this episode.
-        self.gauge_layouts: list[tuple[GaugeSpec, ...]] = [settings.layout] * num_envs
+        self.gauge_layouts = [settings.layout] * num_envs
         self._ended = np.zeros(num_envs, dtype=bool)
         self._obs = {key: np.zeros(space.shape, space.dtype)
                      for key, space in self.observation_space.items()}
-
-    # -- what a face says ---------------------------------------------------------------------
-    def _actions(self, actions: Any, used: np.ndarray) -> tuple[np.ndarray, ...]:
-        """``op``, ``rho``, ``stand``, ``slot`` (N,) of the checked ``actions`` of the envs
-        ``used``, or ``ValueError``."""
-        raise NotImplementedError
-
-    def _step_info(self, result: StepResult, r: int, i: int) -> dict[str, Any]:
-        """The single env's info of row ``r`` of ``result``, env ``i``'s step."""
-        raise NotImplementedError
-
-    def _reset_info(self, i: int) -> dict[str, Any]:
-        """The single env's info of env ``i``'s reset."""
-        raise NotImplementedError
 
     # -- Gymnasium API ------------------------------------------------------------------------
     def reset(self, *, seed: int | Sequence[int | None] | None = None,
@@ -114,8 +97,7 @@ class EngineVectorEnv(VectorEnv):
             raise ValueError(f"reset options must be a dict or None, got {options!r}")
         options = dict(options or {})
         mask = self._reset_mask(options.pop(RESET_MASK, None))
-        machine, layout = reset_options(options, self.settings.design,
-                                        self.settings.stands if self.LAYOUT_OPTION else None)
+        machine, layout = self._reset_options(options)
         rows = np.flatnonzero(mask)
         obs = self._copy_obs()
         self._start(rows, [seeds[i] for i in rows], machine, layout, obs)
@@ -135,7 +117,7 @@ class EngineVectorEnv(VectorEnv):
                                "them (options={'reset_mask': ...}) before stepping again")
         resetting = self._ended if self.autoreset_mode == AutoresetMode.NEXT_STEP else (
             np.zeros(n, dtype=bool))
-        op, rho, stand, slot = self._actions(actions, ~resetting)
+        op, rho, stand, slot = self._actions(actions, (n,), ~resetting)
         rows = np.flatnonzero(~resetting)
         # Only a re-mount draws before it can fail (a slot its machine cannot reach): then
         # no env has stepped and no stream has moved.
@@ -175,6 +157,12 @@ class EngineVectorEnv(VectorEnv):
 
     def close_extras(self, **kwargs: Any) -> None:
         self._batch.backend.close()
+
+    @property
+    def true_machines(self) -> MachineParams:
+        """Every env's machine, a batch (N,) (scoring only)."""
+        self._require()
+        return self._batch.require()
 
     # -- episodes and streams -----------------------------------------------------------------
     def _start(self, rows: np.ndarray, seeds: list[int | None], machine: MachineParams | None,

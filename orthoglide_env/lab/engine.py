@@ -43,6 +43,7 @@ from orthoglide_env.scoring import score
 #: The accuracy reward counts the final TCP error (after the best-fit rigid motion) in
 #: units of this many mm, and time in hours: -error/unit - time_weight * hours.
 ACCURACY_UNIT_MM: float = 0.01
+SECONDS_PER_HOUR: float = 3600.0
 #: Operations that put the machine somewhere and read it.
 _READS: tuple[Op, ...] = (Op.MOVE, Op.REMOUNT)
 
@@ -66,18 +67,13 @@ class StepResult:
 
     def info(self, i: int) -> dict[str, Any]:
         """Row ``i``'s info, as the lab env gives it."""
-        info = step_info(OP_NAMES[self.op[i]], float(self.seconds[i]), self.overtravel[i],
-                         self.collision[i])
-        info["refused"] = self.refused[i]
+        info = {"op": OP_NAMES[self.op[i]], "step_time_s": float(self.seconds[i]),
+                "overtravel": self.overtravel[i], "collision": self.collision[i],
+                "refused": self.refused[i]}
         if self.terminated[i] or self.truncated[i]:
             info.update(is_success=bool(self.success[i]),
                         predicted_tcp_rigid_mm=float(self.predicted[i]))
         return info
-
-
-def step_info(op: str, seconds: float, overtravel: list[str], collision: str
-              ) -> dict[str, Any]:
-    return {"op": op, "step_time_s": seconds, "overtravel": overtravel, "collision": collision}
 
 
 class LabBatch:
@@ -424,7 +420,7 @@ class LabBatch:
             gains = np.array([self.notebooks[i].update_logdet() for i in rows])
             with np.errstate(divide="ignore", invalid="ignore"):
                 return np.where(seconds > 0, gains / seconds, 0.0)
-        reward = -settings.time_weight * seconds / 3600.0
+        reward = -settings.time_weight * seconds / SECONDS_PER_HOUR
         for r in np.flatnonzero(ended):
             reward[r] -= self.final_tcp_rigid_mm(int(rows[r])) / ACCURACY_UNIT_MM
         return reward
