@@ -1,12 +1,9 @@
 """What both native vector envs share: N episodes of the lab engine stepped together.
 
-:class:`EngineVectorEnv` holds one random stream per env (spread and seeded as
-``SyncVectorEnv`` seeds its envs, saved and restored around a refused call), Gymnasium's
-reset mask and autoreset modes, and the vector form of the single env's infos (an array
-and a ``_key`` mask per key).  A face (``OrthoglideLab-v0``'s, ``OrthoglideCalibration-v0``'s)
-says how its actions are checked and how its infos look; env ``i`` then behaves as one
-single env reset with seed ``seed + i`` inside a ``SyncVectorEnv`` with the same
-``autoreset_mode``, bit for bit.
+:class:`EngineVectorEnv` holds one random stream per env (seeded as ``SyncVectorEnv``
+seeds its envs, restored around a refused call), Gymnasium's reset mask and autoreset
+modes, and the vector form of the single env's infos; a face
+(:class:`~orthoglide_env.envs.base.Face`) says how actions are checked and infos look.
 """
 
 from __future__ import annotations

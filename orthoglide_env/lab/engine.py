@@ -159,14 +159,11 @@ class LabBatch:
         self.time[rows] = 0.0
         self.steps[rows] = 0
         self.mounts[rows] = len(first)
+        on = np.arange(settings.stands) < len(first)  # the stands mounted at the start
         self.slot[rows] = -1
         self.slot[rows, : len(first)] = first
-        self.engaged[rows] = False
-        self.engaged[rows, : len(first)] = True
-        self.faulted[rows] = False
-        self.pressed[rows] = False
-        self.count[rows] = 0
-        self.count[rows, : len(first)] = 1
+        self.engaged[rows] = self.count[rows] = on
+        self.faulted[rows] = self.pressed[rows] = False
         self.gauges = _with_gauges(self.gauges, rows[:, None], np.arange(settings.stands),
                                    _unmounted((len(rows), settings.stands), settings.travel))
         self.gauges = _with_gauges(self.gauges, rows[:, None], np.arange(len(first)), installed)

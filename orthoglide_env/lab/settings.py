@@ -84,44 +84,45 @@ def render_modes(backend: str) -> list[str]:
     return ["rgb_array"] + (["human"] if display_problem() is None else [])
 
 
+def _shared(args: dict[str, Any], design: MachineDesign) -> dict[str, Any]:
+    """The settings of the arguments both envs take (:data:`orthoglide_env.lab.spec.
+    CALIBRATION`, :data:`~orthoglide_env.lab.spec.LAB`), for machines of ``design``."""
+    render_mode = args.get("render_mode")  # a lab vector env draws no picture
+    _picture(args["backend"], render_mode)
+    travel = design.gauge_travel if args["travel"] is None else args["travel"]
+    return {"preset": get_preset(args["errors"]), "backend": args["backend"],
+            "noise": check_noise(args["gauge_sigma"], args["gauge_resolution"], travel),
+            "travel": travel, "render_mode": render_mode, "design": design}
+
+
 def lab_settings(args: dict[str, Any]) -> LabSettings:
     """The settings of ``OrthoglideLab-v0`` from its checked arguments
     (:data:`orthoglide_env.lab.spec.LAB`)."""
     if args["reward"] == "accuracy" and args["estimator"] is None:
         raise ValueError("reward 'accuracy' needs an estimator: records -> machine, e.g. "
                          "calibrators.experiment.make_estimator()")
-    _picture(args["backend"], args.get("render_mode"))
     design = args["design"] or PROTOTYPE
     if design.slot_positions != PROTOTYPE.slot_positions:
         raise ValueError("the lab's slot indices are the prototype's slot catalogue: a "
                          f"design's slot_positions must be {list(PROTOTYPE.slot_positions)}")
-    travel = design.gauge_travel if args["travel"] is None else args["travel"]
     stands = args["stands"]
     return LabSettings(
-        preset=get_preset(args["errors"]),
-        noise=check_noise(args["gauge_sigma"], args["gauge_resolution"], travel),
-        backend=args["backend"], stands=stands, design=design,
-        layout=tuple(SLOTS[s] for s in PAPER_SLOTS[:stands]), travel=travel,
+        **_shared(args, design), stands=stands,
+        layout=tuple(SLOTS[s] for s in PAPER_SLOTS[:stands]),
         tracker=args["tracker"], tracker_sigma=args["tracker_sigma"],
         budget_s=args["budget_s"], reward=args["reward"], estimator=args["estimator"],
         time_weight=args["time_weight"], success_mm=args["success_mm"],
-        render_mode=args.get("render_mode"),
     )
 
 
 def calibration_settings(args: dict[str, Any]) -> LabSettings:
     """The settings of ``OrthoglideCalibration-v0`` from its checked arguments
     (:data:`orthoglide_env.lab.spec.CALIBRATION`)."""
-    _picture(args["backend"], args["render_mode"])
     layout = args["gauges"] or PAPER_LAYOUT
-    travel = PROTOTYPE.gauge_travel if args["travel"] is None else args["travel"]
     return LabSettings(
-        preset=get_preset(args["errors"]),
-        noise=check_noise(args["gauge_sigma"], args["gauge_resolution"], travel),
-        backend=args["backend"], stands=len(layout), layout=layout, travel=travel,
-        station=False, max_steps=args["max_episode_steps"], overtravel="momentary",
-        strict_moves=True, notebook=False, motion=args["motion"],
-        render_mode=args["render_mode"],
+        **_shared(args, PROTOTYPE), stands=len(layout), layout=layout, station=False,
+        max_steps=args["max_episode_steps"], overtravel="momentary", strict_moves=True,
+        notebook=False, motion=args["motion"],
     )
 
 
