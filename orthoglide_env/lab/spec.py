@@ -64,8 +64,9 @@ class Arg:
 
 
 def _is_real(value: Any) -> bool:
+    # An integer is finite (and numpy cannot test one past float64's range).
     return (isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
-            and bool(np.isfinite(value)))
+            and (isinstance(value, numbers.Integral) or bool(np.isfinite(value))))
 
 
 @dataclass(frozen=True)
@@ -77,6 +78,7 @@ class Number(Arg):
     open: bool = False
     high: float | None = None
     optional: bool = False  # None is accepted too (the default it stands for)
+    noun = "a number"
 
     @property
     def rule(self) -> str:  # type: ignore[override]
@@ -87,7 +89,7 @@ class Number(Arg):
             bounds = f" {'>' if self.open else '>='} {self.low:g}"
         else:
             bounds = ""
-        return f"a number{unit}{bounds}" + (" or None" if self.optional else "")
+        return f"{self.noun}{unit}{bounds}" + (" or None" if self.optional else "")
 
     def accepts(self, value: Any) -> bool:
         if value is None:
@@ -102,23 +104,13 @@ class Number(Arg):
 
 
 @dataclass(frozen=True)
-class Integer(Arg):
+class Integer(Number):
     """An integer (not a boolean) in ``[low, high]``; with ``optional`` also None."""
 
-    low: int = 1
-    high: int | None = None
-    optional: bool = False
-
-    @property
-    def rule(self) -> str:  # type: ignore[override]
-        bounds = f" >= {self.low}" if self.high is None else f" in [{self.low}, {self.high}]"
-        return f"an integer{bounds}" + (" or None" if self.optional else "")
+    noun = "an integer"
 
     def accepts(self, value: Any) -> bool:
-        if value is None:
-            return self.optional
-        return (isinstance(value, numbers.Integral) and not isinstance(value, bool | np.bool_)
-                and self.low <= value and (self.high is None or value <= self.high))
+        return (value is None or isinstance(value, numbers.Integral)) and super().accepts(value)
 
     def convert(self, value: Any) -> int | None:
         return None if value is None else int(value)
@@ -207,14 +199,14 @@ CALIBRATION: dict[str, Arg] = {
     "motion": Choice(MOTION_MODES, default="quasi-static"),
     "backend": Choice(BACKENDS, default="pybullet"), "gauges": Layout(),
     "travel": Number("mm", 0.0, open=True, optional=True, default=DEFAULT_TRAVEL),
-    "max_episode_steps": Integer(1, optional=True), "render_mode": RENDER_MODE,
+    "max_episode_steps": Integer(low=1, optional=True), "render_mode": RENDER_MODE,
     "clip_actions": FLAG,
 }
 #: ``OrthoglideLab-v0``'s arguments.
 LAB: dict[str, Arg] = {
     "errors": ERRORS, "gauge_sigma": SIGMA, "gauge_resolution": RESOLUTION,
     "backend": Choice(BACKENDS, default="exact"),
-    "stands": Integer(1, len(SLOTS), default=len(PAPER_SLOTS)), "tracker": FLAG,
+    "stands": Integer(low=1, high=len(SLOTS), default=len(PAPER_SLOTS)), "tracker": FLAG,
     "tracker_sigma": Number("mm", 0.0, open=True, default=TRACKER_SIGMA),
     "budget_s": Number("s", 0.0, open=True, default=DEFAULT_BUDGET_S),
     "reward": Choice(REWARDS, default="time"), "estimator": FUNCTION,
@@ -226,9 +218,9 @@ LAB: dict[str, Arg] = {
 #: A native vector env's arguments: ``num_envs``, its single env's (the lab's draws no
 #: picture) and ``autoreset_mode``.
 CALIBRATION_VECTOR: dict[str, Arg] = {
-    "num_envs": Integer(1, default=1), **CALIBRATION, "autoreset_mode": AUTORESET}
+    "num_envs": Integer(low=1, default=1), **CALIBRATION, "autoreset_mode": AUTORESET}
 LAB_VECTOR: dict[str, Arg] = {
-    "num_envs": Integer(1, default=1),
+    "num_envs": Integer(low=1, default=1),
     **{name: arg for name, arg in LAB.items() if name != "render_mode"},
     "autoreset_mode": AUTORESET}
 
