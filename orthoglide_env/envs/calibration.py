@@ -1,7 +1,8 @@
 """``OrthoglideCalibration-v0``: one episode is one calibration experiment on one machine.
 
-A thin face of the lab engine (:mod:`orthoglide_env.lab.engine`): the lab with gauge
-stands at the layout's slots, all engaged, and only one operation, move and read.
+A thin face of the lab engine (:mod:`orthoglide_env.lab.engine`, which ``OrthoglideLab-v0``
+runs on too): the lab with gauge stands at the layout's slots, all engaged, and only one
+operation, move and read; an overtravel lasts while the bar presses; no tracker.
 """
 
 from __future__ import annotations
@@ -160,10 +161,6 @@ class OrthoglideCalibrationEnv(CalibrationFace, EngineEnv):
 
     Ground truth (``true_machine``, ``true_gauges``) is on the unwrapped env for scoring;
     agents must not read it.
-
-    The env is a face of the lab engine (:mod:`orthoglide_env.lab.engine`, which
-    ``OrthoglideLab-v0`` runs on too): its stands at the layout's slots, all engaged, every
-    action a move, an overtravel that lasts while the bar presses, no tracker.
 
     Version history
     ---------------

@@ -1,11 +1,9 @@
 """The native vector env of ``OrthoglideCalibration-v0``: N machines in one numpy pass.
 
 ``gymnasium.make_vec("OrthoglideCalibration-v0", num_envs=N,
-vectorization_mode="vector_entry_point", backend="exact")`` builds it.  It runs the lab
-engine (:mod:`orthoglide_env.lab.engine`, which the single env runs as a batch of one) on
-N episodes in the same array operations, with the autoreset and vector infos of
-:mod:`orthoglide_env.envs.vector`; only the random streams stay one per env, so that env
-``i`` seeded with ``seed + i`` draws what a single env seeded so draws.
+vectorization_mode="vector_entry_point", backend="exact")`` builds it: the lab engine
+(:mod:`orthoglide_env.lab.engine`, which the single env runs as a batch of one) on N
+episodes in the same array operations; only the random streams stay one per env.
 """
 
 from __future__ import annotations

@@ -1,12 +1,10 @@
 """The native vector env of ``OrthoglideLab-v0``: N calibration labs stepped together.
 
 ``gymnasium.make_vec("OrthoglideLab-v0", num_envs=N)`` (the registered
-``vector_entry_point``) builds it.  It runs the lab's rules (:mod:`orthoglide_env.lab.engine`,
-the code the single lab env runs as a batch of one) on N episodes of the exact backend in
-the same array operations; only what is personal to an episode stays one per env: its
-random stream (env ``i`` seeded with ``seed + i`` draws what a single lab so seeded
-draws, in the same order), its notebook of :class:`~orthoglide_env.envs.lab.Record`
-objects, and, with the ``information`` reward, its information sums.
+``vector_entry_point``) builds it: the lab's rules (:mod:`orthoglide_env.lab.engine`, which
+the single lab runs as a batch of one) on N episodes of the exact backend in the same
+array operations; only what is personal to an episode stays one per env: its random
+stream, its notebook and, with the ``information`` reward, its information sums.
 """
 
 from __future__ import annotations

@@ -8,7 +8,8 @@ modes, and the vector form of the single env's infos; a face
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import contextlib
+from collections.abc import Iterator, Mapping, Sequence
 from typing import Any, ClassVar
 
 import numpy as np
@@ -118,12 +119,8 @@ class EngineVectorEnv(Face, VectorEnv):
         rows = np.flatnonzero(~resetting)
         # Only a re-mount draws before it can fail (a slot its machine cannot reach): then
         # no env has stepped and no stream has moved.
-        saved = self._saved_streams(rows[op[rows] == Op.REMOUNT])
-        try:
+        with self._streams_kept(rows[op[rows] == Op.REMOUNT]):
             result = self._batch.step(rows, op[rows], rho[rows], stand[rows], slot[rows])
-        except BaseException:
-            self._restore_streams(saved)
-            raise
         obs = self._copy_obs()
         for key, value in result.obs.items():
             if key in obs:
@@ -168,13 +165,9 @@ class EngineVectorEnv(Face, VectorEnv):
         failure leaves every env, random streams included, as it was."""
         if not len(rows):
             return
-        saved = self._saved_streams(rows)
-        streams, used = self._new_streams(rows, seeds)
-        try:
+        with self._streams_kept(rows):
+            streams, used = self._new_streams(rows, seeds)
             new = self._batch.reset(rows, streams, machine, layout)
-        except BaseException:
-            self._restore_streams(saved)
-            raise
         for i, stream, value in zip(rows, streams, used, strict=True):
             self._streams[i], self._seeds[i] = stream, value
             self.gauge_layouts[i] = self.settings.layout if layout is None else layout
@@ -225,18 +218,21 @@ class EngineVectorEnv(Face, VectorEnv):
                 used.append(value)
         return streams, used
 
-    def _saved_streams(self, rows: np.ndarray) -> list[tuple[int, np.random.Generator | None,
-                                                             dict | None, int | None]]:
-        """The streams of envs ``rows`` as they stand, for :meth:`_restore_streams`."""
-        return [(int(i), self._streams[i],
-                 None if self._streams[i] is None else self._streams[i].bit_generator.state,
-                 self._seeds[i]) for i in rows]
-
-    def _restore_streams(self, saved: list) -> None:
-        for i, stream, state, seed in saved:
-            self._streams[i], self._seeds[i] = stream, seed
-            if stream is not None:
-                stream.bit_generator.state = state
+    @contextlib.contextmanager
+    def _streams_kept(self, rows: np.ndarray) -> Iterator[None]:
+        """The streams (and seeds) of envs ``rows`` as they stand, put back if the block
+        raises."""
+        saved = [(int(i), self._streams[i],
+                  None if self._streams[i] is None else self._streams[i].bit_generator.state,
+                  self._seeds[i]) for i in rows]
+        try:
+            yield
+        except BaseException:
+            for i, stream, state, seed in saved:
+                self._streams[i], self._seeds[i] = stream, seed
+                if stream is not None:
+                    stream.bit_generator.state = state
+            raise
 
     def _seed_list(self, seed: Any) -> list[int | None]:
         """One seed per env from ``reset``'s ``seed`` (as ``SyncVectorEnv`` spreads it)."""
