@@ -155,7 +155,6 @@ class EngineVectorEnv(Face, VectorEnv):
     @property
     def true_machines(self) -> MachineParams:
         """Every env's machine, a batch (N,) (scoring only)."""
-        self._require()
         return self._batch.require()
 
     # -- episodes and streams -----------------------------------------------------------------
@@ -176,8 +175,7 @@ class EngineVectorEnv(Face, VectorEnv):
                 obs[key][rows] = value
 
     def _require(self) -> None:
-        if self._batch.machines is None:
-            raise RuntimeError("call reset() before using the environment")
+        self._batch.require()
 
     def _copy_obs(self) -> dict[str, np.ndarray]:
         return {key: value.copy() for key, value in self._obs.items()}

@@ -126,39 +126,26 @@ def calibration_settings(args: dict[str, Any]) -> LabSettings:
     )
 
 
-def _joints(design: MachineDesign) -> spaces.Box:
-    return spaces.Box(design.rho_min - ENCODER_MARGIN, design.rho_max + ENCODER_MARGIN,
-                      shape=(3,), dtype=np.float64)
-
-
-def _targets(design: MachineDesign) -> spaces.Box:
-    return spaces.Box(design.rho_min, design.rho_max, shape=(3,), dtype=np.float64)
-
-
-def _gauges(settings: LabSettings) -> spaces.Box:
-    # A valid reading lies within +-travel/2 of its zero; the box leaves another travel/2
-    # (>= 25 sigma, see MAX_NOISE_FRACTION) for the noise.
-    return spaces.Box(-settings.travel, settings.travel, shape=(settings.stands,),
-                      dtype=np.float64)
-
-
 def lab_spaces(settings: LabSettings) -> tuple[spaces.Dict, spaces.Dict]:
     """``OrthoglideLab-v0``'s action and observation spaces."""
-    n = settings.stands
+    n, design = settings.stands, settings.design
     action_space = spaces.Dict({
         "op": spaces.Discrete(len(Op)),
-        "rho": _targets(settings.design),
+        "rho": spaces.Box(design.rho_min, design.rho_max, shape=(3,), dtype=np.float64),
         "stand": spaces.Discrete(n),
         "slot": spaces.Discrete(len(SLOTS)),
     })
     observation_space = spaces.Dict({
-        "gauges": _gauges(settings),
+        # A valid reading lies within +-travel/2 of its zero; the box leaves another
+        # travel/2 (>= 25 sigma, see MAX_NOISE_FRACTION) for the noise.
+        "gauges": spaces.Box(-settings.travel, settings.travel, shape=(n,), dtype=np.float64),
         "valid": spaces.MultiBinary(n),
         "engaged": spaces.MultiBinary(n),
         "faulted": spaces.MultiBinary(n),
         "slot": spaces.MultiDiscrete([len(SLOTS) + 1] * n),
         "mounting": spaces.Box(0.0, 1e6, shape=(n,), dtype=np.float64),
-        "joints": _joints(settings.design),
+        "joints": spaces.Box(design.rho_min - ENCODER_MARGIN, design.rho_max + ENCODER_MARGIN,
+                             shape=(3,), dtype=np.float64),
         "tracker": spaces.Box(-1e5, 1e5, shape=(3,), dtype=np.float64),
         "tracker_valid": spaces.MultiBinary(1),
         "time": spaces.Box(0.0, settings.budget_s + settings.longest_step(), shape=(1,),
@@ -168,7 +155,8 @@ def lab_spaces(settings: LabSettings) -> tuple[spaces.Dict, spaces.Dict]:
 
 
 def calibration_spaces(settings: LabSettings) -> tuple[spaces.Box, spaces.Dict]:
-    """``OrthoglideCalibration-v0``'s action and observation spaces."""
-    return _targets(settings.design), spaces.Dict({
-        "gauges": _gauges(settings), "valid": spaces.MultiBinary(settings.stands),
-        "joints": _joints(settings.design)})
+    """``OrthoglideCalibration-v0``'s action and observation spaces: the lab's joint
+    targets, and its gauges, valid flags and joints."""
+    actions, observations = lab_spaces(settings)
+    return actions["rho"], spaces.Dict({key: observations[key]
+                                        for key in ("gauges", "valid", "joints")})
