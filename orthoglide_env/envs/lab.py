@@ -155,6 +155,13 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
     control limits bound ``rho``, its errors' validity range the machines),
     ``render_mode``.  A bad argument raises ``ValueError`` naming it and its
     rule.
+
+    Version history
+    ---------------
+    * v0: the constructor's arguments and defaults are its table in
+      :mod:`orthoglide_env.lab.spec`; an unknown one raises ``ValueError`` (was
+      ``TypeError``).
+    * v0 (first release): the lab on the engine ``OrthoglideCalibration-v0`` shares.
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": list(RENDER_MODES), "render_fps": 4}

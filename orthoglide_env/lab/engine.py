@@ -163,7 +163,7 @@ class LabBatch:
         self.slot[rows] = -1
         self.slot[rows, : len(first)] = first
         self.engaged[rows] = self.count[rows] = on
-        self.faulted[rows] = self.pressed[rows] = False
+        self.faulted[rows] = False  # (``pressed`` is set by the first look below)
         self.gauges = _with_gauges(self.gauges, rows[:, None], np.arange(settings.stands),
                                    _unmounted((len(rows), settings.stands), settings.travel))
         self.gauges = _with_gauges(self.gauges, rows[:, None], np.arange(len(first)), installed)
