@@ -16,9 +16,9 @@ import numpy as np
 
 from orthoglide_env.instruments.gauges import Gauge, GaugeSpec
 from orthoglide_env.lab.engine import LabBatch, StepResult
-from orthoglide_env.lab.machines import ExactMachines, LabMachines, SimulatedMachine
+from orthoglide_env.lab.machines import ExactMachines, SimulatedMachine
 from orthoglide_env.lab.settings import LabSettings, render_modes
-from orthoglide_env.lab.spec import Layout
+from orthoglide_env.lab.spec import RENDER_MODES, Layout
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import MachineParams, check_validity
 
@@ -76,13 +76,6 @@ def _machine_option(value: Any, design: MachineDesign) -> MachineParams | None:
     )
 
 
-def machines_for(settings: LabSettings) -> LabMachines:
-    """The machine back-end of an env with ``settings``."""
-    if settings.backend == "exact":
-        return ExactMachines()
-    return SimulatedMachine(settings.motion, gui=settings.render_mode == "human")
-
-
 class Face:
     """What a face of the engine (``OrthoglideLab-v0``'s, ``OrthoglideCalibration-v0``'s)
     says, the same for its lone env (:class:`EngineEnv`) and its native vector env: how
@@ -123,6 +116,8 @@ class EngineEnv(Face, gym.Env):
     posture and random stream), or, before the first good reset, every ``step`` still
     raises ``RuntimeError``."""
 
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": list(RENDER_MODES), "render_fps": 4}
+
     def _start_engine(self, settings: LabSettings,
                       spaces: tuple[gym.spaces.Space, gym.spaces.Dict]) -> None:
         self.settings = settings
@@ -131,7 +126,9 @@ class EngineEnv(Face, gym.Env):
         # backend draws nothing and a window needs a display.
         self.metadata = {**self.metadata, "render_modes": render_modes(settings.backend)}
         self.action_space, self.observation_space = spaces
-        self._batch = LabBatch(settings, 1, machines_for(settings))
+        machines = (ExactMachines() if settings.backend == "exact" else
+                    SimulatedMachine(settings.motion, gui=settings.render_mode == "human"))
+        self._batch = LabBatch(settings, 1, machines)
         self.gauge_layouts = [settings.layout]
         self._started = False
 

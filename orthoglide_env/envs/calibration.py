@@ -8,7 +8,7 @@ operation, move and read; an overtravel lasts while the bar presses; no tracker.
 from __future__ import annotations
 
 import functools
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 
@@ -18,7 +18,7 @@ from orthoglide_env.lab.actions import check_targets
 from orthoglide_env.lab.engine import StepResult
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.lab.settings import calibration_settings, calibration_spaces
-from orthoglide_env.lab.spec import CALIBRATION, RENDER_MODES, check_arguments, signature
+from orthoglide_env.lab.spec import CALIBRATION, check_arguments, signature
 
 #: How ``info["status"]`` names each :class:`~orthoglide_env.instruments.gauges.Status` code,
 #: indexed by the code.
@@ -175,7 +175,6 @@ class OrthoglideCalibrationEnv(CalibrationFace, EngineEnv):
     * v0 (first release): move and read, on its own implementation.
     """
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": list(RENDER_MODES), "render_fps": 4}
     __signature__ = signature(CALIBRATION)
 
     def __init__(self, **kwargs: Any) -> None:

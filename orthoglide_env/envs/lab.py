@@ -8,7 +8,7 @@ lab's time table (:mod:`orthoglide_env.lab.operations`).
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 
@@ -17,7 +17,7 @@ from orthoglide_env.lab.actions import check_lab_actions
 from orthoglide_env.lab.engine import ACCURACY_UNIT_MM, StepResult
 from orthoglide_env.lab.notebook import Estimator, Record
 from orthoglide_env.lab.settings import lab_settings, lab_spaces
-from orthoglide_env.lab.spec import LAB, RENDER_MODES, REWARDS, check_arguments, signature
+from orthoglide_env.lab.spec import LAB, REWARDS, check_arguments, signature
 
 __all__ = ["ACCURACY_UNIT_MM", "REWARDS", "Estimator", "OrthoglideLabEnv", "Record"]
 
@@ -164,7 +164,6 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
     * v0 (first release): the lab on the engine ``OrthoglideCalibration-v0`` shares.
     """
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": list(RENDER_MODES), "render_fps": 4}
     __signature__ = signature(LAB)
 
     def __init__(self, **kwargs: Any) -> None:
