@@ -368,17 +368,13 @@ class LabBatch:
         self.status[rows] = status
         good = status == Status.VALID
         draws = np.zeros(ideal.shape)
-        counts, full = mounted.sum(axis=1).tolist(), mounted.all(axis=1).tolist()
+        counts = mounted.sum(axis=1).tolist()
         for r, i in enumerate(rows.tolist()):
             # A lone lab draws one number per mounted gauge, then the tracker's three.
-            stream = self.streams[i]
-            drawn = settings.noise.draws(stream, (counts[r],))  # type: ignore[arg-type]
-            if full[r]:
-                draws[r] = drawn
-            else:
-                draws[r, mounted[r]] = drawn
+            stream: np.random.Generator = self.streams[i]  # type: ignore[assignment]
+            draws[r, mounted[r]] = settings.noise.draws(stream, (counts[r],))
             if settings.tracker:
-                noise = stream.normal(0.0, settings.tracker_sigma, 3)  # type: ignore[union-attr]
+                noise = stream.normal(0.0, settings.tracker_sigma, 3)
                 self.tracker_reading[i] = (self.tracker_rotation[i] @ sight.tcp[r]
                                            + self.tracker_position[i] + noise)
         noisy = settings.noise.applied(ideal, draws)
