@@ -205,16 +205,10 @@ class EngineVectorEnv(Face, VectorEnv):
                      ) -> tuple[list[np.random.Generator], list[int | None]]:
         """The streams the envs ``rows`` reset with: a new one per seed given, else their
         own; and their seeds.  Nothing is stored."""
-        streams, used = [], []
-        for i, seed in zip(rows, seeds, strict=True):
-            if seed is None:
-                streams.append(self._stream(int(i)))
-                used.append(self._seeds[i])
-            else:
-                stream, value = seeding.np_random(seed)
-                streams.append(stream)
-                used.append(value)
-        return streams, used
+        pairs = [seeding.np_random(seed) if seed is not None
+                 else (self._stream(int(i)), self._seeds[i])
+                 for i, seed in zip(rows, seeds, strict=True)]
+        return [stream for stream, _ in pairs], [value for _, value in pairs]
 
     @contextlib.contextmanager
     def _streams_kept(self, rows: np.ndarray) -> Iterator[None]:
