@@ -24,6 +24,7 @@ from calibrators.estimators.base import Estimate, get_strategy
 from calibrators.measurements import ZERO_RHO, Measurement, Measurements
 from orthoglide_env.envs.lab import Record
 from orthoglide_env.lab.operations import Op
+from orthoglide_env.lab.settings import DEFAULT_BUDGET_S as DEFAULT_BUDGET_S  # every command's
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture
@@ -116,11 +117,6 @@ def make_estimator(name: str = "extended", design: MachineDesign = PROTOTYPE
         return estimate(measurements_of(records, design=design), name, sigma).machine
 
     return estimator
-
-
-#: The lab time every command gives an agent unless told otherwise (s): an hour, the
-#: comparison's equal budget.
-DEFAULT_BUDGET_S: float = 3600.0
 
 
 def machine_seed(seed: int, index: int) -> int:

@@ -2,23 +2,24 @@
 
 ``OrthoglideLab-v0`` and ``OrthoglideCalibration-v0`` are faces of one engine
 (:mod:`orthoglide_env.lab.engine`): each is an :class:`EngineEnv`, a batch of one episode
-with the env's settings, and says only how its actions, observations and infos look.
+with the env's settings, and says only how its actions, observations and infos look
+(:class:`Face`, which its native vector env shares).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
 
 from orthoglide_env.instruments.gauges import Gauge
 from orthoglide_env.instruments.slots import GaugeSpec
-from orthoglide_env.lab.engine import LabBatch
-from orthoglide_env.lab.machines import ExactMachines, LabMachines, SimulatedMachine
+from orthoglide_env.lab.engine import LabBatch, StepResult
+from orthoglide_env.lab.machines import ExactMachines, SimulatedMachine
 from orthoglide_env.lab.settings import LabSettings, render_modes
-from orthoglide_env.lab.spec import Layout
+from orthoglide_env.lab.spec import RENDER_MODES, Layout
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import MachineParams, check_validity
 
@@ -76,38 +77,69 @@ def _machine_option(value: Any, design: MachineDesign) -> MachineParams | None:
     )
 
 
-def machines_for(settings: LabSettings) -> LabMachines:
-    """The machine back-end of an env with ``settings``."""
-    if settings.backend == "exact":
-        return ExactMachines()
-    return SimulatedMachine(settings.motion, gui=settings.render_mode == "human")
+class Face:
+    """What a face of the engine (``OrthoglideLab-v0``'s, ``OrthoglideCalibration-v0``'s)
+    says, the same for its lone env (:class:`EngineEnv`) and its native vector env: how
+    its actions are checked and how its infos look; ``gauges`` reset options are taken
+    where :attr:`LAYOUT_OPTION` is true."""
+
+    LAYOUT_OPTION: ClassVar[bool] = False
+    settings: LabSettings
+    #: Each env's gauge layout in this episode.
+    gauge_layouts: list[tuple[GaugeSpec, ...]]
+    _batch: LabBatch
+
+    def _actions(self, actions: Any, shape: tuple[int, ...], used: np.ndarray | None
+                 ) -> tuple[np.ndarray, ...]:
+        """``op``, ``rho``, ``stand``, ``slot`` (each of ``shape``: ``()`` for a lone env,
+        ``(N,)`` for N) of the checked ``actions`` of the envs ``used`` (None: all), or
+        ``ValueError``."""
+        raise NotImplementedError
+
+    def _step_info(self, result: StepResult, r: int, i: int) -> dict[str, Any]:
+        """The single env's info of row ``r`` of ``result``, env ``i``'s step."""
+        raise NotImplementedError
+
+    def _reset_info(self, i: int) -> dict[str, Any]:
+        """The single env's info of env ``i``'s reset."""
+        raise NotImplementedError
+
+    def _reset_options(self, options: Any
+                       ) -> tuple[MachineParams | None, tuple[GaugeSpec, ...] | None]:
+        return reset_options(options, self.settings.design,
+                             self.settings.stands if self.LAYOUT_OPTION else None)
 
 
-def first(obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """The lone episode's row of a batch's observation."""
-    return {key: value[0] for key, value in obs.items()}
-
-
-class EngineEnv(gym.Env):
-    """One episode of the lab engine with ``settings`` (a subclass sets its spaces).
+class EngineEnv(Face, gym.Env):
+    """One episode of the lab engine with ``settings`` and a face's spaces.
 
     A refused reset changes nothing: the episode before it goes on (machine, gauges,
     posture and random stream), or, before the first good reset, every ``step`` still
     raises ``RuntimeError``."""
 
-    def _start_engine(self, settings: LabSettings) -> None:
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": list(RENDER_MODES), "render_fps": 4}
+
+    def _start_engine(self, settings: LabSettings,
+                      spaces: tuple[gym.spaces.Space, gym.spaces.Dict]) -> None:
         self.settings = settings
         self.render_mode = settings.render_mode
         # What this instance can draw: the class lists every mode for gym.make; the exact
         # backend draws nothing and a window needs a display.
         self.metadata = {**self.metadata, "render_modes": render_modes(settings.backend)}
-        self._batch = LabBatch(settings, 1, machines_for(settings))
+        self.action_space, self.observation_space = spaces
+        machines = (ExactMachines() if settings.backend == "exact" else
+                    SimulatedMachine(settings.motion, gui=settings.render_mode == "human"))
+        self._batch = LabBatch(settings, 1, machines)
+        self.gauge_layouts = [settings.layout]
         self._started = False
 
-    def _reset_engine(self, seed: int | None, machine: MachineParams | None,
-                      layout: tuple[GaugeSpec, ...] | None) -> dict[str, np.ndarray]:
-        """A new episode (the checked ``seed`` and reset options); its first observation
-        (the batch's row)."""
+    # -- Gymnasium API ------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
+              ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        # Every option is checked before anything changes: a refused reset leaves the
+        # episode (and its random stream) as it was.
+        check_seed(seed)
+        machine, layout = self._reset_options(options)
         rng = self._np_random
         saved = (rng, None if rng is None else rng.bit_generator.state, self._np_random_seed)
         super().reset(seed=seed)
@@ -119,7 +151,21 @@ class EngineEnv(gym.Env):
                 saved[0].bit_generator.state = saved[1]
             raise
         self._started = True
-        return first(obs)
+        self.gauge_layouts[0] = self.settings.layout if layout is None else layout
+        return self._row(obs), self._reset_info(0)
+
+    def step(self, action: Any
+             ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        self._require()
+        op, rho, stand, slot = (part[None] for part in self._actions(action, (), None))
+        result = self._batch.step(ROW, op, rho, stand, slot)
+        return (self._row(result.obs), float(result.reward[0]), bool(result.terminated[0]),
+                bool(result.truncated[0]), self._step_info(result, 0, 0))
+
+    def _row(self, obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """This env's observation: its keys of the engine's, the lone episode's row."""
+        return {key: value[0] for key, value in obs.items()
+                if key in self.observation_space.spaces}
 
     # -- ground truth, for the scorer only --------------------------------------------------
     @property

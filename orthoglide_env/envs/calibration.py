@@ -1,35 +1,67 @@
 """``OrthoglideCalibration-v0``: one episode is one calibration experiment on one machine.
 
-A thin face of the lab engine (:mod:`orthoglide_env.lab.engine`): the lab with gauge
-stands at the layout's slots, all engaged, and only one operation, move and read.
+A thin face of the lab engine (:mod:`orthoglide_env.lab.engine`, which ``OrthoglideLab-v0``
+runs on too): the lab with gauge stands at the layout's slots, all engaged, and only one
+operation, move and read; an overtravel lasts while the bar presses; no tracker.
 """
 
 from __future__ import annotations
 
 import functools
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 
-from orthoglide_env.envs.base import ROW, EngineEnv, check_seed, reset_options
-from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA, Status
-from orthoglide_env.instruments.gauges import DEFAULT_TRAVEL
+from orthoglide_env.envs.base import EngineEnv, Face
+from orthoglide_env.instruments.dial import Status
 from orthoglide_env.instruments.slots import GaugeSpec
 from orthoglide_env.lab.actions import check_targets
 from orthoglide_env.lab.engine import StepResult
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.lab.settings import calibration_settings, calibration_spaces
-from orthoglide_env.lab.spec import CALIBRATION, RENDER_MODES, arguments_of
-from orthoglide_env.model.errors import DEFAULT_PRESET
+from orthoglide_env.lab.spec import CALIBRATION, check_arguments, signature
 
 #: How ``info["status"]`` names each :class:`~orthoglide_env.instruments.dial.Status` code,
 #: indexed by the code.
 STATUS_LABELS: np.ndarray = np.array([s.name.lower().replace("_", "-") for s in Status])
-#: The observation keys of this env, among the lab engine's.
-OBSERVED: tuple[str, ...] = ("gauges", "valid", "joints")
 
 
-class OrthoglideCalibrationEnv(EngineEnv):
+class CalibrationFace(Face):
+    """The calibration env's face, for its lone env and its native vector env: joint
+    targets (every action a move) and infos per gauge."""
+
+    LAYOUT_OPTION = True
+    clip_actions: bool
+
+    def _actions(self, actions: Any, shape: tuple[int, ...], used: np.ndarray | None
+                 ) -> tuple[np.ndarray, ...]:
+        rho = check_targets(actions, (*shape, 3), clip=self.clip_actions, rows=used,
+                            design=self.settings.design)
+        zeros = np.zeros(shape, dtype=np.int64)
+        return np.full(shape, Op.MOVE), rho, zeros, zeros
+
+    def _step_info(self, result: StepResult, r: int, i: int) -> dict[str, Any]:
+        new = zip(gauge_names(self.gauge_layouts[i]), result.new_overtravel[r], strict=True)
+        return self._info(i, [name for name, hit in new if hit], float(result.seconds[r]),
+                          result.collision[r])
+
+    def _reset_info(self, i: int) -> dict[str, Any]:
+        return self._info(i, [], 0.0, "")
+
+    def _info(self, i: int, overtravel: list[str], step_time: float, collision: str
+              ) -> dict[str, Any]:
+        """Env ``i``'s info: its gauges' names and status, the gauges that went into
+        overtravel, the step's time and the collision label."""
+        return {
+            "gauge_names": list(gauge_names(self.gauge_layouts[i])),
+            "status": STATUS_LABELS[self._batch.status[i]].tolist(),
+            "overtravel": overtravel,
+            "step_time_s": step_time,
+            "collision": collision,
+        }
+
+
+class OrthoglideCalibrationEnv(CalibrationFace, EngineEnv):
     """A calibration experiment on a virtual Orthoglide with dial gauges on its base.
 
     Each episode draws a machine (or takes one from ``reset(options={"machine": ...})``),
@@ -104,12 +136,12 @@ class OrthoglideCalibrationEnv(EngineEnv):
 
     Refused input
     -------------
-    A bad constructor argument (types and ranges: :data:`orthoglide_env.lab.spec.
-    CALIBRATION`), reset option, seed or action raises ``ValueError`` whose one-line
-    message names the input and the rule.  A refused ``reset`` or ``step``
-    changes nothing: the episode before it goes on (its machine, gauges, posture and
-    random stream), or, before the first good reset, every ``step`` still raises
-    ``RuntimeError``.
+    A bad or unknown constructor argument (defaults, types and ranges:
+    :data:`orthoglide_env.lab.spec.CALIBRATION`), reset option, seed or action raises
+    ``ValueError`` whose one-line message names the input and the rule.  A refused
+    ``reset`` or ``step`` changes nothing: the episode before it goes on (its machine,
+    gauges, posture and random stream), or, before the first good reset, every ``step``
+    still raises ``RuntimeError``.
 
     Render modes
     ------------
@@ -131,10 +163,6 @@ class OrthoglideCalibrationEnv(EngineEnv):
     Ground truth (``true_machine``, ``true_gauges``) is on the unwrapped env for scoring;
     agents must not read it.
 
-    The env is a face of the lab engine (:mod:`orthoglide_env.lab.engine`, which
-    ``OrthoglideLab-v0`` runs on too): its stands at the layout's slots, all engaged, every
-    action a move, an overtravel that lasts while the bar presses, no tracker.
-
     Version history
     ---------------
     * v0 (issue 20): runs on the lab engine.  The seeded streams did not change: on the
@@ -143,56 +171,27 @@ class OrthoglideCalibrationEnv(EngineEnv):
       exact model's ray distances (as the lab's are), not the simulator's: the installed
       gauges (``true_gauges``) move by ~1e-13 mm, below the readings' last bit in the
       runs compared.  Constructor arguments are checked by the table of
-      :mod:`orthoglide_env.lab.spec`, whose words both envs share.
+      :mod:`orthoglide_env.lab.spec`, whose words both envs share; it holds their defaults
+      too, and an unknown argument raises ``ValueError`` (was ``TypeError``).
     * v0 (first release): move and read, on its own implementation.
     """
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": list(RENDER_MODES), "render_fps": 4}
+    __signature__ = signature(CALIBRATION)
 
-    def __init__(
-        self,
-        errors: str = DEFAULT_PRESET,
-        gauge_sigma: float = DEFAULT_SIGMA,
-        gauge_resolution: float = DEFAULT_RESOLUTION,
-        motion: str = "quasi-static",
-        backend: str = "pybullet",
-        gauges: list[str] | tuple[GaugeSpec, ...] | None = None,
-        travel: float = DEFAULT_TRAVEL,
-        max_episode_steps: int | None = None,
-        render_mode: str | None = None,
-        clip_actions: bool = False,
-    ) -> None:
-        settings = calibration_settings(arguments_of(CALIBRATION, locals()))
+    def __init__(self, **kwargs: Any) -> None:
+        args = check_arguments(CALIBRATION, kwargs)
+        settings = calibration_settings(args)
         self.preset, self.gauge_noise = settings.preset, settings.noise
-        self.gauge_layout = settings.layout
-        self.travel, self.motion, self.backend_name = settings.travel, motion, backend
-        self.clip_actions = bool(clip_actions)
+        self.travel, self.motion = settings.travel, settings.motion
+        self.backend_name = settings.backend
+        self.clip_actions = args["clip_actions"]
         self.max_episode_steps = settings.max_steps
-        self.action_space, self.observation_space = calibration_spaces(settings)
-        self._start_engine(settings)
+        self._start_engine(settings, calibration_spaces(settings))
 
-    def reset(
-        self, *, seed: int | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        check_seed(seed)
-        machine, layout = reset_options(options, self.settings.design, self.settings.stands)
-        obs = self._reset_engine(seed, machine, layout)
-        self.gauge_layout = self.settings.layout if layout is None else layout
-        return observed(obs), calibration_info(gauge_names(self.gauge_layout),
-                                               self._batch.status[0], [], 0.0, "")
-
-    def step(
-        self, action: np.ndarray
-    ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
-        self._require()
-        target = check_targets(action, (3,), clip=self.clip_actions,
-                               design=self.settings.design)
-        result = self._batch.step(ROW, np.full(1, Op.MOVE), target[None], np.zeros(1, int),
-                                  np.zeros(1, int))
-        return (observed({key: value[0] for key, value in result.obs.items()}),
-                float(result.reward[0]), bool(result.terminated[0]),
-                bool(result.truncated[0]),
-                step_info(gauge_names(self.gauge_layout), self._batch.status[0], result, 0))
+    @property
+    def gauge_layout(self) -> tuple[GaugeSpec, ...]:
+        """This episode's gauges: the constructor's, or the ``gauges`` reset option's."""
+        return self.gauge_layouts[0]
 
 
 @functools.lru_cache(maxsize=64)
@@ -200,29 +199,3 @@ def gauge_names(layout: tuple[GaugeSpec, ...]) -> list[str]:
     """The names of a layout's gauges, as ``info["gauge_names"]`` gives them (a list the
     info copies)."""
     return [g.slot for g in layout]
-
-
-def observed(obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """This env's keys of an engine observation (of one env or of a batch)."""
-    return {key: obs[key] for key in OBSERVED}
-
-
-def calibration_info(names: list[str], status: np.ndarray, overtravel: list[str],
-                     step_time: float, collision: str) -> dict[str, Any]:
-    """One env's info: gauge ``names``, their ``status`` codes, the gauges that went into
-    overtravel, the step's time and the collision label."""
-    return {
-        "gauge_names": list(names),
-        "status": STATUS_LABELS[status].tolist(),
-        "overtravel": overtravel,
-        "step_time_s": step_time,
-        "collision": collision,
-    }
-
-
-def step_info(names: list[str], status: np.ndarray, result: StepResult, i: int
-              ) -> dict[str, Any]:
-    """Row ``i``'s info of an engine step (whose gauges are ``names``)."""
-    new = result.new_overtravel[i]
-    return calibration_info(names, status, [n for n, hit in zip(names, new, strict=True) if hit],
-                            float(result.seconds[i]), result.collision[i])

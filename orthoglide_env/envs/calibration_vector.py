@@ -1,34 +1,23 @@
 """The native vector env of ``OrthoglideCalibration-v0``: N machines in one numpy pass.
 
 ``gymnasium.make_vec("OrthoglideCalibration-v0", num_envs=N,
-vectorization_mode="vector_entry_point", backend="exact")`` builds it.  It runs the lab
-engine (:mod:`orthoglide_env.lab.engine`, which the single env runs as a batch of one) on
-N episodes in the same array operations, with the autoreset and vector infos of
-:mod:`orthoglide_env.envs.vector`; only the random streams stay one per env, so that env
-``i`` seeded with ``seed + i`` draws what a single env seeded so draws.
+vectorization_mode="vector_entry_point", backend="exact")`` builds it: the lab engine
+(:mod:`orthoglide_env.lab.engine`, which the single env runs as a batch of one) on N
+episodes in the same array operations; only the random streams stay one per env.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-from gymnasium.vector import AutoresetMode
-
-from orthoglide_env.envs.calibration import calibration_info, gauge_names, step_info
+from orthoglide_env.envs.calibration import CalibrationFace
 from orthoglide_env.envs.vector import EngineVectorEnv
-from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
-from orthoglide_env.instruments.gauges import DEFAULT_TRAVEL
-from orthoglide_env.instruments.slots import GaugeSpec
-from orthoglide_env.lab.actions import check_targets
-from orthoglide_env.lab.engine import StepResult
-from orthoglide_env.lab.operations import Op
+from orthoglide_env.instruments.gauges import Gauge
 from orthoglide_env.lab.settings import calibration_settings, calibration_spaces
-from orthoglide_env.lab.spec import CALIBRATION, VECTOR, arguments_of
-from orthoglide_env.model.errors import DEFAULT_PRESET, MachineParams
+from orthoglide_env.lab.spec import CALIBRATION_VECTOR, check_arguments, signature
 
 
-class OrthoglideCalibrationVectorEnv(EngineVectorEnv):
+class OrthoglideCalibrationVectorEnv(CalibrationFace, EngineVectorEnv):
     """``num_envs`` calibration experiments (``OrthoglideCalibration-v0``, whose docstring
     is the spec) on the exact backend, stepped together as
     :class:`~orthoglide_env.envs.vector.EngineVectorEnv` says: env ``i`` is one
@@ -58,54 +47,19 @@ class OrthoglideCalibrationVectorEnv(EngineVectorEnv):
     and ``travel`` are public as on the single env.
     """
 
-    LAYOUT_OPTION = True
+    __signature__ = signature(CALIBRATION_VECTOR)
 
-    def __init__(
-        self,
-        num_envs: int = 1,
-        errors: str = DEFAULT_PRESET,
-        gauge_sigma: float = DEFAULT_SIGMA,
-        gauge_resolution: float = DEFAULT_RESOLUTION,
-        motion: str = "quasi-static",
-        backend: str = "pybullet",
-        gauges: list[str] | tuple[GaugeSpec, ...] | None = None,
-        travel: float = DEFAULT_TRAVEL,
-        max_episode_steps: int | None = None,
-        render_mode: str | None = None,
-        clip_actions: bool = False,
-        autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
-    ) -> None:
-        args = arguments_of(VECTOR, locals())
-        settings = calibration_settings(arguments_of(CALIBRATION, locals()))
-        self.preset, self.gauge_noise, self.travel = settings.preset, settings.noise, travel
-        self.clip_actions, self.max_episode_steps = bool(clip_actions), settings.max_steps
+    def __init__(self, **kwargs: Any) -> None:
+        args = check_arguments(CALIBRATION_VECTOR, kwargs)
+        settings = calibration_settings(args)
+        self.preset, self.gauge_noise = settings.preset, settings.noise
+        self.travel = settings.travel
+        self.clip_actions, self.max_episode_steps = args["clip_actions"], settings.max_steps
         self._start_engine(settings, args["num_envs"], args["autoreset_mode"],
                            calibration_spaces(settings))
 
-    # -- ground truth, for the scorer only --------------------------------------------------
     @property
-    def true_machines(self) -> MachineParams:
-        self._require()
-        return self._batch.require()
-
-    @property
-    def true_gauges(self) -> list[list]:
+    def true_gauges(self) -> list[list[Gauge]]:
+        """Every env's installations, in mounting order (scoring only)."""
         self._require()
         return [self._batch.true_gauges(i) for i in range(self.num_envs)]
-
-    # -- the calibration env's face -----------------------------------------------------------
-    def _actions(self, actions: Any, used: np.ndarray) -> tuple[np.ndarray, ...]:
-        n = self.num_envs
-        rho = check_targets(actions, (n, 3), clip=self.clip_actions, rows=used,
-                            design=self.settings.design)
-        zeros = np.zeros(n, dtype=np.int64)
-        return np.full(n, Op.MOVE), rho, zeros, zeros
-
-    def _names(self, i: int) -> list[str]:
-        return gauge_names(self.gauge_layouts[i])
-
-    def _step_info(self, result: StepResult, r: int, i: int) -> dict[str, Any]:
-        return step_info(self._names(i), self._batch.status[i], result, r)
-
-    def _reset_info(self, i: int) -> dict[str, Any]:
-        return calibration_info(self._names(i), self._batch.status[i], [], 0.0, "")

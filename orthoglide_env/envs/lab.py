@@ -8,25 +8,37 @@ lab's time table (:mod:`orthoglide_env.lab.operations`).
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 
-from orthoglide_env.envs.base import ROW, EngineEnv, check_seed, first, reset_options
-from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
+from orthoglide_env.envs.base import ROW, EngineEnv, Face
 from orthoglide_env.lab.actions import check_lab_actions
 from orthoglide_env.lab.engine import ACCURACY_UNIT_MM, StepResult
 from orthoglide_env.lab.notebook import Estimator, Record
-from orthoglide_env.lab.operations import OP_NAMES, PAPER_SLOTS, TRACKER_SIGMA
 from orthoglide_env.lab.settings import lab_settings, lab_spaces
-from orthoglide_env.lab.spec import LAB, RENDER_MODES, REWARDS, arguments_of
-from orthoglide_env.model.design import MachineDesign
-from orthoglide_env.model.errors import DEFAULT_PRESET
+from orthoglide_env.lab.spec import LAB, REWARDS, check_arguments, signature
 
 __all__ = ["ACCURACY_UNIT_MM", "REWARDS", "Estimator", "OrthoglideLabEnv", "Record"]
 
 
-class OrthoglideLabEnv(EngineEnv):
+class LabFace(Face):
+    """The lab's face, for its lone env and its native vector env: the whole action, the
+    lab's infos."""
+
+    def _actions(self, actions: Any, shape: tuple[int, ...], used: np.ndarray | None
+                 ) -> tuple[np.ndarray, ...]:
+        return check_lab_actions(actions, shape, self.settings.stands, rows=used,
+                                 design=self.settings.design)
+
+    def _step_info(self, result: StepResult, r: int, i: int) -> dict[str, Any]:
+        return result.info(r)
+
+    def _reset_info(self, i: int) -> dict[str, Any]:
+        return {"op": "reset", "step_time_s": 0.0, "collision": "", "overtravel": []}
+
+
+class OrthoglideLabEnv(LabFace, EngineEnv):
     """A calibration lab around a virtual Orthoglide: gauge stands, a tracker, a clock.
 
     Each episode draws a machine (or takes one from ``reset(options={"machine": ...})``)
@@ -132,7 +144,7 @@ class OrthoglideLabEnv(EngineEnv):
     of an instance lists what it can draw here.  ``render_mode="human"`` without a display
     raises ``ValueError`` (PyBullet's GUI would end the process).
 
-    Kwargs (types and ranges: :data:`orthoglide_env.lab.spec.LAB`): ``errors`` (preset),
+    Kwargs (defaults, types, ranges: :data:`orthoglide_env.lab.spec.LAB`): ``errors`` (preset),
     ``gauge_sigma``, ``gauge_resolution`` (mm), ``backend`` (``exact`` or ``pybullet``),
     ``stands`` (default 6), ``tracker`` (a laser tracker on the platform, read at every
     move), ``tracker_sigma`` (mm), ``budget_s``, ``reward``, ``estimator`` (for
@@ -143,40 +155,30 @@ class OrthoglideLabEnv(EngineEnv):
     control limits bound ``rho``, its errors' validity range the machines),
     ``render_mode``.  A bad argument raises ``ValueError`` naming it and its
     rule.
+
+    Version history
+    ---------------
+    * v0: the constructor's arguments and defaults are its table in
+      :mod:`orthoglide_env.lab.spec`; an unknown one raises ``ValueError`` (was
+      ``TypeError``).
+    * v0 (first release): the lab on the engine ``OrthoglideCalibration-v0`` shares.
     """
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": list(RENDER_MODES), "render_fps": 4}
+    __signature__ = signature(LAB)
 
-    def __init__(
-        self,
-        errors: str = DEFAULT_PRESET,
-        gauge_sigma: float = DEFAULT_SIGMA,
-        gauge_resolution: float = DEFAULT_RESOLUTION,
-        backend: str = "exact",
-        stands: int = len(PAPER_SLOTS),
-        tracker: bool = False,
-        tracker_sigma: float = TRACKER_SIGMA,
-        budget_s: float = 3600.0,
-        reward: str = "time",
-        estimator: Estimator | None = None,
-        time_weight: float = 1.0,
-        success_mm: float = 0.01,
-        travel: float | None = None,
-        design: MachineDesign | None = None,
-        render_mode: str | None = None,
-    ) -> None:
-        settings = lab_settings(arguments_of(LAB, locals()))
+    def __init__(self, **kwargs: Any) -> None:
+        settings = lab_settings(check_arguments(LAB, kwargs))
         self.design = settings.design
         self.preset, self.noise = settings.preset, settings.noise
-        self.backend_name, self.n_stands, self.tracker = backend, settings.stands, settings.tracker
-        self.tracker_sigma, self.budget_s = settings.tracker_sigma, settings.budget_s
-        self.reward_mode, self.estimator = reward, estimator
+        self.backend_name, self.n_stands = settings.backend, settings.stands
+        self.tracker, self.tracker_sigma = settings.tracker, settings.tracker_sigma
+        self.budget_s, self.reward_mode = settings.budget_s, settings.reward
+        self.estimator = settings.estimator
         self.time_weight, self.success_mm = settings.time_weight, settings.success_mm
         self.travel = settings.travel
-        self.action_space, self.observation_space = lab_spaces(settings)
         # The lab's rules live in the engine (orthoglide_env.lab.engine): one lab is a batch
         # of one episode, the native vector env a batch of many.
-        self._start_engine(settings)
+        self._start_engine(settings, lab_spaces(settings))
 
     # -- the episode, as the lab's notebook and clock show it -------------------------------
     @property
@@ -202,25 +204,6 @@ class OrthoglideLabEnv(EngineEnv):
         return batch.backend.look(ROW, batch.machines, batch.gauges[ROW], batch.rho[ROW],
                                   batch.tcp[ROW], batch.engaged[ROW]).tcp[0]
 
-    # -- Gymnasium API --------------------------------------------------------------------------
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
-              ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        # Every option is checked before anything changes: a refused reset leaves the
-        # episode (and its random stream) as it was.
-        check_seed(seed)
-        machine, _ = reset_options(options, self.design)
-        return self._reset_engine(seed, machine, None), RESET_INFO | {"overtravel": []}
-
-    def step(self, action: dict[str, Any]
-             ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
-        self._require()
-        op, rho, stand, slot = (part[None]
-                                for part in check_lab_actions(action, (), self.n_stands,
-                                                              design=self.design))
-        result = self._batch.step(ROW, op, rho, stand, slot)
-        return (first(result.obs), float(result.reward[0]), bool(result.terminated[0]),
-                bool(result.truncated[0]), step_info(result, 0))
-
     # -- what the records say ------------------------------------------------------------------
     def final_tcp_rigid_mm(self) -> float:
         """TCP error RMS after the best-fit rigid motion of the machine the episode's
@@ -237,18 +220,3 @@ class OrthoglideLabEnv(EngineEnv):
         """TCP error RMS after the best-fit rigid motion that the records' information
         predicts (at the nominal machine, a priori sizes from the realistic preset)."""
         return self._batch.notebooks[0].predicted_tcp_rigid_mm()
-
-
-#: The info of a reset (with a fresh ``overtravel`` list).
-RESET_INFO: dict[str, Any] = {"op": "reset", "step_time_s": 0.0, "collision": ""}
-
-
-def step_info(result: StepResult, i: int) -> dict[str, Any]:
-    """Row ``i``'s info of an engine step, as the lab env gives it."""
-    info = {"op": OP_NAMES[result.op[i]], "step_time_s": float(result.seconds[i]),
-            "overtravel": result.overtravel[i], "collision": result.collision[i],
-            "refused": result.refused[i]}
-    if result.terminated[i] or result.truncated[i]:
-        info.update(is_success=bool(result.success[i]),
-                    predicted_tcp_rigid_mm=float(result.predicted[i]))
-    return info

@@ -1,12 +1,10 @@
 """The native vector env of ``OrthoglideLab-v0``: N calibration labs stepped together.
 
 ``gymnasium.make_vec("OrthoglideLab-v0", num_envs=N)`` (the registered
-``vector_entry_point``) builds it.  It runs the lab's rules (:mod:`orthoglide_env.lab.engine`,
-the code the single lab env runs as a batch of one) on N episodes of the exact backend in
-the same array operations; only what is personal to an episode stays one per env: its
-random stream (env ``i`` seeded with ``seed + i`` draws what a single lab so seeded
-draws, in the same order), its notebook of :class:`~orthoglide_env.envs.lab.Record`
-objects, and, with the ``information`` reward, its information sums.
+``vector_entry_point``) builds it: the lab's rules (:mod:`orthoglide_env.lab.engine`, which
+the single lab runs as a batch of one) on N episodes of the exact backend in the same
+array operations; only what is personal to an episode stays one per env: its random
+stream, its notebook and, with the ``information`` reward, its information sums.
 """
 
 from __future__ import annotations
@@ -15,23 +13,17 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
-from gymnasium.vector import AutoresetMode
 
-from orthoglide_env.envs.lab import RESET_INFO, step_info
+from orthoglide_env.envs.lab import LabFace
 from orthoglide_env.envs.vector import EngineVectorEnv
-from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA, GaugeNoise
+from orthoglide_env.instruments.dial import GaugeNoise
 from orthoglide_env.instruments.gauges import Gauge
-from orthoglide_env.lab.actions import check_lab_actions
-from orthoglide_env.lab.engine import StepResult
-from orthoglide_env.lab.notebook import Estimator, Record
-from orthoglide_env.lab.operations import PAPER_SLOTS, TRACKER_SIGMA
+from orthoglide_env.lab.notebook import Record
 from orthoglide_env.lab.settings import lab_settings, lab_spaces
-from orthoglide_env.lab.spec import LAB, VECTOR, arguments_of
-from orthoglide_env.model.design import MachineDesign
-from orthoglide_env.model.errors import DEFAULT_PRESET, MachineParams
+from orthoglide_env.lab.spec import LAB_VECTOR, check_arguments, signature
 
 
-class OrthoglideLabVectorEnv(EngineVectorEnv):
+class OrthoglideLabVectorEnv(LabFace, EngineVectorEnv):
     """``num_envs`` calibration labs (``OrthoglideLab-v0``, whose docstring is the spec) on
     the exact backend, stepped together as :class:`~orthoglide_env.envs.vector.
     EngineVectorEnv` says: env ``i`` is one ``gym.make("OrthoglideLab-v0", ...)`` reset
@@ -51,27 +43,11 @@ class OrthoglideLabVectorEnv(EngineVectorEnv):
     of ``info["predicted_tcp_rigid_mm"]`` is computed once per distinct design.
     """
 
-    def __init__(
-        self,
-        num_envs: int = 1,
-        errors: str = DEFAULT_PRESET,
-        gauge_sigma: float = DEFAULT_SIGMA,
-        gauge_resolution: float = DEFAULT_RESOLUTION,
-        backend: str = "exact",
-        stands: int = len(PAPER_SLOTS),
-        tracker: bool = False,
-        tracker_sigma: float = TRACKER_SIGMA,
-        budget_s: float = 3600.0,
-        reward: str = "time",
-        estimator: Estimator | None = None,
-        time_weight: float = 1.0,
-        success_mm: float = 0.01,
-        travel: float | None = None,
-        design: MachineDesign | None = None,
-        autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
-    ) -> None:
-        args = arguments_of(VECTOR, locals())
-        settings = lab_settings(arguments_of(LAB, locals()))
+    __signature__ = signature(LAB_VECTOR)
+
+    def __init__(self, **kwargs: Any) -> None:
+        args = check_arguments(LAB_VECTOR, kwargs)
+        settings = lab_settings(args)
         self.design = settings.design
         self._start_engine(settings, args["num_envs"], args["autoreset_mode"],
                            lab_spaces(settings))
@@ -90,11 +66,6 @@ class OrthoglideLabVectorEnv(EngineVectorEnv):
         """Env ``i`` as an agent sees a lone lab (see :class:`SubLab`)."""
         return SubLab(self, i)
 
-    @property
-    def true_machines(self) -> MachineParams:
-        self._require()
-        return self._batch.require()
-
     def true_gauges(self, i: int) -> list[Gauge]:
         """Every installation of env ``i``'s episode, in mounting order (scoring only)."""
         self._require()
@@ -105,17 +76,6 @@ class OrthoglideLabVectorEnv(EngineVectorEnv):
         """Every env's tracker rotation (N, 3, 3) and position (N, 3) (scoring only)."""
         self._require()
         return self._batch.tracker_rotation.copy(), self._batch.tracker_position.copy()
-
-    # -- the lab's face ------------------------------------------------------------------------
-    def _actions(self, actions: Any, used: np.ndarray) -> tuple[np.ndarray, ...]:
-        return check_lab_actions(actions, (self.num_envs,), self.settings.stands, rows=used,
-                                 design=self.design)
-
-    def _step_info(self, result: StepResult, r: int, i: int) -> dict[str, Any]:
-        return step_info(result, r)
-
-    def _reset_info(self, i: int) -> dict[str, Any]:
-        return RESET_INFO | {"overtravel": []}
 
 
 class SubLab:

@@ -1,17 +1,15 @@
 """What both native vector envs share: N episodes of the lab engine stepped together.
 
-:class:`EngineVectorEnv` holds one random stream per env (spread and seeded as
-``SyncVectorEnv`` seeds its envs, saved and restored around a refused call), Gymnasium's
-reset mask and autoreset modes, and the vector form of the single env's infos (an array
-and a ``_key`` mask per key).  A face (``OrthoglideLab-v0``'s, ``OrthoglideCalibration-v0``'s)
-says how its actions are checked and how its infos look; env ``i`` then behaves as one
-single env reset with seed ``seed + i`` inside a ``SyncVectorEnv`` with the same
-``autoreset_mode``, bit for bit.
+:class:`EngineVectorEnv` holds one random stream per env (seeded as ``SyncVectorEnv``
+seeds its envs, restored around a refused call), Gymnasium's reset mask and autoreset
+modes, and the vector form of the single env's infos; a face
+(:class:`~orthoglide_env.envs.base.Face`) says how actions are checked and infos look.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import contextlib
+from collections.abc import Iterator, Mapping, Sequence
 from typing import Any, ClassVar
 
 import numpy as np
@@ -20,9 +18,9 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from orthoglide_env.envs.base import check_seed, reset_options
+from orthoglide_env.envs.base import Face, check_seed
 from orthoglide_env.instruments.slots import GaugeSpec
-from orthoglide_env.lab.engine import LabBatch, StepResult
+from orthoglide_env.lab.engine import LabBatch
 from orthoglide_env.lab.machines import ExactMachines
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.lab.settings import LabSettings
@@ -32,7 +30,7 @@ from orthoglide_env.model.errors import MachineParams
 RESET_MASK = "reset_mask"
 
 
-class EngineVectorEnv(VectorEnv):
+class EngineVectorEnv(Face, VectorEnv):
     """``num_envs`` episodes of the lab engine on the exact backend, stepped together.
 
     Env ``i`` behaves exactly as one single env of the same arguments reset with seed
@@ -61,11 +59,9 @@ class EngineVectorEnv(VectorEnv):
     form (``VectorEnv._add_info``, as ``SyncVectorEnv`` builds it: an array and a ``_key``
     mask per key).
 
-    A face calls :meth:`_start_engine` and gives :meth:`_actions`, :meth:`_step_info` and
-    :meth:`_reset_info`; ``gauges`` reset options are taken where :attr:`LAYOUT_OPTION`
-    is true."""
+    A subclass, with its :class:`~orthoglide_env.envs.base.Face`, calls
+    :meth:`_start_engine`."""
 
-    LAYOUT_OPTION: ClassVar[bool] = False
     metadata: ClassVar[dict[str, Any]] = {"render_modes": [],
                                           "autoreset_mode": AutoresetMode.NEXT_STEP}
 
@@ -85,25 +81,10 @@ class EngineVectorEnv(VectorEnv):
         self._seeds: list[int | None] = [None] * num_envs
         self._batch = LabBatch(settings, num_envs, ExactMachines())
         self._batch.streams = self._streams  # the batch draws from the envs' streams
-        #: Each env's gauge layout in this episode.
-        self.gauge_layouts: list[tuple[GaugeSpec, ...]] = [settings.layout] * num_envs
+        self.gauge_layouts = [settings.layout] * num_envs
         self._ended = np.zeros(num_envs, dtype=bool)
         self._obs = {key: np.zeros(space.shape, space.dtype)
                      for key, space in self.observation_space.items()}
-
-    # -- what a face says ---------------------------------------------------------------------
-    def _actions(self, actions: Any, used: np.ndarray) -> tuple[np.ndarray, ...]:
-        """``op``, ``rho``, ``stand``, ``slot`` (N,) of the checked ``actions`` of the envs
-        ``used``, or ``ValueError``."""
-        raise NotImplementedError
-
-    def _step_info(self, result: StepResult, r: int, i: int) -> dict[str, Any]:
-        """The single env's info of row ``r`` of ``result``, env ``i``'s step."""
-        raise NotImplementedError
-
-    def _reset_info(self, i: int) -> dict[str, Any]:
-        """The single env's info of env ``i``'s reset."""
-        raise NotImplementedError
 
     # -- Gymnasium API ------------------------------------------------------------------------
     def reset(self, *, seed: int | Sequence[int | None] | None = None,
@@ -114,8 +95,7 @@ class EngineVectorEnv(VectorEnv):
             raise ValueError(f"reset options must be a dict or None, got {options!r}")
         options = dict(options or {})
         mask = self._reset_mask(options.pop(RESET_MASK, None))
-        machine, layout = reset_options(options, self.settings.design,
-                                        self.settings.stands if self.LAYOUT_OPTION else None)
+        machine, layout = self._reset_options(options)
         rows = np.flatnonzero(mask)
         obs = self._copy_obs()
         self._start(rows, [seeds[i] for i in rows], machine, layout, obs)
@@ -135,16 +115,12 @@ class EngineVectorEnv(VectorEnv):
                                "them (options={'reset_mask': ...}) before stepping again")
         resetting = self._ended if self.autoreset_mode == AutoresetMode.NEXT_STEP else (
             np.zeros(n, dtype=bool))
-        op, rho, stand, slot = self._actions(actions, ~resetting)
+        op, rho, stand, slot = self._actions(actions, (n,), ~resetting)
         rows = np.flatnonzero(~resetting)
         # Only a re-mount draws before it can fail (a slot its machine cannot reach): then
         # no env has stepped and no stream has moved.
-        saved = self._saved_streams(rows[op[rows] == Op.REMOUNT])
-        try:
+        with self._streams_kept(rows[op[rows] == Op.REMOUNT]):
             result = self._batch.step(rows, op[rows], rho[rows], stand[rows], slot[rows])
-        except BaseException:
-            self._restore_streams(saved)
-            raise
         obs = self._copy_obs()
         for key, value in result.obs.items():
             if key in obs:
@@ -176,6 +152,11 @@ class EngineVectorEnv(VectorEnv):
     def close_extras(self, **kwargs: Any) -> None:
         self._batch.backend.close()
 
+    @property
+    def true_machines(self) -> MachineParams:
+        """Every env's machine, a batch (N,) (scoring only)."""
+        return self._batch.require()
+
     # -- episodes and streams -----------------------------------------------------------------
     def _start(self, rows: np.ndarray, seeds: list[int | None], machine: MachineParams | None,
                layout: tuple[GaugeSpec, ...] | None, obs: dict[str, np.ndarray]) -> None:
@@ -183,13 +164,9 @@ class EngineVectorEnv(VectorEnv):
         failure leaves every env, random streams included, as it was."""
         if not len(rows):
             return
-        saved = self._saved_streams(rows)
-        streams, used = self._new_streams(rows, seeds)
-        try:
+        with self._streams_kept(rows):
+            streams, used = self._new_streams(rows, seeds)
             new = self._batch.reset(rows, streams, machine, layout)
-        except BaseException:
-            self._restore_streams(saved)
-            raise
         for i, stream, value in zip(rows, streams, used, strict=True):
             self._streams[i], self._seeds[i] = stream, value
             self.gauge_layouts[i] = self.settings.layout if layout is None else layout
@@ -198,8 +175,7 @@ class EngineVectorEnv(VectorEnv):
                 obs[key][rows] = value
 
     def _require(self) -> None:
-        if self._batch.machines is None:
-            raise RuntimeError("call reset() before using the environment")
+        self._batch.require()
 
     def _copy_obs(self) -> dict[str, np.ndarray]:
         return {key: value.copy() for key, value in self._obs.items()}
@@ -229,29 +205,26 @@ class EngineVectorEnv(VectorEnv):
                      ) -> tuple[list[np.random.Generator], list[int | None]]:
         """The streams the envs ``rows`` reset with: a new one per seed given, else their
         own; and their seeds.  Nothing is stored."""
-        streams, used = [], []
-        for i, seed in zip(rows, seeds, strict=True):
-            if seed is None:
-                streams.append(self._stream(int(i)))
-                used.append(self._seeds[i])
-            else:
-                stream, value = seeding.np_random(seed)
-                streams.append(stream)
-                used.append(value)
-        return streams, used
+        pairs = [seeding.np_random(seed) if seed is not None
+                 else (self._stream(int(i)), self._seeds[i])
+                 for i, seed in zip(rows, seeds, strict=True)]
+        return [stream for stream, _ in pairs], [value for _, value in pairs]
 
-    def _saved_streams(self, rows: np.ndarray) -> list[tuple[int, np.random.Generator | None,
-                                                             dict | None, int | None]]:
-        """The streams of envs ``rows`` as they stand, for :meth:`_restore_streams`."""
-        return [(int(i), self._streams[i],
-                 None if self._streams[i] is None else self._streams[i].bit_generator.state,
-                 self._seeds[i]) for i in rows]
-
-    def _restore_streams(self, saved: list) -> None:
-        for i, stream, state, seed in saved:
-            self._streams[i], self._seeds[i] = stream, seed
-            if stream is not None:
-                stream.bit_generator.state = state
+    @contextlib.contextmanager
+    def _streams_kept(self, rows: np.ndarray) -> Iterator[None]:
+        """The streams (and seeds) of envs ``rows`` as they stand, put back if the block
+        raises."""
+        saved = [(int(i), self._streams[i],
+                  None if self._streams[i] is None else self._streams[i].bit_generator.state,
+                  self._seeds[i]) for i in rows]
+        try:
+            yield
+        except BaseException:
+            for i, stream, state, seed in saved:
+                self._streams[i], self._seeds[i] = stream, seed
+                if stream is not None:
+                    stream.bit_generator.state = state
+            raise
 
     def _seed_list(self, seed: Any) -> list[int | None]:
         """One seed per env from ``reset``'s ``seed`` (as ``SyncVectorEnv`` spreads it)."""

@@ -36,6 +36,7 @@ from orthoglide_env.scoring import score
 #: The accuracy reward counts the final TCP error (after the best-fit rigid motion) in
 #: units of this many mm, and time in hours: -error/unit - time_weight * hours.
 ACCURACY_UNIT_MM: float = 0.01
+SECONDS_PER_HOUR: float = 3600.0
 #: Operations that put the machine somewhere and read it.
 _READS: tuple[Op, ...] = (Op.MOVE, Op.REMOUNT)
 
@@ -59,18 +60,13 @@ class StepResult:
 
     def info(self, i: int) -> dict[str, Any]:
         """Row ``i``'s info, as the lab env gives it."""
-        info = step_info(OP_NAMES[self.op[i]], float(self.seconds[i]), self.overtravel[i],
-                         self.collision[i])
-        info["refused"] = self.refused[i]
+        info = {"op": OP_NAMES[self.op[i]], "step_time_s": float(self.seconds[i]),
+                "overtravel": self.overtravel[i], "collision": self.collision[i],
+                "refused": self.refused[i]}
         if self.terminated[i] or self.truncated[i]:
             info.update(is_success=bool(self.success[i]),
                         predicted_tcp_rigid_mm=float(self.predicted[i]))
         return info
-
-
-def step_info(op: str, seconds: float, overtravel: list[str], collision: str
-              ) -> dict[str, Any]:
-    return {"op": op, "step_time_s": seconds, "overtravel": overtravel, "collision": collision}
 
 
 class LabBatch:
@@ -156,14 +152,11 @@ class LabBatch:
         self.time[rows] = 0.0
         self.steps[rows] = 0
         self.mounts[rows] = len(first)
+        on = np.arange(settings.stands) < len(first)  # the stands mounted at the start
         self.slot[rows] = -1
         self.slot[rows, : len(first)] = first
-        self.engaged[rows] = False
-        self.engaged[rows, : len(first)] = True
-        self.faulted[rows] = False
-        self.pressed[rows] = False
-        self.count[rows] = 0
-        self.count[rows, : len(first)] = 1
+        self.engaged[rows] = self.count[rows] = on
+        self.faulted[rows] = False  # (``pressed`` is set by the first look below)
         self.gauges = _with_gauges(self.gauges, rows[:, None], np.arange(settings.stands),
                                    _unmounted((len(rows), settings.stands), settings.travel))
         self.gauges = _with_gauges(self.gauges, rows[:, None], np.arange(len(first)), installed)
@@ -368,17 +361,13 @@ class LabBatch:
         self.status[rows] = status
         good = status == Status.VALID
         draws = np.zeros(ideal.shape)
-        counts, full = mounted.sum(axis=1).tolist(), mounted.all(axis=1).tolist()
+        counts = mounted.sum(axis=1).tolist()
         for r, i in enumerate(rows.tolist()):
             # A lone lab draws one number per mounted gauge, then the tracker's three.
-            stream = self.streams[i]
-            drawn = settings.noise.draws(stream, (counts[r],))  # type: ignore[arg-type]
-            if full[r]:
-                draws[r] = drawn
-            else:
-                draws[r, mounted[r]] = drawn
+            stream: np.random.Generator = self.streams[i]  # type: ignore[assignment]
+            draws[r, mounted[r]] = settings.noise.draws(stream, (counts[r],))
             if settings.tracker:
-                noise = stream.normal(0.0, settings.tracker_sigma, 3)  # type: ignore[union-attr]
+                noise = stream.normal(0.0, settings.tracker_sigma, 3)
                 self.tracker_reading[i] = (self.tracker_rotation[i] @ sight.tcp[r]
                                            + self.tracker_position[i] + noise)
         noisy = settings.noise.applied(ideal, draws)
@@ -417,7 +406,7 @@ class LabBatch:
             gains = np.array([self.notebooks[i].update_logdet() for i in rows])
             with np.errstate(divide="ignore", invalid="ignore"):
                 return np.where(seconds > 0, gains / seconds, 0.0)
-        reward = -settings.time_weight * seconds / 3600.0
+        reward = -settings.time_weight * seconds / SECONDS_PER_HOUR
         for r in np.flatnonzero(ended):
             reward[r] -= self.final_tcp_rigid_mm(int(rows[r])) / ACCURACY_UNIT_MM
         return reward

@@ -10,7 +10,7 @@ one episode), hosted in one client for every episode of an env.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, NamedTuple, Protocol
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -97,9 +97,12 @@ class Sight(NamedTuple):
     tcp: np.ndarray  # (R, 3) true TCP
 
 
-class LabMachines(Protocol):
+class LabMachines:
     """The machines of a batch of lab episodes.  The batch keeps the machines' errors,
-    postures and gauges; a back-end with machines of its own follows every change."""
+    postures and gauges; a back-end with machines of its own follows every change.  The
+    methods as written here are a back-end's without any (the exact model's): nothing to
+    build, drive, install or release, encoders that read the commanded posture, and no
+    picture."""
 
     def start(self, rows: np.ndarray, machines: MachineParams) -> None:
         """New machines for episodes ``rows``, at Zero; a failure leaves the machines as
@@ -118,29 +121,23 @@ class LabMachines(Protocol):
         already solved them (NaN rows where not); ``engaged`` (R, stands): the gauges whose
         tips are down (a lifted one reads nothing and cannot be pressed, so it may come
         back NaN and unpressed)."""
+        raise NotImplementedError
 
     def encoders(self, rows: np.ndarray, rho: np.ndarray) -> np.ndarray:
         """Encoder readings (R, 3) of the machines of ``rows`` (commanded at ``rho``)."""
+        return rho.copy()
 
     def render(self) -> np.ndarray:
         """An RGB picture (height, width, 3) of the machine, or ``ValueError``."""
+        raise ValueError("the exact backend has no picture: use backend='pybullet' to render")
 
     def close(self) -> None:
         """Release every resource."""
 
 
-class ExactMachines:
+class ExactMachines(LabMachines):
     """The exact model: a machine is its errors and posture, so there is nothing to keep
     in step; one :class:`ExactMachine` computes any batch."""
-
-    def start(self, rows: np.ndarray, machines: MachineParams) -> None:
-        """Nothing to build."""
-
-    def move(self, rows: np.ndarray, rho: np.ndarray) -> None:
-        """Nothing to drive: the batch keeps the postures."""
-
-    def set_gauges(self, rows: np.ndarray, gauges: GaugeArray, mounted: np.ndarray) -> None:
-        """Nothing to install: the batch keeps the gauges."""
 
     def look(self, rows: np.ndarray, machines: MachineParams, gauges: GaugeArray,
              rho: np.ndarray, tcp: np.ndarray, engaged: np.ndarray) -> Sight:
@@ -158,17 +155,8 @@ class ExactMachines:
         pressed[:, down] = pressed_past_travel(traced, *built.target_boxes())
         return Sight(t, pressed, built.collision_mask(), built.tcp())
 
-    def encoders(self, rows: np.ndarray, rho: np.ndarray) -> np.ndarray:
-        return rho.copy()
 
-    def render(self) -> np.ndarray:
-        raise ValueError("the exact backend has no picture: use backend='pybullet' to render")
-
-    def close(self) -> None:
-        """Nothing to release."""
-
-
-class SimulatedMachine:
+class SimulatedMachine(LabMachines):
     """One PyBullet machine (a batch of one episode), moved the ``motion`` way
     (:data:`MOTION_MODES`).  Every machine of the env is built in the same client, made at
     the first start (a GUI window with ``gui``) and kept until :meth:`close`."""

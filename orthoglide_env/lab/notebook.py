@@ -79,11 +79,6 @@ class Notebook:
             self._installed = dict(zip(names, gauges[row].to_gauges(), strict=True))
         return self._installed
 
-    def design_key(self) -> tuple:
-        """What the information depends on: every record's mounting and posture (a lab's
-        mounting name holds its slot, hence its instrument)."""
-        return tuple((r.mounting, r.rho) for r in self.records)
-
     def _add_information(self, records: list[Record]) -> None:
         """Add the records' rows of the Jacobian (at the nominal machine, per unit of each
         parameter's scale, per unit of noise; one batched call) to their mountings' sums:
@@ -117,12 +112,6 @@ class Notebook:
             idx = [names.index(x) for x in mine]
             info[np.ix_(idx, idx)] += s2 - np.outer(s1, s1) / n
         return info, names
-
-    def share_information(self, other: Notebook) -> None:
-        """Take the information sums of ``other``, whose records read what this notebook's
-        read where they read it (:meth:`design_key`), both summed in one go: the same
-        numbers, computed once."""
-        self._sums, self._informed = dict(other._sums), other._informed
 
     def update_logdet(self) -> float:
         """The gain in log det(I + F) since the last call."""
@@ -165,10 +154,12 @@ def predicted_many(notebooks: Sequence[Notebook]) -> list[float]:
         if book._informed:
             out.append(book.predicted_tcp_rigid_mm())
             continue
-        key = book.design_key()
+        # The information depends on every record's mounting and posture only (a lab's
+        # mounting name holds its slot, hence its instrument).
+        key = tuple((r.mounting, r.rho) for r in book.records)
         if key in done:
             first, value = done[key]
-            book.share_information(first)
+            book._sums, book._informed = dict(first._sums), first._informed
         else:
             value = book.predicted_tcp_rigid_mm()
             done[key] = (book, value)

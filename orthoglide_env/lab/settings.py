@@ -29,6 +29,9 @@ from orthoglide_env.sim.display import display_problem, require_display
 #: Encoders may read a hair outside the control limits after settling (solver residue
 #: ~1e-9 mm); the observation box leaves this margin so an observation is always inside.
 ENCODER_MARGIN: float = 1.0
+#: The lab time an experiment has unless told otherwise (s): an hour, the comparison's
+#: equal budget for every agent.
+DEFAULT_BUDGET_S: float = 3600.0
 #: Overtravel rules: a ``fault`` puts the gauge out of service until it is re-mounted; a
 #: ``momentary`` one lasts while the bar presses it (and is charged on entering only).
 OVERTRAVEL_RULES: tuple[str, ...] = ("fault", "momentary")
@@ -82,80 +85,68 @@ def render_modes(backend: str) -> list[str]:
     return ["rgb_array"] + (["human"] if display_problem() is None else [])
 
 
+def _shared(args: dict[str, Any], design: MachineDesign) -> dict[str, Any]:
+    """The settings of the arguments both envs take (:data:`orthoglide_env.lab.spec.
+    CALIBRATION`, :data:`~orthoglide_env.lab.spec.LAB`), for machines of ``design``."""
+    render_mode = args.get("render_mode")  # a lab vector env draws no picture
+    _picture(args["backend"], render_mode)
+    travel = design.gauge_travel if args["travel"] is None else args["travel"]
+    return {"preset": get_preset(args["errors"]), "backend": args["backend"],
+            "noise": check_noise(args["gauge_sigma"], args["gauge_resolution"], travel),
+            "travel": travel, "render_mode": render_mode, "design": design}
+
+
 def lab_settings(args: dict[str, Any]) -> LabSettings:
     """The settings of ``OrthoglideLab-v0`` from its checked arguments
     (:data:`orthoglide_env.lab.spec.LAB`)."""
     if args["reward"] == "accuracy" and args["estimator"] is None:
         raise ValueError("reward 'accuracy' needs an estimator: records -> machine, e.g. "
                          "calibrators.experiment.make_estimator()")
-    _picture(args["backend"], args.get("render_mode"))
     design = args["design"] or PROTOTYPE
     if design.slot_positions != PROTOTYPE.slot_positions:
         raise ValueError("the lab's slot indices are the prototype's slot catalogue: a "
                          f"design's slot_positions must be {list(PROTOTYPE.slot_positions)}")
-    travel = design.gauge_travel if args["travel"] is None else args["travel"]
     stands = args["stands"]
     return LabSettings(
-        preset=get_preset(args["errors"]),
-        noise=check_noise(args["gauge_sigma"], args["gauge_resolution"], travel),
-        backend=args["backend"], stands=stands, design=design,
-        layout=tuple(SLOTS[s] for s in PAPER_SLOTS[:stands]), travel=travel,
+        **_shared(args, design), stands=stands,
+        layout=tuple(SLOTS[s] for s in PAPER_SLOTS[:stands]),
         tracker=args["tracker"], tracker_sigma=args["tracker_sigma"],
         budget_s=args["budget_s"], reward=args["reward"], estimator=args["estimator"],
         time_weight=args["time_weight"], success_mm=args["success_mm"],
-        render_mode=args.get("render_mode"),
     )
 
 
 def calibration_settings(args: dict[str, Any]) -> LabSettings:
     """The settings of ``OrthoglideCalibration-v0`` from its checked arguments
     (:data:`orthoglide_env.lab.spec.CALIBRATION`)."""
-    _picture(args["backend"], args["render_mode"])
     layout = args["gauges"] or PAPER_LAYOUT
-    travel = PROTOTYPE.gauge_travel if args["travel"] is None else args["travel"]
     return LabSettings(
-        preset=get_preset(args["errors"]),
-        noise=check_noise(args["gauge_sigma"], args["gauge_resolution"], travel),
-        backend=args["backend"], stands=len(layout), layout=layout, travel=travel,
-        station=False, max_steps=args["max_episode_steps"], overtravel="momentary",
-        strict_moves=True, notebook=False, motion=args["motion"],
-        render_mode=args["render_mode"],
+        **_shared(args, PROTOTYPE), stands=len(layout), layout=layout, station=False,
+        max_steps=args["max_episode_steps"], overtravel="momentary", strict_moves=True,
+        notebook=False, motion=args["motion"],
     )
-
-
-def _joints(design: MachineDesign) -> spaces.Box:
-    return spaces.Box(design.rho_min - ENCODER_MARGIN, design.rho_max + ENCODER_MARGIN,
-                      shape=(3,), dtype=np.float64)
-
-
-def _targets(design: MachineDesign) -> spaces.Box:
-    return spaces.Box(design.rho_min, design.rho_max, shape=(3,), dtype=np.float64)
-
-
-def _gauges(settings: LabSettings) -> spaces.Box:
-    # A valid reading lies within +-travel/2 of its zero; the box leaves another travel/2
-    # (>= 25 sigma, see MAX_NOISE_FRACTION) for the noise.
-    return spaces.Box(-settings.travel, settings.travel, shape=(settings.stands,),
-                      dtype=np.float64)
 
 
 def lab_spaces(settings: LabSettings) -> tuple[spaces.Dict, spaces.Dict]:
     """``OrthoglideLab-v0``'s action and observation spaces."""
-    n = settings.stands
+    n, design = settings.stands, settings.design
     action_space = spaces.Dict({
         "op": spaces.Discrete(len(Op)),
-        "rho": _targets(settings.design),
+        "rho": spaces.Box(design.rho_min, design.rho_max, shape=(3,), dtype=np.float64),
         "stand": spaces.Discrete(n),
         "slot": spaces.Discrete(len(SLOTS)),
     })
     observation_space = spaces.Dict({
-        "gauges": _gauges(settings),
+        # A valid reading lies within +-travel/2 of its zero; the box leaves another
+        # travel/2 (>= 25 sigma, see MAX_NOISE_FRACTION) for the noise.
+        "gauges": spaces.Box(-settings.travel, settings.travel, shape=(n,), dtype=np.float64),
         "valid": spaces.MultiBinary(n),
         "engaged": spaces.MultiBinary(n),
         "faulted": spaces.MultiBinary(n),
         "slot": spaces.MultiDiscrete([len(SLOTS) + 1] * n),
         "mounting": spaces.Box(0.0, 1e6, shape=(n,), dtype=np.float64),
-        "joints": _joints(settings.design),
+        "joints": spaces.Box(design.rho_min - ENCODER_MARGIN, design.rho_max + ENCODER_MARGIN,
+                             shape=(3,), dtype=np.float64),
         "tracker": spaces.Box(-1e5, 1e5, shape=(3,), dtype=np.float64),
         "tracker_valid": spaces.MultiBinary(1),
         "time": spaces.Box(0.0, settings.budget_s + settings.longest_step(), shape=(1,),
@@ -165,7 +156,8 @@ def lab_spaces(settings: LabSettings) -> tuple[spaces.Dict, spaces.Dict]:
 
 
 def calibration_spaces(settings: LabSettings) -> tuple[spaces.Box, spaces.Dict]:
-    """``OrthoglideCalibration-v0``'s action and observation spaces."""
-    return _targets(settings.design), spaces.Dict({
-        "gauges": _gauges(settings), "valid": spaces.MultiBinary(settings.stands),
-        "joints": _joints(settings.design)})
+    """``OrthoglideCalibration-v0``'s action and observation spaces: the lab's joint
+    targets, and its gauges, valid flags and joints."""
+    actions, observations = lab_spaces(settings)
+    return actions["rho"], spaces.Dict({key: observations[key]
+                                        for key in ("gauges", "valid", "joints")})

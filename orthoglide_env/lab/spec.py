@@ -1,8 +1,9 @@
-"""Every constructor argument of the envs, declared once: its type, its range, its words.
+"""Every constructor argument of the envs, declared once: its default, type, range, words.
 
 Each env (and its native vector env) lists its arguments here as a table of
 :class:`Arg` objects; :func:`check_arguments` checks a call against the table, so the
-same argument is refused in the same words by every env that takes it.  A number is a
+same argument is refused in the same words by every env that takes it, and
+:func:`signature` makes the env's constructor signature of it.  A number is a
 real number (``int`` or ``float``, numpy's too), finite, never a boolean or text; an
 integer likewise; a flag is ``True`` or ``False``.  The checks that tie two arguments
 together (the noise against the travel, a picture against the backend) are the
@@ -11,35 +12,45 @@ settings' (:mod:`orthoglide_env.lab.settings`).
 
 from __future__ import annotations
 
+import inspect
 import numbers
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from gymnasium.vector import AutoresetMode
 
+from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
+from orthoglide_env.instruments.gauges import DEFAULT_TRAVEL
 from orthoglide_env.instruments.slots import GaugeSpec, layout_from_names
 from orthoglide_env.lab.machines import MOTION_MODES
-from orthoglide_env.lab.operations import SLOTS
+from orthoglide_env.lab.operations import PAPER_SLOTS, SLOTS, TRACKER_SIGMA
+from orthoglide_env.lab.settings import DEFAULT_BUDGET_S
 from orthoglide_env.model.design import MachineDesign
-from orthoglide_env.model.errors import PRESETS
+from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS
 
 BACKENDS: tuple[str, ...] = ("pybullet", "exact")
 RENDER_MODES: tuple[str, ...] = ("rgb_array", "human")
 REWARDS: tuple[str, ...] = ("time", "accuracy", "information")
 
 
+@dataclass(frozen=True)
 class Arg:
-    """One argument's rule: :meth:`check` returns the value in its canonical type, or
-    raises ``ValueError`` with ``"<name> must be <rule>, got <value>"``."""
+    """One argument's rule and default: :meth:`check` returns the value in its canonical
+    type, or raises ``ValueError`` with ``"<name> must be <rule>, got <value>"`` (or
+    ``"<name>: <why>"`` when the value has the form but cannot be made)."""
 
-    rule: str = ""
+    default: Any = field(default=None, kw_only=True)
+    rule = ""
 
     def check(self, name: str, value: Any) -> Any:
         if not self.accepts(value):
             raise ValueError(f"{name} must be {self.rule}, got {value!r}")
-        return self.convert(value)
+        try:
+            return self.convert(value)
+        except ValueError as exc:
+            raise ValueError(f"{name}: {exc}") from None
 
     def accepts(self, value: Any) -> bool:
         raise NotImplementedError
@@ -49,8 +60,9 @@ class Arg:
 
 
 def _is_real(value: Any) -> bool:
+    # An integer is finite (and numpy cannot test one past float64's range).
     return (isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
-            and bool(np.isfinite(value)))
+            and (isinstance(value, numbers.Integral) or bool(np.isfinite(value))))
 
 
 @dataclass(frozen=True)
@@ -62,6 +74,7 @@ class Number(Arg):
     open: bool = False
     high: float | None = None
     optional: bool = False  # None is accepted too (the default it stands for)
+    noun = "a number"
 
     @property
     def rule(self) -> str:  # type: ignore[override]
@@ -72,7 +85,7 @@ class Number(Arg):
             bounds = f" {'>' if self.open else '>='} {self.low:g}"
         else:
             bounds = ""
-        return f"a number{unit}{bounds}" + (" or None" if self.optional else "")
+        return f"{self.noun}{unit}{bounds}" + (" or None" if self.optional else "")
 
     def accepts(self, value: Any) -> bool:
         if value is None:
@@ -87,23 +100,13 @@ class Number(Arg):
 
 
 @dataclass(frozen=True)
-class Integer(Arg):
+class Integer(Number):
     """An integer (not a boolean) in ``[low, high]``; with ``optional`` also None."""
 
-    low: int = 1
-    high: int | None = None
-    optional: bool = False
-
-    @property
-    def rule(self) -> str:  # type: ignore[override]
-        bounds = f" >= {self.low}" if self.high is None else f" in [{self.low}, {self.high}]"
-        return f"an integer{bounds}" + (" or None" if self.optional else "")
+    noun = "an integer"
 
     def accepts(self, value: Any) -> bool:
-        if value is None:
-            return self.optional
-        return (isinstance(value, numbers.Integral) and not isinstance(value, bool | np.bool_)
-                and self.low <= value and (self.high is None or value <= self.high))
+        return (value is None or isinstance(value, numbers.Integral)) and super().accepts(value)
 
     def convert(self, value: Any) -> int | None:
         return None if value is None else int(value)
@@ -144,10 +147,11 @@ def _autoreset_mode(value: Any) -> bool:
         isinstance(value, str) and value in {m.value for m in AutoresetMode})
 
 
-FLAG = Kind("True or False", lambda v: isinstance(v, bool | np.bool_), bool)
+FLAG = Kind("True or False", lambda v: isinstance(v, bool | np.bool_), bool, default=False)
 FUNCTION = Kind("a function (records, sigma) -> MachineParams, or None",
                 lambda v: v is None or callable(v))
-AUTORESET = Kind(f"one of {[m.value for m in AutoresetMode]}", _autoreset_mode, AutoresetMode)
+AUTORESET = Kind(f"one of {[m.value for m in AutoresetMode]}", _autoreset_mode, AutoresetMode,
+                 default=AutoresetMode.NEXT_STEP)
 
 
 @dataclass(frozen=True)
@@ -167,14 +171,6 @@ class Layout(Arg):
             return None if value is None else tuple(value)
         return layout_from_names(list(value))
 
-    def check(self, name: str, value: Any) -> Any:
-        if not self.accepts(value):
-            raise ValueError(f"{name} must be {self.rule}, got {value!r}")
-        try:
-            return self.convert(value)
-        except ValueError as exc:
-            raise ValueError(f"{name}: {exc}") from None
-
 
 @dataclass(frozen=True)
 class Design(Arg):
@@ -187,39 +183,57 @@ class Design(Arg):
         return value
 
 
-PRESET = Choice(tuple(sorted(PRESETS)), "the name of an error preset, one of")
-NOISE = Number("mm", 0.0)  # the range that depends on the travel: check_noise
-SHARED: dict[str, Arg] = {
-    "errors": PRESET, "gauge_sigma": NOISE, "gauge_resolution": NOISE,
-    "backend": Choice(BACKENDS), "render_mode": Choice((None, *RENDER_MODES)),
-    "travel": Number("mm", 0.0, open=True, optional=True),
-}
+# Arguments both envs take, by the same rule in the same words.
+ERRORS = Choice(tuple(sorted(PRESETS)), "the name of an error preset, one of",
+                default=DEFAULT_PRESET)
+SIGMA = Number("mm", 0.0, default=DEFAULT_SIGMA)  # the range that depends on the travel:
+RESOLUTION = Number("mm", 0.0, default=DEFAULT_RESOLUTION)  # check_noise
+RENDER_MODE = Choice((None, *RENDER_MODES))
 #: ``OrthoglideCalibration-v0``'s arguments.
 CALIBRATION: dict[str, Arg] = {
-    **SHARED, "motion": Choice(MOTION_MODES), "gauges": Layout(),
-    "max_episode_steps": Integer(1, optional=True), "clip_actions": FLAG,
+    "errors": ERRORS, "gauge_sigma": SIGMA, "gauge_resolution": RESOLUTION,
+    "motion": Choice(MOTION_MODES, default="quasi-static"),
+    "backend": Choice(BACKENDS, default="pybullet"), "gauges": Layout(),
+    "travel": Number("mm", 0.0, open=True, optional=True, default=DEFAULT_TRAVEL),
+    "max_episode_steps": Integer(low=1, optional=True), "render_mode": RENDER_MODE,
+    "clip_actions": FLAG,
 }
 #: ``OrthoglideLab-v0``'s arguments.
 LAB: dict[str, Arg] = {
-    **SHARED, "design": Design(), "stands": Integer(1, len(SLOTS)), "tracker": FLAG,
-    "tracker_sigma": Number("mm", 0.0, open=True), "budget_s": Number("s", 0.0, open=True),
-    "reward": Choice(REWARDS), "estimator": FUNCTION, "time_weight": Number("", 0.0),
-    "success_mm": Number("mm", 0.0, open=True),
+    "errors": ERRORS, "gauge_sigma": SIGMA, "gauge_resolution": RESOLUTION,
+    "backend": Choice(BACKENDS, default="exact"),
+    "stands": Integer(low=1, high=len(SLOTS), default=len(PAPER_SLOTS)), "tracker": FLAG,
+    "tracker_sigma": Number("mm", 0.0, open=True, default=TRACKER_SIGMA),
+    "budget_s": Number("s", 0.0, open=True, default=DEFAULT_BUDGET_S),
+    "reward": Choice(REWARDS, default="time"), "estimator": FUNCTION,
+    "time_weight": Number("", 0.0, default=1.0),
+    "success_mm": Number("mm", 0.0, open=True, default=0.01),
+    "travel": Number("mm", 0.0, open=True, optional=True), "design": Design(),
+    "render_mode": RENDER_MODE,
 }
-#: What a native vector env takes besides its single env's arguments.
-VECTOR: dict[str, Arg] = {"num_envs": Integer(1), "autoreset_mode": AUTORESET}
+#: A native vector env's arguments: ``num_envs``, its single env's (the lab's draws no
+#: picture) and ``autoreset_mode``.
+CALIBRATION_VECTOR: dict[str, Arg] = {
+    "num_envs": Integer(low=1, default=1), **CALIBRATION, "autoreset_mode": AUTORESET}
+LAB_VECTOR: dict[str, Arg] = {
+    "num_envs": Integer(low=1, default=1),
+    **{name: arg for name, arg in LAB.items() if name != "render_mode"},
+    "autoreset_mode": AUTORESET}
 
 
 def check_arguments(spec: Mapping[str, Arg], values: Mapping[str, Any]) -> dict[str, Any]:
-    """``values`` checked against ``spec`` (one entry per argument), in canonical types,
-    or ``ValueError`` naming the first bad argument and its rule."""
+    """Every argument of ``spec`` (one entry per argument): ``values``' or its default,
+    checked, in canonical types; or ``ValueError`` naming the first bad argument and its
+    rule."""
     unknown = sorted(set(values) - set(spec))
     if unknown:
         raise ValueError(f"unknown argument(s) {unknown}; allowed: {', '.join(spec)}")
-    return {name: spec[name].check(name, value) for name, value in values.items()}
+    return {name: arg.check(name, values.get(name, arg.default)) for name, arg in spec.items()}
 
 
-def arguments_of(spec: Mapping[str, Arg], local: Mapping[str, Any]) -> dict[str, Any]:
-    """The arguments of ``spec`` among a constructor's ``local`` variables, checked."""
-    return check_arguments(spec, {name: local[name] for name in spec if name in local})
-
+def signature(spec: Mapping[str, Arg]) -> inspect.Signature:
+    """The constructor signature of an env taking ``spec``'s arguments (keywords, with
+    their defaults), as ``inspect.signature`` and ``help`` show it."""
+    return inspect.Signature([inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY,
+                                                default=arg.default)
+                              for name, arg in spec.items()])
