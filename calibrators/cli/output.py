@@ -11,11 +11,11 @@ The JSON object's keys are a contract that scripts rely on: ``estimate`` and ``s
 
 from __future__ import annotations
 
-import json
 from typing import Any
 
 import numpy as np
 
+from calibrators.cli.common import print_json
 from calibrators.estimators.base import Estimate
 from calibrators.estimators.prediction import predicted_correction, predicted_tcp_error
 from orthoglide_env.model.errors import ERROR_GROUPS, MachineParams
@@ -153,6 +153,6 @@ def print_table(data: dict[str, Any]) -> None:
 def emit(data: dict[str, Any], as_json: bool) -> None:
     """Print the report; JSON output never holds NaN or Infinity (not JSON)."""
     if as_json:
-        print(json.dumps(data, indent=2, allow_nan=False))
+        print_json(data)
     else:
         print_table(data)
