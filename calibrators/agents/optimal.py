@@ -13,6 +13,7 @@ noise, budget), so it is made once per process and replayed on every machine.
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -54,12 +55,10 @@ class OptimalAgent(PlannedAgent):
     name = "optimal"
     criterion = "I"
 
-    def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
-              rng: np.random.Generator) -> None:
-        super().reset(env, observation, rng)
+    def make_plan(self, observation: dict[str, np.ndarray]) -> list[dict[str, Any]]:
         steps, self.predicted_rigid_mm = fixed_plan(*lab_setup(self.env, observation),
                                                     criterion=self.criterion)
-        self.plan = [action(s.op, s.rho, s.stand, s.slot) for s in steps]
+        return [action(s.op, s.rho, s.stand, s.slot) for s in steps]
 
 
 @register
