@@ -110,8 +110,8 @@ class Trial:
         """One line of strict JSON: ``names`` beside ``error`` and ``std``, and ``null``
         where a number is not one (NaN: the std of an error the fit held fixed, or what a
         failed trial never had)."""
-        return json.dumps(_null_for_nan({**asdict(self), "names": list(self.names)}),
-                          allow_nan=False)
+        data = {**asdict(self), "names": list(self.names)}
+        return json.dumps(_leaves(data, lambda v: None if v != v else v), allow_nan=False)
 
     @classmethod
     def from_json(cls, line: str) -> Trial:
@@ -119,32 +119,20 @@ class Trial:
         ``names``)."""
         data = json.loads(line)
         names = data.pop("names", None)
-        trial = cls(**_nan_for_null(data))
+        # A trial holds None nowhere else.
+        trial = cls(**_leaves(data, lambda v: float("nan") if v is None else v))
         if names is not None and tuple(names) != trial.names:
             raise ValueError("the trial's error names are not this version's machine errors")
         return trial
 
 
-def _null_for_nan(value: Any) -> Any:
-    """``value`` with every NaN float, at any depth, replaced by ``None``."""
-    if isinstance(value, float):
-        return None if value != value else value
+def _leaves(value: Any, change: Callable[[Any], Any]) -> Any:
+    """``value`` with ``change`` applied to every leaf, at any depth of dicts and lists."""
     if isinstance(value, dict):
-        return {k: _null_for_nan(v) for k, v in value.items()}
+        return {k: _leaves(v, change) for k, v in value.items()}
     if isinstance(value, list):
-        return [_null_for_nan(v) for v in value]
-    return value
-
-
-def _nan_for_null(value: Any) -> Any:
-    """The inverse of :func:`_null_for_nan`: a trial holds ``None`` nowhere else."""
-    if value is None:
-        return float("nan")
-    if isinstance(value, dict):
-        return {k: _nan_for_null(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_nan_for_null(v) for v in value]
-    return value
+        return [_leaves(v, change) for v in value]
+    return change(value)
 
 
 @cache
