@@ -127,35 +127,33 @@ def run_command(args: argparse.Namespace) -> None:
     config = _check(args)
     out, done = _prepare_out(args, config)
     handle = (out / TRIALS_FILE).open("a") if out else None
+    collected: list[Trial] = list(done)
 
     def keep(trial: Trial) -> None:
+        collected.append(trial)
         if handle:
             handle.write(trial.to_json() + "\n")
             handle.flush()
 
-    finished = {t.machine for t in done}
-    bar = tqdm(total=args.machines, initial=len(finished), desc="machines", unit="machine",
-               disable=args.quiet or args.json, file=sys.stderr)
+    bar = tqdm(total=args.machines, initial=len({t.machine for t in done}), desc="machines",
+               unit="machine", disable=args.quiet or args.json, file=sys.stderr)
     start = time.perf_counter()
-    collected: list[Trial] = list(done)
     try:
-        trials = run(config, args.machines, args.jobs, done,
-                     on_trial=lambda t: (collected.append(t), keep(t)), progress=bar.update,
-                     engine=args.engine, address=args.address)
+        trials = run(config, args.machines, args.jobs, done, on_trial=keep,
+                     progress=bar.update, engine=args.engine, address=args.address)
     except KeyboardInterrupt:
+        trials = None
+    finally:
         bar.close()
         if handle:
             handle.close()
-        rows = summary(collected, config.target_mm)
+    if trials is None:
         print(f"orthoglide compare: interrupted after {len(collected)} trials"
               + (f"; kept in {out / TRIALS_FILE}, continue with --resume" if out else ""),
               file=sys.stderr)
-        _print(rows, config, len({t.machine for t in collected}), time.perf_counter() - start,
-               args.json)
-        raise SystemExit(130) from None
-    bar.close()
-    if handle:
-        handle.close()
+        _print(summary(collected, config.target_mm), config,
+               len({t.machine for t in collected}), time.perf_counter() - start, args.json)
+        raise SystemExit(130)
     rows = summary(trials, config.target_mm)
     _print(rows, config, args.machines, time.perf_counter() - start, args.json)
     if args.verify_pybullet:
