@@ -33,8 +33,7 @@ def fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
     machine of ``design``, and the TCP error after rigid motion it predicts (mm)."""
     planner = Planner(list(slots), list(engaged), sigma, budget_s, criterion=criterion,
                       design=design)
-    down, chance = planner.reading_here()  # the lab reads every stand as the episode opens
-    planner.expect_readings(down, chance)
+    planner.expect_readings()  # the lab reads every stand as the episode opens
     steps = greedy_plan(planner)
     return tuple(steps), planner.predicted_rigid_mm()
 

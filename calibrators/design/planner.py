@@ -238,15 +238,12 @@ class Planner:
     sigma: float
     budget_s: float
     criterion: str = "I"
-    rho: np.ndarray = field(default_factory=lambda: np.zeros(3))
     time_s: float = 0.0
     design: MachineDesign = PROTOTYPE
-    table: SlotTable = None  # type: ignore[assignment]  # default: the design's slot table
     steps: list[Step] = field(default_factory=list)
 
     def __post_init__(self) -> None:
-        if self.table is None:
-            self.table = slot_table(self.design)
+        self.table = slot_table(self.design)
         if self.criterion not in CRITERIA:
             raise ValueError(f"unknown criterion '{self.criterion}'; choose from {CRITERIA}")
         if not (np.isfinite(self.sigma) and self.sigma > 0):
@@ -254,7 +251,7 @@ class Planner:
         self.slots = [int(s) for s in self.slots]
         self.engaged = [bool(e) and s >= 0 for s, e in zip(self.slots, self.engaged,
                                                            strict=True)]
-        self.rho = np.asarray(self.rho, dtype=float)
+        self.rho = np.zeros(3)  # a plan starts at the Zero posture
         n = N_MACHINE + N_STAND * len(self.slots)
         self.covariance = np.eye(n)
         self.mean: np.ndarray | None = None  # set by observe()
@@ -357,8 +354,12 @@ class Planner:
         self.covariance = self.covariance - gain @ b.T
         self.covariance = (self.covariance + self.covariance.T) / 2
 
-    def expect_readings(self, stands: np.ndarray, weights: np.ndarray) -> None:
-        """Count readings of ``stands`` here, each with its probability (a plan's)."""
+    def expect_readings(self, stands: np.ndarray | None = None,
+                        weights: np.ndarray | None = None) -> None:
+        """Count readings of ``stands`` here, each with its probability (a plan's; default:
+        :meth:`reading_here`)."""
+        if stands is None:
+            stands, weights = self.reading_here()
         rows = self.rows[stands, self.here] * np.sqrt(weights)[:, None] / self.sigma
         self._add(rows)
 
@@ -477,15 +478,13 @@ class Planner:
         if choice is None:
             return False
         self.move(*choice)
-        down, chance = self.reading_here()
-        self.expect_readings(down, chance)
+        self.expect_readings()
         return True
 
     def _remounted(self, stand: int, slot: int) -> Planner:
         trial = self.fork()
         trial.remount(stand, slot)
-        down, chance = trial.reading_here()
-        trial.expect_readings(down, chance)
+        trial.expect_readings()
         return trial
 
     def best_remount(self, screened: int | None = SCREENED) -> tuple[int, int] | None:
@@ -526,8 +525,7 @@ def greedy_plan(planner: Planner, remounts: bool = True, screened: int | None = 
             choice = planner.best_remount(screened)
             if choice is not None:
                 planner.remount(*choice)
-                down, chance = planner.reading_here()
-                planner.expect_readings(down, chance)
+                planner.expect_readings()
                 continue
         if not planner.greedy_move():
             break
