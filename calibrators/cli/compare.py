@@ -19,7 +19,7 @@ from calibrators.cli.estimator_options import DEFAULT_STRATEGY
 from calibrators.compare import Config, Trial, run, summary, verify_pybullet
 from calibrators.engines import ENGINES, RAY_INSTALL_HINT, ray_available
 from calibrators.experiment import DEFAULT_BUDGET_S, ESTIMATORS
-from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA, check_noise
+from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS
 from orthoglide_env.scoring import FRAMES
@@ -62,12 +62,11 @@ def _check(args: argparse.Namespace) -> Config:
         raise UsageError("--address is the Ray cluster of --engine ray")
     if args.resume and not args.out:
         raise UsageError("--resume continues the run kept in --out: give --out")
-    sigma = 0.0 if args.noise_free else args.sigma
-    check_noise(sigma, 0.0 if args.noise_free else args.resolution, names=("--sigma",
-                                                                           "--resolution"))
-    return Config(agents, estimators, args.budget, args.errors, sigma,
-                  0.0 if args.noise_free else args.resolution, args.backend, args.seed,
-                  args.target, curve_estimator=_curve_estimator(estimators) if args.out else "",
+    # The gauge noise was checked with every command's (calibrators.cli.run).
+    sigma, resolution = (0.0, 0.0) if args.noise_free else (args.sigma, args.resolution)
+    return Config(agents, estimators, args.budget, args.errors, sigma, resolution,
+                  args.backend, args.seed, args.target,
+                  curve_estimator=_curve_estimator(estimators) if args.out else "",
                   design=design_of(args))
 
 
