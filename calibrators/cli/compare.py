@@ -18,7 +18,7 @@ from calibrators.cli.common import UsageError, add_design, design_of
 from calibrators.cli.estimator_options import DEFAULT_STRATEGY
 from calibrators.compare import Config, Trial, run, summary, verify_pybullet
 from calibrators.engines import ENGINES, RAY_INSTALL_HINT, ray_available
-from calibrators.experiment import DEFAULT_BUDGET_S, ESTIMATORS
+from calibrators.experiment import DEFAULT_BUDGET_S, ESTIMATORS, get_estimator
 from orthoglide_env.instruments.gauges import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS
@@ -42,26 +42,22 @@ def _check(args: argparse.Namespace) -> Config:
         get_agent(name)  # a ValueError names the known agents, or why a policy cannot run
     estimators = _names(args.estimators, "--estimators")
     for name in estimators:
-        if name not in ESTIMATORS:
-            raise UsageError(f"unknown estimator '{name}'; choose from {list(ESTIMATORS)}")
-    if not 1 <= args.machines <= 1_000_000:
-        raise UsageError("--machines must be between 1 and 1000000")
-    if not 0 <= args.seed < 2**32:
-        raise UsageError("--seed must be between 0 and 2**32 - 1")
-    if not (np.isfinite(args.budget) and 0 < args.budget <= 1e6):
-        raise UsageError("--budget must be a number of seconds in (0, 1e6]")
-    if not (np.isfinite(args.target) and args.target > 0):
-        raise UsageError("--target must be a positive number of mm")
-    if not 1 <= args.jobs <= MAX_JOBS:
-        raise UsageError(f"--jobs must be between 1 and {MAX_JOBS}")
-    if not 0 <= args.verify_pybullet <= 1000:
-        raise UsageError("--verify-pybullet must be between 0 and 1000")
-    if args.engine == "ray" and not ray_available():
-        raise UsageError(f"--engine ray needs Ray: {RAY_INSTALL_HINT}")
-    if args.address and args.engine != "ray":
-        raise UsageError("--address is the Ray cluster of --engine ray")
-    if args.resume and not args.out:
-        raise UsageError("--resume continues the run kept in --out: give --out")
+        get_estimator(name)
+    rules = (
+        (1 <= args.machines <= 1_000_000, "--machines must be between 1 and 1000000"),
+        (0 <= args.seed < 2**32, "--seed must be between 0 and 2**32 - 1"),
+        (np.isfinite(args.budget) and 0 < args.budget <= 1e6,
+         "--budget must be a number of seconds in (0, 1e6]"),
+        (np.isfinite(args.target) and args.target > 0, "--target must be a positive number of mm"),
+        (1 <= args.jobs <= MAX_JOBS, f"--jobs must be between 1 and {MAX_JOBS}"),
+        (0 <= args.verify_pybullet <= 1000, "--verify-pybullet must be between 0 and 1000"),
+        (args.engine != "ray" or ray_available(), f"--engine ray needs Ray: {RAY_INSTALL_HINT}"),
+        (not args.address or args.engine == "ray", "--address is the Ray cluster of --engine ray"),
+        (not args.resume or args.out, "--resume continues the run kept in --out: give --out"),
+    )
+    for ok, problem in rules:
+        if not ok:
+            raise UsageError(problem)
     # The gauge noise was checked with every command's (calibrators.cli.run).
     sigma, resolution = (0.0, 0.0) if args.noise_free else (args.sigma, args.resolution)
     return Config(agents, estimators, args.budget, args.errors, sigma, resolution,
