@@ -69,9 +69,6 @@ class Config:
     #: The machines' design.
     design: MachineDesign = PROTOTYPE
 
-    def machine_seed(self, index: int) -> int:
-        return machine_seed(self.seed, index)
-
     def lab_kwargs(self, tracker: bool) -> dict[str, Any]:
         """The lab env's arguments of this comparison (``tracker``: the agent needs one)."""
         return {"errors": self.errors, "gauge_sigma": self.sigma,
@@ -283,21 +280,15 @@ def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]
 def agent_episodes(config: Config, agent_name: str, runs: list[int], batched: bool = True
                    ) -> list[_Episode]:
     """The agent's episode on each machine of ``runs`` (machine ``i`` from its seed)."""
-    seeds = [config.machine_seed(i) for i in runs]
+    seeds = [machine_seed(config.seed, i) for i in runs]
     kwargs = config.lab_kwargs(get_agent(agent_name).needs_tracker)
     if batched and config.backend == "exact":
-        envs = gym.make_vec(orthoglide_env.LAB_ENV_ID, num_envs=len(runs),
-                            vectorization_mode="vector_entry_point", **kwargs)
-        try:
+        with closing(gym.make_vec(orthoglide_env.LAB_ENV_ID, num_envs=len(runs),
+                                  vectorization_mode="vector_entry_point", **kwargs)) as envs:
             done = run_episodes(envs, [get_agent(agent_name) for _ in runs], seeds)
-        finally:
-            envs.close()
     else:
-        env = gym.make(orthoglide_env.LAB_ENV_ID, **kwargs)
-        try:
+        with closing(gym.make(orthoglide_env.LAB_ENV_ID, **kwargs)) as env:
             done = [run_episode(env, get_agent(agent_name), seed) for seed in seeds]
-        finally:
-            env.close()
     return [_Episode(agent_name, index, e) for index, e in zip(runs, done, strict=True)]
 
 
@@ -393,12 +384,10 @@ def verify_pybullet(config: Config, machines: int) -> dict[str, float]:
             envs = gym.vector.SyncVectorEnv([
                 partial(gym.make, orthoglide_env.LAB_ENV_ID, **{**kwargs, "backend": backend})
                 for backend in ("exact", "pybullet")])
-            seed = config.machine_seed(index)
-            try:
+            seed = machine_seed(config.seed, index)
+            with closing(envs):
                 run_episodes(envs, [agent], [seed, seed], lockstep=True,
                              on_step=partial(_widen_gaps, worst, envs))
-            finally:
-                envs.close()
     return worst
 
 
