@@ -1,4 +1,4 @@
-"""What several commands share: the parser class, usage errors, machine and noise options."""
+"""What several commands share: the parser class, usage errors, machine options, output."""
 
 from __future__ import annotations
 
@@ -10,7 +10,6 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from orthoglide_env.instruments.gauges import DEFAULT_SIGMA, DEFAULT_TRAVEL, MAX_NOISE_FRACTION
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign, load_design
 from orthoglide_env.model.errors import MachineParams, check_rho, random_machine
 
@@ -51,13 +50,6 @@ def rho_of(values: list[float], design: MachineDesign) -> np.ndarray:
 
 def vec(values: list[float], digits: int) -> str:
     return "(" + ", ".join(f"{v:.{digits}f}" for v in values) + ")"
-
-
-#: Largest sigma and resolution of the default gauges, as check_noise has it (mm).
-NOISE_LIMIT = (f"travel/{1 / MAX_NOISE_FRACTION:g} = "
-               f"{DEFAULT_TRAVEL * MAX_NOISE_FRACTION:g}")
-SIGMA_HELP = (f"gauge repeatability, standard deviation of a reading (mm, 0 to {NOISE_LIMIT};"
-              f" default {DEFAULT_SIGMA})")
 
 
 def add_machine_posture(p: argparse.ArgumentParser) -> None:
