@@ -88,21 +88,18 @@ def _prepare_out(args: argparse.Namespace, config: Config) -> tuple[Path | None,
         if saved != _config_dict(config, args.machines):
             raise UsageError(f"--resume needs the options of the run in {out} "
                              f"({config_path}): they differ")
-        done = []
-        for n, line in enumerate(trials_path.read_text().splitlines(), start=1):
+        done, lines = [], trials_path.read_text().splitlines()
+        for n, line in enumerate(lines, start=1):
             try:
                 done.append(Trial.from_json(line))
             except (ValueError, TypeError) as exc:
                 # The last line of an interrupted run may be cut short: drop it.
-                if n < len(trials_path.read_text().splitlines()):
+                if n < len(lines):
                     raise UsageError(f"{trials_path}:{n}: not a trial ({exc})") from None
         return out, done
     if trials_path.exists():
         raise UsageError(f"{out} already holds a run: use --resume, or another --out")
     out.mkdir(parents=True, exist_ok=True)
-    probe = out / ".writable"
-    probe.write_text("")
-    probe.unlink()
     config_path.write_text(json.dumps(_config_dict(config, args.machines)) + "\n")
     return out, []
 
