@@ -659,11 +659,8 @@ class Measurements:
         try:
             seconds = _real(data.get("experiment_time_s", 0.0), "experiment_time_s", 0.0,
                             MAX_EXPERIMENT_TIME_S, "s")
-        except FieldError as exc:
-            raise MeasurementFileError(f"{source}: {exc}") from None
-        try:
             named = MachineDesign.from_dict(data["design"]) if "design" in data else None
-        except DesignError as exc:
+        except (FieldError, DesignError) as exc:
             raise MeasurementFileError(f"{source}: {exc}") from None
         if named is not None and design is not None and named != design:
             keys = [k for k, v in named.to_dict().items() if design.to_dict()[k] != v]
