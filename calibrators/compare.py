@@ -69,9 +69,6 @@ class Config:
     #: The machines' design.
     design: MachineDesign = PROTOTYPE
 
-    def machine_seed(self, index: int) -> int:
-        return machine_seed(self.seed, index)
-
     def lab_kwargs(self, tracker: bool) -> dict[str, Any]:
         """The lab env's arguments of this comparison (``tracker``: the agent needs one)."""
         return {"errors": self.errors, "gauge_sigma": self.sigma,
@@ -110,8 +107,8 @@ class Trial:
         """One line of strict JSON: ``names`` beside ``error`` and ``std``, and ``null``
         where a number is not one (NaN: the std of an error the fit held fixed, or what a
         failed trial never had)."""
-        return json.dumps(_null_for_nan({**asdict(self), "names": list(self.names)}),
-                          allow_nan=False)
+        data = {**asdict(self), "names": list(self.names)}
+        return json.dumps(_leaves(data, lambda v: None if v != v else v), allow_nan=False)
 
     @classmethod
     def from_json(cls, line: str) -> Trial:
@@ -119,32 +116,20 @@ class Trial:
         ``names``)."""
         data = json.loads(line)
         names = data.pop("names", None)
-        trial = cls(**_nan_for_null(data))
+        # A trial holds None nowhere else.
+        trial = cls(**_leaves(data, lambda v: float("nan") if v is None else v))
         if names is not None and tuple(names) != trial.names:
             raise ValueError("the trial's error names are not this version's machine errors")
         return trial
 
 
-def _null_for_nan(value: Any) -> Any:
-    """``value`` with every NaN float, at any depth, replaced by ``None``."""
-    if isinstance(value, float):
-        return None if value != value else value
+def _leaves(value: Any, change: Callable[[Any], Any]) -> Any:
+    """``value`` with ``change`` applied to every leaf, at any depth of dicts and lists."""
     if isinstance(value, dict):
-        return {k: _null_for_nan(v) for k, v in value.items()}
+        return {k: _leaves(v, change) for k, v in value.items()}
     if isinstance(value, list):
-        return [_null_for_nan(v) for v in value]
-    return value
-
-
-def _nan_for_null(value: Any) -> Any:
-    """The inverse of :func:`_null_for_nan`: a trial holds ``None`` nowhere else."""
-    if value is None:
-        return float("nan")
-    if isinstance(value, dict):
-        return {k: _nan_for_null(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_nan_for_null(v) for v in value]
-    return value
+        return [_leaves(v, change) for v in value]
+    return change(value)
 
 
 @cache
@@ -295,21 +280,15 @@ def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]
 def agent_episodes(config: Config, agent_name: str, runs: list[int], batched: bool = True
                    ) -> list[_Episode]:
     """The agent's episode on each machine of ``runs`` (machine ``i`` from its seed)."""
-    seeds = [config.machine_seed(i) for i in runs]
+    seeds = [machine_seed(config.seed, i) for i in runs]
     kwargs = config.lab_kwargs(get_agent(agent_name).needs_tracker)
     if batched and config.backend == "exact":
-        envs = gym.make_vec(orthoglide_env.LAB_ENV_ID, num_envs=len(runs),
-                            vectorization_mode="vector_entry_point", **kwargs)
-        try:
+        with closing(gym.make_vec(orthoglide_env.LAB_ENV_ID, num_envs=len(runs),
+                                  vectorization_mode="vector_entry_point", **kwargs)) as envs:
             done = run_episodes(envs, [get_agent(agent_name) for _ in runs], seeds)
-        finally:
-            envs.close()
     else:
-        env = gym.make(orthoglide_env.LAB_ENV_ID, **kwargs)
-        try:
+        with closing(gym.make(orthoglide_env.LAB_ENV_ID, **kwargs)) as env:
             done = [run_episode(env, get_agent(agent_name), seed) for seed in seeds]
-        finally:
-            env.close()
     return [_Episode(agent_name, index, e) for index, e in zip(runs, done, strict=True)]
 
 
@@ -405,12 +384,10 @@ def verify_pybullet(config: Config, machines: int) -> dict[str, float]:
             envs = gym.vector.SyncVectorEnv([
                 partial(gym.make, orthoglide_env.LAB_ENV_ID, **{**kwargs, "backend": backend})
                 for backend in ("exact", "pybullet")])
-            seed = config.machine_seed(index)
-            try:
+            seed = machine_seed(config.seed, index)
+            with closing(envs):
                 run_episodes(envs, [agent], [seed, seed], lockstep=True,
                              on_step=partial(_widen_gaps, worst, envs))
-            finally:
-                envs.close()
     return worst
 
 

@@ -21,17 +21,15 @@ import numpy as np
 from calibrators.agents import Agent
 from calibrators.agents.base import PlannedAgent
 from calibrators.estimators.base import Estimate, get_strategy
-from calibrators.measurements import ZERO_RHO, Measurement, Measurements
+from calibrators.measurements import ZERO_RHO, Measurement, Measurements, paper_rhos
 from orthoglide_env.envs.lab import Record
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.lab.settings import DEFAULT_BUDGET_S as DEFAULT_BUDGET_S  # every command's
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import MachineParams
-from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture
 
 #: Paper postures by their control coordinates, to label the notebook's readings.
-_PAPER_RHO: dict[tuple[float, ...], str] = {
-    tuple(float(v) for v in paper_posture(p)): p for p in PAPER_POSTURES}
+_PAPER_RHO: dict[tuple[float, ...], str] = {v: k for k, v in paper_rhos(PROTOTYPE).items()}
 
 
 def measurements_of(records: list[Record], time_s: float = 0.0,
@@ -100,8 +98,7 @@ def estimate_many(datas: list[Measurements], name: str, sigma: float
     out: list[Estimate | Exception] = []
     for data in datas:
         try:
-            out.append(strategy.estimate(data, spec.params, sigma, verify=False,
-                                         prior=spec.prior))
+            out.append(estimate(data, name, sigma))
         except (ValueError, RuntimeError, np.linalg.LinAlgError) as exc:
             out.append(exc)
     return out

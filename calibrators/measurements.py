@@ -366,10 +366,10 @@ def _fields_problem(names: Collection[str], kind: str) -> str | None:
     return None
 
 
-def _given(fields: Mapping[str, object], name: str) -> Any:
-    """A field's value, or None when it is absent, null or empty."""
+def _given(fields: Mapping[str, object], name: str, default: Any = None) -> Any:
+    """A field's value, or ``default`` when it is absent, null or empty."""
     value = fields.get(name)
-    return None if value is None or value == "" else value
+    return default if value is None or value == "" else value
 
 
 def _required(fields: Mapping[str, object], name: str) -> Any:
@@ -459,10 +459,9 @@ def _measurement(fields: Mapping[str, object], line: int | None, design: Machine
     posture = _given(fields, "posture")
     if posture is None and rho is None:
         raise FieldError("posture", "empty: give a paper posture, or the rho")
-    repetition, mounting = _given(fields, "repetition"), _given(fields, "mounting")
     return Measurement(gauge, "" if posture is None else posture,
-                       1 if repetition is None else repetition, reading, rho,
-                       "" if mounting is None else mounting, line, design=design)
+                       _given(fields, "repetition", 1), reading, rho,
+                       _given(fields, "mounting", ""), line, design=design)
 
 
 class _Readings:
@@ -660,11 +659,8 @@ class Measurements:
         try:
             seconds = _real(data.get("experiment_time_s", 0.0), "experiment_time_s", 0.0,
                             MAX_EXPERIMENT_TIME_S, "s")
-        except FieldError as exc:
-            raise MeasurementFileError(f"{source}: {exc}") from None
-        try:
             named = MachineDesign.from_dict(data["design"]) if "design" in data else None
-        except DesignError as exc:
+        except (FieldError, DesignError) as exc:
             raise MeasurementFileError(f"{source}: {exc}") from None
         if named is not None and design is not None and named != design:
             keys = [k for k, v in named.to_dict().items() if design.to_dict()[k] != v]

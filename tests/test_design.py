@@ -22,8 +22,7 @@ SIGMA = 0.01
 def planner(criterion: str = "I", budget_s: float = 600.0) -> Planner:
     p = Planner(list(PAPER_SLOTS), [True] * len(PAPER_SLOTS), SIGMA, budget_s,
                 criterion=criterion)
-    down, chance = p.reading_here()
-    p.expect_readings(down, chance)
+    p.expect_readings()  # the readings of the lab's opening, at Zero
     return p
 
 

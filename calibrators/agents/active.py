@@ -58,7 +58,6 @@ class ActiveAgent(Agent):
                                design=design)
         steps, _ = fixed_plan(*setup, criterion=self.criterion)
         self.remounts = [s for s in steps if s.op == Op.REMOUNT]
-        self.planner.mean = np.zeros(len(self.planner.covariance))
         self.readings: dict[int, list[tuple[int, float]]] = {k: [] for k in range(len(slots))}
         self.queue: list[Step] = []
         self.last: Step | None = None

@@ -30,10 +30,18 @@ class Agent:
 
 
 class PlannedAgent(Agent):
-    """An agent whose whole experiment is decided at reset: ``plan`` (a list of actions,
-    set by ``reset``) is played in order."""
+    """An agent whose whole experiment is decided at reset: ``plan``, the list of actions
+    :meth:`make_plan` makes of the first observation, is played in order."""
 
     plan: list[dict[str, Any]]
+
+    def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
+              rng: np.random.Generator) -> None:
+        super().reset(env, observation, rng)
+        self.plan = self.make_plan(observation)
+
+    def make_plan(self, observation: dict[str, np.ndarray]) -> list[dict[str, Any]]:
+        raise NotImplementedError
 
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
         return self.plan.pop(0)

@@ -13,6 +13,7 @@ noise, budget), so it is made once per process and replayed on every machine.
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -32,8 +33,7 @@ def fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
     machine of ``design``, and the TCP error after rigid motion it predicts (mm)."""
     planner = Planner(list(slots), list(engaged), sigma, budget_s, criterion=criterion,
                       design=design)
-    down, chance = planner.reading_here()  # the lab reads every stand as the episode opens
-    planner.expect_readings(down, chance)
+    planner.expect_readings()  # the lab reads every stand as the episode opens
     steps = greedy_plan(planner)
     return tuple(steps), planner.predicted_rigid_mm()
 
@@ -54,12 +54,10 @@ class OptimalAgent(PlannedAgent):
     name = "optimal"
     criterion = "I"
 
-    def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
-              rng: np.random.Generator) -> None:
-        super().reset(env, observation, rng)
+    def make_plan(self, observation: dict[str, np.ndarray]) -> list[dict[str, Any]]:
         steps, self.predicted_rigid_mm = fixed_plan(*lab_setup(self.env, observation),
                                                     criterion=self.criterion)
-        self.plan = [action(s.op, s.rho, s.stand, s.slot) for s in steps]
+        return [action(s.op, s.rho, s.stand, s.slot) for s in steps]
 
 
 @register

@@ -10,7 +10,6 @@ from __future__ import annotations
 from functools import lru_cache
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
 from calibrators.agents.base import PlannedAgent, action, register
@@ -34,13 +33,10 @@ class PaperAgent(PlannedAgent):
     name = "paper"
     repetitions = REPETITIONS
 
-    def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
-              rng: np.random.Generator) -> None:
-        super().reset(env, observation, rng)
+    def make_plan(self, observation: dict[str, np.ndarray]) -> list[dict[str, Any]]:
         legs = tuple(SLOTS[s].leg if s < len(SLOTS) else -1 for s in observation["slot"])
         engaged = tuple(bool(e) for e in observation["engaged"])
-        self.plan = [dict(a) for a in paper_plan(legs, engaged, self.repetitions,
-                                                 self.env.design)]
+        return [dict(a) for a in paper_plan(legs, engaged, self.repetitions, self.env.design)]
 
 
 @lru_cache(maxsize=64)

@@ -4,11 +4,11 @@ The floor any designed experiment must beat.  At every step it picks, at random,
 a random posture of the joint cube (60 %), lifting or engaging a random stand (20 %), or
 re-mounting a random stand on a random free slot (20 %).  It uses what a careful
 technician knows, the nominal machine: a move is only made to a posture the nominal model
-reaches with every part clear of the others and no engaged gauge pressed within
-:data:`MARGIN` of its travel, and a gauge is only engaged where that holds.  An engaged
-platform gauge allows only postures where it reads (within its travel of where it was
-zeroed): past its face the whole platform would run into it.  It works until the budget
-runs out.
+reaches with every part :data:`~calibrators.design.planner.CLEARANCE` clear of the others
+and no engaged gauge pressed within :data:`MARGIN` of its travel, and a gauge is only
+engaged where that holds.  An engaged platform gauge allows only postures where it reads
+(within its travel of where it was zeroed): past its face the whole platform would run
+into it.  It works until the budget runs out.
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ import gymnasium as gym
 import numpy as np
 
 from calibrators.agents.base import Agent, action, register
+from calibrators.design.planner import CLEARANCE
 from orthoglide_env.instruments.dial import pressed_past_travel
 from orthoglide_env.instruments.rays import exact_ray_distances, exact_target_boxes
 from orthoglide_env.instruments.slots import Part
@@ -34,8 +35,6 @@ from orthoglide_env.model.kinematics import UnreachableError, direct
 #: the end of its travel, and its target this far from pressing it: more than the
 #: machine errors move a bar at mid-leg.
 MARGIN: float = 2.0
-#: Closest two parts that must never meet may come, on the nominal model (mm).
-CLEARANCE: float = 3.0
 TRIES: int = 50
 
 

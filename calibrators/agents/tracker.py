@@ -7,7 +7,8 @@ each, and stops.  The tracker's frame is unknown to the estimator, which fits it
 
 from __future__ import annotations
 
-import gymnasium as gym
+from typing import Any
+
 import numpy as np
 
 from calibrators.agents.base import PlannedAgent, action, register
@@ -43,9 +44,7 @@ class TrackerAgent(PlannedAgent):
     name = "tracker"
     needs_tracker = True
 
-    def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
-              rng: np.random.Generator) -> None:
-        super().reset(env, observation, rng)
-        self.plan = [action(Op.LIFT, stand=k) for k, e in enumerate(observation["engaged"]) if e]
-        self.plan += [action(Op.MOVE, rho) for rho in serpentine_grid(levels_of(self.env.design))]
-        self.plan.append(action(Op.STOP))
+    def make_plan(self, observation: dict[str, np.ndarray]) -> list[dict[str, Any]]:
+        lifts = [action(Op.LIFT, stand=k) for k, e in enumerate(observation["engaged"]) if e]
+        moves = [action(Op.MOVE, rho) for rho in serpentine_grid(levels_of(self.env.design))]
+        return [*lifts, *moves, action(Op.STOP)]

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+from contextlib import closing
 
 import gymnasium as gym
 import numpy as np
@@ -40,10 +41,8 @@ def _setup(args: argparse.Namespace) -> tuple[MachineParams, str, float, float]:
         # Unused but for its design: the lab draws the machine from the seed.
         machine = MachineParams(design=design)
         noisy = not args.noise_free
-    if not noisy:
-        return machine, preset, 0.0, 0.0
-    return machine, preset, DEFAULT_SIGMA if args.sigma is None else args.sigma, (
-        DEFAULT_RESOLUTION)
+    sigma = DEFAULT_SIGMA if args.sigma is None else args.sigma
+    return (machine, preset, sigma, DEFAULT_RESOLUTION) if noisy else (machine, preset, 0.0, 0.0)
 
 
 def _z_rms(est: Estimate, data: Measurements, env: gym.Env) -> float | None:
@@ -68,7 +67,7 @@ def run(args: argparse.Namespace) -> None:
                    gauge_resolution=resolution, backend=args.backend,
                    tracker=agent.needs_tracker, budget_s=args.budget,
                    design=machine.design)
-    try:
+    with closing(env):
         # A random machine is drawn by the lab from the seed, as ``compare`` draws its first
         # one: the same seed gives the same machine, installation and readings there and here.
         given = {"machine": machine.to_dict()} if args.machine else None
@@ -78,8 +77,6 @@ def run(args: argparse.Namespace) -> None:
             data.write(args.save_measurements)
         est = estimator_options.estimate(args, data, episode.sigma)
         emit(report(est, episode.truth, _z_rms(est, data, env)), args.json)
-    finally:
-        env.close()
 
 
 def add(sub: argparse._SubParsersAction) -> None:

@@ -1,4 +1,4 @@
-"""What several commands share: the parser class, usage errors, machine and noise options."""
+"""What several commands share: the parser class, usage errors, machine options, output."""
 
 from __future__ import annotations
 
@@ -10,8 +10,6 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA, MAX_NOISE_FRACTION
-from orthoglide_env.instruments.gauges import DEFAULT_TRAVEL
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign, load_design
 from orthoglide_env.model.errors import MachineParams, check_rho, random_machine
 
@@ -52,25 +50,6 @@ def rho_of(values: list[float], design: MachineDesign) -> np.ndarray:
 
 def vec(values: list[float], digits: int) -> str:
     return "(" + ", ".join(f"{v:.{digits}f}" for v in values) + ")"
-
-
-def noise_of(args: argparse.Namespace) -> tuple[float, float]:
-    if args.noise_free:
-        return 0.0, 0.0
-    return (DEFAULT_SIGMA if args.sigma is None else args.sigma), DEFAULT_RESOLUTION
-
-
-#: Largest sigma and resolution of the default gauges, as check_noise has it (mm).
-NOISE_LIMIT = (f"travel/{1 / MAX_NOISE_FRACTION:g} = "
-               f"{DEFAULT_TRAVEL * MAX_NOISE_FRACTION:g}")
-SIGMA_HELP = (f"gauge repeatability, standard deviation of a reading (mm, 0 to {NOISE_LIMIT};"
-              f" default {DEFAULT_SIGMA})")
-
-
-def add_noise_options(p: argparse.ArgumentParser) -> None:
-    group = p.add_mutually_exclusive_group()
-    group.add_argument("--noise-free", action="store_true", help="ideal gauges")
-    group.add_argument("--sigma", type=float, default=None, help=SIGMA_HELP)
 
 
 def add_machine_posture(p: argparse.ArgumentParser) -> None:

@@ -18,8 +18,8 @@ from calibrators.cli.common import UsageError, add_design, design_of
 from calibrators.cli.estimator_options import DEFAULT_STRATEGY
 from calibrators.compare import Config, Trial, run, summary, verify_pybullet
 from calibrators.engines import ENGINES, RAY_INSTALL_HINT, ray_available
-from calibrators.experiment import DEFAULT_BUDGET_S, ESTIMATORS
-from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA, check_noise
+from calibrators.experiment import DEFAULT_BUDGET_S, ESTIMATORS, get_estimator
+from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS
 from orthoglide_env.scoring import FRAMES
@@ -42,32 +42,27 @@ def _check(args: argparse.Namespace) -> Config:
         get_agent(name)  # a ValueError names the known agents, or why a policy cannot run
     estimators = _names(args.estimators, "--estimators")
     for name in estimators:
-        if name not in ESTIMATORS:
-            raise UsageError(f"unknown estimator '{name}'; choose from {list(ESTIMATORS)}")
-    if not 1 <= args.machines <= 1_000_000:
-        raise UsageError("--machines must be between 1 and 1000000")
-    if not 0 <= args.seed < 2**32:
-        raise UsageError("--seed must be between 0 and 2**32 - 1")
-    if not (np.isfinite(args.budget) and 0 < args.budget <= 1e6):
-        raise UsageError("--budget must be a number of seconds in (0, 1e6]")
-    if not (np.isfinite(args.target) and args.target > 0):
-        raise UsageError("--target must be a positive number of mm")
-    if not 1 <= args.jobs <= MAX_JOBS:
-        raise UsageError(f"--jobs must be between 1 and {MAX_JOBS}")
-    if not 0 <= args.verify_pybullet <= 1000:
-        raise UsageError("--verify-pybullet must be between 0 and 1000")
-    if args.engine == "ray" and not ray_available():
-        raise UsageError(f"--engine ray needs Ray: {RAY_INSTALL_HINT}")
-    if args.address and args.engine != "ray":
-        raise UsageError("--address is the Ray cluster of --engine ray")
-    if args.resume and not args.out:
-        raise UsageError("--resume continues the run kept in --out: give --out")
-    sigma = 0.0 if args.noise_free else args.sigma
-    check_noise(sigma, 0.0 if args.noise_free else args.resolution, names=("--sigma",
-                                                                           "--resolution"))
-    return Config(agents, estimators, args.budget, args.errors, sigma,
-                  0.0 if args.noise_free else args.resolution, args.backend, args.seed,
-                  args.target, curve_estimator=_curve_estimator(estimators) if args.out else "",
+        get_estimator(name)
+    rules = (
+        (1 <= args.machines <= 1_000_000, "--machines must be between 1 and 1000000"),
+        (0 <= args.seed < 2**32, "--seed must be between 0 and 2**32 - 1"),
+        (np.isfinite(args.budget) and 0 < args.budget <= 1e6,
+         "--budget must be a number of seconds in (0, 1e6]"),
+        (np.isfinite(args.target) and args.target > 0, "--target must be a positive number of mm"),
+        (1 <= args.jobs <= MAX_JOBS, f"--jobs must be between 1 and {MAX_JOBS}"),
+        (0 <= args.verify_pybullet <= 1000, "--verify-pybullet must be between 0 and 1000"),
+        (args.engine != "ray" or ray_available(), f"--engine ray needs Ray: {RAY_INSTALL_HINT}"),
+        (not args.address or args.engine == "ray", "--address is the Ray cluster of --engine ray"),
+        (not args.resume or args.out, "--resume continues the run kept in --out: give --out"),
+    )
+    for ok, problem in rules:
+        if not ok:
+            raise UsageError(problem)
+    # The gauge noise was checked with every command's (calibrators.cli.run).
+    sigma, resolution = (0.0, 0.0) if args.noise_free else (args.sigma, args.resolution)
+    return Config(agents, estimators, args.budget, args.errors, sigma, resolution,
+                  args.backend, args.seed, args.target,
+                  curve_estimator=_curve_estimator(estimators) if args.out else "",
                   design=design_of(args))
 
 
@@ -93,21 +88,18 @@ def _prepare_out(args: argparse.Namespace, config: Config) -> tuple[Path | None,
         if saved != _config_dict(config, args.machines):
             raise UsageError(f"--resume needs the options of the run in {out} "
                              f"({config_path}): they differ")
-        done = []
-        for n, line in enumerate(trials_path.read_text().splitlines(), start=1):
+        done, lines = [], trials_path.read_text().splitlines()
+        for n, line in enumerate(lines, start=1):
             try:
                 done.append(Trial.from_json(line))
             except (ValueError, TypeError) as exc:
                 # The last line of an interrupted run may be cut short: drop it.
-                if n < len(trials_path.read_text().splitlines()):
+                if n < len(lines):
                     raise UsageError(f"{trials_path}:{n}: not a trial ({exc})") from None
         return out, done
     if trials_path.exists():
         raise UsageError(f"{out} already holds a run: use --resume, or another --out")
     out.mkdir(parents=True, exist_ok=True)
-    probe = out / ".writable"
-    probe.write_text("")
-    probe.unlink()
     config_path.write_text(json.dumps(_config_dict(config, args.machines)) + "\n")
     return out, []
 
@@ -127,35 +119,33 @@ def run_command(args: argparse.Namespace) -> None:
     config = _check(args)
     out, done = _prepare_out(args, config)
     handle = (out / TRIALS_FILE).open("a") if out else None
+    collected: list[Trial] = list(done)
 
     def keep(trial: Trial) -> None:
+        collected.append(trial)
         if handle:
             handle.write(trial.to_json() + "\n")
             handle.flush()
 
-    finished = {t.machine for t in done}
-    bar = tqdm(total=args.machines, initial=len(finished), desc="machines", unit="machine",
-               disable=args.quiet or args.json, file=sys.stderr)
+    bar = tqdm(total=args.machines, initial=len({t.machine for t in done}), desc="machines",
+               unit="machine", disable=args.quiet or args.json, file=sys.stderr)
     start = time.perf_counter()
-    collected: list[Trial] = list(done)
     try:
-        trials = run(config, args.machines, args.jobs, done,
-                     on_trial=lambda t: (collected.append(t), keep(t)), progress=bar.update,
-                     engine=args.engine, address=args.address)
+        trials = run(config, args.machines, args.jobs, done, on_trial=keep,
+                     progress=bar.update, engine=args.engine, address=args.address)
     except KeyboardInterrupt:
+        trials = None
+    finally:
         bar.close()
         if handle:
             handle.close()
-        rows = summary(collected, config.target_mm)
+    if trials is None:
         print(f"orthoglide compare: interrupted after {len(collected)} trials"
               + (f"; kept in {out / TRIALS_FILE}, continue with --resume" if out else ""),
               file=sys.stderr)
-        _print(rows, config, len({t.machine for t in collected}), time.perf_counter() - start,
-               args.json)
-        raise SystemExit(130) from None
-    bar.close()
-    if handle:
-        handle.close()
+        _print(summary(collected, config.target_mm), config,
+               len({t.machine for t in collected}), time.perf_counter() - start, args.json)
+        raise SystemExit(130)
     rows = summary(trials, config.target_mm)
     _print(rows, config, args.machines, time.perf_counter() - start, args.json)
     if args.verify_pybullet:

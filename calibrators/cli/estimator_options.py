@@ -49,7 +49,7 @@ def options(args: argparse.Namespace) -> dict[str, Any]:
     """Keyword arguments of ``Calibrator.estimate`` from the parsed options."""
     return {"prior": args.prior, "fix": parse_assignments(args.fix, "--fix"),
             "keep_outliers": args.keep_outliers, "holdout": args.holdout,
-            "seed": args.seed if args.seed is not None else 0, "solver": args.solver}
+            "seed": args.seed, "solver": args.solver}
 
 
 def estimate(args: argparse.Namespace, data: Measurements, sigma: float) -> Estimate:

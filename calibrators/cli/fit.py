@@ -7,21 +7,14 @@ import argparse
 import numpy as np
 
 from calibrators.cli import estimator_options
-from calibrators.cli.common import UsageError, design_of
+from calibrators.cli.common import design_of
 from calibrators.cli.output import emit, report
 from calibrators.measurements import Measurements
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 
-#: Largest repeatability accepted (mm): a dial gauge that scatters by more than this is
-#: not measuring, and the weights would say nothing.
-MAX_SIGMA: float = 1.0
-
 
 def run(args: argparse.Namespace) -> None:
-    for name in ("sigma", "resolution"):
-        value = getattr(args, name)
-        if not 0 <= value <= MAX_SIGMA:
-            raise UsageError(f"--{name} must be between 0 and {MAX_SIGMA:g} mm, got {value:g}")
+    # --sigma and --resolution were checked with every command's (calibrators.cli.run).
     data = Measurements.read(args.file, design_of(args) if args.design else None)
     if args.to_csv:
         data.to_csv(args.to_csv)

@@ -11,14 +11,14 @@ The JSON object's keys are a contract that scripts rely on: ``estimate`` and ``s
 
 from __future__ import annotations
 
-import json
 from typing import Any
 
 import numpy as np
 
+from calibrators.cli.common import print_json
 from calibrators.estimators.base import Estimate
 from calibrators.estimators.prediction import predicted_correction, predicted_tcp_error
-from orthoglide_env.model.errors import ERROR_GROUPS, MachineParams
+from orthoglide_env.model.errors import ERROR_GROUPS, ERROR_NAMES, MachineParams, error_group
 from orthoglide_env.scoring import FRAMES, score
 
 #: How many combinations a table lists before it only counts them (JSON lists all).
@@ -96,8 +96,6 @@ def print_table(data: dict[str, Any]) -> None:
     free = set(data["free"])
     print(f"{'':16}{'estimate':>10}{'std':>9}" + (f"{'truth':>10}{'error':>10}"
                                                    if "truth" in data else ""))
-    from orthoglide_env.model.errors import ERROR_NAMES, error_group
-
     for group in ERROR_GROUPS:
         names = [n for n in ERROR_NAMES if error_group(n) == group]
         if not free & set(names) and group not in ("drho", "dL"):
@@ -153,6 +151,6 @@ def print_table(data: dict[str, Any]) -> None:
 def emit(data: dict[str, Any], as_json: bool) -> None:
     """Print the report; JSON output never holds NaN or Infinity (not JSON)."""
     if as_json:
-        print(json.dumps(data, indent=2, allow_nan=False))
+        print_json(data)
     else:
         print_table(data)

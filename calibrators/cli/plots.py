@@ -21,6 +21,17 @@ def _pyplot():
     return plt
 
 
+def _save(plt, fig, ax, note: str, path: Path, **text) -> Path:
+    """Finish a figure of TCP errors (log scale) with ``note`` below it, write ``path``."""
+    ax.set_yscale("log")
+    ax.set_ylabel("TCP error RMS after rigid motion (mm)")
+    fig.text(0.01, 0.01, note, fontsize=7, **text)
+    fig.tight_layout(rect=(0, 0.04, 1, 1))
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def accuracy_vs_time(trials: list[Trial], config: Config, out: Path) -> Path:
     """Median TCP error after rigid motion against the lab time an agent had spent, one
     curve per agent (``config.curve_estimator``, re-estimated at quarters of its episode)."""
@@ -35,20 +46,14 @@ def accuracy_vs_time(trials: list[Trial], config: Config, out: Path) -> Path:
         points = np.array(curves)  # (machines, points, 2)
         ax.plot(np.median(points[:, :, 0], axis=0) / 60, np.median(points[:, :, 1], axis=0),
                 STYLES[k % len(STYLES)], label=agent)
-    ax.set_yscale("log")
     ax.set_xlabel("lab time spent (min)")
-    ax.set_ylabel("TCP error RMS after rigid motion (mm)")
     ax.set_title(f"Accuracy against lab time ({name} estimator)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
-    fig.text(0.01, 0.01, f"Median over {len({t.machine for t in trials})} {config.errors} "
-             f"machines; gauge sigma {config.sigma} mm; budget {config.budget_s:g} s. Each "
-             "point re-estimates from the readings taken so far.", fontsize=7)
-    fig.tight_layout(rect=(0, 0.04, 1, 1))
-    path = out / "accuracy_vs_time.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, ax, f"Median over {len({t.machine for t in trials})} "
+                 f"{config.errors} machines; gauge sigma {config.sigma} mm; budget "
+                 f"{config.budget_s:g} s. Each point re-estimates from the readings taken so "
+                 "far.", out / "accuracy_vs_time.png")
 
 
 def boxes(trials: list[Trial], config: Config, out: Path) -> Path:
@@ -66,15 +71,8 @@ def boxes(trials: list[Trial], config: Config, out: Path) -> Path:
                 labels.append(f"{agent}\n{name}")
     fig, ax = plt.subplots(figsize=(max(6.0, 1.1 * len(data)), 4.8))
     ax.boxplot(data, tick_labels=labels)
-    ax.set_yscale("log")
-    ax.set_ylabel("TCP error RMS after rigid motion (mm)")
     ax.set_title("Accuracy per agent x estimator")
     ax.grid(True, axis="y", which="both", alpha=0.3)
-    fig.text(0.01, 0.01, "Boxes: quartiles over machines, whiskers 1.5 IQR. Failed "
-             "estimates (an estimator that cannot read an agent's instrument) are left out.",
-             fontsize=7, wrap=True)
-    fig.tight_layout(rect=(0, 0.04, 1, 1))
-    path = out / "boxes.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, ax, "Boxes: quartiles over machines, whiskers 1.5 IQR. Failed "
+                 "estimates (an estimator that cannot read an agent's instrument) are left out.",
+                 out / "boxes.png", wrap=True)

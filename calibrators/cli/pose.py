@@ -6,16 +6,20 @@ import argparse
 
 import numpy as np
 
-from calibrators.cli.common import (
-    NOISE_LIMIT,
-    SIGMA_HELP,
-    add_machine_posture,
-    machine_of,
-    print_json,
-    rho_of,
-    vec,
+from calibrators.cli.common import add_machine_posture, machine_of, print_json, rho_of, vec
+from orthoglide_env.instruments.dial import (
+    DEFAULT_RESOLUTION,
+    DEFAULT_SIGMA,
+    MAX_NOISE_FRACTION,
+    MIN_RESOLUTION,
 )
-from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA, MIN_RESOLUTION
+from orthoglide_env.instruments.gauges import DEFAULT_TRAVEL
+
+#: Largest sigma and resolution of the default gauges, as check_noise has it (mm).
+NOISE_LIMIT = (f"travel/{1 / MAX_NOISE_FRACTION:g} = "
+               f"{DEFAULT_TRAVEL * MAX_NOISE_FRACTION:g}")
+SIGMA_HELP = (f"gauge repeatability, standard deviation of a reading (mm, 0 to {NOISE_LIMIT};"
+              f" default {DEFAULT_SIGMA})")
 
 
 def run(args: argparse.Namespace) -> None:

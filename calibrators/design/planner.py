@@ -129,11 +129,6 @@ class SlotTable:
         """(S, P) ``safe`` and ``contact`` of :func:`reach` a priori (what a plan knows)."""
         return reach(self, np.arange(len(self.tip)), self.tip, self.prior_spread)
 
-    def index(self, rho: np.ndarray) -> int | None:
-        """Index of candidate posture ``rho``, or None."""
-        hit = np.flatnonzero(np.all(np.abs(self.postures - rho) < 1e-9, axis=1))
-        return int(hit[0]) if hit.size else None
-
 
 def reach(table: SlotTable, slots: np.ndarray, tip: np.ndarray, spread: np.ndarray,
           postures: np.ndarray | slice = slice(None)) -> tuple[np.ndarray, np.ndarray]:
@@ -234,15 +229,12 @@ class Planner:
     sigma: float
     budget_s: float
     criterion: str = "I"
-    rho: np.ndarray = field(default_factory=lambda: np.zeros(3))
     time_s: float = 0.0
     design: MachineDesign = PROTOTYPE
-    table: SlotTable = None  # type: ignore[assignment]  # default: the design's slot table
     steps: list[Step] = field(default_factory=list)
 
     def __post_init__(self) -> None:
-        if self.table is None:
-            self.table = slot_table(self.design)
+        self.table = slot_table(self.design)
         if self.criterion not in CRITERIA:
             raise ValueError(f"unknown criterion '{self.criterion}'; choose from {CRITERIA}")
         if not (np.isfinite(self.sigma) and self.sigma > 0):
@@ -250,11 +242,12 @@ class Planner:
         self.slots = [int(s) for s in self.slots]
         self.engaged = [bool(e) and s >= 0 for s, e in zip(self.slots, self.engaged,
                                                            strict=True)]
-        self.rho = np.asarray(self.rho, dtype=float)
         n = N_MACHINE + N_STAND * len(self.slots)
         self.covariance = np.eye(n)
         self.mean: np.ndarray | None = None  # set by observe()
-        self.here = self.table.index(self.rho)
+        # The posture, and its index in the table: a plan starts at Zero, and moves only
+        # to candidate postures.
+        self.rho, self.here = np.zeros(3), self.table.zero
         self.rows = np.stack([self.rows_of(k) for k in range(len(self.slots))])
         # Where an engaged gauge was seen not to read (its tip beyond the travel): it will
         # not read there again until its stand moves.
@@ -314,8 +307,7 @@ class Planner:
         and how likely each reads.  A plunger is let down only where it is safe both here
         and there (let down here, it reads there), and lifted where it is not safe there."""
         safe, contact = self._reach()
-        here = (safe[:, self.here] if self.here is not None
-                else np.zeros(len(self.slots), dtype=bool))
+        here = safe[:, self.here]
         engaged = np.array(self.engaged, dtype=bool)
         after = safe & (engaged | here)[:, None]
         reads = np.where(after, contact, 0.0)
@@ -353,8 +345,12 @@ class Planner:
         self.covariance = self.covariance - gain @ b.T
         self.covariance = (self.covariance + self.covariance.T) / 2
 
-    def expect_readings(self, stands: np.ndarray, weights: np.ndarray) -> None:
-        """Count readings of ``stands`` here, each with its probability (a plan's)."""
+    def expect_readings(self, stands: np.ndarray | None = None,
+                        weights: np.ndarray | None = None) -> None:
+        """Count readings of ``stands`` here, each with its probability (a plan's; default:
+        :meth:`reading_here`)."""
+        if stands is None:
+            stands, weights = self.reading_here()
         rows = self.rows[stands, self.here] * np.sqrt(weights)[:, None] / self.sigma
         self._add(rows)
 
@@ -363,18 +359,14 @@ class Planner:
         update the mean and the covariance."""
         if self.mean is None:
             self.mean = np.zeros(len(self.covariance))
-        if self.here is not None:
-            quiet = [k for k, down in enumerate(self.engaged) if down and k not in stands]
-            self.silent[quiet, self.here] = True
+        quiet = [k for k, down in enumerate(self.engaged) if down and k not in stands]
+        self.silent[quiet, self.here] = True
         stands_ = np.asarray(stands, dtype=int)
         if not stands_.size:
             return
-        index = self.here
-        if index is None:
-            raise ValueError(f"posture {self.rho.tolist()} is not a candidate posture")
-        rows = self.rows[stands_, index] / self.sigma
-        nominal = self.table.reading[[self.slots[k] for k in stands_], index]
-        predicted = nominal + self.rows[stands_, index] @ self.mean
+        rows = self.rows[stands_, self.here] / self.sigma
+        nominal = self.table.reading[[self.slots[k] for k in stands_], self.here]
+        predicted = nominal + self.rows[stands_, self.here] @ self.mean
         self._add(rows, (np.asarray(values, dtype=float) - predicted) / self.sigma)
 
     def retire(self, stand: int) -> None:
@@ -473,15 +465,13 @@ class Planner:
         if choice is None:
             return False
         self.move(*choice)
-        down, chance = self.reading_here()
-        self.expect_readings(down, chance)
+        self.expect_readings()
         return True
 
     def _remounted(self, stand: int, slot: int) -> Planner:
         trial = self.fork()
         trial.remount(stand, slot)
-        down, chance = trial.reading_here()
-        trial.expect_readings(down, chance)
+        trial.expect_readings()
         return trial
 
     def best_remount(self, screened: int | None = SCREENED) -> tuple[int, int] | None:
@@ -522,8 +512,7 @@ def greedy_plan(planner: Planner, remounts: bool = True, screened: int | None = 
             choice = planner.best_remount(screened)
             if choice is not None:
                 planner.remount(*choice)
-                down, chance = planner.reading_here()
-                planner.expect_readings(down, chance)
+                planner.expect_readings()
                 continue
         if not planner.greedy_move():
             break
