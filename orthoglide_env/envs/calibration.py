@@ -41,19 +41,20 @@ class CalibrationFace(Face):
         return np.full(shape, Op.MOVE), rho, zeros, zeros
 
     def _step_info(self, result: StepResult, r: int, i: int) -> dict[str, Any]:
-        new = zip(gauge_names(self.gauge_layouts[i]), result.new_overtravel[r], strict=True)
-        return self._info(i, [name for name, hit in new if hit], float(result.seconds[r]),
-                          result.collision[r])
+        names = gauge_names(self.gauge_layouts[i])
+        hits = result.new_overtravel[r]
+        overtravel = [names[k] for k in np.flatnonzero(hits)] if hits.any() else []
+        return self._info(i, names, overtravel, float(result.seconds[r]), result.collision[r])
 
     def _reset_info(self, i: int) -> dict[str, Any]:
-        return self._info(i, [], 0.0, "")
+        return self._info(i, gauge_names(self.gauge_layouts[i]), [], 0.0, "")
 
-    def _info(self, i: int, overtravel: list[str], step_time: float, collision: str
-              ) -> dict[str, Any]:
-        """Env ``i``'s info: its gauges' names and status, the gauges that went into
+    def _info(self, i: int, names: list[str], overtravel: list[str], step_time: float,
+              collision: str) -> dict[str, Any]:
+        """Env ``i``'s info: its gauges' ``names`` and status, the gauges that went into
         overtravel, the step's time and the collision label."""
         return {
-            "gauge_names": list(gauge_names(self.gauge_layouts[i])),
+            "gauge_names": list(names),
             "status": STATUS_LABELS[self._batch.status[i]].tolist(),
             "overtravel": overtravel,
             "step_time_s": step_time,

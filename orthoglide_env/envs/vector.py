@@ -101,9 +101,7 @@ class EngineVectorEnv(Face, VectorEnv):
         self._start(rows, [seeds[i] for i in rows], machine, layout, obs)
         self._obs = obs
         self._ended[rows] = False
-        info: dict[str, Any] = {}
-        for i in rows:
-            self._add_info(info, self._reset_info(i), i)
+        info = self._add_infos({}, [self._reset_info(i) for i in rows], rows)
         return self._copy_obs(), info
 
     def step(self, actions: Any
@@ -131,10 +129,11 @@ class EngineVectorEnv(Face, VectorEnv):
         ending = (terminated | truncated) if self.autoreset_mode == AutoresetMode.SAME_STEP \
             else np.zeros(n, dtype=bool)
         # An env that resets on this step shows its reset's info (SyncVectorEnv's way).
-        info: dict[str, Any] = {}
-        final: dict[str, Any] = {}
-        for r, i in enumerate(rows):
-            self._add_info(final if ending[i] else info, self._step_info(result, r, i), i)
+        last = ending[rows]
+        info = self._add_infos({}, [self._step_info(result, r, rows[r])
+                                    for r in np.flatnonzero(~last)], rows[~last])
+        final = self._add_infos({}, [self._step_info(result, r, rows[r])
+                                     for r in np.flatnonzero(last)], rows[last])
         if ending.any():
             info["final_obs"] = np.full(n, None, dtype=object)
             for i in np.flatnonzero(ending):
@@ -143,11 +142,34 @@ class EngineVectorEnv(Face, VectorEnv):
             info["final_info"], info["_final_info"] = final, ending.copy()
         renew = np.flatnonzero(resetting | ending)
         self._start(renew, [None] * len(renew), None, None, obs)
-        for i in renew:
-            self._add_info(info, self._reset_info(i), i)
+        self._add_infos(info, [self._reset_info(i) for i in renew], renew)
         self._obs = obs
         self._ended = (terminated | truncated) & ~ending
         return self._copy_obs(), reward, terminated, truncated, info
+
+    def _add_infos(self, vector_infos: dict[str, Any], infos: Sequence[dict[str, Any]],
+                   envs: np.ndarray) -> dict[str, Any]:
+        """``_add_info`` of ``infos[k]`` for env ``envs[k]``, in turn: the same arrays and
+        masks, made a key at a time when every info is flat with the same keys (a call per
+        env and key cost a third of a step of 500 envs)."""
+        flat = all(d.keys() == infos[0].keys() for d in infos) and not any(
+            isinstance(v, dict) or k == "final_obs" for k, v in infos[0].items()) if infos else True
+        if not flat:
+            for d, i in zip(infos, envs, strict=True):
+                self._add_info(vector_infos, d, int(i))
+            return vector_infos
+        for key in infos[0] if infos else ():
+            values = [d[key] for d in infos]
+            if key not in vector_infos:  # Gymnasium's rule picks the array's type
+                self._add_info(vector_infos, {key: values[0]}, int(envs[0]))
+            array = vector_infos[key]
+            if array.dtype == object:  # element by element: lists stay lists
+                for i, v in zip(envs, values, strict=True):
+                    array[i] = v
+            else:
+                array[envs] = values
+            vector_infos[f"_{key}"][envs] = True
+        return vector_infos
 
     def close_extras(self, **kwargs: Any) -> None:
         self._batch.backend.close()

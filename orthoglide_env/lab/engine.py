@@ -37,8 +37,9 @@ from orthoglide_env.scoring import score
 #: units of this many mm, and time in hours: -error/unit - time_weight * hours.
 ACCURACY_UNIT_MM: float = 0.01
 SECONDS_PER_HOUR: float = 3600.0
-#: Operations that put the machine somewhere and read it.
-_READS: tuple[Op, ...] = (Op.MOVE, Op.REMOUNT)
+#: Whether each operation code puts the machine somewhere and reads it (a table, where
+#: ``np.isin`` cost 4 % of a lone env's step).
+_READS: np.ndarray = np.isin(np.arange(len(Op)), (Op.MOVE, Op.REMOUNT))
 
 
 @dataclass
@@ -207,9 +208,9 @@ class LabBatch:
             self.backend.move(rows[remounts], self.rho[rows[remounts]])
             self._mount(rows[remounts], stand[remounts], slot[remounts], mounted)
             self._sync(rows[remounts])
-        reads = ok & np.isin(op, _READS)
+        reads = ok & _READS[op]
         presses = reads | (ok & (op == Op.ENGAGE))
-        looks = np.isin(op, _READS) | presses  # a refused move still checks for a crash
+        looks = _READS[op] | presses  # a refused move still checks for a crash
         sight = self._look(rows[looks])
         at = np.cumsum(looks) - 1  # row of each looked-at episode in ``sight``
         overtravel: list[list[str]] = [[] for _ in rows]
@@ -227,7 +228,8 @@ class LabBatch:
             self.pressed[pressing] = pressed
             new_overtravel[presses] = new
             seconds[presses] += TIME.overtravel_s * np.count_nonzero(new, axis=-1)
-            for r, hit in zip(np.flatnonzero(presses), new, strict=True):
+            hits = new.any(axis=-1)
+            for r, hit in zip(np.flatnonzero(presses)[hits], new[hits], strict=True):
                 overtravel[r] = [f"stand {k} ({self.mounting[rows[r]][k]})"
                                  for k in np.flatnonzero(hit)]
         values = np.full((len(rows), settings.stands), np.nan)
@@ -239,7 +241,7 @@ class LabBatch:
         collision = [""] * len(rows)
         crashed = np.zeros(len(rows), dtype=bool)
         crashed[looks] = sight.crashed.any(axis=-1)
-        for r in np.flatnonzero(crashed & np.isin(op, _READS)):
+        for r in np.flatnonzero(crashed & _READS[op]):
             collision[r] = ", ".join(collision_names(sight.crashed[at[r]]))
         terminated = (op == Op.STOP) | np.array([bool(c) for c in collision], dtype=bool)
         truncated = ~terminated & (self.time[rows] >= settings.budget_s)

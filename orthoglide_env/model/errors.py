@@ -153,8 +153,14 @@ class MachineParams:
         """One machine (or a sub-batch) of a batch."""
         if not self.batch_shape:
             raise IndexError("a single machine has no batch axis to index")
-        return MachineParams(**{key: getattr(self, key)[index] for key in _SHAPES},
-                             design=self.design)
+        fields = {key: np.array(getattr(self, key)[index]) for key in _SHAPES}
+        if isinstance(index, tuple):  # it may reach into the fields' own axes: check
+            return MachineParams(**fields, design=self.design)
+        # Rows of a checked batch need no checks again (a lab takes rows of its batch
+        # every step, and the checks cost 3 % of a lone env's step).
+        part = object.__new__(MachineParams)
+        part.__dict__.update(fields, design=self.design)
+        return part
 
     @classmethod
     def stack(cls, machines: list[MachineParams]) -> MachineParams:
