@@ -268,6 +268,118 @@ def test_the_lab_takes_its_design_limits_and_machines() -> None:
         env.close()
     with pytest.raises(ValueError, match="design must be a MachineDesign, got str"):
         gym.make(orthoglide_env.LAB_ENV_ID, design=str(SMALL_FILE))
-    with pytest.raises(ValueError, match="slot_positions must be"):
-        gym.make(orthoglide_env.LAB_ENV_ID,
-                 design=MachineDesign.from_dict({"slot_positions": [0.3, 0.5]}))
+
+
+# -- a design's own slot catalogue ----------------------------------------------------------
+#: Three bar places per bar side: 18 bar slots, then the 6 carriage and 3 platform slots.
+THREE = {"slot_positions": [0.3, 0.5, 0.7]}
+
+
+def _three(tmp_path: Path) -> tuple[Path, MachineDesign]:
+    path = _write(tmp_path / "three.json", json.dumps(THREE))
+    return path, MachineDesign.from_file(path)
+
+
+def test_the_lab_of_a_design_with_other_slots_has_its_catalogue(tmp_path) -> None:
+    import gymnasium as gym
+
+    import orthoglide_env
+    from orthoglide_env.instruments.slots import PAPER_LAYOUT
+    from orthoglide_env.lab.operations import SLOTS, Op, slot_catalogue, slot_index
+
+    _, design = _three(tmp_path)
+    slots = slot_catalogue(design)
+    assert len(slots) == 27 and slots is slot_catalogue(design)  # made once per design
+    assert [s.slot for s in slots[:3]] == ["x-leg/y@0.3", "x-leg/y@0.5", "x-leg/y@0.7"]
+    assert slots[18:] == SLOTS[30:]  # the carriages and the platform are every design's
+    only_here = slot_index("x-leg/y@0.3", design=design)
+    with pytest.raises(ValueError, match=r"no slot 'x-leg/y@0.3'.*\(0.2, 0.35"):
+        slot_index("x-leg/y@0.3")  # the prototype's catalogue has no such slot
+    env = gym.make(orthoglide_env.LAB_ENV_ID, design=design)
+    try:
+        lab = env.unwrapped
+        assert lab.slots == slots and lab.settings.slots == slots
+        assert env.action_space["slot"].n == 27
+        assert list(env.observation_space["slot"].nvec) == [28] * 6
+        obs, _ = env.reset(seed=0)
+        assert list(obs["slot"]) == [slot_index(s, design=design) for s in PAPER_LAYOUT]
+        obs, _, _, _, info = env.step({"op": Op.REMOUNT, "rho": np.zeros(3), "stand": 0,
+                                       "slot": only_here})
+        assert info["refused"] == "" and obs["slot"][0] == only_here and obs["valid"][0]
+        read = [r for r in lab.records if r.spec.slot == "x-leg/y@0.3"]
+        assert len(read) == 1 and read[0].mounting == "x-leg/y@0.3#7"
+        assert read[0].reading == obs["gauges"][0]
+        obs, *_ = env.step({"op": Op.LIFT, "rho": np.zeros(3), "stand": 1, "slot": 0})
+        assert obs["slot"][1] == slot_index("x-leg/z@0.5", design=design)
+        with pytest.raises(ValueError, match=r"action slot must be an integer in \[0, 27\)"):
+            env.step({"op": Op.REMOUNT, "rho": np.zeros(3), "stand": 0, "slot": 27})
+    finally:
+        env.close()
+
+
+def test_the_vector_lab_of_a_design_with_other_slots_is_its_lone_labs(tmp_path) -> None:
+    import gymnasium as gym
+
+    import orthoglide_env
+    from orthoglide_env.lab.operations import Op, slot_catalogue, slot_index
+
+    _, design = _three(tmp_path)
+    envs = gym.make_vec(orthoglide_env.LAB_ENV_ID, num_envs=2, design=design)
+    lone = gym.make(orthoglide_env.LAB_ENV_ID, design=design)
+    try:
+        assert envs.slots == envs.sub_env(1).slots == slot_catalogue(design)
+        assert envs.single_action_space["slot"].n == 27
+        envs.reset(seed=4)
+        lone.reset(seed=5)  # env 1 of the vector env
+        slot = slot_index("z-leg/y@0.7", design=design)
+        obs, *_ = envs.step({"op": np.array([Op.REMOUNT] * 2), "rho": np.zeros((2, 3)),
+                             "stand": np.array([0, 2]), "slot": np.array([slot] * 2)})
+        alone, *_ = lone.step({"op": Op.REMOUNT, "rho": np.zeros(3), "stand": 2, "slot": slot})
+        for key, value in alone.items():
+            np.testing.assert_array_equal(obs[key][1], value, err_msg=key)
+        assert obs["slot"][1][2] == slot and obs["valid"][1][2]
+    finally:
+        envs.close()
+        lone.close()
+
+
+def test_compare_on_a_design_with_other_slots(tmp_path, capsys) -> None:
+    path, _ = _three(tmp_path)
+    out = tmp_path / "run"
+    assert main(["compare", "--design", str(path), "--agents", "paper,random,optimal,active",
+                 "--estimators", "extended", "--machines", "2", "--quiet",
+                 "--out", str(out)]) == 0
+    trials = [json.loads(line) for line in (out / "trials.jsonl").read_text().splitlines()]
+    assert sorted({t["agent"] for t in trials}) == ["active", "optimal", "paper", "random"]
+    assert len(trials) == 8 and not [t["failed"] for t in trials if t["failed"]]
+
+
+def test_a_design_without_the_mid_leg_slots_is_refused_by_the_lab() -> None:
+    import gymnasium as gym
+
+    import orthoglide_env
+
+    design = MachineDesign.from_dict({"slot_positions": [0.3, 0.7]})
+    message = ("the lab mounts its stands at the paper's mid-leg slots (e.g. 'x-leg/y@0.5') "
+               "at every reset: the design's slot_positions [0.3, 0.7] must include 0.5")
+    for make in (gym.make, lambda env_id, **kw: gym.make_vec(env_id, num_envs=2, **kw)):
+        with pytest.raises(ValueError) as caught:
+            make(orthoglide_env.LAB_ENV_ID, design=design)
+        assert str(caught.value) == message
+
+
+def test_the_stands_follow_the_designs_slot_count() -> None:
+    import gymnasium as gym
+
+    import orthoglide_env
+
+    one = MachineDesign.from_dict({"slot_positions": [0.5]})  # 6 + 6 + 3 slots
+    gym.make(orthoglide_env.LAB_ENV_ID, design=one, stands=15).close()
+    with pytest.raises(ValueError, match=r"^stands must be an integer in \[1, 15\] \(the "
+                                         r"design's slot count\), got 16$"):
+        gym.make(orthoglide_env.LAB_ENV_ID, design=one, stands=16)
+    gym.make(orthoglide_env.LAB_ENV_ID, stands=39).close()
+    with pytest.raises(ValueError, match=r"in \[1, 39\] \(the design's slot count\), got 40"):
+        gym.make(orthoglide_env.LAB_ENV_ID, stands=40)
+    with pytest.raises(ValueError, match=r"in \[1, the design's slot count\], got 0"):
+        gym.make(orthoglide_env.LAB_ENV_ID, stands=0)

@@ -7,6 +7,7 @@ import dataclasses
 import sys
 import zipfile
 from pathlib import Path
+from types import SimpleNamespace
 
 import gymnasium as gym
 import numpy as np
@@ -14,12 +15,13 @@ import pytest
 
 import orthoglide_env
 from calibrators import compare
-from calibrators.agents import get_agent
+from calibrators.agents import get_agent, policy
 from calibrators.agents.policy import SPEC_ENTRY, PolicySpec, _load_model, save_policy, spec_of
 from calibrators.cli import main
 from calibrators.experiment import run_episode
 from orthoglide_env.envs.wrappers import flat_lab_env
 from orthoglide_env.lab.operations import SLOT_NAMES
+from orthoglide_env.model.design import MachineDesign
 
 LAB = {"errors": "realistic", "gauge_sigma": 0.01, "budget_s": 600.0}
 
@@ -73,6 +75,30 @@ def test_a_policy_of_another_slot_catalogue_is_refused(tmp_path: Path,
     path = spec_only_file(tmp_path / "old.zip", older)
     with pytest.raises(ValueError, match=f"{len(SLOT_NAMES) - 3} slots.*retrain"):
         get_agent(f"policy:{path}")
+
+
+def test_a_policy_of_another_designs_catalogue_is_refused_at_reset(
+        tmp_path: Path, lab_spec: PolicySpec, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A lab's catalogue is its design's: a policy of the prototype's is refused on a lab of
+    other slot positions as the episode opens, and one trained there plays there."""
+    def network(path: str, *_: object) -> SimpleNamespace:  # the spaces its spec says
+        spec = policy.read_spec(path)
+        return SimpleNamespace(observation_space=SimpleNamespace(shape=(spec.observation_size,)),
+                               action_space=SimpleNamespace(shape=(spec.action_size,)))
+
+    monkeypatch.setattr(policy, "_load_model", network)
+    design = MachineDesign.from_dict({"slot_positions": [0.3, 0.5, 0.7]})
+    env = gym.make(orthoglide_env.LAB_ENV_ID, design=design, **LAB)
+    observation, _ = env.reset(seed=0)
+    agent = get_agent(f"policy:{spec_only_file(tmp_path / 'prototype.zip', lab_spec)}")
+    with pytest.raises(ValueError, match=r"trained on a lab with 39 slots; this lab's design "
+                                         r"has 27 \(bar slots at \[0.3, 0.5, 0.7\]\).*retrain"):
+        agent.reset(env, observation, np.random.default_rng(0))
+    spec = spec_of(flat_lab_env(design=design, **LAB), "PPO", LAB)
+    assert spec.slots == tuple(s.slot for s in env.unwrapped.slots)
+    agent = get_agent(f"policy:{spec_only_file(tmp_path / 'three.zip', spec)}")
+    agent.reset(env, observation, np.random.default_rng(0))
+    env.close()
 
 
 def test_without_stable_baselines3_the_error_names_the_extra(

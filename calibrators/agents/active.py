@@ -32,7 +32,7 @@ from calibrators.agents.base import Agent, action, register
 from calibrators.agents.optimal import fixed_plan, lab_setup
 from calibrators.design.planner import N_MACHINE, N_STAND, ZERO_SCALE, Planner, Step
 from orthoglide_env.instruments.stands import stand_names
-from orthoglide_env.lab.operations import SLOTS, Op
+from orthoglide_env.lab.operations import Op
 from orthoglide_env.model.errors import ERROR_NAMES
 from orthoglide_env.model.reading_model import ParameterSpace, default_scales
 
@@ -131,8 +131,8 @@ class ActiveAgent(Agent):
             mounting = self._mounting(k)
             if slot < 0 or mounting is None:
                 continue
-            names = stand_names(mounting, SLOTS[slot])
-            space = ParameterSpace((mounting,), (SLOTS[slot],))
+            names = stand_names(mounting, self.env.slots[slot])
+            space = ParameterSpace((mounting,), (self.env.slots[slot],))
             cols = N_MACHINE + N_STAND * k + np.arange(4)
             mean[cols] = [theta.get(n, 0.0) for n in names] / default_scales(space)[
                 len(ERROR_NAMES):]
@@ -149,5 +149,5 @@ class ActiveAgent(Agent):
     def _mounting(self, stand: int) -> str | None:
         """The name the notebook gives the stand's present mounting (its latest record at
         the stand's slot)."""
-        spec = SLOTS[self.planner.slots[stand]]
+        spec = self.env.slots[self.planner.slots[stand]]
         return next((r.mounting for r in reversed(self.env.records) if r.spec == spec), None)

@@ -21,7 +21,6 @@ import numpy as np
 from calibrators.agents.base import PlannedAgent, action, register
 from calibrators.design.planner import Planner, Step, greedy_plan
 from calibrators.estimators.exact_fit import weighting_sigma
-from orthoglide_env.lab.operations import SLOTS
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 
 
@@ -42,7 +41,7 @@ def lab_setup(env: gym.Env, observation: dict[str, np.ndarray]
               ) -> tuple[tuple[int, ...], tuple[bool, ...], float, float, MachineDesign]:
     """What a planner needs to know of the lab: each stand's slot (-1: none), whose
     plunger is down, a reading's sigma, the time budget and the machine's design."""
-    slots = tuple(int(s) if s < len(SLOTS) else -1 for s in observation["slot"])
+    slots = tuple(int(s) if s < len(env.slots) else -1 for s in observation["slot"])
     engaged = tuple(bool(e) for e in observation["engaged"])
     sigma = weighting_sigma(float(env.noise.effective_sigma))
     return (slots, engaged, sigma, float(env.budget_s) - float(observation["time"][0]),

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from calibrators.agents.base import PlannedAgent, action, register
-from orthoglide_env.lab.operations import SLOTS, Op
+from orthoglide_env.lab.operations import Op
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.kinematics import paper_posture
 
@@ -34,7 +34,8 @@ class PaperAgent(PlannedAgent):
     repetitions = REPETITIONS
 
     def make_plan(self, observation: dict[str, np.ndarray]) -> list[dict[str, Any]]:
-        legs = tuple(SLOTS[s].leg if s < len(SLOTS) else -1 for s in observation["slot"])
+        slots = self.env.slots
+        legs = tuple(slots[s].leg if s < len(slots) else -1 for s in observation["slot"])
         engaged = tuple(bool(e) for e in observation["engaged"])
         return [dict(a) for a in paper_plan(legs, engaged, self.repetitions, self.env.design)]
 

@@ -19,12 +19,14 @@ barely moves; played alone, the mean drives to one posture and reads it again an
 drawing, median over four held-out machines).
 
 A file trained on another lab (a slot catalogue that has grown since, another number of
-stands) is refused with the reason, before any episode: the policy's inputs and outputs
-would mean other things.  ``examples/train_policy.py`` trains and saves one.
+stands) is refused with the reason, before any episode (a catalogue that is no design's
+when the file is read, another design's at the lab's reset): the policy's inputs and
+outputs would mean other things.  ``examples/train_policy.py`` trains and saves one.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import zipfile
 from dataclasses import asdict, dataclass
@@ -38,7 +40,8 @@ from gymnasium.spaces import flatten, flatten_space
 
 from calibrators.agents.base import Agent, action
 from orthoglide_env.envs.wrappers import flat_action_space, lab_action
-from orthoglide_env.lab.operations import OP_NAMES, SLOT_NAMES, Op
+from orthoglide_env.lab.operations import OP_NAMES, SLOT_NAMES, Op, slot_catalogue
+from orthoglide_env.model.design import PROTOTYPE
 
 #: The entry of the policy zip that holds the :class:`PolicySpec` (JSON).
 SPEC_ENTRY: str = "orthoglide_policy.json"
@@ -52,7 +55,7 @@ class PolicySpec:
     """What a saved policy was trained on, and how its observations were normalised."""
 
     algorithm: str  # the stable-baselines3 class, e.g. "PPO"
-    slots: tuple[str, ...]  # SLOT_NAMES of the training lab
+    slots: tuple[str, ...]  # the slot names of the training lab's catalogue
     ops: tuple[str, ...]  # OP_NAMES of the training lab
     stands: int
     observation_size: int
@@ -93,7 +96,8 @@ def spec_of(env: gym.Env, algorithm: str, env_kwargs: dict[str, Any],
     lab = env.unwrapped
     rms = getattr(normaliser, "obs_rms", None)
     return PolicySpec(
-        algorithm=algorithm, slots=SLOT_NAMES, ops=OP_NAMES, stands=int(lab.n_stands),
+        algorithm=algorithm, slots=tuple(s.slot for s in lab.slots), ops=OP_NAMES,
+        stands=int(lab.n_stands),
         observation_size=int(env.observation_space.shape[0]),
         action_size=int(env.action_space.shape[0]), budget_s=float(lab.budget_s),
         env=dict(env_kwargs),
@@ -132,13 +136,24 @@ def read_spec(path: str | Path) -> PolicySpec:
     if spec.version != SPEC_VERSION:
         raise ValueError(f"policy file '{path}' has layout version {spec.version}, this "
                          f"workbench reads {SPEC_VERSION}: retrain it")
-    if spec.slots != SLOT_NAMES or spec.ops != OP_NAMES:
+    if not _a_catalogue(spec.slots) or spec.ops != OP_NAMES:
         raise ValueError(
             f"policy file '{path}' was trained on a lab with {len(spec.slots)} slots and "
-            f"operations {list(spec.ops)}; this lab has {len(SLOT_NAMES)} slots and "
-            f"{list(OP_NAMES)}: its actions and observations mean other things here, "
-            "retrain it (examples/train_policy.py)")
+            f"operations {list(spec.ops)}; this lab has a design's slot catalogue (the "
+            f"prototype's: {len(SLOT_NAMES)} slots) and {list(OP_NAMES)}: its actions and "
+            "observations mean other things here, retrain it (examples/train_policy.py)")
     return spec
+
+
+def _a_catalogue(names: tuple[str, ...]) -> bool:
+    """Whether ``names`` are the slot catalogue of a design (the one whose bar slots the
+    names place)."""
+    try:
+        at = tuple(float(n.split("@")[1]) for n in names if n.startswith("x-leg/y@"))
+        design = dataclasses.replace(PROTOTYPE, slot_positions=at)
+    except ValueError:
+        return False
+    return tuple(s.slot for s in slot_catalogue(design)) == names
 
 
 @lru_cache(maxsize=4)
@@ -175,6 +190,13 @@ class PolicyAgent(Agent):
     def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
               rng: np.random.Generator) -> None:
         super().reset(env, observation, rng)
+        slots = tuple(s.slot for s in self.env.slots)
+        if self.spec.slots != slots:
+            raise ValueError(
+                f"policy file '{self.path}' was trained on a lab with {len(self.spec.slots)} "
+                f"slots; this lab's design has {len(slots)} (bar slots at "
+                f"{list(self.env.design.slot_positions)}): its actions and observations mean "
+                "other things here, retrain it on this design (examples/train_policy.py)")
         # The spaces alone: a lab in a vector env is no gymnasium.Env to wrap.
         self.spaces = (self.env.observation_space, self.env.action_space)
         sizes = (flatten_space(self.spaces[0]).shape[0], flat_action_space(self.spaces[1]).shape[0])

@@ -24,7 +24,7 @@ from orthoglide_env.instruments.dial import pressed_past_travel
 from orthoglide_env.instruments.rays import exact_ray_distances, exact_target_boxes
 from orthoglide_env.instruments.slots import Part
 from orthoglide_env.instruments.stands import install, installed_on
-from orthoglide_env.lab.operations import SLOTS, Op
+from orthoglide_env.lab.operations import Op, slot_catalogue
 from orthoglide_env.model.boxes import collision_boxes
 from orthoglide_env.model.collisions import clearance
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
@@ -40,8 +40,9 @@ TRIES: int = 50
 
 def is_safe(rho: np.ndarray, slots: list[int], design: MachineDesign = PROTOTYPE) -> bool:
     """Whether the nominal machine of ``design`` reaches ``rho`` with parts apart and the
-    gauges at ``slots`` (engaged) neither pressed nor within the margin of being pressed,
-    the platform gauges on their faces within their travel."""
+    gauges at ``slots`` (engaged; indices in the design's slot catalogue) neither pressed
+    nor within the margin of being pressed, the platform gauges on their faces within
+    their travel."""
     nominal = MachineParams(design=design)
     try:
         p = direct(nominal, rho)
@@ -52,12 +53,13 @@ def is_safe(rho: np.ndarray, slots: list[int], design: MachineDesign = PROTOTYPE
         return False
     if not slots:
         return True
-    gauges = installed_on(nominal, install([SLOTS[s] for s in slots], nominal))
+    specs = [slot_catalogue(design)[s] for s in slots]
+    gauges = installed_on(nominal, install(specs, nominal))
     centre, rot, half = exact_target_boxes(gauges, boxes)
     if pressed_past_travel(gauges, centre, rot, half + MARGIN).any():
         return False
     t = exact_ray_distances(nominal, gauges, rho, boxes)
-    platform = np.array([SLOTS[s].part == Part.PLATFORM for s in slots])
+    platform = np.array([spec.part == Part.PLATFORM for spec in specs])
     travel = np.array([g.travel for g in gauges])
     return not (np.any(t < MARGIN) or np.any(platform & ~(t <= travel)))
 
@@ -69,11 +71,11 @@ class RandomAgent(Agent):
     def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
               rng: np.random.Generator) -> None:
         super().reset(env, observation, rng)
-        self.n_slots = len(SLOTS)
+        self.n_slots = len(self.env.slots)
 
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
         slots = [int(s) for s in observation["slot"]]
-        engaged = [k for k, e in enumerate(observation["engaged"]) if e and slots[k] < len(SLOTS)]
+        engaged = [k for k, e in enumerate(observation["engaged"]) if e and slots[k] < self.n_slots]
         choice = self.rng.random()
         design = self.env.design
         if choice < 0.6:
@@ -82,14 +84,14 @@ class RandomAgent(Agent):
                 if is_safe(rho, [slots[k] for k in engaged], design):
                     return action(Op.MOVE, rho)
         stand = int(self.rng.integers(len(slots)))
-        if choice < 0.8 and slots[stand] < len(SLOTS):
+        if choice < 0.8 and slots[stand] < self.n_slots:
             if stand in engaged:
                 return action(Op.LIFT, stand=stand)
             if is_safe(observation["joints"], [slots[k] for k in [*engaged, stand]], design):
                 return action(Op.ENGAGE, stand=stand)
-        free = sorted(set(range(len(SLOTS))) - set(slots))
+        free = sorted(set(range(self.n_slots)) - set(slots))
         slot = int(self.rng.choice(free))
         if is_safe(np.zeros(3), [slots[k] for k in engaged if k != stand] + [slot], design):
             return action(Op.REMOUNT, stand=stand, slot=slot)
-        return action(Op.LIFT, stand=stand) if slots[stand] < len(SLOTS) else action(
+        return action(Op.LIFT, stand=stand) if slots[stand] < self.n_slots else action(
             Op.MOVE, np.zeros(3))

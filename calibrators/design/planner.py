@@ -45,7 +45,7 @@ from orthoglide_env.instruments.dial import pressed_past_travel
 from orthoglide_env.instruments.gauges import DEFAULT_TRAVEL
 from orthoglide_env.instruments.rays import exact_ray_distances, exact_target_boxes
 from orthoglide_env.instruments.stands import install, installed_on
-from orthoglide_env.lab.operations import SLOTS, TIME, Op
+from orthoglide_env.lab.operations import TIME, Op, slot_catalogue
 from orthoglide_env.model.boxes import collision_boxes
 from orthoglide_env.model.collisions import clearance
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
@@ -151,7 +151,8 @@ def reach(table: SlotTable, slots: np.ndarray, tip: np.ndarray, spread: np.ndarr
 
 @lru_cache(maxsize=2)
 def slot_table(machine_design: MachineDesign = PROTOTYPE) -> SlotTable:
-    """The :class:`SlotTable` of every slot over the :func:`candidate_postures` the nominal
+    """The :class:`SlotTable` of every slot of the design's catalogue over the
+    :func:`candidate_postures` the nominal
     machine of ``machine_design`` reaches with its parts :data:`CLEARANCE` apart (once per
     process and design: seconds)."""
     nominal = MachineParams(design=machine_design)
@@ -160,15 +161,16 @@ def slot_table(machine_design: MachineDesign = PROTOTYPE) -> SlotTable:
     keep = clearance(nominal, postures, boxes) >= CLEARANCE
     postures = postures[keep]
     boxes = tuple(b[keep] for b in boxes)
-    gauges = installed_on(nominal, install(list(SLOTS), nominal))
+    slots = slot_catalogue(machine_design)
+    gauges = installed_on(nominal, install(list(slots), nominal))
     tip = np.moveaxis(exact_ray_distances(nominal, gauges, postures, boxes), -1, 0)
     centre, rot, half = exact_target_boxes(gauges, boxes)
     pressed = np.moveaxis(pressed_past_travel(gauges, centre, rot, half), -1, 0)
     near = np.moveaxis(pressed_past_travel(gauges, centre, rot, half + PRESS_MARGIN), -1, 0)
     zero = int(np.flatnonzero(np.all(postures == 0.0, axis=1))[0])
-    change = np.zeros((len(SLOTS), len(postures), N_MACHINE + 4))
-    reading = np.zeros((len(SLOTS), len(postures)))
-    for k, spec in enumerate(SLOTS):
+    change = np.zeros((len(slots), len(postures), N_MACHINE + 4))
+    reading = np.zeros((len(slots), len(postures)))
+    for k, spec in enumerate(slots):
         design = Design(("m",), (spec,), np.zeros(len(postures), dtype=int), postures,
                         machine_design)
         scale = default_scales(design.space)
@@ -218,7 +220,8 @@ class Planner:
     unknowns per stand's current mounting (a mounting left behind by a re-mount is
     marginalised out: nothing reads it again).
 
-    ``slots``: each stand's index in :data:`~orthoglide_env.lab.operations.SLOTS` (-1: none);
+    ``slots``: each stand's index in the design's slot catalogue (:func:`~orthoglide_env.
+    lab.operations.slot_catalogue`, the lab's) (-1: none);
     ``engaged``: whose plunger is down; ``sigma``: a reading's standard deviation (mm).
     ``observe`` turns it into a filter: it then also holds the mean of the unknowns and
     predicts the tips from them.  ``design``: the machine's design (its candidate postures,
@@ -482,7 +485,7 @@ class Planner:
         start = self._criterion_value()
         candidates = []
         for stand in range(len(self.slots)):
-            for slot in range(len(SLOTS)):
+            for slot in range(len(slot_catalogue(self.design))):
                 if slot in self.slots:
                     continue
                 trial = self._remounted(stand, slot)

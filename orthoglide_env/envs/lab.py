@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from orthoglide_env.envs.base import ROW, EngineEnv, Face
+from orthoglide_env.instruments.slots import GaugeSpec
 from orthoglide_env.lab.actions import check_lab_actions
 from orthoglide_env.lab.engine import ACCURACY_UNIT_MM, StepResult
 from orthoglide_env.lab.notebook import Estimator, Record
@@ -28,8 +29,14 @@ class LabFace(Face):
 
     def _actions(self, actions: Any, shape: tuple[int, ...], used: np.ndarray | None
                  ) -> tuple[np.ndarray, ...]:
-        return check_lab_actions(actions, shape, self.settings.stands, rows=used,
-                                 design=self.settings.design)
+        return check_lab_actions(actions, shape, self.settings.stands, len(self.slots),
+                                 rows=used, design=self.settings.design)
+
+    @property
+    def slots(self) -> tuple[GaugeSpec, ...]:
+        """The lab's slot catalogue, its design's: the ``slot`` indices of actions and
+        observations (names in each spec's ``slot``)."""
+        return self.settings.slots
 
     def _step_info(self, result: StepResult, r: int, i: int) -> dict[str, Any]:
         return result.info(r)
@@ -56,13 +63,16 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
     rho    Box([-100, 60] mm, (3,))     joint targets, control coordinates     move
     stand  Discrete(stands)             which stand                            lift, engage,
                                                                                re-mount
-    slot   Discrete(len(SLOTS))         where to (:data:`~orthoglide_env.lab.operations.  re-mount
-                                        SLOTS`, names in ``SLOT_NAMES``)
+    slot   Discrete(len(slots))         where to: an index in the lab's slot   re-mount
+                                        catalogue ``slots`` (its design's)
     =====  ===========================  =====================================  ==========
 
     ``move`` drives to ``rho``, settles and reads every engaged gauge and the tracker.
-    A slot is a place on a bar, on a carriage (across its drive) or on a face of the
-    platform (:data:`~orthoglide_env.lab.operations.SLOTS`); a platform gauge reads the platform's
+    A slot is a place on a bar (at each of the design's ``slot_positions``), on a carriage
+    (across its drive) or on a face of the platform: the env's ``slots`` is the catalogue
+    of its design (:func:`~orthoglide_env.lab.operations.slot_catalogue`; the prototype's
+    is :data:`~orthoglide_env.lab.operations.SLOTS`, names in ``SLOT_NAMES``, and
+    ``slot_index(name, design=...)`` finds one).  A platform gauge reads the platform's
     displacement, so it allows moves toward its stand only within its travel: lift it
     before larger ones.
     ``lift`` raises a plunger by its lever: no reading, nothing can press it, and its zero
@@ -87,8 +97,8 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
     faulted        1 where the gauge was pushed past    -    {0, 1}
                    its travel: out of service until
                    re-mounted (a lifted one is 0)
-    slot           slot index of each stand, or        -    {0 .. len(SLOTS)}
-                   len(SLOTS) when not mounted
+    slot           slot index of each stand, or        -    {0 .. len(slots)}
+                   len(slots) when not mounted
     mounting       how many times the stand was         -    [0, 1e6]
                    mounted (a new zero each time)
     joints         encoder readings                     mm   [-101, 61]
@@ -152,12 +162,16 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
     ``calibrators.experiment.make_estimator()``), ``time_weight``, ``success_mm``,
     ``travel`` (default: the design's gauge travel), ``design`` (the machines'
     :class:`~orthoglide_env.model.design.MachineDesign`, default the prototype: its
-    control limits bound ``rho``, its errors' validity range the machines),
+    control limits bound ``rho``, its errors' validity range the machines, its
+    ``slot_positions`` the bar slots; ``stands`` is at most its slot count, and its
+    ``slot_positions`` must include 0.5, where the paper's stands open every episode),
     ``render_mode``.  A bad argument raises ``ValueError`` naming it and its
     rule.
 
     Version history
     ---------------
+    * v0: the slot catalogue is the design's (was the prototype's for every design, and a
+      design with other ``slot_positions`` was refused).
     * v0: the constructor's arguments and defaults are its table in
       :mod:`orthoglide_env.lab.spec`; an unknown one raises ``ValueError`` (was
       ``TypeError``).

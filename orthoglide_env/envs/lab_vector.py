@@ -36,7 +36,8 @@ class OrthoglideLabVectorEnv(LabFace, EngineVectorEnv):
     Reset options: the single lab's ``machine``, and ``reset_mask``.
 
     Per env, for agents and estimators: ``records[i]`` (the notebook), ``sub_env(i)`` (a
-    read-only view of env ``i`` as an agent sees a lone lab); for scoring only:
+    read-only view of env ``i`` as an agent sees a lone lab, ``slots`` included); for all
+    of them, ``slots`` (the design's slot catalogue); for scoring only:
     ``true_machines`` (a :class:`MachineParams` batch (N,)), ``true_gauges(i)``,
     ``true_tracker_frames``.  With the ``information`` reward each env sums its own
     information at every step (a loop over envs); at an episode's end the predicted error
@@ -87,7 +88,7 @@ class SubLab:
         settings = envs.settings
         self.noise, self.n_stands, self.tracker = settings.noise, settings.stands, settings.tracker
         self.budget_s, self.travel = settings.budget_s, settings.travel
-        self.design = settings.design
+        self.design, self.slots = settings.design, settings.slots
         self.action_space: spaces.Dict = envs.single_action_space
         self.observation_space: spaces.Dict = envs.single_observation_space
 

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from orthoglide_env.lab.operations import SLOTS, Op
+from orthoglide_env.lab.operations import Op
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import check_rho
 
@@ -62,19 +62,20 @@ def _holds_bool(value: Any) -> bool:
     return False
 
 
-def check_lab_actions(action: Any, shape: tuple[int, ...], stands: int,
+def check_lab_actions(action: Any, shape: tuple[int, ...], stands: int, slots: int,
                       rows: np.ndarray | None = None, design: MachineDesign = PROTOTYPE
                       ) -> tuple[np.ndarray, ...]:
     """``op``, ``rho``, ``stand``, ``slot`` of a lab action (``shape ()``) or of a batch of
     them (``shape (N,)``, each field with the batch axis first), as arrays, or
-    ``ValueError`` naming the field (and the env).  ``rows``: the envs whose action is used
-    (the others are not checked); ``rho`` is checked where the operation is a move."""
+    ``ValueError`` naming the field (and the env).  ``slots``: the size of the lab's slot
+    catalogue; ``rows``: the envs whose action is used (the others are not checked);
+    ``rho`` is checked where the operation is a move."""
     if not isinstance(action, dict) or set(action) != {"op", "rho", "stand", "slot"}:
         raise ValueError("action must be a dict with keys op, rho, stand, slot")
     used = np.ones(shape, dtype=bool) if rows is None else np.asarray(rows, dtype=bool)
     op = _integers(action["op"], "op", len(Op), shape, used)
     stand = _integers(action["stand"], "stand", stands, shape, used)
-    slot = _integers(action["slot"], "slot", len(SLOTS), shape, used)
+    slot = _integers(action["slot"], "slot", slots, shape, used)
     moving = used & (op == Op.MOVE)
     rho = np.zeros((*shape, 3))
     if moving.any():

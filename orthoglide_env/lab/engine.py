@@ -25,7 +25,7 @@ from orthoglide_env.instruments.slots import GaugeSpec
 from orthoglide_env.instruments.stands import install_array, installation_errors
 from orthoglide_env.lab.machines import ExactMachine, LabMachines, Sight
 from orthoglide_env.lab.notebook import Notebook, Record, predicted_many
-from orthoglide_env.lab.operations import OP_NAMES, SLOTS, TIME, TRACKER_DISTANCE, Op
+from orthoglide_env.lab.operations import OP_NAMES, TIME, TRACKER_DISTANCE, Op
 from orthoglide_env.lab.settings import LabSettings
 from orthoglide_env.model.collisions import PAIR_NAMES, collision_names
 from orthoglide_env.model.errors import AXIS_NAMES, MachineParams
@@ -94,15 +94,16 @@ class LabBatch:
         self.status = np.zeros((n, s), dtype=np.int64)  # Status of each reading at the last
         self.count = np.zeros((n, s), dtype=np.int64)  # times each stand was mounted
         self.mounting: list[list[str]] = [[""] * s for _ in range(n)]
-        self.gauges = _unmounted((n, s), settings.travel)
+        self.slots = settings.slots  # the slot catalogue: its design's
+        self.gauges = _unmounted((n, s), settings.travel, self.slots[0])
         self.notebooks = [self._notebook() for _ in range(n)]
         self.tracker_rotation = np.zeros((n, 3, 3))
         self.tracker_position = np.zeros((n, 3))
         self.tracker_reading = np.zeros((n, 3))
         # The slots stands can be at, by name: the catalogue, and any other place a layout
         # names (its index then lies past the catalogue's).
-        self.places: list[GaugeSpec] = list(SLOTS)
-        self._place_index = {spec.slot: k for k, spec in enumerate(SLOTS)}
+        self.places: list[GaugeSpec] = list(self.slots)
+        self._place_index = {spec.slot: k for k, spec in enumerate(self.slots)}
 
     def place(self, spec: GaugeSpec) -> int:
         """The index of ``spec`` in :attr:`places` (added when new)."""
@@ -159,7 +160,8 @@ class LabBatch:
         self.engaged[rows] = self.count[rows] = on
         self.faulted[rows] = False  # (``pressed`` is set by the first look below)
         self.gauges = _with_gauges(self.gauges, rows[:, None], np.arange(settings.stands),
-                                   _unmounted((len(rows), settings.stands), settings.travel))
+                                   _unmounted((len(rows), settings.stands), settings.travel,
+                                              self.slots[0]))
         self.gauges = _with_gauges(self.gauges, rows[:, None], np.arange(len(first)), installed)
         names = [spec.slot for spec in specs]
         for r, i in enumerate(rows):
@@ -437,7 +439,7 @@ class LabBatch:
             "valid": valid.astype(np.int8),
             "engaged": (self.engaged[rows] & ~self.faulted[rows]).astype(np.int8),
             "faulted": self.faulted[rows].astype(np.int8),
-            "slot": np.where(slot >= 0, slot, len(SLOTS)).astype(np.int64),
+            "slot": np.where(slot >= 0, slot, len(self.slots)).astype(np.int64),
             "mounting": self.count[rows].astype(np.float64),
             "joints": self.backend.encoders(rows, self.rho[rows]),
             "tracker": np.where(tracked[:, None], self.tracker_reading[rows], 0.0),
@@ -472,11 +474,12 @@ def _installed(machines: MachineParams, specs: list, travel: float, errors: np.n
     return gauges.zeroed(ExactMachine(machines, gauges).gauge_distances())
 
 
-def _unmounted(shape: tuple[int, int], travel: float) -> GaugeArray:
-    """Gauges of stands that are not mounted: no ray (NaN), so nothing reads or presses."""
+def _unmounted(shape: tuple[int, int], travel: float, spec: GaugeSpec) -> GaugeArray:
+    """Gauges of stands that are not mounted: no ray (NaN), so nothing reads or presses
+    (named after ``spec``, any slot)."""
     return GaugeArray(origin=np.full((*shape, 3), np.nan), direction=np.full((*shape, 3), np.nan),
                       sign=np.ones(shape), travel=travel, zero=DEFAULT_TRAVEL / 2,
-                      leg=SLOTS[0].leg, axis=SLOTS[0].axis, at=SLOTS[0].at)
+                      leg=spec.leg, axis=spec.axis, at=spec.at)
 
 
 def _with_gauges(array: GaugeArray, rows: np.ndarray, columns: np.ndarray, new: GaugeArray

@@ -3,7 +3,8 @@
 One place for the facts of the calibration lab:
 
 * :data:`TIME`: the seconds every operation takes (the time table);
-* :data:`SLOTS`: where a gauge stand can be mounted (the slot catalogue);
+* :func:`slot_catalogue`: where a gauge stand can be mounted on a design's machine (the
+  lab's slot catalogue), :data:`SLOTS` the prototype's;
 * :class:`Op`: the operations of the lab env's action;
 * the laser tracker's specification.
 
@@ -29,6 +30,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntEnum
+from functools import lru_cache
 
 import numpy as np
 
@@ -56,6 +58,8 @@ class TimeTable:
 
 TIME = TimeTable()
 
+
+@lru_cache(maxsize=8)
 def slot_catalogue(design: MachineDesign) -> tuple[GaugeSpec, ...]:
     """The slot catalogue of a design (kinds of target in
     :mod:`orthoglide_env.instruments.slots`):
@@ -66,7 +70,9 @@ def slot_catalogue(design: MachineDesign) -> tuple[GaugeSpec, ...]:
     * every carriage, both measuring axes across its drive (``x-carriage/y``);
     * the platform's three faces (``platform/x``).
 
-    The bar slots come first, in their historical order, so their indices are stable."""
+    The bar slots come first, in their historical order, so their indices are stable.  A
+    lab's slot indices are its design's catalogue (``settings.slots``, an env's ``slots``);
+    made once per design."""
     return (
         tuple(GaugeSpec(leg, axis, at) for leg in range(3) for axis in range(3) if axis != leg
               for at in design.slot_positions)
@@ -76,25 +82,27 @@ def slot_catalogue(design: MachineDesign) -> tuple[GaugeSpec, ...]:
     )
 
 
-#: The prototype's slot catalogue: the lab's slot indices.
+#: The prototype's slot catalogue (the lab's slot indices on the prototype).
 SLOTS: tuple[GaugeSpec, ...] = slot_catalogue(PROTOTYPE)
 SLOT_NAMES: tuple[str, ...] = tuple(s.slot for s in SLOTS)
 
 
-def slot_index(name_or_spec: str | GaugeSpec) -> int:
-    """Index in :data:`SLOTS` of a slot given by name (``x-leg/y@0.5``, ``x-carriage/y``,
-    ``platform/x``) or spec."""
+def slot_index(name_or_spec: str | GaugeSpec, *, design: MachineDesign = PROTOTYPE) -> int:
+    """Index in the slot catalogue of ``design`` (default the prototype's, :data:`SLOTS`) of
+    a slot given by name (``x-leg/y@0.5``, ``x-carriage/y``, ``platform/x``) or spec."""
     key = name_or_spec if isinstance(name_or_spec, str) else name_or_spec.slot
+    names = [s.slot for s in slot_catalogue(design)]
     try:
-        return SLOT_NAMES.index(key)
+        return names.index(key)
     except ValueError:
         raise ValueError(f"no slot '{key}'; slots are bars x/y/z with a measuring axis across "
-                         f"them at {PROTOTYPE.slot_positions} (e.g. '{SLOT_NAMES[0]}'), "
+                         f"them at {design.slot_positions} (e.g. '{names[0]}'), "
                          "carriages with an axis across their drive (e.g. 'x-carriage/y') and "
                          "platform faces (e.g. 'platform/x')") from None
 
 
-#: The stands of the paper's experiment, mounted at the start of an episode.
+#: The stands of the paper's experiment, mounted at the start of an episode (their indices
+#: in the prototype's catalogue).
 PAPER_SLOTS: tuple[int, ...] = tuple(slot_index(s) for s in PAPER_LAYOUT)
 
 #: Laser tracker: repeatability of a coordinate (mm), and how its station is placed

@@ -13,6 +13,7 @@ that tie arguments together.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -21,7 +22,7 @@ from gymnasium import spaces
 from orthoglide_env.instruments.dial import GaugeNoise, check_noise
 from orthoglide_env.instruments.slots import PAPER_LAYOUT, GaugeSpec
 from orthoglide_env.lab.notebook import Estimator
-from orthoglide_env.lab.operations import PAPER_SLOTS, SLOTS, TIME, TRACKER_SIGMA, Op
+from orthoglide_env.lab.operations import TIME, TRACKER_SIGMA, Op, slot_catalogue, slot_index
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import ErrorPreset, get_preset
 from orthoglide_env.sim.display import display_problem, require_display
@@ -61,7 +62,13 @@ class LabSettings:
     notebook: bool = True  # every reading is written into the episode's notebook
     motion: str = "quasi-static"
     render_mode: str | None = None
-    design: MachineDesign = PROTOTYPE  # the machines' design: control limits, validity
+    design: MachineDesign = PROTOTYPE  # the machines' design: control limits, validity, slots
+
+    @cached_property
+    def slots(self) -> tuple[GaugeSpec, ...]:
+        """The lab's slot catalogue: its design's (:func:`~orthoglide_env.lab.operations.
+        slot_catalogue`), whose indices the ``slot`` action and observation use."""
+        return slot_catalogue(self.design)
 
     def longest_step(self) -> float:
         """The most one operation can cost (a re-mount from the far corner, the tracker, and
@@ -103,13 +110,20 @@ def lab_settings(args: dict[str, Any]) -> LabSettings:
         raise ValueError("reward 'accuracy' needs an estimator: records -> machine, e.g. "
                          "calibrators.experiment.make_estimator()")
     design = args["design"] or PROTOTYPE
-    if design.slot_positions != PROTOTYPE.slot_positions:
-        raise ValueError("the lab's slot indices are the prototype's slot catalogue: a "
-                         f"design's slot_positions must be {list(PROTOTYPE.slot_positions)}")
+    slots = slot_catalogue(design)
     stands = args["stands"]
+    if stands > len(slots):
+        raise ValueError(f"stands must be an integer in [1, {len(slots)}] (the design's slot "
+                         f"count), got {stands!r}")
+    mid = PAPER_LAYOUT[0].at  # the paper's gauges are all at mid-leg
+    if mid not in design.slot_positions:
+        # The lab has no layout argument: every episode opens on the paper's stands.
+        raise ValueError(f"the lab mounts its stands at the paper's mid-leg slots (e.g. "
+                         f"'{PAPER_LAYOUT[0].slot}') at every reset: the design's "
+                         f"slot_positions {list(design.slot_positions)} must include {mid}")
     return LabSettings(
         **_shared(args, design), stands=stands,
-        layout=tuple(SLOTS[s] for s in PAPER_SLOTS[:stands]),
+        layout=tuple(slots[slot_index(spec, design=design)] for spec in PAPER_LAYOUT[:stands]),
         tracker=args["tracker"], tracker_sigma=args["tracker_sigma"],
         budget_s=args["budget_s"], reward=args["reward"], estimator=args["estimator"],
         time_weight=args["time_weight"], success_mm=args["success_mm"],
@@ -134,7 +148,7 @@ def lab_spaces(settings: LabSettings) -> tuple[spaces.Dict, spaces.Dict]:
         "op": spaces.Discrete(len(Op)),
         "rho": spaces.Box(design.rho_min, design.rho_max, shape=(3,), dtype=np.float64),
         "stand": spaces.Discrete(n),
-        "slot": spaces.Discrete(len(SLOTS)),
+        "slot": spaces.Discrete(len(settings.slots)),
     })
     observation_space = spaces.Dict({
         # A valid reading lies within +-travel/2 of its zero; the box leaves another
@@ -143,7 +157,7 @@ def lab_spaces(settings: LabSettings) -> tuple[spaces.Dict, spaces.Dict]:
         "valid": spaces.MultiBinary(n),
         "engaged": spaces.MultiBinary(n),
         "faulted": spaces.MultiBinary(n),
-        "slot": spaces.MultiDiscrete([len(SLOTS) + 1] * n),
+        "slot": spaces.MultiDiscrete([len(settings.slots) + 1] * n),
         "mounting": spaces.Box(0.0, 1e6, shape=(n,), dtype=np.float64),
         "joints": spaces.Box(design.rho_min - ENCODER_MARGIN, design.rho_max + ENCODER_MARGIN,
                              shape=(3,), dtype=np.float64),

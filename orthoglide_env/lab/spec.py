@@ -25,7 +25,7 @@ from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.instruments.gauges import DEFAULT_TRAVEL
 from orthoglide_env.instruments.slots import GaugeSpec, layout_from_names
 from orthoglide_env.lab.machines import MOTION_MODES
-from orthoglide_env.lab.operations import PAPER_SLOTS, SLOTS, TRACKER_SIGMA
+from orthoglide_env.lab.operations import PAPER_SLOTS, TRACKER_SIGMA
 from orthoglide_env.lab.settings import DEFAULT_BUDGET_S
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS
@@ -67,20 +67,23 @@ def _is_real(value: Any) -> bool:
 
 @dataclass(frozen=True)
 class Number(Arg):
-    """A finite real number, above ``low`` (``open``: strictly) and at most ``high``."""
+    """A finite real number, above ``low`` (``open``: strictly) and at most ``high``;
+    ``upper`` names a bound that is checked where it is known (the rule says it)."""
 
     unit: str = ""
     low: float | None = None
     open: bool = False
     high: float | None = None
+    upper: str = ""
     optional: bool = False  # None is accepted too (the default it stands for)
     noun = "a number"
 
     @property
     def rule(self) -> str:  # type: ignore[override]
         unit = f" ({self.unit})" if self.unit else ""
-        if self.low is not None and self.high is not None:
-            bounds = f" in {'(' if self.open else '['}{self.low:g}, {self.high:g}]"
+        high = f"{self.high:g}" if self.high is not None else self.upper
+        if self.low is not None and high:
+            bounds = f" in {'(' if self.open else '['}{self.low:g}, {high}]"
         elif self.low is not None:
             bounds = f" {'>' if self.open else '>='} {self.low:g}"
         else:
@@ -202,7 +205,9 @@ CALIBRATION: dict[str, Arg] = {
 LAB: dict[str, Arg] = {
     "errors": ERRORS, "gauge_sigma": SIGMA, "gauge_resolution": RESOLUTION,
     "backend": Choice(BACKENDS, default="exact"),
-    "stands": Integer(low=1, high=len(SLOTS), default=len(PAPER_SLOTS)), "tracker": FLAG,
+    # At most the design's slot count: lab_settings checks it against the design.
+    "stands": Integer(low=1, upper="the design's slot count", default=len(PAPER_SLOTS)),
+    "tracker": FLAG,
     "tracker_sigma": Number("mm", 0.0, open=True, default=TRACKER_SIGMA),
     "budget_s": Number("s", 0.0, open=True, default=DEFAULT_BUDGET_S),
     "reward": Choice(REWARDS, default="time"), "estimator": FUNCTION,
