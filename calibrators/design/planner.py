@@ -152,9 +152,8 @@ def reach(table: SlotTable, slots: np.ndarray, tip: np.ndarray, spread: np.ndarr
 @lru_cache(maxsize=2)
 def slot_table(machine_design: MachineDesign = PROTOTYPE) -> SlotTable:
     """The :class:`SlotTable` of every slot of the design's catalogue over the
-    :func:`candidate_postures` the nominal
-    machine of ``machine_design`` reaches with its parts :data:`CLEARANCE` apart (once per
-    process and design: seconds)."""
+    :func:`candidate_postures` the nominal machine of ``machine_design`` reaches with its
+    parts :data:`CLEARANCE` apart (once per process and design: seconds)."""
     nominal = MachineParams(design=machine_design)
     postures = candidate_postures(machine_design)
     boxes = collision_boxes(nominal, postures, direct(nominal, postures))
