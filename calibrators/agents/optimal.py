@@ -20,7 +20,7 @@ import numpy as np
 
 from calibrators.agents.base import PlannedAgent, action, register
 from calibrators.design.planner import Planner, Step, greedy_plan
-from calibrators.estimators.exact_fit import weighting_sigma
+from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 
 

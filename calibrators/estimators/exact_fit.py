@@ -31,7 +31,7 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 from scipy import special
 
-from orthoglide_env.instruments.dial import NOISE_FLOOR
+from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.model.reading_model import Design, jacobian, predict
 
 #: A combination is identifiable (and moved by a base-parameter fit) when its information
@@ -56,14 +56,6 @@ DAMPING_MAX: float = 1e10
 #: Significance of the chi-square test of the model: above the (1 - CHI2_LEVEL) quantile
 #: the readings are not explained by the model and the noise.
 CHI2_LEVEL: float = 1e-3
-
-
-def weighting_sigma(sigma: float | np.ndarray) -> float | np.ndarray:
-    """The noise a reading is weighted with (mm): its instrument's, or
-    :data:`~orthoglide_env.instruments.dial.NOISE_FLOOR` for an ideal one (every weight,
-    information and plan of the estimators and agents takes it from here)."""
-    floored = np.maximum(sigma, NOISE_FLOOR)
-    return float(floored) if np.ndim(floored) == 0 else floored
 
 
 @dataclass

@@ -21,7 +21,6 @@ from calibrators.estimators.exact_fit import (
     RETAIN,
     BatchFit,
     fit_batch,
-    weighting_sigma,
 )
 from calibrators.estimators.paper_linear import split_repetitions
 from calibrators.estimators.parameters import (
@@ -34,7 +33,7 @@ from calibrators.estimators.parameters import (
     select,
     sparse_basis,
 )
-from orthoglide_env.instruments.dial import DEFAULT_SIGMA
+from orthoglide_env.instruments.dial import DEFAULT_SIGMA, weighting_sigma
 from orthoglide_env.lab.operations import TRACKER_SIGMA
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import direct

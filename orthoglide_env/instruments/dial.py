@@ -36,6 +36,14 @@ GAUGE_BODY_RADIUS: float = 6.0
 STAND_LENGTH: float = 60.0
 
 
+def weighting_sigma(sigma: float | np.ndarray) -> float | np.ndarray:
+    """The noise a reading is weighted with (mm): its instrument's, or :data:`NOISE_FLOOR`
+    for an ideal one (every weight, information and plan of the lab, the estimators and
+    the agents takes it from here)."""
+    floored = np.maximum(sigma, NOISE_FLOOR)
+    return float(floored) if np.ndim(floored) == 0 else floored
+
+
 class Status(IntEnum):
     """Why a reading is or is not valid."""
 

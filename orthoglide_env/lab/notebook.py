@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from orthoglide_env.instruments.dial import NOISE_FLOOR
+from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.instruments.gauges import Gauge, GaugeArray
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import ERROR_NAMES, MachineParams
@@ -58,7 +58,7 @@ class Notebook:
         #: The first installations, as mounting names and the row of a batch of gauge sets:
         #: turned into gauges when asked for (a sweep's scoring never asks).
         self._first: tuple[list[str], GaugeArray, int] | None = None
-        self._gauge_sigma = max(gauge_sigma, NOISE_FLOOR)
+        self._gauge_sigma = weighting_sigma(gauge_sigma)
         self._tracker_sigma = tracker_sigma
         # Per mounting: count, sum and sum of outer products of its Jacobian rows, names.
         self._sums: dict[str, tuple[int, Any, Any, tuple[str, ...]]] = {}
