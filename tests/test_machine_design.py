@@ -270,6 +270,41 @@ def test_the_lab_takes_its_design_limits_and_machines() -> None:
         gym.make(orthoglide_env.LAB_ENV_ID, design=str(SMALL_FILE))
 
 
+@pytest.mark.parametrize("backend", ["exact", "pybullet"])
+def test_the_calibration_env_takes_its_design(backend: str) -> None:
+    """The calibration env on the small design: its limits, travel and machines; with ideal
+    gauges it reads what the exact model of its machine and installation gives, within
+    the 1 um PyBullet and the exact model agree by."""
+    import gymnasium as gym
+
+    import orthoglide_env
+    from orthoglide_env.instruments.dial import exact_readings
+
+    env = gym.make(orthoglide_env.ENV_ID, design=SMALL, errors="paper", backend=backend,
+                   gauge_sigma=0.0, gauge_resolution=0.0)
+    try:
+        calibration = env.unwrapped
+        assert (env.action_space.low.min(), env.action_space.high.max()) == (
+            SMALL.rho_min, SMALL.rho_max)
+        env.reset(seed=3)
+        assert calibration.true_machine.design == SMALL
+        assert calibration.travel == SMALL.gauge_travel
+        with pytest.raises(ValueError, match=r"outside the joint limits \[-80, 50\] mm"):
+            env.step(np.array([0.0, 0.0, 55.0]))
+        with pytest.raises(ValueError, match="the machine's design is not the lab's"):
+            env.reset(options={"machine": MachineParams()})
+        env.reset(seed=3)
+        for name in ("XMax", "YMin", "Zero"):
+            rho = paper_posture(name, SMALL)
+            obs, *_ = env.step(rho)
+            exact = exact_readings(calibration.true_machine, calibration.true_gauges, rho)
+            valid = obs["valid"].astype(bool)
+            np.testing.assert_array_equal(valid, np.isfinite(exact))
+            np.testing.assert_allclose(obs["gauges"][valid], exact[valid], atol=1e-3)
+    finally:
+        env.close()
+
+
 # -- a design's own slot catalogue ----------------------------------------------------------
 #: Three bar places per bar side: 18 bar slots, then the 6 carriage and 3 platform slots.
 THREE = {"slot_positions": [0.3, 0.5, 0.7]}

@@ -125,8 +125,8 @@ class OrthoglideCalibrationEnv(CalibrationFace, EngineEnv):
     Reset options
     -------------
     ``machine``: the true machine, a dict in the machine file schema
-    (:meth:`MachineParams.from_dict`) or a ``MachineParams``, inside
-    the prototype's validity range; left out or ``None`` (as ``seed=None`` means "none
+    (:meth:`MachineParams.from_dict`) or a ``MachineParams`` of the env's ``design``,
+    inside the design's validity range; left out or ``None`` (as ``seed=None`` means "none
     given"): drawn from the ``errors`` preset with ``np_random``.  Anything
     else (a list, ``0``, ``""``, ``False``) raises ``ValueError``.  ``gauges``: the layout
     of this episode, names such as ``"x-leg/y"`` or ``"z/x@0.3"`` or ``GaugeSpec``
@@ -173,7 +173,10 @@ class OrthoglideCalibrationEnv(CalibrationFace, EngineEnv):
       gauges (``true_gauges``) move by ~1e-13 mm, below the readings' last bit in the
       runs compared.  Constructor arguments are checked by the table of
       :mod:`orthoglide_env.lab.spec`, whose words both envs share; it holds their defaults
-      too, and an unknown argument raises ``ValueError`` (was ``TypeError``).
+      too, and an unknown argument raises ``ValueError`` (was ``TypeError``).  ``design``
+      (a :class:`~orthoglide_env.model.design.MachineDesign`, default the prototype, as
+      the lab's) sets the machines' dimensions and limits, the action and ``joints``
+      boxes and the default ``travel``; the tables above give the prototype's numbers.
     * v0 (first release): move and read, on its own implementation.
     """
 

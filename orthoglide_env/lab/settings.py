@@ -135,7 +135,8 @@ def calibration_settings(args: dict[str, Any]) -> LabSettings:
     (:data:`orthoglide_env.lab.spec.CALIBRATION`)."""
     layout = args["gauges"] or PAPER_LAYOUT
     return LabSettings(
-        **_shared(args, PROTOTYPE), stands=len(layout), layout=layout, station=False,
+        **_shared(args, args["design"] or PROTOTYPE), stands=len(layout), layout=layout,
+        station=False,
         max_steps=args["max_episode_steps"], overtravel="momentary", strict_moves=True,
         notebook=False, motion=args["motion"],
     )

@@ -22,7 +22,6 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
-from orthoglide_env.instruments.gauges import DEFAULT_TRAVEL
 from orthoglide_env.instruments.slots import GaugeSpec, layout_from_names
 from orthoglide_env.lab.machines import MOTION_MODES
 from orthoglide_env.lab.operations import PAPER_SLOTS, TRACKER_SIGMA
@@ -197,9 +196,9 @@ CALIBRATION: dict[str, Arg] = {
     "errors": ERRORS, "gauge_sigma": SIGMA, "gauge_resolution": RESOLUTION,
     "motion": Choice(MOTION_MODES, default="quasi-static"),
     "backend": Choice(BACKENDS, default="pybullet"), "gauges": Layout(),
-    "travel": Number("mm", 0.0, open=True, optional=True, default=DEFAULT_TRAVEL),
+    "travel": Number("mm", 0.0, open=True, optional=True),  # None: the design's
     "max_episode_steps": Integer(low=1, optional=True), "render_mode": RENDER_MODE,
-    "clip_actions": FLAG,
+    "clip_actions": FLAG, "design": Design(),
 }
 #: ``OrthoglideLab-v0``'s arguments.
 LAB: dict[str, Arg] = {
