@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, fields, replace
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from typing import Any
 
 import numpy as np
@@ -119,6 +119,8 @@ class GaugeArray:
 
     def columns(self, index: np.ndarray) -> GaugeArray:
         """The gauges ``index`` of every set (along the gauge axis)."""
+        if np.array_equal(index, np.arange(self.count)):  # all of them, as most looks ask
+            return self
         at = len(self.batch_shape)
         return GaugeArray(**{f.name: np.take(getattr(self, f.name), index, axis=at)
                              for f in fields(self)})
@@ -133,12 +135,13 @@ class GaugeArray:
             out[f.name] = value
         return GaugeArray(**out)
 
-    @property
+    # Remembered: a lab asks its installed gauges for them at every look.
+    @cached_property
     def target(self) -> np.ndarray:
         """Index in :data:`BOX_NAMES` of each gauge's target box, ``(*batch, G)``."""
         return target_index(self.part, self.leg, self.face)
 
-    @property
+    @cached_property
     def face(self) -> np.ndarray:
         """The target box's face (box axis) each gauge touches, ``(*batch, G)``."""
         return face_of(self.part, self.leg, self.axis)
