@@ -41,7 +41,7 @@ from gymnasium.spaces import flatten, flatten_space
 from calibrators.agents.base import Agent, action
 from orthoglide_env.envs.wrappers import flat_action_space, lab_action
 from orthoglide_env.lab.operations import OP_NAMES, SLOT_NAMES, Op, slot_catalogue
-from orthoglide_env.model.design import PROTOTYPE
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 
 #: The entry of the policy zip that holds the :class:`PolicySpec` (JSON).
 SPEC_ENTRY: str = "orthoglide_policy.json"
@@ -68,6 +68,9 @@ class PolicySpec:
     clip_obs: float = 10.0
     epsilon: float = 1e-8
     version: int = SPEC_VERSION
+    #: The training lab's machine design (``MachineDesign.to_dict``); None: the prototype
+    #: (files saved before designs were recorded).
+    design: dict[str, Any] | None = None
 
     def to_json(self) -> str:
         return json.dumps(asdict(self))
@@ -104,7 +107,7 @@ def spec_of(env: gym.Env, algorithm: str, env_kwargs: dict[str, Any],
         obs_mean=tuple(float(v) for v in rms.mean) if rms is not None else (),
         obs_var=tuple(float(v) for v in rms.var) if rms is not None else (),
         clip_obs=float(getattr(normaliser, "clip_obs", 10.0)),
-        epsilon=float(getattr(normaliser, "epsilon", 1e-8)),
+        epsilon=float(getattr(normaliser, "epsilon", 1e-8)), design=lab.design.to_dict(),
     )
 
 
@@ -197,6 +200,16 @@ class PolicyAgent(Agent):
                 f"slots; this lab's design has {len(slots)} (bar slots at "
                 f"{list(self.env.design.slot_positions)}): its actions and observations mean "
                 "other things here, retrain it on this design (examples/train_policy.py)")
+        trained = PROTOTYPE if self.spec.design is None else MachineDesign.from_dict(
+            self.spec.design)
+        if trained != self.env.design:
+            here = self.env.design
+            raise ValueError(
+                f"policy file '{self.path}' was trained on machines of another design (L = "
+                f"{trained.L:g} mm, limits [{trained.rho_min:g}, {trained.rho_max:g}] mm; this "
+                f"lab's: L = {here.L:g} mm, [{here.rho_min:g}, {here.rho_max:g}] mm): its "
+                "actions and observations mean other things here, retrain it on this design "
+                "(examples/train_policy.py)")
         # The spaces alone: a lab in a vector env is no gymnasium.Env to wrap.
         self.spaces = (self.env.observation_space, self.env.action_space)
         sizes = (flatten_space(self.spaces[0]).shape[0], flat_action_space(self.spaces[1]).shape[0])
