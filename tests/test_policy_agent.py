@@ -84,49 +84,46 @@ def _network(path: str, *_: object) -> SimpleNamespace:
                            action_space=SimpleNamespace(shape=(spec.action_size,)))
 
 
-def test_a_policy_of_another_designs_catalogue_is_refused_at_reset(
-        tmp_path: Path, lab_spec: PolicySpec, monkeypatch: pytest.MonkeyPatch) -> None:
-    """A lab's catalogue is its design's: a policy of the prototype's is refused on a lab of
-    other slot positions as the episode opens, and one trained there plays there."""
+SMALL = Path(__file__).resolve().parents[1] / "examples" / "designs" / "small.json"
+
+
+@pytest.mark.parametrize(("design", "refusal"), [
+    # A lab's catalogue is its design's: other slot positions, other slots.
+    ({"slot_positions": [0.3, 0.5, 0.7]}, r"trained on a lab with 39 slots; this lab's design "
+                                           r"has 27 \(bar slots at \[0.3, 0.5, 0.7\]\).*retrain"),
+    # The prototype's slot names but other lengths and limits: the same flat action is
+    # another joint target.
+    (None, r"another design \(L = 310.25 mm, limits \[-100, 60\] mm; this lab's: L = 250 mm, "
+           r"\[-80, 50\] mm\).*retrain"),
+])
+def test_a_policy_of_another_design_is_refused_at_reset(
+        tmp_path: Path, lab_spec: PolicySpec, monkeypatch: pytest.MonkeyPatch,
+        design: dict | None, refusal: str) -> None:
+    """A policy of the prototype is refused on a lab of another design as the episode
+    opens, and one trained there plays there."""
     monkeypatch.setattr(policy, "_load_model", _network)
-    design = MachineDesign.from_dict({"slot_positions": [0.3, 0.5, 0.7]})
+    design = MachineDesign.from_file(SMALL) if design is None else MachineDesign.from_dict(design)
     env = gym.make(orthoglide_env.LAB_ENV_ID, design=design, **LAB)
     observation, _ = env.reset(seed=0)
     agent = get_agent(f"policy:{spec_only_file(tmp_path / 'prototype.zip', lab_spec)}")
-    with pytest.raises(ValueError, match=r"trained on a lab with 39 slots; this lab's design "
-                                         r"has 27 \(bar slots at \[0.3, 0.5, 0.7\]\).*retrain"):
+    with pytest.raises(ValueError, match=refusal):
         agent.reset(env, observation, np.random.default_rng(0))
     spec = spec_of(flat_lab_env(design=design, **LAB), "PPO", LAB)
     assert spec.slots == tuple(s.slot for s in env.unwrapped.slots)
-    agent = get_agent(f"policy:{spec_only_file(tmp_path / 'three.zip', spec)}")
+    agent = get_agent(f"policy:{spec_only_file(tmp_path / 'there.zip', spec)}")
     agent.reset(env, observation, np.random.default_rng(0))
     env.close()
 
 
-def test_a_policy_of_another_design_is_refused_at_reset(
+def test_a_policy_saved_before_designs_were_recorded_is_the_prototypes(
         tmp_path: Path, lab_spec: PolicySpec, monkeypatch: pytest.MonkeyPatch) -> None:
-    """The small design has the prototype's slot names but other lengths and limits, so the
-    same flat action means other joint targets: a policy says the design it learned on.
-    A file saved before designs were recorded is the prototype's."""
     monkeypatch.setattr(policy, "_load_model", _network)
-    small = MachineDesign.from_file(Path(__file__).resolve().parents[1] / "examples"
-                                    / "designs" / "small.json")
-    env = gym.make(orthoglide_env.LAB_ENV_ID, design=small, **LAB)
+    older = dataclasses.replace(lab_spec, design=None)
+    env = gym.make(orthoglide_env.LAB_ENV_ID, **LAB)
     observation, _ = env.reset(seed=0)
-    agent = get_agent(f"policy:{spec_only_file(tmp_path / 'prototype.zip', lab_spec)}")
-    with pytest.raises(ValueError, match=r"another design \(L = 310.25 mm, limits \[-100, 60\] "
-                                         r"mm; this lab's: L = 250 mm, \[-80, 50\] mm\)"):
-        agent.reset(env, observation, np.random.default_rng(0))
-    spec = spec_of(flat_lab_env(design=small, **LAB), "PPO", LAB)
-    get_agent(f"policy:{spec_only_file(tmp_path / 'small.zip', spec)}").reset(
+    get_agent(f"policy:{spec_only_file(tmp_path / 'older.zip', older)}").reset(
         env, observation, np.random.default_rng(0))
     env.close()
-    older = dataclasses.replace(lab_spec, design=None)
-    prototype = gym.make(orthoglide_env.LAB_ENV_ID, **LAB)
-    observation, _ = prototype.reset(seed=0)
-    get_agent(f"policy:{spec_only_file(tmp_path / 'older.zip', older)}").reset(
-        prototype, observation, np.random.default_rng(0))
-    prototype.close()
 
 
 def test_without_stable_baselines3_the_error_names_the_extra(
