@@ -64,8 +64,8 @@ def _machine_option(value: Any, design: MachineDesign) -> MachineParams | None:
     try:
         if isinstance(value, MachineParams):
             if value.design != design:
-                raise ValueError("the machine's design is not the lab's (give the lab its "
-                                 "design: OrthoglideLab-v0, design=...)")
+                raise ValueError("the machine's design is not the lab's (give the env its "
+                                 "design: gym.make(..., design=...))")
             return check_validity(value)
         if isinstance(value, dict):
             return MachineParams.from_dict(value, design=design)
