@@ -45,6 +45,8 @@ from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import DEFAULT_PRESET, ERROR_NAMES, MachineParams
 from orthoglide_env.model.reading_model import ParameterSpace, default_scales
 from orthoglide_env.scoring import FRAMES, score_batch, uncalibrated_errors
+from orthoglide_env.world.conditions import IDEAL, Conditions
+from orthoglide_env.world.truth import World
 
 #: Fractions of an episode's time at which the accuracy-versus-time curve re-estimates.
 CURVE_FRACTIONS: tuple[float, ...] = (0.25, 0.5, 0.75)
@@ -68,12 +70,15 @@ class Config:
     curve_estimator: str = ""
     #: The machines' design.
     design: MachineDesign = PROTOTYPE
+    #: The world beyond the geometry.
+    conditions: Conditions = IDEAL
 
     def lab_kwargs(self, tracker: bool) -> dict[str, Any]:
         """The lab env's arguments of this comparison (``tracker``: the agent needs one)."""
         return {"errors": self.errors, "gauge_sigma": self.sigma,
                 "gauge_resolution": self.resolution, "backend": self.backend,
-                "tracker": tracker, "budget_s": self.budget_s, "design": self.design}
+                "tracker": tracker, "budget_s": self.budget_s, "design": self.design,
+                "conditions": self.conditions}
 
 
 @dataclass(frozen=True)
@@ -89,6 +94,9 @@ class Trial:
     tcp_before: dict[str, float] = field(default_factory=dict)  # frame -> RMS mm
     tcp_after: dict[str, float] = field(default_factory=dict)
     predicted_rigid_mm: float = float("nan")
+    #: The estimator's chi-square test rejects its model on these readings (None: the
+    #: estimator has no such test, or the trial failed).
+    chi2_rejected: bool | None = None
     z: list[float] = field(default_factory=list)
     error: list[float] = field(default_factory=list)  # estimate - truth, 27 errors
     std: list[float] = field(default_factory=list)  # reported, NaN where fixed
@@ -117,7 +125,9 @@ class Trial:
         data = json.loads(line)
         names = data.pop("names", None)
         # A trial holds None nowhere else.
-        trial = cls(**_leaves(data, lambda v: float("nan") if v is None else v))
+        rejected = data.pop("chi2_rejected", None)
+        trial = cls(**_leaves(data, lambda v: float("nan") if v is None else v),
+                    chi2_rejected=rejected)
         if names is not None and tuple(names) != trial.names:
             raise ValueError("the trial's error names are not this version's machine errors")
         return trial
@@ -187,7 +197,8 @@ def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
     z_scores = iter(machine_z_scores(fitted, [episodes[k].run.truth for k in good]))  # type: ignore[arg-type]
     machines = [e.machine for e in fitted]  # type: ignore[union-attr]
     reports = iter(score_batch(machines, [episodes[k].run.truth for k in good],
-                               before=_before([episodes[k] for k in good])) if good else [])
+                               before=_before([episodes[k] for k in good]),
+                               worlds=_worlds([episodes[k] for k in good])) if good else [])
     predicted = iter(predicted_rigid_mm(fitted, machines).tolist())  # type: ignore[arg-type]
     out = []
     for episode, est, curve in zip(episodes, estimates, curves, strict=True):
@@ -206,7 +217,7 @@ def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
             episode.agent, name, episode.machine, time_s=run.time_s, readings=count,
             tcp_before={f: getattr(report.tcp_before, f).rms for f in FRAMES},
             tcp_after={f: getattr(report.tcp_after, f).rms for f in FRAMES},
-            predicted_rigid_mm=next(predicted),
+            predicted_rigid_mm=next(predicted), chi2_rejected=est.chi2_rejected,
             z=next(z_scores).tolist(),
             error=(est.theta[:len(ERROR_NAMES)] - run.truth.to_vector()).tolist(),
             std=std.tolist(), curve=curve,
@@ -229,7 +240,7 @@ def _curves(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
         models = [MachineParams(design=e.run.truth.design) if isinstance(est, Exception)
                   else est.machine for e, est in zip(episodes, fitted, strict=True)]
         reports = score_batch(models, [e.run.truth for e in episodes],
-                              before=_before(episodes))
+                              before=_before(episodes), worlds=_worlds(episodes))
         for k, (episode, report) in enumerate(zip(episodes, reports, strict=True)):
             points[k].append([fraction * episode.run.time_s, report.tcp_after.rigid.rms])
     return points
@@ -240,10 +251,17 @@ def _before(episodes: list[_Episode]) -> np.ndarray:
     batched solve for those not known yet)."""
     new = [e for e in episodes if e.before is None]
     if new:
-        for episode, vectors in zip(new, uncalibrated_errors([e.run.truth for e in new]),
+        for episode, vectors in zip(new, uncalibrated_errors([e.run.truth for e in new],
+                                                             worlds=_worlds(new)),
                                     strict=True):
             episode.before = vectors
     return np.stack([e.before for e in episodes])  # type: ignore[misc]
+
+
+def _worlds(episodes: list[_Episode]) -> list[World] | None:
+    """The episodes' worlds, for scoring (None under ideal conditions)."""
+    worlds = [e.run.world for e in episodes]
+    return None if any(w is None for w in worlds) else worlds  # type: ignore[return-value]
 
 
 def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]],
@@ -342,6 +360,12 @@ def _stats(values: list[float]) -> dict[str, float | None]:
     return {"median": float(np.median(values)), "p95": float(np.percentile(values, 95))}
 
 
+def _fraction(flags: list[bool | None]) -> float | None:
+    """The fraction of the tests that said yes (None: no test)."""
+    tested = [f for f in flags if f is not None]
+    return float(np.mean(tested)) if tested else None
+
+
 def summary(trials: list[Trial], target_mm: float = 0.01) -> list[dict]:
     """One row per agent x estimator, in the order they first appear; success: the error
     an estimate predicts for itself (rigid frame) is at most ``target_mm``."""
@@ -363,6 +387,7 @@ def summary(trials: list[Trial], target_mm: float = 0.01) -> list[dict]:
             "tcp_after_mm": {f: _stats([t.tcp_after[f] for t in ok]) for f in FRAMES},
             "predicted_rigid_mm": _stats([t.predicted_rigid_mm for t in ok]),
             "z_rms": float(np.sqrt(np.mean(z**2))) if z.size else None,
+            "chi2_rejected": _fraction([t.chi2_rejected for t in ok]),
             "success_rate": (float(np.mean([t.predicted_rigid_mm <= target_mm for t in ok]))
                              if ok else 0.0),
         })

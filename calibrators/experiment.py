@@ -27,6 +27,7 @@ from orthoglide_env.lab.operations import Op
 from orthoglide_env.lab.settings import DEFAULT_BUDGET_S as DEFAULT_BUDGET_S  # every command's
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import MachineParams
+from orthoglide_env.world.truth import World
 
 #: Paper postures by their control coordinates, to label the notebook's readings.
 _PAPER_RHO: dict[tuple[float, ...], str] = {v: k for k, v in paper_rhos(PROTOTYPE).items()}
@@ -137,6 +138,7 @@ class Episode:
     sigma: float  # effective noise of a gauge reading (mm)
     truth: MachineParams
     info: dict[str, Any]
+    world: World | None = None  # the machine's world beyond its geometry (None: ideal)
 
     @property
     def measurements(self) -> Measurements:
@@ -192,7 +194,7 @@ def run_episodes(envs: gym.vector.VectorEnv, agents: list[Agent], seeds: list[in
                 lab = labs[i].unwrapped
                 out[i] = Episode(list(lab.records), float(observation["time"][i, 0]),
                                  lab.noise.effective_sigma, _truth(envs, i),
-                                 dict(_InfoRow(info, i)))
+                                 dict(_InfoRow(info, i)), _world(envs, i))
         if all(e is not None for e in out):
             return out  # type: ignore[return-value]
 
@@ -216,6 +218,14 @@ def _truth(envs: gym.vector.VectorEnv, i: int) -> MachineParams:
     if isinstance(envs, gym.vector.SyncVectorEnv):
         return envs.envs[i].unwrapped.true_machine
     return envs.unwrapped.true_machines[i]
+
+
+def _world(envs: gym.vector.VectorEnv, i: int) -> World | None:
+    """Env ``i``'s world (scoring only)."""
+    if isinstance(envs, gym.vector.SyncVectorEnv):
+        return envs.envs[i].unwrapped.true_world
+    worlds = envs.unwrapped.true_worlds
+    return None if worlds is None else worlds[i]
 
 
 def _plan_arrays(plans: list[list[dict[str, Any]]], idle: dict[str, Any]

@@ -36,6 +36,7 @@ from orthoglide_env.model.kinematics import (
     tcp_sensitivity,
     tcp_sensitivity_factors,
 )
+from orthoglide_env.world.truth import World
 
 #: Points along each axis of the scoring grid, whose TCP targets span the design's
 #: ``grid_range`` cube (mm), inside the workspace its nominal model reaches within the
@@ -147,15 +148,21 @@ def tcp_error_vectors(model: MachineParams, truth: MachineParams,
 
 
 def tcp_error_vectors_many(models: Sequence[MachineParams], truths: Sequence[MachineParams],
-                           targets: np.ndarray) -> np.ndarray:
+                           targets: np.ndarray, worlds: Sequence[World] | None = None
+                           ) -> np.ndarray:
     """:func:`tcp_error_vectors` of many pairs over the targets (n, 3): (M, n, 3).  The
     true machines reach their commands in one batched solve; each machine's numbers are
-    those it gets alone."""
+    those it gets alone.  ``worlds``: the machines' worlds, whose drives' lead error
+    the commands meet (the rest of a world passes: the truth is the machine at the 20 C
+    reference, warm, each axis at the centre of its backlash)."""
     if len(models) > BLOCK:
-        return np.concatenate([tcp_error_vectors_many(models[b], truths[b], targets)
-                               for b in _blocks(len(models))])
+        return np.concatenate([tcp_error_vectors_many(
+            models[b], truths[b], targets, None if worlds is None else worlds[b])
+            for b in _blocks(len(models))])
     rho = commands_many(models, targets)  # (M, n, 3)
     inside = np.isfinite(rho).all(axis=-1)
+    if worlds is not None:
+        rho = rho + World.stack(list(worlds)).lead_error(rho, truths[0].design)
 
     def alone(m: int) -> np.ndarray:
         out = np.full(rho[m].shape, np.nan)
@@ -281,20 +288,23 @@ def frame_errors(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray) -> 
     return [FrameErrors(*frames) for frames in zip(raw, translation, rigid, strict=True)]
 
 
-def uncalibrated_errors(truths: Sequence[MachineParams], grid: np.ndarray | None = None
-                        ) -> np.ndarray:
-    """TCP error vectors (M, n, 3) over the grid of each true machine commanded with the
-    nominal model: what :func:`score_batch` compares a compensation with."""
+def uncalibrated_errors(truths: Sequence[MachineParams], grid: np.ndarray | None = None,
+                        worlds: Sequence[World] | None = None) -> np.ndarray:
+    """TCP error vectors (M, n, 3) over the grid of each true machine (in its world, when
+    given) commanded with the nominal model: what :func:`score_batch` compares a
+    compensation with."""
     targets = _targets(grid, truths)
     nominal = MachineParams(design=truths[0].design) if len(truths) else MachineParams()
-    return tcp_error_vectors_many([nominal] * len(truths), truths, targets)
+    return tcp_error_vectors_many([nominal] * len(truths), truths, targets, worlds)
 
 
 def score_batch(
     estimates: Sequence[MachineParams], truths: Sequence[MachineParams],
     grid: np.ndarray | None = None, before: np.ndarray | None = None,
+    worlds: Sequence[World] | None = None,
 ) -> list[ScoreReport]:
-    """Score each estimate against its true machine (see :func:`score`); ``before``: the
+    """Score each estimate against its true machine (see :func:`score`; ``worlds``: the
+    machines' worlds, see :func:`tcp_error_vectors_many`); ``before``: the
     :func:`uncalibrated_errors` of ``truths``, when already known (they depend on the
     machines only, not on the estimates).
 
@@ -303,8 +313,8 @@ def score_batch(
         raise ValueError("score_batch needs as many estimates as true machines, at least one")
     targets = _targets(grid, truths)
     if before is None:
-        before = uncalibrated_errors(truths, targets)
-    after = tcp_error_vectors_many(estimates, truths, targets)
+        before = uncalibrated_errors(truths, targets, worlds)
+    after = tcp_error_vectors_many(estimates, truths, targets, worlds)
     usable = np.isfinite(before).all(axis=-1) & np.isfinite(after).all(axis=-1)
     empty = np.flatnonzero(~usable.any(axis=-1))
     if empty.size:
@@ -323,12 +333,13 @@ def score_batch(
 
 
 def score(
-    estimate: MachineParams, truth: MachineParams, grid: np.ndarray | None = None
+    estimate: MachineParams, truth: MachineParams, grid: np.ndarray | None = None,
+    world: World | None = None,
 ) -> ScoreReport:
-    """Score ``estimate`` against ``truth``: parameter errors and TCP errors before
-    (nominal model) and after (estimated model) compensation, in the three frames, over
-    the targets both reach within the control limits."""
-    return score_batch([estimate], [truth], grid)[0]
+    """Score ``estimate`` against ``truth`` (in its ``world``, when given): parameter
+    errors and TCP errors before (nominal model) and after (estimated model) compensation,
+    in the three frames, over the targets both reach within the control limits."""
+    return score_batch([estimate], [truth], grid, worlds=None if world is None else [world])[0]
 
 
 # --- predicted errors, from a covariance ----------------------------------------------

@@ -16,6 +16,7 @@ from calibrators.experiment import make_estimator
 from orthoglide_env.envs.lab_vector import OrthoglideLabVectorEnv
 from orthoglide_env.lab.operations import PAPER_SLOTS, SLOTS, Op
 from orthoglide_env.model.design import PROTOTYPE
+from orthoglide_env.world.conditions import Conditions
 
 N = 4
 LAB = orthoglide_env.LAB_ENV_ID
@@ -70,6 +71,9 @@ CASES = {
     "disabled information": (AutoresetMode.DISABLED, {"reward": "information",
                                                       "budget_s": 300.0, "stands": 3}),
     "accuracy": (AutoresetMode.NEXT_STEP, {"reward": "accuracy", "budget_s": 300.0}),
+    # Every effect of the world, re-mountings (their own draws) and the tracker's MPE.
+    "workshop world": (AutoresetMode.NEXT_STEP, {"conditions": "workshop", "tracker": True,
+                                                 "stands": 8, "budget_s": 600.0}),
 }
 
 
@@ -148,13 +152,15 @@ def test_lab_vector_env_checks_like_the_single_lab() -> None:
         gym.make_vec(LAB, num_envs=2, backend="pybullet")
 
 
-def test_batched_compare_gives_the_per_machine_trials() -> None:
+@pytest.mark.parametrize("conditions", ["ideal", "lab"])
+def test_batched_compare_gives_the_per_machine_trials(conditions: str) -> None:
     """compare's batched path (each agent's episodes in one lab vector env) and its
     per-machine path (one lone lab at a time) give the same trials to the last bit: the
     same notebooks, so the same estimates and scores.  A planned agent, one with a
-    tracker, and one that acts on its own readings and spends the whole budget."""
+    tracker, and one that acts on its own readings and spends the whole budget; in the
+    ideal world and with every effect of the lab's."""
     config = Config(("paper", "tracker", "random"), ("paper", "paper6"), budget_s=600.0,
-                    seed=2)
+                    seed=2, conditions=Conditions(conditions))
     batched = run_chunk(config, [0, 1, 2], set(), batched=True)
     alone = run_chunk(config, [0, 1, 2], set(), batched=False)
     assert [t.to_json() for t in batched] == [t.to_json() for t in alone]

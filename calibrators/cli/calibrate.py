@@ -13,7 +13,7 @@ import orthoglide_env
 from calibrators.agents import available as agents_available
 from calibrators.agents import get_agent
 from calibrators.cli import estimator_options
-from calibrators.cli.common import add_design
+from calibrators.cli.common import add_conditions, add_design, conditions_of
 from calibrators.cli.output import emit, report
 from calibrators.estimators.base import Estimate, Measurements, get_strategy
 from calibrators.estimators.exact_fit import z_scores
@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> None:
     env = gym.make(orthoglide_env.LAB_ENV_ID, errors=preset, gauge_sigma=sigma,
                    gauge_resolution=resolution, backend=args.backend,
                    tracker=agent.needs_tracker, budget_s=args.budget,
-                   design=machine.design)
+                   design=machine.design, conditions=conditions_of(args))
     with closing(env):
         # A random machine is drawn by the lab from the seed, as ``compare`` draws its first
         # one: the same seed gives the same machine, installation and readings there and here.
@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> None:
         if args.save_measurements:
             data.write(args.save_measurements)
         est = estimator_options.estimate(args, data, episode.sigma)
-        emit(report(est, episode.truth, _z_rms(est, data, env)), args.json)
+        emit(report(est, episode.truth, _z_rms(est, data, env), episode.world), args.json)
 
 
 def add(sub: argparse._SubParsersAction) -> None:
@@ -93,6 +93,7 @@ def add(sub: argparse._SubParsersAction) -> None:
                         "of the gauge installation only (default: realistic, or none with "
                         "--machine)")
     add_design(p)
+    add_conditions(p)
     p.add_argument("--backend", choices=["pybullet", "exact"], default="pybullet",
                    help="simulator of the virtual machine (default: %(default)s)")
     group = p.add_mutually_exclusive_group()

@@ -12,6 +12,12 @@ import numpy as np
 
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign, load_design
 from orthoglide_env.model.errors import MachineParams, check_rho, random_machine
+from orthoglide_env.world.conditions import (
+    CONDITION_NAMES,
+    DEFAULT_CONDITIONS,
+    EFFECT_NAMES,
+    Conditions,
+)
 
 #: Help of ``--design``, on every command that builds a machine.
 DESIGN_HELP = ("machine design file, JSON or TOML: the nominal dimensions, joint limits and "
@@ -62,6 +68,27 @@ def add_machine_posture(p: argparse.ArgumentParser) -> None:
 
 def add_design(p: argparse.ArgumentParser) -> None:
     p.add_argument("--design", metavar="FILE", help=DESIGN_HELP)
+
+
+def add_conditions(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--conditions", choices=CONDITION_NAMES, default=DEFAULT_CONDITIONS,
+                   help="the world beyond the geometry: ideal (none), lab (a controlled "
+                   "room, a well-kept machine) or workshop (a shop floor, an ordinary "
+                   "machine); the README's 'Conditions' lists every effect and its size "
+                   "(default: %(default)s)")
+    p.add_argument("--effects", metavar="LIST", default=None,
+                   help="only these effects of --conditions act, comma-separated: "
+                   f"{','.join(EFFECT_NAMES)} (default: all of them)")
+
+
+def conditions_of(args: argparse.Namespace) -> Conditions:
+    """The conditions of ``--conditions`` and ``--effects``; :class:`UsageError` if bad."""
+    effects = None if args.effects is None else tuple(
+        e.strip() for e in args.effects.split(",") if e.strip())
+    try:
+        return Conditions(args.conditions, effects)
+    except ValueError as exc:
+        raise UsageError(f"--effects: {exc}") from None
 
 
 def add_machine(p: argparse.ArgumentParser) -> None:

@@ -14,7 +14,13 @@ from tqdm import tqdm
 
 from calibrators.agents import available as agents_available
 from calibrators.agents import get_agent
-from calibrators.cli.common import UsageError, add_design, design_of
+from calibrators.cli.common import (
+    UsageError,
+    add_conditions,
+    add_design,
+    conditions_of,
+    design_of,
+)
 from calibrators.cli.estimator_options import DEFAULT_STRATEGY
 from calibrators.compare import Config, Trial, run, summary, verify_pybullet
 from calibrators.engines import ENGINES, RAY_INSTALL_HINT, ray_available
@@ -63,7 +69,7 @@ def _check(args: argparse.Namespace) -> Config:
     return Config(agents, estimators, args.budget, args.errors, sigma, resolution,
                   args.backend, args.seed, args.target,
                   curve_estimator=_curve_estimator(estimators) if args.out else "",
-                  design=design_of(args))
+                  design=design_of(args), conditions=conditions_of(args))
 
 
 def _curve_estimator(estimators: tuple[str, ...]) -> str:
@@ -85,6 +91,9 @@ def _prepare_out(args: argparse.Namespace, config: Config) -> tuple[Path | None,
         if not trials_path.exists():
             raise UsageError(f"nothing to resume: {trials_path} does not exist")
         saved = json.loads(config_path.read_text()) if config_path.exists() else None
+        if saved is not None:  # a run kept before conditions existed ran in the ideal world
+            saved.setdefault("conditions", "ideal")
+            saved.setdefault("effects", [])
         if saved != _config_dict(config, args.machines):
             raise UsageError(f"--resume needs the options of the run in {out} "
                              f"({config_path}): they differ")
@@ -112,6 +121,8 @@ def _config_dict(config: Config, machines: int) -> dict:
     design = data.pop("design")
     if design != PROTOTYPE:
         data["design"] = design.to_dict()
+    conditions = data.pop("conditions")
+    data.update(conditions=conditions.name, effects=list(conditions.effects))
     return data
 
 
@@ -165,12 +176,14 @@ def _print(rows: list[dict], config: Config, machines: int, seconds: float,
         print(json.dumps({"config": _config_dict(config, machines), "rows": rows},
                          allow_nan=False))
         return
-    print(f"{machines} machines ({config.errors} errors, gauge sigma {config.sigma} mm, "
-          f"budget {config.budget_s:g} s, {config.backend} backend), {seconds:.1f} s. TCP error "
+    print(f"{machines} machines ({config.errors} errors, {config.conditions.label} conditions, "
+          f"gauge sigma {config.sigma} mm, budget {config.budget_s:g} s, {config.backend} "
+          f"backend), {seconds:.1f} s. TCP error "
           "RMS over the workspace after calibration (mm), median over machines; rigid = after "
           "the best-fit rigid motion (the headline), raw = world frame")
     print(f"{'agent':10}{'estimator':15}{'TCP after (rigid) med':>22}{'p95':>9}"
-          f"{'(raw) med':>11}{'time s med':>11}{'z-RMS':>8}{'success':>9}{'failed':>8}")
+          f"{'(raw) med':>11}{'time s med':>11}{'z-RMS':>8}{'chi2 rej':>9}{'success':>9}"
+          f"{'failed':>8}")
     for r in rows:
         rigid, raw = r["tcp_after_mm"]["rigid"], r["tcp_after_mm"]["raw"]
 
@@ -180,7 +193,7 @@ def _print(rows: list[dict], config: Config, machines: int, seconds: float,
         print(f"{r['agent']:10}{r['estimator']:15}{show(rigid['median'], 22, 4)}"
               f"{show(rigid['p95'], 9, 4)}{show(raw['median'], 11, 3)}"
               f"{r['time_s']['median']:11.0f}{show(r['z_rms'], 8, 2)}"
-              f"{r['success_rate']:9.0%}{r['failed']:8d}")
+              f"{show(r['chi2_rejected'], 9, 2)}{r['success_rate']:9.0%}{r['failed']:8d}")
     for r in rows:
         if r["failed"]:
             print(f"{r['agent']} x {r['estimator']}: {r['failed']} of {r['machines']} failed "
@@ -232,6 +245,7 @@ def add(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--resolution", type=float, default=DEFAULT_RESOLUTION,
                    help="gauge display resolution (mm, default %(default)s)")
     add_design(p)
+    add_conditions(p)
     p.add_argument("--backend", choices=["exact", "pybullet"], default="exact",
                    help="simulator (default %(default)s)")
     p.add_argument("--target", type=float, default=0.01,

@@ -20,6 +20,7 @@ from calibrators.estimators.base import Estimate
 from calibrators.estimators.prediction import predicted_correction, predicted_tcp_error
 from orthoglide_env.model.errors import ERROR_GROUPS, ERROR_NAMES, MachineParams, error_group
 from orthoglide_env.scoring import FRAMES, score
+from orthoglide_env.world.truth import World
 
 #: How many combinations a table lists before it only counts them (JSON lists all).
 LISTED: int = 6
@@ -48,8 +49,9 @@ def _residuals(est: Estimate) -> list[dict[str, Any]]:
 
 
 def report(est: Estimate, truth: MachineParams | None,
-           z_rms: float | None = None) -> dict[str, Any]:
-    """The JSON-ready report of an estimate (and of its score, when the truth is known)."""
+           z_rms: float | None = None, world: World | None = None) -> dict[str, Any]:
+    """The JSON-ready report of an estimate (and of its score, when the truth is known, in
+    its ``world`` when there is one)."""
     data: dict[str, Any] = {
         "strategy": est.strategy,
         "params": est.params,
@@ -79,8 +81,10 @@ def report(est: Estimate, truth: MachineParams | None,
         "predicted_tcp_error_mm": predicted_tcp_error(est).to_dict(),
     }
     if truth is not None:
-        scored = score(est.machine, truth)
+        scored = score(est.machine, truth, world=world)
         data["truth"] = truth.to_dict()
+        if world is not None:
+            data["world"] = world.to_dict()
         data["tcp_error_before_mm"] = scored.tcp_before.to_dict()
         data["tcp_error_after_mm"] = scored.tcp_after.to_dict()
         data["z_rms"] = z_rms

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
+from scipy import special
 
 from calibrators.measurements import Measurements
 from calibrators.registry import Registry
@@ -119,6 +120,16 @@ class Estimate:
     def condition_number(self) -> float:
         sv = self.singular_values
         return float(sv[0] / sv[-1]) if sv.size and sv[-1] > 0 else float("inf")
+
+    @property
+    def chi2_rejected(self) -> bool | None:
+        """Whether the chi-square test rejects the model on the readings at
+        :data:`~calibrators.estimators.exact_fit.CHI2_LEVEL` (None: no test)."""
+        if self.chi2 is None or not self.dof:
+            return None
+        from calibrators.estimators.exact_fit import CHI2_LEVEL
+
+        return bool(special.chdtrc(self.dof, self.chi2) < CHI2_LEVEL)
 
     @property
     def machine(self) -> MachineParams:

@@ -22,6 +22,7 @@ from orthoglide_env.lab.settings import LabSettings, render_modes
 from orthoglide_env.lab.spec import RENDER_MODES, Layout
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import MachineParams, check_validity
+from orthoglide_env.world.truth import World
 
 #: The one episode of a lone env, in its batch.
 ROW = np.zeros(1, dtype=np.intp)
@@ -173,10 +174,31 @@ class EngineEnv(Face, gym.Env):
         return self._require()[0]
 
     @property
+    def true_world(self) -> World | None:
+        """The machine's drawn world beyond its geometry (None under ideal conditions)."""
+        self._require()
+        world = self._batch.world
+        return None if world is None else world[0]
+
+    @property
     def true_gauges(self) -> list[Gauge]:
         """Every installation of the episode, in mounting order (scoring only)."""
         self._require()
         return self._batch.true_gauges(0)
+
+    def tcp(self) -> np.ndarray:
+        """The true TCP (mm), as the machine shows it (scoring and fidelity checks only)."""
+        self._require()
+        return self._batch.true_tcp(0)
+
+    @property
+    def simulated_machine(self) -> Any:
+        """The PyBullet machine of the episode (``backend='pybullet'``; fidelity checks)."""
+        self._require()
+        machine = getattr(self._batch.backend, "machine", None)
+        if machine is None:
+            raise ValueError("the exact backend has no simulated machine")
+        return machine
 
     def render(self) -> np.ndarray | None:
         if self.render_mode == "rgb_array":

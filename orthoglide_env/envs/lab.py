@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from orthoglide_env.envs.base import ROW, EngineEnv, Face
+from orthoglide_env.envs.base import EngineEnv, Face
 from orthoglide_env.instruments.slots import GaugeSpec
 from orthoglide_env.lab.actions import check_lab_actions
 from orthoglide_env.lab.engine import ACCURACY_UNIT_MM, StepResult
@@ -210,13 +210,6 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
     def true_tracker_frame(self) -> tuple[np.ndarray, np.ndarray]:
         """The tracker station's rotation and position (scoring only)."""
         return self._batch.tracker_rotation[0].copy(), self._batch.tracker_position[0].copy()
-
-    def tcp(self) -> np.ndarray:
-        """The true TCP (mm), as the machine shows it (scoring and fidelity checks only)."""
-        batch = self._batch
-        self._require()
-        return batch.backend.look(ROW, batch.machines, batch.gauges[ROW], batch.rho[ROW],
-                                  batch.tcp[ROW], batch.engaged[ROW]).tcp[0]
 
     # -- what the records say ------------------------------------------------------------------
     def final_tcp_rigid_mm(self) -> float:

@@ -25,6 +25,7 @@ from orthoglide_env.lab.machines import ExactMachines
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.lab.settings import LabSettings
 from orthoglide_env.model.errors import MachineParams
+from orthoglide_env.world.truth import World
 
 #: What ``options["reset_mask"]`` must be, as Gymnasium's vector envs take it.
 RESET_MASK = "reset_mask"
@@ -180,6 +181,12 @@ class EngineVectorEnv(Face, VectorEnv):
     def true_machines(self) -> MachineParams:
         """Every env's machine, a batch (N,) (scoring only)."""
         return self._batch.require()
+
+    @property
+    def true_worlds(self) -> World | None:
+        """Every env's world, a batch (N,) (None under ideal conditions; scoring only)."""
+        self._batch.require()
+        return self._batch.world
 
     # -- episodes and streams -----------------------------------------------------------------
     def _start(self, rows: np.ndarray, seeds: list[int | None], machine: MachineParams | None,

@@ -14,14 +14,14 @@ LabMachines`.
 from __future__ import annotations
 
 import contextlib
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 import numpy as np
 
 from orthoglide_env.instruments.dial import Status, readings_from_distances, status_of
 from orthoglide_env.instruments.gauges import DEFAULT_TRAVEL, Gauge, GaugeArray
-from orthoglide_env.instruments.slots import GaugeSpec
+from orthoglide_env.instruments.slots import GaugeSpec, Part
 from orthoglide_env.instruments.stands import install_array, installation_errors
 from orthoglide_env.lab.machines import ExactMachine, LabMachines, Sight
 from orthoglide_env.lab.notebook import Notebook, Record, predicted_many
@@ -32,6 +32,7 @@ from orthoglide_env.model.errors import AXIS_NAMES, MachineParams
 from orthoglide_env.model.kinematics import UnreachableError, direct
 from orthoglide_env.model.reading_model import TrackerAxis
 from orthoglide_env.scoring import score
+from orthoglide_env.world.truth import World
 
 #: The accuracy reward counts the final TCP error (after the best-fit rigid motion) in
 #: units of this many mm, and time in hours: -error/unit - time_weight * hours.
@@ -100,6 +101,14 @@ class LabBatch:
         self.tracker_rotation = np.zeros((n, 3, 3))
         self.tracker_position = np.zeros((n, 3))
         self.tracker_reading = np.zeros((n, 3))
+        # The world beyond the geometry (None under ideal conditions): its drawn truth, the
+        # carriages' actual positions, each axis's last direction of travel and each
+        # plunger's (+1: going in) and its last ray distance.
+        self.world: World | None = None
+        self.actual = np.zeros((n, 3))
+        self.approach = np.ones((n, 3))
+        self.going_in = np.ones((n, s))
+        self.last_t = np.full((n, s), np.nan)
         # The slots stands can be at, by name: the catalogue, and any other place a layout
         # names (its index then lies past the catalogue's).
         self.places: list[GaugeSpec] = list(self.slots)
@@ -132,7 +141,7 @@ class LabBatch:
         settings = self.settings
         specs = settings.layout if layout is None else layout
         first = [self.place(spec) for spec in specs]
-        drawn, rotations, positions, errors = [], [], [], []
+        drawn, rotations, positions, errors, worlds = [], [], [], [], []
         for stream in streams:
             drawn.append(settings.preset.sample(stream, settings.design) if machine is None
                          else machine)
@@ -141,12 +150,25 @@ class LabBatch:
                 direction = stream.normal(size=3)
                 positions.append(TRACKER_DISTANCE * direction / np.linalg.norm(direction))
             errors.append(installation_errors(len(first), settings.preset, stream))
+            if settings.conditions.active:
+                worlds.append(World.draw(settings.conditions, stream, settings.stands))
         machines = MachineParams.stack(drawn)
-        installed = _installed(machines, list(specs), settings.travel, np.stack(errors))
+        world = World.stack(worlds) if worlds else None
+        installed = self._installed(machines, list(specs), np.stack(errors), world,
+                                    np.zeros(len(rows)), np.ones((len(rows), 3)),
+                                    np.broadcast_to(np.arange(len(first)),
+                                                    (len(rows), len(first))))
         # Nothing above is stored: a failure leaves every episode as it was.
         self.backend.start(rows, machines)
         self.machines = machines if self.machines is None or len(rows) == self.size else (
             _with_rows(self.machines, rows, machines))
+        if world is not None:
+            self.world = world if self.world is None or len(rows) == self.size else (
+                self.world.with_rows(rows, world))
+            self.approach[rows] = self.going_in[rows] = 1.0
+            self.last_t[rows] = np.nan
+            self.actual[rows] = world.joints(np.zeros((len(rows), 3)), self.approach[rows],
+                                             np.zeros(len(rows)), settings.design)
         for i, stream in zip(rows, streams, strict=True):
             self.streams[i] = stream
         self.rho[rows] = 0.0
@@ -173,7 +195,9 @@ class LabBatch:
             self.tracker_rotation[rows] = rotations
             self.tracker_position[rows] = positions
         self._sync(rows)
-        sight = self._look(rows)
+        if world is not None:
+            self.backend.move(rows, self.actual[rows])
+        sight = self._look(rows, np.zeros(len(rows)))
         self.pressed[rows] = sight.pressed & self.engaged[rows]
         values = self._read(rows, np.zeros(len(rows)), sight)
         return self.observation(rows, values)
@@ -185,35 +209,47 @@ class LabBatch:
         :func:`~orthoglide_env.lab.actions.check_lab_actions`) to its episode."""
         settings = self.settings
         self.require()
-        refused, reached = self._refusals(rows, op, rho, stand, slot)
+        # Where each move or re-mount takes the carriages, and when: the commanded posture
+        # in an ideal world.
+        goal = np.where((op == Op.REMOUNT)[:, None], 0.0, rho)
+        tracker = TIME.tracker_point_s if settings.tracker else 0.0
+        travel_s = TIME.move(self.rho[rows], goal) + np.where(op == Op.MOVE, tracker,
+                                                              TIME.remount_s)
+        approach, target = self._carriages(rows, goal, self.time[rows] + travel_s)
+        refused, reached = self._refusals(rows, op, rho, stand, slot, target)
         if settings.strict_moves:
-            self._raise_unreachable(rows, op, rho, reached)
+            self._raise_unreachable(rows, op, rho, reached, target)
         ok = np.array([not r for r in refused], dtype=bool)
         moves, remounts = ok & (op == Op.MOVE), ok & (op == Op.REMOUNT)
         flicks = ok & ((op == Op.LIFT) | (op == Op.ENGAGE))
         # New installations first (they draw from the streams before the readings do, and
         # may fail): nothing is stored before they are made.
-        mounted = self._installations(rows[remounts], stand[remounts], slot[remounts])
+        mounted = self._installations(rows[remounts], stand[remounts], slot[remounts],
+                                      (self.time[rows] + travel_s)[remounts],
+                                      approach[remounts])
         seconds = np.where(ok, 0.0, TIME.lift_s)
         seconds[flicks] = TIME.lift_s
-        if moves.any():
-            tracker = TIME.tracker_point_s if settings.tracker else 0.0
-            seconds[moves] = TIME.move(self.rho[rows[moves]], rho[moves]) + tracker
-            self.rho[rows[moves]] = rho[moves]
-            self.tcp[rows[moves]] = reached[moves]
-            self.backend.move(rows[moves], rho[moves])
-        self.engaged[rows[flicks], stand[flicks]] = op[flicks] == Op.ENGAGE
+        carried = moves | remounts
+        if carried.any():
+            seconds[carried] = travel_s[carried]
+            self.rho[rows[carried]] = goal[carried]
+            self.tcp[rows[carried]] = np.where(moves[carried, None], reached[carried], np.nan)
+            if self.world is not None:
+                self.actual[rows[carried]] = target[carried]
+                self.approach[rows[carried]] = approach[carried]
+            self.backend.move(rows[carried], target[carried])
+        engages = flicks & (op == Op.ENGAGE)
+        self.engaged[rows[flicks], stand[flicks]] = engages[flicks]
+        # An engaged plunger drops onto its bar: it comes out.
+        self.going_in[rows[engages], stand[engages]] = -1.0
+        self.last_t[rows[engages], stand[engages]] = np.nan
         if remounts.any():
-            seconds[remounts] = TIME.move(self.rho[rows[remounts]], np.zeros(3)) + TIME.remount_s
-            self.rho[rows[remounts]] = 0.0
-            self.tcp[rows[remounts]] = np.nan
-            self.backend.move(rows[remounts], self.rho[rows[remounts]])
             self._mount(rows[remounts], stand[remounts], slot[remounts], mounted)
             self._sync(rows[remounts])
         reads = ok & _READS[op]
         presses = reads | (ok & (op == Op.ENGAGE))
         looks = _READS[op] | presses  # a refused move still checks for a crash
-        sight = self._look(rows[looks])
+        sight = self._look(rows[looks], (self.time[rows] + seconds)[looks])
         at = np.cumsum(looks) - 1  # row of each looked-at episode in ``sight``
         overtravel: list[list[str]] = [[] for _ in rows]
         new_overtravel = np.zeros((len(rows), settings.stands), dtype=bool)
@@ -258,8 +294,31 @@ class LabBatch:
                           predicted,
                           ended & (predicted <= settings.success_mm))
 
+    def _carriages(self, rows: np.ndarray, goal: np.ndarray, when: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+        """Each axis's direction of travel (R, 3) to ``goal`` (commanded, R x 3) and where
+        the carriages then are at lab time ``when`` (the goal itself in an ideal world)."""
+        if self.world is None:
+            return self.approach[rows], goal
+        before = self.rho[rows]
+        approach = np.where(goal > before, 1.0, np.where(goal < before, -1.0,
+                                                         self.approach[rows]))
+        world = self._world(rows)
+        gauges = self.gauges if len(rows) == self.size else self.gauges[rows]
+        # The indicators press as they did at the last look (the plunger's next depth is
+        # a micrometre-level change of a force that moves the platform by nanometres).
+        pressing = np.where(self.engaged[rows], self.last_t[rows], np.nan)
+        share = np.where(gauges.part == Part.BAR, 1 - gauges.at,
+                         np.where(gauges.part == Part.PLATFORM, 1.0, 0.0))
+        load = world.platform_load(pressing, gauges.travel, gauges.direction, share)
+        return approach, world.joints(goal, approach, when, self.settings.design, load)
+
+    def _world(self, rows: np.ndarray) -> World:
+        world: World = self.world  # type: ignore[assignment]
+        return world if len(rows) == self.size else world[rows]
+
     def _raise_unreachable(self, rows: np.ndarray, op: np.ndarray, rho: np.ndarray,
-                           reached: np.ndarray) -> None:
+                           reached: np.ndarray, target: np.ndarray) -> None:
         """``ValueError`` for the first move its machine cannot be assembled at (naming its
         env in a batch of many), before anything changes."""
         bad = np.flatnonzero((op == Op.MOVE) & np.isnan(reached[:, 0]))
@@ -267,7 +326,7 @@ class LabBatch:
             return
         r = int(bad[0])
         try:
-            direct(self.require()[rows[r]], rho[r])
+            direct(self.require()[rows[r]], target[r])
         except UnreachableError as exc:
             reason = str(exc)
         else:  # solved alone, not in the batch: the batch's reason is all there is
@@ -278,7 +337,7 @@ class LabBatch:
                          f"{after}")
 
     def _refusals(self, rows: np.ndarray, op: np.ndarray, rho: np.ndarray, stand: np.ndarray,
-                  slot: np.ndarray) -> tuple[list[str], np.ndarray]:
+                  slot: np.ndarray, target: np.ndarray) -> tuple[list[str], np.ndarray]:
         """Why each well-formed operation cannot be done ("" when it can): a stand that is
         not mounted cannot be lifted or engaged, a slot holds one stand, and the machine
         cannot be driven where it cannot assemble; and the TCP (R, 3) where each move
@@ -294,36 +353,69 @@ class LabBatch:
             out[r] = f"slot {self.places[slot[r]].slot} already holds a stand"
         moves = np.flatnonzero(op == Op.MOVE)
         if len(moves):
-            reached[moves] = assembled(self.require()[rows[moves]], rho[moves])
+            reached[moves] = assembled(self.require()[rows[moves]], target[moves])
             for r in moves[np.isnan(reached[moves, 0])]:
                 out[r] = f"the machine cannot assemble at rho = {rho[r].tolist()}"
         return out, reached
 
-    def _installations(self, rows: np.ndarray, stand: np.ndarray, slot: np.ndarray
-                       ) -> GaugeArray | None:
+    def _installations(self, rows: np.ndarray, stand: np.ndarray, slot: np.ndarray,
+                       when: np.ndarray, approach: np.ndarray
+                       ) -> tuple[GaugeArray, World | None] | None:
         """New installations of stands ``stand`` at ``slot`` on the machines of ``rows``
-        (drawn from their streams), zeroed at Zero: one gauge per row, (R,)."""
+        (drawn from their streams), zeroed at Zero at lab time ``when`` (reached from the
+        ``approach`` directions): one gauge per row, (R,), and the machines' worlds with
+        the new mountings."""
         if not len(rows):
             return None
-        errors = np.stack([installation_errors(1, self.settings.preset, self.streams[i])
-                           for i in rows])
+        errors, worlds = [], []
+        for r, i in enumerate(rows):
+            errors.append(installation_errors(1, self.settings.preset, self.streams[i]))
+            if self.world is not None:
+                worlds.append(self.world[i].mounted(self.streams[i], when[r], [stand[r]]))
+        errors = np.stack(errors)
+        world = World.stack(worlds) if worlds else None
         per_row: list[GaugeArray] = [None] * len(rows)  # type: ignore[list-item]
         for value in np.unique(slot):
             mine = np.flatnonzero(slot == value)
             try:
-                part = _installed(self.require()[rows[mine]], [self.places[value]],
-                                  self.settings.travel, errors[mine])
+                part = self._installed(self.require()[rows[mine]], [self.places[value]],
+                                       errors[mine], None if world is None else world[mine],
+                                       when[mine], approach[mine], stand[mine, None])
             except ValueError:
                 raise ValueError(f"slot {self.places[value].slot} cannot be reached on this "
                                  "machine") from None
             for j, r in enumerate(mine):
                 per_row[r] = part[j]
-        return GaugeArray.stack(per_row)
+        return GaugeArray.stack(per_row), world
+
+    def _installed(self, machines: MachineParams, specs: list, errors: np.ndarray,
+                   world: World | None, when: np.ndarray, approach: np.ndarray,
+                   stands: np.ndarray) -> GaugeArray:
+        """Gauges of ``specs`` installed on each machine with ``errors`` (R, G, 2, 3) on
+        ``stands`` (R, G), slid to mid-travel and zeroed at Zero at lab time ``when`` (the
+        dial reads 0 then, whatever the world adds); ``ValueError`` when one misses its bar
+        there."""
+        design = self.settings.design
+        gauges = install_array(specs, machines, travel=self.settings.travel, errors=errors)
+        if world is None:
+            return gauges.zeroed(ExactMachine(machines, gauges).gauge_distances())
+        zero = world.joints(np.zeros((len(when), 3)), approach, when, design)
+        # Slid to mid-travel, then the bezel is turned to 0 where the dial points.
+        slid = gauges.zeroed(ExactMachine(machines, gauges, zero).gauge_distances())
+        half = slid.zero * world.scale(when)[:, None]
+        return replace(slid, zero=half + world.columns(stands).distance_offsets(
+            half, np.ones(half.shape), when, slid.at, slid.part == Part.BAR, slid.travel,
+            design))
 
     def _mount(self, rows: np.ndarray, stand: np.ndarray, slot: np.ndarray,
-               gauges: GaugeArray) -> None:
+               made: tuple[GaugeArray, World | None]) -> None:
         """Store the installations of :meth:`_installations` (one gauge per row)."""
+        gauges, world = made
         self.gauges = _with_gauges(self.gauges, rows, stand, gauges)
+        if world is not None:
+            self.world = self.world.with_rows(rows, world)  # type: ignore[union-attr]
+            self.going_in[rows, stand] = 1.0  # slid in to mid-travel
+            self.last_t[rows, stand] = np.nan
         self.mounts[rows] += 1
         self.slot[rows, stand] = slot
         self.engaged[rows, stand] = True
@@ -339,19 +431,40 @@ class LabBatch:
         """Hand the backend the gauges of every mounted stand of ``rows``."""
         self.backend.set_gauges(rows, self.gauges[rows], self.slot[rows] >= 0)
 
-    def _look(self, rows: np.ndarray) -> Sight:
+    def _look(self, rows: np.ndarray, when: np.ndarray) -> Sight:
+        """What the machines of ``rows`` show at lab time ``when``."""
         if not len(rows):
             stands = self.settings.stands
             return Sight(np.zeros((0, stands)), np.zeros((0, stands), dtype=bool),
                          np.zeros((0, len(PAIR_NAMES)), dtype=bool), np.zeros((0, 3)))
+        at = self.rho if self.world is None else self.actual
         if len(rows) == self.size:  # every episode: no copies
-            sight = self.backend.look(rows, self.require(), self.gauges, self.rho, self.tcp,
+            sight = self.backend.look(rows, self.require(), self.gauges, at, self.tcp,
                                       self.engaged)
         else:
             sight = self.backend.look(rows, self.require()[rows], self.gauges[rows],
-                                      self.rho[rows], self.tcp[rows], self.engaged[rows])
+                                      at[rows], self.tcp[rows], self.engaged[rows])
         self.tcp[rows] = sight.tcp
-        return sight
+        return sight if self.world is None else self._in_world(rows, sight, when)
+
+    def _in_world(self, rows: np.ndarray, sight: Sight, when: np.ndarray) -> Sight:
+        """``sight`` (the geometry at the carriages' positions) as the world shows it at
+        ``when``: the structure grown with the room, each reading moved by its stand,
+        indicator and bar; each engaged plunger's direction of travel followed."""
+        world = self._world(rows)
+        gauges = self.gauges if len(rows) == self.size else self.gauges[rows]
+        scale = world.scale(when)
+        t = sight.t * scale[:, None]
+        last = self.last_t[rows]
+        followed = self.engaged[rows] & np.isfinite(t)
+        with np.errstate(invalid="ignore"):
+            going = np.where(followed & (t < last), 1.0, np.where(
+                followed & (t > last), -1.0, self.going_in[rows]))
+        self.going_in[rows] = going
+        self.last_t[rows] = np.where(followed, t, last)
+        t = t + world.distance_offsets(t, going, when, gauges.at, gauges.part == Part.BAR,
+                                       gauges.travel, self.settings.design)
+        return sight._replace(t=t, tcp=sight.tcp * scale[:, None])
 
     def _read(self, rows: np.ndarray, pending: np.ndarray, sight: Sight) -> np.ndarray:
         """Read every engaged, working gauge (and the tracker) of ``rows``: noisy values per
@@ -371,9 +484,13 @@ class LabBatch:
             stream: np.random.Generator = self.streams[i]  # type: ignore[assignment]
             draws[r, mounted[r]] = settings.noise.draws(stream, (counts[r],))
             if settings.tracker:
-                noise = stream.normal(0.0, settings.tracker_sigma, 3)
-                self.tracker_reading[i] = (self.tracker_rotation[i] @ sight.tcp[r]
-                                           + self.tracker_position[i] + noise)
+                seen = self.tracker_rotation[i] @ sight.tcp[r] + self.tracker_position[i]
+                if self.world is not None and "tracker" in settings.conditions:
+                    noise = self.world.tracker_noise(stream.normal(0.0, 1.0, (1, 3)),
+                                                     seen[None])[0]
+                else:
+                    noise = stream.normal(0.0, settings.tracker_sigma, 3)
+                self.tracker_reading[i] = seen + noise
         noisy = settings.noise.applied(ideal, draws)
         valid = good & mounted & self.engaged[rows] & ~self.faulted[rows]
         values = np.where(valid, noisy, np.nan)
@@ -415,6 +532,16 @@ class LabBatch:
             reward[r] -= self.final_tcp_rigid_mm(int(rows[r])) / ACCURACY_UNIT_MM
         return reward
 
+    def true_tcp(self, row: int) -> np.ndarray:
+        """Where episode ``row``'s TCP truly is now (mm; scoring and fidelity checks)."""
+        rows = np.array([row])
+        at = self.rho if self.world is None else self.actual
+        tcp = self.backend.look(rows, self.require()[rows], self.gauges[rows], at[rows],
+                                self.tcp[rows], self.engaged[rows]).tcp
+        if self.world is not None:
+            tcp = tcp * self.world[rows].scale(self.time[rows])[:, None]
+        return tcp[0]
+
     def final_tcp_rigid_mm(self, row: int) -> float:
         """TCP error RMS after the best-fit rigid motion of the machine the estimator makes
         of episode ``row``'s records (scoring against the truth)."""
@@ -424,7 +551,8 @@ class LabBatch:
                                                self.settings.noise.effective_sigma)
         except (ValueError, RuntimeError, np.linalg.LinAlgError):
             estimate = MachineParams(design=truth.design)
-        return score(estimate, truth).tcp_after.rigid.rms
+        world = None if self.world is None else self.world[row]
+        return score(estimate, truth, world=world).tcp_after.rigid.rms
 
     def observation(self, rows: np.ndarray, values: np.ndarray,
                     fresh: np.ndarray | None = None) -> dict[str, np.ndarray]:
@@ -441,7 +569,8 @@ class LabBatch:
             "faulted": self.faulted[rows].astype(np.int8),
             "slot": np.where(slot >= 0, slot, len(self.slots)).astype(np.int64),
             "mounting": self.count[rows].astype(np.float64),
-            "joints": self.backend.encoders(rows, self.rho[rows]),
+            "joints": self.backend.encoders(rows, self.rho[rows], None if self.world is None
+                                            else self.actual[rows]),
             "tracker": np.where(tracked[:, None], self.tracker_reading[rows], 0.0),
             "tracker_valid": tracked.astype(np.int8)[:, None],
             "time": self.time[rows][:, None].copy(),
@@ -464,14 +593,6 @@ def assembled(machines: MachineParams, rho: np.ndarray) -> np.ndarray:
         with contextlib.suppress(UnreachableError):
             out[r] = direct(machines[r], rho[r])
     return out
-
-
-def _installed(machines: MachineParams, specs: list, travel: float, errors: np.ndarray
-               ) -> GaugeArray:
-    """Gauges of ``specs`` installed on each machine with ``errors`` (R, G, 2, 3), slid to
-    mid-travel and zeroed at Zero; ``ValueError`` when one misses its bar there."""
-    gauges = install_array(specs, machines, travel=travel, errors=errors)
-    return gauges.zeroed(ExactMachine(machines, gauges).gauge_distances())
 
 
 def _unmounted(shape: tuple[int, int], travel: float, spec: GaugeSpec) -> GaugeArray:

@@ -123,8 +123,11 @@ class LabMachines:
         back NaN and unpressed)."""
         raise NotImplementedError
 
-    def encoders(self, rows: np.ndarray, rho: np.ndarray) -> np.ndarray:
-        """Encoder readings (R, 3) of the machines of ``rows`` (commanded at ``rho``)."""
+    def encoders(self, rows: np.ndarray, rho: np.ndarray, actual: np.ndarray | None = None
+                 ) -> np.ndarray:
+        """Encoder readings (R, 3) of the machines of ``rows`` (commanded at ``rho``; their
+        carriages at ``actual`` when the world puts them elsewhere: the motor encoders
+        still read the command)."""
         return rho.copy()
 
     def render(self) -> np.ndarray:
@@ -206,8 +209,11 @@ class SimulatedMachine(LabMachines):
                                                    *machine.target_boxes())
         return Sight(t[None], pressed[None], machine.collision_mask()[None], machine.tcp()[None])
 
-    def encoders(self, rows: np.ndarray, rho: np.ndarray) -> np.ndarray:
-        return np.asarray(self._require().encoders(), dtype=np.float64)[None]
+    def encoders(self, rows: np.ndarray, rho: np.ndarray, actual: np.ndarray | None = None
+                 ) -> np.ndarray:
+        joints = np.asarray(self._require().encoders(), dtype=np.float64)[None]
+        # The servo's residue is the motor's; the rest of the way is the drive's, unseen.
+        return joints if actual is None else rho + (joints - actual)
 
     def render(self) -> np.ndarray:
         """A TinyRenderer picture of the machine and its stands (no window needed)."""

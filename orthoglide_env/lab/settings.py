@@ -26,6 +26,7 @@ from orthoglide_env.lab.operations import TIME, TRACKER_SIGMA, Op, slot_catalogu
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import ErrorPreset, get_preset
 from orthoglide_env.sim.display import display_problem, require_display
+from orthoglide_env.world.conditions import IDEAL, Conditions
 
 #: Encoders may read a hair outside the control limits after settling (solver residue
 #: ~1e-9 mm); the observation box leaves this margin so an observation is always inside.
@@ -63,6 +64,7 @@ class LabSettings:
     motion: str = "quasi-static"
     render_mode: str | None = None
     design: MachineDesign = PROTOTYPE  # the machines' design: control limits, validity, slots
+    conditions: Conditions = IDEAL  # the world's effects beyond the geometry
 
     @cached_property
     def slots(self) -> tuple[GaugeSpec, ...]:
@@ -100,7 +102,8 @@ def _shared(args: dict[str, Any], design: MachineDesign) -> dict[str, Any]:
     travel = design.gauge_travel if args["travel"] is None else args["travel"]
     return {"preset": get_preset(args["errors"]), "backend": args["backend"],
             "noise": check_noise(args["gauge_sigma"], args["gauge_resolution"], travel),
-            "travel": travel, "render_mode": render_mode, "design": design}
+            "travel": travel, "render_mode": render_mode, "design": design,
+            "conditions": args["conditions"]}
 
 
 def lab_settings(args: dict[str, Any]) -> LabSettings:

@@ -28,6 +28,7 @@ from orthoglide_env.lab.operations import PAPER_SLOTS, TRACKER_SIGMA
 from orthoglide_env.lab.settings import DEFAULT_BUDGET_S
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS
+from orthoglide_env.world.conditions import DEFAULT_CONDITIONS, as_conditions
 
 BACKENDS: tuple[str, ...] = ("pybullet", "exact")
 RENDER_MODES: tuple[str, ...] = ("rgb_array", "human")
@@ -191,6 +192,21 @@ ERRORS = Choice(tuple(sorted(PRESETS)), "the name of an error preset, one of",
 SIGMA = Number("mm", 0.0, default=DEFAULT_SIGMA)  # the range that depends on the travel:
 RESOLUTION = Number("mm", 0.0, default=DEFAULT_RESOLUTION)  # check_noise
 RENDER_MODE = Choice((None, *RENDER_MODES))
+
+
+@dataclass(frozen=True)
+class World(Arg):
+    """The conditions: a name of :data:`CONDITION_NAMES`, a ``Conditions``, or a dict of
+    its ``name`` and ``effects``."""
+
+    def check(self, name: str, value: Any) -> Any:
+        try:
+            return as_conditions(value)
+        except ValueError as exc:
+            raise ValueError(f"{name}: {exc}") from None
+
+
+CONDITIONS = World(default=DEFAULT_CONDITIONS)
 #: ``OrthoglideCalibration-v0``'s arguments.
 CALIBRATION: dict[str, Arg] = {
     "errors": ERRORS, "gauge_sigma": SIGMA, "gauge_resolution": RESOLUTION,
@@ -198,7 +214,7 @@ CALIBRATION: dict[str, Arg] = {
     "backend": Choice(BACKENDS, default="pybullet"), "gauges": Layout(),
     "travel": Number("mm", 0.0, open=True, optional=True),  # None: the design's
     "max_episode_steps": Integer(low=1, optional=True), "render_mode": RENDER_MODE,
-    "clip_actions": FLAG, "design": Design(),
+    "clip_actions": FLAG, "design": Design(), "conditions": CONDITIONS,
 }
 #: ``OrthoglideLab-v0``'s arguments.
 LAB: dict[str, Arg] = {
@@ -213,7 +229,7 @@ LAB: dict[str, Arg] = {
     "time_weight": Number("", 0.0, default=1.0),
     "success_mm": Number("mm", 0.0, open=True, default=0.01),
     "travel": Number("mm", 0.0, open=True, optional=True), "design": Design(),
-    "render_mode": RENDER_MODE,
+    "conditions": CONDITIONS, "render_mode": RENDER_MODE,
 }
 #: A native vector env's arguments: ``num_envs``, its single env's (the lab's draws no
 #: picture) and ``autoreset_mode``.

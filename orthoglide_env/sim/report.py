@@ -19,6 +19,7 @@ from orthoglide_env.instruments.stands import install, zero_gauges
 from orthoglide_env.model.errors import AXIS_NAMES, LEG_NAMES, MachineParams, check_rho
 from orthoglide_env.model.kinematics import direct
 from orthoglide_env.sim.pybullet import OrthoglideMachine
+from orthoglide_env.world.conditions import Conditions
 
 
 def _machine_with_gauges(machine: MachineParams) -> OrthoglideMachine:
@@ -77,6 +78,46 @@ def pose_report(
             }
             for g, r, s in zip(gauges, readings, status, strict=True)
         ],
+    }
+
+
+def pose_in_world(machine: MachineParams, rho: np.ndarray, conditions: Conditions, *,
+                  seed: int | None, sigma: float, resolution: float) -> dict:
+    """:func:`pose_report` in a world beyond the geometry: the paper's gauges mounted at
+    Zero on the machine, which is then driven to ``rho``, in a lab of each backend (the
+    world drawn from ``seed``).  The same keys, with the world's ``conditions`` and
+    ``world``; the gauges' readings are the simulated lab's."""
+    import gymnasium as gym
+
+    from orthoglide_env import ENV_ID
+
+    rho = check_rho(rho, design=machine.design)
+    seed = int(np.random.SeedSequence().generate_state(1)[0]) if seed is None else seed
+    out: dict = {}
+    for backend in ("exact", "pybullet"):
+        env = gym.make(ENV_ID, backend=backend, conditions=conditions,
+                       gauge_sigma=sigma, gauge_resolution=resolution, errors="nominal",
+                       design=machine.design)
+        try:
+            env.reset(seed=seed, options={"machine": machine.to_dict()})
+            obs, *_ = env.step(rho)
+            lab = env.unwrapped
+            out[backend] = (obs, lab.tcp(), lab.true_world, lab.true_gauges)
+            if backend == "pybullet":
+                sim = lab.simulated_machine
+                out["residual"] = sim.loop_residual()
+                out["rotation"] = sim.platform_orientation_error()
+        finally:
+            env.close()
+    obs, tcp, world, gauges = out["pybullet"]
+    return {
+        "tcp": tcp.tolist(), "tcp_model": out["exact"][1].tolist(),
+        "loop_residual_mm": out["residual"], "platform_rotation_rad": out["rotation"],
+        "conditions": conditions.to_dict(), "world": world.to_dict(),
+        "gauges": [{"leg": LEG_NAMES[g.spec.leg], "axis": AXIS_NAMES[g.spec.axis],
+                    "reading": float(r) if v else None, "valid": bool(v),
+                    "status": "valid" if v else "not-valid"}
+                   for g, r, v in zip(gauges, obs["gauges"], obs["valid"], strict=True)],
     }
 
 

@@ -1,0 +1,124 @@
+"""The sizes of the real lab's effects: one table, each number with its source.
+
+Each row is one parameter of one effect.  Under the ``lab`` conditions (a
+temperature-controlled room, a well-kept machine: C3 screws, preloaded nuts, good
+instruments) and the ``workshop`` ones (a shop floor, an ordinary machine: C5 screws,
+precision nuts) a machine's value is drawn uniformly in the row's range; a ``signed``
+row then takes a random sign.  A range whose ends are equal is a fixed value.  The
+README shows this table (``orthoglide conditions`` prints it).
+
+Positions along a drive are measured from the back end of its travel (``rho_min``, where
+the screw's fixed bearing is assumed to be); the stroke is ``rho_max - rho_min``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Size:
+    """One parameter: its range under each condition, unit, how it is drawn, source."""
+
+    lab: tuple[float, float]
+    workshop: tuple[float, float]
+    unit: str
+    meaning: str
+    source: str
+    signed: bool = False
+
+    def at(self, condition: str) -> tuple[float, float]:
+        """The range under ``condition`` (``lab`` or ``workshop``)."""
+        return self.lab if condition == "lab" else self.workshop
+
+
+EFFECTS: dict[str, dict[str, Size]] = {
+    "lead": {
+        "scale": Size((0, 12), (0, 23), "um", "travel deviation at the stroke's end "
+                      "(linear part)", "ISO 3408-3 e_p, useful travel <= 315 mm: C3 12, "
+                      "C5 23 um", signed=True),
+        "curve": Size((0, 8), (0, 18), "um", "peak-to-peak of a smooth curve about the "
+                      "mean line (two sine terms over the stroke)",
+                      "ISO 3408-3 v_300p: C3 8, C5 18 um"),
+        "periodic": Size((0, 6), (0, 8), "um", "peak-to-peak within one screw revolution, "
+                         "random phase", "ISO 3408-3 v_2pi p: C3 6, C5 8 um"),
+        "screw_lead": Size((5, 5), (5, 5), "mm", "the screw's lead (the periodic error's "
+                           "period)", "assumption: a 5 mm lead, usual for a 16 mm "
+                           "precision screw"),
+    },
+    "backlash": {
+        "lost_motion": Size((0, 5), (5, 15), "um", "per axis: the carriage lags the "
+                            "command by half of it in the direction of the last move",
+                            "lab: a preloaded nut's elastic lost motion (assumption); "
+                            "workshop: precision nuts 5-15 um (ball screw catalogues)"),
+    },
+    "warmup": {
+        "amplitude": Size((10, 20), (20, 30), "um", "screw growth at the stroke's far end "
+                          "once warm, proportional to the distance from the bearing",
+                          "assumption: 10-30 um; a semi-closed-loop axis drifted 44 um on a "
+                          "test part that a linear encoder removed"),
+        "time_constant": Size((20, 40), (20, 40), "min", "exponential warm-up from the "
+                              "lab clock's 0 (the drives are switched on at reset)",
+                              "assumption: 20-40 min"),
+    },
+    "room": {
+        "offset": Size((0, 0.5), (0, 3), "K", "room temperature at reset minus the 20 C "
+                       "reference", "ISO 1 (reference 20 C); lab +-0.5 K, workshop +-3 K "
+                       "(assumption)", signed=True),
+        "drift": Size((0.3, 0.3), (1, 1), "K/h", "steady drift of the room",
+                      "about 0.3 K/h for a controlled room, 1 K/h for a shop (assumption)",
+                      signed=True),
+        "walk": Size((0.1, 0.1), (0.3, 0.3), "K/sqrt(h)", "a slow random walk about the "
+                     "drift (8 smooth modes over 8 h)", "assumption"),
+        "expansion": Size((11.5, 11.5), (11.5, 11.5), "um/(m K)", "the machine (steel) "
+                          "grows about the world origin with the room", "steel "
+                          "11.5-12 um/(m K) (handbook value)"),
+    },
+    "dial": {
+        "range": Size((0, 8), (0, 10), "um", "peak-to-peak of the indicator's error over "
+                      "its whole travel (half a sine over the travel)", "ISO 463 / "
+                      "JIS B 7503: 15 um over the range, 9 um any half revolution"),
+        "revolution": Size((0, 4), (0, 5), "um", "peak-to-peak of the error that repeats "
+                           "every revolution (1 mm)", "ISO 463 / JIS B 7503: 10 um any "
+                           "revolution, 5 um any 0.1 mm"),
+        "retrace": Size((0, 2), (0, 3), "um", "hysteresis: the reading differs by it "
+                        "between the plunger going in and out", "ISO 463 / JIS B 7503: "
+                        "retrace error 3 um"),
+        "force_rest": Size((0.6, 0.6), (0.6, 0.6), "N", "measuring force with the plunger "
+                           "out", "assumption from catalogue indicators"),
+        "force_full": Size((1.5, 1.5), (1.5, 1.5), "N", "measuring force with the plunger "
+                           "fully in (linear between)", "JIS B 7503:2017: at most 2 N"),
+    },
+    "stands": {
+        "creep": Size((0, 2), (0, 5), "um", "a magnetic stand's settling after each "
+                      "mounting, along the measuring axis", "assumption: a few um over "
+                      "minutes", signed=True),
+        "creep_time": Size((2, 5), (2, 5), "min", "its exponential time constant",
+                           "assumption"),
+        "give": Size((0.5, 0.5), (0.5, 0.5), "um/N", "the stand yields under the gauge's "
+                     "force", "assumption"),
+        "thermal": Size((2, 3.5), (2, 3.5), "um/K", "a stand's arm grows with the room, "
+                        "along the measuring axis", "200-300 mm steel arm: 2-3.5 um/K",
+                        signed=True),
+    },
+    "compliance": {
+        "actuator": Size((0.03, 0.03), (0.05, 0.05), "um/N", "axial compliance of each "
+                         "drive (screw, nut, bearings)", "assumption: 20-33 N/um, a "
+                         "16 mm screw's axial stiffness"),
+        "weight": Size((30, 30), (30, 30), "N", "weight of the platform and the legs' "
+                       "moving share, along -z", "assumption: about 3 kg"),
+        "bar_modulus": Size((210, 210), (210, 210), "GPa", "Young's modulus of the bars "
+                            "(solid, the design's bar_section), bent by the gauge's force "
+                            "between their hinges", "steel: 210 GPa"),
+    },
+    "tracker": {
+        "distance": Size((10, 10), (10, 10), "um", "MPE along the line of sight, plus "
+                         "0.3 um/m; a reading's sigma is half the MPE", "laser tracker "
+                         "datasheets (ISO 10360-10): +-(10 um + 0.3 um/m)"),
+        "transverse": Size((15, 15), (15, 15), "um", "MPE across the line of sight, plus "
+                           "6 um/m; sigma half of it", "datasheets: +-(15 um + 6 um/m)"),
+    },
+}
+
+#: The per-metre parts of the tracker's MPE (um/m), beside the table's constant parts.
+TRACKER_MPE_PER_M: dict[str, float] = {"distance": 0.3, "transverse": 6.0}
