@@ -211,3 +211,13 @@ def test_bad_conditions_exit_2_with_one_line(args: list[str], words: str) -> Non
                             capture_output=True, text=True, timeout=120)
     assert result.returncode == 2
     assert words in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
+def test_the_readme_shows_the_conditions_table() -> None:
+    """The README's table is the module's, row for row (one source for every size)."""
+    from pathlib import Path
+
+    from calibrators.cli.conditions import table
+
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    assert table() in readme
