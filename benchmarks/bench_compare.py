@@ -12,9 +12,12 @@ lone lab step by step, then its fit and its scores, each a batch of one) on the 
 each the fastest of ``--repeat`` runs taken in turns; the time per machine of each, their
 ratio, and the largest difference between the two paths' trials on the machines both ran
 (parameters, scores, predicted errors, mm).  Then the episodes alone (the agent in the
-lab, no estimate).  Last, the peak resident memory (``getrusage`` max RSS) of a fresh
-process that runs ``--memory-machines`` machines through the batched path with the paper
-estimator.  BLAS runs single-threaded, as in compare's workers.
+lab, no estimate).  Then, per estimator, the batched path under ``--conditions`` (default
+``lab``: every effect of the world on) against the same run under ``ideal``, each the
+fastest of ``--repeat`` runs taken in turns, and their ratio.  Last, the peak resident
+memory (``getrusage`` max RSS) of a fresh process that runs ``--memory-machines``
+machines through the batched path with the paper estimator.  BLAS runs single-threaded,
+as in compare's workers.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ for _variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
+from dataclasses import replace  # noqa: E402
 
 import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
@@ -36,6 +40,7 @@ import orthoglide_env  # noqa: E402
 from calibrators.agents import get_agent  # noqa: E402
 from calibrators.compare import CHUNK, Config, Trial, run_chunk  # noqa: E402
 from calibrators.experiment import run_episode, run_episodes  # noqa: E402
+from orthoglide_env.world.conditions import Conditions  # noqa: E402
 
 #: Machines per chunk of the per-machine path: one, every stage a batch of one.
 PER_MACHINE_CHUNK: int = 1
@@ -94,6 +99,24 @@ print(len(trials), time.perf_counter() - start,
 """
 
 
+def world_costs(args: argparse.Namespace) -> None:
+    """The batched path's time per machine under ``args.conditions`` against ``ideal``."""
+    print(f"{'estimator':12}{'ideal ms/machine':>20}{args.conditions + ' ms/machine':>24}"
+          f"{'ratio':>8}")
+    for name in args.estimators.split(","):
+        ideal = Config(("paper",), (name,))
+        world = replace(ideal, conditions=Conditions(args.conditions))
+        for config in (ideal, world):
+            run_chunk(config, [args.machines + 1], set(), batched=True)
+        best = {"ideal": float("inf"), "world": float("inf")}
+        for _ in range(args.repeat):
+            best["ideal"] = min(best["ideal"], timed(ideal, args.machines, True)[0])
+            best["world"] = min(best["world"], timed(world, args.machines, True)[0])
+        ms = {key: 1e3 * value / args.machines for key, value in best.items()}
+        print(f"{name:12}{ms['ideal']:20.1f}{ms['world']:24.1f}"
+              f"{ms['world'] / ms['ideal']:8.2f}", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--machines", type=int, default=1000)
@@ -103,6 +126,9 @@ def main() -> None:
     parser.add_argument("--memory-machines", type=int, default=10000)
     parser.add_argument("--repeat", type=int, default=3,
                         help="runs of each path; the fastest counts")
+    parser.add_argument("--conditions", default="lab",
+                        help="the world the batched path is timed in against ideal "
+                             "('' to skip)")
     args = parser.parse_args()
     load = os.getloadavg()[0]
     print(f"paper agent, {args.machines} realistic machines (per-machine path: the first "
@@ -129,6 +155,8 @@ def main() -> None:
     batched_s, alone_s = episodes_only(args.machines, args.per_machine)
     print(f"{'episodes':12}{1e3 * batched_s:20.1f}{1e3 * alone_s:24.1f}"
           f"{alone_s / batched_s:8.1f}", flush=True)
+    if args.conditions:
+        world_costs(args)
     if args.memory_machines:
         out = subprocess.run([sys.executable, "-c", MEMORY_RUN, str(args.memory_machines)],
                              capture_output=True, text=True, check=True).stdout.split()

@@ -221,3 +221,87 @@ def test_the_readme_shows_the_conditions_table() -> None:
 
     readme = (Path(__file__).parents[1] / "README.md").read_text()
     assert table() in readme
+
+
+def _episode(options: dict | None, seed: int) -> tuple[list[np.ndarray], gym.Env]:
+    """Readings and TCPs of a fixed tour (no remounting) in a lab with ideal gauges."""
+    env = lab(Conditions("workshop"), backend="exact")
+    env.reset(seed=seed, options=options)
+    seen = []
+    for rho in ([10, 0, 0], [0, -20, 5], [30, 30, -30], [0, 0, 0]):
+        obs = move(env, rho)
+        seen += [obs["gauges"].copy(), env.tcp()]
+    return seen, env
+
+
+def test_a_machine_file_replays_its_world() -> None:
+    """A truth written to a machine file (through JSON) and given back replays its world:
+    the same readings and TCPs to the last bit, though the stream (another seed) would
+    draw another world; without the file's world the readings differ by um."""
+    import json
+
+    from orthoglide_env.world.machine_file import machine_dict
+
+    drawn, env = _episode(None, 5)
+    truth = json.loads(json.dumps(machine_dict(env.true_machine, env.true_world)))
+    replayed, again = _episode({"machine": truth}, 99)
+    assert all(np.array_equal(a, b) for a, b in zip(drawn, replayed, strict=True))
+    assert again.true_world.to_dict() == truth["world"]
+    other, _ = _episode({"machine": {k: v for k, v in truth.items() if k != "world"}}, 99)
+    assert max(np.abs(a - b).max() for a, b in zip(drawn[1::2], other[1::2], strict=True)) > 1 * UM
+
+
+@pytest.mark.parametrize("change, words", [
+    (lambda w: w.update(backlash=[0.0, 0.0, 1.0]), "backlash = 1000 um exceeds the workshop"),
+    (lambda w: w.update(warm_tau=[1.0, 1.0, 1.0]), "warm_tau below the workshop"),
+    (lambda w: w.update(conditions={"name": "workshop", "effects": ["lead"]}),
+     "exceeds zero: backlash is off in workshop[lead]"),
+    (lambda w: w.pop("room" if "room" in w else "rate"), "missing ['rate']"),
+])
+def test_a_bad_world_in_a_machine_file_is_refused(change, words: str) -> None:
+    """A world outside the table's sizes, drawn under other conditions, or missing a key is
+    refused with ``ValueError`` naming it; nothing is clipped."""
+    from orthoglide_env.world.machine_file import machine_dict
+
+    _, env = _episode(None, 5)
+    truth = machine_dict(env.true_machine, env.true_world)
+    change(truth["world"])
+    fresh = lab(Conditions("workshop"), backend="exact")
+    with pytest.raises(ValueError, match="reset option 'machine'") as info:
+        fresh.reset(seed=0, options={"machine": truth})
+    assert words in str(info.value)
+
+
+def test_calibrate_writes_a_truth_that_replays(tmp_path) -> None:
+    """``calibrate --save-truth`` writes the machine and its world; ``--machine FILE``
+    replays it under the file's conditions (left out on the command line), and refuses
+    other ones with exit 2."""
+    import json
+
+    truth = tmp_path / "truth.json"
+    base = [sys.executable, "-m", "calibrators.cli", "calibrate", "--backend", "exact",
+            "--budget", "600", "--json"]
+    first = subprocess.run([*base, "--conditions", "lab", "--save-truth", str(truth)],
+                           capture_output=True, text=True, timeout=300, check=True)
+    written = json.loads(truth.read_text())
+    assert written["world"]["conditions"]["name"] == "lab"
+    assert json.loads(first.stdout)["truth"] == written
+    replay = [*base, "--machine", str(truth)]
+    runs = [json.loads(subprocess.run(replay, capture_output=True, text=True, timeout=300,
+                                      check=True).stdout) for _ in range(2)]
+    assert runs[0]["truth"] == written
+    assert runs[0]["estimate"] == runs[1]["estimate"]
+    refused = subprocess.run([*replay, "--conditions", "workshop"], capture_output=True,
+                             text=True, timeout=120)
+    assert refused.returncode == 2 and "drawn under lab" in refused.stderr
+
+
+def test_a_world_of_other_conditions_is_refused() -> None:
+    from orthoglide_env.world.machine_file import machine_dict
+
+    env = lab(Conditions("lab"), backend="exact")
+    env.reset(seed=1)
+    truth = machine_dict(env.true_machine, env.true_world)
+    with pytest.raises(ValueError, match="drawn under the conditions 'lab'; this lab's are "
+                                         "'workshop'"):
+        lab(Conditions("workshop"), backend="exact").reset(seed=0, options={"machine": truth})

@@ -23,17 +23,23 @@ from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.model.design import load_design
 from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS, MachineParams
 from orthoglide_env.model.reading_model import TrackerAxis, parameters_of
+from orthoglide_env.world.machine_file import machine_dict, read_machine_file, write_machine_file
+from orthoglide_env.world.truth import World
 
 
-def _setup(args: argparse.Namespace) -> tuple[MachineParams, str, float, float]:
-    """The true machine, the preset of gauge installation errors, and the gauge noise.
+def _setup(args: argparse.Namespace
+           ) -> tuple[MachineParams, World | None, str, float, float]:
+    """The true machine and its world (a machine file's, else None: drawn by the lab), the
+    preset of gauge installation errors, and the gauge noise.
 
-    A machine file defines every true error: its gauges are installed perfectly and read
-    without noise unless ``--errors`` or ``--sigma`` ask for them.  A random machine is
-    drawn from ``--errors`` (default realistic) with its gauge errors and noise."""
+    A machine file defines every true error (and, when it holds a ``world``, the drawn
+    non-geometric truth): its gauges are installed perfectly and read without noise unless
+    ``--errors`` or ``--sigma`` ask for them.  A random machine is drawn from ``--errors``
+    (default realistic) with its gauge errors and noise."""
     design = load_design(args.design)
+    world = None
     if args.machine:
-        machine = MachineParams.from_json(args.machine, design)
+        machine, world = read_machine_file(args.machine, design)
         preset = args.errors or "nominal"
         noisy = args.sigma is not None
     else:
@@ -42,7 +48,8 @@ def _setup(args: argparse.Namespace) -> tuple[MachineParams, str, float, float]:
         machine = MachineParams(design=design)
         noisy = not args.noise_free
     sigma = DEFAULT_SIGMA if args.sigma is None else args.sigma
-    return (machine, preset, sigma, DEFAULT_RESOLUTION) if noisy else (machine, preset, 0.0, 0.0)
+    noise = (sigma, DEFAULT_RESOLUTION) if noisy else (0.0, 0.0)
+    return machine, world, preset, *noise
 
 
 def _z_rms(est: Estimate, data: Measurements, env: gym.Env) -> float | None:
@@ -62,19 +69,21 @@ def run(args: argparse.Namespace) -> None:
     get_strategy(args.strategy)  # an unknown one is refused before the experiment
     agent = get_agent(args.agent)
     estimator_options.options(args)  # and so are bad options
-    machine, preset, sigma, resolution = _setup(args)
+    machine, world, preset, sigma, resolution = _setup(args)
     env = gym.make(orthoglide_env.LAB_ENV_ID, errors=preset, gauge_sigma=sigma,
                    gauge_resolution=resolution, backend=args.backend,
                    tracker=agent.needs_tracker, budget_s=args.budget,
-                   design=machine.design, conditions=conditions_of(args))
+                   design=machine.design, conditions=conditions_of(args, world))
     with closing(env):
         # A random machine is drawn by the lab from the seed, as ``compare`` draws its first
         # one: the same seed gives the same machine, installation and readings there and here.
-        given = {"machine": machine.to_dict()} if args.machine else None
+        given = {"machine": machine_dict(machine, world)} if args.machine else None
         episode = run_episode(env, agent, machine_seed(args.seed, 0), options=given)
         data = episode.measurements
         if args.save_measurements:
             data.write(args.save_measurements)
+        if args.save_truth:
+            write_machine_file(args.save_truth, episode.truth, episode.world)
         est = estimator_options.estimate(args, data, episode.sigma)
         emit(report(est, episode.truth, _z_rms(est, data, env), episode.world), args.json)
 
@@ -93,7 +102,7 @@ def add(sub: argparse._SubParsersAction) -> None:
                         "of the gauge installation only (default: realistic, or none with "
                         "--machine)")
     add_design(p)
-    add_conditions(p)
+    add_conditions(p, replays=True)
     p.add_argument("--backend", choices=["pybullet", "exact"], default="pybullet",
                    help="simulator of the virtual machine (default: %(default)s)")
     group = p.add_mutually_exclusive_group()
@@ -110,5 +119,8 @@ def add(sub: argparse._SubParsersAction) -> None:
                    help="lab time budget (s, default %(default)s)")
     p.add_argument("--save-measurements", metavar="FILE.csv",
                    help="write the experiment's readings in the format that `fit` reads")
+    p.add_argument("--save-truth", metavar="FILE.json",
+                   help="write the true machine as a machine file, with its drawn world "
+                        "under --conditions lab or workshop: --machine FILE replays it")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)

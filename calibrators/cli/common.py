@@ -18,6 +18,8 @@ from orthoglide_env.world.conditions import (
     EFFECT_NAMES,
     Conditions,
 )
+from orthoglide_env.world.machine_file import read_machine_file
+from orthoglide_env.world.truth import World
 
 #: Help of ``--design``, on every command that builds a machine.
 DESIGN_HELP = ("machine design file, JSON or TOML: the nominal dimensions, joint limits and "
@@ -44,10 +46,16 @@ def design_of(args: argparse.Namespace) -> MachineDesign:
 def machine_of(args: argparse.Namespace) -> MachineParams:
     """The machine of ``--machine FILE`` (its design: the file's, else ``--design``'s),
     else a random machine of ``--design`` drawn from ``--seed`` and ``--errors``."""
+    return truth_of(args)[0]
+
+
+def truth_of(args: argparse.Namespace) -> tuple[MachineParams, World | None]:
+    """:func:`machine_of` and the world the machine file holds (None when it holds none,
+    or for a random machine)."""
     design = design_of(args)
     if getattr(args, "machine", None):
-        return MachineParams.from_json(args.machine, design)
-    return random_machine(args.seed, args.errors, design)
+        return read_machine_file(args.machine, design)
+    return random_machine(args.seed, args.errors, design), None
 
 
 def rho_of(values: list[float], design: MachineDesign) -> np.ndarray:
@@ -70,25 +78,37 @@ def add_design(p: argparse.ArgumentParser) -> None:
     p.add_argument("--design", metavar="FILE", help=DESIGN_HELP)
 
 
-def add_conditions(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--conditions", choices=CONDITION_NAMES, default=DEFAULT_CONDITIONS,
+def add_conditions(p: argparse.ArgumentParser, replays: bool = False) -> None:
+    """``--conditions`` and ``--effects``; ``replays``: the command takes a machine file,
+    whose world (when it holds one) gives the conditions."""
+    default = (f"the machine file's world, else {DEFAULT_CONDITIONS}" if replays
+               else DEFAULT_CONDITIONS)
+    p.add_argument("--conditions", choices=CONDITION_NAMES, default=None,
                    help="the world beyond the geometry: ideal (none), lab (a controlled "
                    "room, a well-kept machine) or workshop (a shop floor, an ordinary "
                    "machine); the README's 'Conditions' lists every effect and its size "
-                   "(default: %(default)s)")
+                   f"(default: {default})")
     p.add_argument("--effects", metavar="LIST", default=None,
                    help="only these effects of --conditions act, comma-separated: "
                    f"{','.join(EFFECT_NAMES)} (default: all of them)")
 
 
-def conditions_of(args: argparse.Namespace) -> Conditions:
-    """The conditions of ``--conditions`` and ``--effects``; :class:`UsageError` if bad."""
+def conditions_of(args: argparse.Namespace, world: World | None = None) -> Conditions:
+    """The conditions of ``--conditions`` and ``--effects``, or those of a machine file's
+    ``world`` (which the options, when given, must name); :class:`UsageError` if bad."""
     effects = None if args.effects is None else tuple(
         e.strip() for e in args.effects.split(",") if e.strip())
+    if world is not None and args.conditions is None and effects is None:
+        return world.conditions
     try:
-        return Conditions(args.conditions, effects)
+        conditions = Conditions(args.conditions or DEFAULT_CONDITIONS, effects)
     except ValueError as exc:
         raise UsageError(f"--effects: {exc}") from None
+    if world is not None and conditions != world.conditions:
+        raise UsageError(f"--conditions {conditions.label}: the machine file's world was drawn "
+                         f"under {world.conditions.label}; leave --conditions and --effects "
+                         "out to replay it")
+    return conditions
 
 
 def add_machine(p: argparse.ArgumentParser) -> None:

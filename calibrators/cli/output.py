@@ -20,6 +20,7 @@ from calibrators.estimators.base import Estimate
 from calibrators.estimators.prediction import predicted_correction, predicted_tcp_error
 from orthoglide_env.model.errors import ERROR_GROUPS, ERROR_NAMES, MachineParams, error_group
 from orthoglide_env.scoring import FRAMES, score
+from orthoglide_env.world.machine_file import machine_dict
 from orthoglide_env.world.truth import World
 
 #: How many combinations a table lists before it only counts them (JSON lists all).
@@ -82,9 +83,8 @@ def report(est: Estimate, truth: MachineParams | None,
     }
     if truth is not None:
         scored = score(est.machine, truth, world=world)
-        data["truth"] = truth.to_dict()
-        if world is not None:
-            data["world"] = world.to_dict()
+        # A machine file's object: the truth can be replayed with ``calibrate --machine``.
+        data["truth"] = machine_dict(truth, world)
         data["tcp_error_before_mm"] = scored.tcp_before.to_dict()
         data["tcp_error_after_mm"] = scored.tcp_after.to_dict()
         data["z_rms"] = z_rms

@@ -10,9 +10,9 @@ from calibrators.cli.common import (
     add_conditions,
     add_machine_posture,
     conditions_of,
-    machine_of,
     print_json,
     rho_of,
+    truth_of,
     vec,
 )
 from orthoglide_env.instruments.dial import (
@@ -31,17 +31,17 @@ SIGMA_HELP = (f"gauge repeatability, standard deviation of a reading (mm, 0 to {
 
 
 def run(args: argparse.Namespace) -> None:
-    machine = machine_of(args)
+    machine, world = truth_of(args)
     rho = rho_of(args.rho, machine.design)
     # The simulator loads after validation.
     from orthoglide_env.sim.report import pose_in_world, pose_report
 
     sigma = DEFAULT_SIGMA if args.sigma is None else args.sigma
-    conditions = conditions_of(args)
+    conditions = conditions_of(args, world)
     if conditions.active:
         noise = (0.0, 0.0) if args.noise_free else (sigma, args.resolution)
         report = pose_in_world(machine, rho, conditions, seed=args.seed, sigma=noise[0],
-                               resolution=noise[1])
+                               resolution=noise[1], world=world)
     else:
         report = pose_report(machine, rho, noise_free=args.noise_free, seed=args.seed,
                              sigma=sigma, resolution=args.resolution)
@@ -68,7 +68,7 @@ def add(sub: argparse._SubParsersAction) -> None:
                    f"for none, or {MIN_RESOLUTION:g} to {NOISE_LIMIT}; default %(default)s)")
     p.add_argument("--seed", type=int, default=None, help="seed of the gauge noise "
                    "(default: %(default)s, fresh noise on every run)")
-    add_conditions(p)
+    add_conditions(p, replays=True)
     p.add_argument("--json", action="store_true", help="print one JSON object (mm, rad) "
                    "instead of a table")
     p.set_defaults(func=run)

@@ -20,8 +20,8 @@ from orthoglide_env.lab.engine import LabBatch, StepResult
 from orthoglide_env.lab.machines import ExactMachines, SimulatedMachine
 from orthoglide_env.lab.settings import LabSettings, render_modes
 from orthoglide_env.lab.spec import RENDER_MODES, Layout
-from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import MachineParams, check_validity
+from orthoglide_env.world.machine_file import read_machine
 from orthoglide_env.world.truth import World
 
 #: The one episode of a lone env, in its batch.
@@ -34,12 +34,12 @@ def check_seed(seed: Any) -> None:
         raise ValueError(f"reset seed must be None or an integer >= 0, got {seed!r}")
 
 
-def reset_options(options: Any, design: MachineDesign, stands: int | None = None
-                  ) -> tuple[MachineParams | None, tuple[GaugeSpec, ...] | None]:
-    """The checked reset options: the given machine of ``design`` (None: draw one) and,
-    where the env takes a ``gauges`` option (``stands``: how many gauges it observes), the
-    layout (None: the constructor's)."""
-    allowed = ("machine",) if stands is None else ("machine", "gauges")
+def reset_options(options: Any, settings: LabSettings, layouts: bool = False
+                  ) -> tuple[MachineParams | None, World | None, tuple[GaugeSpec, ...] | None]:
+    """The checked reset options: the given machine of the lab's design (None: draw one),
+    its world (None: draw one, when the conditions have effects) and, where the env takes
+    a ``gauges`` option (``layouts``), the layout (None: the constructor's)."""
+    allowed = ("machine", "gauges") if layouts else ("machine",)
     if options is None:
         options = {}
     if not isinstance(options, Mapping):
@@ -48,34 +48,55 @@ def reset_options(options: Any, design: MachineDesign, stands: int | None = None
     if unknown:
         raise ValueError(f"unknown reset option(s) {unknown}; allowed: {', '.join(allowed)}")
     layout = Layout().check("reset option 'gauges'", options.get("gauges"))
-    if layout is not None and len(layout) != stands:
-        raise ValueError(f"reset option 'gauges': this env observes {stands} gauges; a layout "
-                         f"of {len(layout)} needs an env built with gauges=[...] of that size")
-    return _machine_option(options.get("machine"), design), layout
+    if layout is not None and len(layout) != settings.stands:
+        raise ValueError(f"reset option 'gauges': this env observes {settings.stands} gauges; "
+                         f"a layout of {len(layout)} needs an env built with gauges=[...] of "
+                         "that size")
+    return (*_machine_option(options.get("machine"), settings), layout)
 
 
-def _machine_option(value: Any, design: MachineDesign) -> MachineParams | None:
-    """The ``machine`` reset option.  None, like leaving the key out, draws a machine from
-    the preset (as ``seed=None`` and ``options=None`` mean "nothing given" in Gymnasium);
-    anything else must be a dict in the machine file schema (a machine of ``design``
-    unless it names its own) or a ``MachineParams`` of ``design``, inside the design's
+def _machine_option(value: Any, settings: LabSettings
+                    ) -> tuple[MachineParams | None, World | None]:
+    """The ``machine`` reset option and its world.  None, like leaving the key out, draws a
+    machine from the preset (as ``seed=None`` and ``options=None`` mean "nothing given" in
+    Gymnasium); anything else must be a dict in the machine file schema (a machine of the
+    lab's design unless it names its own, with a ``world`` drawn under the lab's
+    conditions or none) or a ``MachineParams`` of the lab's design, inside the design's
     validity range."""
+    design = settings.design
     if value is None:
-        return None
+        return None, None
     try:
         if isinstance(value, MachineParams):
             if value.design != design:
                 raise ValueError("the machine's design is not the lab's (give the env its "
                                  "design: gym.make(..., design=...))")
-            return check_validity(value)
+            return check_validity(value), None
         if isinstance(value, dict):
-            return MachineParams.from_dict(value, design=design)
+            machine, world = read_machine(value, design=design)
+            return machine, _world_option(world, settings)
     except ValueError as exc:
         raise ValueError(f"reset option 'machine': {exc}") from None
     raise ValueError(
         "reset option 'machine' must be a dict in the machine file schema, a MachineParams "
         f"or None (draw one from the preset), got {type(value).__name__} {value!r}"
     )
+
+
+def _world_option(world: World | None, settings: LabSettings) -> World | None:
+    """A machine file's world, if this lab can replay it: drawn under its conditions, for
+    as many stands."""
+    if world is None:
+        return None
+    if world.conditions != settings.conditions:
+        raise ValueError(f"its world was drawn under the conditions "
+                         f"{world.conditions.label!r}; this lab's are "
+                         f"{settings.conditions.label!r} (build it with conditions="
+                         f"{world.conditions.to_dict()})")
+    if world.dial_range.shape[1] != settings.stands:
+        raise ValueError(f"its world has {world.dial_range.shape[1]} stands; this lab has "
+                         f"{settings.stands}")
+    return world
 
 
 class Face:
@@ -106,9 +127,9 @@ class Face:
         raise NotImplementedError
 
     def _reset_options(self, options: Any
-                       ) -> tuple[MachineParams | None, tuple[GaugeSpec, ...] | None]:
-        return reset_options(options, self.settings.design,
-                             self.settings.stands if self.LAYOUT_OPTION else None)
+                       ) -> tuple[MachineParams | None, World | None,
+                                  tuple[GaugeSpec, ...] | None]:
+        return reset_options(options, self.settings, self.LAYOUT_OPTION)
 
 
 class EngineEnv(Face, gym.Env):
@@ -140,12 +161,12 @@ class EngineEnv(Face, gym.Env):
         # Every option is checked before anything changes: a refused reset leaves the
         # episode (and its random stream) as it was.
         check_seed(seed)
-        machine, layout = self._reset_options(options)
+        machine, world, layout = self._reset_options(options)
         rng = self._np_random
         saved = (rng, None if rng is None else rng.bit_generator.state, self._np_random_seed)
         super().reset(seed=seed)
         try:
-            obs = self._batch.reset(ROW, [self.np_random], machine, layout)
+            obs = self._batch.reset(ROW, [self.np_random], machine, layout, world)
         except BaseException:
             self._np_random, self._np_random_seed = saved[0], saved[2]
             if saved[0] is not None:

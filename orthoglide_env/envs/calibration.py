@@ -127,7 +127,9 @@ class OrthoglideCalibrationEnv(CalibrationFace, EngineEnv):
     ``machine``: the true machine, a dict in the machine file schema
     (:meth:`MachineParams.from_dict`) or a ``MachineParams`` of the env's ``design``,
     inside the design's validity range; left out or ``None`` (as ``seed=None`` means "none
-    given"): drawn from the ``errors`` preset with ``np_random``.  Anything
+    given"): drawn from the ``errors`` preset with ``np_random``.  Its dict may hold a
+    ``world`` (the machine's drawn non-geometric truth, drawn under this env's
+    ``conditions``): it is replayed instead of drawn.  Anything
     else (a list, ``0``, ``""``, ``False``) raises ``ValueError``.  ``gauges``: the layout
     of this episode, names such as ``"x-leg/y"`` or ``"z/x@0.3"`` or ``GaugeSpec``
     objects (left out or ``None``: the constructor's); it must hold as many gauges as the
@@ -166,6 +168,11 @@ class OrthoglideCalibrationEnv(CalibrationFace, EngineEnv):
 
     Version history
     ---------------
+    * v0: ``conditions`` (``"ideal"``, ``"lab"``, ``"workshop"``, a ``Conditions`` or its
+      dict; default ``ideal``, whose numbers are unchanged bit for bit) adds the world
+      beyond the geometry, as ``OrthoglideLab-v0`` describes it: ``joints`` are then the
+      encoders' (the commanded positions), not where the carriages are; ``true_world``
+      holds the drawn world.
     * v0 (issue 20): runs on the lab engine.  The seeded streams did not change: on the
       exact backend observations, rewards and infos are the earlier implementation's, bit
       for bit.  On the ``pybullet`` backend the gauges are now set up at Zero with the

@@ -165,11 +165,29 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
     control limits bound ``rho``, its errors' validity range the machines, its
     ``slot_positions`` the bar slots; ``stands`` is at most its slot count, and its
     ``slot_positions`` must include 0.5, where the paper's stands open every episode),
-    ``render_mode``.  A bad argument raises ``ValueError`` naming it and its
-    rule.
+    ``conditions`` (the world beyond the geometry: ``"ideal"``, ``"lab"``, ``"workshop"``,
+    a :class:`~orthoglide_env.world.conditions.Conditions` naming which effects act, or its
+    dict; default ``"ideal"``), ``render_mode``.  A bad argument raises ``ValueError``
+    naming it and its rule.
+
+    Conditions
+    ----------
+    Under ``lab`` or ``workshop`` each episode also draws its world from ``np_random``
+    (:mod:`orthoglide_env.world`): the screws' lead error, backlash and warm-up move the
+    carriages away from what the encoders (``joints``) say; the room's temperature, read
+    on the lab's clock, grows the machine and the stands; each stand's indicator has its
+    own error curve and retrace; stands creep after mounting and give under the measuring
+    force; the platform and bars deflect under the weight and the gauges' forces; the
+    tracker reads with its MPE-based noise.  An agent that works longer meets a warmer
+    machine.  The drawn world is on ``true_world`` (for scoring only); a ``machine`` reset
+    option whose dict holds a ``world`` (a machine file written with ``calibrate
+    --save-truth``) replays that world instead of drawing one, and is refused by a lab
+    of other conditions.  ``ideal`` draws nothing: every stream is as before.
 
     Version history
     ---------------
+    * v0: ``conditions`` adds the world beyond the geometry (default ``ideal``: numbers
+      unchanged, bit for bit); the ``machine`` reset option may carry its ``world``.
     * v0: the slot catalogue is the design's (was the prototype's for every design, and a
       design with other ``slot_positions`` was refused).
     * v0: the constructor's arguments and defaults are its table in

@@ -96,10 +96,10 @@ class EngineVectorEnv(Face, VectorEnv):
             raise ValueError(f"reset options must be a dict or None, got {options!r}")
         options = dict(options or {})
         mask = self._reset_mask(options.pop(RESET_MASK, None))
-        machine, layout = self._reset_options(options)
+        machine, world, layout = self._reset_options(options)
         rows = np.flatnonzero(mask)
         obs = self._copy_obs()
-        self._start(rows, [seeds[i] for i in rows], machine, layout, obs)
+        self._start(rows, [seeds[i] for i in rows], machine, layout, obs, world)
         self._obs = obs
         self._ended[rows] = False
         info = self._add_infos({}, [self._reset_info(i) for i in rows], rows)
@@ -190,14 +190,15 @@ class EngineVectorEnv(Face, VectorEnv):
 
     # -- episodes and streams -----------------------------------------------------------------
     def _start(self, rows: np.ndarray, seeds: list[int | None], machine: MachineParams | None,
-               layout: tuple[GaugeSpec, ...] | None, obs: dict[str, np.ndarray]) -> None:
+               layout: tuple[GaugeSpec, ...] | None, obs: dict[str, np.ndarray],
+               world: World | None = None) -> None:
         """New episodes for envs ``rows``; their first observation goes into ``obs``.  A
         failure leaves every env, random streams included, as it was."""
         if not len(rows):
             return
         with self._streams_kept(rows):
             streams, used = self._new_streams(rows, seeds)
-            new = self._batch.reset(rows, streams, machine, layout)
+            new = self._batch.reset(rows, streams, machine, layout, world)
         for i, stream, value in zip(rows, streams, used, strict=True):
             self._streams[i], self._seeds[i] = stream, value
             self.gauge_layouts[i] = self.settings.layout if layout is None else layout

@@ -134,10 +134,12 @@ class LabBatch:
     # -- reset --------------------------------------------------------------------------------
     def reset(self, rows: np.ndarray, streams: list[np.random.Generator],
               machine: MachineParams | None = None,
-              layout: tuple[GaugeSpec, ...] | None = None) -> dict[str, np.ndarray]:
+              layout: tuple[GaugeSpec, ...] | None = None,
+              world: World | None = None) -> dict[str, np.ndarray]:
         """New episodes for ``rows`` (each drawing from its stream in ``streams``, or on
-        ``machine`` when given): the stands at the slots of ``layout`` (default the
-        settings'), zeroed at Zero, and the first reading.  Their observation rows."""
+        ``machine`` and ``world`` when given, a machine file's truth): the stands at the
+        slots of ``layout`` (default the settings'), zeroed at Zero, and the first reading.
+        Their observation rows."""
         settings = self.settings
         specs = settings.layout if layout is None else layout
         first = [self.place(spec) for spec in specs]
@@ -151,7 +153,8 @@ class LabBatch:
                 positions.append(TRACKER_DISTANCE * direction / np.linalg.norm(direction))
             errors.append(installation_errors(len(first), settings.preset, stream))
             if settings.conditions.active:
-                worlds.append(World.draw(settings.conditions, stream, settings.stands))
+                worlds.append(World.draw(settings.conditions, stream, settings.stands)
+                              if world is None else world)
         machines = MachineParams.stack(drawn)
         world = World.stack(worlds) if worlds else None
         installed = self._installed(machines, list(specs), np.stack(errors), world,

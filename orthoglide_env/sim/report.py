@@ -20,6 +20,8 @@ from orthoglide_env.model.errors import AXIS_NAMES, LEG_NAMES, MachineParams, ch
 from orthoglide_env.model.kinematics import direct
 from orthoglide_env.sim.pybullet import OrthoglideMachine
 from orthoglide_env.world.conditions import Conditions
+from orthoglide_env.world.machine_file import machine_dict
+from orthoglide_env.world.truth import World
 
 
 def _machine_with_gauges(machine: MachineParams) -> OrthoglideMachine:
@@ -82,11 +84,12 @@ def pose_report(
 
 
 def pose_in_world(machine: MachineParams, rho: np.ndarray, conditions: Conditions, *,
-                  seed: int | None, sigma: float, resolution: float) -> dict:
+                  seed: int | None, sigma: float, resolution: float,
+                  world: World | None = None) -> dict:
     """:func:`pose_report` in a world beyond the geometry: the paper's gauges mounted at
     Zero on the machine, which is then driven to ``rho``, in a lab of each backend (the
-    world drawn from ``seed``).  The same keys, with the world's ``conditions`` and
-    ``world``; the gauges' readings are the simulated lab's."""
+    ``world`` of a machine file, else one drawn from ``seed``).  The same keys, with the
+    world's ``conditions`` and ``world``; the gauges' readings are the simulated lab's."""
     import gymnasium as gym
 
     from orthoglide_env import ENV_ID
@@ -99,7 +102,7 @@ def pose_in_world(machine: MachineParams, rho: np.ndarray, conditions: Condition
                        gauge_sigma=sigma, gauge_resolution=resolution, errors="nominal",
                        design=machine.design)
         try:
-            env.reset(seed=seed, options={"machine": machine.to_dict()})
+            env.reset(seed=seed, options={"machine": machine_dict(machine, world)})
             obs, *_ = env.step(rho)
             lab = env.unwrapped
             out[backend] = (obs, lab.tcp(), lab.true_world, lab.true_gauges)

@@ -46,6 +46,20 @@ _DRIVE_FIELDS = ("lead_scale", "lead_a1", "lead_a2", "lead_periodic", "lead_phas
 _DIAL_FIELDS = ("dial_range", "dial_phase", "dial_revolution", "dial_revolution_phase",
                 "retrace")
 _STAND_FIELDS = ("creep", "creep_tau", "thermal", "mounted_at")
+#: Each drawn number's bound: (effect, table parameter, table unit in the field's unit).
+#: The curve terms share one peak-to-peak and the dial's terms are half-amplitudes, so
+#: each alone stays within the table's number.
+_BOUNDS: dict[str, tuple[str, str, float]] = {
+    "lead_scale": ("lead", "scale", UM), "lead_a1": ("lead", "curve", UM),
+    "lead_a2": ("lead", "curve", UM / 2), "lead_periodic": ("lead", "periodic", UM / 2),
+    "backlash": ("backlash", "lost_motion", UM),
+    "warm_amplitude": ("warmup", "amplitude", UM),
+    "warm_tau": ("warmup", "time_constant", MINUTE),
+    "offset": ("room", "offset", 1.0), "rate": ("room", "drift", 1 / HOUR),
+    "dial_range": ("dial", "range", UM / 2), "dial_revolution": ("dial", "revolution", UM / 2),
+    "retrace": ("dial", "retrace", UM), "creep": ("stands", "creep", UM),
+    "creep_tau": ("stands", "creep_time", MINUTE), "thermal": ("stands", "thermal", UM),
+}
 
 
 def _uniform(stream: np.random.Generator, size: tuple[float, float], shape: tuple[int, ...],
@@ -331,4 +345,29 @@ class World:
                 shapes[n] != (1, 3) for n in _DRIVE_FIELDS) or len(
                 {shapes[n] for n in _DIAL_FIELDS + _STAND_FIELDS}) != 1:
             raise ValueError(f"world: arrays of the wrong shape {shapes}")
-        return cls(conditions, **values)
+        world = cls(conditions, **values)
+        world.check()
+        return world
+
+    def check(self) -> None:
+        """``ValueError`` naming the first number outside what its conditions draw (an
+        effect that is off draws zero): a world read from a file is held to the table."""
+        for name, (effect, parameter, unit) in _BOUNDS.items():
+            value = np.abs(getattr(self, name))
+            on = effect in self.conditions
+            low, high = self.conditions.size(effect, parameter) if on else (0.0, 0.0)
+            # The time constants' ranges are open below (a tau of zero divides).
+            if name in ("warm_tau", "creep_tau"):
+                if on and np.any(value < low * unit * (1 - 1e-9)):
+                    raise ValueError(f"world: {name} below the {self.conditions.name} "
+                                     f"table's {low:g} {EFFECTS[effect][parameter].unit}")
+                high = np.inf if on else high
+                if not on:
+                    continue
+            if np.any(value > high * unit * (1 + 1e-9) + 1e-15):
+                limit = (f"the {self.conditions.name} table's {high:g} "
+                         f"{EFFECTS[effect][parameter].unit}" if on
+                         else f"zero: {effect} is off in {self.conditions.label}")
+                unit_name = EFFECTS[effect][parameter].unit
+                raise ValueError(f"world: {name} = {value.max() / unit:g} {unit_name} "
+                                 f"exceeds {limit}")
