@@ -19,21 +19,11 @@ import argparse
 import sys
 
 import numpy as np
-from scipy import stats
 
-from calibrators.compare import Config, Trial, run
+from calibrators.compare import Config, Trial, median_interval, run
 from orthoglide_env.world.conditions import EFFECT_NAMES, Conditions
 
 UM = 1e3  # per mm
-
-
-def median_interval(values: np.ndarray, level: float = 0.95) -> tuple[float, float]:
-    """A distribution-free interval of the median: the order statistics k and n-1-k
-    with k the binomial(n, 1/2) quantile of (1 - level)/2."""
-    ordered = np.sort(values)
-    n = len(ordered)
-    k = max(int(stats.binom.ppf((1 - level) / 2, n, 0.5)) - 1, 0)
-    return float(ordered[k]), float(ordered[n - 1 - k])
 
 
 def rigid(trials: list[Trial], agent: str) -> dict[int, float]:

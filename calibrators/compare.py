@@ -24,6 +24,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from scipy import special
 
 import orthoglide_env
 from calibrators.agents import get_agent
@@ -358,6 +359,23 @@ def _stats(values: list[float]) -> dict[str, float | None]:
     if not values:
         return {"median": None, "p95": None}
     return {"median": float(np.median(values)), "p95": float(np.percentile(values, 95))}
+
+
+def median_interval(values: Any, level: float = 0.95) -> tuple[float, float]:
+    """A distribution-free interval of the median of ``values``: the order statistics k
+    and n-1-k (0-based), k the largest with binomial(n, 1/2) probability of fewer than k+1
+    values below the median at most (1 - level)/2, so it covers the median at least
+    ``level`` of the time whatever the distribution.  ``ValueError`` when n is too small
+    for that level (n < 6 at 95 %)."""
+    ordered = np.sort(np.asarray(values, dtype=float))
+    n = len(ordered)
+    k = int(special.bdtrik((1 - level) / 2, n, 0.5)) if n else 0
+    # bdtrik inverts the binomial CDF continuously: step down to an exact order statistic.
+    while k >= 0 and special.bdtr(k, n, 0.5) > (1 - level) / 2:
+        k -= 1
+    if k < 0:
+        raise ValueError(f"{n} values cannot bound a median at {level:.0%}")
+    return float(ordered[k]), float(ordered[n - 1 - k])
 
 
 def _fraction(flags: list[bool | None]) -> float | None:

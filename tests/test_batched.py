@@ -215,3 +215,27 @@ def _same(a: GaugeArray, b: GaugeArray) -> bool:
     return all(np.array_equal(getattr(a, name), getattr(b, name))
                for name in ("origin", "direction", "sign", "travel", "zero", "leg", "axis",
                             "at"))
+
+
+@pytest.mark.parametrize("n", [6, 10, 20, 50, 200])
+def test_the_median_interval_covers_at_its_level_and_no_wider(n: int) -> None:
+    """The interval's order statistics k, n-1-k cover the median with probability
+    1 - 2 P(B <= k), B ~ binomial(n, 1/2), whatever the distribution: at least 95 %, and
+    the next narrower pair would fall below it.  Checked on the ranks (any continuous
+    distribution maps onto them)."""
+    from scipy import stats
+
+    from calibrators.compare import median_interval
+
+    low, high = median_interval(np.arange(n))
+    k = int(low)
+    assert high == n - 1 - k
+    assert 1 - 2 * stats.binom.cdf(k, n, 0.5) >= 0.95
+    assert 1 - 2 * stats.binom.cdf(k + 1, n, 0.5) < 0.95
+
+
+def test_too_few_values_bound_no_median() -> None:
+    from calibrators.compare import median_interval
+
+    with pytest.raises(ValueError, match="5 values cannot bound a median at 95%"):
+        median_interval(np.arange(5))
