@@ -257,6 +257,8 @@ def test_a_machine_file_replays_its_world() -> None:
     (lambda w: w.update(conditions={"name": "workshop", "effects": ["lead"]}),
      "exceeds zero: backlash is off in workshop[lead]"),
     (lambda w: w.pop("room" if "room" in w else "rate"), "missing ['rate']"),
+    (lambda w: w.update(lead_scale="x"), "world: lead_scale must hold numbers"),
+    (lambda w: w.update(backlash=[True, 0.0, 0.0]), "world: backlash must hold numbers"),
 ])
 def test_a_bad_world_in_a_machine_file_is_refused(change, words: str) -> None:
     """A world outside the table's sizes, drawn under other conditions, or missing a key is

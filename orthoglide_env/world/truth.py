@@ -21,6 +21,7 @@ A batch of machines is one ``World`` whose arrays have the machine first.
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -70,6 +71,14 @@ def _uniform(stream: np.random.Generator, size: tuple[float, float], shape: tupl
 
 def _fixed(conditions: Conditions, effect: str, parameter: str) -> float:
     return float(conditions.size(effect, parameter)[0]) if effect in conditions else 0.0
+
+
+def _all_numbers(value: Any) -> bool:
+    """Whether ``value`` is a number or nested lists of them (numpy alone would read
+    ``true`` and ``"1.5"`` as numbers)."""
+    if isinstance(value, list | tuple):
+        return all(_all_numbers(v) for v in value)
+    return isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
 
 
 @dataclass(frozen=True)
@@ -336,7 +345,14 @@ class World:
         conditions = Conditions.from_dict(data["conditions"])
         values = {}
         for name in names[1:]:
-            value = np.asarray(data[name], dtype=float)[None]
+            if not _all_numbers(data[name]):
+                raise ValueError(f"world: {name} must hold numbers (not booleans or text), "
+                                 f"got {data[name]!r:.60}")
+            try:
+                value = np.asarray(data[name], dtype=float)[None]
+            except (OverflowError, ValueError):  # huge integers, ragged lists
+                raise ValueError(f"world: {name} must hold finite numbers of its shape"
+                                 ) from None
             if not np.isfinite(value).all():
                 raise ValueError(f"world: {name} must hold finite numbers")
             values[name] = value
