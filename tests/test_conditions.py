@@ -16,7 +16,7 @@ import pytest
 import orthoglide_env
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.model.design import PROTOTYPE
-from orthoglide_env.world.conditions import Conditions
+from orthoglide_env.world.conditions import EFFECT_NAMES, Conditions
 from orthoglide_env.world.table import EFFECTS
 from orthoglide_env.world.truth import WALK_HORIZON_S, World
 
@@ -259,6 +259,9 @@ def test_a_machine_file_replays_its_world() -> None:
     (lambda w: w.pop("room" if "room" in w else "rate"), "missing ['rate']"),
     (lambda w: w.update(lead_scale="x"), "world: lead_scale must hold numbers"),
     (lambda w: w.update(backlash=[True, 0.0, 0.0]), "world: backlash must hold numbers"),
+    (lambda w: w.update(conditions={"name": "workshop", "effects": [
+        e for e in EFFECT_NAMES if e != "room"]}, rate=0.0, offset=0.0),
+     "walk must be zero: room is off"),
 ])
 def test_a_bad_world_in_a_machine_file_is_refused(change, words: str) -> None:
     """A world outside the table's sizes, drawn under other conditions, or missing a key is

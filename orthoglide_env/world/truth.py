@@ -387,3 +387,8 @@ class World:
                 unit_name = EFFECTS[effect][parameter].unit
                 raise ValueError(f"world: {name} = {value.max() / unit:g} {unit_name} "
                                  f"exceeds {limit}")
+        if "room" not in self.conditions and np.any(self.walk != 0):
+            raise ValueError(f"world: walk must be zero: room is off in "
+                             f"{self.conditions.label}")
+        if np.any(self.mounted_at < 0):
+            raise ValueError("world: mounted_at must be a lab time >= 0 s")
