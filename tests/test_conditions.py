@@ -310,3 +310,45 @@ def test_a_world_of_other_conditions_is_refused() -> None:
     with pytest.raises(ValueError, match="drawn under the conditions 'lab'; this lab's are "
                                          "'workshop'"):
         lab(Conditions("workshop"), backend="exact").reset(seed=0, options={"machine": truth})
+
+
+@pytest.mark.parametrize("indicator", ["dial", "digital"])
+def test_a_digital_indicator_scatters_at_its_strokes_ends(indicator: str) -> None:
+    """Noise-free gauges, the indicators' effect alone: a posture read 40 times from the
+    same side repeats (to round-off), except on a digital indicator whose tip is within
+    the table's end band (0.2 mm) of its stroke's end, which scatters by the table's sigma
+    (3 um in the lab; the sample std of 40 is within 25 % of it at 3.5 sigma)."""
+    conditions = Conditions("lab", ("dial",), indicator)
+    env = lab(conditions, backend="exact")
+    env.reset(seed=3)
+    seen = []
+    for _ in range(40):
+        seen.append(move(env, [10.0, 0.0, 0.0])["gauges"].copy())
+        move(env, [0.0, 0.0, 0.0])
+    seen = np.array(seen)
+    half = env.travel / 2
+    band = EFFECTS["dial"]["digital_end"].lab[0]
+    at_end = np.abs(seen[0]) > half - band
+    assert at_end.any() and not at_end.all()  # the posture puts one plunger in the band
+    spread = seen.std(axis=0, ddof=1)
+    assert np.all(spread[~at_end] < 1e-9)  # round-off of the repeated sums
+    sigma = EFFECTS["dial"]["digital_end_sigma"].lab[0] * UM
+    if indicator == "digital":
+        assert np.all(np.abs(spread[at_end] / sigma - 1) < 0.25)
+    else:
+        assert np.all(spread[at_end] < 1e-9)
+
+
+def test_a_digital_indicators_error_curve_has_its_own_size() -> None:
+    """Its error over the travel stays within the digital row (3 um peak-to-peak) and it
+    has no revolution error; an unknown indicator, or one without the dial effect, is
+    refused."""
+    stream = np.random.default_rng(0)
+    world = World.draw(Conditions("workshop", indicator="digital"), stream, 200)
+    assert np.all(world.dial_revolution == 0.0)
+    high = EFFECTS["dial"]["digital_range"].workshop[1] * UM / 2
+    assert world.dial_range.max() <= high and world.dial_range.max() > 0.8 * high
+    with pytest.raises(ValueError, match="unknown indicator 'laser'"):
+        Conditions("lab", indicator="laser")
+    with pytest.raises(ValueError, match="errors are the dial effect's"):
+        Conditions("lab", ("lead",), "digital")

@@ -74,6 +74,9 @@ CASES = {
     # Every effect of the world, re-mountings (their own draws) and the tracker's MPE.
     "workshop world": (AutoresetMode.NEXT_STEP, {"conditions": "workshop", "tracker": True,
                                                  "stands": 8, "budget_s": 600.0}),
+    # Digital indicators scatter more at their stroke's ends, from the same draws.
+    "digital indicators": (AutoresetMode.NEXT_STEP, {
+        "conditions": {"name": "lab", "indicator": "digital"}, "budget_s": 300.0}),
 }
 
 

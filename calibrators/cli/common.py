@@ -16,6 +16,7 @@ from orthoglide_env.world.conditions import (
     CONDITION_NAMES,
     DEFAULT_CONDITIONS,
     EFFECT_NAMES,
+    INDICATORS,
     Conditions,
 )
 from orthoglide_env.world.machine_file import read_machine_file
@@ -91,6 +92,11 @@ def add_conditions(p: argparse.ArgumentParser, replays: bool = False) -> None:
     p.add_argument("--effects", metavar="LIST", default=None,
                    help="only these effects of --conditions act, comma-separated: "
                    f"{','.join(EFFECT_NAMES)} (default: all of them)")
+    p.add_argument("--indicator", choices=INDICATORS, default=None,
+                   help="the gauges' indicators under lab or workshop conditions: dial "
+                   "(ISO 463) or digital (its own error rows in the README's "
+                   "'Conditions'; read it at 1 um with --resolution 0.001 where the "
+                   "command has it) (default: dial)")
 
 
 def conditions_of(args: argparse.Namespace, world: World | None = None) -> Conditions:
@@ -98,16 +104,19 @@ def conditions_of(args: argparse.Namespace, world: World | None = None) -> Condi
     ``world`` (which the options, when given, must name); :class:`UsageError` if bad."""
     effects = None if args.effects is None else tuple(
         e.strip() for e in args.effects.split(",") if e.strip())
-    if world is not None and args.conditions is None and effects is None:
+    indicator = getattr(args, "indicator", None)
+    if world is not None and args.conditions is None and effects is None and indicator is None:
         return world.conditions
     try:
-        conditions = Conditions(args.conditions or DEFAULT_CONDITIONS, effects)
+        conditions = Conditions(args.conditions or DEFAULT_CONDITIONS, effects,
+                                indicator or "dial")
     except ValueError as exc:
-        raise UsageError(f"--effects: {exc}") from None
+        option = "--indicator" if "indicator" in str(exc) else "--effects"
+        raise UsageError(f"{option}: {exc}") from None
     if world is not None and conditions != world.conditions:
         raise UsageError(f"--conditions {conditions.label}: the machine file's world was drawn "
-                         f"under {world.conditions.label}; leave --conditions and --effects "
-                         "out to replay it")
+                         f"under {world.conditions.label}; leave --conditions, --effects "
+                         "and --indicator out to replay it")
     return conditions
 
 

@@ -94,6 +94,7 @@ def _prepare_out(args: argparse.Namespace, config: Config) -> tuple[Path | None,
         if saved is not None:  # a run kept before conditions existed ran in the ideal world
             saved.setdefault("conditions", "ideal")
             saved.setdefault("effects", [])
+            saved.setdefault("indicator", "dial")
         if saved != _config_dict(config, args.machines):
             raise UsageError(f"--resume needs the options of the run in {out} "
                              f"({config_path}): they differ")
@@ -122,7 +123,8 @@ def _config_dict(config: Config, machines: int) -> dict:
     if design != PROTOTYPE:
         data["design"] = design.to_dict()
     conditions = data.pop("conditions")
-    data.update(conditions=conditions.name, effects=list(conditions.effects))
+    data.update(conditions=conditions.name, effects=list(conditions.effects),
+                indicator=conditions.indicator)
     return data
 
 

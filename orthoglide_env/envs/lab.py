@@ -174,15 +174,16 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
     ----------
     Under ``lab`` or ``workshop`` each episode also draws its world from ``np_random``
     (:mod:`orthoglide_env.world`): the screws' lead error, backlash and warm-up move the
-    carriages away from what the encoders (``joints``) say; the room's temperature, read
-    on the lab's clock, grows the machine and the stands; each stand's indicator has its
-    own error curve and retrace; stands creep after mounting and give under the measuring
-    force; the platform and bars deflect under the weight and the gauges' forces; the
-    tracker reads with its MPE-based noise.  An agent that works longer meets a warmer
+    carriages away from what the encoders (``joints``) say; the room's temperature, read on
+    the lab's clock, grows the machine and the stands; each stand's indicator has its own
+    error curve and retrace (a digital one, ``"indicator": "digital"``, its own curve and
+    more scatter near its stroke's ends); stands creep after mounting and give under the
+    measuring force; the platform and bars deflect under the weight and the gauges' forces;
+    the tracker reads with its MPE-based noise.  An agent that works longer meets a warmer
     machine.  The drawn world is on ``true_world`` (for scoring only); a ``machine`` reset
     option whose dict holds a ``world`` (a machine file written with ``calibrate
-    --save-truth``) replays that world instead of drawing one, and is refused by a lab
-    of other conditions.  ``ideal`` draws nothing: every stream is as before.
+    --save-truth``) replays that world instead of drawing one, and is refused by a lab of
+    other conditions.  ``ideal`` draws nothing: every stream is as before.
 
     Version history
     ---------------

@@ -494,6 +494,10 @@ class LabBatch:
                 else:
                     noise = stream.normal(0.0, settings.tracker_sigma, 3)
                 self.tracker_reading[i] = seen + noise
+        if self.world is not None:
+            # The same draws, scaled up where a digital indicator scatters more: a batch
+            # draws what a lone lab draws.
+            ideal = ideal + draws * self._world(rows).scatter(sight.t, gauges.travel)
         noisy = settings.noise.applied(ideal, draws)
         valid = good & mounted & self.engaged[rows] & ~self.faulted[rows]
         values = np.where(valid, noisy, np.nan)

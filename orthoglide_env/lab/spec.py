@@ -197,7 +197,7 @@ RENDER_MODE = Choice((None, *RENDER_MODES))
 @dataclass(frozen=True)
 class World(Arg):
     """The conditions: a name of :data:`CONDITION_NAMES`, a ``Conditions``, or a dict of
-    its ``name`` and ``effects``."""
+    its ``name``, ``effects`` and ``indicator``."""
 
     def check(self, name: str, value: Any) -> Any:
         try:

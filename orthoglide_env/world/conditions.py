@@ -14,17 +14,22 @@ from typing import Any
 from orthoglide_env.world.table import EFFECTS
 
 CONDITION_NAMES: tuple[str, ...] = ("ideal", "lab", "workshop")
+#: The gauges' indicators: mechanical dials (ISO 463) or digital ones.
+INDICATORS: tuple[str, ...] = ("dial", "digital")
 EFFECT_NAMES: tuple[str, ...] = tuple(EFFECTS)
 DEFAULT_CONDITIONS: str = "ideal"
 
 
 @dataclass(frozen=True)
 class Conditions:
-    """The world a lab's machines live in: ``name`` (:data:`CONDITION_NAMES`) and the
-    ``effects`` that act (all of the name's when None; none under ``ideal``)."""
+    """The world a lab's machines live in: ``name`` (:data:`CONDITION_NAMES`), the
+    ``effects`` that act (all of the name's when None; none under ``ideal``) and the
+    gauges' ``indicator`` (:data:`INDICATORS`: its error curve is the ``dial`` effect's
+    ``digital_*`` rows for a digital one)."""
 
     name: str = DEFAULT_CONDITIONS
     effects: tuple[str, ...] | None = None
+    indicator: str = "dial"
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or self.name not in CONDITION_NAMES:
@@ -45,6 +50,12 @@ class Conditions:
                 raise ValueError("the ideal conditions have no effects: name 'lab' or "
                                  "'workshop' for their sizes")
             on = tuple(e for e in EFFECT_NAMES if e in self.effects)
+        if not isinstance(self.indicator, str) or self.indicator not in INDICATORS:
+            raise ValueError(f"unknown indicator {self.indicator!r}; choose from "
+                             f"{list(INDICATORS)}")
+        if self.indicator != "dial" and "dial" not in on:
+            raise ValueError(f"a {self.indicator} indicator's errors are the dial effect's: "
+                             f"name 'lab' or 'workshop' with the dial effect on")
         object.__setattr__(self, "effects", on)
 
     def __contains__(self, effect: str) -> bool:
@@ -60,22 +71,27 @@ class Conditions:
         return EFFECTS[effect][parameter].at(self.name)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"name": self.name, "effects": list(self.effects)}  # type: ignore[arg-type]
+        return {"name": self.name, "effects": list(self.effects),  # type: ignore[arg-type]
+                "indicator": self.indicator}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Conditions:
-        unknown = sorted(set(data) - {"name", "effects"})
+        unknown = sorted(set(data) - {"name", "effects", "indicator"})
         if unknown:
-            raise ValueError(f"unknown conditions key(s) {unknown}; keys are name, effects")
+            raise ValueError(f"unknown conditions key(s) {unknown}; keys are name, effects, "
+                             "indicator")
         effects = data.get("effects")
         return cls(data.get("name", DEFAULT_CONDITIONS),
-                   tuple(effects) if isinstance(effects, list | tuple) else effects)
+                   tuple(effects) if isinstance(effects, list | tuple) else effects,
+                   data.get("indicator", "dial"))
 
     @property
     def label(self) -> str:
-        """``lab``, or ``lab[lead,room]`` when only some effects act."""
+        """``lab``, or ``lab[lead,room]`` when only some effects act; ``+digital`` with
+        digital indicators."""
         full = self.effects == (() if self.name == "ideal" else EFFECT_NAMES)
-        return self.name if full else f"{self.name}[{','.join(self.effects)}]"  # type: ignore[arg-type]
+        label = self.name if full else f"{self.name}[{','.join(self.effects)}]"  # type: ignore[arg-type]
+        return label if self.indicator == "dial" else f"{label}+{self.indicator}"
 
 
 def as_conditions(value: Any) -> Conditions:
@@ -88,7 +104,7 @@ def as_conditions(value: Any) -> Conditions:
     if isinstance(value, dict):
         return Conditions.from_dict(value)
     raise ValueError(f"conditions must be one of {list(CONDITION_NAMES)}, a Conditions or "
-                     f"a dict with name and effects, got {value!r}")
+                     f"a dict with name, effects and indicator, got {value!r}")
 
 
 #: The textbook world: no effect beyond the geometry.

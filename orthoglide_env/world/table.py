@@ -84,6 +84,17 @@ EFFECTS: dict[str, dict[str, Size]] = {
         "retrace": Size((0, 2), (0, 3), "um", "hysteresis: the reading differs by it "
                         "between the plunger going in and out", "ISO 463 / JIS B 7503: "
                         "retrace error 3 um"),
+        "digital_range": Size((0, 3), (0, 3), "um", "a digital indicator's error over its "
+                              "whole travel (half a sine; no revolution error: no gear "
+                              "train), with the retrace above", "digital indicator "
+                              "datasheets: 1 um resolution, accuracy about 3 um"),
+        "digital_end": Size((0.2, 0.2), (0.2, 0.2), "mm", "the last part of a digital "
+                            "indicator's stroke at either end, where readings scatter more",
+                            "digital indicator datasheets: no repeatability guarantee "
+                            "within the last 0.2 mm"),
+        "digital_end_sigma": Size((3, 3), (5, 5), "um", "a reading's extra scatter there "
+                                  "(added to the gauge sigma)", "assumption: the stated "
+                                  "accuracy, and more on a shop floor"),
         "force_rest": Size((0.6, 0.6), (0.6, 0.6), "N", "measuring force with the plunger "
                            "out", "assumption from catalogue indicators"),
         "force_full": Size((1.5, 1.5), (1.5, 1.5), "N", "measuring force with the plunger "

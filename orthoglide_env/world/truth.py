@@ -47,6 +47,9 @@ _DRIVE_FIELDS = ("lead_scale", "lead_a1", "lead_a2", "lead_periodic", "lead_phas
 _DIAL_FIELDS = ("dial_range", "dial_phase", "dial_revolution", "dial_revolution_phase",
                 "retrace")
 _STAND_FIELDS = ("creep", "creep_tau", "thermal", "mounted_at")
+#: The rows a digital indicator's numbers are held to instead (no revolution error).
+_DIGITAL: dict[str, tuple[str, float]] = {"dial_range": ("digital_range", UM / 2),
+                                          "dial_revolution": ("digital_range", 0.0)}
 #: Each drawn number's bound: (effect, table parameter, table unit in the field's unit).
 #: The curve terms share one peak-to-peak and the dial's terms are half-amplitudes, so
 #: each alone stays within the table's number.
@@ -151,11 +154,13 @@ class World:
                 * np.sqrt(WALK_HORIZON_S / HOUR))
         dial = dict.fromkeys(_DIAL_FIELDS, zeros)
         if on("dial"):
+            digital = c.indicator == "digital"
             dial.update(
-                dial_range=_uniform(stream, c.size("dial", "range"), (1, stands), scale=UM / 2),
+                dial_range=_uniform(stream, c.size("dial", "digital_range" if digital
+                                                   else "range"), (1, stands), scale=UM / 2),
                 dial_phase=stream.uniform(0, 2 * np.pi, (1, stands)),
                 dial_revolution=_uniform(stream, c.size("dial", "revolution"), (1, stands),
-                                         scale=UM / 2),
+                                         scale=0.0 if digital else UM / 2),
                 dial_revolution_phase=stream.uniform(0, 2 * np.pi, (1, stands)),
                 retrace=_uniform(stream, c.size("dial", "retrace"), (1, stands), scale=UM))
         world = cls(conditions, **drives, **room, **dial,
@@ -326,6 +331,17 @@ class World:
         radial = (draws * u).sum(axis=-1, keepdims=True)
         return across * draws + (along - across) * radial * u
 
+    def scatter(self, t: np.ndarray, travel: np.ndarray) -> np.ndarray:
+        """A reading's extra scatter (mm, multiplies its standard normal draw) with the tip
+        ``t`` mm out (M, S): a digital indicator's within the last part of its stroke at
+        either end; zero elsewhere and for dials."""
+        if self.conditions.indicator != "digital" or "dial" not in self.conditions:
+            return np.zeros(np.shape(t))
+        band = _fixed(self.conditions, "dial", "digital_end")
+        sigma = _fixed(self.conditions, "dial", "digital_end_sigma") * UM
+        with np.errstate(invalid="ignore"):
+            return np.where((t < band) | (t > travel - band), sigma, 0.0)
+
     # -- files --------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
         """One machine's world (machine 0) as plain JSON values."""
@@ -368,7 +384,10 @@ class World:
     def check(self) -> None:
         """``ValueError`` naming the first number outside what its conditions draw (an
         effect that is off draws zero): a world read from a file is held to the table."""
+        digital = self.conditions.indicator == "digital"
         for name, (effect, parameter, unit) in _BOUNDS.items():
+            if digital and name in _DIGITAL:
+                parameter, unit = _DIGITAL[name]
             value = np.abs(getattr(self, name))
             on = effect in self.conditions
             low, high = self.conditions.size(effect, parameter) if on else (0.0, 0.0)
