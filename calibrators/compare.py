@@ -226,8 +226,8 @@ def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
     return out
 
 
-def _curves(episodes: list[_Episode], name: str, estimates: list[Estimate | Exception]
-            ) -> list[list[list[float]]]:
+def _curves(episodes: list[_Episode], name: str, estimates: list[Estimate | Exception],
+            config: Config) -> list[list[list[float]]]:
     """Accuracy against time for each episode: re-estimates from the readings taken by
     :data:`CURVE_FRACTIONS` of its time (the uncalibrated error where there are too few),
     then the full estimate (``estimates``: the fits of the whole episodes)."""
@@ -236,8 +236,8 @@ def _curves(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
         datas = [measurements_of(e.run.records, e.run.time_s, until_s=fraction * e.run.time_s,
                                  design=e.run.truth.design)
                  for e in episodes]
-        fitted = estimates if fraction == 1.0 else estimate_many(datas, name,
-                                                                 episodes[0].run.sigma)
+        fitted = estimates if fraction == 1.0 else estimate_many(
+            datas, name, episodes[0].run.sigma, config.conditions, config.errors)
         models = [MachineParams(design=e.run.truth.design) if isinstance(est, Exception)
                   else est.machine for e, est in zip(episodes, fitted, strict=True)]
         reports = score_batch(models, [e.run.truth for e in episodes],
@@ -287,9 +287,12 @@ def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]
             mine = [e for e in episodes if name in todo[e.machine]]
             if not mine:
                 continue
+            # The machines' preset sizes the errors an estimator leaves out: its a-priori
+            # belief of what the machine holds, not the machine itself.
             estimates = estimate_many([e.run.measurements for e in mine], name,
-                                      mine[0].run.sigma)
-            curves = (_curves(mine, name, estimates) if name == config.curve_estimator
+                                      mine[0].run.sigma, config.conditions, config.errors)
+            curves = (_curves(mine, name, estimates, config)
+                      if name == config.curve_estimator
                       else [[] for _ in mine])
             trials += _trials(mine, name, estimates, curves)
         uncalibrated.update((e.machine, e.before) for e in episodes if e.before is not None)

@@ -26,7 +26,8 @@ from orthoglide_env.envs.lab import Record
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.lab.settings import DEFAULT_BUDGET_S as DEFAULT_BUDGET_S  # every command's
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
-from orthoglide_env.model.errors import MachineParams
+from orthoglide_env.model.errors import DEFAULT_PRESET, MachineParams
+from orthoglide_env.world.conditions import IDEAL, Conditions
 from orthoglide_env.world.truth import World
 
 #: Paper postures by their control coordinates, to label the notebook's readings.
@@ -50,7 +51,8 @@ def measurements_of(records: list[Record], time_s: float = 0.0,
         if r.rho == ZERO_RHO:
             zeros[r.mounting] = zeros.get(r.mounting, 0) + 1
         items.append(Measurement.recorded(r.spec, labels.get(r.rho, ""), r.reading, r.rho,
-                                          r.mounting, max(zeros.get(r.mounting, 0), 1)))
+                                          r.mounting, max(zeros.get(r.mounting, 0), 1),
+                                          r.time_s))
     return Measurements(items, time_s if until_s is None else min(time_s, until_s), design)
 
 
@@ -78,14 +80,27 @@ def get_estimator(name: str) -> EstimatorSpec:
     return ESTIMATORS[name]
 
 
-def estimate(data: Measurements, name: str, sigma: float) -> Estimate:
-    """Estimate with the named estimator of :data:`ESTIMATORS`."""
+def _world_options(strategy: object, conditions: Conditions, left_out: str
+                   ) -> dict[str, Any]:
+    """What an exact-model fit puts into its covariance without fitting it: the effects of
+    ``conditions``, and the errors it leaves out at the sizes of the preset ``left_out``;
+    the paper's linear fit is the paper's, white noise only."""
+    return ({"conditions": conditions, "left_out": left_out}
+            if hasattr(strategy, "estimate_many") else {})
+
+
+def estimate(data: Measurements, name: str, sigma: float, conditions: Conditions = IDEAL,
+             left_out: str = DEFAULT_PRESET) -> Estimate:
+    """Estimate with the named estimator of :data:`ESTIMATORS`, for readings taken under
+    ``conditions`` on a machine whose errors are of the preset ``left_out``'s size."""
     spec = get_estimator(name)
-    return get_strategy(spec.strategy).estimate(data, spec.params, sigma, verify=False,
-                                                prior=spec.prior)
+    strategy = get_strategy(spec.strategy)
+    return strategy.estimate(data, spec.params, sigma, verify=False, prior=spec.prior,
+                             **_world_options(strategy, conditions, left_out))
 
 
-def estimate_many(datas: list[Measurements], name: str, sigma: float
+def estimate_many(datas: list[Measurements], name: str, sigma: float,
+                  conditions: Conditions = IDEAL, left_out: str = DEFAULT_PRESET
                   ) -> list[Estimate | Exception]:
     """:func:`estimate` of many experiments, batched where the estimator can (experiments
     of one design are fitted together, without the words on what the data determine); a
@@ -95,11 +110,12 @@ def estimate_many(datas: list[Measurements], name: str, sigma: float
     if hasattr(strategy, "estimate_many"):
         # A comparison scores estimates; it has no reader for their words.
         return strategy.estimate_many(datas, spec.params, sigma, verify=False,
-                                      prior=spec.prior, explain=False)
+                                      prior=spec.prior, explain=False,
+                                      **_world_options(strategy, conditions, left_out))
     out: list[Estimate | Exception] = []
     for data in datas:
         try:
-            out.append(estimate(data, name, sigma))
+            out.append(estimate(data, name, sigma, conditions, left_out))
         except (ValueError, RuntimeError, np.linalg.LinAlgError) as exc:
             out.append(exc)
     return out

@@ -40,6 +40,9 @@ column                        required  meaning
                                         at the same place is a new mounting with its
                                         own zero (default: the gauge's name,
                                         ``x-leg/y@0.5``)
+``time_s``                    no        when it was read (s on the lab clock, from the
+                                        drives' switch-on): what a fit under lab or
+                                        workshop conditions sizes drift with
 ============================  ========  ================================================
 
 (a) the gauge either as ``gauge`` or as ``leg`` and ``axis`` (and ``at``), not both.  A
@@ -113,11 +116,12 @@ MAX_EXPERIMENT_TIME_S: float = 1e9
 
 #: The columns :meth:`Measurements.to_csv` writes, in order.
 COLUMNS: tuple[str, ...] = ("mounting", "leg", "axis", "at", "posture", "rho_x", "rho_y",
-                            "rho_z", "repetition", "reading_mm")
+                            "rho_z", "repetition", "reading_mm", "time_s")
 RHO_FIELDS: tuple[str, str, str] = ("rho_x", "rho_y", "rho_z")
 #: Every name a CSV column or a JSON reading's key may have.
 FIELDS: tuple[str, ...] = (*COLUMNS, "gauge")
-NUMBER_FIELDS: frozenset[str] = frozenset({"at", *RHO_FIELDS, "repetition", "reading_mm"})
+NUMBER_FIELDS: frozenset[str] = frozenset({"at", *RHO_FIELDS, "repetition", "reading_mm",
+                                          "time_s"})
 JSON_KEYS: tuple[str, ...] = ("readings", "experiment_time_s", "design")
 
 ZERO_RHO: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -274,6 +278,7 @@ class Measurement:
     mounting: str = ""
     line: int | None = field(default=None, compare=False)
     _: KW_ONLY
+    time_s: float | None = None
     design: InitVar[MachineDesign] = PROTOTYPE
 
     def __post_init__(self, design: MachineDesign) -> None:
@@ -283,15 +288,17 @@ class Measurement:
         limit, rule = ((MAX_TRACKER_MM, _TRACKER_RULE) if isinstance(self.gauge, TrackerAxis)
                        else (MAX_READING_MM, _READING_RULE))
         reading = _real(self.reading, "reading_mm", -limit, limit, rule)
+        time_s = None if self.time_s is None else _real(
+            self.time_s, "time_s", 0.0, MAX_EXPERIMENT_TIME_S, "s (the lab clock)")
         for name, value in (("posture", posture), ("rho", rho), ("mounting", mounting),
                             ("repetition", _repetition(self.repetition)),
-                            ("reading", reading)):
+                            ("reading", reading), ("time_s", time_s)):
             object.__setattr__(self, name, value)
 
     @classmethod
     def recorded(cls, gauge: GaugeSpec | TrackerAxis, posture: str, reading: float,
-                 rho: tuple[float, float, float], mounting: str, repetition: int
-                 ) -> Measurement:
+                 rho: tuple[float, float, float], mounting: str, repetition: int,
+                 time_s: float | None = None) -> Measurement:
         """A reading the lab wrote in its notebook, taken as it is: the lab only records
         finite readings of its own gauges at postures it reached, so the checks a reading
         from a file needs (a tenth of a millisecond each on a large sweep's notebooks)
@@ -299,7 +306,7 @@ class Measurement:
         out = object.__new__(cls)
         for name, value in (("gauge", gauge), ("posture", posture or rho_label(rho)),
                             ("repetition", repetition), ("reading", reading), ("rho", rho),
-                            ("mounting", mounting), ("line", None)):
+                            ("mounting", mounting), ("line", None), ("time_s", time_s)):
             object.__setattr__(out, name, value)
         return out
 
@@ -309,9 +316,12 @@ class Measurement:
 
     def to_dict(self) -> dict[str, Any]:
         """The reading as a JSON object of the file format."""
-        return {"mounting": self.mounting, "gauge": gauge_name(self.gauge),
-                "posture": self.posture, "rho": list(self.rho), "repetition": self.repetition,
-                "reading_mm": self.reading}
+        out = {"mounting": self.mounting, "gauge": gauge_name(self.gauge),
+               "posture": self.posture, "rho": list(self.rho), "repetition": self.repetition,
+               "reading_mm": self.reading}
+        if self.time_s is not None:
+            out["time_s"] = self.time_s
+        return out
 
     @classmethod
     def from_dict(cls, data: object, design: MachineDesign = PROTOTYPE) -> Measurement:
@@ -343,7 +353,8 @@ class Measurement:
             leg, axis = part_label(self.gauge), AXIS_NAMES[self.gauge.axis]
             at = repr(float(self.gauge.at)) if self.gauge.part == Part.BAR else ""
         return [self.mounting, leg, axis, at, self.posture, *(repr(v) for v in self.rho),
-                str(self.repetition), repr(self.reading)]
+                str(self.repetition), repr(self.reading),
+                "" if self.time_s is None else repr(self.time_s)]
 
 
 def _fields_problem(names: Collection[str], kind: str) -> str | None:
@@ -461,7 +472,8 @@ def _measurement(fields: Mapping[str, object], line: int | None, design: Machine
         raise FieldError("posture", "empty: give a paper posture, or the rho")
     return Measurement(gauge, "" if posture is None else posture,
                        _given(fields, "repetition", 1), reading, rho,
-                       _given(fields, "mounting", ""), line, design=design)
+                       _given(fields, "mounting", ""), line, design=design,
+                       time_s=_given(fields, "time_s"))
 
 
 class _Readings:
@@ -708,12 +720,15 @@ class Measurements:
         return result
 
     def to_csv(self, path: str | Path) -> None:
-        """Write the CSV format: the header :data:`COLUMNS`, then one reading per row."""
+        """Write the CSV format: the header :data:`COLUMNS`, then one reading per row
+        (without the ``time_s`` column when no reading has a time)."""
         self.check()
+        timed = any(m.time_s is not None for m in self.items)
+        width = len(COLUMNS) - (not timed)
         with Path(path).open("w", newline="", encoding="utf-8") as handle:
             writer = csv.writer(handle)
-            writer.writerow(COLUMNS)
-            writer.writerows(m.csv_row() for m in self.items)
+            writer.writerow(COLUMNS[:width])
+            writer.writerows(m.csv_row()[:width] for m in self.items)
 
     @classmethod
     def from_csv(cls, path: str | Path, design: MachineDesign | None = None) -> Measurements:

@@ -70,10 +70,11 @@ def run(args: argparse.Namespace) -> None:
     agent = get_agent(args.agent)
     estimator_options.options(args)  # and so are bad options
     machine, world, preset, sigma, resolution = _setup(args)
+    conditions = conditions_of(args, world)
     env = gym.make(orthoglide_env.LAB_ENV_ID, errors=preset, gauge_sigma=sigma,
                    gauge_resolution=resolution, backend=args.backend,
                    tracker=agent.needs_tracker, budget_s=args.budget,
-                   design=machine.design, conditions=conditions_of(args, world))
+                   design=machine.design, conditions=conditions)
     with closing(env):
         # A random machine is drawn by the lab from the seed, as ``compare`` draws its first
         # one: the same seed gives the same machine, installation and readings there and here.
@@ -84,7 +85,7 @@ def run(args: argparse.Namespace) -> None:
             data.write(args.save_measurements)
         if args.save_truth:
             write_machine_file(args.save_truth, episode.truth, episode.world)
-        est = estimator_options.estimate(args, data, episode.sigma)
+        est = estimator_options.estimate(args, data, episode.sigma, conditions)
         emit(report(est, episode.truth, _z_rms(est, data, env), episode.world), args.json)
 
 

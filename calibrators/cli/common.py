@@ -79,13 +79,17 @@ def add_design(p: argparse.ArgumentParser) -> None:
     p.add_argument("--design", metavar="FILE", help=DESIGN_HELP)
 
 
-def add_conditions(p: argparse.ArgumentParser, replays: bool = False) -> None:
+def add_conditions(p: argparse.ArgumentParser, replays: bool = False,
+                   measured: bool = False) -> None:
     """``--conditions`` and ``--effects``; ``replays``: the command takes a machine file,
-    whose world (when it holds one) gives the conditions."""
+    whose world (when it holds one) gives the conditions; ``measured``: the command fits
+    readings taken under them (a real machine's)."""
     default = (f"the machine file's world, else {DEFAULT_CONDITIONS}" if replays
                else DEFAULT_CONDITIONS)
+    what = ("the world the readings were taken in, whose effects beyond the geometry the "
+            "fit puts into its error bars" if measured else "the world beyond the geometry")
     p.add_argument("--conditions", choices=CONDITION_NAMES, default=None,
-                   help="the world beyond the geometry: ideal (none), lab (a controlled "
+                   help=f"{what}: ideal (none), lab (a controlled "
                    "room, a well-kept machine) or workshop (a shop floor, an ordinary "
                    "machine); the README's 'Conditions' lists every effect and its size "
                    f"(default: {default})")

@@ -12,6 +12,8 @@ from calibrators.estimators.gauss_newton import MAX_OUTLIER_FRACTION, OUTLIER_K
 from calibrators.estimators.paper_linear import NeedsExactFit
 from calibrators.estimators.parameters import parse_assignments
 from calibrators.measurements import Measurements
+from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS
+from orthoglide_env.world.conditions import IDEAL, Conditions
 
 DEFAULT_STRATEGY = "gauss-newton"
 
@@ -30,6 +32,10 @@ def add(p: argparse.ArgumentParser) -> None:
                         "readings cannot see stay nominal), a preset name (its sigmas), and/or "
                         "GROUP=SIGMA or NAME=SIGMA (mm, rad); auto = the realistic preset's "
                         "when more than paper6 is free, else none (default: %(default)s)")
+    p.add_argument("--left-out", choices=sorted(PRESETS), default=DEFAULT_PRESET,
+                   help="the error preset whose sizes the errors --params leaves out have a "
+                        "priori: their spread goes into the error bars (paper or nominal: "
+                        "they do not exist) (default: %(default)s)")
     p.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
                    help="hold a parameter at a known value (mm, rad); repeatable")
     p.add_argument("--solver", choices=list(SOLVERS), default="gauss-newton",
@@ -49,13 +55,16 @@ def options(args: argparse.Namespace) -> dict[str, Any]:
     """Keyword arguments of ``Calibrator.estimate`` from the parsed options."""
     return {"prior": args.prior, "fix": parse_assignments(args.fix, "--fix"),
             "keep_outliers": args.keep_outliers, "holdout": args.holdout,
-            "seed": args.seed, "solver": args.solver}
+            "seed": args.seed, "solver": args.solver, "left_out": args.left_out}
 
 
-def estimate(args: argparse.Namespace, data: Measurements, sigma: float) -> Estimate:
-    """The estimate of ``--strategy`` with the parsed options; what only the exact-model fit
-    can do is refused with the option that asks for it."""
+def estimate(args: argparse.Namespace, data: Measurements, sigma: float,
+             conditions: Conditions = IDEAL) -> Estimate:
+    """The estimate of ``--strategy`` with the parsed options, for readings taken under
+    ``conditions`` (whose effects an exact-model fit puts into its error bars); what only
+    the exact-model fit can do is refused with the option that asks for it."""
     try:
-        return get_strategy(args.strategy).estimate(data, args.params, sigma, **options(args))
+        return get_strategy(args.strategy).estimate(data, args.params, sigma,
+                                                    conditions=conditions, **options(args))
     except NeedsExactFit as exc:
         raise UsageError(f"{exc}: use --strategy {DEFAULT_STRATEGY}") from None

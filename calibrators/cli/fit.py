@@ -7,7 +7,7 @@ import argparse
 import numpy as np
 
 from calibrators.cli import estimator_options
-from calibrators.cli.common import design_of
+from calibrators.cli.common import add_conditions, conditions_of, design_of
 from calibrators.cli.output import emit, report
 from calibrators.measurements import Measurements
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
@@ -19,7 +19,7 @@ def run(args: argparse.Namespace) -> None:
     if args.to_csv:
         data.to_csv(args.to_csv)
     sigma = float(np.hypot(args.sigma, args.resolution / np.sqrt(12)))
-    est = estimator_options.estimate(args, data, sigma)
+    est = estimator_options.estimate(args, data, sigma, conditions_of(args))
     emit(report(est, None), args.json)
 
 
@@ -36,6 +36,7 @@ def add(sub: argparse._SubParsersAction) -> None:
                    "from, JSON or TOML (see the README's 'Machine designs'; default: the "
                    "readings file's, else the prototype)")
     estimator_options.add(p)
+    add_conditions(p, measured=True)
     p.add_argument("--to-csv", metavar="FILE.csv",
                    help="also write the readings as CSV (shortest round-trip numbers)")
     p.add_argument("--json", action="store_true", help="print one JSON object")

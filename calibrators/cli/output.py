@@ -4,7 +4,8 @@ The JSON object's keys are a contract that scripts rely on: ``estimate`` and ``s
 (parameter values and standard deviations in the machine-file schema, gauge stands under
 ``stands``), ``chi2_dof``, ``warnings``, ``residuals`` (one object per reading: ``posture``,
 ``gauge``, ``residual_mm``, ``outlier``, and ``line`` when read from a file),
-``identifiable``, ``predicted_tcp_error_mm``, and for virtual machines ``truth``,
+``identifiable``, ``considered`` (the lab's effects the fit put into its error bars without
+fitting them), ``predicted_tcp_error_mm``, and for virtual machines ``truth``,
 ``tcp_error_before_mm`` and ``tcp_error_after_mm``; each TCP error is
 ``{"raw": {"rms", "max"}, "translation": {...}, "rigid": {...}}`` in mm.
 """
@@ -65,6 +66,7 @@ def report(est: Estimate, truth: MachineParams | None,
         "chi2_dof": est.chi2 / est.dof if est.chi2 is not None and est.dof else None,
         "covariance_scale": est.covariance_scale,
         "warnings": est.warnings,
+        "considered": est.considered,
         "identifiable": est.identifiable,
         "unidentifiable": est.unidentifiable,
         "residuals": _residuals(est),
@@ -117,6 +119,8 @@ def print_table(data: dict[str, Any]) -> None:
               "(see --json)")
     if data["chi2_dof"] is not None:
         print(f"chi2/dof {data['chi2_dof']:.2f} ({data['dof']} degrees of freedom)")
+    if data["considered"]:
+        print(f"in the error bars, not fitted: {', '.join(data['considered'])}")
     print(f"residual RMS {data['residual_rms_mm']:.4f} mm over {data['n_readings']} readings"
           + (f"; held-out repetitions {data['verification_rms_mm']:.4f} mm"
              if data["verification_rms_mm"] is not None else "")

@@ -85,6 +85,9 @@ class Estimate:
     #: Covariance of (estimate - truth) over every parameter of ``space``, with the errors
     #: the model leaves out when the data show them (what a TCP prediction needs).
     error_covariance: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    #: The real lab's effects the fit did not model but put into its covariance
+    #: (:mod:`calibrators.estimators.consider`), empty under ``ideal`` conditions.
+    considered: list[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         if not self.names:

@@ -31,7 +31,9 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 from scipy import special
 
+from calibrators.estimators.consider import Consider
 from orthoglide_env.instruments.dial import weighting_sigma
+from orthoglide_env.model.errors import ERROR_NAMES
 from orthoglide_env.model.reading_model import Design, jacobian, predict
 
 #: A combination is identifiable (and moved by a base-parameter fit) when its information
@@ -365,15 +367,20 @@ SOLVERS = {"gauss-newton": _damped_gauss_newton, "scipy": _scipy_least_squares}
 def fit_batch(design: Design, values: np.ndarray, mask: np.ndarray, sigma: float | np.ndarray,
               free: np.ndarray, fixed: np.ndarray, prior: np.ndarray, scale: np.ndarray,
               max_iterations: int = MAX_ITERATIONS, unmodelled: np.ndarray | None = None,
-              solver: str = "gauss-newton") -> BatchFit:
+              solver: str = "gauss-newton", consider: Consider | None = None,
+              left_out: np.ndarray | None = None) -> BatchFit:
     """Fit machines whose readings ``values`` (M, N) of ``design`` are used where ``mask``.
 
     ``free``, ``fixed``, ``prior``, ``scale``: per parameter of ``design.space`` (mask of the
     free ones, values of the others, prior sigmas or inf, scales).  The fit starts from
     nominal (the prior mean) for the free parameters.  ``unmodelled``: the parameters that
-    are neither free nor known (the model leaves them out); their misfit goes into the
-    reported covariance (:func:`_model_error`).  ``solver``: one of :data:`SOLVERS`.
-    ``sigma``: the noise of every reading (mm), or one for all."""
+    are neither free nor known (the model leaves them out); their a-priori spread
+    ``left_out`` (per parameter of the space, mm or rad; default their scale) and their
+    misfit go into the reported covariance (:func:`_model_error`).  ``solver``: one of
+    :data:`SOLVERS`.  ``sigma``: the noise of every reading (mm), or one for all.
+    ``consider``: the real lab's effects the model leaves out
+    (:mod:`calibrators.estimators.consider`), added to the covariance
+    (:func:`_considered`)."""
     if solver not in SOLVERS:
         raise ValueError(f"unknown solver '{solver}'; choose from {list(SOLVERS)}")
     values = np.atleast_2d(np.asarray(values, dtype=float))
@@ -413,6 +420,8 @@ def fit_batch(design: Design, values: np.ndarray, mask: np.ndarray, sigma: float
     mountings_used = (mask.astype(float) @ problem.onehot > 0).sum(axis=1)
     priored = int(np.sum(problem.precision > 0))
     dof = mask.sum(axis=1) - mountings_used - np.maximum(retained - priored, 0)
+    if consider is not None and not consider.empty:
+        cov_scaled = cov_scaled + _considered(problem, theta, jac, gain_matrix, consider)
     fit = BatchFit(
         theta=theta, free=problem.free, scale=problem.scale,
         prior=np.asarray(prior, dtype=float), covariance=cov_scaled * np.outer(s, s),
@@ -421,46 +430,71 @@ def fit_batch(design: Design, values: np.ndarray, mask: np.ndarray, sigma: float
         error_covariance=np.zeros((m_count, len(free), len(free))),
     )
     _model_error(fit, problem, jac, gain_matrix,
-                 np.zeros(len(free), dtype=bool) if unmodelled is None else unmodelled)
+                 np.zeros(len(free), dtype=bool) if unmodelled is None else unmodelled,
+                 problem.scale if left_out is None else np.asarray(left_out, dtype=float))
     return fit
 
 
+def _considered(problem: _Problem, theta: np.ndarray, jac: np.ndarray,
+                gain_matrix: np.ndarray, consider: Consider) -> np.ndarray:
+    """(M, nf, nf) the covariance, in scaled units, that the consider terms add to the
+    estimate: each term's reading pattern ``C`` (a carriage's pattern times the reading's
+    derivative by that axis's encoder offset, or a reading's own), whitened and centred
+    within its mounting as the residuals are, moves the estimate by ``gain J^T C`` per unit
+    of its coefficient, whose second moment the pattern already carries."""
+    design = problem.design
+    drho = np.isin(np.arange(len(problem.free)),
+                   [design.space.names.index(n) for n in ERROR_NAMES[:3]])
+    derivative = jacobian(theta, design, drho, np.ones(3))  # (M, N, 3), mm per mm
+    columns = np.concatenate([np.einsum("mna,mnak->mnk", derivative, consider.drive),
+                              consider.reading], axis=-1)
+    columns = _centre(columns * problem.weight[:, None], problem.mask, problem.onehot,
+                      design.mounting)
+    moved = gain_matrix @ (_t(jac) @ columns)
+    return moved @ _t(moved)
+
+
 def _model_error(fit: BatchFit, problem: _Problem, jac: np.ndarray, gain_matrix: np.ndarray,
-                 unmodelled: np.ndarray) -> None:
+                 unmodelled: np.ndarray, spread: np.ndarray) -> None:
     """Fill ``fit.error_covariance``: the covariance of (estimate - truth) over every
     parameter, including the ``unmodelled`` ones the fit kept at nominal.
 
     A model that leaves parameters out is wrong by ``J_u theta_u``.  Taking the left-out
-    errors as zero-mean with covariance ``kappa * scale^2`` (their structure from the exact
-    model, their size from the data: ``kappa`` makes the expected chi-square equal the
-    observed one), the estimate's error is ``gain @ (noise + J_u theta_u)``: its covariance
-    has the unmodelled part ``kappa * (gain J_u)(gain J_u)^T``, and the left-out parameters
-    themselves are off by their whole size.  Where the data show no misfit, ``kappa`` is
-    zero.  Scaling the covariance by chi2/dof instead, as a fit with only noise in mind
-    would, leaves the parameters' error 8x larger than their reported std on realistic
-    machines fitted with the paper's six parameters: the model error inside the column
-    space of the Jacobian goes into the weak directions undetected, and only its
-    structure tells how much."""
+    errors as zero-mean with covariance ``D`` (their structure from the exact model), the
+    estimate's error is ``gain @ (noise + J_u theta_u)``: its covariance has the
+    unmodelled part ``(gain J_u) D (gain J_u)^T``, and the left-out parameters themselves
+    are off by their whole size.  ``D`` is at least their a-priori ``spread`` squared (most
+    of ``J_u theta_u`` lies in the column space of ``J`` and goes into the estimate unseen
+    by the residuals, so a fit on readings that show no misfit is no less wrong), and
+    ``kappa * scale^2`` where the data say more: where the chi-square test rejects,
+    ``kappa`` makes the expected chi-square equal the observed one.  Scaling the
+    covariance by chi2/dof instead, as a fit with only noise in mind would, leaves the
+    parameters' error 8x larger than their reported std on realistic machines fitted with
+    the paper's six parameters."""
     idx = np.flatnonzero(fit.free)
     out = np.flatnonzero(unmodelled)
     s_free = fit.scale[idx]
     cov = fit.error_covariance
     cov[:, idx[:, None], idx] = fit.covariance
-    rows = np.flatnonzero(fit.misfit)
-    if not len(out) or not len(rows):
+    if not len(out):
         return
-    ju = problem.jacobian(fit.theta[rows], rows, free=unmodelled)  # (m, N, n_out)
+    rows = np.arange(len(fit.theta))
+    ju = problem.jacobian(fit.theta, rows, free=unmodelled)  # (M, N, n_out)
     # gain J_u, the gain being ``gain_matrix @ J^T`` (the pseudo-inverse over the retained
     # directions times the Jacobian).
-    propagated = gain_matrix[rows] @ (_t(jac[rows]) @ ju)
-    left = ju - jac[rows] @ propagated
-    excess = np.maximum(fit.chi2[rows] - fit.dof[rows], 0.0)
+    propagated = gain_matrix @ (_t(jac) @ ju)
+    left = ju - jac @ propagated
+    excess = np.where(fit.misfit, np.maximum(fit.chi2 - fit.dof, 0.0), 0.0)
     kappa = excess / np.maximum(np.einsum("mnu,mnu->m", left, left), 1e-300)
+    # D in scaled units: per machine and left-out parameter.
+    d = np.maximum(kappa[:, None], (spread[out] / fit.scale[out])[None] ** 2)
+    if not d.any():
+        return
     s_out = fit.scale[out]
-    cov_ff = fit.covariance[rows] + kappa[:, None, None] * np.einsum(
-        "mfu,mgu->mfg", propagated, propagated) * np.outer(s_free, s_free)
+    cov_ff = fit.covariance[rows] + np.einsum(
+        "mfu,mu,mgu->mfg", propagated, d, propagated) * np.outer(s_free, s_free)
     cov[rows[:, None, None], idx[:, None], idx] = cov_ff
-    cov[rows[:, None, None], out[:, None], out] = kappa[:, None, None] * np.diag(s_out**2)
-    cross = -kappa[:, None, None] * propagated * np.outer(s_free, s_out)
+    cov[rows[:, None, None], out[:, None], out] = d[:, None, :] * np.eye(len(out)) * s_out**2
+    cross = -(propagated * d[:, None, :]) * np.outer(s_free, s_out)
     cov[rows[:, None, None], idx[:, None], out] = cross
     cov[rows[:, None, None], out[:, None], idx] = np.swapaxes(cross, 1, 2)

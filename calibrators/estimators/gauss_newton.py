@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from calibrators.estimators.base import Calibrator, Estimate, Measurements, register
+from calibrators.estimators.consider import consider_terms
 from calibrators.estimators.exact_fit import (
     CHI2_LEVEL,
     RETAIN,
@@ -35,10 +36,17 @@ from calibrators.estimators.parameters import (
 )
 from orthoglide_env.instruments.dial import DEFAULT_SIGMA, weighting_sigma
 from orthoglide_env.lab.operations import TRACKER_SIGMA
-from orthoglide_env.model.errors import MachineParams
+from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS, ErrorPreset, MachineParams
 from orthoglide_env.model.kinematics import direct
-from orthoglide_env.model.reading_model import Design, TrackerAxis, predict, station_of
+from orthoglide_env.model.reading_model import (
+    Design,
+    TrackerAxis,
+    predict,
+    preset_sigmas,
+    station_of,
+)
 from orthoglide_env.scoring import best_rigid_motion
+from orthoglide_env.world.conditions import Conditions
 
 #: A reading is an outlier when its residual exceeds this many robust standard deviations
 #: (1.4826 x the median absolute residual, or its instrument's sigma when larger): a normal
@@ -89,6 +97,13 @@ def align_tracker(design: Design, values: np.ndarray) -> np.ndarray:
     return out
 
 
+def left_out_sigmas(name: str) -> ErrorPreset:
+    """The error preset ``name`` (``ValueError`` naming the presets if unknown)."""
+    if name not in PRESETS:
+        raise ValueError(f"unknown left-out preset '{name}'; choose from {sorted(PRESETS)}")
+    return PRESETS[name]
+
+
 @register
 class GaussNewtonCalibrator(Calibrator):
     """The exact model, any parameter set."""
@@ -109,16 +124,25 @@ class GaussNewtonCalibrator(Calibrator):
                       sigma: float = DEFAULT_SIGMA, *, verify: bool = True, prior: str = "auto",
                       fix: dict[str, float] | None = None, keep_outliers: bool = False,
                       holdout: float = 0.0, seed: int = 0, solver: str = "gauss-newton",
-                      tracker_sigma: float = TRACKER_SIGMA, explain: bool = True
+                      tracker_sigma: float = TRACKER_SIGMA, explain: bool = True,
+                      conditions: Conditions | str = "ideal", left_out: str = DEFAULT_PRESET
                       ) -> list[Estimate | Exception]:
         """:meth:`estimate` of many experiments; ``tracker_sigma``: a laser tracker
-        coordinate's noise (mm).  Those of one design (the same readings of the same
-        mountings at the same postures, as a fixed agent takes them on every machine) are
-        fitted together, in one batched solve.  A failure is returned in
+        coordinate's noise (mm); ``conditions``: the lab's (a name or
+        :class:`~orthoglide_env.world.conditions.Conditions`), whose effects the fit does
+        not model but puts in its covariance (:mod:`calibrators.estimators.consider`);
+        ``left_out``: the error preset whose sizes the machine errors and stand errors the
+        selection leaves out have a priori (their spread goes into the covariance;
+        ``paper`` or ``nominal``: they do not exist, and only a misfit widens it).
+        Those of one design (the same readings of the same mountings at the same
+        postures, as a fixed agent takes them on every machine) are fitted together, in
+        one batched solve.  A failure is returned in
         place of its estimate, not raised.  ``explain=False`` leaves out the words on
         which combinations the data determine and which not (``identifiable``,
         ``unidentifiable``), which cost more than the fit on large designs."""
         out: list[Estimate | Exception] = [ValueError("not fitted")] * len(datas)
+        if isinstance(conditions, str):
+            conditions = Conditions(conditions)
         groups: dict[tuple, list[int]] = {}
         prepared = []
         for k, data in enumerate(datas):
@@ -135,7 +159,8 @@ class GaussNewtonCalibrator(Calibrator):
         options = {"params": params, "prior": prior, "fix": fix or {}, "holdout": holdout,
                    "seed": seed, "solver": solver, "keep_outliers": keep_outliers,
                    "sigma": sigma, "tracker_sigma": tracker_sigma, "verify": verify,
-                   "explain": explain}
+                   "explain": explain, "conditions": conditions,
+                   "left_out": left_out_sigmas(left_out)}
         for members in groups.values():
             design = prepared[members[0]][0]
             values = np.stack([prepared[k][1] for k in members])
@@ -151,7 +176,8 @@ class GaussNewtonCalibrator(Calibrator):
     def _fit_group(self, design: Design, values: np.ndarray, datas: list[Measurements], *,
                    params: str, prior: str, fix: dict[str, float], holdout: float, seed: int,
                    solver: str, keep_outliers: bool, sigma: float, tracker_sigma: float,
-                   verify: bool, explain: bool) -> list[Estimate | Exception]:
+                   verify: bool, explain: bool, conditions: Conditions,
+                   left_out: ErrorPreset) -> list[Estimate | Exception]:
         """Fit the experiments ``values`` (M, N) of one ``design`` together."""
         space = design.space
         free = select(params, space)
@@ -171,10 +197,15 @@ class GaussNewtonCalibrator(Calibrator):
                              f"without a prior: at least {needed} are needed")
         noise = np.where([isinstance(design.specs[m], TrackerAxis) for m in design.mounting],
                          tracker_sigma, sigma)
+        stamps = [[m.time_s for m in data.items] for data in datas]
+        times = None if any(None in row for row in stamps) else np.array(stamps, dtype=float)
+        consider = consider_terms(design, values, times, conditions)
 
         def fit(rows: np.ndarray, mask: np.ndarray) -> BatchFit:
             return fit_batch(design, values[rows], mask[rows], noise, free, fixed, priors,
-                             scale, unmodelled=unmodelled, solver=solver)
+                             scale, unmodelled=unmodelled, solver=solver,
+                             consider=consider.rows(rows),
+                             left_out=preset_sigmas(left_out, space))
 
         m_count = len(values)
         held = _holdout(design, holdout, seed) if holdout else np.zeros(values.shape[1], bool)
@@ -221,13 +252,14 @@ class GaussNewtonCalibrator(Calibrator):
             else:
                 out.append(self._estimate(datas[m], params, prior, sigma, design, values[m],
                                           result, eigenvalues[m], mask[m], held, outliers[m],
-                                          verify, explain))
+                                          verify, explain, consider.effects))
         return out
 
     def _estimate(self, data: Measurements, params: str, prior: str, sigma: float,
                   design: Design, values: np.ndarray, result: BatchFit,
                   eigenvalues: np.ndarray, mask: np.ndarray, held: np.ndarray,
-                  outliers: list[int], verify: bool, explain: bool) -> Estimate:
+                  outliers: list[int], verify: bool, explain: bool,
+                  considered: list[str]) -> Estimate:
         space = design.space
         names = [n for n, f in zip(space.names, result.free, strict=True) if f]
         idx = np.flatnonzero(result.free)
@@ -271,6 +303,7 @@ class GaussNewtonCalibrator(Calibrator):
                             for d in sparse_basis(result.unidentifiable(0))] if explain else [],
             outliers=outliers, information=info, scale=s, error_covariance=error_cov,
             holdout_rms_mm=float(np.sqrt(np.mean(residuals[held] ** 2))) if held.any() else None,
+            considered=considered,
         )
 
     def _verify(self, design: Design, values: np.ndarray, result: BatchFit, mask: np.ndarray,

@@ -75,7 +75,10 @@ class PaperCalibrator(Calibrator):
             ("prior", options.get("prior", "none") not in ("auto", "none")),
             ("fix", bool(options.get("fix"))), ("holdout", bool(options.get("holdout"))),
             ("keep_outliers", bool(options.get("keep_outliers"))),
-            ("solver", options.get("solver", "gauss-newton") != "gauss-newton")) if given]
+            ("solver", options.get("solver", "gauss-newton") != "gauss-newton"),
+            ("conditions", str(getattr(options.get("conditions", "ideal"), "name",
+                                       options.get("conditions", "ideal"))) != "ideal"))
+            if given]
         if used:
             raise NeedsExactFit(f"the paper's linear fit (eq. 10) takes no "
                                 f"{', '.join(used)}; the exact-model fit does")

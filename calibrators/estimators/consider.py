@@ -1,0 +1,268 @@
+"""Consider terms: the real lab's effects that an exact-model fit does not fit, in its
+error bars.
+
+Under ``lab`` or ``workshop`` conditions the readings carry, beyond the 27 geometric
+errors and white noise, what the drives, the room and the instruments add
+(:mod:`orthoglide_env.world`).  A fit that does not model an effect is biased by it, and
+its white-noise covariance lies.  Each effect here is a *consider term*: a known pattern
+over the readings with a random coefficient whose second moment is what the conditions'
+table draws (:data:`~orthoglide_env.world.table.EFFECTS`).  The fit's error then has the
+part ``gain @ C c``, and ``(gain C) E[c c^T] (gain C)^T`` is added to its covariance
+(:func:`calibrators.estimators.exact_fit.fit_batch`): consider-covariance analysis, as
+orbit determination does for parameters it cannot afford to estimate.  Every coefficient
+has zero mean except backlash (its sign is known from the approach); a second moment in
+place of a variance keeps the bias in the error bars.
+
+The terms (each is named in :attr:`Consider.names`, so the estimate says what it
+considered):
+
+* ``lead``: per axis, the carriage's error along its travel ``x`` in [0, 1] (from
+  ``rho_min``): the linear scale ``x``, the curve ``sin(pi x)`` and ``sin(2 pi x)``, and
+  the screw's periodic error ``sin``/``cos(2 pi stroke x / lead)``.  A carriage error
+  moves a reading as an encoder offset does: its pattern multiplies the reading's
+  derivative by that axis's ``drho``.
+* ``backlash``: per axis, half the lost motion times the direction of the last move of
+  that axis before the reading (from the readings' order: the lab starts each axis as if
+  last moved forward).
+* ``warmup``: per axis, ``x (1 - exp(-t / tau))`` at the table's middle time constant.
+* ``stands``: per gauge mounting, its creep ``1 - exp(-(t - t0) / tau)`` from its first
+  reading ``t0`` (a stand is mounted before it is read: this overstates what is left;
+  the time constant's spread by Simpson's rule over its range), its arm's growth with
+  the room, ``t`` times the room's drift (its random walk folded in at one hour), and
+  its give, with the bar's bending under ``compliance``, under the measuring force that
+  grows as the plunger goes in (a known gain on the reading: one term over every
+  mounting, as every known term is one, so that its parts add up as they do).
+* ``dial``: per gauge mounting, the indicator's error over the plunger's position, which
+  is the reading up to the mounting's zero: ``sin``/``cos(pi y / travel)`` and
+  ``sin``/``cos(2 pi y / revolution)`` (the phase is random, so the zero's offset is in
+  it); each mounting is taken as its own indicator.
+
+Left out, each at most about 1 um over a one-hour experiment under ``lab``: the
+structure's growth with the room (a similarity the legs' parallelism does not see), the
+indicator's retrace, the drives' compliance under the platform's weight and the gauges'
+force, and the tracker's MPE (a tracker's readings keep their own
+sigma; its fits reject by chi-square).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from orthoglide_env.instruments.slots import Part
+from orthoglide_env.model.errors import AXIS_NAMES
+from orthoglide_env.model.reading_model import Design, TrackerAxis
+from orthoglide_env.world.conditions import Conditions
+from orthoglide_env.world.table import EFFECTS
+from orthoglide_env.world.truth import HOUR, MINUTE, REVOLUTION_MM, UM
+
+#: The effects whose terms need each reading's time.
+TIMED_EFFECTS: tuple[str, ...] = ("warmup", "stands")
+
+@dataclass(frozen=True)
+class Consider:
+    """The consider terms of one design's readings, for machines ``(M, ...)``: ``drive``
+    (M, N, 3, K), the carriages' errors of each of K terms (mm per unit coefficient: the
+    pattern times its coefficient's root second moment), which move a reading as the
+    encoder offsets ``drho`` do; ``reading`` (M, N, J), what J terms add to the readings
+    themselves (mm); ``names`` the K drive terms, then the J reading terms.  The terms'
+    coefficients are uncorrelated with unit second moment."""
+
+    names: tuple[str, ...]
+    drive: np.ndarray
+    reading: np.ndarray
+
+    @property
+    def empty(self) -> bool:
+        return not self.drive.shape[-1] and not self.reading.shape[-1]
+
+    @property
+    def effects(self) -> list[str]:
+        """The terms without their axes and mountings (``dial.range_sin``, once)."""
+        return list(dict.fromkeys(name.split("[")[0] for name in self.names))
+
+    def rows(self, rows: np.ndarray) -> Consider:
+        """The terms of machines ``rows``."""
+        return Consider(self.names, self.drive[rows], self.reading[rows])
+
+
+def _range(effect: str, parameter: str, conditions: Conditions) -> tuple[float, float]:
+    return EFFECTS[effect][parameter].at(conditions.name)
+
+
+def second_moment(effect: str, parameter: str, conditions: Conditions) -> float:
+    """E[v^2] of a value drawn uniformly in the table's range under ``conditions``."""
+    low, high = _range(effect, parameter, conditions)
+    return (low * low + low * high + high * high) / 3.0
+
+
+def _fixed(effect: str, parameter: str, conditions: Conditions) -> float:
+    return _range(effect, parameter, conditions)[0]
+
+
+def _mean(effect: str, parameter: str, conditions: Conditions) -> float:
+    low, high = _range(effect, parameter, conditions)
+    return (low + high) / 2.0
+
+
+#: Simpson's rule over a time constant drawn uniformly in its range: E over tau of
+#: f_tau f_tau^T is sum_j w_j f_j f_j^T, a sum of terms with positive weights.
+_NODES: tuple[float, ...] = (0.0, 0.5, 1.0)
+_WEIGHTS: tuple[float, ...] = (1 / 6, 2 / 3, 1 / 6)
+
+
+def _taus(effect: str, parameter: str, conditions: Conditions) -> list[float]:
+    low, high = _range(effect, parameter, conditions)
+    return [(low + (high - low) * node) * MINUTE for node in _NODES]
+
+
+def _approach(rho: np.ndarray) -> np.ndarray:
+    """(N, 3) the direction (+-1) of each axis's last move before each reading, from the
+    readings' order; +1 before an axis first moves."""
+    out = np.ones(rho.shape)
+    for k in range(1, len(rho)):
+        step = rho[k] - rho[k - 1]
+        out[k] = np.where(step > 0, 1.0, np.where(step < 0, -1.0, out[k - 1]))
+    return out
+
+
+def _per_axis(name: str, pattern: np.ndarray) -> list[tuple[str, np.ndarray]]:
+    """Three terms, one per axis, of a pattern (..., N, 3): the axes' coefficients are
+    drawn independently."""
+    out = []
+    for a, axis in enumerate(AXIS_NAMES):
+        only = np.zeros(pattern.shape)
+        only[..., a] = pattern[..., a]
+        out.append((f"{name}[{axis}]", only))
+    return out
+
+
+def _drive_terms(design: Design, t: np.ndarray | None, conditions: Conditions
+                 ) -> list[tuple[str, np.ndarray]]:
+    """The carriages' terms: (name, pattern (M or 1, N, 3))."""
+    on = conditions.__contains__
+    machine = design.machine_design
+    stroke = machine.rho_max - machine.rho_min
+    x = (design.rho - machine.rho_min) / stroke  # (N, 3)
+    out: list[tuple[str, np.ndarray]] = []
+    if on("lead"):
+        scale = np.sqrt(second_moment("lead", "scale", conditions)) * UM
+        curve = np.sqrt(second_moment("lead", "curve", conditions)) * UM
+        # The table's curve is split between the two sines as the lab draws it: a share
+        # s ~ U(0, 1) to the first, (1 - s) / 2 to the second (E[s^2] = 1/3).
+        periodic = np.sqrt(second_moment("lead", "periodic", conditions) / 2) * UM / 2
+        angle = 2 * np.pi * x * stroke / _range("lead", "screw_lead", conditions)[0]
+        for name, pattern in (("lead.scale", scale * x),
+                              ("lead.curve1", curve / np.sqrt(3) * np.sin(np.pi * x)),
+                              ("lead.curve2", curve / np.sqrt(12) * np.sin(2 * np.pi * x)),
+                              ("lead.periodic_sin", periodic * np.sin(angle)),
+                              ("lead.periodic_cos", periodic * np.cos(angle))):
+            out += _per_axis(name, pattern[None])
+    if on("backlash"):
+        # Half the lost motion, b / 2, against the approach: b's mean acts on every axis
+        # at once (the axes' b are all positive), its spread on each alone.
+        lag = -_approach(design.rho)[None] / 2 * UM
+        mean = _mean("backlash", "lost_motion", conditions)
+        spread = np.sqrt(second_moment("backlash", "lost_motion", conditions) - mean**2)
+        out.append(("backlash.mean", mean * lag))
+        out += _per_axis("backlash.spread", spread * lag)
+    if on("warmup"):
+        # A x (1 - exp(-t / tau)): A's mean times tau's mean curve acts on every axis at
+        # once; what tau's spread and A's spread add, on each alone.
+        curves = [x * (1 - np.exp(-t[..., None] / tau))
+                  for tau in _taus("warmup", "time_constant", conditions)]
+        mean_curve = sum(w * c for w, c in zip(_WEIGHTS, curves, strict=True))
+        mean = _mean("warmup", "amplitude", conditions) * UM
+        spread = np.sqrt(second_moment("warmup", "amplitude", conditions)) * UM
+        spread = np.sqrt(spread**2 - mean**2)
+        out.append(("warmup.mean", mean * mean_curve))
+        for j, (w, c) in enumerate(zip(_WEIGHTS, curves, strict=True)):
+            out += _per_axis(f"warmup.tau{j}", np.sqrt(w) * mean * (c - mean_curve))
+            out += _per_axis(f"warmup.spread{j}", np.sqrt(w) * spread * c)
+    return out
+
+
+def _reading_terms(design: Design, values: np.ndarray, t: np.ndarray | None,
+                   conditions: Conditions) -> list[tuple[str, np.ndarray]]:
+    """The gauges' own terms: (name, (M, N) zero off the mounting)."""
+    on = conditions.__contains__
+    n = len(design)
+    out: list[tuple[str, np.ndarray]] = []
+    # The give is known, sign and all: one term over every mounting (terms of their own
+    # would take its parts as uncorrelated, where they add up or cancel).
+    give_all = np.zeros((len(values), n))
+    gives = False
+    for k, name in enumerate(design.mountings):
+        if isinstance(design.specs[k], TrackerAxis):
+            continue
+        rows = np.flatnonzero(design.mounting == k)
+        spec = design.specs[k]
+        # The measuring force grows as the plunger goes in, and the stand (and a bar,
+        # between its hinges) yields under it: a known gain on the readings.
+        give = _fixed("stands", "give", conditions) * UM if on("stands") else 0.0
+        if on("compliance") and spec.part == Part.BAR:
+            modulus = _fixed("compliance", "bar_modulus", conditions) * 1e3  # N/mm^2
+            width, height = design.machine_design.bar_section
+            length = design.machine_design.L
+            a, b = spec.at * length, (1 - spec.at) * length
+            give += a**2 * b**2 / (3 * modulus * width * height**3 / 12 * length)
+        gives = gives or bool(give)
+        force = (_fixed("dial", "force_full", conditions)
+                 - _fixed("dial", "force_rest", conditions))
+        give_all[:, rows] = -give * force / design.machine_design.gauge_travel * values[:, rows]
+        if on("stands"):
+            creep = np.sqrt(second_moment("stands", "creep", conditions)) * UM
+            since = t[:, rows] - t[:, rows[:1]]
+            for j, (w, tau) in enumerate(zip(_WEIGHTS, _taus("stands", "creep_time",
+                                                             conditions), strict=True)):
+                out.append((f"stands.creep{j}[{name}]", _on_rows(
+                    np.sqrt(w) * creep * (1 - np.exp(-since / tau)), rows, n)))
+            if on("room"):
+                # The walk's variance at one hour folded into the drift's.
+                rate2 = (second_moment("room", "drift", conditions)
+                         + second_moment("room", "walk", conditions)) / HOUR**2
+                arm = np.sqrt(second_moment("stands", "thermal", conditions) * rate2) * UM
+                out.append((f"stands.thermal[{name}]", _on_rows(arm * t[:, rows], rows, n)))
+        if on("dial"):
+            parameter = "digital_range" if conditions.indicator == "digital" else "range"
+            y = values[:, rows]
+            # Half-amplitudes drawn uniformly; a random phase splits E[A^2] between sin, cos.
+            waves = [("range", parameter, np.pi * y / design.machine_design.gauge_travel)]
+            if conditions.indicator != "digital":
+                waves.append(("revolution", "revolution", 2 * np.pi * y / REVOLUTION_MM))
+            for label, row, wave in waves:
+                size = np.sqrt(second_moment("dial", row, conditions) / 2) * UM / 2
+                out += [(f"dial.{label}_sin[{name}]", _on_rows(size * np.sin(wave), rows, n)),
+                        (f"dial.{label}_cos[{name}]", _on_rows(size * np.cos(wave), rows, n))]
+    if gives:
+        out.append(("stands.give", give_all))
+    return out
+
+
+def consider_terms(design: Design, values: np.ndarray, times: np.ndarray | None,
+                   conditions: Conditions) -> Consider:
+    """The consider terms of ``design`` read as ``values`` (M, N) at lab ``times`` (M, N)
+    or None, under ``conditions``.  ``ValueError`` when an effect that acts needs the
+    readings' times and they are not given."""
+    needs = [e for e in TIMED_EFFECTS if e in conditions]
+    if needs and times is None:
+        raise ValueError(f"under the {conditions.name} conditions every reading needs its "
+                         f"time (time_s) to size {', '.join(needs)}")
+    t = None if times is None else np.asarray(times, dtype=float)
+    m_count, n = len(values), len(design)
+    drive = _drive_terms(design, t, conditions)
+    reading = _reading_terms(design, values, t, conditions)
+    drive_array = (np.stack([np.broadcast_to(p, (m_count, n, 3)) for _, p in drive], axis=-1)
+                   if drive else np.zeros((m_count, n, 3, 0)))
+    reading_array = (np.stack([np.broadcast_to(p, (m_count, n)) for _, p in reading],
+                              axis=-1) if reading else np.zeros((m_count, n, 0)))
+    return Consider(tuple(name for name, _ in drive) + tuple(name for name, _ in reading),
+                    drive_array, reading_array)
+
+
+def _on_rows(pattern: np.ndarray, rows: np.ndarray, n: int) -> np.ndarray:
+    """(M, N): ``pattern`` (M, len(rows)) at ``rows``, zero elsewhere."""
+    out = np.zeros((len(pattern), n))
+    out[:, rows] = pattern
+    return out
