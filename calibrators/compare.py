@@ -16,6 +16,7 @@ resume from it.
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Callable
 from contextlib import closing
 from dataclasses import asdict, dataclass, field
@@ -65,7 +66,9 @@ class Config:
     resolution: float = DEFAULT_RESOLUTION
     backend: str = "exact"
     seed: int = 0
-    target_mm: float = 0.01  # success: predicted TCP error after rigid motion at most this
+    #: Success: the TCP error after rigid motion at most this (mm), against the truth (and
+    #: predicted, by the estimate itself).
+    target_mm: float = 0.01
     #: The estimator re-run at fractions of each episode's time for the accuracy-versus-time
     #: curve ("": no curve).
     curve_estimator: str = ""
@@ -102,6 +105,7 @@ class Trial:
     error: list[float] = field(default_factory=list)  # estimate - truth, 27 errors
     std: list[float] = field(default_factory=list)  # reported, NaN where fixed
     curve: list[list[float]] = field(default_factory=list)  # [seconds, rigid RMS mm]
+    warnings: list[str] = field(default_factory=list)  # the estimate's
 
     @property
     def key(self) -> tuple[str, str, int]:
@@ -192,36 +196,39 @@ class _Episode:
 def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exception],
             curves: list[list[list[float]]]) -> list[Trial]:
     """Score each estimate against its machine's truth (the kinematics of every score and
-    predicted error in one batched solve)."""
+    predicted error in one batched solve).  A failed estimate leaves its machine
+    uncalibrated: it is scored as the nominal machine (its TCP error after is the one
+    before), so that the accuracy over trials counts it."""
     good = [k for k, est in enumerate(estimates) if not isinstance(est, Exception)]
     fitted = [estimates[k] for k in good]
     z_scores = iter(machine_z_scores(fitted, [episodes[k].run.truth for k in good]))  # type: ignore[arg-type]
-    machines = [e.machine for e in fitted]  # type: ignore[union-attr]
-    reports = iter(score_batch(machines, [episodes[k].run.truth for k in good],
-                               before=_before([episodes[k] for k in good]),
-                               worlds=_worlds([episodes[k] for k in good])) if good else [])
-    predicted = iter(predicted_rigid_mm(fitted, machines).tolist())  # type: ignore[arg-type]
+    machines = [MachineParams(design=e.run.truth.design) if isinstance(est, Exception)
+                else est.machine for e, est in zip(episodes, estimates, strict=True)]
+    reports = iter(score_batch(machines, [e.run.truth for e in episodes],
+                               before=_before(episodes), worlds=_worlds(episodes)))
+    predicted = iter(predicted_rigid_mm(fitted, [machines[k] for k in good]).tolist()  # type: ignore[arg-type]
+                     if good else [])
     out = []
     for episode, est, curve in zip(episodes, estimates, curves, strict=True):
         run, count = episode.run, len(episode.run.records)
+        report = next(reports)
+        scored = {"tcp_before": {f: getattr(report.tcp_before, f).rms for f in FRAMES},
+                  "tcp_after": {f: getattr(report.tcp_after, f).rms for f in FRAMES}}
         if isinstance(est, Exception):
             out.append(Trial(episode.agent, name, episode.machine,
                              failed=str(est).splitlines()[0] or type(est).__name__,
-                             time_s=run.time_s, readings=count))
+                             time_s=run.time_s, readings=count, **scored))
             continue
-        report = next(reports)
         std = np.full(len(ERROR_NAMES), np.nan)
         for k, n in enumerate(est.names):
             if n in ERROR_NAMES:
                 std[ERROR_NAMES.index(n)] = np.sqrt(est.covariance[k, k])
         out.append(Trial(
             episode.agent, name, episode.machine, time_s=run.time_s, readings=count,
-            tcp_before={f: getattr(report.tcp_before, f).rms for f in FRAMES},
-            tcp_after={f: getattr(report.tcp_after, f).rms for f in FRAMES},
             predicted_rigid_mm=next(predicted), chi2_rejected=est.chi2_rejected,
             z=next(z_scores).tolist(),
             error=(est.theta[:len(ERROR_NAMES)] - run.truth.to_vector()).tolist(),
-            std=std.tolist(), curve=curve,
+            std=std.tolist(), curve=curve, warnings=list(est.warnings), **scored,
         ))
     return out
 
@@ -357,11 +364,19 @@ def run(config: Config, machines: int, jobs: int = 1, done: list[Trial] | None =
     return sorted(trials, key=lambda t: (t.machine, order.get((t.agent, t.estimator), 0)))
 
 
-def _stats(values: list[float]) -> dict[str, float | None]:
+def _stats(values: list[float]) -> dict[str, Any]:
+    """Median with its 95 % interval (:func:`median_interval`, None below 6 values) and
+    p95 of the finite ``values``."""
     values = [v for v in values if np.isfinite(v)]
     if not values:
-        return {"median": None, "p95": None}
-    return {"median": float(np.median(values)), "p95": float(np.percentile(values, 95))}
+        return {"median": None, "ci95": None, "p95": None}
+    interval = list(median_interval(values)) if len(values) >= MIN_INTERVAL else None
+    return {"median": float(np.median(values)), "ci95": interval,
+            "p95": float(np.percentile(values, 95))}
+
+
+#: The fewest values a 95 % median interval can be had from.
+MIN_INTERVAL: int = 6
 
 
 def median_interval(values: Any, level: float = 0.95) -> tuple[float, float]:
@@ -387,33 +402,95 @@ def _fraction(flags: list[bool | None]) -> float | None:
     return float(np.mean(tested)) if tested else None
 
 
+def warning_kind(text: str) -> str:
+    """A warning without its particulars: what it says up to its first colon, its
+    numbers as N."""
+    return re.sub(r"\d+", "N", text.split(":", 1)[0])
+
+
 def summary(trials: list[Trial], target_mm: float = 0.01) -> list[dict]:
-    """One row per agent x estimator, in the order they first appear; success: the error
-    an estimate predicts for itself (rigid frame) is at most ``target_mm``."""
+    """One row per agent x estimator, in the order they first appear.  Accuracy is over
+    every trial: a failed one counts with its machine's uncalibrated error
+    (``failed_counted_as``).  ``success_rate``: the TCP error after rigid motion, against
+    the truth, is at most ``target_mm``; ``predicted_success_rate``: the error an estimate
+    predicts for itself is (a failed trial succeeds at neither).  ``warnings``: how many
+    trials' estimates gave each kind of warning, with the first one's text."""
     rows = []
     for agent, name in dict.fromkeys((t.agent, t.estimator) for t in trials):
         mine = [t for t in trials if t.agent == agent and t.estimator == name]
         ok = [t for t in mine if not t.failed]
         z = np.concatenate([t.z for t in ok]) if ok else np.zeros(0)
         times = [t.time_s for t in mine]
+        warned: dict[str, dict[str, Any]] = {}
+        for t in ok:
+            for text in dict.fromkeys(t.warnings):
+                # A fit's hint names its own command's options, not compare's.
+                kind = warned.setdefault(warning_kind(text),
+                                         {"trials": 0, "example": text.split("; try ")[0]})
+                kind["trials"] += 1
         rows.append({
             "agent": agent,
             "estimator": name,
             "machines": len(mine),
             "failed": len(mine) - len(ok),
             "failure": next((t.failed for t in mine if t.failed), ""),
+            "failed_counted_as": "uncalibrated",
             "time_s": {"median": float(np.median(times)), "max": float(np.max(times))},
             "readings_median": float(np.median([t.readings for t in mine])),
-            "tcp_before_mm": {f: _stats([t.tcp_before[f] for t in ok]) for f in FRAMES},
-            "tcp_after_mm": {f: _stats([t.tcp_after[f] for t in ok]) for f in FRAMES},
+            "tcp_before_mm": {f: _stats([_rms(t.tcp_before, f) for t in mine])
+                              for f in FRAMES},
+            "tcp_after_mm": {f: _stats([_rms(t.tcp_after, f) for t in mine]) for f in FRAMES},
             "predicted_rigid_mm": _stats([t.predicted_rigid_mm for t in ok]),
             "z_rms": float(np.sqrt(np.mean(z**2))) if z.size else None,
             "chi2_rejected": _fraction([t.chi2_rejected for t in ok]),
-            "success_rate": (float(np.mean([t.predicted_rigid_mm <= target_mm for t in ok]))
-                             if ok else 0.0),
+            "success_rate": float(np.mean([_rms(t.tcp_after, "rigid") <= target_mm
+                                           for t in mine])),
+            "predicted_success_rate": float(np.mean([not t.failed
+                                                     and t.predicted_rigid_mm <= target_mm
+                                                     for t in mine])),
+            "warnings": warned,
         })
     return rows
 
+
+def _rms(scores: dict[str, float], frame: str) -> float:
+    """A trial's TCP error in ``frame`` (NaN where it has none: a failed trial kept by a
+    version that did not score failures)."""
+    return scores.get(frame, float("nan"))
+
+
+def paired(trials: list[Trial]) -> list[dict]:
+    """Every two agents compared on the machines both ran, per estimator: the median over
+    machines of the ratio of their TCP errors after rigid motion (``agent`` over
+    ``against``: below 1, ``agent`` is the more accurate) with its 95 % interval, and the
+    fraction of machines where ``agent``'s error is the smaller (``win_rate``; a tie
+    counts a half).  Failed trials count with their uncalibrated error, as in
+    :func:`summary`."""
+    rows = []
+    agents = list(dict.fromkeys(t.agent for t in trials))
+    for name in dict.fromkeys(t.estimator for t in trials):
+        error = {(t.agent, t.machine): _rms(t.tcp_after, "rigid")
+                 for t in trials if t.estimator == name}
+        for k, agent in enumerate(agents):
+            for against in agents[k + 1:]:
+                both = sorted(m for a, m in error if a == agent
+                              and np.isfinite(error[agent, m])
+                              and np.isfinite(error.get((against, m), np.nan)))
+                if not both:
+                    continue
+                mine = np.array([error[agent, m] for m in both])
+                theirs = np.array([error[against, m] for m in both])
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    ratio = mine / theirs
+                rows.append({
+                    "estimator": name, "agent": agent, "against": against,
+                    "machines": len(both),
+                    "ratio_median": float(np.median(ratio)),
+                    "ratio_ci95": (list(median_interval(ratio))
+                                   if len(both) >= MIN_INTERVAL else None),
+                    "win_rate": float(np.mean((mine < theirs) + 0.5 * (mine == theirs))),
+                })
+    return rows
 
 
 def verify_pybullet(config: Config, machines: int) -> dict[str, float]:

@@ -231,6 +231,10 @@ def test_resume_refuses_a_trial_of_other_error_names_in_one_line(tmp_path, capsy
         # A bad --out is refused before any machine is run, not after the whole run.
         (["compare", "--out", "GOOD"], "is not a folder"),
         (["compare", "--machines", "0"], "--machines"),
+        (["compare", "--success-mm", "0"], "--success-mm must be a positive"),
+        (["compare", "--success-mm", "nan"], "--success-mm must be a positive"),
+        (["fit", "GOOD_CSV", "--conditions", "lab"], "needs its time (time_s)"),
+        (["fit", "GOOD_CSV", "--left-out", "huge"], "--left-out"),
         (["compare", "--address", "auto"], "--engine ray"),
     ],
 )

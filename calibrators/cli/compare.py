@@ -22,7 +22,7 @@ from calibrators.cli.common import (
     design_of,
 )
 from calibrators.cli.estimator_options import DEFAULT_STRATEGY
-from calibrators.compare import Config, Trial, run, summary, verify_pybullet
+from calibrators.compare import Config, Trial, paired, run, summary, verify_pybullet
 from calibrators.engines import ENGINES, RAY_INSTALL_HINT, ray_available
 from calibrators.experiment import DEFAULT_BUDGET_S, ESTIMATORS, get_estimator
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
@@ -54,7 +54,8 @@ def _check(args: argparse.Namespace) -> Config:
         (0 <= args.seed < 2**32, "--seed must be between 0 and 2**32 - 1"),
         (np.isfinite(args.budget) and 0 < args.budget <= 1e6,
          "--budget must be a number of seconds in (0, 1e6]"),
-        (np.isfinite(args.target) and args.target > 0, "--target must be a positive number of mm"),
+        (np.isfinite(args.success_mm) and args.success_mm > 0,
+         "--success-mm must be a positive number of mm"),
         (1 <= args.jobs <= MAX_JOBS, f"--jobs must be between 1 and {MAX_JOBS}"),
         (0 <= args.verify_pybullet <= 1000, "--verify-pybullet must be between 0 and 1000"),
         (args.engine != "ray" or ray_available(), f"--engine ray needs Ray: {RAY_INSTALL_HINT}"),
@@ -67,7 +68,7 @@ def _check(args: argparse.Namespace) -> Config:
     # The gauge noise was checked with every command's (calibrators.cli.run).
     sigma, resolution = (0.0, 0.0) if args.noise_free else (args.sigma, args.resolution)
     return Config(agents, estimators, args.budget, args.errors, sigma, resolution,
-                  args.backend, args.seed, args.target,
+                  args.backend, args.seed, args.success_mm,
                   curve_estimator=_curve_estimator(estimators) if args.out else "",
                   design=design_of(args), conditions=conditions_of(args))
 
@@ -156,11 +157,10 @@ def run_command(args: argparse.Namespace) -> None:
         print(f"orthoglide compare: interrupted after {len(collected)} trials"
               + (f"; kept in {out / TRIALS_FILE}, continue with --resume" if out else ""),
               file=sys.stderr)
-        _print(summary(collected, config.target_mm), config,
-               len({t.machine for t in collected}), time.perf_counter() - start, args.json)
+        _print(collected, config, len({t.machine for t in collected}),
+               time.perf_counter() - start, args.json)
         raise SystemExit(130)
-    rows = summary(trials, config.target_mm)
-    _print(rows, config, args.machines, time.perf_counter() - start, args.json)
+    rows = _print(trials, config, args.machines, time.perf_counter() - start, args.json)
     if args.verify_pybullet:
         gaps = verify_pybullet(config, min(args.verify_pybullet, args.machines))
         print(f"PyBullet check of {min(args.verify_pybullet, args.machines)} machine(s), "
@@ -172,38 +172,63 @@ def run_command(args: argparse.Namespace) -> None:
             print(f"wrote {path}", file=sys.stderr if args.json else sys.stdout)
 
 
-def _print(rows: list[dict], config: Config, machines: int, seconds: float,
-           as_json: bool) -> None:
+def _print(trials: list[Trial], config: Config, machines: int, seconds: float,
+           as_json: bool) -> list[dict]:
+    """Print the summary of ``trials`` (and the paired comparisons of its agents) as text
+    or JSON; return its rows."""
+    rows, pairs = summary(trials, config.target_mm), paired(trials)
     if as_json:
-        print(json.dumps({"config": _config_dict(config, machines), "rows": rows},
-                         allow_nan=False))
-        return
+        print(json.dumps({"config": _config_dict(config, machines), "rows": rows,
+                          "paired": pairs}, allow_nan=False))
+        return rows
     print(f"{machines} machines ({config.errors} errors, {config.conditions.label} conditions, "
           f"gauge sigma {config.sigma} mm, budget {config.budget_s:g} s, {config.backend} "
           f"backend), {seconds:.1f} s. TCP error "
-          "RMS over the workspace after calibration (mm), median over machines; rigid = after "
-          "the best-fit rigid motion (the headline), raw = world frame")
-    print(f"{'agent':10}{'estimator':15}{'TCP after (rigid) med':>22}{'p95':>9}"
-          f"{'(raw) med':>11}{'time s med':>11}{'z-RMS':>8}{'chi2 rej':>9}{'success':>9}"
-          f"{'failed':>8}")
+          "RMS over the workspace after calibration (mm), median over machines with its "
+          "95 % interval; rigid = after the best-fit rigid motion (the headline), raw = "
+          "world frame; a failed trial counts as its uncalibrated machine; success: rigid "
+          f"error against the truth <= {config.target_mm:g} mm (predicted: by the estimate "
+          "itself)")
+    print(f"{'agent':10}{'estimator':15}{'TCP after (rigid) med':>22}{'95 % interval':>18}"
+          f"{'p95':>9}{'(raw) med':>11}{'time s med':>11}{'z-RMS':>8}{'chi2 rej':>9}"
+          f"{'success':>9}{'predicted':>10}{'failed':>8}")
     for r in rows:
         rigid, raw = r["tcp_after_mm"]["rigid"], r["tcp_after_mm"]["raw"]
-
-        def show(value: float | None, width: int, digits: int) -> str:
-            return f"{value:{width}.{digits}f}" if value is not None else f"{'-':>{width}}"
-
-        print(f"{r['agent']:10}{r['estimator']:15}{show(rigid['median'], 22, 4)}"
-              f"{show(rigid['p95'], 9, 4)}{show(raw['median'], 11, 3)}"
-              f"{r['time_s']['median']:11.0f}{show(r['z_rms'], 8, 2)}"
-              f"{show(r['chi2_rejected'], 9, 2)}{r['success_rate']:9.0%}{r['failed']:8d}")
+        interval = (f"[{rigid['ci95'][0]:.4f}, {rigid['ci95'][1]:.4f}]" if rigid["ci95"]
+                    else "-")
+        print(f"{r['agent']:10}{r['estimator']:15}{_show(rigid['median'], 22, 4)}"
+              f"{interval:>18}{_show(rigid['p95'], 9, 4)}{_show(raw['median'], 11, 3)}"
+              f"{r['time_s']['median']:11.0f}{_show(r['z_rms'], 8, 2)}"
+              f"{_show(r['chi2_rejected'], 9, 2)}{r['success_rate']:9.0%}"
+              f"{r['predicted_success_rate']:10.0%}{r['failed']:8d}")
     for r in rows:
         if r["failed"]:
             print(f"{r['agent']} x {r['estimator']}: {r['failed']} of {r['machines']} failed "
-                  f"({r['failure']})")
+                  f"({r['failure']}), counted as uncalibrated")
+        for kind, seen in r["warnings"].items():
+            example = seen["example"].split(":", 1)[-1].strip()
+            example = example if len(example) <= 110 else example[:107] + "..."
+            print(f"{r['agent']} x {r['estimator']}: {seen['trials']} of {r['machines']} "
+                  f"fits warn: {kind} (e.g. {example})")
     exact = [name for name, spec in ESTIMATORS.items() if spec.strategy == DEFAULT_STRATEGY]
     if any(r["failed"] and r["estimator"] not in exact for r in rows):
         print(f"the exact-model estimators read any agent's readings: --estimators "
               f"{','.join(exact)}")
+    if pairs:
+        print("paired on the same machines: median ratio of the TCP errors after rigid "
+              "motion (agent / against; below 1 the agent is better) with its 95 % interval, "
+              "and the agent's win rate")
+        for pair in pairs:
+            interval = (f"[{pair['ratio_ci95'][0]:.3f}, {pair['ratio_ci95'][1]:.3f}]"
+                        if pair["ratio_ci95"] else "-")
+            print(f"  {pair['estimator']:15}{pair['agent']:>10} / {pair['against']:10}"
+                  f"{pair['ratio_median']:8.3f} {interval:>16}  wins {pair['win_rate']:4.0%} "
+                  f"of {pair['machines']}")
+    return rows
+
+
+def _show(value: float | None, width: int, digits: int) -> str:
+    return f"{value:{width}.{digits}f}" if value is not None else f"{'-':>{width}}"
 
 
 def _write(trials: list[Trial], rows: list[dict], out: Path, config: Config) -> list[Path]:
@@ -212,12 +237,17 @@ def _write(trials: list[Trial], rows: list[dict], out: Path, config: Config) -> 
         writer = csv.writer(handle)
         writer.writerow(["agent", "estimator", "machines", "failed", "time_s_median",
                          *(f"tcp_after_{f}_median_mm" for f in FRAMES),
-                         "tcp_after_rigid_p95_mm", "z_rms", "success_rate"])
+                         "tcp_after_rigid_ci95_low_mm", "tcp_after_rigid_ci95_high_mm",
+                         "tcp_after_rigid_p95_mm", "z_rms", "chi2_rejected", "success_rate",
+                         "predicted_success_rate"])
         for r in rows:
             writer.writerow([r["agent"], r["estimator"], r["machines"], r["failed"],
                              r["time_s"]["median"],
                              *(r["tcp_after_mm"][f]["median"] for f in FRAMES),
-                             r["tcp_after_mm"]["rigid"]["p95"], r["z_rms"], r["success_rate"]])
+                             *(r["tcp_after_mm"]["rigid"]["ci95"] or (None, None)),
+                             r["tcp_after_mm"]["rigid"]["p95"], r["z_rms"],
+                             r["chi2_rejected"], r["success_rate"],
+                             r["predicted_success_rate"]])
     from calibrators.cli.plots import accuracy_vs_time, boxes
 
     return [out / TRIALS_FILE, summary_csv, accuracy_vs_time(trials, config, out),
@@ -250,9 +280,9 @@ def add(sub: argparse._SubParsersAction) -> None:
     add_conditions(p)
     p.add_argument("--backend", choices=["exact", "pybullet"], default="exact",
                    help="simulator (default %(default)s)")
-    p.add_argument("--target", type=float, default=0.01,
-                   help="success: predicted TCP error after rigid motion at most this "
-                        "(mm, default %(default)s)")
+    p.add_argument("--success-mm", "--target", dest="success_mm", type=float, default=0.01,
+                   help="success: the TCP error after rigid motion, against the truth, at "
+                        "most this (mm; --target is its older name; default %(default)s)")
     p.add_argument("--jobs", type=int, default=1,
                    help="worker processes; with --engine ray and no cluster address, the "
                         "CPUs of the local Ray instance (default %(default)s)")

@@ -180,6 +180,9 @@ class GaussNewtonCalibrator(Calibrator):
                    left_out: ErrorPreset) -> list[Estimate | Exception]:
         """Fit the experiments ``values`` (M, N) of one ``design`` together."""
         space = design.space
+        stamps = [[m.time_s for m in data.items] for data in datas]
+        times = None if any(None in row for row in stamps) else np.array(stamps, dtype=float)
+        consider = consider_terms(design, values, times, conditions)
         free = select(params, space)
         fixed = fixed_values(fix, space)
         for name in fix:
@@ -197,9 +200,6 @@ class GaussNewtonCalibrator(Calibrator):
                              f"without a prior: at least {needed} are needed")
         noise = np.where([isinstance(design.specs[m], TrackerAxis) for m in design.mounting],
                          tracker_sigma, sigma)
-        stamps = [[m.time_s for m in data.items] for data in datas]
-        times = None if any(None in row for row in stamps) else np.array(stamps, dtype=float)
-        consider = consider_terms(design, values, times, conditions)
 
         def fit(rows: np.ndarray, mask: np.ndarray) -> BatchFit:
             return fit_batch(design, values[rows], mask[rows], noise, free, fixed, priors,
@@ -274,10 +274,14 @@ class GaussNewtonCalibrator(Calibrator):
             beyond = [g not in ("drho", "dL", "tracker_rotation") for g in space.groups]
             hint = ("try --params extended" if not result.free[beyond].any() else
                     "look for outliers, a gauge that moved, or a slipping stand")
+            left_out = np.diagonal(result.error_covariance[0])[~result.free].any()
+            widened = ("error bars carry the errors the model leaves out, at the size the "
+                       "misfit shows" if left_out else "error bars are scaled by "
+                       f"sqrt(chi2/dof) = {np.sqrt(result.chi2_dof[0]):.2f}")
             warnings.append(
                 f"the model does not explain the readings: chi2/dof = "
-                f"{result.chi2_dof[0]:.1f} (chi-square test at {CHI2_LEVEL:g}); error bars "
-                f"are scaled by sqrt(chi2/dof) = {np.sqrt(result.chi2_dof[0]):.2f}; {hint}")
+                f"{result.chi2_dof[0]:.1f} (chi-square test at {CHI2_LEVEL:g}); {widened}; "
+                f"{hint}")
         if outliers:
             where = ", ".join(_where(data, k) for k in outliers)
             warnings.append(f"{len(outliers)} outlier reading(s) "

@@ -1,0 +1,67 @@
+"""What ``compare`` reports of its trials: failures counted, success against the truth,
+intervals, paired comparisons."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from calibrators.compare import Trial, median_interval, paired, summary, warning_kind
+
+
+def _trial(agent: str, machine: int, rigid: float, *, before: float = 0.5,
+           predicted: float = 0.001, failed: str = "") -> Trial:
+    frames = {"raw": 2 * rigid, "translation": 1.5 * rigid, "rigid": rigid}
+    return Trial(agent, "extended", machine, failed=failed, time_s=60.0, readings=10,
+                 tcp_before={f: before for f in frames}, tcp_after=frames,
+                 predicted_rigid_mm=float("nan") if failed else predicted,
+                 chi2_rejected=None if failed else False, z=[] if failed else [1.0],
+                 warnings=[] if failed else ["the model does not explain the readings: "
+                                             f"chi2/dof = {machine}"])
+
+
+def test_a_failed_trial_counts_as_its_uncalibrated_machine_and_never_succeeds() -> None:
+    """Ten machines: the agent fails on the three hardest (their uncalibrated error,
+    0.5 mm, enters the median as the table says), succeeds against the truth on the five
+    below 0.01 mm, and predicts success on all seven it fitted."""
+    trials = [_trial("a", m, 0.002 if m < 5 else 0.02) for m in range(7)]
+    trials += [_trial("a", m, 0.5, failed="did not converge") for m in range(7, 10)]
+    row = summary(trials, 0.01)[0]
+    assert row["failed"] == 3 and row["failed_counted_as"] == "uncalibrated"
+    rigid = sorted([0.002] * 5 + [0.02] * 2 + [0.5] * 3)
+    assert row["tcp_after_mm"]["rigid"]["median"] == pytest.approx(np.median(rigid))
+    assert row["tcp_after_mm"]["rigid"]["ci95"] == list(median_interval(rigid))
+    assert row["success_rate"] == pytest.approx(0.5)
+    assert row["predicted_success_rate"] == pytest.approx(0.7)
+    assert row["warnings"]["the model does not explain the readings"]["trials"] == 7
+    assert summary([_trial("a", 0, 0.1, failed=""), _trial("a", 1, 0.1)])[0]["warnings"] == {
+        "the model does not explain the readings": {
+            "trials": 2, "example": "the model does not explain the readings: chi2/dof = 0"}}
+
+
+def test_paired_comparison_is_per_machine() -> None:
+    """Agent ``a`` is 2x better than ``b`` on every machine although their error
+    distributions overlap: the paired ratio says 0.5 on all 20 machines with an interval
+    of zero width, and a wins everywhere."""
+    errors = np.geomspace(0.001, 0.1, 20)
+    trials = [t for m, e in enumerate(errors)
+              for t in (_trial("a", m, e), _trial("b", m, 2 * e))]
+    (pair,) = paired(trials)
+    assert (pair["agent"], pair["against"], pair["machines"]) == ("a", "b", 20)
+    assert pair["ratio_median"] == pytest.approx(0.5)
+    assert pair["ratio_ci95"] == pytest.approx([0.5, 0.5])
+    assert pair["win_rate"] == 1.0
+
+
+def test_paired_comparison_uses_only_the_machines_both_ran() -> None:
+    trials = [_trial("a", m, 0.01) for m in range(8)] + [_trial("b", m, 0.04)
+                                                         for m in range(4, 12)]
+    (pair,) = paired(trials)
+    assert pair["machines"] == 4 and pair["ratio_ci95"] is None
+    assert pair["ratio_median"] == pytest.approx(0.25)
+
+
+def test_warnings_of_one_kind_are_counted_together() -> None:
+    assert warning_kind("3 outlier reading(s) left out: reading 7 (x-leg/y)") == \
+        warning_kind("12 outlier reading(s) left out: reading 1 (z-leg/x)") == \
+        "N outlier reading(s) left out"
