@@ -177,3 +177,21 @@ def test_a_lab_notebook_keeps_each_readings_time_and_the_fit_names_what_it_consi
         untimed = Measurements([Measurement(m.gauge, m.posture, m.repetition, m.reading, m.rho,
                                             m.mounting) for m in data.items])
         gn.estimate(untimed, "extended", episode.sigma, verify=False, conditions="lab")
+
+
+def test_the_trackers_sigma_bounds_its_noise_under_its_mpe() -> None:
+    """The lab's tracker noise (half the MPE along and across the line of sight) at 2.2 m:
+    every coordinate's spread is at most the sigma the fit weights it with, and the
+    coordinates across the line of sight reach it (20000 draws: 1 % standard error)."""
+    from calibrators.estimators.consider import tracker_sigma
+
+    conditions = Conditions("lab")
+    world = World.draw(conditions, np.random.default_rng(0), 1)
+    sight = np.array([2200.0, 0.0, 0.0])
+    draws = np.random.default_rng(1).normal(0.0, 1.0, (20000, 3))
+    noise = world[np.zeros(len(draws), int)].tracker_noise(draws, np.tile(sight, (len(draws), 1)))
+    spread = noise.std(axis=0)
+    sigma = tracker_sigma(conditions, 2200.0)
+    assert np.all(spread <= 1.03 * sigma)
+    assert spread[1:] == pytest.approx([sigma, sigma], rel=0.03)
+    assert spread[0] < 0.5 * sigma  # along the line of sight: 10 um + 0.3 um/m

@@ -40,8 +40,8 @@ considered):
 Left out, each at most about 1 um over a one-hour experiment under ``lab``: the
 structure's growth with the room (a similarity the legs' parallelism does not see), the
 indicator's retrace, the drives' compliance under the platform's weight and the gauges'
-force, and the tracker's MPE (a tracker's readings keep their own
-sigma; its fits reject by chi-square).
+force.  A tracker's noise under conditions with its MPE is not a term but its readings'
+sigma (:func:`tracker_sigma`).
 """
 
 from __future__ import annotations
@@ -54,7 +54,7 @@ from orthoglide_env.instruments.slots import Part
 from orthoglide_env.model.errors import AXIS_NAMES
 from orthoglide_env.model.reading_model import Design, TrackerAxis
 from orthoglide_env.world.conditions import Conditions
-from orthoglide_env.world.table import EFFECTS
+from orthoglide_env.world.table import EFFECTS, TRACKER_MPE_PER_M
 from orthoglide_env.world.truth import HOUR, MINUTE, REVOLUTION_MM, UM
 
 #: The effects whose terms need each reading's time.
@@ -89,6 +89,16 @@ class Consider:
 
 def _range(effect: str, parameter: str, conditions: Conditions) -> tuple[float, float]:
     return EFFECTS[effect][parameter].at(conditions.name)
+
+
+def tracker_sigma(conditions: Conditions, distance_mm: float) -> float:
+    """A tracker coordinate's sigma (mm) for points up to ``distance_mm`` from it, under
+    conditions with the tracker's MPE: half the transverse MPE there, which bounds every
+    coordinate's (the lab draws half the MPE along and across the line of sight, and the
+    one along it is the smaller)."""
+    mpe = _fixed("tracker", "transverse", conditions) + TRACKER_MPE_PER_M["transverse"] * (
+        distance_mm / 1e3)
+    return mpe / 2 * UM
 
 
 def second_moment(effect: str, parameter: str, conditions: Conditions) -> float:

@@ -17,6 +17,7 @@ import numpy as np
 
 from calibrators.estimators.base import Calibrator, Estimate, Measurements, register
 from calibrators.estimators.consider import consider_terms
+from calibrators.estimators.consider import tracker_sigma as tracker_sigma_of
 from calibrators.estimators.exact_fit import (
     CHI2_LEVEL,
     RETAIN,
@@ -67,6 +68,26 @@ def design_of(data: Measurements) -> tuple[Design, np.ndarray]:
     return design, align_tracker(design, np.array([m.reading for m in data.items], dtype=float))
 
 
+def _tracker_rows(design: Design, station: str) -> list[np.ndarray]:
+    """The readings of ``station``'s x, y and z coordinates, each in reading order."""
+    return [np.flatnonzero([station_of(design.mountings[m]) == station
+                            and isinstance(design.specs[m], TrackerAxis)
+                            and design.specs[m].component == c for m in design.mounting])
+            for c in range(3)]
+
+
+def tracker_reach(design: Design, data: Measurements) -> float:
+    """The farthest point of ``data`` from its tracker (mm; 0 without one): the norm of its
+    three coordinates, which a tracker reads in its own frame."""
+    raw = np.array([m.reading for m in data.items], dtype=float)
+    reach = 0.0
+    for station in design.space.stations:
+        rows = _tracker_rows(design, station)
+        if all(len(r) == len(rows[0]) for r in rows):
+            reach = max(reach, float(np.sqrt(sum(raw[r] ** 2 for r in rows)).max(initial=0.0)))
+    return reach
+
+
 def align_tracker(design: Design, values: np.ndarray) -> np.ndarray:
     """Tracker readings in the machine's frame, to within a small rotation: each station's
     points are fitted (best rigid motion) to where the nominal machine puts the TCP, and
@@ -76,10 +97,7 @@ def align_tracker(design: Design, values: np.ndarray) -> np.ndarray:
     out = values.copy()
     space = design.space
     for station in space.stations:
-        rows = [np.flatnonzero(
-            [station_of(design.mountings[m]) == station
-             and isinstance(design.specs[m], TrackerAxis) and design.specs[m].component == c
-             for m in design.mounting]) for c in range(3)]
+        rows = _tracker_rows(design, station)
         # Equal postures in equal order (array_equal also tells unequal counts).
         if any(not np.array_equal(design.rho[rows[0]], design.rho[r]) for r in rows[1:]):
             raise ValueError(f"tracker station '{station}': every point needs its x, y and z "
@@ -131,6 +149,8 @@ class GaussNewtonCalibrator(Calibrator):
         coordinate's noise (mm); ``conditions``: the lab's (a name or
         :class:`~orthoglide_env.world.conditions.Conditions`), whose effects the fit does
         not model but puts in its covariance (:mod:`calibrators.estimators.consider`);
+        under conditions with the tracker's MPE, its readings' sigma comes from it
+        (:func:`~calibrators.estimators.consider.tracker_sigma`) instead;
         ``left_out``: the error preset whose sizes the machine errors and stand errors the
         selection leaves out have a priori (their spread goes into the covariance;
         ``paper`` or ``nominal``: they do not exist, and only a misfit widens it).
@@ -153,8 +173,10 @@ class GaussNewtonCalibrator(Calibrator):
                 prepared.append(None)
                 continue
             prepared.append((design, values))
+            # Under the tracker's MPE its sigma depends on how far its points are.
+            reach = tracker_reach(design, data) if "tracker" in conditions else 0.0
             key = (design.mountings, design.specs, design.rho.tobytes(),
-                   design.mounting.tobytes())
+                   design.mounting.tobytes(), reach)
             groups.setdefault(key, []).append(k)
         options = {"params": params, "prior": prior, "fix": fix or {}, "holdout": holdout,
                    "seed": seed, "solver": solver, "keep_outliers": keep_outliers,
@@ -198,8 +220,12 @@ class GaussNewtonCalibrator(Calibrator):
             raise ValueError(f"{values.shape[1]} readings cannot determine "
                              f"{len(design.mountings)} gauge zeros and the parameters "
                              f"without a prior: at least {needed} are needed")
-        noise = np.where([isinstance(design.specs[m], TrackerAxis) for m in design.mounting],
-                         tracker_sigma, sigma)
+        tracked = np.array([isinstance(design.specs[m], TrackerAxis)
+                            for m in design.mounting])
+        if "tracker" in conditions and tracked.any():
+            # One machine's (estimate_many groups machines by it).
+            tracker_sigma = tracker_sigma_of(conditions, tracker_reach(design, datas[0]))
+        noise = np.where(tracked, tracker_sigma, sigma)
 
         def fit(rows: np.ndarray, mask: np.ndarray) -> BatchFit:
             return fit_batch(design, values[rows], mask[rows], noise, free, fixed, priors,
