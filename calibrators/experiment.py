@@ -63,6 +63,8 @@ class EstimatorSpec:
     strategy: str
     params: str
     prior: str = "auto"
+    #: The lab's effects are fitted (with their sizes as priors), not only considered.
+    fit_world: bool = False
 
 
 #: The estimators ``compare`` offers, by name.
@@ -71,6 +73,7 @@ ESTIMATORS: dict[str, EstimatorSpec] = {
     "paper6": EstimatorSpec("gauss-newton", "paper6", "none"),
     "extended": EstimatorSpec("gauss-newton", "extended", "auto"),
     "extended-base": EstimatorSpec("gauss-newton", "extended", "none"),
+    "extended-world": EstimatorSpec("gauss-newton", "extended", "auto", fit_world=True),
 }
 
 
@@ -80,12 +83,13 @@ def get_estimator(name: str) -> EstimatorSpec:
     return ESTIMATORS[name]
 
 
-def _world_options(strategy: object, conditions: Conditions, left_out: str
-                   ) -> dict[str, Any]:
-    """What an exact-model fit puts into its covariance without fitting it: the effects of
-    ``conditions``, and the errors it leaves out at the sizes of the preset ``left_out``;
-    the paper's linear fit is the paper's, white noise only."""
-    return ({"conditions": conditions, "left_out": left_out}
+def _world_options(strategy: object, spec: EstimatorSpec, conditions: Conditions,
+                   left_out: str) -> dict[str, Any]:
+    """What an exact-model fit knows beyond its readings: the effects of ``conditions``
+    (which it fits, or puts into its covariance), and the errors it leaves out at the
+    sizes of the preset ``left_out``; the paper's linear fit is the paper's, white noise
+    only."""
+    return ({"conditions": conditions, "left_out": left_out, "fit_world": spec.fit_world}
             if hasattr(strategy, "estimate_many") else {})
 
 
@@ -96,7 +100,7 @@ def estimate(data: Measurements, name: str, sigma: float, conditions: Conditions
     spec = get_estimator(name)
     strategy = get_strategy(spec.strategy)
     return strategy.estimate(data, spec.params, sigma, verify=False, prior=spec.prior,
-                             **_world_options(strategy, conditions, left_out))
+                             **_world_options(strategy, spec, conditions, left_out))
 
 
 def estimate_many(datas: list[Measurements], name: str, sigma: float,
@@ -111,7 +115,7 @@ def estimate_many(datas: list[Measurements], name: str, sigma: float,
         # A comparison scores estimates; it has no reader for their words.
         return strategy.estimate_many(datas, spec.params, sigma, verify=False,
                                       prior=spec.prior, explain=False,
-                                      **_world_options(strategy, conditions, left_out))
+                                      **_world_options(strategy, spec, conditions, left_out))
     out: list[Estimate | Exception] = []
     for data in datas:
         try:

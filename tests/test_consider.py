@@ -195,3 +195,31 @@ def test_the_trackers_sigma_bounds_its_noise_under_its_mpe() -> None:
     assert np.all(spread <= 1.03 * sigma)
     assert spread[1:] == pytest.approx([sigma, sigma], rel=0.03)
     assert spread[0] < 0.5 * sigma  # along the line of sight: 10 um + 0.3 um/m
+
+
+def test_fitting_the_world_keeps_batches_and_ideal_fits_as_they_are() -> None:
+    """``fit_world``: each term's coefficient is a parameter with a unit prior.  Under
+    ``ideal`` there is none, and the fit is the extended one bit for bit; under ``lab`` a
+    batch of the paper's experiments gives each machine its lone fit (to the solver's
+    1e-9 of a scale) and names the terms it fitted."""
+    from conftest import paper_experiment
+
+    gn = get_strategy("gauss-newton")
+    datas, sigma = [], 0.0
+    for seed in (3, 4, 5):
+        episode, _ = paper_experiment(None, seed, errors="realistic", conditions="lab")
+        datas.append(measurements_of(episode.records, episode.time_s))
+        sigma = episode.sigma
+    ideal = gn.estimate(datas[0], "extended", sigma, verify=False, fit_world=True)
+    plain = gn.estimate(datas[0], "extended", sigma, verify=False)
+    np.testing.assert_array_equal(ideal.theta, plain.theta)
+    assert ideal.names == plain.names
+    batch = gn.estimate_many(datas, "extended", sigma, verify=False, conditions="lab",
+                             fit_world=True)
+    for data, together in zip(datas, batch, strict=True):
+        alone = gn.estimate(data, "extended", sigma, verify=False, conditions="lab",
+                            fit_world=True)
+        assert together.names == alone.names
+        assert "world.lead.scale[x]" in alone.names and not alone.considered
+        assert set(alone.estimate["world"]) >= {"lead.scale[x]", "backlash.mean"}
+        np.testing.assert_allclose(together.theta, alone.theta, rtol=0, atol=1e-8)

@@ -15,7 +15,9 @@ from calibrators.agents import get_agent
 from calibrators.cli import estimator_options
 from calibrators.cli.common import add_conditions, add_design, conditions_of
 from calibrators.cli.output import emit, report
+from calibrators.compare import machine_z_scores
 from calibrators.estimators.base import Estimate, Measurements, get_strategy
+from calibrators.estimators.consider import WORLD_PREFIX
 from calibrators.estimators.exact_fit import z_scores
 from calibrators.estimators.gauss_newton import design_of
 from calibrators.experiment import DEFAULT_BUDGET_S, machine_seed, run_episode
@@ -58,6 +60,11 @@ def _z_rms(est: Estimate, data: Measurements, env: gym.Env) -> float | None:
     if not est.information.size or any(isinstance(m.gauge, TrackerAxis) for m in data.items):
         # A tracker's frame has no truth the readings were aligned to: no full z here.
         return None
+    if any(n.startswith(WORLD_PREFIX) for n in est.names):
+        # The world's drawn numbers are not the fit's terms: the machine errors' z, as
+        # compare scores them.
+        z = machine_z_scores([est], [env.unwrapped.true_machine])[0]
+        return float(np.sqrt(np.mean(z**2))) if len(z) else None
     design, _ = design_of(data)
     truth = parameters_of(design, env.unwrapped.true_machine, env.unwrapped.true_gauges)
     free = [est.space.index(n) for n in est.names]

@@ -36,6 +36,10 @@ def add(p: argparse.ArgumentParser) -> None:
                    help="the error preset whose sizes the errors --params leaves out have a "
                         "priori: their spread goes into the error bars (paper or nominal: "
                         "they do not exist) (default: %(default)s)")
+    p.add_argument("--fit-world", action="store_true",
+                   help="under --conditions lab or workshop, fit the lab's effects (lead "
+                        "error, backlash, warm-up, stands, indicators; their sizes as priors) "
+                        "instead of only carrying them in the error bars")
     p.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
                    help="hold a parameter at a known value (mm, rad); repeatable")
     p.add_argument("--solver", choices=list(SOLVERS), default="gauss-newton",
@@ -55,7 +59,8 @@ def options(args: argparse.Namespace) -> dict[str, Any]:
     """Keyword arguments of ``Calibrator.estimate`` from the parsed options."""
     return {"prior": args.prior, "fix": parse_assignments(args.fix, "--fix"),
             "keep_outliers": args.keep_outliers, "holdout": args.holdout,
-            "seed": args.seed, "solver": args.solver, "left_out": args.left_out}
+            "seed": args.seed, "solver": args.solver, "left_out": args.left_out,
+            **({"fit_world": True} if args.fit_world else {})}
 
 
 def estimate(args: argparse.Namespace, data: Measurements, sigma: float,

@@ -18,6 +18,7 @@ from typing import Any, ClassVar
 import numpy as np
 from scipy import special
 
+from calibrators.estimators.consider import WORLD_PREFIX
 from calibrators.measurements import Measurements
 from calibrators.registry import Registry
 from orthoglide_env.instruments.dial import DEFAULT_SIGMA
@@ -174,7 +175,8 @@ class Estimate:
 
 def schema(values: list, space: list[str]) -> dict[str, Any]:
     """Per-parameter ``values`` (in the order of the names ``space``) in the machine-file
-    schema; stand parameters go under ``"stands"`` keyed by mounting."""
+    schema; stand parameters go under ``"stands"`` keyed by mounting, fitted terms of the
+    lab's world under ``"world"`` keyed by term."""
     n = len(ERROR_NAMES)
     out: dict[str, Any] = {}
     start = 0
@@ -185,11 +187,17 @@ def schema(values: list, space: list[str]) -> dict[str, Any]:
                                                        for i in range(0, size, size // 3)]
         start += size
     stands: dict[str, list] = {}
+    world: dict[str, Any] = {}
     for name, value in zip(space[n:], values[n:], strict=True):
+        if name.startswith(WORLD_PREFIX):
+            world[name[len(WORLD_PREFIX):]] = value
+            continue
         mounting = name.rsplit(".", 1)[0]
         stands.setdefault(mounting, []).append(value)
     if stands:
         out["stands"] = stands
+    if world:
+        out["world"] = world
     return out
 
 

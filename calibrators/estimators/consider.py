@@ -57,6 +57,8 @@ from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.world.table import EFFECTS, TRACKER_MPE_PER_M
 from orthoglide_env.world.truth import HOUR, MINUTE, REVOLUTION_MM, UM
 
+#: A fitted term's parameter name is its name after this.
+WORLD_PREFIX: str = "world."
 #: The effects whose terms need each reading's time.
 TIMED_EFFECTS: tuple[str, ...] = ("warmup", "stands")
 

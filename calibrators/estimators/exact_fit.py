@@ -181,9 +181,14 @@ class _Problem:
 
     def __init__(self, design: Design, values: np.ndarray, mask: np.ndarray,
                  sigma: float | np.ndarray,
-                 free: np.ndarray, prior: np.ndarray, scale: np.ndarray) -> None:
+                 free: np.ndarray, prior: np.ndarray, scale: np.ndarray,
+                 world: np.ndarray | None = None) -> None:
         self.design, self.values, self.mask, self.free, self.scale = (
             design, values, mask, free, scale)
+        # Parameters beyond the design's space are the coefficients of ``world``'s reading
+        # patterns (M, N, K), mm per unit: they enter the readings linearly.
+        self.n = len(design.space.names)
+        self.world = np.zeros((len(values), len(design), 0)) if world is None else world
         self.idx = np.flatnonzero(free)
         self.s = scale[self.idx]
         with np.errstate(divide="ignore"):
@@ -197,10 +202,17 @@ class _Problem:
         # (as the extended fit's does) leaves none to truncate: a step is a linear solve.
         self.full_rank = bool(np.all(self.precision >= RETAIN * (1 - 1e-9)))
 
+    def predict(self, theta: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """The readings of machines ``rows`` at ``theta`` (mm)."""
+        model = predict(theta[:, :self.n], self.design)
+        if self.world.shape[-1]:
+            model += (self.world[rows] @ theta[:, self.n:, None])[..., 0]
+        return model
+
     def residual(self, theta: np.ndarray, rows: np.ndarray,
                  model: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Whitened data residuals (zeros eliminated) and the total cost with the prior."""
-        model = predict(theta, self.design) if model is None else model
+        model = self.predict(theta, rows) if model is None else model
         r = _centre((model - self.values[rows]) * self.weight, self.mask[rows], self.onehot,
                     self.design.mounting)
         phi = theta[:, self.idx] / self.s
@@ -210,7 +222,11 @@ class _Problem:
                  ) -> np.ndarray:
         """Whitened Jacobian over ``free`` (default: the free parameters), scaled units."""
         free = self.free if free is None else free
-        jac = jacobian(theta, self.design, free, self.scale)
+        n = self.n
+        jac = jacobian(theta[:, :n], self.design, free[:n], self.scale[:n])
+        if free[n:].any():
+            jac = np.concatenate([jac, self.world[rows][..., free[n:]] * self.scale[n:][free[n:]]],
+                                 axis=-1)
         jac *= self.weight[:, None]
         return _centre(jac, self.mask[rows], self.onehot, self.design.mounting)
 
@@ -273,7 +289,7 @@ def _damped_gauss_newton(problem: _Problem, theta: np.ndarray, max_iterations: i
         th = theta[rows]
         unknown = rows[~known[rows]]
         if len(unknown):
-            models[unknown] = predict(theta[unknown], problem.design)
+            models[unknown] = problem.predict(theta[unknown], unknown)
         model = models[rows]
         r, cost = problem.residual(th, rows, model)
         jac = problem.jacobian(th, rows)
@@ -307,7 +323,7 @@ def _damped_gauss_newton(problem: _Problem, theta: np.ndarray, max_iterations: i
                                                                  eigen[1][sub[damped]]))
             trial = th[sub].copy()
             trial[:, idx] += step * s
-            trial_model = predict(trial, problem.design)
+            trial_model = problem.predict(trial, rows[sub])
             _, trial_cost = problem.residual(trial, rows[sub], trial_model)
             accept = trial_cost <= cost[sub]
             ok = sub[accept]
@@ -368,7 +384,8 @@ def fit_batch(design: Design, values: np.ndarray, mask: np.ndarray, sigma: float
               free: np.ndarray, fixed: np.ndarray, prior: np.ndarray, scale: np.ndarray,
               max_iterations: int = MAX_ITERATIONS, unmodelled: np.ndarray | None = None,
               solver: str = "gauss-newton", consider: Consider | None = None,
-              left_out: np.ndarray | None = None) -> BatchFit:
+              left_out: np.ndarray | None = None, world: np.ndarray | None = None
+              ) -> BatchFit:
     """Fit machines whose readings ``values`` (M, N) of ``design`` are used where ``mask``.
 
     ``free``, ``fixed``, ``prior``, ``scale``: per parameter of ``design.space`` (mask of the
@@ -380,7 +397,8 @@ def fit_batch(design: Design, values: np.ndarray, mask: np.ndarray, sigma: float
     :data:`SOLVERS`.  ``sigma``: the noise of every reading (mm), or one for all.
     ``consider``: the real lab's effects the model leaves out
     (:mod:`calibrators.estimators.consider`), added to the covariance
-    (:func:`_considered`)."""
+    (:func:`_considered`).  ``world``: (M, N, K) reading patterns (:func:`world_columns`)
+    whose coefficients are the parameters after the design's space, fitted instead."""
     if solver not in SOLVERS:
         raise ValueError(f"unknown solver '{solver}'; choose from {list(SOLVERS)}")
     values = np.atleast_2d(np.asarray(values, dtype=float))
@@ -388,7 +406,7 @@ def fit_batch(design: Design, values: np.ndarray, mask: np.ndarray, sigma: float
     values = np.where(mask, values, 0.0)
     m_count = len(values)
     problem = _Problem(design, values, mask, sigma, np.asarray(free, dtype=bool),
-                       np.asarray(prior, dtype=float), np.asarray(scale, dtype=float))
+                       np.asarray(prior, dtype=float), np.asarray(scale, dtype=float), world)
     idx, s = problem.idx, problem.s
     theta = np.tile(np.asarray(fixed, dtype=float), (m_count, 1))
     theta[:, idx] = 0.0
@@ -396,7 +414,7 @@ def fit_batch(design: Design, values: np.ndarray, mask: np.ndarray, sigma: float
 
     # The covariance and information at the solution.
     rows = np.arange(m_count)
-    model = predict(theta, design)
+    model = problem.predict(theta, rows)
     r, cost = problem.residual(theta, rows, model)
     # A converged fit's last Jacobian is its solution's to ~1e-11 (the last step is below
     # 1e-9 of each scale; the model bends on the scale of the leg length).
@@ -421,7 +439,8 @@ def fit_batch(design: Design, values: np.ndarray, mask: np.ndarray, sigma: float
     priored = int(np.sum(problem.precision > 0))
     dof = mask.sum(axis=1) - mountings_used - np.maximum(retained - priored, 0)
     if consider is not None and not consider.empty:
-        cov_scaled = cov_scaled + _considered(problem, theta, jac, gain_matrix, consider)
+        cov_scaled = cov_scaled + _considered(problem, jac, gain_matrix,
+                                              world_columns(design, consider))
     fit = BatchFit(
         theta=theta, free=problem.free, scale=problem.scale,
         prior=np.asarray(prior, dtype=float), covariance=cov_scaled * np.outer(s, s),
@@ -435,21 +454,26 @@ def fit_batch(design: Design, values: np.ndarray, mask: np.ndarray, sigma: float
     return fit
 
 
-def _considered(problem: _Problem, theta: np.ndarray, jac: np.ndarray,
-                gain_matrix: np.ndarray, consider: Consider) -> np.ndarray:
-    """(M, nf, nf) the covariance, in scaled units, that the consider terms add to the
-    estimate: each term's reading pattern ``C`` (a carriage's pattern times the reading's
-    derivative by that axis's encoder offset, or a reading's own), whitened and centred
-    within its mounting as the residuals are, moves the estimate by ``gain J^T C`` per unit
-    of its coefficient, whose second moment the pattern already carries."""
-    design = problem.design
-    drho = np.isin(np.arange(len(problem.free)),
+def world_columns(design: Design, consider: Consider) -> np.ndarray:
+    """(M, N, K) each consider term's pattern over the readings (mm per unit coefficient):
+    a carriage's pattern times the reading's derivative by that axis's encoder offset (at
+    the nominal machine: the machine's errors change it by parts in 1e3 of a term of a few
+    um), or a reading's own."""
+    drho = np.isin(np.arange(len(design.space.names)),
                    [design.space.names.index(n) for n in ERROR_NAMES[:3]])
-    derivative = jacobian(theta, design, drho, np.ones(3))  # (M, N, 3), mm per mm
-    columns = np.concatenate([np.einsum("mna,mnak->mnk", derivative, consider.drive),
-                              consider.reading], axis=-1)
+    derivative = jacobian(np.zeros(len(drho)), design, drho, np.ones(3))  # (N, 3), mm/mm
+    return np.concatenate([np.einsum("na,mnak->mnk", derivative, consider.drive),
+                           consider.reading], axis=-1)
+
+
+def _considered(problem: _Problem, jac: np.ndarray, gain_matrix: np.ndarray,
+                columns: np.ndarray) -> np.ndarray:
+    """(M, nf, nf) the covariance, in scaled units, that consider terms add to the
+    estimate: each term's reading pattern ``columns`` (:func:`world_columns`), whitened and
+    centred within its mounting as the residuals are, moves the estimate by ``gain J^T C``
+    per unit of its coefficient, whose second moment the pattern already carries."""
     columns = _centre(columns * problem.weight[:, None], problem.mask, problem.onehot,
-                      design.mounting)
+                      problem.design.mounting)
     moved = gain_matrix @ (_t(jac) @ columns)
     return moved @ _t(moved)
 

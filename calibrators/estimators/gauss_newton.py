@@ -16,13 +16,14 @@ from typing import Any
 import numpy as np
 
 from calibrators.estimators.base import Calibrator, Estimate, Measurements, register
-from calibrators.estimators.consider import consider_terms
+from calibrators.estimators.consider import WORLD_PREFIX, Consider, consider_terms
 from calibrators.estimators.consider import tracker_sigma as tracker_sigma_of
 from calibrators.estimators.exact_fit import (
     CHI2_LEVEL,
     RETAIN,
     BatchFit,
     fit_batch,
+    world_columns,
 )
 from calibrators.estimators.paper_linear import split_repetitions
 from calibrators.estimators.parameters import (
@@ -143,8 +144,8 @@ class GaussNewtonCalibrator(Calibrator):
                       fix: dict[str, float] | None = None, keep_outliers: bool = False,
                       holdout: float = 0.0, seed: int = 0, solver: str = "gauss-newton",
                       tracker_sigma: float = TRACKER_SIGMA, explain: bool = True,
-                      conditions: Conditions | str = "ideal", left_out: str = DEFAULT_PRESET
-                      ) -> list[Estimate | Exception]:
+                      conditions: Conditions | str = "ideal", left_out: str = DEFAULT_PRESET,
+                      fit_world: bool = False) -> list[Estimate | Exception]:
         """:meth:`estimate` of many experiments; ``tracker_sigma``: a laser tracker
         coordinate's noise (mm); ``conditions``: the lab's (a name or
         :class:`~orthoglide_env.world.conditions.Conditions`), whose effects the fit does
@@ -153,7 +154,9 @@ class GaussNewtonCalibrator(Calibrator):
         (:func:`~calibrators.estimators.consider.tracker_sigma`) instead;
         ``left_out``: the error preset whose sizes the machine errors and stand errors the
         selection leaves out have a priori (their spread goes into the covariance;
-        ``paper`` or ``nominal``: they do not exist, and only a misfit widens it).
+        ``paper`` or ``nominal``: they do not exist, and only a misfit widens it);
+        ``fit_world``: the conditions' terms are fitted (each coefficient a parameter
+        ``world.<term>`` with its second moment as a normal prior) instead of considered.
         Those of one design (the same readings of the same mountings at the same
         postures, as a fixed agent takes them on every machine) are fitted together, in
         one batched solve.  A failure is returned in
@@ -182,7 +185,7 @@ class GaussNewtonCalibrator(Calibrator):
                    "seed": seed, "solver": solver, "keep_outliers": keep_outliers,
                    "sigma": sigma, "tracker_sigma": tracker_sigma, "verify": verify,
                    "explain": explain, "conditions": conditions,
-                   "left_out": left_out_sigmas(left_out)}
+                   "left_out": left_out_sigmas(left_out), "fit_world": fit_world}
         for members in groups.values():
             design = prepared[members[0]][0]
             values = np.stack([prepared[k][1] for k in members])
@@ -199,7 +202,7 @@ class GaussNewtonCalibrator(Calibrator):
                    params: str, prior: str, fix: dict[str, float], holdout: float, seed: int,
                    solver: str, keep_outliers: bool, sigma: float, tracker_sigma: float,
                    verify: bool, explain: bool, conditions: Conditions,
-                   left_out: ErrorPreset) -> list[Estimate | Exception]:
+                   left_out: ErrorPreset, fit_world: bool) -> list[Estimate | Exception]:
         """Fit the experiments ``values`` (M, N) of one ``design`` together."""
         space = design.space
         stamps = [[m.time_s for m in data.items] for data in datas]
@@ -220,6 +223,21 @@ class GaussNewtonCalibrator(Calibrator):
             raise ValueError(f"{values.shape[1]} readings cannot determine "
                              f"{len(design.mountings)} gauge zeros and the parameters "
                              f"without a prior: at least {needed} are needed")
+        spread = preset_sigmas(left_out, space)
+        names = list(space.names)
+        world = None
+        if fit_world and not consider.empty:
+            # The terms' coefficients, in units of their root second moment, join the
+            # parameters with a unit normal prior.
+            world = world_columns(design, consider)
+            names += [f"{WORLD_PREFIX}{n}" for n in consider.names]
+            k = world.shape[-1]
+            free, fixed, priors, scale, unmodelled, spread = (
+                np.concatenate([a, np.full(k, v, dtype=a.dtype)])
+                for a, v in ((free, True), (fixed, 0.0), (priors, 1.0), (scale, 1.0),
+                             (unmodelled, False), (spread, 0.0)))
+            consider = Consider((), np.zeros((len(values), len(design), 3, 0)),
+                                np.zeros((len(values), len(design), 0)))
         tracked = np.array([isinstance(design.specs[m], TrackerAxis)
                             for m in design.mounting])
         if "tracker" in conditions and tracked.any():
@@ -230,8 +248,8 @@ class GaussNewtonCalibrator(Calibrator):
         def fit(rows: np.ndarray, mask: np.ndarray) -> BatchFit:
             return fit_batch(design, values[rows], mask[rows], noise, free, fixed, priors,
                              scale, unmodelled=unmodelled, solver=solver,
-                             consider=consider.rows(rows),
-                             left_out=preset_sigmas(left_out, space))
+                             consider=consider.rows(rows), left_out=spread,
+                             world=None if world is None else world[rows])
 
         m_count = len(values)
         held = _holdout(design, holdout, seed) if holdout else np.zeros(values.shape[1], bool)
@@ -278,16 +296,18 @@ class GaussNewtonCalibrator(Calibrator):
             else:
                 out.append(self._estimate(datas[m], params, prior, sigma, design, values[m],
                                           result, eigenvalues[m], mask[m], held, outliers[m],
-                                          verify, explain, consider.effects))
+                                          verify, explain, consider.effects, names,
+                                          None if world is None else world[m]))
         return out
 
     def _estimate(self, data: Measurements, params: str, prior: str, sigma: float,
                   design: Design, values: np.ndarray, result: BatchFit,
                   eigenvalues: np.ndarray, mask: np.ndarray, held: np.ndarray,
                   outliers: list[int], verify: bool, explain: bool,
-                  considered: list[str]) -> Estimate:
+                  considered: list[str], every: list[str], world: np.ndarray | None
+                  ) -> Estimate:
         space = design.space
-        names = [n for n, f in zip(space.names, result.free, strict=True) if f]
+        names = [n for n, f in zip(every, result.free, strict=True) if f]
         idx = np.flatnonzero(result.free)
         s = result.scale[idx]
         info = result.information[0]
@@ -298,7 +318,7 @@ class GaussNewtonCalibrator(Calibrator):
         warnings = []
         if result.misfit[0]:
             beyond = [g not in ("drho", "dL", "tracker_rotation") for g in space.groups]
-            hint = ("try --params extended" if not result.free[beyond].any() else
+            hint = ("try --params extended" if not result.free[:len(beyond)][beyond].any() else
                     "look for outliers, a gauge that moved, or a slipping stand")
             left_out = np.diagonal(result.error_covariance[0])[~result.free].any()
             widened = ("error bars carry the errors the model leaves out, at the size the "
@@ -314,18 +334,19 @@ class GaussNewtonCalibrator(Calibrator):
                             f"{'kept' if mask[outliers].all() else 'left out'}: {where}")
         residuals = result.residuals[0]
         if held.any():
-            residuals = np.where(held, _held_out(design, values, theta, mask, held), residuals)
+            residuals = np.where(held, _held_out(design, values, theta, mask, held, world),
+                                 residuals)
         return Estimate(
             strategy=self.name, params=params, drho=theta[:3], dL=theta[3:6], covariance=cov,
             residuals=residuals, singular_values=np.sqrt(np.clip(eigenvalues, 0, None)),
             crlb=np.sqrt(np.diag(result.covariance[0])), weak_directions=[],
             n_readings=int(mask.sum()), experiment_time_s=data.experiment_time_s,
-            verification_rms_mm=self._verify(design, values, result, mask, data)
+            verification_rms_mm=self._verify(design, values, result, mask, data, world)
             if verify else None,
             iterations=int(result.iterations[0]), sigma=sigma,
             # Physical units, for readings of unit variance (as the paper's fit reports it).
             fisher=info / np.outer(s, s) * weighting_sigma(sigma) ** 2,
-            readings=data, names=names, space=list(space.names), theta=theta, prior=prior,
+            readings=data, names=names, space=every, theta=theta, prior=prior,
             chi2=float(result.chi2[0]), dof=int(result.dof[0]),
             covariance_scale=float(result.covariance_scale[0]), warnings=warnings,
             identifiable=[describe(d, names) for d in result.identifiable(0)] if explain else [],
@@ -337,7 +358,7 @@ class GaussNewtonCalibrator(Calibrator):
         )
 
     def _verify(self, design: Design, values: np.ndarray, result: BatchFit, mask: np.ndarray,
-                data: Measurements) -> float | None:
+                data: Measurements, world: np.ndarray | None) -> float | None:
         """Leave one repetition out: fit without it, predict its readings (each mounting's
         zero from the rest); the RMS over every held-out reading (mm)."""
         reps = np.array([m.repetition for m in data.items])
@@ -349,21 +370,26 @@ class GaussNewtonCalibrator(Calibrator):
             train = mask & ~test
             try:
                 fit = fit_batch(design, values[None], train[None], result.sigma,
-                                result.free, result.theta[0], result.prior, result.scale)
+                                result.free, result.theta[0], result.prior, result.scale,
+                                world=None if world is None else world[None])
             except np.linalg.LinAlgError:
                 continue
             if fit.converged[0]:
-                held = _held_out(design, values, fit.theta[0], train, test)[test]
+                held = _held_out(design, values, fit.theta[0], train, test, world)[test]
                 errors.append(held[np.isfinite(held)])
         errors = np.concatenate(errors) if errors else np.zeros(0)
         return float(np.sqrt(np.mean(errors**2))) if errors.size else None
 
 
 def _held_out(design: Design, values: np.ndarray, theta: np.ndarray, train: np.ndarray,
-              test: np.ndarray) -> np.ndarray:
-    """Residuals of the ``test`` readings predicted by ``theta``, each mounting's zero taken
-    from its ``train`` readings (NaN where a mounting has none)."""
-    raw = values - predict(theta, design)
+              test: np.ndarray, world: np.ndarray | None = None) -> np.ndarray:
+    """Residuals of the ``test`` readings predicted by ``theta`` (with the fitted terms of
+    ``world``, (N, K), when there are), each mounting's zero taken from its ``train``
+    readings (NaN where a mounting has none)."""
+    n = len(design.space.names)
+    raw = values - predict(theta[:n], design)
+    if world is not None:
+        raw -= world @ theta[n:]
     out = np.full(len(values), np.nan)
     for k in range(len(design.mountings)):
         mine = design.mounting == k

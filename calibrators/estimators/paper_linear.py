@@ -76,6 +76,7 @@ class PaperCalibrator(Calibrator):
             ("fix", bool(options.get("fix"))), ("holdout", bool(options.get("holdout"))),
             ("keep_outliers", bool(options.get("keep_outliers"))),
             ("solver", options.get("solver", "gauss-newton") != "gauss-newton"),
+            ("fit_world", bool(options.get("fit_world"))),
             ("conditions", str(getattr(options.get("conditions", "ideal"), "name",
                                        options.get("conditions", "ideal"))) != "ideal"))
             if given]
