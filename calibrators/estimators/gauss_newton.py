@@ -116,7 +116,7 @@ def align_tracker(design: Design, values: np.ndarray) -> np.ndarray:
     return out
 
 
-def left_out_sigmas(name: str) -> ErrorPreset:
+def left_out_preset(name: str) -> ErrorPreset:
     """The error preset ``name`` (``ValueError`` naming the presets if unknown)."""
     if name not in PRESETS:
         raise ValueError(f"unknown left-out preset '{name}'; choose from {sorted(PRESETS)}")
@@ -185,7 +185,7 @@ class GaussNewtonCalibrator(Calibrator):
                    "seed": seed, "solver": solver, "keep_outliers": keep_outliers,
                    "sigma": sigma, "tracker_sigma": tracker_sigma, "verify": verify,
                    "explain": explain, "conditions": conditions,
-                   "left_out": left_out_sigmas(left_out), "fit_world": fit_world}
+                   "left_out": left_out_preset(left_out), "fit_world": fit_world}
         for members in groups.values():
             design = prepared[members[0]][0]
             values = np.stack([prepared[k][1] for k in members])
