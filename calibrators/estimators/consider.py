@@ -24,7 +24,8 @@ considered):
 * ``backlash``: per axis, half the lost motion times the direction of the last move of
   that axis before the reading (from the readings' order: the lab starts each axis as if
   last moved forward).
-* ``warmup``: per axis, ``x (1 - exp(-t / tau))`` at the table's middle time constant.
+* ``warmup``: per axis, ``x (1 - exp(-t / tau))``, the time constant's spread by
+  Simpson's rule over its range; the amplitude's mean acts on every axis at once.
 * ``stands``: per gauge mounting, its creep ``1 - exp(-(t - t0) / tau)`` from its first
   reading ``t0`` (a stand is mounted before it is read: this overstates what is left;
   the time constant's spread by Simpson's rule over its range), its arm's growth with
@@ -54,8 +55,8 @@ from orthoglide_env.instruments.slots import Part
 from orthoglide_env.model.errors import AXIS_NAMES
 from orthoglide_env.model.reading_model import Design, TrackerAxis
 from orthoglide_env.world.conditions import Conditions
-from orthoglide_env.world.table import EFFECTS, TRACKER_MPE_PER_M
-from orthoglide_env.world.truth import HOUR, MINUTE, REVOLUTION_MM, UM
+from orthoglide_env.world.table import TRACKER_MPE_PER_M
+from orthoglide_env.world.truth import HOUR, MINUTE, REVOLUTION_MM, UM, bar_bending
 
 #: A fitted term's parameter name is its name after this.
 WORLD_PREFIX: str = "world."
@@ -89,10 +90,6 @@ class Consider:
         return Consider(self.names, self.drive[rows], self.reading[rows])
 
 
-def _range(effect: str, parameter: str, conditions: Conditions) -> tuple[float, float]:
-    return EFFECTS[effect][parameter].at(conditions.name)
-
-
 def tracker_sigma(conditions: Conditions, distance_mm: float) -> float:
     """A tracker coordinate's sigma (mm) for points up to ``distance_mm`` from it, under
     conditions with the tracker's MPE: half the transverse MPE there, which bounds every
@@ -105,16 +102,16 @@ def tracker_sigma(conditions: Conditions, distance_mm: float) -> float:
 
 def second_moment(effect: str, parameter: str, conditions: Conditions) -> float:
     """E[v^2] of a value drawn uniformly in the table's range under ``conditions``."""
-    low, high = _range(effect, parameter, conditions)
+    low, high = conditions.size(effect, parameter)
     return (low * low + low * high + high * high) / 3.0
 
 
 def _fixed(effect: str, parameter: str, conditions: Conditions) -> float:
-    return _range(effect, parameter, conditions)[0]
+    return conditions.size(effect, parameter)[0]
 
 
 def _mean(effect: str, parameter: str, conditions: Conditions) -> float:
-    low, high = _range(effect, parameter, conditions)
+    low, high = conditions.size(effect, parameter)
     return (low + high) / 2.0
 
 
@@ -125,7 +122,7 @@ _WEIGHTS: tuple[float, ...] = (1 / 6, 2 / 3, 1 / 6)
 
 
 def _taus(effect: str, parameter: str, conditions: Conditions) -> list[float]:
-    low, high = _range(effect, parameter, conditions)
+    low, high = conditions.size(effect, parameter)
     return [(low + (high - low) * node) * MINUTE for node in _NODES]
 
 
@@ -164,7 +161,7 @@ def _drive_terms(design: Design, t: np.ndarray | None, conditions: Conditions
         # The table's curve is split between the two sines as the lab draws it: a share
         # s ~ U(0, 1) to the first, (1 - s) / 2 to the second (E[s^2] = 1/3).
         periodic = np.sqrt(second_moment("lead", "periodic", conditions) / 2) * UM / 2
-        angle = 2 * np.pi * x * stroke / _range("lead", "screw_lead", conditions)[0]
+        angle = 2 * np.pi * x * stroke / conditions.size("lead", "screw_lead")[0]
         for name, pattern in (("lead.scale", scale * x),
                               ("lead.curve1", curve / np.sqrt(3) * np.sin(np.pi * x)),
                               ("lead.curve2", curve / np.sqrt(12) * np.sin(2 * np.pi * x)),
@@ -214,11 +211,7 @@ def _reading_terms(design: Design, values: np.ndarray, t: np.ndarray | None,
         # between its hinges) yields under it: a known gain on the readings.
         give = _fixed("stands", "give", conditions) * UM if on("stands") else 0.0
         if on("compliance") and spec.part == Part.BAR:
-            modulus = _fixed("compliance", "bar_modulus", conditions) * 1e3  # N/mm^2
-            width, height = design.machine_design.bar_section
-            length = design.machine_design.L
-            a, b = spec.at * length, (1 - spec.at) * length
-            give += a**2 * b**2 / (3 * modulus * width * height**3 / 12 * length)
+            give += float(bar_bending(conditions, spec.at, design.machine_design))
         gives = gives or bool(give)
         force = (_fixed("dial", "force_full", conditions)
                  - _fixed("dial", "force_rest", conditions))

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from calibrators.estimators.base import Calibrator, Estimate, Measurements, register
-from calibrators.estimators.consider import WORLD_PREFIX, Consider, consider_terms
+from calibrators.estimators.consider import WORLD_PREFIX, consider_terms
 from calibrators.estimators.consider import tracker_sigma as tracker_sigma_of
 from calibrators.estimators.exact_fit import (
     CHI2_LEVEL,
@@ -48,7 +48,7 @@ from orthoglide_env.model.reading_model import (
     station_of,
 )
 from orthoglide_env.scoring import best_rigid_motion
-from orthoglide_env.world.conditions import Conditions
+from orthoglide_env.world.conditions import IDEAL, Conditions
 
 #: A reading is an outlier when its residual exceeds this many robust standard deviations
 #: (1.4826 x the median absolute residual, or its instrument's sigma when larger): a normal
@@ -236,8 +236,7 @@ class GaussNewtonCalibrator(Calibrator):
                 np.concatenate([a, np.full(k, v, dtype=a.dtype)])
                 for a, v in ((free, True), (fixed, 0.0), (priors, 1.0), (scale, 1.0),
                              (unmodelled, False), (spread, 0.0)))
-            consider = Consider((), np.zeros((len(values), len(design), 3, 0)),
-                                np.zeros((len(values), len(design), 0)))
+            consider = consider_terms(design, values, times, IDEAL)  # none left to consider
         tracked = np.array([isinstance(design.specs[m], TrackerAxis)
                             for m in design.mounting])
         if "tracker" in conditions and tracked.any():

@@ -84,6 +84,17 @@ def _all_numbers(value: Any) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
 
 
+def bar_bending(conditions: Conditions, at: np.ndarray | float, design: MachineDesign
+                ) -> np.ndarray | float:
+    """How far (mm per N) a leg's bar gives under a gauge pressing it at ``at`` (a fraction
+    of the leg) between its hinges: a simply supported beam of the design's section."""
+    modulus = _fixed(conditions, "compliance", "bar_modulus") * 1e3  # N/mm^2
+    width, height = design.bar_section
+    inertia = width * height**3 / 12  # either way: a square bar in the prototype
+    a, b = np.asarray(at) * design.L, (1 - np.asarray(at)) * design.L
+    return a**2 * b**2 / (3 * modulus * inertia * design.L)
+
+
 @dataclass(frozen=True)
 class World:
     """The drawn non-geometric truth of a batch of machines (``(M, ...)`` arrays; zeros
@@ -309,13 +320,8 @@ class World:
         out = out + self.thermal * self.temperature(time[:, 0])[:, None]
         force = self.measuring_force(t, travel)
         out = out + force * _fixed(self.conditions, "stands", "give") * UM
-        modulus = _fixed(self.conditions, "compliance", "bar_modulus") * 1e3  # N/mm^2
-        if modulus:
-            width, height = design.bar_section
-            inertia = width * height**3 / 12  # either way: a square bar in the prototype
-            a, b = at * design.L, (1 - at) * design.L
-            out = out + np.where(bar, force * a**2 * b**2 / (3 * modulus * inertia * design.L),
-                                 0.0)
+        if "compliance" in self.conditions:
+            out = out + np.where(bar, force * bar_bending(self.conditions, at, design), 0.0)
         return out
 
     def tracker_noise(self, draws: np.ndarray, sight: np.ndarray) -> np.ndarray:
