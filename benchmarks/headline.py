@@ -7,7 +7,8 @@
 Per agent x estimator and per folder (one compare run each, its conditions in its
 config): the TCP error after rigid motion (um), median with its 95 % distribution-free
 interval, and p95; z-RMS; the fraction of trials whose chi-square test rejects the
-model; failed trials (which enter no median: the column says how many).
+model; failed trials (each counted as its uncalibrated machine, as compare's summary
+counts them).
 """
 
 from __future__ import annotations
@@ -16,21 +17,18 @@ import argparse
 import json
 from pathlib import Path
 
-import numpy as np
-
-from calibrators.compare import Trial, median_interval
+from calibrators.compare import Trial, summary
 
 UM = 1e3  # per mm
 
 
 def cell(trials: list[Trial]) -> str:
-    ok = [t for t in trials if not t.failed]
-    rigid = np.array([t.tcp_after["rigid"] for t in ok]) * UM
-    low, high = median_interval(rigid)
-    z = np.concatenate([t.z for t in ok])
-    rejected = np.mean([bool(t.chi2_rejected) for t in ok])
-    return (f"{np.median(rigid):.1f} [{low:.1f}, {high:.1f}] ({np.percentile(rigid, 95):.1f}),"
-            f" {np.sqrt(np.mean(z**2)):.2f}, {rejected:.2f}, {len(trials) - len(ok)}")
+    """One agent x estimator's row of compare's summary, in um."""
+    (row,) = summary(trials)
+    rigid = row["tcp_after_mm"]["rigid"]
+    low, high = (UM * v for v in rigid["ci95"])
+    return (f"{UM * rigid['median']:.1f} [{low:.1f}, {high:.1f}] ({UM * rigid['p95']:.1f}),"
+            f" {row['z_rms']:.2f}, {row['chi2_rejected']:.2f}, {row['failed']}")
 
 
 def main() -> None:
