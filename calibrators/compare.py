@@ -46,7 +46,7 @@ from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import DEFAULT_PRESET, ERROR_NAMES, MachineParams
 from orthoglide_env.model.reading_model import ParameterSpace, default_scales
-from orthoglide_env.scoring import FRAMES, score_batch, uncalibrated_errors
+from orthoglide_env.scoring import FRAMES, Correction, score_batch, uncalibrated_errors
 from orthoglide_env.world.conditions import IDEAL, Conditions
 from orthoglide_env.world.truth import World
 
@@ -205,7 +205,8 @@ def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
     machines = [MachineParams(design=e.run.truth.design) if isinstance(est, Exception)
                 else est.machine for e, est in zip(episodes, estimates, strict=True)]
     reports = iter(score_batch(machines, [e.run.truth for e in episodes],
-                               before=_before(episodes), worlds=_worlds(episodes)))
+                               before=_before(episodes), worlds=_worlds(episodes),
+                               corrections=_corrections(estimates)))
     predicted = iter(predicted_rigid_mm(fitted, [machines[k] for k in good]).tolist()  # type: ignore[arg-type]
                      if good else [])
     out = []
@@ -248,10 +249,17 @@ def _curves(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
         models = [MachineParams(design=e.run.truth.design) if isinstance(est, Exception)
                   else est.machine for e, est in zip(episodes, fitted, strict=True)]
         reports = score_batch(models, [e.run.truth for e in episodes],
-                              before=_before(episodes), worlds=_worlds(episodes))
+                              before=_before(episodes), worlds=_worlds(episodes),
+                              corrections=_corrections(fitted))
         for k, (episode, report) in enumerate(zip(episodes, reports, strict=True)):
             points[k].append([fraction * episode.run.time_s, report.tcp_after.rigid.rms])
     return points
+
+
+def _corrections(estimates: list[Estimate | Exception]) -> list[Correction | None]:
+    """What each estimate's controller compensates of the drives' lead error."""
+    return [est.lead_correction if isinstance(est, Estimate) and est.fits_lead else None
+            for est in estimates]
 
 
 def _before(episodes: list[_Episode]) -> np.ndarray:

@@ -63,8 +63,10 @@ class EstimatorSpec:
     strategy: str
     params: str
     prior: str = "auto"
-    #: The lab's effects are fitted (with their sizes as priors), not only considered.
-    fit_world: bool = False
+    #: The lab's effects fitted (with their sizes as priors), not only considered: the
+    #: term families of :data:`~calibrators.estimators.consider.TERM_FAMILIES`, or True
+    #: for all.
+    fit_world: bool | tuple[str, ...] = False
 
 
 #: The estimators ``compare`` offers, by name.
@@ -74,6 +76,7 @@ ESTIMATORS: dict[str, EstimatorSpec] = {
     "extended": EstimatorSpec("gauss-newton", "extended", "auto"),
     "extended-base": EstimatorSpec("gauss-newton", "extended", "none"),
     "extended-world": EstimatorSpec("gauss-newton", "extended", "auto", fit_world=True),
+    "full": EstimatorSpec("gauss-newton", "full", "auto"),
 }
 
 

@@ -38,6 +38,11 @@ from orthoglide_env.model.kinematics import (
 )
 from orthoglide_env.world.truth import World
 
+#: The drives' error (mm) a controller compensates, a function of its commands: (n, 3)
+#: -> (n, 3).
+Correction = Callable[[np.ndarray], np.ndarray]
+#: Error terms of the drives at the commands, mm per unit coefficient: (n, 3) -> (n, 3, K).
+DriveTerms = Callable[[np.ndarray], np.ndarray]
 #: Points along each axis of the scoring grid, whose TCP targets span the design's
 #: ``grid_range`` cube (mm), inside the workspace its nominal model reaches within the
 #: control limits.
@@ -148,19 +153,26 @@ def tcp_error_vectors(model: MachineParams, truth: MachineParams,
 
 
 def tcp_error_vectors_many(models: Sequence[MachineParams], truths: Sequence[MachineParams],
-                           targets: np.ndarray, worlds: Sequence[World] | None = None
+                           targets: np.ndarray, worlds: Sequence[World] | None = None,
+                           corrections: Sequence[Correction | None] | None = None
                            ) -> np.ndarray:
     """:func:`tcp_error_vectors` of many pairs over the targets (n, 3): (M, n, 3).  The
     true machines reach their commands in one batched solve; each machine's numbers are
     those it gets alone.  ``worlds``: the machines' worlds, whose drives' lead error
     the commands meet (the rest of a world passes: the truth is the machine at the 20 C
-    reference, warm, each axis at the centre of its backlash)."""
+    reference, warm, each axis at the centre of its backlash).  ``corrections``: per
+    model, the drives' error (mm, a function of ``rho`` (n, 3)) that its controller
+    compensates (a pitch-error table's, :mod:`orthoglide_env.model.compensation`): it
+    commands ``rho - correction(rho)``."""
     if len(models) > BLOCK:
         return np.concatenate([tcp_error_vectors_many(
-            models[b], truths[b], targets, None if worlds is None else worlds[b])
-            for b in _blocks(len(models))])
+            models[b], truths[b], targets, None if worlds is None else worlds[b],
+            None if corrections is None else corrections[b]) for b in _blocks(len(models))])
     rho = commands_many(models, targets)  # (M, n, 3)
     inside = np.isfinite(rho).all(axis=-1)
+    for m, correct in enumerate(corrections or ()):
+        if correct is not None:
+            rho[m][inside[m]] -= correct(rho[m][inside[m]])
     if worlds is not None:
         rho = rho + World.stack(list(worlds)).lead_error(rho, truths[0].design)
 
@@ -302,9 +314,10 @@ def score_batch(
     estimates: Sequence[MachineParams], truths: Sequence[MachineParams],
     grid: np.ndarray | None = None, before: np.ndarray | None = None,
     worlds: Sequence[World] | None = None,
+    corrections: Sequence[Correction | None] | None = None,
 ) -> list[ScoreReport]:
-    """Score each estimate against its true machine (see :func:`score`; ``worlds``: the
-    machines' worlds, see :func:`tcp_error_vectors_many`); ``before``: the
+    """Score each estimate against its true machine (see :func:`score`; ``worlds`` and
+    ``corrections``: see :func:`tcp_error_vectors_many`); ``before``: the
     :func:`uncalibrated_errors` of ``truths``, when already known (they depend on the
     machines only, not on the estimates).
 
@@ -314,7 +327,7 @@ def score_batch(
     targets = _targets(grid, truths)
     if before is None:
         before = uncalibrated_errors(truths, targets, worlds)
-    after = tcp_error_vectors_many(estimates, truths, targets, worlds)
+    after = tcp_error_vectors_many(estimates, truths, targets, worlds, corrections)
     usable = np.isfinite(before).all(axis=-1) & np.isfinite(after).all(axis=-1)
     empty = np.flatnonzero(~usable.any(axis=-1))
     if empty.size:
@@ -334,26 +347,17 @@ def score_batch(
 
 def score(
     estimate: MachineParams, truth: MachineParams, grid: np.ndarray | None = None,
-    world: World | None = None,
+    world: World | None = None, correction: Correction | None = None,
 ) -> ScoreReport:
-    """Score ``estimate`` against ``truth`` (in its ``world``, when given): parameter
-    errors and TCP errors before (nominal model) and after (estimated model) compensation,
-    in the three frames, over the targets both reach within the control limits."""
-    return score_batch([estimate], [truth], grid, worlds=None if world is None else [world])[0]
+    """Score ``estimate`` against ``truth`` (in its ``world``, when given; its controller
+    compensating the drives' error ``correction``, when given): parameter errors and TCP
+    errors before (nominal model) and after (estimated model) compensation, in the three
+    frames, over the targets both reach within the control limits."""
+    return score_batch([estimate], [truth], grid, worlds=None if world is None else [world],
+                       corrections=[correction])[0]
 
 
 # --- predicted errors, from a covariance ----------------------------------------------
-def _tcp_jacobian_arrays(models: Sequence[MachineParams], targets: np.ndarray
-                         ) -> tuple[np.ndarray, np.ndarray]:
-    """Which targets (n, 3) each model commands within the control limits (M, n), and the
-    derivative of the TCP reached at every target's command over the machine's 27 errors
-    (M, n, 3, 27), by the implicit function theorem
-    (:func:`~orthoglide_env.model.kinematics.tcp_sensitivity`): to first order the error
-    of a machine compensated with a model is ``jac @ (theta - theta_model)``."""
-    usable, machines, rho, p = _commanded(models, targets)
-    return usable, tcp_sensitivity(machines, rho, p)
-
-
 def _commanded(models: Sequence[MachineParams], targets: np.ndarray
                ) -> tuple[np.ndarray, MachineParams, np.ndarray, np.ndarray]:
     """Which targets (n, 3) each model commands within the control limits (M, n), the
@@ -361,7 +365,11 @@ def _commanded(models: Sequence[MachineParams], targets: np.ndarray
 
     A model's commands put its own TCP on the target exactly (the inverse is closed form),
     so the target is the TCP.  Targets without a command are taken at Zero, TCP at the
-    origin (any well-posed point will do), for the callers to drop."""
+    origin (any well-posed point will do), for the callers to drop.  The derivative of
+    the TCP reached at every command over the machine's 27 errors is
+    :func:`~orthoglide_env.model.kinematics.tcp_sensitivity` there (the implicit function
+    theorem): to first order a machine compensated with a model is off by
+    ``jac @ (theta - theta_model)``."""
     machines = MachineParams.stack(list(models))
     rho = commands_many(models, targets, machines)  # (M, n, 3)
     usable = np.isfinite(rho).all(axis=-1)
@@ -482,17 +490,35 @@ def predicted_tcp_frames(model: MachineParams, covariance: np.ndarray,
 
 def predicted_tcp_frames_many(models: Sequence[MachineParams],
                               covariances: Sequence[np.ndarray],
-                              grid: np.ndarray | None = None) -> list[FrameErrors]:
+                              grid: np.ndarray | None = None,
+                              drives: Sequence[DriveTerms | None] | None = None
+                              ) -> list[FrameErrors]:
     """:func:`predicted_tcp_frames` of each model and covariance (the kinematics batched,
-    and the frames of the models that reach the same targets)."""
+    and the frames of the models that reach the same targets).  ``drives``: per model,
+    K terms of the drives' error after compensation (their carriage errors at the
+    commands); its covariance is then over the 27 errors and the K terms' coefficients
+    (a carriage error moves the tool as an encoder offset does)."""
     if not models:
         return []
     targets = _targets(grid, models)
-    usable, jac = _tcp_jacobian_arrays(models, targets)
-    covariances = np.asarray(covariances, dtype=float)
+    usable, machines, rho, p = _commanded(models, targets)
+    jac = tcp_sensitivity(machines, rho, p)  # (M, n, 3, 27)
+    covariances = [np.asarray(c, dtype=float) for c in covariances]
+    if drives is not None and any(d is not None for d in drives):
+        terms = [np.zeros((*rho.shape[1:], 0)) if d is None else d(rho[m])
+                 for m, d in enumerate(drives)]
+        width = max(t.shape[-1] for t in terms)
+        moved = np.zeros((*jac.shape[:3], width))
+        padded = np.zeros((len(models), jac.shape[-1] + width, jac.shape[-1] + width))
+        for m, (t, c) in enumerate(zip(terms, covariances, strict=True)):
+            moved[m, ..., :t.shape[-1]] = np.einsum("nia,nak->nik", jac[m, ..., :3], t)
+            padded[m, :len(c), :len(c)] = c
+        jac = np.concatenate([jac, moved], axis=-1)
+        covariances = list(padded)
+    stacked = np.stack(covariances)
     out: list[FrameErrors | None] = [None] * len(models)
     for mask, members in _same_targets(usable):
-        frames = _predicted_frames(targets[mask], jac[members][:, mask], covariances[members])
+        frames = _predicted_frames(targets[mask], jac[members][:, mask], stacked[members])
         for m, frame in zip(members, frames, strict=True):
             out[m] = frame
     return out  # type: ignore[return-value]

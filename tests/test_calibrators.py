@@ -47,18 +47,18 @@ def test_paper_reduced_fits_reproduce_table1(params: str, drho, dL) -> None:
 
 
 def test_gauss_newton_recovers_table1_exactly_and_paper_is_biased() -> None:
-    gn, truth = run("gauss-newton", "full", TABLE1, gauge_sigma=0.0, gauge_resolution=0.0)
+    gn, truth = run("gauss-newton", "paper6", TABLE1, gauge_sigma=0.0, gauge_resolution=0.0)
     np.testing.assert_allclose(np.concatenate([gn.drho, gn.dL]),
                                np.concatenate([truth.drho, truth.dL]), atol=1e-3)
     assert gn.residual_rms_mm < 1e-9
-    paper, _ = run("paper", "full", TABLE1, gauge_sigma=0.0, gauge_resolution=0.0)
+    paper, _ = run("paper", "paper6", TABLE1, gauge_sigma=0.0, gauge_resolution=0.0)
     bias = np.concatenate([paper.drho - truth.drho, paper.dL - truth.dL])
     # The linearisation of eq. (10) at errors of ~5 mm leaves a bias of tenths of a mm.
     assert 0.1 < np.max(np.abs(bias)) < 0.5
 
 
 def test_paper_design_matches_eq10_and_its_conditioning() -> None:
-    est, _ = run("paper", "full", TABLE1, gauge_sigma=0.0, gauge_resolution=0.0)
+    est, _ = run("paper", "paper6", TABLE1, gauge_sigma=0.0, gauge_resolution=0.0)
     np.testing.assert_allclose(est.singular_values,
                                np.linalg.svd(eq10(), compute_uv=False), rtol=1e-12)
     assert est.condition_number == pytest.approx(61.9, abs=0.1)
@@ -82,7 +82,7 @@ def test_crlb_of_the_paper_design_is_about_43_sigma() -> None:
     rows = differences(Measurements(est_items(TABLE1)))
     jac = paper_matrix(rows)
     expected = sigma * np.sqrt(np.diag(np.linalg.inv(jac.T @ np.linalg.inv(rows.cov_unit) @ jac)))
-    paper = get_strategy("paper").estimate(Measurements(est_items(TABLE1)), "full", sigma)
+    paper = get_strategy("paper").estimate(Measurements(est_items(TABLE1)), "paper6", sigma)
     np.testing.assert_allclose(paper.crlb, expected, rtol=1e-12)
     assert np.all((paper.crlb > 30 * sigma) & (paper.crlb < 43 * sigma))
 
@@ -120,7 +120,7 @@ def test_statistics_against_the_cramer_rao_bound(strategy: str) -> None:
     errors, stds, crlbs = [], [], []
     for seed in range(200):
         episode = run_episode(env, get_agent("paper"), seed)
-        est = calibrator.estimate(episode.measurements, "full", episode.sigma, verify=False,
+        est = calibrator.estimate(episode.measurements, "paper6", episode.sigma, verify=False,
                                   left_out="paper")
         truth = episode.truth
         errors.append(np.concatenate([est.drho - truth.drho, est.dL - truth.dL]))
@@ -147,7 +147,7 @@ def test_measurement_csv_round_trip_and_errors(tmp_path) -> None:
     data.to_csv(path)
     again = Measurements.from_csv(path)
     assert again.items == data.items
-    est = get_strategy("gauss-newton").estimate(again, "full", 0.01)
+    est = get_strategy("gauss-newton").estimate(again, "paper6", 0.01)
     np.testing.assert_allclose(est.drho, TABLE1["drho"], atol=1e-3)
     old_header = "leg,axis,posture,repetition,reading_mm"
     for bad, fragment in (
@@ -170,11 +170,11 @@ def test_measurement_csv_round_trip_and_errors(tmp_path) -> None:
 def test_too_few_valid_readings_is_a_clear_error() -> None:
     data = Measurements(est_items(TABLE1)[:10])
     with pytest.raises(ValueError, match="usable differences"):
-        get_strategy("paper").estimate(data, "full", 0.01)
+        get_strategy("paper").estimate(data, "paper6", 0.01)
 
 
 def test_verification_on_held_out_repetitions_sees_the_noise() -> None:
-    est, _ = run("gauss-newton", "full", TABLE1, gauge_sigma=0.02, gauge_resolution=0.01)
+    est, _ = run("gauss-newton", "paper6", TABLE1, gauge_sigma=0.02, gauge_resolution=0.01)
     # Held-out differences of one repetition carry noise of about sigma * sqrt(2).
     assert 0.01 < est.verification_rms_mm < 0.1
 
@@ -216,7 +216,7 @@ def test_predictions_without_the_truth() -> None:
     from calibrators.estimators.prediction import predicted_correction, predicted_tcp_error
     from orthoglide_env.scoring import FRAMES, score
 
-    est, truth = run("gauss-newton", "full", TABLE1, gauge_sigma=0.0, gauge_resolution=0.0)
+    est, truth = run("gauss-newton", "paper6", TABLE1, gauge_sigma=0.0, gauge_resolution=0.0)
     before = score(est.machine, truth).tcp_before
     correction = predicted_correction(est)
     for frame in FRAMES:
@@ -225,7 +225,7 @@ def test_predictions_without_the_truth() -> None:
                                                                abs=1e-5)
     # Every direction stays above the base-parameter threshold at these sigmas (a
     # combination known worse than its 2 mm scale would keep its a-priori spread instead).
-    noisy, twice = (get_strategy("gauss-newton").estimate(est.readings, "full", sigma,
+    noisy, twice = (get_strategy("gauss-newton").estimate(est.readings, "paper6", sigma,
                                                           verify=False, left_out="paper")
                     for sigma in (0.01, 0.02))
     for frame in FRAMES:

@@ -33,7 +33,7 @@ def test_eq10_singular_values_and_condition() -> None:
 def test_exact_model_design_has_eq10_singular_values(paper_design) -> None:
     # Finite differences of the exact model at the nominal machine are eq. (10)'s matrix
     # to ~1e-7 (truncation of a 1e-4 mm step), so the singular values agree to that level.
-    ident = of_design(paper_design, "full", 1.0)
+    ident = of_design(paper_design, "paper6", 1.0)
     np.testing.assert_allclose(ident.singular_values, np.linalg.svd(eq10(), compute_uv=False),
                                rtol=1e-5)
 
@@ -62,7 +62,7 @@ def test_crlb_of_the_averaged_differences(paper_design) -> None:
         idx = [k for k, h in enumerate(rows.gauges) if h == g]
         cov[np.ix_(idx, idx)] = block
     np.testing.assert_allclose(rows.cov_unit, cov, atol=1e-15)
-    ident = of_design(paper_design, "full", sigma)
+    ident = of_design(paper_design, "paper6", sigma)
     np.testing.assert_allclose(ident.crlb / sigma, 36.1, rtol=0.01)
     assert np.all(ident.crlb / sigma > 43 * np.sqrt(8 / 15))
 
@@ -74,13 +74,13 @@ def test_fisher_information_scales_with_repetitions(paper_design) -> None:
         Measurement(m.gauge, m.posture, m.repetition + 10, m.reading)
         for m in paper_design.items
     ])
-    one, two = of_design(paper_design, "full", 0.01), of_design(doubled, "full", 0.01)
+    one, two = of_design(paper_design, "paper6", 0.01), of_design(doubled, "paper6", 0.01)
     np.testing.assert_allclose(two.fisher, 2 * one.fisher, rtol=1e-9)
     np.testing.assert_allclose(two.crlb, one.crlb / np.sqrt(2), rtol=1e-9)
 
 
 def test_weak_directions_are_drho_and_dl_together(paper_design) -> None:
-    ident = of_design(paper_design, "full", 0.01)
+    ident = of_design(paper_design, "paper6", 0.01)
     assert len(ident.weak_directions) == 3
     for weak in ident.weak_directions:
         for axis in "xyz":
@@ -111,7 +111,7 @@ def test_a_design_of_custom_postures() -> None:
     assert ident.fisher.shape == (3, 3) and np.all(np.isfinite(ident.crlb))
     # Four differences cannot identify six parameters.
     with pytest.raises(ValueError, match="4 differences for 6 parameters"):
-        of_design(Measurements(items), "full", 0.01)
+        of_design(Measurements(items), "paper6", 0.01)
 
 
 def test_a_design_the_gauges_cannot_see_is_an_error() -> None:

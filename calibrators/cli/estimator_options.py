@@ -7,6 +7,12 @@ from typing import Any
 
 from calibrators.cli.common import UsageError
 from calibrators.estimators.base import Estimate, get_strategy
+from calibrators.estimators.consider import (
+    DEFAULT_NODE_SPACING,
+    FULL_TERMS,
+    TERM_FAMILIES,
+    check_families,
+)
 from calibrators.estimators.exact_fit import SOLVERS
 from calibrators.estimators.gauss_newton import MAX_OUTLIER_FRACTION, OUTLIER_K
 from calibrators.estimators.paper_linear import NeedsExactFit
@@ -24,7 +30,9 @@ def add(p: argparse.ArgumentParser) -> None:
                         "(eq. 10, linear, paper6/drho/dL only) (default: %(default)s)")
     p.add_argument("--params", default="paper6",
                    help="free parameters: paper6 (drho, dL), extended (all 27 machine errors "
-                        "and 4 per gauge stand), or a comma list of groups (drho, dL, "
+                        "and 4 per gauge stand), full (extended, and under --conditions lab "
+                        "or workshop the lab's terms of --terms, the lead error as a "
+                        "pitch-error table), or a comma list of groups (drho, dL, "
                         "axis_tilt, axis_offset, attach, stands) and names (drho_x, "
                         "attach_y.z, x-leg/y@0.5.tilt_z) (default: %(default)s)")
     p.add_argument("--prior", default="auto",
@@ -37,9 +45,22 @@ def add(p: argparse.ArgumentParser) -> None:
                         "priori: their spread goes into the error bars (paper or nominal: "
                         "they do not exist) (default: %(default)s)")
     p.add_argument("--fit-world", action="store_true",
-                   help="under --conditions lab or workshop, fit the lab's effects (lead "
-                        "error, backlash, warm-up, stands, indicators; their sizes as priors) "
-                        "instead of only carrying them in the error bars")
+                   help="under --conditions lab or workshop, fit every one of the lab's "
+                        "terms (their sizes as priors) instead of only carrying them in the "
+                        "error bars")
+    p.add_argument("--terms", default=None, metavar="LIST",
+                   help=f"the lab's terms to fit, a comma list of {', '.join(TERM_FAMILIES)} "
+                        f"(the others are carried in the error bars) (default with --params "
+                        f"full: {','.join(FULL_TERMS)})")
+    p.add_argument("--node-spacing", type=float, default=None, metavar="MM",
+                   help=f"fit the lead error as a controller's pitch-error table with nodes "
+                        f"this far apart, with a smoothness prior (default with --params "
+                        f"full: {DEFAULT_NODE_SPACING:g})")
+    p.add_argument("--save-pitch-table", metavar="FILE.csv",
+                   help="write the fitted lead error as per-axis pitch-error tables for the "
+                        "controller: axis, position_mm, error_mm (where the carriage is minus "
+                        "where its encoder says; the controller commands rho - error), "
+                        "sigma_mm")
     p.add_argument("--fix", action="append", default=[], metavar="NAME=VALUE",
                    help="hold a parameter at a known value (mm, rad); repeatable")
     p.add_argument("--solver", choices=list(SOLVERS), default="gauss-newton",
@@ -60,7 +81,20 @@ def options(args: argparse.Namespace) -> dict[str, Any]:
     return {"prior": args.prior, "fix": parse_assignments(args.fix, "--fix"),
             "keep_outliers": args.keep_outliers, "holdout": args.holdout,
             "seed": args.seed, "solver": args.solver, "left_out": args.left_out,
-            **({"fit_world": True} if args.fit_world else {})}
+            "node_spacing": args.node_spacing, **_fitted(args)}
+
+
+def _fitted(args: argparse.Namespace) -> dict[str, Any]:
+    """``fit_world`` from ``--fit-world`` or ``--terms`` (one line on an unknown term)."""
+    if args.fit_world and args.terms is not None:
+        raise UsageError("--fit-world fits every term; give it or --terms, not both")
+    if args.terms is not None:
+        try:
+            return {"fit_world": check_families([t.strip() for t in args.terms.split(",")
+                                                 if t.strip()])}
+        except ValueError as exc:
+            raise UsageError(f"--terms: {exc}") from None
+    return {"fit_world": True} if args.fit_world else {}
 
 
 def estimate(args: argparse.Namespace, data: Measurements, sigma: float,

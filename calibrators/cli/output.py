@@ -12,14 +12,22 @@ fitting them), ``predicted_tcp_error_mm``, and for virtual machines ``truth``,
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from calibrators.cli.common import print_json
+from calibrators.cli.common import UsageError, print_json
 from calibrators.estimators.base import Estimate
 from calibrators.estimators.prediction import predicted_correction, predicted_tcp_error
-from orthoglide_env.model.errors import ERROR_GROUPS, ERROR_NAMES, MachineParams, error_group
+from orthoglide_env.model.compensation import PitchTable
+from orthoglide_env.model.errors import (
+    AXIS_NAMES,
+    ERROR_GROUPS,
+    ERROR_NAMES,
+    MachineParams,
+    error_group,
+)
 from orthoglide_env.scoring import FRAMES, score
 from orthoglide_env.world.machine_file import machine_dict
 from orthoglide_env.world.truth import World
@@ -83,8 +91,12 @@ def report(est: Estimate, truth: MachineParams | None,
         "predicted_correction_mm": predicted_correction(est).to_dict(),
         "predicted_tcp_error_mm": predicted_tcp_error(est).to_dict(),
     }
+    table = est.pitch_table
+    if table is not None:
+        data["pitch_table"] = table.to_dict()
     if truth is not None:
-        scored = score(est.machine, truth, world=world)
+        scored = score(est.machine, truth, world=world,
+                       correction=est.lead_correction if est.fits_lead else None)
         # A machine file's object: the truth can be replayed with ``calibrate --machine``.
         data["truth"] = machine_dict(truth, world)
         data["tcp_error_before_mm"] = scored.tcp_before.to_dict()
@@ -121,6 +133,15 @@ def print_table(data: dict[str, Any]) -> None:
         print(f"chi2/dof {data['chi2_dof']:.2f} ({data['dof']} degrees of freedom)")
     if data["considered"]:
         print(f"in the error bars, not fitted: {', '.join(data['considered'])}")
+    if "pitch_table" in data:
+        table = PitchTable.from_dict(data["pitch_table"])
+        print(f"pitch-error tables (um, +- std; {table.spacing:g} mm spacing from "
+              f"{table.start:g} mm):")
+        print(f"{'':6}" + "".join(f"{rho:>11.0f}" for rho in table.nodes))
+        for a, axis in enumerate(AXIS_NAMES):
+            print(f"{axis:6}" + "".join(f"{v * 1e3:6.1f}+-{s * 1e3:<3.1f}"
+                                        for v, s in zip(table.values[a], table.sigma[a],
+                                                        strict=True)))
     print(f"residual RMS {data['residual_rms_mm']:.4f} mm over {data['n_readings']} readings"
           + (f"; held-out repetitions {data['verification_rms_mm']:.4f} mm"
              if data["verification_rms_mm"] is not None else "")
@@ -154,6 +175,19 @@ def print_table(data: dict[str, Any]) -> None:
                 f"{data[key][f]['rms']:10.4f} /{data[key][f]['max']:7.4f}" for f in FRAMES))
     if data.get("z_rms") is not None:
         print(f"z-RMS of the identifiable combinations against the truth: {data['z_rms']:.2f}")
+
+
+def save_pitch_table(est: Estimate, path: str | None) -> None:
+    """Write the estimate's pitch-error tables as CSV to ``path`` (when given); a usage
+    error when the fit found none."""
+    if not path:
+        return
+    table = est.pitch_table
+    if table is None:
+        raise UsageError("--save-pitch-table: this fit has no pitch-error table (fit the "
+                         "lead error with --params full or --node-spacing under --conditions "
+                         "lab or workshop)")
+    Path(path).write_text(table.to_csv())
 
 
 def emit(data: dict[str, Any], as_json: bool) -> None:

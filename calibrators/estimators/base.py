@@ -18,22 +18,24 @@ from typing import Any, ClassVar
 import numpy as np
 from scipy import special
 
-from calibrators.estimators.consider import WORLD_PREFIX
+from calibrators.estimators.consider import TABLE_TERM, WORLD_PREFIX, lead_terms, table_prior
 from calibrators.measurements import Measurements
 from calibrators.registry import Registry
 from orthoglide_env.instruments.dial import DEFAULT_SIGMA
+from orthoglide_env.model.compensation import PitchTable
 from orthoglide_env.model.errors import (
+    AXIS_NAMES,
     ERROR_GROUPS,
     ERROR_NAMES,
     MachineParams,
     error_group,
 )
+from orthoglide_env.world.conditions import as_conditions
 
 PARAM_NAMES: tuple[str, ...] = ("drho_x", "drho_y", "drho_z", "dL_x", "dL_y", "dL_z")
 #: Which of the six paper parameters each ``--params`` choice frees (the others stay 0).
 PARAM_SETS: dict[str, tuple[int, ...]] = {
     "paper6": (0, 1, 2, 3, 4, 5),
-    "full": (0, 1, 2, 3, 4, 5),
     "drho": (0, 1, 2),
     "dL": (3, 4, 5),
 }
@@ -89,6 +91,17 @@ class Estimate:
     #: The real lab's effects the fit did not model but put into its covariance
     #: (:mod:`calibrators.estimators.consider`), empty under ``ideal`` conditions.
     considered: list[str] = field(default_factory=list)
+    #: The lead error's terms (:func:`~calibrators.estimators.consider.lead_terms`), fitted
+    #: ones with their estimate in ``lead_values`` and considered ones at 0, and the joint
+    #: covariance of (estimate - truth) over the 27 machine errors, then these terms'
+    #: coefficients: the drives' part of the tool's error after compensation.
+    lead_terms: list[str] = field(default_factory=list)
+    lead_values: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    lead_covariance: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    #: The conditions the readings were taken under (their ``to_dict``), and the
+    #: pitch-error table's node spacing (mm) when the lead error was fitted as one.
+    conditions: dict[str, Any] = field(default_factory=dict)
+    node_spacing: float | None = None
 
     def __post_init__(self) -> None:
         if not self.names:
@@ -115,6 +128,45 @@ class Estimate:
     def estimate(self) -> dict[str, Any]:
         """Every parameter's value in the machine-file schema, stands under ``"stands"``."""
         return schema(self.theta.tolist(), self.space)
+
+    def lead_patterns(self, rho: np.ndarray) -> np.ndarray:
+        """(..., 3, K) the lead terms' carriage errors at ``rho`` (..., 3), mm per unit
+        coefficient, in :attr:`lead_terms` order."""
+        terms = dict(lead_terms(rho, self.readings.design, as_conditions(self.conditions),
+                                self.node_spacing))
+        shape = np.shape(rho)
+        return (np.stack([terms[n] for n in self.lead_terms], axis=-1) if self.lead_terms
+                else np.zeros((*shape, 0)))
+
+    def lead_correction(self, rho: np.ndarray) -> np.ndarray:
+        """The drives' error (mm) at ``rho`` (..., 3) that the fit found, which the
+        controller compensates (0 without fitted lead terms)."""
+        return self.lead_patterns(rho) @ self.lead_values if self.lead_terms else np.zeros(
+            np.shape(rho))
+
+    @property
+    def fits_lead(self) -> bool:
+        """Whether the fit found a lead error to compensate."""
+        return bool(np.any(self.lead_values != 0))
+
+    @property
+    def pitch_table(self) -> PitchTable | None:
+        """The fitted lead error as the controller's pitch-error tables, with each node's
+        standard deviation; None unless the fit took the lead error as one."""
+        fitted = [k for k, n in enumerate(self.lead_terms) if n.startswith(TABLE_TERM)]
+        if self.node_spacing is None or not fitted:
+            return None
+        design = self.readings.design
+        count, root = table_prior(design, as_conditions(self.conditions), self.node_spacing)
+        values = np.zeros((3, count + 1))
+        sigma = np.zeros((3, count + 1))
+        n = len(ERROR_NAMES)
+        for a, axis in enumerate(AXIS_NAMES):
+            mine = [k for k in fitted if self.lead_terms[k].endswith(f"[{axis}]")]
+            values[a, 1:] = root @ self.lead_values[mine]
+            cov = self.lead_covariance[np.ix_([n + k for k in mine], [n + k for k in mine])]
+            sigma[a, 1:] = np.sqrt(np.clip(np.diag(root @ cov @ root.T), 0.0, None))
+        return PitchTable(design.rho_min, self.node_spacing, values, sigma)
 
     @property
     def residual_rms_mm(self) -> float:
@@ -148,8 +200,10 @@ class Estimate:
         for key, value in data.items():
             if isinstance(value, np.ndarray):
                 data[key] = value.tolist()
+        table = self.pitch_table
         data.update(readings=self.readings.to_dict(), std=self.std,
-                    residual_rms_mm=self.residual_rms_mm, condition_number=self.condition_number)
+                    residual_rms_mm=self.residual_rms_mm, condition_number=self.condition_number,
+                    pitch_table=None if table is None else table.to_dict())
         return data
 
     @classmethod
@@ -158,7 +212,8 @@ class Estimate:
         for key in _ARRAY_FIELDS:
             if key in kwargs:
                 kwargs[key] = np.array(kwargs[key], dtype=float)
-        for key in ("covariance", "fisher", "information", "error_covariance"):
+        for key in ("covariance", "fisher", "information", "error_covariance",
+                    "lead_covariance"):
             if key in kwargs and kwargs[key].size == 0:
                 kwargs[key] = np.zeros((0, 0))  # an empty matrix comes back from JSON as []
         if "readings" in kwargs:
@@ -203,7 +258,7 @@ def schema(values: list, space: list[str]) -> dict[str, Any]:
 
 _ARRAY_FIELDS: tuple[str, ...] = ("drho", "dL", "covariance", "residuals", "singular_values",
                                   "crlb", "fisher", "theta", "information", "scale",
-                                  "error_covariance")
+                                  "error_covariance", "lead_values", "lead_covariance")
 
 
 class Calibrator:

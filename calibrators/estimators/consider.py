@@ -52,6 +52,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from orthoglide_env.instruments.slots import Part
+from orthoglide_env.model.compensation import interpolation_weights, node_count
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import AXIS_NAMES
 from orthoglide_env.model.reading_model import Design, TrackerAxis
 from orthoglide_env.world.conditions import Conditions
@@ -62,6 +64,21 @@ from orthoglide_env.world.truth import HOUR, MINUTE, REVOLUTION_MM, UM, bar_bend
 WORLD_PREFIX: str = "world."
 #: The effects whose terms need each reading's time.
 TIMED_EFFECTS: tuple[str, ...] = ("warmup", "stands")
+#: The pitch-error table's terms are named this and their index.
+TABLE_TERM: str = "lead.table"
+#: The families of terms an estimator fits or considers: the lead error's curve (its
+#: table), the screw's periodic error, backlash, warm-up, the stands' drift and give, the
+#: indicators' error curves.
+TERM_FAMILIES: tuple[str, ...] = ("lead", "periodic", "backlash", "warmup", "stands", "dial")
+#: What the ``full`` estimator fits; the rest it considers: a table coarser than the
+#: screw's lead cannot compensate the periodic error, and an indicator's error curve is
+#: told apart from the geometry only against a reference.
+FULL_TERMS: tuple[str, ...] = ("lead", "backlash", "warmup", "stands")
+#: The pitch-error table's prior: the curve's correlation length, a fraction of the stroke.
+CURVE_LENGTH: float = 0.25
+#: The ``full`` estimator's pitch-error table's default node spacing (mm).  Assumption:
+#: 10 mm, a usual spacing of a controller's pitch-error table on a short axis.
+DEFAULT_NODE_SPACING: float = 10.0
 
 @dataclass(frozen=True)
 class Consider:
@@ -88,6 +105,32 @@ class Consider:
     def rows(self, rows: np.ndarray) -> Consider:
         """The terms of machines ``rows``."""
         return Consider(self.names, self.drive[rows], self.reading[rows])
+
+    def split(self, families: tuple[str, ...]) -> tuple[Consider, Consider]:
+        """The terms of ``families`` (:func:`term_family`), and the others."""
+        k = self.drive.shape[-1]
+        chosen = np.array([term_family(n) in families for n in self.names], dtype=bool)
+
+        def part(keep: np.ndarray) -> Consider:
+            return Consider(tuple(n for n, c in zip(self.names, keep, strict=True) if c),
+                            self.drive[..., keep[:k]], self.reading[..., keep[k:]])
+
+        return part(chosen), part(~chosen)
+
+
+def term_family(name: str) -> str:
+    """The family of a term (:data:`TERM_FAMILIES`), by which terms are chosen."""
+    return "periodic" if name.startswith("lead.periodic") else name.split(".")[0]
+
+
+def check_families(families: tuple[str, ...] | list[str]) -> tuple[str, ...]:
+    """``families`` in :data:`TERM_FAMILIES` order; ``ValueError`` naming an unknown
+    one."""
+    unknown = [f for f in families if f not in TERM_FAMILIES]
+    if unknown:
+        raise ValueError(f"unknown estimator term(s) {unknown}; terms are "
+                         f"{', '.join(TERM_FAMILIES)}")
+    return tuple(f for f in TERM_FAMILIES if f in families)
 
 
 def tracker_sigma(conditions: Conditions, distance_mm: float) -> float:
@@ -147,27 +190,79 @@ def _per_axis(name: str, pattern: np.ndarray) -> list[tuple[str, np.ndarray]]:
     return out
 
 
-def _drive_terms(design: Design, t: np.ndarray | None, conditions: Conditions
-                 ) -> list[tuple[str, np.ndarray]]:
-    """The carriages' terms: (name, pattern (M or 1, N, 3))."""
-    on = conditions.__contains__
-    machine = design.machine_design
+def lead_terms(rho: np.ndarray, machine: MachineDesign, conditions: Conditions,
+               spacing: float | None = None) -> list[tuple[str, np.ndarray]]:
+    """The lead error's terms at the carriages' positions ``rho`` (..., 3): (name,
+    pattern (..., 3), mm per unit coefficient), none where the lead effect is off.
+
+    ``spacing`` None: the curve as the conditions' table describes it (scale, two sines,
+    the screw's periodic sin/cos).  A spacing (mm): the curve as a controller's
+    pitch-error table with nodes that far apart (:func:`table_prior`), in the
+    coefficients that whiten its prior (``lead.table<i>``), and the periodic terms, which a
+    table coarser than the screw's lead cannot hold.  The curve's prior is the table's
+    sizes, not the sines the lab draws: a real screw's curve has no such form."""
+    if "lead" not in conditions:
+        return []
     stroke = machine.rho_max - machine.rho_min
-    x = (design.rho - machine.rho_min) / stroke  # (N, 3)
-    out: list[tuple[str, np.ndarray]] = []
-    if on("lead"):
+    x = (np.asarray(rho, dtype=float) - machine.rho_min) / stroke
+    periodic = np.sqrt(second_moment("lead", "periodic", conditions) / 2) * UM / 2
+    angle = 2 * np.pi * x * stroke / conditions.size("lead", "screw_lead")[0]
+    waves = [("lead.periodic_sin", periodic * np.sin(angle)),
+             ("lead.periodic_cos", periodic * np.cos(angle))]
+    if spacing is None:
         scale = np.sqrt(second_moment("lead", "scale", conditions)) * UM
         curve = np.sqrt(second_moment("lead", "curve", conditions)) * UM
         # The table's curve is split between the two sines as the lab draws it: a share
         # s ~ U(0, 1) to the first, (1 - s) / 2 to the second (E[s^2] = 1/3).
-        periodic = np.sqrt(second_moment("lead", "periodic", conditions) / 2) * UM / 2
-        angle = 2 * np.pi * x * stroke / conditions.size("lead", "screw_lead")[0]
-        for name, pattern in (("lead.scale", scale * x),
-                              ("lead.curve1", curve / np.sqrt(3) * np.sin(np.pi * x)),
-                              ("lead.curve2", curve / np.sqrt(12) * np.sin(2 * np.pi * x)),
-                              ("lead.periodic_sin", periodic * np.sin(angle)),
-                              ("lead.periodic_cos", periodic * np.cos(angle))):
-            out += _per_axis(name, pattern[None])
+        curves = [("lead.scale", scale * x),
+                  ("lead.curve1", curve / np.sqrt(3) * np.sin(np.pi * x)),
+                  ("lead.curve2", curve / np.sqrt(12) * np.sin(2 * np.pi * x))]
+    else:
+        count, root = table_prior(machine, conditions, spacing)
+        weights = interpolation_weights(rho, machine.rho_min, spacing, count) @ root
+        curves = [(f"{TABLE_TERM}{i}", weights[..., i]) for i in range(root.shape[1])]
+    out: list[tuple[str, np.ndarray]] = []
+    for name, pattern in (*curves, *waves):
+        out += _per_axis(name, pattern)
+    return out
+
+
+def table_prior(machine: MachineDesign, conditions: Conditions, spacing: float
+                ) -> tuple[int, np.ndarray]:
+    """The pitch-error table's node count after the reference node and ``R`` (count, K),
+    mm: node values ``R z`` with ``z ~ N(0, I)`` have the table's prior, a Gaussian
+    process that is 0 at the reference (its error is an encoder offset) and smooth: a
+    linear part whose slope is the screw's travel deviation (the table's ``scale`` at the
+    stroke's end), and a curve of the table's ``curve`` size with a squared-exponential
+    correlation over a quarter of the stroke (ISO 3408's v_300p bounds the deviation in
+    any 300 mm; two bends over the stroke, an assumption), conditioned on 0 at the
+    reference.  Directions of the prior below 1e-3 of its largest spread are dropped:
+    they move no node by a measurable amount."""
+    stroke = machine.rho_max - machine.rho_min
+    count = node_count(stroke, spacing)
+    x = spacing * np.arange(1, count + 1) / stroke
+    x = np.minimum(x, 1.0 + spacing / stroke)  # the last node may lie beyond the stroke
+
+    def correlation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return np.exp(-0.5 * ((a[:, None] - b[None]) / CURVE_LENGTH) ** 2)
+
+    zero = np.zeros(1)
+    curve = correlation(x, x) - correlation(x, zero) @ correlation(zero, x)
+    cov = (second_moment("lead", "scale", conditions) * np.outer(x, x)
+           + second_moment("lead", "curve", conditions) / 2 * curve) * UM**2
+    values, vectors = np.linalg.eigh(cov)
+    keep = values > 1e-6 * values.max()
+    return count, vectors[:, keep] * np.sqrt(values[keep])
+
+
+def _drive_terms(design: Design, t: np.ndarray | None, conditions: Conditions,
+                 spacing: float | None) -> list[tuple[str, np.ndarray]]:
+    """The carriages' terms: (name, pattern (M or 1, N, 3))."""
+    on = conditions.__contains__
+    out = [(name, pattern[None]) for name, pattern in lead_terms(
+        design.rho, design.machine_design, conditions, spacing)]
+    machine = design.machine_design
+    x = (design.rho - machine.rho_min) / (machine.rho_max - machine.rho_min)  # (N, 3)
     if on("backlash"):
         # Half the lost motion, b / 2, against the approach: b's mean acts on every axis
         # at once (the axes' b are all positive), its spread on each alone.
@@ -246,17 +341,18 @@ def _reading_terms(design: Design, values: np.ndarray, t: np.ndarray | None,
 
 
 def consider_terms(design: Design, values: np.ndarray, times: np.ndarray | None,
-                   conditions: Conditions) -> Consider:
+                   conditions: Conditions, spacing: float | None = None) -> Consider:
     """The consider terms of ``design`` read as ``values`` (M, N) at lab ``times`` (M, N)
-    or None, under ``conditions``.  ``ValueError`` when an effect that acts needs the
-    readings' times and they are not given."""
+    or None, under ``conditions``; ``spacing``: the lead error as a pitch-error table
+    with nodes that far apart (:func:`lead_terms`).  ``ValueError`` when an effect that
+    acts needs the readings' times and they are not given."""
     needs = [e for e in TIMED_EFFECTS if e in conditions]
     if needs and times is None:
         raise ValueError(f"under the {conditions.name} conditions every reading needs its "
                          f"time (time_s) to size {', '.join(needs)}")
     t = None if times is None else np.asarray(times, dtype=float)
     m_count, n = len(values), len(design)
-    drive = _drive_terms(design, t, conditions)
+    drive = _drive_terms(design, t, conditions, spacing)
     reading = _reading_terms(design, values, t, conditions)
     drive_array = (np.stack([np.broadcast_to(p, (m_count, n, 3)) for _, p in drive], axis=-1)
                    if drive else np.zeros((m_count, n, 3, 0)))

@@ -80,6 +80,9 @@ class BatchFit:
     #: (M, n, n) covariance of (estimate - truth) over every parameter, physical units,
     #: with the errors the model leaves out (see :func:`_model_error`).
     error_covariance: np.ndarray
+    #: (M, nf, K) how far each considered term's unit coefficient moves the free
+    #: parameters (physical units): the estimate's covariance with the terms.
+    considered_gain: np.ndarray
 
     def split(self) -> list[BatchFit]:
         """One fit per machine (each a batch of one)."""
@@ -438,15 +441,17 @@ def fit_batch(design: Design, values: np.ndarray, mask: np.ndarray, sigma: float
     mountings_used = (mask.astype(float) @ problem.onehot > 0).sum(axis=1)
     priored = int(np.sum(problem.precision > 0))
     dof = mask.sum(axis=1) - mountings_used - np.maximum(retained - priored, 0)
+    moved = np.zeros((m_count, len(idx), 0))
     if consider is not None and not consider.empty:
-        cov_scaled = cov_scaled + _considered(problem, jac, gain_matrix,
-                                              world_columns(design, consider))
+        moved = _considered(problem, jac, gain_matrix, world_columns(design, consider))
+        cov_scaled = cov_scaled + moved @ _t(moved)
     fit = BatchFit(
         theta=theta, free=problem.free, scale=problem.scale,
         prior=np.asarray(prior, dtype=float), covariance=cov_scaled * np.outer(s, s),
         information=info, residuals=np.where(mask, -r / problem.weight, np.nan), chi2=cost,
         dof=dof, retained=retained, converged=converged, iterations=iterations, sigma=sigma,
         error_covariance=np.zeros((m_count, len(free), len(free))),
+        considered_gain=moved * s[:, None],
     )
     _model_error(fit, problem, jac, gain_matrix,
                  np.zeros(len(free), dtype=bool) if unmodelled is None else unmodelled,
@@ -468,14 +473,14 @@ def world_columns(design: Design, consider: Consider) -> np.ndarray:
 
 def _considered(problem: _Problem, jac: np.ndarray, gain_matrix: np.ndarray,
                 columns: np.ndarray) -> np.ndarray:
-    """(M, nf, nf) the covariance, in scaled units, that consider terms add to the
-    estimate: each term's reading pattern ``columns`` (:func:`world_columns`), whitened and
-    centred within its mounting as the residuals are, moves the estimate by ``gain J^T C``
-    per unit of its coefficient, whose second moment the pattern already carries."""
+    """(M, nf, K) how far, in scaled units, each consider term moves the estimate: its
+    reading pattern ``columns`` (:func:`world_columns`), whitened and centred within its
+    mounting as the residuals are, moves it by ``gain J^T C`` per unit of its coefficient,
+    whose second moment the pattern already carries; ``moved moved^T`` is what the terms
+    add to the covariance."""
     columns = _centre(columns * problem.weight[:, None], problem.mask, problem.onehot,
                       problem.design.mounting)
-    moved = gain_matrix @ (_t(jac) @ columns)
-    return moved @ _t(moved)
+    return gain_matrix @ (_t(jac) @ columns)
 
 
 def _model_error(fit: BatchFit, problem: _Problem, jac: np.ndarray, gain_matrix: np.ndarray,

@@ -16,7 +16,15 @@ from typing import Any
 import numpy as np
 
 from calibrators.estimators.base import Calibrator, Estimate, Measurements, register
-from calibrators.estimators.consider import WORLD_PREFIX, consider_terms
+from calibrators.estimators.consider import (
+    DEFAULT_NODE_SPACING,
+    FULL_TERMS,
+    TERM_FAMILIES,
+    WORLD_PREFIX,
+    Consider,
+    check_families,
+    consider_terms,
+)
 from calibrators.estimators.consider import tracker_sigma as tracker_sigma_of
 from calibrators.estimators.exact_fit import (
     CHI2_LEVEL,
@@ -38,7 +46,14 @@ from calibrators.estimators.parameters import (
 )
 from orthoglide_env.instruments.dial import DEFAULT_SIGMA, weighting_sigma
 from orthoglide_env.lab.operations import TRACKER_SIGMA
-from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS, ErrorPreset, MachineParams
+from orthoglide_env.model.compensation import node_count
+from orthoglide_env.model.errors import (
+    DEFAULT_PRESET,
+    ERROR_NAMES,
+    PRESETS,
+    ErrorPreset,
+    MachineParams,
+)
 from orthoglide_env.model.kinematics import direct
 from orthoglide_env.model.reading_model import (
     Design,
@@ -48,7 +63,7 @@ from orthoglide_env.model.reading_model import (
     station_of,
 )
 from orthoglide_env.scoring import best_rigid_motion
-from orthoglide_env.world.conditions import IDEAL, Conditions
+from orthoglide_env.world.conditions import Conditions
 
 #: A reading is an outlier when its residual exceeds this many robust standard deviations
 #: (1.4826 x the median absolute residual, or its instrument's sigma when larger): a normal
@@ -145,7 +160,8 @@ class GaussNewtonCalibrator(Calibrator):
                       holdout: float = 0.0, seed: int = 0, solver: str = "gauss-newton",
                       tracker_sigma: float = TRACKER_SIGMA, explain: bool = True,
                       conditions: Conditions | str = "ideal", left_out: str = DEFAULT_PRESET,
-                      fit_world: bool = False) -> list[Estimate | Exception]:
+                      fit_world: bool | tuple[str, ...] = False,
+                      node_spacing: float | None = None) -> list[Estimate | Exception]:
         """:meth:`estimate` of many experiments; ``tracker_sigma``: a laser tracker
         coordinate's noise (mm); ``conditions``: the lab's (a name or
         :class:`~orthoglide_env.world.conditions.Conditions`), whose effects the fit does
@@ -155,8 +171,16 @@ class GaussNewtonCalibrator(Calibrator):
         ``left_out``: the error preset whose sizes the machine errors and stand errors the
         selection leaves out have a priori (their spread goes into the covariance;
         ``paper`` or ``nominal``: they do not exist, and only a misfit widens it);
-        ``fit_world``: the conditions' terms are fitted (each coefficient a parameter
-        ``world.<term>`` with its second moment as a normal prior) instead of considered.
+        ``params`` ``full``: every parameter (``extended``) and, unless ``fit_world`` says
+        otherwise, the terms of :data:`~calibrators.estimators.consider.FULL_TERMS` on a
+        pitch-error table (``node_spacing`` default
+        :data:`~calibrators.estimators.consider.DEFAULT_NODE_SPACING`);
+        ``fit_world``: the conditions' terms of these families
+        (:data:`~calibrators.estimators.consider.TERM_FAMILIES`; True: all) are fitted
+        (each coefficient a parameter ``world.<term>`` with its second moment as a normal
+        prior) instead of considered; ``node_spacing``: the lead error's curve as a
+        controller's pitch-error table with nodes this far apart (mm), with its smoothness
+        prior (:func:`~calibrators.estimators.consider.table_prior`).
         Those of one design (the same readings of the same mountings at the same
         postures, as a fixed agent takes them on every machine) are fitted together, in
         one batched solve.  A failure is returned in
@@ -166,6 +190,13 @@ class GaussNewtonCalibrator(Calibrator):
         out: list[Estimate | Exception] = [ValueError("not fitted")] * len(datas)
         if isinstance(conditions, str):
             conditions = Conditions(conditions)
+        if params == "full" and fit_world is False:
+            fit_world = FULL_TERMS
+            node_spacing = DEFAULT_NODE_SPACING if node_spacing is None else node_spacing
+        terms = check_families(TERM_FAMILIES if fit_world is True else fit_world or ())
+        if node_spacing is not None:
+            machine = (datas[0].design if datas else MachineParams().design)
+            node_count(machine.rho_max - machine.rho_min, node_spacing)
         groups: dict[tuple, list[int]] = {}
         prepared = []
         for k, data in enumerate(datas):
@@ -185,7 +216,8 @@ class GaussNewtonCalibrator(Calibrator):
                    "seed": seed, "solver": solver, "keep_outliers": keep_outliers,
                    "sigma": sigma, "tracker_sigma": tracker_sigma, "verify": verify,
                    "explain": explain, "conditions": conditions,
-                   "left_out": left_out_preset(left_out), "fit_world": fit_world}
+                   "left_out": left_out_preset(left_out), "terms": terms,
+                   "spacing": node_spacing}
         for members in groups.values():
             design = prepared[members[0]][0]
             values = np.stack([prepared[k][1] for k in members])
@@ -202,12 +234,13 @@ class GaussNewtonCalibrator(Calibrator):
                    params: str, prior: str, fix: dict[str, float], holdout: float, seed: int,
                    solver: str, keep_outliers: bool, sigma: float, tracker_sigma: float,
                    verify: bool, explain: bool, conditions: Conditions,
-                   left_out: ErrorPreset, fit_world: bool) -> list[Estimate | Exception]:
+                   left_out: ErrorPreset, terms: tuple[str, ...], spacing: float | None
+                   ) -> list[Estimate | Exception]:
         """Fit the experiments ``values`` (M, N) of one ``design`` together."""
         space = design.space
         stamps = [[m.time_s for m in data.items] for data in datas]
         times = None if any(None in row for row in stamps) else np.array(stamps, dtype=float)
-        consider = consider_terms(design, values, times, conditions)
+        consider = consider_terms(design, values, times, conditions, spacing)
         free = select(params, space)
         fixed = fixed_values(fix, space)
         for name in fix:
@@ -226,17 +259,17 @@ class GaussNewtonCalibrator(Calibrator):
         spread = preset_sigmas(left_out, space)
         names = list(space.names)
         world = None
-        if fit_world and not consider.empty:
+        fitted, consider = consider.split(terms)
+        if not fitted.empty:
             # The terms' coefficients, in units of their root second moment, join the
             # parameters with a unit normal prior.
-            world = world_columns(design, consider)
-            names += [f"{WORLD_PREFIX}{n}" for n in consider.names]
+            world = world_columns(design, fitted)
+            names += [f"{WORLD_PREFIX}{n}" for n in fitted.names]
             k = world.shape[-1]
             free, fixed, priors, scale, unmodelled, spread = (
                 np.concatenate([a, np.full(k, v, dtype=a.dtype)])
                 for a, v in ((free, True), (fixed, 0.0), (priors, 1.0), (scale, 1.0),
                              (unmodelled, False), (spread, 0.0)))
-            consider = consider_terms(design, values, times, IDEAL)  # none left to consider
         tracked = np.array([isinstance(design.specs[m], TrackerAxis)
                             for m in design.mounting])
         if "tracker" in conditions and tracked.any():
@@ -295,16 +328,17 @@ class GaussNewtonCalibrator(Calibrator):
             else:
                 out.append(self._estimate(datas[m], params, prior, sigma, design, values[m],
                                           result, eigenvalues[m], mask[m], held, outliers[m],
-                                          verify, explain, consider.effects, names,
-                                          None if world is None else world[m]))
+                                          verify, explain, consider, names,
+                                          None if world is None else world[m],
+                                          conditions, spacing))
         return out
 
     def _estimate(self, data: Measurements, params: str, prior: str, sigma: float,
                   design: Design, values: np.ndarray, result: BatchFit,
                   eigenvalues: np.ndarray, mask: np.ndarray, held: np.ndarray,
                   outliers: list[int], verify: bool, explain: bool,
-                  considered: list[str], every: list[str], world: np.ndarray | None
-                  ) -> Estimate:
+                  considered: Consider, every: list[str], world: np.ndarray | None,
+                  conditions: Conditions, spacing: float | None) -> Estimate:
         space = design.space
         names = [n for n, f in zip(every, result.free, strict=True) if f]
         idx = np.flatnonzero(result.free)
@@ -353,7 +387,8 @@ class GaussNewtonCalibrator(Calibrator):
                             for d in sparse_basis(result.unidentifiable(0))] if explain else [],
             outliers=outliers, information=info, scale=s, error_covariance=error_cov,
             holdout_rms_mm=float(np.sqrt(np.mean(residuals[held] ** 2))) if held.any() else None,
-            considered=considered,
+            considered=considered.effects,
+            **_lead(result, every, considered.names, error_cov, conditions, spacing),
         )
 
     def _verify(self, design: Design, values: np.ndarray, result: BatchFit, mask: np.ndarray,
@@ -378,6 +413,37 @@ class GaussNewtonCalibrator(Calibrator):
                 errors.append(held[np.isfinite(held)])
         errors = np.concatenate(errors) if errors else np.zeros(0)
         return float(np.sqrt(np.mean(errors**2))) if errors.size else None
+
+
+def _lead(result: BatchFit, every: list[str], considered: tuple[str, ...],
+          error_cov: np.ndarray, conditions: Conditions, spacing: float | None
+          ) -> dict[str, Any]:
+    """The lead error's terms of an estimate (fitted or considered), with the joint
+    covariance of (estimate - truth) over the 27 machine errors and their coefficients
+    (a considered term's estimate is 0; the estimate moved with it): what the tool's
+    position after compensation needs."""
+    n = len(ERROR_NAMES)
+    fitted = [k for k, name in enumerate(every) if name.startswith(f"{WORLD_PREFIX}lead.")]
+    other = [k for k, name in enumerate(considered) if name.startswith("lead.")]
+    if not fitted and not other:
+        return {}
+    rows = list(range(n)) + fitted
+    size = len(rows) + len(other)
+    joint = np.zeros((size, size))
+    joint[:len(rows), :len(rows)] = error_cov[np.ix_(rows, rows)]
+    free = np.flatnonzero(result.free)
+    position = {int(k): j for j, k in enumerate(free)}
+    gain = result.considered_gain[0]  # (nf, K) over every considered term
+    for i, k in enumerate(rows):
+        if k in position:
+            joint[i, len(rows):] = -gain[position[k], other]
+    joint[len(rows):, :len(rows)] = joint[:len(rows), len(rows):].T
+    joint[len(rows):, len(rows):] = np.eye(len(other))
+    return {"lead_terms": [every[k][len(WORLD_PREFIX):] for k in fitted]
+            + [considered[k] for k in other],
+            "lead_values": np.concatenate([result.theta[0][fitted], np.zeros(len(other))]),
+            "lead_covariance": joint, "conditions": conditions.to_dict(),
+            "node_spacing": spacing}
 
 
 def _held_out(design: Design, values: np.ndarray, theta: np.ndarray, train: np.ndarray,

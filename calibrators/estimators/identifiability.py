@@ -57,7 +57,7 @@ def analyse(jac: np.ndarray, cov_unit: np.ndarray, sigma: float,
     return Identifiability(fisher, crlb, sv, weak)
 
 
-def of_design(data: Measurements, params: str = "full", sigma: float = DEFAULT_SIGMA,
+def of_design(data: Measurements, params: str = "paper6", sigma: float = DEFAULT_SIGMA,
               theta: np.ndarray | None = None) -> Identifiability:
     """Identifiability of any strategy's readings (its design): the exact gauge model's
     Jacobian of the averaged differences at the machine ``theta`` (drho, dL; default

@@ -77,6 +77,7 @@ class PaperCalibrator(Calibrator):
             ("keep_outliers", bool(options.get("keep_outliers"))),
             ("solver", options.get("solver", "gauss-newton") != "gauss-newton"),
             ("fit_world", bool(options.get("fit_world"))),
+            ("node_spacing", options.get("node_spacing") is not None),
             ("conditions", str(getattr(options.get("conditions", "ideal"), "name",
                                        options.get("conditions", "ideal"))) != "ideal"))
             if given]

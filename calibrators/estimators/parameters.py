@@ -8,7 +8,7 @@ measuring axis).  A *selection* names the free ones, by comma-separated tokens:
 ==============  ==============================================================
 token           frees
 ==============  ==============================================================
-``paper6``      drho and dL (the paper's model; ``full`` is an alias)
+``paper6``      drho and dL (the paper's model)
 ``extended``    every machine error and every stand parameter
 ``machine``     every machine error
 ``stands``      every stand parameter (``stand_shift``, ``stand_tilt``: half)
@@ -35,8 +35,9 @@ from orthoglide_env.model.errors import (
 )
 from orthoglide_env.model.reading_model import ParameterSpace, default_scales, preset_sigmas
 
-#: Selections by alias.
-ALIASES: dict[str, str] = {"full": "paper6"}
+#: Selections by alias: ``full`` is the extended selection (with the lab's terms, which
+#: the exact-model fit adds: :data:`calibrators.estimators.consider.FULL_TERMS`).
+ALIASES: dict[str, str] = {"full": "extended"}
 #: The selections that free a run of the parameter vector.
 SPANS: dict[str, slice] = {"paper6": slice(6), "extended": slice(None),
                            "machine": slice(len(ERROR_NAMES)),

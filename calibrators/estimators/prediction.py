@@ -43,21 +43,32 @@ def predicted_tcp_error(est: Estimate, grid: np.ndarray | None = None) -> FrameE
 def predicted_rigid_mm(ests: list[Estimate], machines: list[MachineParams] | None = None
                        ) -> np.ndarray:
     """The rigid-frame RMS of :func:`predicted_tcp_errors` of each estimate (mm), alone:
-    ``sqrt(trace(W C))`` (:func:`~orthoglide_env.scoring.rigid_weights`).  ``machines``:
-    the estimates' machines, when the caller has them already."""
+    ``sqrt(trace(W C))`` (:func:`~orthoglide_env.scoring.rigid_weights`) for the
+    geometry's part, through the frames where the drives' lead error adds its own.
+    ``machines``: the estimates' machines, when the caller has them already."""
     n = len(ERROR_NAMES)
-    weights = rigid_weights([e.machine for e in ests] if machines is None else machines)
+    machines = [e.machine for e in ests] if machines is None else machines
+    weights = rigid_weights(machines)
     covariances = np.array([e.error_covariance[:n, :n] for e in ests]).reshape(-1, n, n)
-    return np.sqrt(np.clip(np.einsum("mij,mji->m", weights, covariances), 0.0, None))
+    out = np.sqrt(np.clip(np.einsum("mij,mji->m", weights, covariances), 0.0, None))
+    leads = [k for k, e in enumerate(ests) if e.lead_terms]
+    if leads:
+        frames = predicted_tcp_errors([ests[k] for k in leads])
+        out[leads] = [f.rigid.rms for f in frames]
+    return out
 
 
 def predicted_tcp_errors(ests: list[Estimate], grid: np.ndarray | None = None
                          ) -> list[FrameErrors]:
     """Expected error (mm) of the compensated tool position over the workspace grid, in
     the three frames, from the covariance of the estimate's error over the machine's
-    errors (with the errors its model leaves out, when it says so): the raw RMS is the 3-D standard
-    deviation (square root of the trace of the position covariance) averaged over the
-    grid in the mean-square sense."""
+    errors (with the errors its model leaves out, when it says so) and, under conditions
+    with lead error, over its terms (:attr:`~calibrators.estimators.base.Estimate.
+    lead_covariance`: what the compensation leaves of a fitted one, all of a considered
+    one): the raw RMS is the 3-D standard deviation (square root of the trace of the
+    position covariance) averaged over the grid in the mean-square sense."""
     n = len(ERROR_NAMES)
-    return predicted_tcp_frames_many([e.machine for e in ests],
-                                     [e.error_covariance[:n, :n] for e in ests], grid)
+    return predicted_tcp_frames_many(
+        [e.machine for e in ests],
+        [e.lead_covariance if e.lead_terms else e.error_covariance[:n, :n] for e in ests],
+        grid, [e.lead_patterns if e.lead_terms else None for e in ests])
