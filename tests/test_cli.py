@@ -236,6 +236,13 @@ def test_resume_refuses_a_trial_of_other_error_names_in_one_line(tmp_path, capsy
         (["fit", "GOOD_CSV", "--conditions", "lab"], "needs its time (time_s)"),
         (["fit", "GOOD_CSV", "--left-out", "huge"], "--left-out"),
         (["compare", "--address", "auto"], "--engine ray"),
+        (["fit", "GOOD_CSV", "--params", "full", "--node-spacing", "0"],
+         "node spacing must be positive"),
+        (["fit", "GOOD_CSV", "--params", "full", "--node-spacing", "500"],
+         "larger than the drives' travel"),
+        (["fit", "GOOD_CSV", "--params", "full", "--terms", "lead,heat"],
+         "unknown estimator term(s) ['heat']"),
+        (["fit", "GOOD_CSV", "--fit-world", "--terms", "lead"], "not both"),
     ],
 )
 def test_bad_input_gives_one_line_and_status_2(tmp_path, argv, fragment: str) -> None:

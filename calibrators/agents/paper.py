@@ -2,7 +2,9 @@
 
 For each leg in turn: engage that leg's two gauges and lift the other four (so no bar
 pushes a gauge past its travel), then Zero -> Max -> Min three times and a last Zero,
-reading at every posture (section 4 of the paper).  Then stop.
+reading at every posture (section 4 of the paper).  Then stop.  ``paper-once`` goes
+through it once: what the repetitions buy (drift seen by the revisits of Zero, noise
+averaged) is the difference.
 """
 
 from __future__ import annotations
@@ -60,3 +62,12 @@ def paper_plan(legs: tuple[int, ...], engaged: tuple[bool, ...], repetitions: in
                  for p in leg_sequence(leg, repetitions)]
     plan.append(action(Op.STOP))
     return tuple(plan)
+
+
+@register
+class PaperOnceAgent(PaperAgent):
+    """``paper-once``: the paper's procedure gone through once per leg (Zero -> Max -> Min
+    -> Zero), beside ``paper``'s three times, to measure what the repetitions buy."""
+
+    name = "paper-once"
+    repetitions = 1

@@ -1,0 +1,89 @@
+"""Which of the lab's terms each instrument sees: the ``full`` estimator's posterior
+against its prior, per family of terms, and what the drives' lead error left costs.
+
+    python benchmarks/terms.py [--machines 5] [--agents paper,optimal,tracker]
+                               [--conditions lab] [--seed 1]
+
+Per agent (each its one-hour experiment under the conditions, the ``realistic``
+preset), per family of terms (:data:`calibrators.estimators.consider.TERM_FAMILIES`):
+the share of the prior's variance the readings remove, ``1 - trace(posterior) /
+trace(prior)`` over the family's coefficients (each has a unit prior), median over the
+machines.  Near 1 the instrument identifies the family, near 0 nothing sees it; the
+periodic and dial families are considered, not fitted (their share is 0 by
+construction).  Then the predicted TCP error after rigid motion (um) with and without
+the drives' part: the linearised cost of the lead error the fit leaves, against the
+truth's error after compensation.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+import gymnasium as gym
+import numpy as np
+
+import orthoglide_env
+from calibrators.agents import get_agent
+from calibrators.estimators.base import Estimate, get_strategy
+from calibrators.estimators.consider import FULL_TERMS, WORLD_PREFIX, term_family
+from calibrators.estimators.prediction import predicted_tcp_error
+from calibrators.experiment import machine_seed, run_episode
+from orthoglide_env.scoring import score
+
+UM = 1e3  # per mm
+
+
+def shares(est: Estimate) -> dict[str, float]:
+    """Per fitted family, the share of its prior variance the fit removed."""
+    out: dict[str, list[float]] = {}
+    for k, name in enumerate(est.names):
+        if name.startswith(WORLD_PREFIX):
+            family = term_family(name[len(WORLD_PREFIX):])
+            out.setdefault(family, []).append(float(est.covariance[k, k]))
+    return {f: 1.0 - float(np.mean(v)) for f, v in out.items()}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--machines", type=int, default=5)
+    parser.add_argument("--agents", default="paper,optimal,tracker")
+    parser.add_argument("--conditions", default="lab")
+    parser.add_argument("--seed", type=int, default=1)
+    args = parser.parse_args()
+    gn = get_strategy("gauss-newton")
+    print(f"{args.conditions}, {args.machines} machines, seed {args.seed}: share of each "
+          f"family's prior variance the full fit removes (median), predicted TCP rigid "
+          f"(um) with / without the drives' part, and the true one")
+    print(f"{'agent':10}" + "".join(f"{f:>10}" for f in FULL_TERMS)
+          + f"{'pred':>8}{'geom':>8}{'true':>8}")
+    for agent_name in args.agents.split(","):
+        agent = get_agent(agent_name)
+        rows: dict[str, list[float]] = {}
+        predicted, geometric, true = [], [], []
+        for m in range(args.machines):
+            env = gym.make(orthoglide_env.LAB_ENV_ID, backend="exact",
+                           conditions=args.conditions, errors="realistic",
+                           tracker=agent.needs_tracker)
+            try:
+                episode = run_episode(env, agent, machine_seed(args.seed, m))
+            finally:
+                env.close()
+            est = gn.estimate(episode.measurements, "full", episode.sigma, verify=False,
+                              explain=False, conditions=args.conditions)
+            for family, value in shares(est).items():
+                rows.setdefault(family, []).append(value)
+            predicted.append(predicted_tcp_error(est).rigid.rms * UM)
+            geometry = Estimate.from_dict({**est.to_dict(), "lead_terms": []})
+            geometric.append(predicted_tcp_error(geometry).rigid.rms * UM)
+            true.append(score(est.machine, episode.truth, world=episode.world,
+                              correction=est.lead_correction if est.fits_lead else None
+                              ).tcp_after.rigid.rms * UM)
+            print(f"  {agent_name} machine {m + 1}/{args.machines}", file=sys.stderr)
+        print(f"{agent_name:10}" + "".join(
+            f"{np.median(rows[f]):10.2f}" if f in rows else f"{'-':>10}" for f in FULL_TERMS)
+            + f"{np.median(predicted):8.1f}{np.median(geometric):8.1f}{np.median(true):8.1f}")
+
+
+if __name__ == "__main__":
+    main()
