@@ -1,14 +1,14 @@
 """The headline under each world: compare's trials as a table with intervals.
 
     orthoglide compare --machines 50 --seed 1 --agents paper,random,tracker,optimal,active \
-        --estimators paper6,extended --conditions C --jobs 2 --out results/head/C
+        --estimators extended,full --conditions C --jobs 2 --out results/head/C
     python benchmarks/headline.py results/head/ideal results/head/lab results/head/workshop
 
 Per agent x estimator and per folder (one compare run each, its conditions in its
 config): the TCP error after rigid motion (um), median with its 95 % distribution-free
-interval, and p95; z-RMS; the fraction of trials whose chi-square test rejects the
-model; failed trials (each counted as its uncalibrated machine, as compare's summary
-counts them).
+interval, and p95; the median lab time (min); z-RMS; the fraction of trials whose
+chi-square test rejects the model; failed trials (each counted as its uncalibrated
+machine, as compare's summary counts them).
 """
 
 from __future__ import annotations
@@ -28,7 +28,8 @@ def cell(trials: list[Trial]) -> str:
     rigid = row["tcp_after_mm"]["rigid"]
     low, high = (UM * v for v in rigid["ci95"])
     return (f"{UM * rigid['median']:.1f} [{low:.1f}, {high:.1f}] ({UM * rigid['p95']:.1f}),"
-            f" {row['z_rms']:.2f}, {row['chi2_rejected']:.2f}, {row['failed']}")
+            f" {row['time_s']['median'] / 60:.0f}, {row['z_rms']:.2f},"
+            f" {row['chi2_rejected']:.2f}, {row['failed']}")
 
 
 def main() -> None:
@@ -41,7 +42,7 @@ def main() -> None:
         trials = [Trial.from_json(line) for line in (folder / "trials.jsonl").open()]
         runs[config.get("conditions", "ideal")] = trials
     print("| agent | estimator | " + " | ".join(
-        f"{name}: rigid µm median [95 % interval] (p95), z-RMS, chi2 rejected, failed"
+        f"{name}: rigid µm median [95 % interval] (p95), min, z-RMS, chi2 rejected, failed"
         for name in runs) + " |")
     print("|---|---|" + "---|" * len(runs))
     first = next(iter(runs.values()))

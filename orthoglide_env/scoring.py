@@ -408,8 +408,19 @@ def _predicted_frames(targets: np.ndarray, jac: np.ndarray, covariance: np.ndarr
                       ) -> list[FrameErrors]:
     """:func:`predicted_frame_errors` of many error models over the same ``targets``:
     ``jac`` (k, m, 3, p), ``covariance`` (k, p, p)."""
+    per_target = _per_target(targets, jac, covariance)
+    stats = [[ErrorStats(float(r), float(m)) for r, m in zip(
+        np.sqrt(per_target[frame].mean(axis=-1)), np.sqrt(per_target[frame].max(axis=-1)),
+        strict=True)] for frame in FRAMES]
+    return [FrameErrors(*frames) for frames in zip(*stats, strict=True)]
+
+
+def _per_target(targets: np.ndarray, jac: np.ndarray, covariance: np.ndarray
+                ) -> dict[str, np.ndarray]:
+    """Per frame, the expected squared error (mm^2) at each target (k, m) of the error
+    models of :func:`_predicted_frames`."""
     flat = jac.reshape(len(jac), -1, jac.shape[-1])
-    stats = []
+    out = {}
     for frame in FRAMES:
         basis = motion_basis(targets, frame)
         left = flat
@@ -418,10 +429,8 @@ def _predicted_frames(targets: np.ndarray, jac: np.ndarray, covariance: np.ndarr
             left = flat - q @ (q.T @ flat)
         per_target = np.sum((left @ covariance) * left, axis=-1).reshape(
             len(jac), -1, 3).sum(-1)
-        per_target = np.clip(per_target, 0.0, None)  # round-off of a PSD quadratic form
-        stats.append([ErrorStats(float(r), float(m)) for r, m in zip(
-            np.sqrt(per_target.mean(axis=-1)), np.sqrt(per_target.max(axis=-1)), strict=True)])
-    return [FrameErrors(*frames) for frames in zip(*stats, strict=True)]
+        out[frame] = np.clip(per_target, 0.0, None)  # round-off of a PSD quadratic form
+    return out
 
 
 def _same_targets(usable: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -488,6 +497,45 @@ def predicted_tcp_frames(model: MachineParams, covariance: np.ndarray,
     return predicted_tcp_frames_many([model], [covariance], grid)[0]
 
 
+def predicted_target_errors(model: MachineParams, covariance: np.ndarray,
+                            targets: np.ndarray, drive: DriveTerms | None = None
+                            ) -> dict[str, np.ndarray]:
+    """Per frame, the expected error (mm, root mean square) at each of ``targets`` (n, 3)
+    of a machine compensated with ``model`` (see :func:`predicted_tcp_frames_many`; the
+    best fit of a frame is over these targets); NaN where ``model`` has no command."""
+    targets = np.asarray(targets, dtype=float)
+    usable, machines, rho, p = _commanded([model], targets)
+    jac, cov = _with_drives(tcp_sensitivity(machines, rho, p), rho, [covariance],
+                            None if drive is None else [drive])
+    mask = usable[0]
+    out = {}
+    for frame, values in _per_target(targets[mask], jac[:, mask], cov).items():
+        full = np.full(len(targets), np.nan)
+        full[usable[0]] = np.sqrt(values[0])
+        out[frame] = full
+    return out
+
+
+def _with_drives(jac: np.ndarray, rho: np.ndarray, covariances: Sequence[np.ndarray],
+                 drives: Sequence[DriveTerms | None] | None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The Jacobians (M, n, 3, 27) and covariances extended by each model's drive terms
+    at its commands ``rho`` (M, n, 3) (a carriage error moves the tool as an encoder
+    offset does), padded with zeros to the largest; unchanged without drives."""
+    covariances = [np.asarray(c, dtype=float) for c in covariances]
+    if drives is None or all(d is None for d in drives):
+        return jac, np.stack(covariances)
+    terms = [np.zeros((*rho.shape[1:], 0)) if d is None else d(rho[m])
+             for m, d in enumerate(drives)]
+    width = max(t.shape[-1] for t in terms)
+    moved = np.zeros((*jac.shape[:3], width))
+    padded = np.zeros((len(covariances), jac.shape[-1] + width, jac.shape[-1] + width))
+    for m, (t, c) in enumerate(zip(terms, covariances, strict=True)):
+        moved[m, ..., :t.shape[-1]] = np.einsum("nia,nak->nik", jac[m, ..., :3], t)
+        padded[m, :len(c), :len(c)] = c
+    return np.concatenate([jac, moved], axis=-1), padded
+
+
 def predicted_tcp_frames_many(models: Sequence[MachineParams],
                               covariances: Sequence[np.ndarray],
                               grid: np.ndarray | None = None,
@@ -502,20 +550,7 @@ def predicted_tcp_frames_many(models: Sequence[MachineParams],
         return []
     targets = _targets(grid, models)
     usable, machines, rho, p = _commanded(models, targets)
-    jac = tcp_sensitivity(machines, rho, p)  # (M, n, 3, 27)
-    covariances = [np.asarray(c, dtype=float) for c in covariances]
-    if drives is not None and any(d is not None for d in drives):
-        terms = [np.zeros((*rho.shape[1:], 0)) if d is None else d(rho[m])
-                 for m, d in enumerate(drives)]
-        width = max(t.shape[-1] for t in terms)
-        moved = np.zeros((*jac.shape[:3], width))
-        padded = np.zeros((len(models), jac.shape[-1] + width, jac.shape[-1] + width))
-        for m, (t, c) in enumerate(zip(terms, covariances, strict=True)):
-            moved[m, ..., :t.shape[-1]] = np.einsum("nia,nak->nik", jac[m, ..., :3], t)
-            padded[m, :len(c), :len(c)] = c
-        jac = np.concatenate([jac, moved], axis=-1)
-        covariances = list(padded)
-    stacked = np.stack(covariances)
+    jac, stacked = _with_drives(tcp_sensitivity(machines, rho, p), rho, covariances, drives)
     out: list[FrameErrors | None] = [None] * len(models)
     for mask, members in _same_targets(usable):
         frames = _predicted_frames(targets[mask], jac[members][:, mask], stacked[members])

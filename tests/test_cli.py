@@ -89,11 +89,13 @@ def test_calibrate_table_and_fixed_params(capsys) -> None:
     assert main(["calibrate", "--seed", "3", "--params", "drho", "--backend", "exact"]) == 0
     text = capsys.readouterr().out
     assert "fixed" in text and "TCP error over the workspace" in text
-    assert "the model does not explain the readings" not in text  # no warning is printed
-    # ... because the table prints warnings only in JSON: the paper6 fit of a realistic
-    # machine is rejected by the chi-square test, and says so.
+    # The paper6 fit of a realistic machine is rejected by the chi-square test, and says
+    # so in the table as in JSON.
+    assert main(["calibrate", "--seed", "3", "--backend", "exact"]) == 0
+    text = capsys.readouterr().out
     out = run_json(capsys, ["calibrate", "--seed", "3", "--backend", "exact", "--json"])
     assert out["chi2_dof"] > 5 and "try --params extended" in out["warnings"][0]
+    assert f"warning: {out['warnings'][0]}" in text.splitlines()
 
 
 def test_saved_measurements_fit_to_the_same_estimate(tmp_path, capsys) -> None:

@@ -181,6 +181,12 @@ def test_full_fits_the_tables_and_its_prediction_carries_the_drives(tracker_lab,
     np.testing.assert_array_equal(again.pitch_table.values, table.values)
     np.testing.assert_array_equal(again.lead_covariance, full.lead_covariance)
 
+    # The controller's backlash values, each within 4 of its sigmas of the truth's.
+    backlash = full.backlash
+    assert backlash is not None and extended.backlash is None
+    for a, axis in enumerate("xyz"):
+        value, std = backlash[axis]["value"], backlash[axis]["sigma"]
+        assert std > 0 and abs(value - world.backlash[0, a]) < 4 * std, (axis, value, std)
     after = {name: score(est.machine, truth, world=world,
                          correction=est.lead_correction if est.fits_lead else None)
              for name, est in (("full", full), ("extended", extended))}

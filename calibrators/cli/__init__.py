@@ -13,11 +13,21 @@ import os
 import sys
 from importlib import metadata
 
-from calibrators.cli import calibrate, compare, conditions, design, fit, pose, render, urdf
+from calibrators.cli import (
+    calibrate,
+    compare,
+    compensate,
+    conditions,
+    design,
+    fit,
+    pose,
+    render,
+    urdf,
+)
 from calibrators.cli.common import Parser, UsageError
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA, check_noise
 
-COMMANDS = (pose, render, urdf, calibrate, fit, compare, design, conditions)
+COMMANDS = (pose, render, urdf, calibrate, fit, compensate, compare, design, conditions)
 #: The distribution whose metadata carries the version.
 DISTRIBUTION = "orthoglide-workbench"
 

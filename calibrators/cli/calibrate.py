@@ -14,7 +14,7 @@ from calibrators.agents import available as agents_available
 from calibrators.agents import get_agent
 from calibrators.cli import estimator_options
 from calibrators.cli.common import add_conditions, add_design, conditions_of
-from calibrators.cli.output import emit, report, save_pitch_table
+from calibrators.cli.output import emit, report, save
 from calibrators.compare import machine_z_scores
 from calibrators.estimators.base import Estimate, Measurements, get_strategy
 from calibrators.estimators.consider import WORLD_PREFIX
@@ -93,7 +93,7 @@ def run(args: argparse.Namespace) -> None:
         if args.save_truth:
             write_machine_file(args.save_truth, episode.truth, episode.world)
         est = estimator_options.estimate(args, data, episode.sigma, conditions)
-        save_pitch_table(est, args.save_pitch_table)
+        save(est, args)
         emit(report(est, episode.truth, _z_rms(est, data, env), episode.world), args.json)
 
 

@@ -56,6 +56,10 @@ def add(p: argparse.ArgumentParser) -> None:
                    help=f"fit the lead error as a controller's pitch-error table with nodes "
                         f"this far apart, with a smoothness prior (default with --params "
                         f"full: {DEFAULT_NODE_SPACING:g})")
+    p.add_argument("--save-estimate", metavar="FILE.json",
+                   help="write the estimate file: a machine file of the estimated machine "
+                        "(pose --machine reads it) with the fit under 'calibration', which "
+                        "orthoglide compensate reads")
     p.add_argument("--save-pitch-table", metavar="FILE.csv",
                    help="write the fitted lead error as per-axis pitch-error tables for the "
                         "controller: axis, position_mm, error_mm (where the carriage is minus "

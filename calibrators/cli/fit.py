@@ -8,7 +8,7 @@ import numpy as np
 
 from calibrators.cli import estimator_options
 from calibrators.cli.common import add_conditions, conditions_of, design_of
-from calibrators.cli.output import emit, report, save_pitch_table
+from calibrators.cli.output import emit, report, save
 from calibrators.measurements import Measurements
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 
@@ -20,7 +20,7 @@ def run(args: argparse.Namespace) -> None:
         data.to_csv(args.to_csv)
     sigma = float(np.hypot(args.sigma, args.resolution / np.sqrt(12)))
     est = estimator_options.estimate(args, data, sigma, conditions_of(args))
-    save_pitch_table(est, args.save_pitch_table)
+    save(est, args)
     emit(report(est, None), args.json)
 
 

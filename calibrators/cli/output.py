@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from calibrators.cli.common import UsageError, print_json
+from calibrators.compensation import write_estimate
 from calibrators.estimators.base import Estimate
 from calibrators.estimators.prediction import predicted_correction, predicted_tcp_error
 from orthoglide_env.model.compensation import PitchTable
@@ -94,6 +95,8 @@ def report(est: Estimate, truth: MachineParams | None,
     table = est.pitch_table
     if table is not None:
         data["pitch_table"] = table.to_dict()
+    if est.backlash is not None:
+        data["backlash_mm"] = est.backlash
     if truth is not None:
         scored = score(est.machine, truth, world=world,
                        correction=est.lead_correction if est.fits_lead else None)
@@ -133,6 +136,10 @@ def print_table(data: dict[str, Any]) -> None:
         print(f"chi2/dof {data['chi2_dof']:.2f} ({data['dof']} degrees of freedom)")
     if data["considered"]:
         print(f"in the error bars, not fitted: {', '.join(data['considered'])}")
+    if "backlash_mm" in data:
+        print("backlash (lost motion per axis, um, +- std): " + ", ".join(
+            f"{axis} {v['value'] * 1e3:.1f} +- {v['sigma'] * 1e3:.1f}"
+            for axis, v in data["backlash_mm"].items()))
     if "pitch_table" in data:
         table = PitchTable.from_dict(data["pitch_table"])
         print(f"pitch-error tables (um, +- std; {table.spacing:g} mm spacing from "
@@ -175,11 +182,17 @@ def print_table(data: dict[str, Any]) -> None:
                 f"{data[key][f]['rms']:10.4f} /{data[key][f]['max']:7.4f}" for f in FRAMES))
     if data.get("z_rms") is not None:
         print(f"z-RMS of the identifiable combinations against the truth: {data['z_rms']:.2f}")
+    # Last, where a reader's eye ends: what the fit says against itself.
+    for warning in data["warnings"]:
+        print(f"warning: {warning}")
 
 
-def save_pitch_table(est: Estimate, path: str | None) -> None:
-    """Write the estimate's pitch-error tables as CSV to ``path`` (when given); a usage
-    error when the fit found none."""
+def save(est: Estimate, args: Any) -> None:
+    """Write what ``--save-estimate`` and ``--save-pitch-table`` ask for; a usage error
+    when the fit has no pitch-error table to write."""
+    if args.save_estimate:
+        write_estimate(args.save_estimate, est)
+    path = args.save_pitch_table
     if not path:
         return
     table = est.pitch_table

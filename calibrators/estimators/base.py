@@ -18,7 +18,13 @@ from typing import Any, ClassVar
 import numpy as np
 from scipy import special
 
-from calibrators.estimators.consider import TABLE_TERM, WORLD_PREFIX, lead_terms, table_prior
+from calibrators.estimators.consider import (
+    TABLE_TERM,
+    WORLD_PREFIX,
+    backlash_sizes,
+    lead_terms,
+    table_prior,
+)
 from calibrators.measurements import Measurements
 from calibrators.registry import Registry
 from orthoglide_env.instruments.dial import DEFAULT_SIGMA
@@ -169,6 +175,26 @@ class Estimate:
         return PitchTable(design.rho_min, self.node_spacing, values, sigma)
 
     @property
+    def backlash(self) -> dict[str, dict[str, float]] | None:
+        """Each axis's fitted lost motion (mm) with its standard deviation, the controller's
+        backlash value; None unless the fit fitted backlash."""
+        names = [f"{WORLD_PREFIX}backlash.mean",
+                 *(f"{WORLD_PREFIX}backlash.spread[{a}]" for a in AXIS_NAMES)]
+        if not all(n in self.names for n in names):
+            return None
+        mean, spread = backlash_sizes(as_conditions(self.conditions))
+        idx = [self.names.index(n) for n in names]
+        theta = self.theta[[self.space.index(n) for n in names]]
+        out = {}
+        for a, axis in enumerate(AXIS_NAMES):
+            gain = np.zeros(len(names))
+            gain[0], gain[1 + a] = mean * 1e-3, spread * 1e-3
+            variance = gain @ self.covariance[np.ix_(idx, idx)] @ gain
+            out[axis] = {"value": float(gain @ theta), "sigma": float(np.sqrt(max(variance,
+                                                                                    0.0)))}
+        return out
+
+    @property
     def residual_rms_mm(self) -> float:
         return float(np.sqrt(np.nanmean(self.residuals**2))) if self.residuals.size else 0.0
 
@@ -203,7 +229,8 @@ class Estimate:
         table = self.pitch_table
         data.update(readings=self.readings.to_dict(), std=self.std,
                     residual_rms_mm=self.residual_rms_mm, condition_number=self.condition_number,
-                    pitch_table=None if table is None else table.to_dict())
+                    pitch_table=None if table is None else table.to_dict(),
+                    backlash_mm=self.backlash)
         return data
 
     @classmethod
@@ -211,7 +238,7 @@ class Estimate:
         kwargs = {f.name: data[f.name] for f in fields(cls) if f.name in data}
         for key in _ARRAY_FIELDS:
             if key in kwargs:
-                kwargs[key] = np.array(kwargs[key], dtype=float)
+                kwargs[key] = np.array(_nan(kwargs[key]), dtype=float)
         for key in ("covariance", "fisher", "information", "error_covariance",
                     "lead_covariance"):
             if key in kwargs and kwargs[key].size == 0:
@@ -221,11 +248,33 @@ class Estimate:
         return cls(**kwargs)
 
     def to_json(self, path: str | Path) -> None:
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+        """Strict JSON (a NaN, such as a left-out reading's residual, as null)."""
+        Path(path).write_text(json.dumps(strict(self.to_dict()), indent=2,
+                                         allow_nan=False) + "\n")
 
     @classmethod
     def from_json(cls, path: str | Path) -> Estimate:
         return cls.from_dict(json.loads(Path(path).read_text()))
+
+
+def strict(value: Any) -> Any:
+    """``value`` with every float that JSON cannot carry (NaN, infinities) as None."""
+    if isinstance(value, float):
+        return value if np.isfinite(value) else None
+    if isinstance(value, list | tuple):
+        return [strict(v) for v in value]
+    if isinstance(value, dict):
+        return {k: strict(v) for k, v in value.items()}
+    return value
+
+
+def _nan(value: Any) -> Any:
+    """What :func:`strict` wrote, None back as NaN."""
+    if value is None:
+        return float("nan")
+    if isinstance(value, list):
+        return [_nan(v) for v in value]
+    return value
 
 
 def schema(values: list, space: list[str]) -> dict[str, Any]:

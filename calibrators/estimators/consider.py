@@ -267,8 +267,7 @@ def _drive_terms(design: Design, t: np.ndarray | None, conditions: Conditions,
         # Half the lost motion, b / 2, against the approach: b's mean acts on every axis
         # at once (the axes' b are all positive), its spread on each alone.
         lag = -_approach(design.rho)[None] / 2 * UM
-        mean = _mean("backlash", "lost_motion", conditions)
-        spread = np.sqrt(second_moment("backlash", "lost_motion", conditions) - mean**2)
+        mean, spread = backlash_sizes(conditions)
         out.append(("backlash.mean", mean * lag))
         out += _per_axis("backlash.spread", spread * lag)
     if on("warmup"):
@@ -285,6 +284,14 @@ def _drive_terms(design: Design, t: np.ndarray | None, conditions: Conditions,
             out += _per_axis(f"warmup.tau{j}", np.sqrt(w) * mean * (c - mean_curve))
             out += _per_axis(f"warmup.spread{j}", np.sqrt(w) * spread * c)
     return out
+
+
+def backlash_sizes(conditions: Conditions) -> tuple[float, float]:
+    """The lost motion's mean and spread (um) under ``conditions``: the sizes of the
+    ``backlash.mean`` term and of each axis's ``backlash.spread`` term, so that an axis's
+    lost motion is ``mean c_mean + spread c_axis`` in their coefficients."""
+    mean = _mean("backlash", "lost_motion", conditions)
+    return mean, float(np.sqrt(second_moment("backlash", "lost_motion", conditions) - mean**2))
 
 
 def _reading_terms(design: Design, values: np.ndarray, t: np.ndarray | None,

@@ -6,6 +6,10 @@ hold one more key, ``"world"``: :meth:`World.to_dict` of that machine as a lab d
 written (``calibrate --save-truth``), read and replayed: a lab reset with such a machine
 takes its world instead of drawing one, so the same commands on the same machine meet
 the same screws, room and indicators.  A lab of other conditions refuses it.
+
+An estimate file is a machine file too: the estimated machine's errors, and under
+``"calibration"`` the fit that found them (its covariance, readings, gauge stands, the
+lab's fitted terms; the calibrators read it, the machine does not).
 """
 
 from __future__ import annotations
@@ -20,6 +24,8 @@ from orthoglide_env.model.userfile import load_user_file
 from orthoglide_env.world.truth import World
 
 WORLD_KEY: str = "world"
+#: The key of an estimate file's fit (an object the machine passes over).
+CALIBRATION_KEY: str = "calibration"
 
 
 def machine_dict(machine: MachineParams, world: World | None) -> dict[str, Any]:
@@ -36,7 +42,11 @@ def read_machine(data: Any, design: MachineDesign | None = None,
     object; :class:`MachineFileError` naming the key at fault."""
     if not isinstance(data, dict):
         raise MachineFileError("a machine must be a JSON object")
-    geometry = {key: value for key, value in data.items() if key != WORLD_KEY}
+    if CALIBRATION_KEY in data and not isinstance(data[CALIBRATION_KEY], dict):
+        raise MachineFileError("machine key 'calibration' must be an object (a fit's record)",
+                               key=CALIBRATION_KEY)
+    geometry = {key: value for key, value in data.items()
+                if key not in (WORLD_KEY, CALIBRATION_KEY)}
     machine = MachineParams.from_dict(geometry, design, folder)
     if WORLD_KEY not in data:
         return machine, None
