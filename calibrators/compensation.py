@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from calibrators.estimators.base import Estimate, strict
-from orthoglide_env.model.errors import AXIS_NAMES, ERROR_NAMES
+from orthoglide_env.model.errors import AXIS_NAMES, ERROR_NAMES, MachineFileError, check_validity
 from orthoglide_env.scoring import FRAMES, commands, predicted_target_errors
 from orthoglide_env.sim.urdf import write_urdf
 from orthoglide_env.world.machine_file import CALIBRATION_KEY, machine_dict
@@ -85,6 +85,16 @@ def read_targets(path: str | Path) -> np.ndarray:
     return np.array(out)
 
 
+def check_usable(est: Estimate) -> None:
+    """``ValueError`` for an estimate outside the validity range: a controller must not
+    take it."""
+    try:
+        check_validity(est.machine)
+    except MachineFileError as exc:
+        raise ValueError(f"the estimate is outside the validity range: "
+                         f"{str(exc).replace('machine key', 'estimate key')}") from None
+
+
 @dataclass
 class Compensation:
     """Each target's compensated command ``rho`` (n, 3), mm, and its predicted error (mm,
@@ -97,9 +107,10 @@ class Compensation:
 
 def compensate(est: Estimate, targets: np.ndarray) -> Compensation:
     """The commands that put the tool of the machine ``est`` estimates on ``targets``
-    (n, 3); ``ValueError`` naming the first target the estimated machine cannot reach
-    within its control limits."""
+    (n, 3); ``ValueError`` for an estimate outside the validity range, or naming the first
+    target the estimated machine cannot reach within its control limits."""
     targets = np.asarray(targets, dtype=float)
+    check_usable(est)
     rho = commands(est.machine, targets)
     outside = np.flatnonzero(~np.isfinite(rho).all(axis=-1))
     if outside.size:
@@ -120,7 +131,9 @@ def write_controller_files(est: Estimate, folder: str | Path,
     """Write what a controller takes into ``folder``: ``joint_offsets.csv`` (the encoder
     offsets ``drho``, as the paper put them into its control software), ``pitch_table.csv``
     and ``backlash.csv`` when the fit has them, the calibrated ``machine.json`` and
-    ``machine.urdf``, and with a compensation ``commands.csv``.  The paths written."""
+    ``machine.urdf``, and with a compensation ``commands.csv``.  The paths written;
+    nothing for an estimate outside the validity range (``ValueError``)."""
+    check_usable(est)
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     written = []

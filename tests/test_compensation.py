@@ -107,3 +107,25 @@ def test_bad_targets_are_refused_in_one_line(tmp_path, capsys, text, fragment) -
                  "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and fragment in err[0], err
+
+
+def test_an_estimate_outside_the_validity_range_is_flagged_and_not_compensated(
+        tmp_path, capsys) -> None:
+    """Held at 12 mm, beyond the validity range's 10 mm, drho_x makes the estimate one the
+    model cannot vouch for: the fit says so in its text and its warnings, and
+    ``compensate`` refuses it in one line."""
+    est_path = tmp_path / "est.json"
+    assert main(["calibrate", "--agent", "paper", "--backend", "exact", "--seed", "1",
+                 "--params", "paper6", "--fix", "drho_x=12", "--save-estimate",
+                 str(est_path)]) == 0
+    text = capsys.readouterr().out
+    assert "warning: the estimate is outside the validity range" in text
+    assert any("validity range" in w for w in read_estimate(est_path).warnings)
+    (tmp_path / "t.csv").write_text("x_mm,y_mm,z_mm\n0,0,0\n")
+    assert main(["compensate", str(est_path), "--targets", str(tmp_path / "t.csv"),
+                 "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "estimate key 'drho'" in err[0], err
+    # Nor are its controller values written without targets.
+    assert main(["compensate", str(est_path), "--out", str(tmp_path / "o")]) == 2
+    assert not (tmp_path / "o").exists()

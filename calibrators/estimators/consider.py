@@ -20,7 +20,9 @@ considered):
   ``rho_min``): the linear scale ``x``, the curve ``sin(pi x)`` and ``sin(2 pi x)``, and
   the screw's periodic error ``sin``/``cos(2 pi stroke x / lead)``.  A carriage error
   moves a reading as an encoder offset does: its pattern multiplies the reading's
-  derivative by that axis's ``drho``.
+  derivative by that axis's ``drho``.  With a node spacing the curve is instead a
+  controller's pitch-error table (:func:`lead_terms`, :func:`table_prior`), and the
+  periodic terms are their own family, ``periodic``.
 * ``backlash``: per axis, half the lost motion times the direction of the last move of
   that axis before the reading (from the readings' order: the lab starts each axis as if
   last moved forward).
@@ -37,6 +39,9 @@ considered):
   is the reading up to the mounting's zero: ``sin``/``cos(pi y / travel)`` and
   ``sin``/``cos(2 pi y / revolution)`` (the phase is random, so the zero's offset is in
   it); each mounting is taken as its own indicator.
+
+A term's *family* (:func:`term_family`, :data:`TERM_FAMILIES`) is what an estimator
+fits or considers: ``full`` fits :data:`FULL_TERMS` and considers the rest.
 
 Left out, each at most about 1 um over a one-hour experiment under ``lab``: the
 structure's growth with the room (a similarity the legs' parallelism does not see), the

@@ -52,7 +52,9 @@ from orthoglide_env.model.errors import (
     ERROR_NAMES,
     PRESETS,
     ErrorPreset,
+    MachineFileError,
     MachineParams,
+    check_validity,
 )
 from orthoglide_env.model.kinematics import direct
 from orthoglide_env.model.reading_model import (
@@ -69,6 +71,9 @@ from orthoglide_env.world.conditions import Conditions
 #: (1.4826 x the median absolute residual, or its instrument's sigma when larger): a normal
 #: reading does so with probability 6e-5, so 60 readings flag a good one once in 270 fits.
 OUTLIER_K: float = 4.0
+#: What to do about an estimate outside the validity range.
+VALIDITY_HINT: str = ("free more parameters, e.g. --params extended, or take readings at "
+                      "more postures")
 #: At most this fraction of the readings is flagged; beyond it the model, not the
 #: readings, is wrong, and the warning says so.
 MAX_OUTLIER_FRACTION: float = 0.05
@@ -361,6 +366,13 @@ class GaussNewtonCalibrator(Calibrator):
                 f"the model does not explain the readings: chi2/dof = "
                 f"{result.chi2_dof[0]:.1f} (chi-square test at {CHI2_LEVEL:g}); {widened}; "
                 f"{hint}")
+        try:
+            check_validity(MachineParams.from_vector(theta[:len(ERROR_NAMES)],
+                                                     design.machine_design))
+        except MachineFileError as exc:
+            warnings.append(f"the estimate is outside the validity range, where the model "
+                            f"holds: {str(exc).replace('machine key', 'estimate key')}; do "
+                            f"not compensate with it ({VALIDITY_HINT})")
         if outliers:
             where = ", ".join(_where(data, k) for k in outliers)
             warnings.append(f"{len(outliers)} outlier reading(s) "
