@@ -1,0 +1,46 @@
+"""The ``active`` agent's sweep cost: machines, one hour each, wall time on ``--jobs``
+workers, against the target of 100 machines within 2 minutes on 2 cores.
+
+    python benchmarks/bench_active.py [--machines 100] [--jobs 2] [--conditions lab]
+
+Runs ``compare``'s own path (``calibrators.compare.run``: the batched lab, the batched
+fits) for ``active`` with the ``extended`` estimator and reports the wall time (each
+worker's one-off planning start-up included, as a sweep pays it), the seconds per
+machine and the ratio to the target.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from calibrators.compare import Config, run
+from orthoglide_env.world.conditions import Conditions
+
+#: The target: machines and wall seconds (issue: 100 machines within 2 minutes, 2 cores).
+TARGET_MACHINES, TARGET_S = 100, 120.0
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--machines", type=int, default=TARGET_MACHINES)
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--conditions", default="lab")
+    parser.add_argument("--seed", type=int, default=1)
+    args = parser.parse_args()
+    config = Config(("active",), ("extended",), seed=args.seed,
+                    conditions=Conditions(args.conditions))
+    start = time.perf_counter()
+    trials = run(config, args.machines, jobs=args.jobs)
+    wall = time.perf_counter() - start
+    hours = sum(t.time_s for t in trials) / 3600
+    failed = sum(bool(t.failed) for t in trials)
+    target = TARGET_S * args.machines / TARGET_MACHINES
+    print(f"active x extended, {args.conditions}, {args.machines} machines ({hours:.1f} "
+          f"machine-hours, {failed} failed) on {args.jobs} workers: {wall:.1f} s wall, "
+          f"{wall / args.machines:.2f} s per machine; the target's pace would be "
+          f"{target:.0f} s ({wall / target:.1f}x that)")
+
+
+if __name__ == "__main__":
+    main()
