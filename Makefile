@@ -35,6 +35,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/realistic.py
 	$(BIN)/python benchmarks/bench_calibrators.py
 	$(BIN)/python benchmarks/bench_compare.py
+	$(BIN)/python benchmarks/bench_active.py
 	$(BIN)/python benchmarks/bench_measurements.py
 	$(BIN)/python benchmarks/estimators.py
 
