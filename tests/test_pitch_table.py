@@ -20,7 +20,6 @@ from calibrators.estimators.consider import (
     term_family,
 )
 from calibrators.estimators.exact_fit import fit_batch, world_columns
-from calibrators.estimators.parameters import prior_sigmas, scales, select
 from calibrators.estimators.prediction import predicted_tcp_error
 from calibrators.experiment import run_episode
 from orthoglide_env.model.compensation import PitchTable, interpolation_weights, node_count
@@ -31,7 +30,7 @@ from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.world.truth import World
 
 sys.path.insert(0, str(Path(__file__).parent))
-from test_consider import GAUGES, _experiment, _world_readings
+from test_consider import GAUGES, lead_machines
 
 
 def test_a_table_interpolates_linearly_from_its_reference_and_round_trips() -> None:
@@ -95,17 +94,8 @@ def test_the_tables_error_bars_hold_against_the_true_lead_error() -> None:
     which the legs' parallelism hardly sees."""
     conditions = Conditions("workshop", effects=("lead",))
     spacing = 10.0
-    design, which, times = _experiment(200, 5)
-    space = design.space
-    free = select("extended", space)
-    prior = prior_sigmas("auto", space, free)
-    scale = scales(space, prior)
-    rng = np.random.default_rng(3)
-    machines = 40
-    theta = rng.normal(0.0, 1.0, (machines, len(scale))) * scale
-    values = np.concatenate([_world_readings(design, which, times, theta[m], conditions, 1, m)
-                             for m in range(machines)])
-    values += rng.normal(0.0, 0.003, values.shape)
+    design, _, values, free, prior, scale = lead_machines(conditions)
+    machines = len(values)
     fitted, rest = consider_terms(design, values, None, conditions, spacing).split(("lead",))
     assert rest.names and all(term_family(n) == "periodic" for n in rest.names)
     world = world_columns(design, fitted)
