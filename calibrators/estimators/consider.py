@@ -246,7 +246,6 @@ def table_prior(machine: MachineDesign, conditions: Conditions, spacing: float
     stroke = machine.rho_max - machine.rho_min
     count = node_count(stroke, spacing)
     x = spacing * np.arange(1, count + 1) / stroke
-    x = np.minimum(x, 1.0 + spacing / stroke)  # the last node may lie beyond the stroke
 
     def correlation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return np.exp(-0.5 * ((a[:, None] - b[None]) / CURVE_LENGTH) ** 2)
