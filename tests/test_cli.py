@@ -115,6 +115,20 @@ def test_saved_measurements_fit_to_the_same_estimate(tmp_path, capsys) -> None:
     assert out["predicted_correction_mm"]["rigid"]["rms"] > 0.1
     assert 0 < out["predicted_tcp_error_mm"]["rigid"]["rms"] < 0.2
     assert all("line" in r for r in out["residuals"])
+    # A slip of the pen on line 20: named by its line and cause, with its residual against
+    # the fit without it, in JSON and in the table.
+    lines = path.read_text().splitlines()
+    cells = lines[19].split(",")
+    cells[9] = repr(float(cells[9]) + 0.5)
+    lines[19] = ",".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+    out = run_json(capsys, ["fit", str(path), "--params", "extended", *sigma, "--json"])
+    flagged = [r for r in out["residuals"] if r["outlier"]]
+    assert [(r["line"], r["cause"]) for r in flagged] == [(20, "reading")]
+    assert 0.45 < flagged[0]["residual_mm"] < 0.55
+    assert main(["fit", str(path), "--params", "extended", *sigma]) == 0
+    text = capsys.readouterr().out
+    assert "outlier: line 20" in text and "mistyped or misread" in text and "None" not in text
 
 
 def strict_json(text: str) -> object:
@@ -255,7 +269,7 @@ def test_bad_input_gives_one_line_and_status_2(tmp_path, argv, fragment: str) ->
         "UNASSEMBLABLE": '{"dL": [-200, -200, -200]}',
         "GOOD": "{}",
         "BAD_CSV": "leg,axis,posture,repetition,reading_mm\nx,y,XMax,1,abc\n",
-        "GOOD_CSV": "leg,axis,posture,repetition,reading_mm\nx,y,XMax,1,0.1\n",
+        "GOOD_CSV": "leg,axis,posture,repetition,reading_mm\nx,y,Zero,1,0.0\nx,y,XMax,1,0.1\n",
     }
     resolved = []
     for arg in argv:

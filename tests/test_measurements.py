@@ -490,13 +490,25 @@ def test_json_readings_beyond_the_limits(tmp_path, monkeypatch) -> None:
 # Differences and verification -----------------------------------------------------------
 
 
+ZERO_LESS = ("gauge x-leg/z@0.5, mounting 'x-leg/z@0.5', has readings but "
+             r"none at Zero \(first reading: line 4\)")
+
+
 def test_a_gauge_without_a_zero_reading_is_named(tmp_path) -> None:
     data = Measurements.read(_written(tmp_path, csv_file(
         "x,y,Zero,1,0.0", "x,y,XMax,1,0.1", "x,z,XMax,1,0.2", "x,z,XMin,1,0.3")))
-    with pytest.raises(MissingZeroError,
-                       match="gauge x-leg/z@0.5, mounting 'x-leg/z@0.5', has readings but "
-                             r"none at Zero \(first reading: line 4\)"):
+    with pytest.raises(MissingZeroError, match=ZERO_LESS):
         differences(data)
+
+
+@pytest.mark.parametrize("params", ["paper6", "extended", "full"])
+def test_every_fit_refuses_a_mounting_without_zero(tmp_path, params) -> None:
+    """The exact-model fit could take the missing zero as one more unknown and fit on; it
+    refuses instead, as the linear fit does, because such a sheet has lost a line."""
+    data = Measurements.read(_written(tmp_path, csv_file(
+        "x,y,Zero,1,0.0", "x,y,XMax,1,0.1", "x,z,XMax,1,0.2", "x,z,XMin,1,0.3")))
+    with pytest.raises(MissingZeroError, match=ZERO_LESS):
+        get_strategy("gauss-newton").estimate(data, params)
 
 
 def test_each_mounting_has_its_own_zero() -> None:

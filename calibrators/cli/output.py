@@ -3,7 +3,10 @@
 The JSON object's keys are a contract that scripts rely on: ``estimate`` and ``std``
 (parameter values and standard deviations in the machine-file schema, gauge stands under
 ``stands``), ``chi2_dof``, ``warnings``, ``residuals`` (one object per reading: ``posture``,
-``gauge``, ``residual_mm``, ``outlier``, and ``line`` when read from a file),
+``gauge``, ``residual_mm`` (a left-out reading's against the fit without it), ``outlier``,
+``cause`` for a flagged reading (``reading``: unlike its repetitions, mistyped or misread;
+``unrepeated``: none to tell; ``model``: its repetitions read the same, so the model is
+wrong there and the reading is kept), and ``line`` when read from a file),
 ``identifiable``, ``considered`` (the lab's effects the fit put into its error bars without
 fitting them), ``predicted_tcp_error_mm``, and for virtual machines ``truth``,
 ``tcp_error_before_mm`` and ``tcp_error_after_mm``; each TCP error is
@@ -33,20 +36,31 @@ from orthoglide_env.scoring import FRAMES, score
 from orthoglide_env.world.machine_file import machine_dict
 from orthoglide_env.world.truth import World
 
+#: A flagged reading's cause in the text report.
+CAUSE_WORDS: dict[str, str] = {
+    "reading": "unlike its repetitions: a mistyped or misread reading",
+    "unrepeated": "no repetition to tell a wrong reading from model error",
+    "model": "its repetitions read the same: model error, kept in the fit",
+}
 #: How many combinations a table lists before it only counts them (JSON lists all).
 LISTED: int = 6
 
 
 def _residuals(est: Estimate) -> list[dict[str, Any]]:
     """One object per reading (exact-model fits) or per difference (the paper's fit)."""
-    outliers = set(est.outliers)
+    outliers = dict(zip(est.outliers, zip(est.outlier_causes, est.outlier_residuals,
+                                          strict=True), strict=True))
+    misfits = set(est.misfits)
     out = []
     if len(est.residuals) == len(est.readings):
         for k, (m, r) in enumerate(zip(est.readings.items, est.residuals, strict=True)):
+            cause, left_out = outliers.get(k, (None, r))
             item = {"posture": m.posture, "gauge": m.gauge.slot,
                     "repetition": m.repetition,
-                    "residual_mm": None if not np.isfinite(r) else float(r),
+                    "residual_mm": None if not np.isfinite(left_out) else float(left_out),
                     "outlier": k in outliers}
+            if cause is not None or k in misfits:
+                item["cause"] = "model" if k in misfits else cause
             if m.line is not None:
                 item["line"] = m.line
             out.append(item)
@@ -162,11 +176,12 @@ def print_table(data: dict[str, Any]) -> None:
                 print(f"  {text}")
             if len(combos) > LISTED:
                 print(f"  ... and {len(combos) - LISTED} more (see --json)")
-    outliers = [r for r in data["residuals"] if r["outlier"]]
-    for r in outliers:
-        where = f"line {r['line']}" if "line" in r else r["gauge"]
-        print(f"outlier: {where} ({r['gauge']}, {r['posture']}): residual "
-              f"{r['residual_mm']} mm")
+    for r in data["residuals"]:
+        if "cause" in r:
+            where = f"line {r['line']}" if "line" in r else r["gauge"]
+            print(f"{'outlier' if r['outlier'] else 'misfit'}: {where} ({r['gauge']}, "
+                  f"{r['posture']}): residual {r['residual_mm']:+.4f} mm, "
+                  f"{CAUSE_WORDS[r['cause']]}")
     print(f"experiment time {data['experiment_time_s']:.0f} s")
     print("TCP error over the workspace (mm, RMS / max): raw = world frame, then after the "
           "best-fit translation and rigid motion (the headline: what a user who touches off "

@@ -86,6 +86,14 @@ class Estimate:
     identifiable: list[str] = field(default_factory=list)
     unidentifiable: list[str] = field(default_factory=list)
     outliers: list[int] = field(default_factory=list)
+    #: Per outlier, why it was flagged (``reading``: unlike its repetitions, a mistyped
+    #: or misread reading; ``unrepeated``: no repetition to tell) and its residual (mm)
+    #: against the fit without it.
+    outlier_causes: list[str] = field(default_factory=list)
+    outlier_residuals: list[float] = field(default_factory=list)
+    #: Readings as far from the model as an outlier, whose repetitions read as they do:
+    #: model error, kept in the fit.
+    misfits: list[int] = field(default_factory=list)
     holdout_rms_mm: float | None = None
     #: Data information over the free parameters in units of their ``scale`` (the
     #: identifiability analysis of exact-model fits).

@@ -49,6 +49,25 @@ class Differences:
         return len(self.values)
 
 
+def check_zeros(items: Collection[Measurement]) -> None:
+    """Raise :class:`MissingZeroError` for the first gauge mounting of ``items`` with
+    readings but none at Zero.  A fit could estimate such a zero as one more unknown, but
+    a technician's sheet without it has lost a line, and the paper's procedure and the
+    lab's re-mounting both read at Zero first; a tracker's coordinates need no zero."""
+    first: dict[tuple[str, GaugeSpec], Measurement] = {}
+    zeroed: set[tuple[str, GaugeSpec]] = set()
+    for m in items:
+        if isinstance(m.gauge, GaugeSpec):
+            first.setdefault((m.mounting, m.gauge), m)
+            if m.is_zero:
+                zeroed.add((m.mounting, m.gauge))
+    for (mounting, gauge), m in first.items():
+        if (mounting, gauge) not in zeroed:
+            where = f" (first reading: line {m.line})" if m.line is not None else ""
+            raise MissingZeroError(f"gauge {gauge_name(gauge)}, mounting '{mounting}', has "
+                                   f"readings but none at Zero{where}: its zero is unknown")
+
+
 def differences(data: Measurements, repetitions: Collection[int] | None = None) -> Differences:
     """Average each mounting's readings per posture and subtract its mean Zero reading.
 
@@ -61,17 +80,11 @@ def differences(data: Measurements, repetitions: Collection[int] | None = None) 
     """
     groups: dict[tuple[str, GaugeSpec, tuple[float, ...]], list[float]] = {}
     labels: dict[tuple[float, ...], str] = {}
-    first: dict[tuple[str, GaugeSpec], Measurement] = {}
-    for m in data.items:
-        if repetitions is None or m.repetition in repetitions:
-            groups.setdefault((m.mounting, m.gauge, m.rho), []).append(m.reading)
-            labels.setdefault(m.rho, m.posture)
-            first.setdefault((m.mounting, m.gauge), m)
-    for (mounting, gauge), m in first.items():
-        if (mounting, gauge, ZERO_RHO) not in groups:
-            where = f" (first reading: line {m.line})" if m.line is not None else ""
-            raise MissingZeroError(f"gauge {gauge_name(gauge)}, mounting '{mounting}', has "
-                                   f"readings but none at Zero{where}: its zero is unknown")
+    kept = [m for m in data.items if repetitions is None or m.repetition in repetitions]
+    check_zeros(kept)
+    for m in kept:
+        groups.setdefault((m.mounting, m.gauge, m.rho), []).append(m.reading)
+        labels.setdefault(m.rho, m.posture)
     keys = sorted((k for k in groups if k[2] != ZERO_RHO),
                   key=lambda k: (k[1].leg, k[1].axis, k[1].at, k[0], labels[k[2]], k[2]))
     if len(keys) > MAX_DIFFERENCES:

@@ -26,6 +26,7 @@ from calibrators.estimators.consider import (
     consider_terms,
 )
 from calibrators.estimators.consider import tracker_sigma as tracker_sigma_of
+from calibrators.estimators.differences import check_zeros
 from calibrators.estimators.exact_fit import (
     CHI2_LEVEL,
     RETAIN,
@@ -74,6 +75,14 @@ OUTLIER_K: float = 4.0
 #: What to do about an estimate outside the validity range.
 VALIDITY_HINT: str = ("free more parameters, e.g. --params extended, or take readings at "
                       "more postures")
+#: What the report says of an outlier, by its cause (:func:`_worst`).
+OUTLIER_WORDS: dict[str, str] = {
+    "reading": "unlike their repetitions (a mistyped or misread reading)",
+    "unrepeated": "with no repetition to tell a wrong reading from model error (repeat it "
+                  "to tell)",
+}
+#: The warning on model error names this many readings, then counts the rest.
+LISTED_MISFITS: int = 5
 #: At most this fraction of the readings is flagged; beyond it the model, not the
 #: readings, is wrong, and the warning says so.
 MAX_OUTLIER_FRACTION: float = 0.05
@@ -81,9 +90,11 @@ MAX_OUTLIER_FRACTION: float = 0.05
 
 def design_of(data: Measurements) -> tuple[Design, np.ndarray]:
     """The design and the readings of ``data``; tracker readings turned into the machine's
-    frame (:func:`align_tracker`)."""
+    frame (:func:`align_tracker`); a gauge mounting without a Zero reading is refused
+    (:func:`~calibrators.estimators.differences.check_zeros`)."""
     if not len(data):
         raise ValueError("no readings to fit")
+    check_zeros(data.items)
     design = Design.of([m.mounting for m in data.items], [m.gauge for m in data.items],
                        np.array([m.rho for m in data.items], dtype=float), data.design)
     return design, align_tracker(design, np.array([m.reading for m in data.items], dtype=float))
@@ -293,6 +304,8 @@ class GaussNewtonCalibrator(Calibrator):
         mask = np.tile(~held, (m_count, 1))
         results = fit(np.arange(m_count), mask).split()
         outliers: list[list[int]] = [[] for _ in range(m_count)]
+        causes: list[list[str]] = [[] for _ in range(m_count)]
+        group = _repetition_groups(design)
         pending = np.arange(m_count)
         while len(pending):
             again = []
@@ -300,13 +313,11 @@ class GaussNewtonCalibrator(Calibrator):
                 if not results[m].converged[0] or len(outliers[m]) >= (
                         MAX_OUTLIER_FRACTION * values.shape[1]):
                     continue
-                # Residuals in units of their instrument's noise: gauges and a tracker differ.
-                residual = np.abs(results[m].residuals[0]) / weighting_sigma(noise)
-                robust = 1.4826 * np.nanmedian(residual)
-                worst = int(np.nanargmax(residual))
-                if residual[worst] > OUTLIER_K * max(1.0, robust):
-                    outliers[m].append(worst)
-                    mask[m, worst] = False
+                flagged = _worst(results[m].residuals[0], group, noise)
+                if flagged is not None:
+                    outliers[m].append(flagged[0])
+                    causes[m].append(flagged[1])
+                    mask[m, flagged[0]] = False
                     again.append(m)
             pending = np.array(again, dtype=int)
             if len(pending):
@@ -333,7 +344,8 @@ class GaussNewtonCalibrator(Calibrator):
             else:
                 out.append(self._estimate(datas[m], params, prior, sigma, design, values[m],
                                           result, eigenvalues[m], mask[m], held, outliers[m],
-                                          verify, explain, consider, names,
+                                          causes[m], group, noise, verify, explain,
+                                          consider, names,
                                           None if world is None else world[m],
                                           conditions, spacing))
         return out
@@ -341,7 +353,8 @@ class GaussNewtonCalibrator(Calibrator):
     def _estimate(self, data: Measurements, params: str, prior: str, sigma: float,
                   design: Design, values: np.ndarray, result: BatchFit,
                   eigenvalues: np.ndarray, mask: np.ndarray, held: np.ndarray,
-                  outliers: list[int], verify: bool, explain: bool,
+                  outliers: list[int], causes: list[str], group: np.ndarray,
+                  noise: np.ndarray, verify: bool, explain: bool,
                   considered: Consider, every: list[str], world: np.ndarray | None,
                   conditions: Conditions, spacing: float | None) -> Estimate:
         space = design.space
@@ -373,10 +386,29 @@ class GaussNewtonCalibrator(Calibrator):
             warnings.append(f"the estimate is outside the validity range, where the model "
                             f"holds: {str(exc).replace('machine key', 'estimate key')}; do "
                             f"not compensate with it ({VALIDITY_HINT})")
-        if outliers:
-            where = ", ".join(_where(data, k) for k in outliers)
-            warnings.append(f"{len(outliers)} outlier reading(s) "
-                            f"{'kept' if mask[outliers].all() else 'left out'}: {where}")
+        # Every reading's residual against this fit, a left-out one's with its mounting's
+        # zero from the readings used: what the report compares with its repetitions.
+        every_residual = np.where(mask, result.residuals[0],
+                                  _held_out(design, values, theta, mask, ~mask, world))
+        repeated, _ = _repetition_means(every_residual, group)
+        for cause, words in OUTLIER_WORDS.items():
+            mine = [k for k, c in zip(outliers, causes, strict=True) if c == cause]
+            if mine:
+                where = ", ".join(_where(data, k, every_residual, repeated) for k in mine)
+                warnings.append(f"{len(mine)} outlier reading(s) "
+                                f"{'kept' if mask[mine].all() else 'left out'}, {words}: "
+                                f"{where}")
+        misfits = _misfits(result.residuals[0], group, noise)
+        if len(misfits):
+            where = ", ".join(_where(data, k, every_residual, repeated)
+                              for k in misfits[:LISTED_MISFITS])
+            more = (f" and {len(misfits) - LISTED_MISFITS} more"
+                    if len(misfits) > LISTED_MISFITS else "")
+            warnings.append(f"{len(misfits)} reading(s) the model does not fit, though their "
+                            "repetitions read the same (model error, not a wrong reading; "
+                            f"kept): {where}{more}; "
+                            + ("try --params extended" if params in ("paper", "paper6") else
+                               "look for a gauge that moved or a slipping stand"))
         residuals = result.residuals[0]
         if held.any():
             residuals = np.where(held, _held_out(design, values, theta, mask, held, world),
@@ -397,7 +429,10 @@ class GaussNewtonCalibrator(Calibrator):
             identifiable=[describe(d, names) for d in result.identifiable(0)] if explain else [],
             unidentifiable=[act_together(d, names)
                             for d in sparse_basis(result.unidentifiable(0))] if explain else [],
-            outliers=outliers, information=info, scale=s, error_covariance=error_cov,
+            outliers=outliers, outlier_causes=causes,
+            outlier_residuals=[float(every_residual[k]) for k in outliers],
+            misfits=misfits.tolist(),
+            information=info, scale=s, error_covariance=error_cov,
             holdout_rms_mm=float(np.sqrt(np.mean(residuals[held] ** 2))) if held.any() else None,
             considered=considered.effects,
             **_lead(result, every, considered.names, error_cov, conditions, spacing),
@@ -489,10 +524,73 @@ def _holdout(design: Design, fraction: float, seed: int) -> np.ndarray:
     return held
 
 
-def _where(data: Measurements, k: int) -> str:
+def _repetition_groups(design: Design) -> np.ndarray:
+    """Per reading, the number of its group: the readings of its mounting at its posture,
+    its repetitions."""
+    _, group = np.unique(np.column_stack([design.mounting, design.rho]), axis=0,
+                         return_inverse=True)
+    return np.ravel(group)
+
+
+def _repetition_means(residuals: np.ndarray, group: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Per reading, the mean residual of its repetitions (the other finite residuals of
+    its group; NaN without one) and how many there are, in one pass over the readings."""
+    used = np.isfinite(residuals)
+    r = np.where(used, residuals, 0.0)
+    total = np.bincount(group, r)[group] - r
+    count = np.bincount(group, used.astype(float))[group] - used
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(count > 0, total / count, np.nan), count
+
+
+def _worst(residuals: np.ndarray, group: np.ndarray, noise: np.ndarray
+           ) -> tuple[int, str] | None:
+    """The reading to leave out next and why, or None.  First the reading furthest from
+    its repetitions, beyond :data:`OUTLIER_K` robust standard deviations of that spread
+    (``reading``: a mistyped or misread one; the model cannot tell it, since repetitions
+    share the model's error); else the unrepeated reading furthest from the model, beyond
+    as many of the residuals' (``unrepeated``).  A repeated reading far from the model
+    whose repetitions agree is model error and is not left out (:func:`_misfits`)."""
+    sigma = weighting_sigma(noise)  # gauges and a tracker differ
+    repeated, count = _repetition_means(residuals, group)
+    # In units of its own spread: a reading and the mean of n others differ by
+    # sigma * sqrt(1 + 1/n) when both are only noise.
+    with np.errstate(divide="ignore"):
+        departure = np.abs(residuals - repeated) / (sigma * np.sqrt(1 + 1 / count))
+    if np.isfinite(departure).any():
+        spread = 1.4826 * np.nanmedian(departure)
+        k = int(np.nanargmax(departure))
+        if departure[k] > OUTLIER_K * max(1.0, spread):
+            return k, "reading"
+    score = np.abs(residuals) / sigma
+    robust = 1.4826 * np.nanmedian(score)
+    score[count > 0] = np.nan
+    if np.isfinite(score).any():
+        k = int(np.nanargmax(score))
+        if score[k] > OUTLIER_K * max(1.0, robust):
+            return k, "unrepeated"
+    return None
+
+
+def _misfits(residuals: np.ndarray, group: np.ndarray, noise: np.ndarray) -> np.ndarray:
+    """The used readings beyond :data:`OUTLIER_K` robust standard deviations of the
+    residuals whose repetitions read with them: model error, kept."""
+    score = np.abs(residuals) / weighting_sigma(noise)
+    robust = 1.4826 * np.nanmedian(score)
+    _, count = _repetition_means(residuals, group)
+    return np.flatnonzero((score > OUTLIER_K * max(1.0, robust)) & (count > 0))
+
+
+def _where(data: Measurements, k: int, residuals: np.ndarray | None = None,
+           repeated: np.ndarray | None = None) -> str:
     m = data.items[k]
     place = f"line {m.line}" if m.line else f"reading {k + 1}"
-    return f"{place} ({m.gauge.slot}, {m.posture}, repetition {m.repetition})"
+    detail = ""
+    if residuals is not None and repeated is not None:
+        detail = f", residual {residuals[k]:+.4f} mm" + (
+            f", its repetitions {repeated[k]:+.4f} mm" if np.isfinite(repeated[k]) else "")
+    return f"{place} ({m.gauge.slot}, {m.posture}, repetition {m.repetition}{detail})"
 
 
 __all__ = ["GaussNewtonCalibrator", "ParameterSpace", "design_of"]
