@@ -37,6 +37,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_compare.py
 	$(BIN)/python benchmarks/bench_active.py
 	$(BIN)/python benchmarks/bench_measurements.py
+	$(BIN)/python benchmarks/bench_fit.py
 	$(BIN)/python benchmarks/estimators.py
 
 clean:

@@ -285,15 +285,31 @@ class Measurement:
         posture, rho = _posture(self.posture, self.rho, design)
         mounting = default_mounting(self.gauge) if self.mounting == "" else _label(
             self.mounting, "mounting")
+        for name, value in (("posture", posture), ("rho", rho), ("mounting", mounting)):
+            object.__setattr__(self, name, value)
+        self._own(self.reading, self.repetition, self.time_s, self.line)
+
+    def _own(self, reading: object, repetition: object, time_s: object,
+             line: int | None) -> None:
+        """Check and set what is this reading's own: its value, repetition and time."""
         limit, rule = ((MAX_TRACKER_MM, _TRACKER_RULE) if isinstance(self.gauge, TrackerAxis)
                        else (MAX_READING_MM, _READING_RULE))
-        reading = _real(self.reading, "reading_mm", -limit, limit, rule)
-        time_s = None if self.time_s is None else _real(
-            self.time_s, "time_s", 0.0, MAX_EXPERIMENT_TIME_S, "s (the lab clock)")
-        for name, value in (("posture", posture), ("rho", rho), ("mounting", mounting),
-                            ("repetition", _repetition(self.repetition)),
-                            ("reading", reading), ("time_s", time_s)):
+        reading = _real(reading, "reading_mm", -limit, limit, rule)
+        time_s = None if time_s is None else _real(
+            time_s, "time_s", 0.0, MAX_EXPERIMENT_TIME_S, "s (the lab clock)")
+        for name, value in (("repetition", _repetition(repetition)), ("reading", reading),
+                            ("time_s", time_s), ("line", line)):
             object.__setattr__(self, name, value)
+
+    def again(self, reading: object, repetition: object = 1, time_s: object = None,
+              line: int | None = None) -> Measurement:
+        """Another reading of this gauge and mounting at this posture, its own fields
+        checked as a new reading's are (what a file repeats is checked once)."""
+        out = object.__new__(type(self))
+        for name in ("gauge", "posture", "rho", "mounting"):
+            object.__setattr__(out, name, getattr(self, name))
+        out._own(reading, repetition, time_s, line)
+        return out
 
     @classmethod
     def recorded(cls, gauge: GaugeSpec | TrackerAxis, posture: str, reading: float,
@@ -495,6 +511,10 @@ class _Readings:
 
 
 _INTEGER = re.compile(r"[+-]?[0-9]+")
+#: The columns that hold what is a reading's own; the rest a file repeats.
+_OWN_FIELDS: tuple[str, ...] = ("reading_mm", "repetition", "time_s")
+#: At most this many distinct (gauge, mounting, posture) rows are kept parsed (a few MB).
+MAX_SEEN: int = 100_000
 
 
 def _cell_value(name: str, text: str) -> object:
@@ -559,14 +579,30 @@ def _read_csv(handle: BinaryIO, path: Path, design: MachineDesign) -> list[Measu
     if problem:
         raise MeasurementFileError(f"{path}:{line}: header: {problem}")
     readings = _Readings()
+    own = [(name, header.index(name)) for name in _OWN_FIELDS if name in header]
+    shared = [k for k in range(len(header)) if k not in {k for _, k in own}]
+    # A long experiment repeats a few gauges, mountings and postures: each distinct set of
+    # those cells is parsed and checked once, which keeps a million rows to seconds.
+    seen: dict[tuple[str, ...], Measurement] = {}
     for line, cells in records:
         if len(cells) != len(header):
             raise MeasurementFileError(f"{path}:{line}: expected {len(header)} columns as in "
                                        f"the header, got {len(cells)}")
         try:
-            fields = {name: _cell_value(name, text)
-                      for name, text in zip(header, cells, strict=True)}
-            readings.add(_measurement(fields, line, design), f"line {line}")
+            key = tuple(cells[k] for k in shared)
+            first = seen.get(key)
+            if first is None:
+                fields = {name: _cell_value(name, text)
+                          for name, text in zip(header, cells, strict=True)}
+                m = _measurement(fields, line, design)
+                if len(seen) < MAX_SEEN:
+                    seen[key] = m
+            else:
+                fields = {name: _cell_value(name, cells[k]) for name, k in own}
+                m = first.again(_required(fields, "reading_mm"),
+                                _given(fields, "repetition", 1), _given(fields, "time_s"),
+                                line)
+            readings.add(m, f"line {line}")
         except FieldError as exc:
             place = (f"column {header.index(exc.field) + 1} ({exc.field}): "
                      if exc.field in header else "")

@@ -661,7 +661,8 @@ def test_fit_recovers_a_small_machine_from_its_saved_readings(tmp_path, capsys) 
     machine = tmp_path / "m.json"
     machine.write_text('{"drho": [0.5, -0.3, 0.2], "dL": [-0.4, 0.6, 0.1]}')
     saved = tmp_path / "r.csv"
-    design = ["--design", str(SMALL_FILE)]
+    # The paper's six parameters: what 66 noise-free readings determine exactly.
+    design = ["--design", str(SMALL_FILE), "--params", "paper6"]
     assert main(["calibrate", "--machine", str(machine), *design, "--backend", "exact",
                  "--save-measurements", str(saved), "--json"]) == 0
     truth = json.loads(capsys.readouterr().out)["truth"]

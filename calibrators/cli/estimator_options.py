@@ -22,19 +22,25 @@ from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS
 from orthoglide_env.world.conditions import IDEAL, Conditions
 
 DEFAULT_STRATEGY = "gauss-newton"
+#: The parameters each strategy fits when ``--params`` is not given: the exact-model fit
+#: frees every error and, under a real lab's conditions, its terms (``full``), because a
+#: fit of fewer parameters than the machine has can hand a user a wrong number with small
+#: error bars; the paper's linear fit knows only its six.
+DEFAULT_PARAMS: dict[str, str] = {"gauss-newton": "full", "paper": "paper6"}
 
 
 def add(p: argparse.ArgumentParser) -> None:
     p.add_argument("--strategy", default=DEFAULT_STRATEGY,
                    help="estimator: gauss-newton (exact model, any parameters) or paper "
                         "(eq. 10, linear, paper6/drho/dL only) (default: %(default)s)")
-    p.add_argument("--params", default="paper6",
+    p.add_argument("--params", default=None,
                    help="free parameters: paper6 (drho, dL), extended (all 27 machine errors "
                         "and 4 per gauge stand), full (extended, and under --conditions lab "
                         "or workshop the lab's terms of --terms, the lead error as a "
                         "pitch-error table), or a comma list of groups (drho, dL, "
                         "axis_tilt, axis_offset, attach, stands) and names (drho_x, "
-                        "attach_y.z, x-leg/y@0.5.tilt_z) (default: %(default)s)")
+                        "attach_y.z, x-leg/y@0.5.tilt_z) (default: "
+                        + ", ".join(f"{v} for {k}" for k, v in DEFAULT_PARAMS.items()) + ")")
     p.add_argument("--prior", default="auto",
                    help="zero-mean normal prior: none (base parameters: combinations the "
                         "readings cannot see stay nominal), a preset name (its sigmas), and/or "
@@ -80,6 +86,12 @@ def add(p: argparse.ArgumentParser) -> None:
                         "random fraction (default: none)")
 
 
+def params_of(args: argparse.Namespace) -> str:
+    """``--params``, or its strategy's default (:data:`DEFAULT_PARAMS`)."""
+    return args.params if args.params is not None else DEFAULT_PARAMS.get(args.strategy,
+                                                                          "full")
+
+
 def options(args: argparse.Namespace) -> dict[str, Any]:
     """Keyword arguments of ``Calibrator.estimate`` from the parsed options."""
     return {"prior": args.prior, "fix": parse_assignments(args.fix, "--fix"),
@@ -107,7 +119,7 @@ def estimate(args: argparse.Namespace, data: Measurements, sigma: float,
     ``conditions`` (whose effects an exact-model fit puts into its error bars); what only
     the exact-model fit can do is refused with the option that asks for it."""
     try:
-        return get_strategy(args.strategy).estimate(data, args.params, sigma,
+        return get_strategy(args.strategy).estimate(data, params_of(args), sigma,
                                                     conditions=conditions, **options(args))
     except NeedsExactFit as exc:
         raise UsageError(f"{exc}: use --strategy {DEFAULT_STRATEGY}") from None

@@ -32,9 +32,10 @@ from calibrators.estimators.exact_fit import (
     RETAIN,
     BatchFit,
     fit_batch,
+    newton_step,
     world_columns,
 )
-from calibrators.estimators.paper_linear import split_repetitions
+from calibrators.estimators.paper_linear import folds
 from calibrators.estimators.parameters import (
     ParameterSpace,
     act_together,
@@ -305,7 +306,7 @@ class GaussNewtonCalibrator(Calibrator):
         results = fit(np.arange(m_count), mask).split()
         outliers: list[list[int]] = [[] for _ in range(m_count)]
         causes: list[list[str]] = [[] for _ in range(m_count)]
-        group = _repetition_groups(design)
+        group = design.distinct[1]  # each reading's mounting at its posture: repetitions
         pending = np.arange(m_count)
         while len(pending):
             again = []
@@ -440,24 +441,27 @@ class GaussNewtonCalibrator(Calibrator):
 
     def _verify(self, design: Design, values: np.ndarray, result: BatchFit, mask: np.ndarray,
                 data: Measurements, world: np.ndarray | None) -> float | None:
-        """Leave one repetition out: fit without it, predict its readings (each mounting's
-        zero from the rest); the RMS over every held-out reading (mm)."""
+        """Leave one repetition out (runs of repetitions beyond
+        :data:`~calibrators.estimators.paper_linear.MAX_FOLDS`, so that the cost stays
+        linear in the readings): fit without it (one Gauss-Newton step from the fit of
+        all, :func:`~calibrators.estimators.exact_fit.newton_step`), predict its readings
+        (each mounting's zero from the rest); the RMS over every held-out reading (mm)."""
         reps = np.array([m.repetition for m in data.items])
         errors = []
-        if len(split_repetitions(data)) < 2:
+        held_out = folds(data)
+        if len(held_out) < 2:
             return None  # nothing to hold out: one repetition is the whole experiment
-        for rep in split_repetitions(data):
-            test = mask & (reps == rep)
+        for held in held_out:
+            test = mask & np.isin(reps, list(held))
             train = mask & ~test
             try:
-                fit = fit_batch(design, values[None], train[None], result.sigma,
-                                result.free, result.theta[0], result.prior, result.scale,
-                                world=None if world is None else world[None])
+                theta = newton_step(design, values[None], train[None], result.sigma,
+                                    result.free, result.theta, result.prior, result.scale,
+                                    world=None if world is None else world[None])[0]
             except np.linalg.LinAlgError:
                 continue
-            if fit.converged[0]:
-                held = _held_out(design, values, fit.theta[0], train, test, world)[test]
-                errors.append(held[np.isfinite(held)])
+            held = _held_out(design, values, theta, train, test, world)[test]
+            errors.append(held[np.isfinite(held)])
         errors = np.concatenate(errors) if errors else np.zeros(0)
         return float(np.sqrt(np.mean(errors**2))) if errors.size else None
 
@@ -522,14 +526,6 @@ def _holdout(design: Design, fraction: float, seed: int) -> np.ndarray:
         if held[mine].all():
             held[mine[0]] = False
     return held
-
-
-def _repetition_groups(design: Design) -> np.ndarray:
-    """Per reading, the number of its group: the readings of its mounting at its posture,
-    its repetitions."""
-    _, group = np.unique(np.column_stack([design.mounting, design.rho]), axis=0,
-                         return_inverse=True)
-    return np.ravel(group)
 
 
 def _repetition_means(residuals: np.ndarray, group: np.ndarray
