@@ -43,6 +43,10 @@ column                        required  meaning
 ``time_s``                    no        when it was read (s on the lab clock, from the
                                         drives' switch-on): what a fit under lab or
                                         workshop conditions sizes drift with
+``step``                      no        the step of a written procedure
+                                        (``orthoglide plan``) the reading was taken at,
+                                        1 .. :data:`MAX_REPETITION`; ``fit --plan``
+                                        checks it against the plan
 ============================  ========  ================================================
 
 (a) the gauge either as ``gauge`` or as ``leg`` and ``axis`` (and ``at``), not both.  A
@@ -119,9 +123,9 @@ COLUMNS: tuple[str, ...] = ("mounting", "leg", "axis", "at", "posture", "rho_x",
                             "rho_z", "repetition", "reading_mm", "time_s")
 RHO_FIELDS: tuple[str, str, str] = ("rho_x", "rho_y", "rho_z")
 #: Every name a CSV column or a JSON reading's key may have.
-FIELDS: tuple[str, ...] = (*COLUMNS, "gauge")
+FIELDS: tuple[str, ...] = (*COLUMNS, "gauge", "step")
 NUMBER_FIELDS: frozenset[str] = frozenset({"at", *RHO_FIELDS, "repetition", "reading_mm",
-                                          "time_s"})
+                                          "time_s", "step"})
 JSON_KEYS: tuple[str, ...] = ("readings", "experiment_time_s", "design")
 
 ZERO_RHO: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -177,13 +181,13 @@ def _real(value: object, name: str, low: float, high: float, unit: str) -> float
     return float(value)
 
 
-def _repetition(value: object) -> int:
+def _repetition(value: object, name: str = "repetition") -> int:
     if type(value) is int and 1 <= value <= MAX_REPETITION:  # the common case, fast
         return value
     if (isinstance(value, bool) or not isinstance(value, numbers.Integral)
             or not 1 <= value <= MAX_REPETITION):
-        raise FieldError("repetition", f"must be an integer 1..{MAX_REPETITION}, "
-                                       f"got {_show(value)}")
+        raise FieldError(name, f"must be an integer 1..{MAX_REPETITION}, "
+                               f"got {_show(value)}")
     return int(value)
 
 
@@ -279,6 +283,8 @@ class Measurement:
     line: int | None = field(default=None, compare=False)
     _: KW_ONLY
     time_s: float | None = None
+    #: The step of a written procedure it was taken at (``orthoglide plan``), if any.
+    step: int | None = field(default=None, compare=False)
     design: InitVar[MachineDesign] = PROTOTYPE
 
     def __post_init__(self, design: MachineDesign) -> None:
@@ -287,28 +293,30 @@ class Measurement:
             self.mounting, "mounting")
         for name, value in (("posture", posture), ("rho", rho), ("mounting", mounting)):
             object.__setattr__(self, name, value)
-        self._own(self.reading, self.repetition, self.time_s, self.line)
+        self._own(self.reading, self.repetition, self.time_s, self.line, self.step)
 
     def _own(self, reading: object, repetition: object, time_s: object,
-             line: int | None) -> None:
-        """Check and set what is this reading's own: its value, repetition and time."""
+             line: int | None, step: object = None) -> None:
+        """Check and set what is this reading's own: its value, repetition, time and
+        procedure step."""
         limit, rule = ((MAX_TRACKER_MM, _TRACKER_RULE) if isinstance(self.gauge, TrackerAxis)
                        else (MAX_READING_MM, _READING_RULE))
         reading = _real(reading, "reading_mm", -limit, limit, rule)
         time_s = None if time_s is None else _real(
             time_s, "time_s", 0.0, MAX_EXPERIMENT_TIME_S, "s (the lab clock)")
+        step = None if step is None else _repetition(step, "step")
         for name, value in (("repetition", _repetition(repetition)), ("reading", reading),
-                            ("time_s", time_s), ("line", line)):
+                            ("time_s", time_s), ("line", line), ("step", step)):
             object.__setattr__(self, name, value)
 
     def again(self, reading: object, repetition: object = 1, time_s: object = None,
-              line: int | None = None) -> Measurement:
+              line: int | None = None, step: object = None) -> Measurement:
         """Another reading of this gauge and mounting at this posture, its own fields
         checked as a new reading's are (what a file repeats is checked once)."""
         out = object.__new__(type(self))
         for name in ("gauge", "posture", "rho", "mounting"):
             object.__setattr__(out, name, getattr(self, name))
-        out._own(reading, repetition, time_s, line)
+        out._own(reading, repetition, time_s, line, step)
         return out
 
     @classmethod
@@ -322,7 +330,8 @@ class Measurement:
         out = object.__new__(cls)
         for name, value in (("gauge", gauge), ("posture", posture or rho_label(rho)),
                             ("repetition", repetition), ("reading", reading), ("rho", rho),
-                            ("mounting", mounting), ("line", None), ("time_s", time_s)):
+                            ("mounting", mounting), ("line", None), ("time_s", time_s),
+                            ("step", None)):
             object.__setattr__(out, name, value)
         return out
 
@@ -337,6 +346,8 @@ class Measurement:
                "reading_mm": self.reading}
         if self.time_s is not None:
             out["time_s"] = self.time_s
+        if self.step is not None:
+            out["step"] = self.step
         return out
 
     @classmethod
@@ -489,7 +500,7 @@ def _measurement(fields: Mapping[str, object], line: int | None, design: Machine
     return Measurement(gauge, "" if posture is None else posture,
                        _given(fields, "repetition", 1), reading, rho,
                        _given(fields, "mounting", ""), line, design=design,
-                       time_s=_given(fields, "time_s"))
+                       time_s=_given(fields, "time_s"), step=_given(fields, "step"))
 
 
 class _Readings:
@@ -512,7 +523,7 @@ class _Readings:
 
 _INTEGER = re.compile(r"[+-]?[0-9]+")
 #: The columns that hold what is a reading's own; the rest a file repeats.
-_OWN_FIELDS: tuple[str, ...] = ("reading_mm", "repetition", "time_s")
+_OWN_FIELDS: tuple[str, ...] = ("reading_mm", "repetition", "time_s", "step")
 #: At most this many distinct (gauge, mounting, posture) rows are kept parsed (a few MB).
 MAX_SEEN: int = 100_000
 
@@ -601,7 +612,7 @@ def _read_csv(handle: BinaryIO, path: Path, design: MachineDesign) -> list[Measu
                 fields = {name: _cell_value(name, cells[k]) for name, k in own}
                 m = first.again(_required(fields, "reading_mm"),
                                 _given(fields, "repetition", 1), _given(fields, "time_s"),
-                                line)
+                                line, _given(fields, "step"))
             readings.add(m, f"line {line}")
         except FieldError as exc:
             place = (f"column {header.index(exc.field) + 1} ({exc.field}): "

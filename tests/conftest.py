@@ -16,6 +16,9 @@ from orthoglide_env.model.design import PROTOTYPE
 
 #: Rows of eq. (10) as (posture, index of the gauge in the paper layout).  The paper's
 #: labels of rows 9-12 are misprinted (docs/calibrators.md); these are the physical ones.
+#: The paper's Table 1: the machine its experiment identified (mm).
+TABLE1: dict[str, list[float]] = {"drho": [4.66, -5.36, 1.46], "dL": [5.20, -5.96, 3.16]}
+
 EQ10_ROWS: tuple[tuple[str, int], ...] = (
     ("YMax", 2), ("XMax", 0), ("YMin", 2), ("XMin", 0),
     ("ZMax", 5), ("YMax", 3), ("ZMin", 5), ("YMin", 3),

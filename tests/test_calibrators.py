@@ -6,7 +6,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import paper_experiment
+from conftest import TABLE1, paper_experiment
 from conftest import paper_matrix as eq10
 
 import orthoglide_env
@@ -16,8 +16,6 @@ from calibrators.estimators.differences import differences, paper_matrix
 from calibrators.experiment import run_episode
 from calibrators.measurements import Measurement, MeasurementFileError, Measurements
 from orthoglide_env.instruments.slots import GaugeSpec
-
-TABLE1 = {"drho": [4.66, -5.36, 1.46], "dL": [5.20, -5.96, 3.16]}
 
 
 def run(strategy: str, params: str, machine: dict, **lab):

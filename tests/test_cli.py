@@ -11,12 +11,13 @@ import sys
 
 import numpy as np
 import pytest
+from conftest import TABLE1 as TABLE1_ERRORS
 
 from calibrators.cli import build_parser, main
 from calibrators.compare import Trial
 from orthoglide_env.model.errors import ERROR_NAMES, error_group
 
-TABLE1 = '{"drho": [4.66, -5.36, 1.46], "dL": [5.20, -5.96, 3.16]}'
+TABLE1 = json.dumps(TABLE1_ERRORS)
 
 
 @pytest.fixture

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import TABLE1 as TABLE1_ERRORS
 from conftest import paper_experiment
 
 from calibrators.estimators.base import get_strategy
@@ -34,7 +35,7 @@ from orthoglide_env.model.errors import (
 from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture
 from orthoglide_env.model.reading_model import parameters_of, predict
 
-TABLE1 = MachineParams(drho=[4.66, -5.36, 1.46], dL=[5.20, -5.96, 3.16])
+TABLE1 = MachineParams(**TABLE1_ERRORS)
 
 
 def experiment(machine: MachineParams | None, seed: int, errors: str = "realistic",

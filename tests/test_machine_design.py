@@ -177,7 +177,7 @@ def test_calibrate_paper_on_the_small_design_recovers_the_paper_parameters(
         tmp_path, capsys) -> None:
     path = _write(tmp_path / "paper.json", '{"drho": [0.5, -0.3, 0.2], "dL": [-0.4, 0.6, 0.1]}')
     report = _json(capsys, ["calibrate", "--machine", str(path), "--design", str(SMALL_FILE),
-                            "--agent", "paper", "--json"])
+                            "--agent", "paper", "--params", "paper6", "--json"])
     for key in ("drho", "dL"):
         np.testing.assert_allclose(report["estimate"][key], report["truth"][key], atol=1e-6)
     assert report["experiment_time_s"] > 0
@@ -192,7 +192,7 @@ def test_fit_reads_the_design_of_a_json_readings_file_or_takes_it_from_the_comma
     for suffix in ("json", "csv"):
         saved = tmp_path / f"readings.{suffix}"
         _json(capsys, ["calibrate", *common, "--save-measurements", str(saved)])
-        noise = ["--sigma", "0", "--resolution", "0", "--json"]
+        noise = ["--sigma", "0", "--resolution", "0", "--params", "paper6", "--json"]
         fits[suffix] = _json(capsys, ["fit", str(saved), *noise])["estimate"]["dL"]
         fits[f"{suffix} --design"] = _json(capsys, ["fit", str(saved), "--design",
                                                     str(SMALL_FILE), *noise])["estimate"]["dL"]

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import paper_experiment
+from conftest import TABLE1, paper_experiment
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -34,7 +34,6 @@ from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture
 
 OLD_HEADER = "leg,axis,posture,repetition,reading_mm"
-TABLE1 = {"drho": [4.66, -5.36, 1.46], "dL": [5.20, -5.96, 3.16]}
 
 labels = st.text(st.characters(categories=("L", "M", "N", "P", "S"), include_characters=" "),
                  min_size=1, max_size=12).filter(

@@ -20,6 +20,7 @@ from calibrators.cli import (
     conditions,
     design,
     fit,
+    plan,
     pose,
     render,
     urdf,
@@ -27,7 +28,8 @@ from calibrators.cli import (
 from calibrators.cli.common import Parser, UsageError
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA, check_noise
 
-COMMANDS = (pose, render, urdf, calibrate, fit, compensate, compare, design, conditions)
+COMMANDS = (pose, render, urdf, calibrate, plan, fit, compensate, compare, design,
+            conditions)
 #: The distribution whose metadata carries the version.
 DISTRIBUTION = "orthoglide-workbench"
 

@@ -7,21 +7,37 @@ import argparse
 import numpy as np
 
 from calibrators.cli import estimator_options
-from calibrators.cli.common import add_conditions, conditions_of, design_of
+from calibrators.cli.common import UsageError, add_conditions, conditions_of, design_of
 from calibrators.cli.output import emit, report, save
 from calibrators.measurements import Measurements
+from calibrators.procedure import Procedure, check_sheet
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 
 
 def run(args: argparse.Namespace) -> None:
     # --sigma and --resolution were checked with every command's (calibrators.cli.run).
     data = Measurements.read(args.file, design_of(args) if args.design else None)
+    if args.plan:
+        _check_plan(data, args.plan)
     if args.to_csv:
         data.to_csv(args.to_csv)
     sigma = float(np.hypot(args.sigma, args.resolution / np.sqrt(12)))
     est = estimator_options.estimate(args, data, sigma, conditions_of(args))
     save(est, args)
     emit(report(est, None), args.json)
+
+
+def _check_plan(data: Measurements, path: str) -> None:
+    """The readings are the sheet of the plan at ``path``: same design, each row one of its
+    steps' readings (:class:`UsageError` naming the line otherwise)."""
+    try:
+        procedure = Procedure.read(path)
+        if procedure.design != data.design.to_dict():
+            raise ValueError("the plan is for a machine of another design than the "
+                             "readings' (give the plan's design with --design)")
+        check_sheet(data, procedure)
+    except ValueError as exc:
+        raise UsageError(f"--plan {path}: {exc}") from None
 
 
 def add(sub: argparse._SubParsersAction) -> None:
@@ -38,6 +54,9 @@ def add(sub: argparse._SubParsersAction) -> None:
                    "readings file's, else the prototype)")
     estimator_options.add(p)
     add_conditions(p, measured=True)
+    p.add_argument("--plan", metavar="PLAN.json",
+                   help="the plan.json of orthoglide plan whose readings sheet this is: each "
+                        "row is checked against its step")
     p.add_argument("--to-csv", metavar="FILE.csv",
                    help="also write the readings as CSV (shortest round-trip numbers)")
     p.add_argument("--json", action="store_true", help="print one JSON object")

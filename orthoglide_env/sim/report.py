@@ -147,3 +147,80 @@ def render_png(
     out_path.parent.mkdir(parents=True, exist_ok=True)
     image.imsave(out_path, frame)
     return out_path
+
+
+def project(points: np.ndarray, eye: np.ndarray, target: np.ndarray, fov: float,
+            width: int, height: int) -> np.ndarray:
+    """Pixel coordinates (column, row) of world ``points`` (..., 3) (mm) in the image of a
+    camera at ``eye`` aimed at ``target``, world z up, vertical field of view ``fov``
+    (deg): the pinhole model of :meth:`OrthoglideMachine.render`."""
+    forward = (target - eye) / np.linalg.norm(target - eye)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    d = np.asarray(points, dtype=float) - eye
+    depth = d @ forward
+    scale = np.tan(np.radians(fov) / 2) * depth
+    x = (d @ right) / (scale * width / height)
+    y = (d @ up) / scale
+    return np.stack([(x + 1) / 2 * width, (1 - y) / 2 * height], axis=-1)
+
+
+def render_stands_png(machine: MachineParams, specs: list, labels: list[str],
+                      out_path: str | Path, *, highlight: int | None = None,
+                      title: str = "", width: int = 960, height: int = 720) -> Path:
+    """A PNG picture of ``machine`` at Zero with gauge stands at ``specs``, each tip
+    marked and labelled with ``labels`` (the stand ``highlight`` in red, larger): what a
+    technician looks at to find where a stand goes."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot as plt
+
+    from orthoglide_env.sim.pybullet import square_on_camera
+
+    sim = OrthoglideMachine(machine, install(list(specs), machine))
+    try:
+        sim.move(np.zeros(3))
+        frame = sim.render(width, height)
+        tips = np.array([g.origin + t * g.direction
+                         for g, t in zip(sim.gauges, sim.gauge_distances(), strict=True)])
+    finally:
+        sim.close()
+    eye, target, fov = square_on_camera(width / height, machine.design)
+    pixels = project(tips, eye, target, fov, width, height)
+    figure = plt.figure(figsize=(width / 100, height / 100), dpi=100)
+    try:
+        axes = figure.add_axes((0, 0, 1, 1))
+        axes.imshow(frame)
+        axes.set_axis_off()
+        centre = np.array([width / 2, height / 2])
+        for k, ((u, v), label) in enumerate(zip(pixels, labels, strict=True)):
+            mine = k == highlight
+            # Labels sit outward from the image's centre, away from the machine's middle.
+            away = np.array([u, v]) - centre
+            away = away / max(np.linalg.norm(away), 1.0) * (90 if mine else 60)
+            axes.annotate(label, (u, v), xytext=(u + away[0], v + away[1]),
+                          color="red" if mine else "navy", fontsize=14 if mine else 10,
+                          fontweight="bold" if mine else "normal", ha="center",
+                          bbox={"boxstyle": "round", "fc": "white", "alpha": 0.85},
+                          arrowprops={"arrowstyle": "->", "lw": 2.5 if mine else 1.2,
+                                      "color": "red" if mine else "navy"})
+        # The world axes, as a triad in a corner: the sheet's signs are along them.
+        ends = project(np.vstack([np.zeros(3), 100 * np.eye(3)]), eye, target, fov, width,
+                       height)
+        corner = np.array([70.0, height - 70.0])
+        for k, name in enumerate(AXIS_NAMES):
+            tip = corner + (ends[k + 1] - ends[0]) / np.linalg.norm(ends[k + 1] - ends[0]) * 50
+            axes.annotate("", tip, xytext=corner, arrowprops={"arrowstyle": "->", "lw": 2})
+            axes.text(*(corner + (tip - corner) * 1.3), f"+{name}", fontsize=12, ha="center",
+                      va="center")
+        if title:
+            axes.text(10, 24, title, fontsize=13, color="black",
+                      bbox={"fc": "white", "alpha": 0.85})
+        out_path = Path(out_path)
+        out_path.parent.mkdir(parents=True, exist_ok=True)
+        figure.savefig(out_path, dpi=100)
+    finally:
+        plt.close(figure)
+    return out_path

@@ -1,0 +1,166 @@
+"""``orthoglide plan``: a designed experiment as a procedure a technician follows.
+
+It writes into ``--out DIR``:
+
+* ``plan.json``: the steps (:class:`~calibrators.procedure.Procedure`), which
+  ``fit --plan`` checks a filled sheet against;
+* ``readings.csv``: the readings sheet, a measurement file with ``reading_mm`` blank, one
+  row per reading to take, in step order, with its ``step``;
+* ``setup.png`` and ``step-N.png``: the machine at Zero with the stands mounted at set-up
+  and after each re-mount, each stand marked and labelled (the moved one in red);
+* ``procedure.html``: a printable page with all of it (print it to PDF from a browser).
+"""
+
+from __future__ import annotations
+
+import argparse
+import html
+import json
+from pathlib import Path
+
+from calibrators.cli.common import UsageError, add_conditions, add_design, conditions_of
+from calibrators.experiment import DEFAULT_BUDGET_S
+from calibrators.procedure import Procedure, make_procedure, planned_agents, write_sheet
+from orthoglide_env.lab.operations import slot_catalogue
+from orthoglide_env.model.design import MachineDesign, load_design
+from orthoglide_env.model.errors import MachineParams
+
+
+def run(args: argparse.Namespace) -> None:
+    if not args.budget > 0:
+        raise UsageError(f"--budget must be a positive number of seconds, got {args.budget:g}")
+    design = load_design(args.design)
+    try:
+        procedure = make_procedure(args.agent, args.budget, design, conditions_of(args, None),
+                                   args.seed)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "plan.json").write_text(json.dumps(procedure.to_dict(), indent=1) + "\n",
+                                   encoding="utf-8")
+    write_sheet(procedure, out / "readings.csv")
+    pictures = _pictures(procedure, design, out)
+    (out / "procedure.html").write_text(page(procedure, pictures), encoding="utf-8")
+    print(f"agent {procedure.agent}: {len(procedure.steps)} steps, "
+          f"{len(procedure.sheet)} readings, {procedure.total_s / 60:.1f} min on the lab's "
+          f"clock (budget {procedure.budget_s / 60:.0f} min); wrote {out / 'procedure.html'}, "
+          f"{out / 'readings.csv'}, {out / 'plan.json'} and {len(pictures)} pictures")
+
+
+def _pictures(procedure: Procedure, design: MachineDesign, out: Path) -> dict[int, str]:
+    """A picture per mounting: the set-up's stands, then the stands after each re-mount
+    with the moved one highlighted; by step number, file names relative to ``out``."""
+    from orthoglide_env.sim.report import render_stands_png
+
+    machine = MachineParams(design=design)
+    by_name = {s.slot: s for s in slot_catalogue(design)}
+    held = {s["stand"]: s["slot"] for s in procedure.stands}
+    pictures = {}
+    for step in procedure.steps:
+        if step.action not in ("set up", "re-mount"):
+            continue
+        if step.action == "re-mount":
+            held[step.stand] = step.slot
+        stands = sorted(held)
+        name = "setup.png" if step.action == "set up" else f"step-{step.number}.png"
+        title = ("Set-up: every stand" if step.action == "set up"
+                 else f"Step {step.number}: stand {step.stand} moves to {step.slot}")
+        render_stands_png(machine, [by_name[held[k]] for k in stands],
+                          [f"stand {k}: {held[k]}" for k in stands], out / name,
+                          highlight=None if step.stand is None else stands.index(step.stand),
+                          title=title)
+        pictures[step.number] = name
+    return pictures
+
+
+def page(procedure: Procedure, pictures: dict[int, str]) -> str:
+    """The printable page: what it is, the sign rule, the stands, the steps with their
+    pictures, and the sheet to fill in."""
+    e = html.escape
+    conditions = procedure.conditions.get("name", "ideal")
+    rows = []
+    for step in procedure.steps:
+        sheet = (f"{step.rows[0]}-{step.rows[-1]}" if len(step.rows) > 1
+                 else str(step.rows[0]) if step.rows else "")
+        rows.append(f"<tr><td>{step.number}</td><td>{e(step.action)}</td>"
+                    f"<td>{e(step.text)}</td><td>{step.seconds:.0f}</td>"
+                    f"<td>{step.start_s / 60:.1f}</td><td>{sheet}</td></tr>")
+        if step.number in pictures:
+            rows.append(f'<tr class="picture"><td colspan="6"><img src="{pictures[step.number]}"'
+                        f' alt="{e(step.text[:80])}"></td></tr>')
+    stands = "".join(f"<tr><td>{s['stand']}</td><td>{e(s['slot'])}</td><td>{e(s['place'])}</td>"
+                     "</tr>" for s in procedure.stands)
+    sheet = "".join(
+        f"<tr><td>{k}</td><td>{m.step}</td><td>{e(m.mounting)}</td><td>{e(m.posture)}</td>"
+        f"<td>{', '.join(f'{v:g}' for v in m.rho)}</td><td>{m.repetition}</td>"
+        f"<td>{'' if m.time_s is None else f'{m.time_s:.0f}'}</td><td class='blank'></td></tr>"
+        for k, m in enumerate(procedure.sheet, start=1))
+    return f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8">
+<title>Calibration procedure: {e(procedure.agent)}</title>
+<style>
+body {{ font-family: sans-serif; margin: 2em; max-width: 60em; }}
+table {{ border-collapse: collapse; width: 100%; margin-bottom: 1.5em; }}
+td, th {{ border: 1px solid #888; padding: 0.25em 0.5em; vertical-align: top; }}
+th {{ background: #eee; }}
+td.blank {{ min-width: 8em; }}
+tr.picture td {{ text-align: center; border: none; }}
+img {{ max-width: 100%; }}
+@media print {{ tr, img {{ page-break-inside: avoid; }} }}
+</style></head><body>
+<h1>Calibration procedure</h1>
+<p>Agent <b>{e(procedure.agent)}</b>, {len(procedure.steps)} steps,
+{len(procedure.sheet)} readings, <b>{procedure.total_s / 60:.1f} min</b> on the lab's clock
+(budget {procedure.budget_s / 60:.0f} min), planned for <b>{e(conditions)}</b> conditions on
+a machine of L = {procedure.design['L']:g} mm, control limits {procedure.design['rho_min']:g}
+.. {procedure.design['rho_max']:g} mm.</p>
+<h2>Before you start</h2>
+<ul>
+<li>Postures are control coordinates rho (mm): 0, 0, 0 is the Zero posture, and each value
+is a drive's command. The machine drives all three axes together.</li>
+<li>Every reading is written in mm, <b>positive when the touched face moves toward the
++ world axis</b> the stand measures along (the pictures show the axes). Each stand's place
+says whether its plunger then comes out or is pushed in. A dial that reads plus when its
+plunger is pushed in shows the opposite sign where the plunger comes out: write minus what
+it shows there.</li>
+<li>Fill in <code>reading_mm</code> in <code>readings.csv</code> row by row, as the steps
+say. Write the lab clock in <code>time_s</code> (seconds since the drives were switched on)
+when it differs from the planned time. Then run
+<code>orthoglide fit readings.csv --plan plan.json</code>.</li>
+<li>The set-up is not on the lab's clock. Each step's seconds are the lab's time table:
+driving at 20 mm/s, 5 s to settle and read, 3 s per plunger lever, 120 s per re-mount.</li>
+</ul>
+<h2>The stands at set-up</h2>
+<table><tr><th>stand</th><th>slot</th><th>where, and which way it reads plus</th></tr>
+{stands}</table>
+<h2>Steps</h2>
+<table><tr><th>step</th><th>action</th><th>what to do</th><th>s</th><th>clock (min)</th>
+<th>sheet rows</th></tr>
+{''.join(rows)}</table>
+<h2>Readings sheet</h2>
+<table><tr><th>row</th><th>step</th><th>stand (mounting)</th><th>posture</th>
+<th>rho (mm)</th><th>repetition</th><th>time (s)</th><th>reading (mm)</th></tr>
+{sheet}</table>
+</body></html>
+"""
+
+
+def add(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("plan", help="write a designed experiment as a procedure a technician "
+                                    "follows: steps, stand places, pictures, a readings "
+                                    "sheet and a printable page")
+    p.add_argument("--agent", default="paper",
+                   help=f"an agent that decides its experiment at the start: "
+                        f"{', '.join(planned_agents())} (default: %(default)s)")
+    p.add_argument("--budget", type=float, default=DEFAULT_BUDGET_S, metavar="S",
+                   help="the lab time the experiment may take, seconds (default: "
+                        "%(default)g)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="the stream of a random agent's choices (default: %(default)s)")
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="folder to write plan.json, readings.csv, the pictures and "
+                        "procedure.html into (made if missing; files replaced)")
+    add_design(p)
+    add_conditions(p)
+    p.set_defaults(func=run)

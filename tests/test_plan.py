@@ -1,0 +1,165 @@
+"""``orthoglide plan``: a designed experiment as a technician's procedure, and its sheet
+read back by ``fit --plan``."""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import TABLE1
+
+from calibrators.cli import main
+from calibrators.cli.plan import _pictures
+from calibrators.procedure import Procedure, Step, make_procedure, place_words
+from orthoglide_env.instruments.slots import GaugeSpec
+from orthoglide_env.instruments.stands import install
+from orthoglide_env.lab.operations import SLOTS
+from orthoglide_env.model.design import PROTOTYPE
+from orthoglide_env.model.errors import AXIS_NAMES, MachineParams
+
+
+def run_json(capsys, argv: list[str]) -> dict:
+    assert main(argv) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+@pytest.fixture(scope="module")
+def paper_plan(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("plan")
+    assert main(["plan", "--agent", "paper", "--out", str(out)]) == 0
+    return out
+
+
+def test_the_paper_plan_is_the_lab_experiment(paper_plan, capsys) -> None:
+    """The procedure is the experiment the lab runs: the same time on the clock and the
+    same readings in the same order as `calibrate --agent paper`."""
+    plan = json.loads((paper_plan / "plan.json").read_text())
+    cal = run_json(capsys, ["calibrate", "--agent", "paper", "--backend", "exact",
+                            "--params", "paper6", "--json"])
+    assert plan["total_s"] == pytest.approx(cal["experiment_time_s"]) == 330.0
+    rows = list(csv.DictReader((paper_plan / "readings.csv").open()))
+    assert len(rows) == len(cal["residuals"]) == 66
+    assert all(r["reading_mm"] == "" for r in rows)
+    assert [(r["posture"], r["repetition"]) for r in rows] == [
+        (r["posture"], str(r["repetition"])) for r in cal["residuals"]]
+    steps = {s["number"]: s for s in plan["steps"]}
+    # Every row names a step that takes it, and every reading step's rows are its own.
+    for k, row in enumerate(rows, start=1):
+        assert k in steps[int(row["step"])]["rows"]
+    assert sum(len(s["rows"]) for s in plan["steps"]) == 66
+    assert [s["number"] for s in plan["steps"]] == list(range(1, len(plan["steps"]) + 1))
+    page = (paper_plan / "procedure.html").read_text()
+    assert '<img src="setup.png"' in page and (paper_plan / "setup.png").read_bytes()[:4] == \
+        b"\x89PNG"
+    assert all(s["text"].replace("'", "&#x27;") in page for s in plan["steps"])
+    assert Procedure.read(paper_plan / "plan.json").to_dict() == plan
+
+
+def _filled(paper_plan: Path, tmp_path: Path, capsys) -> Path:
+    """The sheet filled by a technician on the Table 1 machine: the lab's readings of it,
+    row by row (each row checked to be the same gauge and posture)."""
+    machine = tmp_path / "m.json"
+    machine.write_text(json.dumps(TABLE1))
+    readings = tmp_path / "lab.csv"
+    assert main(["calibrate", "--agent", "paper", "--machine", str(machine), "--backend",
+                 "exact", "--params", "paper6", "--save-measurements", str(readings)]) == 0
+    capsys.readouterr()
+    lab = list(csv.DictReader(readings.open()))
+    rows = list(csv.DictReader((paper_plan / "readings.csv").open()))
+    for row, read in zip(rows, lab, strict=True):
+        assert (row["mounting"], row["posture"], row["rho_x"]) == (
+            read["mounting"], read["posture"], read["rho_x"])
+        row["reading_mm"] = read["reading_mm"]
+    sheet = tmp_path / "readings.csv"
+    with sheet.open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    return sheet
+
+
+def test_the_filled_sheet_fits_as_it_is(paper_plan, tmp_path, capsys) -> None:
+    """`fit --plan` reads the filled sheet and recovers Table 1 exactly (noise-free, the
+    paper's six parameters: the issue's 1e-6 mm)."""
+    sheet = _filled(paper_plan, tmp_path, capsys)
+    out = run_json(capsys, ["fit", str(sheet), "--plan", str(paper_plan / "plan.json"),
+                            "--params", "paper6", "--sigma", "0", "--resolution", "0",
+                            "--json"])
+    np.testing.assert_allclose(out["estimate"]["drho"], TABLE1["drho"], atol=1e-6)
+    np.testing.assert_allclose(out["estimate"]["dL"], TABLE1["dL"], atol=1e-6)
+
+
+@pytest.mark.parametrize(("row", "column", "value", "fragment"), [
+    (10, "step", "999", "line 11: step 999 is not in the plan"),
+    (10, "step", "2", "line 11: step 2 (lift) takes no reading"),
+    (10, "rho_x", "1.0", "line 11: step"),
+])
+def test_a_sheet_row_the_plan_does_not_hold_is_refused(paper_plan, tmp_path, capsys, row,
+                                                       column, value, fragment) -> None:
+    sheet = _filled(paper_plan, tmp_path, capsys)
+    rows = list(csv.DictReader(sheet.open()))
+    rows[row - 1][column] = value
+    if column == "rho_x":
+        rows[row - 1]["posture"] = ""
+    with sheet.open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    proc = subprocess.run([sys.executable, "-m", "calibrators.cli", "fit", str(sheet),
+                           "--plan", str(paper_plan / "plan.json")],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and fragment in proc.stderr, proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_a_plan_of_another_design_is_refused(paper_plan, tmp_path, capsys) -> None:
+    sheet = _filled(paper_plan, tmp_path, capsys)
+    plan = json.loads((paper_plan / "plan.json").read_text())
+    plan["design"]["L"] = 250.0
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps(plan))
+    assert main(["fit", str(sheet), "--plan", str(other)]) == 2
+    assert "another design" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("argv", "fragment"), [
+    (["--agent", "active"], "chooses each move from the last readings"),
+    (["--agent", "nobody"], "nobody"),
+    (["--budget", "0"], "--budget must be a positive"),
+])
+def test_plan_refuses_bad_input_in_one_line(tmp_path, argv, fragment) -> None:
+    proc = subprocess.run([sys.executable, "-m", "calibrators.cli", "plan", *argv, "--out",
+                           str(tmp_path)], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and fragment in proc.stderr, proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1 and "Traceback" not in proc.stderr
+
+
+@pytest.mark.parametrize("spec", SLOTS, ids=[s.slot for s in SLOTS])
+def test_the_words_say_where_the_plunger_points(spec: GaugeSpec) -> None:
+    """The words follow the installed gauge: its plunger points along the world axis as
+    they say, and a reading is positive along that axis (the sheet's rule) whichever way
+    the plunger points, so the words say when that is the plunger coming out."""
+    gauge = install([spec], MachineParams())[0]
+    axis = AXIS_NAMES[spec.axis]
+    pointing = "+" if gauge.direction[spec.axis] > 0 else "-"
+    words = place_words(spec, PROTOTYPE)
+    assert f"plunger pointing {pointing}{axis}" in words
+    assert ("plunger comes out" in words) == (pointing == "+")
+
+
+def test_each_re_mount_has_its_picture(tmp_path) -> None:
+    """A re-mount step gets a picture of the stands after it, the moved one highlighted;
+    the set-up gets one of all."""
+    paper = make_procedure("paper", 3600)
+    moved = Step(len(paper.steps) + 1, "re-mount", "Move stand 1.", 120.0, paper.total_s,
+                 stand=1, slot="x-leg/y@0.8")
+    procedure = Procedure(paper.agent, paper.budget_s, paper.conditions, paper.design,
+                          paper.stands, [*paper.steps, moved])
+    pictures = _pictures(procedure, PROTOTYPE, tmp_path)
+    assert pictures == {1: "setup.png", moved.number: f"step-{moved.number}.png"}
+    assert all((tmp_path / name).read_bytes()[:4] == b"\x89PNG" for name in pictures.values())
