@@ -31,7 +31,9 @@ from orthoglide_env.sim.urdf import write_urdf
 from orthoglide_env.world.machine_file import CALIBRATION_KEY, machine_dict
 
 #: The columns of a targets file, in mm in the world frame.
-TARGET_COLUMNS: tuple[str, ...] = ("x_mm", "y_mm", "z_mm")
+TARGET_COLUMNS: tuple[str, ...] = ("x", "y", "z")
+#: The targets' columns as commands.csv names them, also read.
+TARGET_MM_COLUMNS: tuple[str, ...] = ("x_mm", "y_mm", "z_mm")
 
 
 def write_estimate(path: str | Path, est: Estimate) -> None:
@@ -55,7 +57,8 @@ def read_estimate(path: str | Path) -> Estimate:
 
 
 def read_targets(path: str | Path) -> np.ndarray:
-    """The targets (n, 3), mm, of a CSV file with the columns :data:`TARGET_COLUMNS`;
+    """The targets (n, 3), mm, of a CSV file with the columns :data:`TARGET_COLUMNS` (or
+    :data:`TARGET_MM_COLUMNS`, as commands.csv writes them);
     ``ValueError`` naming the file, line and column of the first fault."""
     try:
         handle = Path(path).open(newline="", encoding="utf-8-sig")
@@ -63,14 +66,18 @@ def read_targets(path: str | Path) -> np.ndarray:
         raise ValueError(f"{path}: not found") from None
     with handle:
         reader = csv.DictReader(handle)
-        missing = [c for c in TARGET_COLUMNS if c not in (reader.fieldnames or [])]
+        header = reader.fieldnames or []
+        columns = (TARGET_MM_COLUMNS if set(TARGET_MM_COLUMNS) <= set(header)
+                   and not set(TARGET_COLUMNS) & set(header) else TARGET_COLUMNS)
+        missing = [c for c in columns if c not in header]
         if missing:
             raise ValueError(f"{path}: the header needs the columns {', '.join(TARGET_COLUMNS)}"
-                             f" (missing {', '.join(missing)})")
+                             f" (or {', '.join(TARGET_MM_COLUMNS)}; missing "
+                             f"{', '.join(missing)})")
         out = []
         for row in reader:
             values = []
-            for column in TARGET_COLUMNS:
+            for column in columns:
                 try:
                     value = float(row[column])
                 except (TypeError, ValueError):
@@ -105,20 +112,31 @@ class Compensation:
     predicted: dict[str, np.ndarray]
 
 
-def compensate(est: Estimate, targets: np.ndarray) -> Compensation:
-    """The commands that put the tool of the machine ``est`` estimates on ``targets``
-    (n, 3); ``ValueError`` for an estimate outside the validity range, or naming the first
-    target the estimated machine cannot reach within its control limits."""
-    targets = np.asarray(targets, dtype=float)
+def compensated_commands(est: Estimate, targets: np.ndarray) -> np.ndarray:
+    """The commands (n, 3) that put the tool of the machine ``est`` estimates on
+    ``targets`` (n, 3), NaN rows where it cannot within its control limits: the estimated
+    machine's inverse kinematics, less the pitch-error table's value when the fit has one;
+    ``ValueError`` for an estimate outside the validity range."""
     check_usable(est)
-    rho = commands(est.machine, targets)
+    rho = commands(est.machine, np.asarray(targets, dtype=float))
+    reached = np.isfinite(rho).all(axis=-1)
+    if est.fits_lead and reached.any():
+        rho[reached] -= est.lead_correction(rho[reached])
+    return rho
+
+
+def compensate(est: Estimate, targets: np.ndarray) -> Compensation:
+    """:func:`compensated_commands` for ``targets`` (n, 3) with each one's predicted error;
+    ``ValueError`` naming the first target the estimated machine cannot reach within its
+    control limits."""
+    targets = np.asarray(targets, dtype=float)
+    rho = compensated_commands(est, targets)
     outside = np.flatnonzero(~np.isfinite(rho).all(axis=-1))
     if outside.size:
         k = int(outside[0])
-        raise ValueError(f"target {k + 1} ({', '.join(f'{v:g}' for v in targets[k])}) mm is "
+        raise ValueError(f"target {k + 1} (line {k + 2} of a targets file: "
+                         f"{', '.join(f'{v:g}' for v in targets[k])}) mm is "
                          "outside the estimated machine's control limits")
-    if est.fits_lead:
-        rho = rho - est.lead_correction(rho)
     n = len(ERROR_NAMES)
     covariance = est.lead_covariance if est.lead_terms else est.error_covariance[:n, :n]
     predicted = predicted_target_errors(est.machine, covariance, targets,
@@ -156,7 +174,7 @@ def write_controller_files(est: Estimate, folder: str | Path,
     write("machine.json", json.dumps(machine_dict(est.machine, None), indent=2) + "\n")
     write("machine.urdf", write_urdf(est.machine))
     if compensation is not None:
-        header = [*TARGET_COLUMNS, "rho_x_mm", "rho_y_mm", "rho_z_mm",
+        header = [*TARGET_MM_COLUMNS, "rho_x_mm", "rho_y_mm", "rho_z_mm",
                   *(f"predicted_{frame}_mm" for frame in FRAMES)]
         rows = [",".join(header)]
         for k, target in enumerate(compensation.targets):

@@ -71,6 +71,8 @@ class Procedure:
     stands: list[dict[str, Any]]  # {"stand", "slot", "place"} as mounted at set-up
     steps: list[Step]
     sheet: list[Measurement] = field(default_factory=list, compare=False)
+    #: What the technician should know beyond the steps (e.g. steps left out).
+    notes: list[str] = field(default_factory=list)
 
     @property
     def total_s(self) -> float:
@@ -89,7 +91,8 @@ class Procedure:
         try:
             return cls(data["agent"], float(data["budget_s"]), dict(data["conditions"]),
                        dict(data["design"]), list(data["stands"]),
-                       [Step(**s) for s in data["steps"]])
+                       [Step(**s) for s in data["steps"]],
+                       notes=[str(n) for n in data.get("notes", [])])
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"not a procedure written by orthoglide plan: {exc}") from None
 

@@ -4,6 +4,7 @@ what they reach on the true machine."""
 from __future__ import annotations
 
 import csv
+import json
 
 import gymnasium as gym
 import numpy as np
@@ -86,16 +87,27 @@ def test_the_estimate_file_is_a_machine_file_and_compensate_writes_the_controlle
     offsets = list(csv.DictReader((out / "joint_offsets.csv").open()))
     np.testing.assert_allclose([float(r["drho_mm"]) for r in offsets], est.theta[:3],
                                atol=1e-9)
+    # The same in --json, for scripts.
+    capsys.readouterr()
+    assert main(["compensate", str(est_path), "--targets", str(targets), "--out", str(out),
+                 "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    np.testing.assert_allclose([t["command"] for t in printed["targets"]], comp.commands,
+                               atol=1e-12)
+    np.testing.assert_allclose([t["predicted_rigid_mm"] for t in printed["targets"]],
+                               comp.predicted["rigid"], atol=1e-12)
+    assert [o["drho_mm"] for o in printed["joint_offsets"]] == est.theta[:3].tolist()
     # A strict JSON file, read back to the same estimate.
     write_estimate(tmp_path / "again.json", read_estimate(est_path))
     assert (tmp_path / "again.json").read_text() == est_path.read_text()
 
 
 @pytest.mark.parametrize(("text", "fragment"), [
-    ("x_mm,y_mm\n0,0\n", "missing z_mm"),
+    ("x,y\n0,0\n", "missing z)"),
+    ("x,y,z\n0,0,abc\n", ":2: z must be a finite number"),
     ("x_mm,y_mm,z_mm\n0,0,abc\n", ":2: z_mm must be a finite number"),
-    ("x_mm,y_mm,z_mm\n", "no target"),
-    ("x_mm,y_mm,z_mm\n0,0,400\n", "outside the estimated machine's control limits"),
+    ("x,y,z\n", "no target"),
+    ("x,y,z\n0,0,400\n", "outside the estimated machine's control limits"),
 ])
 def test_bad_targets_are_refused_in_one_line(tmp_path, capsys, text, fragment) -> None:
     est_path = tmp_path / "est.json"
@@ -121,7 +133,7 @@ def test_an_estimate_outside_the_validity_range_is_flagged_and_not_compensated(
     text = capsys.readouterr().out
     assert "warning: the estimate is outside the validity range" in text
     assert any("validity range" in w for w in read_estimate(est_path).warnings)
-    (tmp_path / "t.csv").write_text("x_mm,y_mm,z_mm\n0,0,0\n")
+    (tmp_path / "t.csv").write_text("x,y,z\n0,0,0\n")
     assert main(["compensate", str(est_path), "--targets", str(tmp_path / "t.csv"),
                  "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()

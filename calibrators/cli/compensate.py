@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 
 import numpy as np
 
@@ -19,7 +20,21 @@ def run(args: argparse.Namespace) -> None:
     est = read_estimate(args.estimate)
     compensation = (compensate(est, read_targets(args.targets)) if args.targets
                     else None)
-    for path in write_controller_files(est, args.out, compensation):
+    written = write_controller_files(est, args.out, compensation)
+    if args.json:
+        sigma = np.sqrt(np.clip(np.diag(est.error_covariance)[:3], 0.0, None))
+        print(json.dumps({
+            "joint_offsets": [{"axis": axis, "drho_mm": float(est.theta[a]),
+                               "sigma_mm": float(sigma[a])} for a, axis in enumerate("xyz")],
+            "targets": [] if compensation is None else [
+                {"target": t.tolist(), "command": c.tolist(),
+                 **{f"predicted_{frame}_mm": float(compensation.predicted[frame][k])
+                    for frame in compensation.predicted}}
+                for k, (t, c) in enumerate(zip(compensation.targets, compensation.commands,
+                                               strict=True))],
+            "files": [str(p) for p in written]}))
+        return
+    for path in written:
         print(f"wrote {path}")
     print("joint offsets (drho, mm): " + ", ".join(
         f"{axis} {value:+.4f}" for axis, value in zip("xyz", est.theta[:3], strict=True)))
@@ -48,4 +63,8 @@ def add(sub: argparse._SubParsersAction) -> None:
                         "(mm, world frame)")
     p.add_argument("--out", required=True, metavar="DIR",
                    help="folder to write into (made if missing; files are replaced)")
+    p.add_argument("--json", action="store_true",
+                   help="print one JSON object: joint_offsets, targets (each with target, "
+                        "command and predicted_raw_mm, predicted_translation_mm, "
+                        "predicted_rigid_mm) and the files written")
     p.set_defaults(func=run)

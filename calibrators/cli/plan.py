@@ -19,8 +19,10 @@ import json
 from pathlib import Path
 
 from calibrators.cli.common import UsageError, add_conditions, add_design, conditions_of
+from calibrators.compensation import read_estimate
 from calibrators.experiment import DEFAULT_BUDGET_S
 from calibrators.procedure import Procedure, make_procedure, planned_agents, write_sheet
+from calibrators.verification import compensated_procedure
 from orthoglide_env.lab.operations import slot_catalogue
 from orthoglide_env.model.design import MachineDesign, load_design
 from orthoglide_env.model.errors import MachineParams
@@ -33,6 +35,8 @@ def run(args: argparse.Namespace) -> None:
     try:
         procedure = make_procedure(args.agent, args.budget, design, conditions_of(args, None),
                                    args.seed)
+        if args.verify:
+            procedure = compensated_procedure(procedure, read_estimate(args.verify))
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     out = Path(args.out)
@@ -41,11 +45,15 @@ def run(args: argparse.Namespace) -> None:
                                    encoding="utf-8")
     write_sheet(procedure, out / "readings.csv")
     pictures = _pictures(procedure, design, out)
-    (out / "procedure.html").write_text(page(procedure, pictures), encoding="utf-8")
+    then = (f"orthoglide verify {args.verify} readings.csv" if args.verify
+            else "orthoglide fit readings.csv --plan plan.json")
+    (out / "procedure.html").write_text(page(procedure, pictures, then), encoding="utf-8")
     print(f"agent {procedure.agent}: {len(procedure.steps)} steps, "
           f"{len(procedure.sheet)} readings, {procedure.total_s / 60:.1f} min on the lab's "
           f"clock (budget {procedure.budget_s / 60:.0f} min); wrote {out / 'procedure.html'}, "
           f"{out / 'readings.csv'}, {out / 'plan.json'} and {len(pictures)} pictures")
+    for note in procedure.notes:
+        print(f"note: {note}")
 
 
 def _pictures(procedure: Procedure, design: MachineDesign, out: Path) -> dict[int, str]:
@@ -74,9 +82,10 @@ def _pictures(procedure: Procedure, design: MachineDesign, out: Path) -> dict[in
     return pictures
 
 
-def page(procedure: Procedure, pictures: dict[int, str]) -> str:
+def page(procedure: Procedure, pictures: dict[int, str],
+         then: str = "orthoglide fit readings.csv --plan plan.json") -> str:
     """The printable page: what it is, the sign rule, the stands, the steps with their
-    pictures, and the sheet to fill in."""
+    pictures, and the sheet to fill in; ``then``: the command that reads the sheet."""
     e = html.escape
     conditions = procedure.conditions.get("name", "ideal")
     rows = []
@@ -126,11 +135,11 @@ plunger is pushed in shows the opposite sign where the plunger comes out: write 
 it shows there.</li>
 <li>Fill in <code>reading_mm</code> in <code>readings.csv</code> row by row, as the steps
 say. Write the lab clock in <code>time_s</code> (seconds since the drives were switched on)
-when it differs from the planned time. Then run
-<code>orthoglide fit readings.csv --plan plan.json</code>.</li>
+when it differs from the planned time. Then run <code>{e(then)}</code>.</li>
 <li>The set-up is not on the lab's clock. Each step's seconds are the lab's time table:
 driving at 20 mm/s, 5 s to settle and read, 3 s per plunger lever, 120 s per re-mount.</li>
 </ul>
+{''.join(f"<p><b>Note:</b> {e(n)}.</p>" for n in procedure.notes)}
 <h2>The stands at set-up</h2>
 <table><tr><th>stand</th><th>slot</th><th>where, and which way it reads plus</th></tr>
 {stands}</table>
@@ -158,6 +167,10 @@ def add(sub: argparse._SubParsersAction) -> None:
                         "%(default)g)")
     p.add_argument("--seed", type=int, default=0,
                    help="the stream of a random agent's choices (default: %(default)s)")
+    p.add_argument("--verify", metavar="EST",
+                   help="plan the verification of the estimate file EST: the experiment "
+                        "with every command compensated, as the compensated controller "
+                        "drives it; orthoglide verify reads its filled sheet")
     p.add_argument("--out", required=True, metavar="DIR",
                    help="folder to write plan.json, readings.csv, the pictures and "
                         "procedure.html into (made if missing; files replaced)")

@@ -1,0 +1,47 @@
+"""``orthoglide verify``: the paper's third experiment, readings through the compensated
+controller held against the estimate's prediction."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from calibrators.cli.common import add_conditions, conditions_of
+from calibrators.compensation import read_estimate
+from calibrators.measurements import Measurements
+from calibrators.verification import verify
+
+
+def run(args: argparse.Namespace) -> None:
+    est = read_estimate(args.estimate)
+    data = Measurements.read(args.readings, est.readings.design)
+    given = args.conditions is not None or args.effects is not None
+    result = verify(est, data, conditions_of(args) if given else None)
+    if args.json:
+        print(json.dumps(result.to_dict()))
+        return
+    print(f"{'mounting':<16}{'posture':<22}{'before':>10}{'after':>10}{'predicted':>11}"
+          f"{'residual':>10}   (mm: each mounting's readings minus its first)")
+    for r in result.rows:
+        print(f"{r['mounting']:<16}{r['posture']:<22}{r['before_mm']:>10.4f}"
+              f"{r['after_mm']:>10.4f}{r['predicted_mm']:>11.4f}{r['residual_mm']:>10.4f}")
+    print(("PASSED: " if result.passed else "FAILED: ") + result.reason)
+
+
+def add(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "verify", help="the paper's third experiment: a verification run's readings "
+        "through the compensated controller against the estimate's prediction",
+        description="Read the filled sheet of 'orthoglide plan --verify EST' and report, per "
+        "reading, the leg-parallelism deviation before compensation (the estimated machine "
+        "at the uncompensated commands), after it (the readings), the predicted one and the "
+        "residual, then pass or fail: a chi-square test of the readings against the "
+        "estimate's prediction, with its error bars, the new stands' installation errors, "
+        "the conditions' effects and the gauges' noise.")
+    p.add_argument("estimate", help="estimate file (calibrate or fit --save-estimate)")
+    p.add_argument("readings", help="the verification's readings, .csv or .json")
+    add_conditions(p, measured=True)
+    p.add_argument("--json", action="store_true",
+                   help="print one JSON object: passed, reason, chi2, dof, "
+                        "deviations_before, deviations_after, readings")
+    p.set_defaults(func=run)
