@@ -179,7 +179,7 @@ def make_procedure(agent_name: str, budget_s: float, design: MachineDesign = PRO
             now = float(observation["time"][0])
             number = len(steps) + 1
             read = lab.records[before:]
-            steps.append(_step(number, act, now - clock, clock, read, before, slots, design,
+            steps.append(describe_step(number, act, now - clock, clock, read, before, slots, design,
                                held))
             taken += [number] * len(read)
             held = [int(s) for s in observation["slot"]]
@@ -205,9 +205,12 @@ def _setup_text(stands: list[dict[str, Any]], engaged: list[bool]) -> str:
                if lifted else "") + ".")
 
 
-def _step(number: int, act: dict[str, Any], seconds: float, start: float, read: list,
-          first_row: int, slots: tuple[GaugeSpec, ...], design: MachineDesign,
-          held: list[int]) -> Step:
+def describe_step(number: int, act: dict[str, Any], seconds: float, start: float,
+                  read: list, first_row: int, slots: tuple[GaugeSpec, ...],
+                  design: MachineDesign, held: list[int]) -> Step:
+    """Step ``number``: lab action ``act``, its ``seconds`` from the clock at ``start``, the
+    records it ``read`` (rows from ``first_row + 1`` on the sheet), in words for the
+    technician, with the stands at the slots ``held`` (indices into ``slots``)."""
     op = Op(int(act["op"]))
     stand = int(act["stand"]) + 1
     rows = list(range(first_row + 1, first_row + len(read) + 1))

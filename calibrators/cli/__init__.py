@@ -23,14 +23,15 @@ from calibrators.cli import (
     plan,
     pose,
     render,
+    session,
     urdf,
     verify,
 )
 from calibrators.cli.common import Parser, UsageError
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA, check_noise
 
-COMMANDS = (pose, render, urdf, calibrate, plan, fit, compensate, verify, compare, design,
-            conditions)
+COMMANDS = (pose, render, urdf, calibrate, plan, session, fit, compensate, verify, compare,
+            design, conditions)
 #: The distribution whose metadata carries the version.
 DISTRIBUTION = "orthoglide-workbench"
 

@@ -220,6 +220,11 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
         return self._batch.notebooks[0].records
 
     @property
+    def mountings(self) -> list[str]:
+        """Each stand's present mounting, as the notebook names it ("" if not mounted)."""
+        return list(self._batch.mounting[0])
+
+    @property
     def _time(self) -> float:
         """Seconds used so far."""
         return float(self._batch.time[0])

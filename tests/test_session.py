@@ -1,0 +1,132 @@
+"""``orthoglide session``: the active agent with the readings typed in, through a pipe."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import orthoglide_env
+from calibrators.cli import main
+from calibrators.experiment import machine_seed
+from calibrators.measurements import Measurements
+from calibrators.session import parse_answer
+from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
+
+SEED, BUDGET = 2, "600"
+
+
+def _drive(out: Path, stop_after: int | None = None, resume: bool = False,
+           typos: bool = False) -> subprocess.CompletedProcess | None:
+    """The session on machine SEED, its readings answered through the pipe from a lab of
+    the true machine (built as calibrate builds it), stepped with each action the session
+    announces; ``stop_after``: end the input after that many answers; ``typos``: answer
+    every fifth reading first with text."""
+    env = gym.make(orthoglide_env.LAB_ENV_ID, errors="realistic", gauge_sigma=DEFAULT_SIGMA,
+                   gauge_resolution=DEFAULT_RESOLUTION, backend="exact",
+                   budget_s=float(BUDGET))
+    observation, _ = env.reset(seed=machine_seed(SEED, 0))
+    argv = [sys.executable, "-m", "calibrators.cli", "session", "--agent", "active",
+            "--budget", BUDGET, "--seed", str(SEED), "--out", str(out), "--json"]
+    proc = subprocess.Popen(argv + (["--resume"] if resume else []), stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    answered, asked, retyped = 0, 0, 0
+    try:
+        for line in proc.stdout:
+            item = json.loads(line)
+            if "action" in item:
+                a = item["action"]
+                observation, *_ = env.step({"op": int(a["op"]), "rho": np.array(a["rho"]),
+                                            "stand": int(a["stand"]), "slot": int(a["slot"])})
+            elif "ask" in item:
+                asked += 1
+                if typos and asked % 5 == 0 and not retyped:
+                    proc.stdin.write("zero point one\n")
+                    proc.stdin.flush()
+                    retyped = 1
+                    continue
+                retyped = 0
+                if stop_after is not None and answered == stop_after:
+                    proc.stdin.close()
+                    break
+                k = item["ask"]["stand"] - 1
+                value = float(observation["gauges"][k]) if observation["valid"][k] else None
+                proc.stdin.write(json.dumps({"reading_mm": value}) + "\n")
+                proc.stdin.flush()
+                answered += 1
+        proc.wait(timeout=600)
+    finally:
+        env.close()
+        if proc.poll() is None:
+            proc.kill()
+    return subprocess.CompletedProcess(argv, proc.returncode, "", proc.stderr.read())
+
+
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory) -> tuple[Path, dict]:
+    folder = tmp_path_factory.mktemp("session")
+    readings = folder / "calibrate.csv"
+    out = subprocess.run([sys.executable, "-m", "calibrators.cli", "calibrate", "--agent",
+                          "active", "--backend", "exact", "--seed", str(SEED), "--budget",
+                          BUDGET, "--save-measurements", str(readings), "--json"],
+                         capture_output=True, text=True, check=True, timeout=600)
+    return readings, json.loads(out.stdout)
+
+
+def test_a_piped_session_is_calibrate(calibrated, tmp_path, capsys) -> None:
+    """Fed the machine's readings as they come, with a slip of the finger typed now and
+    then (asked again, never fatal), the session takes the same readings at the same
+    lab times as `calibrate --agent active` on that machine and seed, and they fit to its
+    estimate."""
+    readings, cal = calibrated
+    done = _drive(tmp_path / "s", typos=True)
+    assert done.returncode == 0, done.stderr
+    mine = Measurements.read(tmp_path / "s" / "readings.csv")
+    theirs = Measurements.read(readings)
+    assert mine.items == theirs.items
+    assert [m.time_s for m in mine.items] == [m.time_s for m in theirs.items]
+    assert main(["fit", str(tmp_path / "s" / "readings.csv"), "--json"]) == 0
+    fitted = json.loads(capsys.readouterr().out)
+    assert fitted["estimate"] == cal["estimate"]
+
+
+def test_a_session_stopped_half_way_resumes(calibrated, tmp_path) -> None:
+    """The input ends after 40 answers: the notebook holds them, the command says how to
+    go on, and `--resume` replays them and ends where an unbroken session ends."""
+    readings, _ = calibrated
+    stopped = _drive(tmp_path / "s", stop_after=40)
+    assert stopped.returncode == 2 and "--resume goes on" in stopped.stderr
+    assert len((tmp_path / "s" / "notebook.jsonl").read_text().splitlines()) == 40
+    again = subprocess.run([sys.executable, "-m", "calibrators.cli", "session", "--agent",
+                            "active", "--out", str(tmp_path / "s")], capture_output=True,
+                           text=True, timeout=120)
+    assert again.returncode == 2 and "give --resume" in again.stderr
+    resumed = _drive(tmp_path / "s", resume=True)
+    assert resumed.returncode == 0, resumed.stderr
+    assert (Measurements.read(tmp_path / "s" / "readings.csv").items
+            == Measurements.read(readings).items)
+
+
+@pytest.mark.parametrize(("text", "value"), [("0.12", 0.12), (" -0.5 ", -0.5), ("-", None),
+                                             ('{"reading_mm": 0.03}', 0.03),
+                                             ('{"reading_mm": null}', None)])
+def test_answers(text, value) -> None:
+    assert parse_answer(text) == value
+
+
+@pytest.mark.parametrize("text", ["abc", "nan", "1e9", '{"reading": 1}', "true", ""])
+def test_an_answer_that_is_no_reading_is_refused(text) -> None:
+    with pytest.raises(ValueError, match="reading"):
+        parse_answer(text)
+
+
+def test_a_planned_agent_is_sent_to_plan(tmp_path) -> None:
+    proc = subprocess.run([sys.executable, "-m", "calibrators.cli", "session", "--agent",
+                           "paper", "--out", str(tmp_path)], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 2 and "orthoglide plan" in proc.stderr
