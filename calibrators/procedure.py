@@ -107,6 +107,11 @@ class Procedure:
         return cls.from_dict(data)
 
 
+def rho_words(rho: list[float] | tuple[float, ...]) -> str:
+    """A command as a controller takes it: mm to the micron."""
+    return ", ".join(f"{v:.3f}".rstrip("0").rstrip(".") for v in rho)
+
+
 def planned_agents() -> list[str]:
     """The registered agents that decide their whole experiment at the start."""
     return [name for name in available() if isinstance(get_agent(name), PlannedAgent)]
@@ -119,12 +124,16 @@ def place_words(spec: GaugeSpec, design: MachineDesign = PROTOTYPE) -> str:
     axis = AXIS_NAMES[spec.axis]
     toward = "+" if spec.approach > 0 else "-"
     side = "-" if spec.approach > 0 else "+"
-    pushed = ("away from the stand: the plunger comes out" if spec.approach > 0
-              else "toward the stand: the plunger is pushed in")
+    pushed = ("away from the stand: the plunger comes out, so a dial that reads plus when "
+              "pressed shows minus: write minus what it shows" if spec.approach > 0
+              else "toward the stand: the plunger is pushed in, so a dial that reads plus "
+              "when pressed shows it: write what it shows")
     if spec.part == Part.BAR:
         leg = LEG_NAMES[spec.leg]
-        where = (f"on the {leg} leg's parallelogram, the bar at {'+' if spec.bar > 0 else '-'}"
-                 f"d/2 of the leg's width, {spec.at * design.L:.0f} mm along the bar from "
+        where = (f"on the {leg} leg's parallelogram, on the one of its two bars the picture's "
+                 f"arrow points at (the bar at {'+' if spec.bar > 0 else '-'}d/2, d = "
+                 f"{design.d:g} mm the distance between the bars), "
+                 f"{spec.at * design.L:.0f} mm along the bar from "
                  f"the centre of its platform-end hinge ({spec.at:g} of L = {design.L:g} mm), "
                  "on the bar's flat face")
     elif spec.part == Part.CARRIAGE:
@@ -200,7 +209,8 @@ def _setup_text(stands: list[dict[str, Any]], engaged: list[bool]) -> str:
     return ("Switch the drives on and drive to Zero (rho 0, 0, 0). Mount "
             + ", ".join(f"stand {s['stand']} at {s['slot']}" for s in stands)
             + ", each where the stands' list says. Set each gauge at mid-travel, zero its "
-            "dial and write each reading (0.000 unless it moved) on the sheet"
+            "dial and write each reading (0.000 unless it moved) on the sheet. The lab "
+            "clock (the sheet's time_s) starts at 0 when this step ends"
             + (f"; then lift the plungers of stands {', '.join(map(str, lifted))}"
                if lifted else "") + ".")
 
@@ -216,13 +226,15 @@ def describe_step(number: int, act: dict[str, Any], seconds: float, start: float
     rows = list(range(first_row + 1, first_row + len(read) + 1))
     # Stands by the number the technician gave them, with where they are.
     number_of = {slots[s].slot: k + 1 for k, s in enumerate(held) if s < len(slots)}
+    if op == Op.REMOUNT:
+        number_of[slots[int(act["slot"])].slot] = stand
     names = [f"stand {number_of[n]} ({n})" if n in number_of else n
              for n in dict.fromkeys(gauge_name(r.spec) for r in read)]
     if op == Op.MOVE:
         rho = [float(v) for v in np.asarray(act["rho"], dtype=float)]
         reading = (f"read {', '.join(names)} onto the sheet" if names
                    else "no reading (every gauge is lifted)")
-        return Step(number, ACTIONS[op], f"Drive to rho = ({', '.join(f'{v:g}' for v in rho)}) "
+        return Step(number, ACTIONS[op], f"Drive to rho = ({rho_words(rho)}) "
                     f"mm, wait until it settles, {reading}.", seconds, start, rho=rho,
                     rows=rows)
     if op == Op.LIFT:
@@ -234,9 +246,9 @@ def describe_step(number: int, act: dict[str, Any], seconds: float, start: float
     if op == Op.REMOUNT:
         slot = slots[int(act["slot"])]
         return Step(number, ACTIONS[op], f"Drive to Zero. Move stand {stand} to {slot.slot}: "
-                    f"{place_words(slot, design)}. Set the gauge at mid-travel, zero its dial "
-                    "and write its reading on the sheet.", seconds, start, stand, slot.slot,
-                    rows=rows)
+                    f"{place_words(slot, design)}. Set the gauge at mid-travel and zero its "
+                    f"dial. Then, at Zero, read {', '.join(names)} onto the sheet.", seconds,
+                    start, stand, slot.slot, rows=rows)
     return Step(number, ACTIONS[op], "The experiment is over: lift every plunger and switch "
                 "the drives off.", seconds, start, rows=rows)
 

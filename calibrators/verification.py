@@ -34,7 +34,7 @@ from calibrators.estimators.base import Estimate
 from calibrators.estimators.consider import consider_terms
 from calibrators.estimators.exact_fit import CHI2_LEVEL, world_columns
 from calibrators.measurements import Measurement, Measurements
-from calibrators.procedure import Procedure
+from calibrators.procedure import Procedure, rho_words
 from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import DEFAULT_PRESET, ERROR_NAMES, PRESETS, MachineParams
@@ -76,8 +76,7 @@ def compensated_procedure(procedure: Procedure, est: Estimate) -> Procedure:
                              f"{', '.join(f'{v:g}' for v in step.rho)}) is left out: its "
                              "compensated command lies beyond the control limits")
                 continue
-            text = step.text.replace(f"({', '.join(f'{v:g}' for v in step.rho)})",
-                                     f"({', '.join(f'{v:.4f}' for v in rho)})", 1)
+            text = step.text.replace(f"({rho_words(step.rho)})", f"({rho_words(rho)})", 1)
             step = replace(step, rho=rho, text=text)
         number[step.number] = len(steps) + 1
         steps.append(step)

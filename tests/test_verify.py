@@ -99,3 +99,19 @@ def test_the_plan_drives_the_compensated_commands(calibrated) -> None:
         np.testing.assert_allclose(direct(est.machine, rho),
                                    direct(MachineParams(), paper_posture(name)), atol=1e-9)
     assert [s["number"] for s in plan["steps"]] == list(range(1, len(plan["steps"]) + 1))
+
+
+def test_readings_of_another_design_are_refused(calibrated, tmp_path, capsys) -> None:
+    """A verification sheet written for a machine of another design (a JSON readings file
+    names its design) is refused in one line, before anything is computed."""
+    from calibrators.measurements import Measurement, Measurements
+    from orthoglide_env.instruments.slots import GaugeSpec
+    from orthoglide_env.model.design import load_design
+
+    small = load_design(str(Path(__file__).resolve().parent.parent / "examples" / "designs"
+                            / "small.json"))
+    items = [Measurement(GaugeSpec(0, 1), "Zero", 1, 0.0, design=small),
+             Measurement(GaugeSpec(0, 1), "XMax", 1, 0.1, design=small)]
+    Measurements(items, design=small).write(tmp_path / "other.json")
+    assert main(["verify", str(calibrated / "est.json"), str(tmp_path / "other.json")]) == 2
+    assert "design" in capsys.readouterr().err

@@ -130,14 +130,17 @@ a machine of L = {procedure.design['L']:g} mm, control limits {procedure.design[
 is a drive's command. The machine drives all three axes together.</li>
 <li>Every reading is written in mm, <b>positive when the touched face moves toward the
 + world axis</b> the stand measures along (the pictures show the axes). Each stand's place
-says whether its plunger then comes out or is pushed in. A dial that reads plus when its
-plunger is pushed in shows the opposite sign where the plunger comes out: write minus what
-it shows there.</li>
+says whether its plunger then comes out or is pushed in, and so whether to write what a
+dial that reads plus when pressed shows, or minus that.</li>
 <li>Fill in <code>reading_mm</code> in <code>readings.csv</code> row by row, as the steps
-say. Write the lab clock in <code>time_s</code> (seconds since the drives were switched on)
-when it differs from the planned time. Then run <code>{e(then)}</code>.</li>
+say: sheet row N is line N + 1 of the file (the first line names the columns). A
+mounting such as <code>x-leg/z@0.8#7</code> is the stand's installation at that place (the
+number counts the installations). A row whose gauge gives no reading (out of its travel)
+is deleted. Write the lab clock in <code>time_s</code> when it differs from the planned
+time: it starts at 0 when the set-up ends. Then run <code>{e(then)}</code>.</li>
 <li>The set-up is not on the lab's clock. Each step's seconds are the lab's time table:
-driving at 20 mm/s, 5 s to settle and read, 3 s per plunger lever, 120 s per re-mount.</li>
+driving at 20 mm/s, 5 s to settle and read, 3 s per plunger lever, 120 s per re-mount.
+Read the dials to their resolution (0.01 mm for the usual dial).</li>
 </ul>
 {''.join(f"<p><b>Note:</b> {e(n)}.</p>" for n in procedure.notes)}
 <h2>The stands at set-up</h2>
