@@ -78,14 +78,22 @@ def calibrated(tmp_path_factory) -> tuple[Path, dict]:
     return readings, json.loads(out.stdout)
 
 
-def test_a_piped_session_is_calibrate(calibrated, tmp_path, capsys) -> None:
+def test_a_piped_session_is_calibrate_and_resumes(calibrated, tmp_path, capsys) -> None:
     """Fed the machine's readings as they come, with a slip of the finger typed now and
-    then (asked again, never fatal), the session takes the same readings at the same
-    lab times as `calibrate --agent active` on that machine and seed, and they fit to its
-    estimate."""
+    then (asked again, never fatal), and its input ended after 40 answers (the notebook
+    holds them, the command says how to go on, a new session there is refused), then
+    resumed: the session takes the same readings at the same lab times as `calibrate
+    --agent active` on that machine and seed, and they fit to its estimate."""
     readings, cal = calibrated
-    done = _drive(tmp_path / "s", typos=True)
-    assert done.returncode == 0, done.stderr
+    stopped = _drive(tmp_path / "s", stop_after=40, typos=True)
+    assert stopped.returncode == 2 and "--resume goes on" in stopped.stderr
+    assert len((tmp_path / "s" / "notebook.jsonl").read_text().splitlines()) == 40
+    again = subprocess.run([sys.executable, "-m", "calibrators.cli", "session", "--agent",
+                            "active", "--out", str(tmp_path / "s")], capture_output=True,
+                           text=True, timeout=120)
+    assert again.returncode == 2 and "give --resume" in again.stderr
+    resumed = _drive(tmp_path / "s", resume=True, typos=True)
+    assert resumed.returncode == 0, resumed.stderr
     mine = Measurements.read(tmp_path / "s" / "readings.csv")
     theirs = Measurements.read(readings)
     assert mine.items == theirs.items
@@ -93,23 +101,6 @@ def test_a_piped_session_is_calibrate(calibrated, tmp_path, capsys) -> None:
     assert main(["fit", str(tmp_path / "s" / "readings.csv"), "--json"]) == 0
     fitted = json.loads(capsys.readouterr().out)
     assert fitted["estimate"] == cal["estimate"]
-
-
-def test_a_session_stopped_half_way_resumes(calibrated, tmp_path) -> None:
-    """The input ends after 40 answers: the notebook holds them, the command says how to
-    go on, and `--resume` replays them and ends where an unbroken session ends."""
-    readings, _ = calibrated
-    stopped = _drive(tmp_path / "s", stop_after=40)
-    assert stopped.returncode == 2 and "--resume goes on" in stopped.stderr
-    assert len((tmp_path / "s" / "notebook.jsonl").read_text().splitlines()) == 40
-    again = subprocess.run([sys.executable, "-m", "calibrators.cli", "session", "--agent",
-                            "active", "--out", str(tmp_path / "s")], capture_output=True,
-                           text=True, timeout=120)
-    assert again.returncode == 2 and "give --resume" in again.stderr
-    resumed = _drive(tmp_path / "s", resume=True)
-    assert resumed.returncode == 0, resumed.stderr
-    assert (Measurements.read(tmp_path / "s" / "readings.csv").items
-            == Measurements.read(readings).items)
 
 
 @pytest.mark.parametrize(("text", "value"), [("0.12", 0.12), (" -0.5 ", -0.5), ("-", None),
