@@ -23,6 +23,7 @@ import numpy as np
 from calibrators.cli.common import UsageError, print_json
 from calibrators.compensation import write_estimate
 from calibrators.estimators.base import Estimate
+from calibrators.estimators.gauss_newton import CAUSE_WORDS
 from calibrators.estimators.prediction import predicted_correction, predicted_tcp_error
 from orthoglide_env.model.compensation import PitchTable
 from orthoglide_env.model.errors import (
@@ -36,12 +37,6 @@ from orthoglide_env.scoring import FRAMES, score
 from orthoglide_env.world.machine_file import machine_dict
 from orthoglide_env.world.truth import World
 
-#: A flagged reading's cause in the text report.
-CAUSE_WORDS: dict[str, str] = {
-    "reading": "unlike its repetitions: a mistyped or misread reading",
-    "unrepeated": "no repetition to tell a wrong reading from model error",
-    "model": "its repetitions read the same: model error, kept in the fit",
-}
 #: How many combinations a table lists before it only counts them (JSON lists all).
 LISTED: int = 6
 

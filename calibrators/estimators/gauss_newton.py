@@ -76,11 +76,13 @@ OUTLIER_K: float = 4.0
 #: What to do about an estimate outside the validity range.
 VALIDITY_HINT: str = ("free more parameters, e.g. --params extended, or take readings at "
                       "more postures")
-#: What the report says of an outlier, by its cause (:func:`_worst`).
-OUTLIER_WORDS: dict[str, str] = {
-    "reading": "unlike their repetitions (a mistyped or misread reading)",
-    "unrepeated": "with no repetition to tell a wrong reading from model error (repeat it "
-                  "to tell)",
+#: What the report says of a flagged reading, by its cause (:func:`_worst` for the left
+#: out ones, :func:`_misfits` for model error).
+CAUSE_WORDS: dict[str, str] = {
+    "reading": "unlike its repetitions: a mistyped or misread reading",
+    "unrepeated": "no repetition to tell a wrong reading from model error (repeat it to "
+                  "tell)",
+    "model": "its repetitions read the same: model error, kept in the fit",
 }
 #: The warning on model error names this many readings, then counts the rest.
 LISTED_MISFITS: int = 5
@@ -392,13 +394,13 @@ class GaussNewtonCalibrator(Calibrator):
         every_residual = np.where(mask, result.residuals[0],
                                   _held_out(design, values, theta, mask, ~mask, world))
         repeated, _ = _repetition_means(every_residual, group)
-        for cause, words in OUTLIER_WORDS.items():
+        for cause in ("reading", "unrepeated"):
             mine = [k for k, c in zip(outliers, causes, strict=True) if c == cause]
             if mine:
                 where = ", ".join(_where(data, k, every_residual, repeated) for k in mine)
                 warnings.append(f"{len(mine)} outlier reading(s) "
-                                f"{'kept' if mask[mine].all() else 'left out'}, {words}: "
-                                f"{where}")
+                                f"{'kept' if mask[mine].all() else 'left out'} ("
+                                f"{CAUSE_WORDS[cause]}): {where}")
         misfits = _misfits(result.residuals[0], group, noise)
         if len(misfits):
             where = ", ".join(_where(data, k, every_residual, repeated)
