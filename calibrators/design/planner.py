@@ -518,38 +518,47 @@ class Planner:
         return self.predicted_rigid_mm() ** 2
 
     def best_move(self) -> tuple[int, Options] | None:
-        """The affordable move with the most gain per second (with every move's seconds,
-        plungers and readings, and the gains priced), or None when no move gains
-        anything within the budget.
+        """The affordable move with the most gain per second (the first of equals), with
+        every move's seconds, plungers and readings and the gains that were priced
+        (:meth:`top_rates`), or None when no move gains anything within the budget: the
+        same move as the highest of :meth:`affordable_rates` over :meth:`options`."""
+        rate, options = self.top_rates(1)
+        best = int(np.argmax(rate))
+        return (best, options) if rate[best] > 0 else None
 
-        The same move as the highest of :meth:`affordable_rates` over :meth:`options`
-        (the first of equals), at a fraction of the price: only the moves whose bound
-        (:meth:`_gain_bounds`) per second reaches the best rate priced are priced.  The
-        bound is widened by :data:`BOUND_SLACK` (relative to itself and to the largest
-        one) for the rounding of both computations, far below any real difference."""
+    def top_rates(self, count: int) -> tuple[np.ndarray, Options]:
+        """Gain per second (P,) of the affordable moves that may be among the ``count``
+        best, exactly as :meth:`affordable_rates` over :meth:`options` has them, and -inf
+        for the others, whose rates are below the ``count``-th best (NaN gains in the
+        options: not priced).
+
+        Each move's gain has an upper bound (:meth:`_gain_bounds`), widened by
+        :data:`BOUND_SLACK` for the rounding of both.  The moves of the highest bounds
+        per second are priced first; then every move whose bound per second reaches the
+        ``count``-th best rate found, which can only rise as more are priced, so a move
+        left out can neither beat nor tie it.  A move where no stand reads gains nothing
+        (its rate 0) and is not priced either."""
         seconds, after, reads = self._moves()
         fits = self.time_s + seconds <= self.budget_s
         live = np.flatnonzero(fits & reads.any(axis=0))
-        if not live.size:
-            return None
-        bound = self._gain_bounds(reads, live)
-        bound = bound + BOUND_SLACK * (np.abs(bound) + np.max(np.abs(bound)))
-        ceiling = bound / seconds[live]
-        # The most promising first; then every move whose ceiling reaches the best rate
-        # seen, which can only rise, so no move left out can reach (or tie) it.
-        order = np.argsort(-ceiling, kind="stable")
         gain = np.full(len(seconds), np.nan)
         rate = np.full(len(seconds), -np.inf)
-        first = order[:FIRST_PRICED]
-        gain[live[first]] = self._gains(self._rows(reads, live[first]))
-        rate[live[first]] = gain[live[first]] / seconds[live[first]]
-        rest = order[FIRST_PRICED:]
-        rest = rest[ceiling[rest] >= rate.max()]
-        if rest.size:
-            gain[live[rest]] = self._gains(self._rows(reads, live[rest]))
-            rate[live[rest]] = gain[live[rest]] / seconds[live[rest]]
-        best = int(np.argmax(rate))
-        return (best, Options(gain, seconds, after, reads)) if rate[best] > 0 else None
+
+        def price(moves: np.ndarray) -> None:
+            postures = live[moves]
+            gain[postures] = self._gains(self._rows(reads, postures))
+            rate[postures] = gain[postures] / seconds[postures]
+
+        if live.size:
+            bound = self._gain_bounds(reads, live)
+            bound = bound + BOUND_SLACK * (np.abs(bound) + np.max(np.abs(bound)))
+            ceiling = bound / seconds[live]
+            order = np.argsort(-ceiling, kind="stable")
+            first, rest = np.split(order, [max(FIRST_PRICED, count)])
+            price(first)
+            if rest.size:
+                price(rest[ceiling[rest] >= np.sort(rate[live[first]])[-count]])
+        return rate, Options(gain, seconds, after, reads)
 
     def greedy_move(self) -> bool:
         """Take :meth:`best_move`, its readings expected; False when there is none."""
@@ -566,6 +575,21 @@ class Planner:
         trial.expect_readings()
         return trial
 
+    def _screening_moves(self) -> tuple[np.ndarray, Options]:
+        """The :data:`LOOKAHEAD_MOVES` affordable moves of the highest rates, the lowest
+        first, as ``np.argsort`` of :meth:`affordable_rates` over :meth:`options` ranks
+        them, and the options with their gains.  From :meth:`top_rates` when those rates
+        are positive and distinct, and above every other (so the ranking is the only
+        one); else from every move priced, whose ties ``np.argsort`` breaks its way."""
+        rate, options = self.top_rates(LOOKAHEAD_MOVES)
+        top = np.argsort(rate)[-LOOKAHEAD_MOVES:]
+        kept = rate[top]
+        if (kept[0] > 0 and np.unique(kept).size == LOOKAHEAD_MOVES
+                and np.sum(rate >= kept[0]) == LOOKAHEAD_MOVES):
+            return top, options
+        options = self.options()
+        return np.argsort(self.affordable_rates(options))[-LOOKAHEAD_MOVES:], options
+
     def best_remount(self, screened: int | None = SCREENED) -> tuple[int, int] | None:
         """The re-mount (stand, slot) whose next moves gain more per second, re-mount
         included, than the next moves of the present configuration, or None.  Every
@@ -578,8 +602,7 @@ class Planner:
                 if slot in self.slots:
                     continue
                 trial = self._remounted(stand, slot)
-                options = trial.options()
-                top = np.argsort(trial.affordable_rates(options))[-LOOKAHEAD_MOVES:]
+                top, options = trial._screening_moves()
                 gain = start - trial._criterion_value() + options.gain[top].sum()
                 spent = trial.time_s - self.time_s + options.seconds[top].sum()
                 candidates.append((gain / spent, stand, slot))
