@@ -29,6 +29,10 @@ at the far end of the travel); a plunger goes down only where the tip stays
 A fixed plan knows each reading only a priori, so its margins are wide (up to ~3 mm);
 a planner that has seen readings (:meth:`Planner.observe`) predicts them to microns and
 may use the whole travel: that is what the ``active`` agent buys with its feedback.
+
+Choosing a move prices exactly only the moves that may win: a move where no stand reads
+gains nothing, and every other one's gain has a cheap upper bound
+(:meth:`Planner.top_rates`), so the choice is the one pricing every move makes.
 """
 
 from __future__ import annotations
