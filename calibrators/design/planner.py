@@ -89,8 +89,8 @@ CRITERIA: tuple[str, ...] = ("I", "D")
 REMOUNT_CHECK_S: float = 300.0
 LOOKAHEAD_MOVES: int = 24
 SCREENED: int = 6
-#: :meth:`Planner.best_move` prices this many moves of the highest bounds first, then
-#: only those whose bound can still beat the best of them.
+#: :meth:`Planner.top_rates` prices at least this many moves of the highest bounds first,
+#: then only those whose bound can still beat the best of them.
 FIRST_PRICED: int = 8
 #: Relative widening of a gain's upper bound for the rounding of the gain and the bound
 #: (both ~1e-15 relative; a real difference between two moves is far larger).
@@ -216,7 +216,7 @@ class Step(NamedTuple):
 class Options(NamedTuple):
     """Every candidate move priced (P postures, K stands)."""
 
-    gain: np.ndarray  # (P,) (NaN: not priced, see Planner.best_move)
+    gain: np.ndarray  # (P,) (NaN: not priced, see Planner.top_rates)
     seconds: np.ndarray  # (P,)
     engaged: np.ndarray  # (K, P) plungers down after the move
     reads: np.ndarray  # (K, P) probability that each of them reads there
