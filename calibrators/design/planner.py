@@ -29,6 +29,10 @@ at the far end of the travel); a plunger goes down only where the tip stays
 A fixed plan knows each reading only a priori, so its margins are wide (up to ~3 mm);
 a planner that has seen readings (:meth:`Planner.observe`) predicts them to microns and
 may use the whole travel: that is what the ``active`` agent buys with its feedback.
+
+Choosing a move prices exactly only the moves that may win: a move where no stand reads
+gains nothing, and every other one's gain has a cheap upper bound
+(:meth:`Planner.top_rates`), so the choice is the one pricing every move makes.
 """
 
 from __future__ import annotations
@@ -85,6 +89,12 @@ CRITERIA: tuple[str, ...] = ("I", "D")
 REMOUNT_CHECK_S: float = 300.0
 LOOKAHEAD_MOVES: int = 24
 SCREENED: int = 6
+#: :meth:`Planner.top_rates` prices at least this many moves of the highest bounds first,
+#: then only those whose bound can still beat the best of them.
+FIRST_PRICED: int = 8
+#: Relative widening of a gain's upper bound for the rounding of the gain and the bound
+#: (both ~1e-15 relative; a real difference between two moves is far larger).
+BOUND_SLACK: float = 1e-9
 
 
 def candidate_postures(design: MachineDesign = PROTOTYPE) -> np.ndarray:
@@ -206,7 +216,7 @@ class Step(NamedTuple):
 class Options(NamedTuple):
     """Every candidate move priced (P postures, K stands)."""
 
-    gain: np.ndarray  # (P,)
+    gain: np.ndarray  # (P,) (NaN: not priced, see Planner.top_rates)
     seconds: np.ndarray  # (P,)
     engaged: np.ndarray  # (K, P) plungers down after the move
     reads: np.ndarray  # (K, P) probability that each of them reads there
@@ -250,7 +260,12 @@ class Planner:
         # The posture, and its index in the table: a plan starts at Zero, and moves only
         # to candidate postures.
         self.rho, self.here = np.zeros(3), self.table.zero
-        self.rows = np.stack([self.rows_of(k) for k in range(len(self.slots))])
+        self.rows = np.zeros((len(self.slots), len(self.table.postures), n))
+        # Each stand's rows over the unknowns they touch, and those unknowns' columns.
+        self.touched: list[tuple[np.ndarray, np.ndarray]] = [
+            (np.arange(0), np.zeros((0, 0)))] * len(self.slots)
+        for k in range(len(self.slots)):
+            self._set_rows(k)
         # Where an engaged gauge was seen not to read (its tip beyond the travel): it will
         # not read there again until its stand moves.
         self.silent = np.zeros((len(self.slots), len(self.table.postures)), dtype=bool)
@@ -271,6 +286,13 @@ class Planner:
             out[:, self._columns(stand)[:-1]] = self.table.change[self.slots[stand]]
             out[:, self._columns(stand)[-1]] = ZERO_SCALE
         return out
+
+    def _set_rows(self, stand: int) -> None:
+        """Make ``stand``'s rows those of its present mounting (:meth:`rows_of`), and keep
+        them over the unknowns they touch (``touched``: columns, rows)."""
+        self.rows[stand] = self.rows_of(stand)
+        cols = np.flatnonzero(np.any(self.rows[stand] != 0.0, axis=0))
+        self.touched[stand] = (cols, self.rows[stand][:, cols])
 
     def tips(self, postures: np.ndarray | slice = slice(None)
              ) -> tuple[np.ndarray, np.ndarray]:
@@ -306,17 +328,38 @@ class Planner:
     # -- pricing --------------------------------------------------------------------------
     def options(self) -> Options:
         """Every candidate move priced: its gain, its seconds, the plungers down after it
-        and how likely each reads.  A plunger is let down only where it is safe both here
-        and there (let down here, it reads there), and lifted where it is not safe there."""
+        and how likely each reads."""
+        seconds, after, reads = self._moves()
+        gain = np.zeros(len(seconds))
+        live = np.flatnonzero(reads.any(axis=0))
+        gain[live] = self._gains(self._rows(reads, live))
+        return Options(gain, seconds, after, reads)
+
+    def _moves(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The seconds (P,) of every candidate move, the plungers down after it (K, P) and
+        how likely each reads there (K, P).  A plunger is let down only where it is safe
+        both here and there (let down here, it reads there), and lifted where it is not
+        safe there."""
         safe, contact = self._reach()
         here = safe[:, self.here]
         engaged = np.array(self.engaged, dtype=bool)
         after = safe & (engaged | here)[:, None]
         reads = np.where(after, contact, 0.0)
-        rows = np.swapaxes(self.rows, 0, 1) * np.sqrt(reads.T)[:, :, None] / self.sigma
         flicks = np.sum(after != engaged[:, None], axis=0)
         seconds = TIME.move(self.rho[None], self.table.postures) + TIME.lift_s * flicks
-        return Options(self._gains(rows), seconds, after, reads)
+        return seconds, after, reads
+
+    def _rows(self, reads: np.ndarray, postures: np.ndarray) -> np.ndarray:
+        """Whitened rows (L, K, n) of the readings at ``postures`` (L,), each stand's
+        weighted by its probability of reading (``reads``, K by every posture).
+
+        Only postures where some stand reads need pricing: elsewhere every row is zero,
+        the update nil and the gain exactly 0 (``_gains`` would give ``trace(solve(I,
+        0))`` or ``slogdet(I)``, zeros that differ at most in their sign).  A posture's
+        gain is computed alone (stacked products and solves work item by item), so it is
+        the same to the bit whichever others are priced with it."""
+        return (np.swapaxes(self.rows[:, postures], 0, 1)
+                * np.sqrt(reads.T[postures])[:, :, None] / self.sigma)
 
     def _gains(self, rows: np.ndarray) -> np.ndarray:
         """Gain of adding each batch of whitened rows (B, K, n) to the covariance."""
@@ -327,6 +370,30 @@ class Planner:
         bm = b[..., :N_MACHINE]
         return np.trace(np.linalg.solve(m, (bm @ self.weight) @ np.swapaxes(bm, 1, 2)),
                         axis1=1, axis2=2)
+
+    def _gain_bounds(self, reads: np.ndarray, postures: np.ndarray) -> np.ndarray:
+        """An upper bound (L,) on the gain of the readings at ``postures`` (L,) (``reads``
+        as in :meth:`_rows`), valid for any rows and covariance, at a fraction of the
+        price of the gain.
+
+        With a posture's whitened rows ``R``, ``G = R C R'`` and, for I, ``Q = R C V C
+        R'`` (``V``: the rigid weight padded with zeros to every unknown, positive
+        semi-definite): I's gain is ``trace((1 + G)^-1 Q)``, and since ``G >= 0`` makes
+        ``(1 + G)^-1 <= 1`` and ``Q >= 0``, it is at most ``trace(Q)``; D's gain is ``log
+        det(1 + G)``, the sum of ``log(1 + g)`` over the eigenvalues ``g >= 0`` of ``G``,
+        at most ``trace(G)``.  Either trace is a sum of one quadratic form per row (of
+        ``C V C`` or ``C``): a stand's whitened row is its row scaled by ``sqrt(reads) /
+        sigma``, so its form is that of its row over the unknowns it touches, times
+        ``reads / sigma^2``.  The bound is tight where a posture's readings pin down
+        little of what is left (``G`` small), as they do after the first minutes."""
+        c = self.covariance
+        form = c if self.criterion == "D" else c[:, :N_MACHINE] @ self.weight @ c[:N_MACHINE]
+        bound = np.zeros(len(postures))
+        for k, (cols, rows) in enumerate(self.touched):
+            part = rows[postures]
+            bound += reads[k, postures] * np.einsum("li,li->l", part @ form[np.ix_(cols, cols)],
+                                                     part)
+        return bound / self.sigma**2
 
     def predicted_rigid_mm(self) -> float:
         """Predicted TCP error RMS after the best-fit rigid motion (mm)."""
@@ -375,7 +442,7 @@ class Planner:
         """A stand that reads no more (pushed past its travel) until it is re-mounted."""
         self.slots[stand] = -1
         self.engaged[stand] = False
-        self.rows[stand] = self.rows_of(stand)
+        self._set_rows(stand)
 
     def move(self, posture: int, options: Options) -> np.ndarray:
         """Take candidate move ``posture``: the steps, the clock; returns which stands are
@@ -409,7 +476,7 @@ class Planner:
             self.mean[cols] = 0.0
         self.slots[stand] = slot
         self.engaged[stand] = True
-        self.rows[stand] = self.rows_of(stand)
+        self._set_rows(stand)
         self.silent[stand] = False
 
     def reading_here(self) -> tuple[np.ndarray, np.ndarray]:
@@ -424,6 +491,7 @@ class Planner:
         trial = copy.copy(self)
         trial.slots, trial.engaged, trial.steps = list(self.slots), list(self.engaged), []
         trial.covariance, trial.rows = self.covariance.copy(), self.rows.copy()
+        trial.touched = list(self.touched)
         trial.silent = self.silent.copy()
         trial.mean = None if self.mean is None else self.mean.copy()
         return trial
@@ -454,12 +522,47 @@ class Planner:
         return self.predicted_rigid_mm() ** 2
 
     def best_move(self) -> tuple[int, Options] | None:
-        """The affordable move with the most gain per second (and every move priced), or
-        None when no move gains anything within the budget."""
-        options = self.options()
-        rate = self.affordable_rates(options)
+        """The affordable move with the most gain per second (the first of equals), with
+        every move's seconds, plungers and readings and the gains that were priced
+        (:meth:`top_rates`), or None when no move gains anything within the budget: the
+        same move as the highest of :meth:`affordable_rates` over :meth:`options`."""
+        rate, options = self.top_rates(1)
         best = int(np.argmax(rate))
         return (best, options) if rate[best] > 0 else None
+
+    def top_rates(self, count: int) -> tuple[np.ndarray, Options]:
+        """Gain per second (P,) of the affordable moves that may be among the ``count``
+        best, exactly as :meth:`affordable_rates` over :meth:`options` has them, and -inf
+        for the others, whose rates are below the ``count``-th best (NaN gains in the
+        options: not priced).
+
+        Each move's gain has an upper bound (:meth:`_gain_bounds`), widened by
+        :data:`BOUND_SLACK` for the rounding of both.  The moves of the highest bounds
+        per second are priced first; then every move whose bound per second reaches the
+        ``count``-th best rate found, which can only rise as more are priced, so a move
+        left out can neither beat nor tie it.  A move where no stand reads gains nothing
+        (its rate 0) and is not priced either."""
+        seconds, after, reads = self._moves()
+        fits = self.time_s + seconds <= self.budget_s
+        live = np.flatnonzero(fits & reads.any(axis=0))
+        gain = np.full(len(seconds), np.nan)
+        rate = np.full(len(seconds), -np.inf)
+
+        def price(moves: np.ndarray) -> None:
+            postures = live[moves]
+            gain[postures] = self._gains(self._rows(reads, postures))
+            rate[postures] = gain[postures] / seconds[postures]
+
+        if live.size:
+            bound = self._gain_bounds(reads, live)
+            bound = bound + BOUND_SLACK * (np.abs(bound) + np.max(np.abs(bound)))
+            ceiling = bound / seconds[live]
+            order = np.argsort(-ceiling, kind="stable")
+            first, rest = np.split(order, [max(FIRST_PRICED, count)])
+            price(first)
+            if rest.size:
+                price(rest[ceiling[rest] >= np.sort(rate[live[first]])[-count]])
+        return rate, Options(gain, seconds, after, reads)
 
     def greedy_move(self) -> bool:
         """Take :meth:`best_move`, its readings expected; False when there is none."""
@@ -476,6 +579,21 @@ class Planner:
         trial.expect_readings()
         return trial
 
+    def _screening_moves(self) -> tuple[np.ndarray, Options]:
+        """The :data:`LOOKAHEAD_MOVES` affordable moves of the highest rates, the lowest
+        first, as ``np.argsort`` of :meth:`affordable_rates` over :meth:`options` ranks
+        them, and the options with their gains.  From :meth:`top_rates` when those rates
+        are positive and distinct, and above every other (so the ranking is the only
+        one); else from every move priced, whose ties ``np.argsort`` breaks its way."""
+        rate, options = self.top_rates(LOOKAHEAD_MOVES)
+        top = np.argsort(rate)[-LOOKAHEAD_MOVES:]
+        kept = rate[top]
+        if (kept[0] > 0 and np.unique(kept).size == LOOKAHEAD_MOVES
+                and np.sum(rate >= kept[0]) == LOOKAHEAD_MOVES):
+            return top, options
+        options = self.options()
+        return np.argsort(self.affordable_rates(options))[-LOOKAHEAD_MOVES:], options
+
     def best_remount(self, screened: int | None = SCREENED) -> tuple[int, int] | None:
         """The re-mount (stand, slot) whose next moves gain more per second, re-mount
         included, than the next moves of the present configuration, or None.  Every
@@ -488,8 +606,7 @@ class Planner:
                 if slot in self.slots:
                     continue
                 trial = self._remounted(stand, slot)
-                options = trial.options()
-                top = np.argsort(trial.affordable_rates(options))[-LOOKAHEAD_MOVES:]
+                top, options = trial._screening_moves()
                 gain = start - trial._criterion_value() + options.gain[top].sum()
                 spent = trial.time_s - self.time_s + options.seconds[top].sum()
                 candidates.append((gain / spent, stand, slot))
