@@ -30,7 +30,7 @@ from scipy import special
 import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.engines import results
-from calibrators.estimators.base import Estimate
+from calibrators.estimators.base import Estimate, leaves
 from calibrators.estimators.prediction import predicted_rigid_mm
 from calibrators.experiment import (
     DEFAULT_BUDGET_S,
@@ -46,7 +46,7 @@ from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import DEFAULT_PRESET, ERROR_NAMES, MachineParams
 from orthoglide_env.model.reading_model import ParameterSpace, default_scales
-from orthoglide_env.scoring import FRAMES, Correction, score_batch, uncalibrated_errors
+from orthoglide_env.scoring import FRAMES, ScoreReport, score_batch, uncalibrated_errors
 from orthoglide_env.world.conditions import IDEAL, Conditions
 from orthoglide_env.world.truth import World
 
@@ -121,7 +121,7 @@ class Trial:
         where a number is not one (NaN: the std of an error the fit held fixed, or what a
         failed trial never had)."""
         data = {**asdict(self), "names": list(self.names)}
-        return json.dumps(_leaves(data, lambda v: None if v != v else v), allow_nan=False)
+        return json.dumps(leaves(data, lambda v: None if v != v else v), allow_nan=False)
 
     @classmethod
     def from_json(cls, line: str) -> Trial:
@@ -131,20 +131,11 @@ class Trial:
         names = data.pop("names", None)
         # A trial holds None nowhere else.
         rejected = data.pop("chi2_rejected", None)
-        trial = cls(**_leaves(data, lambda v: float("nan") if v is None else v),
+        trial = cls(**leaves(data, lambda v: float("nan") if v is None else v),
                     chi2_rejected=rejected)
         if names is not None and tuple(names) != trial.names:
             raise ValueError("the trial's error names are not this version's machine errors")
         return trial
-
-
-def _leaves(value: Any, change: Callable[[Any], Any]) -> Any:
-    """``value`` with ``change`` applied to every leaf, at any depth of dicts and lists."""
-    if isinstance(value, dict):
-        return {k: _leaves(v, change) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_leaves(v, change) for v in value]
-    return change(value)
 
 
 @cache
@@ -195,20 +186,14 @@ class _Episode:
 
 def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exception],
             curves: list[list[list[float]]]) -> list[Trial]:
-    """Score each estimate against its machine's truth (the kinematics of every score and
-    predicted error in one batched solve).  A failed estimate leaves its machine
-    uncalibrated: it is scored as the nominal machine (its TCP error after is the one
-    before), so that the accuracy over trials counts it."""
+    """Score each estimate against its machine's truth (:func:`_score`).  A failed estimate
+    leaves its machine uncalibrated: its TCP error after is the one before, so that the
+    accuracy over trials counts it."""
     good = [k for k, est in enumerate(estimates) if not isinstance(est, Exception)]
     fitted = [estimates[k] for k in good]
     z_scores = iter(machine_z_scores(fitted, [episodes[k].run.truth for k in good]))  # type: ignore[arg-type]
-    machines = [MachineParams(design=e.run.truth.design) if isinstance(est, Exception)
-                else est.machine for e, est in zip(episodes, estimates, strict=True)]
-    reports = iter(score_batch(machines, [e.run.truth for e in episodes],
-                               before=_before(episodes), worlds=_worlds(episodes),
-                               corrections=_corrections(estimates)))
-    predicted = iter(predicted_rigid_mm(fitted, [machines[k] for k in good]).tolist()  # type: ignore[arg-type]
-                     if good else [])
+    reports = iter(_score(episodes, estimates))
+    predicted = iter(predicted_rigid_mm(fitted).tolist() if good else [])  # type: ignore[arg-type]
     out = []
     for episode, est, curve in zip(episodes, estimates, curves, strict=True):
         run, count = episode.run, len(episode.run.records)
@@ -246,20 +231,23 @@ def _curves(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
                  for e in episodes]
         fitted = estimates if fraction == 1.0 else estimate_many(
             datas, name, episodes[0].run.sigma, config.conditions, config.errors)
-        models = [MachineParams(design=e.run.truth.design) if isinstance(est, Exception)
-                  else est.machine for e, est in zip(episodes, fitted, strict=True)]
-        reports = score_batch(models, [e.run.truth for e in episodes],
-                              before=_before(episodes), worlds=_worlds(episodes),
-                              corrections=_corrections(fitted))
-        for k, (episode, report) in enumerate(zip(episodes, reports, strict=True)):
+        for k, (episode, report) in enumerate(zip(episodes, _score(episodes, fitted),
+                                                  strict=True)):
             points[k].append([fraction * episode.run.time_s, report.tcp_after.rigid.rms])
     return points
 
 
-def _corrections(estimates: list[Estimate | Exception]) -> list[Correction | None]:
-    """What each estimate's controller compensates of the drives' lead error."""
-    return [est.lead_correction if isinstance(est, Estimate) and est.fits_lead else None
-            for est in estimates]
+def _score(episodes: list[_Episode], estimates: list[Estimate | Exception]
+           ) -> list[ScoreReport]:
+    """Each estimate's machine, with what its controller compensates of the drives' lead
+    error, scored against its episode's truth in one batched solve; a failed estimate is
+    scored as the nominal machine."""
+    machines = [MachineParams(design=e.run.truth.design) if isinstance(est, Exception)
+                else est.machine for e, est in zip(episodes, estimates, strict=True)]
+    corrections = [est.lead_correction if isinstance(est, Estimate) and est.fits_lead else None
+                   for est in estimates]
+    return score_batch(machines, [e.run.truth for e in episodes], before=_before(episodes),
+                       worlds=_worlds(episodes), corrections=corrections)
 
 
 def _before(episodes: list[_Episode]) -> np.ndarray:

@@ -215,9 +215,10 @@ def run_episodes(envs: gym.vector.VectorEnv, agents: list[Agent], seeds: list[in
         for i in np.flatnonzero(terminated | truncated):
             if out[i] is None:
                 lab = labs[i].unwrapped
+                truth, world = _truth(envs, i)
                 out[i] = Episode(list(lab.records), float(observation["time"][i, 0]),
-                                 lab.noise.effective_sigma, _truth(envs, i),
-                                 dict(_InfoRow(info, i)), _world(envs, i))
+                                 lab.noise.effective_sigma, truth, dict(_InfoRow(info, i)),
+                                 world)
         if all(e is not None for e in out):
             return out  # type: ignore[return-value]
 
@@ -236,19 +237,13 @@ def _labs(envs: gym.vector.VectorEnv) -> list[Any]:
     return [envs.unwrapped.sub_env(i) for i in range(envs.num_envs)]
 
 
-def _truth(envs: gym.vector.VectorEnv, i: int) -> MachineParams:
-    """Env ``i``'s true machine (scoring only)."""
+def _truth(envs: gym.vector.VectorEnv, i: int) -> tuple[MachineParams, World | None]:
+    """Env ``i``'s true machine and world (None: ideal), for scoring only."""
     if isinstance(envs, gym.vector.SyncVectorEnv):
-        return envs.envs[i].unwrapped.true_machine
-    return envs.unwrapped.true_machines[i]
-
-
-def _world(envs: gym.vector.VectorEnv, i: int) -> World | None:
-    """Env ``i``'s world (scoring only)."""
-    if isinstance(envs, gym.vector.SyncVectorEnv):
-        return envs.envs[i].unwrapped.true_world
+        lab = envs.envs[i].unwrapped
+        return lab.true_machine, lab.true_world
     worlds = envs.unwrapped.true_worlds
-    return None if worlds is None else worlds[i]
+    return envs.unwrapped.true_machines[i], None if worlds is None else worlds[i]
 
 
 def _plan_arrays(plans: list[list[dict[str, Any]]], idle: dict[str, Any]

@@ -11,10 +11,10 @@ T = TypeVar("T")
 
 class Registry(Generic[T]):
     """Classes registered by their ``name``, found by importing every module of a package
-    (except ``skip``) the first time the names are asked for."""
+    the first time the names are asked for."""
 
-    def __init__(self, kind: str, package: str, skip: tuple[str, ...] = ()) -> None:
-        self.kind, self.package, self.skip = kind, package, skip
+    def __init__(self, kind: str, package: str) -> None:
+        self.kind, self.package = kind, package
         self.classes: dict[str, type[T]] = {}
 
     def register(self, cls: type[T]) -> type[T]:
@@ -29,8 +29,7 @@ class Registry(Generic[T]):
         """Every registered name (imports each module of the package once)."""
         package = importlib.import_module(self.package)
         for module in pkgutil.iter_modules(package.__path__):
-            if module.name not in self.skip:
-                importlib.import_module(f"{self.package}.{module.name}")
+            importlib.import_module(f"{self.package}.{module.name}")
         return sorted(self.classes)
 
     def get(self, name: str) -> T:

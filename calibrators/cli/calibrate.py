@@ -64,11 +64,11 @@ def _z_rms(est: Estimate, data: Measurements, env: gym.Env) -> float | None:
         # The world's drawn numbers are not the fit's terms: the machine errors' z, as
         # compare scores them.
         z = machine_z_scores([est], [env.unwrapped.true_machine])[0]
-        return float(np.sqrt(np.mean(z**2))) if len(z) else None
-    design, _ = design_of(data)
-    truth = parameters_of(design, env.unwrapped.true_machine, env.unwrapped.true_gauges)
-    free = [est.space.index(n) for n in est.names]
-    z = z_scores(est.theta[free], truth[free], est.covariance, est.information, est.scale)
+    else:
+        design, _ = design_of(data)
+        truth = parameters_of(design, env.unwrapped.true_machine, env.unwrapped.true_gauges)
+        free = [est.space.index(n) for n in est.names]
+        z = z_scores(est.theta[free], truth[free], est.covariance, est.information, est.scale)
     return float(np.sqrt(np.mean(z**2))) if len(z) else None
 
 

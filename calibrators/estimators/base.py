@@ -11,6 +11,7 @@ package is imported by :func:`available`, so adding a strategy is adding one mod
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, ClassVar
@@ -246,7 +247,9 @@ class Estimate:
         kwargs = {f.name: data[f.name] for f in fields(cls) if f.name in data}
         for key in _ARRAY_FIELDS:
             if key in kwargs:
-                kwargs[key] = np.array(_nan(kwargs[key]), dtype=float)
+                # What :func:`strict` wrote as None is NaN again.
+                kwargs[key] = np.array(leaves(kwargs[key], lambda v: np.nan if v is None else v),
+                                       dtype=float)
         for key in ("covariance", "fisher", "information", "error_covariance",
                     "lead_covariance"):
             if key in kwargs and kwargs[key].size == 0:
@@ -265,24 +268,19 @@ class Estimate:
         return cls.from_dict(json.loads(Path(path).read_text()))
 
 
+def leaves(value: Any, change: Callable[[Any], Any]) -> Any:
+    """``value`` with ``change`` applied to every leaf, at any depth of dicts, lists and
+    tuples (a tuple comes back as a list, as JSON writes it)."""
+    if isinstance(value, dict):
+        return {k: leaves(v, change) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [leaves(v, change) for v in value]
+    return change(value)
+
+
 def strict(value: Any) -> Any:
     """``value`` with every float that JSON cannot carry (NaN, infinities) as None."""
-    if isinstance(value, float):
-        return value if np.isfinite(value) else None
-    if isinstance(value, list | tuple):
-        return [strict(v) for v in value]
-    if isinstance(value, dict):
-        return {k: strict(v) for k, v in value.items()}
-    return value
-
-
-def _nan(value: Any) -> Any:
-    """What :func:`strict` wrote, None back as NaN."""
-    if value is None:
-        return float("nan")
-    if isinstance(value, list):
-        return [_nan(v) for v in value]
-    return value
+    return leaves(value, lambda v: None if isinstance(v, float) and not np.isfinite(v) else v)
 
 
 def schema(values: list, space: list[str]) -> dict[str, Any]:

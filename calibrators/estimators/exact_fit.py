@@ -122,28 +122,13 @@ class BatchFit:
             np.diagonal(self.error_covariance, axis1=1, axis2=2)[:, ~self.free].any(axis=1))
         return np.where(modelled[:, None, None], with_model, inflated)
 
-    def identifiable(self, m: int) -> np.ndarray:
-        """Directions (rows, over the free parameters in scaled units) that the data of
-        machine ``m`` determine at least as well as their scale."""
-        return identifiable_directions(self.information[m])
 
-    def unidentifiable(self, m: int) -> np.ndarray:
-        values, vectors = np.linalg.eigh(self.information[m])
-        return vectors[:, values < RETAIN].T
-
-    def z_scores(self, m: int, truth: np.ndarray) -> np.ndarray:
-        """(estimate - truth) / std along machine ``m``'s identifiable directions."""
-        idx = np.flatnonzero(self.free)
-        return z_scores(self.theta[m, idx], np.asarray(truth)[idx], self.scaled_covariance[m],
-                        self.information[m], self.scale[idx])
-
-
-def identifiable_directions(information: np.ndarray) -> np.ndarray:
-    """Eigenvectors (rows, most informative first) of a data information matrix in scaled
-    units whose eigenvalue is at least :data:`RETAIN`: the combinations the data determine
-    at least as well as their a-priori scale."""
+def directions(information: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenvectors (rows) of a data information matrix in scaled units: those whose
+    eigenvalue is at least :data:`RETAIN`, most informative first (the combinations the
+    data determine at least as well as their a-priori scale), and the others."""
     values, vectors = np.linalg.eigh(information)
-    return vectors[:, values >= RETAIN].T[::-1]
+    return vectors[:, values >= RETAIN].T[::-1], vectors[:, values < RETAIN].T
 
 
 def z_scores(estimate: np.ndarray, truth: np.ndarray, covariance: np.ndarray,
@@ -154,7 +139,7 @@ def z_scores(estimate: np.ndarray, truth: np.ndarray, covariance: np.ndarray,
     normal: their RMS over many machines is the check that its error bars can be trusted."""
     err = (estimate - truth) / scale
     cov = covariance / np.outer(scale, scale)
-    dirs = identifiable_directions(information)
+    dirs, _ = directions(information)
     return dirs @ err / np.sqrt(np.einsum("kf,fg,kg->k", dirs, cov, dirs))
 
 
@@ -439,8 +424,6 @@ def fit_batch(design: Design, values: np.ndarray, mask: np.ndarray, sigma: float
     theta = np.tile(np.asarray(fixed, dtype=float), (m_count, 1))
     theta[:, idx] = 0.0 if start is None else np.broadcast_to(start, theta.shape)[:, idx]
     converged, iterations, last = SOLVERS[solver](problem, theta, max_iterations)
-
-    # The covariance and information at the solution.
     rows = np.arange(m_count)
     model = problem.predict(theta, rows)
     r, cost = problem.residual(theta, rows, model)

@@ -31,6 +31,7 @@ from calibrators.estimators.exact_fit import (
     CHI2_LEVEL,
     RETAIN,
     BatchFit,
+    directions,
     fit_batch,
     newton_step,
     world_columns,
@@ -365,6 +366,7 @@ class GaussNewtonCalibrator(Calibrator):
         idx = np.flatnonzero(result.free)
         s = result.scale[idx]
         info = result.information[0]
+        seen, unseen = directions(info) if explain else ((), ())
         cov = result.scaled_covariance[0]
         error_cov = result.error_covariance[0].copy()
         error_cov[np.ix_(idx, idx)] = cov
@@ -429,9 +431,9 @@ class GaussNewtonCalibrator(Calibrator):
             readings=data, names=names, space=every, theta=theta, prior=prior,
             chi2=float(result.chi2[0]), dof=int(result.dof[0]),
             covariance_scale=float(result.covariance_scale[0]), warnings=warnings,
-            identifiable=[describe(d, names) for d in result.identifiable(0)] if explain else [],
-            unidentifiable=[act_together(d, names)
-                            for d in sparse_basis(result.unidentifiable(0))] if explain else [],
+            identifiable=[describe(d, names) for d in seen],
+            unidentifiable=[act_together(d, names) for d in sparse_basis(unseen)]
+            if explain else [],
             outliers=outliers, outlier_causes=causes,
             outlier_residuals=[float(every_residual[k]) for k in outliers],
             misfits=misfits.tolist(),

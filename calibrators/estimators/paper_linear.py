@@ -41,14 +41,10 @@ class NeedsExactFit(ValueError):
     message names no option: each command says how its user reaches that fit."""
 
 
-def split_repetitions(data: Measurements) -> list[int]:
-    """Repetitions that have Max/Min readings (the last Zero opens none)."""
-    return sorted({m.repetition for m in data.items if not m.is_zero})
-
-
 def folds(data: Measurements) -> list[set[int]]:
-    """The held-out sets of repetitions of the verification (see :data:`MAX_FOLDS`)."""
-    reps = split_repetitions(data)
+    """The held-out sets of repetitions of the verification (see :data:`MAX_FOLDS`): those
+    with readings away from Zero (the last Zero opens a repetition of its own)."""
+    reps = sorted({m.repetition for m in data.items if not m.is_zero})
     if not reps:
         return []
     return [set(run.tolist()) for run in np.array_split(np.array(reps, dtype=int),
