@@ -181,8 +181,12 @@ def tcp_error_vectors_many(models: Sequence[MachineParams], truths: Sequence[Mac
         out[inside[m]] = _rowwise(lambda r: direct(truths[m], r), rho[m][inside[m]])
         return out
 
-    # Rows without a command are solved at Zero (any posture will do) and dropped.
-    reached = _direct_many(list(truths), np.where(inside[..., None], rho, 0.0), alone)
+    # Rows without a command are solved at Zero (any posture will do) and dropped; when a
+    # posture cannot be assembled, each machine alone.
+    try:
+        reached = direct(MachineParams.stack(list(truths)), np.where(inside[..., None], rho, 0.0))
+    except UnreachableError:
+        reached = np.stack([alone(m) for m in range(len(truths))])
     return np.where(inside[..., None], reached, np.nan) - targets
 
 
@@ -203,15 +207,6 @@ def commands_many(models: Sequence[MachineParams], targets: np.ndarray,
         return np.stack([commands(m, targets) for m in models])
     inside = within_limits(rho, stacked.design).all(axis=-1)
     return np.where(inside[..., None], rho, np.nan)
-
-
-def _direct_many(machines: list[MachineParams], rho: np.ndarray,
-                 alone: Callable[[int], np.ndarray]) -> np.ndarray:
-    """``direct(machines[m], rho[m])`` for each machine (``rho`` (M, ..., 3)) in one
-    batched solve, or, when a posture cannot be assembled, ``alone(m)`` for each."""
-    with contextlib.suppress(UnreachableError):
-        return direct(MachineParams.stack(machines), rho)
-    return np.stack([alone(m) for m in range(len(machines))])
 
 
 def tcp_errors(model: MachineParams, truth: MachineParams, targets: np.ndarray) -> np.ndarray:
@@ -508,11 +503,9 @@ def predicted_target_errors(model: MachineParams, covariance: np.ndarray,
     jac, cov = _with_drives(tcp_sensitivity(machines, rho, p), rho, [covariance],
                             None if drive is None else [drive])
     mask = usable[0]
-    out = {}
+    out = {frame: np.full(len(targets), np.nan) for frame in FRAMES}
     for frame, values in _per_target(targets[mask], jac[:, mask], cov).items():
-        full = np.full(len(targets), np.nan)
-        full[usable[0]] = np.sqrt(values[0])
-        out[frame] = full
+        out[frame][mask] = np.sqrt(values[0])
     return out
 
 

@@ -5,6 +5,7 @@ parameters an estimator fits per mounting.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from functools import lru_cache
 from typing import overload
 
@@ -165,12 +166,11 @@ def install_array(
         origin = origin + errors[..., 0, :]
         direction = direction + cross(errors[..., 1, :], direction)
         direction = direction / np.linalg.norm(direction, axis=-1, keepdims=True)
-    axis = np.array([s.axis for s in specs], dtype=np.intp)
+    g = spec_arrays(specs)
     # The reading runs along the world axis, whichever side the stand is on.
-    sign = np.sign(direction[..., np.arange(len(specs)), axis])
-    return GaugeArray(origin=origin, direction=direction, sign=sign, travel=float(travel),
-                      zero=travel / 2, leg=[s.leg for s in specs], axis=axis,
-                      at=[s.at for s in specs], part=[s.part for s in specs])
+    sign = np.sign(direction[..., np.arange(len(specs)), g.axis])
+    return replace(g, origin=origin, direction=direction, sign=sign, travel=float(travel),
+                   zero=travel / 2)
 
 
 @overload

@@ -175,10 +175,8 @@ class MachineParams:
 
     def to_vector(self) -> np.ndarray:
         """The 27 errors as one vector in :data:`ERROR_NAMES` order, shape ``(*batch, 27)``."""
-        batch = self.batch_shape
-        return np.concatenate(
-            [getattr(self, key).reshape(*batch, -1) for key in _SHAPES], axis=-1
-        )
+        return np.concatenate([getattr(self, key).reshape(*self.batch_shape, -1)
+                               for key in _SHAPES], axis=-1)
 
     @classmethod
     def from_vector(cls, vector: np.ndarray, design: MachineDesign = PROTOTYPE
@@ -189,12 +187,9 @@ class MachineParams:
         if vector.shape[-1:] != (len(ERROR_NAMES),):
             raise ValueError(f"a machine vector has {len(ERROR_NAMES)} entries, "
                              f"got shape {list(vector.shape)}")
-        batch, kwargs, start = vector.shape[:-1], {}, 0
-        for key, shape in _SHAPES.items():
-            size = int(np.prod(shape))
-            kwargs[key] = vector[..., start:start + size].reshape(*batch, *shape)
-            start += size
-        return cls(**kwargs, design=design)
+        parts = np.split(vector, _SPLITS, axis=-1)
+        return cls(**{key: part.reshape(*vector.shape[:-1], *shape) for (key, shape), part
+                      in zip(_SHAPES.items(), parts, strict=True)}, design=design)
 
     # -- derived geometry, used by the kinematics and the URDF writer ------------------
     @property
@@ -304,6 +299,8 @@ _SHAPES: dict[str, tuple[int, ...]] = {
     "axis_offset": (3, 2),
     "attach": (3, 3),
 }
+#: Where each group's errors end in a machine's vector (but the last).
+_SPLITS: list[int] = np.cumsum([np.prod(shape) for shape in _SHAPES.values()])[:-1].tolist()
 
 def _by_value(function: Callable[[np.ndarray], np.ndarray]
               ) -> Callable[[np.ndarray], np.ndarray]:
@@ -450,46 +447,23 @@ class ErrorPreset:
                ) -> MachineParams:
         """Draw one machine of ``design`` (the gauge installation errors are drawn by the
         gauges)."""
-        return MachineParams(
-            drho=rng.normal(0.0, self.drho, 3),
-            dL=rng.normal(0.0, self.dL, 3),
-            axis_tilt=rng.normal(0.0, self.axis_tilt, (3, 2)),
-            axis_offset=rng.normal(0.0, self.axis_offset, (3, 2)),
-            attach=rng.normal(0.0, self.attach, (3, 3)),
-            design=design,
-        )
+        return MachineParams(**{key: rng.normal(0.0, getattr(self, key), shape)
+                                for key, shape in _SHAPES.items()}, design=design)
 
 
 #: Named error presets.  ``realistic`` sizes the extended errors so that the paper's
 #: six-parameter model is left with gauge residuals of the order the paper reports
 #: (about 0.1 mm, Table 1); ``benchmarks/realistic.py`` measures that.
-PRESETS: dict[str, ErrorPreset] = {
-    p.name: p
-    for p in (
-        ErrorPreset("nominal", description="no error at all"),
-        ErrorPreset(
-            "paper",
-            drho=2.0,
-            dL=2.0,
-            description="only the paper's six parameters: drho, dL ~ N(0, 2 mm)",
-        ),
-        ErrorPreset(
-            "realistic",
-            drho=2.0,
-            dL=2.0,
-            axis_tilt=2e-3,
-            axis_offset=0.5,
-            attach=0.3,
-            gauge_position=0.5,
-            gauge_tilt=5e-3,
-            description=(
-                "paper errors N(0, 2 mm) plus actuator tilt N(0, 2 mrad), axis offset "
-                "N(0, 0.5 mm), platform attachment N(0, 0.3 mm), gauge stand position "
-                "N(0, 0.5 mm) and tilt N(0, 5 mrad)"
-            ),
-        ),
-    )
-}
+PRESETS: dict[str, ErrorPreset] = {p.name: p for p in (
+    ErrorPreset("nominal", description="no error at all"),
+    ErrorPreset("paper", drho=2.0, dL=2.0,
+                description="only the paper's six parameters: drho, dL ~ N(0, 2 mm)"),
+    ErrorPreset("realistic", drho=2.0, dL=2.0, axis_tilt=2e-3, axis_offset=0.5, attach=0.3,
+                gauge_position=0.5, gauge_tilt=5e-3,
+                description="paper errors N(0, 2 mm) plus actuator tilt N(0, 2 mrad), axis "
+                "offset N(0, 0.5 mm), platform attachment N(0, 0.3 mm), gauge stand position "
+                "N(0, 0.5 mm) and tilt N(0, 5 mrad)"),
+)}
 DEFAULT_PRESET = "realistic"
 
 

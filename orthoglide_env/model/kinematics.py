@@ -216,8 +216,7 @@ def axis_direction_derivatives(machine: MachineParams) -> np.ndarray:
     ``(*batch, 3 legs, 2, 3)``.  With ``u_i = R_LEG[i] l_i`` and ``l_i = (1, tan a, tan b)
     / N``: ``dl/da = (I - l l^T) e_1 sec^2(a) / N`` (``b`` with ``e_2``)."""
     tilt = machine.axis_tilt  # (*batch, 3, 2)
-    tan = np.tan(tilt)
-    local = np.concatenate([np.ones((*tan.shape[:-1], 1)), tan], axis=-1)
+    local = np.concatenate([np.ones((*tilt.shape[:-1], 1)), np.tan(tilt)], axis=-1)
     norm = np.linalg.norm(local, axis=-1, keepdims=True)
     local = local / norm
     dlocal = (np.eye(3)[1:] - local[..., None, :] * local[..., 1:, None]) * (
@@ -267,9 +266,7 @@ def tcp_sensitivity(machine: MachineParams, rho: np.ndarray, p: np.ndarray) -> n
     in closed form.  Each error is in one leg's loop (:data:`ERROR_LEGS`), so ``df/dtheta``
     has one entry per column and the solve is a column of the inverse times it."""
     inverse, row = tcp_sensitivity_factors(machine, rho, p)
-    out = np.take(inverse, ERROR_LEGS, axis=-1)
-    out *= row[..., None, :]
-    return out
+    return np.take(inverse, ERROR_LEGS, axis=-1) * row[..., None, :]
 
 
 def tcp_sensitivity_factors(machine: MachineParams, rho: np.ndarray, p: np.ndarray
@@ -298,9 +295,7 @@ def sensitivity_along(inverse: np.ndarray, row: np.ndarray, weights: np.ndarray
     not three times."""
     through = (weights[..., 0, None] * inverse[..., 0, :] + weights[..., 1, None]
                * inverse[..., 1, :] + weights[..., 2, None] * inverse[..., 2, :])
-    out = np.take(through, ERROR_LEGS, axis=-1)
-    out *= row
-    return out
+    return np.take(through, ERROR_LEGS, axis=-1) * row
 
 
 def inverse_3x3(m: np.ndarray) -> np.ndarray:

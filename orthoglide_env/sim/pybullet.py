@@ -241,9 +241,7 @@ class OrthoglideMachine:
         target = rho * MM
         for n in range(1, MAX_SETTLE_STEPS + 1):
             self.sim.step()
-            states = self.bc.getJointStates(self.body, self.slides)
-            pos = np.array([s[0] for s in states])
-            vel = np.array([s[1] for s in states])
+            pos, vel = np.array([s[:2] for s in self.bc.getJointStates(self.body, self.slides)]).T
             if np.all(np.abs(pos - target) < SETTLE_TOL) and np.all(np.abs(vel) < SETTLE_TOL):
                 return n
         raise RuntimeError(f"the machine did not settle in {MAX_SETTLE_STEPS} steps")
