@@ -215,9 +215,8 @@ def tcp_errors(model: MachineParams, truth: MachineParams, targets: np.ndarray) 
     return np.linalg.norm(tcp_error_vectors(model, truth, targets), axis=-1)
 
 
-def _masked_centroids(
-    targets: np.ndarray, reached: np.ndarray, mask: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _masked_centroids(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Targets and reached points about their centroids over ``mask``, zero (not NaN) in
     the rows left out so that sums ignore them, and the two centroids (..., 3)."""
     keep = mask[..., None]
@@ -230,9 +229,8 @@ def _masked_centroids(
             cq, cp)
 
 
-def best_rigid_motion(
-    targets: np.ndarray, reached: np.ndarray, mask: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+def best_rigid_motion(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
     """Rotation ``R`` (..., 3, 3) and translation ``t`` (..., 3) minimising the sum over
     ``mask`` of ``|R reached + t - target|^2``, for a batch of machines: ``targets`` and
     ``reached`` (..., n, 3) broadcast together, ``mask`` (..., n) marks the usable targets.
@@ -305,12 +303,10 @@ def uncalibrated_errors(truths: Sequence[MachineParams], grid: np.ndarray | None
     return tcp_error_vectors_many([nominal] * len(truths), truths, targets, worlds)
 
 
-def score_batch(
-    estimates: Sequence[MachineParams], truths: Sequence[MachineParams],
-    grid: np.ndarray | None = None, before: np.ndarray | None = None,
-    worlds: Sequence[World] | None = None,
-    corrections: Sequence[Correction | None] | None = None,
-) -> list[ScoreReport]:
+def score_batch(estimates: Sequence[MachineParams], truths: Sequence[MachineParams],
+                grid: np.ndarray | None = None, before: np.ndarray | None = None,
+                worlds: Sequence[World] | None = None,
+                corrections: Sequence[Correction | None] | None = None) -> list[ScoreReport]:
     """Score each estimate against its true machine (see :func:`score`; ``worlds`` and
     ``corrections``: see :func:`tcp_error_vectors_many`); ``before``: the
     :func:`uncalibrated_errors` of ``truths``, when already known (they depend on the
@@ -330,20 +326,15 @@ def score_batch(
                          f"limits (machines {empty.tolist()} of the batch)")
     frames_before = frame_errors(targets, targets + before, usable)
     frames_after = frame_errors(targets, targets + after, usable)
-    return [
-        ScoreReport(
-            drho_error=(e.drho - t.drho).tolist(), dL_error=(e.dL - t.dL).tolist(),
-            tcp_before=b, tcp_after=a, n_targets=int(m.sum()), n_skipped=int((~m).sum()),
-        )
-        for e, t, b, a, m in zip(estimates, truths, frames_before, frames_after, usable,
-                                 strict=True)
-    ]
+    return [ScoreReport(drho_error=(e.drho - t.drho).tolist(), dL_error=(e.dL - t.dL).tolist(),
+                        tcp_before=b, tcp_after=a, n_targets=int(m.sum()),
+                        n_skipped=int((~m).sum()))
+            for e, t, b, a, m in zip(estimates, truths, frames_before, frames_after, usable,
+                                     strict=True)]
 
 
-def score(
-    estimate: MachineParams, truth: MachineParams, grid: np.ndarray | None = None,
-    world: World | None = None, correction: Correction | None = None,
-) -> ScoreReport:
+def score(estimate: MachineParams, truth: MachineParams, grid: np.ndarray | None = None,
+          world: World | None = None, correction: Correction | None = None) -> ScoreReport:
     """Score ``estimate`` against ``truth`` (in its ``world``, when given; its controller
     compensating the drives' error ``correction``, when given): parameter errors and TCP
     errors before (nominal model) and after (estimated model) compensation, in the three

@@ -72,10 +72,9 @@ def _machine_option(value: Any, settings: LabSettings
             return machine, _world_option(world, settings)
     except ValueError as exc:
         raise ValueError(f"reset option 'machine': {exc}") from None
-    raise ValueError(
-        "reset option 'machine' must be a dict in the machine file schema, a MachineParams "
-        f"or None (draw one from the preset), got {type(value).__name__} {value!r}"
-    )
+    raise ValueError("reset option 'machine' must be a dict in the machine file schema, a "
+                     "MachineParams or None (draw one from the preset), got "
+                     f"{type(value).__name__} {value!r}")
 
 
 def _world_option(world: World | None, settings: LabSettings) -> World | None:

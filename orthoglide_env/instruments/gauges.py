@@ -164,12 +164,10 @@ class GaugeArray:
         """One machine's gauges as :class:`Gauge` objects."""
         if self.batch_shape:
             raise ValueError("to_gauges() converts one machine's gauges: index the batch first")
-        return [
-            Gauge(self.spec((k,)), origin.copy(), direction.copy(), float(sign), float(travel),
-                  float(zero))
-            for k, (origin, direction, sign, travel, zero) in enumerate(zip(
-                self.origin, self.direction, self.sign, self.travel, self.zero, strict=True))
-        ]
+        return [Gauge(self.spec((k,)), origin.copy(), direction.copy(), float(sign),
+                      float(travel), float(zero))
+                for k, (origin, direction, sign, travel, zero) in enumerate(zip(
+                    self.origin, self.direction, self.sign, self.travel, self.zero, strict=True))]
 
     def zeroed(self, t_at_zero: np.ndarray) -> GaugeArray:
         """The gauges set up at the Zero posture: see :func:`zero_gauges`."""

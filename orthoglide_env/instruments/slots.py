@@ -172,8 +172,6 @@ def layout_from_names(names: list[str]) -> tuple[GaugeSpec, ...]:
             raise ValueError(f"bad gauge name '{raw}': expected like 'x-leg/y', 'x/y@0.5', "
                              "'x-carriage/y' or 'platform/x'")
         axis_index = AXIS_NAMES.index(axis)
-        specs.append(
-            GaugeSpec.platform(axis_index) if part == Part.PLATFORM
-            else GaugeSpec(LEG_NAMES.index(leg), axis_index, float(at) if at else 0.5, part)
-        )
+        specs.append(GaugeSpec.platform(axis_index) if part == Part.PLATFORM else GaugeSpec(
+            LEG_NAMES.index(leg), axis_index, float(at) if at else 0.5, part))
     return tuple(specs)

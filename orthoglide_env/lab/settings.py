@@ -129,8 +129,7 @@ def lab_settings(args: dict[str, Any]) -> LabSettings:
         layout=tuple(slots[slot_index(spec, design=design)] for spec in PAPER_LAYOUT[:stands]),
         tracker=args["tracker"], tracker_sigma=args["tracker_sigma"],
         budget_s=args["budget_s"], reward=args["reward"], estimator=args["estimator"],
-        time_weight=args["time_weight"], success_mm=args["success_mm"],
-    )
+        time_weight=args["time_weight"], success_mm=args["success_mm"])
 
 
 def calibration_settings(args: dict[str, Any]) -> LabSettings:
@@ -139,10 +138,8 @@ def calibration_settings(args: dict[str, Any]) -> LabSettings:
     layout = args["gauges"] or PAPER_LAYOUT
     return LabSettings(
         **_shared(args, args["design"] or PROTOTYPE), stands=len(layout), layout=layout,
-        station=False,
-        max_steps=args["max_episode_steps"], overtravel="momentary", strict_moves=True,
-        notebook=False, motion=args["motion"],
-    )
+        station=False, max_steps=args["max_episode_steps"], overtravel="momentary",
+        strict_moves=True, notebook=False, motion=args["motion"])
 
 
 def lab_spaces(settings: LabSettings) -> tuple[spaces.Dict, spaces.Dict]:

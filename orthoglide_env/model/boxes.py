@@ -29,9 +29,8 @@ PLATFORM_BOX: int = BOX_NAMES.index("platform")
 CARRIAGE_BOX: int = BOX_NAMES.index("x_carriage")
 
 
-def collision_boxes(
-    machine: MachineParams, rho: np.ndarray, p: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def collision_boxes(machine: MachineParams, rho: np.ndarray, p: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every moving box, in the order of :data:`BOX_NAMES`: centres ``(..., 13, 3)``,
     rotations ``(..., 13, 3, 3)``, half extents ``(..., 13, 3)``."""
     legs = np.repeat(np.arange(3), 2)
@@ -58,9 +57,8 @@ def collision_boxes(
     return centres, rots, halves
 
 
-def bar_boxes(
-    a: np.ndarray, c: np.ndarray, legs: np.ndarray, bars: np.ndarray, design: MachineDesign
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def bar_boxes(a: np.ndarray, c: np.ndarray, legs: np.ndarray, bars: np.ndarray,
+              design: MachineDesign) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Bar boxes from the joint centres ``a`` (carriage) and ``c`` (platform) of their legs,
     shaped as ``design`` says."""
     r_axis = R_LEG[legs][..., :, 2]

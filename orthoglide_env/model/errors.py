@@ -251,10 +251,8 @@ class MachineParams:
             raise MachineFileError("a machine must be a JSON object")
         unknown = [key for key in data if key not in (*_SHAPES, "design")]
         if unknown:
-            raise MachineFileError(
-                f"unknown machine key(s) {sorted(map(str, unknown))}; allowed: "
-                f"{[*sorted(_SHAPES), 'design']}", key=str(unknown[0]),
-            )
+            raise MachineFileError(f"unknown machine key(s) {sorted(map(str, unknown))}; "
+                                   f"allowed: {[*sorted(_SHAPES), 'design']}", key=str(unknown[0]))
         if "design" in data:
             named = _design_of(data["design"], folder)
             if design is not None and named != design:
@@ -374,8 +372,7 @@ def check_validity(machine: MachineParams) -> MachineParams:
             raise MachineFileError(
                 f"machine key '{key}' element {list(index)} = {values[index]:g} {unit} is "
                 f"outside the validity range [-{limit:g}, {limit:g}] {unit} (where the "
-                "simulator and the exact model agree)", key=key,
-            )
+                "simulator and the exact model agree)", key=key)
     return machine
 
 
@@ -475,10 +472,8 @@ def get_preset(name: str) -> ErrorPreset:
         raise ValueError(f"unknown error preset '{name}'; choose from {sorted(PRESETS)}") from None
 
 
-def random_machine(
-    seed: int | np.random.Generator | None, preset: str = DEFAULT_PRESET,
-    design: MachineDesign = PROTOTYPE,
-) -> MachineParams:
+def random_machine(seed: int | np.random.Generator | None, preset: str = DEFAULT_PRESET,
+                   design: MachineDesign = PROTOTYPE) -> MachineParams:
     """A seeded random machine of ``design`` drawn from a named preset."""
     return get_preset(preset).sample(np.random.default_rng(seed), design)
 

@@ -101,10 +101,8 @@ def direct_paper(rho: np.ndarray, drho: np.ndarray, lengths: np.ndarray,
     return a_vec + t[..., None] * b_vec
 
 
-def jacobian_paper(
-    p: np.ndarray, rho: np.ndarray, drho: np.ndarray, lengths: np.ndarray,
-    nominal: float = PROTOTYPE.L,
-) -> np.ndarray:
+def jacobian_paper(p: np.ndarray, rho: np.ndarray, drho: np.ndarray, lengths: np.ndarray,
+                   nominal: float = PROTOTYPE.L) -> np.ndarray:
     """Eq. (5): ``dp / d(drho, L)``, shape ``(..., 3, 6)``.
 
     Differentiating eq. (2) gives ``M dp/ddrho = diag(p_i - q_i)`` and
@@ -147,9 +145,8 @@ def inverse(machine: MachineParams, p: np.ndarray) -> np.ndarray:
     return uw + np.sqrt(disc)
 
 
-def direct(
-    machine: MachineParams, rho: np.ndarray, *, tol: float = 1e-11, max_iter: int = 30
-) -> np.ndarray:
+def direct(machine: MachineParams, rho: np.ndarray, *, tol: float = 1e-11, max_iter: int = 30
+           ) -> np.ndarray:
     """TCP position (mm) for control coordinates ``rho``, exactly (Newton to ``tol`` mm)."""
     g, rho = geometry(machine, rho)
     p = direct_paper(rho, g.drho, g.lengths, machine.design.L)
@@ -334,9 +331,8 @@ def leg_vectors(machine: MachineParams, rho: np.ndarray, p: np.ndarray) -> np.nd
     return platform_points(machine, p) - carriage_points(machine, rho)
 
 
-def leg_angles(
-    machine: MachineParams, rho: np.ndarray, p: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+def leg_angles(machine: MachineParams, rho: np.ndarray, p: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
     """Passive joint angles ``(theta, beta)`` of each leg, shapes ``(..., 3)``.
 
     ``theta`` turns R1 about the leg's local Z; ``beta`` turns the parallelogram bars about
@@ -357,10 +353,8 @@ def check_reachable(machine: MachineParams, p: np.ndarray) -> np.ndarray:
     design = machine.design
     bad = ~within_limits(rho, design)
     if np.any(bad):
-        raise UnreachableError(
-            f"TCP needs joint coordinate {rho[bad].flat[0]:.3f} mm, outside the control "
-            f"limits [{design.rho_min:g}, {design.rho_max:g}] mm"
-        )
+        raise UnreachableError(f"TCP needs joint coordinate {rho[bad].flat[0]:.3f} mm, outside "
+                               f"the control limits [{design.rho_min:g}, {design.rho_max:g}] mm")
     return rho
 
 

@@ -36,15 +36,9 @@ def _machine_with_gauges(machine: MachineParams) -> OrthoglideMachine:
     return sim
 
 
-def pose_report(
-    machine: MachineParams,
-    rho: np.ndarray,
-    *,
-    noise_free: bool = False,
-    seed: int | None = None,
-    sigma: float = DEFAULT_SIGMA,
-    resolution: float = DEFAULT_RESOLUTION,
-) -> dict:
+def pose_report(machine: MachineParams, rho: np.ndarray, *, noise_free: bool = False,
+                seed: int | None = None, sigma: float = DEFAULT_SIGMA,
+                resolution: float = DEFAULT_RESOLUTION) -> dict:
     """Simulated TCP, exact-model TCP, loop residual and every gauge reading at ``rho``.
 
     Keys: ``tcp`` [3] (simulated, mm), ``tcp_model`` [3], ``loop_residual_mm``,
@@ -115,10 +109,8 @@ def pose_in_world(machine: MachineParams, rho: np.ndarray, conditions: Condition
                               ["valid" if v else "not-valid" for v in obs["valid"]])}
 
 
-def render_png(
-    machine: MachineParams, rho: np.ndarray, out_path: str | Path, *, width: int = 960,
-    height: int = 720,
-) -> Path:
+def render_png(machine: MachineParams, rho: np.ndarray, out_path: str | Path, *, width: int = 960,
+               height: int = 720) -> Path:
     """Render the machine at ``rho`` with its gauges to a PNG file; returns the path."""
     import matplotlib
 
