@@ -60,33 +60,33 @@ def _blocks(count: int) -> list[slice]:
     return [slice(i, min(i + BLOCK, count)) for i in range(0, count, BLOCK)]
 
 
+class _Plain:
+    """A result that scripts read as nested dicts of numbers (mm): :meth:`to_dict`."""
+
+    def to_dict(self) -> dict:
+        return asdict(self)  # type: ignore[call-overload]
+
+
 @dataclass(frozen=True)
-class ErrorStats:
+class ErrorStats(_Plain):
     """RMS and maximum (mm) of the TCP error's length over the targets."""
 
     rms: float
     max: float
 
-    def to_dict(self) -> dict[str, float]:
-        return asdict(self)
-
 
 @dataclass(frozen=True)
-class FrameErrors:
-    """One TCP error in the three frames of :data:`FRAMES`."""
+class FrameErrors(_Plain):
+    """One TCP error in the three frames of :data:`FRAMES`: as a dict, ``{"raw": {"rms",
+    "max"}, "translation": {...}, "rigid": {...}}`` in mm."""
 
     raw: ErrorStats
     translation: ErrorStats
     rigid: ErrorStats
 
-    def to_dict(self) -> dict[str, dict[str, float]]:
-        """``{"raw": {"rms", "max"}, "translation": {...}, "rigid": {...}}`` in mm: the
-        shape scripts read."""
-        return asdict(self)
-
 
 @dataclass(frozen=True)
-class ScoreReport:
+class ScoreReport(_Plain):
     """Parameter errors (estimate - truth, mm) and TCP errors over the workspace grid,
     before and after compensation, over the same targets."""
 
@@ -96,9 +96,6 @@ class ScoreReport:
     tcp_after: FrameErrors
     n_targets: int
     n_skipped: int
-
-    def to_dict(self) -> dict:
-        return asdict(self)
 
 
 def workspace_grid(points: int = GRID_POINTS, design: MachineDesign = PROTOTYPE) -> np.ndarray:

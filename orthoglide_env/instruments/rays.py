@@ -135,9 +135,9 @@ def boxes_at(gauges: GaugeArray, a: np.ndarray, c: np.ndarray, p: np.ndarray,
         for b, c, f, tail in zip(bars, carriages, platform, (1, 2, 1), strict=True))
 
 
-def exact_target_boxes(
-    gauges: GaugeArray | Sequence[Gauge], boxes: tuple[np.ndarray, np.ndarray, np.ndarray]
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def exact_target_boxes(gauges: GaugeArray | Sequence[Gauge],
+                       boxes: tuple[np.ndarray, np.ndarray, np.ndarray]
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The box of every gauge's target among the :func:`collision_boxes` ``boxes``:
     centres ``(..., G, 3)``, rotations ``(..., G, 3, 3)``, half extents ``(..., G, 3)``."""
     centre, rot, half = boxes
@@ -170,10 +170,9 @@ def exact_ray_distances(
     rho = np.asarray(rho, dtype=float)
     centre, rot, half = boxes or collision_boxes(machine, rho, direct(machine, rho))
     g = as_gauge_array(gauges).for_postures(centre.ndim - 2)
-    t_in, t_out = ray_box_interval(
+    t_in, t_out = ray_box_interval(  # (..., gauges, boxes)
         g.origin[..., None, :], g.direction[..., None, :], centre[..., None, :, :],
-        rot[..., None, :, :, :], half[..., None, :, :],
-    )  # (..., gauges, boxes)
+        rot[..., None, :, :, :], half[..., None, :, :])
     target = g.target
     t_in_target = _pick(t_in, target[..., None], 0)[..., 0]
     t_out_target = _pick(t_out, target[..., None], 0)[..., 0]

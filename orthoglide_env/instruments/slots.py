@@ -151,9 +151,8 @@ class GaugeSpec:
 
 
 #: The paper's layout: two gauges at the middle of each leg, in the documented order.
-PAPER_LAYOUT: tuple[GaugeSpec, ...] = tuple(
-    GaugeSpec(leg, axis) for leg, axis in ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))
-)
+PAPER_LAYOUT: tuple[GaugeSpec, ...] = tuple(GaugeSpec(leg, axis) for leg, axis in (
+    (0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1)))
 
 
 def layout_from_names(names: list[str]) -> tuple[GaugeSpec, ...]:

@@ -131,7 +131,6 @@ class LabBatch:
             raise RuntimeError("call reset() before using the environment")
         return self.machines
 
-    # -- reset --------------------------------------------------------------------------------
     def reset(self, rows: np.ndarray, streams: list[np.random.Generator],
               machine: MachineParams | None = None,
               layout: tuple[GaugeSpec, ...] | None = None,
@@ -203,7 +202,6 @@ class LabBatch:
         values = self._read(rows, np.zeros(len(rows)), sight)
         return self.observation(rows, values)
 
-    # -- step ---------------------------------------------------------------------------------
     def step(self, rows: np.ndarray, op: np.ndarray, rho: np.ndarray, stand: np.ndarray,
              slot: np.ndarray) -> StepResult:
         """Apply each row's checked action (see

@@ -168,9 +168,8 @@ class SimulatedMachine(LabMachines):
             from orthoglide_env.sim.pybullet import OrthoglideMachine
             from orthoglide_env.sim.simulator import Simulator
         except ImportError as exc:
-            raise ImportError(
-                f"the pybullet backend is not available ({exc}); use backend='exact'"
-            ) from exc
+            raise ImportError(f"the pybullet backend is not available ({exc}); use "
+                              "backend='exact'") from exc
         if self.sim is None:
             self.sim = Simulator(gui=self.gui)
         try:

@@ -34,9 +34,6 @@ ENCODER_MARGIN: float = 1.0
 #: The lab time an experiment has unless told otherwise (s): an hour, the comparison's
 #: equal budget for every agent.
 DEFAULT_BUDGET_S: float = 3600.0
-#: Overtravel rules: a ``fault`` puts the gauge out of service until it is re-mounted; a
-#: ``momentary`` one lasts while the bar presses it (and is charged on entering only).
-OVERTRAVEL_RULES: tuple[str, ...] = ("fault", "momentary")
 
 
 @dataclass(frozen=True)
@@ -58,6 +55,8 @@ class LabSettings:
     estimator: Estimator | None = None
     time_weight: float = 1.0
     success_mm: float = 0.01
+    #: A ``fault`` puts the gauge out of service until it is re-mounted; a ``momentary``
+    #: overtravel lasts while the bar presses it (and is charged on entering only).
     overtravel: str = "fault"
     strict_moves: bool = False  # a move the machine cannot assemble raises ValueError
     notebook: bool = True  # every reading is written into the episode's notebook

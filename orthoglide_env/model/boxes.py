@@ -19,11 +19,9 @@ from orthoglide_env.model.kinematics import (
 
 #: Names of the moving boxes (the simulator's link names): the bars, the couplers, the
 #: platform and the carriages.
-BOX_NAMES: tuple[str, ...] = tuple(
-    [f"{leg}_{bar}" for leg in LEG_NAMES for bar in ("bar1", "bar2")]
-    + [f"{leg}_coupler" for leg in LEG_NAMES] + ["platform"]
-    + [f"{leg}_carriage" for leg in LEG_NAMES]
-)
+BOX_NAMES: tuple[str, ...] = (*(f"{leg}_{bar}" for leg in LEG_NAMES for bar in ("bar1", "bar2")),
+                              *(f"{leg}_coupler" for leg in LEG_NAMES), "platform",
+                              *(f"{leg}_carriage" for leg in LEG_NAMES))
 PLATFORM_BOX: int = BOX_NAMES.index("platform")
 #: Index of the x leg's carriage; the y and z legs' follow.
 CARRIAGE_BOX: int = BOX_NAMES.index("x_carriage")

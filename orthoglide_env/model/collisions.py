@@ -31,15 +31,10 @@ def crash_pairs() -> list[tuple[str, str]]:
                     for p in ("bar1", "bar2", "carriage")]
 
 
-def _pair_indices() -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
-    index = {name: k for k, name in enumerate(BOX_NAMES)}
-    pairs = crash_pairs()
-    first = np.array([index[a] for a, _ in pairs])
-    second = np.array([index[b] for _, b in pairs])
-    return first, second, tuple(f"{a}/{b}" for a, b in pairs)
-
-
-PAIR_FIRST, PAIR_SECOND, PAIR_NAMES = _pair_indices()
+#: The crash pairs' boxes (indices in :data:`BOX_NAMES`) and names (``"a/b"``).
+PAIR_FIRST, PAIR_SECOND = (np.array([BOX_NAMES.index(pair[k]) for pair in crash_pairs()])
+                           for k in (0, 1))
+PAIR_NAMES: tuple[str, ...] = tuple(f"{a}/{b}" for a, b in crash_pairs())
 
 
 #: Cyclic successors of a box axis: with right-handed axes, axis ``i`` crossed with axis

@@ -79,13 +79,13 @@ def _validated(values: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     for key, value in values.items():
         shape = _SHAPES[key]
         if value.shape[value.ndim - len(shape):] != shape or value.ndim < len(shape):
-            raise MachineFileError(
-                f"machine key '{key}' must have shape {list(shape)}, got {list(value.shape)}")
+            raise MachineFileError(f"machine key '{key}' must have shape {list(shape)}, got "
+                                   f"{list(value.shape)}")
         if not np.all(np.isfinite(value)):
             raise MachineFileError(f"machine key '{key}' holds a non-finite number")
     try:
-        batch = np.broadcast_shapes(
-            *(v.shape[: v.ndim - len(_SHAPES[k])] for k, v in values.items()))
+        batch = np.broadcast_shapes(*(v.shape[: v.ndim - len(_SHAPES[k])]
+                                      for k, v in values.items()))
     except ValueError:
         raise MachineFileError("machine keys have different batch shapes") from None
     return {key: value if value.shape == (*batch, *_SHAPES[key])

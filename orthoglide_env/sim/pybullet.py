@@ -105,10 +105,8 @@ class OrthoglideMachine:
                 for j in range(self.bc.getNumJoints(self.body))]
         self._index = {i[12].decode(): i[0] for i in info}  # by child link name
         self._joints = {i[1].decode(): (i[0], i[2]) for i in info}  # index, type
-        self._com = {
-            name: np.array(self.bc.getDynamicsInfo(self.body, j)[3]) / MM
-            for name, j in self._index.items()
-        }
+        self._com = {name: np.array(self.bc.getDynamicsInfo(self.body, j)[3]) / MM
+                     for name, j in self._index.items()}
         self.slides = [self._index[link_name(i, "carriage")] for i in range(3)]
         self.platform = self._index["platform"]
         for j in range(self.bc.getNumJoints(self.body)):
@@ -321,11 +319,8 @@ class OrthoglideMachine:
         """Which pairs of :meth:`_collision_pairs` are in contact."""
         # getClosestPoints(distance=0) reports nothing, not even a deep penetration: ask
         # for a hair more and keep what touches.
-        return np.array([
-            any(pt[8] <= 0.0 for pt in
-                self.bc.getClosestPoints(self.body, self.body, CONTACT_QUERY, a, b))
-            for a, b, _ in self._pairs
-        ], dtype=bool)
+        return np.array([any(pt[8] <= 0.0 for pt in self.bc.getClosestPoints(
+            self.body, self.body, CONTACT_QUERY, a, b)) for a, b, _ in self._pairs], dtype=bool)
 
     def collisions(self) -> list[str]:
         """Pairs of parts in contact that should never touch (see :meth:`_collision_pairs`)."""

@@ -36,14 +36,9 @@ URDF_NAME = "orthoglide.urdf"
 
 # Masses (kg) of the prototype-like parts: aluminium bars and links, steel carriages.
 MASS = {"carriage": 2.0, "r1": 0.3, "bar": 0.25, "coupler": 0.2, "r2": 0.1, "platform": 0.6}
-COLOURS = {
-    "base": (0.35, 0.35, 0.38, 1),
-    "rail": (0.6, 0.6, 0.62, 1),
-    "carriage": (0.15, 0.3, 0.6, 1),
-    "joint": (0.85, 0.55, 0.1, 1),
-    "bar": (0.8, 0.8, 0.82, 1),
-    "platform": (0.7, 0.15, 0.15, 1),
-}
+COLOURS = {"base": (0.35, 0.35, 0.38, 1), "rail": (0.6, 0.6, 0.62, 1),
+           "carriage": (0.15, 0.3, 0.6, 1), "joint": (0.85, 0.55, 0.1, 1),
+           "bar": (0.8, 0.8, 0.82, 1), "platform": (0.7, 0.15, 0.15, 1)}
 HINGE_RADIUS = 8.0  # mm, visual hinge pins
 RAIL_SECTION = (40.0, 30.0)  # mm, along local Y and Z
 RAIL_BESIDE = 45.0  # mm, rail centre to actuator axis along -local Y (beside the carriage)
