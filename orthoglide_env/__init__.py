@@ -19,11 +19,9 @@ FLAT_LAB_ENV_ID = "OrthoglideLabFlat-v0"
 
 if ENV_ID not in gymnasium.registry:
     gymnasium.register(
-        id=ENV_ID,
-        entry_point="orthoglide_env.envs.calibration:OrthoglideCalibrationEnv",
+        id=ENV_ID, entry_point="orthoglide_env.envs.calibration:OrthoglideCalibrationEnv",
         vector_entry_point="orthoglide_env.envs.calibration_vector:OrthoglideCalibrationVectorEnv",
-        max_episode_steps=500,
-    )
+        max_episode_steps=500)
 if LAB_ENV_ID not in gymnasium.registry:
     # No step limit: an episode ends on the agent's stop or the lab's time budget.
     gymnasium.register(id=LAB_ENV_ID, entry_point="orthoglide_env.envs.lab:OrthoglideLabEnv",

@@ -60,33 +60,33 @@ def _blocks(count: int) -> list[slice]:
     return [slice(i, min(i + BLOCK, count)) for i in range(0, count, BLOCK)]
 
 
+class _Plain:
+    """A result that scripts read as nested dicts of numbers (mm): :meth:`to_dict`."""
+
+    def to_dict(self) -> dict:
+        return asdict(self)  # type: ignore[call-overload]
+
+
 @dataclass(frozen=True)
-class ErrorStats:
+class ErrorStats(_Plain):
     """RMS and maximum (mm) of the TCP error's length over the targets."""
 
     rms: float
     max: float
 
-    def to_dict(self) -> dict[str, float]:
-        return asdict(self)
-
 
 @dataclass(frozen=True)
-class FrameErrors:
-    """One TCP error in the three frames of :data:`FRAMES`."""
+class FrameErrors(_Plain):
+    """One TCP error in the three frames of :data:`FRAMES`: as a dict, ``{"raw": {"rms",
+    "max"}, "translation": {...}, "rigid": {...}}`` in mm."""
 
     raw: ErrorStats
     translation: ErrorStats
     rigid: ErrorStats
 
-    def to_dict(self) -> dict[str, dict[str, float]]:
-        """``{"raw": {"rms", "max"}, "translation": {...}, "rigid": {...}}`` in mm: the
-        shape scripts read."""
-        return asdict(self)
-
 
 @dataclass(frozen=True)
-class ScoreReport:
+class ScoreReport(_Plain):
     """Parameter errors (estimate - truth, mm) and TCP errors over the workspace grid,
     before and after compensation, over the same targets."""
 
@@ -96,9 +96,6 @@ class ScoreReport:
     tcp_after: FrameErrors
     n_targets: int
     n_skipped: int
-
-    def to_dict(self) -> dict:
-        return asdict(self)
 
 
 def workspace_grid(points: int = GRID_POINTS, design: MachineDesign = PROTOTYPE) -> np.ndarray:
@@ -181,8 +178,12 @@ def tcp_error_vectors_many(models: Sequence[MachineParams], truths: Sequence[Mac
         out[inside[m]] = _rowwise(lambda r: direct(truths[m], r), rho[m][inside[m]])
         return out
 
-    # Rows without a command are solved at Zero (any posture will do) and dropped.
-    reached = _direct_many(list(truths), np.where(inside[..., None], rho, 0.0), alone)
+    # Rows without a command are solved at Zero (any posture will do) and dropped; when a
+    # posture cannot be assembled, each machine alone.
+    try:
+        reached = direct(MachineParams.stack(list(truths)), np.where(inside[..., None], rho, 0.0))
+    except UnreachableError:
+        reached = np.stack([alone(m) for m in range(len(truths))])
     return np.where(inside[..., None], reached, np.nan) - targets
 
 
@@ -205,24 +206,14 @@ def commands_many(models: Sequence[MachineParams], targets: np.ndarray,
     return np.where(inside[..., None], rho, np.nan)
 
 
-def _direct_many(machines: list[MachineParams], rho: np.ndarray,
-                 alone: Callable[[int], np.ndarray]) -> np.ndarray:
-    """``direct(machines[m], rho[m])`` for each machine (``rho`` (M, ..., 3)) in one
-    batched solve, or, when a posture cannot be assembled, ``alone(m)`` for each."""
-    with contextlib.suppress(UnreachableError):
-        return direct(MachineParams.stack(machines), rho)
-    return np.stack([alone(m) for m in range(len(machines))])
-
-
 def tcp_errors(model: MachineParams, truth: MachineParams, targets: np.ndarray) -> np.ndarray:
     """Distance (mm) from each target to where the true machine goes when commanded with
     ``model``; NaN where the model has no command within the control limits."""
     return np.linalg.norm(tcp_error_vectors(model, truth, targets), axis=-1)
 
 
-def _masked_centroids(
-    targets: np.ndarray, reached: np.ndarray, mask: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _masked_centroids(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Targets and reached points about their centroids over ``mask``, zero (not NaN) in
     the rows left out so that sums ignore them, and the two centroids (..., 3)."""
     keep = mask[..., None]
@@ -235,9 +226,8 @@ def _masked_centroids(
             cq, cp)
 
 
-def best_rigid_motion(
-    targets: np.ndarray, reached: np.ndarray, mask: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+def best_rigid_motion(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
     """Rotation ``R`` (..., 3, 3) and translation ``t`` (..., 3) minimising the sum over
     ``mask`` of ``|R reached + t - target|^2``, for a batch of machines: ``targets`` and
     ``reached`` (..., n, 3) broadcast together, ``mask`` (..., n) marks the usable targets.
@@ -310,12 +300,10 @@ def uncalibrated_errors(truths: Sequence[MachineParams], grid: np.ndarray | None
     return tcp_error_vectors_many([nominal] * len(truths), truths, targets, worlds)
 
 
-def score_batch(
-    estimates: Sequence[MachineParams], truths: Sequence[MachineParams],
-    grid: np.ndarray | None = None, before: np.ndarray | None = None,
-    worlds: Sequence[World] | None = None,
-    corrections: Sequence[Correction | None] | None = None,
-) -> list[ScoreReport]:
+def score_batch(estimates: Sequence[MachineParams], truths: Sequence[MachineParams],
+                grid: np.ndarray | None = None, before: np.ndarray | None = None,
+                worlds: Sequence[World] | None = None,
+                corrections: Sequence[Correction | None] | None = None) -> list[ScoreReport]:
     """Score each estimate against its true machine (see :func:`score`; ``worlds`` and
     ``corrections``: see :func:`tcp_error_vectors_many`); ``before``: the
     :func:`uncalibrated_errors` of ``truths``, when already known (they depend on the
@@ -335,20 +323,15 @@ def score_batch(
                          f"limits (machines {empty.tolist()} of the batch)")
     frames_before = frame_errors(targets, targets + before, usable)
     frames_after = frame_errors(targets, targets + after, usable)
-    return [
-        ScoreReport(
-            drho_error=(e.drho - t.drho).tolist(), dL_error=(e.dL - t.dL).tolist(),
-            tcp_before=b, tcp_after=a, n_targets=int(m.sum()), n_skipped=int((~m).sum()),
-        )
-        for e, t, b, a, m in zip(estimates, truths, frames_before, frames_after, usable,
-                                 strict=True)
-    ]
+    return [ScoreReport(drho_error=(e.drho - t.drho).tolist(), dL_error=(e.dL - t.dL).tolist(),
+                        tcp_before=b, tcp_after=a, n_targets=int(m.sum()),
+                        n_skipped=int((~m).sum()))
+            for e, t, b, a, m in zip(estimates, truths, frames_before, frames_after, usable,
+                                     strict=True)]
 
 
-def score(
-    estimate: MachineParams, truth: MachineParams, grid: np.ndarray | None = None,
-    world: World | None = None, correction: Correction | None = None,
-) -> ScoreReport:
+def score(estimate: MachineParams, truth: MachineParams, grid: np.ndarray | None = None,
+          world: World | None = None, correction: Correction | None = None) -> ScoreReport:
     """Score ``estimate`` against ``truth`` (in its ``world``, when given; its controller
     compensating the drives' error ``correction``, when given): parameter errors and TCP
     errors before (nominal model) and after (estimated model) compensation, in the three
@@ -508,11 +491,9 @@ def predicted_target_errors(model: MachineParams, covariance: np.ndarray,
     jac, cov = _with_drives(tcp_sensitivity(machines, rho, p), rho, [covariance],
                             None if drive is None else [drive])
     mask = usable[0]
-    out = {}
+    out = {frame: np.full(len(targets), np.nan) for frame in FRAMES}
     for frame, values in _per_target(targets[mask], jac[:, mask], cov).items():
-        full = np.full(len(targets), np.nan)
-        full[usable[0]] = np.sqrt(values[0])
-        out[frame] = full
+        out[frame][mask] = np.sqrt(values[0])
     return out
 
 

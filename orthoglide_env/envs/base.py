@@ -1,10 +1,5 @@
-"""What both envs share: a lone episode of the lab engine, its reset options and seeds.
-
-``OrthoglideLab-v0`` and ``OrthoglideCalibration-v0`` are faces of one engine
-(:mod:`orthoglide_env.lab.engine`): each is an :class:`EngineEnv`, a batch of one episode
-with the env's settings, and says only how its actions, observations and infos look
-(:class:`Face`, which its native vector env shares).
-"""
+"""What both envs share: a lone episode of the lab engine (:class:`EngineEnv`), its reset
+options and seeds, and the :class:`Face` each env's native vector env shares with it."""
 
 from __future__ import annotations
 
@@ -77,10 +72,9 @@ def _machine_option(value: Any, settings: LabSettings
             return machine, _world_option(world, settings)
     except ValueError as exc:
         raise ValueError(f"reset option 'machine': {exc}") from None
-    raise ValueError(
-        "reset option 'machine' must be a dict in the machine file schema, a MachineParams "
-        f"or None (draw one from the preset), got {type(value).__name__} {value!r}"
-    )
+    raise ValueError("reset option 'machine' must be a dict in the machine file schema, a "
+                     "MachineParams or None (draw one from the preset), got "
+                     f"{type(value).__name__} {value!r}")
 
 
 def _world_option(world: World | None, settings: LabSettings) -> World | None:

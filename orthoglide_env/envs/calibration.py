@@ -53,13 +53,8 @@ class CalibrationFace(Face):
               collision: str) -> dict[str, Any]:
         """Env ``i``'s info: its gauges' ``names`` and status, the gauges that went into
         overtravel, the step's time and the collision label."""
-        return {
-            "gauge_names": list(names),
-            "status": STATUS_LABELS[self._batch.status[i]].tolist(),
-            "overtravel": overtravel,
-            "step_time_s": step_time,
-            "collision": collision,
-        }
+        return {"gauge_names": list(names), "status": STATUS_LABELS[self._batch.status[i]].tolist(),
+                "overtravel": overtravel, "step_time_s": step_time, "collision": collision}
 
 
 class OrthoglideCalibrationEnv(CalibrationFace, EngineEnv):

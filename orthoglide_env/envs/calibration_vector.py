@@ -1,10 +1,6 @@
-"""The native vector env of ``OrthoglideCalibration-v0``: N machines in one numpy pass.
-
-``gymnasium.make_vec("OrthoglideCalibration-v0", num_envs=N,
-vectorization_mode="vector_entry_point", backend="exact")`` builds it: the lab engine
-(:mod:`orthoglide_env.lab.engine`, which the single env runs as a batch of one) on N
-episodes in the same array operations; only the random streams stay one per env.
-"""
+"""The native vector env of ``OrthoglideCalibration-v0``: N machines in one numpy pass,
+built by ``gymnasium.make_vec("OrthoglideCalibration-v0", num_envs=N,
+vectorization_mode="vector_entry_point", backend="exact")``."""
 
 from __future__ import annotations
 

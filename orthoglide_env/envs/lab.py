@@ -209,8 +209,6 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
         self.estimator = settings.estimator
         self.time_weight, self.success_mm = settings.time_weight, settings.success_mm
         self.travel = settings.travel
-        # The lab's rules live in the engine (orthoglide_env.lab.engine): one lab is a batch
-        # of one episode, the native vector env a batch of many.
         self._start_engine(settings, lab_spaces(settings))
 
     # -- the episode, as the lab's notebook and clock show it -------------------------------

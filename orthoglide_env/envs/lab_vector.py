@@ -1,11 +1,5 @@
-"""The native vector env of ``OrthoglideLab-v0``: N calibration labs stepped together.
-
-``gymnasium.make_vec("OrthoglideLab-v0", num_envs=N)`` (the registered
-``vector_entry_point``) builds it: the lab's rules (:mod:`orthoglide_env.lab.engine`, which
-the single lab runs as a batch of one) on N episodes of the exact backend in the same
-array operations; only what is personal to an episode stays one per env: its random
-stream, its notebook and, with the ``information`` reward, its information sums.
-"""
+"""The native vector env of ``OrthoglideLab-v0``: N calibration labs stepped together,
+built by ``gymnasium.make_vec("OrthoglideLab-v0", num_envs=N)``."""
 
 from __future__ import annotations
 

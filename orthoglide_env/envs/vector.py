@@ -1,10 +1,5 @@
-"""What both native vector envs share: N episodes of the lab engine stepped together.
-
-:class:`EngineVectorEnv` holds one random stream per env (seeded as ``SyncVectorEnv``
-seeds its envs, restored around a refused call), Gymnasium's reset mask and autoreset
-modes, and the vector form of the single env's infos; a face
-(:class:`~orthoglide_env.envs.base.Face`) says how actions are checked and infos look.
-"""
+"""What both native vector envs share: N episodes of the lab engine stepped together
+(:class:`EngineVectorEnv`)."""
 
 from __future__ import annotations
 

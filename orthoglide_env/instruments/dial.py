@@ -79,10 +79,8 @@ def exact_readings(machine: MachineParams, gauges: GaugeArray | Sequence[Gauge],
     return readings_from_distances(gauges, exact_ray_distances(machine, gauges, rho))
 
 
-def pressed_past_travel(
-    gauges: GaugeArray | Sequence[Gauge], centre: np.ndarray, rot: np.ndarray,
-    half: np.ndarray,
-) -> np.ndarray:
+def pressed_past_travel(gauges: GaugeArray | Sequence[Gauge], centre: np.ndarray, rot: np.ndarray,
+                        half: np.ndarray) -> np.ndarray:
     """Whether each gauge's target presses it past its travel: the target's box, grown by
     the body radius, meets the gauge axis behind the fully pushed-in tip (``t < 0``) and
     in front of the stand's end.  The boxes are :func:`exact_target_boxes`, ``(..., G,
@@ -104,10 +102,8 @@ MAX_NOISE_FRACTION: float = 1 / 50
 MIN_RESOLUTION: float = 1e-6
 
 
-def check_noise(
-    sigma: object, resolution: object, travel: float = DEFAULT_TRAVEL, *,
-    names: tuple[str, str] = ("gauge_sigma", "gauge_resolution"),
-) -> GaugeNoise:
+def check_noise(sigma: object, resolution: object, travel: float = DEFAULT_TRAVEL, *,
+                names: tuple[str, str] = ("gauge_sigma", "gauge_resolution")) -> GaugeNoise:
     """The noise of a dial gauge with ``travel`` mm of travel, or ``ValueError`` naming the
     bad value (``names``: what the caller calls sigma and resolution).
 

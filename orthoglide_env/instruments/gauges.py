@@ -82,15 +82,12 @@ class GaugeArray:
     @classmethod
     def of(cls, gauges: Sequence[Gauge]) -> GaugeArray:
         """The array form of one machine's gauges (batch shape ``()``)."""
-        specs = [g.spec for g in gauges]
-        return cls(
+        return replace(
+            spec_arrays([g.spec for g in gauges]),
             origin=np.array([g.origin for g in gauges], dtype=float).reshape(len(gauges), 3),
             direction=np.array([g.direction for g in gauges], dtype=float).reshape(-1, 3),
             sign=[g.sign for g in gauges], travel=[g.travel for g in gauges],
-            zero=[g.zero for g in gauges], leg=[s.leg for s in specs],
-            axis=[s.axis for s in specs], at=[s.at for s in specs],
-            part=[s.part for s in specs],
-        )
+            zero=[g.zero for g in gauges])
 
     @classmethod
     def stack(cls, sets: Sequence[GaugeArray | Sequence[Gauge]]) -> GaugeArray:
@@ -125,13 +122,14 @@ class GaugeArray:
         return GaugeArray(**{f.name: np.take(getattr(self, f.name), index, axis=at)
                              for f in fields(self)})
 
-    def with_rows(self, index: np.ndarray, rows: GaugeArray) -> GaugeArray:
-        """A copy of this batch whose machines ``index`` (along the first batch axis) carry
-        the gauge sets ``rows`` instead."""
+    def with_rows(self, index: Any, rows: GaugeArray) -> GaugeArray:
+        """A copy of this batch whose gauges at ``index`` (machines along the first batch
+        axis, or a tuple of indices reaching into the gauge axis) are ``rows`` instead (of
+        the indexed shape, or that shape with singleton axes)."""
         out = {}
         for f in fields(self):
             value = np.array(getattr(self, f.name))
-            value[index] = getattr(rows, f.name)
+            value[index] = np.reshape(getattr(rows, f.name), value[index].shape)
             out[f.name] = value
         return GaugeArray(**out)
 
@@ -166,12 +164,10 @@ class GaugeArray:
         """One machine's gauges as :class:`Gauge` objects."""
         if self.batch_shape:
             raise ValueError("to_gauges() converts one machine's gauges: index the batch first")
-        return [
-            Gauge(self.spec((k,)), origin.copy(), direction.copy(), float(sign), float(travel),
-                  float(zero))
-            for k, (origin, direction, sign, travel, zero) in enumerate(zip(
-                self.origin, self.direction, self.sign, self.travel, self.zero, strict=True))
-        ]
+        return [Gauge(self.spec((k,)), origin.copy(), direction.copy(), float(sign),
+                      float(travel), float(zero))
+                for k, (origin, direction, sign, travel, zero) in enumerate(zip(
+                    self.origin, self.direction, self.sign, self.travel, self.zero, strict=True))]
 
     def zeroed(self, t_at_zero: np.ndarray) -> GaugeArray:
         """The gauges set up at the Zero posture: see :func:`zero_gauges`."""

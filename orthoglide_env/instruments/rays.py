@@ -37,9 +37,8 @@ TIP_EDGE_MARGIN: float = 1.5
 RAY_BACKOFF: float = 30.0
 
 
-def ray_box_interval(
-    origin: np.ndarray, direction: np.ndarray, centre: np.ndarray, rot: np.ndarray, half: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+def ray_box_interval(origin: np.ndarray, direction: np.ndarray, centre: np.ndarray, rot: np.ndarray,
+                     half: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Where the line ``origin + t * direction`` enters and leaves a box (slab method);
     ``t_in > t_out`` when it misses.  Broadcast over leading dimensions."""
     origin, direction = np.asarray(origin, dtype=float), np.asarray(direction, dtype=float)
@@ -77,9 +76,8 @@ def _components(vector: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     return np.ascontiguousarray(np.broadcast_to(np.moveaxis(vector, -1, 0), (3, *shape)))
 
 
-def ray_box_distance(
-    origin: np.ndarray, direction: np.ndarray, centre: np.ndarray, rot: np.ndarray, half: np.ndarray
-) -> np.ndarray:
+def ray_box_distance(origin: np.ndarray, direction: np.ndarray, centre: np.ndarray, rot: np.ndarray,
+                     half: np.ndarray) -> np.ndarray:
     """Distance along the ray at which it enters the box; NaN on a miss.
 
     The ray is the whole line ``origin + t * direction``: negative ``t`` is reported, so an
@@ -89,10 +87,9 @@ def ray_box_distance(
     return np.where(t_out >= t_in, t_in, np.nan)
 
 
-def on_flat_face(
-    point: np.ndarray, centre: np.ndarray, rot: np.ndarray, half: np.ndarray,
-    margin: float = TIP_EDGE_MARGIN, face: np.ndarray | int | None = None,
-) -> np.ndarray:
+def on_flat_face(point: np.ndarray, centre: np.ndarray, rot: np.ndarray, half: np.ndarray,
+                 margin: float = TIP_EDGE_MARGIN, face: np.ndarray | int | None = None
+                 ) -> np.ndarray:
     """Whether a contact point on a box's surface lies ``margin`` inside its face's edges,
     and, when ``face`` (box axis 0, 1 or 2) is given, on that face.
 
@@ -107,9 +104,8 @@ def on_flat_face(
     return ok if face is None else ok & (touched == face)
 
 
-def target_boxes(
-    machine: MachineParams, gauges: GaugeArray, rho: np.ndarray, p: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def target_boxes(machine: MachineParams, gauges: GaugeArray, rho: np.ndarray, p: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The box each of ``gauges`` (one set, batch shape ``()``) touches, at control
     coordinates ``rho`` with the TCP at ``p``: centres ``(..., G, 3)``, rotations
     ``(..., G, 3, 3)``, half extents ``(..., G, 3)``.  What :func:`exact_target_boxes`
@@ -139,9 +135,9 @@ def boxes_at(gauges: GaugeArray, a: np.ndarray, c: np.ndarray, p: np.ndarray,
         for b, c, f, tail in zip(bars, carriages, platform, (1, 2, 1), strict=True))
 
 
-def exact_target_boxes(
-    gauges: GaugeArray | Sequence[Gauge], boxes: tuple[np.ndarray, np.ndarray, np.ndarray]
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def exact_target_boxes(gauges: GaugeArray | Sequence[Gauge],
+                       boxes: tuple[np.ndarray, np.ndarray, np.ndarray]
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The box of every gauge's target among the :func:`collision_boxes` ``boxes``:
     centres ``(..., G, 3)``, rotations ``(..., G, 3, 3)``, half extents ``(..., G, 3)``."""
     centre, rot, half = boxes
@@ -174,10 +170,9 @@ def exact_ray_distances(
     rho = np.asarray(rho, dtype=float)
     centre, rot, half = boxes or collision_boxes(machine, rho, direct(machine, rho))
     g = as_gauge_array(gauges).for_postures(centre.ndim - 2)
-    t_in, t_out = ray_box_interval(
+    t_in, t_out = ray_box_interval(  # (..., gauges, boxes)
         g.origin[..., None, :], g.direction[..., None, :], centre[..., None, :, :],
-        rot[..., None, :, :, :], half[..., None, :, :],
-    )  # (..., gauges, boxes)
+        rot[..., None, :, :, :], half[..., None, :, :])
     target = g.target
     t_in_target = _pick(t_in, target[..., None], 0)[..., 0]
     t_out_target = _pick(t_out, target[..., None], 0)[..., 0]
@@ -192,10 +187,8 @@ def exact_ray_distances(
     return np.where(occluded | (t > reach), np.nan, t)
 
 
-def face_distances(
-    machine: MachineParams, specs: tuple[GaugeSpec, ...] | list[GaugeSpec],
-    origins: np.ndarray, directions: np.ndarray, rho: np.ndarray,
-) -> np.ndarray:
+def face_distances(machine: MachineParams, specs: tuple[GaugeSpec, ...] | list[GaugeSpec],
+                   origins: np.ndarray, directions: np.ndarray, rho: np.ndarray) -> np.ndarray:
     """Distance along each ray to the plane of the face its gauge is aimed at, at every
     posture: shape ``(*batch, *postures, n)`` for ``rho`` of shape
     ``(*batch, *postures, 3)`` and rays ``(*batch, n, 3)``.

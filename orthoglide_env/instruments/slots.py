@@ -151,9 +151,8 @@ class GaugeSpec:
 
 
 #: The paper's layout: two gauges at the middle of each leg, in the documented order.
-PAPER_LAYOUT: tuple[GaugeSpec, ...] = tuple(
-    GaugeSpec(leg, axis) for leg, axis in ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))
-)
+PAPER_LAYOUT: tuple[GaugeSpec, ...] = tuple(GaugeSpec(leg, axis) for leg, axis in (
+    (0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1)))
 
 
 def layout_from_names(names: list[str]) -> tuple[GaugeSpec, ...]:
@@ -172,8 +171,6 @@ def layout_from_names(names: list[str]) -> tuple[GaugeSpec, ...]:
             raise ValueError(f"bad gauge name '{raw}': expected like 'x-leg/y', 'x/y@0.5', "
                              "'x-carriage/y' or 'platform/x'")
         axis_index = AXIS_NAMES.index(axis)
-        specs.append(
-            GaugeSpec.platform(axis_index) if part == Part.PLATFORM
-            else GaugeSpec(LEG_NAMES.index(leg), axis_index, float(at) if at else 0.5, part)
-        )
+        specs.append(GaugeSpec.platform(axis_index) if part == Part.PLATFORM else GaugeSpec(
+            LEG_NAMES.index(leg), axis_index, float(at) if at else 0.5, part))
     return tuple(specs)

@@ -5,6 +5,7 @@ parameters an estimator fits per mounting.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from functools import lru_cache
 from typing import overload
 
@@ -17,10 +18,8 @@ from orthoglide_env.model.errors import AXIS_NAMES, ErrorPreset, MachineParams
 from orthoglide_env.model.kinematics import cross, direct, dot
 
 
-def ideal_rays(
-    specs: tuple[GaugeSpec, ...] | list[GaugeSpec], machine: MachineParams,
-    travel: float = DEFAULT_TRAVEL,
-) -> tuple[np.ndarray, np.ndarray]:
+def ideal_rays(specs: tuple[GaugeSpec, ...] | list[GaugeSpec], machine: MachineParams,
+               travel: float = DEFAULT_TRAVEL) -> tuple[np.ndarray, np.ndarray]:
     """Rays of perfectly installed gauges: each aimed at its place on its target's face at
     the Zero posture of ``machine`` (a bar's ``at``, a carriage face's middle, the
     platform face's :data:`PLATFORM_AIM`), the plunger at mid-travel.  Origins
@@ -80,10 +79,8 @@ def _across_axes(specs: tuple[GaugeSpec, ...]) -> np.ndarray:
     return out
 
 
-def stand_rays(
-    specs: tuple[GaugeSpec, ...] | list[GaugeSpec], origins: np.ndarray,
-    directions: np.ndarray, stand: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
+def stand_rays(specs: tuple[GaugeSpec, ...] | list[GaugeSpec], origins: np.ndarray,
+               directions: np.ndarray, stand: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rays of stands installed with errors ``stand`` (shape ``(*batch, n, 4)``, in
     :data:`STAND_PARAMS` order) from the ideal ``origins`` and ``directions``."""
     across = across_axes(specs)
@@ -93,10 +90,9 @@ def stand_rays(
     return origin, direction / np.sqrt(dot(direction, direction))[..., None]
 
 
-def stand_errors(
-    specs: tuple[GaugeSpec, ...] | list[GaugeSpec], origins: np.ndarray,
-    directions: np.ndarray, ideal_origins: np.ndarray, ideal_directions: np.ndarray,
-) -> np.ndarray:
+def stand_errors(specs: tuple[GaugeSpec, ...] | list[GaugeSpec], origins: np.ndarray,
+                 directions: np.ndarray, ideal_origins: np.ndarray, ideal_directions: np.ndarray
+                 ) -> np.ndarray:
     """The stand parameters (n, 4) of installed rays relative to ideal ones: the inverse of
     :func:`stand_rays` (the shift is measured where the ray crosses the plane through the
     ideal origin normal to the ideal direction).  For scoring against the truth only."""
@@ -109,14 +105,9 @@ def stand_errors(
     return np.concatenate([np.einsum("gj,gkj->gk", crossing, across), tilt], axis=-1)
 
 
-def install(
-    specs: tuple[GaugeSpec, ...] | list[GaugeSpec],
-    machine: MachineParams | None = None,
-    *,
-    travel: float | None = None,
-    preset: ErrorPreset | None = None,
-    rng: np.random.Generator | None = None,
-) -> list[Gauge]:
+def install(specs: tuple[GaugeSpec, ...] | list[GaugeSpec], machine: MachineParams | None = None, *,
+            travel: float | None = None, preset: ErrorPreset | None = None,
+            rng: np.random.Generator | None = None) -> list[Gauge]:
     """Install gauges on ``machine`` (default nominal) as the paper does: each aimed at
     its place on its target's face at the Zero posture, plus the preset's installation
     errors (stand position and tilt) when ``preset`` and ``rng`` are given.
@@ -145,13 +136,8 @@ def installation_errors(count: int, preset: ErrorPreset, rng: np.random.Generato
     return np.array(draws, dtype=float).reshape(count, 2, 3)
 
 
-def install_array(
-    specs: tuple[GaugeSpec, ...] | list[GaugeSpec],
-    machine: MachineParams,
-    *,
-    travel: float | None = None,
-    errors: np.ndarray | None = None,
-) -> GaugeArray:
+def install_array(specs: tuple[GaugeSpec, ...] | list[GaugeSpec], machine: MachineParams, *,
+                  travel: float | None = None, errors: np.ndarray | None = None) -> GaugeArray:
     """:func:`install` for a batch of machines: the gauges of ``specs`` aimed at their targets
     on every machine of ``machine``, moved by installation ``errors`` (shape
     ``(*batch, G, 2, 3)``, see :func:`installation_errors`) when given.  ``travel``:
@@ -165,12 +151,11 @@ def install_array(
         origin = origin + errors[..., 0, :]
         direction = direction + cross(errors[..., 1, :], direction)
         direction = direction / np.linalg.norm(direction, axis=-1, keepdims=True)
-    axis = np.array([s.axis for s in specs], dtype=np.intp)
+    g = spec_arrays(specs)
     # The reading runs along the world axis, whichever side the stand is on.
-    sign = np.sign(direction[..., np.arange(len(specs)), axis])
-    return GaugeArray(origin=origin, direction=direction, sign=sign, travel=float(travel),
-                      zero=travel / 2, leg=[s.leg for s in specs], axis=axis,
-                      at=[s.at for s in specs], part=[s.part for s in specs])
+    sign = np.sign(direction[..., np.arange(len(specs)), g.axis])
+    return replace(g, origin=origin, direction=direction, sign=sign, travel=float(travel),
+                   zero=travel / 2)
 
 
 @overload

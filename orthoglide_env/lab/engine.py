@@ -14,7 +14,7 @@ LabMachines`.
 from __future__ import annotations
 
 import contextlib
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -131,7 +131,6 @@ class LabBatch:
             raise RuntimeError("call reset() before using the environment")
         return self.machines
 
-    # -- reset --------------------------------------------------------------------------------
     def reset(self, rows: np.ndarray, streams: list[np.random.Generator],
               machine: MachineParams | None = None,
               layout: tuple[GaugeSpec, ...] | None = None,
@@ -172,8 +171,6 @@ class LabBatch:
             self.last_t[rows] = np.nan
             self.actual[rows] = world.joints(np.zeros((len(rows), 3)), self.approach[rows],
                                              np.zeros(len(rows)), settings.design)
-        for i, stream in zip(rows, streams, strict=True):
-            self.streams[i] = stream
         self.rho[rows] = 0.0
         self.tcp[rows] = np.nan
         self.time[rows] = 0.0
@@ -184,12 +181,12 @@ class LabBatch:
         self.slot[rows, : len(first)] = first
         self.engaged[rows] = self.count[rows] = on
         self.faulted[rows] = False  # (``pressed`` is set by the first look below)
-        self.gauges = _with_gauges(self.gauges, rows[:, None], np.arange(settings.stands),
-                                   _unmounted((len(rows), settings.stands), settings.travel,
-                                              self.slots[0]))
-        self.gauges = _with_gauges(self.gauges, rows[:, None], np.arange(len(first)), installed)
+        self.gauges = self.gauges.with_rows((rows[:, None], np.arange(settings.stands)), _unmounted(
+            (len(rows), settings.stands), settings.travel, self.slots[0]))
+        self.gauges = self.gauges.with_rows((rows[:, None], np.arange(len(first))), installed)
         names = [spec.slot for spec in specs]
         for r, i in enumerate(rows):
+            self.streams[i] = streams[r]
             self.mounting[i] = names + [""] * (settings.stands - len(first))
             book = self._notebook()
             book.install(names, installed, r)
@@ -205,7 +202,6 @@ class LabBatch:
         values = self._read(rows, np.zeros(len(rows)), sight)
         return self.observation(rows, values)
 
-    # -- step ---------------------------------------------------------------------------------
     def step(self, rows: np.ndarray, op: np.ndarray, rho: np.ndarray, stand: np.ndarray,
              slot: np.ndarray) -> StepResult:
         """Apply each row's checked action (see
@@ -306,8 +302,7 @@ class LabBatch:
         before = self.rho[rows]
         approach = np.where(goal > before, 1.0, np.where(goal < before, -1.0,
                                                          self.approach[rows]))
-        world = self._world(rows)
-        gauges = self.gauges if len(rows) == self.size else self.gauges[rows]
+        world, gauges = self._of(self.world, rows), self._of(self.gauges, rows)
         # The indicators press as they did at the last look (the plunger's next depth is
         # a micrometre-level change of a force that moves the platform by nanometres).
         pressing = np.where(self.engaged[rows], self.last_t[rows], np.nan)
@@ -316,9 +311,10 @@ class LabBatch:
         load = world.platform_load(pressing, gauges.travel, gauges.direction, share)
         return approach, world.joints(goal, approach, when, self.settings.design, load)
 
-    def _world(self, rows: np.ndarray) -> World:
-        world: World = self.world  # type: ignore[assignment]
-        return world if len(rows) == self.size else world[rows]
+    def _of(self, value: Any, rows: np.ndarray) -> Any:
+        """Rows ``rows`` of a batch's ``value`` (itself, not a copy, when they are every
+        episode)."""
+        return value if len(rows) == self.size else value[rows]
 
     def _raise_unreachable(self, rows: np.ndarray, op: np.ndarray, rho: np.ndarray,
                            reached: np.ndarray, target: np.ndarray) -> None:
@@ -414,7 +410,7 @@ class LabBatch:
                made: tuple[GaugeArray, World | None]) -> None:
         """Store the installations of :meth:`_installations` (one gauge per row)."""
         gauges, world = made
-        self.gauges = _with_gauges(self.gauges, rows, stand, gauges)
+        self.gauges = self.gauges.with_rows((rows, stand), gauges)
         if world is not None:
             self.world = self.world.with_rows(rows, world)  # type: ignore[union-attr]
             self.going_in[rows, stand] = 1.0  # slid in to mid-travel
@@ -441,12 +437,8 @@ class LabBatch:
             return Sight(np.zeros((0, stands)), np.zeros((0, stands), dtype=bool),
                          np.zeros((0, len(PAIR_NAMES)), dtype=bool), np.zeros((0, 3)))
         at = self.rho if self.world is None else self.actual
-        if len(rows) == self.size:  # every episode: no copies
-            sight = self.backend.look(rows, self.require(), self.gauges, at, self.tcp,
-                                      self.engaged)
-        else:
-            sight = self.backend.look(rows, self.require()[rows], self.gauges[rows],
-                                      at[rows], self.tcp[rows], self.engaged[rows])
+        sight = self.backend.look(rows, *(self._of(x, rows) for x in (
+            self.require(), self.gauges, at, self.tcp, self.engaged)))
         self.tcp[rows] = sight.tcp
         return sight if self.world is None else self._in_world(rows, sight, when)
 
@@ -454,8 +446,7 @@ class LabBatch:
         """``sight`` (the geometry at the carriages' positions) as the world shows it at
         ``when``: the structure grown with the room, each reading moved by its stand,
         indicator and bar; each engaged plunger's direction of travel followed."""
-        world = self._world(rows)
-        gauges = self.gauges if len(rows) == self.size else self.gauges[rows]
+        world, gauges = self._of(self.world, rows), self._of(self.gauges, rows)
         scale = world.scale(when)
         t = sight.t * scale[:, None]
         last = self.last_t[rows]
@@ -474,7 +465,7 @@ class LabBatch:
         stand, NaN where there is none; every reading goes to the notebooks.  ``pending``:
         the seconds of the step so far (the readings are written at its end)."""
         settings = self.settings
-        gauges = self.gauges if len(rows) == self.size else self.gauges[rows]
+        gauges = self._of(self.gauges, rows)
         mounted = self.slot[rows] >= 0
         ideal = readings_from_distances(gauges, sight.t)
         status = status_of(gauges, sight.t)
@@ -497,7 +488,7 @@ class LabBatch:
         if self.world is not None:
             # The same draws, scaled up where a digital indicator scatters more: a batch
             # draws what a lone lab draws.
-            ideal = ideal + draws * self._world(rows).scatter(sight.t, gauges.travel)
+            ideal = ideal + draws * self._of(self.world, rows).scatter(sight.t, gauges.travel)
         noisy = settings.noise.applied(ideal, draws)
         valid = good & mounted & self.engaged[rows] & ~self.faulted[rows]
         values = np.where(valid, noisy, np.nan)
@@ -543,8 +534,8 @@ class LabBatch:
         """Where episode ``row``'s TCP truly is now (mm; scoring and fidelity checks)."""
         rows = np.array([row])
         at = self.rho if self.world is None else self.actual
-        tcp = self.backend.look(rows, self.require()[rows], self.gauges[rows], at[rows],
-                                self.tcp[rows], self.engaged[rows]).tcp
+        tcp = self.backend.look(rows, *(x[rows] for x in (
+            self.require(), self.gauges, at, self.tcp, self.engaged))).tcp
         if self.world is not None:
             tcp = tcp * self.world[rows].scale(self.time[rows])[:, None]
         return tcp[0]
@@ -608,19 +599,6 @@ def _unmounted(shape: tuple[int, int], travel: float, spec: GaugeSpec) -> GaugeA
     return GaugeArray(origin=np.full((*shape, 3), np.nan), direction=np.full((*shape, 3), np.nan),
                       sign=np.ones(shape), travel=travel, zero=DEFAULT_TRAVEL / 2,
                       leg=spec.leg, axis=spec.axis, at=spec.at)
-
-
-def _with_gauges(array: GaugeArray, rows: np.ndarray, columns: np.ndarray, new: GaugeArray
-                 ) -> GaugeArray:
-    """A copy of ``array`` (E, S) with the gauges at ``[rows, columns]`` replaced by ``new``
-    (of the indexed shape, or that shape with singleton axes)."""
-    out = {}
-    for f in fields(array):
-        value = np.array(getattr(array, f.name))
-        target = value[rows, columns]
-        value[rows, columns] = np.reshape(getattr(new, f.name), target.shape)
-        out[f.name] = value
-    return GaugeArray(**out)
 
 
 def _with_rows(machines: MachineParams, rows: np.ndarray, new: MachineParams) -> MachineParams:

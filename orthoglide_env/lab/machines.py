@@ -1,12 +1,5 @@
-"""The machines a lab works on: the exact model (any batch) or one PyBullet machine.
-
-The lab engine (:mod:`orthoglide_env.lab.engine`) keeps the machines' errors, postures
-and gauges itself and asks a :class:`LabMachines` back-end what the machines show there:
-:class:`ExactMachines` computes any batch with one :class:`ExactMachine` (the closed-form
-and Newton solution of the geometry, instant); :class:`SimulatedMachine` is the PyBullet
-closed-chain machine of :mod:`orthoglide_env.sim.pybullet` (the faithful one, a batch of
-one episode), hosted in one client for every episode of an env.
-"""
+"""The machines a lab works on (:class:`LabMachines`): the exact model, any batch
+(:class:`ExactMachines`), or one PyBullet machine (:class:`SimulatedMachine`)."""
 
 from __future__ import annotations
 
@@ -175,9 +168,8 @@ class SimulatedMachine(LabMachines):
             from orthoglide_env.sim.pybullet import OrthoglideMachine
             from orthoglide_env.sim.simulator import Simulator
         except ImportError as exc:
-            raise ImportError(
-                f"the pybullet backend is not available ({exc}); use backend='exact'"
-            ) from exc
+            raise ImportError(f"the pybullet backend is not available ({exc}); use "
+                              "backend='exact'") from exc
         if self.sim is None:
             self.sim = Simulator(gui=self.gui)
         try:

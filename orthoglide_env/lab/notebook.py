@@ -123,12 +123,11 @@ class Notebook:
     def predicted_tcp_rigid_mm(self) -> float:
         """TCP error RMS after the best-fit rigid motion that the records' information
         predicts (at the nominal machine, a priori sizes from the realistic preset)."""
-        info, names = self.information()
-        space = ParameterSpace()
+        info, _ = self.information()
         n = len(ERROR_NAMES)
-        scale = np.concatenate([default_scales(space), np.ones(len(names) - n)])
+        scale = default_scales(ParameterSpace())  # the machine's errors'
         posterior = np.linalg.inv(np.eye(len(info)) + info)[:n, :n]
-        covariance = posterior * np.outer(scale[:n], scale[:n])
+        covariance = posterior * np.outer(scale, scale)
         return predicted_tcp_frames(MachineParams(design=self._design), covariance).rigid.rms
 
 

@@ -73,13 +73,10 @@ def slot_catalogue(design: MachineDesign) -> tuple[GaugeSpec, ...]:
     The bar slots come first, in their historical order, so their indices are stable.  A
     lab's slot indices are its design's catalogue (``settings.slots``, an env's ``slots``);
     made once per design."""
-    return (
-        tuple(GaugeSpec(leg, axis, at) for leg in range(3) for axis in range(3) if axis != leg
-              for at in design.slot_positions)
-        + tuple(GaugeSpec.carriage(leg, axis) for leg in range(3) for axis in range(3)
-                if axis != leg)
-        + tuple(GaugeSpec.platform(axis) for axis in range(3))
-    )
+    across = [(leg, axis) for leg in range(3) for axis in range(3) if axis != leg]
+    return (tuple(GaugeSpec(leg, axis, at) for leg, axis in across for at in design.slot_positions)
+            + tuple(GaugeSpec.carriage(leg, axis) for leg, axis in across)
+            + tuple(GaugeSpec.platform(axis) for axis in range(3)))
 
 
 #: The prototype's slot catalogue (the lab's slot indices on the prototype).

@@ -34,9 +34,6 @@ ENCODER_MARGIN: float = 1.0
 #: The lab time an experiment has unless told otherwise (s): an hour, the comparison's
 #: equal budget for every agent.
 DEFAULT_BUDGET_S: float = 3600.0
-#: Overtravel rules: a ``fault`` puts the gauge out of service until it is re-mounted; a
-#: ``momentary`` one lasts while the bar presses it (and is charged on entering only).
-OVERTRAVEL_RULES: tuple[str, ...] = ("fault", "momentary")
 
 
 @dataclass(frozen=True)
@@ -58,6 +55,8 @@ class LabSettings:
     estimator: Estimator | None = None
     time_weight: float = 1.0
     success_mm: float = 0.01
+    #: A ``fault`` puts the gauge out of service until it is re-mounted; a ``momentary``
+    #: overtravel lasts while the bar presses it (and is charged on entering only).
     overtravel: str = "fault"
     strict_moves: bool = False  # a move the machine cannot assemble raises ValueError
     notebook: bool = True  # every reading is written into the episode's notebook
@@ -129,8 +128,7 @@ def lab_settings(args: dict[str, Any]) -> LabSettings:
         layout=tuple(slots[slot_index(spec, design=design)] for spec in PAPER_LAYOUT[:stands]),
         tracker=args["tracker"], tracker_sigma=args["tracker_sigma"],
         budget_s=args["budget_s"], reward=args["reward"], estimator=args["estimator"],
-        time_weight=args["time_weight"], success_mm=args["success_mm"],
-    )
+        time_weight=args["time_weight"], success_mm=args["success_mm"])
 
 
 def calibration_settings(args: dict[str, Any]) -> LabSettings:
@@ -139,10 +137,8 @@ def calibration_settings(args: dict[str, Any]) -> LabSettings:
     layout = args["gauges"] or PAPER_LAYOUT
     return LabSettings(
         **_shared(args, args["design"] or PROTOTYPE), stands=len(layout), layout=layout,
-        station=False,
-        max_steps=args["max_episode_steps"], overtravel="momentary", strict_moves=True,
-        notebook=False, motion=args["motion"],
-    )
+        station=False, max_steps=args["max_episode_steps"], overtravel="momentary",
+        strict_moves=True, notebook=False, motion=args["motion"])
 
 
 def lab_spaces(settings: LabSettings) -> tuple[spaces.Dict, spaces.Dict]:

@@ -145,16 +145,13 @@ class Kind(Arg):
         return value if self.make is None else self.make(value)
 
 
-def _autoreset_mode(value: Any) -> bool:
-    return isinstance(value, AutoresetMode) or (
-        isinstance(value, str) and value in {m.value for m in AutoresetMode})
-
-
 FLAG = Kind("True or False", lambda v: isinstance(v, bool | np.bool_), bool, default=False)
 FUNCTION = Kind("a function (records, sigma) -> MachineParams, or None",
                 lambda v: v is None or callable(v))
-AUTORESET = Kind(f"one of {[m.value for m in AutoresetMode]}", _autoreset_mode, AutoresetMode,
-                 default=AutoresetMode.NEXT_STEP)
+AUTORESET = Kind(f"one of {[m.value for m in AutoresetMode]}",
+                 lambda v: isinstance(v, AutoresetMode) or (
+                     isinstance(v, str) and v in {m.value for m in AutoresetMode}),
+                 AutoresetMode, default=AutoresetMode.NEXT_STEP)
 
 
 @dataclass(frozen=True)

@@ -19,19 +19,16 @@ from orthoglide_env.model.kinematics import (
 
 #: Names of the moving boxes (the simulator's link names): the bars, the couplers, the
 #: platform and the carriages.
-BOX_NAMES: tuple[str, ...] = tuple(
-    [f"{leg}_{bar}" for leg in LEG_NAMES for bar in ("bar1", "bar2")]
-    + [f"{leg}_coupler" for leg in LEG_NAMES] + ["platform"]
-    + [f"{leg}_carriage" for leg in LEG_NAMES]
-)
+BOX_NAMES: tuple[str, ...] = (*(f"{leg}_{bar}" for leg in LEG_NAMES for bar in ("bar1", "bar2")),
+                              *(f"{leg}_coupler" for leg in LEG_NAMES), "platform",
+                              *(f"{leg}_carriage" for leg in LEG_NAMES))
 PLATFORM_BOX: int = BOX_NAMES.index("platform")
 #: Index of the x leg's carriage; the y and z legs' follow.
 CARRIAGE_BOX: int = BOX_NAMES.index("x_carriage")
 
 
-def collision_boxes(
-    machine: MachineParams, rho: np.ndarray, p: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def collision_boxes(machine: MachineParams, rho: np.ndarray, p: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every moving box, in the order of :data:`BOX_NAMES`: centres ``(..., 13, 3)``,
     rotations ``(..., 13, 3, 3)``, half extents ``(..., 13, 3)``."""
     legs = np.repeat(np.arange(3), 2)
@@ -58,9 +55,8 @@ def collision_boxes(
     return centres, rots, halves
 
 
-def bar_boxes(
-    a: np.ndarray, c: np.ndarray, legs: np.ndarray, bars: np.ndarray, design: MachineDesign
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def bar_boxes(a: np.ndarray, c: np.ndarray, legs: np.ndarray, bars: np.ndarray,
+              design: MachineDesign) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Bar boxes from the joint centres ``a`` (carriage) and ``c`` (platform) of their legs,
     shaped as ``design`` says."""
     r_axis = R_LEG[legs][..., :, 2]

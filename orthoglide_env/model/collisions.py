@@ -31,15 +31,10 @@ def crash_pairs() -> list[tuple[str, str]]:
                     for p in ("bar1", "bar2", "carriage")]
 
 
-def _pair_indices() -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
-    index = {name: k for k, name in enumerate(BOX_NAMES)}
-    pairs = crash_pairs()
-    first = np.array([index[a] for a, _ in pairs])
-    second = np.array([index[b] for _, b in pairs])
-    return first, second, tuple(f"{a}/{b}" for a, b in pairs)
-
-
-PAIR_FIRST, PAIR_SECOND, PAIR_NAMES = _pair_indices()
+#: The crash pairs' boxes (indices in :data:`BOX_NAMES`) and names (``"a/b"``).
+PAIR_FIRST, PAIR_SECOND = (np.array([BOX_NAMES.index(pair[k]) for pair in crash_pairs()])
+                           for k in (0, 1))
+PAIR_NAMES: tuple[str, ...] = tuple(f"{a}/{b}" for a, b in crash_pairs())
 
 
 #: Cyclic successors of a box axis: with right-handed axes, axis ``i`` crossed with axis
@@ -47,10 +42,8 @@ PAIR_FIRST, PAIR_SECOND, PAIR_NAMES = _pair_indices()
 NEXT, AFTER = np.array([1, 2, 0]), np.array([2, 0, 1])
 
 
-def box_gap(
-    centre_a: np.ndarray, rot_a: np.ndarray, half_a: np.ndarray,
-    centre_b: np.ndarray, rot_b: np.ndarray, half_b: np.ndarray,
-) -> np.ndarray:
+def box_gap(centre_a: np.ndarray, rot_a: np.ndarray, half_a: np.ndarray, centre_b: np.ndarray,
+            rot_b: np.ndarray, half_b: np.ndarray) -> np.ndarray:
     """Largest separating-axis gap (mm) between boxes A and B, broadcast over leading
     dimensions: positive means apart by at least that much, zero or less means touching
     or overlapping.  Rotation columns are the box axes in world.
@@ -88,9 +81,8 @@ def box_gap(
                       edges.reshape(*edges.shape[:-2], 9).max(axis=-1))
 
 
-def pair_gaps(
-    machine: MachineParams, rho: np.ndarray, boxes: tuple[np.ndarray, ...] | None = None
-) -> np.ndarray:
+def pair_gaps(machine: MachineParams, rho: np.ndarray, boxes: tuple[np.ndarray, ...] | None = None
+              ) -> np.ndarray:
     """Separating-axis gap (mm) of every pair of :data:`PAIR_NAMES`, shape ``(..., pairs)``."""
     rho = np.asarray(rho, dtype=float)
     centre, rot, half = boxes or collision_boxes(machine, rho, direct(machine, rho))
@@ -99,17 +91,15 @@ def pair_gaps(
                    centre[..., second, :], rot[..., second, :, :], half[..., second, :])
 
 
-def clearance(
-    machine: MachineParams, rho: np.ndarray, boxes: tuple[np.ndarray, ...] | None = None
-) -> np.ndarray:
+def clearance(machine: MachineParams, rho: np.ndarray, boxes: tuple[np.ndarray, ...] | None = None
+              ) -> np.ndarray:
     """Smallest gap (mm) over the crash pairs at ``rho``, shape ``rho.shape[:-1]``: a lower
     bound on how far the nearest two parts that must never meet are apart."""
     return np.min(pair_gaps(machine, rho, boxes), axis=-1)
 
 
-def collision_mask(
-    machine: MachineParams, rho: np.ndarray, boxes: tuple[np.ndarray, ...] | None = None
-) -> np.ndarray:
+def collision_mask(machine: MachineParams, rho: np.ndarray,
+                   boxes: tuple[np.ndarray, ...] | None = None) -> np.ndarray:
     """Which crash pairs of :data:`PAIR_NAMES` are in contact (``pair_gaps <= 0``), shape
     ``(..., pairs)``: per machine of a batch and per posture.
 
@@ -141,9 +131,8 @@ def collision_names(mask: np.ndarray) -> list[str]:
     return [name for name, hit in zip(PAIR_NAMES, mask, strict=True) if hit]
 
 
-def collisions(
-    machine: MachineParams, rho: np.ndarray, boxes: tuple[np.ndarray, ...] | None = None
-) -> list[str]:
+def collisions(machine: MachineParams, rho: np.ndarray, boxes: tuple[np.ndarray, ...] | None = None
+               ) -> list[str]:
     """Names (``"a/b"``, as the simulator names them) of the crash pairs in contact at one
     posture ``rho`` (shape ``(3,)``) of one machine."""
     return collision_names(collision_mask(machine, rho, boxes))

@@ -204,11 +204,8 @@ class MachineDesign:
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
-            if f.name == "validity":
-                checked = _validity(value)
-            else:
-                checked = _numbers(f.name, value, RULES[f.name])
-            object.__setattr__(self, f.name, checked)
+            object.__setattr__(self, f.name, _validity(value) if f.name == "validity"
+                               else _numbers(f.name, value, RULES[f.name]))
         for keys, holds, rule in _relations(self):
             if not holds:
                 raise DesignError(f"design: {rule}", key=keys[0])
@@ -223,11 +220,9 @@ class MachineDesign:
     # -- (de)serialisation ---------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
         """The design as a JSON-ready dict (every key)."""
-        out: dict[str, Any] = {}
-        for f in fields(self):
-            value = getattr(self, f.name)
-            out[f.name] = (dict(zip(VALIDITY_UNITS, value, strict=True)) if f.name == "validity"
-                           else list(value) if isinstance(value, tuple) else value)
+        out: dict[str, Any] = {f.name: getattr(self, f.name) for f in fields(self)}
+        out.update({key: list(value) for key, value in out.items() if isinstance(value, tuple)},
+                   validity=dict(zip(VALIDITY_UNITS, self.validity, strict=True)))
         return out
 
     def to_json(self) -> str:

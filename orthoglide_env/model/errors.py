@@ -79,13 +79,13 @@ def _validated(values: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     for key, value in values.items():
         shape = _SHAPES[key]
         if value.shape[value.ndim - len(shape):] != shape or value.ndim < len(shape):
-            raise MachineFileError(
-                f"machine key '{key}' must have shape {list(shape)}, got {list(value.shape)}")
+            raise MachineFileError(f"machine key '{key}' must have shape {list(shape)}, got "
+                                   f"{list(value.shape)}")
         if not np.all(np.isfinite(value)):
             raise MachineFileError(f"machine key '{key}' holds a non-finite number")
     try:
-        batch = np.broadcast_shapes(
-            *(v.shape[: v.ndim - len(_SHAPES[k])] for k, v in values.items()))
+        batch = np.broadcast_shapes(*(v.shape[: v.ndim - len(_SHAPES[k])]
+                                      for k, v in values.items()))
     except ValueError:
         raise MachineFileError("machine keys have different batch shapes") from None
     return {key: value if value.shape == (*batch, *_SHAPES[key])
@@ -175,10 +175,8 @@ class MachineParams:
 
     def to_vector(self) -> np.ndarray:
         """The 27 errors as one vector in :data:`ERROR_NAMES` order, shape ``(*batch, 27)``."""
-        batch = self.batch_shape
-        return np.concatenate(
-            [getattr(self, key).reshape(*batch, -1) for key in _SHAPES], axis=-1
-        )
+        return np.concatenate([getattr(self, key).reshape(*self.batch_shape, -1)
+                               for key in _SHAPES], axis=-1)
 
     @classmethod
     def from_vector(cls, vector: np.ndarray, design: MachineDesign = PROTOTYPE
@@ -189,12 +187,9 @@ class MachineParams:
         if vector.shape[-1:] != (len(ERROR_NAMES),):
             raise ValueError(f"a machine vector has {len(ERROR_NAMES)} entries, "
                              f"got shape {list(vector.shape)}")
-        batch, kwargs, start = vector.shape[:-1], {}, 0
-        for key, shape in _SHAPES.items():
-            size = int(np.prod(shape))
-            kwargs[key] = vector[..., start:start + size].reshape(*batch, *shape)
-            start += size
-        return cls(**kwargs, design=design)
+        parts = np.split(vector, _SPLITS, axis=-1)
+        return cls(**{key: part.reshape(*vector.shape[:-1], *shape) for (key, shape), part
+                      in zip(_SHAPES.items(), parts, strict=True)}, design=design)
 
     # -- derived geometry, used by the kinematics and the URDF writer ------------------
     @property
@@ -256,10 +251,8 @@ class MachineParams:
             raise MachineFileError("a machine must be a JSON object")
         unknown = [key for key in data if key not in (*_SHAPES, "design")]
         if unknown:
-            raise MachineFileError(
-                f"unknown machine key(s) {sorted(map(str, unknown))}; allowed: "
-                f"{[*sorted(_SHAPES), 'design']}", key=str(unknown[0]),
-            )
+            raise MachineFileError(f"unknown machine key(s) {sorted(map(str, unknown))}; "
+                                   f"allowed: {[*sorted(_SHAPES), 'design']}", key=str(unknown[0]))
         if "design" in data:
             named = _design_of(data["design"], folder)
             if design is not None and named != design:
@@ -304,6 +297,8 @@ _SHAPES: dict[str, tuple[int, ...]] = {
     "axis_offset": (3, 2),
     "attach": (3, 3),
 }
+#: Where each group's errors end in a machine's vector (but the last).
+_SPLITS: list[int] = np.cumsum([np.prod(shape) for shape in _SHAPES.values()])[:-1].tolist()
 
 def _by_value(function: Callable[[np.ndarray], np.ndarray]
               ) -> Callable[[np.ndarray], np.ndarray]:
@@ -377,8 +372,7 @@ def check_validity(machine: MachineParams) -> MachineParams:
             raise MachineFileError(
                 f"machine key '{key}' element {list(index)} = {values[index]:g} {unit} is "
                 f"outside the validity range [-{limit:g}, {limit:g}] {unit} (where the "
-                "simulator and the exact model agree)", key=key,
-            )
+                "simulator and the exact model agree)", key=key)
     return machine
 
 
@@ -450,46 +444,23 @@ class ErrorPreset:
                ) -> MachineParams:
         """Draw one machine of ``design`` (the gauge installation errors are drawn by the
         gauges)."""
-        return MachineParams(
-            drho=rng.normal(0.0, self.drho, 3),
-            dL=rng.normal(0.0, self.dL, 3),
-            axis_tilt=rng.normal(0.0, self.axis_tilt, (3, 2)),
-            axis_offset=rng.normal(0.0, self.axis_offset, (3, 2)),
-            attach=rng.normal(0.0, self.attach, (3, 3)),
-            design=design,
-        )
+        return MachineParams(**{key: rng.normal(0.0, getattr(self, key), shape)
+                                for key, shape in _SHAPES.items()}, design=design)
 
 
 #: Named error presets.  ``realistic`` sizes the extended errors so that the paper's
 #: six-parameter model is left with gauge residuals of the order the paper reports
 #: (about 0.1 mm, Table 1); ``benchmarks/realistic.py`` measures that.
-PRESETS: dict[str, ErrorPreset] = {
-    p.name: p
-    for p in (
-        ErrorPreset("nominal", description="no error at all"),
-        ErrorPreset(
-            "paper",
-            drho=2.0,
-            dL=2.0,
-            description="only the paper's six parameters: drho, dL ~ N(0, 2 mm)",
-        ),
-        ErrorPreset(
-            "realistic",
-            drho=2.0,
-            dL=2.0,
-            axis_tilt=2e-3,
-            axis_offset=0.5,
-            attach=0.3,
-            gauge_position=0.5,
-            gauge_tilt=5e-3,
-            description=(
-                "paper errors N(0, 2 mm) plus actuator tilt N(0, 2 mrad), axis offset "
-                "N(0, 0.5 mm), platform attachment N(0, 0.3 mm), gauge stand position "
-                "N(0, 0.5 mm) and tilt N(0, 5 mrad)"
-            ),
-        ),
-    )
-}
+PRESETS: dict[str, ErrorPreset] = {p.name: p for p in (
+    ErrorPreset("nominal", description="no error at all"),
+    ErrorPreset("paper", drho=2.0, dL=2.0,
+                description="only the paper's six parameters: drho, dL ~ N(0, 2 mm)"),
+    ErrorPreset("realistic", drho=2.0, dL=2.0, axis_tilt=2e-3, axis_offset=0.5, attach=0.3,
+                gauge_position=0.5, gauge_tilt=5e-3,
+                description="paper errors N(0, 2 mm) plus actuator tilt N(0, 2 mrad), axis "
+                "offset N(0, 0.5 mm), platform attachment N(0, 0.3 mm), gauge stand position "
+                "N(0, 0.5 mm) and tilt N(0, 5 mrad)"),
+)}
 DEFAULT_PRESET = "realistic"
 
 
@@ -501,10 +472,8 @@ def get_preset(name: str) -> ErrorPreset:
         raise ValueError(f"unknown error preset '{name}'; choose from {sorted(PRESETS)}") from None
 
 
-def random_machine(
-    seed: int | np.random.Generator | None, preset: str = DEFAULT_PRESET,
-    design: MachineDesign = PROTOTYPE,
-) -> MachineParams:
+def random_machine(seed: int | np.random.Generator | None, preset: str = DEFAULT_PRESET,
+                   design: MachineDesign = PROTOTYPE) -> MachineParams:
     """A seeded random machine of ``design`` drawn from a named preset."""
     return get_preset(preset).sample(np.random.default_rng(seed), design)
 

@@ -101,10 +101,8 @@ def direct_paper(rho: np.ndarray, drho: np.ndarray, lengths: np.ndarray,
     return a_vec + t[..., None] * b_vec
 
 
-def jacobian_paper(
-    p: np.ndarray, rho: np.ndarray, drho: np.ndarray, lengths: np.ndarray,
-    nominal: float = PROTOTYPE.L,
-) -> np.ndarray:
+def jacobian_paper(p: np.ndarray, rho: np.ndarray, drho: np.ndarray, lengths: np.ndarray,
+                   nominal: float = PROTOTYPE.L) -> np.ndarray:
     """Eq. (5): ``dp / d(drho, L)``, shape ``(..., 3, 6)``.
 
     Differentiating eq. (2) gives ``M dp/ddrho = diag(p_i - q_i)`` and
@@ -147,9 +145,8 @@ def inverse(machine: MachineParams, p: np.ndarray) -> np.ndarray:
     return uw + np.sqrt(disc)
 
 
-def direct(
-    machine: MachineParams, rho: np.ndarray, *, tol: float = 1e-11, max_iter: int = 30
-) -> np.ndarray:
+def direct(machine: MachineParams, rho: np.ndarray, *, tol: float = 1e-11, max_iter: int = 30
+           ) -> np.ndarray:
     """TCP position (mm) for control coordinates ``rho``, exactly (Newton to ``tol`` mm)."""
     g, rho = geometry(machine, rho)
     p = direct_paper(rho, g.drho, g.lengths, machine.design.L)
@@ -216,8 +213,7 @@ def axis_direction_derivatives(machine: MachineParams) -> np.ndarray:
     ``(*batch, 3 legs, 2, 3)``.  With ``u_i = R_LEG[i] l_i`` and ``l_i = (1, tan a, tan b)
     / N``: ``dl/da = (I - l l^T) e_1 sec^2(a) / N`` (``b`` with ``e_2``)."""
     tilt = machine.axis_tilt  # (*batch, 3, 2)
-    tan = np.tan(tilt)
-    local = np.concatenate([np.ones((*tan.shape[:-1], 1)), tan], axis=-1)
+    local = np.concatenate([np.ones((*tilt.shape[:-1], 1)), np.tan(tilt)], axis=-1)
     norm = np.linalg.norm(local, axis=-1, keepdims=True)
     local = local / norm
     dlocal = (np.eye(3)[1:] - local[..., None, :] * local[..., 1:, None]) * (
@@ -267,9 +263,7 @@ def tcp_sensitivity(machine: MachineParams, rho: np.ndarray, p: np.ndarray) -> n
     in closed form.  Each error is in one leg's loop (:data:`ERROR_LEGS`), so ``df/dtheta``
     has one entry per column and the solve is a column of the inverse times it."""
     inverse, row = tcp_sensitivity_factors(machine, rho, p)
-    out = np.take(inverse, ERROR_LEGS, axis=-1)
-    out *= row[..., None, :]
-    return out
+    return np.take(inverse, ERROR_LEGS, axis=-1) * row[..., None, :]
 
 
 def tcp_sensitivity_factors(machine: MachineParams, rho: np.ndarray, p: np.ndarray
@@ -298,9 +292,7 @@ def sensitivity_along(inverse: np.ndarray, row: np.ndarray, weights: np.ndarray
     not three times."""
     through = (weights[..., 0, None] * inverse[..., 0, :] + weights[..., 1, None]
                * inverse[..., 1, :] + weights[..., 2, None] * inverse[..., 2, :])
-    out = np.take(through, ERROR_LEGS, axis=-1)
-    out *= row
-    return out
+    return np.take(through, ERROR_LEGS, axis=-1) * row
 
 
 def inverse_3x3(m: np.ndarray) -> np.ndarray:
@@ -339,9 +331,8 @@ def leg_vectors(machine: MachineParams, rho: np.ndarray, p: np.ndarray) -> np.nd
     return platform_points(machine, p) - carriage_points(machine, rho)
 
 
-def leg_angles(
-    machine: MachineParams, rho: np.ndarray, p: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+def leg_angles(machine: MachineParams, rho: np.ndarray, p: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
     """Passive joint angles ``(theta, beta)`` of each leg, shapes ``(..., 3)``.
 
     ``theta`` turns R1 about the leg's local Z; ``beta`` turns the parallelogram bars about
@@ -362,10 +353,8 @@ def check_reachable(machine: MachineParams, p: np.ndarray) -> np.ndarray:
     design = machine.design
     bad = ~within_limits(rho, design)
     if np.any(bad):
-        raise UnreachableError(
-            f"TCP needs joint coordinate {rho[bad].flat[0]:.3f} mm, outside the control "
-            f"limits [{design.rho_min:g}, {design.rho_max:g}] mm"
-        )
+        raise UnreachableError(f"TCP needs joint coordinate {rho[bad].flat[0]:.3f} mm, outside "
+                               f"the control limits [{design.rho_min:g}, {design.rho_max:g}] mm")
     return rho
 
 

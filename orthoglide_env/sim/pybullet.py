@@ -64,16 +64,9 @@ FOOT_SIZE = np.array([30.0, 30.0, 30.0])  # mm, a stand's magnetic foot on a rai
 class OrthoglideMachine:
     """A virtual Orthoglide in PyBullet, with gauges installed on its base."""
 
-    def __init__(
-        self,
-        machine: MachineParams,
-        gauges: list[Gauge],
-        *,
-        gui: bool = False,
-        gravity: bool = True,
-        settings: PhysicsSettings | None = None,
-        sim: Simulator | None = None,
-    ) -> None:
+    def __init__(self, machine: MachineParams, gauges: list[Gauge], *, gui: bool = False,
+                 gravity: bool = True, settings: PhysicsSettings | None = None,
+                 sim: Simulator | None = None) -> None:
         """Build the machine in a new PyBullet client, or in ``sim``: a client that hosts
         one machine after another (everything in it is removed first).  A machine in a
         given client takes that client's settings, so ``gui``, ``gravity`` and ``settings``
@@ -112,10 +105,8 @@ class OrthoglideMachine:
                 for j in range(self.bc.getNumJoints(self.body))]
         self._index = {i[12].decode(): i[0] for i in info}  # by child link name
         self._joints = {i[1].decode(): (i[0], i[2]) for i in info}  # index, type
-        self._com = {
-            name: np.array(self.bc.getDynamicsInfo(self.body, j)[3]) / MM
-            for name, j in self._index.items()
-        }
+        self._com = {name: np.array(self.bc.getDynamicsInfo(self.body, j)[3]) / MM
+                     for name, j in self._index.items()}
         self.slides = [self._index[link_name(i, "carriage")] for i in range(3)]
         self.platform = self._index["platform"]
         for j in range(self.bc.getNumJoints(self.body)):
@@ -163,8 +154,7 @@ class OrthoglideMachine:
                 continue
             cid = self.bc.createConstraint(
                 self.body, a, self.body, b, pb.JOINT_FIXED, [0, 0, 0], *pivots,
-                [0, 0, 0, 1], list(Rotation.from_matrix(c.rotation).as_quat()),
-            )
+                [0, 0, 0, 1], list(Rotation.from_matrix(c.rotation).as_quat()))
             self.bc.changeConstraint(cid, maxForce=1e9)
         return closures
 
@@ -202,8 +192,7 @@ class OrthoglideMachine:
             linkInertialFramePositions=[[0.0, 0.0, 0.0]] * n,
             linkInertialFrameOrientations=[[0.0, 0.0, 0.0, 1.0]] * n,
             linkParentIndices=[0] * n, linkJointTypes=[pb.JOINT_FIXED] * n,
-            linkJointAxis=[[0.0, 0.0, 1.0]] * n,
-        )
+            linkJointAxis=[[0.0, 0.0, 1.0]] * n)
 
     # -- motion -------------------------------------------------------------------------
     def move(self, rho: np.ndarray, mode: str = "quasi-static") -> None:
@@ -232,18 +221,15 @@ class OrthoglideMachine:
 
     def _hold(self, rho: np.ndarray) -> None:
         for i, j in enumerate(self.slides):
-            self.bc.setJointMotorControl2(
-                self.body, j, pb.POSITION_CONTROL, targetPosition=rho[i] * MM,
-                positionGain=POSITION_GAIN, force=MOTOR_FORCE,
-            )
+            self.bc.setJointMotorControl2(self.body, j, pb.POSITION_CONTROL,
+                                          targetPosition=rho[i] * MM,
+                                          positionGain=POSITION_GAIN, force=MOTOR_FORCE)
 
     def _settle(self, rho: np.ndarray) -> int:
         target = rho * MM
         for n in range(1, MAX_SETTLE_STEPS + 1):
             self.sim.step()
-            states = self.bc.getJointStates(self.body, self.slides)
-            pos = np.array([s[0] for s in states])
-            vel = np.array([s[1] for s in states])
+            pos, vel = np.array([s[:2] for s in self.bc.getJointStates(self.body, self.slides)]).T
             if np.all(np.abs(pos - target) < SETTLE_TOL) and np.all(np.abs(vel) < SETTLE_TOL):
                 return n
         raise RuntimeError(f"the machine did not settle in {MAX_SETTLE_STEPS} steps")
@@ -333,11 +319,8 @@ class OrthoglideMachine:
         """Which pairs of :meth:`_collision_pairs` are in contact."""
         # getClosestPoints(distance=0) reports nothing, not even a deep penetration: ask
         # for a hair more and keep what touches.
-        return np.array([
-            any(pt[8] <= 0.0 for pt in
-                self.bc.getClosestPoints(self.body, self.body, CONTACT_QUERY, a, b))
-            for a, b, _ in self._pairs
-        ], dtype=bool)
+        return np.array([any(pt[8] <= 0.0 for pt in self.bc.getClosestPoints(
+            self.body, self.body, CONTACT_QUERY, a, b)) for a, b, _ in self._pairs], dtype=bool)
 
     def collisions(self) -> list[str]:
         """Pairs of parts in contact that should never touch (see :meth:`_collision_pairs`)."""
@@ -349,10 +332,8 @@ class OrthoglideMachine:
         if self.sim.gui or self._stands is not None:
             self._draw_stands()
 
-    def render(
-        self, width: int = 640, height: int = 480, *, eye: np.ndarray | None = None,
-        target: np.ndarray | None = None, fov: float | None = None,
-    ) -> np.ndarray:
+    def render(self, width: int = 640, height: int = 480, *, eye: np.ndarray | None = None,
+               target: np.ndarray | None = None, fov: float | None = None) -> np.ndarray:
         """An RGB image (height, width, 3) of the machine and its gauges, TinyRenderer.
 
         ``eye`` and ``target``: camera position and aim point (mm, world), ``fov`` its
@@ -364,10 +345,9 @@ class OrthoglideMachine:
         if eye is None or target is None:
             eye, target, framing = square_on_camera(width / height, self.machine.design)
             fov = framing if fov is None else fov
-        view = self.bc.computeViewMatrix(
-            cameraEyePosition=list(eye * MM), cameraTargetPosition=list(target * MM),
-            cameraUpVector=[0, 0, 1],
-        )
+        view = self.bc.computeViewMatrix(cameraEyePosition=list(eye * MM),
+                                         cameraTargetPosition=list(target * MM),
+                                         cameraUpVector=[0, 0, 1])
         proj = self.bc.computeProjectionMatrixFOV(fov=fov or CAMERA_FOV, aspect=width / height,
                                                   nearVal=0.05, farVal=5.0)
         img = self.bc.getCameraImage(width, height, view, proj, renderer=pb.ER_TINY_RENDERER)

@@ -14,6 +14,7 @@ from orthoglide_env.instruments.dial import (
     readings_from_distances,
     status_of,
 )
+from orthoglide_env.instruments.gauges import Gauge
 from orthoglide_env.instruments.slots import PAPER_LAYOUT
 from orthoglide_env.instruments.stands import install, zero_gauges
 from orthoglide_env.model.errors import AXIS_NAMES, LEG_NAMES, MachineParams, check_rho
@@ -35,15 +36,9 @@ def _machine_with_gauges(machine: MachineParams) -> OrthoglideMachine:
     return sim
 
 
-def pose_report(
-    machine: MachineParams,
-    rho: np.ndarray,
-    *,
-    noise_free: bool = False,
-    seed: int | None = None,
-    sigma: float = DEFAULT_SIGMA,
-    resolution: float = DEFAULT_RESOLUTION,
-) -> dict:
+def pose_report(machine: MachineParams, rho: np.ndarray, *, noise_free: bool = False,
+                seed: int | None = None, sigma: float = DEFAULT_SIGMA,
+                resolution: float = DEFAULT_RESOLUTION) -> dict:
     """Simulated TCP, exact-model TCP, loop residual and every gauge reading at ``rho``.
 
     Keys: ``tcp`` [3] (simulated, mm), ``tcp_model`` [3], ``loop_residual_mm``,
@@ -64,23 +59,17 @@ def pose_report(
     readings = readings_from_distances(gauges, t)
     if not noise_free:
         readings = GaugeNoise(sigma, resolution).apply(readings, np.random.default_rng(seed))
-    status = status_of(gauges, t)
-    return {
-        "tcp": tcp.tolist(),
-        "tcp_model": tcp_model.tolist(),
-        "loop_residual_mm": residual,
-        "platform_rotation_rad": rotation,
-        "gauges": [
-            {
-                "leg": LEG_NAMES[g.spec.leg],
-                "axis": AXIS_NAMES[g.spec.axis],
-                "reading": None if np.isnan(r) else float(r),
-                "valid": bool(np.isfinite(r)),
-                "status": Status(s).name.lower().replace("_", "-"),
-            }
-            for g, r, s in zip(gauges, readings, status, strict=True)
-        ],
-    }
+    status = [Status(s).name.lower().replace("_", "-") for s in status_of(gauges, t)]
+    return {"tcp": tcp.tolist(), "tcp_model": tcp_model.tolist(), "loop_residual_mm": residual,
+            "platform_rotation_rad": rotation, "gauges": _gauges(gauges, readings, status)}
+
+
+def _gauges(gauges: list[Gauge], readings: np.ndarray, status: list[str]) -> list[dict]:
+    """The report's ``gauges``: each gauge's leg, axis, reading (mm, None when not valid),
+    validity and status."""
+    return [{"leg": LEG_NAMES[g.spec.leg], "axis": AXIS_NAMES[g.spec.axis],
+             "reading": None if np.isnan(r) else float(r), "valid": bool(np.isfinite(r)),
+             "status": s} for g, r, s in zip(gauges, readings, status, strict=True)]
 
 
 def pose_in_world(machine: MachineParams, rho: np.ndarray, conditions: Conditions, *,
@@ -113,21 +102,15 @@ def pose_in_world(machine: MachineParams, rho: np.ndarray, conditions: Condition
         finally:
             env.close()
     obs, tcp, world, gauges = out["pybullet"]
-    return {
-        "tcp": tcp.tolist(), "tcp_model": out["exact"][1].tolist(),
-        "loop_residual_mm": out["residual"], "platform_rotation_rad": out["rotation"],
-        "conditions": conditions.to_dict(), "world": world.to_dict(),
-        "gauges": [{"leg": LEG_NAMES[g.spec.leg], "axis": AXIS_NAMES[g.spec.axis],
-                    "reading": float(r) if v else None, "valid": bool(v),
-                    "status": "valid" if v else "not-valid"}
-                   for g, r, v in zip(gauges, obs["gauges"], obs["valid"], strict=True)],
-    }
+    return {"tcp": tcp.tolist(), "tcp_model": out["exact"][1].tolist(),
+            "loop_residual_mm": out["residual"], "platform_rotation_rad": out["rotation"],
+            "conditions": conditions.to_dict(), "world": world.to_dict(),
+            "gauges": _gauges(gauges, np.where(obs["valid"], obs["gauges"], np.nan),
+                              ["valid" if v else "not-valid" for v in obs["valid"]])}
 
 
-def render_png(
-    machine: MachineParams, rho: np.ndarray, out_path: str | Path, *, width: int = 960,
-    height: int = 720,
-) -> Path:
+def render_png(machine: MachineParams, rho: np.ndarray, out_path: str | Path, *, width: int = 960,
+               height: int = 720) -> Path:
     """Render the machine at ``rho`` with its gauges to a PNG file; returns the path."""
     import matplotlib
 

@@ -82,13 +82,9 @@ class Simulator:
     def _configure(self) -> None:
         s = self.settings
         self.client.setPhysicsEngineParameter(
-            fixedTimeStep=s.time_step,
-            numSolverIterations=s.solver_iterations,
-            solverResidualThreshold=s.residual_threshold,
-            erp=s.erp,
-            contactERP=s.erp,
-            frictionERP=s.erp,
-        )
+            fixedTimeStep=s.time_step, numSolverIterations=s.solver_iterations,
+            solverResidualThreshold=s.residual_threshold, erp=s.erp, contactERP=s.erp,
+            frictionERP=s.erp)
         self.client.setGravity(0.0, 0.0, s.gravity)
         if self.gui:
             self.client.configureDebugVisualizer(pb.COV_ENABLE_GUI, 0)
@@ -112,9 +108,8 @@ class Simulator:
         try:
             with os.fdopen(fd, "w") as handle:
                 handle.write(text)
-            return self.client.loadURDF(
-                path, useFixedBase=True, flags=pb.URDF_USE_IMPLICIT_CYLINDER
-            )
+            return self.client.loadURDF(path, useFixedBase=True,
+                                        flags=pb.URDF_USE_IMPLICIT_CYLINDER)
         finally:
             os.unlink(path)
 

@@ -36,14 +36,9 @@ URDF_NAME = "orthoglide.urdf"
 
 # Masses (kg) of the prototype-like parts: aluminium bars and links, steel carriages.
 MASS = {"carriage": 2.0, "r1": 0.3, "bar": 0.25, "coupler": 0.2, "r2": 0.1, "platform": 0.6}
-COLOURS = {
-    "base": (0.35, 0.35, 0.38, 1),
-    "rail": (0.6, 0.6, 0.62, 1),
-    "carriage": (0.15, 0.3, 0.6, 1),
-    "joint": (0.85, 0.55, 0.1, 1),
-    "bar": (0.8, 0.8, 0.82, 1),
-    "platform": (0.7, 0.15, 0.15, 1),
-}
+COLOURS = {"base": (0.35, 0.35, 0.38, 1), "rail": (0.6, 0.6, 0.62, 1),
+           "carriage": (0.15, 0.3, 0.6, 1), "joint": (0.85, 0.55, 0.1, 1),
+           "bar": (0.8, 0.8, 0.82, 1), "platform": (0.7, 0.15, 0.15, 1)}
 HINGE_RADIUS = 8.0  # mm, visual hinge pins
 RAIL_SECTION = (40.0, 30.0)  # mm, along local Y and Z
 RAIL_BESIDE = 45.0  # mm, rail centre to actuator axis along -local Y (beside the carriage)
@@ -84,14 +79,11 @@ def _box(size: np.ndarray, xyz: np.ndarray, colour: str, *, collide: bool) -> st
 
 
 def _pin(length: float, xyz: np.ndarray, axis: str) -> str:
-    """A visual hinge pin (cylinder) along a local axis."""
-    rot = {"x": Rotation.from_euler("y", 90, degrees=True),
-           "y": Rotation.from_euler("x", 90, degrees=True),
+    """A visual hinge pin (cylinder) along local Y or Z."""
+    rot = {"y": Rotation.from_euler("x", 90, degrees=True),
            "z": Rotation.identity()}[axis].as_matrix()
-    geometry = (
-        f'<geometry><cylinder radius="{HINGE_RADIUS * MM:.6g}" length="{length * MM:.6g}"/>'
-        "</geometry>"
-    )
+    geometry = (f'<geometry><cylinder radius="{HINGE_RADIUS * MM:.6g}" '
+                f'length="{length * MM:.6g}"/></geometry>')
     return f'<visual>{_origin(xyz, rot)}{geometry}<material name="joint"/></visual>'
 
 
@@ -100,11 +92,9 @@ def _inertial(mass: float, com: np.ndarray, size: np.ndarray) -> str:
     # (see machine.py: link frames are recovered from the double-precision COM pose).
     sx, sy, sz = np.asarray(size) * MM
     ixx, iyy, izz = (mass / 12 * (b * b + c * c) for b, c in ((sy, sz), (sx, sz), (sx, sy)))
-    return (
-        f"<inertial>{_origin(com)}<mass value=\"{mass}\"/>"
-        f'<inertia ixx="{ixx:.6g}" iyy="{iyy:.6g}" izz="{izz:.6g}" ixy="0" ixz="0" iyz="0"/>'
-        "</inertial>"
-    )
+    return (f"<inertial>{_origin(com)}<mass value=\"{mass}\"/>"
+            f'<inertia ixx="{ixx:.6g}" iyy="{iyy:.6g}" izz="{izz:.6g}" ixy="0" ixz="0" iyz="0"/>'
+            "</inertial>")
 
 
 def _link(name: str, body: str) -> str:
@@ -160,9 +150,8 @@ def joint_origins(machine: MachineParams) -> dict[str, JointOrigin]:
     out: list[JointOrigin] = []
     for i in range(3):
         n = functools.partial(link_name, i)
-        slide = machine.axis_origins[i] + (design.L + design.r + machine.drho[i]) * (
-            machine.axis_directions[i]
-        )
+        slide = (machine.axis_origins[i]
+                 + (design.L + design.r + machine.drho[i]) * machine.axis_directions[i])
         bar_end = np.array([-machine.leg_lengths[i], 0.0, 0.0])
         out += [
             JointOrigin(n("slide"), "prismatic", "base", n("carriage"), slide, R_LEG[i],
@@ -202,27 +191,17 @@ def loop_closures(machine: MachineParams) -> list[LoopClosure]:
     welded to the platform at ``r e_i + attach[i]``, so these closures carry the y and z
     attachment errors.
     """
-    closures = [
-        LoopClosure("point", link_name(i, "bar2"),
-                    np.array([-machine.leg_lengths[i], 0.0, 0.0]), link_name(i, "coupler"),
-                    np.array([0.0, 0.0, -machine.design.d]), np.eye(3))
-        for i in range(3)
-    ]
-    closures += [
-        LoopClosure("fixed", link_name(i, "r2"), np.zeros(3), "platform",
-                    machine.attach_points[i], R_LEG[i])
-        for i in (1, 2)
-    ]
-    return closures
+    return [*(LoopClosure("point", link_name(i, "bar2"),
+                          np.array([-machine.leg_lengths[i], 0.0, 0.0]), link_name(i, "coupler"),
+                          np.array([0.0, 0.0, -machine.design.d]), np.eye(3)) for i in range(3)),
+            *(LoopClosure("fixed", link_name(i, "r2"), np.zeros(3), "platform",
+                          machine.attach_points[i], R_LEG[i]) for i in (1, 2))]
 
 
 def _closures_comment(machine: MachineParams) -> str:
-    lines = [
-        f"  {c.kind} {c.link_a} ({_xyz(c.point_a)}) = {c.link_b} ({_xyz(c.point_b)})"
-        + (f", {c.link_a} axes in {c.link_b} rpy ({_rpy(c.rotation)})" if c.kind == "fixed"
-           else "")
-        for c in loop_closures(machine)
-    ]
+    lines = [f"  {c.kind} {c.link_a} ({_xyz(c.point_a)}) = {c.link_b} ({_xyz(c.point_b)})"
+             + (f", {c.link_a} axes in {c.link_b} rpy ({_rpy(c.rotation)})"
+                if c.kind == "fixed" else "") for c in loop_closures(machine)]
     return ("<!-- Loops the tree leaves open, to close in the simulator (points in metres, "
             "each in its link's frame):\n" + "\n".join(lines) + "\n-->\n")
 
@@ -330,22 +309,14 @@ def _platform(machine: MachineParams) -> list[str]:
 
 def write_urdf(machine: MachineParams) -> str:
     """The URDF (a string) of ``machine``; lengths in metres."""
-    materials = "".join(
-        f'<material name="{k}"><color rgba="{" ".join(map(str, v))}"/></material>'
-        for k, v in COLOURS.items()
-    )
-    parts = [_base(machine.design)]
+    materials = "".join(f'<material name="{k}"><color rgba="{" ".join(map(str, v))}"/></material>'
+                        for k, v in COLOURS.items())
     joints = joint_origins(machine)
-    for i in range(3):
-        parts += _leg(machine, i, joints)
-    parts += _platform(machine)
+    parts = [_base(machine.design), *(x for i in range(3) for x in _leg(machine, i, joints)),
+             *_platform(machine)]
     body = "\n  ".join([materials, *parts])
-    return (
-        '<?xml version="1.0"?>\n'
-        "<!-- Generated by orthoglide_env.sim.urdf: do not edit. -->\n"
-        f"{_closures_comment(machine)}"
-        f'<robot name="orthoglide">\n  {body}\n</robot>\n'
-    )
+    return ('<?xml version="1.0"?>\n<!-- Generated by orthoglide_env.sim.urdf: do not edit. -->\n'
+            f'{_closures_comment(machine)}<robot name="orthoglide">\n  {body}\n</robot>\n')
 
 
 def nominal_urdf_path() -> Path:
