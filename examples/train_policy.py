@@ -4,18 +4,21 @@ machines.
     pip install torch --index-url https://download.pytorch.org/whl/cpu  # CPU-only: not GBs
     pip install -e '.[rl]'
     python examples/train_policy.py [--steps 120000] [--envs 8] [--reward information]
-        [--budget 600] [--out results/policy.zip] [--machines 20]
-    orthoglide compare --agents policy:results/policy.zip,random,paper --estimators extended
+        [--budget 600] [--conditions lab] [--sigma 0.02] [--out results/policy.zip]
+        [--machines 20]
+    orthoglide compare --agents policy:results/policy.zip,random,paper --estimators full \
+        --conditions lab
 
-PPO learns on ``OrthoglideLab-v0`` through its flat view (one Box of actions, one of
-observations, :mod:`orthoglide_env.envs.wrappers`), several envs in parallel, observations
-normalised by ``VecNormalize`` (its statistics are saved with the policy: the agent
-``policy:FILE`` normalises as training did).  Every ``--every`` steps the policy so far
-is saved and played on the first ``--curve-machines`` held-out machines, scored by
-:func:`calibrators.compare.run` exactly as ``orthoglide compare`` scores any agent; the
-learning curve goes to ``<out>.curve.csv`` and ``<out>.curve.png``.  At the end the
-policy is compared with ``random``, ``paper`` and every other designed agent that is
-registered on ``--machines`` held-out machines.
+PPO learns on ``OrthoglideLab-v0`` under ``--conditions`` (default ``lab``: the screws,
+heat and indicators of a real lab, the world every agent is compared in) through its flat
+view (one Box of actions, one of observations, :mod:`orthoglide_env.envs.wrappers`),
+several envs in parallel, observations normalised by ``VecNormalize`` (its statistics are
+saved with the policy: the agent ``policy:FILE`` normalises as training did).  Every
+``--every`` steps the policy so far is saved and played on the first ``--curve-machines``
+held-out machines, scored by :func:`calibrators.compare.run` exactly as ``orthoglide
+compare`` scores any agent; the learning curve goes to ``<out>.curve.csv`` and
+``<out>.curve.png``.  At the end the policy is compared with ``random``, ``paper`` and
+every other designed agent that is registered on ``--machines`` held-out machines.
 
 Why PPO: the CPU is the limit (an env step costs ~3 ms), and PPO's updates cost little per
 step, where SAC or TD3 take a gradient step per env step; the information reward is dense
@@ -45,12 +48,17 @@ from calibrators.agents.base import POLICY_PREFIX
 from calibrators.agents.policy import PolicySpec, save_policy, spec_of
 from calibrators.experiment import DEFAULT_BUDGET_S, make_estimator
 from orthoglide_env.envs.wrappers import flat_lab_env
+from orthoglide_env.instruments.dial import DEFAULT_SIGMA
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import DEFAULT_PRESET
+from orthoglide_env.world.conditions import CONDITION_NAMES, Conditions
 
-#: The estimator that scores every evaluation (the comparison's headline).
-ESTIMATOR: str = "extended"
+LAB = Conditions("lab")
+
+#: The estimator that scores every evaluation (the comparison's headline; under ``ideal``
+#: it is ``extended``, bit for bit).
+ESTIMATOR: str = "full"
 #: The untrained policy (:func:`start_near_zero`): log standard deviation of its actions,
 #: the bias of ``move`` in the operation block (another operation wins an untrained step's
 #: arg-max about once in 30 steps), and the spread of its joint targets around Zero (mm;
@@ -65,25 +73,28 @@ BASELINES: tuple[str, ...] = ("random", "paper", "optimal", "active")
 
 @dataclass(frozen=True)
 class Lab:
-    """The lab of training and of every evaluation (the README's comparison: gauges of
-    sigma 0.01 mm, the default hour for every agent; the policy stops after its training
-    episodes' time)."""
+    """The lab of training and of every evaluation (the README's real-world comparison:
+    ``lab`` conditions, dials of sigma 0.02 mm, the default hour for every agent; the
+    policy stops after its training episodes' time)."""
 
     errors: str = DEFAULT_PRESET
-    sigma: float = 0.01
+    sigma: float = DEFAULT_SIGMA
     budget_s: float = DEFAULT_BUDGET_S
+    conditions: Conditions = LAB
 
     def env_kwargs(self, reward: str, budget_s: float) -> dict[str, Any]:
-        """Keyword arguments of the training lab env, episodes of ``budget_s``."""
+        """Keyword arguments of the training lab env, episodes of ``budget_s`` (the
+        conditions as their dict, so that the policy file records them)."""
         kwargs: dict[str, Any] = {"errors": self.errors, "gauge_sigma": self.sigma,
-                                  "budget_s": budget_s, "reward": reward}
+                                  "budget_s": budget_s, "reward": reward,
+                                  "conditions": self.conditions.to_dict()}
         if reward == "accuracy":
             kwargs["estimator"] = make_estimator(ESTIMATOR)
         return kwargs
 
     def config(self, agents: tuple[str, ...], seed: int) -> compare.Config:
         return compare.Config(agents, (ESTIMATOR,), budget_s=self.budget_s, errors=self.errors,
-                              sigma=self.sigma, seed=seed)
+                              sigma=self.sigma, seed=seed, conditions=self.conditions)
 
 
 def start_near_zero(model: Any) -> None:
@@ -250,6 +261,10 @@ def main() -> None:
                         choices=["information", "accuracy"])
     parser.add_argument("--budget", type=float, default=600.0,
                         help="lab seconds of a training episode; the policy stops there")
+    parser.add_argument("--conditions", default="lab", choices=CONDITION_NAMES,
+                        help="the world of training and evaluation")
+    parser.add_argument("--sigma", type=float, default=DEFAULT_SIGMA,
+                        help="the dials' standard deviation (mm)")
     parser.add_argument("--seed", type=int, default=0, help="seed of training")
     parser.add_argument("--eval-seed", type=int, default=1,
                         help="comparison seed of the held-out machines (>= 1)")
@@ -264,6 +279,8 @@ def main() -> None:
     args = parser.parse_args()
     if args.eval_seed < 1:
         parser.error("--eval-seed must be >= 1: seed 0's machines include training machines")
+    if not (np.isfinite(args.sigma) and args.sigma > 0):
+        parser.error(f"--sigma must be a positive number of mm, got {args.sigma}")
     # One thread each: the learner shares the cores with the envs (and other jobs).
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import torch
@@ -271,7 +288,7 @@ def main() -> None:
     from stable_baselines3.common.vec_env import VecNormalize
 
     torch.set_num_threads(1)
-    lab = Lab()
+    lab = Lab(sigma=args.sigma, conditions=Conditions(args.conditions))
     env_kwargs = lab.env_kwargs(args.reward, args.budget)
     vec = VecNormalize(make_vec_env(args.envs, env_kwargs, args.seed, args.subprocesses),
                        norm_obs=True, norm_reward=True, gamma=0.99)
