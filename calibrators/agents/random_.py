@@ -22,7 +22,7 @@ from calibrators.agents.base import Agent, action, register
 from calibrators.design.planner import CLEARANCE
 from orthoglide_env.instruments.dial import pressed_past_travel
 from orthoglide_env.instruments.rays import exact_ray_distances, exact_target_boxes
-from orthoglide_env.instruments.slots import Part
+from orthoglide_env.instruments.slots import on_platform
 from orthoglide_env.instruments.stands import install, installed_on
 from orthoglide_env.lab.operations import Op, slot_catalogue
 from orthoglide_env.model.boxes import collision_boxes
@@ -59,7 +59,7 @@ def is_safe(rho: np.ndarray, slots: list[int], design: MachineDesign = PROTOTYPE
     if pressed_past_travel(gauges, centre, rot, half + MARGIN).any():
         return False
     t = exact_ray_distances(nominal, gauges, rho, boxes)
-    platform = np.array([spec.part == Part.PLATFORM for spec in specs])
+    platform = np.array([on_platform(spec.part) for spec in specs])
     travel = np.array([g.travel for g in gauges])
     return not (np.any(t < MARGIN) or np.any(platform & ~(t <= travel)))
 

@@ -22,6 +22,13 @@ against a box face is exact to round-off):
   carries the tool; the same place on every face keeps the three slots alike under
   x -> y -> z).  It reads the platform's displacement along that axis, so it only allows
   moves within its travel toward the stand; across the axis the face slides under the tip.
+* the **length reference** (``reference/x``): a platform gauge set up against a gauge
+  block (:data:`~orthoglide_env.world.table.REFERENCE`).  At Zero the block is held to
+  the platform's face and the dial zeroed on the block's far face; the block is then taken
+  away, so the stand stands one block length further back and reads the bare face once the
+  platform has come that far toward it.  Its readings at Zero are through the block, every
+  other one on the face: the difference measures the platform's travel against the
+  block's length, which is what a drive's scale error changes and no gauge on a leg sees.
 """
 
 from __future__ import annotations
@@ -41,6 +48,12 @@ class Part(IntEnum):
     BAR = 0  # a leg's parallelogram bar
     CARRIAGE = 1  # a leg's carriage (drive block carrying R1)
     PLATFORM = 2  # a face of the platform
+    REFERENCE = 3  # a face of the platform, zeroed against the gauge block at Zero
+
+
+def on_platform(part: np.ndarray | int) -> np.ndarray:
+    """Whether a gauge of ``part`` touches a platform face (a platform or reference gauge)."""
+    return np.isin(part, (Part.PLATFORM, Part.REFERENCE))
 
 
 #: The leg of a platform gauge: it has none.
@@ -56,7 +69,7 @@ def face_of(part: np.ndarray | int, leg: np.ndarray | int, axis: np.ndarray | in
     box lie in the leg frame (the world axis after the leg's is its local Y: 1, the other
     local Z: 2), the platform's in the world frame (the measuring axis)."""
     local = np.where(np.asarray(axis) == (np.asarray(leg) + 1) % 3, 1, 2)
-    return np.where(np.asarray(part) == Part.PLATFORM, axis, local)
+    return np.where(on_platform(part), axis, local)
 
 
 def target_index(part: np.ndarray | int, leg: np.ndarray | int, face: np.ndarray | int
@@ -78,7 +91,8 @@ class GaugeSpec:
     ``at`` is the fraction of the leg from the platform end (0) to the carriage end (1) at
     the Zero posture; the paper's gauges sit in the middle (0.5).  A carriage or platform
     gauge has one place per face (``at`` stays 0.5); a platform gauge has no leg
-    (:data:`NO_LEG`).  :meth:`carriage` and :meth:`platform` make those.
+    (:data:`NO_LEG`), nor has a reference gauge.  :meth:`carriage`, :meth:`platform` and
+    :meth:`reference` make those.
     """
 
     leg: int
@@ -92,7 +106,7 @@ class GaugeSpec:
         object.__setattr__(self, "part", Part(self.part))
         if self.axis not in (0, 1, 2):
             raise ValueError("gauge axis must be 0, 1 or 2 (x, y, z)")
-        if self.part == Part.PLATFORM:
+        if self.part in (Part.PLATFORM, Part.REFERENCE):
             if self.leg != NO_LEG:
                 raise ValueError(f"a platform gauge has no leg (leg {NO_LEG})")
         elif self.leg not in (0, 1, 2):
@@ -117,12 +131,20 @@ class GaugeSpec:
         """A gauge on the platform's face normal to world ``axis``."""
         return cls(NO_LEG, axis, part=Part.PLATFORM)
 
+    @classmethod
+    def reference(cls, axis: int) -> GaugeSpec:
+        """A gauge on the platform's face normal to world ``axis``, zeroed against the
+        gauge block (the length reference)."""
+        return cls(NO_LEG, axis, part=Part.REFERENCE)
+
     @property
     def name(self) -> str:
-        """``x-leg/y`` (a bar), ``x-carriage/y`` or ``platform/x``."""
+        """``x-leg/y`` (a bar), ``x-carriage/y``, ``platform/x`` or ``reference/x``."""
         axis = AXIS_NAMES[self.axis]
         if self.part == Part.PLATFORM:
             return f"platform/{axis}"
+        if self.part == Part.REFERENCE:
+            return f"reference/{axis}"
         kind = "leg" if self.part == Part.BAR else "carriage"
         return f"{LEG_NAMES[self.leg]}-{kind}/{axis}"
 
@@ -156,21 +178,21 @@ PAPER_LAYOUT: tuple[GaugeSpec, ...] = tuple(GaugeSpec(leg, axis) for leg, axis i
 
 
 def layout_from_names(names: list[str]) -> tuple[GaugeSpec, ...]:
-    """Parse names such as ``"x-leg/y"``, ``"x/y@0.3"``, ``"x-carriage/y"`` or
-    ``"platform/x"`` into gauge specs."""
+    """Parse names such as ``"x-leg/y"``, ``"x/y@0.3"``, ``"x-carriage/y"``,
+    ``"platform/x"`` or ``"reference/x"`` into gauge specs."""
     specs = []
     for raw in names:
         body, _, at = raw.partition("@")
         where, _, axis = body.partition("/")
         leg, _, kind = where.partition("-")
         part = {"": Part.BAR, "leg": Part.BAR, "carriage": Part.CARRIAGE}.get(kind)
-        if where == "platform" and not at:
-            leg, part = LEG_NAMES[0], Part.PLATFORM
+        if where in ("platform", "reference") and not at:
+            leg, part = LEG_NAMES[0], Part[where.upper()]
         if leg not in LEG_NAMES or axis not in AXIS_NAMES or part is None or (
                 at and part != Part.BAR):
             raise ValueError(f"bad gauge name '{raw}': expected like 'x-leg/y', 'x/y@0.5', "
-                             "'x-carriage/y' or 'platform/x'")
+                             "'x-carriage/y', 'platform/x' or 'reference/x'")
         axis_index = AXIS_NAMES.index(axis)
-        specs.append(GaugeSpec.platform(axis_index) if part == Part.PLATFORM else GaugeSpec(
+        specs.append(GaugeSpec(NO_LEG, axis_index, part=part) if on_platform(part) else GaugeSpec(
             LEG_NAMES.index(leg), axis_index, float(at) if at else 0.5, part))
     return tuple(specs)

@@ -13,7 +13,7 @@ import numpy as np
 
 from orthoglide_env.instruments.gauges import DEFAULT_TRAVEL, Gauge, GaugeArray, spec_arrays
 from orthoglide_env.instruments.rays import exact_ray_distances, target_boxes
-from orthoglide_env.instruments.slots import PLATFORM_AIM, GaugeSpec, Part
+from orthoglide_env.instruments.slots import PLATFORM_AIM, GaugeSpec, Part, on_platform
 from orthoglide_env.model.errors import AXIS_NAMES, ErrorPreset, MachineParams
 from orthoglide_env.model.kinematics import cross, direct, dot
 
@@ -36,7 +36,7 @@ def ideal_rays(specs: tuple[GaugeSpec, ...] | list[GaugeSpec], machine: MachineP
     # middle.
     clearance = machine.design.bar_clearance
     along = np.where(g.part == Part.BAR, (0.5 - g.at) * 2 * (half[..., 0] + clearance), 0.0)
-    aside = np.where((np.arange(3) != face[:, None]) & (g.part == Part.PLATFORM)[:, None],
+    aside = np.where((np.arange(3) != face[:, None]) & on_platform(g.part)[:, None],
                      -PLATFORM_AIM, 0.0)
     local = aside + along[..., None] * np.eye(3)[0]
     place = rot[..., 0] * local[..., 0, None] + rot[..., 1] * local[..., 1, None] + (

@@ -21,7 +21,7 @@ import numpy as np
 
 from orthoglide_env.instruments.dial import Status, readings_from_distances, status_of
 from orthoglide_env.instruments.gauges import DEFAULT_TRAVEL, Gauge, GaugeArray
-from orthoglide_env.instruments.slots import GaugeSpec, Part
+from orthoglide_env.instruments.slots import GaugeSpec, Part, on_platform
 from orthoglide_env.instruments.stands import install_array, installation_errors
 from orthoglide_env.lab.machines import ExactMachine, LabMachines, Sight
 from orthoglide_env.lab.notebook import Notebook, Record, predicted_many
@@ -32,7 +32,8 @@ from orthoglide_env.model.errors import AXIS_NAMES, MachineParams
 from orthoglide_env.model.kinematics import UnreachableError, direct
 from orthoglide_env.model.reading_model import TrackerAxis
 from orthoglide_env.scoring import score
-from orthoglide_env.world.truth import World
+from orthoglide_env.world.table import REFERENCE_DEVIATION, REFERENCE_LENGTH_MM
+from orthoglide_env.world.truth import UM, World
 
 #: The accuracy reward counts the final TCP error (after the best-fit rigid motion) in
 #: units of this many mm, and time in hours: -error/unit - time_weight * hours.
@@ -109,6 +110,10 @@ class LabBatch:
         self.approach = np.ones((n, 3))
         self.going_in = np.ones((n, s))
         self.last_t = np.full((n, s), np.nan)
+        # The gauge block: each episode's true length (mm), and the length held in front of
+        # each stand's plunger now (0: none; only while a reference stand is zeroed).
+        self.block_length = np.full(n, REFERENCE_LENGTH_MM)
+        self.block = np.zeros((n, s))
         # The slots stands can be at, by name: the catalogue, and any other place a layout
         # names (its index then lies past the catalogue's).
         self.places: list[GaugeSpec] = list(self.slots)
@@ -154,6 +159,12 @@ class LabBatch:
             if settings.conditions.active:
                 worlds.append(World.draw(settings.conditions, stream, settings.stands)
                               if world is None else world)
+        blocks = np.full(len(rows), REFERENCE_LENGTH_MM)
+        if settings.reference and settings.conditions.active:
+            # Drawn last: a lab without the block draws what it always drew.
+            deviation = REFERENCE_DEVIATION.at(settings.conditions.name)
+            blocks += np.array([stream.uniform(*deviation) * stream.choice((-1.0, 1.0))
+                                for stream in streams]) * UM
         machines = MachineParams.stack(drawn)
         world = World.stack(worlds) if worlds else None
         installed = self._installed(machines, list(specs), np.stack(errors), world,
@@ -171,6 +182,8 @@ class LabBatch:
             self.last_t[rows] = np.nan
             self.actual[rows] = world.joints(np.zeros((len(rows), 3)), self.approach[rows],
                                              np.zeros(len(rows)), settings.design)
+        self.block_length[rows] = blocks
+        self.block[rows] = 0.0
         self.rho[rows] = 0.0
         self.tcp[rows] = np.nan
         self.time[rows] = 0.0
@@ -214,6 +227,9 @@ class LabBatch:
         tracker = TIME.tracker_point_s if settings.tracker else 0.0
         travel_s = TIME.move(self.rho[rows], goal) + np.where(op == Op.MOVE, tracker,
                                                               TIME.remount_s)
+        if settings.reference:
+            blocked = (op == Op.REMOUNT) & self._references(slot)
+            travel_s = travel_s + np.where(blocked, TIME.reference_s, 0.0)
         approach, target = self._carriages(rows, goal, self.time[rows] + travel_s)
         refused, reached = self._refusals(rows, op, rho, stand, slot, target)
         if settings.strict_moves:
@@ -273,6 +289,10 @@ class LabBatch:
         if reads.any():
             values[reads] = self._read(rows[reads], seconds[reads], Sight(
                 *(part[at[reads]] for part in sight)))
+        # A reference stand was zeroed on the block, then the block was taken away.
+        if self.block[rows[remounts], stand[remounts]].any():
+            self.block[rows[remounts], stand[remounts]] = 0.0
+            self._sync(rows[remounts])
         self.time[rows] += seconds
         self.steps[rows] += 1
         collision = [""] * len(rows)
@@ -307,9 +327,23 @@ class LabBatch:
         # a micrometre-level change of a force that moves the platform by nanometres).
         pressing = np.where(self.engaged[rows], self.last_t[rows], np.nan)
         share = np.where(gauges.part == Part.BAR, 1 - gauges.at,
-                         np.where(gauges.part == Part.PLATFORM, 1.0, 0.0))
+                         np.where(on_platform(gauges.part), 1.0, 0.0))
         load = world.platform_load(pressing, gauges.travel, gauges.direction, share)
         return approach, world.joints(goal, approach, when, self.settings.design, load)
+
+    def _references(self, slot: np.ndarray) -> np.ndarray:
+        """Whether each slot index names a reference slot."""
+        return np.array([self.places[s].part == Part.REFERENCE for s in slot.tolist()],
+                        dtype=bool)
+
+    def _through(self, gauges: GaugeArray, block: np.ndarray) -> np.ndarray:
+        """How much nearer a block of length ``block`` (mm, ``(R, G)``) held to the face
+        brings each gauge's target along its ray: the length over the cosine of the ray's
+        tilt from the face's normal, the world axis it measures along."""
+        axis = np.broadcast_to(gauges.axis, block.shape)[..., None]
+        along = np.take_along_axis(gauges.direction, axis, axis=-1)[..., 0]
+        with np.errstate(invalid="ignore"):
+            return np.where(block > 0, block / np.abs(along), 0.0)
 
     def _of(self, value: Any, rows: np.ndarray) -> Any:
         """Rows ``rows`` of a batch's ``value`` (itself, not a copy, when they are every
@@ -376,10 +410,12 @@ class LabBatch:
         per_row: list[GaugeArray] = [None] * len(rows)  # type: ignore[list-item]
         for value in np.unique(slot):
             mine = np.flatnonzero(slot == value)
+            block = (self.block_length[rows[mine], None]
+                     if self.places[value].part == Part.REFERENCE else None)
             try:
                 part = self._installed(self.require()[rows[mine]], [self.places[value]],
                                        errors[mine], None if world is None else world[mine],
-                                       when[mine], approach[mine], stand[mine, None])
+                                       when[mine], approach[mine], stand[mine, None], block)
             except ValueError:
                 raise ValueError(f"slot {self.places[value].slot} cannot be reached on this "
                                  "machine") from None
@@ -389,18 +425,22 @@ class LabBatch:
 
     def _installed(self, machines: MachineParams, specs: list, errors: np.ndarray,
                    world: World | None, when: np.ndarray, approach: np.ndarray,
-                   stands: np.ndarray) -> GaugeArray:
+                   stands: np.ndarray, block: np.ndarray | None = None) -> GaugeArray:
         """Gauges of ``specs`` installed on each machine with ``errors`` (R, G, 2, 3) on
         ``stands`` (R, G), slid to mid-travel and zeroed at Zero at lab time ``when`` (the
-        dial reads 0 then, whatever the world adds); ``ValueError`` when one misses its bar
-        there."""
+        dial reads 0 then, whatever the world adds), against a gauge block of length
+        ``block`` (R, G) held to the face when given; ``ValueError`` when one misses its
+        bar there."""
         design = self.settings.design
         gauges = install_array(specs, machines, travel=self.settings.travel, errors=errors)
+        block = np.zeros(gauges.origin.shape[:-1]) if block is None else block
         if world is None:
-            return gauges.zeroed(ExactMachine(machines, gauges).gauge_distances())
+            return gauges.zeroed(ExactMachine(machines, gauges).gauge_distances()
+                                 - self._through(gauges, block))
         zero = world.joints(np.zeros((len(when), 3)), approach, when, design)
         # Slid to mid-travel, then the bezel is turned to 0 where the dial points.
-        slid = gauges.zeroed(ExactMachine(machines, gauges, zero).gauge_distances())
+        slid = gauges.zeroed(ExactMachine(machines, gauges, zero).gauge_distances()
+                             - self._through(gauges, block))
         half = slid.zero * world.scale(when)[:, None]
         return replace(slid, zero=half + world.columns(stands).distance_offsets(
             half, np.ones(half.shape), when, slid.at, slid.part == Part.BAR, slid.travel,
@@ -416,6 +456,7 @@ class LabBatch:
             self.going_in[rows, stand] = 1.0  # slid in to mid-travel
             self.last_t[rows, stand] = np.nan
         self.mounts[rows] += 1
+        self.block[rows, stand] = np.where(self._references(slot), self.block_length[rows], 0.0)
         self.slot[rows, stand] = slot
         self.engaged[rows, stand] = True
         self.faulted[rows, stand] = False
@@ -428,7 +469,16 @@ class LabBatch:
 
     def _sync(self, rows: np.ndarray) -> None:
         """Hand the backend the gauges of every mounted stand of ``rows``."""
-        self.backend.set_gauges(rows, self.gauges[rows], self.slot[rows] >= 0)
+        self.backend.set_gauges(rows, self._seen(rows), self.slot[rows] >= 0)
+
+    def _seen(self, rows: np.ndarray) -> GaugeArray:
+        """The gauges of ``rows`` as the machine meets them: a plunger set on a gauge block
+        held to the face reads as if its stand stood the block's length nearer."""
+        gauges, block = self._of(self.gauges, rows), self.block[rows]
+        if not block.any():
+            return gauges
+        ahead = self._through(gauges, block)[..., None] * gauges.direction
+        return replace(gauges, origin=gauges.origin + np.nan_to_num(ahead))
 
     def _look(self, rows: np.ndarray, when: np.ndarray) -> Sight:
         """What the machines of ``rows`` show at lab time ``when``."""
@@ -437,8 +487,8 @@ class LabBatch:
             return Sight(np.zeros((0, stands)), np.zeros((0, stands), dtype=bool),
                          np.zeros((0, len(PAIR_NAMES)), dtype=bool), np.zeros((0, 3)))
         at = self.rho if self.world is None else self.actual
-        sight = self.backend.look(rows, *(self._of(x, rows) for x in (
-            self.require(), self.gauges, at, self.tcp, self.engaged)))
+        sight = self.backend.look(rows, self._of(self.require(), rows), self._seen(rows),
+                                  *(self._of(x, rows) for x in (at, self.tcp, self.engaged)))
         self.tcp[rows] = sight.tcp
         return sight if self.world is None else self._in_world(rows, sight, when)
 

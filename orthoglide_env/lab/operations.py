@@ -21,6 +21,9 @@ re-mount a stand        120       loosen the magnetic base, move it, aim at the 
                                   Zero posture (the machine drives there first), slide the
                                   gauge to mid-travel, zero the dial
 tracker point           3         the tracker's averaged reading of the settled reflector
+length reference        60        on top of a re-mount at a reference slot: wipe the gauge
+                                  block, hold it to the platform's face (gloved: a hand
+                                  warms it), zero the dial on it, take it away
 overtravel              120       an engaged gauge pushed past its travel: check it,
                                   re-install and re-zero it (it reads nothing until then)
 ======================  ========  ==========================================================
@@ -48,6 +51,7 @@ class TimeTable:
     remount_s: float = 120.0
     tracker_point_s: float = 3.0
     overtravel_s: float = 120.0
+    reference_s: float = 60.0
 
     def move(self, start: np.ndarray, target: np.ndarray) -> np.ndarray:
         """Seconds to drive from ``start`` to ``target`` (axes together) and settle; shapes
@@ -60,7 +64,7 @@ TIME = TimeTable()
 
 
 @lru_cache(maxsize=8)
-def slot_catalogue(design: MachineDesign) -> tuple[GaugeSpec, ...]:
+def slot_catalogue(design: MachineDesign, reference: bool = False) -> tuple[GaugeSpec, ...]:
     """The slot catalogue of a design (kinds of target in
     :mod:`orthoglide_env.instruments.slots`):
 
@@ -68,7 +72,9 @@ def slot_catalogue(design: MachineDesign) -> tuple[GaugeSpec, ...]:
       ``slot_positions`` (fractions from the platform end; closer to either end the tip
       leaves the bar's flat face as the leg turns) (``x-leg/y@0.5``);
     * every carriage, both measuring axes across its drive (``x-carriage/y``);
-    * the platform's three faces (``platform/x``).
+    * the platform's three faces (``platform/x``);
+    * with ``reference`` (a lab that has the gauge block), the same faces read against it
+      (``reference/x``).
 
     The bar slots come first, in their historical order, so their indices are stable.  A
     lab's slot indices are its design's catalogue (``settings.slots``, an env's ``slots``);
@@ -76,7 +82,8 @@ def slot_catalogue(design: MachineDesign) -> tuple[GaugeSpec, ...]:
     across = [(leg, axis) for leg in range(3) for axis in range(3) if axis != leg]
     return (tuple(GaugeSpec(leg, axis, at) for leg, axis in across for at in design.slot_positions)
             + tuple(GaugeSpec.carriage(leg, axis) for leg, axis in across)
-            + tuple(GaugeSpec.platform(axis) for axis in range(3)))
+            + tuple(GaugeSpec.platform(axis) for axis in range(3))
+            + tuple(GaugeSpec.reference(axis) for axis in range(3) if reference))
 
 
 #: The prototype's slot catalogue (the lab's slot indices on the prototype).
@@ -84,18 +91,21 @@ SLOTS: tuple[GaugeSpec, ...] = slot_catalogue(PROTOTYPE)
 SLOT_NAMES: tuple[str, ...] = tuple(s.slot for s in SLOTS)
 
 
-def slot_index(name_or_spec: str | GaugeSpec, *, design: MachineDesign = PROTOTYPE) -> int:
-    """Index in the slot catalogue of ``design`` (default the prototype's, :data:`SLOTS`) of
-    a slot given by name (``x-leg/y@0.5``, ``x-carriage/y``, ``platform/x``) or spec."""
+def slot_index(name_or_spec: str | GaugeSpec, *, design: MachineDesign = PROTOTYPE,
+               reference: bool = False) -> int:
+    """Index in the slot catalogue of ``design`` (default the prototype's, :data:`SLOTS`;
+    with ``reference`` slots when told) of a slot given by name (``x-leg/y@0.5``,
+    ``x-carriage/y``, ``platform/x``, ``reference/x``) or spec."""
     key = name_or_spec if isinstance(name_or_spec, str) else name_or_spec.slot
-    names = [s.slot for s in slot_catalogue(design)]
+    names = [s.slot for s in slot_catalogue(design, reference)]
     try:
         return names.index(key)
     except ValueError:
         raise ValueError(f"no slot '{key}'; slots are bars x/y/z with a measuring axis across "
                          f"them at {design.slot_positions} (e.g. '{names[0]}'), "
-                         "carriages with an axis across their drive (e.g. 'x-carriage/y') and "
-                         "platform faces (e.g. 'platform/x')") from None
+                         "carriages with an axis across their drive (e.g. 'x-carriage/y'), "
+                         "platform faces (e.g. 'platform/x') and, in a lab with the gauge "
+                         "block, reference faces (e.g. 'reference/x')") from None
 
 
 #: The stands of the paper's experiment, mounted at the start of an episode (their indices

@@ -64,18 +64,22 @@ class LabSettings:
     render_mode: str | None = None
     design: MachineDesign = PROTOTYPE  # the machines' design: control limits, validity, slots
     conditions: Conditions = IDEAL  # the world's effects beyond the geometry
+    reference: bool = False  # the lab has the gauge block: its catalogue the reference slots
 
     @cached_property
     def slots(self) -> tuple[GaugeSpec, ...]:
         """The lab's slot catalogue: its design's (:func:`~orthoglide_env.lab.operations.
-        slot_catalogue`), whose indices the ``slot`` action and observation use."""
-        return slot_catalogue(self.design)
+        slot_catalogue`, with the reference slots when the lab has the gauge block), whose
+        indices the ``slot`` action and observation use."""
+        return slot_catalogue(self.design, self.reference)
 
     def longest_step(self) -> float:
         """The most one operation can cost (a re-mount from the far corner, the tracker, and
         every stand pushed past its travel): the clock never passes budget + this."""
         far = TIME.move(np.full(3, self.design.rho_min), np.full(3, self.design.rho_max))
-        return far + TIME.remount_s + TIME.tracker_point_s + TIME.overtravel_s * self.stands
+        block = TIME.reference_s if self.reference else 0.0
+        return (far + TIME.remount_s + block + TIME.tracker_point_s
+                + TIME.overtravel_s * self.stands)
 
 
 def _picture(backend: str, render_mode: str | None) -> None:
@@ -128,7 +132,8 @@ def lab_settings(args: dict[str, Any]) -> LabSettings:
         layout=tuple(slots[slot_index(spec, design=design)] for spec in PAPER_LAYOUT[:stands]),
         tracker=args["tracker"], tracker_sigma=args["tracker_sigma"],
         budget_s=args["budget_s"], reward=args["reward"], estimator=args["estimator"],
-        time_weight=args["time_weight"], success_mm=args["success_mm"])
+        time_weight=args["time_weight"], success_mm=args["success_mm"],
+        reference=args["reference"])
 
 
 def calibration_settings(args: dict[str, Any]) -> LabSettings:

@@ -226,7 +226,7 @@ LAB: dict[str, Arg] = {
     "time_weight": Number("", 0.0, default=1.0),
     "success_mm": Number("mm", 0.0, open=True, default=0.01),
     "travel": Number("mm", 0.0, open=True, optional=True), "design": Design(),
-    "conditions": CONDITIONS, "render_mode": RENDER_MODE,
+    "conditions": CONDITIONS, "reference": FLAG, "render_mode": RENDER_MODE,
 }
 #: A native vector env's arguments: ``num_envs``, its single env's (the lab's draws no
 #: picture) and ``autoreset_mode``.

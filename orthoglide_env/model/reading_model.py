@@ -3,7 +3,10 @@
 A *design* says where readings were taken: which gauge mountings (stand installations)
 and, for every reading, its mounting and the commanded posture.  The model reading of a
 mounting at a posture is ``sign * t`` with ``t`` the distance along the stand's ray to the
-plane of the bar face it is aimed at (:func:`orthoglide_env.instruments.rays.face_distances`); the
+plane of the bar face it is aimed at (:func:`orthoglide_env.instruments.rays.face_distances`),
+less, for a reference gauge at Zero, the gauge block's nominal length over the cosine of
+the ray's tilt (:attr:`Design.through`; its derivative over the tilt, the length times the
+tilt, about 0.25 mm/rad for the stands' 5 mrad, is left out of :func:`jacobian`); the
 gauge's zero is one unknown constant per mounting, which estimators eliminate, so the
 model leaves it out.
 
@@ -21,7 +24,7 @@ import numpy as np
 
 from orthoglide_env.instruments.gauges import Gauge, spec_arrays
 from orthoglide_env.instruments.rays import boxes_at, face_distances, face_normals, plane_distances
-from orthoglide_env.instruments.slots import GaugeSpec, Part
+from orthoglide_env.instruments.slots import GaugeSpec, Part, on_platform
 from orthoglide_env.instruments.stands import (
     across_axes,
     ideal_rays,
@@ -52,6 +55,7 @@ from orthoglide_env.model.kinematics import (
     skew,
     tcp_sensitivity_factors,
 )
+from orthoglide_env.world.table import REFERENCE_LENGTH_MM
 
 N_MACHINE: int = len(ERROR_NAMES)
 
@@ -189,6 +193,16 @@ class Design:
         return self._unique_postures[1]
 
     @cached_property
+    def through(self) -> np.ndarray:
+        """Per reading, the nominal length (mm) of the gauge block between the plunger and
+        the face: a reference gauge's readings at Zero are through it, its others and every
+        other gauge's are not (0)."""
+        block = np.array([isinstance(s, GaugeSpec) and s.part == Part.REFERENCE
+                          for s in self.specs])
+        at_zero = ~self.rho.any(axis=-1)
+        return np.where(block[self.mounting] & at_zero, REFERENCE_LENGTH_MM, 0.0)
+
+    @cached_property
     def signs(self) -> np.ndarray:
         """Reading sign of every mounting: +1 when a gauge's plunger points along the world
         axis, and for a tracker coordinate."""
@@ -249,6 +263,14 @@ def predict(theta: np.ndarray, design: Design) -> np.ndarray:
                 if isinstance(spec, TrackerAxis) and station_of(name) == station:
                     values[..., m] = seen[..., spec.component]
     rows = values[..., design.posture_index, design.mounting]
+    through = np.flatnonzero(design.through)
+    if len(through):
+        gauge = np.full(len(design.specs), -1)
+        gauge[gauges] = np.arange(len(gauges))
+        axes = np.array([design.specs[k].axis for k in gauges])
+        cosines = np.abs(directions[..., np.arange(len(gauges)), axes])
+        rows[..., through] -= (design.through[through]
+                               / cosines[..., gauge[design.mounting[through]]])
     return design.signs[design.mounting] * rows
 
 
@@ -373,7 +395,7 @@ def _gauge_derivatives(theta: np.ndarray, design: Design, machine: MachineParams
     d_a = np.where(bar, towards_centre / 2 - turn,
                    np.where((g.part == Part.CARRIAGE)[:, None], towards_centre, 0.0))
     d_c = np.where(bar, towards_centre / 2 + turn, 0.0)
-    d_p = np.where((g.part == Part.PLATFORM)[:, None], towards_centre, 0.0)
+    d_p = np.where(on_platform(g.part)[:, None], towards_centre, 0.0)
     # The machine moves the target through A, C and p at the posture, and the ray's
     # origin (aimed at Zero) through the same points at Zero: on a bar at ``at * A + (1 -
     # at) * C``, on a carriage with A, on the platform with p.
@@ -381,7 +403,7 @@ def _gauge_derivatives(theta: np.ndarray, design: Design, machine: MachineParams
     p_zero = direct(machine, zero)
     aimed = [np.where(bar, g.at[:, None], np.where((g.part == Part.CARRIAGE)[:, None], 1.0, 0.0)),
              np.where(bar, 1 - g.at[:, None], 0.0),
-             np.where((g.part == Part.PLATFORM)[:, None], 1.0, 0.0)]
+             np.where(on_platform(g.part)[:, None], 1.0, 0.0)]
     machine_part = (
         _through_leg(machine, postures[None], (dp[0][:, at], dp[1][:, at]), legs, d_a, d_c,
                      d_p)

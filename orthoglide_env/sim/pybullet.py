@@ -26,7 +26,7 @@ from scipy.spatial.transform import Rotation
 from orthoglide_env.instruments.dial import GAUGE_BODY_RADIUS, STAND_LENGTH
 from orthoglide_env.instruments.gauges import Gauge, GaugeArray
 from orthoglide_env.instruments.rays import RAY_BACKOFF, on_flat_face, ray_box_distance
-from orthoglide_env.instruments.slots import GaugeSpec, Part
+from orthoglide_env.instruments.slots import GaugeSpec, Part, on_platform
 from orthoglide_env.lab.machines import check_motion_mode
 from orthoglide_env.model.collisions import collision_names, crash_pairs
 from orthoglide_env.model.design import MachineDesign
@@ -172,7 +172,7 @@ class OrthoglideMachine:
         for g in self.gauges:
             rear = g.origin - g.direction * STAND_LENGTH
             # A platform gauge has no leg: its stand stands behind it.
-            foot = (rear - g.direction * STAND_LENGTH if g.spec.part == Part.PLATFORM
+            foot = (rear - g.direction * STAND_LENGTH if on_platform(g.spec.part)
                     else rail_ends(self.machine.design)[g.spec.leg, 0])
             for a, b, radius in ((g.origin, rear, GAUGE_BODY_RADIUS), (rear, foot, ARM_RADIUS)):
                 shapes.append(self.bc.createVisualShape(
@@ -300,7 +300,7 @@ class OrthoglideMachine:
         simulated: where the URDF puts each box in its link's frame."""
         pos, rot = self._link_pose(target_link(spec))
         design = self.machine.design
-        if spec.part == Part.PLATFORM:
+        if on_platform(spec.part):
             return pos, rot, np.full(3, design.platform_size / 2)
         if spec.part == Part.CARRIAGE:
             ahead = np.array([design.carriage_setback + design.carriage_size[0] / 2, 0.0, 0.0])
@@ -366,7 +366,7 @@ class OrthoglideMachine:
 def target_link(spec: GaugeSpec) -> str:
     """The link a gauge touches: a bar (``x_bar1`` at +d/2, ``x_bar2`` at -d/2), a
     carriage (``x_carriage``) or the platform."""
-    if spec.part == Part.PLATFORM:
+    if on_platform(spec.part):
         return "platform"
     if spec.part == Part.CARRIAGE:
         return link_name(spec.leg, "carriage")

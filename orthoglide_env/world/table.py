@@ -133,3 +133,16 @@ EFFECTS: dict[str, dict[str, Size]] = {
 
 #: The per-metre parts of the tracker's MPE (um/m), beside the table's constant parts.
 TRACKER_MPE_PER_M: dict[str, float] = {"distance": 0.3, "transverse": 6.0}
+
+#: The lab's length reference (``reference`` slots, a lab built with ``reference=True``):
+#: one steel gauge block of this nominal length (mm), across which the platform travels
+#: toward a face's stand.  An assumption: the prototype's carriages reach 100 mm back from
+#: Zero, and 50 mm is a common single block.
+REFERENCE_LENGTH_MM: float = 50.0
+#: The block's deviation from its nominal length, drawn once per lab under ``lab`` or
+#: ``workshop`` (exact under ``ideal``).  Being steel at the room's temperature it grows
+#: with the machine.
+REFERENCE_DEVIATION: Size = Size(
+    (0, 0.20), (0, 0.80), "um", "the gauge block's length minus its nominal length",
+    "ISO 3650 (DIN 861) limit deviation of a 25-50 mm block: grade 0 +-0.20 um (lab), "
+    "grade 2 +-0.80 um (workshop)", signed=True)
