@@ -64,7 +64,7 @@ def main() -> None:
         for m in range(args.machines):
             env = gym.make(orthoglide_env.LAB_ENV_ID, backend="exact",
                            conditions=args.conditions, errors="realistic",
-                           tracker=agent.needs_tracker)
+                           tracker=agent.needs_tracker, reference=agent.needs_reference)
             try:
                 episode = run_episode(env, agent, machine_seed(args.seed, m))
             finally:

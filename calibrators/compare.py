@@ -28,7 +28,7 @@ import numpy as np
 from scipy import special
 
 import orthoglide_env
-from calibrators.agents import get_agent
+from calibrators.agents import Agent, get_agent
 from calibrators.engines import results
 from calibrators.estimators.base import Estimate, leaves
 from calibrators.estimators.prediction import predicted_rigid_mm
@@ -77,11 +77,13 @@ class Config:
     #: The world beyond the geometry.
     conditions: Conditions = IDEAL
 
-    def lab_kwargs(self, tracker: bool) -> dict[str, Any]:
-        """The lab env's arguments of this comparison (``tracker``: the agent needs one)."""
+    def lab_kwargs(self, agent: Agent) -> dict[str, Any]:
+        """The lab env's arguments of this comparison for ``agent`` (with the tracker or
+        the gauge block when it needs one)."""
         return {"errors": self.errors, "gauge_sigma": self.sigma,
                 "gauge_resolution": self.resolution, "backend": self.backend,
-                "tracker": tracker, "budget_s": self.budget_s, "design": self.design,
+                "tracker": agent.needs_tracker, "reference": agent.needs_reference,
+                "budget_s": self.budget_s, "design": self.design,
                 "conditions": self.conditions}
 
 
@@ -306,7 +308,7 @@ def agent_episodes(config: Config, agent_name: str, runs: list[int], batched: bo
                    ) -> list[_Episode]:
     """The agent's episode on each machine of ``runs`` (machine ``i`` from its seed)."""
     seeds = [machine_seed(config.seed, i) for i in runs]
-    kwargs = config.lab_kwargs(get_agent(agent_name).needs_tracker)
+    kwargs = config.lab_kwargs(get_agent(agent_name))
     if batched and config.backend == "exact":
         with closing(gym.make_vec(orthoglide_env.LAB_ENV_ID, num_envs=len(runs),
                                   vectorization_mode="vector_entry_point", **kwargs)) as envs:
@@ -498,7 +500,7 @@ def verify_pybullet(config: Config, machines: int) -> dict[str, float]:
     for index in range(machines):
         for name in config.agents:
             agent = get_agent(name)
-            kwargs = {**config.lab_kwargs(agent.needs_tracker), "gauge_sigma": 0.0,
+            kwargs = {**config.lab_kwargs(agent), "gauge_sigma": 0.0,
                       "gauge_resolution": 0.0}
             envs = gym.vector.SyncVectorEnv([
                 partial(gym.make, orthoglide_env.LAB_ENV_ID, **{**kwargs, "backend": backend})

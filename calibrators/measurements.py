@@ -20,10 +20,12 @@ column                        required  meaning
 ============================  ========  ================================================
 ``reading_mm``                yes       the dial reading (mm), positive along the axis
 ``gauge``                     (a)       a gauge name: ``x-leg/y``, ``x/y@0.3`` (a bar),
-                                        ``x-carriage/y`` (a carriage), ``platform/x``
+                                        ``x-carriage/y`` (a carriage), ``platform/x``,
+                                        ``reference/x`` (c)
 ``leg``, ``axis``             (a)       what the gauge touches: a leg's bar (``x``,
-                                        ``y``, ``z``), a carriage (``x-carriage``, ...)
-                                        or ``platform``; and the world axis measured
+                                        ``y``, ``z``), a carriage (``x-carriage``, ...),
+                                        ``platform`` or ``reference``; and the world
+                                        axis measured
                                         along (for a bar or a carriage one of the two
                                         normal to its leg)
 ``at``                        no        with a bar's ``leg``, ``axis``: the gauge's place
@@ -55,6 +57,9 @@ tracker's frame: ``gauge`` ``tracker/x`` (or ``leg`` ``tracker``, ``axis`` ``x``
 +-:data:`MAX_TRACKER_MM`; its default mounting is ``tracker.x`` (station ``tracker``).
 (b) ``posture`` and/or the three ``rho_*`` columns; a row whose rho cells are empty
 names a paper posture, and a paper posture's rho, when given, is its own.
+(c) a platform gauge zeroed against the gauge block
+(:data:`~orthoglide_env.world.table.REFERENCE_LENGTH_MM` long) held to the face at
+Zero: its readings at Zero are through the block, its others on the bare face.
 
 JSON
 ----
@@ -94,7 +99,7 @@ from dataclasses import KW_ONLY, InitVar, dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
 
-from orthoglide_env.instruments.slots import NO_LEG, GaugeSpec, Part, layout_from_names
+from orthoglide_env.instruments.slots import NO_LEG, GaugeSpec, Part, layout_from_names, on_platform
 from orthoglide_env.model.design import PROTOTYPE, DesignError, MachineDesign
 from orthoglide_env.model.errors import AXIS_NAMES, LEG_NAMES
 from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture
@@ -422,10 +427,10 @@ CARRIAGE_SUFFIX: str = "-carriage"
 
 
 def part_label(gauge: GaugeSpec) -> str:
-    """The ``leg`` column of a gauge: its bar's leg (``x``), its carriage (``x-carriage``)
-    or ``platform``."""
-    if gauge.part == Part.PLATFORM:
-        return "platform"
+    """The ``leg`` column of a gauge: its bar's leg (``x``), its carriage (``x-carriage``),
+    ``platform`` or ``reference``."""
+    if on_platform(gauge.part):
+        return gauge.part.name.lower()
     return LEG_NAMES[gauge.leg] + (CARRIAGE_SUFFIX if gauge.part == Part.CARRIAGE else "")
 
 
@@ -441,7 +446,7 @@ def _named_gauge(name: str) -> GaugeSpec | TrackerAxis:
         return layout_from_names([name])[0]
     except ValueError as exc:
         raise FieldError("gauge", f"must name a gauge like 'x-leg/y', 'x/y@0.3', "
-                                  f"'x-carriage/y' or 'platform/x' ({exc}), "
+                                  f"'x-carriage/y', 'platform/x' or 'reference/x' ({exc}), "
                                   f"got {_show(name)}") from None
 
 
@@ -455,20 +460,20 @@ def _gauge(fields: Mapping[str, object]) -> GaugeSpec | TrackerAxis:
     at = _given(fields, "at")
     if leg == "tracker" and axis in AXIS_NAMES and at is None:
         return TrackerAxis(AXIS_NAMES.index(axis))
-    if leg == "platform":
+    if leg in ("platform", "reference"):
         if not isinstance(axis, str) or axis not in AXIS_NAMES:
             raise FieldError("axis", f"must be one of {', '.join(AXIS_NAMES)}, got "
                                      f"{_show(axis)}")
         if at is not None:
-            raise FieldError("at", "a platform gauge has one place per face: leave 'at' "
+            raise FieldError("at", f"a {leg} gauge has one place per face: leave 'at' "
                                    "empty")
-        return _spec(NO_LEG, AXIS_NAMES.index(axis), part=Part.PLATFORM)
+        return _spec(NO_LEG, AXIS_NAMES.index(axis), part=Part[leg.upper()])
     carriage = isinstance(leg, str) and leg.endswith(CARRIAGE_SUFFIX)
     name = leg.removesuffix(CARRIAGE_SUFFIX) if carriage else leg
     if not isinstance(leg, str) or name not in LEG_NAMES:
         raise FieldError("leg", f"must be one of {', '.join(LEG_NAMES)} (a bar), "
-                                f"{', '.join(n + CARRIAGE_SUFFIX for n in LEG_NAMES)}, platform "
-                                f"or tracker, got {_show(leg)}")
+                                f"{', '.join(n + CARRIAGE_SUFFIX for n in LEG_NAMES)}, platform, "
+                                f"reference or tracker, got {_show(leg)}")
     if not isinstance(axis, str) or axis not in AXIS_NAMES or axis == name:
         raise FieldError("axis", f"must be one of the two axes normal to the {name} leg, "
                                  f"got {_show(axis)}")

@@ -36,6 +36,7 @@ from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import AXIS_NAMES, LEG_NAMES, MachineParams
 from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.world.machine_file import machine_dict
+from orthoglide_env.world.table import REFERENCE_LENGTH_MM
 
 #: The sheet's columns: the measurement file's, and the step each reading belongs to.
 SHEET_COLUMNS: tuple[str, ...] = (*COLUMNS, "step")
@@ -143,6 +144,13 @@ def place_words(spec: GaugeSpec, design: MachineDesign = PROTOTYPE) -> str:
         others = " and ".join(f"-{AXIS_NAMES[a]}" for a in range(3) if a != spec.axis)
         where = (f"on the platform's -{axis} face, {PLATFORM_AIM:g} mm off its centre toward "
                  f"{others}")
+        if spec.part == Part.REFERENCE:
+            where += (f", through the {REFERENCE_LENGTH_MM:g} mm gauge block: with the "
+                      "machine at Zero hold the block square to that face, set the plunger "
+                      "on the block's far face at mid-travel, zero the dial and read it "
+                      "there, then take the block away (the stand stays); the dial then "
+                      f"reads the bare face once the platform has come {REFERENCE_LENGTH_MM:g} "
+                      "mm toward it. Handle the block with gloves: a hand warms it")
     return (f"{where}; the stand on the {side}{axis} side, its plunger pointing {toward}{axis}, "
             f"square to the face. Write a reading positive when the face moves toward +{axis} "
             f"({pushed})")
@@ -163,6 +171,7 @@ def make_procedure(agent_name: str, budget_s: float, design: MachineDesign = PRO
                          f"at the start ({', '.join(planned_agents())})")
     env = gym.make(orthoglide_env.LAB_ENV_ID, backend="exact", errors="nominal",
                    gauge_sigma=0.0, gauge_resolution=0.0, tracker=agent.needs_tracker,
+                   reference=agent.needs_reference,
                    budget_s=budget_s, design=design, conditions=conditions)
     try:
         observation, _ = env.reset(seed=seed,

@@ -68,7 +68,8 @@ class Session:
         self.replay = _read_notebook(self.notebook)
         self.env = gym.make(orthoglide_env.LAB_ENV_ID, backend="exact", errors="nominal",
                             gauge_sigma=sigma, gauge_resolution=resolution,
-                            tracker=self.agent.needs_tracker, budget_s=budget_s,
+                            tracker=self.agent.needs_tracker,
+                            reference=self.agent.needs_reference, budget_s=budget_s,
                             design=design,
                             conditions=Conditions("ideal") if conditions is None else conditions)
         self.answered = 0

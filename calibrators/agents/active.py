@@ -51,7 +51,7 @@ class ActiveAgent(Agent):
     def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
               rng: np.random.Generator) -> None:
         super().reset(env, observation, rng)
-        setup = lab_setup(self.env, observation)
+        setup = lab_setup(self.env, observation, self.reserved_s)
         slots, engaged, sigma, budget, design = setup
         self.planner = Planner(list(slots), list(engaged), sigma,
                                budget + float(observation["time"][0]), criterion=self.criterion,

@@ -13,10 +13,14 @@ from orthoglide_env.lab.operations import Op
 
 class Agent:
     """Base class: ``reset`` once per episode (after the env's reset), then ``act`` until
-    the episode ends.  ``needs_tracker``: the lab must have a laser tracker."""
+    the episode ends.  ``needs_tracker``: the lab must have a laser tracker;
+    ``needs_reference``: the gauge block.  ``reserved_s``: seconds of the budget an agent
+    that plans to the budget leaves to what follows it (:mod:`calibrators.agents.reference`)."""
 
     name: ClassVar[str] = ""
     needs_tracker: ClassVar[bool] = False
+    needs_reference: ClassVar[bool] = False
+    reserved_s: float = 0.0
 
     def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
               rng: np.random.Generator) -> None:
@@ -57,7 +61,12 @@ POLICY_PREFIX: str = "policy:"
 
 def get_agent(name: str) -> Agent:
     """A new agent: one registered by ``name``, or ``policy:PATH``, the learned policy saved
-    in the file PATH (:mod:`calibrators.agents.policy`)."""
+    in the file PATH (:mod:`calibrators.agents.policy`); either with ``+reference``, followed
+    by the length reference's procedure (:mod:`calibrators.agents.reference`)."""
+    from calibrators.agents.reference import REFERENCE_SUFFIX, with_reference
+
+    if name.endswith(REFERENCE_SUFFIX) and len(name) > len(REFERENCE_SUFFIX):
+        return with_reference(get_agent(name[:-len(REFERENCE_SUFFIX)]))
     if name.startswith(POLICY_PREFIX):
         from calibrators.agents.policy import PolicyAgent
 

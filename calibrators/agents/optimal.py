@@ -37,15 +37,16 @@ def fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
     return tuple(steps), planner.predicted_rigid_mm()
 
 
-def lab_setup(env: gym.Env, observation: dict[str, np.ndarray]
+def lab_setup(env: gym.Env, observation: dict[str, np.ndarray], reserved_s: float = 0.0
               ) -> tuple[tuple[int, ...], tuple[bool, ...], float, float, MachineDesign]:
     """What a planner needs to know of the lab: each stand's slot (-1: none), whose
-    plunger is down, a reading's sigma, the time budget and the machine's design."""
+    plunger is down, a reading's sigma, the time budget left (less ``reserved_s`` for what
+    follows) and the machine's design."""
     slots = tuple(int(s) if s < len(env.slots) else -1 for s in observation["slot"])
     engaged = tuple(bool(e) for e in observation["engaged"])
     sigma = weighting_sigma(float(env.noise.effective_sigma))
-    return (slots, engaged, sigma, float(env.budget_s) - float(observation["time"][0]),
-            env.design)
+    return (slots, engaged, sigma,
+            float(env.budget_s) - reserved_s - float(observation["time"][0]), env.design)
 
 
 @register
@@ -54,7 +55,8 @@ class OptimalAgent(PlannedAgent):
     criterion = "I"
 
     def make_plan(self, observation: dict[str, np.ndarray]) -> list[dict[str, Any]]:
-        steps, self.predicted_rigid_mm = fixed_plan(*lab_setup(self.env, observation),
+        steps, self.predicted_rigid_mm = fixed_plan(*lab_setup(self.env, observation,
+                                                               self.reserved_s),
                                                     criterion=self.criterion)
         return [action(s.op, s.rho, s.stand, s.slot) for s in steps]
 

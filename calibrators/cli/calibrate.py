@@ -80,7 +80,8 @@ def run(args: argparse.Namespace) -> None:
     conditions = conditions_of(args, world)
     env = gym.make(orthoglide_env.LAB_ENV_ID, errors=preset, gauge_sigma=sigma,
                    gauge_resolution=resolution, backend=args.backend,
-                   tracker=agent.needs_tracker, budget_s=args.budget,
+                   tracker=agent.needs_tracker, reference=agent.needs_reference,
+                   budget_s=args.budget,
                    design=machine.design, conditions=conditions)
     with closing(env):
         # A random machine is drawn by the lab from the seed, as ``compare`` draws its first

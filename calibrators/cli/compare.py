@@ -189,14 +189,16 @@ def _print(trials: list[Trial], config: Config, machines: int, seconds: float,
           "world frame; a failed trial counts as its uncalibrated machine; success: rigid "
           f"error against the truth <= {config.target_mm:g} mm (predicted: by the estimate "
           "itself)")
-    print(f"{'agent':10}{'estimator':15}{'TCP after (rigid) med':>22}{'95 % interval':>18}"
+    # Wide enough for the longest agent name (a policy file's, AGENT+reference).
+    width = max([10, *(len(r["agent"]) + 1 for r in rows)])
+    print(f"{'agent':{width}}{'estimator':15}{'TCP after (rigid) med':>22}{'95 % interval':>18}"
           f"{'p95':>9}{'(raw) med':>11}{'time s med':>11}{'z-RMS':>8}{'chi2 rej':>9}"
           f"{'success':>9}{'predicted':>10}{'failed':>8}")
     for r in rows:
         rigid, raw = r["tcp_after_mm"]["rigid"], r["tcp_after_mm"]["raw"]
         interval = (f"[{rigid['ci95'][0]:.4f}, {rigid['ci95'][1]:.4f}]" if rigid["ci95"]
                     else "-")
-        print(f"{r['agent']:10}{r['estimator']:15}{_show(rigid['median'], 22, 4)}"
+        print(f"{r['agent']:{width}}{r['estimator']:15}{_show(rigid['median'], 22, 4)}"
               f"{interval:>18}{_show(rigid['p95'], 9, 4)}{_show(raw['median'], 11, 3)}"
               f"{r['time_s']['median']:11.0f}{_show(r['z_rms'], 8, 2)}"
               f"{_show(r['chi2_rejected'], 9, 2)}{r['success_rate']:9.0%}"

@@ -208,7 +208,7 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
         self.budget_s, self.reward_mode = settings.budget_s, settings.reward
         self.estimator = settings.estimator
         self.time_weight, self.success_mm = settings.time_weight, settings.success_mm
-        self.travel = settings.travel
+        self.travel, self.reference = settings.travel, settings.reference
         self._start_engine(settings, lab_spaces(settings))
 
     # -- the episode, as the lab's notebook and clock show it -------------------------------

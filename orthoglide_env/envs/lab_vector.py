@@ -83,6 +83,7 @@ class SubLab:
         self.noise, self.n_stands, self.tracker = settings.noise, settings.stands, settings.tracker
         self.budget_s, self.travel = settings.budget_s, settings.travel
         self.design, self.slots = settings.design, settings.slots
+        self.reference = settings.reference
         self.action_space: spaces.Dict = envs.single_action_space
         self.observation_space: spaces.Dict = envs.single_observation_space
 
