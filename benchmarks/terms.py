@@ -2,7 +2,7 @@
 against its prior, per family of terms, and what the drives' lead error left costs.
 
     python benchmarks/terms.py [--machines 5] [--agents paper,optimal,tracker]
-                               [--conditions lab] [--seed 1]
+                               [--conditions lab] [--seed 1] [--sigma 0.02]
 
 Per agent (each its one-hour experiment under the conditions, the ``realistic``
 preset), per family of terms (:data:`calibrators.estimators.consider.TERM_FAMILIES`):
@@ -29,6 +29,7 @@ from calibrators.estimators.base import Estimate, get_strategy
 from calibrators.estimators.consider import FULL_TERMS, WORLD_PREFIX, term_family
 from calibrators.estimators.prediction import predicted_tcp_error
 from calibrators.experiment import machine_seed, run_episode
+from orthoglide_env.instruments.dial import DEFAULT_SIGMA
 from orthoglide_env.scoring import score
 
 UM = 1e3  # per mm
@@ -50,12 +51,18 @@ def main() -> None:
     parser.add_argument("--agents", default="paper,optimal,tracker")
     parser.add_argument("--conditions", default="lab")
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--sigma", type=float, default=DEFAULT_SIGMA,
+                        help="the gauges' reading sigma (mm, default %(default)s)")
     args = parser.parse_args()
+    if not args.sigma > 0:
+        parser.error(f"--sigma must be positive (mm), got {args.sigma}")
     gn = get_strategy("gauss-newton")
-    print(f"{args.conditions}, {args.machines} machines, seed {args.seed}: share of each "
+    print(f"{args.conditions}, {args.machines} machines, seed {args.seed}, gauge sigma "
+          f"{args.sigma} mm: share of each "
           f"family's prior variance the full fit removes (median), predicted TCP rigid "
           f"(um) with / without the drives' part, and the true one")
-    print(f"{'agent':10}" + "".join(f"{f:>10}" for f in FULL_TERMS)
+    width = max(10, *(len(a) + 1 for a in args.agents.split(",")))
+    print(f"{'agent':{width}}" + "".join(f"{f:>10}" for f in FULL_TERMS)
           + f"{'pred':>8}{'geom':>8}{'true':>8}")
     for agent_name in args.agents.split(","):
         agent = get_agent(agent_name)
@@ -64,7 +71,8 @@ def main() -> None:
         for m in range(args.machines):
             env = gym.make(orthoglide_env.LAB_ENV_ID, backend="exact",
                            conditions=args.conditions, errors="realistic",
-                           tracker=agent.needs_tracker, reference=agent.needs_reference)
+                           tracker=agent.needs_tracker, reference=agent.needs_reference,
+                           gauge_sigma=args.sigma)
             try:
                 episode = run_episode(env, agent, machine_seed(args.seed, m))
             finally:
@@ -80,7 +88,7 @@ def main() -> None:
                               correction=est.lead_correction if est.fits_lead else None
                               ).tcp_after.rigid.rms * UM)
             print(f"  {agent_name} machine {m + 1}/{args.machines}", file=sys.stderr)
-        print(f"{agent_name:10}" + "".join(
+        print(f"{agent_name:{width}}" + "".join(
             f"{np.median(rows[f]):10.2f}" if f in rows else f"{'-':>10}" for f in FULL_TERMS)
             + f"{np.median(predicted):8.1f}{np.median(geometric):8.1f}{np.median(true):8.1f}")
 
