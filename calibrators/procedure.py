@@ -31,7 +31,7 @@ from calibrators.agents.base import PlannedAgent
 from calibrators.experiment import agent_rng, measurements_of
 from calibrators.measurements import COLUMNS, Measurement, Measurements, gauge_name
 from orthoglide_env.instruments.slots import PLATFORM_AIM, GaugeSpec, Part
-from orthoglide_env.lab.operations import Op, slot_catalogue
+from orthoglide_env.lab.operations import Op
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import AXIS_NAMES, LEG_NAMES, MachineParams
 from orthoglide_env.world.conditions import Conditions
@@ -179,7 +179,7 @@ def make_procedure(agent_name: str, budget_s: float, design: MachineDesign = PRO
                                                                       None)})
         lab = env.unwrapped
         agent.reset(env, observation, agent_rng(seed))
-        slots = slot_catalogue(design)
+        slots = lab.slots
         held = [int(s) for s in observation["slot"]]
         stands = [{"stand": k + 1, "slot": slots[s].slot, "place": place_words(slots[s], design)}
                   for k, s in enumerate(held) if s < len(slots)]

@@ -62,7 +62,7 @@ def _pictures(procedure: Procedure, design: MachineDesign, out: Path) -> dict[in
     from orthoglide_env.sim.report import render_stands_png
 
     machine = MachineParams(design=design)
-    by_name = {s.slot: s for s in slot_catalogue(design)}
+    by_name = {s.slot: s for s in slot_catalogue(design, reference=True)}
     held = {s["stand"]: s["slot"] for s in procedure.stands}
     pictures = {}
     for step in procedure.steps:

@@ -46,8 +46,10 @@ fits or considers: ``full`` fits :data:`FULL_TERMS` and considers the rest.
 Left out, each at most about 1 um over a one-hour experiment under ``lab``: the
 structure's growth with the room (a similarity the legs' parallelism does not see), the
 indicator's retrace, the drives' compliance under the platform's weight and the gauges'
-force.  A tracker's noise under conditions with its MPE is not a term but its readings'
-sigma (:func:`tracker_sigma`).
+force, and the gauge block's deviation from its nominal length (a reference gauge's
+zeroing reading; its grade allows 0.2 um under ``lab``, 0.8 um in the workshop:
+:data:`~orthoglide_env.world.table.REFERENCE_DEVIATION`).  A tracker's noise under
+conditions with its MPE is not a term but its readings' sigma (:func:`tracker_sigma`).
 """
 
 from __future__ import annotations

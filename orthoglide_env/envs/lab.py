@@ -167,7 +167,9 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
     ``slot_positions`` must include 0.5, where the paper's stands open every episode),
     ``conditions`` (the world beyond the geometry: ``"ideal"``, ``"lab"``, ``"workshop"``,
     a :class:`~orthoglide_env.world.conditions.Conditions` naming which effects act, or its
-    dict; default ``"ideal"``), ``render_mode``.  A bad argument raises ``ValueError``
+    dict; default ``"ideal"``), ``reference`` (the lab has a gauge block: the catalogue's
+    ``reference`` slots, see :mod:`orthoglide_env.instruments.slots`; default False),
+    ``render_mode``.  A bad argument raises ``ValueError``
     naming it and its rule.
 
     Conditions
@@ -187,6 +189,11 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
 
     Version history
     ---------------
+    * v0: ``reference`` adds the gauge block: three more slots, ``reference/x``, ``/y``,
+      ``/z`` (after the design's catalogue, whose indices stay), a platform gauge zeroed
+      against the block held to the face at Zero and then reading the bare face a block's
+      length back; a re-mount there costs ``TIME.reference_s`` more.  Default off: every
+      space and stream as before.
     * v0: ``conditions`` adds the world beyond the geometry (default ``ideal``: numbers
       unchanged, bit for bit); the ``machine`` reset option may carry its ``world``.
     * v0: the slot catalogue is the design's (was the prototype's for every design, and a
