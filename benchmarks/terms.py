@@ -3,6 +3,7 @@ against its prior, per family of terms, and what the drives' lead error left cos
 
     python benchmarks/terms.py [--machines 5] [--agents paper,optimal,tracker]
                                [--conditions lab] [--seed 1] [--sigma 0.02]
+                               [--resolution 0.01]
 
 Per agent (each its one-hour experiment under the conditions, the ``realistic``
 preset), per family of terms (:data:`calibrators.estimators.consider.TERM_FAMILIES`):
@@ -29,7 +30,7 @@ from calibrators.estimators.base import Estimate, get_strategy
 from calibrators.estimators.consider import FULL_TERMS, WORLD_PREFIX, term_family
 from calibrators.estimators.prediction import predicted_tcp_error
 from calibrators.experiment import machine_seed, run_episode
-from orthoglide_env.instruments.dial import DEFAULT_SIGMA
+from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.scoring import score
 
 UM = 1e3  # per mm
@@ -53,12 +54,16 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--sigma", type=float, default=DEFAULT_SIGMA,
                         help="the gauges' reading sigma (mm, default %(default)s)")
+    parser.add_argument("--resolution", type=float, default=DEFAULT_RESOLUTION,
+                        help="the dials' resolution (mm, default %(default)s)")
     args = parser.parse_args()
     if not args.sigma > 0:
         parser.error(f"--sigma must be positive (mm), got {args.sigma}")
+    if not args.resolution >= 0:
+        parser.error(f"--resolution must be 0 or more (mm), got {args.resolution}")
     gn = get_strategy("gauss-newton")
     print(f"{args.conditions}, {args.machines} machines, seed {args.seed}, gauge sigma "
-          f"{args.sigma} mm: share of each "
+          f"{args.sigma} mm read to {args.resolution} mm: share of each "
           f"family's prior variance the full fit removes (median), predicted TCP rigid "
           f"(um) with / without the drives' part, and the true one")
     width = max(10, *(len(a) + 1 for a in args.agents.split(",")))
@@ -72,7 +77,7 @@ def main() -> None:
             env = gym.make(orthoglide_env.LAB_ENV_ID, backend="exact",
                            conditions=args.conditions, errors="realistic",
                            tracker=agent.needs_tracker, reference=agent.needs_reference,
-                           gauge_sigma=args.sigma)
+                           gauge_sigma=args.sigma, gauge_resolution=args.resolution)
             try:
                 episode = run_episode(env, agent, machine_seed(args.seed, m))
             finally:
