@@ -102,9 +102,9 @@ def candidate_postures(design: MachineDesign = PROTOTYPE) -> np.ndarray:
     cube; denser tubes along each axis (20 mm along it, 10 mm across from -40 to +20
     mm), where the gauges on that axis's bars stay within their travel; and the postures
     that put the TCP on each axis (:func:`~orthoglide_env.model.kinematics.axis_postures`,
-    20 mm apart and at both limits: the paper's Max and Min among them), where the
-    nominal tips of that leg's gauges stay where they were at Zero: mid-travel, the
-    surest readings a plan can count on."""
+    20 mm apart and at both limits: the paper's Max and Min among them), where that leg's
+    gauges, wherever they meet their targets, are as far from them as at Zero on the
+    nominal machine: mid-travel, the surest readings a plan can count on."""
     along = np.arange(design.rho_min, design.rho_max + 1e-9, 20.0)
     side = np.arange(-40.0, 20.0 + 1e-9, 10.0)
     points = [np.stack(np.meshgrid(along, along, along, indexing="ij"), -1).reshape(-1, 3)]
