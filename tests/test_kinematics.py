@@ -9,6 +9,7 @@ from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import MachineParams, random_machine
 from orthoglide_env.model.kinematics import (
     UnreachableError,
+    axis_postures,
     carriage_points,
     check_reachable,
     direct,
@@ -64,6 +65,21 @@ def test_paper_postures_put_the_tcp_on_the_axes() -> None:
     np.testing.assert_allclose(direct(nominal, paper_posture("ZMin")), [0, 0, -100], atol=EXACT)
     with pytest.raises(ValueError, match="unknown posture"):
         paper_posture("WMax")
+
+
+def test_axis_postures_put_the_tcp_on_the_axes() -> None:
+    """The TCP is on the leg's axis, at the leg's coordinate, from one limit to the other;
+    the paper's Max and Min are the family's ends."""
+    nominal = MachineParams()
+    along = np.linspace(PROTOTYPE.rho_min, PROTOTYPE.rho_max, 9)
+    for leg in range(3):
+        expected = np.zeros((len(along), 3))
+        expected[:, leg] = along
+        np.testing.assert_allclose(direct(nominal, axis_postures(leg, along)), expected,
+                                   atol=EXACT)
+        ends = axis_postures(leg, np.array([PROTOTYPE.rho_max, PROTOTYPE.rho_min]))
+        assert np.array_equal(ends, [paper_posture(f"{'XYZ'[leg]}{end}")
+                                     for end in ("Max", "Min")])
 
 
 def test_zero_posture_follows_eq7() -> None:

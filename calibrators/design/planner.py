@@ -54,7 +54,7 @@ from orthoglide_env.model.boxes import collision_boxes
 from orthoglide_env.model.collisions import clearance
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import ERROR_NAMES, MachineParams
-from orthoglide_env.model.kinematics import direct
+from orthoglide_env.model.kinematics import axis_postures, direct
 from orthoglide_env.model.reading_model import (
     Design,
     ParameterSpace,
@@ -99,16 +99,21 @@ BOUND_SLACK: float = 1e-9
 
 def candidate_postures(design: MachineDesign = PROTOTYPE) -> np.ndarray:
     """Postures an experiment may visit (P, 3): a 20 mm grid of the machine design's joint
-    cube, and denser tubes along each axis (20 mm along it, 10 mm across from -40 to +20
-    mm), where the gauges on that axis's bars stay within their travel."""
+    cube; denser tubes along each axis (20 mm along it, 10 mm across from -40 to +20
+    mm), where the gauges on that axis's bars stay within their travel; and the postures
+    that put the TCP on each axis (:func:`~orthoglide_env.model.kinematics.axis_postures`,
+    20 mm apart and at both limits: the paper's Max and Min among them), where that leg's
+    gauges, wherever they meet their targets, are as far from them as at Zero on the
+    nominal machine: mid-travel, the surest readings a plan can count on."""
     along = np.arange(design.rho_min, design.rho_max + 1e-9, 20.0)
     side = np.arange(-40.0, 20.0 + 1e-9, 10.0)
     points = [np.stack(np.meshgrid(along, along, along, indexing="ij"), -1).reshape(-1, 3)]
+    ends = np.union1d(along, [design.rho_min, design.rho_max])
     for axis in range(3):
         a, b, c = np.meshgrid(along, side, side, indexing="ij")
         tube = np.zeros((*a.shape, 3))
         tube[..., axis], tube[..., (axis + 1) % 3], tube[..., (axis + 2) % 3] = a, b, c
-        points.append(tube.reshape(-1, 3))
+        points += [tube.reshape(-1, 3), axis_postures(axis, ends, design)]
     return np.unique(np.vstack(points), axis=0)
 
 

@@ -366,19 +366,26 @@ def paper_posture(name: str, design: MachineDesign = PROTOTYPE) -> np.ndarray:
     """Control coordinates of a paper posture, computed on ``design``'s nominal model (as
     the controller does: it only knows the nominal geometry).
 
-    ``XMax``: TCP at ``(L sin a, 0, 0)`` with ``a = asin(rho_max / L)``, so
-    ``rho = (L sin a, L cos a - L, L cos a - L)``; likewise ``Min`` with ``rho_min`` and
-    the Y, Z postures by permutation.
+    ``XMax``: the TCP on the x axis with ``rho_x = rho_max`` (:func:`axis_postures`);
+    likewise ``Min`` with ``rho_min`` and the Y, Z postures by permutation.
     """
     if name == "Zero":
         return np.zeros(3)
     if name not in PAPER_POSTURES:
         raise ValueError(f"unknown posture '{name}'; choose from {list(PAPER_POSTURES)}")
-    leg = "XYZ".index(name[0])
     limit = design.rho_max if name.endswith("Max") else design.rho_min
-    alpha = np.arcsin(limit / design.L)
-    rho = np.full(3, design.L * np.cos(alpha) - design.L)
-    rho[leg] = design.L * np.sin(alpha)
+    return axis_postures("XYZ".index(name[0]), np.array([limit]), design)[0]
+
+
+def axis_postures(leg: int, along: np.ndarray, design: MachineDesign = PROTOTYPE
+                  ) -> np.ndarray:
+    """Control coordinates (N, 3) that put the nominal TCP on the axis of ``leg`` with that
+    leg's coordinate at each of ``along`` (N,), mm: ``rho_leg = L sin a`` and the other two
+    ``L cos a - L`` (the TCP at ``(L sin a, 0, 0)`` for the x leg), the family of the
+    paper's Max and Min postures."""
+    alpha = np.arcsin(np.asarray(along, dtype=float) / design.L)
+    rho = np.repeat((design.L * np.cos(alpha) - design.L)[:, None], 3, axis=1)
+    rho[:, leg] = design.L * np.sin(alpha)
     return rho
 
 
