@@ -76,13 +76,15 @@ class Config:
     design: MachineDesign = PROTOTYPE
     #: The world beyond the geometry.
     conditions: Conditions = IDEAL
+    #: The lab has a room thermometer.
+    thermometer: bool = False
 
     def lab_kwargs(self, tracker: bool) -> dict[str, Any]:
         """The lab env's arguments of this comparison (``tracker``: the agent needs one)."""
         return {"errors": self.errors, "gauge_sigma": self.sigma,
                 "gauge_resolution": self.resolution, "backend": self.backend,
                 "tracker": tracker, "budget_s": self.budget_s, "design": self.design,
-                "conditions": self.conditions}
+                "conditions": self.conditions, "thermometer": self.thermometer}
 
 
 @dataclass(frozen=True)
