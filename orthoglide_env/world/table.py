@@ -123,10 +123,10 @@ EFFECTS: dict[str, dict[str, Size]] = {
                             "between their hinges", "steel: 210 GPa"),
     },
     "thermometer": {
-        "tolerance": Size((0, 0.19), (0, 0.19), "K", "a room thermometer's error: a fixed "
-                          "offset of the lab's (read with --thermometer; not an effect of "
-                          "the conditions)", "IEC 60751 class A Pt100: +-(0.15 + "
-                          "0.002|t|) C, 0.19 K at 20 C", signed=True),
+        "tolerance": Size((0, 0.19), (0, 0.19), "K", "the room thermometer's error (a lab "
+                          "with --thermometer): a fixed offset of the lab's",
+                          "IEC 60751 class A Pt100: +-(0.15 + 0.002 abs(t)) C, 0.19 K at "
+                          "20 C", signed=True),
         "resolution": Size((0.01, 0.01), (0.01, 0.01), "K", "its readings are rounded to "
                            "it", "assumption: a Pt100 logger's 0.01 K display"),
     },
