@@ -145,9 +145,8 @@ def test_the_fit_against_the_thermometer_recovers_the_stands_growth_better(seed:
     the growth as linear in the clock.  The bounds: each arm's coefficient is known to
     about 0.08 um/K (its reported std) over a swing of about 1 K, and the thermometer's
     rounding adds 0.01 um; the clock's line cannot follow the swing, 0.6 K at 2-3.5 um/K,
-    which leaves about 0.5 um.  (Under the drawn walk alone, 0.3 K per root hour, the
-    room is nearly linear in the clock over an hour, and both fits are at the noise's
-    0.04 um.)"""
+    which leaves 0.4-0.6 um here.  (Under the drawn walk alone, 0.3 K per root hour, the
+    room is nearly linear in the clock over an hour: 0.04 um against 0.04-0.2 um.)"""
     env, _ = _hour(GROWTH, True, seed=seed, swing=True)
     data = measurements_of(env.unwrapped.records, 3600.0)
     clock = Measurements([replace(m, temperature_c=None) for m in data.items], 3600.0)
