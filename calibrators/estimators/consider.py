@@ -346,7 +346,7 @@ def _reading_terms(design: Design, values: np.ndarray, t: np.ndarray | None,
                 out.append((f"stands.creep{j}[{name}]", _on_rows(
                     np.sqrt(w) * creep * (1 - np.exp(-since / tau)), rows, n)))
             if on("room") and temperatures is not None:
-                # The growth itself, against the thermometer (K per um/K of the arm).
+                # The growth itself, against the thermometer (its offset cancels here).
                 arm = np.sqrt(second_moment("stands", "thermal", conditions)) * UM
                 growth = arm * (temperatures[:, rows] - temperatures[:, rows[:1]])
                 out.append((f"stands.thermal[{name}]", _on_rows(growth, rows, n)))

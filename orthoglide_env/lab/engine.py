@@ -102,7 +102,7 @@ class LabBatch:
         self.tracker_rotation = np.zeros((n, 3, 3))
         self.tracker_position = np.zeros((n, 3))
         self.tracker_reading = np.zeros((n, 3))
-        self.thermometer_offset = np.zeros(n)  # K, each lab's thermometer (scoring only)
+        self.thermometer_offset = np.zeros(n)  # K, each lab's thermometer (the truth)
         # The world beyond the geometry (None under ideal conditions): its drawn truth, the
         # carriages' actual positions, each axis's last direction of travel and each
         # plunger's (+1: going in) and its last ray distance.
