@@ -76,6 +76,8 @@ class Config:
     design: MachineDesign = PROTOTYPE
     #: The world beyond the geometry.
     conditions: Conditions = IDEAL
+    #: The lab has a room thermometer.
+    thermometer: bool = False
 
     def lab_kwargs(self, agent: Agent) -> dict[str, Any]:
         """The lab env's arguments of this comparison for ``agent`` (with the tracker or
@@ -84,7 +86,7 @@ class Config:
                 "gauge_resolution": self.resolution, "backend": self.backend,
                 "tracker": agent.needs_tracker, "reference": agent.needs_reference,
                 "budget_s": self.budget_s, "design": self.design,
-                "conditions": self.conditions}
+                "conditions": self.conditions, "thermometer": self.thermometer}
 
 
 @dataclass(frozen=True)

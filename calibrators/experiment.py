@@ -52,7 +52,7 @@ def measurements_of(records: list[Record], time_s: float = 0.0,
             zeros[r.mounting] = zeros.get(r.mounting, 0) + 1
         items.append(Measurement.recorded(r.spec, labels.get(r.rho, ""), r.reading, r.rho,
                                           r.mounting, max(zeros.get(r.mounting, 0), 1),
-                                          r.time_s))
+                                          r.time_s, r.temperature_c))
     return Measurements(items, time_s if until_s is None else min(time_s, until_s), design)
 
 

@@ -45,6 +45,9 @@ column                        required  meaning
 ``time_s``                    no        when it was read (s on the lab clock, from the
                                         drives' switch-on): what a fit under lab or
                                         workshop conditions sizes drift with
+``temperature_c``             no        the room's temperature then (C, a thermometer's
+                                        reading, :data:`MIN_ROOM_C` .. :data:`MAX_ROOM_C`):
+                                        the stands' growth is fitted against it
 ``step``                      no        the step of a written procedure
                                         (``orthoglide plan``) the reading was taken at,
                                         1 .. :data:`MAX_REPETITION`; ``fit --plan``
@@ -122,15 +125,19 @@ MAX_JSON_BYTES: int = 256 * 1024 * 1024
 PAPER_RHO_TOLERANCE: float = 1e-6
 #: An experiment time beyond ~30 years is a wrong unit.
 MAX_EXPERIMENT_TIME_S: float = 1e9
+#: A room's temperature (C) where a machine is calibrated lies well within these: a value
+#: in kelvin (about 293) or Fahrenheit (about 68) is a wrong unit.
+MIN_ROOM_C: float = 0.0
+MAX_ROOM_C: float = 50.0
 
 #: The columns :meth:`Measurements.to_csv` writes, in order.
 COLUMNS: tuple[str, ...] = ("mounting", "leg", "axis", "at", "posture", "rho_x", "rho_y",
-                            "rho_z", "repetition", "reading_mm", "time_s")
+                            "rho_z", "repetition", "reading_mm", "time_s", "temperature_c")
 RHO_FIELDS: tuple[str, str, str] = ("rho_x", "rho_y", "rho_z")
 #: Every name a CSV column or a JSON reading's key may have.
 FIELDS: tuple[str, ...] = (*COLUMNS, "gauge", "step")
 NUMBER_FIELDS: frozenset[str] = frozenset({"at", *RHO_FIELDS, "repetition", "reading_mm",
-                                          "time_s", "step"})
+                                          "time_s", "temperature_c", "step"})
 JSON_KEYS: tuple[str, ...] = ("readings", "experiment_time_s", "design")
 
 ZERO_RHO: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -288,6 +295,8 @@ class Measurement:
     line: int | None = field(default=None, compare=False)
     _: KW_ONLY
     time_s: float | None = None
+    #: The room's temperature (C) a thermometer read with it, if any.
+    temperature_c: float | None = None
     #: The step of a written procedure it was taken at (``orthoglide plan``), if any.
     step: int | None = field(default=None, compare=False)
     design: InitVar[MachineDesign] = PROTOTYPE
@@ -298,36 +307,42 @@ class Measurement:
             self.mounting, "mounting")
         for name, value in (("posture", posture), ("rho", rho), ("mounting", mounting)):
             object.__setattr__(self, name, value)
-        self._own(self.reading, self.repetition, self.time_s, self.line, self.step)
+        self._own(self.reading, self.repetition, self.time_s, self.line, self.step,
+                  self.temperature_c)
 
     def _own(self, reading: object, repetition: object, time_s: object,
-             line: int | None, step: object = None) -> None:
-        """Check and set what is this reading's own: its value, repetition, time and
-        procedure step."""
+             line: int | None, step: object = None, temperature_c: object = None) -> None:
+        """Check and set what is this reading's own: its value, repetition, time,
+        procedure step and room temperature."""
         limit, rule = ((MAX_TRACKER_MM, _TRACKER_RULE) if isinstance(self.gauge, TrackerAxis)
                        else (MAX_READING_MM, _READING_RULE))
         reading = _real(reading, "reading_mm", -limit, limit, rule)
         time_s = None if time_s is None else _real(
             time_s, "time_s", 0.0, MAX_EXPERIMENT_TIME_S, "s (the lab clock)")
         step = None if step is None else _repetition(step, "step")
+        temperature_c = None if temperature_c is None else _real(
+            temperature_c, "temperature_c", MIN_ROOM_C, MAX_ROOM_C, "C (a room's)")
         for name, value in (("repetition", _repetition(repetition)), ("reading", reading),
-                            ("time_s", time_s), ("line", line), ("step", step)):
+                            ("time_s", time_s), ("line", line), ("step", step),
+                            ("temperature_c", temperature_c)):
             object.__setattr__(self, name, value)
 
     def again(self, reading: object, repetition: object = 1, time_s: object = None,
-              line: int | None = None, step: object = None) -> Measurement:
+              line: int | None = None, step: object = None,
+              temperature_c: object = None) -> Measurement:
         """Another reading of this gauge and mounting at this posture, its own fields
         checked as a new reading's are (what a file repeats is checked once)."""
         out = object.__new__(type(self))
         for name in ("gauge", "posture", "rho", "mounting"):
             object.__setattr__(out, name, getattr(self, name))
-        out._own(reading, repetition, time_s, line, step)
+        out._own(reading, repetition, time_s, line, step, temperature_c)
         return out
 
     @classmethod
     def recorded(cls, gauge: GaugeSpec | TrackerAxis, posture: str, reading: float,
                  rho: tuple[float, float, float], mounting: str, repetition: int,
-                 time_s: float | None = None) -> Measurement:
+                 time_s: float | None = None, temperature_c: float | None = None
+                 ) -> Measurement:
         """A reading the lab wrote in its notebook, taken as it is: the lab only records
         finite readings of its own gauges at postures it reached, so the checks a reading
         from a file needs (a tenth of a millisecond each on a large sweep's notebooks)
@@ -336,7 +351,7 @@ class Measurement:
         for name, value in (("gauge", gauge), ("posture", posture or rho_label(rho)),
                             ("repetition", repetition), ("reading", reading), ("rho", rho),
                             ("mounting", mounting), ("line", None), ("time_s", time_s),
-                            ("step", None)):
+                            ("temperature_c", temperature_c), ("step", None)):
             object.__setattr__(out, name, value)
         return out
 
@@ -351,6 +366,8 @@ class Measurement:
                "reading_mm": self.reading}
         if self.time_s is not None:
             out["time_s"] = self.time_s
+        if self.temperature_c is not None:
+            out["temperature_c"] = self.temperature_c
         if self.step is not None:
             out["step"] = self.step
         return out
@@ -386,7 +403,7 @@ class Measurement:
             at = repr(float(self.gauge.at)) if self.gauge.part == Part.BAR else ""
         return [self.mounting, leg, axis, at, self.posture, *(repr(v) for v in self.rho),
                 str(self.repetition), repr(self.reading),
-                "" if self.time_s is None else repr(self.time_s)]
+                *("" if v is None else repr(v) for v in (self.time_s, self.temperature_c))]
 
 
 def _fields_problem(names: Collection[str], kind: str) -> str | None:
@@ -505,7 +522,8 @@ def _measurement(fields: Mapping[str, object], line: int | None, design: Machine
     return Measurement(gauge, "" if posture is None else posture,
                        _given(fields, "repetition", 1), reading, rho,
                        _given(fields, "mounting", ""), line, design=design,
-                       time_s=_given(fields, "time_s"), step=_given(fields, "step"))
+                       time_s=_given(fields, "time_s"), step=_given(fields, "step"),
+                       temperature_c=_given(fields, "temperature_c"))
 
 
 class _Readings:
@@ -528,7 +546,8 @@ class _Readings:
 
 _INTEGER = re.compile(r"[+-]?[0-9]+")
 #: The columns that hold what is a reading's own; the rest a file repeats.
-_OWN_FIELDS: tuple[str, ...] = ("reading_mm", "repetition", "time_s", "step")
+_OWN_FIELDS: tuple[str, ...] = ("reading_mm", "repetition", "time_s", "step",
+                                "temperature_c")
 #: At most this many distinct (gauge, mounting, posture) rows are kept parsed (a few MB).
 MAX_SEEN: int = 100_000
 
@@ -617,7 +636,7 @@ def _read_csv(handle: BinaryIO, path: Path, design: MachineDesign) -> list[Measu
                 fields = {name: _cell_value(name, cells[k]) for name, k in own}
                 m = first.again(_required(fields, "reading_mm"),
                                 _given(fields, "repetition", 1), _given(fields, "time_s"),
-                                line, _given(fields, "step"))
+                                line, _given(fields, "step"), _given(fields, "temperature_c"))
             readings.add(m, f"line {line}")
         except FieldError as exc:
             place = (f"column {header.index(exc.field) + 1} ({exc.field}): "
@@ -773,14 +792,15 @@ class Measurements:
 
     def to_csv(self, path: str | Path) -> None:
         """Write the CSV format: the header :data:`COLUMNS`, then one reading per row
-        (without the ``time_s`` column when no reading has a time)."""
+        (without the ``time_s`` or ``temperature_c`` column when no reading has one)."""
         self.check()
-        timed = any(m.time_s is not None for m in self.items)
-        width = len(COLUMNS) - (not timed)
+        keep = [k for k, name in enumerate(COLUMNS)
+                if name not in ("time_s", "temperature_c")
+                or any(getattr(m, name) is not None for m in self.items)]
         with Path(path).open("w", newline="", encoding="utf-8") as handle:
             writer = csv.writer(handle)
-            writer.writerow(COLUMNS[:width])
-            writer.writerows(m.csv_row()[:width] for m in self.items)
+            writer.writerow([COLUMNS[k] for k in keep])
+            writer.writerows([row[k] for k in keep] for row in (m.csv_row() for m in self.items))
 
     @classmethod
     def from_csv(cls, path: str | Path, design: MachineDesign | None = None) -> Measurements:

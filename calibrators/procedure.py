@@ -207,7 +207,7 @@ def make_procedure(agent_name: str, budget_s: float, design: MachineDesign = PRO
         data = measurements_of(list(lab.records), clock, design=design)
     finally:
         env.close()
-    sheet = [m.again(m.reading, m.repetition, m.time_s, None, step)
+    sheet = [m.again(m.reading, m.repetition, m.time_s, None, step, m.temperature_c)
              for m, step in zip(data.items, taken, strict=True)]
     return Procedure(agent_name, float(budget_s), conditions.to_dict(), design.to_dict(),
                      stands, steps, sheet)

@@ -13,7 +13,7 @@ import orthoglide_env
 from calibrators.agents import available as agents_available
 from calibrators.agents import get_agent
 from calibrators.cli import estimator_options
-from calibrators.cli.common import add_conditions, add_design, conditions_of
+from calibrators.cli.common import add_conditions, add_design, add_thermometer, conditions_of
 from calibrators.cli.output import emit, report, save
 from calibrators.compare import machine_z_scores
 from calibrators.estimators.base import Estimate, Measurements, get_strategy
@@ -81,6 +81,7 @@ def run(args: argparse.Namespace) -> None:
     env = gym.make(orthoglide_env.LAB_ENV_ID, errors=preset, gauge_sigma=sigma,
                    gauge_resolution=resolution, backend=args.backend,
                    tracker=agent.needs_tracker, reference=agent.needs_reference,
+                   thermometer=args.thermometer,
                    budget_s=args.budget,
                    design=machine.design, conditions=conditions)
     with closing(env):
@@ -113,6 +114,7 @@ def add(sub: argparse._SubParsersAction) -> None:
                         "--machine)")
     add_design(p)
     add_conditions(p, replays=True)
+    add_thermometer(p)
     p.add_argument("--backend", choices=["pybullet", "exact"], default="pybullet",
                    help="simulator of the virtual machine (default: %(default)s)")
     group = p.add_mutually_exclusive_group()

@@ -103,6 +103,14 @@ def add_conditions(p: argparse.ArgumentParser, replays: bool = False,
                    "command has it) (default: dial)")
 
 
+def add_thermometer(p: argparse.ArgumentParser) -> None:
+    """``--thermometer``: the lab has a room thermometer."""
+    p.add_argument("--thermometer", action="store_true",
+                   help="the lab has a room thermometer: every reading carries the room's "
+                   "temperature, against which the full estimator fits the stands' growth "
+                   "(its error: the README's 'Conditions', rows thermometer)")
+
+
 def conditions_of(args: argparse.Namespace, world: World | None = None) -> Conditions:
     """The conditions of ``--conditions`` and ``--effects``, or those of a machine file's
     ``world`` (which the options, when given, must name); :class:`UsageError` if bad."""

@@ -18,6 +18,7 @@ from calibrators.cli.common import (
     UsageError,
     add_conditions,
     add_design,
+    add_thermometer,
     conditions_of,
     design_of,
 )
@@ -29,6 +30,7 @@ from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS
 from orthoglide_env.scoring import FRAMES
+from orthoglide_env.world.conditions import EFFECT_NAMES
 
 TRIALS_FILE = "trials.jsonl"
 #: Most processes a run may ask for: beyond the cores they only compete.
@@ -70,7 +72,8 @@ def _check(args: argparse.Namespace) -> Config:
     return Config(agents, estimators, args.budget, args.errors, sigma, resolution,
                   args.backend, args.seed, args.success_mm,
                   curve_estimator=_curve_estimator(estimators) if args.out else "",
-                  design=design_of(args), conditions=conditions_of(args))
+                  design=design_of(args), conditions=conditions_of(args),
+                  thermometer=args.thermometer)
 
 
 def _curve_estimator(estimators: tuple[str, ...]) -> str:
@@ -96,6 +99,12 @@ def _prepare_out(args: argparse.Namespace, config: Config) -> tuple[Path | None,
             saved.setdefault("conditions", "ideal")
             saved.setdefault("effects", [])
             saved.setdefault("indicator", "dial")
+        if saved is not None and "thermometer" not in saved:
+            # A run kept before the thermometer existed had none, and its error, which
+            # draws nothing without one, was not yet among a condition's effects.
+            saved["thermometer"] = False
+            if saved["effects"] == [e for e in EFFECT_NAMES if e != "thermometer"]:
+                saved["effects"] = list(EFFECT_NAMES)
         if saved != _config_dict(config, args.machines):
             raise UsageError(f"--resume needs the options of the run in {out} "
                              f"({config_path}): they differ")
@@ -181,9 +190,9 @@ def _print(trials: list[Trial], config: Config, machines: int, seconds: float,
         print(json.dumps({"config": _config_dict(config, machines), "rows": rows,
                           "paired": pairs}, allow_nan=False))
         return rows
-    print(f"{machines} machines ({config.errors} errors, {config.conditions.label} conditions, "
-          f"gauge sigma {config.sigma} mm, budget {config.budget_s:g} s, {config.backend} "
-          f"backend), {seconds:.1f} s. TCP error "
+    print(f"{machines} machines ({config.errors} errors, {config.conditions.label} conditions"
+          f"{', a thermometer' if config.thermometer else ''}, gauge sigma {config.sigma} mm, "
+          f"budget {config.budget_s:g} s, {config.backend} backend), {seconds:.1f} s. TCP error "
           "RMS over the workspace after calibration (mm), median over machines with its "
           "95 % interval; rigid = after the best-fit rigid motion (the headline), raw = "
           "world frame; a failed trial counts as its uncalibrated machine; success: rigid "
@@ -280,6 +289,7 @@ def add(sub: argparse._SubParsersAction) -> None:
                    help="gauge display resolution (mm, default %(default)s)")
     add_design(p)
     add_conditions(p)
+    add_thermometer(p)
     p.add_argument("--backend", choices=["exact", "pybullet"], default="exact",
                    help="simulator (default %(default)s)")
     p.add_argument("--success-mm", "--target", dest="success_mm", type=float, default=0.01,

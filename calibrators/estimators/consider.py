@@ -31,7 +31,9 @@ considered):
 * ``stands``: per gauge mounting, its creep ``1 - exp(-(t - t0) / tau)`` from its first
   reading ``t0`` (a stand is mounted before it is read: this overstates what is left;
   the time constant's spread by Simpson's rule over its range), its arm's growth with
-  the room, ``t`` times the room's drift (its random walk folded in at one hour), and
+  the room, ``t`` times the room's drift (its random walk folded in at one hour), or,
+  when the readings carry a thermometer's (:func:`thermometer_sigma`), the arm's
+  coefficient times ``T(t) - T(t0)``, and
   its give, with the bar's bending under ``compliance``, under the measuring force that
   grows as the plunger goes in (a known gain on the reading: one term over every
   mounting, as every known term is one, so that its parts add up as they do).
@@ -300,8 +302,22 @@ def backlash_sizes(conditions: Conditions) -> tuple[float, float]:
     return mean, float(np.sqrt(second_moment("backlash", "lost_motion", conditions) - mean**2))
 
 
+def thermometer_sigma(conditions: Conditions) -> float:
+    """What a thermometer's error adds (mm, a standard deviation) to a gauge reading when
+    the stands' growth is sized by its readings: the arm's coefficient times its rounding,
+    uniform within half its resolution.  Its offset is the same in every reading, so each
+    mounting's zero takes it.  Zero where the stands or the room do not act, or the
+    thermometer reads the truth."""
+    if not all(e in conditions for e in ("stands", "room", "thermometer")):
+        return 0.0
+    step = _fixed("thermometer", "resolution", conditions)
+    return float(np.sqrt(second_moment("stands", "thermal", conditions)) * UM * step
+                 / np.sqrt(12.0))
+
+
 def _reading_terms(design: Design, values: np.ndarray, t: np.ndarray | None,
-                   conditions: Conditions) -> list[tuple[str, np.ndarray]]:
+                   conditions: Conditions, temperatures: np.ndarray | None = None
+                   ) -> list[tuple[str, np.ndarray]]:
     """The gauges' own terms: (name, (M, N) zero off the mounting)."""
     on = conditions.__contains__
     n = len(design)
@@ -331,7 +347,12 @@ def _reading_terms(design: Design, values: np.ndarray, t: np.ndarray | None,
                                                              conditions), strict=True)):
                 out.append((f"stands.creep{j}[{name}]", _on_rows(
                     np.sqrt(w) * creep * (1 - np.exp(-since / tau)), rows, n)))
-            if on("room"):
+            if on("room") and temperatures is not None:
+                # The growth itself, against the thermometer (its offset cancels here).
+                arm = np.sqrt(second_moment("stands", "thermal", conditions)) * UM
+                growth = arm * (temperatures[:, rows] - temperatures[:, rows[:1]])
+                out.append((f"stands.thermal[{name}]", _on_rows(growth, rows, n)))
+            elif on("room"):
                 # The walk's variance at one hour folded into the drift's.
                 rate2 = (second_moment("room", "drift", conditions)
                          + second_moment("room", "walk", conditions)) / HOUR**2
@@ -354,11 +375,13 @@ def _reading_terms(design: Design, values: np.ndarray, t: np.ndarray | None,
 
 
 def consider_terms(design: Design, values: np.ndarray, times: np.ndarray | None,
-                   conditions: Conditions, spacing: float | None = None) -> Consider:
+                   conditions: Conditions, spacing: float | None = None,
+                   temperatures: np.ndarray | None = None) -> Consider:
     """The consider terms of ``design`` read as ``values`` (M, N) at lab ``times`` (M, N)
     or None, under ``conditions``; ``spacing``: the lead error as a pitch-error table
-    with nodes that far apart (:func:`lead_terms`).  ``ValueError`` when an effect that
-    acts needs the readings' times and they are not given."""
+    with nodes that far apart (:func:`lead_terms`); ``temperatures``: the room's (M, N,
+    C) as a thermometer read it with each reading, or None.  ``ValueError`` when an
+    effect that acts needs the readings' times and they are not given."""
     needs = [e for e in TIMED_EFFECTS if e in conditions]
     if needs and times is None:
         raise ValueError(f"under the {conditions.name} conditions every reading needs its "
@@ -366,7 +389,8 @@ def consider_terms(design: Design, values: np.ndarray, times: np.ndarray | None,
     t = None if times is None else np.asarray(times, dtype=float)
     m_count, n = len(values), len(design)
     drive = _drive_terms(design, t, conditions, spacing)
-    reading = _reading_terms(design, values, t, conditions)
+    reading = _reading_terms(design, values, t, conditions,
+                             None if temperatures is None else np.asarray(temperatures, float))
     drive_array = (np.stack([np.broadcast_to(p, (m_count, n, 3)) for _, p in drive], axis=-1)
                    if drive else np.zeros((m_count, n, 3, 0)))
     reading_array = (np.stack([np.broadcast_to(p, (m_count, n)) for _, p in reading],

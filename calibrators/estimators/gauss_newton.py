@@ -24,6 +24,7 @@ from calibrators.estimators.consider import (
     Consider,
     check_families,
     consider_terms,
+    thermometer_sigma,
 )
 from calibrators.estimators.consider import tracker_sigma as tracker_sigma_of
 from calibrators.estimators.differences import check_zeros
@@ -260,7 +261,10 @@ class GaussNewtonCalibrator(Calibrator):
         space = design.space
         stamps = [[m.time_s for m in data.items] for data in datas]
         times = None if any(None in row for row in stamps) else np.array(stamps, dtype=float)
-        consider = consider_terms(design, values, times, conditions, spacing)
+        heat = [[m.temperature_c for m in data.items] for data in datas]
+        temperatures = (None if any(None in row for row in heat)
+                        else np.array(heat, dtype=float))
+        consider = consider_terms(design, values, times, conditions, spacing, temperatures)
         free = select(params, space)
         fixed = fixed_values(fix, space)
         for name in fix:
@@ -295,6 +299,9 @@ class GaussNewtonCalibrator(Calibrator):
         if "tracker" in conditions and tracked.any():
             # One machine's (estimate_many groups machines by it).
             tracker_sigma = tracker_sigma_of(conditions, tracker_reach(design, datas[0]))
+        if temperatures is not None:
+            # The thermometer's rounding, through the stands' arms, is white on a reading.
+            sigma = float(np.hypot(sigma, thermometer_sigma(conditions)))
         noise = np.where(tracked, tracker_sigma, sigma)
 
         def fit(rows: np.ndarray, mask: np.ndarray) -> BatchFit:

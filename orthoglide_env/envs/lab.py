@@ -157,7 +157,8 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
     Kwargs (defaults, types, ranges: :data:`orthoglide_env.lab.spec.LAB`): ``errors`` (preset),
     ``gauge_sigma``, ``gauge_resolution`` (mm), ``backend`` (``exact`` or ``pybullet``),
     ``stands`` (default 6), ``tracker`` (a laser tracker on the platform, read at every
-    move), ``tracker_sigma`` (mm), ``budget_s``, ``reward``, ``estimator`` (for
+    move), ``tracker_sigma`` (mm), ``thermometer`` (a room thermometer: each record
+    carries its reading, see Conditions), ``budget_s``, ``reward``, ``estimator`` (for
     ``accuracy``: records and sigma to a ``MachineParams``, e.g.
     ``calibrators.experiment.make_estimator()``), ``time_weight``, ``success_mm``,
     ``travel`` (default: the design's gauge travel), ``design`` (the machines'
@@ -187,6 +188,14 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
     --save-truth``) replays that world instead of drawing one, and is refused by a lab of
     other conditions.  ``ideal`` draws nothing: every stream is as before.
 
+    With ``thermometer=True`` every record also carries the room's temperature as the
+    lab's thermometer read it then (``temperature_c``, C; None without one).  Under
+    conditions with the ``thermometer`` effect it reads with a fixed offset within a class
+    A Pt100's tolerance and rounds to 0.01 K; otherwise it reads the truth (20 C exactly
+    where the room does not act).  Its offset is drawn from a jump of ``np_random``, which
+    does not move: the machine, its world and every reading are those of a lab without
+    one.
+
     Version history
     ---------------
     * v0: ``reference`` adds the gauge block: three more slots, ``reference/x``, ``/y``,
@@ -194,6 +203,8 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
       against the block held to the face at Zero and then reading the bare face a block's
       length back; a re-mount there costs ``TIME.reference_s`` more.  Default off: every
       space and stream as before.
+    * v0: ``thermometer`` (default False: numbers unchanged, bit for bit) adds a room
+      thermometer whose reading each record carries; the ``thermometer`` effect its error.
     * v0: ``conditions`` adds the world beyond the geometry (default ``ideal``: numbers
       unchanged, bit for bit); the ``machine`` reset option may carry its ``world``.
     * v0: the slot catalogue is the design's (was the prototype's for every design, and a

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from orthoglide_env.instruments import thermometer
 from orthoglide_env.instruments.dial import Status, readings_from_distances, status_of
 from orthoglide_env.instruments.gauges import DEFAULT_TRAVEL, Gauge, GaugeArray
 from orthoglide_env.instruments.slots import GaugeSpec, Part, on_platform
@@ -102,6 +103,7 @@ class LabBatch:
         self.tracker_rotation = np.zeros((n, 3, 3))
         self.tracker_position = np.zeros((n, 3))
         self.tracker_reading = np.zeros((n, 3))
+        self.thermometer_offset = np.zeros(n)  # K, each lab's thermometer (the truth)
         # The world beyond the geometry (None under ideal conditions): its drawn truth, the
         # carriages' actual positions, each axis's last direction of travel and each
         # plunger's (+1: going in) and its last ray distance.
@@ -147,7 +149,7 @@ class LabBatch:
         settings = self.settings
         specs = settings.layout if layout is None else layout
         first = [self.place(spec) for spec in specs]
-        drawn, rotations, positions, errors, worlds = [], [], [], [], []
+        drawn, rotations, positions, errors, worlds, offsets = [], [], [], [], [], []
         for stream in streams:
             drawn.append(settings.preset.sample(stream, settings.design) if machine is None
                          else machine)
@@ -159,6 +161,8 @@ class LabBatch:
             if settings.conditions.active:
                 worlds.append(World.draw(settings.conditions, stream, settings.stands)
                               if world is None else world)
+            if settings.thermometer:
+                offsets.append(thermometer.draw_offset(settings.conditions, stream))
         blocks = np.full(len(rows), REFERENCE_LENGTH_MM)
         if settings.reference and settings.conditions.active:
             # Drawn last: a lab without the block draws what it always drew.
@@ -207,6 +211,8 @@ class LabBatch:
         if settings.station:
             self.tracker_rotation[rows] = rotations
             self.tracker_position[rows] = positions
+        if settings.thermometer:
+            self.thermometer_offset[rows] = offsets
         self._sync(rows)
         if world is not None:
             self.backend.move(rows, self.actual[rows])
@@ -554,16 +560,28 @@ class LabBatch:
         index, rho = rows.tolist(), [tuple(p) for p in self.rho[rows].tolist()]
         steps, stamps = self.steps[rows].tolist(), (self.time[rows] + pending).tolist()
         read, slots = values.tolist(), self.slot[rows].tolist()
+        room = self._room(rows, self.time[rows] + pending)
         for r, k in zip(*(part.tolist() for part in np.nonzero(valid)), strict=True):
             i = index[r]
             self.notebooks[i].records.append(Record(self.places[slots[r][k]], self.mounting[i][k],
-                                                    rho[r], read[r][k], steps[r], stamps[r]))
+                                                    rho[r], read[r][k], steps[r], stamps[r],
+                                                    room[r]))
         if settings.tracker:
             tracker = self.tracker_reading[rows].tolist()
             for r, i in enumerate(index):
                 self.notebooks[i].records.extend(
                     Record(TrackerAxis(c), f"tracker.{AXIS_NAMES[c]}", rho[r], tracker[r][c],
-                           steps[r], stamps[r]) for c in range(3))
+                           steps[r], stamps[r], room[r]) for c in range(3))
+
+    def _room(self, rows: np.ndarray, when: np.ndarray) -> list[float | None]:
+        """What the thermometer of each of ``rows`` reads (C) at lab time ``when``; None
+        where the lab has none."""
+        if not self.settings.thermometer:
+            return [None] * len(rows)
+        temperature = (np.zeros(len(rows)) if self.world is None
+                       else self._of(self.world, rows).temperature(when))
+        return thermometer.read(self.settings.conditions, temperature,
+                                self.thermometer_offset[rows]).tolist()
 
     # -- rewards and observations --------------------------------------------------------------
     def _rewards(self, rows: np.ndarray, seconds: np.ndarray, ended: np.ndarray) -> np.ndarray:

@@ -41,6 +41,7 @@ class Record:
     reading: float
     step: int
     time_s: float  # lab time when it was read
+    temperature_c: float | None = None  # the room thermometer's reading then (C), if any
 
 
 Estimator = Callable[[list[Record], float], MachineParams]

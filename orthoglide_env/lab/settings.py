@@ -48,6 +48,7 @@ class LabSettings:
     travel: float
     tracker: bool = False  # the tracker is read at every move
     tracker_sigma: float = TRACKER_SIGMA
+    thermometer: bool = False  # a room thermometer is read with every reading
     station: bool = True  # a tracker station stands in the lab (its frame drawn at reset)
     budget_s: float = np.inf
     max_steps: int | None = None
@@ -131,6 +132,7 @@ def lab_settings(args: dict[str, Any]) -> LabSettings:
         **_shared(args, design), stands=stands,
         layout=tuple(slots[slot_index(spec, design=design)] for spec in PAPER_LAYOUT[:stands]),
         tracker=args["tracker"], tracker_sigma=args["tracker_sigma"],
+        thermometer=args["thermometer"],
         budget_s=args["budget_s"], reward=args["reward"], estimator=args["estimator"],
         time_weight=args["time_weight"], success_mm=args["success_mm"],
         reference=args["reference"])

@@ -221,6 +221,7 @@ LAB: dict[str, Arg] = {
     "stands": Integer(low=1, upper="the design's slot count", default=len(PAPER_SLOTS)),
     "tracker": FLAG,
     "tracker_sigma": Number("mm", 0.0, open=True, default=TRACKER_SIGMA),
+    "thermometer": FLAG,
     "budget_s": Number("s", 0.0, open=True, default=DEFAULT_BUDGET_S),
     "reward": Choice(REWARDS, default="time"), "estimator": FUNCTION,
     "time_weight": Number("", 0.0, default=1.0),

@@ -122,6 +122,14 @@ EFFECTS: dict[str, dict[str, Size]] = {
                             "(solid, the design's bar_section), bent by the gauge's force "
                             "between their hinges", "steel: 210 GPa"),
     },
+    "thermometer": {
+        "tolerance": Size((0, 0.19), (0, 0.19), "K", "the room thermometer's error (a lab "
+                          "with --thermometer): a fixed offset of the lab's",
+                          "IEC 60751 class A Pt100: +-(0.15 + 0.002 abs(t)) C, 0.19 K at "
+                          "20 C", signed=True),
+        "resolution": Size((0.01, 0.01), (0.01, 0.01), "K", "its readings are rounded to "
+                           "it", "assumption: a Pt100 logger's 0.01 K display"),
+    },
     "tracker": {
         "distance": Size((10, 10), (10, 10), "um", "MPE along the line of sight, plus "
                          "0.3 um/m; a reading's sigma is half the MPE", "laser tracker "

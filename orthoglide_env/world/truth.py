@@ -33,6 +33,8 @@ from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.world.table import EFFECTS, TRACKER_MPE_PER_M
 
 UM: float = 1e-3  # mm
+#: The reference temperature (C, ISO 1) that :meth:`World.temperature` is measured from.
+REFERENCE_C: float = 20.0
 MINUTE: float = 60.0
 HOUR: float = 3600.0
 #: The room's random walk is drawn as this many smooth modes over this horizon (s): a
