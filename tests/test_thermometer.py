@@ -181,3 +181,20 @@ def test_a_sheets_temperatures_survive_both_formats(tmp_path) -> None:
         back = Measurements.read(tmp_path / f"m{suffix}")
         assert [m.temperature_c for m in back.items] == [m.temperature_c for m in data.items]
     assert "temperature_c" in (tmp_path / "m.csv").read_text().splitlines()[0]
+
+
+def test_a_world_saved_before_the_thermometer_replays_in_a_lab_lab() -> None:
+    """A machine file written before the thermometer existed names every effect but it:
+    its world was drawn the same way, so a ``lab`` lab replays it (one of other conditions
+    still refuses it)."""
+    env = gym.make(orthoglide_env.LAB_ENV_ID, conditions="lab")
+    env.reset(seed=4)
+    batch = env.unwrapped._batch
+    world = batch.world[0]
+    old = Conditions("lab", [e for e in world.conditions.effects if e != "thermometer"])
+    saved = machine_dict(batch.machines[0], replace(world, conditions=old))
+    env.reset(seed=5, options={"machine": saved})
+    assert np.array_equal(batch.world[0].lead_scale, world.lead_scale)
+    with pytest.raises(ValueError, match="drawn under the conditions"):
+        gym.make(orthoglide_env.LAB_ENV_ID, conditions="workshop").reset(
+            seed=5, options={"machine": saved})

@@ -77,12 +77,19 @@ def _machine_option(value: Any, settings: LabSettings
                      f"{type(value).__name__} {value!r}")
 
 
+def _drawn(conditions: Conditions) -> tuple:
+    """What of ``conditions`` a world's truth depends on: not the thermometer's error, which
+    the lab draws (files written before the thermometer existed do not name it)."""
+    return (conditions.name, tuple(e for e in conditions.effects if e != "thermometer"),
+            conditions.indicator)
+
+
 def _world_option(world: World | None, settings: LabSettings) -> World | None:
     """A machine file's world, if this lab can replay it: drawn under its conditions, for
     as many stands."""
     if world is None:
         return None
-    if world.conditions != settings.conditions:
+    if _drawn(world.conditions) != _drawn(settings.conditions):
         raise ValueError(f"its world was drawn under the conditions "
                          f"{world.conditions.label!r}; this lab's are "
                          f"{settings.conditions.label!r} (build it with conditions="
