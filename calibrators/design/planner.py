@@ -92,6 +92,10 @@ SCREENED: int = 6
 #: :meth:`Planner.top_rates` prices at least this many moves of the highest bounds first,
 #: then only those whose bound can still beat the best of them.
 FIRST_PRICED: int = 8
+#: Widening (mm) of a remembered spread before it is taken for an upper bound of the
+#: present one (:meth:`Planner._reach`): far above the rounding of a spread (under 1e-6
+#: mm even where it is nearly zero) and far below the microns that decide a margin.
+SPREAD_SLACK: float = 1e-5
 #: Relative widening of a gain's upper bound for the rounding of the gain and the bound
 #: (both ~1e-15 relative; a real difference between two moves is far larger).
 BOUND_SLACK: float = 1e-9
@@ -261,6 +265,8 @@ class Planner:
         # to candidate postures.
         self.rho, self.here = np.zeros(3), self.table.zero
         self.rows = np.zeros((len(self.slots), len(self.table.postures), n))
+        # An upper bound of each stand's spread at every posture (see _reach).
+        self.spread_bound = np.zeros((len(self.slots), len(self.table.postures)))
         # Each stand's rows over the unknowns they touch, and those unknowns' columns.
         self.touched: list[tuple[np.ndarray, np.ndarray]] = [
             (np.arange(0), np.zeros((0, 0)))] * len(self.slots)
@@ -289,40 +295,70 @@ class Planner:
 
     def _set_rows(self, stand: int) -> None:
         """Make ``stand``'s rows those of its present mounting (:meth:`rows_of`), and keep
-        them over the unknowns they touch (``touched``: columns, rows)."""
+        them over the unknowns they touch (``touched``: columns, rows); its spread bound
+        is the prior spread (its unknowns are as wide as a priori, the machine's at most)."""
         self.rows[stand] = self.rows_of(stand)
+        self.spread_bound[stand] = self.table.prior_spread[max(self.slots[stand], 0)]
         cols = np.flatnonzero(np.any(self.rows[stand] != 0.0, axis=0))
         self.touched[stand] = (cols, self.rows[stand][:, cols])
 
-    def tips(self, postures: np.ndarray | slice = slice(None)
-             ) -> tuple[np.ndarray, np.ndarray]:
-        """Predicted tip distance of every stand's gauge at ``postures`` and its standard
-        deviation (K, P'), mm: a priori for a plan, from the mean and covariance once
-        readings were observed.  (An empty stand gets slot 0's: it is masked later.)"""
+    def predicted_tips(self, postures: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """Predicted tip distance of every stand's gauge at ``postures`` (K, P'), mm:
+        nominal for a plan, from the mean once readings were observed.  (An empty stand
+        gets slot 0's: it is masked later.)"""
         slots = np.maximum(np.array(self.slots), 0)
         tip = self.table.tip[slots][:, postures]
         if self.mean is None:
-            return tip, self.table.prior_spread[slots][:, postures]
-        cols = np.array([self._columns(k)[:-1] for k in range(len(slots))])  # (K, 31)
-        change = self.table.change[slots][:, postures]  # (K, P', 31)
-        mean = self.mean[cols]
-        cov = self.covariance[cols[:, :, None], cols[:, None, :]]  # (K, 31, 31)
-        tip = tip + self.table.sign[slots][:, None] * (change @ mean[:, :, None])[..., 0]
-        spread = np.sqrt(np.clip(np.sum((change @ cov) * change, axis=-1), 0.0, None))
-        return tip, spread
+            return tip
+        for k, slot in enumerate(slots):
+            change = self.table.change[slot][postures] @ self.mean[self._columns(k)[:-1]]
+            tip[k] += self.table.sign[slot] * change
+        return tip
+
+    def _spread(self, stand: int, postures: np.ndarray) -> np.ndarray:
+        """Standard deviation (L,) of ``stand``'s predicted tip at ``postures`` (L,), mm,
+        from the covariance.  A posture's value is the same to the bit whichever others
+        are computed with it: the rows go to BLAS in an even count (its kernels take a
+        lone last row their own way, a few ulps off)."""
+        cols = self._columns(stand)[:-1]
+        cov = self.covariance[np.ix_(cols, cols)]
+        change = self.table.change[self.slots[stand], np.r_[postures, postures[-1:]]
+                                   [:len(postures) + len(postures) % 2]]
+        return np.sqrt(np.clip(np.sum((change @ cov) * change, axis=-1), 0.0, None)
+                       )[:len(postures)]
 
     def _reach(self, postures: np.ndarray | slice = slice(None)
                ) -> tuple[np.ndarray, np.ndarray]:
         """:func:`reach` of every stand at ``postures`` (nothing for an empty stand, no
-        contact where it was seen not to read)."""
+        contact where it was seen not to read).
+
+        Once readings were observed, a spread is computed only where the answer depends
+        on it.  Not where the tip misses its bar or a bar presses the gauge, nor where
+        the tip is less than :data:`END_GAP` off the end, and not where the stand's
+        spread bound (``spread_bound``) already leaves the tip safe and touching
+        (contact exactly 1): the spread, at most the bound, would leave it so too.  The
+        bound is the prior spread at a mounting, then each spread as last computed,
+        plus :data:`SPREAD_SLACK`: readings only shrink the covariance, so a spread
+        never grows until its stand is re-mounted."""
         slots = np.array(self.slots)
         mounted = (slots >= 0)[:, None]
         if self.mean is None:
             safe, contact = (a[np.maximum(slots, 0)][:, postures]
                              for a in self.table.prior_reach)
         else:
-            safe, contact = reach(self.table, np.maximum(slots, 0), *self.tips(postures),
-                                  postures)
+            tip = self.predicted_tips(postures)
+            safe, contact = reach(self.table, np.maximum(slots, 0), tip,
+                                  self.spread_bound[:, postures] + SPREAD_SLACK, postures)
+            index = np.arange(len(self.table.postures))[postures]
+            with np.errstate(invalid="ignore"):
+                open_ = ((tip >= END_GAP) & (contact < 1.0)
+                         & ~self.table.pressed[np.maximum(slots, 0)][:, postures] & mounted)
+            for k in np.flatnonzero(open_.any(axis=1)):
+                at = np.flatnonzero(open_[k])
+                spread = self._spread(k, index[at])
+                self.spread_bound[k, index[at]] = spread
+                safe[k, at], contact[k, at] = (a[0] for a in reach(
+                    self.table, slots[k:k + 1], tip[k:k + 1, at], spread[None], index[at]))
         return safe & mounted, np.where(self.silent[:, postures], 0.0, contact) * mounted
 
     # -- pricing --------------------------------------------------------------------------
@@ -493,6 +529,7 @@ class Planner:
         trial.covariance, trial.rows = self.covariance.copy(), self.rows.copy()
         trial.touched = list(self.touched)
         trial.silent = self.silent.copy()
+        trial.spread_bound = self.spread_bound.copy()
         trial.mean = None if self.mean is None else self.mean.copy()
         return trial
 
