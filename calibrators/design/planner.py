@@ -89,8 +89,8 @@ CRITERIA: tuple[str, ...] = ("I", "D")
 REMOUNT_CHECK_S: float = 300.0
 LOOKAHEAD_MOVES: int = 24
 SCREENED: int = 6
-#: :meth:`Planner.top_rates` prices at least this many moves of the highest bounds first,
-#: then only those whose bound can still beat the best of them.
+#: :meth:`Planner.top_rates` prices the moves of the highest bounds in batches of at least
+#: this many, as long as their bound can still beat the best found.
 FIRST_PRICED: int = 8
 #: Widening (mm) of a remembered spread before it is taken for an upper bound of the
 #: present one (:meth:`Planner._reach`): far above the rounding of a spread (under 1e-6
@@ -159,8 +159,10 @@ def reach(table: SlotTable, slots: np.ndarray, tip: np.ndarray, spread: np.ndarr
         safe = np.where(missed, ~table.near[slots][:, postures],
                         ~table.pressed[slots][:, postures]
                         & (tip - SAFETY_SIGMAS * spread >= END_GAP))
-        within = ndtr((table.travel - tip) / np.maximum(spread, 1e-9))
-    return safe, np.where(safe & ~missed, within, 0.0)
+    contact = np.zeros(tip.shape)
+    touches = safe & ~missed
+    contact[touches] = ndtr((table.travel - tip[touches]) / np.maximum(spread[touches], 1e-9))
+    return safe, contact
 
 
 @lru_cache(maxsize=2)
@@ -204,6 +206,16 @@ def rigid_weight(design: MachineDesign = PROTOTYPE) -> np.ndarray:
     :func:`orthoglide_env.scoring.predicted_frame_errors`)."""
     scale = default_scales(ParameterSpace())
     return rigid_weights([MachineParams(design=design)])[0] * np.outer(scale, scale)
+
+
+@lru_cache(maxsize=2)
+def rigid_factor(design: MachineDesign = PROTOTYPE) -> np.ndarray:
+    """``F`` (27, r) with ``F F' = W`` (:func:`rigid_weight`): ``W`` has rank ``r``, 12 on
+    the prototype, as many errors only move the tool rigidly or as others do.  The
+    eigenvalues below 1e-12 of the largest are the rounding of those zeros."""
+    value, vector = np.linalg.eigh(rigid_weight(design))
+    keep = value > 1e-12 * value[-1]
+    return vector[:, keep] * np.sqrt(value[keep])
 
 
 class Step(NamedTuple):
@@ -267,7 +279,9 @@ class Planner:
         self.rows = np.zeros((len(self.slots), len(self.table.postures), n))
         # An upper bound of each stand's spread at every posture (see _reach).
         self.spread_bound = np.zeros((len(self.slots), len(self.table.postures)))
-        # Each stand's rows over the unknowns they touch, and those unknowns' columns.
+        # Each stand's columns of the unknowns its rows touch and its rows over them,
+        # padded to N_MACHINE + N_STAND (the most a mounting touches) with zero rows at
+        # column 0.
         self.touched: list[tuple[np.ndarray, np.ndarray]] = [
             (np.arange(0), np.zeros((0, 0)))] * len(self.slots)
         for k in range(len(self.slots)):
@@ -283,7 +297,7 @@ class Planner:
     # -- the model of a reading -----------------------------------------------------------
     def _columns(self, stand: int) -> np.ndarray:
         start = N_MACHINE + N_STAND * stand
-        return np.r_[0:N_MACHINE, start:start + N_STAND]
+        return np.concatenate((np.arange(N_MACHINE), np.arange(start, start + N_STAND)))
 
     def rows_of(self, stand: int) -> np.ndarray:
         """Rows (P, n) in mm per unit scale of a reading of ``stand`` at every posture."""
@@ -294,13 +308,16 @@ class Planner:
         return out
 
     def _set_rows(self, stand: int) -> None:
-        """Make ``stand``'s rows those of its present mounting (:meth:`rows_of`), and keep
-        them over the unknowns they touch (``touched``: columns, rows); its spread bound
-        is the prior spread (its unknowns are as wide as a priori, the machine's at most)."""
+        """Make ``stand``'s rows those of its present mounting (:meth:`rows_of`), also
+        over the unknowns they touch (``touched``: columns, rows); its spread bound is the
+        prior spread (its unknowns are as wide as a priori, the machine's at most)."""
         self.rows[stand] = self.rows_of(stand)
         self.spread_bound[stand] = self.table.prior_spread[max(self.slots[stand], 0)]
-        cols = np.flatnonzero(np.any(self.rows[stand] != 0.0, axis=0))
-        self.touched[stand] = (cols, self.rows[stand][:, cols])
+        used = np.flatnonzero(np.any(self.rows[stand] != 0.0, axis=0))
+        cols = np.zeros(N_MACHINE + N_STAND, dtype=int)
+        rows = np.zeros((len(self.table.postures), len(cols)))
+        cols[:len(used)], rows[:, :len(used)] = used, self.rows[stand][:, used]
+        self.touched[stand] = (cols, rows)
 
     def predicted_tips(self, postures: np.ndarray | slice = slice(None)) -> np.ndarray:
         """Predicted tip distance of every stand's gauge at ``postures`` (K, P'), mm:
@@ -321,11 +338,10 @@ class Planner:
         are computed with it: the rows go to BLAS in an even count (its kernels take a
         lone last row their own way, a few ulps off)."""
         cols = self._columns(stand)[:-1]
-        cov = self.covariance[np.ix_(cols, cols)]
-        change = self.table.change[self.slots[stand], np.r_[postures, postures[-1:]]
-                                   [:len(postures) + len(postures) % 2]]
-        return np.sqrt(np.clip(np.sum((change @ cov) * change, axis=-1), 0.0, None)
-                       )[:len(postures)]
+        even = np.append(postures, postures[-1]) if len(postures) % 2 else postures
+        change = self.table.change[self.slots[stand], even]
+        product = change @ self.covariance[cols[:, None], cols]
+        return np.sqrt(np.clip(np.sum(product * change, axis=-1), 0.0, None))[:len(postures)]
 
     def _reach(self, postures: np.ndarray | slice = slice(None)
                ) -> tuple[np.ndarray, np.ndarray]:
@@ -347,18 +363,18 @@ class Planner:
                              for a in self.table.prior_reach)
         else:
             tip = self.predicted_tips(postures)
-            safe, contact = reach(self.table, np.maximum(slots, 0), tip,
-                                  self.spread_bound[:, postures] + SPREAD_SLACK, postures)
+            spread = self.spread_bound[:, postures] + SPREAD_SLACK
+            safe, contact = reach(self.table, np.maximum(slots, 0), tip, spread, postures)
             index = np.arange(len(self.table.postures))[postures]
             with np.errstate(invalid="ignore"):
                 open_ = ((tip >= END_GAP) & (contact < 1.0)
                          & ~self.table.pressed[np.maximum(slots, 0)][:, postures] & mounted)
-            for k in np.flatnonzero(open_.any(axis=1)):
+            stands = np.flatnonzero(open_.any(axis=1))
+            for k in stands:
                 at = np.flatnonzero(open_[k])
-                spread = self._spread(k, index[at])
-                self.spread_bound[k, index[at]] = spread
-                safe[k, at], contact[k, at] = (a[0] for a in reach(
-                    self.table, slots[k:k + 1], tip[k:k + 1, at], spread[None], index[at]))
+                spread[k, at] = self.spread_bound[k, index[at]] = self._spread(k, index[at])
+            if stands.size:
+                safe, contact = reach(self.table, np.maximum(slots, 0), tip, spread, postures)
         return safe & mounted, np.where(self.silent[:, postures], 0.0, contact) * mounted
 
     # -- pricing --------------------------------------------------------------------------
@@ -421,15 +437,16 @@ class Planner:
         ``C V C`` or ``C``): a stand's whitened row is its row scaled by ``sqrt(reads) /
         sigma``, so its form is that of its row over the unknowns it touches, times
         ``reads / sigma^2``.  The bound is tight where a posture's readings pin down
-        little of what is left (``G`` small), as they do after the first minutes."""
-        c = self.covariance
-        form = c if self.criterion == "D" else c[:, :N_MACHINE] @ self.weight @ c[:N_MACHINE]
-        bound = np.zeros(len(postures))
-        for k, (cols, rows) in enumerate(self.touched):
-            part = rows[postures]
-            bound += reads[k, postures] * np.einsum("li,li->l", part @ form[np.ix_(cols, cols)],
-                                                     part)
-        return bound / self.sigma**2
+        little of what is left (``G`` small), as they do after the first minutes.  For I
+        the form is ``(C F)(C F)'`` (``F``: :func:`rigid_factor`), so a row's is the
+        square of its product with ``C F``, r columns instead of every unknown's."""
+        c, cols = self.covariance, np.array([cols for cols, _ in self.touched])  # (K, T)
+        part = np.stack([rows[postures] for _, rows in self.touched])  # (K, L, T)
+        if self.criterion == "D":
+            left, right = part @ c[cols[:, :, None], cols[:, None, :]], part
+        else:
+            left = right = part @ (c[:, :N_MACHINE] @ rigid_factor(self.design))[cols]
+        return np.sum(reads[:, postures] * np.sum(left * right, axis=-1), axis=0) / self.sigma**2
 
     def predicted_rigid_mm(self) -> float:
         """Predicted TCP error RMS after the best-fit rigid motion (mm)."""
@@ -574,10 +591,11 @@ class Planner:
         options: not priced).
 
         Each move's gain has an upper bound (:meth:`_gain_bounds`), widened by
-        :data:`BOUND_SLACK` for the rounding of both.  The moves of the highest bounds
-        per second are priced first; then every move whose bound per second reaches the
-        ``count``-th best rate found, which can only rise as more are priced, so a move
-        left out can neither beat nor tie it.  A move where no stand reads gains nothing
+        :data:`BOUND_SLACK` for the rounding of both.  The moves are priced in the order
+        of their bounds per second, in batches of :data:`FIRST_PRICED` (at least
+        ``count``), until the next bound per second is below the ``count``-th best rate
+        found, which can only rise as more are priced, so a move left out can neither
+        beat nor tie it.  A move where no stand reads gains nothing
         (its rate 0) and is not priced either."""
         seconds, after, reads = self._moves()
         fits = self.time_s + seconds <= self.budget_s
@@ -595,10 +613,11 @@ class Planner:
             bound = bound + BOUND_SLACK * (np.abs(bound) + np.max(np.abs(bound)))
             ceiling = bound / seconds[live]
             order = np.argsort(-ceiling, kind="stable")
-            first, rest = np.split(order, [max(FIRST_PRICED, count)])
-            price(first)
-            if rest.size:
-                price(rest[ceiling[rest] >= np.sort(rate[live[first]])[-count]])
+            batch = max(FIRST_PRICED, count)
+            price(order[:batch])
+            while (order := order[batch:]).size:
+                order = order[ceiling[order] >= np.sort(rate[live])[-count]]
+                price(order[:batch])
         return rate, Options(gain, seconds, after, reads)
 
     def greedy_move(self) -> bool:
