@@ -89,8 +89,8 @@ CRITERIA: tuple[str, ...] = ("I", "D")
 REMOUNT_CHECK_S: float = 300.0
 LOOKAHEAD_MOVES: int = 24
 SCREENED: int = 6
-#: :meth:`Planner.top_rates` prices the moves of the highest bounds in batches of at least
-#: this many, as long as their bound can still beat the best found.
+#: :meth:`Planner.top_rates` prices at least this many moves of the highest bounds first,
+#: then only those whose bound can still beat the best of them.
 FIRST_PRICED: int = 8
 #: Widening (mm) of a remembered spread before it is taken for an upper bound of the
 #: present one (:meth:`Planner._reach`): far above the rounding of a spread (under 1e-6
@@ -591,11 +591,10 @@ class Planner:
         options: not priced).
 
         Each move's gain has an upper bound (:meth:`_gain_bounds`), widened by
-        :data:`BOUND_SLACK` for the rounding of both.  The moves are priced in the order
-        of their bounds per second, in batches of :data:`FIRST_PRICED` (at least
-        ``count``), until the next bound per second is below the ``count``-th best rate
-        found, which can only rise as more are priced, so a move left out can neither
-        beat nor tie it.  A move where no stand reads gains nothing
+        :data:`BOUND_SLACK` for the rounding of both.  The moves of the highest bounds
+        per second are priced first; then every move whose bound per second reaches the
+        ``count``-th best rate found, which can only rise as more are priced, so a move
+        left out can neither beat nor tie it.  A move where no stand reads gains nothing
         (its rate 0) and is not priced either."""
         seconds, after, reads = self._moves()
         fits = self.time_s + seconds <= self.budget_s
@@ -613,11 +612,10 @@ class Planner:
             bound = bound + BOUND_SLACK * (np.abs(bound) + np.max(np.abs(bound)))
             ceiling = bound / seconds[live]
             order = np.argsort(-ceiling, kind="stable")
-            batch = max(FIRST_PRICED, count)
-            price(order[:batch])
-            while (order := order[batch:]).size:
-                order = order[ceiling[order] >= np.sort(rate[live])[-count]]
-                price(order[:batch])
+            first, rest = np.split(order, [max(FIRST_PRICED, count)])
+            price(first)
+            if rest.size:
+                price(rest[ceiling[rest] >= np.sort(rate[live[first]])[-count]])
         return rate, Options(gain, seconds, after, reads)
 
     def greedy_move(self) -> bool:
