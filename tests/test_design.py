@@ -9,7 +9,15 @@ import pytest
 import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.agents.optimal import fixed_plan
-from calibrators.design.planner import N_MACHINE, Planner, greedy_plan, rigid_weight, slot_table
+from calibrators.design.planner import (
+    N_MACHINE,
+    SPREAD_SLACK,
+    Planner,
+    greedy_plan,
+    reach,
+    rigid_weight,
+    slot_table,
+)
 from calibrators.experiment import estimate, measurements_of, run_episode
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op, slot_catalogue
 from orthoglide_env.model.design import PROTOTYPE
@@ -242,10 +250,52 @@ def test_a_wrong_start_does_not_lock_the_active_agent() -> None:
         observation, info = env.reset(seed=6)
         agent.reset(env, observation, np.random.default_rng(6))
         if corrupt:
-            before, _ = agent.planner.tips()
+            before = agent.planner.predicted_tips()
             agent.planner.mean[:N_MACHINE] = np.random.default_rng(1).normal(size=N_MACHINE)
-            after, _ = agent.planner.tips()
+            after = agent.planner.predicted_tips()
             assert np.nanmax(np.abs(after - before)) > 0.5  # a wrong start, in mm of tip
         lab, est = play_without_faults(env, agent, observation, info)
         results.append(score(est.machine, lab.true_machine).tcp_after.rigid.rms)
     assert results[1] < 3 * results[0]
+
+
+def test_the_filter_computes_only_the_spreads_that_decide_its_reach(monkeypatch) -> None:
+    """Once readings are observed, a tip's spread is computed only where it decides
+    whether the plunger may be down and how likely it reads; elsewhere the stand's spread
+    bound settles it.  Through a filter's decisions and a re-mount, the reach is the one
+    every spread computed gives, to the bit, the bound is at least every spread, and
+    fewer than a tenth of the spreads are computed (most postures leave a tip off its
+    bar, or far from both ends of its travel)."""
+    p = planner(budget_s=3600.0)
+    rng = np.random.default_rng(5)
+    table = slot_table()
+    computed = [0]
+    spread_of = Planner._spread
+
+    def counted(self: Planner, stand: int, postures: np.ndarray) -> np.ndarray:
+        computed[0] += len(postures)
+        return spread_of(self, stand, postures)
+
+    monkeypatch.setattr(Planner, "_spread", counted)
+    mine = every = 0
+    for step in range(40):
+        if step == 20:
+            p.remount(1, next(s for s in range(len(table.tip)) if s not in p.slots))
+        stands, _ = p.reading_here()
+        nominal = table.reading[[p.slots[k] for k in stands], p.here]
+        p.observe(list(stands), list(nominal + rng.normal(0.0, SIGMA, len(stands))))
+        spread = np.zeros_like(p.spread_bound)
+        for k, slot in enumerate(p.slots):
+            cols = p._columns(k)[:-1]
+            change = table.change[slot]
+            spread[k] = np.sqrt(np.clip(np.sum(
+                (change @ p.covariance[np.ix_(cols, cols)]) * change, axis=-1), 0.0, None))
+        safe, contact = reach(table, np.array(p.slots), p.predicted_tips(), spread)
+        before = computed[0]
+        got_safe, got_contact = p._reach()
+        mine, every = mine + computed[0] - before, every + spread.size
+        assert np.array_equal(got_safe, safe)
+        assert np.array_equal(got_contact, np.where(p.silent, 0.0, contact))
+        assert np.all(spread <= p.spread_bound + SPREAD_SLACK)
+        p.move(*p.best_move())
+    assert 0 < mine < every / 10

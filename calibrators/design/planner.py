@@ -92,6 +92,10 @@ SCREENED: int = 6
 #: :meth:`Planner.top_rates` prices at least this many moves of the highest bounds first,
 #: then only those whose bound can still beat the best of them.
 FIRST_PRICED: int = 8
+#: Widening (mm) of a remembered spread before it is taken for an upper bound of the
+#: present one (:meth:`Planner._reach`): far above the rounding of a spread (under 1e-6
+#: mm even where it is nearly zero) and far below the microns that decide a margin.
+SPREAD_SLACK: float = 1e-5
 #: Relative widening of a gain's upper bound for the rounding of the gain and the bound
 #: (both ~1e-15 relative; a real difference between two moves is far larger).
 BOUND_SLACK: float = 1e-9
@@ -160,8 +164,10 @@ def reach(table: SlotTable, slots: np.ndarray, tip: np.ndarray, spread: np.ndarr
         safe = np.where(missed, ~table.near[slots][:, postures],
                         ~table.pressed[slots][:, postures]
                         & (tip - SAFETY_SIGMAS * spread >= END_GAP))
-        within = ndtr((table.travel - tip) / np.maximum(spread, 1e-9))
-    return safe, np.where(safe & ~missed, within, 0.0)
+    contact = np.zeros(tip.shape)
+    touches = safe & ~missed
+    contact[touches] = ndtr((table.travel - tip[touches]) / np.maximum(spread[touches], 1e-9))
+    return safe, contact
 
 
 @lru_cache(maxsize=2)
@@ -205,6 +211,16 @@ def rigid_weight(design: MachineDesign = PROTOTYPE) -> np.ndarray:
     :func:`orthoglide_env.scoring.predicted_frame_errors`)."""
     scale = default_scales(ParameterSpace())
     return rigid_weights([MachineParams(design=design)])[0] * np.outer(scale, scale)
+
+
+@lru_cache(maxsize=2)
+def rigid_factor(design: MachineDesign = PROTOTYPE) -> np.ndarray:
+    """``F`` (27, r) with ``F F' = W`` (:func:`rigid_weight`): ``W`` has rank ``r``, 12 on
+    the prototype, as many errors only move the tool rigidly or as others do.  The
+    eigenvalues below 1e-12 of the largest are the rounding of those zeros."""
+    value, vector = np.linalg.eigh(rigid_weight(design))
+    keep = value > 1e-12 * value[-1]
+    return vector[:, keep] * np.sqrt(value[keep])
 
 
 class Step(NamedTuple):
@@ -266,7 +282,11 @@ class Planner:
         # to candidate postures.
         self.rho, self.here = np.zeros(3), self.table.zero
         self.rows = np.zeros((len(self.slots), len(self.table.postures), n))
-        # Each stand's rows over the unknowns they touch, and those unknowns' columns.
+        # An upper bound of each stand's spread at every posture (see _reach).
+        self.spread_bound = np.zeros((len(self.slots), len(self.table.postures)))
+        # Each stand's columns of the unknowns its rows touch and its rows over them,
+        # padded to N_MACHINE + N_STAND (the most a mounting touches) with zero rows at
+        # column 0.
         self.touched: list[tuple[np.ndarray, np.ndarray]] = [
             (np.arange(0), np.zeros((0, 0)))] * len(self.slots)
         for k in range(len(self.slots)):
@@ -282,7 +302,7 @@ class Planner:
     # -- the model of a reading -----------------------------------------------------------
     def _columns(self, stand: int) -> np.ndarray:
         start = N_MACHINE + N_STAND * stand
-        return np.r_[0:N_MACHINE, start:start + N_STAND]
+        return np.concatenate((np.arange(N_MACHINE), np.arange(start, start + N_STAND)))
 
     def rows_of(self, stand: int) -> np.ndarray:
         """Rows (P, n) in mm per unit scale of a reading of ``stand`` at every posture."""
@@ -293,41 +313,73 @@ class Planner:
         return out
 
     def _set_rows(self, stand: int) -> None:
-        """Make ``stand``'s rows those of its present mounting (:meth:`rows_of`), and keep
-        them over the unknowns they touch (``touched``: columns, rows)."""
+        """Make ``stand``'s rows those of its present mounting (:meth:`rows_of`), also
+        over the unknowns they touch (``touched``: columns, rows); its spread bound is the
+        prior spread (its unknowns are as wide as a priori, the machine's at most)."""
         self.rows[stand] = self.rows_of(stand)
-        cols = np.flatnonzero(np.any(self.rows[stand] != 0.0, axis=0))
-        self.touched[stand] = (cols, self.rows[stand][:, cols])
+        self.spread_bound[stand] = self.table.prior_spread[max(self.slots[stand], 0)]
+        used = np.flatnonzero(np.any(self.rows[stand] != 0.0, axis=0))
+        cols = np.zeros(N_MACHINE + N_STAND, dtype=int)
+        rows = np.zeros((len(self.table.postures), len(cols)))
+        cols[:len(used)], rows[:, :len(used)] = used, self.rows[stand][:, used]
+        self.touched[stand] = (cols, rows)
 
-    def tips(self, postures: np.ndarray | slice = slice(None)
-             ) -> tuple[np.ndarray, np.ndarray]:
-        """Predicted tip distance of every stand's gauge at ``postures`` and its standard
-        deviation (K, P'), mm: a priori for a plan, from the mean and covariance once
-        readings were observed.  (An empty stand gets slot 0's: it is masked later.)"""
+    def predicted_tips(self, postures: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """Predicted tip distance of every stand's gauge at ``postures`` (K, P'), mm:
+        nominal for a plan, from the mean once readings were observed.  (An empty stand
+        gets slot 0's: it is masked later.)"""
         slots = np.maximum(np.array(self.slots), 0)
         tip = self.table.tip[slots][:, postures]
         if self.mean is None:
-            return tip, self.table.prior_spread[slots][:, postures]
-        cols = np.array([self._columns(k)[:-1] for k in range(len(slots))])  # (K, 31)
-        change = self.table.change[slots][:, postures]  # (K, P', 31)
-        mean = self.mean[cols]
-        cov = self.covariance[cols[:, :, None], cols[:, None, :]]  # (K, 31, 31)
-        tip = tip + self.table.sign[slots][:, None] * (change @ mean[:, :, None])[..., 0]
-        spread = np.sqrt(np.clip(np.sum((change @ cov) * change, axis=-1), 0.0, None))
-        return tip, spread
+            return tip
+        for k, slot in enumerate(slots):
+            change = self.table.change[slot][postures] @ self.mean[self._columns(k)[:-1]]
+            tip[k] += self.table.sign[slot] * change
+        return tip
+
+    def _spread(self, stand: int, postures: np.ndarray) -> np.ndarray:
+        """Standard deviation (L,) of ``stand``'s predicted tip at ``postures`` (L,), mm,
+        from the covariance.  A posture's value is the same to the bit whichever others
+        are computed with it: the rows go to BLAS in an even count (its kernels take a
+        lone last row their own way, a few ulps off)."""
+        cols = self._columns(stand)[:-1]
+        even = np.append(postures, postures[-1]) if len(postures) % 2 else postures
+        change = self.table.change[self.slots[stand], even]
+        product = change @ self.covariance[cols[:, None], cols]
+        return np.sqrt(np.clip(np.sum(product * change, axis=-1), 0.0, None))[:len(postures)]
 
     def _reach(self, postures: np.ndarray | slice = slice(None)
                ) -> tuple[np.ndarray, np.ndarray]:
         """:func:`reach` of every stand at ``postures`` (nothing for an empty stand, no
-        contact where it was seen not to read)."""
+        contact where it was seen not to read).
+
+        Once readings were observed, a spread is computed only where the answer depends
+        on it.  Not where the tip misses its bar or a bar presses the gauge, nor where
+        the tip is less than :data:`END_GAP` off the end, and not where the stand's
+        spread bound (``spread_bound``) already leaves the tip safe and touching
+        (contact exactly 1): the spread, at most the bound, would leave it so too.  The
+        bound is the prior spread at a mounting, then each spread as last computed,
+        plus :data:`SPREAD_SLACK`: readings only shrink the covariance, so a spread
+        never grows until its stand is re-mounted."""
         slots = np.array(self.slots)
         mounted = (slots >= 0)[:, None]
         if self.mean is None:
             safe, contact = (a[np.maximum(slots, 0)][:, postures]
                              for a in self.table.prior_reach)
         else:
-            safe, contact = reach(self.table, np.maximum(slots, 0), *self.tips(postures),
-                                  postures)
+            tip = self.predicted_tips(postures)
+            spread = self.spread_bound[:, postures] + SPREAD_SLACK
+            safe, contact = reach(self.table, np.maximum(slots, 0), tip, spread, postures)
+            index = np.arange(len(self.table.postures))[postures]
+            with np.errstate(invalid="ignore"):
+                open_ = ((tip >= END_GAP) & (contact < 1.0)
+                         & ~self.table.pressed[np.maximum(slots, 0)][:, postures] & mounted)
+            stands = np.flatnonzero(open_.any(axis=1))
+            for k in stands:
+                at = np.flatnonzero(open_[k])
+                spread[k, at] = self.spread_bound[k, index[at]] = self._spread(k, index[at])
+            if stands.size:
+                safe, contact = reach(self.table, np.maximum(slots, 0), tip, spread, postures)
         return safe & mounted, np.where(self.silent[:, postures], 0.0, contact) * mounted
 
     # -- pricing --------------------------------------------------------------------------
@@ -390,15 +442,16 @@ class Planner:
         ``C V C`` or ``C``): a stand's whitened row is its row scaled by ``sqrt(reads) /
         sigma``, so its form is that of its row over the unknowns it touches, times
         ``reads / sigma^2``.  The bound is tight where a posture's readings pin down
-        little of what is left (``G`` small), as they do after the first minutes."""
-        c = self.covariance
-        form = c if self.criterion == "D" else c[:, :N_MACHINE] @ self.weight @ c[:N_MACHINE]
-        bound = np.zeros(len(postures))
-        for k, (cols, rows) in enumerate(self.touched):
-            part = rows[postures]
-            bound += reads[k, postures] * np.einsum("li,li->l", part @ form[np.ix_(cols, cols)],
-                                                     part)
-        return bound / self.sigma**2
+        little of what is left (``G`` small), as they do after the first minutes.  For I
+        the form is ``(C F)(C F)'`` (``F``: :func:`rigid_factor`), so a row's is the
+        square of its product with ``C F``, r columns instead of every unknown's."""
+        c, cols = self.covariance, np.array([cols for cols, _ in self.touched])  # (K, T)
+        part = np.stack([rows[postures] for _, rows in self.touched])  # (K, L, T)
+        if self.criterion == "D":
+            left, right = part @ c[cols[:, :, None], cols[:, None, :]], part
+        else:
+            left = right = part @ (c[:, :N_MACHINE] @ rigid_factor(self.design))[cols]
+        return np.sum(reads[:, postures] * np.sum(left * right, axis=-1), axis=0) / self.sigma**2
 
     def predicted_rigid_mm(self) -> float:
         """Predicted TCP error RMS after the best-fit rigid motion (mm)."""
@@ -498,6 +551,7 @@ class Planner:
         trial.covariance, trial.rows = self.covariance.copy(), self.rows.copy()
         trial.touched = list(self.touched)
         trial.silent = self.silent.copy()
+        trial.spread_bound = self.spread_bound.copy()
         trial.mean = None if self.mean is None else self.mean.copy()
         return trial
 
