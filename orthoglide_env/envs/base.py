@@ -16,6 +16,7 @@ from orthoglide_env.lab.machines import ExactMachines, SimulatedMachine
 from orthoglide_env.lab.settings import LabSettings, render_modes
 from orthoglide_env.lab.spec import RENDER_MODES, Layout
 from orthoglide_env.model.errors import MachineParams, check_validity
+from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.world.machine_file import read_machine
 from orthoglide_env.world.truth import World
 
