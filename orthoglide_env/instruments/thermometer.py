@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from orthoglide_env.world.conditions import Conditions
-from orthoglide_env.world.truth import REFERENCE_C
+from orthoglide_env.world.truth import REFERENCE_C, draw_range
 
 
 def draw_offset(conditions: Conditions, stream: np.random.Generator) -> float:
@@ -24,8 +24,7 @@ def draw_offset(conditions: Conditions, stream: np.random.Generator) -> float:
     if "thermometer" not in conditions:
         return 0.0
     own = np.random.Generator(stream.bit_generator.jumped())
-    low, high = conditions.size("thermometer", "tolerance")
-    return float(own.uniform(low, high) * own.choice((-1.0, 1.0)))
+    return float(draw_range(own, conditions.size("thermometer", "tolerance"), (), True))
 
 
 def read(conditions: Conditions, temperature: np.ndarray, offset: np.ndarray) -> np.ndarray:

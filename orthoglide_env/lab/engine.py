@@ -34,7 +34,7 @@ from orthoglide_env.model.kinematics import UnreachableError, direct
 from orthoglide_env.model.reading_model import TrackerAxis
 from orthoglide_env.scoring import score
 from orthoglide_env.world.table import REFERENCE_DEVIATION, REFERENCE_LENGTH_MM
-from orthoglide_env.world.truth import UM, World
+from orthoglide_env.world.truth import UM, World, draw_range
 
 #: The accuracy reward counts the final TCP error (after the best-fit rigid motion) in
 #: units of this many mm, and time in hours: -error/unit - time_weight * hours.
@@ -167,8 +167,8 @@ class LabBatch:
         if settings.reference and settings.conditions.active:
             # Drawn last: a lab without the block draws what it always drew.
             deviation = REFERENCE_DEVIATION.at(settings.conditions.name)
-            blocks += np.array([stream.uniform(*deviation) * stream.choice((-1.0, 1.0))
-                                for stream in streams]) * UM
+            blocks += np.array([draw_range(stream, deviation, (), True, UM)
+                                for stream in streams])
         machines = MachineParams.stack(drawn)
         world = World.stack(worlds) if worlds else None
         installed = self._installed(machines, list(specs), np.stack(errors), world,

@@ -68,8 +68,11 @@ _BOUNDS: dict[str, tuple[str, str, float]] = {
 }
 
 
-def _uniform(stream: np.random.Generator, size: tuple[float, float], shape: tuple[int, ...],
-             signed: bool = False, scale: float = 1.0) -> np.ndarray:
+def draw_range(stream: np.random.Generator, size: tuple[float, float], shape: tuple[int, ...],
+               signed: bool = False, scale: float = 1.0) -> np.ndarray:
+    """Values of ``shape`` drawn uniformly in a table row's range ``size`` from ``stream``,
+    then (``signed``) each given a random sign, times ``scale``: how every size of the
+    conditions' table is drawn."""
     value = stream.uniform(size[0], size[1], shape) * scale
     return value * stream.choice((-1.0, 1.0), shape) if signed else value
 
@@ -140,42 +143,42 @@ class World:
         drives = dict.fromkeys(_DRIVE_FIELDS, zero3)
         drives["warm_tau"] = np.ones((1, 3))
         if on("lead"):
-            curve = _uniform(stream, c.size("lead", "curve"), (1, 3), scale=UM)
+            curve = draw_range(stream, c.size("lead", "curve"), (1, 3), scale=UM)
             share = stream.uniform(0, 1, (1, 3))
             drives.update(
-                lead_scale=_uniform(stream, c.size("lead", "scale"), (1, 3), True, UM),
+                lead_scale=draw_range(stream, c.size("lead", "scale"), (1, 3), True, UM),
                 lead_a1=curve * share * stream.choice((-1.0, 1.0), (1, 3)),
                 lead_a2=curve * (1 - share) / 2 * stream.choice((-1.0, 1.0), (1, 3)),
-                lead_periodic=_uniform(stream, c.size("lead", "periodic"), (1, 3),
+                lead_periodic=draw_range(stream, c.size("lead", "periodic"), (1, 3),
                                        scale=UM / 2),
                 lead_phase=stream.uniform(0, 2 * np.pi, (1, 3)))
         if on("backlash"):
-            drives["backlash"] = _uniform(stream, c.size("backlash", "lost_motion"), (1, 3),
+            drives["backlash"] = draw_range(stream, c.size("backlash", "lost_motion"), (1, 3),
                                           scale=UM)
         if on("warmup"):
             drives.update(
-                warm_amplitude=_uniform(stream, c.size("warmup", "amplitude"), (1, 3),
+                warm_amplitude=draw_range(stream, c.size("warmup", "amplitude"), (1, 3),
                                         scale=UM),
-                warm_tau=_uniform(stream, c.size("warmup", "time_constant"), (1, 3),
+                warm_tau=draw_range(stream, c.size("warmup", "time_constant"), (1, 3),
                                   scale=MINUTE))
         room = {"offset": np.zeros(1), "rate": np.zeros(1), "walk": np.zeros((1, WALK_MODES))}
         if on("room"):
             room.update(
-                offset=_uniform(stream, c.size("room", "offset"), (1,), True),
-                rate=_uniform(stream, c.size("room", "drift"), (1,), True, 1 / HOUR),
+                offset=draw_range(stream, c.size("room", "offset"), (1,), True),
+                rate=draw_range(stream, c.size("room", "drift"), (1,), True, 1 / HOUR),
                 walk=stream.normal(0, 1, (1, WALK_MODES)) * _fixed(c, "room", "walk")
                 * np.sqrt(WALK_HORIZON_S / HOUR))
         dial = dict.fromkeys(_DIAL_FIELDS, zeros)
         if on("dial"):
             digital = c.indicator == "digital"
             dial.update(
-                dial_range=_uniform(stream, c.size("dial", "digital_range" if digital
+                dial_range=draw_range(stream, c.size("dial", "digital_range" if digital
                                                    else "range"), (1, stands), scale=UM / 2),
                 dial_phase=stream.uniform(0, 2 * np.pi, (1, stands)),
-                dial_revolution=_uniform(stream, c.size("dial", "revolution"), (1, stands),
+                dial_revolution=draw_range(stream, c.size("dial", "revolution"), (1, stands),
                                          scale=0.0 if digital else UM / 2),
                 dial_revolution_phase=stream.uniform(0, 2 * np.pi, (1, stands)),
-                retrace=_uniform(stream, c.size("dial", "retrace"), (1, stands), scale=UM))
+                retrace=draw_range(stream, c.size("dial", "retrace"), (1, stands), scale=UM))
         world = cls(conditions, **drives, **room, **dial,
                     **dict.fromkeys(_STAND_FIELDS, zeros))
         return world.mounted(stream, 0.0, range(stands))
@@ -187,10 +190,10 @@ class World:
             return self
         stands = list(stands)
         c, n = self.conditions, len(stands)
-        new = {"creep": _uniform(stream, c.size("stands", "creep"), (n,), True, UM),
-               "creep_tau": _uniform(stream, c.size("stands", "creep_time"), (n,),
+        new = {"creep": draw_range(stream, c.size("stands", "creep"), (n,), True, UM),
+               "creep_tau": draw_range(stream, c.size("stands", "creep_time"), (n,),
                                      scale=MINUTE),
-               "thermal": _uniform(stream, c.size("stands", "thermal"), (n,), True, UM),
+               "thermal": draw_range(stream, c.size("stands", "thermal"), (n,), True, UM),
                "mounted_at": np.full(n, time)}
         out = {}
         for name, value in new.items():
