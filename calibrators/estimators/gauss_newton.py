@@ -159,6 +159,13 @@ def left_out_preset(name: str) -> ErrorPreset:
     return PRESETS[name]
 
 
+def _every_reading(datas: list[Measurements], name: str) -> np.ndarray | None:
+    """Field ``name`` of every reading of every experiment (M, N), or None when one
+    reading lacks it."""
+    rows = [[getattr(m, name) for m in data.items] for data in datas]
+    return None if any(None in row for row in rows) else np.array(rows, dtype=float)
+
+
 @register
 class GaussNewtonCalibrator(Calibrator):
     """The exact model, any parameter set."""
@@ -259,11 +266,8 @@ class GaussNewtonCalibrator(Calibrator):
                    ) -> list[Estimate | Exception]:
         """Fit the experiments ``values`` (M, N) of one ``design`` together."""
         space = design.space
-        stamps = [[m.time_s for m in data.items] for data in datas]
-        times = None if any(None in row for row in stamps) else np.array(stamps, dtype=float)
-        heat = [[m.temperature_c for m in data.items] for data in datas]
-        temperatures = (None if any(None in row for row in heat)
-                        else np.array(heat, dtype=float))
+        times, temperatures = (_every_reading(datas, name) for name in ("time_s",
+                                                                        "temperature_c"))
         consider = consider_terms(design, values, times, conditions, spacing, temperatures)
         free = select(params, space)
         fixed = fixed_values(fix, space)
