@@ -19,6 +19,10 @@ the whole notebook and its estimate replaces the filter's mean: a poor early est
 (the first readings pin down little, and the filter is linearised at the nominal
 machine) is corrected from all the data, so it cannot lock the design.  It stops when
 the predicted error reaches :attr:`ActiveAgent.target_mm` or the budget is spent.
+
+Under ``lab`` or ``workshop`` conditions its filter also holds the world's drift,
+backlash and warm-up, carries the indicators' curves as consider terms, and stops when
+more time does not pay (:mod:`calibrators.design.world_terms`).
 """
 
 from __future__ import annotations
@@ -52,10 +56,10 @@ class ActiveAgent(Agent):
               rng: np.random.Generator) -> None:
         super().reset(env, observation, rng)
         setup = lab_setup(self.env, observation, self.reserved_s)
-        slots, engaged, sigma, budget, design = setup
+        slots, engaged, sigma, budget, design, conditions = setup
         self.planner = Planner(list(slots), list(engaged), sigma,
                                budget + float(observation["time"][0]), criterion=self.criterion,
-                               design=design)
+                               design=design, conditions=conditions)
         steps, _ = fixed_plan(*setup, criterion=self.criterion)
         self.remounts = [s for s in steps if s.op == Op.REMOUNT]
         self.readings: dict[int, list[tuple[int, float]]] = {k: [] for k in range(len(slots))}

@@ -5,9 +5,11 @@ the stands where they stand, the move (with the lifts and engages it needs) or t
 re-mount that buys the most fall of the predicted TCP error after the best-fit rigid
 motion per second of lab time, again and again until the budget is spent.  A plan knows
 no reading, so every plunger keeps three a-priori standard deviations of its reading
-clear of the pushed-in end.  ``optimal-d`` plans for the D criterion instead (the
+clear of the pushed-in end.  Under ``lab`` or ``workshop`` conditions the plan also
+weighs the world's drift, backlash and indicator curves, and may stop before the budget
+(:mod:`calibrators.design.world_terms`).  ``optimal-d`` plans for the D criterion instead (the
 information about every unknown).  The plan depends only on the lab's set-up (stands,
-noise, budget), so it is made once per process and replayed on every machine.
+noise, budget, conditions), so it is made once per process and replayed on every machine.
 """
 
 from __future__ import annotations
@@ -22,31 +24,36 @@ from calibrators.agents.base import PlannedAgent, action, register
 from calibrators.design.planner import Planner, Step, greedy_plan
 from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.world.conditions import Conditions
 
 
 @lru_cache(maxsize=8)
 def fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
-               budget_s: float, design: MachineDesign = PROTOTYPE, criterion: str = "I"
+               budget_s: float, design: MachineDesign = PROTOTYPE,
+               conditions: Conditions | None = None, criterion: str = "I"
                ) -> tuple[tuple[Step, ...], float]:
     """The greedy plan from stands at ``slots`` (-1: none) with plungers ``engaged`` on a
-    machine of ``design``, and the TCP error after rigid motion it predicts (mm)."""
+    machine of ``design`` in a lab of ``conditions`` (None: ideal), and the TCP error after
+    rigid motion it predicts (mm)."""
     planner = Planner(list(slots), list(engaged), sigma, budget_s, criterion=criterion,
-                      design=design)
+                      design=design, conditions=conditions)
     planner.expect_readings()  # the lab reads every stand as the episode opens
     steps = greedy_plan(planner)
     return tuple(steps), planner.predicted_rigid_mm()
 
 
 def lab_setup(env: gym.Env, observation: dict[str, np.ndarray], reserved_s: float = 0.0
-              ) -> tuple[tuple[int, ...], tuple[bool, ...], float, float, MachineDesign]:
+              ) -> tuple[tuple[int, ...], tuple[bool, ...], float, float, MachineDesign,
+                         Conditions]:
     """What a planner needs to know of the lab: each stand's slot (-1: none), whose
     plunger is down, a reading's sigma, the time budget left (less ``reserved_s`` for what
-    follows) and the machine's design."""
+    follows), the machine's design and the lab's conditions."""
     slots = tuple(int(s) if s < len(env.slots) else -1 for s in observation["slot"])
     engaged = tuple(bool(e) for e in observation["engaged"])
     sigma = weighting_sigma(float(env.noise.effective_sigma))
     return (slots, engaged, sigma,
-            float(env.budget_s) - reserved_s - float(observation["time"][0]), env.design)
+            float(env.budget_s) - reserved_s - float(observation["time"][0]), env.design,
+            env.conditions)
 
 
 @register

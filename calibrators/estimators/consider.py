@@ -281,17 +281,31 @@ def _drive_terms(design: Design, t: np.ndarray | None, conditions: Conditions,
     if on("warmup"):
         # A x (1 - exp(-t / tau)): A's mean times tau's mean curve acts on every axis at
         # once; what tau's spread and A's spread add, on each alone.
-        curves = [x * (1 - np.exp(-t[..., None] / tau))
-                  for tau in _taus("warmup", "time_constant", conditions)]
-        mean_curve = sum(w * c for w, c in zip(_WEIGHTS, curves, strict=True))
-        mean = _mean("warmup", "amplitude", conditions) * UM
-        spread = np.sqrt(second_moment("warmup", "amplitude", conditions)) * UM
-        spread = np.sqrt(spread**2 - mean**2)
+        curves, mean_curve = warmup_curves(x, t, conditions)
+        mean, spread = warmup_sizes(conditions)
         out.append(("warmup.mean", mean * mean_curve))
         for j, (w, c) in enumerate(zip(_WEIGHTS, curves, strict=True)):
             out += _per_axis(f"warmup.tau{j}", np.sqrt(w) * mean * (c - mean_curve))
             out += _per_axis(f"warmup.spread{j}", np.sqrt(w) * spread * c)
     return out
+
+
+def warmup_curves(x: np.ndarray, t: np.ndarray, conditions: Conditions
+                  ) -> tuple[list[np.ndarray], np.ndarray]:
+    """The warm-up's curves ``x (1 - exp(-t / tau))`` at the time constant's Simpson nodes
+    for carriages at ``x`` (..., 3), a fraction of the stroke, at lab times ``t`` (...),
+    and their mean over the time constant's range."""
+    curves = [x * (1 - np.exp(-t[..., None] / tau))
+              for tau in _taus("warmup", "time_constant", conditions)]
+    return curves, sum(w * c for w, c in zip(_WEIGHTS, curves, strict=True))
+
+
+def warmup_sizes(conditions: Conditions) -> tuple[float, float]:
+    """The warm-up amplitude's mean and spread (mm) under ``conditions``: the sizes of the
+    ``warmup.mean`` term and of each axis's own terms."""
+    mean = _mean("warmup", "amplitude", conditions) * UM
+    spread = np.sqrt(second_moment("warmup", "amplitude", conditions)) * UM
+    return mean, float(np.sqrt(spread**2 - mean**2))
 
 
 def backlash_sizes(conditions: Conditions) -> tuple[float, float]:
@@ -341,36 +355,59 @@ def _reading_terms(design: Design, values: np.ndarray, t: np.ndarray | None,
                  - _fixed("dial", "force_rest", conditions))
         give_all[:, rows] = -give * force / design.machine_design.gauge_travel * values[:, rows]
         if on("stands"):
-            creep = np.sqrt(second_moment("stands", "creep", conditions)) * UM
             since = t[:, rows] - t[:, rows[:1]]
-            for j, (w, tau) in enumerate(zip(_WEIGHTS, _taus("stands", "creep_time",
-                                                             conditions), strict=True)):
-                out.append((f"stands.creep{j}[{name}]", _on_rows(
-                    np.sqrt(w) * creep * (1 - np.exp(-since / tau)), rows, n)))
-            if on("room") and temperatures is not None:
-                # The growth itself, against the thermometer (its offset cancels here).
-                arm = np.sqrt(second_moment("stands", "thermal", conditions)) * UM
-                growth = arm * (temperatures[:, rows] - temperatures[:, rows[:1]])
-                out.append((f"stands.thermal[{name}]", _on_rows(growth, rows, n)))
-            elif on("room"):
-                # The walk's variance at one hour folded into the drift's.
-                rate2 = (second_moment("room", "drift", conditions)
-                         + second_moment("room", "walk", conditions)) / HOUR**2
-                arm = np.sqrt(second_moment("stands", "thermal", conditions) * rate2) * UM
-                out.append((f"stands.thermal[{name}]", _on_rows(arm * t[:, rows], rows, n)))
-        if on("dial"):
-            parameter = "digital_range" if conditions.indicator == "digital" else "range"
-            y = values[:, rows]
-            # Half-amplitudes drawn uniformly; a random phase splits E[A^2] between sin, cos.
-            waves = [("range", parameter, np.pi * y / design.machine_design.gauge_travel)]
-            if conditions.indicator != "digital":
-                waves.append(("revolution", "revolution", 2 * np.pi * y / REVOLUTION_MM))
-            for label, row, wave in waves:
-                size = np.sqrt(second_moment("dial", row, conditions) / 2) * UM / 2
-                out += [(f"dial.{label}_sin[{name}]", _on_rows(size * np.sin(wave), rows, n)),
-                        (f"dial.{label}_cos[{name}]", _on_rows(size * np.cos(wave), rows, n))]
+            heat = (None if temperatures is None
+                    else temperatures[:, rows] - temperatures[:, rows[:1]])
+            out += [(f"{label}[{name}]", _on_rows(pattern, rows, n))
+                    for label, pattern in drift_terms(since, t[:, rows], conditions, heat)]
+        out += [(f"{label}[{name}]", _on_rows(pattern, rows, n)) for label, pattern in
+                dial_terms(values[:, rows], design.machine_design.gauge_travel, conditions)]
     if gives:
         out.append(("stands.give", give_all))
+    return out
+
+
+def drift_terms(since: np.ndarray, t: np.ndarray, conditions: Conditions,
+                heat: np.ndarray | None = None) -> list[tuple[str, np.ndarray]]:
+    """A gauge mounting's drift at lab times ``t``, ``since`` its first reading (s, same
+    shapes): its creep at the time constant's Simpson nodes and, with the room on, its
+    arm's growth, against the room's ``heat`` since that reading (same shapes) when a
+    thermometer read it, else linear in the clock; (name, pattern in mm per unit
+    coefficient).  Only under ``stands``."""
+    creep = np.sqrt(second_moment("stands", "creep", conditions)) * UM
+    out = [(f"stands.creep{j}", np.sqrt(w) * creep * (1 - np.exp(-since / tau)))
+           for j, (w, tau) in enumerate(zip(_WEIGHTS, _taus("stands", "creep_time",
+                                                            conditions), strict=True))]
+    if "room" in conditions and heat is not None:
+        # The growth itself, against the thermometer (its offset cancels here).
+        arm = np.sqrt(second_moment("stands", "thermal", conditions)) * UM
+        out.append(("stands.thermal", arm * heat))
+    elif "room" in conditions:
+        # The walk's variance at one hour folded into the drift's.
+        rate2 = (second_moment("room", "drift", conditions)
+                 + second_moment("room", "walk", conditions)) / HOUR**2
+        arm = np.sqrt(second_moment("stands", "thermal", conditions) * rate2) * UM
+        out.append(("stands.thermal", arm * t))
+    return out
+
+
+def dial_terms(y: np.ndarray, travel: float, conditions: Conditions
+               ) -> list[tuple[str, np.ndarray]]:
+    """An indicator's error curve at readings ``y`` (mm, the plunger's position up to the
+    mounting's zero) of a gauge of ``travel``: (name, pattern in mm per unit coefficient);
+    none without the ``dial`` effect."""
+    if "dial" not in conditions:
+        return []
+    parameter = "digital_range" if conditions.indicator == "digital" else "range"
+    # Half-amplitudes drawn uniformly; a random phase splits E[A^2] between sin, cos.
+    waves = [("range", parameter, np.pi * y / travel)]
+    if conditions.indicator != "digital":
+        waves.append(("revolution", "revolution", 2 * np.pi * y / REVOLUTION_MM))
+    out = []
+    for label, row, wave in waves:
+        size = np.sqrt(second_moment("dial", row, conditions) / 2) * UM / 2
+        out += [(f"dial.{label}_sin", size * np.sin(wave)),
+                (f"dial.{label}_cos", size * np.cos(wave))]
     return out
 
 

@@ -219,7 +219,7 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
 
     def __init__(self, **kwargs: Any) -> None:
         settings = lab_settings(check_arguments(LAB, kwargs))
-        self.design = settings.design
+        self.design, self.conditions = settings.design, settings.conditions
         self.preset, self.noise = settings.preset, settings.noise
         self.backend_name, self.n_stands = settings.backend, settings.stands
         self.tracker, self.tracker_sigma = settings.tracker, settings.tracker_sigma

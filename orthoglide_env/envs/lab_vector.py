@@ -84,6 +84,7 @@ class SubLab:
         self.budget_s, self.travel = settings.budget_s, settings.travel
         self.design, self.slots = settings.design, settings.slots
         self.reference = settings.reference
+        self.conditions = settings.conditions
         self.action_space: spaces.Dict = envs.single_action_space
         self.observation_space: spaces.Dict = envs.single_observation_space
 

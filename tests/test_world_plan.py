@@ -1,0 +1,115 @@
+"""Experiment design with the lab's world: the planner's world terms and what they do to
+a plan."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from calibrators.design.planner import N_MACHINE, Planner, greedy_plan
+from orthoglide_env.lab.operations import PAPER_SLOTS, Op
+from orthoglide_env.world.conditions import Conditions
+
+SIGMA = 0.02
+LAB = Conditions("lab")
+
+
+def planner(conditions: Conditions | None, budget_s: float = 120.0) -> Planner:
+    p = Planner(list(PAPER_SLOTS), [True] * len(PAPER_SLOTS), SIGMA, budget_s,
+                conditions=conditions)
+    p.expect_readings()  # the readings of the lab's opening, at Zero
+    return p
+
+
+def test_ideal_conditions_plan_as_without_conditions() -> None:
+    """Under ``ideal`` the planner has no world terms: the same plan, step for step, and
+    the same predicted error to the last bit as a planner told nothing."""
+    plans = []
+    for conditions in (None, Conditions("ideal")):
+        p = planner(conditions)
+        assert p.world is None
+        plans.append((greedy_plan(p, remounts=False), p.predicted_rigid_mm()))
+    assert plans[0] == plans[1]
+
+
+def test_lab_terms_enlarge_the_state_and_the_predicted_error() -> None:
+    """Under ``lab`` the state holds the drives' and the stands' drift unknowns, and the
+    indicators' curves bias the estimate: after the same moves, the predicted error is
+    larger than the ideal planner's, by the considered terms' part and more."""
+    ideal, lab = planner(None), planner(LAB)
+    assert len(lab.covariance) == len(ideal.covariance) + lab.world.count
+    for _ in range(6):
+        choice = ideal.best_move()
+        assert choice is not None
+        posture = choice[0]
+        ideal.move(posture, choice[1])
+        ideal.expect_readings()
+        lab.move(posture, lab.options())
+        lab.expect_readings()
+    bias = lab.world.bias(lab.weight)
+    assert bias > 0
+    known = np.trace(lab.weight @ lab.covariance[:N_MACHINE, :N_MACHINE])
+    assert lab.predicted_rigid_mm() ** 2 == pytest.approx(known + bias, rel=1e-12)
+    assert lab.predicted_rigid_mm() > ideal.predicted_rigid_mm()
+
+
+def test_schmidt_updates_are_the_batch_consider_covariance() -> None:
+    """Readings added one batch at a time leave ``D`` = ``P R^T Dc``, the batch
+    consider analysis of all of them (``P`` the posterior covariance, ``R`` and ``Dc``
+    the whitened rows over the fitted and the considered unknowns): what the ``full``
+    estimator's consider covariance is for the same readings."""
+    p = planner(LAB)
+    prior, n, m = p.covariance.copy(), len(p.covariance), p.world.consider.shape[1]
+    start = p.world.consider.copy()
+    rng = np.random.default_rng(1)
+    rows = [rng.normal(size=(3, n)) for _ in range(4)]
+    considered = [rng.normal(size=(3, m)) for _ in range(4)]
+    for r, d in zip(rows, considered, strict=True):
+        p._add(r, considered=d)
+    r, d = np.vstack(rows), np.vstack(considered)
+    posterior = np.linalg.inv(np.linalg.inv(prior) + r.T @ r)
+    # The opening's readings left a bias ``start`` with their own covariance ``prior``.
+    expected = posterior @ (np.linalg.solve(prior, start) + r.T @ d)
+    assert np.allclose(p.covariance, posterior, atol=1e-9)
+    assert np.allclose(p.world.consider, expected, atol=1e-9)
+
+
+def test_the_price_of_a_move_under_lab_is_what_taking_it_changes() -> None:
+    """Under ``lab`` the gain the planner quotes for a move (the world's rows at the
+    move's time and direction, the considered terms' bias included) is the fall of the
+    predicted mean-square error once the move is taken and its readings expected."""
+    p = planner(LAB)
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        options = p.options()
+        posture = int(rng.choice(np.flatnonzero(options.seconds < 10)))
+        trial = p.fork()
+        before = trial.predicted_rigid_mm() ** 2
+        trial.move(posture, options)
+        trial.expect_readings(np.arange(len(PAPER_SLOTS)), options.reads[:, posture])
+        after = trial.predicted_rigid_mm() ** 2
+        assert options.gain[posture] == pytest.approx(before - after, rel=1e-6, abs=1e-14)
+        p.move(posture, options)
+        p.expect_readings(np.arange(len(PAPER_SLOTS)), options.reads[:, posture])
+
+
+def test_backlash_makes_a_moves_direction_count() -> None:
+    """A posture read after driving up to it is not read as one reached coming down: the
+    backlash unknowns' rows change sign with the axes' direction of travel."""
+    p = planner(Conditions("lab", effects=("backlash",)))
+    here = np.flatnonzero(np.all(p.table.postures == [20.0, 0.0, 0.0], axis=1))[0]
+    slots = np.array(p.slots)
+    times = np.zeros(1)
+    up, _ = p.world.rows(slots, np.array([here]), times, np.ones((1, 3)))
+    down, _ = p.world.rows(slots, np.array([here]), times, -np.ones((1, 3)))
+    assert np.abs(up).max() > 0
+    assert np.allclose(up, -down)
+
+
+def test_a_lab_plan_ends_with_a_stop_within_its_budget() -> None:
+    """Under ``lab`` a greedy plan is a plan: it ends with a stop and keeps to its budget
+    (it may stop before it)."""
+    p = planner(LAB, budget_s=90.0)
+    steps = greedy_plan(p, remounts=False)
+    assert steps[-1].op == Op.STOP
+    assert steps[-1].time_s <= 90.0
