@@ -10,7 +10,12 @@ drive there too, counted apart), how it approaches the postures it reads more th
 the moves that reverse an axis, and each mounting's plunger range (the span of its
 nominal readings where the nominal tip is within its travel, mm; median over mountings)
 and reach (its largest reading).  Then the TCP error after rigid motion each plan
-predicts for itself.
+predicts for itself, and what a planner under ``--conditions`` predicts for it (the
+``ideal`` plan replayed with the world's terms): what knowing the world buys, by the
+planner's own model.  The lead error and the screw's periodic error are not in that
+model: base-fixed gauges see next to nothing of the ``full`` estimator's pitch table
+(``benchmarks/terms.py``: the one-hour ``optimal`` plan removes none of its variance),
+so the planner leaves it out.
 """
 
 from __future__ import annotations

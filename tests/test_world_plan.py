@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calibrators.design.planner import N_MACHINE, Planner, greedy_plan
+from calibrators.design.planner import N_MACHINE, WORLD_SHORTLIST, Planner, greedy_plan
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op
 from orthoglide_env.world.conditions import Conditions
 
@@ -113,3 +113,40 @@ def test_a_lab_plan_ends_with_a_stop_within_its_budget() -> None:
     steps = greedy_plan(p, remounts=False)
     assert steps[-1].op == Op.STOP
     assert steps[-1].time_s <= 90.0
+
+
+def test_a_subset_of_stands_gets_those_stands_rows() -> None:
+    """The world's rows of some stands' readings are those stands' rows among every
+    stand's: each stand's drift and indicator columns are its own, whichever others are
+    read with it."""
+    p = planner(LAB)
+    for _ in range(3):
+        p.greedy_move()
+    slots, here = np.array(p.slots), np.array([p.here])
+    times, approach = np.array([p.time_s]), p.world.approach[None]
+    every = p.world.rows(slots, here, times, approach)
+    some = np.array([4, 1])
+    part = p.world.rows(slots, here, times, approach, some)
+    for whole, subset in zip(every, part, strict=True):
+        assert np.array_equal(subset, whole[some])
+
+
+def test_the_world_prices_the_bounds_shortlist_and_zero() -> None:
+    """Under ``lab`` a move is priced with the world's terms only if its geometric gain
+    bound per second is among the :data:`WORLD_SHORTLIST` highest, or it goes to Zero;
+    each priced gain is the one pricing every move gives it, and the best move is the
+    best of them."""
+    p = planner(LAB, budget_s=600.0)
+    for _ in range(5):
+        p.greedy_move()
+    rate, options = p.top_rates(1)
+    priced = np.flatnonzero(np.isfinite(rate))
+    seconds, _, reads = p._moves()
+    live = np.flatnonzero((p.time_s + seconds <= p.budget_s) & reads.any(axis=0))
+    ceiling = p._gain_bounds(reads, live) / seconds[live]
+    top = live[np.argsort(-ceiling, kind="stable")[:WORLD_SHORTLIST]]
+    assert set(priced) == set(top) | {p.table.zero}
+    every = p.options()
+    assert np.allclose(options.gain[priced], every.gain[priced], rtol=1e-9, atol=0.0)
+    choice = p.best_move()
+    assert choice is not None and choice[0] == priced[np.argmax(rate[priced])]

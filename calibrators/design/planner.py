@@ -35,7 +35,10 @@ gains nothing, and every other one's gain has a cheap upper bound
 (:meth:`Planner.top_rates`), so the choice is the one pricing every move makes.
 
 Under ``lab`` or ``workshop`` conditions the state also holds the world's unknowns, and
-the indicators' curves bias the estimate (:mod:`calibrators.design.world_terms`).
+the indicators' curves bias the estimate (:mod:`calibrators.design.world_terms`).  The
+world's gain has no cheap bound, so the geometry's bounds shortlist the moves and the
+world prices only those and Zero (:data:`WORLD_SHORTLIST`): a heuristic, like the greedy
+choice itself.
 """
 
 from __future__ import annotations

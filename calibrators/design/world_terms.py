@@ -30,6 +30,12 @@ Planner`) then carries, with the patterns and second moments of
   D D^T))`` over the machine's errors, what the estimator's consider covariance says.
   A reading far in a plunger's travel then costs accuracy as well as buying it.
 
+Left out: the lead error, which ``full`` fits as a pitch-error table, and the screw's
+periodic error, which it considers.  Base-fixed gauges see next to nothing of them (the
+one-hour ``optimal`` plan removes none of the table's variance: ``benchmarks/terms.py``),
+so no choice of move changes their share of the error, and 24 more unknowns would only
+slow the planner.  The planner's predicted error is therefore below the estimator's.
+
 Readings always gain information about fitted unknowns, but a considered term can make a
 reading's net gain negative, and the last minutes of a budget may buy next to nothing:
 the planner stops early by :data:`STOP_SHARE` (:meth:`WorldTerms.stops`).
