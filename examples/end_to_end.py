@@ -9,7 +9,8 @@ a posture, and where its tool is):
 1. the "real" machine: a realistic random machine of ``examples/designs/small.json`` in
    the lab's world, written to ``truth.json`` (``calibrate --save-truth``; nothing else of
    that run is used);
-2. ``plan --agent optimal --budget 1800 --conditions lab``: the procedure and its sheet;
+2. ``plan --agent optimal-stay --budget 1800 --conditions lab``: the procedure and its
+   sheet, the stands kept where they are set up;
 3. the technician fills the sheet: one ``pose`` per drive step, its gauges' readings;
 4. ``fit`` the sheet (``--plan`` checks it) into an estimate file;
 5. ``compensate`` a grid of workspace targets: the commands and their predicted errors;
@@ -96,7 +97,8 @@ def main_() -> None:
     orthoglide("calibrate", "--design", DESIGN, "--conditions", "lab", "--seed", args.seed,
                "--agent", "paper-once", "--backend", "exact", "--params", "paper6",
                "--save-truth", truth)
-    print(orthoglide("plan", "--agent", "optimal", "--budget", args.budget, "--conditions",
+    # The technician reads the set-up's six gauges (what ``pose`` reads): no re-mount.
+    print(orthoglide("plan", "--agent", "optimal-stay", "--budget", args.budget, "--conditions",
                      "lab", "--design", DESIGN, "--out", out / "plan").strip())
     fill(out / "plan" / "readings.csv", truth, args.seed)
     estimate = out / "estimate.json"

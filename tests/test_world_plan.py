@@ -6,8 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from calibrators.agents import get_agent
+from calibrators.agents.optimal import fixed_plan
 from calibrators.design.planner import N_MACHINE, WORLD_SHORTLIST, Planner, greedy_plan
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op
+from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
 
 SIGMA = 0.02
@@ -150,3 +153,24 @@ def test_the_world_prices_the_bounds_shortlist_and_zero() -> None:
     assert np.allclose(options.gain[priced], every.gain[priced], rtol=1e-9, atol=0.0)
     choice = p.best_move()
     assert choice is not None and choice[0] == priced[np.argmax(rate[priced])]
+
+
+def test_a_lab_plan_ends_only_when_no_move_pays() -> None:
+    """A plan under ``lab`` ends when the best of every move priced, not only of the
+    shortlist, falls under the stop rule (or gains nothing)."""
+    p = planner(LAB, budget_s=600.0)
+    greedy_plan(p, remounts=False)
+    rate = p.affordable_rates(p.options())
+    assert p._ends(float(np.max(rate)))
+
+
+def test_optimal_stay_never_remounts() -> None:
+    """``optimal-stay``'s plan keeps the set-up's stands where ``optimal``'s moves some,
+    and is a plan: it ends with a stop within its budget."""
+    setup = (tuple(PAPER_SLOTS), (True,) * len(PAPER_SLOTS), SIGMA, 900.0, PROTOTYPE, LAB)
+    moving, _ = fixed_plan(*setup)
+    staying, _ = fixed_plan(*setup, remounts=False)
+    assert any(s.op == Op.REMOUNT for s in moving)
+    assert not any(s.op == Op.REMOUNT for s in staying)
+    assert staying[-1].op == Op.STOP and staying[-1].time_s <= 900.0
+    assert get_agent("optimal-stay").remounts is False

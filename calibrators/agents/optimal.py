@@ -7,9 +7,10 @@ motion per second of lab time, again and again until the budget is spent.  A pla
 no reading, so every plunger keeps three a-priori standard deviations of its reading
 clear of the pushed-in end.  Under ``lab`` or ``workshop`` conditions the plan also
 weighs the world's drift, backlash and indicator curves, and may stop before the budget
-(:mod:`calibrators.design.world_terms`).  ``optimal-d`` plans for the D criterion instead (the
-information about every unknown).  The plan depends only on the lab's set-up (stands,
-noise, budget, conditions), so it is made once per process and replayed on every machine.
+(:mod:`calibrators.design.world_terms`).  ``optimal-d`` plans for the D criterion instead
+(the information about every unknown); ``optimal-stay`` never re-mounts a stand.  The
+plan depends only on the lab's set-up (stands, noise, budget, conditions), so it is made
+once per process and replayed on every machine.
 """
 
 from __future__ import annotations
@@ -30,15 +31,15 @@ from orthoglide_env.world.conditions import Conditions
 @lru_cache(maxsize=8)
 def fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
                budget_s: float, design: MachineDesign = PROTOTYPE,
-               conditions: Conditions | None = None, criterion: str = "I"
-               ) -> tuple[tuple[Step, ...], float]:
+               conditions: Conditions | None = None, criterion: str = "I",
+               remounts: bool = True) -> tuple[tuple[Step, ...], float]:
     """The greedy plan from stands at ``slots`` (-1: none) with plungers ``engaged`` on a
-    machine of ``design`` in a lab of ``conditions`` (None: ideal), and the TCP error after
-    rigid motion it predicts (mm)."""
+    machine of ``design`` in a lab of ``conditions`` (None: ideal), re-mounting stands
+    or not, and the TCP error after rigid motion it predicts (mm)."""
     planner = Planner(list(slots), list(engaged), sigma, budget_s, criterion=criterion,
                       design=design, conditions=conditions)
     planner.expect_readings()  # the lab reads every stand as the episode opens
-    steps = greedy_plan(planner)
+    steps = greedy_plan(planner, remounts=remounts)
     return tuple(steps), planner.predicted_rigid_mm()
 
 
@@ -60,11 +61,14 @@ def lab_setup(env: gym.Env, observation: dict[str, np.ndarray], reserved_s: floa
 class OptimalAgent(PlannedAgent):
     name = "optimal"
     criterion = "I"
+    #: Whether the plan may move stands to other slots.
+    remounts = True
 
     def make_plan(self, observation: dict[str, np.ndarray]) -> list[dict[str, Any]]:
         steps, self.predicted_rigid_mm = fixed_plan(*lab_setup(self.env, observation,
                                                                self.reserved_s),
-                                                    criterion=self.criterion)
+                                                    criterion=self.criterion,
+                                                    remounts=self.remounts)
         return [action(s.op, s.rho, s.stand, s.slot) for s in steps]
 
 
@@ -72,3 +76,12 @@ class OptimalAgent(PlannedAgent):
 class OptimalDAgent(OptimalAgent):
     name = "optimal-d"
     criterion = "D"
+
+
+@register
+class OptimalStayAgent(OptimalAgent):
+    """``optimal`` with the stands kept where the lab put them: a procedure for a
+    technician who reads the set-up's gauges only (no re-mount)."""
+
+    name = "optimal-stay"
+    remounts = False

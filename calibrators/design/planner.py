@@ -660,13 +660,28 @@ class Planner:
         """The affordable move with the most gain per second (the first of equals), with
         every move's seconds, plungers and readings and the gains that were priced
         (:meth:`top_rates`), or None when no move gains anything within the budget: the
-        same move as the highest of :meth:`affordable_rates` over :meth:`options`."""
+        same move as the highest of :meth:`affordable_rates` over :meth:`options`.
+
+        With the world's terms the shortlist's best is taken unless it would end the plan
+        (:meth:`~calibrators.design.world_terms.WorldTerms.stops`, or no gain): then every
+        move is priced, so a plan ends only when no move pays, not when the shortlist's
+        do not (a fresh mounting's loose bounds may shortlist moves that add more to the
+        indicators' bias than they take off the geometry)."""
         rate, options = self.top_rates(1)
         best = int(np.argmax(rate))
-        if self.world is not None and self.criterion == "I" and self.world.stops(
-                rate[best], self.budget_s - self.time_s, self._criterion_value()):
-            return None
+        if self.world is not None and self._ends(rate[best]):
+            options = self.options()
+            rate = self.affordable_rates(options)
+            best = int(np.argmax(rate))
+            if self._ends(rate[best]):
+                return None
         return (best, options) if rate[best] > 0 else None
+
+    def _ends(self, rate: float) -> bool:
+        """Whether a best move of gain per second ``rate`` ends the plan."""
+        return rate <= 0 or (self.criterion == "I" and self.world is not None
+                             and self.world.stops(rate, self.budget_s - self.time_s,
+                                                  self._criterion_value()))
 
     def top_rates(self, count: int) -> tuple[np.ndarray, Options]:
         """Gain per second (P,) of the affordable moves that may be among the ``count``
