@@ -29,7 +29,8 @@ import numpy as np
 
 import orthoglide_env
 from calibrators.agents import get_agent
-from calibrators.design.planner import Planner, greedy_plan, slot_table
+from calibrators.design.planner import Planner, greedy_plan
+from calibrators.design.slot_table import slot_table
 from calibrators.experiment import DEFAULT_BUDGET_S, run_episode
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op
 

@@ -26,7 +26,8 @@ import time
 import numpy as np
 
 from calibrators.agents.optimal import fixed_plan
-from calibrators.design.planner import Planner, slot_table
+from calibrators.design.planner import Planner
+from calibrators.design.slot_table import slot_table
 from calibrators.design.world_terms import directions
 from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op

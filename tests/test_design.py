@@ -14,10 +14,9 @@ from calibrators.design.planner import (
     SPREAD_SLACK,
     Planner,
     greedy_plan,
-    reach,
     rigid_weight,
-    slot_table,
 )
+from calibrators.design.slot_table import reach, slot_table
 from calibrators.experiment import estimate, measurements_of, run_episode
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op, slot_catalogue
 from orthoglide_env.model.design import PROTOTYPE

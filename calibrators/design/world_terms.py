@@ -46,10 +46,10 @@ from __future__ import annotations
 import copy
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import TYPE_CHECKING
 
 import numpy as np
 
+from calibrators.design.slot_table import SlotTable
 from calibrators.estimators.consider import (
     backlash_sizes,
     dial_terms,
@@ -62,9 +62,6 @@ from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.reading_model import Design, ParameterSpace, default_scales, jacobian
 from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.world.truth import UM
-
-if TYPE_CHECKING:
-    from calibrators.design.planner import SlotTable
 
 #: The plan stops when the best move's gain per second, kept up for the rest of the
 #: budget, would lower the predicted mean-square TCP error by less than this share of it:
