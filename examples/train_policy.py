@@ -44,7 +44,7 @@ import numpy as np
 
 from calibrators import compare
 from calibrators.agents import available
-from calibrators.agents.base import POLICY_PREFIX
+from calibrators.agents.names import POLICY_PREFIX
 from calibrators.agents.policy import PolicySpec, save_policy, spec_of
 from calibrators.experiment import DEFAULT_BUDGET_S, make_estimator
 from orthoglide_env.envs.wrappers import flat_lab_env

@@ -26,7 +26,7 @@ from pathlib import Path
 import pytest
 from conftest import TABLE1 as TABLE1_ERRORS
 
-from calibrators.agents.base import POLICY_PREFIX
+from calibrators.agents.names import POLICY_PREFIX
 from calibrators.cli import build_parser, main
 from calibrators.engines import ray_available
 

@@ -8,6 +8,7 @@ this package.  :func:`calibrators.experiment.run_episodes` runs them.
 
 from __future__ import annotations
 
-from calibrators.agents.base import AGENTS, Agent, available, get_agent, register
+from calibrators.agents.base import AGENTS, Agent, available, register
+from calibrators.agents.names import get_agent
 
 __all__ = ["AGENTS", "Agent", "available", "get_agent", "register"]

@@ -55,25 +55,6 @@ AGENT_REGISTRY: Registry[Agent] = Registry("agent", "calibrators.agents")
 AGENTS = AGENT_REGISTRY.classes
 register = AGENT_REGISTRY.register
 available = AGENT_REGISTRY.available
-#: ``get_agent(POLICY_PREFIX + path)`` plays the learned policy saved in ``path``.
-POLICY_PREFIX: str = "policy:"
-
-
-def get_agent(name: str) -> Agent:
-    """A new agent: one registered by ``name``, or ``policy:PATH``, the learned policy saved
-    in the file PATH (:mod:`calibrators.agents.policy`); either with ``+reference``, followed
-    by the length reference's procedure (:mod:`calibrators.agents.reference`)."""
-    from calibrators.agents.reference import REFERENCE_SUFFIX, with_reference
-
-    if name.endswith(REFERENCE_SUFFIX) and len(name) > len(REFERENCE_SUFFIX):
-        return with_reference(get_agent(name[:-len(REFERENCE_SUFFIX)]))
-    if name.startswith(POLICY_PREFIX):
-        from calibrators.agents.policy import PolicyAgent
-
-        return PolicyAgent(name[len(POLICY_PREFIX):])
-    return AGENT_REGISTRY.get(name)
-
-
 def action(op: Op, rho: np.ndarray | None = None, stand: int = 0, slot: int = 0
            ) -> dict[str, Any]:
     """An action of the lab env (unused fields at harmless values)."""
