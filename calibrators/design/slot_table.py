@@ -73,6 +73,7 @@ class SlotTable:
     pressed: np.ndarray  # (S, P) a bar would press the gauge past its travel
     near: np.ndarray  # (S, P) ... if it were PRESS_MARGIN larger all round
     change: np.ndarray  # (S, P, 31)
+    at_zero: np.ndarray  # (S, 31) the derivative at Zero, which ``change`` is taken from
     sign: np.ndarray  # (S,) reading = sign * (tip - tip at Zero)
     reading: np.ndarray  # (S, P) nominal reading, zeroed at Zero, of the reading model
     travel: float = DEFAULT_TRAVEL
@@ -128,15 +129,16 @@ def slot_table(machine_design: MachineDesign = PROTOTYPE) -> SlotTable:
     near = np.moveaxis(pressed_past_travel(gauges, centre, rot, half + PRESS_MARGIN), -1, 0)
     zero = int(np.flatnonzero(np.all(postures == 0.0, axis=1))[0])
     change = np.zeros((len(slots), len(postures), len(ERROR_NAMES) + 4))
+    at_zero = np.zeros((len(slots), len(ERROR_NAMES) + 4))
     reading = np.zeros((len(slots), len(postures)))
     for k, spec in enumerate(slots):
         design = Design(("m",), (spec,), np.zeros(len(postures), dtype=int), postures,
                         machine_design)
         scale = default_scales(design.space)
         rows = jacobian(np.zeros(len(scale)), design, np.ones(len(scale), bool), scale)
-        change[k] = rows - rows[zero]
+        change[k], at_zero[k] = rows - rows[zero], rows[zero]
         values = predict(np.zeros(len(scale)), design)
         reading[k] = values - values[zero]
     sign = np.array([g.sign for g in gauges], dtype=float)
-    return SlotTable(postures, zero, tip, pressed, near, change, sign, reading,
+    return SlotTable(postures, zero, tip, pressed, near, change, at_zero, sign, reading,
                      machine_design.gauge_travel)

@@ -45,7 +45,6 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
 
@@ -57,9 +56,8 @@ from calibrators.estimators.consider import (
     warmup_curves,
     warmup_sizes,
 )
-from orthoglide_env.lab.operations import slot_catalogue
 from orthoglide_env.model.design import MachineDesign
-from orthoglide_env.model.reading_model import Design, ParameterSpace, default_scales, jacobian
+from orthoglide_env.model.reading_model import ParameterSpace, default_scales
 from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.world.truth import UM
 
@@ -69,20 +67,6 @@ from orthoglide_env.world.truth import UM
 STOP_SHARE: float = 0.01
 #: The drive effects the planner fits: each is a mean on every axis and a spread per axis.
 AXIS_EFFECTS: tuple[str, ...] = ("warmup", "backlash")
-
-
-@lru_cache(maxsize=2)
-def zero_drive(design: MachineDesign) -> np.ndarray:
-    """(S, 3) the derivative of a reading of each slot of the design's catalogue at Zero
-    over each axis's encoder offset (mm per mm), on the nominal machine."""
-    slots = slot_catalogue(design)
-    out = np.zeros((len(slots), 3))
-    for k, spec in enumerate(slots):
-        single = Design(("m",), (spec,), np.zeros(1, dtype=int), np.zeros((1, 3)), design)
-        scale = default_scales(single.space)
-        rows = jacobian(np.zeros(len(scale)), single, np.ones(len(scale), bool), scale)
-        out[k] = rows[0, :3] / scale[:3]
-    return out
 
 
 def directions(start: np.ndarray, targets: np.ndarray, last: np.ndarray) -> np.ndarray:
@@ -118,8 +102,8 @@ class WorldTerms:
         stroke = self.design.rho_max - self.design.rho_min
         self.x = (self.table.postures - self.design.rho_min) / stroke  # (P, 3)
         # Each slot's reading's derivative over the encoder offsets (S, P, 3), mm per mm.
-        self.drive = (self.table.change[..., :3] / default_scales(ParameterSpace())[:3]
-                      + zero_drive(self.design)[:, None])
+        self.drive = ((self.table.change[..., :3] + self.table.at_zero[:, None, :3])
+                      / default_scales(ParameterSpace())[:3])
 
     @property
     def count(self) -> int:
@@ -224,8 +208,9 @@ class WorldTerms:
 
         b = times(rows, covariance)
         m = np.eye(rows.shape[1]) + rows @ np.swapaxes(b, 1, 2)
-        hf = np.linalg.solve(m, times(b[..., :n], factor))  # (B, K, r): the gain, times F
-        known = np.sum(hf * times(b[..., :n], factor), axis=(1, 2))
+        bf = times(b[..., :n], factor)
+        hf = np.linalg.solve(m, bf)  # (B, K, r): the gain, times F
+        known = np.sum(hf * bf, axis=(1, 2))
         # How the readings move D's machine rows, times F: (B, m, r).
         qf = np.swapaxes(considered - times(rows, self.consider), 1, 2) @ hf
         df = self.consider[:n].T @ factor  # (m, r)
