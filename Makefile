@@ -22,7 +22,7 @@ run: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n auto
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/fidelity.py --machines 200
@@ -39,6 +39,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_measurements.py
 	$(BIN)/python benchmarks/bench_fit.py
 	$(BIN)/python benchmarks/estimators.py
+	$(BIN)/python benchmarks/speed_against_revision.py --rev 02c124b
 
 clean:
 	rm -rf $(VENV) results .pytest_cache

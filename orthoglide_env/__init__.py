@@ -7,9 +7,19 @@ backend="exact")``, :mod:`orthoglide_env.envs.calibration_vector`), and
 lab: gauge handling, stands, tracker, a clock), with a native vector env too
 (:mod:`orthoglide_env.envs.lab_vector`), with Gymnasium.  :class:`MachineDesign`
 describes a machine's nominal dimensions (the prototype's by default).
+
+The package itself imports neither Gymnasium nor SciPy nor PyBullet: the model, the
+instruments and the command line's ``--help`` start in the time NumPy takes.  The envs
+are registered the moment Gymnasium is imported (at once when it already is), so
+``import orthoglide_env`` then ``gymnasium.make(...)`` works in either import order.
 """
 
-import gymnasium
+from __future__ import annotations
+
+import importlib.abc
+import importlib.util
+import sys
+from types import ModuleType
 
 from orthoglide_env.model.design import MachineDesign
 
@@ -17,17 +27,53 @@ ENV_ID = "OrthoglideCalibration-v0"
 LAB_ENV_ID = "OrthoglideLab-v0"
 FLAT_LAB_ENV_ID = "OrthoglideLabFlat-v0"
 
-if ENV_ID not in gymnasium.registry:
-    gymnasium.register(
-        id=ENV_ID, entry_point="orthoglide_env.envs.calibration:OrthoglideCalibrationEnv",
-        vector_entry_point="orthoglide_env.envs.calibration_vector:OrthoglideCalibrationVectorEnv",
-        max_episode_steps=500)
-if LAB_ENV_ID not in gymnasium.registry:
-    # No step limit: an episode ends on the agent's stop or the lab's time budget.
-    gymnasium.register(id=LAB_ENV_ID, entry_point="orthoglide_env.envs.lab:OrthoglideLabEnv",
-                       vector_entry_point="orthoglide_env.envs.lab_vector:OrthoglideLabVectorEnv")
-if FLAT_LAB_ENV_ID not in gymnasium.registry:
-    # The lab with one Box of actions and one of observations, for off-the-shelf learners.
-    gymnasium.register(id=FLAT_LAB_ENV_ID, entry_point="orthoglide_env.envs.wrappers:flat_lab_env")
+
+def _register(gymnasium: ModuleType) -> None:
+    """Register the envs with ``gymnasium`` (once: a second call changes nothing)."""
+    if ENV_ID not in gymnasium.registry:
+        gymnasium.register(
+            id=ENV_ID, entry_point="orthoglide_env.envs.calibration:OrthoglideCalibrationEnv",
+            vector_entry_point=(
+                "orthoglide_env.envs.calibration_vector:OrthoglideCalibrationVectorEnv"),
+            max_episode_steps=500)
+    if LAB_ENV_ID not in gymnasium.registry:
+        # No step limit: an episode ends on the agent's stop or the lab's time budget.
+        gymnasium.register(
+            id=LAB_ENV_ID, entry_point="orthoglide_env.envs.lab:OrthoglideLabEnv",
+            vector_entry_point="orthoglide_env.envs.lab_vector:OrthoglideLabVectorEnv")
+    if FLAT_LAB_ENV_ID not in gymnasium.registry:
+        # The lab with one Box of actions and one of observations, for off-the-shelf
+        # learners.
+        gymnasium.register(id=FLAT_LAB_ENV_ID,
+                           entry_point="orthoglide_env.envs.wrappers:flat_lab_env")
+
+
+class _RegisterOnImport(importlib.abc.MetaPathFinder):
+    """Finds Gymnasium for the import system once, and registers the envs as soon as its
+    module has run: Gymnasium has no plugin hook of its own (1.x), and importing it here
+    would cost every user of the model a tenth of a second and a second package."""
+
+    def find_spec(self, fullname: str, path: object = None, target: object = None
+                  ) -> importlib.machinery.ModuleSpec | None:
+        if fullname != "gymnasium":
+            return None
+        sys.meta_path.remove(self)  # the finders after this one find it, exactly once
+        spec = importlib.util.find_spec(fullname)
+        if spec is None or spec.loader is None:
+            return spec
+        run = spec.loader.exec_module
+
+        def exec_module(module: ModuleType) -> None:
+            run(module)
+            _register(module)
+
+        spec.loader.exec_module = exec_module  # type: ignore[method-assign]
+        return spec
+
+
+if "gymnasium" in sys.modules:
+    _register(sys.modules["gymnasium"])
+elif not any(isinstance(f, _RegisterOnImport) for f in sys.meta_path):
+    sys.meta_path.insert(0, _RegisterOnImport())
 
 __all__ = ["ENV_ID", "FLAT_LAB_ENV_ID", "LAB_ENV_ID", "MachineDesign"]

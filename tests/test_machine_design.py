@@ -381,8 +381,10 @@ def test_the_vector_lab_of_a_design_with_other_slots_is_its_lone_labs(tmp_path) 
 def test_compare_on_a_design_with_other_slots(tmp_path, capsys) -> None:
     path, _ = _three(tmp_path)
     out = tmp_path / "run"
+    # A quarter of an hour: the planners still weigh a re-mount (every 300 s) on this
+    # design's slots, at a quarter of the hour's cost.
     assert main(["compare", "--design", str(path), "--agents", "paper,random,optimal,active",
-                 "--estimators", "extended", "--machines", "2", "--quiet",
+                 "--estimators", "extended", "--machines", "2", "--budget", "900", "--quiet",
                  "--out", str(out)]) == 0
     trials = [json.loads(line) for line in (out / "trials.jsonl").read_text().splitlines()]
     assert sorted({t["agent"] for t in trials}) == ["active", "optimal", "paper", "random"]

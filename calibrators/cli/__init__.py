@@ -1,6 +1,6 @@
 """The ``orthoglide`` command: one module per sub-command.
 
-Each command module has ``add(subparsers)``, which declares its options and sets
+Each command module has ``add(parser)``, which declares its options and sets
 ``func``.  Every failure a user can cause ends in one line on stderr and exit status 2,
 without a traceback.  A reader that stops early (``orthoglide ... | head``) ends the
 command quietly, with status 1 as Python's own recipe for a broken pipe has it.
@@ -9,29 +9,38 @@ command quietly, with status 1 as Python's own recipe for a broken pipe has it.
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import sys
 from importlib import metadata
+from types import ModuleType
 
-from calibrators.cli import (
-    calibrate,
-    compare,
-    compensate,
-    conditions,
-    design,
-    fit,
-    plan,
-    pose,
-    render,
-    session,
-    urdf,
-    verify,
-)
-from calibrators.cli.common import Parser, UsageError
-from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA, check_noise
+from calibrators.cli.parser import Parser, UsageError
 
-COMMANDS = (pose, render, urdf, calibrate, plan, session, fit, compensate, verify, compare,
-            design, conditions)
+#: Each command, in the order ``orthoglide --help`` lists them, with its line there.  A
+#: command's module (``calibrators.cli.NAME``: its options and what it does) is imported
+#: only when the command is asked for, so that ``--help``, ``--version`` and a quick
+#: command do not pay for the others' imports (SciPy, Gymnasium, PyBullet).
+COMMANDS: dict[str, str] = {
+    "pose": "simulate one posture of a machine and read its gauges",
+    "render": "write a PNG picture of a machine at a posture",
+    "urdf": "write a machine's URDF (its errors baked in) for other simulators",
+    "calibrate": ("calibrate a virtual machine: an agent's experiment in the lab, then one "
+                  "estimator"),
+    "plan": ("write a designed experiment as a procedure a technician follows: steps, stand "
+             "places, pictures, a readings sheet and a printable page"),
+    "session": ("a sequential experiment with a person or a script at the machine: says each step, "
+                "reads the readings typed in, says the next"),
+    "fit": "calibrate a real machine from measured gauge readings",
+    "compensate": ("the controller's values from an estimate file: compensated commands, joint "
+                   "offsets, pitch-error tables, backlash, the calibrated machine"),
+    "verify": ("the paper's third experiment: a verification run's readings through the "
+               "compensated controller against the estimate's prediction"),
+    "compare": "agents x estimators on the same random machines, at an equal time budget",
+    "design": "print a machine design as JSON (default: the prototype's)",
+    "conditions": ("print the table of the lab's and the workshop's effects, with their sizes and "
+                   "sources (Markdown)"),
+}
 #: The distribution whose metadata carries the version.
 DISTRIBUTION = "orthoglide-workbench"
 
@@ -44,20 +53,42 @@ def version() -> str:
         return "unknown (the package is not installed)"
 
 
-def build_parser() -> argparse.ArgumentParser:
+def command_module(name: str) -> ModuleType:
+    """The module of command ``name`` (imported now, if it was not)."""
+    return importlib.import_module(f"{__name__}.{name}")
+
+
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The whole command line; with ``only``, the options of that command alone (the
+    others are listed, their modules not imported: what one run needs)."""
     parser = Parser(prog="orthoglide", description="Virtual Orthoglide calibration workbench.")
     parser.add_argument("--version", action="version", version=f"%(prog)s {version()}")
     sub = parser.add_subparsers(dest="command", required=True)
-    for command in COMMANDS:
-        command.add(sub)
+    for name, summary in COMMANDS.items():
+        p = sub.add_parser(name, help=summary)
+        if only is None or name == only:
+            command_module(name).add(p)
     return parser
+
+
+def _command(argv: list[str]) -> str:
+    """The command ``argv`` names ('' when none: the top-level options alone)."""
+    return next((a for a in argv if not a.startswith("-")), "")
 
 
 def run(argv: list[str] | None = None) -> int:
     """Parse ``argv`` and run the command; a user's mistake is one line and status 2."""
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    command = _command(argv)
+    parser = build_parser(command if command in COMMANDS else "")
     args = parser.parse_args(argv)
     try:
+        from orthoglide_env.instruments.dial import (
+            DEFAULT_RESOLUTION,
+            DEFAULT_SIGMA,
+            check_noise,
+        )
+
         sigma, resolution = (getattr(args, name, None) for name in ("sigma", "resolution"))
         check_noise(DEFAULT_SIGMA if sigma is None else sigma,
                     DEFAULT_RESOLUTION if resolution is None else resolution,
@@ -87,4 +118,4 @@ def main(argv: list[str] | None = None) -> int:
         return 1
 
 
-__all__ = ["COMMANDS", "UsageError", "build_parser", "main", "version"]
+__all__ = ["COMMANDS", "UsageError", "build_parser", "command_module", "main", "version"]

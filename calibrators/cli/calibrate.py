@@ -99,9 +99,7 @@ def run(args: argparse.Namespace) -> None:
         emit(report(est, episode.truth, _z_rms(est, data, env), episode.world), args.json)
 
 
-def add(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("calibrate", help="calibrate a virtual machine: an agent's experiment "
-                                         "in the lab, then one estimator")
+def add(p: argparse.ArgumentParser) -> None:
     p.add_argument("--machine", help="machine JSON file: it defines every true error, and its "
                    "gauges are ideal unless --errors or --sigma ask for installation errors "
                    "or noise (default: a random machine drawn from --errors)")

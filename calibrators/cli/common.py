@@ -6,10 +6,12 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any
 
 import numpy as np
 
+from calibrators.cli.parser import Parser as Parser
+from calibrators.cli.parser import UsageError as UsageError
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign, load_design
 from orthoglide_env.model.errors import MachineParams, check_rho, random_machine
 from orthoglide_env.world.conditions import (
@@ -26,17 +28,6 @@ from orthoglide_env.world.truth import World
 DESIGN_HELP = ("machine design file, JSON or TOML: the nominal dimensions, joint limits and "
                "link shapes (see the README's 'Machine designs'; keys left out take the "
                "prototype's values; default: the prototype)")
-
-
-class UsageError(Exception):
-    """Bad input from the user: reported in one line, exit status 2."""
-
-
-class Parser(argparse.ArgumentParser):
-    """Reports a bad command line in one line (argparse adds a usage block; ``-h`` has it)."""
-
-    def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: error: {message}\n")
 
 
 def design_of(args: argparse.Namespace) -> MachineDesign:

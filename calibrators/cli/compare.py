@@ -265,9 +265,7 @@ def _write(trials: list[Trial], rows: list[dict], out: Path, config: Config) -> 
             boxes(trials, config, out)]
 
 
-def add(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("compare", help="agents x estimators on the same random machines, "
-                                       "at an equal time budget")
+def add(p: argparse.ArgumentParser) -> None:
     p.add_argument("--agents", default="paper,random,tracker",
                    help=f"comma list of agents ({', '.join(agents_available())}, or "
                         "policy:FILE, a learned policy) (default: %(default)s)")

@@ -45,11 +45,8 @@ def run(args: argparse.Namespace) -> None:
               "(raw and after translation in commands.csv)")
 
 
-def add(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "compensate", help="the controller's values from an estimate file: compensated "
-        "commands, joint offsets, pitch-error tables, backlash, the calibrated machine",
-        description="Write, into --out, what a controller takes from a calibration: "
+def add(p: argparse.ArgumentParser) -> None:
+    p.description = ("Write, into --out, what a controller takes from a calibration: "
         "joint_offsets.csv (axis, drho_mm, sigma_mm: the encoder offsets the paper put into "
         "its control software), pitch_table.csv and backlash.csv when the fit has them "
         "(--params full), machine.json and machine.urdf (the calibrated machine) and, with "

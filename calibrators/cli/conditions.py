@@ -29,7 +29,5 @@ def run(args: argparse.Namespace) -> None:
     print(table(), end="")
 
 
-def add(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("conditions", help="print the table of the lab's and the workshop's "
-                       "effects, with their sizes and sources (Markdown)")
+def add(p: argparse.ArgumentParser) -> None:
     p.set_defaults(func=run)

@@ -13,10 +13,8 @@ def run(args: argparse.Namespace) -> None:
     write_output(args.out, text, "design")
 
 
-def add(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "design", help="print a machine design as JSON (default: the prototype's)",
-        description="Print a machine design as JSON, every key given: the prototype's, or "
+def add(p: argparse.ArgumentParser) -> None:
+    p.description = ("Print a machine design as JSON, every key given: the prototype's, or "
         "with --design the file's, its left-out keys filled in. A copy is a starting point "
         "for a design file of another machine (see the README's 'Machine designs').")
     p.add_argument("--design", metavar="FILE",

@@ -40,8 +40,7 @@ def _check_plan(data: Measurements, path: str) -> None:
         raise UsageError(f"--plan {path}: {exc}") from None
 
 
-def add(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("fit", help="calibrate a real machine from measured gauge readings")
+def add(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", help="readings, .csv or .json (README: the measurement file)")
     p.add_argument("--sigma", type=float, default=DEFAULT_SIGMA,
                    help="gauge repeatability (mm, default %(default)s)")

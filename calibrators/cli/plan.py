@@ -158,10 +158,7 @@ Read the dials to their resolution (0.01 mm for the usual dial).</li>
 """
 
 
-def add(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("plan", help="write a designed experiment as a procedure a technician "
-                                    "follows: steps, stand places, pictures, a readings "
-                                    "sheet and a printable page")
+def add(p: argparse.ArgumentParser) -> None:
     p.add_argument("--agent", default="paper",
                    help=f"an agent that decides its experiment at the start: "
                         f"{', '.join(planned_agents())} (default: %(default)s)")

@@ -57,8 +57,7 @@ def run(args: argparse.Namespace) -> None:
         print(f"  gauge {g['leg']}-leg/{g['axis']}: {value}  ({g['status']})")
 
 
-def add(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("pose", help="simulate one posture of a machine and read its gauges")
+def add(p: argparse.ArgumentParser) -> None:
     add_machine_posture(p)
     p.add_argument("--noise-free", action="store_true", help="ideal gauges (no noise, no "
                    "quantisation; overrides --sigma and --resolution)")

@@ -16,8 +16,7 @@ def run(args: argparse.Namespace) -> None:
     print(f"wrote {path}")
 
 
-def add(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("render", help="write a PNG picture of a machine at a posture")
+def add(p: argparse.ArgumentParser) -> None:
     add_machine_posture(p)
     p.add_argument("--out", required=True, metavar="FILE", help="PNG file to write, "
                    "replaced if it exists (required)")

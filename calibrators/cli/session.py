@@ -62,11 +62,8 @@ def run(args: argparse.Namespace) -> None:
         f"{out / 'readings.csv'}")
 
 
-def add(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "session", help="a sequential experiment with a person or a script at the machine: "
-        "says each step, reads the readings typed in, says the next",
-        description="Run an agent that decides as it reads (active) with the readings typed "
+def add(p: argparse.ArgumentParser) -> None:
+    p.description = ("Run an agent that decides as it reads (active) with the readings typed "
         "in, one per line: a number in mm, - for none (out of travel), or a JSON line "
         "{\"reading_mm\": 0.12}.  Every answer goes to --out's notebook.jsonl at once; "
         "--resume replays it and goes on.  At the end the readings are written to "

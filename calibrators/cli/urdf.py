@@ -13,14 +13,11 @@ def run(args: argparse.Namespace) -> None:
     write_output(args.out, text, "URDF")
 
 
-def add(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "urdf", help="write a machine's URDF (its errors baked in) for other simulators",
-        description="Write the URDF of a machine, its geometric errors baked in (lengths in "
+def add(p: argparse.ArgumentParser) -> None:
+    p.description = ("Write the URDF of a machine, its geometric errors baked in (lengths in "
         "metres, as URDF has them). URDF holds trees only: the five loops a simulator must "
         "close (each parallelogram's second bar, the y and z legs' platform joints) are "
-        "listed in a comment at the top of the file.",
-    )
+        "listed in a comment at the top of the file.")
     add_machine(p)
     p.add_argument("-o", "--out", required=True, metavar="FILE",
                    help=f"URDF file to write, replaced if it exists ('{STDOUT}': standard "

@@ -28,11 +28,8 @@ def run(args: argparse.Namespace) -> None:
     print(("PASSED: " if result.passed else "FAILED: ") + result.reason)
 
 
-def add(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "verify", help="the paper's third experiment: a verification run's readings "
-        "through the compensated controller against the estimate's prediction",
-        description="Read the filled sheet of 'orthoglide plan --verify EST' and report, per "
+def add(p: argparse.ArgumentParser) -> None:
+    p.description = ("Read the filled sheet of 'orthoglide plan --verify EST' and report, per "
         "reading, the leg-parallelism deviation before compensation (the estimated machine "
         "at the uncompensated commands), after it (the readings), the predicted one and the "
         "residual, then pass or fail: a chi-square test of the readings against the "

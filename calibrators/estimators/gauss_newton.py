@@ -323,18 +323,16 @@ class GaussNewtonCalibrator(Calibrator):
         group = design.distinct[1]  # each reading's mounting at its posture: repetitions
         pending = np.arange(m_count)
         while len(pending):
-            again = []
-            for m in pending:
-                if not results[m].converged[0] or len(outliers[m]) >= (
-                        MAX_OUTLIER_FRACTION * values.shape[1]):
-                    continue
-                flagged = _worst(results[m].residuals[0], group, noise)
-                if flagged is not None:
-                    outliers[m].append(flagged[0])
-                    causes[m].append(flagged[1])
-                    mask[m, flagged[0]] = False
-                    again.append(m)
-            pending = np.array(again, dtype=int)
+            pending = np.array([m for m in pending if results[m].converged[0] and len(
+                outliers[m]) < MAX_OUTLIER_FRACTION * values.shape[1]], dtype=int)
+            flagged, why = _worst(np.array([results[m].residuals[0] for m in pending]),
+                                  group, noise)
+            for m, k, cause in zip(pending, flagged, why, strict=True):
+                if k >= 0:
+                    outliers[m].append(int(k))
+                    causes[m].append(cause)
+                    mask[m, k] = False
+            pending = pending[flagged >= 0]
             if len(pending):
                 for m, result in zip(pending, fit(pending, mask).split(), strict=True):
                     results[m] = result
@@ -349,6 +347,18 @@ class GaussNewtonCalibrator(Calibrator):
         # The information's eigenvalues, most first, of every machine in one call.
         eigenvalues = np.linalg.eigvalsh(np.concatenate([r.information for r in results]))
         eigenvalues = eigenvalues[:, ::-1]
+        # Every machine's residuals, a left-out reading's with its mounting's zero from
+        # the readings used, what the report compares with its repetitions, and the
+        # readings the model does not fit, over the arrays of machines at once.
+        residuals = np.stack([r.residuals[0] for r in results])
+        every = residuals.copy()
+        converged = np.array([r.converged[0] for r in results])
+        for m in np.flatnonzero(~mask.all(axis=1) & converged):
+            every[m] = np.where(mask[m], residuals[m], _held_out(
+                design, values[m], results[m].theta[0], mask[m], ~mask[m],
+                None if world is None else world[m]))
+        repeated, _ = _repetition_means(every, group)
+        misfits = _misfits(residuals, group, noise)
         for m, result in enumerate(results):
             if not result.converged[0]:
                 out.append(RuntimeError("the exact-model fit did not converge"))
@@ -359,8 +369,8 @@ class GaussNewtonCalibrator(Calibrator):
             else:
                 out.append(self._estimate(datas[m], params, prior, sigma, design, values[m],
                                           result, eigenvalues[m], mask[m], held, outliers[m],
-                                          causes[m], group, noise, verify, explain,
-                                          consider, names,
+                                          causes[m], every[m], repeated[m], misfits[m],
+                                          verify, explain, consider, names,
                                           None if world is None else world[m],
                                           conditions, spacing))
         return out
@@ -368,8 +378,8 @@ class GaussNewtonCalibrator(Calibrator):
     def _estimate(self, data: Measurements, params: str, prior: str, sigma: float,
                   design: Design, values: np.ndarray, result: BatchFit,
                   eigenvalues: np.ndarray, mask: np.ndarray, held: np.ndarray,
-                  outliers: list[int], causes: list[str], group: np.ndarray,
-                  noise: np.ndarray, verify: bool, explain: bool,
+                  outliers: list[int], causes: list[str], every_residual: np.ndarray,
+                  repeated: np.ndarray, misfits: np.ndarray, verify: bool, explain: bool,
                   considered: Consider, every: list[str], world: np.ndarray | None,
                   conditions: Conditions, spacing: float | None) -> Estimate:
         space = design.space
@@ -402,11 +412,6 @@ class GaussNewtonCalibrator(Calibrator):
             warnings.append(f"the estimate is outside the validity range, where the model "
                             f"holds: {str(exc).replace('machine key', 'estimate key')}; do "
                             f"not compensate with it ({VALIDITY_HINT})")
-        # Every reading's residual against this fit, a left-out one's with its mounting's
-        # zero from the readings used: what the report compares with its repetitions.
-        every_residual = np.where(mask, result.residuals[0],
-                                  _held_out(design, values, theta, mask, ~mask, world))
-        repeated, _ = _repetition_means(every_residual, group)
         for cause in ("reading", "unrepeated"):
             mine = [k for k, c in zip(outliers, causes, strict=True) if c == cause]
             if mine:
@@ -414,7 +419,6 @@ class GaussNewtonCalibrator(Calibrator):
                 warnings.append(f"{len(mine)} outlier reading(s) "
                                 f"{'kept' if mask[mine].all() else 'left out'} ("
                                 f"{CAUSE_WORDS[cause]}): {where}")
-        misfits = _misfits(result.residuals[0], group, noise)
         if len(misfits):
             where = ", ".join(_where(data, k, every_residual, repeated)
                               for k in misfits[:LISTED_MISFITS])
@@ -517,11 +521,13 @@ def _held_out(design: Design, values: np.ndarray, theta: np.ndarray, train: np.n
     """Residuals of the ``test`` readings predicted by ``theta`` (with the fitted terms of
     ``world``, (N, K), when there are), each mounting's zero taken from its ``train``
     readings (NaN where a mounting has none)."""
+    out = np.full(len(values), np.nan)
+    if not test.any():
+        return out  # the usual fit: every reading used, none to predict
     n = len(design.space.names)
     raw = values - predict(theta[:n], design)
     if world is not None:
         raw -= world @ theta[n:]
-    out = np.full(len(values), np.nan)
     for k in range(len(design.mountings)):
         mine = design.mounting == k
         if (mine & train).any():
@@ -545,52 +551,92 @@ def _holdout(design: Design, fraction: float, seed: int) -> np.ndarray:
 
 def _repetition_means(residuals: np.ndarray, group: np.ndarray
                       ) -> tuple[np.ndarray, np.ndarray]:
-    """Per reading, the mean residual of its repetitions (the other finite residuals of
-    its group; NaN without one) and how many there are, in one pass over the readings."""
+    """Per reading of each machine (``residuals`` (..., N)), the mean residual of its
+    repetitions (the other finite residuals of its group; NaN without one) and how many
+    there are, in one pass over every machine's readings.  Each machine's bins are its
+    own, filled in the order of its readings: its numbers are those it gets alone."""
     used = np.isfinite(residuals)
     r = np.where(used, residuals, 0.0)
-    total = np.bincount(group, r)[group] - r
-    count = np.bincount(group, used.astype(float))[group] - used
+    size = int(group.max()) + 1 if group.size else 0
+    machines = int(np.prod(residuals.shape[:-1], dtype=int))
+    bins = (group + size * np.arange(machines)[:, None]).ravel()
+
+    def per_reading(weights: np.ndarray) -> np.ndarray:
+        sums = np.bincount(bins, weights.ravel(), minlength=machines * size)
+        return np.take_along_axis(sums.reshape(machines, size),
+                                  np.broadcast_to(group, (machines, len(group))), axis=1)
+
+    total = per_reading(r).reshape(residuals.shape) - r
+    count = per_reading(used.astype(float)).reshape(residuals.shape) - used
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(count > 0, total / count, np.nan), count
 
 
+def _nanmedian(values: np.ndarray) -> np.ndarray:
+    """``np.nanmedian`` of each row (M, N) over its last axis, to the bit (the mean of the
+    two middle finite values, or the middle one twice), and NaN for a row without one,
+    with no warning: the rows of a batch at once."""
+    ordered = np.sort(values, axis=-1)  # NaN last
+    count = np.sum(~np.isnan(values), axis=-1)
+    low, high = (np.maximum(i, 0)[:, None] for i in ((count - 1) // 2, count // 2))
+    middle = (np.take_along_axis(ordered, low, -1) + np.take_along_axis(ordered, high, -1))
+    return np.where(count > 0, middle[:, 0] / 2, np.nan)
+
+
+def _first_max(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each row's (M, N) first largest finite value's index and the value, (-1, NaN) for a
+    row without one (``np.nanargmax``'s choice)."""
+    finite = np.isfinite(values).any(axis=-1)
+    index = np.where(finite, np.argmax(np.where(np.isnan(values), -np.inf, values), axis=-1),
+                     -1)
+    return index, np.where(finite, np.take_along_axis(
+        values, np.maximum(index, 0)[:, None], -1)[:, 0], np.nan)
+
+
 def _worst(residuals: np.ndarray, group: np.ndarray, noise: np.ndarray
-           ) -> tuple[int, str] | None:
-    """The reading to leave out next and why, or None.  First the reading furthest from
-    its repetitions, beyond :data:`OUTLIER_K` robust standard deviations of that spread
-    (``reading``: a mistyped or misread one; the model cannot tell it, since repetitions
-    share the model's error); else the unrepeated reading furthest from the model, beyond
-    as many of the residuals' (``unrepeated``).  A repeated reading far from the model
-    whose repetitions agree is model error and is not left out (:func:`_misfits`)."""
+           ) -> tuple[np.ndarray, list[str]]:
+    """The reading to leave out next of each machine (``residuals`` (M, N)), -1 for none,
+    and why.  First the reading furthest from its repetitions, beyond :data:`OUTLIER_K`
+    robust standard deviations of that spread (``reading``: a mistyped or misread one; the
+    model cannot tell it, since repetitions share the model's error); else the unrepeated
+    reading furthest from the model, beyond as many of the residuals' (``unrepeated``).  A
+    repeated reading far from the model whose repetitions agree is model error and is not
+    left out (:func:`_misfits`)."""
+    if not len(residuals):
+        return np.zeros(0, dtype=int), []
     sigma = weighting_sigma(noise)  # gauges and a tracker differ
     repeated, count = _repetition_means(residuals, group)
     # In units of its own spread: a reading and the mean of n others differ by
     # sigma * sqrt(1 + 1/n) when both are only noise.
     with np.errstate(divide="ignore"):
         departure = np.abs(residuals - repeated) / (sigma * np.sqrt(1 + 1 / count))
-    if np.isfinite(departure).any():
-        spread = 1.4826 * np.nanmedian(departure)
-        k = int(np.nanargmax(departure))
-        if departure[k] > OUTLIER_K * max(1.0, spread):
-            return k, "reading"
+    # A row with a finite value has a finite median: the comparisons below see no NaN.
+    spread = 1.4826 * _nanmedian(departure)
+    k, worst = _first_max(departure)
+    with np.errstate(invalid="ignore"):
+        reading = (k >= 0) & (worst > OUTLIER_K * np.maximum(1.0, spread))
     score = np.abs(residuals) / sigma
-    robust = 1.4826 * np.nanmedian(score)
+    robust = 1.4826 * _nanmedian(score)
     score[count > 0] = np.nan
-    if np.isfinite(score).any():
-        k = int(np.nanargmax(score))
-        if score[k] > OUTLIER_K * max(1.0, robust):
-            return k, "unrepeated"
-    return None
+    j, worst = _first_max(score)
+    with np.errstate(invalid="ignore"):
+        unrepeated = ~reading & (j >= 0) & (worst > OUTLIER_K * np.maximum(1.0, robust))
+    index = np.where(reading, k, np.where(unrepeated, j, -1))
+    return index, ["reading" if r else "unrepeated" if u else ""
+                   for r, u in zip(reading, unrepeated, strict=True)]
 
 
-def _misfits(residuals: np.ndarray, group: np.ndarray, noise: np.ndarray) -> np.ndarray:
-    """The used readings beyond :data:`OUTLIER_K` robust standard deviations of the
-    residuals whose repetitions read with them: model error, kept."""
+def _misfits(residuals: np.ndarray, group: np.ndarray, noise: np.ndarray
+             ) -> list[np.ndarray]:
+    """Of each machine (``residuals`` (M, N)), the used readings beyond :data:`OUTLIER_K`
+    robust standard deviations of the residuals whose repetitions read with them: model
+    error, kept."""
     score = np.abs(residuals) / weighting_sigma(noise)
-    robust = 1.4826 * np.nanmedian(score)
+    robust = 1.4826 * _nanmedian(score)
     _, count = _repetition_means(residuals, group)
-    return np.flatnonzero((score > OUTLIER_K * max(1.0, robust)) & (count > 0))
+    with np.errstate(invalid="ignore"):
+        far = (score > OUTLIER_K * np.maximum(1.0, robust)[:, None]) & (count > 0)
+    return [np.flatnonzero(row) for row in far]
 
 
 def _where(data: Measurements, k: int, residuals: np.ndarray | None = None,

@@ -1,0 +1,169 @@
+"""Wall times of this tree against an earlier revision, in one run, with the outputs held
+identical: the batched comparison, the command line's start-up, the ``active`` sweep and
+the test suite.
+
+    python benchmarks/speed_against_revision.py [--rev 02c124b] [--rounds 3]
+        [--items compare,startup,active,suite] [--active-machines 100]
+
+Each item times whole commands in fresh processes, this tree and ``REV`` taken in turns,
+round after round, so a change of load hits both alike; the table gives each tree's median
+wall time and their ratio.  ``REV`` is checked out into a temporary git worktree; both
+trees run from their own folder with their own code first on ``PYTHONPATH`` (the same
+interpreter and packages), so the comparison is of the code alone.
+
+=========  ============================================================================
+item       what is timed, and what must come out the same
+=========  ============================================================================
+compare    ``orthoglide compare --agents paper --estimators paper6 --machines 1000
+           --seed 1 --jobs 1 --conditions ideal --quiet``; its printed table, the run's
+           seconds masked, must be the same bytes
+startup    ``orthoglide --version``, beside ``python -c "import numpy"`` (the target is
+           at most 2x numpy's)
+active     ``benchmarks/bench_active.py``'s sweep (``active`` x ``extended``, lab, one
+           hour, ``--jobs 2``); every trial (its readings, time and errors) must be the
+           same bytes: the plans are identical
+suite      ``CI=true make test`` in a fresh clone of each (HEAD and ``REV``): the wall
+           time, the venv's build included, and the number of tests that passed
+=========  ============================================================================
+
+The suite item clones the committed HEAD, not the working tree, and takes minutes per
+round; it runs one round whatever ``--rounds`` says.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+ITEMS = ("compare", "startup", "active", "suite")
+COMPARE = ["compare", "--agents", "paper", "--estimators", "paper6", "--machines", "1000",
+           "--seed", "1", "--jobs", "1", "--conditions", "ideal", "--quiet"]
+#: What of the comparison's output depends on the run and not on the results: its seconds.
+RUN_SECONDS = re.compile(r", [0-9.]+ s\. ")
+
+#: The sweep of ``bench_active.py`` through ``calibrators.compare.run``, an interface both
+#: trees have; prints a digest of every trial's JSON line.
+ACTIVE = """
+import hashlib, sys
+from calibrators.compare import Config, run
+from orthoglide_env.world.conditions import Conditions
+machines = int(sys.argv[1])
+config = Config(("active",), ("extended",), seed=1, conditions=Conditions("lab"))
+trials = run(config, machines, jobs=2)
+digest = hashlib.sha256("\\n".join(t.to_json() for t in trials).encode()).hexdigest()
+print(digest)
+"""
+
+
+def _env(tree: Path) -> dict[str, str]:
+    return dict(os.environ, PYTHONPATH=str(tree))
+
+
+def _timed(command: list[str], tree: Path, env: dict[str, str] | None = None
+           ) -> tuple[float, str]:
+    """Wall seconds of ``command`` run in ``tree`` and what it printed."""
+    start = time.perf_counter()
+    out = subprocess.run(command, cwd=tree, env=env or _env(tree), check=True,
+                         capture_output=True, text=True)
+    return time.perf_counter() - start, out.stdout
+
+
+def compare(tree: Path, _: argparse.Namespace) -> tuple[float, str]:
+    seconds, out = _timed([sys.executable, "-m", "calibrators.cli", *COMPARE], tree)
+    return seconds, RUN_SECONDS.sub(", (seconds) s. ", out)
+
+
+def startup(tree: Path, _: argparse.Namespace) -> tuple[float, str]:
+    return _timed([sys.executable, "-m", "calibrators.cli", "--version"], tree)
+
+
+def active(tree: Path, args: argparse.Namespace) -> tuple[float, str]:
+    return _timed([sys.executable, "-c", ACTIVE, str(args.active_machines)], tree)
+
+
+def suite(tree: Path, _: argparse.Namespace) -> tuple[float, str]:
+    """``CI=true make test`` in a fresh clone of ``tree``'s checked-out commit; prints the
+    number of tests that passed."""
+    with tempfile.TemporaryDirectory() as tmp:
+        clone = Path(tmp) / "clone"
+        subprocess.run(["git", "clone", "--quiet", str(tree), str(clone)], check=True)
+        env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+        seconds, out = _timed(["make", "test"], clone, dict(env, CI="true"))
+    passed = re.findall(r"(\d+) passed", out)
+    return seconds, f"{passed[-1] if passed else '?'} passed"
+
+
+RUNNERS: dict[str, Callable[[Path, argparse.Namespace], tuple[float, str]]] = {
+    "compare": compare, "startup": startup, "active": active, "suite": suite}
+
+
+def numpy_import(rounds: int) -> float:
+    """Median wall seconds of ``python -c "import numpy"``."""
+    return float(np.median([_timed([sys.executable, "-c", "import numpy"], ROOT)[0]
+                            for _ in range(rounds)]))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rev", default="02c124b", help="the earlier revision (git)")
+    parser.add_argument("--rounds", type=int, default=3, help="rounds per tree (>= 1)")
+    parser.add_argument("--items", default=",".join(ITEMS),
+                        help=f"comma list of {', '.join(ITEMS)} (default: all)")
+    parser.add_argument("--active-machines", type=int, default=100,
+                        help="machines of the active sweep (default %(default)s)")
+    args = parser.parse_args()
+    items = [i.strip() for i in args.items.split(",") if i.strip()]
+    unknown = sorted(set(items) - set(ITEMS))
+    if unknown or not items:
+        parser.error(f"--items: unknown {unknown}; choose from {', '.join(ITEMS)}")
+    if args.rounds < 1 or args.active_machines < 1:
+        parser.error("--rounds and --active-machines must be >= 1")
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        old = Path(tmp) / "rev"
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", "--quiet",
+                        str(old), args.rev], check=True)
+        try:
+            for item in items:
+                rounds = 1 if item == "suite" else args.rounds
+                times: dict[str, list[float]] = {"new": [], "old": []}
+                outputs: dict[str, set[str]] = {"new": set(), "old": set()}
+                for r in range(rounds):
+                    for name, tree in (("new", ROOT), ("old", old)):
+                        seconds, out = RUNNERS[item](tree, args)
+                        times[name].append(seconds)
+                        outputs[name].add(out)
+                    print(f"{item}: round {r + 1}/{rounds} done", file=sys.stderr, flush=True)
+                new, was = (float(np.median(times[k])) for k in ("new", "old"))
+                if item == "startup":
+                    same = f"numpy {numpy_import(args.rounds):.3f} s"
+                elif item == "suite":
+                    same = f"tests: {outputs['new'].pop()} / {outputs['old'].pop()}"
+                else:
+                    same = ("outputs identical" if outputs["new"] == outputs["old"]
+                            and len(outputs["new"]) == 1 else "OUTPUTS DIFFER")
+                    digest = hashlib.sha256(sorted(outputs["new"])[0].encode()).hexdigest()
+                    same += f" (sha256 {digest[:12]})"
+                rows.append((item, new, was, same))
+        finally:
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force",
+                            str(old)], check=True)
+    print(f"load average {os.getloadavg()[0]:.1f}, {args.rounds} rounds, median wall seconds")
+    print(f"{'item':<10}{'this tree':>11}{args.rev[:10]:>12}{'ratio':>8}  check")
+    for item, new, was, same in rows:
+        print(f"{item:<10}{new:11.3f}{was:12.3f}{new / was:8.2f}  {same}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,72 @@
+"""Start-up stays light: the package and the command line's ``--help`` and ``--version``
+import none of the heavy packages, and the envs are still registered with Gymnasium
+whichever is imported first.  Each check runs in a fresh interpreter, since this test
+process has imported everything long before."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+HEAVY = ("scipy", "gymnasium", "pybullet", "matplotlib", "torch")
+
+
+def _imported_after(code: str) -> list[str]:
+    """The heavy top-level packages a fresh interpreter holds after running ``code``."""
+    probe = (f"import sys\n{code}\n"
+             f"print(__import__('json').dumps(sorted(m for m in {HEAVY!r} "
+             "if m in sys.modules)))")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.parametrize("argv", [["--version"], ["--help"]])
+def test_the_command_lines_own_options_import_nothing_heavy(argv: list[str]) -> None:
+    code = ("from calibrators.cli import main\n"
+            "import contextlib, io\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n"
+            f"    try:\n        main({argv!r})\n    except SystemExit:\n        pass")
+    assert _imported_after(code) == []
+
+
+def test_a_command_imports_only_its_own_module() -> None:
+    """Parsing ``conditions`` imports no other command's module."""
+    code = ("from calibrators.cli import build_parser\n"
+            "build_parser('conditions').parse_args(['conditions'])\n"
+            "print(__import__('json').dumps(sorted(m for m in sys.modules\n"
+            "                                        if m.startswith('calibrators.cli.'))))")
+    probe = f"import sys\n{code}"
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         check=True).stdout
+    loaded = set(json.loads(out.strip().splitlines()[-1]))
+    assert "calibrators.cli.conditions" in loaded
+    assert not loaded & {"calibrators.cli.compare", "calibrators.cli.calibrate",
+                         "calibrators.cli.plan", "calibrators.cli.pose"}
+
+
+def test_importing_the_package_imports_no_heavy_package() -> None:
+    assert _imported_after("import orthoglide_env\nimport orthoglide_env.model.kinematics") == []
+
+
+@pytest.mark.parametrize("order", ["package first", "gymnasium first"])
+def test_the_envs_are_registered_in_either_import_order(order: str) -> None:
+    imports = (["import orthoglide_env", "import gymnasium"] if order == "package first"
+               else ["import gymnasium", "import orthoglide_env"])
+    code = "\n".join([*imports,
+                      "env = gymnasium.make(orthoglide_env.ENV_ID, backend='exact')",
+                      "env.reset(seed=0)",
+                      "assert orthoglide_env.LAB_ENV_ID in gymnasium.registry",
+                      "assert orthoglide_env.FLAT_LAB_ENV_ID in gymnasium.registry"])
+    assert "gymnasium" in _imported_after(code)
+
+
+def test_an_env_id_with_its_module_registers_it() -> None:
+    """Gymnasium's ``module:id`` form imports the package, which registers at once."""
+    code = ("import gymnasium\n"
+            "env = gymnasium.make('orthoglide_env:OrthoglideLab-v0')\n"
+            "assert type(env.unwrapped).__name__ == 'OrthoglideLabEnv'")
+    assert "gymnasium" in _imported_after(code)
