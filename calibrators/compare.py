@@ -332,22 +332,26 @@ CHUNK: int = 500
 def run(config: Config, machines: int, jobs: int = 1, done: list[Trial] | None = None,
         on_trial: Callable[[Trial], None] | None = None,
         progress: Callable[[int], None] | None = None, engine: str = "local",
-        address: str | None = None) -> list[Trial]:
-    """Run the comparison over ``machines`` machines in chunks spread over ``jobs``
-    workers of ``engine`` (:func:`calibrators.engines.results`: ``local`` processes, or
-    ``ray`` at ``address``), skipping the trials in ``done``; ``on_trial`` sees each new
+        address: str | None = None, chunk: int = CHUNK) -> list[Trial]:
+    """Run the comparison over ``machines`` machines in chunks of at most ``chunk``
+    machines spread over ``jobs`` workers of ``engine`` (:func:`calibrators.engines.
+    results`: ``local`` processes, or ``ray`` at ``address``), skipping the trials in
+    ``done``; ``on_trial`` sees each new
     trial as it ends, ``progress`` the number of machines finished.  Trials come back in
-    (machine, agent, estimator) order, the same whatever ``jobs`` and ``engine``.  A
+    (machine, agent, estimator) order, the same whatever ``jobs``, ``engine`` and
+    ``chunk``: a machine's fits are those it gets alone.  A
     KeyboardInterrupt stops the workers at once and is raised again, every trial
     finished so far having gone to ``on_trial``."""
     for name in config.agents:
         get_agent(name)
     for name in config.estimators:
         get_estimator(name)
+    if not (isinstance(chunk, int) and chunk >= 1):
+        raise ValueError(f"chunk must be a whole number of machines >= 1, got {chunk!r}")
     done = list(done or [])
     skip = {t.key for t in done}
     # Every worker gets work even on short runs.
-    size = max(1, min(CHUNK, -(-machines // jobs)))
+    size = max(1, min(chunk, -(-machines // jobs)))
     chunks = [list(range(i, min(i + size, machines))) for i in range(0, machines, size)]
     trials = list(done)
     with closing(results(partial(run_chunk, config, skip=skip), chunks, jobs, engine,

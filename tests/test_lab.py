@@ -329,21 +329,22 @@ def test_ctrl_c_keeps_the_finished_trials_and_resume_completes_the_table(tmp_pat
     run with one line and the partial table; --resume then ends with the table of an
     uninterrupted run.  Four chunks' worth of machines, so the interrupt, sent when the
     first chunk's trials are written, lands while the third and fourth are pending (the
-    two workers can finish two chunks at once)."""
+    two workers can finish two chunks at once).  The uninterrupted run takes its chunks
+    at the default size: the table does not depend on them either."""
     import os
     import signal
     import time
 
-    from calibrators.compare import CHUNK
-
-    machines = 4 * CHUNK
+    chunk = 100  # a second or so of work each: the interrupt lands between chunks
+    machines = 4 * chunk
     out = tmp_path / "run"
     argv = [sys.executable, "-m", "calibrators.cli", "compare", "--agents", "paper",
             "--estimators", "paper6", "--machines", str(machines), "--seed", "2", "--jobs",
             "2", "--quiet"]
+    chunked = [*argv, "--chunk", str(chunk)]
     # A shell starts background jobs with SIGINT ignored, and children inherit that: give
     # the run the default disposition a terminal's foreground job has.
-    proc = subprocess.Popen([*argv, "--out", str(out)], stdout=subprocess.PIPE,
+    proc = subprocess.Popen([*chunked, "--out", str(out)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, start_new_session=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     trials = out / "trials.jsonl"
@@ -358,7 +359,7 @@ def test_ctrl_c_keeps_the_finished_trials_and_resume_completes_the_table(tmp_pat
     assert "TCP after (rigid) med" in stdout
     kept = len(trials.read_text().splitlines())
     assert 0 < kept < machines
-    resumed = subprocess.run([*argv, "--out", str(out), "--resume", "--json"],
+    resumed = subprocess.run([*chunked, "--out", str(out), "--resume", "--json"],
                              capture_output=True, text=True, timeout=600)
     whole = subprocess.run([*argv, "--json"], capture_output=True, text=True, timeout=600)
     assert resumed.returncode == 0 and whole.returncode == 0, resumed.stderr

@@ -23,7 +23,7 @@ from calibrators.cli.common import (
     design_of,
 )
 from calibrators.cli.estimator_options import DEFAULT_STRATEGY
-from calibrators.compare import Config, Trial, paired, run, summary, verify_pybullet
+from calibrators.compare import CHUNK, Config, Trial, paired, run, summary, verify_pybullet
 from calibrators.engines import ENGINES, RAY_INSTALL_HINT, ray_available
 from calibrators.experiment import DEFAULT_BUDGET_S, ESTIMATORS, get_estimator
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
@@ -59,6 +59,7 @@ def _check(args: argparse.Namespace) -> Config:
         (np.isfinite(args.success_mm) and args.success_mm > 0,
          "--success-mm must be a positive number of mm"),
         (1 <= args.jobs <= MAX_JOBS, f"--jobs must be between 1 and {MAX_JOBS}"),
+        (1 <= args.chunk <= 1_000_000, "--chunk must be between 1 and 1000000"),
         (0 <= args.verify_pybullet <= 1000, "--verify-pybullet must be between 0 and 1000"),
         (args.engine != "ray" or ray_available(), f"--engine ray needs Ray: {RAY_INSTALL_HINT}"),
         (not args.address or args.engine == "ray", "--address is the Ray cluster of --engine ray"),
@@ -155,7 +156,8 @@ def run_command(args: argparse.Namespace) -> None:
     start = time.perf_counter()
     try:
         trials = run(config, args.machines, args.jobs, done, on_trial=keep,
-                     progress=bar.update, engine=args.engine, address=args.address)
+                     progress=bar.update, engine=args.engine, address=args.address,
+                     chunk=args.chunk)
     except KeyboardInterrupt:
         trials = None
     finally:
@@ -296,6 +298,11 @@ def add(p: argparse.ArgumentParser) -> None:
     p.add_argument("--jobs", type=int, default=1,
                    help="worker processes; with --engine ray and no cluster address, the "
                         "CPUs of the local Ray instance (default %(default)s)")
+    p.add_argument("--chunk", type=int, default=CHUNK, metavar="N",
+                   help="machines per task: their episodes run in one vector env and a "
+                        "fixed design's fits in one batched solve; fewer lose less work to "
+                        "an interrupt and update the progress bar more often, the results "
+                        "are the same (default %(default)s)")
     p.add_argument("--engine", choices=ENGINES, default=ENGINES[0],
                    help="where the workers run: local processes, or Ray tasks (extra "
                         "'ray') on a cluster (default %(default)s)")
