@@ -97,7 +97,8 @@ def suite(tree: Path, _: argparse.Namespace) -> tuple[float, str]:
     number of tests that passed."""
     with tempfile.TemporaryDirectory() as tmp:
         clone = Path(tmp) / "clone"
-        subprocess.run(["git", "clone", "--quiet", str(tree), str(clone)], check=True)
+        subprocess.run(["git", "-c", "advice.detachedHead=false", "clone", "--quiet", str(tree),
+                        str(clone)], check=True)
         env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
         seconds, out = _timed(["make", "test"], clone, dict(env, CI="true"))
     passed = re.findall(r"(\d+) passed", out)
