@@ -302,3 +302,21 @@ def test_bad_input_gives_one_line_and_status_2(tmp_path, argv, fragment: str) ->
     assert "Traceback" not in proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("orthoglide") and fragment in lines[0], lines
+
+
+def test_calibrates_left_out_preset_follows_the_machines(capsys) -> None:
+    """A machine drawn from ``--errors paper`` has none of the errors ``paper6`` leaves
+    out: by default the fit's error bars are those of ``--left-out paper``, as
+    ``compare``'s are, and narrower than a realistic machine's would be (the left-out
+    errors' spread widens them)."""
+    def fitted(*extra: str) -> dict:
+        assert main(["calibrate", "--errors", "paper", "--params", "paper6", "--seed", "1",
+                     "--conditions", "ideal", "--json", *extra]) == 0
+        return json.loads(capsys.readouterr().out)
+
+    default, paper, realistic = fitted(), fitted("--left-out", "paper"), fitted(
+        "--left-out", "realistic")
+    assert default == paper
+    for group in ("drho", "dL"):
+        assert all(p < r for p, r in zip(paper["std"][group], realistic["std"][group],
+                                         strict=True))

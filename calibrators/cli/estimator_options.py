@@ -46,10 +46,12 @@ def add(p: argparse.ArgumentParser) -> None:
                         "readings cannot see stay nominal), a preset name (its sigmas), and/or "
                         "GROUP=SIGMA or NAME=SIGMA (mm, rad); auto = the realistic preset's "
                         "when more than paper6 is free, else none (default: %(default)s)")
-    p.add_argument("--left-out", choices=sorted(PRESETS), default=DEFAULT_PRESET,
+    p.add_argument("--left-out", choices=sorted(PRESETS), default=None,
                    help="the error preset whose sizes the errors --params leaves out have a "
                         "priori: their spread goes into the error bars (paper or nominal: "
-                        "they do not exist) (default: %(default)s)")
+                        "they do not exist) (default: the preset a random machine is drawn "
+                        f"from, --errors; else {DEFAULT_PRESET}: a real machine's, or a "
+                        "machine file's, is not known)")
     p.add_argument("--fit-world", action="store_true",
                    help="under --conditions lab or workshop, fit every one of the lab's "
                         "terms (their sizes as priors) instead of only carrying them in the "
@@ -96,8 +98,17 @@ def options(args: argparse.Namespace) -> dict[str, Any]:
     """Keyword arguments of ``Calibrator.estimate`` from the parsed options."""
     return {"prior": args.prior, "fix": parse_assignments(args.fix, "--fix"),
             "keep_outliers": args.keep_outliers, "holdout": args.holdout,
-            "seed": args.seed, "solver": args.solver, "left_out": args.left_out,
+            "seed": args.seed, "solver": args.solver, "left_out": left_out(args),
             "node_spacing": args.node_spacing, **_fitted(args)}
+
+
+def left_out(args: argparse.Namespace) -> str:
+    """``--left-out``, or the preset the machine was drawn from when it was (``calibrate``'s
+    random machine: its ``--errors``), else :data:`DEFAULT_PRESET`, as ``compare`` does."""
+    if args.left_out is not None:
+        return args.left_out
+    drawn = getattr(args, "errors", None) if not getattr(args, "machine", None) else None
+    return drawn or DEFAULT_PRESET
 
 
 def _fitted(args: argparse.Namespace) -> dict[str, Any]:
