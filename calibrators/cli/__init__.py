@@ -2,8 +2,9 @@
 
 Each command module has ``add(parser)``, which declares its options and sets
 ``func``.  Every failure a user can cause ends in one line on stderr and exit status 2,
-without a traceback.  A reader that stops early (``orthoglide ... | head``) ends the
-command quietly, with status 1 as Python's own recipe for a broken pipe has it.
+without a traceback; so does Ctrl-C, with status 130.  A reader that stops early
+(``orthoglide ... | head``) ends the command quietly, with status 1 as Python's own recipe
+for a broken pipe has it.
 """
 
 from __future__ import annotations
@@ -116,6 +117,12 @@ def main(argv: list[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 1
+    except KeyboardInterrupt:
+        # Ctrl-C before a command handles it itself (while its modules load, say): one
+        # line and the shell's status for SIGINT, no traceback.
+        command = _command(sys.argv[1:] if argv is None else list(argv))
+        print(" ".join(("orthoglide", command)).strip() + ": interrupted", file=sys.stderr)
+        return 130
 
 
 __all__ = ["COMMANDS", "UsageError", "build_parser", "command_module", "main", "version"]
