@@ -23,8 +23,8 @@ from calibrators.agents.base import PlannedAgent
 from calibrators.estimators.base import Estimate, get_strategy
 from calibrators.measurements import ZERO_RHO, Measurement, Measurements, paper_rhos
 from orthoglide_env.envs.lab import Record
+from orthoglide_env.lab.operations import DEFAULT_BUDGET_S as DEFAULT_BUDGET_S  # every command's
 from orthoglide_env.lab.operations import Op
-from orthoglide_env.lab.settings import DEFAULT_BUDGET_S as DEFAULT_BUDGET_S  # every command's
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import DEFAULT_PRESET, MachineParams
 from orthoglide_env.world.conditions import IDEAL, Conditions

@@ -33,6 +33,22 @@ def test_the_command_lines_own_options_import_nothing_heavy(argv: list[str]) -> 
     assert _imported_after(code) == []
 
 
+#: Commands whose ``--help`` needs nothing heavy: the others list the registered agents
+#: and estimators, found by importing them.
+LIGHT_HELP = ("pose", "render", "urdf", "session", "fit", "compensate", "verify", "design",
+              "conditions")
+
+
+@pytest.mark.parametrize("command", LIGHT_HELP)
+def test_a_commands_help_imports_nothing_heavy(command: str) -> None:
+    code = ("from calibrators.cli import main\n"
+            "import contextlib, io\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n"
+            f"    try:\n        main([{command!r}, '--help'])\n    except SystemExit:\n"
+            "        pass")
+    assert _imported_after(code) == []
+
+
 def test_a_command_imports_only_its_own_module() -> None:
     """Parsing ``conditions`` imports no other command's module."""
     code = ("from calibrators.cli import build_parser\n"

@@ -5,6 +5,10 @@ Each command module has ``add(parser)``, which declares its options and sets
 without a traceback; so does Ctrl-C, with status 130.  A reader that stops early
 (``orthoglide ... | head``) ends the command quietly, with status 1 as Python's own recipe
 for a broken pipe has it.
+
+A command's module imports at its top what its options need, and what the command runs
+with in its ``run``: ``orthoglide --help``, ``--version`` and most commands' ``--help``
+start without SciPy, Gymnasium or PyBullet (``tests/test_startup.py``).
 """
 
 from __future__ import annotations

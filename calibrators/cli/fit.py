@@ -8,13 +8,13 @@ import numpy as np
 
 from calibrators.cli import estimator_options
 from calibrators.cli.common import UsageError, add_conditions, conditions_of, design_of
-from calibrators.cli.output import emit, report, save
 from calibrators.measurements import Measurements
-from calibrators.procedure import Procedure, check_sheet
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 
 
 def run(args: argparse.Namespace) -> None:
+    from calibrators.cli.output import emit, report, save
+
     # --sigma and --resolution were checked with every command's (calibrators.cli.run).
     data = Measurements.read(args.file, design_of(args) if args.design else None)
     if args.plan:
@@ -30,6 +30,8 @@ def run(args: argparse.Namespace) -> None:
 def _check_plan(data: Measurements, path: str) -> None:
     """The readings are the sheet of the plan at ``path``: same design, each row one of its
     steps' readings (:class:`UsageError` naming the line otherwise)."""
+    from calibrators.procedure import Procedure, check_sheet
+
     try:
         procedure = Procedure.read(path)
         if procedure.design != data.design.to_dict():

@@ -20,10 +20,9 @@ from pathlib import Path
 
 from calibrators.cli.common import UsageError, add_conditions, add_design, conditions_of
 from calibrators.compensation import read_estimate
-from calibrators.experiment import DEFAULT_BUDGET_S
 from calibrators.procedure import Procedure, make_procedure, planned_agents, write_sheet
 from calibrators.verification import compensated_procedure
-from orthoglide_env.lab.operations import slot_catalogue
+from orthoglide_env.lab.operations import DEFAULT_BUDGET_S, slot_catalogue
 from orthoglide_env.model.design import MachineDesign, load_design
 from orthoglide_env.model.errors import MachineParams
 

@@ -12,12 +12,14 @@ from typing import Any
 import numpy as np
 
 from calibrators.cli.common import UsageError, add_conditions, add_design, conditions_of
-from calibrators.experiment import DEFAULT_BUDGET_S, machine_seed
-from calibrators.session import Session, parse_answer
+from orthoglide_env.lab.operations import DEFAULT_BUDGET_S
 from orthoglide_env.model.design import load_design
 
 
 def run(args: argparse.Namespace) -> None:
+    from calibrators.experiment import machine_seed
+    from calibrators.session import Session, parse_answer
+
     out = Path(args.out)
     notebook = out / "notebook.jsonl"
     if notebook.exists() and not args.resume:

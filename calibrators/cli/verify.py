@@ -7,12 +7,13 @@ import argparse
 import json
 
 from calibrators.cli.common import add_conditions, conditions_of
-from calibrators.compensation import read_estimate
-from calibrators.measurements import Measurements
-from calibrators.verification import verify
 
 
 def run(args: argparse.Namespace) -> None:
+    from calibrators.compensation import read_estimate
+    from calibrators.measurements import Measurements
+    from calibrators.verification import verify
+
     est = read_estimate(args.estimate)
     data = Measurements.read(args.readings, est.readings.design)
     given = args.conditions is not None or args.effects is not None

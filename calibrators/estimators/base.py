@@ -17,7 +17,6 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
-from scipy import special
 
 from calibrators.estimators.consider import (
     TABLE_TERM,
@@ -218,9 +217,9 @@ class Estimate:
         :data:`~calibrators.estimators.exact_fit.CHI2_LEVEL` (None: no test)."""
         if self.chi2 is None or not self.dof:
             return None
-        from calibrators.estimators.exact_fit import CHI2_LEVEL
+        from calibrators.estimators.exact_fit import chi2_rejects
 
-        return bool(special.chdtrc(self.dof, self.chi2) < CHI2_LEVEL)
+        return bool(chi2_rejects(self.dof, self.chi2))
 
     @property
     def machine(self) -> MachineParams:

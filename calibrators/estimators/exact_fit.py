@@ -29,7 +29,6 @@ from __future__ import annotations
 from dataclasses import dataclass, fields, replace
 
 import numpy as np
-from scipy import special
 
 from calibrators.estimators.consider import Consider
 from orthoglide_env.instruments.dial import weighting_sigma
@@ -100,10 +99,7 @@ class BatchFit:
     @property
     def misfit(self) -> np.ndarray:
         """(M,) bool: the chi-square test rejects the model at :data:`CHI2_LEVEL`."""
-        # The chi-square survival function itself (what scipy.stats.chi2.sf evaluates,
-        # without its per-call overhead: this runs once per machine of a sweep).
-        survival = special.chdtrc(np.maximum(self.dof, 1), self.chi2)
-        return (self.dof > 0) & (survival < CHI2_LEVEL)
+        return chi2_rejects(self.dof, self.chi2)
 
     @property
     def covariance_scale(self) -> np.ndarray:
@@ -121,6 +117,18 @@ class BatchFit:
         modelled = np.any(self.error_covariance != 0, axis=(1, 2)) & (
             np.diagonal(self.error_covariance, axis1=1, axis2=2)[:, ~self.free].any(axis=1))
         return np.where(modelled[:, None, None], with_model, inflated)
+
+
+def chi2_rejects(dof: np.ndarray, chi2: np.ndarray) -> np.ndarray:
+    """Whether the chi-square test at :data:`CHI2_LEVEL` rejects a fit of ``dof`` degrees
+    of freedom and chi-square ``chi2`` (arrays alike; never without a degree of freedom)."""
+    # SciPy loads when a fit is judged, not when the command line starts.  The survival
+    # function itself (what scipy.stats.chi2.sf evaluates, without its per-call overhead:
+    # this runs once per machine of a sweep).
+    from scipy import special
+
+    dof = np.asarray(dof)
+    return (dof > 0) & (special.chdtrc(np.maximum(dof, 1), chi2) < CHI2_LEVEL)
 
 
 def directions(information: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

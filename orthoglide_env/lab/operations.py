@@ -61,6 +61,9 @@ class TimeTable:
 
 
 TIME = TimeTable()
+#: The lab time an experiment has unless told otherwise (s): an hour, the comparison's
+#: equal budget for every agent.
+DEFAULT_BUDGET_S: float = 3600.0
 
 
 @lru_cache(maxsize=8)

@@ -31,9 +31,6 @@ from orthoglide_env.world.conditions import IDEAL, Conditions
 #: Encoders may read a hair outside the control limits after settling (solver residue
 #: ~1e-9 mm); the observation box leaves this margin so an observation is always inside.
 ENCODER_MARGIN: float = 1.0
-#: The lab time an experiment has unless told otherwise (s): an hour, the comparison's
-#: equal budget for every agent.
-DEFAULT_BUDGET_S: float = 3600.0
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,6 @@ from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import LEG_NAMES, R_LEG, MachineParams
@@ -55,13 +54,21 @@ def _xyz(v: np.ndarray) -> str:
     return " ".join(f"{x:.12g}" for x in np.asarray(v, dtype=float) * MM)
 
 
+def _rotation() -> type:
+    """SciPy's ``Rotation``, imported when a URDF is written, not with the package (the
+    command line and the model start without SciPy)."""
+    from scipy.spatial.transform import Rotation
+
+    return Rotation
+
+
 def _rpy(rot: np.ndarray) -> str:
     # scipy's extrinsic xyz Euler angles are URDF's rpy.  The y and z leg frames sit at
     # pitch +-90 deg (gimbal lock): scipy warns and folds the yaw into the roll, which still
     # represents the same rotation exactly, so the warning carries no information here.
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
-        angles = Rotation.from_matrix(rot).as_euler("xyz")
+        angles = _rotation().from_matrix(rot).as_euler("xyz")
     return " ".join(f"{a:.15g}" for a in angles)
 
 
@@ -80,8 +87,9 @@ def _box(size: np.ndarray, xyz: np.ndarray, colour: str, *, collide: bool) -> st
 
 def _pin(length: float, xyz: np.ndarray, axis: str) -> str:
     """A visual hinge pin (cylinder) along local Y or Z."""
-    rot = {"y": Rotation.from_euler("x", 90, degrees=True),
-           "z": Rotation.identity()}[axis].as_matrix()
+    rotation = _rotation()
+    rot = {"y": rotation.from_euler("x", 90, degrees=True),
+           "z": rotation.identity()}[axis].as_matrix()
     geometry = (f'<geometry><cylinder radius="{HINGE_RADIUS * MM:.6g}" '
                 f'length="{length * MM:.6g}"/></geometry>')
     return f'<visual>{_origin(xyz, rot)}{geometry}<material name="joint"/></visual>'
