@@ -33,7 +33,7 @@ from calibrators.compensation import compensated_commands
 from calibrators.estimators.base import Estimate
 from calibrators.estimators.consider import consider_terms
 from calibrators.estimators.exact_fit import CHI2_LEVEL, world_columns
-from calibrators.measurements import Measurement, Measurements
+from calibrators.measurements import Measurement, Measurements, rho_label
 from calibrators.procedure import Procedure, rho_words
 from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.model.design import MachineDesign
@@ -51,22 +51,35 @@ from orthoglide_env.world.conditions import Conditions
 
 #: The posture label of a compensated command: the nominal posture's, with this suffix.
 COMPENSATED: str = "-compensated"
+#: How far at a time (mm) the verification pulls a command at a control limit inside when
+#: its compensated command lies beyond the limit (:func:`compensated_procedure`): small
+#: next to the stroke (160 mm on the prototype), so that the posture verified stays the
+#: calibration's to a few hundredths of the workspace; an assumption, no standard sets it.
+INWARD_STEP_MM: float = 0.5
 
 
 def compensated_procedure(procedure: Procedure, est: Estimate) -> Procedure:
     """``procedure`` with every drive command replaced by the one that puts the tool of
     the machine ``est`` estimates where the nominal machine's tool is at that command (the
     compensated controller's), its readings' postures labelled with :data:`COMPENSATED`.
-    A drive whose compensated command lies beyond the control limits cannot be made: it
-    is left out with its readings, and said in the procedure's ``notes``.  The steps'
-    seconds stay the lab's for the nominal commands: the commands differ by a few tenths
-    of a mm, a few ms of driving."""
-    nominal = MachineParams(design=est.readings.design)
+
+    A command at a control limit (the paper's postures sit there) whose compensated one
+    lies beyond it is pulled inside, by :data:`INWARD_STEP_MM` at a time on its axes at a
+    limit, until the compensated command can be made: the verification reads every
+    posture of the calibration it verifies, that one a little inside, its reading
+    labelled with the command it was made from (``rho(...)``) and said in the notes.  One
+    that cannot be brought within the design's ``drho`` validity range of its place is
+    left out with its readings, and said too.  The steps' seconds stay the lab's for the
+    nominal commands: the commands differ by a few tenths of a mm, a few ms of driving."""
+    design = est.readings.design
+    nominal = MachineParams(design=design)
     wanted = sorted({tuple(s.rho) for s in procedure.steps if s.rho is not None}
                     | {tuple(m.rho) for m in procedure.sheet})
-    found = compensated_commands(est, direct(nominal, np.array(wanted, dtype=float)))
+    made, found = _inside(est, nominal, np.array(wanted, dtype=float))
     table = {rho: [float(v) for v in c] for rho, c in zip(wanted, found, strict=True)
              if np.isfinite(c).all()}
+    moved = {rho: tuple(float(v) for v in m) for rho, m in zip(wanted, made, strict=True)
+             if rho in table and tuple(m) != rho}
     steps, notes, number = [], list(procedure.notes), {}
     for step in procedure.steps:
         if step.rho is not None:
@@ -77,10 +90,16 @@ def compensated_procedure(procedure: Procedure, est: Estimate) -> Procedure:
                              "compensated command lies beyond the control limits")
                 continue
             text = step.text.replace(f"({rho_words(step.rho)})", f"({rho_words(rho)})", 1)
+            if tuple(step.rho) in moved:
+                notes.append(f"step {step.number} of the plan (drive to "
+                             f"{', '.join(f'{v:g}' for v in step.rho)}) is verified at "
+                             f"{', '.join(f'{v:g}' for v in moved[tuple(step.rho)])}: its "
+                             "compensated command lies beyond the control limits there")
             step = replace(step, rho=rho, text=text)
         number[step.number] = len(steps) + 1
         steps.append(step)
-    sheet = [type(m)(m.gauge, m.posture + COMPENSATED, m.repetition, 0.0,
+    sheet = [type(m)(m.gauge, (rho_label(moved[tuple(m.rho)]) if tuple(m.rho) in moved
+                               else m.posture) + COMPENSATED, m.repetition, 0.0,
                      tuple(table[tuple(m.rho)]), m.mounting, time_s=m.time_s,
                      step=number[m.step], design=est.readings.design)
              for m in procedure.sheet if m.step in number]
@@ -90,6 +109,28 @@ def compensated_procedure(procedure: Procedure, est: Estimate) -> Procedure:
     steps = [replace(s, number=number[s.number], rows=rows.get(number[s.number], []))
              for s in steps]
     return replace(procedure, steps=steps, sheet=sheet, notes=notes)
+
+
+def _inside(est: Estimate, nominal: MachineParams, rho: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """The commands (n, 3) the verification makes of the nominal commands ``rho`` (n, 3)
+    (each itself, or pulled inside on its axes at a control limit, see
+    :func:`compensated_procedure`) and their compensated commands (NaN rows: none)."""
+    design = nominal.design
+    made = rho.copy()
+    found = compensated_commands(est, direct(nominal, made))
+    at_max, at_min = rho >= design.rho_max, rho <= design.rho_min
+    reach = design.validity_range["drho"][0]
+    for step in range(1, int(reach / INWARD_STEP_MM) + 1):
+        missing = ~np.isfinite(found).all(axis=-1) & (at_max | at_min).any(axis=-1)
+        if not missing.any():
+            break
+        inward = step * INWARD_STEP_MM
+        made[missing] = np.where(at_max[missing], rho[missing] - inward,
+                                 np.where(at_min[missing], rho[missing] + inward,
+                                          rho[missing]))
+        found[missing] = compensated_commands(est, direct(nominal, made[missing]))
+    return made, found
 
 
 def _nominal_command(m: Measurement, design: MachineDesign) -> np.ndarray:

@@ -15,6 +15,7 @@ from orthoglide_env import MachineDesign
 from orthoglide_env.model.design import PROTOTYPE, RULES, DesignError
 from orthoglide_env.model.errors import MachineFileError, MachineParams, check_validity
 from orthoglide_env.model.kinematics import direct, paper_posture
+from orthoglide_env.world.machine_file import read_machine_file
 
 SMALL_FILE = Path(__file__).resolve().parents[1] / "examples" / "designs" / "small.json"
 SMALL = MachineDesign.from_file(SMALL_FILE)
@@ -420,3 +421,107 @@ def test_the_stands_follow_the_designs_slot_count() -> None:
         gym.make(orthoglide_env.LAB_ENV_ID, stands=40)
     with pytest.raises(ValueError, match=r"in \[1, the design's slot count\], got 0"):
         gym.make(orthoglide_env.LAB_ENV_ID, stands=0)
+
+
+# --- Every file that holds a design makes the commands use it ------------------------
+#: A machine builder's design (not the prototype's, nor the small example's).
+BUILDER = {"L": 280.0, "d": 70.0, "r": 28.0}
+
+
+@pytest.fixture(scope="module")
+def builder(tmp_path_factory) -> dict[str, Path]:
+    """A builder's design file, an estimate of one of its machines, the compensation's
+    machine file and a plan with its filled sheet."""
+    import csv
+
+    folder = tmp_path_factory.mktemp("builder")
+    files = {"design": _write(folder / "design.json", json.dumps(BUILDER)),
+             "estimate": folder / "est.json", "plan": folder / "plan"}
+    assert main(["calibrate", "--design", str(files["design"]), "--seed", "3", "--params",
+                 "paper6", "--conditions", "ideal", "--save-estimate",
+                 str(files["estimate"]), "--json"]) == 0
+    assert main(["compensate", str(files["estimate"]), "--out", str(folder / "comp"),
+                 "--json"]) == 0
+    files["machine"] = folder / "comp" / "machine.json"
+    assert main(["plan", "--design", str(files["design"]), "--out",
+                 str(files["plan"])]) == 0
+    rows = list(csv.reader((files["plan"] / "readings.csv").open()))
+    column = rows[0].index("reading_mm")
+    for row in rows[1:]:
+        row[column] = "0.01"
+    files["sheet"] = folder / "filled.csv"
+    with files["sheet"].open("w", newline="") as handle:
+        csv.writer(handle).writerows(rows)
+    return files
+
+
+@pytest.mark.parametrize("kind", ["estimate", "machine"])
+def test_pose_reads_a_machine_file_of_its_own_design(builder, capsys, kind) -> None:
+    """An estimate, or the compensation's machine.json, names its design: pose uses it
+    without --design, and refuses a --design that is another in one line."""
+    capsys.readouterr()
+    assert main(["pose", "--machine", str(builder[kind]), "--rho", "0", "0", "0",
+                 "--noise-free", "--json"]) == 0
+    tcp = json.loads(capsys.readouterr().out)["tcp_model"]
+    machine, _ = read_machine_file(builder[kind])
+    assert machine.design == MachineDesign.from_dict(BUILDER)
+    # The exact model's tool at Zero is the builder's machine's (the prototype's with the
+    # same errors would sit elsewhere: its legs are 30 mm longer).
+    assert np.allclose(tcp, direct(machine, np.zeros(3)), rtol=0, atol=1e-9)
+    assert main(["pose", "--machine", str(builder[kind]), "--rho", "0", "0", "0",
+                 "--design", "examples/designs/small.json"]) == 2
+    assert "another design" in capsys.readouterr().err
+
+
+def test_plan_verify_plans_for_the_estimates_design(builder, tmp_path, capsys) -> None:
+    """The verification of an estimate is planned on the estimate's machine (its stands
+    placed along its bars, its postures within its limits), and a --design that is
+    another is refused."""
+    out = tmp_path / "verify"
+    assert main(["plan", "--verify", str(builder["estimate"]), "--out", str(out)]) == 0
+    plan = json.loads((out / "plan.json").read_text())
+    assert MachineDesign.from_dict(plan["design"]) == MachineDesign.from_dict(BUILDER)
+    capsys.readouterr()
+    assert main(["plan", "--verify", str(builder["estimate"]), "--design",
+                 "examples/designs/small.json", "--out", str(tmp_path / "no")]) == 2
+    assert "another design than the estimate's" in capsys.readouterr().err
+
+
+def test_fit_takes_the_plans_design(builder, capsys) -> None:
+    """A sheet filled from a plan is fitted against the plan without --design (the plan
+    holds its design); a --design that is another is refused in one line."""
+    capsys.readouterr()
+    assert main(["fit", str(builder["sheet"]), "--plan", str(builder["plan"] / "plan.json"),
+                 "--params", "paper6", "--json"]) == 0
+    capsys.readouterr()
+    assert main(["fit", str(builder["sheet"]), "--plan", str(builder["plan"] / "plan.json"),
+                 "--design", "examples/designs/small.json"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "another design than the plan's" in err[0]
+
+
+def test_the_verification_checks_every_posture_of_the_calibration(builder, tmp_path) -> None:
+    """The paper's postures sit at the control limits, and the compensated command of an
+    estimated machine with encoder offsets can lie beyond them there: the verification
+    pulls such a command inside instead of leaving its posture out, so it has every step
+    and reading of the calibration's plan, each command within the limits."""
+    out = tmp_path / "verify"
+    assert main(["plan", "--verify", str(builder["estimate"]), "--out", str(out)]) == 0
+    verification = json.loads((out / "plan.json").read_text())
+    calibration = json.loads((builder["plan"] / "plan.json").read_text())
+    # This machine's offsets push some commands beyond a limit (else nothing is tested).
+    assert any("is verified at" in note for note in verification["notes"])
+    assert not any("left out" in note for note in verification["notes"])
+    assert len(verification["steps"]) == len(calibration["steps"])
+    import csv
+
+    def sheet(folder: Path) -> list[dict[str, str]]:
+        with (folder / "readings.csv").open() as handle:
+            return list(csv.DictReader(handle))
+
+    rows = sheet(out)
+    assert len(rows) == len(sheet(builder["plan"]))
+    design = MachineDesign.from_dict(BUILDER)
+    for row in rows:
+        rho = [float(row[f"rho_{a}"]) for a in "xyz"]
+        assert all(design.rho_min <= v <= design.rho_max for v in rho), row

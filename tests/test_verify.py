@@ -84,20 +84,31 @@ def test_another_machine_fails(calibrated, tmp_path, capsys) -> None:
 
 def test_the_plan_drives_the_compensated_commands(calibrated) -> None:
     """Each drive of the verification plan is the command that puts the estimated
-    machine's tool where the nominal machine's is at the paper's posture."""
+    machine's tool where the nominal machine's is at the paper's posture, or, where that
+    command lies beyond the control limits, at the command its label names: the paper's
+    posture pulled inside on its axes at a limit, by at most the validity range's
+    offset."""
+    from types import SimpleNamespace
+
     from calibrators.compensation import read_estimate
+    from calibrators.verification import COMPENSATED, _nominal_command
+    from orthoglide_env.model.design import PROTOTYPE
     from orthoglide_env.model.errors import MachineParams
-    from orthoglide_env.model.kinematics import direct, paper_posture
+    from orthoglide_env.model.kinematics import PAPER_POSTURES, direct, paper_posture
 
     est = read_estimate(calibrated / "est.json")
     plan = json.loads((calibrated / "plan" / "plan.json").read_text())
     rows = list(csv.DictReader((calibrated / "plan" / "readings.csv").open()))
-    assert all(r["posture"].endswith("-compensated") for r in rows)
+    assert all(r["posture"].endswith(COMPENSATED) for r in rows)
+    papers = np.array([paper_posture(name) for name in PAPER_POSTURES])
     for row in rows:
-        name = row["posture"].removesuffix("-compensated")
+        nominal = _nominal_command(SimpleNamespace(posture=row["posture"]), PROTOTYPE)
+        assert np.isfinite(nominal).all(), row["posture"]
+        nearest = np.abs(papers - nominal).max(axis=1).min()
+        assert nearest <= PROTOTYPE.validity_range["drho"][0], row["posture"]
         rho = np.array([float(row[f"rho_{a}"]) for a in "xyz"])
         np.testing.assert_allclose(direct(est.machine, rho),
-                                   direct(MachineParams(), paper_posture(name)), atol=1e-9)
+                                   direct(MachineParams(), nominal), atol=1e-9)
     assert [s["number"] for s in plan["steps"]] == list(range(1, len(plan["steps"]) + 1))
 
 

@@ -13,7 +13,13 @@ import orthoglide_env
 from calibrators.agents import available as agents_available
 from calibrators.agents import get_agent
 from calibrators.cli import estimator_options
-from calibrators.cli.common import add_conditions, add_design, add_thermometer, conditions_of
+from calibrators.cli.common import (
+    add_conditions,
+    add_design,
+    add_thermometer,
+    conditions_of,
+    given_design,
+)
 from calibrators.cli.output import emit, report, save
 from calibrators.compare import machine_z_scores
 from calibrators.estimators.base import Estimate, Measurements, get_strategy
@@ -38,16 +44,15 @@ def _setup(args: argparse.Namespace
     non-geometric truth): its gauges are installed perfectly and read without noise unless
     ``--errors`` or ``--sigma`` ask for them.  A random machine is drawn from ``--errors``
     (default realistic) with its gauge errors and noise."""
-    design = load_design(args.design)
     world = None
     if args.machine:
-        machine, world = read_machine_file(args.machine, design)
+        machine, world = read_machine_file(args.machine, given_design(args))
         preset = args.errors or "nominal"
         noisy = args.sigma is not None
     else:
         preset = args.errors or DEFAULT_PRESET
         # Unused but for its design: the lab draws the machine from the seed.
-        machine = MachineParams(design=design)
+        machine = MachineParams(design=load_design(args.design))
         noisy = not args.noise_free
     sigma = DEFAULT_SIGMA if args.sigma is None else args.sigma
     noise = (sigma, DEFAULT_RESOLUTION) if noisy else (0.0, 0.0)

@@ -43,11 +43,18 @@ def machine_of(args: argparse.Namespace) -> MachineParams:
 
 def truth_of(args: argparse.Namespace) -> tuple[MachineParams, World | None]:
     """:func:`machine_of` and the world the machine file holds (None when it holds none,
-    or for a random machine)."""
-    design = design_of(args)
+    or for a random machine).  A machine file that names its design (an estimate's, a
+    compensation's ``machine.json``) is of that design; ``--design`` is for a file that
+    names none, and one that names another is refused."""
     if getattr(args, "machine", None):
-        return read_machine_file(args.machine, design)
-    return random_machine(args.seed, args.errors, design), None
+        return read_machine_file(args.machine, given_design(args))
+    return random_machine(args.seed, args.errors, design_of(args)), None
+
+
+def given_design(args: argparse.Namespace) -> MachineDesign | None:
+    """The design of ``--design FILE`` when given, else None (a file's own, or the
+    prototype)."""
+    return load_design(args.design) if getattr(args, "design", None) else None
 
 
 def rho_of(values: list[float], design: MachineDesign) -> np.ndarray:

@@ -3,12 +3,17 @@
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from calibrators.cli import estimator_options
 from calibrators.cli.common import UsageError, add_conditions, conditions_of, design_of
 from calibrators.measurements import Measurements
+from orthoglide_env.model.design import MachineDesign
+
+if TYPE_CHECKING:
+    from calibrators.procedure import Procedure
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 
 
@@ -16,9 +21,17 @@ def run(args: argparse.Namespace) -> None:
     from calibrators.cli.output import emit, report, save
 
     # --sigma and --resolution were checked with every command's (calibrators.cli.run).
-    data = Measurements.read(args.file, design_of(args) if args.design else None)
-    if args.plan:
-        _check_plan(data, args.plan)
+    plan = _read_plan(args.plan) if args.plan else None
+    try:
+        data = Measurements.read(args.file, _design(args, plan))
+    except ValueError as exc:
+        if plan is None or args.design:
+            raise
+        Measurements.read(args.file)  # a file at fault by itself says so
+        raise UsageError(f"--plan {args.plan}: the readings are of another design than the "
+                         f"plan's: {str(exc).splitlines()[0]}") from None
+    if plan is not None:
+        _check_plan(data, plan, args.plan)
     if args.to_csv:
         data.to_csv(args.to_csv)
     sigma = float(np.hypot(args.sigma, args.resolution / np.sqrt(12)))
@@ -27,16 +40,39 @@ def run(args: argparse.Namespace) -> None:
     emit(report(est, None), args.json)
 
 
-def _check_plan(data: Measurements, path: str) -> None:
-    """The readings are the sheet of the plan at ``path``: same design, each row one of its
-    steps' readings (:class:`UsageError` naming the line otherwise)."""
-    from calibrators.procedure import Procedure, check_sheet
+def _read_plan(path: str) -> Procedure:
+    from calibrators.procedure import Procedure
 
     try:
-        procedure = Procedure.read(path)
+        return Procedure.read(path)
+    except ValueError as exc:
+        raise UsageError(f"--plan {path}: {exc}") from None
+
+
+def _design(args: argparse.Namespace, plan: Procedure | None) -> MachineDesign | None:
+    """The design the readings are of: ``--design``'s, else the plan's (it holds its
+    design), else None (the readings file's, or the prototype); a ``--design`` other than
+    the plan's is refused."""
+    given = design_of(args) if args.design else None
+    if plan is None:
+        return given
+    own = MachineDesign.from_dict(plan.design)
+    if given is not None and given != own:
+        raise UsageError(f"--design {args.design} is another design than the plan's "
+                         f"({args.plan}): leave --design out, the plan holds its design")
+    return own
+
+
+def _check_plan(data: Measurements, procedure: Procedure, path: str) -> None:
+    """The readings are the sheet of the plan ``procedure`` (read from ``path``): same
+    design, each row one of its steps' readings (:class:`UsageError` naming the line
+    otherwise)."""
+    from calibrators.procedure import check_sheet
+
+    try:
         if procedure.design != data.design.to_dict():
             raise ValueError("the plan is for a machine of another design than the "
-                             "readings' (give the plan's design with --design)")
+                             "readings'")
         check_sheet(data, procedure)
     except ValueError as exc:
         raise UsageError(f"--plan {path}: {exc}") from None

@@ -30,12 +30,21 @@ from orthoglide_env.model.errors import MachineParams
 def run(args: argparse.Namespace) -> None:
     if not args.budget > 0:
         raise UsageError(f"--budget must be a positive number of seconds, got {args.budget:g}")
-    design = load_design(args.design)
     try:
+        est = read_estimate(args.verify) if args.verify else None
+        design = load_design(args.design)
+        if est is not None:
+            # The estimate holds the design it calibrated: the verification is planned for
+            # it, and a --design that is another is refused.
+            if args.design and design != est.readings.design:
+                raise ValueError(f"--design {args.design} is another design than the "
+                                 f"estimate's ({args.verify}): leave --design out, the "
+                                 "estimate holds its design")
+            design = est.readings.design
         procedure = make_procedure(args.agent, args.budget, design, conditions_of(args, None),
                                    args.seed)
-        if args.verify:
-            procedure = compensated_procedure(procedure, read_estimate(args.verify))
+        if est is not None:
+            procedure = compensated_procedure(procedure, est)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     out = Path(args.out)
