@@ -88,6 +88,7 @@ def run(argv: list[str] | None = None) -> int:
     parser = build_parser(command if command in COMMANDS else "")
     args = parser.parse_args(argv)
     try:
+        # Imported once the command line is parsed: --help and --version need none of it.
         from orthoglide_env.instruments.dial import (
             DEFAULT_RESOLUTION,
             DEFAULT_SIGMA,
@@ -109,6 +110,7 @@ def run(argv: list[str] | None = None) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
     try:
         try:
             return run(argv)
@@ -124,8 +126,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         # Ctrl-C before a command handles it itself (while its modules load, say): one
         # line and the shell's status for SIGINT, no traceback.
-        command = _command(sys.argv[1:] if argv is None else list(argv))
-        print(" ".join(("orthoglide", command)).strip() + ": interrupted", file=sys.stderr)
+        print(" ".join(("orthoglide", _command(argv))).strip() + ": interrupted",
+              file=sys.stderr)
         return 130
 
 

@@ -57,6 +57,17 @@ def given_design(args: argparse.Namespace) -> MachineDesign | None:
     return load_design(args.design) if getattr(args, "design", None) else None
 
 
+def held_design(args: argparse.Namespace, own: MachineDesign, what: str, path: str
+                ) -> MachineDesign:
+    """``own``, the design the ``what`` file at ``path`` holds (a plan, an estimate);
+    :class:`UsageError` in one line when ``--design`` names another."""
+    given = given_design(args)
+    if given is not None and given != own:
+        raise UsageError(f"--design {args.design} is another design than the {what}'s "
+                         f"({path}): leave --design out, the {what} holds its design")
+    return own
+
+
 def rho_of(values: list[float], design: MachineDesign) -> np.ndarray:
     return check_rho(np.array(values, dtype=float), design=design)
 

@@ -8,13 +8,19 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from calibrators.cli import estimator_options
-from calibrators.cli.common import UsageError, add_conditions, conditions_of, design_of
+from calibrators.cli.common import (
+    UsageError,
+    add_conditions,
+    conditions_of,
+    given_design,
+    held_design,
+)
 from calibrators.measurements import Measurements
+from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.model.design import MachineDesign
 
 if TYPE_CHECKING:
     from calibrators.procedure import Procedure
-from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 
 
 def run(args: argparse.Namespace) -> None:
@@ -53,14 +59,9 @@ def _design(args: argparse.Namespace, plan: Procedure | None) -> MachineDesign |
     """The design the readings are of: ``--design``'s, else the plan's (it holds its
     design), else None (the readings file's, or the prototype); a ``--design`` other than
     the plan's is refused."""
-    given = design_of(args) if args.design else None
     if plan is None:
-        return given
-    own = MachineDesign.from_dict(plan.design)
-    if given is not None and given != own:
-        raise UsageError(f"--design {args.design} is another design than the plan's "
-                         f"({args.plan}): leave --design out, the plan holds its design")
-    return own
+        return given_design(args)
+    return held_design(args, MachineDesign.from_dict(plan.design), "plan", args.plan)
 
 
 def _check_plan(data: Measurements, procedure: Procedure, path: str) -> None:

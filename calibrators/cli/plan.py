@@ -18,7 +18,13 @@ import html
 import json
 from pathlib import Path
 
-from calibrators.cli.common import UsageError, add_conditions, add_design, conditions_of
+from calibrators.cli.common import (
+    UsageError,
+    add_conditions,
+    add_design,
+    conditions_of,
+    held_design,
+)
 from calibrators.compensation import read_estimate
 from calibrators.procedure import Procedure, make_procedure, planned_agents, write_sheet
 from calibrators.verification import compensated_procedure
@@ -32,15 +38,9 @@ def run(args: argparse.Namespace) -> None:
         raise UsageError(f"--budget must be a positive number of seconds, got {args.budget:g}")
     try:
         est = read_estimate(args.verify) if args.verify else None
-        design = load_design(args.design)
-        if est is not None:
-            # The estimate holds the design it calibrated: the verification is planned for
-            # it, and a --design that is another is refused.
-            if args.design and design != est.readings.design:
-                raise ValueError(f"--design {args.design} is another design than the "
-                                 f"estimate's ({args.verify}): leave --design out, the "
-                                 "estimate holds its design")
-            design = est.readings.design
+        # The estimate holds the design it calibrated: its verification is planned for it.
+        design = (load_design(args.design) if est is None
+                  else held_design(args, est.readings.design, "estimate", args.verify))
         procedure = make_procedure(args.agent, args.budget, design, conditions_of(args, None),
                                    args.seed)
         if est is not None:
