@@ -3,7 +3,7 @@ workers, against the target of 100 machines within 2 minutes on 2 cores.
 
     python benchmarks/bench_active.py [--machines 100] [--jobs 2] [--conditions lab]
 
-Runs ``compare``'s own path (``calibrators.compare.run``: the batched lab, the batched
+Runs ``compare``'s own path (``calibrators.study.compare.run``: the batched lab, the batched
 fits) for ``active`` with the ``extended`` estimator and reports the wall time (each
 worker's one-off planning start-up included, as a sweep pays it), the seconds per
 machine and the ratio to the target.
@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from calibrators.compare import Config, run
+from calibrators.study.compare import Config, run
 from orthoglide_env.world.conditions import Conditions
 
 #: The target: machines and wall seconds (issue: 100 machines within 2 minutes, 2 cores).

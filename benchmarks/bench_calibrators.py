@@ -17,8 +17,8 @@ import numpy as np
 
 import orthoglide_env
 from calibrators.agents import get_agent
-from calibrators.compare import Config, run
-from calibrators.experiment import estimate, run_episode
+from calibrators.study.compare import Config, run
+from calibrators.study.episodes import estimate, run_episode
 
 
 def episode_times(backend: str, estimator: str, repeats: int = 10) -> np.ndarray:

@@ -38,8 +38,8 @@ import numpy as np  # noqa: E402
 
 import orthoglide_env  # noqa: E402
 from calibrators.agents import get_agent  # noqa: E402
-from calibrators.compare import CHUNK, Config, Trial, run_chunk  # noqa: E402
-from calibrators.experiment import run_episode, run_episodes  # noqa: E402
+from calibrators.study.compare import CHUNK, Config, Trial, run_chunk  # noqa: E402
+from calibrators.study.episodes import run_episode, run_episodes  # noqa: E402
 from orthoglide_env.world.conditions import Conditions  # noqa: E402
 
 #: Machines per chunk of the per-machine path: one, every stage a batch of one.
@@ -91,7 +91,7 @@ def episodes_only(machines: int, per_machine: int) -> tuple[float, float]:
 
 MEMORY_RUN = """
 import resource, sys, time
-from calibrators.compare import Config, run
+from calibrators.study.compare import Config, run
 start = time.perf_counter()
 trials = run(Config(("paper",), ("paper",)), int(sys.argv[1]))
 print(len(trials), time.perf_counter() - start,

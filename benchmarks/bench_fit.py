@@ -24,8 +24,8 @@ import gymnasium as gym
 
 import orthoglide_env
 from calibrators.agents import get_agent
-from calibrators.experiment import run_episode
 from calibrators.measurements import Measurements
+from calibrators.study.episodes import run_episode
 
 #: The target: readings and wall seconds (issue: 10^6 readings within 60 s, 2 cores).
 TARGET_READINGS, TARGET_S = 1_000_000, 60.0

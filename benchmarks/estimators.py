@@ -41,8 +41,8 @@ from calibrators.estimators.base import get_strategy
 from calibrators.estimators.exact_fit import z_scores
 from calibrators.estimators.gauss_newton import design_of
 from calibrators.estimators.prediction import predicted_tcp_error
-from calibrators.experiment import run_episode
-from orthoglide_env.model.reading_model import parameters_of
+from calibrators.study.episodes import run_episode
+from orthoglide_env.reading_model import parameters_of
 from orthoglide_env.scoring import FRAMES, score
 
 ESTIMATORS: dict[str, tuple[str, str, str]] = {

@@ -17,7 +17,7 @@ import argparse
 import json
 from pathlib import Path
 
-from calibrators.compare import Trial, summary
+from calibrators.study.compare import Trial, summary
 
 UM = 1e3  # per mm
 

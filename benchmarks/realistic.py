@@ -21,7 +21,7 @@ import numpy as np
 import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.estimators.differences import differences
-from calibrators.experiment import estimate, run_episode
+from calibrators.study.episodes import estimate, run_episode
 from orthoglide_env.scoring import FRAMES, score
 
 ESTIMATORS: tuple[str, ...] = ("paper", "paper6", "extended")

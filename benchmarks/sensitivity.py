@@ -20,7 +20,7 @@ import sys
 
 import numpy as np
 
-from calibrators.compare import Config, Trial, median_interval, run
+from calibrators.study.compare import Config, Trial, median_interval, run
 from orthoglide_env.world.conditions import EFFECT_NAMES, Conditions
 
 UM = 1e3  # per mm

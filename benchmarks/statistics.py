@@ -14,7 +14,7 @@ import argparse
 
 import numpy as np
 
-from calibrators.compare import Config, run
+from calibrators.study.compare import Config, run
 from orthoglide_env.model.errors import ERROR_NAMES
 
 

@@ -29,7 +29,7 @@ from calibrators.agents import get_agent
 from calibrators.estimators.base import Estimate, get_strategy
 from calibrators.estimators.consider import FULL_TERMS, WORLD_PREFIX, term_family
 from calibrators.estimators.prediction import predicted_tcp_error
-from calibrators.experiment import machine_seed, run_episode
+from calibrators.study.episodes import machine_seed, run_episode
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.scoring import score
 

@@ -26,9 +26,9 @@ import time
 import numpy as np
 
 from calibrators.agents.optimal import fixed_plan
-from calibrators.design.planner import Planner
-from calibrators.design.slot_table import slot_table
-from calibrators.design.world_terms import directions
+from calibrators.planning.planner import Planner
+from calibrators.planning.slot_table import slot_table
+from calibrators.planning.world_terms import directions
 from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op
 from orthoglide_env.model.design import PROTOTYPE

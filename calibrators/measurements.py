@@ -106,7 +106,7 @@ from orthoglide_env.instruments.slots import NO_LEG, GaugeSpec, Part, layout_fro
 from orthoglide_env.model.design import PROTOTYPE, DesignError, MachineDesign
 from orthoglide_env.model.errors import AXIS_NAMES, LEG_NAMES
 from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture
-from orthoglide_env.model.reading_model import TrackerAxis
+from orthoglide_env.reading_model import TrackerAxis
 
 #: A dial gauge's travel is about 10 mm: a reading ten times that is a wrong unit or column.
 MAX_READING_MM: float = 100.0

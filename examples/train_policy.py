@@ -15,7 +15,7 @@ view (one Box of actions, one of observations, :mod:`orthoglide_env.envs.wrapper
 several envs in parallel, observations normalised by ``VecNormalize`` (its statistics are
 saved with the policy: the agent ``policy:FILE`` normalises as training did).  Every
 ``--every`` steps the policy so far is saved and played on the first ``--curve-machines``
-held-out machines, scored by :func:`calibrators.compare.run` exactly as ``orthoglide
+held-out machines, scored by :func:`calibrators.study.compare.run` exactly as ``orthoglide
 compare`` scores any agent; the learning curve goes to ``<out>.curve.csv`` and
 ``<out>.curve.png``.  At the end the policy is compared with ``random``, ``paper`` and
 every other designed agent that is registered on ``--machines`` held-out machines.
@@ -42,11 +42,11 @@ from typing import Any
 
 import numpy as np
 
-from calibrators import compare
 from calibrators.agents import available
 from calibrators.agents.names import POLICY_PREFIX
 from calibrators.agents.policy import PolicySpec, save_policy, spec_of
-from calibrators.experiment import DEFAULT_BUDGET_S, make_estimator
+from calibrators.study import compare
+from calibrators.study.episodes import DEFAULT_BUDGET_S, make_estimator
 from orthoglide_env.envs.wrappers import flat_lab_env
 from orthoglide_env.instruments.dial import DEFAULT_SIGMA
 from orthoglide_env.lab.operations import Op

@@ -11,7 +11,7 @@ import pytest
 
 import orthoglide_env
 from calibrators.agents import get_agent
-from calibrators.experiment import Episode, run_episode
+from calibrators.study.episodes import Episode, run_episode
 from orthoglide_env.model.design import PROTOTYPE
 
 #: Rows of eq. (10) as (posture, index of the gauge in the paper layout).  The paper's

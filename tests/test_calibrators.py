@@ -13,8 +13,8 @@ import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.estimators.base import Estimate, available, get_strategy
 from calibrators.estimators.differences import differences, paper_matrix
-from calibrators.experiment import run_episode
 from calibrators.measurements import Measurement, MeasurementFileError, Measurements
+from calibrators.study.episodes import run_episode
 from orthoglide_env.instruments.slots import GaugeSpec
 
 

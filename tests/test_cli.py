@@ -14,7 +14,7 @@ import pytest
 from conftest import TABLE1 as TABLE1_ERRORS
 
 from calibrators.cli import build_parser, main
-from calibrators.compare import Trial
+from calibrators.study.compare import Trial
 from orthoglide_env.model.errors import ERROR_NAMES, error_group
 
 TABLE1 = json.dumps(TABLE1_ERRORS)

@@ -13,9 +13,9 @@ import pytest
 import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.cli import main
-from calibrators.compensation import compensate, read_estimate, read_targets, write_estimate
 from calibrators.estimators.base import get_strategy
-from calibrators.experiment import machine_seed, run_episode
+from calibrators.study.episodes import machine_seed, run_episode
+from calibrators.workflow.compensate import compensate, read_estimate, read_targets, write_estimate
 from orthoglide_env.model.kinematics import direct
 from orthoglide_env.scoring import remove_rigid, tcp_error_vectors_many, workspace_grid
 from orthoglide_env.world.machine_file import read_machine_file

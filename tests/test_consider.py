@@ -10,11 +10,11 @@ from calibrators.estimators.base import get_strategy
 from calibrators.estimators.consider import consider_terms
 from calibrators.estimators.exact_fit import fit_batch, z_scores
 from calibrators.estimators.parameters import prior_sigmas, scales, select
-from calibrators.experiment import measurements_of
 from calibrators.measurements import Measurement, Measurements
+from calibrators.study.episodes import measurements_of
 from orthoglide_env.instruments.slots import PAPER_LAYOUT, Part
 from orthoglide_env.model.design import PROTOTYPE
-from orthoglide_env.model.reading_model import Design, predict
+from orthoglide_env.reading_model import Design, predict
 from orthoglide_env.world.conditions import IDEAL, Conditions
 from orthoglide_env.world.truth import HOUR, World
 

@@ -9,20 +9,20 @@ import pytest
 import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.agents.optimal import fixed_plan
-from calibrators.design.planner import (
+from calibrators.planning.planner import (
     N_MACHINE,
     SPREAD_SLACK,
     Planner,
     greedy_plan,
     rigid_weight,
 )
-from calibrators.design.slot_table import reach, slot_table
-from calibrators.experiment import estimate, measurements_of, run_episode
+from calibrators.planning.slot_table import reach, slot_table
+from calibrators.study.episodes import estimate, measurements_of, run_episode
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op, slot_catalogue
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import PAPER_POSTURES, axis_postures, paper_posture
-from orthoglide_env.model.reading_model import ParameterSpace, default_scales
+from orthoglide_env.reading_model import ParameterSpace, default_scales
 from orthoglide_env.scoring import predicted_tcp_frames, score
 
 SIGMA = 0.01

@@ -28,7 +28,7 @@ from conftest import TABLE1 as TABLE1_ERRORS
 
 from calibrators.agents.names import POLICY_PREFIX
 from calibrators.cli import build_parser, main
-from calibrators.engines import ray_available
+from calibrators.study.engines import ray_available
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCUMENTS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]

@@ -9,7 +9,7 @@ import sys
 import pytest
 
 from calibrators.cli import main
-from calibrators.compare import Config, run
+from calibrators.study.compare import Config, run
 
 
 def test_ray_engine_gives_the_local_engines_trials(monkeypatch) -> None:
@@ -45,7 +45,7 @@ def _thread_settings(_: int) -> tuple[str | None, ...]:
     """What a worker sees of the numerical libraries' thread variables."""
     import os
 
-    from calibrators.engines import _THREAD_VARIABLES
+    from calibrators.study.engines import _THREAD_VARIABLES
 
     return tuple(os.environ.get(key) for key in _THREAD_VARIABLES)
 
@@ -55,7 +55,7 @@ def test_local_workers_start_single_threaded(monkeypatch) -> None:
     workers with a multi-threaded BLAS each on two cores spin against each other (a
     comparison ran 2.5x slower).  The pool spawns its workers when the first result is
     asked for, so this checks the environment there, not where the generator was made."""
-    from calibrators.engines import _THREAD_VARIABLES, results
+    from calibrators.study.engines import _THREAD_VARIABLES, results
 
     for key in _THREAD_VARIABLES:
         monkeypatch.delenv(key, raising=False)
@@ -75,7 +75,7 @@ def _fail_on_two(item: int) -> int:
 def test_a_worker_error_reaches_the_caller_with_its_traceback() -> None:
     """The worker's exception is raised in the parent, of its own type, and the worker's
     traceback goes with it as its cause."""
-    from calibrators.engines import RemoteTraceback, results
+    from calibrators.study.engines import RemoteTraceback, results
 
     with pytest.raises(ValueError, match="item 2 is refused") as caught:
         list(results(_fail_on_two, [0, 1, 2, 3], jobs=2))
@@ -86,7 +86,7 @@ def test_a_worker_error_reaches_the_caller_with_its_traceback() -> None:
 _INTERRUPTED_RUN = """
 import time
 from contextlib import closing
-from calibrators.engines import results
+from calibrators.study.engines import results
 
 def answer(item):
     # The second worker answers with 200 MB, far more than a pipe holds: it is still

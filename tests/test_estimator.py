@@ -33,7 +33,7 @@ from orthoglide_env.model.errors import (
     random_machine,
 )
 from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture
-from orthoglide_env.model.reading_model import parameters_of, predict
+from orthoglide_env.reading_model import parameters_of, predict
 
 TABLE1 = MachineParams(**TABLE1_ERRORS)
 
@@ -127,7 +127,7 @@ def test_jacobian_equals_central_differences_on_every_target_and_the_tracker() -
     scale unit on readings of the order of L = 310 mm, times the few operations a
     reading takes: the bar is 1e-9 mm per scale unit."""
     from orthoglide_env.instruments.slots import layout_from_names
-    from orthoglide_env.model.reading_model import Design, TrackerAxis, default_scales, jacobian
+    from orthoglide_env.reading_model import Design, TrackerAxis, default_scales, jacobian
 
     rng = np.random.default_rng(0)
     names = ["x-leg/y", "y/z@0.3", "z-leg/x", "x-carriage/y", "y-carriage/z", "platform/x"]

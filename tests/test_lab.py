@@ -18,8 +18,8 @@ import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.agents.base import action
 from calibrators.agents.paper import PaperAgent
-from calibrators.compare import Config, agent_episodes, run, run_chunk, summary
-from calibrators.experiment import estimate, make_estimator, measurements_of, run_episode
+from calibrators.study.compare import Config, agent_episodes, run, run_chunk, summary
+from calibrators.study.episodes import estimate, make_estimator, measurements_of, run_episode
 from orthoglide_env.lab.operations import SLOTS, TIME, Op, slot_index
 from orthoglide_env.scoring import score
 

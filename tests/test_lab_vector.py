@@ -11,8 +11,8 @@ from gymnasium.vector import AutoresetMode
 from test_vector_env import CRASHING, assert_same
 
 import orthoglide_env
-from calibrators.compare import Config, run_chunk
-from calibrators.experiment import make_estimator
+from calibrators.study.compare import Config, run_chunk
+from calibrators.study.episodes import make_estimator
 from orthoglide_env.envs.lab_vector import OrthoglideLabVectorEnv
 from orthoglide_env.lab.operations import PAPER_SLOTS, SLOTS, Op
 from orthoglide_env.model.design import PROTOTYPE

@@ -21,7 +21,7 @@ from calibrators.estimators.consider import (
 )
 from calibrators.estimators.exact_fit import fit_batch, world_columns
 from calibrators.estimators.prediction import predicted_tcp_error
-from calibrators.experiment import run_episode
+from calibrators.study.episodes import run_episode
 from orthoglide_env.model.compensation import PitchTable, interpolation_weights, node_count
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import MachineParams

@@ -15,7 +15,7 @@ from conftest import TABLE1
 
 from calibrators.cli import main
 from calibrators.cli.plan import _pictures
-from calibrators.procedure import Procedure, Step, make_procedure, place_words
+from calibrators.workflow.plan import Procedure, Step, make_procedure, place_words
 from orthoglide_env.instruments.slots import GaugeSpec
 from orthoglide_env.instruments.stands import install
 from orthoglide_env.lab.operations import SLOTS

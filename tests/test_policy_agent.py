@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 import orthoglide_env
-from calibrators import compare
 from calibrators.agents import get_agent, policy
 from calibrators.agents.policy import SPEC_ENTRY, PolicySpec, _load_model, save_policy, spec_of
 from calibrators.cli import main
-from calibrators.experiment import run_episode
+from calibrators.study import compare
+from calibrators.study.episodes import run_episode
 from orthoglide_env.envs.wrappers import flat_lab_env
 from orthoglide_env.lab.operations import SLOT_NAMES
 from orthoglide_env.model.design import MachineDesign

@@ -11,12 +11,12 @@ import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.agents.base import action
 from calibrators.agents.reference import POSTURES, reference_seconds, reference_steps
-from calibrators.experiment import measurements_of, run_episode
 from calibrators.measurements import Measurements
+from calibrators.study.episodes import measurements_of, run_episode
 from orthoglide_env.instruments.slots import GaugeSpec, Part, layout_from_names
 from orthoglide_env.lab.operations import SLOTS, TIME, Op, slot_catalogue
 from orthoglide_env.model.design import PROTOTYPE
-from orthoglide_env.model.reading_model import Design, parameters_of, predict
+from orthoglide_env.reading_model import Design, parameters_of, predict
 from orthoglide_env.world.table import REFERENCE_DEVIATION, REFERENCE_LENGTH_MM
 
 LAB = orthoglide_env.LAB_ENV_ID

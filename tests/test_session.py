@@ -13,9 +13,9 @@ import pytest
 
 import orthoglide_env
 from calibrators.cli import main
-from calibrators.experiment import machine_seed
 from calibrators.measurements import Measurements
-from calibrators.session import parse_answer
+from calibrators.study.episodes import machine_seed
+from calibrators.workflow.session import parse_answer
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 
 SEED, BUDGET = 2, "600"

@@ -35,7 +35,7 @@ from orthoglide_env.model.boxes import collision_boxes
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import ERROR_NAMES, PRESETS, MachineParams, random_machine
 from orthoglide_env.model.kinematics import direct
-from orthoglide_env.model.reading_model import parameters_of, predict
+from orthoglide_env.reading_model import parameters_of, predict
 
 #: The slots this file is about: every carriage face and platform face of the catalogue.
 NEW_SLOTS: tuple[GaugeSpec, ...] = tuple(s for s in SLOTS if s.part != Part.BAR)

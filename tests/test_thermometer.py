@@ -13,8 +13,8 @@ import orthoglide_env
 from calibrators.cli import main
 from calibrators.estimators.consider import WORLD_PREFIX, consider_terms
 from calibrators.estimators.gauss_newton import design_of
-from calibrators.experiment import estimate, measurements_of
 from calibrators.measurements import Measurements
+from calibrators.study.episodes import estimate, measurements_of
 from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.world.machine_file import machine_dict
 from orthoglide_env.world.table import EFFECTS

@@ -90,8 +90,8 @@ def test_the_plan_drives_the_compensated_commands(calibrated) -> None:
     offset."""
     from types import SimpleNamespace
 
-    from calibrators.compensation import read_estimate
-    from calibrators.verification import COMPENSATED, _nominal_command
+    from calibrators.workflow.compensate import read_estimate
+    from calibrators.workflow.verify import COMPENSATED, _nominal_command
     from orthoglide_env.model.design import PROTOTYPE
     from orthoglide_env.model.errors import MachineParams
     from orthoglide_env.model.kinematics import PAPER_POSTURES, direct, paper_posture

@@ -8,7 +8,7 @@ import pytest
 
 from calibrators.agents import get_agent
 from calibrators.agents.optimal import fixed_plan
-from calibrators.design.planner import N_MACHINE, WORLD_SHORTLIST, Planner, greedy_plan
+from calibrators.planning.planner import N_MACHINE, WORLD_SHORTLIST, Planner, greedy_plan
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions

@@ -3,7 +3,7 @@
 An agent sees observations and the lab notebook (``env.unwrapped.records``), plans with
 the nominal model if it wants, and returns actions; it never reads the machine's truth.
 Agents register themselves by name (:func:`register`); a new agent is one new module in
-this package.  :func:`calibrators.experiment.run_episodes` runs them.
+this package.  :func:`calibrators.study.episodes.run_episodes` runs them.
 """
 
 from __future__ import annotations

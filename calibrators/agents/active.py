@@ -1,7 +1,7 @@
 """``active``: sequential Bayesian design, one operation at a time.
 
-The agent keeps the linearised extended estimator as a filter (:class:`calibrators.design.planner.
-Planner` with :meth:`~calibrators.design.planner.Planner.observe`): the 27 machine errors and each
+The agent keeps the linearised extended estimator as a filter (:class:`calibrators.planning.planner.
+Planner` with :meth:`~calibrators.planning.planner.Planner.observe`): the 27 machine errors and each
 mounting's stand and zero, with the estimators' priors, updated in closed form after every
 reading.  Before each move it prices every candidate move by the expected fall of the predicted TCP
 error after the best-fit rigid motion per second, and takes the best.  Its stands move
@@ -22,7 +22,7 @@ the predicted error reaches :attr:`ActiveAgent.target_mm` or the budget is spent
 
 Under ``lab`` or ``workshop`` conditions its filter also holds the world's drift,
 backlash and warm-up, carries the indicators' curves as consider terms, and stops when
-more time does not pay (:mod:`calibrators.design.world_terms`).
+more time does not pay (:mod:`calibrators.planning.world_terms`).
 """
 
 from __future__ import annotations
@@ -34,11 +34,11 @@ import numpy as np
 
 from calibrators.agents.base import Agent, action, register
 from calibrators.agents.optimal import fixed_plan, lab_setup
-from calibrators.design.planner import N_MACHINE, N_STAND, ZERO_SCALE, Planner, Step
+from calibrators.planning.planner import N_MACHINE, N_STAND, ZERO_SCALE, Planner, Step
 from orthoglide_env.instruments.stands import stand_names
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.model.errors import ERROR_NAMES
-from orthoglide_env.model.reading_model import ParameterSpace, default_scales
+from orthoglide_env.reading_model import ParameterSpace, default_scales
 
 #: Seconds of lab time between two full refits of the notebook.
 REFIT_S: float = 600.0
@@ -119,7 +119,7 @@ class ActiveAgent(Agent):
     def _refit(self) -> None:
         """Replace the filter's mean by the extended estimator's fit of the notebook."""
         # Imported here: the experiment module imports the agents package.
-        from calibrators.experiment import estimate, measurements_of
+        from calibrators.study.episodes import estimate, measurements_of
 
         records = self.env.records
         planner = self.planner

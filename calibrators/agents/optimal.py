@@ -1,13 +1,13 @@
 """``optimal``: a fixed experiment designed before the first reading.
 
-The plan is made on the nominal machine by :func:`calibrators.design.planner.greedy_plan`: from
+The plan is made on the nominal machine by :func:`calibrators.planning.planner.greedy_plan`: from
 the stands where they stand, the move (with the lifts and engages it needs) or the
 re-mount that buys the most fall of the predicted TCP error after the best-fit rigid
 motion per second of lab time, again and again until the budget is spent.  A plan knows
 no reading, so every plunger keeps three a-priori standard deviations of its reading
 clear of the pushed-in end.  Under ``lab`` or ``workshop`` conditions the plan also
 weighs the world's drift, backlash and indicator curves, and may stop before the budget
-(:mod:`calibrators.design.world_terms`).  ``optimal-d`` plans for the D criterion instead
+(:mod:`calibrators.planning.world_terms`).  ``optimal-d`` plans for the D criterion instead
 (the information about every unknown); ``optimal-stay`` never re-mounts a stand.  The
 plan depends only on the lab's set-up (stands, noise, budget, conditions), so it is made
 once per process and replayed on every machine.
@@ -22,7 +22,7 @@ import gymnasium as gym
 import numpy as np
 
 from calibrators.agents.base import PlannedAgent, action, register
-from calibrators.design.planner import Planner, Step, greedy_plan
+from calibrators.planning.planner import Planner, Step, greedy_plan
 from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.world.conditions import Conditions

@@ -21,16 +21,16 @@ from calibrators.cli.common import (
     given_design,
 )
 from calibrators.cli.output import emit, report, save
-from calibrators.compare import machine_z_scores
 from calibrators.estimators.base import Estimate, Measurements, get_strategy
 from calibrators.estimators.consider import WORLD_PREFIX
 from calibrators.estimators.exact_fit import z_scores
 from calibrators.estimators.gauss_newton import design_of
-from calibrators.experiment import DEFAULT_BUDGET_S, machine_seed, run_episode
+from calibrators.study.compare import machine_z_scores
+from calibrators.study.episodes import DEFAULT_BUDGET_S, machine_seed, run_episode
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.model.design import load_design
 from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS, MachineParams
-from orthoglide_env.model.reading_model import TrackerAxis, parameters_of
+from orthoglide_env.reading_model import TrackerAxis, parameters_of
 from orthoglide_env.world.machine_file import machine_dict, read_machine_file, write_machine_file
 from orthoglide_env.world.truth import World
 

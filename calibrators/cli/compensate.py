@@ -7,7 +7,7 @@ import json
 
 import numpy as np
 
-from calibrators.compensation import (
+from calibrators.workflow.compensate import (
     TARGET_COLUMNS,
     compensate,
     read_estimate,

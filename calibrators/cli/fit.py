@@ -20,7 +20,7 @@ from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.model.design import MachineDesign
 
 if TYPE_CHECKING:
-    from calibrators.procedure import Procedure
+    from calibrators.workflow.plan import Procedure
 
 
 def run(args: argparse.Namespace) -> None:
@@ -47,7 +47,7 @@ def run(args: argparse.Namespace) -> None:
 
 
 def _read_plan(path: str) -> Procedure:
-    from calibrators.procedure import Procedure
+    from calibrators.workflow.plan import Procedure
 
     try:
         return Procedure.read(path)
@@ -68,7 +68,7 @@ def _check_plan(data: Measurements, procedure: Procedure, path: str) -> None:
     """The readings are the sheet of the plan ``procedure`` (read from ``path``): same
     design, each row one of its steps' readings (:class:`UsageError` naming the line
     otherwise)."""
-    from calibrators.procedure import check_sheet
+    from calibrators.workflow.plan import check_sheet
 
     try:
         if procedure.design != data.design.to_dict():

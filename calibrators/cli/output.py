@@ -21,10 +21,10 @@ from typing import Any
 import numpy as np
 
 from calibrators.cli.common import UsageError, print_json
-from calibrators.compensation import write_estimate
 from calibrators.estimators.base import Estimate
 from calibrators.estimators.gauss_newton import CAUSE_WORDS
 from calibrators.estimators.prediction import predicted_correction, predicted_tcp_error
+from calibrators.workflow.compensate import write_estimate
 from orthoglide_env.model.compensation import PitchTable
 from orthoglide_env.model.errors import (
     AXIS_NAMES,

@@ -2,7 +2,7 @@
 
 It writes into ``--out DIR``:
 
-* ``plan.json``: the steps (:class:`~calibrators.procedure.Procedure`), which
+* ``plan.json``: the steps (:class:`~calibrators.workflow.plan.Procedure`), which
   ``fit --plan`` checks a filled sheet against;
 * ``readings.csv``: the readings sheet, a measurement file with ``reading_mm`` blank, one
   row per reading to take, in step order, with its ``step``;
@@ -25,9 +25,9 @@ from calibrators.cli.common import (
     conditions_of,
     held_design,
 )
-from calibrators.compensation import read_estimate
-from calibrators.procedure import Procedure, make_procedure, planned_agents, write_sheet
-from calibrators.verification import compensated_procedure
+from calibrators.workflow.compensate import read_estimate
+from calibrators.workflow.plan import Procedure, make_procedure, planned_agents, write_sheet
+from calibrators.workflow.verify import compensated_procedure
 from orthoglide_env.lab.operations import DEFAULT_BUDGET_S, slot_catalogue
 from orthoglide_env.model.design import MachineDesign, load_design
 from orthoglide_env.model.errors import MachineParams

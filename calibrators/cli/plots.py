@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calibrators.compare import Config, Trial
+from calibrators.study.compare import Config, Trial
 
 #: One line style per agent, so curves stay apart in grey print too.
 STYLES: tuple[str, ...] = ("o-", "s--", "^-.", "D:", "v-", "P--", "X-.")

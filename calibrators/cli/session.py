@@ -1,5 +1,5 @@
 """``orthoglide session``: a sequential experiment run with a person or a script at the
-machine (:mod:`calibrators.session`)."""
+machine (:mod:`calibrators.workflow.session`)."""
 
 from __future__ import annotations
 
@@ -17,8 +17,8 @@ from orthoglide_env.model.design import load_design
 
 
 def run(args: argparse.Namespace) -> None:
-    from calibrators.experiment import machine_seed
-    from calibrators.session import Session, parse_answer
+    from calibrators.study.episodes import machine_seed
+    from calibrators.workflow.session import Session, parse_answer
 
     out = Path(args.out)
     notebook = out / "notebook.jsonl"

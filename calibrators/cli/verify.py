@@ -10,9 +10,9 @@ from calibrators.cli.common import add_conditions, conditions_of
 
 
 def run(args: argparse.Namespace) -> None:
-    from calibrators.compensation import read_estimate
     from calibrators.measurements import Measurements
-    from calibrators.verification import verify
+    from calibrators.workflow.compensate import read_estimate
+    from calibrators.workflow.verify import verify
 
     est = read_estimate(args.estimate)
     data = Measurements.read(args.readings, est.readings.design)

@@ -1,1 +1,2 @@
-"""Experiment design on the linearised model."""
+"""Moved to :mod:`calibrators.planning` (experiment planning on the linearised model);
+its modules' old paths stay so that earlier scripts' imports work."""

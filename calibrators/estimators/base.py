@@ -2,7 +2,7 @@
 
 A strategy's ``estimate(measurements, params, sigma)`` turns readings into an
 :class:`Estimate`.  It reads a lab notebook (an agent's experiment,
-:mod:`calibrators.experiment`) exactly as it reads a real machine's measurement file.
+:mod:`calibrators.study.episodes`) exactly as it reads a real machine's measurement file.
 
 Strategies register themselves by name with :func:`register`; every module of this
 package is imported by :func:`available`, so adding a strategy is adding one module.

@@ -64,7 +64,7 @@ from orthoglide_env.instruments.slots import Part
 from orthoglide_env.model.compensation import interpolation_weights, node_count
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import AXIS_NAMES
-from orthoglide_env.model.reading_model import Design, TrackerAxis
+from orthoglide_env.reading_model import Design, TrackerAxis
 from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.world.table import TRACKER_MPE_PER_M
 from orthoglide_env.world.truth import HOUR, MINUTE, REVOLUTION_MM, UM, bar_bending

@@ -33,7 +33,7 @@ import numpy as np
 from calibrators.estimators.consider import Consider
 from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.model.errors import ERROR_NAMES
-from orthoglide_env.model.reading_model import Design, jacobian, predict
+from orthoglide_env.reading_model import Design, jacobian, predict
 
 #: A combination is identifiable (and moved by a base-parameter fit) when its information
 #: in scaled units is at least this: the data determine it at least as well as its

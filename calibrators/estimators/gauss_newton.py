@@ -1,7 +1,7 @@
 """``gauss-newton``: any experiment's readings, fitted with the exact model.
 
 The paper linearises the gauge differences around the nominal machine and fits six
-parameters.  This strategy fits the exact model (:mod:`orthoglide_env.model.reading_model`) with the
+parameters.  This strategy fits the exact model (:mod:`orthoglide_env.reading_model`) with the
 batched damped Gauss-Newton solver of :mod:`calibrators.estimators.exact_fit`, over any parameter
 selection (``paper6``, ``extended`` with the gauge stands, groups, names), with priors or
 base parameters, and reports what the data could and could not determine, a chi-square
@@ -61,7 +61,7 @@ from orthoglide_env.model.errors import (
     check_validity,
 )
 from orthoglide_env.model.kinematics import direct
-from orthoglide_env.model.reading_model import (
+from orthoglide_env.reading_model import (
     Design,
     TrackerAxis,
     predict,

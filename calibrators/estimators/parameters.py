@@ -33,7 +33,7 @@ from orthoglide_env.model.errors import (
     ERROR_NAMES,
     PRESETS,
 )
-from orthoglide_env.model.reading_model import ParameterSpace, default_scales, preset_sigmas
+from orthoglide_env.reading_model import ParameterSpace, default_scales, preset_sigmas
 
 #: Selections by alias: ``full`` is the extended selection (with the lab's terms, which
 #: the exact-model fit adds: :data:`calibrators.estimators.consider.FULL_TERMS`).
@@ -140,7 +140,7 @@ def prior_sigmas(prior: str, space: ParameterSpace, free: np.ndarray) -> np.ndar
 
 def scales(space: ParameterSpace, prior: np.ndarray) -> np.ndarray:
     """Typical size of every parameter: its prior sigma, else its default scale
-    (:func:`orthoglide_env.model.reading_model.default_scales`)."""
+    (:func:`orthoglide_env.reading_model.default_scales`)."""
     return np.where(np.isfinite(prior), prior, default_scales(space))
 
 

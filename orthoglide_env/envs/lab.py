@@ -160,7 +160,7 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
     move), ``tracker_sigma`` (mm), ``thermometer`` (a room thermometer: each record
     carries its reading, see Conditions), ``budget_s``, ``reward``, ``estimator`` (for
     ``accuracy``: records and sigma to a ``MachineParams``, e.g.
-    ``calibrators.experiment.make_estimator()``), ``time_weight``, ``success_mm``,
+    ``calibrators.study.episodes.make_estimator()``), ``time_weight``, ``success_mm``,
     ``travel`` (default: the design's gauge travel), ``design`` (the machines'
     :class:`~orthoglide_env.model.design.MachineDesign`, default the prototype: its
     control limits bound ``rho``, its errors' validity range the machines, its

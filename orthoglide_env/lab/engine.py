@@ -31,7 +31,7 @@ from orthoglide_env.lab.settings import LabSettings
 from orthoglide_env.model.collisions import PAIR_NAMES, collision_names
 from orthoglide_env.model.errors import AXIS_NAMES, MachineParams
 from orthoglide_env.model.kinematics import UnreachableError, direct
-from orthoglide_env.model.reading_model import TrackerAxis
+from orthoglide_env.reading_model import TrackerAxis
 from orthoglide_env.scoring import score
 from orthoglide_env.world.table import REFERENCE_DEVIATION, REFERENCE_LENGTH_MM
 from orthoglide_env.world.truth import UM, World, draw_range

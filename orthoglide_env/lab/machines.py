@@ -14,18 +14,11 @@ from orthoglide_env.model.boxes import collision_boxes
 from orthoglide_env.model.collisions import collision_mask
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import direct
+from orthoglide_env.sim.motion import check_motion_mode
 
 if TYPE_CHECKING:  # PyBullet is imported only by the back-end that needs it
     from orthoglide_env.sim.pybullet import OrthoglideMachine
     from orthoglide_env.sim.simulator import Simulator
-
-MOTION_MODES: tuple[str, ...] = ("quasi-static", "dynamic")
-
-
-def check_motion_mode(mode: str) -> None:
-    if mode not in MOTION_MODES:
-        raise ValueError(f"unknown motion mode '{mode}'; choose from {list(MOTION_MODES)}")
-
 
 class ExactMachine:
     """The machine as the exact kinematic model computes it (no dynamics, no solver).
@@ -154,8 +147,9 @@ class ExactMachines(LabMachines):
 
 class SimulatedMachine(LabMachines):
     """One PyBullet machine (a batch of one episode), moved the ``motion`` way
-    (:data:`MOTION_MODES`).  Every machine of the env is built in the same client, made at
-    the first start (a GUI window with ``gui``) and kept until :meth:`close`."""
+    (:data:`~orthoglide_env.sim.motion.MOTION_MODES`).  Every machine of the env is built
+    in the same client, made at the first start (a GUI window with ``gui``) and kept until
+    :meth:`close`."""
 
     def __init__(self, motion: str = "quasi-static", gui: bool = False) -> None:
         check_motion_mode(motion)

@@ -19,7 +19,7 @@ from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.instruments.gauges import Gauge, GaugeArray
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import ERROR_NAMES, MachineParams
-from orthoglide_env.model.reading_model import (
+from orthoglide_env.reading_model import (
     Design,
     ParameterSpace,
     Spec,

@@ -112,7 +112,7 @@ def lab_settings(args: dict[str, Any]) -> LabSettings:
     (:data:`orthoglide_env.lab.spec.LAB`)."""
     if args["reward"] == "accuracy" and args["estimator"] is None:
         raise ValueError("reward 'accuracy' needs an estimator: records -> machine, e.g. "
-                         "calibrators.experiment.make_estimator()")
+                         "calibrators.study.episodes.make_estimator()")
     design = args["design"] or PROTOTYPE
     slots = slot_catalogue(design)
     stands = args["stands"]

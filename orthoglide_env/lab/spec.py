@@ -23,10 +23,10 @@ from gymnasium.vector import AutoresetMode
 
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.instruments.slots import GaugeSpec, layout_from_names
-from orthoglide_env.lab.machines import MOTION_MODES
 from orthoglide_env.lab.operations import DEFAULT_BUDGET_S, PAPER_SLOTS, TRACKER_SIGMA
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS
+from orthoglide_env.sim.motion import MOTION_MODES
 from orthoglide_env.world.conditions import DEFAULT_CONDITIONS, as_conditions
 
 BACKENDS: tuple[str, ...] = ("pybullet", "exact")

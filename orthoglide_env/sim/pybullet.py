@@ -27,11 +27,11 @@ from orthoglide_env.instruments.dial import GAUGE_BODY_RADIUS, STAND_LENGTH
 from orthoglide_env.instruments.gauges import Gauge, GaugeArray
 from orthoglide_env.instruments.rays import RAY_BACKOFF, on_flat_face, ray_box_distance
 from orthoglide_env.instruments.slots import GaugeSpec, Part, on_platform
-from orthoglide_env.lab.machines import check_motion_mode
 from orthoglide_env.model.collisions import collision_names, crash_pairs
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import LEG_NAMES, MachineParams
 from orthoglide_env.model.kinematics import direct
+from orthoglide_env.sim.motion import check_motion_mode
 from orthoglide_env.sim.simulator import PhysicsSettings, Simulator, pb
 from orthoglide_env.sim.urdf import (
     MM,

@@ -1,0 +1,1 @@
+"""Experiment design on the linearised model."""

@@ -1,0 +1,279 @@
+"""Running agents in the lab, and what estimators make of their notebooks.
+
+An experiment is an agent's episode in ``OrthoglideLab-v0``; its result is the lab
+notebook (``env.unwrapped.records``) as :class:`~calibrators.measurements.Measurements`,
+which any estimator reads exactly as it reads a measurement file.  :func:`run_episodes`
+is the one episode runner: on a lab vector env (many machines stepped together) or, by
+:func:`run_episode`, on a lone lab as a batch of one.  Every command draws machine ``i``
+of seed ``s`` from :func:`machine_seed` and its agent's choices from :func:`agent_rng`,
+so ``calibrate --seed s`` runs the experiment of ``compare --seed s``'s first machine.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from calibrators.agents import Agent
+from calibrators.agents.base import PlannedAgent
+from calibrators.estimators.base import Estimate, get_strategy
+from calibrators.measurements import ZERO_RHO, Measurement, Measurements, paper_rhos
+from orthoglide_env.envs.lab import Record
+from orthoglide_env.lab.operations import DEFAULT_BUDGET_S as DEFAULT_BUDGET_S  # every command's
+from orthoglide_env.lab.operations import Op
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.errors import DEFAULT_PRESET, MachineParams
+from orthoglide_env.world.conditions import IDEAL, Conditions
+from orthoglide_env.world.truth import World
+
+#: Paper postures by their control coordinates, to label the notebook's readings.
+_PAPER_RHO: dict[tuple[float, ...], str] = {v: k for k, v in paper_rhos(PROTOTYPE).items()}
+
+
+def measurements_of(records: list[Record], time_s: float = 0.0,
+                    until_s: float | None = None, design: MachineDesign = PROTOTYPE
+                    ) -> Measurements:
+    """The notebook as measurements (only what was read by ``until_s`` seconds, if given)
+    of a machine of ``design``.  A reading at a paper posture of the prototype is labelled
+    with its name (a measurement file's paper postures are the prototype's); each Zero
+    reading of a mounting opens its next repetition (the file format's meaning), so the
+    paper's procedure is numbered as the paper numbers it."""
+    labels = _PAPER_RHO if design == PROTOTYPE else {}
+    zeros: dict[str, int] = {}
+    items = []
+    for r in records:
+        if until_s is not None and r.time_s > until_s:
+            continue
+        if r.rho == ZERO_RHO:
+            zeros[r.mounting] = zeros.get(r.mounting, 0) + 1
+        items.append(Measurement.recorded(r.spec, labels.get(r.rho, ""), r.reading, r.rho,
+                                          r.mounting, max(zeros.get(r.mounting, 0), 1),
+                                          r.time_s, r.temperature_c))
+    return Measurements(items, time_s if until_s is None else min(time_s, until_s), design)
+
+
+@dataclass(frozen=True)
+class EstimatorSpec:
+    """An estimator of the comparison: a strategy's estimate with its options."""
+
+    strategy: str
+    params: str
+    prior: str = "auto"
+    #: The lab's effects fitted (with their sizes as priors), not only considered: the
+    #: term families of :data:`~calibrators.estimators.consider.TERM_FAMILIES`, or True
+    #: for all.
+    fit_world: bool | tuple[str, ...] = False
+
+
+#: The estimators ``compare`` offers, by name.
+ESTIMATORS: dict[str, EstimatorSpec] = {
+    "paper": EstimatorSpec("paper", "paper6", "none"),
+    "paper6": EstimatorSpec("gauss-newton", "paper6", "none"),
+    "extended": EstimatorSpec("gauss-newton", "extended", "auto"),
+    "extended-base": EstimatorSpec("gauss-newton", "extended", "none"),
+    "extended-world": EstimatorSpec("gauss-newton", "extended", "auto", fit_world=True),
+    "full": EstimatorSpec("gauss-newton", "full", "auto"),
+}
+
+
+def get_estimator(name: str) -> EstimatorSpec:
+    if name not in ESTIMATORS:
+        raise ValueError(f"unknown estimator '{name}'; choose from {list(ESTIMATORS)}")
+    return ESTIMATORS[name]
+
+
+def _world_options(strategy: object, spec: EstimatorSpec, conditions: Conditions,
+                   left_out: str) -> dict[str, Any]:
+    """What an exact-model fit knows beyond its readings: the effects of ``conditions``
+    (which it fits, or puts into its covariance), and the errors it leaves out at the
+    sizes of the preset ``left_out``; the paper's linear fit is the paper's, white noise
+    only."""
+    return ({"conditions": conditions, "left_out": left_out, "fit_world": spec.fit_world}
+            if hasattr(strategy, "estimate_many") else {})
+
+
+def estimate(data: Measurements, name: str, sigma: float, conditions: Conditions = IDEAL,
+             left_out: str = DEFAULT_PRESET) -> Estimate:
+    """Estimate with the named estimator of :data:`ESTIMATORS`, for readings taken under
+    ``conditions`` on a machine whose errors are of the preset ``left_out``'s size."""
+    spec = get_estimator(name)
+    strategy = get_strategy(spec.strategy)
+    return strategy.estimate(data, spec.params, sigma, verify=False, prior=spec.prior,
+                             **_world_options(strategy, spec, conditions, left_out))
+
+
+def estimate_many(datas: list[Measurements], name: str, sigma: float,
+                  conditions: Conditions = IDEAL, left_out: str = DEFAULT_PRESET
+                  ) -> list[Estimate | Exception]:
+    """:func:`estimate` of many experiments, batched where the estimator can (experiments
+    of one design are fitted together, without the words on what the data determine); a
+    failure comes back in place of its estimate."""
+    spec = get_estimator(name)
+    strategy = get_strategy(spec.strategy)
+    if hasattr(strategy, "estimate_many"):
+        # A comparison scores estimates; it has no reader for their words.
+        return strategy.estimate_many(datas, spec.params, sigma, verify=False,
+                                      prior=spec.prior, explain=False,
+                                      **_world_options(strategy, spec, conditions, left_out))
+    out: list[Estimate | Exception] = []
+    for data in datas:
+        try:
+            out.append(estimate(data, name, sigma, conditions, left_out))
+        except (ValueError, RuntimeError, np.linalg.LinAlgError) as exc:
+            out.append(exc)
+    return out
+
+
+def make_estimator(name: str = "extended", design: MachineDesign = PROTOTYPE
+                   ) -> Callable[[list[Record], float], MachineParams]:
+    """The lab env's ``estimator`` for its accuracy reward: notebook and sigma to the
+    estimated machine (of ``design``)."""
+    get_estimator(name)
+
+    def estimator(records: list[Record], sigma: float) -> MachineParams:
+        return estimate(measurements_of(records, design=design), name, sigma).machine
+
+    return estimator
+
+
+def machine_seed(seed: int, index: int) -> int:
+    """The lab's reset seed of machine ``index`` of a run seeded ``seed``: every command
+    and agent of that run works on the machine it draws."""
+    return seed * 1_000_003 + index
+
+
+def agent_rng(seed: int) -> np.random.Generator:
+    """The stream of an agent's own choices in the episode reset with ``seed``."""
+    return np.random.default_rng([seed, 1])
+
+
+@dataclass(frozen=True)
+class Episode:
+    """What an agent left in one lab: the notebook, the time used, the last step's info,
+    and (for scoring only) the machine's truth."""
+
+    records: list[Record]
+    time_s: float
+    sigma: float  # effective noise of a gauge reading (mm)
+    truth: MachineParams
+    info: dict[str, Any]
+    world: World | None = None  # the machine's world beyond its geometry (None: ideal)
+
+    @property
+    def measurements(self) -> Measurements:
+        """The notebook as an estimator reads it."""
+        return measurements_of(self.records, self.time_s, design=self.truth.design)
+
+
+def run_episodes(envs: gym.vector.VectorEnv, agents: list[Agent], seeds: list[int],
+                 options: dict | None = None, *, lockstep: bool = False,
+                 on_step: Callable[[dict[str, np.ndarray]], None] | None = None
+                 ) -> list[Episode]:
+    """One episode in each env of a lab vector env (autoreset ``NEXT_STEP``; the native
+    one, or ``SyncVectorEnv`` of lone labs), env ``i`` reset with ``seeds[i]`` (and
+    ``options``) and worked by ``agents[i]``, which acts on its own observation with
+    :func:`agent_rng` of its seed.  ``lockstep``: ``agents[0]`` alone decides, on env 0's
+    observation, and every env takes its action (labs compared step by step).
+    ``on_step`` sees every step's observations.  An env whose episode has ended is kept
+    busy with lever flicks (never refused: stand 0 is always mounted) until every
+    episode has ended."""
+    if len(agents) != (1 if lockstep else len(seeds)):
+        raise ValueError(f"{len(agents)} agents for {len(seeds)} labs"
+                         + (" in lockstep (one decides)" if lockstep else ""))
+    observation, info = envs.reset(seed=list(seeds), options=options)
+    labs = _labs(envs)
+    for i, agent in enumerate(agents):
+        agent.reset(labs[i], _row(observation, i), agent_rng(seeds[i]))
+    idle = {"op": int(Op.LIFT), "rho": np.zeros(3), "stand": 0, "slot": 0}
+    # Plans decided at reset are played as arrays, every machine's step t at once.
+    plans = (_plan_arrays([a.plan for a in agents], idle)  # type: ignore[attr-defined]
+             if all(type(a).act is PlannedAgent.act for a in agents) else None)
+    out: list[Episode | None] = [None] * len(seeds)
+    step = 0
+    while True:
+        if plans is not None:
+            if step >= len(plans["op"][0]):
+                raise RuntimeError(f"agent '{agents[0].name}' ran out of plan before its "
+                                   "episode ended")
+            actions = {key: value[:, step] for key, value in plans.items()}
+        else:
+            moves = [idle if out[i] is not None else agent.act(_row(observation, i),
+                                                               _InfoRow(info, i))
+                     for i, agent in enumerate(agents)]
+            actions = {key: np.array([m[key] for m in moves]) for key in idle}
+        if lockstep:
+            actions = {key: np.repeat(value[:1], len(seeds), axis=0)
+                       for key, value in actions.items()}
+        observation, _, terminated, truncated, info = envs.step(actions)
+        step += 1
+        if on_step is not None:
+            on_step(observation)
+        for i in np.flatnonzero(terminated | truncated):
+            if out[i] is None:
+                lab = labs[i].unwrapped
+                truth, world = _truth(envs, i)
+                out[i] = Episode(list(lab.records), float(observation["time"][i, 0]),
+                                 lab.noise.effective_sigma, truth, dict(_InfoRow(info, i)),
+                                 world)
+        if all(e is not None for e in out):
+            return out  # type: ignore[return-value]
+
+
+def run_episode(env: gym.Env, agent: Agent, seed: int, options: dict | None = None
+                ) -> Episode:
+    """:func:`run_episodes` on a lone lab ``env``, a batch of one: reset with ``seed``
+    (and ``options``), worked by ``agent`` until the episode ends."""
+    return run_episodes(gym.vector.SyncVectorEnv([lambda: env]), [agent], [seed], options)[0]
+
+
+def _labs(envs: gym.vector.VectorEnv) -> list[Any]:
+    """Each env of ``envs`` as its agent sees a lone lab."""
+    if isinstance(envs, gym.vector.SyncVectorEnv):
+        return list(envs.envs)
+    return [envs.unwrapped.sub_env(i) for i in range(envs.num_envs)]
+
+
+def _truth(envs: gym.vector.VectorEnv, i: int) -> tuple[MachineParams, World | None]:
+    """Env ``i``'s true machine and world (None: ideal), for scoring only."""
+    if isinstance(envs, gym.vector.SyncVectorEnv):
+        lab = envs.envs[i].unwrapped
+        return lab.true_machine, lab.true_world
+    worlds = envs.unwrapped.true_worlds
+    return envs.unwrapped.true_machines[i], None if worlds is None else worlds[i]
+
+
+def _plan_arrays(plans: list[list[dict[str, Any]]], idle: dict[str, Any]
+                 ) -> dict[str, np.ndarray]:
+    """Every machine's plan as arrays ``(machines, steps, ...)`` per action field, a short
+    plan padded with ``idle`` (what an ended episode is kept busy with)."""
+    length = max(len(plan) for plan in plans)
+    return {key: np.array([[a[key] for a in plan] + [idle[key]] * (length - len(plan))
+                           for plan in plans]) for key in idle}
+
+
+def _row(observation: dict[str, np.ndarray], i: int) -> dict[str, np.ndarray]:
+    """Env ``i``'s observation of a vector env's."""
+    return {key: value[i] for key, value in observation.items()}
+
+
+class _InfoRow(Mapping[str, Any]):
+    """Env ``i``'s info of a vector env's (Gymnasium's vector form: an array and a mask
+    per key), read only where an agent reads it."""
+
+    def __init__(self, info: dict[str, Any], i: int) -> None:
+        self._info, self._i = info, i
+
+    def __getitem__(self, key: str) -> Any:
+        if key.startswith("_") or not self._info[f"_{key}"][self._i]:
+            raise KeyError(key)
+        return self._info[key][self._i]
+
+    def __iter__(self) -> Iterator[str]:
+        return (k for k in self._info if not k.startswith("_") and self._info[f"_{k}"][self._i])
+
+    def __len__(self) -> int:
+        return sum(1 for _ in self)

@@ -1,0 +1,301 @@
+"""A designed experiment as a procedure a technician follows, and its readings sheet.
+
+:func:`make_procedure` plays a planned agent's experiment (decided at reset, from what the
+lab shows before the first move: :class:`~calibrators.agents.base.PlannedAgent`) on the
+nominal machine of a design, in an exact-model lab of the given conditions and budget,
+and writes down what a technician does: numbered steps (mount, drive, lift, engage,
+re-mount, read), each with the seconds the lab's time table gives it, and every reading
+to take, in step order, as rows of a measurement file whose ``reading_mm`` is left blank
+(:func:`write_sheet`).  :func:`place_words` says where a stand goes in a technician's
+words.  The filled sheet is read by ``orthoglide fit``; with the plan (``--plan``) its
+rows are checked against the steps (:func:`check_sheet`).
+
+An agent that chooses each move from the last reading (``active``) has no procedure to
+write ahead: it is refused by name.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import orthoglide_env
+from calibrators.agents import available, get_agent
+from calibrators.agents.base import PlannedAgent
+from calibrators.measurements import COLUMNS, Measurement, Measurements, gauge_name
+from calibrators.study.episodes import agent_rng, measurements_of
+from orthoglide_env.instruments.slots import PLATFORM_AIM, GaugeSpec, Part
+from orthoglide_env.lab.operations import Op
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.errors import AXIS_NAMES, LEG_NAMES, MachineParams
+from orthoglide_env.world.conditions import Conditions
+from orthoglide_env.world.machine_file import machine_dict
+from orthoglide_env.world.table import REFERENCE_LENGTH_MM
+
+#: The sheet's columns: the measurement file's, and the step each reading belongs to.
+SHEET_COLUMNS: tuple[str, ...] = (*COLUMNS, "step")
+#: What each lab operation is called in a step.
+ACTIONS: dict[Op, str] = {Op.MOVE: "drive and read", Op.LIFT: "lift", Op.ENGAGE: "engage",
+                          Op.REMOUNT: "re-mount", Op.STOP: "stop"}
+
+
+@dataclass(frozen=True)
+class Step:
+    """One step of a procedure: what to do, how long the lab's time table gives it, and
+    which readings (rows of the sheet, from 1) are taken at it."""
+
+    number: int
+    action: str
+    text: str
+    seconds: float
+    start_s: float  # the lab clock when it begins
+    stand: int | None = None  # 1, 2, ... as the technician numbers the stands
+    slot: str | None = None
+    rho: list[float] | None = None
+    rows: list[int] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class Procedure:
+    """A planned agent's experiment as steps, with the stands' places and its sheet."""
+
+    agent: str
+    budget_s: float
+    conditions: dict[str, Any]
+    design: dict[str, Any]
+    stands: list[dict[str, Any]]  # {"stand", "slot", "place"} as mounted at set-up
+    steps: list[Step]
+    sheet: list[Measurement] = field(default_factory=list, compare=False)
+    #: What the technician should know beyond the steps (e.g. steps left out).
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def total_s(self) -> float:
+        return float(sum(s.seconds for s in self.steps))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The procedure as JSON (the sheet is its own file, :func:`write_sheet`)."""
+        out = asdict(self)
+        out.pop("sheet")
+        out["total_s"] = self.total_s
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Procedure:
+        """The procedure :meth:`to_dict` wrote (``ValueError`` if it is not one)."""
+        try:
+            return cls(data["agent"], float(data["budget_s"]), dict(data["conditions"]),
+                       dict(data["design"]), list(data["stands"]),
+                       [Step(**s) for s in data["steps"]],
+                       notes=[str(n) for n in data.get("notes", [])])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"not a procedure written by orthoglide plan: {exc}") from None
+
+    @classmethod
+    def read(cls, path: str | Path) -> Procedure:
+        try:
+            data = json.loads(Path(path).read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError) as exc:
+            raise ValueError(f"{path}: cannot read the plan: {exc}") from None
+        if not isinstance(data, dict):
+            raise ValueError(f"{path}: not a procedure written by orthoglide plan")
+        return cls.from_dict(data)
+
+
+def rho_words(rho: list[float] | tuple[float, ...]) -> str:
+    """A command as a controller takes it: mm to the micron."""
+    return ", ".join(f"{v:.3f}".rstrip("0").rstrip(".") for v in rho)
+
+
+def planned_agents() -> list[str]:
+    """The registered agents that decide their whole experiment at the start."""
+    return [name for name in available() if isinstance(get_agent(name), PlannedAgent)]
+
+
+def place_words(spec: GaugeSpec, design: MachineDesign = PROTOTYPE) -> str:
+    """Where a stand goes and how its dial is read, in a technician's words: the part and
+    face, the distance from a named hinge, the measuring direction and which way a
+    reading is positive on the sheet (along the world axis, as every reading is)."""
+    axis = AXIS_NAMES[spec.axis]
+    toward = "+" if spec.approach > 0 else "-"
+    side = "-" if spec.approach > 0 else "+"
+    pushed = ("away from the stand: the plunger comes out, so a dial that reads plus when "
+              "pressed shows minus: write minus what it shows" if spec.approach > 0
+              else "toward the stand: the plunger is pushed in, so a dial that reads plus "
+              "when pressed shows it: write what it shows")
+    if spec.part == Part.BAR:
+        leg = LEG_NAMES[spec.leg]
+        where = (f"on the {leg} leg's parallelogram, on the one of its two bars the picture's "
+                 f"arrow points at (the bar at {'+' if spec.bar > 0 else '-'}d/2, d = "
+                 f"{design.d:g} mm the distance between the bars), "
+                 f"{spec.at * design.L:.0f} mm along the bar from "
+                 f"the centre of its platform-end hinge ({spec.at:g} of L = {design.L:g} mm), "
+                 "on the bar's flat face")
+    elif spec.part == Part.CARRIAGE:
+        where = (f"on the {LEG_NAMES[spec.leg]} carriage, its face normal to {axis}, at the "
+                 "middle of the face with the machine at Zero")
+    else:
+        others = " and ".join(f"-{AXIS_NAMES[a]}" for a in range(3) if a != spec.axis)
+        where = (f"on the platform's -{axis} face, {PLATFORM_AIM:g} mm off its centre toward "
+                 f"{others}")
+        if spec.part == Part.REFERENCE:
+            where += (f", through the {REFERENCE_LENGTH_MM:g} mm gauge block: with the "
+                      "machine at Zero hold the block square to that face, set the plunger "
+                      "on the block's far face at mid-travel, zero the dial and read it "
+                      "there, then take the block away (the stand stays); the dial then "
+                      f"reads the bare face once the platform has come {REFERENCE_LENGTH_MM:g} "
+                      "mm toward it. Handle the block with gloves: a hand warms it")
+    return (f"{where}; the stand on the {side}{axis} side, its plunger pointing {toward}{axis}, "
+            f"square to the face. Write a reading positive when the face moves toward +{axis} "
+            f"({pushed})")
+
+
+def make_procedure(agent_name: str, budget_s: float, design: MachineDesign = PROTOTYPE,
+                   conditions: Conditions | None = None, seed: int = 0) -> Procedure:
+    """The procedure of agent ``agent_name``'s experiment within ``budget_s`` seconds on a
+    machine of ``design`` under ``conditions`` (default ideal).  The experiment is played
+    on the design's nominal machine in the exact-model lab; a planned agent's steps do not
+    depend on the machine, so they are the real machine's.  ``ValueError`` for an agent
+    that decides as it reads."""
+    conditions = Conditions("ideal") if conditions is None else conditions
+    agent = get_agent(agent_name)
+    if not isinstance(agent, PlannedAgent):
+        raise ValueError(f"agent '{agent_name}' chooses each move from the last readings: its "
+                         "experiment cannot be written down ahead; plan one that decides it "
+                         f"at the start ({', '.join(planned_agents())})")
+    env = gym.make(orthoglide_env.LAB_ENV_ID, backend="exact", errors="nominal",
+                   gauge_sigma=0.0, gauge_resolution=0.0, tracker=agent.needs_tracker,
+                   reference=agent.needs_reference,
+                   budget_s=budget_s, design=design, conditions=conditions)
+    try:
+        observation, _ = env.reset(seed=seed,
+                                   options={"machine": machine_dict(MachineParams(design=design),
+                                                                      None)})
+        lab = env.unwrapped
+        agent.reset(env, observation, agent_rng(seed))
+        slots = lab.slots
+        held = [int(s) for s in observation["slot"]]
+        stands = [{"stand": k + 1, "slot": slots[s].slot, "place": place_words(slots[s], design)}
+                  for k, s in enumerate(held) if s < len(slots)]
+        engaged = [bool(e) for e in observation["engaged"]]
+        steps = [Step(1, "set up", _setup_text(stands, engaged), 0.0, 0.0,
+                      rows=list(range(1, len(lab.records) + 1)))]
+        taken = [1] * len(lab.records)
+        clock = 0.0
+        for act in list(agent.plan):
+            before = len(lab.records)
+            observation, _, terminated, truncated, info = env.step(act)
+            if info.get("refused"):
+                raise RuntimeError(f"the lab refused step {len(steps) + 1} of agent "
+                                   f"'{agent_name}' on the nominal machine: {info['refused']}")
+            now = float(observation["time"][0])
+            number = len(steps) + 1
+            read = lab.records[before:]
+            steps.append(describe_step(number, act, now - clock, clock, read, before, slots, design,
+                               held))
+            taken += [number] * len(read)
+            held = [int(s) for s in observation["slot"]]
+            clock = now
+            if terminated or truncated:
+                break
+        data = measurements_of(list(lab.records), clock, design=design)
+    finally:
+        env.close()
+    sheet = [m.again(m.reading, m.repetition, m.time_s, None, step, m.temperature_c)
+             for m, step in zip(data.items, taken, strict=True)]
+    return Procedure(agent_name, float(budget_s), conditions.to_dict(), design.to_dict(),
+                     stands, steps, sheet)
+
+
+def _setup_text(stands: list[dict[str, Any]], engaged: list[bool]) -> str:
+    lifted = [s["stand"] for s in stands if not engaged[s["stand"] - 1]]
+    return ("Switch the drives on and drive to Zero (rho 0, 0, 0). Mount "
+            + ", ".join(f"stand {s['stand']} at {s['slot']}" for s in stands)
+            + ", each where the stands' list says. Set each gauge at mid-travel, zero its "
+            "dial and write each reading (0.000 unless it moved) on the sheet. The lab "
+            "clock (the sheet's time_s) starts at 0 when this step ends"
+            + (f"; then lift the plungers of stands {', '.join(map(str, lifted))}"
+               if lifted else "") + ".")
+
+
+def describe_step(number: int, act: dict[str, Any], seconds: float, start: float,
+                  read: list, first_row: int, slots: tuple[GaugeSpec, ...],
+                  design: MachineDesign, held: list[int]) -> Step:
+    """Step ``number``: lab action ``act``, its ``seconds`` from the clock at ``start``, the
+    records it ``read`` (rows from ``first_row + 1`` on the sheet), in words for the
+    technician, with the stands at the slots ``held`` (indices into ``slots``)."""
+    op = Op(int(act["op"]))
+    stand = int(act["stand"]) + 1
+    rows = list(range(first_row + 1, first_row + len(read) + 1))
+    # Stands by the number the technician gave them, with where they are.
+    number_of = {slots[s].slot: k + 1 for k, s in enumerate(held) if s < len(slots)}
+    if op == Op.REMOUNT:
+        number_of[slots[int(act["slot"])].slot] = stand
+    names = [f"stand {number_of[n]} ({n})" if n in number_of else n
+             for n in dict.fromkeys(gauge_name(r.spec) for r in read)]
+    if op == Op.MOVE:
+        rho = [float(v) for v in np.asarray(act["rho"], dtype=float)]
+        reading = (f"read {', '.join(names)} onto the sheet" if names
+                   else "no reading (every gauge is lifted)")
+        return Step(number, ACTIONS[op], f"Drive to rho = ({rho_words(rho)}) "
+                    f"mm, wait until it settles, {reading}.", seconds, start, rho=rho,
+                    rows=rows)
+    if op == Op.LIFT:
+        return Step(number, ACTIONS[op], f"Lift the plunger of stand {stand} with its lever.",
+                    seconds, start, stand, rows=rows)
+    if op == Op.ENGAGE:
+        return Step(number, ACTIONS[op], f"Let the plunger of stand {stand} down on its face "
+                    "again (its zero is kept).", seconds, start, stand, rows=rows)
+    if op == Op.REMOUNT:
+        slot = slots[int(act["slot"])]
+        return Step(number, ACTIONS[op], f"Drive to Zero. Move stand {stand} to {slot.slot}: "
+                    f"{place_words(slot, design)}. Set the gauge at mid-travel and zero its "
+                    f"dial. Then, at Zero, read {', '.join(names)} onto the sheet.", seconds,
+                    start, stand, slot.slot, rows=rows)
+    return Step(number, ACTIONS[op], "The experiment is over: lift every plunger and switch "
+                "the drives off.", seconds, start, rows=rows)
+
+
+def write_sheet(procedure: Procedure, path: str | Path) -> Path:
+    """The readings sheet: one row per reading to take, in step order, the measurement
+    file's columns and ``step``, ``reading_mm`` blank (``time_s`` the planned time: write
+    the clock's when it differs)."""
+    path = Path(path)
+    with path.open("w", newline="", encoding="utf-8") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(SHEET_COLUMNS)
+        reading = COLUMNS.index("reading_mm")
+        for m in procedure.sheet:
+            row = m.csv_row()
+            row[reading] = ""
+            writer.writerow([*row, str(m.step)])
+    return path
+
+
+def check_sheet(data: Measurements, procedure: Procedure) -> None:
+    """``ValueError`` naming the line of the first reading of ``data`` that the plan does
+    not hold: a step it does not have, or a gauge, mounting or posture other than that
+    step's."""
+    steps = {s.number: s for s in procedure.steps}
+    for m in data.items:
+        where = f"line {m.line}" if m.line is not None else "a reading"
+        if m.step is None:
+            raise ValueError(f"{where}: no step: a sheet of the plan numbers every reading")
+        step = steps.get(m.step)
+        if step is None:
+            raise ValueError(f"{where}: step {m.step} is not in the plan (steps 1 .. "
+                             f"{len(procedure.steps)})")
+        if step.action not in ("set up", "drive and read", "re-mount"):
+            raise ValueError(f"{where}: step {m.step} ({step.action}) takes no reading")
+        if step.slot is not None and m.gauge.slot != step.slot:
+            raise ValueError(f"{where}: step {m.step} reads stand {step.stand} at "
+                             f"{step.slot}, not {m.gauge.slot}")
+        if step.rho is not None and tuple(step.rho) != m.rho:
+            raise ValueError(f"{where}: step {m.step} is at rho {tuple(step.rho)}, not "
+                             f"{m.rho}")

@@ -1,0 +1,209 @@
+"""A sequential experiment with a person (or a script) at the machine.
+
+:class:`Session` runs an agent that decides as it reads (``active``) in an exact-model lab
+of the design's nominal machine, which gives only the steps' timing and which readings
+each step takes.  The readings themselves come from ``answer``, a person typing or a
+digital readout.  Before the agent sees a step, that step's readings in the lab's notebook
+and observation are replaced by the answers. A reading the gauge could not give
+(``-``: out of travel, no contact) is taken out.  Every answer is appended to the session's
+notebook file at once, so a crash loses nothing; a session started again on that file
+replays it (``resume``) and goes on where it stopped.  The session ends when the agent
+stops (at its target predicted error, or when nothing is worth the time) or at the budget.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import orthoglide_env
+from calibrators.agents import get_agent
+from calibrators.agents.base import PlannedAgent
+from calibrators.measurements import Measurements, gauge_name
+from calibrators.study.episodes import agent_rng, measurements_of
+from calibrators.workflow.plan import describe_step
+from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
+from orthoglide_env.lab.notebook import Record
+from orthoglide_env.lab.operations import Op, slot_catalogue
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.errors import MachineParams
+from orthoglide_env.world.conditions import Conditions
+from orthoglide_env.world.machine_file import machine_dict
+
+#: What an answer is asked for: (step number, what to do, stand (1, 2, ...), gauge name,
+#: rho, lab clock (s)); it returns the reading (mm) or None (the gauge gave none).
+Answer = Callable[[dict[str, Any]], float | None]
+
+
+class Session:
+    """A sequential experiment of agent ``agent_name`` (see the module docstring); its
+    notebook file ``notebook`` (JSON lines: one answer each) is written as it goes and
+    replayed when it exists."""
+
+    def __init__(self, agent_name: str, budget_s: float, notebook: str | Path, *,
+                 design: MachineDesign = PROTOTYPE, conditions: Conditions | None = None,
+                 seed: int = 0, target_mm: float = 0.0, sigma: float = DEFAULT_SIGMA,
+                 resolution: float = DEFAULT_RESOLUTION) -> None:
+        if not budget_s > 0:
+            raise ValueError(f"the budget must be a positive number of seconds, got "
+                             f"{budget_s:g}")
+        if not target_mm >= 0:
+            raise ValueError(f"the target must be 0 (none) or a positive mm, got {target_mm:g}")
+        self.agent = get_agent(agent_name)
+        if isinstance(self.agent, PlannedAgent):
+            raise ValueError(f"agent '{agent_name}' decides its whole experiment at the start: "
+                             "write it down with orthoglide plan instead")
+        if hasattr(self.agent, "target_mm"):
+            self.agent.target_mm = target_mm
+        elif target_mm:
+            raise ValueError(f"agent '{agent_name}' has no target error to stop at")
+        self.design, self.seed = design, seed
+        self.notebook = Path(notebook)
+        self.replay = _read_notebook(self.notebook)
+        self.env = gym.make(orthoglide_env.LAB_ENV_ID, backend="exact", errors="nominal",
+                            gauge_sigma=sigma, gauge_resolution=resolution,
+                            tracker=self.agent.needs_tracker,
+                            reference=self.agent.needs_reference, budget_s=budget_s,
+                            design=design,
+                            conditions=Conditions("ideal") if conditions is None else conditions)
+        self.answered = 0
+
+    def run(self, answer: Answer, say: Callable[..., None] = print) -> Measurements:
+        """The experiment to its end; ``answer`` gives each reading asked for (replayed
+        answers first), ``say`` is told each step (its words, and the lab action after the
+        set-up).  The readings, as a measurement file holds them."""
+        env = self.env
+        try:
+            observation, info = env.reset(seed=self.seed, options={
+                "machine": machine_dict(MachineParams(design=self.design), None)})
+            lab = env.unwrapped
+            slots = slot_catalogue(self.design)
+            held = [int(s) for s in observation["slot"]]
+            say("Step 1: drive to Zero, mount the stands ("
+                + ", ".join(f"stand {k + 1} at {slots[s].slot}" for k, s in enumerate(held)
+                            if s < len(slots))
+                + "), set each gauge at mid-travel and zero its dial.")
+            self._answer(1, "set up", observation, 0, held, answer)
+            self.agent.reset(env, observation, agent_rng(self.seed))
+            number = 1
+            while True:
+                act = self.agent.act(observation, info)
+                before = len(lab.records)
+                clock = float(observation["time"][0])
+                observation, _, terminated, truncated, info = env.step(act)
+                number += 1
+                step = describe_step(number, act, float(observation["time"][0]) - clock, clock,
+                             lab.records[before:], before, slots, self.design, held)
+                say(f"Step {number} ({step.seconds:.0f} s, clock {clock / 60:.1f} min): "
+                    f"{step.text}", act)
+                held = [int(s) for s in observation["slot"]]
+                self._answer(number, step.text, observation, before, held, answer,
+                             moved=tuple(float(v) for v in np.asarray(act["rho"]))
+                             if int(act["op"]) == Op.MOVE else None)
+                if terminated or truncated:
+                    break
+            return measurements_of(list(lab.records), float(observation["time"][0]),
+                                   design=self.design)
+        finally:
+            env.close()
+
+    def _answer(self, number: int, text: str, observation: dict[str, np.ndarray],
+                first: int, held: list[int], answer: Answer,
+                moved: tuple[float, ...] | None = None) -> None:
+        """Replace the notebook's and the observation's readings from ``first`` on by the
+        answers.  Asked are the stands the nominal lab read, and after a move to ``moved``
+        (its rho) every stand in service: the real machine may read where the nominal
+        one could not.  In stand order, as the lab writes its notebook."""
+        lab = self.env.unwrapped
+        slots = slot_catalogue(self.design)
+        stand_of = {slots[s]: k for k, s in enumerate(held) if s < len(slots)}
+        records = lab.records
+        nominal = {stand_of[r.spec]: r for r in records[first:]}
+        asked = set(nominal)
+        if moved is not None:
+            asked |= {k for k, s in enumerate(held)
+                      if s < len(slots) and observation["engaged"][k]}
+        template = records[first] if len(records) > first else None
+        kept = records[:first]
+        for stand in sorted(asked):
+            record = nominal.get(stand) or Record(
+                slots[held[stand]], lab.mountings[stand],
+                template.rho if template else moved,
+                0.0, template.step if template else number - 1,
+                template.time_s if template else float(observation["time"][0]))
+            question = {"step": number, "text": text, "stand": stand + 1,
+                        "gauge": gauge_name(record.spec), "rho": list(record.rho),
+                        "time_s": record.time_s}
+            if self.answered < len(self.replay):
+                given = self.replay[self.answered]
+                if (given["step"], given["stand"]) != (number, stand + 1):
+                    raise ValueError(f"{self.notebook}: answer {self.answered + 1} is for "
+                                     f"step {given['step']}, stand {given['stand']}, but "
+                                     f"the session asks step {number}, stand {stand + 1}: "
+                                     "not this session's notebook")
+                value = given["reading_mm"]
+            else:
+                value = answer(question)
+                with self.notebook.open("a", encoding="utf-8") as handle:
+                    handle.write(json.dumps({"step": number, "stand": stand + 1,
+                                             "gauge": question["gauge"],
+                                             "reading_mm": value}) + "\n")
+            self.answered += 1
+            observation["valid"][stand] = value is not None
+            observation["gauges"][stand] = 0.0 if value is None else value
+            if value is not None:
+                kept.append(replace(record, reading=float(value)))
+        records[:] = kept
+
+
+def _read_notebook(path: Path) -> list[dict[str, Any]]:
+    """The answers a session's notebook holds (none when it does not exist)."""
+    if not path.exists():
+        return []
+    out = []
+    for line_number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+        if not line.strip():
+            continue
+        try:
+            item = json.loads(line)
+            value = item["reading_mm"]
+            if value is not None and not (isinstance(value, int | float)
+                                          and not isinstance(value, bool)
+                                          and np.isfinite(value)):
+                raise ValueError
+            out.append({"step": int(item["step"]), "stand": int(item["stand"]),
+                        "reading_mm": value})
+        except (ValueError, KeyError, TypeError):
+            raise ValueError(f"{path}:{line_number}: not an answer of a session's "
+                             "notebook") from None
+    return out
+
+
+def parse_answer(text: str) -> float | None:
+    """A typed answer: a reading in mm, ``-`` for none, or a JSON line
+    ``{"reading_mm": 0.12}`` (``null`` for none); ``ValueError`` otherwise."""
+    text = text.strip()
+    if text == "-":
+        return None
+    if text.startswith("{"):
+        try:
+            value = json.loads(text)["reading_mm"]
+        except (ValueError, KeyError, TypeError):
+            raise ValueError("a JSON answer is {\"reading_mm\": number or null}") from None
+        if value is None:
+            return None
+    else:
+        value = text
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"not a reading: {text!r} (a number in mm, or - for none)") from None
+    if isinstance(value, bool) or not np.isfinite(number) or abs(number) > 100:
+        raise ValueError(f"not a reading: {text!r} (a finite number of mm within +-100)")
+    return number

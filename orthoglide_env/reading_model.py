@@ -1,0 +1,458 @@
+"""The exact model of an experiment's readings, batched over parameter vectors.
+
+A *design* says where readings were taken: which gauge mountings (stand installations)
+and, for every reading, its mounting and the commanded posture.  The model reading of a
+mounting at a posture is ``sign * t`` with ``t`` the distance along the stand's ray to the
+plane of the bar face it is aimed at (:func:`orthoglide_env.instruments.rays.face_distances`),
+less, for a reference gauge at Zero, the gauge block's nominal length over the cosine of
+the ray's tilt (:attr:`Design.through`; its derivative over the tilt, the length times the
+tilt, about 0.25 mm/rad for the stands' 5 mrad, is left out of :func:`jacobian`); the
+gauge's zero is one unknown constant per mounting, which estimators eliminate, so the
+model leaves it out.
+
+The parameter vector is the one of :mod:`calibrators.estimators.parameters`: 27 machine errors, then
+four stand parameters per mounting.  Any leading dimensions of it are a batch (machines,
+or the perturbations of a finite-difference Jacobian), evaluated in one numpy pass.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from orthoglide_env.instruments.gauges import Gauge, spec_arrays
+from orthoglide_env.instruments.rays import boxes_at, face_distances, face_normals, plane_distances
+from orthoglide_env.instruments.slots import GaugeSpec, Part, on_platform
+from orthoglide_env.instruments.stands import (
+    across_axes,
+    ideal_rays,
+    stand_errors,
+    stand_names,
+    stand_rays,
+)
+from orthoglide_env.model.boxes import bar_normal_pullback
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.errors import (
+    AXIS_NAMES,
+    DEFAULT_PRESET,
+    ERROR_NAMES,
+    PRESETS,
+    ErrorPreset,
+    MachineParams,
+    error_group,
+)
+from orthoglide_env.model.kinematics import (
+    ATTACH_COLUMN,
+    CARRIAGE_COLUMNS,
+    carriage_gradients,
+    carriage_points,
+    direct,
+    dot,
+    platform_points,
+    sensitivity_along,
+    skew,
+    tcp_sensitivity_factors,
+)
+from orthoglide_env.world.table import REFERENCE_LENGTH_MM
+
+N_MACHINE: int = len(ERROR_NAMES)
+
+
+@dataclass(frozen=True)
+class TrackerAxis:
+    """One coordinate (0, 1, 2 for x, y, z) of a laser tracker's reading of the reflector
+    on the platform, in the tracker's own frame.  A tracker station's three coordinates are
+    three mountings named ``STATION.x``, ``.y``, ``.z``: each has its own unknown offset
+    (the station's position, eliminated like a gauge's zero), and the station has three
+    unknown rotations (``STATION.rot_x``, ...).  The reflector's place on the platform is an
+    offset too: the platform only translates."""
+
+    component: int
+
+    @property
+    def slot(self) -> str:
+        return f"tracker/{AXIS_NAMES[self.component]}"
+
+
+Spec = GaugeSpec | TrackerAxis
+
+
+def station_of(mounting: str) -> str:
+    """The tracker station a tracker mounting belongs to (``tracker.x`` -> ``tracker``)."""
+    return mounting.rsplit(".", 1)[0]
+
+
+@dataclass(frozen=True)
+class ParameterSpace:
+    """Every parameter a fit could estimate for a set of mountings: the 27 machine errors in
+    :data:`~orthoglide_env.model.errors.ERROR_NAMES` order, four stand parameters per gauge
+    mounting (:data:`~orthoglide_env.instruments.stands.STAND_PARAMS`), then three rotations per
+    tracker station."""
+
+    mountings: tuple[str, ...] = ()
+    specs: tuple[Spec, ...] = ()
+
+    @cached_property
+    def gauges(self) -> list[int]:
+        """Indices of the gauge mountings."""
+        return [k for k, s in enumerate(self.specs) if isinstance(s, GaugeSpec)]
+
+    @cached_property
+    def stations(self) -> list[str]:
+        """Tracker stations, in order of first appearance."""
+        return list(dict.fromkeys(station_of(m) for m, s in zip(self.mountings, self.specs,
+                                                                strict=True)
+                                  if isinstance(s, TrackerAxis)))
+
+    @cached_property
+    def names(self) -> tuple[str, ...]:
+        stands = [n for k in self.gauges for n in stand_names(self.mountings[k], self.specs[k])]
+        rotations = [f"{st}.rot_{a}" for st in self.stations for a in AXIS_NAMES]
+        return ERROR_NAMES + tuple(stands) + tuple(rotations)
+
+    @cached_property
+    def groups(self) -> tuple[str, ...]:
+        """Group of every parameter: a machine-file key, ``stand_shift``, ``stand_tilt`` or
+        ``tracker_rotation``."""
+        stands = ("stand_shift",) * 2 + ("stand_tilt",) * 2
+        return (tuple(error_group(n) for n in ERROR_NAMES) + stands * len(self.gauges)
+                + ("tracker_rotation",) * (3 * len(self.stations)))
+
+    def __len__(self) -> int:
+        return len(ERROR_NAMES) + 4 * len(self.gauges) + 3 * len(self.stations)
+
+
+
+#: Scale of a tracker frame's rotation (rad) once its readings are turned into the
+#: machine's frame by a best fit to the nominal machine: what is left is of the order of
+#: the machine's own errors over its workspace, ~1 mm over ~100 mm.
+TRACKER_ROTATION_SCALE: float = 1e-2
+
+
+def preset_sigmas(preset: ErrorPreset, space: ParameterSpace) -> np.ndarray:
+    """A preset's sigma of every parameter of ``space``: the machine errors, each stand's
+    installation tolerance, and 0 for a tracker's frame (no preset says how it was
+    turned)."""
+    stands = [preset.gauge_position] * 2 + [preset.gauge_tilt] * 2
+    return np.concatenate([preset.sigmas(), np.tile(stands, len(space.gauges)),
+                           np.zeros(3 * len(space.stations))])
+
+
+def default_scales(space: ParameterSpace) -> np.ndarray:
+    """Typical size of every parameter: the default preset's sigma, and
+    :data:`TRACKER_ROTATION_SCALE` for a tracker's frame.  It makes the numerics unit-free
+    (mm and rad) and sets what "identified" means: known better than this."""
+    scale = preset_sigmas(PRESETS[DEFAULT_PRESET], space)
+    scale[[g == "tracker_rotation" for g in space.groups]] = TRACKER_ROTATION_SCALE
+    return np.where(scale > 0, scale, 1.0)
+
+@dataclass(frozen=True)
+class Design:
+    """Where an experiment's readings were taken."""
+
+    mountings: tuple[str, ...]
+    specs: tuple[Spec, ...]  # one per mounting
+    mounting: np.ndarray  # (N,) index of each reading's mounting
+    rho: np.ndarray  # (N, 3) commanded posture of each reading, mm
+    machine_design: MachineDesign = PROTOTYPE  # the design of the machine read
+
+    @cached_property
+    def _unique_postures(self) -> tuple[np.ndarray, np.ndarray]:
+        # On first use: of a sweep's many identical designs, only the one fitted needs it.
+        postures, index = np.unique(self.rho, axis=0, return_inverse=True)
+        return postures, np.ravel(index)
+
+    def __len__(self) -> int:
+        return len(self.mounting)
+
+    @cached_property
+    def space(self) -> ParameterSpace:
+        return ParameterSpace(self.mountings, self.specs)
+
+    @cached_property
+    def distinct(self) -> tuple[Design, np.ndarray]:
+        """The design with each mounting read once at each of its postures, and every
+        reading's row in it: repeated readings share their model and its derivatives."""
+        key = self.posture_index * len(self.specs) + self.mounting
+        _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+        if len(first) == len(self):
+            return self, np.arange(len(self))
+        return (Design(self.mountings, self.specs, self.mounting[first], self.rho[first],
+                       self.machine_design), np.ravel(inverse))
+
+    @property
+    def postures(self) -> np.ndarray:
+        """The distinct postures (P, 3)."""
+        return self._unique_postures[0]
+
+    @property
+    def posture_index(self) -> np.ndarray:
+        """Each reading's row in :attr:`postures` (N,)."""
+        return self._unique_postures[1]
+
+    @cached_property
+    def through(self) -> np.ndarray:
+        """Per reading, the nominal length (mm) of the gauge block between the plunger and
+        the face: a reference gauge's readings at Zero are through it, its others and every
+        other gauge's are not (0)."""
+        block = np.array([isinstance(s, GaugeSpec) and s.part == Part.REFERENCE
+                          for s in self.specs])
+        at_zero = ~self.rho.any(axis=-1)
+        return np.where(block[self.mounting] & at_zero, REFERENCE_LENGTH_MM, 0.0)
+
+    @cached_property
+    def signs(self) -> np.ndarray:
+        """Reading sign of every mounting: +1 when a gauge's plunger points along the world
+        axis, and for a tracker coordinate."""
+        gauges = [s for s in self.specs if isinstance(s, GaugeSpec)]
+        signs = np.ones(len(self.specs))
+        if gauges:
+            _, directions = ideal_rays(gauges, MachineParams(design=self.machine_design))
+            signs[self.space.gauges] = np.sign(
+                directions[np.arange(len(gauges)), [s.axis for s in gauges]])
+        return signs
+
+    @classmethod
+    def of(cls, mountings: list[str], specs: list[Spec], rho: np.ndarray,
+           machine_design: MachineDesign = PROTOTYPE) -> Design:
+        """A design from each reading's mounting name and spec, and its posture, on a
+        machine of ``machine_design``."""
+        spec_of: dict[str, Spec] = {}
+        for name, spec in zip(mountings, specs, strict=True):
+            known = spec_of.setdefault(name, spec)
+            if known is not spec and known != spec:
+                raise ValueError(f"mounting '{name}' holds two different instruments "
+                                 f"({known.slot} and {spec.slot})")
+        names = list(spec_of)
+        position = {name: k for k, name in enumerate(names)}
+        index = np.array([position[m] for m in mountings], dtype=int)
+        return cls(tuple(names), tuple(spec_of[n] for n in names), index,
+                   np.asarray(rho, dtype=float).reshape(-1, 3), machine_design)
+
+
+def predict(theta: np.ndarray, design: Design) -> np.ndarray:
+    """Model readings (mm, up to one constant per mounting) of every reading of
+    ``design`` for parameter vectors ``theta`` of shape ``(*batch, n)``: ``(*batch, N)``."""
+    theta = np.asarray(theta, dtype=float)
+    batch = theta.shape[:-1]
+    flat = theta.reshape(-1, theta.shape[-1])
+    if len(flat) > 1 and bool((flat == flat[0]).all()):
+        # Every fit of a batch starts at the same point (nominal): one evaluation serves all.
+        return np.broadcast_to(predict(flat[0], design), (*batch, len(design))).copy()
+    space = design.space
+    machine = MachineParams.from_vector(theta[..., :N_MACHINE], design.machine_design)
+    postures = design.postures.reshape((1,) * len(batch) + design.postures.shape)
+    values = np.zeros((*batch, len(design.postures), len(design.specs)))  # (*b, P, K)
+    gauges = space.gauges
+    if gauges:
+        specs = [design.specs[k] for k in gauges]
+        stand = theta[..., N_MACHINE:N_MACHINE + 4 * len(gauges)].reshape(*batch, -1, 4)
+        origins, directions = ideal_rays(specs, machine)
+        origins, directions = stand_rays(specs, origins, directions, stand)
+        values[..., gauges] = face_distances(machine, specs, origins, directions, postures)
+    stations = space.stations
+    if stations:
+        tcp = direct(machine, postures)  # (*b, P, 3)
+        start = N_MACHINE + 4 * len(gauges)
+        for k, station in enumerate(stations):
+            rotation = rotation_matrices(theta[..., start + 3 * k:start + 3 * k + 3])
+            seen = np.einsum("...ij,...pj->...pi", rotation, tcp)
+            for m, (name, spec) in enumerate(zip(design.mountings, design.specs, strict=True)):
+                if isinstance(spec, TrackerAxis) and station_of(name) == station:
+                    values[..., m] = seen[..., spec.component]
+    rows = values[..., design.posture_index, design.mounting]
+    through = np.flatnonzero(design.through)
+    if len(through):
+        gauge = np.full(len(design.specs), -1)
+        gauge[gauges] = np.arange(len(gauges))
+        axes = np.array([design.specs[k].axis for k in gauges])
+        cosines = np.abs(directions[..., np.arange(len(gauges)), axes])
+        rows[..., through] -= (design.through[through]
+                               / cosines[..., gauge[design.mounting[through]]])
+    return design.signs[design.mounting] * rows
+
+
+def rotation_matrices(rotvec: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``(..., 3, 3)`` of rotation vectors ``(..., 3)`` (Rodrigues),
+    batched (scipy's Rotation holds one batch axis only)."""
+    rotvec = np.asarray(rotvec, dtype=float)
+    angle = np.linalg.norm(rotvec, axis=-1)[..., None, None]
+    k = skew(rotvec)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        a = np.where(angle > 1e-8, np.sin(angle) / angle, 1.0 - angle**2 / 6)
+        b = np.where(angle > 1e-8, (1 - np.cos(angle)) / angle**2, 0.5 - angle**2 / 24)
+    return np.eye(3) + a * k + b * (k @ k)
+
+
+def rotated_derivatives(rotvec: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Derivative of ``R(rotvec) @ points`` over the rotation vector, premultiplied by
+    ``R^T``: ``-[p]x J_r(rotvec)`` with the right Jacobian of SO(3), ``J_r = I - (1 - cos
+    a) / a^2 [w]x + (a - sin a) / a^3 [w]x^2`` (``a = |w|``), ``(..., 3, 3)``."""
+    rotvec = np.asarray(rotvec, dtype=float)
+    angle = np.linalg.norm(rotvec, axis=-1)[..., None, None]
+    k = skew(rotvec)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        a = np.where(angle > 1e-2, (1 - np.cos(angle)) / angle**2, 0.5 - angle**2 / 24)
+        b = np.where(angle > 1e-2, (angle - np.sin(angle)) / angle**3, 1 / 6 - angle**2 / 120)
+    right = np.eye(3) - a * k + b * (k @ k)
+    return -skew(points) @ right
+
+
+def jacobian(theta: np.ndarray, design: Design, free: np.ndarray, scale: np.ndarray
+             ) -> np.ndarray:
+    """Derivative of :func:`predict` over the ``free`` parameters, per unit of their
+    ``scale``: ``(*batch, N, n_free)``.
+
+    By the chain rule, each reading's kinematics solved once: a reading ``t = (n . (c -
+    o) - h sign(n . d)) / (n . d)`` depends on the machine through its target box (the
+    leg's R1 and R2 centres, or the TCP: their derivatives in closed form, the TCP's by the
+    implicit function theorem) and its stand's ideal ray, and on the stand parameters
+    through its ray alone."""
+    theta = np.asarray(theta, dtype=float)
+    batch = theta.shape[:-1]
+    flat = theta.reshape(-1, theta.shape[-1])
+    idx = np.flatnonzero(free)
+    # Every fit of a batch starts at the same point (nominal): one evaluation serves all.
+    same = len(flat) > 1 and bool((flat == flat[0]).all())
+    distinct, rows = design.distinct
+    full = _derivatives(flat[:1] if same else flat, distinct, np.asarray(free, dtype=bool))
+    if len(idx) == full.shape[-1]:
+        full *= scale
+    else:
+        full = full[..., idx] * scale[idx]
+    full = full[:, rows]
+    if same:
+        full = np.repeat(full, len(flat), axis=0)
+    return full.reshape(*batch, len(design), len(idx))
+
+
+def _derivatives(theta: np.ndarray, design: Design, wanted: np.ndarray) -> np.ndarray:
+    """Derivative of every reading over every parameter, ``(B, N, n)`` for ``theta``
+    ``(B, n)``; the stands' columns are left at zero unless one of them is ``wanted``."""
+    space = design.space
+    machine = MachineParams.from_vector(theta[:, :N_MACHINE], design.machine_design)
+    postures = design.postures[None]
+    p = direct(machine, postures)  # (B, P, 3)
+    # The TCP's derivative (B, P, 3, 27) as its factors (B, P, 3, 3) and (B, P, 27).
+    inv, row = tcp_sensitivity_factors(machine, postures, p)
+    out = np.zeros((len(theta), len(design), theta.shape[-1]))
+    at = design.posture_index
+    gauges = space.gauges
+    if gauges:
+        where = np.full(len(design.specs), -1)
+        where[gauges] = np.arange(len(gauges))
+        rows = np.flatnonzero(where[design.mounting] >= 0)
+        _gauge_derivatives(theta, design, machine, p, (inv, row), rows,
+                           where[design.mounting[rows]], at[rows], out,
+                           stands=bool(wanted[N_MACHINE:N_MACHINE + 4 * len(gauges)].any()))
+    start = N_MACHINE + 4 * len(gauges)
+    for k, station in enumerate(space.stations):
+        rows = np.flatnonzero([isinstance(design.specs[m], TrackerAxis)
+                               and station_of(design.mountings[m]) == station
+                               for m in design.mounting])
+        component = np.array([design.specs[m].component for m in design.mounting[rows]])
+        columns = slice(start + 3 * k, start + 3 * k + 3)
+        rotation = rotation_matrices(theta[:, columns])
+        # Component i of R p moves with row i of R.
+        out[:, rows, :N_MACHINE] = sensitivity_along(inv[:, at[rows]], row[:, at[rows]],
+                                                     rotation[:, component])
+        turned = np.einsum("bij,brjk->brik", rotation, rotated_derivatives(
+            theta[:, None, columns], p[:, at[rows]]))
+        out[:, rows, columns] = turned[:, np.arange(len(rows)), component]
+    return out
+
+
+def _gauge_derivatives(theta: np.ndarray, design: Design, machine: MachineParams,
+                       p: np.ndarray, dp: tuple[np.ndarray, np.ndarray], rows: np.ndarray,
+                       gauge: np.ndarray, at: np.ndarray, out: np.ndarray, stands: bool
+                       ) -> None:
+    """Fill ``out[:, rows]``: the derivatives of the gauge readings ``rows`` (their gauge
+    among the design's gauges, their posture index ``at``) over the machine's errors, and
+    over the stand parameters when ``stands``."""
+    space = design.space
+    specs = [design.specs[k] for k in space.gauges]
+    count = len(specs)
+    stand = theta[:, N_MACHINE:N_MACHINE + 4 * count].reshape(-1, count, 4)
+    ideal, aim = ideal_rays(specs, machine)
+    origins, directions = stand_rays(specs, ideal, aim, stand)
+    g = spec_arrays([specs[j] for j in gauge])
+    legs = np.maximum(g.leg, 0)
+    postures = design.postures[at]
+    each = np.arange(len(rows))
+    a = carriage_points(machine, postures[None])[:, each, legs]
+    c = platform_points(machine, p[:, at])[:, each, legs]
+    centre, rot, half = boxes_at(g, a, c, p[:, at], machine.design)
+    o, d = origins[:, gauge], directions[:, gauge]
+    t = plane_distances(centre, rot, half, g.face, o, d)
+    normal = face_normals(rot, g.face)
+    nd = dot(normal, d)[..., None]
+    towards_centre = normal / nd  # dt/dc, and -dt/do
+    # dt/dn = (c - hit) / (n . d) through the bar's normal, which turns with v = c - a.
+    turn = bar_normal_pullback((centre - o - t[..., None] * d) / nd, a, c, legs, g.face)
+    bar = (g.part == Part.BAR)[:, None]
+    d_a = np.where(bar, towards_centre / 2 - turn,
+                   np.where((g.part == Part.CARRIAGE)[:, None], towards_centre, 0.0))
+    d_c = np.where(bar, towards_centre / 2 + turn, 0.0)
+    d_p = np.where(on_platform(g.part)[:, None], towards_centre, 0.0)
+    # The machine moves the target through A, C and p at the posture, and the ray's
+    # origin (aimed at Zero) through the same points at Zero: on a bar at ``at * A + (1 -
+    # at) * C``, on a carriage with A, on the platform with p.
+    zero = np.zeros((1, 1, 3))
+    p_zero = direct(machine, zero)
+    aimed = [np.where(bar, g.at[:, None], np.where((g.part == Part.CARRIAGE)[:, None], 1.0, 0.0)),
+             np.where(bar, 1 - g.at[:, None], 0.0),
+             np.where(on_platform(g.part)[:, None], 1.0, 0.0)]
+    machine_part = (
+        _through_leg(machine, postures[None], (dp[0][:, at], dp[1][:, at]), legs, d_a, d_c,
+                     d_p)
+        - _through_leg(machine, zero, tcp_sensitivity_factors(machine, zero, p_zero), legs,
+                       *(w * towards_centre for w in aimed)))
+    sign = design.signs[design.mounting[rows]]
+    out[:, rows, :N_MACHINE] = sign[:, None] * machine_part
+    if not stands:
+        return
+    # Stand parameters move the ray only: shifts its origin across the measuring axis,
+    # tilts its direction d = (d0 + tilt . across) / |...|.
+    across = across_axes(specs)[gauge]  # (R, 2, 3)
+    tilt = stand[:, gauge, 2:]
+    raw = aim[gauge] + tilt[..., 0, None] * across[:, 0] + tilt[..., 1, None] * across[:, 1]
+    size = np.sqrt(dot(raw, raw))[..., None, None]
+    turned = (across - d[..., None, :] * dot(d[..., None, :], across)[..., None]) / size
+    shifts = -dot(towards_centre[..., None, :], across)
+    tilts = -t[..., None] * dot(towards_centre[..., None, :], turned)
+    columns = N_MACHINE + 4 * gauge[:, None] + np.arange(4)
+    out[:, rows[:, None], columns] = sign[:, None] * np.concatenate([shifts, tilts], axis=-1)
+
+
+def _through_leg(machine: MachineParams, rho: np.ndarray, dp: tuple[np.ndarray, np.ndarray],
+                 legs: np.ndarray, d_a: np.ndarray, d_c: np.ndarray, d_p: np.ndarray
+                 ) -> np.ndarray:
+    """``d_a . dA/dtheta + d_c . dC/dtheta + d_p . dp/dtheta`` over the 27 errors, for the
+    R1 centre A and R2 centre C of leg ``legs`` (``(R,)``) and the TCP p at commands
+    ``rho`` (``(..., R, 3)``, or one posture for all), the TCP's derivative ``dp`` as its
+    :func:`~orthoglide_env.model.kinematics.tcp_sensitivity_factors` (``(B, R, 3, 3)``, ``(B, R,
+    27)``, or one posture for all): ``(B, R, 27)``."""
+    each = np.arange(len(legs))[:, None]
+    out = sensitivity_along(*dp, d_c + d_p)
+    out[:, each, CARRIAGE_COLUMNS[legs]] += carriage_gradients(
+        machine, rho, d_a[..., None, :], legs[:, None])[..., 0, :]
+    out[:, each, ATTACH_COLUMN + 3 * legs[:, None] + np.arange(3)] += d_c
+    return out
+
+
+def parameters_of(design: Design, machine: MachineParams, gauges: list[Gauge]) -> np.ndarray:
+    """The true parameter vector of a simulated experiment: the machine's errors and the
+    stand parameters of its installed ``gauges`` (matched to the design's mountings by
+    slot).  For scoring an estimate; an agent never sees it."""
+    by_slot = {g.spec.slot: g for g in gauges}
+    slots = [spec.slot for spec in design.specs]
+    missing = [m for m, slot in zip(design.mountings, slots, strict=True) if slot not in by_slot]
+    if missing:
+        raise ValueError(f"no installed gauge for mounting(s) {missing}")
+    installed = [by_slot[slot] for slot in slots]
+    origins, directions = ideal_rays(design.specs, machine)
+    stand = stand_errors(design.specs, np.array([g.origin for g in installed]),
+                         np.array([g.direction for g in installed]), origins, directions)
+    return np.concatenate([machine.to_vector(), stand.ravel()])
