@@ -351,7 +351,7 @@ def test_text_that_is_not_utf8_names_its_line(tmp_path) -> None:
 
 
 def test_rows_beyond_the_limit(tmp_path, monkeypatch) -> None:
-    monkeypatch.setattr(measurements, "MAX_ROWS", 3)
+    monkeypatch.setattr(measurements.fields, "MAX_ROWS", 3)
     assert len(Measurements.read(_written(tmp_path, csv_file(*["x,y,Zero,1,0.1"] * 3)))) == 3
     refused(tmp_path / "m.csv", csv_file(*["x,y,Zero,1,0.1"] * 4), ":5: more than 3 readings")
 
@@ -480,9 +480,9 @@ def test_json_document_rules(tmp_path, content: str | bytes, fragment: str) -> N
 
 
 def test_json_readings_beyond_the_limits(tmp_path, monkeypatch) -> None:
-    monkeypatch.setattr(measurements, "MAX_ROWS", 2)
+    monkeypatch.setattr(measurements.fields, "MAX_ROWS", 2)
     refused(tmp_path / "m.json", json_file(GOOD, GOOD, GOOD), ": more than 2 readings")
-    monkeypatch.setattr(measurements, "MAX_JSON_BYTES", 100)
+    monkeypatch.setattr(measurements.json_file, "MAX_JSON_BYTES", 100)
     refused(tmp_path / "m.json", json_file(GOOD, GOOD), ": larger than 100 bytes")
 
 

@@ -1,0 +1,293 @@
+"""One reading (:class:`Measurement`): which gauge in which mounting, at which posture,
+in which repetition; built from a file's fields and written back to them."""
+
+from __future__ import annotations
+
+import functools
+import sys
+from collections.abc import Mapping
+from dataclasses import KW_ONLY, InitVar, dataclass, field
+from typing import Any
+
+from calibrators.measurements import fields
+from calibrators.measurements.fields import (
+    _READING_RULE,
+    _TRACKER_RULE,
+    MAX_EXPERIMENT_TIME_S,
+    MAX_READING_MM,
+    MAX_ROOM_C,
+    MAX_TRACKER_MM,
+    MIN_ROOM_C,
+    RHO_FIELDS,
+    ZERO_RHO,
+    FieldError,
+    _fields_problem,
+    _given,
+    _label,
+    _posture,
+    _real,
+    _repetition,
+    _required,
+    _show,
+    rho_label,
+)
+from orthoglide_env.instruments.slots import NO_LEG, GaugeSpec, Part, layout_from_names, on_platform
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.errors import AXIS_NAMES, LEG_NAMES
+from orthoglide_env.reading_model import TrackerAxis
+
+
+@functools.lru_cache(maxsize=4096)
+def default_mounting(gauge: GaugeSpec | TrackerAxis) -> str:
+    """A reading's mounting when none is named: a gauge's slot (``x-leg/y@0.5``), or the
+    coordinate of the one tracker station (``tracker.x``)."""
+    if isinstance(gauge, TrackerAxis):
+        return f"tracker.{AXIS_NAMES[gauge.component]}"
+    return gauge_name(gauge)
+
+
+def gauge_name(gauge: GaugeSpec | TrackerAxis) -> str:
+    """A gauge's full name, place included, e.g. ``x-leg/y@0.5``: the default mounting."""
+    return sys.intern(gauge.slot)
+
+
+@dataclass(frozen=True, slots=True)
+class Measurement:
+    """One gauge reading: which gauge, in which mounting, at which posture and repetition.
+
+    ``rho`` is the commanded posture (control coordinates, mm, within the control limits
+    of ``design``, the machine's design: default the prototype); ``posture`` its label, a
+    paper posture name (whose rho on ``design`` is filled in when not given) or any other
+    label for a posture given by its ``rho`` ("" makes one from the rho).  ``mounting`` names one
+    installation of the gauge's stand ("": the gauge's name): each has its own zero, and
+    differences are taken against its readings at ``rho = (0, 0, 0)``.  ``line`` is where
+    the reading came from in a file (not part of the reading: equality ignores it).  The
+    module docstring's rules of one reading are checked here; a broken one raises
+    :class:`FieldError` (a ValueError) naming the field.
+    """
+
+    gauge: GaugeSpec | TrackerAxis
+    posture: str
+    repetition: int
+    reading: float
+    rho: tuple[float, float, float] | None = None
+    mounting: str = ""
+    line: int | None = field(default=None, compare=False)
+    _: KW_ONLY
+    time_s: float | None = None
+    #: The room's temperature (C) a thermometer read with it, if any.
+    temperature_c: float | None = None
+    #: The step of a written procedure it was taken at (``orthoglide plan``), if any.
+    step: int | None = field(default=None, compare=False)
+    design: InitVar[MachineDesign] = PROTOTYPE
+
+    def __post_init__(self, design: MachineDesign) -> None:
+        posture, rho = _posture(self.posture, self.rho, design)
+        mounting = default_mounting(self.gauge) if self.mounting == "" else _label(
+            self.mounting, "mounting")
+        for name, value in (("posture", posture), ("rho", rho), ("mounting", mounting)):
+            object.__setattr__(self, name, value)
+        self._own(self.reading, self.repetition, self.time_s, self.line, self.step,
+                  self.temperature_c)
+
+    def _own(self, reading: object, repetition: object, time_s: object,
+             line: int | None, step: object = None, temperature_c: object = None) -> None:
+        """Check and set what is this reading's own: its value, repetition, time,
+        procedure step and room temperature."""
+        limit, rule = ((MAX_TRACKER_MM, _TRACKER_RULE) if isinstance(self.gauge, TrackerAxis)
+                       else (MAX_READING_MM, _READING_RULE))
+        reading = _real(reading, "reading_mm", -limit, limit, rule)
+        time_s = None if time_s is None else _real(
+            time_s, "time_s", 0.0, MAX_EXPERIMENT_TIME_S, "s (the lab clock)")
+        step = None if step is None else _repetition(step, "step")
+        temperature_c = None if temperature_c is None else _real(
+            temperature_c, "temperature_c", MIN_ROOM_C, MAX_ROOM_C, "C (a room's)")
+        for name, value in (("repetition", _repetition(repetition)), ("reading", reading),
+                            ("time_s", time_s), ("line", line), ("step", step),
+                            ("temperature_c", temperature_c)):
+            object.__setattr__(self, name, value)
+
+    def again(self, reading: object, repetition: object = 1, time_s: object = None,
+              line: int | None = None, step: object = None,
+              temperature_c: object = None) -> Measurement:
+        """Another reading of this gauge and mounting at this posture, its own fields
+        checked as a new reading's are (what a file repeats is checked once)."""
+        out = object.__new__(type(self))
+        for name in ("gauge", "posture", "rho", "mounting"):
+            object.__setattr__(out, name, getattr(self, name))
+        out._own(reading, repetition, time_s, line, step, temperature_c)
+        return out
+
+    @classmethod
+    def recorded(cls, gauge: GaugeSpec | TrackerAxis, posture: str, reading: float,
+                 rho: tuple[float, float, float], mounting: str, repetition: int,
+                 time_s: float | None = None, temperature_c: float | None = None
+                 ) -> Measurement:
+        """A reading the lab wrote in its notebook, taken as it is: the lab only records
+        finite readings of its own gauges at postures it reached, so the checks a reading
+        from a file needs (a tenth of a millisecond each on a large sweep's notebooks)
+        would find nothing."""
+        out = object.__new__(cls)
+        for name, value in (("gauge", gauge), ("posture", posture or rho_label(rho)),
+                            ("repetition", repetition), ("reading", reading), ("rho", rho),
+                            ("mounting", mounting), ("line", None), ("time_s", time_s),
+                            ("temperature_c", temperature_c), ("step", None)):
+            object.__setattr__(out, name, value)
+        return out
+
+    @property
+    def is_zero(self) -> bool:
+        return self.rho == ZERO_RHO
+
+    def to_dict(self) -> dict[str, Any]:
+        """The reading as a JSON object of the file format."""
+        out = {"mounting": self.mounting, "gauge": gauge_name(self.gauge),
+               "posture": self.posture, "rho": list(self.rho), "repetition": self.repetition,
+               "reading_mm": self.reading}
+        if self.time_s is not None:
+            out["time_s"] = self.time_s
+        if self.temperature_c is not None:
+            out["temperature_c"] = self.temperature_c
+        if self.step is not None:
+            out["step"] = self.step
+        return out
+
+    @classmethod
+    def from_dict(cls, data: object, design: MachineDesign = PROTOTYPE) -> Measurement:
+        """A reading on a machine of ``design`` from a JSON object of the file format
+        (:class:`FieldError` if bad)."""
+        if not isinstance(data, dict):
+            raise FieldError(None, f"must be a JSON object, got {_show(data)}")
+        if getattr(data, "duplicates", ()):
+            raise FieldError(data.duplicates[0], "the key appears more than once")
+        fields = dict(data)
+        if "rho" in fields:
+            rho = fields.pop("rho")
+            if any(name in fields for name in RHO_FIELDS):
+                raise FieldError("rho", "give rho as a list or as rho_x, rho_y, rho_z, not both")
+            if not isinstance(rho, list) or len(rho) != 3:
+                raise FieldError("rho", f"must be a list of 3 numbers, got {_show(rho)}")
+            fields.update(zip(RHO_FIELDS, rho, strict=True))
+        problem = _fields_problem(fields, "key")
+        if problem:
+            raise FieldError(None, problem)
+        return _measurement(fields, None, design)
+
+    def csv_row(self) -> list[str]:
+        """The reading as a row of :data:`COLUMNS`; numbers as their shortest round-trip
+        ``repr``, so reading the file back gives the identical floats."""
+        if isinstance(self.gauge, TrackerAxis):
+            leg, axis, at = "tracker", AXIS_NAMES[self.gauge.component], ""
+        else:
+            leg, axis = part_label(self.gauge), AXIS_NAMES[self.gauge.axis]
+            at = repr(float(self.gauge.at)) if self.gauge.part == Part.BAR else ""
+        return [self.mounting, leg, axis, at, self.posture, *(repr(v) for v in self.rho),
+                str(self.repetition), repr(self.reading),
+                *("" if v is None else repr(v) for v in (self.time_s, self.temperature_c))]
+
+
+#: The ``leg`` column of a carriage gauge: its leg's name with this suffix.
+CARRIAGE_SUFFIX: str = "-carriage"
+
+
+def part_label(gauge: GaugeSpec) -> str:
+    """The ``leg`` column of a gauge: its bar's leg (``x``), its carriage (``x-carriage``),
+    ``platform`` or ``reference``."""
+    if on_platform(gauge.part):
+        return gauge.part.name.lower()
+    return LEG_NAMES[gauge.leg] + (CARRIAGE_SUFFIX if gauge.part == Part.CARRIAGE else "")
+
+
+#: A file names a few gauges many times.
+_spec = functools.lru_cache(maxsize=4096)(GaugeSpec)
+
+
+@functools.lru_cache(maxsize=4096)
+def _named_gauge(name: str) -> GaugeSpec | TrackerAxis:
+    if name.startswith("tracker/") and name[len("tracker/"):] in AXIS_NAMES:
+        return TrackerAxis(AXIS_NAMES.index(name[len("tracker/"):]))
+    try:
+        return layout_from_names([name])[0]
+    except ValueError as exc:
+        raise FieldError("gauge", f"must name a gauge like 'x-leg/y', 'x/y@0.3', "
+                                  f"'x-carriage/y', 'platform/x' or 'reference/x' ({exc}), "
+                                  f"got {_show(name)}") from None
+
+
+def _gauge(fields: Mapping[str, object]) -> GaugeSpec | TrackerAxis:
+    if "gauge" in fields:
+        name = _required(fields, "gauge")
+        if not isinstance(name, str):
+            raise FieldError("gauge", f"must be a gauge name, got {_show(name)}")
+        return _named_gauge(name)
+    leg, axis = _required(fields, "leg"), _required(fields, "axis")
+    at = _given(fields, "at")
+    if leg == "tracker" and axis in AXIS_NAMES and at is None:
+        return TrackerAxis(AXIS_NAMES.index(axis))
+    if leg in ("platform", "reference"):
+        if not isinstance(axis, str) or axis not in AXIS_NAMES:
+            raise FieldError("axis", f"must be one of {', '.join(AXIS_NAMES)}, got "
+                                     f"{_show(axis)}")
+        if at is not None:
+            raise FieldError("at", f"a {leg} gauge has one place per face: leave 'at' "
+                                   "empty")
+        return _spec(NO_LEG, AXIS_NAMES.index(axis), part=Part[leg.upper()])
+    carriage = isinstance(leg, str) and leg.endswith(CARRIAGE_SUFFIX)
+    name = leg.removesuffix(CARRIAGE_SUFFIX) if carriage else leg
+    if not isinstance(leg, str) or name not in LEG_NAMES:
+        raise FieldError("leg", f"must be one of {', '.join(LEG_NAMES)} (a bar), "
+                                f"{', '.join(n + CARRIAGE_SUFFIX for n in LEG_NAMES)}, platform, "
+                                f"reference or tracker, got {_show(leg)}")
+    if not isinstance(axis, str) or axis not in AXIS_NAMES or axis == name:
+        raise FieldError("axis", f"must be one of the two axes normal to the {name} leg, "
+                                 f"got {_show(axis)}")
+    if carriage:
+        if at is not None:
+            raise FieldError("at", "a carriage gauge has one place: leave 'at' empty")
+        return _spec(LEG_NAMES.index(name), AXIS_NAMES.index(axis), part=Part.CARRIAGE)
+    at = 0.5 if at is None else _real(at, "at", 0.0, 1.0, "(a fraction of the leg)")
+    try:
+        return _spec(LEG_NAMES.index(leg), AXIS_NAMES.index(axis), at)
+    except ValueError as exc:
+        raise FieldError("at", str(exc)) from None
+
+
+def _measurement(fields: Mapping[str, object], line: int | None, design: MachineDesign
+                 ) -> Measurement:
+    """One reading from its fields: a CSV row's cells (numbers parsed) or a JSON object."""
+    reading = _required(fields, "reading_mm")
+    gauge = _gauge(fields)
+    rho = [_given(fields, name) for name in RHO_FIELDS]
+    if None in rho:
+        if any(v is not None for v in rho):
+            raise FieldError(RHO_FIELDS[rho.index(None)],
+                             "empty: give all of rho_x, rho_y, rho_z or none")
+        rho = None
+    posture = _given(fields, "posture")
+    if posture is None and rho is None:
+        raise FieldError("posture", "empty: give a paper posture, or the rho")
+    return Measurement(gauge, "" if posture is None else posture,
+                       _given(fields, "repetition", 1), reading, rho,
+                       _given(fields, "mounting", ""), line, design=design,
+                       time_s=_given(fields, "time_s"), step=_given(fields, "step"),
+                       temperature_c=_given(fields, "temperature_c"))
+
+
+class _Readings:
+    """Readings as they are read or written, with the rules that span readings."""
+
+    def __init__(self) -> None:
+        self.items: list[Measurement] = []
+        self._mounting: dict[str, tuple[GaugeSpec, str]] = {}
+
+    def add(self, m: Measurement, where: str) -> None:
+        if len(self.items) >= fields.MAX_ROWS:
+            raise FieldError(None, f"more than {fields.MAX_ROWS} readings")
+        gauge, first = self._mounting.setdefault(m.mounting, (m.gauge, where))
+        if gauge != m.gauge:
+            raise FieldError("mounting", f"mounting {_show(m.mounting)} holds gauge "
+                                         f"{gauge_name(gauge)} ({first}), not "
+                                         f"{gauge_name(m.gauge)}: one stand, one gauge")
+        self.items.append(m)
+
+
