@@ -28,7 +28,8 @@ def import_graph(root: Path = ROOT) -> dict[str, set[str]]:
     """Every project module (old paths' aliases left out) -> the project modules it imports,
     at any depth of its code; ``from package import name`` counts as an import of the
     submodule where ``name`` is one."""
-    sources = {_module_name(p, root): p for package in PACKAGES for p in (root / package).rglob("*.py")}
+    sources = {_module_name(p, root): p
+               for package in PACKAGES for p in (root / package).rglob("*.py")}
     trees = {name: ast.parse(path.read_text()) for name, path in sources.items()}
     modules = {name for name, tree in trees.items() if not _is_alias(tree)}
     graph: dict[str, set[str]] = {}
