@@ -17,7 +17,8 @@ import argparse
 import json
 from pathlib import Path
 
-from calibrators.study.compare import Trial, summary
+from calibrators.study.compare import Trial
+from calibrators.study.statistics import summary
 
 UM = 1e3  # per mm
 

@@ -20,7 +20,8 @@ import sys
 
 import numpy as np
 
-from calibrators.study.compare import Config, Trial, median_interval, run
+from calibrators.study.compare import Config, Trial, run
+from calibrators.study.statistics import median_interval
 from orthoglide_env.world.conditions import EFFECT_NAMES, Conditions
 
 UM = 1e3  # per mm

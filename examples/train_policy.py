@@ -45,7 +45,7 @@ import numpy as np
 from calibrators.agents import available
 from calibrators.agents.names import POLICY_PREFIX
 from calibrators.agents.policy import PolicySpec, save_policy, spec_of
-from calibrators.study import compare
+from calibrators.study import compare, statistics
 from calibrators.study.episodes import DEFAULT_BUDGET_S, make_estimator
 from orthoglide_env.envs.wrappers import flat_lab_env
 from orthoglide_env.instruments.dial import DEFAULT_SIGMA
@@ -141,7 +141,7 @@ def make_vec_env(n_envs: int, env_kwargs: dict[str, Any], seed: int, subprocesse
 def evaluate(path: Path, lab: Lab, seed: int, machines: int) -> list[dict]:
     """``compare``'s summary of the policy in ``path`` on held-out machines."""
     config = lab.config((POLICY_PREFIX + str(path),), seed)
-    return compare.summary(compare.run(config, machines), config.target_mm)
+    return statistics.summary(compare.run(config, machines), config.target_mm)
 
 
 def median_rigid(row: dict) -> float:
@@ -306,7 +306,7 @@ def main() -> None:
     known = available()
     agents = (POLICY_PREFIX + str(args.out), *(a for a in BASELINES if a in known))
     config = lab.config(agents, args.eval_seed)
-    rows = compare.summary(compare.run(config, args.machines, args.jobs), config.target_mm)
+    rows = statistics.summary(compare.run(config, args.machines, args.jobs), config.target_mm)
     print_table(rows, minutes, model.num_timesteps)
     print(f"wrote {plot_curve(curve.rows, rows[1:], args.out.with_suffix('.curve.png'))}")
 

@@ -225,7 +225,7 @@ def test_the_median_interval_covers_at_its_level_and_no_wider(n: int) -> None:
     distribution maps onto them)."""
     from scipy import stats
 
-    from calibrators.study.compare import median_interval
+    from calibrators.study.statistics import median_interval
 
     low, high = median_interval(np.arange(n))
     k = int(low)
@@ -235,7 +235,7 @@ def test_the_median_interval_covers_at_its_level_and_no_wider(n: int) -> None:
 
 
 def test_too_few_values_bound_no_median() -> None:
-    from calibrators.study.compare import median_interval
+    from calibrators.study.statistics import median_interval
 
     with pytest.raises(ValueError, match="5 values cannot bound a median at 95%"):
         median_interval(np.arange(5))

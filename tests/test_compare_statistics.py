@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calibrators.study.compare import Trial, median_interval, paired, summary, warning_kind
+from calibrators.study.compare import Trial
+from calibrators.study.statistics import median_interval, paired, summary, warning_kind
 
 
 def _trial(agent: str, machine: int, rigid: float, *, before: float = 0.5,

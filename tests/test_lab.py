@@ -18,8 +18,9 @@ import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.agents.base import action
 from calibrators.agents.paper import PaperAgent
-from calibrators.study.compare import Config, agent_episodes, run, run_chunk, summary
+from calibrators.study.compare import Config, agent_episodes, run, run_chunk
 from calibrators.study.episodes import estimate, make_estimator, measurements_of, run_episode
+from calibrators.study.statistics import summary
 from orthoglide_env.lab.operations import SLOTS, TIME, Op, slot_index
 from orthoglide_env.scoring import score
 

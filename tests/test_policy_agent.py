@@ -17,7 +17,7 @@ import orthoglide_env
 from calibrators.agents import get_agent, policy
 from calibrators.agents.policy import SPEC_ENTRY, PolicySpec, _load_model, save_policy, spec_of
 from calibrators.cli import main
-from calibrators.study import compare
+from calibrators.study import compare, statistics
 from calibrators.study.episodes import run_episode
 from orthoglide_env.envs.wrappers import flat_lab_env
 from orthoglide_env.lab.operations import SLOT_NAMES
@@ -181,7 +181,7 @@ def test_compare_runs_the_policy_like_any_agent(trained: tuple[Path, object]) ->
     mine = [t for t in trials if t.agent == name]
     assert [t.machine for t in mine] == [0, 1]
     assert all(t.time_s > 0 and t.readings >= 6 for t in mine)  # six stands read at Zero
-    rows = compare.summary(trials)
+    rows = statistics.summary(trials)
     assert [r["agent"] for r in rows] == [name, "paper"]
 
 

@@ -23,9 +23,10 @@ from calibrators.cli.common import (
     design_of,
 )
 from calibrators.cli.estimator_options import DEFAULT_STRATEGY
-from calibrators.study.compare import CHUNK, Config, Trial, paired, run, summary, verify_pybullet
+from calibrators.study.compare import CHUNK, Config, Trial, run, verify_pybullet
 from calibrators.study.engines import ENGINES, RAY_INSTALL_HINT, ray_available
 from calibrators.study.episodes import DEFAULT_BUDGET_S, ESTIMATORS, get_estimator
+from calibrators.study.statistics import paired, summary
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS

@@ -15,21 +15,18 @@ resume from it.
 
 from __future__ import annotations
 
-import json
-import re
 from collections.abc import Callable
 from contextlib import closing
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass
 from functools import cache, partial
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from scipy import special
 
 import orthoglide_env
 from calibrators.agents import Agent, get_agent
-from calibrators.estimators.base import Estimate, leaves
+from calibrators.estimators.base import Estimate
 from calibrators.estimators.prediction import predicted_rigid_mm
 from calibrators.study.engines import results
 from calibrators.study.episodes import (
@@ -42,6 +39,16 @@ from calibrators.study.episodes import (
     run_episode,
     run_episodes,
 )
+
+# The statistics lived here; scripts that import them from this module keep working.
+from calibrators.study.statistics import (  # noqa: F401
+    MIN_INTERVAL,
+    median_interval,
+    paired,
+    summary,
+    warning_kind,
+)
+from calibrators.study.trials import Trial
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import DEFAULT_PRESET, ERROR_NAMES, MachineParams
@@ -87,59 +94,6 @@ class Config:
                 "tracker": agent.needs_tracker, "reference": agent.needs_reference,
                 "budget_s": self.budget_s, "design": self.design,
                 "conditions": self.conditions, "thermometer": self.thermometer}
-
-
-@dataclass(frozen=True)
-class Trial:
-    """One agent and one estimator on one machine."""
-
-    agent: str
-    estimator: str
-    machine: int
-    failed: str = ""  # why, when the estimate could not be made
-    time_s: float = float("nan")
-    readings: int = 0
-    tcp_before: dict[str, float] = field(default_factory=dict)  # frame -> RMS mm
-    tcp_after: dict[str, float] = field(default_factory=dict)
-    predicted_rigid_mm: float = float("nan")
-    #: The estimator's chi-square test rejects its model on these readings (None: the
-    #: estimator has no such test, or the trial failed).
-    chi2_rejected: bool | None = None
-    z: list[float] = field(default_factory=list)
-    error: list[float] = field(default_factory=list)  # estimate - truth, 27 errors
-    std: list[float] = field(default_factory=list)  # reported, NaN where fixed
-    curve: list[list[float]] = field(default_factory=list)  # [seconds, rigid RMS mm]
-    warnings: list[str] = field(default_factory=list)  # the estimate's
-
-    @property
-    def key(self) -> tuple[str, str, int]:
-        return self.agent, self.estimator, self.machine
-
-    @property
-    def names(self) -> tuple[str, ...]:
-        """The machine errors that ``error`` and ``std`` hold, in order (none if failed)."""
-        return ERROR_NAMES if self.error else ()
-
-    def to_json(self) -> str:
-        """One line of strict JSON: ``names`` beside ``error`` and ``std``, and ``null``
-        where a number is not one (NaN: the std of an error the fit held fixed, or what a
-        failed trial never had)."""
-        data = {**asdict(self), "names": list(self.names)}
-        return json.dumps(leaves(data, lambda v: None if v != v else v), allow_nan=False)
-
-    @classmethod
-    def from_json(cls, line: str) -> Trial:
-        """A line of :meth:`to_json`, or of an earlier version (NaN for null, no
-        ``names``)."""
-        data = json.loads(line)
-        names = data.pop("names", None)
-        # A trial holds None nowhere else.
-        rejected = data.pop("chi2_rejected", None)
-        trial = cls(**leaves(data, lambda v: float("nan") if v is None else v),
-                    chi2_rejected=rejected)
-        if names is not None and tuple(names) != trial.names:
-            raise ValueError("the trial's error names are not this version's machine errors")
-        return trial
 
 
 @cache
@@ -366,135 +320,6 @@ def run(config: Config, machines: int, jobs: int = 1, done: list[Trial] | None =
     order = {(a, e): k for k, (a, e) in enumerate(
         (a, e) for a in config.agents for e in config.estimators)}
     return sorted(trials, key=lambda t: (t.machine, order.get((t.agent, t.estimator), 0)))
-
-
-def _stats(values: list[float]) -> dict[str, Any]:
-    """Median with its 95 % interval (:func:`median_interval`, None below 6 values) and
-    p95 of the finite ``values``."""
-    values = [v for v in values if np.isfinite(v)]
-    if not values:
-        return {"median": None, "ci95": None, "p95": None}
-    interval = list(median_interval(values)) if len(values) >= MIN_INTERVAL else None
-    return {"median": float(np.median(values)), "ci95": interval,
-            "p95": float(np.percentile(values, 95))}
-
-
-#: The fewest values a 95 % median interval can be had from.
-MIN_INTERVAL: int = 6
-
-
-def median_interval(values: Any, level: float = 0.95) -> tuple[float, float]:
-    """A distribution-free interval of the median of ``values``: the order statistics k
-    and n-1-k (0-based), k the largest with binomial(n, 1/2) probability of fewer than k+1
-    values below the median at most (1 - level)/2, so it covers the median at least
-    ``level`` of the time whatever the distribution.  ``ValueError`` when n is too small
-    for that level (n < 6 at 95 %)."""
-    ordered = np.sort(np.asarray(values, dtype=float))
-    n = len(ordered)
-    k = int(special.bdtrik((1 - level) / 2, n, 0.5)) if n else 0
-    # bdtrik inverts the binomial CDF continuously: step down to an exact order statistic.
-    while k >= 0 and special.bdtr(k, n, 0.5) > (1 - level) / 2:
-        k -= 1
-    if k < 0:
-        raise ValueError(f"{n} values cannot bound a median at {level:.0%}")
-    return float(ordered[k]), float(ordered[n - 1 - k])
-
-
-def _fraction(flags: list[bool | None]) -> float | None:
-    """The fraction of the tests that said yes (None: no test)."""
-    tested = [f for f in flags if f is not None]
-    return float(np.mean(tested)) if tested else None
-
-
-def warning_kind(text: str) -> str:
-    """A warning without its particulars: what it says up to its first colon, its
-    numbers as N."""
-    return re.sub(r"\d+", "N", text.split(":", 1)[0])
-
-
-def summary(trials: list[Trial], target_mm: float = 0.01) -> list[dict]:
-    """One row per agent x estimator, in the order they first appear.  Accuracy is over
-    every trial: a failed one counts with its machine's uncalibrated error
-    (``failed_counted_as``).  ``success_rate``: the TCP error after rigid motion, against
-    the truth, is at most ``target_mm``; ``predicted_success_rate``: the error an estimate
-    predicts for itself is (a failed trial succeeds at neither).  ``warnings``: how many
-    trials' estimates gave each kind of warning, with the first one's text."""
-    rows = []
-    for agent, name in dict.fromkeys((t.agent, t.estimator) for t in trials):
-        mine = [t for t in trials if t.agent == agent and t.estimator == name]
-        ok = [t for t in mine if not t.failed]
-        z = np.concatenate([t.z for t in ok]) if ok else np.zeros(0)
-        times = [t.time_s for t in mine]
-        warned: dict[str, dict[str, Any]] = {}
-        for t in ok:
-            for text in dict.fromkeys(t.warnings):
-                # A fit's hint names its own command's options, not compare's.
-                kind = warned.setdefault(warning_kind(text),
-                                         {"trials": 0, "example": text.split("; try ")[0]})
-                kind["trials"] += 1
-        rows.append({
-            "agent": agent,
-            "estimator": name,
-            "machines": len(mine),
-            "failed": len(mine) - len(ok),
-            "failure": next((t.failed for t in mine if t.failed), ""),
-            "failed_counted_as": "uncalibrated",
-            "time_s": {"median": float(np.median(times)), "max": float(np.max(times))},
-            "readings_median": float(np.median([t.readings for t in mine])),
-            "tcp_before_mm": {f: _stats([_rms(t.tcp_before, f) for t in mine])
-                              for f in FRAMES},
-            "tcp_after_mm": {f: _stats([_rms(t.tcp_after, f) for t in mine]) for f in FRAMES},
-            "predicted_rigid_mm": _stats([t.predicted_rigid_mm for t in ok]),
-            "z_rms": float(np.sqrt(np.mean(z**2))) if z.size else None,
-            "chi2_rejected": _fraction([t.chi2_rejected for t in ok]),
-            "success_rate": float(np.mean([_rms(t.tcp_after, "rigid") <= target_mm
-                                           for t in mine])),
-            "predicted_success_rate": float(np.mean([not t.failed
-                                                     and t.predicted_rigid_mm <= target_mm
-                                                     for t in mine])),
-            "warnings": warned,
-        })
-    return rows
-
-
-def _rms(scores: dict[str, float], frame: str) -> float:
-    """A trial's TCP error in ``frame`` (NaN where it has none: a failed trial kept by a
-    version that did not score failures)."""
-    return scores.get(frame, float("nan"))
-
-
-def paired(trials: list[Trial]) -> list[dict]:
-    """Every two agents compared on the machines both ran, per estimator: the median over
-    machines of the ratio of their TCP errors after rigid motion (``agent`` over
-    ``against``: below 1, ``agent`` is the more accurate) with its 95 % interval, and the
-    fraction of machines where ``agent``'s error is the smaller (``win_rate``; a tie
-    counts a half).  Failed trials count with their uncalibrated error, as in
-    :func:`summary`."""
-    rows = []
-    agents = list(dict.fromkeys(t.agent for t in trials))
-    for name in dict.fromkeys(t.estimator for t in trials):
-        error = {(t.agent, t.machine): _rms(t.tcp_after, "rigid")
-                 for t in trials if t.estimator == name}
-        for k, agent in enumerate(agents):
-            for against in agents[k + 1:]:
-                both = sorted(m for a, m in error if a == agent
-                              and np.isfinite(error[agent, m])
-                              and np.isfinite(error.get((against, m), np.nan)))
-                if not both:
-                    continue
-                mine = np.array([error[agent, m] for m in both])
-                theirs = np.array([error[against, m] for m in both])
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    ratio = mine / theirs
-                rows.append({
-                    "estimator": name, "agent": agent, "against": against,
-                    "machines": len(both),
-                    "ratio_median": float(np.median(ratio)),
-                    "ratio_ci95": (list(median_interval(ratio))
-                                   if len(both) >= MIN_INTERVAL else None),
-                    "win_rate": float(np.mean((mine < theirs) + 0.5 * (mine == theirs))),
-                })
-    return rows
 
 
 def verify_pybullet(config: Config, machines: int) -> dict[str, float]:
