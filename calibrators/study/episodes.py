@@ -4,9 +4,11 @@ An experiment is an agent's episode in ``OrthoglideLab-v0``; its result is the l
 notebook (``env.unwrapped.records``) as :class:`~calibrators.measurements.Measurements`,
 which any estimator reads exactly as it reads a measurement file.  :func:`run_episodes`
 is the one episode runner: on a lab vector env (many machines stepped together) or, by
-:func:`run_episode`, on a lone lab as a batch of one.  Every command draws machine ``i``
-of seed ``s`` from :func:`machine_seed` and its agent's choices from :func:`agent_rng`,
-so ``calibrate --seed s`` runs the experiment of ``compare --seed s``'s first machine.
+:func:`run_episode`, on a lone lab as a batch of one; a :class:`Watcher` sees each step
+before the agent does (the workflow's plan writes its steps down, its session asks for
+the readings).  Every command draws machine ``i`` of seed ``s`` from :func:`machine_seed`
+and its agent's choices from :func:`agent_rng`, so ``calibrate --seed s`` runs the
+experiment of ``compare --seed s``'s first machine.
 """
 
 from __future__ import annotations
