@@ -14,7 +14,7 @@ import pytest
 from conftest import TABLE1
 
 from calibrators.cli import main
-from calibrators.cli.plan import _pictures
+from calibrators.workflow.page import pictures as draw_pictures
 from calibrators.workflow.plan import Procedure, Step, make_procedure, place_words
 from orthoglide_env.instruments.slots import GaugeSpec
 from orthoglide_env.instruments.stands import install
@@ -160,6 +160,6 @@ def test_each_re_mount_has_its_picture(tmp_path) -> None:
                  stand=1, slot="x-leg/y@0.8")
     procedure = Procedure(paper.agent, paper.budget_s, paper.conditions, paper.design,
                           paper.stands, [*paper.steps, moved])
-    pictures = _pictures(procedure, PROTOTYPE, tmp_path)
+    pictures = draw_pictures(procedure, PROTOTYPE, tmp_path)
     assert pictures == {1: "setup.png", moved.number: f"step-{moved.number}.png"}
     assert all((tmp_path / name).read_bytes()[:4] == b"\x89PNG" for name in pictures.values())

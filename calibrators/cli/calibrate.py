@@ -6,10 +6,6 @@ from __future__ import annotations
 import argparse
 from contextlib import closing
 
-import gymnasium as gym
-import numpy as np
-
-import orthoglide_env
 from calibrators.agents import available as agents_available
 from calibrators.agents import get_agent
 from calibrators.cli import estimator_options
@@ -21,16 +17,13 @@ from calibrators.cli.common import (
     given_design,
 )
 from calibrators.cli.output import emit, report, save
-from calibrators.estimators.base import Estimate, Measurements, get_strategy
-from calibrators.estimators.consider import WORLD_PREFIX
-from calibrators.estimators.exact_fit import z_scores
-from calibrators.estimators.gauss_newton import design_of
-from calibrators.study.compare import machine_z_scores
+from calibrators.estimators.base import get_strategy
 from calibrators.study.episodes import DEFAULT_BUDGET_S, machine_seed, run_episode
+from calibrators.study.labs import make_lab
+from calibrators.study.z_scores import z_rms
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.model.design import load_design
 from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS, MachineParams
-from orthoglide_env.reading_model import TrackerAxis, parameters_of
 from orthoglide_env.world.machine_file import machine_dict, read_machine_file, write_machine_file
 from orthoglide_env.world.truth import World
 
@@ -59,35 +52,14 @@ def _setup(args: argparse.Namespace
     return machine, world, preset, *noise
 
 
-def _z_rms(est: Estimate, data: Measurements, env: gym.Env) -> float | None:
-    """RMS of the z-scores of the identifiable combinations against the truth (exact-model
-    estimates only: the paper's linear fit reports no information matrix)."""
-    if not est.information.size or any(isinstance(m.gauge, TrackerAxis) for m in data.items):
-        # A tracker's frame has no truth the readings were aligned to: no full z here.
-        return None
-    if any(n.startswith(WORLD_PREFIX) for n in est.names):
-        # The world's drawn numbers are not the fit's terms: the machine errors' z, as
-        # compare scores them.
-        z = machine_z_scores([est], [env.unwrapped.true_machine])[0]
-    else:
-        design, _ = design_of(data)
-        truth = parameters_of(design, env.unwrapped.true_machine, env.unwrapped.true_gauges)
-        free = [est.space.index(n) for n in est.names]
-        z = z_scores(est.theta[free], truth[free], est.covariance, est.information, est.scale)
-    return float(np.sqrt(np.mean(z**2))) if len(z) else None
-
-
 def run(args: argparse.Namespace) -> None:
     get_strategy(args.strategy)  # an unknown one is refused before the experiment
     agent = get_agent(args.agent)
     estimator_options.options(args)  # and so are bad options
     machine, world, preset, sigma, resolution = _setup(args)
     conditions = conditions_of(args, world)
-    env = gym.make(orthoglide_env.LAB_ENV_ID, errors=preset, gauge_sigma=sigma,
-                   gauge_resolution=resolution, backend=args.backend,
-                   tracker=agent.needs_tracker, reference=agent.needs_reference,
-                   thermometer=args.thermometer,
-                   budget_s=args.budget,
+    env = make_lab(agent, errors=preset, gauge_sigma=sigma, gauge_resolution=resolution,
+                   backend=args.backend, thermometer=args.thermometer, budget_s=args.budget,
                    design=machine.design, conditions=conditions)
     with closing(env):
         # A random machine is drawn by the lab from the seed, as ``compare`` draws its first
@@ -101,7 +73,9 @@ def run(args: argparse.Namespace) -> None:
             write_machine_file(args.save_truth, episode.truth, episode.world)
         est = estimator_options.estimate(args, data, episode.sigma, conditions)
         save(est, args)
-        emit(report(est, episode.truth, _z_rms(est, data, env), episode.world), args.json)
+        lab = env.unwrapped
+        emit(report(est, episode.truth, z_rms(est, data, lab.true_machine, lab.true_gauges),
+                    episode.world), args.json)
 
 
 def add(p: argparse.ArgumentParser) -> None:

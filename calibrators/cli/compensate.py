@@ -9,37 +9,27 @@ import numpy as np
 
 from calibrators.workflow.compensate import (
     TARGET_COLUMNS,
-    compensate,
+    Compensate,
     read_estimate,
     read_targets,
-    write_controller_files,
 )
 
 
 def run(args: argparse.Namespace) -> None:
     est = read_estimate(args.estimate)
-    compensation = (compensate(est, read_targets(args.targets)) if args.targets
-                    else None)
-    written = write_controller_files(est, args.out, compensation)
+    controller = Compensate(est, read_targets(args.targets) if args.targets else None).run()
+    written = controller.write(args.out)
     if args.json:
-        sigma = np.sqrt(np.clip(np.diag(est.error_covariance)[:3], 0.0, None))
-        print(json.dumps({
-            "joint_offsets": [{"axis": axis, "drho_mm": float(est.theta[a]),
-                               "sigma_mm": float(sigma[a])} for a, axis in enumerate("xyz")],
-            "targets": [] if compensation is None else [
-                {"target": t.tolist(), "command": c.tolist(),
-                 **{f"predicted_{frame}_mm": float(compensation.predicted[frame][k])
-                    for frame in compensation.predicted}}
-                for k, (t, c) in enumerate(zip(compensation.targets, compensation.commands,
-                                               strict=True))],
-            "files": [str(p) for p in written]}))
+        print(json.dumps({"joint_offsets": controller.joint_offsets(),
+                          "targets": controller.targets(),
+                          "files": [str(p) for p in written]}))
         return
     for path in written:
         print(f"wrote {path}")
     print("joint offsets (drho, mm): " + ", ".join(
         f"{axis} {value:+.4f}" for axis, value in zip("xyz", est.theta[:3], strict=True)))
-    if compensation is not None:
-        rigid = compensation.predicted["rigid"]
+    if controller.compensation is not None:
+        rigid = controller.compensation.predicted["rigid"]
         print(f"{len(rigid)} targets: predicted error after the best-fit rigid motion "
               f"{np.sqrt(np.mean(rigid**2)):.4f} mm RMS, {rigid.max():.4f} mm at most "
               "(raw and after translation in commands.csv)")

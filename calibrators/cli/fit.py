@@ -5,8 +5,6 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from calibrators.cli import estimator_options
 from calibrators.cli.common import (
     UsageError,
@@ -25,6 +23,9 @@ if TYPE_CHECKING:
 
 def run(args: argparse.Namespace) -> None:
     from calibrators.cli.output import emit, report, save
+    from calibrators.estimators.paper_linear import NeedsExactFit
+    from calibrators.workflow.fit import Fit
+    from calibrators.workflow.plan import SheetError
 
     # --sigma and --resolution were checked with every command's (calibrators.cli.run).
     plan = _read_plan(args.plan) if args.plan else None
@@ -36,12 +37,20 @@ def run(args: argparse.Namespace) -> None:
         Measurements.read(args.file)  # a file at fault by itself says so
         raise UsageError(f"--plan {args.plan}: the readings are of another design than the "
                          f"plan's: {str(exc).splitlines()[0]}") from None
-    if plan is not None:
-        _check_plan(data, plan, args.plan)
+    try:
+        fit = Fit(data, strategy=args.strategy, params=estimator_options.params_of(args),
+                  sigma=args.sigma, resolution=args.resolution,
+                  conditions=conditions_of(args), plan=plan,
+                  options=estimator_options.options(args))
+    except SheetError as exc:
+        raise UsageError(f"--plan {args.plan}: {exc}") from None
     if args.to_csv:
         data.to_csv(args.to_csv)
-    sigma = float(np.hypot(args.sigma, args.resolution / np.sqrt(12)))
-    est = estimator_options.estimate(args, data, sigma, conditions_of(args))
+    try:
+        est = fit.run().estimate
+    except NeedsExactFit as exc:
+        raise UsageError(f"{exc}: use --strategy {estimator_options.DEFAULT_STRATEGY}"
+                         ) from None
     save(est, args)
     emit(report(est, None), args.json)
 
@@ -62,21 +71,6 @@ def _design(args: argparse.Namespace, plan: Procedure | None) -> MachineDesign |
     if plan is None:
         return given_design(args)
     return held_design(args, MachineDesign.from_dict(plan.design), "plan", args.plan)
-
-
-def _check_plan(data: Measurements, procedure: Procedure, path: str) -> None:
-    """The readings are the sheet of the plan ``procedure`` (read from ``path``): same
-    design, each row one of its steps' readings (:class:`UsageError` naming the line
-    otherwise)."""
-    from calibrators.workflow.plan import check_sheet
-
-    try:
-        if procedure.design != data.design.to_dict():
-            raise ValueError("the plan is for a machine of another design than the "
-                             "readings'")
-        check_sheet(data, procedure)
-    except ValueError as exc:
-        raise UsageError(f"--plan {path}: {exc}") from None
 
 
 def add(p: argparse.ArgumentParser) -> None:

@@ -1,4 +1,6 @@
-"""``orthoglide plan``: a designed experiment as a procedure a technician follows.
+"""``orthoglide plan``: a designed experiment as a procedure a technician follows
+(:class:`calibrators.workflow.plan.Plan`, or with ``--verify`` the verification's
+:class:`calibrators.workflow.verify.VerificationPlan`).
 
 It writes into ``--out DIR``:
 
@@ -14,9 +16,6 @@ It writes into ``--out DIR``:
 from __future__ import annotations
 
 import argparse
-import html
-import json
-from pathlib import Path
 
 from calibrators.cli.common import (
     UsageError,
@@ -26,144 +25,38 @@ from calibrators.cli.common import (
     held_design,
 )
 from calibrators.workflow.compensate import read_estimate
-from calibrators.workflow.plan import Procedure, make_procedure, planned_agents, write_sheet
-from calibrators.workflow.verify import compensated_procedure
-from orthoglide_env.lab.operations import DEFAULT_BUDGET_S, slot_catalogue
-from orthoglide_env.model.design import MachineDesign, load_design
-from orthoglide_env.model.errors import MachineParams
+from calibrators.workflow.page import page as page  # the page's earlier path
+from calibrators.workflow.page import write_page
+from calibrators.workflow.plan import Plan, planned_agents
+from calibrators.workflow.verify import VerificationPlan
+from orthoglide_env.lab.operations import DEFAULT_BUDGET_S
+from orthoglide_env.model.design import load_design
 
 
 def run(args: argparse.Namespace) -> None:
     if not args.budget > 0:
         raise UsageError(f"--budget must be a positive number of seconds, got {args.budget:g}")
+    conditions = conditions_of(args, None)
     try:
-        est = read_estimate(args.verify) if args.verify else None
-        # The estimate holds the design it calibrated: its verification is planned for it.
-        design = (load_design(args.design) if est is None
-                  else held_design(args, est.readings.design, "estimate", args.verify))
-        procedure = make_procedure(args.agent, args.budget, design, conditions_of(args, None),
-                                   args.seed)
-        if est is not None:
-            procedure = compensated_procedure(procedure, est)
+        if args.verify:
+            est = read_estimate(args.verify)
+            held_design(args, est.readings.design, "estimate", args.verify)
+            planner = VerificationPlan(est, agent=args.agent, conditions=conditions,
+                                       budget_s=args.budget, seed=args.seed)
+        else:
+            planner = Plan(load_design(args.design), agent=args.agent,
+                           conditions=conditions, budget_s=args.budget, seed=args.seed)
+        procedure = planner.run()
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "plan.json").write_text(json.dumps(procedure.to_dict(), indent=1) + "\n",
-                                   encoding="utf-8")
-    write_sheet(procedure, out / "readings.csv")
-    pictures = _pictures(procedure, design, out)
+    plan_path, sheet_path = procedure.write(args.out)
     then = (f"orthoglide verify {args.verify} readings.csv" if args.verify
             else "orthoglide fit readings.csv --plan plan.json")
-    (out / "procedure.html").write_text(page(procedure, pictures, then), encoding="utf-8")
-    print(f"agent {procedure.agent}: {len(procedure.steps)} steps, "
-          f"{len(procedure.sheet)} readings, {procedure.total_s / 60:.1f} min on the lab's "
-          f"clock (budget {procedure.budget_s / 60:.0f} min); wrote {out / 'procedure.html'}, "
-          f"{out / 'readings.csv'}, {out / 'plan.json'} and {len(pictures)} pictures")
+    page_path, pictures = write_page(procedure, args.out, then)
+    print(f"{procedure.summary()}; wrote {page_path}, {sheet_path}, {plan_path} and "
+          f"{len(pictures)} pictures")
     for note in procedure.notes:
         print(f"note: {note}")
-
-
-def _pictures(procedure: Procedure, design: MachineDesign, out: Path) -> dict[int, str]:
-    """A picture per mounting: the set-up's stands, then the stands after each re-mount
-    with the moved one highlighted; by step number, file names relative to ``out``."""
-    from orthoglide_env.sim.report import render_stands_png
-
-    machine = MachineParams(design=design)
-    by_name = {s.slot: s for s in slot_catalogue(design, reference=True)}
-    held = {s["stand"]: s["slot"] for s in procedure.stands}
-    pictures = {}
-    for step in procedure.steps:
-        if step.action not in ("set up", "re-mount"):
-            continue
-        if step.action == "re-mount":
-            held[step.stand] = step.slot
-        stands = sorted(held)
-        name = "setup.png" if step.action == "set up" else f"step-{step.number}.png"
-        title = ("Set-up: every stand" if step.action == "set up"
-                 else f"Step {step.number}: stand {step.stand} moves to {step.slot}")
-        render_stands_png(machine, [by_name[held[k]] for k in stands],
-                          [f"stand {k}: {held[k]}" for k in stands], out / name,
-                          highlight=None if step.stand is None else stands.index(step.stand),
-                          title=title)
-        pictures[step.number] = name
-    return pictures
-
-
-def page(procedure: Procedure, pictures: dict[int, str],
-         then: str = "orthoglide fit readings.csv --plan plan.json") -> str:
-    """The printable page: what it is, the sign rule, the stands, the steps with their
-    pictures, and the sheet to fill in; ``then``: the command that reads the sheet."""
-    e = html.escape
-    conditions = procedure.conditions.get("name", "ideal")
-    rows = []
-    for step in procedure.steps:
-        sheet = (f"{step.rows[0]}-{step.rows[-1]}" if len(step.rows) > 1
-                 else str(step.rows[0]) if step.rows else "")
-        rows.append(f"<tr><td>{step.number}</td><td>{e(step.action)}</td>"
-                    f"<td>{e(step.text)}</td><td>{step.seconds:.0f}</td>"
-                    f"<td>{step.start_s / 60:.1f}</td><td>{sheet}</td></tr>")
-        if step.number in pictures:
-            rows.append(f'<tr class="picture"><td colspan="6"><img src="{pictures[step.number]}"'
-                        f' alt="{e(step.text[:80])}"></td></tr>')
-    stands = "".join(f"<tr><td>{s['stand']}</td><td>{e(s['slot'])}</td><td>{e(s['place'])}</td>"
-                     "</tr>" for s in procedure.stands)
-    sheet = "".join(
-        f"<tr><td>{k}</td><td>{m.step}</td><td>{e(m.mounting)}</td><td>{e(m.posture)}</td>"
-        f"<td>{', '.join(f'{v:g}' for v in m.rho)}</td><td>{m.repetition}</td>"
-        f"<td>{'' if m.time_s is None else f'{m.time_s:.0f}'}</td><td class='blank'></td></tr>"
-        for k, m in enumerate(procedure.sheet, start=1))
-    return f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8">
-<title>Calibration procedure: {e(procedure.agent)}</title>
-<style>
-body {{ font-family: sans-serif; margin: 2em; max-width: 60em; }}
-table {{ border-collapse: collapse; width: 100%; margin-bottom: 1.5em; }}
-td, th {{ border: 1px solid #888; padding: 0.25em 0.5em; vertical-align: top; }}
-th {{ background: #eee; }}
-td.blank {{ min-width: 8em; }}
-tr.picture td {{ text-align: center; border: none; }}
-img {{ max-width: 100%; }}
-@media print {{ tr, img {{ page-break-inside: avoid; }} }}
-</style></head><body>
-<h1>Calibration procedure</h1>
-<p>Agent <b>{e(procedure.agent)}</b>, {len(procedure.steps)} steps,
-{len(procedure.sheet)} readings, <b>{procedure.total_s / 60:.1f} min</b> on the lab's clock
-(budget {procedure.budget_s / 60:.0f} min), planned for <b>{e(conditions)}</b> conditions on
-a machine of L = {procedure.design['L']:g} mm, control limits {procedure.design['rho_min']:g}
-.. {procedure.design['rho_max']:g} mm.</p>
-<h2>Before you start</h2>
-<ul>
-<li>Postures are control coordinates rho (mm): 0, 0, 0 is the Zero posture, and each value
-is a drive's command. The machine drives all three axes together.</li>
-<li>Every reading is written in mm, <b>positive when the touched face moves toward the
-+ world axis</b> the stand measures along (the pictures show the axes). Each stand's place
-says whether its plunger then comes out or is pushed in, and so whether to write what a
-dial that reads plus when pressed shows, or minus that.</li>
-<li>Fill in <code>reading_mm</code> in <code>readings.csv</code> row by row, as the steps
-say: sheet row N is line N + 1 of the file (the first line names the columns). A
-mounting such as <code>x-leg/z@0.8#7</code> is the stand's installation at that place (the
-number counts the installations). A row whose gauge gives no reading (out of its travel)
-is deleted. Write the lab clock in <code>time_s</code> when it differs from the planned
-time: it starts at 0 when the set-up ends. Then run <code>{e(then)}</code>.</li>
-<li>The set-up is not on the lab's clock. Each step's seconds are the lab's time table:
-driving at 20 mm/s, 5 s to settle and read, 3 s per plunger lever, 120 s per re-mount.
-Read the dials to their resolution (0.01 mm for the usual dial).</li>
-</ul>
-{''.join(f"<p><b>Note:</b> {e(n)}.</p>" for n in procedure.notes)}
-<h2>The stands at set-up</h2>
-<table><tr><th>stand</th><th>slot</th><th>where, and which way it reads plus</th></tr>
-{stands}</table>
-<h2>Steps</h2>
-<table><tr><th>step</th><th>action</th><th>what to do</th><th>s</th><th>clock (min)</th>
-<th>sheet rows</th></tr>
-{''.join(rows)}</table>
-<h2>Readings sheet</h2>
-<table><tr><th>row</th><th>step</th><th>stand (mounting)</th><th>posture</th>
-<th>rho (mm)</th><th>repetition</th><th>time (s)</th><th>reading (mm)</th></tr>
-{sheet}</table>
-</body></html>
-"""
 
 
 def add(p: argparse.ArgumentParser) -> None:

@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> None:
                 say(f"{exc}: asked again")
 
     data = session.run(answer, say)
-    data.write(out / "readings.csv")
+    Session.write(data, out)
     say(f"the experiment is over after {data.experiment_time_s / 60:.1f} min: "
         f"{len(data)} readings in {out / 'readings.csv'}; fit them with orthoglide fit "
         f"{out / 'readings.csv'}")

@@ -12,12 +12,12 @@ from calibrators.cli.common import add_conditions, conditions_of
 def run(args: argparse.Namespace) -> None:
     from calibrators.measurements import Measurements
     from calibrators.workflow.compensate import read_estimate
-    from calibrators.workflow.verify import verify
+    from calibrators.workflow.verify import Verify
 
     est = read_estimate(args.estimate)
     data = Measurements.read(args.readings, est.readings.design)
     given = args.conditions is not None or args.effects is not None
-    result = verify(est, data, conditions_of(args) if given else None)
+    result = Verify(est, data, conditions_of(args) if given else None).run()
     if args.json:
         print(json.dumps(result.to_dict()))
         return

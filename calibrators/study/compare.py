@@ -39,6 +39,7 @@ from calibrators.study.episodes import (
     run_episode,
     run_episodes,
 )
+from calibrators.study.labs import lab_kwargs
 
 # The statistics lived here; scripts that import them from this module keep working.
 from calibrators.study.statistics import (  # noqa: F401
@@ -89,11 +90,10 @@ class Config:
     def lab_kwargs(self, agent: Agent) -> dict[str, Any]:
         """The lab env's arguments of this comparison for ``agent`` (with the tracker or
         the gauge block when it needs one)."""
-        return {"errors": self.errors, "gauge_sigma": self.sigma,
-                "gauge_resolution": self.resolution, "backend": self.backend,
-                "tracker": agent.needs_tracker, "reference": agent.needs_reference,
-                "budget_s": self.budget_s, "design": self.design,
-                "conditions": self.conditions, "thermometer": self.thermometer}
+        return lab_kwargs(agent, errors=self.errors, gauge_sigma=self.sigma,
+                          gauge_resolution=self.resolution, backend=self.backend,
+                          budget_s=self.budget_s, design=self.design,
+                          conditions=self.conditions, thermometer=self.thermometer)
 
 
 @cache

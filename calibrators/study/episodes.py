@@ -4,16 +4,18 @@ An experiment is an agent's episode in ``OrthoglideLab-v0``; its result is the l
 notebook (``env.unwrapped.records``) as :class:`~calibrators.measurements.Measurements`,
 which any estimator reads exactly as it reads a measurement file.  :func:`run_episodes`
 is the one episode runner: on a lab vector env (many machines stepped together) or, by
-:func:`run_episode`, on a lone lab as a batch of one.  Every command draws machine ``i``
-of seed ``s`` from :func:`machine_seed` and its agent's choices from :func:`agent_rng`,
-so ``calibrate --seed s`` runs the experiment of ``compare --seed s``'s first machine.
+:func:`run_episode`, on a lone lab as a batch of one; a :class:`Watcher` sees each step
+before the agent does (the workflow's plan writes its steps down, its session asks for
+the readings).  Every command draws machine ``i`` of seed ``s`` from :func:`machine_seed`
+and its agent's choices from :func:`agent_rng`, so ``calibrate --seed s`` runs the
+experiment of ``compare --seed s``'s first machine.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import gymnasium as gym
 import numpy as np
@@ -169,23 +171,40 @@ class Episode:
         return measurements_of(self.records, self.time_s, design=self.truth.design)
 
 
+class Watcher(Protocol):
+    """What sees each lab of :func:`run_episodes` between its steps, before its agent
+    does: it may change the observation (in place) and the lab's notebook, as a person
+    typing in a real machine's readings does."""
+
+    def reset(self, i: int, observation: dict[str, np.ndarray]) -> None:
+        """Env ``i`` was reset to ``observation``; its agent has not seen it yet."""
+
+    def step(self, i: int, action: Mapping[str, Any], observation: dict[str, np.ndarray],
+             info: Mapping[str, Any]) -> None:
+        """Env ``i`` took ``action`` and shows ``observation`` and ``info`` (every step
+        until its episode ends, that step included)."""
+
+
 def run_episodes(envs: gym.vector.VectorEnv, agents: list[Agent], seeds: list[int],
                  options: dict | None = None, *, lockstep: bool = False,
-                 on_step: Callable[[dict[str, np.ndarray]], None] | None = None
-                 ) -> list[Episode]:
+                 on_step: Callable[[dict[str, np.ndarray]], None] | None = None,
+                 watch: Watcher | None = None) -> list[Episode]:
     """One episode in each env of a lab vector env (autoreset ``NEXT_STEP``; the native
     one, or ``SyncVectorEnv`` of lone labs), env ``i`` reset with ``seeds[i]`` (and
     ``options``) and worked by ``agents[i]``, which acts on its own observation with
     :func:`agent_rng` of its seed.  ``lockstep``: ``agents[0]`` alone decides, on env 0's
     observation, and every env takes its action (labs compared step by step).
-    ``on_step`` sees every step's observations.  An env whose episode has ended is kept
-    busy with lever flicks (never refused: stand 0 is always mounted) until every
-    episode has ended."""
+    ``on_step`` sees every step's observations; ``watch`` sees each lab's reset and steps
+    (:class:`Watcher`).  An env whose episode has ended is kept busy with lever flicks
+    (never refused: stand 0 is always mounted) until every episode has ended."""
     if len(agents) != (1 if lockstep else len(seeds)):
         raise ValueError(f"{len(agents)} agents for {len(seeds)} labs"
                          + (" in lockstep (one decides)" if lockstep else ""))
     observation, info = envs.reset(seed=list(seeds), options=options)
     labs = _labs(envs)
+    if watch is not None:
+        for i in range(len(seeds)):
+            watch.reset(i, _row(observation, i))
     for i, agent in enumerate(agents):
         agent.reset(labs[i], _row(observation, i), agent_rng(seeds[i]))
     idle = {"op": int(Op.LIFT), "rho": np.zeros(3), "stand": 0, "slot": 0}
@@ -195,6 +214,7 @@ def run_episodes(envs: gym.vector.VectorEnv, agents: list[Agent], seeds: list[in
     out: list[Episode | None] = [None] * len(seeds)
     step = 0
     while True:
+        moves: list[Mapping[str, Any]] | None = None
         if plans is not None:
             if step >= len(plans["op"][0]):
                 raise RuntimeError(f"agent '{agents[0].name}' ran out of plan before its "
@@ -208,10 +228,16 @@ def run_episodes(envs: gym.vector.VectorEnv, agents: list[Agent], seeds: list[in
         if lockstep:
             actions = {key: np.repeat(value[:1], len(seeds), axis=0)
                        for key, value in actions.items()}
+            moves = None
         observation, _, terminated, truncated, info = envs.step(actions)
         step += 1
         if on_step is not None:
             on_step(observation)
+        if watch is not None:
+            for i in (i for i in range(len(seeds)) if out[i] is None):
+                # The agent's own action where it made one, else the plan's step.
+                watch.step(i, moves[i] if moves is not None else _row(actions, i),
+                           _row(observation, i), _InfoRow(info, i))
         for i in np.flatnonzero(terminated | truncated):
             if out[i] is None:
                 lab = labs[i].unwrapped
@@ -223,11 +249,12 @@ def run_episodes(envs: gym.vector.VectorEnv, agents: list[Agent], seeds: list[in
             return out  # type: ignore[return-value]
 
 
-def run_episode(env: gym.Env, agent: Agent, seed: int, options: dict | None = None
-                ) -> Episode:
+def run_episode(env: gym.Env, agent: Agent, seed: int, options: dict | None = None,
+                watch: Watcher | None = None) -> Episode:
     """:func:`run_episodes` on a lone lab ``env``, a batch of one: reset with ``seed``
-    (and ``options``), worked by ``agent`` until the episode ends."""
-    return run_episodes(gym.vector.SyncVectorEnv([lambda: env]), [agent], [seed], options)[0]
+    (and ``options``), worked by ``agent`` until the episode ends, seen by ``watch``."""
+    return run_episodes(gym.vector.SyncVectorEnv([lambda: env]), [agent], [seed], options,
+                        watch=watch)[0]
 
 
 def _labs(envs: gym.vector.VectorEnv) -> list[Any]:

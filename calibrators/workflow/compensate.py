@@ -13,6 +13,10 @@ controller's pitch-error compensation, :mod:`orthoglide_env.model.compensation`)
 predicted error is the estimate's covariance carried to the target
 (:func:`~orthoglide_env.scoring.predicted_target_errors`), in the three frames over the
 targets given.
+
+:class:`Compensate` (the estimate, and the targets if any) makes the :class:`Controller`:
+the joint offsets, the compensation of the targets, and the files a controller takes
+(:meth:`Controller.write`).
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ import csv
 import json
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -183,3 +188,76 @@ def write_controller_files(est: Estimate, folder: str | Path,
             rows.append(",".join(f"{v:.9f}" for v in cells))
         write("commands.csv", "\n".join(rows) + "\n")
     return written
+
+
+class Compensate:
+    """The compensation, configured: the estimate ``estimate`` and the tool ``targets``
+    (n, 3), mm, whose commands to compensate (None: none).  ``ValueError`` at
+    construction for an estimate outside the validity range or targets that are not a
+    finite (n, 3) array; :meth:`run` makes the :class:`Controller`."""
+
+    def __init__(self, estimate: Estimate, targets: np.ndarray | None = None) -> None:
+        check_usable(estimate)
+        if targets is not None:
+            targets = np.asarray(targets, dtype=float)
+            if targets.ndim != 2 or targets.shape[1:] != (3,) or not len(targets):
+                raise ValueError(f"targets must be an (n, 3) array of mm, got the shape "
+                                 f"{targets.shape}")
+            if not np.isfinite(targets).all():
+                raise ValueError("targets must be finite numbers of mm")
+        self.estimate, self.targets = estimate, targets
+
+    def run(self) -> Controller:
+        """The controller's values; ``ValueError`` naming the first target the estimated
+        machine cannot reach within its control limits."""
+        return Controller(self.estimate, None if self.targets is None
+                          else compensate(self.estimate, self.targets))
+
+
+@dataclass
+class Controller:
+    """What a controller takes from the estimate ``estimate``: its joint offsets, and the
+    ``compensation`` of the targets (None: none were given)."""
+
+    estimate: Estimate
+    compensation: Compensation | None = None
+
+    def joint_offsets(self) -> list[dict[str, Any]]:
+        """Per axis the encoder offset ``drho_mm`` and its ``sigma_mm``."""
+        est = self.estimate
+        sigma = np.sqrt(np.clip(np.diag(est.error_covariance)[:3], 0.0, None))
+        return [{"axis": axis, "drho_mm": float(est.theta[a]), "sigma_mm": float(sigma[a])}
+                for a, axis in enumerate(AXIS_NAMES)]
+
+    def targets(self) -> list[dict[str, Any]]:
+        """Per target its ``target``, compensated ``command`` and predicted error per
+        frame (``predicted_FRAME_mm``)."""
+        c = self.compensation
+        return [] if c is None else [
+            {"target": t.tolist(), "command": rho.tolist(),
+             **{f"predicted_{frame}_mm": float(c.predicted[frame][k]) for frame in c.predicted}}
+            for k, (t, rho) in enumerate(zip(c.targets, c.commands, strict=True))]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The joint offsets and targets (``compensate --json``'s keys) and the estimate."""
+        return {"joint_offsets": self.joint_offsets(), "targets": self.targets(),
+                "estimate": strict(self.estimate.to_dict())}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Controller:
+        """The controller's values :meth:`to_dict` wrote (``ValueError`` if they are not)."""
+        try:
+            est = Estimate.from_dict(data["estimate"])
+            rows = data["targets"]
+            compensation = None if not rows else Compensation(
+                np.array([r["target"] for r in rows], dtype=float),
+                np.array([r["command"] for r in rows], dtype=float),
+                {frame: np.array([r[f"predicted_{frame}_mm"] for r in rows], dtype=float)
+                 for frame in FRAMES})
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"not a controller's values: {exc}") from None
+        return cls(est, compensation)
+
+    def write(self, folder: str | Path) -> list[Path]:
+        """:func:`write_controller_files` into ``folder``; the paths written."""
+        return write_controller_files(self.estimate, folder, self.compensation)

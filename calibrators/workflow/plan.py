@@ -1,14 +1,16 @@
 """A designed experiment as a procedure a technician follows, and its readings sheet.
 
-:func:`make_procedure` plays a planned agent's experiment (decided at reset, from what the
-lab shows before the first move: :class:`~calibrators.agents.base.PlannedAgent`) on the
-nominal machine of a design, in an exact-model lab of the given conditions and budget,
-and writes down what a technician does: numbered steps (mount, drive, lift, engage,
-re-mount, read), each with the seconds the lab's time table gives it, and every reading
-to take, in step order, as rows of a measurement file whose ``reading_mm`` is left blank
+:class:`Plan` (configured with the design, the agent, the conditions and the budget) plays
+a planned agent's experiment (decided at reset, from what the lab shows before the first
+move: :class:`~calibrators.agents.base.PlannedAgent`) on the nominal machine of the design,
+in an exact-model lab of the given conditions and budget, and writes down what a
+technician does: a :class:`Procedure` of numbered steps (mount, drive, lift, engage,
+re-mount, read), each with the seconds the lab's time table gives it, and every reading to
+take, in step order, as rows of a measurement file whose ``reading_mm`` is left blank
 (:func:`write_sheet`).  :func:`place_words` says where a stand goes in a technician's
-words.  The filled sheet is read by ``orthoglide fit``; with the plan (``--plan``) its
-rows are checked against the steps (:func:`check_sheet`).
+words.  The filled sheet is read by :mod:`calibrators.workflow.fit`; with the plan its rows
+are checked against the steps (:func:`check_sheet`).  The printable page and its pictures
+are :mod:`calibrators.workflow.page`'s.
 
 An agent that chooses each move from the last reading (``active``) has no procedure to
 write ahead: it is refused by name.
@@ -18,28 +20,30 @@ from __future__ import annotations
 
 import csv
 import json
+from collections.abc import Mapping
+from contextlib import closing
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
-import orthoglide_env
 from calibrators.agents import available, get_agent
 from calibrators.agents.base import PlannedAgent
 from calibrators.measurements import COLUMNS, Measurement, Measurements, gauge_name
-from calibrators.study.episodes import agent_rng, measurements_of
+from calibrators.study.episodes import measurements_of, run_episode
+from calibrators.study.labs import nominal_lab, nominal_options
 from orthoglide_env.instruments.slots import PLATFORM_AIM, GaugeSpec, Part
-from orthoglide_env.lab.operations import Op
+from orthoglide_env.lab.operations import DEFAULT_BUDGET_S, Op
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
-from orthoglide_env.model.errors import AXIS_NAMES, LEG_NAMES, MachineParams
+from orthoglide_env.model.errors import AXIS_NAMES, LEG_NAMES
 from orthoglide_env.world.conditions import Conditions
-from orthoglide_env.world.machine_file import machine_dict
 from orthoglide_env.world.table import REFERENCE_LENGTH_MM
 
 #: The sheet's columns: the measurement file's, and the step each reading belongs to.
 SHEET_COLUMNS: tuple[str, ...] = (*COLUMNS, "step")
+#: The files :meth:`Procedure.write` writes: the steps, and the readings sheet.
+PLAN_FILE, SHEET_FILE = "plan.json", "readings.csv"
 #: What each lab operation is called in a step.
 ACTIONS: dict[Op, str] = {Op.MOVE: "drive and read", Op.LIFT: "lift", Op.ENGAGE: "engage",
                           Op.REMOUNT: "re-mount", Op.STOP: "stop"}
@@ -79,6 +83,12 @@ class Procedure:
     def total_s(self) -> float:
         return float(sum(s.seconds for s in self.steps))
 
+    def summary(self) -> str:
+        """The procedure in one line: its agent, steps, readings and time."""
+        return (f"agent {self.agent}: {len(self.steps)} steps, {len(self.sheet)} readings, "
+                f"{self.total_s / 60:.1f} min on the lab's clock (budget "
+                f"{self.budget_s / 60:.0f} min)")
+
     def to_dict(self) -> dict[str, Any]:
         """The procedure as JSON (the sheet is its own file, :func:`write_sheet`)."""
         out = asdict(self)
@@ -96,6 +106,15 @@ class Procedure:
                        notes=[str(n) for n in data.get("notes", [])])
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"not a procedure written by orthoglide plan: {exc}") from None
+
+    def write(self, folder: str | Path) -> list[Path]:
+        """Write ``plan.json`` (:meth:`to_dict`) and the readings sheet ``readings.csv``
+        (:func:`write_sheet`) into ``folder`` (made if missing); the paths written."""
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        plan = folder / PLAN_FILE
+        plan.write_text(json.dumps(self.to_dict(), indent=1) + "\n", encoding="utf-8")
+        return [plan, write_sheet(self, folder / SHEET_FILE)]
 
     @classmethod
     def read(cls, path: str | Path) -> Procedure:
@@ -156,61 +175,97 @@ def place_words(spec: GaugeSpec, design: MachineDesign = PROTOTYPE) -> str:
             f"({pushed})")
 
 
-def make_procedure(agent_name: str, budget_s: float, design: MachineDesign = PROTOTYPE,
-                   conditions: Conditions | None = None, seed: int = 0) -> Procedure:
-    """The procedure of agent ``agent_name``'s experiment within ``budget_s`` seconds on a
-    machine of ``design`` under ``conditions`` (default ideal).  The experiment is played
-    on the design's nominal machine in the exact-model lab; a planned agent's steps do not
-    depend on the machine, so they are the real machine's.  ``ValueError`` for an agent
-    that decides as it reads."""
-    conditions = Conditions("ideal") if conditions is None else conditions
+class Plan:
+    """The plan of an experiment, configured: agent ``agent``'s experiment within
+    ``budget_s`` seconds on a machine of ``design`` under ``conditions`` (default ideal),
+    a random agent's choices drawn from ``seed``.  ``ValueError`` at construction for a
+    budget that is not positive, or an agent that decides as it reads; :meth:`run` makes
+    the :class:`Procedure`."""
+
+    def __init__(self, design: MachineDesign, *, agent: str = "paper",
+                 conditions: Conditions | None = None, budget_s: float = DEFAULT_BUDGET_S,
+                 seed: int = 0) -> None:
+        if not isinstance(design, MachineDesign):
+            raise TypeError(f"design must be a MachineDesign, got {type(design).__name__}")
+        if not budget_s > 0:
+            raise ValueError(f"budget_s must be a positive number of seconds, got "
+                             f"{budget_s:g}")
+        _planned(agent)
+        self.design, self.agent, self.budget_s, self.seed = design, agent, float(budget_s), seed
+        self.conditions = Conditions("ideal") if conditions is None else conditions
+
+    def run(self) -> Procedure:
+        """The procedure: the experiment played on the design's nominal machine in the
+        exact-model lab; a planned agent's steps do not depend on the machine, so they
+        are the real machine's."""
+        return make_procedure(self.agent, self.budget_s, self.design, self.conditions,
+                              self.seed)
+
+
+def _planned(agent_name: str) -> PlannedAgent:
+    """The agent ``agent_name``; ``ValueError`` for one that decides as it reads."""
     agent = get_agent(agent_name)
     if not isinstance(agent, PlannedAgent):
         raise ValueError(f"agent '{agent_name}' chooses each move from the last readings: its "
                          "experiment cannot be written down ahead; plan one that decides it "
                          f"at the start ({', '.join(planned_agents())})")
-    env = gym.make(orthoglide_env.LAB_ENV_ID, backend="exact", errors="nominal",
-                   gauge_sigma=0.0, gauge_resolution=0.0, tracker=agent.needs_tracker,
-                   reference=agent.needs_reference,
-                   budget_s=budget_s, design=design, conditions=conditions)
-    try:
-        observation, _ = env.reset(seed=seed,
-                                   options={"machine": machine_dict(MachineParams(design=design),
-                                                                      None)})
-        lab = env.unwrapped
-        agent.reset(env, observation, agent_rng(seed))
-        slots = lab.slots
-        held = [int(s) for s in observation["slot"]]
-        stands = [{"stand": k + 1, "slot": slots[s].slot, "place": place_words(slots[s], design)}
-                  for k, s in enumerate(held) if s < len(slots)]
-        engaged = [bool(e) for e in observation["engaged"]]
-        steps = [Step(1, "set up", _setup_text(stands, engaged), 0.0, 0.0,
-                      rows=list(range(1, len(lab.records) + 1)))]
-        taken = [1] * len(lab.records)
-        clock = 0.0
-        for act in list(agent.plan):
-            before = len(lab.records)
-            observation, _, terminated, truncated, info = env.step(act)
-            if info.get("refused"):
-                raise RuntimeError(f"the lab refused step {len(steps) + 1} of agent "
-                                   f"'{agent_name}' on the nominal machine: {info['refused']}")
-            now = float(observation["time"][0])
-            number = len(steps) + 1
-            read = lab.records[before:]
-            steps.append(describe_step(number, act, now - clock, clock, read, before, slots, design,
-                               held))
-            taken += [number] * len(read)
-            held = [int(s) for s in observation["slot"]]
-            clock = now
-            if terminated or truncated:
-                break
-        data = measurements_of(list(lab.records), clock, design=design)
-    finally:
-        env.close()
+    return agent
+
+
+def make_procedure(agent_name: str, budget_s: float, design: MachineDesign = PROTOTYPE,
+                   conditions: Conditions | None = None, seed: int = 0) -> Procedure:
+    """The procedure of agent ``agent_name``'s experiment within ``budget_s`` seconds on a
+    machine of ``design`` under ``conditions`` (default ideal): :meth:`Plan.run`.
+    ``ValueError`` for an agent that decides as it reads."""
+    conditions = Conditions("ideal") if conditions is None else conditions
+    agent = _planned(agent_name)
+    with closing(nominal_lab(agent, design, conditions, budget_s)) as env:
+        writer = _StepWriter(env.unwrapped, agent_name, design)
+        episode = run_episode(env, agent, seed, nominal_options(design), watch=writer)
+    data = measurements_of(episode.records, episode.time_s, design=design)
     sheet = [m.again(m.reading, m.repetition, m.time_s, None, step, m.temperature_c)
-             for m, step in zip(data.items, taken, strict=True)]
+             for m, step in zip(data.items, writer.taken, strict=True)]
     return Procedure(agent_name, float(budget_s), conditions.to_dict(), design.to_dict(),
-                     stands, steps, sheet)
+                     writer.stands, writer.steps, sheet)
+
+
+class _StepWriter:
+    """Writes down each step of a planned agent's episode in ``lab`` as the technician's
+    :class:`Step`, and the step each reading of the notebook belongs to."""
+
+    def __init__(self, lab: Any, agent_name: str, design: MachineDesign) -> None:
+        self.lab, self.agent_name, self.design = lab, agent_name, design
+        self.steps: list[Step] = []
+        self.stands: list[dict[str, Any]] = []
+        self.taken: list[int] = []
+
+    def reset(self, i: int, observation: dict[str, np.ndarray]) -> None:
+        slots = self.lab.slots
+        self.held = [int(s) for s in observation["slot"]]
+        self.stands = [{"stand": k + 1, "slot": slots[s].slot,
+                        "place": place_words(slots[s], self.design)}
+                       for k, s in enumerate(self.held) if s < len(slots)]
+        engaged = [bool(e) for e in observation["engaged"]]
+        read = len(self.lab.records)
+        self.steps = [Step(1, "set up", _setup_text(self.stands, engaged), 0.0, 0.0,
+                           rows=list(range(1, read + 1)))]
+        self.taken = [1] * read
+        self.clock = 0.0
+
+    def step(self, i: int, action: Mapping[str, Any], observation: dict[str, np.ndarray],
+             info: Mapping[str, Any]) -> None:
+        number = len(self.steps) + 1
+        if info.get("refused"):
+            raise RuntimeError(f"the lab refused step {number} of agent '{self.agent_name}' "
+                               f"on the nominal machine: {info['refused']}")
+        now = float(observation["time"][0])
+        before = len(self.taken)
+        read = self.lab.records[before:]
+        self.steps.append(describe_step(number, action, now - self.clock, self.clock, read,
+                                        before, self.lab.slots, self.design, self.held))
+        self.taken += [number] * len(read)
+        self.held = [int(s) for s in observation["slot"]]
+        self.clock = now
 
 
 def _setup_text(stands: list[dict[str, Any]], engaged: list[bool]) -> str:
@@ -224,7 +279,7 @@ def _setup_text(stands: list[dict[str, Any]], engaged: list[bool]) -> str:
                if lifted else "") + ".")
 
 
-def describe_step(number: int, act: dict[str, Any], seconds: float, start: float,
+def describe_step(number: int, act: Mapping[str, Any], seconds: float, start: float,
                   read: list, first_row: int, slots: tuple[GaugeSpec, ...],
                   design: MachineDesign, held: list[int]) -> Step:
     """Step ``number``: lab action ``act``, its ``seconds`` from the clock at ``start``, the
@@ -278,24 +333,28 @@ def write_sheet(procedure: Procedure, path: str | Path) -> Path:
     return path
 
 
+class SheetError(ValueError):
+    """Readings that are not a filled sheet of the plan they are checked against."""
+
+
 def check_sheet(data: Measurements, procedure: Procedure) -> None:
-    """``ValueError`` naming the line of the first reading of ``data`` that the plan does
+    """:class:`SheetError` naming the line of the first reading of ``data`` that the plan does
     not hold: a step it does not have, or a gauge, mounting or posture other than that
     step's."""
     steps = {s.number: s for s in procedure.steps}
     for m in data.items:
         where = f"line {m.line}" if m.line is not None else "a reading"
         if m.step is None:
-            raise ValueError(f"{where}: no step: a sheet of the plan numbers every reading")
+            raise SheetError(f"{where}: no step: a sheet of the plan numbers every reading")
         step = steps.get(m.step)
         if step is None:
-            raise ValueError(f"{where}: step {m.step} is not in the plan (steps 1 .. "
+            raise SheetError(f"{where}: step {m.step} is not in the plan (steps 1 .. "
                              f"{len(procedure.steps)})")
         if step.action not in ("set up", "drive and read", "re-mount"):
-            raise ValueError(f"{where}: step {m.step} ({step.action}) takes no reading")
+            raise SheetError(f"{where}: step {m.step} ({step.action}) takes no reading")
         if step.slot is not None and m.gauge.slot != step.slot:
-            raise ValueError(f"{where}: step {m.step} reads stand {step.stand} at "
+            raise SheetError(f"{where}: step {m.step} reads stand {step.stand} at "
                              f"{step.slot}, not {m.gauge.slot}")
         if step.rho is not None and tuple(step.rho) != m.rho:
-            raise ValueError(f"{where}: step {m.step} is at rho {tuple(step.rho)}, not "
+            raise SheetError(f"{where}: step {m.step} is at rho {tuple(step.rho)}, not "
                              f"{m.rho}")

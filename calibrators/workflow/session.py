@@ -9,32 +9,33 @@ and observation are replaced by the answers. A reading the gauge could not give
 notebook file at once, so a crash loses nothing; a session started again on that file
 replays it (``resume``) and goes on where it stopped.  The session ends when the agent
 stops (at its target predicted error, or when nothing is worth the time) or at the budget.
+
+The episode is :func:`~calibrators.study.episodes.run_episode`'s, the session watching each
+step (:class:`~calibrators.study.episodes.Watcher`) to say it and ask its readings.
 """
 
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from contextlib import closing
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
-import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.agents.base import PlannedAgent
 from calibrators.measurements import Measurements, gauge_name
-from calibrators.study.episodes import agent_rng, measurements_of
-from calibrators.workflow.plan import describe_step
+from calibrators.study.episodes import run_episode
+from calibrators.study.labs import nominal_lab, nominal_options
+from calibrators.workflow.plan import SHEET_FILE, describe_step
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.lab.notebook import Record
 from orthoglide_env.lab.operations import Op, slot_catalogue
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
-from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.world.conditions import Conditions
-from orthoglide_env.world.machine_file import machine_dict
 
 #: What an answer is asked for: (step number, what to do, stand (1, 2, ...), gauge name,
 #: rho, lab clock (s)); it returns the reading (mm) or None (the gauge gave none).
@@ -66,52 +67,30 @@ class Session:
         self.design, self.seed = design, seed
         self.notebook = Path(notebook)
         self.replay = _read_notebook(self.notebook)
-        self.env = gym.make(orthoglide_env.LAB_ENV_ID, backend="exact", errors="nominal",
-                            gauge_sigma=sigma, gauge_resolution=resolution,
-                            tracker=self.agent.needs_tracker,
-                            reference=self.agent.needs_reference, budget_s=budget_s,
-                            design=design,
-                            conditions=Conditions("ideal") if conditions is None else conditions)
+        self.env = nominal_lab(self.agent, design,
+                               Conditions("ideal") if conditions is None else conditions,
+                               budget_s, sigma=sigma, resolution=resolution)
         self.answered = 0
 
     def run(self, answer: Answer, say: Callable[..., None] = print) -> Measurements:
         """The experiment to its end; ``answer`` gives each reading asked for (replayed
         answers first), ``say`` is told each step (its words, and the lab action after the
-        set-up).  The readings, as a measurement file holds them."""
-        env = self.env
-        try:
-            observation, info = env.reset(seed=self.seed, options={
-                "machine": machine_dict(MachineParams(design=self.design), None)})
-            lab = env.unwrapped
-            slots = slot_catalogue(self.design)
-            held = [int(s) for s in observation["slot"]]
-            say("Step 1: drive to Zero, mount the stands ("
-                + ", ".join(f"stand {k + 1} at {slots[s].slot}" for k, s in enumerate(held)
-                            if s < len(slots))
-                + "), set each gauge at mid-travel and zero its dial.")
-            self._answer(1, "set up", observation, 0, held, answer)
-            self.agent.reset(env, observation, agent_rng(self.seed))
-            number = 1
-            while True:
-                act = self.agent.act(observation, info)
-                before = len(lab.records)
-                clock = float(observation["time"][0])
-                observation, _, terminated, truncated, info = env.step(act)
-                number += 1
-                step = describe_step(number, act, float(observation["time"][0]) - clock, clock,
-                             lab.records[before:], before, slots, self.design, held)
-                say(f"Step {number} ({step.seconds:.0f} s, clock {clock / 60:.1f} min): "
-                    f"{step.text}", act)
-                held = [int(s) for s in observation["slot"]]
-                self._answer(number, step.text, observation, before, held, answer,
-                             moved=tuple(float(v) for v in np.asarray(act["rho"]))
-                             if int(act["op"]) == Op.MOVE else None)
-                if terminated or truncated:
-                    break
-            return measurements_of(list(lab.records), float(observation["time"][0]),
-                                   design=self.design)
-        finally:
-            env.close()
+        set-up).  The readings, as a measurement file holds them (:meth:`write` saves
+        them)."""
+        with closing(self.env):
+            episode = run_episode(self.env, self.agent, self.seed,
+                                  nominal_options(self.design), watch=_Asker(self, answer, say))
+        return episode.measurements
+
+    @staticmethod
+    def write(readings: Measurements, folder: str | Path) -> list[Path]:
+        """Write the session's ``readings`` as :data:`~calibrators.workflow.plan.SHEET_FILE`
+        into ``folder`` (made if missing), for :mod:`calibrators.workflow.fit`; the paths
+        written."""
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        readings.write(folder / SHEET_FILE)
+        return [folder / SHEET_FILE]
 
     def _answer(self, number: int, text: str, observation: dict[str, np.ndarray],
                 first: int, held: list[int], answer: Answer,
@@ -160,6 +139,41 @@ class Session:
             if value is not None:
                 kept.append(replace(record, reading=float(value)))
         records[:] = kept
+
+
+class _Asker:
+    """Watches a session's episode: says each step and puts the answers to its readings
+    into the lab's notebook and observation before the agent sees them."""
+
+    def __init__(self, session: Session, answer: Answer, say: Callable[..., None]) -> None:
+        self.session, self.answer, self.say = session, answer, say
+        self.lab = session.env.unwrapped
+        self.slots = slot_catalogue(session.design)
+
+    def reset(self, i: int, observation: dict[str, np.ndarray]) -> None:
+        self.held = [int(s) for s in observation["slot"]]
+        self.say("Step 1: drive to Zero, mount the stands ("
+                 + ", ".join(f"stand {k + 1} at {self.slots[s].slot}"
+                             for k, s in enumerate(self.held) if s < len(self.slots))
+                 + "), set each gauge at mid-travel and zero its dial.")
+        self.session._answer(1, "set up", observation, 0, self.held, self.answer)
+        self.number, self.clock, self.before = 1, 0.0, len(self.lab.records)
+
+    def step(self, i: int, action: Mapping[str, Any], observation: dict[str, np.ndarray],
+             info: Mapping[str, Any]) -> None:
+        self.number += 1
+        now = float(observation["time"][0])
+        step = describe_step(self.number, action, now - self.clock, self.clock,
+                             self.lab.records[self.before:], self.before, self.slots,
+                             self.session.design, self.held)
+        self.say(f"Step {self.number} ({step.seconds:.0f} s, clock {self.clock / 60:.1f} min): "
+                 f"{step.text}", action)
+        self.held = [int(s) for s in observation["slot"]]
+        self.session._answer(self.number, step.text, observation, self.before, self.held,
+                             self.answer,
+                             moved=tuple(float(v) for v in np.asarray(action["rho"]))
+                             if int(action["op"]) == Op.MOVE else None)
+        self.clock, self.before = now, len(self.lab.records)
 
 
 def _read_notebook(path: Path) -> list[dict[str, Any]]:

@@ -1,8 +1,9 @@
 """The paper's third experiment: readings taken through the compensated controller, held
 against what the estimate predicts for them.
 
-``orthoglide plan --verify EST`` writes the procedure with each posture's command
-compensated (:func:`compensated_procedure`); :func:`verify` reads its filled sheet.  The
+:class:`VerificationPlan` (``orthoglide plan --verify EST``) plans the experiment with
+each posture's command compensated (:func:`compensated_procedure`); :class:`Verify`
+(:func:`verify`) holds its filled sheet against the estimate.  The
 leg-parallelism deviations are each mounting's readings minus its first one (the
 compensated Zero).  *Before* is what the estimated machine shows at the uncompensated
 commands; *after* is what the readings show.  The test is a chi-square of the readings
@@ -22,8 +23,10 @@ It passes at the fit's own :data:`~calibrators.estimators.exact_fit.CHI2_LEVEL`.
 
 from __future__ import annotations
 
+import json
 import re
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -34,8 +37,9 @@ from calibrators.estimators.consider import consider_terms
 from calibrators.estimators.exact_fit import CHI2_LEVEL, world_columns
 from calibrators.measurements import Measurement, Measurements, rho_label
 from calibrators.workflow.compensate import compensated_commands
-from calibrators.workflow.plan import Procedure, rho_words
+from calibrators.workflow.plan import Plan, Procedure, rho_words
 from orthoglide_env.instruments.dial import weighting_sigma
+from orthoglide_env.lab.operations import DEFAULT_BUDGET_S
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import DEFAULT_PRESET, ERROR_NAMES, PRESETS, MachineParams
 from orthoglide_env.model.kinematics import PAPER_POSTURES, direct, paper_posture
@@ -56,6 +60,26 @@ COMPENSATED: str = "-compensated"
 #: next to the stroke (160 mm on the prototype), so that the posture verified stays the
 #: calibration's to a few hundredths of the workspace; an assumption, no standard sets it.
 INWARD_STEP_MM: float = 0.5
+
+
+class VerificationPlan:
+    """The plan of the verification of the estimate ``estimate``, configured: agent
+    ``agent``'s experiment (within ``budget_s`` s, under ``conditions``, a random agent's
+    choices from ``seed``) on a machine of the estimate's design, every command
+    compensated as the compensated controller drives it.  ``ValueError`` at construction
+    as :class:`~calibrators.workflow.plan.Plan`'s; :meth:`run` makes the procedure."""
+
+    def __init__(self, estimate: Estimate, *, agent: str = "paper",
+                 conditions: Conditions | None = None, budget_s: float = DEFAULT_BUDGET_S,
+                 seed: int = 0) -> None:
+        self.estimate = estimate
+        # The estimate holds the design it calibrated: its verification is planned for it.
+        self.plan = Plan(estimate.readings.design, agent=agent, conditions=conditions,
+                         budget_s=budget_s, seed=seed)
+
+    def run(self) -> Procedure:
+        """:func:`compensated_procedure` of the plan's procedure."""
+        return compensated_procedure(self.plan.run(), self.estimate)
 
 
 def compensated_procedure(procedure: Procedure, est: Estimate) -> Procedure:
@@ -162,11 +186,57 @@ class Verification:
     predicted_rms_mm: float
 
     def to_dict(self) -> dict[str, Any]:
+        """The outcome as JSON (``verify --json``'s object)."""
         return {"passed": self.passed, "reason": self.reason, "chi2": self.chi2,
                 "dof": self.dof, "residual_rms_mm": self.residual_rms_mm,
                 "predicted_rms_mm": self.predicted_rms_mm,
                 "deviations_before": [r["before_mm"] for r in self.rows],
                 "deviations_after": [r["after_mm"] for r in self.rows], "readings": self.rows}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Verification:
+        """The outcome :meth:`to_dict` wrote (``ValueError`` if it is not one)."""
+        try:
+            return cls(bool(data["passed"]), str(data["reason"]), float(data["chi2"]),
+                       int(data["dof"]), [dict(r) for r in data["readings"]],
+                       float(data["residual_rms_mm"]), float(data["predicted_rms_mm"]))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"not a verification's outcome: {exc}") from None
+
+    def write(self, folder: str | Path) -> list[Path]:
+        """Write :data:`VERIFICATION_FILE` (:meth:`to_dict`) into ``folder`` (made if
+        missing); the paths written."""
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / VERIFICATION_FILE
+        path.write_text(json.dumps(self.to_dict(), indent=1) + "\n", encoding="utf-8")
+        return [path]
+
+
+#: The file :meth:`Verification.write` writes.
+VERIFICATION_FILE = "verification.json"
+
+
+class Verify:
+    """The verification, configured: the readings ``readings`` taken through the
+    compensated controller (the filled sheet of a :class:`VerificationPlan`), under
+    ``conditions`` (default the estimate's), against the estimate ``estimate``.
+    ``ValueError`` at construction for readings of another design than the estimate's;
+    :meth:`run` makes the :class:`Verification`."""
+
+    def __init__(self, estimate: Estimate, readings: Measurements,
+                 conditions: Conditions | None = None) -> None:
+        _check_design(estimate, readings)
+        self.estimate, self.readings, self.conditions = estimate, readings, conditions
+
+    def run(self) -> Verification:
+        """:func:`verify` of the readings."""
+        return verify(self.estimate, self.readings, self.conditions)
+
+
+def _check_design(est: Estimate, data: Measurements) -> None:
+    if data.design != est.readings.design:
+        raise ValueError("the readings are of another design than the estimate's machine")
 
 
 def verify(est: Estimate, data: Measurements, conditions: Conditions | None = None
@@ -174,8 +244,7 @@ def verify(est: Estimate, data: Measurements, conditions: Conditions | None = No
     """Hold the verification readings ``data`` (taken under ``conditions``, default the
     estimate's) against the estimate ``est``'s prediction; ``ValueError`` when they are
     of another design, or too few to test."""
-    if data.design != est.readings.design:
-        raise ValueError("the readings are of another design than the estimate's machine")
+    _check_design(est, data)
     if conditions is None:
         conditions = Conditions.from_dict(est.conditions) if est.conditions else (
             Conditions("ideal"))
