@@ -127,7 +127,7 @@ def test_jacobian_equals_central_differences_on_every_target_and_the_tracker() -
     scale unit on readings of the order of L = 310 mm, times the few operations a
     reading takes: the bar is 1e-9 mm per scale unit."""
     from orthoglide_env.instruments.slots import layout_from_names
-    from orthoglide_env.reading_model import Design, TrackerAxis, default_scales, jacobian
+    from orthoglide_env.reading_model import ReadingLayout, TrackerAxis, default_scales, jacobian
 
     rng = np.random.default_rng(0)
     names = ["x-leg/y", "y/z@0.3", "z-leg/x", "x-carriage/y", "y-carriage/z", "platform/x"]
@@ -140,7 +140,7 @@ def test_jacobian_equals_central_differences_on_every_target_and_the_tracker() -
                 mountings.append(name)
                 chosen.append(spec)
                 rho.append(posture)
-    design = Design.of(mountings, chosen, np.array(rho))
+    design = ReadingLayout.of(mountings, chosen, np.array(rho))
     count = len(design.space)
     scale = default_scales(design.space)
     theta = rng.normal(0.0, 1.0, (3, count)) * scale
