@@ -9,7 +9,7 @@ from conftest import paper_experiment
 
 from calibrators.estimators.base import get_strategy
 from calibrators.estimators.exact_fit import fit_batch, z_scores
-from calibrators.estimators.gauss_newton import design_of
+from calibrators.estimators.gauss_newton import layout_and_values
 from calibrators.estimators.parameters import (
     ParameterSpace,
     fixed_values,
@@ -45,7 +45,7 @@ def experiment(machine: MachineParams | None, seed: int, errors: str = "realisti
                                     errors=errors, gauge_sigma=sigma,
                                     gauge_resolution=resolution)
     data = episode.measurements
-    design, _ = design_of(data)
+    design, _ = layout_and_values(data)
     truth = parameters_of(design, episode.truth, lab.true_gauges)
     return data, truth, episode.sigma
 
@@ -89,8 +89,8 @@ def test_the_face_model_is_the_simulators_gauge_on_valid_readings() -> None:
 def test_batched_fit_is_the_single_fits() -> None:
     """One code path: three machines in one call give each machine's own fit."""
     runs = [experiment(None, seed) for seed in (11, 12, 13)]
-    design, _ = design_of(runs[0][0])
-    values = np.array([design_of(data)[1] for data, _, _ in runs])
+    design, _ = layout_and_values(runs[0][0])
+    values = np.array([layout_and_values(data)[1] for data, _, _ in runs])
     space = design.space
     free = select("extended", space)
     prior = prior_sigmas("auto", space, free)

@@ -12,7 +12,7 @@ from calibrators.agents import get_agent
 from calibrators.agents.base import action
 from calibrators.estimators.base import get_strategy
 from calibrators.estimators.differences import differences, paper_matrix
-from calibrators.estimators.gauss_newton import design_of
+from calibrators.estimators.gauss_newton import layout_and_values
 from calibrators.measurements import Measurement, Measurements
 from orthoglide_env.instruments.dial import exact_readings, pressed_past_travel, status_of
 from orthoglide_env.instruments.rays import exact_ray_distances, exact_target_boxes
@@ -136,7 +136,7 @@ def test_the_reading_model_is_the_exact_gauge_on_carriages_and_platform() -> Non
     posture, gauge = np.nonzero(np.isfinite(readings))
     data = Measurements([Measurement(NEW_SLOTS[g], "", 1, readings[p, g], tuple(rho[p]))
                          for p, g in zip(posture, gauge, strict=True)])
-    design, values = design_of(data)
+    design, values = layout_and_values(data)
     model = predict(parameters_of(design, machine, gauges), design)
     zero = {m: model[k] - values[k] for k, m in enumerate(design.mounting)
             if not np.any(design.rho[k])}

@@ -24,7 +24,7 @@ from calibrators.cli.output import emit, report, save
 from calibrators.estimators.base import Estimate, Measurements, get_strategy
 from calibrators.estimators.consider import WORLD_PREFIX
 from calibrators.estimators.exact_fit import z_scores
-from calibrators.estimators.gauss_newton import design_of
+from calibrators.estimators.gauss_newton import layout_and_values
 from calibrators.study.compare import machine_z_scores
 from calibrators.study.episodes import DEFAULT_BUDGET_S, machine_seed, run_episode
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
@@ -70,7 +70,7 @@ def _z_rms(est: Estimate, data: Measurements, env: gym.Env) -> float | None:
         # compare scores them.
         z = machine_z_scores([est], [env.unwrapped.true_machine])[0]
     else:
-        design, _ = design_of(data)
+        design, _ = layout_and_values(data)
         truth = parameters_of(design, env.unwrapped.true_machine, env.unwrapped.true_gauges)
         free = [est.space.index(n) for n in est.names]
         z = z_scores(est.theta[free], truth[free], est.covariance, est.information, est.scale)
