@@ -33,7 +33,7 @@ from orthoglide_env.instruments.stands import (
     stand_rays,
 )
 from orthoglide_env.model.boxes import bar_normal_pullback
-from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import (
     AXIS_NAMES,
     DEFAULT_PRESET,
@@ -156,7 +156,7 @@ class ReadingLayout:
     specs: tuple[Spec, ...]  # one per mounting
     mounting: np.ndarray  # (N,) index of each reading's mounting
     rho: np.ndarray  # (N, 3) commanded posture of each reading, mm
-    machine_design: MachineDesign = PROTOTYPE  # the design of the machine read
+    machine_design: MachineDesign  # the design of the machine read
 
     @cached_property
     def _unique_postures(self) -> tuple[np.ndarray, np.ndarray]:
@@ -179,8 +179,8 @@ class ReadingLayout:
         _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
         if len(first) == len(self):
             return self, np.arange(len(self))
-        return (ReadingLayout(self.mountings, self.specs, self.mounting[first], self.rho[first],
-                       self.machine_design), np.ravel(inverse))
+        return (ReadingLayout(self.mountings, self.specs, self.mounting[first],
+                              self.rho[first], self.machine_design), np.ravel(inverse))
 
     @property
     def postures(self) -> np.ndarray:
@@ -216,7 +216,7 @@ class ReadingLayout:
 
     @classmethod
     def of(cls, mountings: list[str], specs: list[Spec], rho: np.ndarray,
-           machine_design: MachineDesign = PROTOTYPE) -> ReadingLayout:
+           machine_design: MachineDesign) -> ReadingLayout:
         """A layout from each reading's mounting name and spec, and its posture, on a
         machine of ``machine_design``."""
         spec_of: dict[str, Spec] = {}

@@ -34,7 +34,7 @@ def _experiment(postures: int, seed: int) -> tuple[ReadingLayout, np.ndarray, np
     read = [[g for g in GAUGES if g.leg == a] for a in axes]
     design = ReadingLayout.of([g.slot for gauges in read for g in gauges],
                        [g for gauges in read for g in gauges],
-                       np.repeat(rho, [len(gauges) for gauges in read], axis=0))
+                       np.repeat(rho, [len(gauges) for gauges in read], axis=0), PROTOTYPE)
     which = np.repeat(np.arange(postures), [len(gauges) for gauges in read])
     return design, which, (which + 1) * HOUR / postures
 

@@ -26,6 +26,7 @@ from orthoglide_env.instruments.stands import (
     stand_errors,
     stand_rays,
 )
+from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import (
     ERROR_NAMES,
     PRESETS,
@@ -64,10 +65,10 @@ def test_the_face_model_is_the_simulators_gauge_on_valid_readings() -> None:
     """The estimator's smooth plane model and the exact ray-on-box gauge agree wherever a
     reading is valid, with stands installed with realistic errors; and the stand
     parameters of an installed gauge rebuild its ray exactly."""
-    machine = random_machine(5)
+    machine = random_machine(5, design=PROTOTYPE)
     gauges = installed_on(machine, install(PAPER_LAYOUT, machine, preset=PRESETS["realistic"],
                                            rng=np.random.default_rng(3)))
-    rho = np.stack([paper_posture(n) for n in PAPER_POSTURES])
+    rho = np.stack([paper_posture(n, PROTOTYPE) for n in PAPER_POSTURES])
     origins, directions = ideal_rays(PAPER_LAYOUT, machine)
     true_origins = np.array([g.origin for g in gauges])
     true_directions = np.array([g.direction for g in gauges])
@@ -140,7 +141,7 @@ def test_jacobian_equals_central_differences_on_every_target_and_the_tracker() -
                 mountings.append(name)
                 chosen.append(spec)
                 rho.append(posture)
-    design = ReadingLayout.of(mountings, chosen, np.array(rho))
+    design = ReadingLayout.of(mountings, chosen, np.array(rho), PROTOTYPE)
     count = len(design.space)
     scale = default_scales(design.space)
     theta = rng.normal(0.0, 1.0, (3, count)) * scale

@@ -95,7 +95,7 @@ def test_the_model_reads_the_reference_as_the_lab_does(backend: str) -> None:
     assert {r.mounting.split("#")[0] for r in records} == {
         "reference/x", "reference/y", "reference/z"}
     design = ReadingLayout.of([r.mounting for r in records], [r.spec for r in records],
-                       np.array([r.rho for r in records]))
+                       np.array([r.rho for r in records]), PROTOTYPE)
     assert np.count_nonzero(design.through) == 3  # one zeroing reading per mounting
     batch = env.unwrapped._batch
     theta = parameters_of(design, batch.machines[0], batch.true_gauges(0))

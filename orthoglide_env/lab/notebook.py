@@ -17,7 +17,7 @@ import numpy as np
 
 from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.instruments.gauges import Gauge, GaugeArray
-from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import ERROR_NAMES, MachineParams
 from orthoglide_env.reading_model import (
     ParameterSpace,
@@ -52,7 +52,7 @@ class Notebook:
     and the information the records carry about the machine's errors."""
 
     def __init__(self, gauge_sigma: float, tracker_sigma: float,
-                 design: MachineDesign = PROTOTYPE) -> None:
+                 design: MachineDesign) -> None:
         self.records: list[Record] = []
         self._design = design
         self._installed: dict[str, Gauge] = {}

@@ -11,7 +11,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import MachineParams, within_limits
 from orthoglide_env.model.kinematics import UnreachableError, inverse
 
@@ -30,7 +30,7 @@ def blocks(count: int) -> list[slice]:
     return [slice(i, min(i + BLOCK, count)) for i in range(0, count, BLOCK)]
 
 
-def workspace_grid(points: int = GRID_POINTS, design: MachineDesign = PROTOTYPE) -> np.ndarray:
+def workspace_grid(points: int = GRID_POINTS, *, design: MachineDesign) -> np.ndarray:
     """TCP targets (mm) on a cubic grid over ``design``'s ``grid_range`` whose nominal
     commands respect its control limits."""
     axis = np.linspace(*design.grid_range, points)
@@ -39,10 +39,11 @@ def workspace_grid(points: int = GRID_POINTS, design: MachineDesign = PROTOTYPE)
 
 
 def grid_targets(grid: np.ndarray | None, machines: Sequence[MachineParams]) -> np.ndarray:
-    """The TCP targets ``grid``, or the scoring grid of the machines' design."""
+    """The TCP targets ``grid``, or the scoring grid of the machines' design (at least
+    one machine)."""
     if grid is not None:
         return np.asarray(grid, dtype=float)
-    return workspace_grid(design=machines[0].design if len(machines) else PROTOTYPE)
+    return workspace_grid(design=machines[0].design)
 
 
 def rowwise(solve: Callable[[np.ndarray], np.ndarray], points: np.ndarray) -> np.ndarray:
