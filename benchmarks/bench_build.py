@@ -24,6 +24,7 @@ import numpy as np
 import orthoglide_env
 from orthoglide_env.instruments.slots import PAPER_LAYOUT
 from orthoglide_env.instruments.stands import install, installed_on
+from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import PRESETS, random_machine
 from orthoglide_env.sim.pybullet import OrthoglideMachine
 from orthoglide_env.sim.simulator import Simulator
@@ -45,7 +46,7 @@ def main() -> None:
     rng = np.random.default_rng(0)
     machines = []
     for _ in range(args.machines):
-        m = random_machine(rng, "realistic")
+        m = random_machine(rng, "realistic", design=PROTOTYPE)
         gauges = install(PAPER_LAYOUT, m, preset=PRESETS["realistic"], rng=rng)
         machines.append((m, installed_on(m, gauges)))
     shared = Simulator()

@@ -33,7 +33,7 @@ def main() -> None:
     parser.add_argument("--postures", type=int, default=300)
     args = parser.parse_args()
     rng = np.random.default_rng(0)
-    machine = random_machine(rng, "realistic")
+    machine = random_machine(rng, "realistic", design=PROTOTYPE)
     gauges = installed_on(machine, install(PAPER_LAYOUT, machine, preset=PRESETS["realistic"],
                                            rng=rng))
     targets = rng.uniform(PROTOTYPE.rho_min, PROTOTYPE.rho_max, (args.postures, 3))

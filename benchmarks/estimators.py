@@ -39,7 +39,7 @@ import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.estimators.base import get_strategy
 from calibrators.estimators.exact_fit import z_scores
-from calibrators.estimators.gauss_newton import design_of
+from calibrators.estimators.gauss_newton import layout_and_values
 from calibrators.estimators.prediction import predicted_tcp_error
 from calibrators.study.episodes import run_episode
 from orthoglide_env.reading_model import parameters_of
@@ -61,7 +61,7 @@ def run(machines: int, seed: int) -> dict[str, dict[str, list[float]]]:
     for k in range(machines):
         episode = run_episode(env, get_agent("paper"), seed * 100_003 + k)
         data, truth_machine, sigma = episode.measurements, episode.truth, episode.sigma
-        design, _ = design_of(data)
+        design, _ = layout_and_values(data)
         truth = parameters_of(design, truth_machine, env.unwrapped.true_gauges)
         for name, (strategy, params, prior) in ESTIMATORS.items():
             start = time.perf_counter()

@@ -32,7 +32,7 @@ def measure(preset: str, n: int, seed: int) -> dict[str, dict[str, np.ndarray]]:
     }
     agree = total = 0
     for _ in tqdm(range(n), desc=preset, leave=False):
-        machine = random_machine(rng, preset)
+        machine = random_machine(rng, preset, design=PROTOTYPE)
         gauges = installed_on(machine, install(PAPER_LAYOUT, machine, preset=PRESETS[preset],
                                                rng=rng))
         sim = OrthoglideMachine(machine, gauges)

@@ -1,11 +1,11 @@
 """The exact model of an experiment's readings, batched over parameter vectors.
 
-A *design* says where readings were taken: which gauge mountings (stand installations)
+A *reading layout* says where readings were taken: which gauge mountings (stand installations)
 and, for every reading, its mounting and the commanded posture.  The model reading of a
 mounting at a posture is ``sign * t`` with ``t`` the distance along the stand's ray to the
 plane of the bar face it is aimed at (:func:`orthoglide_env.instruments.rays.face_distances`),
 less, for a reference gauge at Zero, the gauge block's nominal length over the cosine of
-the ray's tilt (:attr:`Design.through`; its derivative over the tilt, the length times the
+the ray's tilt (:attr:`ReadingLayout.through`; its derivative over the tilt, the length times the
 tilt, about 0.25 mm/rad for the stands' 5 mrad, is left out of :func:`jacobian`); the
 gauge's zero is one unknown constant per mounting, which estimators eliminate, so the
 model leaves it out.
@@ -33,7 +33,7 @@ from orthoglide_env.instruments.stands import (
     stand_rays,
 )
 from orthoglide_env.model.boxes import bar_normal_pullback
-from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import (
     AXIS_NAMES,
     DEFAULT_PRESET,
@@ -149,18 +149,18 @@ def default_scales(space: ParameterSpace) -> np.ndarray:
     return np.where(scale > 0, scale, 1.0)
 
 @dataclass(frozen=True)
-class Design:
+class ReadingLayout:
     """Where an experiment's readings were taken."""
 
     mountings: tuple[str, ...]
     specs: tuple[Spec, ...]  # one per mounting
     mounting: np.ndarray  # (N,) index of each reading's mounting
     rho: np.ndarray  # (N, 3) commanded posture of each reading, mm
-    machine_design: MachineDesign = PROTOTYPE  # the design of the machine read
+    machine_design: MachineDesign  # the design of the machine read
 
     @cached_property
     def _unique_postures(self) -> tuple[np.ndarray, np.ndarray]:
-        # On first use: of a sweep's many identical designs, only the one fitted needs it.
+        # On first use: of a sweep's many identical layouts, only the one fitted needs it.
         postures, index = np.unique(self.rho, axis=0, return_inverse=True)
         return postures, np.ravel(index)
 
@@ -172,15 +172,15 @@ class Design:
         return ParameterSpace(self.mountings, self.specs)
 
     @cached_property
-    def distinct(self) -> tuple[Design, np.ndarray]:
-        """The design with each mounting read once at each of its postures, and every
+    def distinct(self) -> tuple[ReadingLayout, np.ndarray]:
+        """The layout with each mounting read once at each of its postures, and every
         reading's row in it: repeated readings share their model and its derivatives."""
         key = self.posture_index * len(self.specs) + self.mounting
         _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
         if len(first) == len(self):
             return self, np.arange(len(self))
-        return (Design(self.mountings, self.specs, self.mounting[first], self.rho[first],
-                       self.machine_design), np.ravel(inverse))
+        return (ReadingLayout(self.mountings, self.specs, self.mounting[first],
+                              self.rho[first], self.machine_design), np.ravel(inverse))
 
     @property
     def postures(self) -> np.ndarray:
@@ -216,8 +216,8 @@ class Design:
 
     @classmethod
     def of(cls, mountings: list[str], specs: list[Spec], rho: np.ndarray,
-           machine_design: MachineDesign = PROTOTYPE) -> Design:
-        """A design from each reading's mounting name and spec, and its posture, on a
+           machine_design: MachineDesign) -> ReadingLayout:
+        """A layout from each reading's mounting name and spec, and its posture, on a
         machine of ``machine_design``."""
         spec_of: dict[str, Spec] = {}
         for name, spec in zip(mountings, specs, strict=True):
@@ -232,22 +232,26 @@ class Design:
                    np.asarray(rho, dtype=float).reshape(-1, 3), machine_design)
 
 
-def predict(theta: np.ndarray, design: Design) -> np.ndarray:
+
+#: The earlier name of :class:`ReadingLayout` ("design" now means a MachineDesign only).
+Design = ReadingLayout
+
+def predict(theta: np.ndarray, layout: ReadingLayout) -> np.ndarray:
     """Model readings (mm, up to one constant per mounting) of every reading of
-    ``design`` for parameter vectors ``theta`` of shape ``(*batch, n)``: ``(*batch, N)``."""
+    ``layout`` for parameter vectors ``theta`` of shape ``(*batch, n)``: ``(*batch, N)``."""
     theta = np.asarray(theta, dtype=float)
     batch = theta.shape[:-1]
     flat = theta.reshape(-1, theta.shape[-1])
     if len(flat) > 1 and bool((flat == flat[0]).all()):
         # Every fit of a batch starts at the same point (nominal): one evaluation serves all.
-        return np.broadcast_to(predict(flat[0], design), (*batch, len(design))).copy()
-    space = design.space
-    machine = MachineParams.from_vector(theta[..., :N_MACHINE], design.machine_design)
-    postures = design.postures.reshape((1,) * len(batch) + design.postures.shape)
-    values = np.zeros((*batch, len(design.postures), len(design.specs)))  # (*b, P, K)
+        return np.broadcast_to(predict(flat[0], layout), (*batch, len(layout))).copy()
+    space = layout.space
+    machine = MachineParams.from_vector(theta[..., :N_MACHINE], layout.machine_design)
+    postures = layout.postures.reshape((1,) * len(batch) + layout.postures.shape)
+    values = np.zeros((*batch, len(layout.postures), len(layout.specs)))  # (*b, P, K)
     gauges = space.gauges
     if gauges:
-        specs = [design.specs[k] for k in gauges]
+        specs = [layout.specs[k] for k in gauges]
         stand = theta[..., N_MACHINE:N_MACHINE + 4 * len(gauges)].reshape(*batch, -1, 4)
         origins, directions = ideal_rays(specs, machine)
         origins, directions = stand_rays(specs, origins, directions, stand)
@@ -259,19 +263,19 @@ def predict(theta: np.ndarray, design: Design) -> np.ndarray:
         for k, station in enumerate(stations):
             rotation = rotation_matrices(theta[..., start + 3 * k:start + 3 * k + 3])
             seen = np.einsum("...ij,...pj->...pi", rotation, tcp)
-            for m, (name, spec) in enumerate(zip(design.mountings, design.specs, strict=True)):
+            for m, (name, spec) in enumerate(zip(layout.mountings, layout.specs, strict=True)):
                 if isinstance(spec, TrackerAxis) and station_of(name) == station:
                     values[..., m] = seen[..., spec.component]
-    rows = values[..., design.posture_index, design.mounting]
-    through = np.flatnonzero(design.through)
+    rows = values[..., layout.posture_index, layout.mounting]
+    through = np.flatnonzero(layout.through)
     if len(through):
-        gauge = np.full(len(design.specs), -1)
+        gauge = np.full(len(layout.specs), -1)
         gauge[gauges] = np.arange(len(gauges))
-        axes = np.array([design.specs[k].axis for k in gauges])
+        axes = np.array([layout.specs[k].axis for k in gauges])
         cosines = np.abs(directions[..., np.arange(len(gauges)), axes])
-        rows[..., through] -= (design.through[through]
-                               / cosines[..., gauge[design.mounting[through]]])
-    return design.signs[design.mounting] * rows
+        rows[..., through] -= (layout.through[through]
+                               / cosines[..., gauge[layout.mounting[through]]])
+    return layout.signs[layout.mounting] * rows
 
 
 def rotation_matrices(rotvec: np.ndarray) -> np.ndarray:
@@ -300,7 +304,7 @@ def rotated_derivatives(rotvec: np.ndarray, points: np.ndarray) -> np.ndarray:
     return -skew(points) @ right
 
 
-def jacobian(theta: np.ndarray, design: Design, free: np.ndarray, scale: np.ndarray
+def jacobian(theta: np.ndarray, layout: ReadingLayout, free: np.ndarray, scale: np.ndarray
              ) -> np.ndarray:
     """Derivative of :func:`predict` over the ``free`` parameters, per unit of their
     ``scale``: ``(*batch, N, n_free)``.
@@ -316,7 +320,7 @@ def jacobian(theta: np.ndarray, design: Design, free: np.ndarray, scale: np.ndar
     idx = np.flatnonzero(free)
     # Every fit of a batch starts at the same point (nominal): one evaluation serves all.
     same = len(flat) > 1 and bool((flat == flat[0]).all())
-    distinct, rows = design.distinct
+    distinct, rows = layout.distinct
     full = _derivatives(flat[:1] if same else flat, distinct, np.asarray(free, dtype=bool))
     if len(idx) == full.shape[-1]:
         full *= scale
@@ -325,34 +329,34 @@ def jacobian(theta: np.ndarray, design: Design, free: np.ndarray, scale: np.ndar
     full = full[:, rows]
     if same:
         full = np.repeat(full, len(flat), axis=0)
-    return full.reshape(*batch, len(design), len(idx))
+    return full.reshape(*batch, len(layout), len(idx))
 
 
-def _derivatives(theta: np.ndarray, design: Design, wanted: np.ndarray) -> np.ndarray:
+def _derivatives(theta: np.ndarray, layout: ReadingLayout, wanted: np.ndarray) -> np.ndarray:
     """Derivative of every reading over every parameter, ``(B, N, n)`` for ``theta``
     ``(B, n)``; the stands' columns are left at zero unless one of them is ``wanted``."""
-    space = design.space
-    machine = MachineParams.from_vector(theta[:, :N_MACHINE], design.machine_design)
-    postures = design.postures[None]
+    space = layout.space
+    machine = MachineParams.from_vector(theta[:, :N_MACHINE], layout.machine_design)
+    postures = layout.postures[None]
     p = direct(machine, postures)  # (B, P, 3)
     # The TCP's derivative (B, P, 3, 27) as its factors (B, P, 3, 3) and (B, P, 27).
     inv, row = tcp_sensitivity_factors(machine, postures, p)
-    out = np.zeros((len(theta), len(design), theta.shape[-1]))
-    at = design.posture_index
+    out = np.zeros((len(theta), len(layout), theta.shape[-1]))
+    at = layout.posture_index
     gauges = space.gauges
     if gauges:
-        where = np.full(len(design.specs), -1)
+        where = np.full(len(layout.specs), -1)
         where[gauges] = np.arange(len(gauges))
-        rows = np.flatnonzero(where[design.mounting] >= 0)
-        _gauge_derivatives(theta, design, machine, p, (inv, row), rows,
-                           where[design.mounting[rows]], at[rows], out,
+        rows = np.flatnonzero(where[layout.mounting] >= 0)
+        _gauge_derivatives(theta, layout, machine, p, (inv, row), rows,
+                           where[layout.mounting[rows]], at[rows], out,
                            stands=bool(wanted[N_MACHINE:N_MACHINE + 4 * len(gauges)].any()))
     start = N_MACHINE + 4 * len(gauges)
     for k, station in enumerate(space.stations):
-        rows = np.flatnonzero([isinstance(design.specs[m], TrackerAxis)
-                               and station_of(design.mountings[m]) == station
-                               for m in design.mounting])
-        component = np.array([design.specs[m].component for m in design.mounting[rows]])
+        rows = np.flatnonzero([isinstance(layout.specs[m], TrackerAxis)
+                               and station_of(layout.mountings[m]) == station
+                               for m in layout.mounting])
+        component = np.array([layout.specs[m].component for m in layout.mounting[rows]])
         columns = slice(start + 3 * k, start + 3 * k + 3)
         rotation = rotation_matrices(theta[:, columns])
         # Component i of R p moves with row i of R.
@@ -364,22 +368,22 @@ def _derivatives(theta: np.ndarray, design: Design, wanted: np.ndarray) -> np.nd
     return out
 
 
-def _gauge_derivatives(theta: np.ndarray, design: Design, machine: MachineParams,
+def _gauge_derivatives(theta: np.ndarray, layout: ReadingLayout, machine: MachineParams,
                        p: np.ndarray, dp: tuple[np.ndarray, np.ndarray], rows: np.ndarray,
                        gauge: np.ndarray, at: np.ndarray, out: np.ndarray, stands: bool
                        ) -> None:
     """Fill ``out[:, rows]``: the derivatives of the gauge readings ``rows`` (their gauge
-    among the design's gauges, their posture index ``at``) over the machine's errors, and
+    among the layout's gauges, their posture index ``at``) over the machine's errors, and
     over the stand parameters when ``stands``."""
-    space = design.space
-    specs = [design.specs[k] for k in space.gauges]
+    space = layout.space
+    specs = [layout.specs[k] for k in space.gauges]
     count = len(specs)
     stand = theta[:, N_MACHINE:N_MACHINE + 4 * count].reshape(-1, count, 4)
     ideal, aim = ideal_rays(specs, machine)
     origins, directions = stand_rays(specs, ideal, aim, stand)
     g = spec_arrays([specs[j] for j in gauge])
     legs = np.maximum(g.leg, 0)
-    postures = design.postures[at]
+    postures = layout.postures[at]
     each = np.arange(len(rows))
     a = carriage_points(machine, postures[None])[:, each, legs]
     c = platform_points(machine, p[:, at])[:, each, legs]
@@ -409,7 +413,7 @@ def _gauge_derivatives(theta: np.ndarray, design: Design, machine: MachineParams
                      d_p)
         - _through_leg(machine, zero, tcp_sensitivity_factors(machine, zero, p_zero), legs,
                        *(w * towards_centre for w in aimed)))
-    sign = design.signs[design.mounting[rows]]
+    sign = layout.signs[layout.mounting[rows]]
     out[:, rows, :N_MACHINE] = sign[:, None] * machine_part
     if not stands:
         return
@@ -442,17 +446,17 @@ def _through_leg(machine: MachineParams, rho: np.ndarray, dp: tuple[np.ndarray, 
     return out
 
 
-def parameters_of(design: Design, machine: MachineParams, gauges: list[Gauge]) -> np.ndarray:
+def parameters_of(layout: ReadingLayout, machine: MachineParams, gauges: list[Gauge]) -> np.ndarray:
     """The true parameter vector of a simulated experiment: the machine's errors and the
-    stand parameters of its installed ``gauges`` (matched to the design's mountings by
+    stand parameters of its installed ``gauges`` (matched to the layout's mountings by
     slot).  For scoring an estimate; an agent never sees it."""
     by_slot = {g.spec.slot: g for g in gauges}
-    slots = [spec.slot for spec in design.specs]
-    missing = [m for m, slot in zip(design.mountings, slots, strict=True) if slot not in by_slot]
+    slots = [spec.slot for spec in layout.specs]
+    missing = [m for m, slot in zip(layout.mountings, slots, strict=True) if slot not in by_slot]
     if missing:
         raise ValueError(f"no installed gauge for mounting(s) {missing}")
     installed = [by_slot[slot] for slot in slots]
-    origins, directions = ideal_rays(design.specs, machine)
-    stand = stand_errors(design.specs, np.array([g.origin for g in installed]),
+    origins, directions = ideal_rays(layout.specs, machine)
+    stand = stand_errors(layout.specs, np.array([g.origin for g in installed]),
                          np.array([g.direction for g in installed]), origins, directions)
     return np.concatenate([machine.to_vector(), stand.ravel()])

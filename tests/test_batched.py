@@ -57,7 +57,7 @@ def random_layout(rng: np.random.Generator) -> tuple[GaugeSpec, ...]:
 def crashing_machine(rng: np.random.Generator) -> MachineParams:
     """A realistic machine whose x-leg's R2 sits 4-12 mm off toward the y axis (outside
     the validity range): its couplers meet near the (60, 60, 60) corner, mostly."""
-    m = random_machine(rng, "realistic")
+    m = random_machine(rng, "realistic", design=PROTOTYPE)
     shift = np.zeros((3, 3))
     shift[0, :2] = np.array([-1.0, 1.0]) * rng.uniform(4.0, 12.0)
     return MachineParams(drho=m.drho, dL=m.dL, axis_tilt=m.axis_tilt,
@@ -98,7 +98,7 @@ def world() -> dict:
     and installation errors, gauges zeroed at Zero one machine at a time, and 12 postures
     per machine."""
     rng = np.random.default_rng(42)
-    machines = [random_machine(rng, "realistic") for _ in range(60)]
+    machines = [random_machine(rng, "realistic", design=PROTOTYPE) for _ in range(60)]
     machines += [far_machine(rng) for _ in range(15)]
     machines += [crashing_machine(rng) for _ in range(15)]
     gauge_sets = []
@@ -172,7 +172,7 @@ def test_batched_exact_machine_is_its_machines_one_by_one(world: dict) -> None:
 
 def test_installing_and_zeroing_a_batch_is_each_machine_alone() -> None:
     rng = np.random.default_rng(7)
-    machines = [random_machine(rng, "realistic") for _ in range(20)]
+    machines = [random_machine(rng, "realistic", design=PROTOTYPE) for _ in range(20)]
     layout = random_layout(rng)
     preset = PRESETS["realistic"]
     streams = [np.random.default_rng(s) for s in range(20)]

@@ -30,7 +30,7 @@ CONSTRAINTS = 5
 
 def machine_and_gauges(seed: int) -> tuple:
     rng = np.random.default_rng(seed)
-    machine = random_machine(rng, "realistic")
+    machine = random_machine(rng, "realistic", design=PROTOTYPE)
     gauges = install(PAPER_LAYOUT, machine, preset=PRESETS["realistic"], rng=rng)
     return machine, installed_on(machine, gauges)
 

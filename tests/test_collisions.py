@@ -104,8 +104,8 @@ def worst_posture(machine: MachineParams, points: int) -> tuple[float, np.ndarra
     return best, where
 
 
-@pytest.mark.parametrize("machine", [MachineParams(), *(random_machine(s, "realistic")
-                                                        for s in range(3))])
+@pytest.mark.parametrize("machine", [MachineParams(), *(
+    random_machine(s, "realistic", design=PROTOTYPE) for s in range(3))])
 def test_no_crash_is_possible_within_the_joint_limits(machine: MachineParams) -> None:
     # Measured: the couplers come closest, ~6.1 mm apart on the nominal machine and
     # ~5.5-6 mm on realistic ones, at a corner of the cube with two joints at -100 mm.
@@ -119,7 +119,7 @@ def test_a_machine_far_from_nominal_crashes_its_couplers() -> None:
                                                           "x_coupler/z_coupler"]
 
 
-@pytest.mark.parametrize("machine", [CRASHING, random_machine(4, "realistic")])
+@pytest.mark.parametrize("machine", [CRASHING, random_machine(4, "realistic", design=PROTOTYPE)])
 def test_agrees_with_the_simulators_contact_check(machine: MachineParams) -> None:
     machine_module = pytest.importorskip("orthoglide_env.sim.pybullet")
     axis = np.linspace(PROTOTYPE.rho_min, PROTOTYPE.rho_max, 5)

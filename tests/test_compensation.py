@@ -16,6 +16,7 @@ from calibrators.cli import main
 from calibrators.estimators.base import get_strategy
 from calibrators.study.episodes import machine_seed, run_episode
 from calibrators.workflow.compensate import compensate, read_estimate, read_targets, write_estimate
+from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.kinematics import direct
 from orthoglide_env.scoring import remove_rigid, tcp_error_vectors_many, workspace_grid
 from orthoglide_env.world.machine_file import read_machine_file
@@ -39,7 +40,7 @@ def test_compensated_commands_reach_their_targets_within_the_predicted_error() -
     [0.4, 1.25] (measured 0.69 on eight machines: the table's prior is wider than the
     lab's screws; above 1.25 the prediction would be over-confident).  The commands are
     those the scoring drives, to round-off."""
-    targets = workspace_grid(5)
+    targets = workspace_grid(5, design=PROTOTYPE)
     actual, predicted = [], []
     for index in range(6):
         episode = _tracker_lab(index)

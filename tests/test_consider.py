@@ -14,14 +14,14 @@ from calibrators.measurements import Measurement, Measurements
 from calibrators.study.episodes import measurements_of
 from orthoglide_env.instruments.slots import PAPER_LAYOUT, Part
 from orthoglide_env.model.design import PROTOTYPE
-from orthoglide_env.reading_model import Design, predict
+from orthoglide_env.reading_model import ReadingLayout, predict
 from orthoglide_env.world.conditions import IDEAL, Conditions
 from orthoglide_env.world.truth import HOUR, World
 
 GAUGES = list(PAPER_LAYOUT)
 
 
-def _experiment(postures: int, seed: int) -> tuple[Design, np.ndarray, np.ndarray]:
+def _experiment(postures: int, seed: int) -> tuple[ReadingLayout, np.ndarray, np.ndarray]:
     """The paper's gauges read as the paper reads them, at random postures: each along one
     Cartesian axis, read by the gauges on that axis's leg (which then only slides, so its
     plungers stay within their travel), one posture every 3600/postures s.  The design,
@@ -32,14 +32,14 @@ def _experiment(postures: int, seed: int) -> tuple[Design, np.ndarray, np.ndarra
     rho[np.arange(postures), axes] = rng.uniform(PROTOTYPE.rho_min, PROTOTYPE.rho_max,
                                                  postures)
     read = [[g for g in GAUGES if g.leg == a] for a in axes]
-    design = Design.of([g.slot for gauges in read for g in gauges],
+    design = ReadingLayout.of([g.slot for gauges in read for g in gauges],
                        [g for gauges in read for g in gauges],
-                       np.repeat(rho, [len(gauges) for gauges in read], axis=0))
+                       np.repeat(rho, [len(gauges) for gauges in read], axis=0), PROTOTYPE)
     which = np.repeat(np.arange(postures), [len(gauges) for gauges in read])
     return design, which, (which + 1) * HOUR / postures
 
 
-def _world_readings(design: Design, which: np.ndarray, times: np.ndarray, theta: np.ndarray,
+def _world_readings(design: ReadingLayout, which: np.ndarray, times: np.ndarray, theta: np.ndarray,
                     conditions: Conditions, machines: int, seed: int) -> np.ndarray:
     """Noise-free readings of the machine ``theta`` in ``machines`` drawn worlds, through
     the world's own maps: the carriages where :meth:`World.joints` puts them (approached as
@@ -66,7 +66,7 @@ def _world_readings(design: Design, which: np.ndarray, times: np.ndarray, theta:
                                np.full(machines, times[rows[0]]), PROTOTYPE)
         shifted = np.tile(theta, (machines, 1))
         shifted[:, :3] += joints - postures[p]
-        here = Design(design.mountings, design.specs, design.mounting[rows],
+        here = ReadingLayout(design.mountings, design.specs, design.mounting[rows],
                       design.rho[rows], PROTOTYPE)
         y = predict(shifted, here)
         t = travel / 2 + y - centre[design.mounting[rows]]

@@ -131,7 +131,7 @@ def test_the_tcp_on_an_axis_keeps_that_legs_gauges_at_their_zero_distance() -> N
         along = np.union1d(np.arange(PROTOTYPE.rho_min, PROTOTYPE.rho_max + 1e-9, 20.0),
                            [PROTOTYPE.rho_min, PROTOTYPE.rho_max])
         on_axis = [int(np.flatnonzero(np.all(table.postures == rho, axis=1))[0])
-                   for rho in axis_postures(leg, along)]
+                   for rho in axis_postures(leg, along, PROTOTYPE)]
         mine = [k for k, spec in enumerate(slots) if spec.leg == leg]
         tip = table.tip[np.ix_(mine, on_axis)]
         zero = table.tip[mine, table.zero][:, None]
@@ -139,7 +139,7 @@ def test_the_tcp_on_an_axis_keeps_that_legs_gauges_at_their_zero_distance() -> N
         assert met[:, on_axis.index(table.zero)].all() and met.mean() > 0.5
         np.testing.assert_allclose(tip[met], np.broadcast_to(zero, tip.shape)[met], atol=1e-9)
     for name in PAPER_POSTURES[1:]:
-        assert np.all(table.postures == paper_posture(name), axis=1).any()
+        assert np.all(table.postures == paper_posture(name, PROTOTYPE), axis=1).any()
 
 
 def test_a_plan_spends_at_most_its_budget_and_the_lab_charges_what_it_planned() -> None:
@@ -214,7 +214,7 @@ def test_active_agents_filter_follows_the_estimator_and_presses_nothing() -> Non
     agent.reset(env, observation, np.random.default_rng(4))
     lab, est = play_without_faults(env, agent, observation, info)
     filtered = MachineParams.from_vector(
-        agent.planner.mean[:N_MACHINE] * default_scales(ParameterSpace()))
+        agent.planner.mean[:N_MACHINE] * default_scales(ParameterSpace()), PROTOTYPE)
     gap = score(filtered, est.machine).tcp_after.rigid.rms
     error = score(est.machine, lab.true_machine).tcp_after.rigid.rms
     assert gap < 0.05

@@ -14,6 +14,7 @@ from gymnasium.utils.env_checker import check_env
 import orthoglide_env
 from orthoglide_env.instruments.dial import exact_readings
 from orthoglide_env.lab.operations import TIME
+from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture
 
@@ -84,8 +85,8 @@ def test_paper_sequence_matches_exact_model_with_ideal_gauges(backend: str) -> N
     zero = exact_readings(truth, gauges, np.zeros(3))
     compared = 0
     for name in PAPER_POSTURES:
-        obs, *_ = env.step(paper_posture(name))
-        expected = exact_readings(truth, gauges, paper_posture(name)) - zero
+        obs, *_ = env.step(paper_posture(name, PROTOTYPE))
+        expected = exact_readings(truth, gauges, paper_posture(name, PROTOTYPE)) - zero
         valid = obs["valid"].astype(bool)
         np.testing.assert_array_equal(valid, np.isfinite(expected))
         # 1 µm: the fidelity bar (a tenth of the gauges' resolution).
@@ -108,14 +109,14 @@ def test_overtravel_is_reported_and_penalised(backend: str) -> None:
     env = make(backend)
     # Toward -y the x leg presses its y gauge (stand on the -y side) past its travel, and
     # at YMin (50 mm at the gauge) it is off the face too: still an overtravel.
-    for target in (np.array([0.0, -12.0, 0.0]), paper_posture("YMin")):
+    for target in (np.array([0.0, -12.0, 0.0]), paper_posture("YMin", PROTOTYPE)):
         env.reset(seed=0)
         _, reward, terminated, _, info = env.step(target)
         assert "x-leg/y@0.5" in info["overtravel"] and not terminated
         assert info["status"][0] in ("overtravel", "missed")
         assert reward <= -TIME.overtravel_s
     # Staying in overtravel is not charged again; leaving and re-entering is.
-    _, reward, *_ = env.step(paper_posture("YMin"))
+    _, reward, *_ = env.step(paper_posture("YMin", PROTOTYPE))
     assert reward == pytest.approx(-TIME.settle_and_read_s)
     env.step(np.zeros(3))
     _, reward, _, _, info = env.step(np.array([0.0, -12.0, 0.0]))

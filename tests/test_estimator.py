@@ -9,7 +9,7 @@ from conftest import paper_experiment
 
 from calibrators.estimators.base import get_strategy
 from calibrators.estimators.exact_fit import fit_batch, z_scores
-from calibrators.estimators.gauss_newton import design_of
+from calibrators.estimators.gauss_newton import layout_and_values
 from calibrators.estimators.parameters import (
     ParameterSpace,
     fixed_values,
@@ -26,6 +26,7 @@ from orthoglide_env.instruments.stands import (
     stand_errors,
     stand_rays,
 )
+from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import (
     ERROR_NAMES,
     PRESETS,
@@ -45,7 +46,7 @@ def experiment(machine: MachineParams | None, seed: int, errors: str = "realisti
                                     errors=errors, gauge_sigma=sigma,
                                     gauge_resolution=resolution)
     data = episode.measurements
-    design, _ = design_of(data)
+    design, _ = layout_and_values(data)
     truth = parameters_of(design, episode.truth, lab.true_gauges)
     return data, truth, episode.sigma
 
@@ -64,10 +65,10 @@ def test_the_face_model_is_the_simulators_gauge_on_valid_readings() -> None:
     """The estimator's smooth plane model and the exact ray-on-box gauge agree wherever a
     reading is valid, with stands installed with realistic errors; and the stand
     parameters of an installed gauge rebuild its ray exactly."""
-    machine = random_machine(5)
+    machine = random_machine(5, design=PROTOTYPE)
     gauges = installed_on(machine, install(PAPER_LAYOUT, machine, preset=PRESETS["realistic"],
                                            rng=np.random.default_rng(3)))
-    rho = np.stack([paper_posture(n) for n in PAPER_POSTURES])
+    rho = np.stack([paper_posture(n, PROTOTYPE) for n in PAPER_POSTURES])
     origins, directions = ideal_rays(PAPER_LAYOUT, machine)
     true_origins = np.array([g.origin for g in gauges])
     true_directions = np.array([g.direction for g in gauges])
@@ -89,8 +90,8 @@ def test_the_face_model_is_the_simulators_gauge_on_valid_readings() -> None:
 def test_batched_fit_is_the_single_fits() -> None:
     """One code path: three machines in one call give each machine's own fit."""
     runs = [experiment(None, seed) for seed in (11, 12, 13)]
-    design, _ = design_of(runs[0][0])
-    values = np.array([design_of(data)[1] for data, _, _ in runs])
+    design, _ = layout_and_values(runs[0][0])
+    values = np.array([layout_and_values(data)[1] for data, _, _ in runs])
     space = design.space
     free = select("extended", space)
     prior = prior_sigmas("auto", space, free)
@@ -127,7 +128,7 @@ def test_jacobian_equals_central_differences_on_every_target_and_the_tracker() -
     scale unit on readings of the order of L = 310 mm, times the few operations a
     reading takes: the bar is 1e-9 mm per scale unit."""
     from orthoglide_env.instruments.slots import layout_from_names
-    from orthoglide_env.reading_model import Design, TrackerAxis, default_scales, jacobian
+    from orthoglide_env.reading_model import ReadingLayout, TrackerAxis, default_scales, jacobian
 
     rng = np.random.default_rng(0)
     names = ["x-leg/y", "y/z@0.3", "z-leg/x", "x-carriage/y", "y-carriage/z", "platform/x"]
@@ -140,7 +141,7 @@ def test_jacobian_equals_central_differences_on_every_target_and_the_tracker() -
                 mountings.append(name)
                 chosen.append(spec)
                 rho.append(posture)
-    design = Design.of(mountings, chosen, np.array(rho))
+    design = ReadingLayout.of(mountings, chosen, np.array(rho), PROTOTYPE)
     count = len(design.space)
     scale = default_scales(design.space)
     theta = rng.normal(0.0, 1.0, (3, count)) * scale

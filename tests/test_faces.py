@@ -17,6 +17,7 @@ from calibrators.agents.base import action
 from orthoglide_env.lab.operations import Op, slot_index
 from orthoglide_env.lab.settings import lab_settings
 from orthoglide_env.lab.spec import LAB, check_arguments
+from orthoglide_env.model.design import PROTOTYPE
 
 ENV_IDS = [orthoglide_env.ENV_ID, orthoglide_env.LAB_ENV_ID]
 #: Arguments both envs take, with input one of them accepted before the engine was
@@ -167,7 +168,8 @@ def test_the_lab_tells_a_faulted_stand_from_a_lifted_one() -> None:
     assert info["overtravel"] == ["stand 0 (x-leg/y@0.5)"]
     assert obs["engaged"].tolist() == [0, 0] and obs["faulted"].tolist() == [1, 0]
     # Re-mounted, it is in service again.
-    obs, *_ = env.step(action(Op.REMOUNT, stand=0, slot=slot_index("x-leg/y@0.5")))
+    obs, *_ = env.step(action(Op.REMOUNT, stand=0,
+                              slot=slot_index("x-leg/y@0.5", design=PROTOTYPE)))
     assert obs["engaged"].tolist() == [1, 0] and obs["faulted"].tolist() == [0, 0]
     assert env.observation_space.contains(obs)
     env.close()
@@ -185,7 +187,7 @@ def test_the_clock_stays_inside_its_documented_bound() -> None:
     env.reset(seed=0)
     obs, _, _, truncated, _ = env.step(action(Op.MOVE, np.full(3, 60.0)))
     obs, _, _, truncated, _ = env.step(action(Op.REMOUNT, stand=0,
-                                              slot=slot_index("x-leg/y@0.5")))
+                                              slot=slot_index("x-leg/y@0.5", design=PROTOTYPE)))
     assert truncated and 10.0 <= obs["time"][0] <= high
     assert env.observation_space.contains(obs)
     env.close()

@@ -10,7 +10,7 @@ from orthoglide_env.instruments.dial import GaugeNoise, Status, exact_readings, 
 from orthoglide_env.instruments.rays import ray_box_distance
 from orthoglide_env.instruments.slots import PAPER_LAYOUT, GaugeSpec, layout_from_names
 from orthoglide_env.instruments.stands import install, installed_on
-from orthoglide_env.model.design import MachineDesign
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import MachineParams, random_machine
 from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture
 
@@ -19,7 +19,8 @@ def eq10_differences(theta: np.ndarray) -> np.ndarray:
     """The twelve gauge differences of eq. (10) for paper parameters ``theta``."""
     machine = MachineParams(drho=theta[:3], dL=theta[3:])
     gauges = installed_on(machine, install(PAPER_LAYOUT))
-    return np.array([exact_readings(machine, gauges, paper_posture(p))[k] for p, k in EQ10_ROWS])
+    return np.array([exact_readings(machine, gauges, paper_posture(p, PROTOTYPE))[k]
+                     for p, k in EQ10_ROWS])
 
 
 def test_finite_differences_reproduce_eq10() -> None:
@@ -40,7 +41,7 @@ def test_nominal_machine_keeps_its_legs_parallel() -> None:
     nominal = MachineParams()
     gauges = installed_on(nominal, install(PAPER_LAYOUT))
     for posture in PAPER_POSTURES:
-        readings = exact_readings(nominal, gauges, paper_posture(posture))
+        readings = exact_readings(nominal, gauges, paper_posture(posture, PROTOTYPE))
         leg = "XYZ".find(posture[0])
         tested = [k for k, g in enumerate(gauges) if leg < 0 or g.spec.leg == leg]
         np.testing.assert_allclose(readings[tested], 0.0, atol=1e-9)
@@ -51,13 +52,13 @@ def test_tool_offset_cancels_in_every_gauge_difference(tilted: bool) -> None:
     """r shifts leg i and its gauges along e_i, so it cancels, as the paper says.  A tilted
     actuator moves the carriage end along u_i instead: then r leaves an effect of order
     r * tilt, which the test shows is not negligible."""
-    data = random_machine(6, "realistic").to_dict()
+    data = random_machine(6, "realistic", design=PROTOTYPE).to_dict()
     if not tilted:
         data["axis_tilt"] = np.zeros((3, 2)).tolist()
     machine = MachineParams.from_dict(data)
     # Small moves keep every tip on its bar; the paper postures add the large ones.
     small = np.random.default_rng(1).uniform(-6, 6, (50, 3))
-    rho = np.vstack([small, [paper_posture(n) for n in PAPER_POSTURES]])
+    rho = np.vstack([small, [paper_posture(n, PROTOTYPE) for n in PAPER_POSTURES]])
 
     def differences(machine: MachineParams) -> np.ndarray:
         gauges = installed_on(machine, install(PAPER_LAYOUT, machine, travel=200.0))
@@ -97,7 +98,7 @@ def test_status_and_readings_respect_the_travel() -> None:
 def test_gauges_lose_contact_far_from_their_posture() -> None:
     machine = MachineParams()
     gauges = installed_on(machine, install(PAPER_LAYOUT))
-    readings = exact_readings(machine, gauges, paper_posture("YMax"))
+    readings = exact_readings(machine, gauges, paper_posture("YMax", PROTOTYPE))
     # The x-leg follows the TCP 60 mm along y: its gauges cannot follow.
     assert np.isnan(readings[:2]).all() and np.isfinite(readings[2:4]).all()
 

@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 
+from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import (
     PRESETS,
     R_LEG,
@@ -28,7 +29,7 @@ def test_leg_frames_are_right_handed_cyclic_permutations() -> None:
 
 
 def test_json_round_trip_is_exact(tmp_path) -> None:
-    machine = random_machine(7, "realistic")
+    machine = random_machine(7, "realistic", design=PROTOTYPE)
     path = tmp_path / "m.json"
     machine.to_json(path)
     again = MachineParams.from_json(path)
@@ -70,19 +71,20 @@ def test_missing_machine_file(tmp_path) -> None:
 
 
 def test_presets_are_seeded_and_paper_preset_has_only_paper_errors() -> None:
-    a, b = random_machine(3, "realistic"), random_machine(3, "realistic")
+    a, b = (random_machine(3, "realistic", design=PROTOTYPE),
+            random_machine(3, "realistic", design=PROTOTYPE))
     np.testing.assert_array_equal(a.axis_tilt, b.axis_tilt)
-    assert not np.array_equal(a.drho, random_machine(4, "realistic").drho)
-    paper = random_machine(3, "paper")
+    assert not np.array_equal(a.drho, random_machine(4, "realistic", design=PROTOTYPE).drho)
+    paper = random_machine(3, "paper", design=PROTOTYPE)
     assert paper.is_paper_model and paper.drho.any()
-    assert random_machine(3, "nominal").to_dict() == MachineParams().to_dict()
+    assert random_machine(3, "nominal", design=PROTOTYPE).to_dict() == MachineParams().to_dict()
     with pytest.raises(ValueError, match="unknown error preset"):
         get_preset("wild")
     assert set(PRESETS) >= {"paper", "realistic"}
 
 
 def test_with_paper_params_keeps_extended_errors() -> None:
-    machine = random_machine(5, "realistic")
+    machine = random_machine(5, "realistic", design=PROTOTYPE)
     other = machine.with_paper_params(np.ones(3), np.zeros(3))
     np.testing.assert_array_equal(other.attach, machine.attach)
     np.testing.assert_array_equal(other.drho, np.ones(3))
@@ -94,5 +96,5 @@ def test_with_paper_params_keeps_extended_errors() -> None:
 )
 def test_check_rho_refuses_bad_targets(rho, fragment: str) -> None:
     with pytest.raises(ValueError, match=fragment):
-        check_rho(np.array(rho, dtype=float))
-    np.testing.assert_array_equal(check_rho([-100, 60, 0]), [-100, 60, 0])
+        check_rho(np.array(rho, dtype=float), design=PROTOTYPE)
+    np.testing.assert_array_equal(check_rho([-100, 60, 0], design=PROTOTYPE), [-100, 60, 0])

@@ -118,7 +118,7 @@ def test_presets_lie_well_inside_the_validity_range(preset: str) -> None:
         assert 5 * getattr(sigmas, key) <= limit, key
     rng = np.random.default_rng(0)
     for _ in range(1000):
-        check_validity(random_machine(rng, preset))
+        check_validity(random_machine(rng, preset, design=PROTOTYPE))
 
 
 def test_machines_given_as_objects_are_held_to_the_range() -> None:
@@ -130,7 +130,7 @@ def test_machines_given_as_objects_are_held_to_the_range() -> None:
 
 
 def test_equality_compares_arrays() -> None:
-    a = random_machine(1, "realistic")
+    a = random_machine(1, "realistic", design=PROTOTYPE)
     assert a == MachineParams.from_dict(json.loads(json.dumps(a.to_dict())))
     assert a == MachineParams(**a.to_dict())
     b = MachineParams(**(a.to_dict() | {"attach": (a.attach + 1e-12).tolist()}))
@@ -160,7 +160,8 @@ def test_machines_at_the_limits_are_simulated_faithfully() -> None:
     from orthoglide_env.model.kinematics import direct, paper_posture
 
     rng = np.random.default_rng(7)
-    paper = [paper_posture(name) for name in ("XMax", "XMin", "YMax", "YMin", "ZMax", "ZMin")]
+    paper = [paper_posture(name, PROTOTYPE)
+             for name in ("XMax", "XMin", "YMax", "YMin", "ZMax", "ZMin")]
     for _ in range(4):
         machine = MachineParams(**{key: limit * rng.choice([-1.0, 1.0], SHAPES[key])
                                    for key, (limit, _) in PROTOTYPE.validity_range.items()})

@@ -30,13 +30,13 @@ EXACT = 1e-9
 @pytest.mark.parametrize("preset", ["paper", "realistic"])
 def test_inverse_of_direct_is_identity(preset: str, joint_samples: np.ndarray) -> None:
     for seed in range(5):
-        machine = random_machine(seed, preset)
+        machine = random_machine(seed, preset, design=PROTOTYPE)
         p = direct(machine, joint_samples)
         np.testing.assert_allclose(inverse(machine, p), joint_samples, atol=EXACT, rtol=0)
 
 
 def test_direct_closes_every_leg(joint_samples: np.ndarray) -> None:
-    machine = random_machine(11, "realistic")
+    machine = random_machine(11, "realistic", design=PROTOTYPE)
     p = direct(machine, joint_samples)
     lengths = np.linalg.norm(leg_vectors(machine, joint_samples, p), axis=-1)
     np.testing.assert_allclose(lengths, np.broadcast_to(machine.leg_lengths, lengths.shape),
@@ -44,27 +44,28 @@ def test_direct_closes_every_leg(joint_samples: np.ndarray) -> None:
 
 
 def test_paper_closed_forms_match_general_model(joint_samples: np.ndarray) -> None:
-    machine = random_machine(2, "paper")
-    p = direct_paper(joint_samples, machine.drho, machine.leg_lengths)
+    machine = random_machine(2, "paper", design=PROTOTYPE)
+    p = direct_paper(joint_samples, machine.drho, machine.leg_lengths, PROTOTYPE.L)
     np.testing.assert_allclose(inverse(machine, p), joint_samples, atol=EXACT, rtol=0)
-    np.testing.assert_allclose(inverse_paper(p, machine.drho, machine.leg_lengths),
+    np.testing.assert_allclose(inverse_paper(p, machine.drho, machine.leg_lengths, PROTOTYPE.L),
                                joint_samples, atol=EXACT, rtol=0)
 
 
 def test_direct_paper_picks_the_assembly_mode_at_zero() -> None:
     # At Zero the quadratic's roots are t = 0 (this mode) and t = 2 L^2 / 3 (the other).
-    np.testing.assert_allclose(direct_paper(np.zeros(3), np.zeros(3), np.full(3, PROTOTYPE.L)),
-                               0.0, atol=1e-12)
+    np.testing.assert_allclose(direct_paper(np.zeros(3), np.zeros(3), np.full(3, PROTOTYPE.L),
+                                            PROTOTYPE.L), 0.0, atol=1e-12)
 
 
 def test_paper_postures_put_the_tcp_on_the_axes() -> None:
     nominal = MachineParams()
     alpha = np.arcsin(PROTOTYPE.rho_max / PROTOTYPE.L)
-    np.testing.assert_allclose(direct(nominal, paper_posture("YMax")),
+    np.testing.assert_allclose(direct(nominal, paper_posture("YMax", PROTOTYPE)),
                                [0, PROTOTYPE.L * np.sin(alpha), 0], atol=EXACT)
-    np.testing.assert_allclose(direct(nominal, paper_posture("ZMin")), [0, 0, -100], atol=EXACT)
+    np.testing.assert_allclose(direct(nominal, paper_posture("ZMin", PROTOTYPE)), [0, 0, -100],
+                               atol=EXACT)
     with pytest.raises(ValueError, match="unknown posture"):
-        paper_posture("WMax")
+        paper_posture("WMax", PROTOTYPE)
 
 
 def test_axis_postures_put_the_tcp_on_the_axes() -> None:
@@ -75,10 +76,10 @@ def test_axis_postures_put_the_tcp_on_the_axes() -> None:
     for leg in range(3):
         expected = np.zeros((len(along), 3))
         expected[:, leg] = along
-        np.testing.assert_allclose(direct(nominal, axis_postures(leg, along)), expected,
+        np.testing.assert_allclose(direct(nominal, axis_postures(leg, along, PROTOTYPE)), expected,
                                    atol=EXACT)
-        ends = axis_postures(leg, np.array([PROTOTYPE.rho_max, PROTOTYPE.rho_min]))
-        assert np.array_equal(ends, [paper_posture(f"{'XYZ'[leg]}{end}")
+        ends = axis_postures(leg, np.array([PROTOTYPE.rho_max, PROTOTYPE.rho_min]), PROTOTYPE)
+        assert np.array_equal(ends, [paper_posture(f"{'XYZ'[leg]}{end}", PROTOTYPE)
                                      for end in ("Max", "Min")])
 
 
@@ -92,29 +93,32 @@ def test_zero_posture_follows_eq7() -> None:
 
 
 def test_jacobian_equals_finite_differences(joint_samples: np.ndarray) -> None:
-    machine = random_machine(4, "paper")
+    machine = random_machine(4, "paper", design=PROTOTYPE)
     rho = joint_samples[:50]
     p = direct(machine, rho)
-    jac = jacobian_paper(p, rho, machine.drho, machine.leg_lengths)
+    jac = jacobian_paper(p, rho, machine.drho, machine.leg_lengths, PROTOTYPE.L)
     h = 1e-4  # central differences: truncation ~h^2 * p''' ~ 1e-10 here
     fd = np.empty_like(jac)
     for k in range(6):
         step = np.zeros(6)
         step[k] = h
-        plus = direct_paper(rho, machine.drho + step[:3], machine.leg_lengths + step[3:])
-        minus = direct_paper(rho, machine.drho - step[:3], machine.leg_lengths - step[3:])
+        plus = direct_paper(rho, machine.drho + step[:3], machine.leg_lengths + step[3:],
+                            PROTOTYPE.L)
+        minus = direct_paper(rho, machine.drho - step[:3], machine.leg_lengths - step[3:],
+                             PROTOTYPE.L)
         fd[..., k] = (plus - minus) / (2 * h)
     np.testing.assert_allclose(jac, fd, atol=1e-7, rtol=0)
 
 
 def test_jacobian_at_zero_and_xmax_are_eq6_and_eq8() -> None:
     lengths = np.full(3, PROTOTYPE.L)
-    j0 = jacobian_paper(np.zeros(3), np.zeros(3), np.zeros(3), lengths)
+    j0 = jacobian_paper(np.zeros(3), np.zeros(3), np.zeros(3), lengths, PROTOTYPE.L)
     np.testing.assert_allclose(j0, np.hstack([np.eye(3), -np.eye(3)]), atol=1e-12)
     alpha = np.arcsin(PROTOTYPE.rho_max / PROTOTYPE.L)
     t, c = np.tan(alpha), np.cos(alpha)
-    rho = paper_posture("XMax")
-    jx = jacobian_paper(direct_paper(rho, np.zeros(3), lengths), rho, np.zeros(3), lengths)
+    rho = paper_posture("XMax", PROTOTYPE)
+    jx = jacobian_paper(direct_paper(rho, np.zeros(3), lengths, PROTOTYPE.L), rho, np.zeros(3),
+                        lengths, PROTOTYPE.L)
     expected = np.array([[1, 0, 0, -1, 0, 0], [t, 1, 0, -t, -1 / c, 0], [t, 0, 1, -t, 0, -1 / c]])
     np.testing.assert_allclose(jx, expected, atol=1e-12)
 
@@ -122,7 +126,7 @@ def test_jacobian_at_zero_and_xmax_are_eq6_and_eq8() -> None:
 def test_leg_angles_rebuild_the_leg_vectors(joint_samples: np.ndarray) -> None:
     from orthoglide_env.model.errors import R_LEG
 
-    machine = random_machine(9, "realistic")
+    machine = random_machine(9, "realistic", design=PROTOTYPE)
     p = direct(machine, joint_samples)
     theta, beta = leg_angles(machine, joint_samples, p)
     local = -np.stack([np.cos(theta) * np.cos(beta), np.sin(theta) * np.cos(beta),
@@ -160,7 +164,8 @@ def test_tcp_sensitivity_is_the_derivative_of_the_direct_kinematics() -> None:
     from orthoglide_env.model.kinematics import tcp_sensitivity
 
     rng = np.random.default_rng(3)
-    machines = MachineParams.stack([get_preset("realistic").sample(rng) for _ in range(2)])
+    machines = MachineParams.stack([get_preset("realistic").sample(rng, PROTOTYPE)
+                                    for _ in range(2)])
     rho = rng.uniform(-80.0, 40.0, (2, 20, 3))
     p = direct(machines, rho)
     jac = tcp_sensitivity(machines, rho, p)
@@ -168,6 +173,6 @@ def test_tcp_sensitivity_is_the_derivative_of_the_direct_kinematics() -> None:
     for k in range(theta.shape[-1]):
         step = np.zeros(theta.shape[-1])
         step[k] = h
-        plus = direct(MachineParams.from_vector(theta + step), rho)
-        minus = direct(MachineParams.from_vector(theta - step), rho)
+        plus = direct(MachineParams.from_vector(theta + step, PROTOTYPE), rho)
+        minus = direct(MachineParams.from_vector(theta - step, PROTOTYPE), rho)
         assert np.allclose(jac[..., k], (plus - minus) / (2 * h), rtol=1e-6, atol=1e-7)

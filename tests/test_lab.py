@@ -22,6 +22,7 @@ from calibrators.study.compare import Config, agent_episodes, run, run_chunk
 from calibrators.study.episodes import estimate, make_estimator, measurements_of, run_episode
 from calibrators.study.statistics import summary
 from orthoglide_env.lab.operations import SLOTS, TIME, Op, slot_index
+from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.scoring import score
 
 LAB = orthoglide_env.LAB_ENV_ID
@@ -72,7 +73,7 @@ def test_a_remount_is_a_new_installation_with_its_own_zero() -> None:
     env = lab(gauge_sigma=0.0, gauge_resolution=0.0)
     obs, _ = env.reset(seed=1)
     env.step(action(Op.MOVE, [40.0, 0.0, 0.0]))
-    slot = slot_index("x-leg/y@0.2")
+    slot = slot_index("x-leg/y@0.2", design=PROTOTYPE)
     obs, reward, *_ = env.step(action(Op.REMOUNT, stand=0, slot=slot))
     assert reward == pytest.approx(-(TIME.move([40, 0, 0], [0, 0, 0]) + TIME.remount_s))
     assert obs["slot"][0] == slot and obs["mounting"][0] == 2
@@ -86,10 +87,10 @@ def test_a_remount_is_a_new_installation_with_its_own_zero() -> None:
 def test_refused_operations_cost_a_moment_and_change_nothing() -> None:
     env = lab()
     env.reset(seed=2)
-    env.step(action(Op.REMOUNT, stand=0, slot=slot_index("z-leg/x@0.8")))
+    env.step(action(Op.REMOUNT, stand=0, slot=slot_index("z-leg/x@0.8", design=PROTOTYPE)))
     before = (len(env.unwrapped.records), env.unwrapped._time)
-    _, reward, terminated, _, info = env.step(action(Op.REMOUNT, stand=1,
-                                                     slot=slot_index("z-leg/x@0.8")))
+    _, reward, terminated, _, info = env.step(action(
+        Op.REMOUNT, stand=1, slot=slot_index("z-leg/x@0.8", design=PROTOTYPE)))
     assert "already holds" in info["refused"] and reward == -TIME.lift_s and not terminated
     assert len(env.unwrapped.records) == before[0]
     with pytest.raises(ValueError, match="op must be"):

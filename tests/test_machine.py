@@ -25,7 +25,7 @@ MODES = ("quasi-static", "dynamic")
 
 def build(seed: int, preset: str) -> OrthoglideMachine:
     rng = np.random.default_rng(seed)
-    machine = random_machine(rng, preset)
+    machine = random_machine(rng, preset, design=PROTOTYPE)
     gauges = install(PAPER_LAYOUT, machine, preset=PRESETS[preset], rng=rng)
     return OrthoglideMachine(machine, installed_on(machine, gauges))
 
@@ -33,7 +33,7 @@ def build(seed: int, preset: str) -> OrthoglideMachine:
 def postures(seed: int) -> np.ndarray:
     """Paper postures, small moves (gauges in contact) and moves across the whole range."""
     rng = np.random.default_rng(seed)
-    paper = [paper_posture(n) for n in ("XMax", "YMin", "ZMax")]
+    paper = [paper_posture(n, PROTOTYPE) for n in ("XMax", "YMin", "ZMax")]
     return np.vstack([paper, rng.uniform(-8, 8, (3, 3)),
                       rng.uniform(PROTOTYPE.rho_min, PROTOTYPE.rho_max, (3, 3))])
 
@@ -85,9 +85,9 @@ def test_gauges_zeroed_at_zero_read_mid_travel_and_see_overtravel() -> None:
         np.testing.assert_allclose(sim.gauge_distances(), [g.travel / 2 for g in sim.gauges],
                                    atol=FIDELITY)
         # The x leg follows the TCP along y; its y gauge's stand is on the -y side.
-        sim.move(paper_posture("YMax"))
+        sim.move(paper_posture("YMax", PROTOTYPE))
         assert status_of(sim.gauges, sim.gauge_distances())[0] == Status.NO_CONTACT
-        sim.move(paper_posture("YMin"))
+        sim.move(paper_posture("YMin", PROTOTYPE))
         assert status_of(sim.gauges, sim.gauge_distances())[0] == Status.OVERTRAVEL
     finally:
         sim.close()
@@ -152,7 +152,7 @@ def test_ray_through_a_bar_end_is_missed_by_both_backends() -> None:
     # end face at grazing incidence, where a tip slides off; both sides must call it MISSED.
     rng = np.random.default_rng(0)
     for _ in range(29):
-        machine = random_machine(rng, "realistic")
+        machine = random_machine(rng, "realistic", design=PROTOTYPE)
         gauges = installed_on(machine, install(PAPER_LAYOUT, machine,
                                                preset=PRESETS["realistic"], rng=rng))
         rho = (rng.uniform(-8, 8, 3) if rng.random() < 0.5

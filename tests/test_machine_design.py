@@ -330,7 +330,7 @@ def test_the_lab_of_a_design_with_other_slots_has_its_catalogue(tmp_path) -> Non
     assert slots[18:] == SLOTS[30:]  # the carriages and the platform are every design's
     only_here = slot_index("x-leg/y@0.3", design=design)
     with pytest.raises(ValueError, match=r"no slot 'x-leg/y@0.3'.*\(0.2, 0.35"):
-        slot_index("x-leg/y@0.3")  # the prototype's catalogue has no such slot
+        slot_index("x-leg/y@0.3", design=PROTOTYPE)  # the prototype's catalogue has no such slot
     env = gym.make(orthoglide_env.LAB_ENV_ID, design=design)
     try:
         lab = env.unwrapped
@@ -525,3 +525,23 @@ def test_the_verification_checks_every_posture_of_the_calibration(builder, tmp_p
     for row in rows:
         rho = [float(row[f"rho_{a}"]) for a in "xyz"]
         assert all(design.rho_min <= v <= design.rho_max for v in rho), row
+
+
+def test_below_the_envs_a_design_is_never_assumed() -> None:
+    """The model, the lab and the scoring take the design they work on: a call that forgets
+    it fails at once instead of computing the prototype (the envs and ``gym.make`` keep
+    the prototype as the user's default)."""
+    from orthoglide_env.lab.notebook import Notebook
+    from orthoglide_env.lab.operations import slot_index
+    from orthoglide_env.model.errors import random_machine, within_limits
+    from orthoglide_env.scoring import workspace_grid
+
+    forgetful = [lambda: paper_posture("XMax"), lambda: random_machine(1, "paper"),
+                 lambda: within_limits(np.zeros(3)), lambda: slot_index("platform/x"),
+                 lambda: workspace_grid(), lambda: Notebook(0.01, 0.005),
+                 lambda: MachineParams.from_vector(np.zeros(27))]
+    for call in forgetful:
+        with pytest.raises(TypeError, match="design"):
+            call()
+    small = MachineDesign.from_dict({"L": 280.0, "d": 70.0, "r": 28.0})
+    assert not np.array_equal(paper_posture("XMax", small), paper_posture("XMax", PROTOTYPE))

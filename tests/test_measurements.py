@@ -135,7 +135,7 @@ def test_the_papers_five_columns_read_as_before(tmp_path) -> None:
                           Measurement(GaugeSpec(0, 2), "XMax", 2, -0.31)]
     assert [m.line for m in data.items] == [2, 4]
     assert [m.mounting for m in data.items] == ["x-leg/y@0.5", "x-leg/z@0.5"]
-    assert data.items[1].rho == tuple(paper_posture("XMax"))
+    assert data.items[1].rho == tuple(paper_posture("XMax", PROTOTYPE))
 
 
 def test_columns_come_in_any_order(tmp_path) -> None:
@@ -159,7 +159,7 @@ def test_the_gauge_as_a_name_or_as_leg_axis_at(tmp_path) -> None:
 
 
 def test_postures_by_name_by_rho_or_both(tmp_path) -> None:
-    xmax = paper_posture("XMax")
+    xmax = paper_posture("XMax", PROTOTYPE)
     path = tmp_path / "m.csv"
     path.write_text(csv_file(
         "x,y,Zero,,,,0.0",  # a paper posture, its rho filled in
@@ -653,7 +653,7 @@ def test_paper_postures_are_the_designs(tmp_path) -> None:
     assert [m.posture for m in data.items] == ["XMax", "XMin"]
     assert data.items[0].rho == tuple(xmax)
     assert data.items[1].rho == tuple(paper_posture("XMin", small))
-    assert data.items[1].rho != tuple(paper_posture("XMin"))
+    assert data.items[1].rho != tuple(paper_posture("XMin", PROTOTYPE))
 
 
 def test_fit_recovers_a_small_machine_from_its_saved_readings(tmp_path, capsys) -> None:

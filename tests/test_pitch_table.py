@@ -71,9 +71,9 @@ def test_a_controller_that_compensates_the_true_lead_error_meets_the_machine_wit
     up to the lead error's change over the correction itself: at most its slope (the
     periodic term's 2 pi 4 um / 5 mm under workshop, 5e-3) times the correction (at most
     about 50 um): 0.25 um.  The scoring then sees the machine without the world."""
-    truth = MachineParams.from_vector(np.random.default_rng(2).normal(0, 0.05, 27))
+    truth = MachineParams.from_vector(np.random.default_rng(2).normal(0, 0.05, 27), PROTOTYPE)
     world = World.draw(Conditions("workshop", effects=("lead",)), np.random.default_rng(3), 6)
-    grid = workspace_grid()
+    grid = workspace_grid(design=PROTOTYPE)
     plain = tcp_error_vectors_many([truth], [truth], grid)
     leadless = tcp_error_vectors_many([truth], [truth], grid, [world])
     compensated = tcp_error_vectors_many(

@@ -9,6 +9,7 @@ from conftest import paper_experiment
 
 from calibrators.estimators.base import get_strategy
 from calibrators.estimators.prediction import predicted_tcp_error
+from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import ERROR_NAMES, MachineParams
 from orthoglide_env.model.kinematics import cross
 from orthoglide_env.scoring import (
@@ -33,7 +34,7 @@ def random_covariance(rng: np.random.Generator, size: int) -> np.ndarray:
 def test_a_translation_in_tcp_space_is_predicted_away() -> None:
     # delta moves every target by the same vector: raw error sqrt(trace C) everywhere.
     rng = np.random.default_rng(0)
-    targets = workspace_grid()
+    targets = workspace_grid(design=PROTOTYPE)
     jac = np.broadcast_to(np.eye(3), (len(targets), 3, 3))
     cov = random_covariance(rng, 3)
     frames = predicted_frame_errors(targets, jac, cov)
@@ -46,7 +47,7 @@ def test_a_translation_in_tcp_space_is_predicted_away() -> None:
 def test_a_small_rotation_is_predicted_away_only_by_the_rigid_frame() -> None:
     # delta = omega, a rotation about the origin: the error omega x target.
     rng = np.random.default_rng(1)
-    targets = workspace_grid()
+    targets = workspace_grid(design=PROTOTYPE)
     jac = np.stack([cross(axis, targets) for axis in np.eye(3)], axis=-1)
     frames = predicted_frame_errors(targets, jac, random_covariance(rng, 3))
     assert frames.rigid.max < PROJECTION_ROUND_OFF * np.abs(targets).max()
@@ -62,7 +63,7 @@ def test_rigid_weights_give_the_rigid_frames_mean_square() -> None:
     from orthoglide_env.scoring import predicted_tcp_frames_many, rigid_weights
 
     rng = np.random.default_rng(4)
-    models = [get_preset("realistic").sample(rng) for _ in range(3)]
+    models = [get_preset("realistic").sample(rng, PROTOTYPE) for _ in range(3)]
     models.append(MachineParams(drho=[40.0, 0.0, 0.0]))  # loses the far targets along x
     covariances = [random_covariance(rng, 27) * 1e-6 for _ in models]
     weights = rigid_weights(models)
@@ -72,7 +73,7 @@ def test_rigid_weights_give_the_rigid_frames_mean_square() -> None:
 
 
 def test_the_rigid_basis_spans_six_motions() -> None:
-    targets = workspace_grid()
+    targets = workspace_grid(design=PROTOTYPE)
     assert motion_basis(targets, "raw").shape == (3 * len(targets), 0)
     assert np.linalg.matrix_rank(motion_basis(targets, "translation")) == 3
     assert np.linalg.matrix_rank(motion_basis(targets, "rigid")) == 6
@@ -97,7 +98,7 @@ def test_predicted_rms_matches_sampled_true_machines() -> None:
     rng = np.random.default_rng(2)
     n = len(ERROR_NAMES)
     deltas = rng.multivariate_normal(np.zeros(n), est.error_covariance[:n, :n], size=samples)
-    truths = [MachineParams.from_vector(t) for t in est.theta[:n] + deltas]
+    truths = [MachineParams.from_vector(t, PROTOTYPE) for t in est.theta[:n] + deltas]
     reports = score_batch([est.machine] * samples, truths)
     predicted = predicted_tcp_error(est)
     for frame in FRAMES:

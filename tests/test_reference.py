@@ -16,7 +16,7 @@ from calibrators.study.episodes import measurements_of, run_episode
 from orthoglide_env.instruments.slots import GaugeSpec, Part, layout_from_names
 from orthoglide_env.lab.operations import SLOTS, TIME, Op, slot_catalogue
 from orthoglide_env.model.design import PROTOTYPE
-from orthoglide_env.reading_model import Design, parameters_of, predict
+from orthoglide_env.reading_model import ReadingLayout, parameters_of, predict
 from orthoglide_env.world.table import REFERENCE_DEVIATION, REFERENCE_LENGTH_MM
 
 LAB = orthoglide_env.LAB_ENV_ID
@@ -94,8 +94,8 @@ def test_the_model_reads_the_reference_as_the_lab_does(backend: str) -> None:
     records = read_references(env, seed=5)
     assert {r.mounting.split("#")[0] for r in records} == {
         "reference/x", "reference/y", "reference/z"}
-    design = Design.of([r.mounting for r in records], [r.spec for r in records],
-                       np.array([r.rho for r in records]))
+    design = ReadingLayout.of([r.mounting for r in records], [r.spec for r in records],
+                       np.array([r.rho for r in records]), PROTOTYPE)
     assert np.count_nonzero(design.through) == 3  # one zeroing reading per mounting
     batch = env.unwrapped._batch
     theta = parameters_of(design, batch.machines[0], batch.true_gauges(0))

@@ -32,13 +32,13 @@ FIT_ROUND_OFF: float = 1e-11
 
 
 def test_grid_commands_respect_the_limits() -> None:
-    grid = workspace_grid()
+    grid = workspace_grid(design=PROTOTYPE)
     rho = inverse(MachineParams(), grid)
     assert len(grid) > 200 and np.all((rho >= PROTOTYPE.rho_min) & (rho <= PROTOTYPE.rho_max))
 
 
 def test_compensating_with_the_truth_leaves_no_error() -> None:
-    truth = random_machine(3, "paper")
+    truth = random_machine(3, "paper", design=PROTOTYPE)
     report = score(truth, truth)
     # inverse then direct of the same model: round-off only (1e-9 mm, see kinematics tests).
     for frame in FRAMES:
@@ -48,7 +48,7 @@ def test_compensating_with_the_truth_leaves_no_error() -> None:
 
 
 def test_compensating_with_nominal_is_uncompensated() -> None:
-    truth = random_machine(4, "realistic")
+    truth = random_machine(4, "realistic", design=PROTOTYPE)
     report = score(MachineParams(), truth)
     assert report.tcp_after == report.tcp_before
 
@@ -63,7 +63,8 @@ def test_paper_errors_at_zero_follow_eq7() -> None:
 
 
 def test_score_report_to_dict_has_the_documented_shape() -> None:
-    report = score(random_machine(5, "paper"), random_machine(6, "paper"))
+    report = score(random_machine(5, "paper", design=PROTOTYPE),
+                   random_machine(6, "paper", design=PROTOTYPE))
     data = report.to_dict()
     assert set(data) == {"drho_error", "dL_error", "tcp_before", "tcp_after", "n_targets",
                          "n_skipped"}
@@ -76,26 +77,27 @@ def test_score_report_to_dict_has_the_documented_shape() -> None:
 
 @pytest.mark.parametrize("seed", range(3))
 def test_compensating_a_realistic_machine_with_its_truth_leaves_no_error(seed: int) -> None:
-    truth = random_machine(seed, "realistic")
+    truth = random_machine(seed, "realistic", design=PROTOTYPE)
     report = score(truth, truth)
     # The general direct model is Newton's method converged to 1e-11 mm per step;
     # measured maxima are ~2e-13 mm.
     assert report.tcp_after.raw.max < 1e-9 and report.tcp_after.rigid.max < 1e-9
-    assert report.n_targets + report.n_skipped == len(workspace_grid())
+    assert report.n_targets + report.n_skipped == len(workspace_grid(design=PROTOTYPE))
 
 
 def test_commands_outside_the_limits_are_skipped_and_counted() -> None:
     # An estimate that believes the x encoder reads 30 mm high commands 30 mm less on x:
     # targets near the -100 mm limit get commands the controller refuses.
-    report = score(MachineParams(drho=[30.0, 0.0, 0.0]), random_machine(1, "realistic"))
+    report = score(MachineParams(drho=[30.0, 0.0, 0.0]),
+                   random_machine(1, "realistic", design=PROTOTYPE))
     assert report.n_skipped > 0
-    assert report.n_targets + report.n_skipped == len(workspace_grid())
+    assert report.n_targets + report.n_skipped == len(workspace_grid(design=PROTOTYPE))
 
 
 def test_a_wild_estimate_is_scored_without_crashing() -> None:
     # Legs of 60 mm cannot reach most targets: no command, no crash, NaN errors.
     wild = MachineParams(dL=[-250.0, 0.0, 0.0])
-    assert np.all(np.isnan(tcp_errors(wild, MachineParams(), workspace_grid())))
+    assert np.all(np.isnan(tcp_errors(wild, MachineParams(), workspace_grid(design=PROTOTYPE))))
     with pytest.raises(ValueError, match="no target"):
         score(wild, MachineParams())
 
@@ -106,7 +108,7 @@ def test_equal_attachment_errors_shift_the_workspace_rigidly() -> None:
     # target, all of it a translation.
     offset = np.array([0.3, -0.2, 0.5])
     truth = MachineParams(attach=np.tile(offset, (3, 1)))
-    grid = workspace_grid()
+    grid = workspace_grid(design=PROTOTYPE)
     # Newton's direct solve converges to 1e-11 mm.
     np.testing.assert_allclose(tcp_error_vectors(MachineParams(), truth, grid),
                                np.broadcast_to(-offset, grid.shape), rtol=0, atol=1e-10)
@@ -194,8 +196,8 @@ def test_a_batch_is_its_machines_one_by_one() -> None:
              for q, p, m in zip(targets, reached, mask, strict=True)]
     for a, b in zip(frame_errors(targets, reached, mask), alone, strict=True):
         assert_same_frames(a, b)
-    estimates = [random_machine(k, "paper") for k in range(3)]
-    truths = [random_machine(10 + k, "realistic") for k in range(3)]
+    estimates = [random_machine(k, "paper", design=PROTOTYPE) for k in range(3)]
+    truths = [random_machine(10 + k, "realistic", design=PROTOTYPE) for k in range(3)]
     for a, e, t in zip(score_batch(estimates, truths), estimates, truths, strict=True):
         b = score(e, t)
         assert_same_frames(a.tcp_before, b.tcp_before)

@@ -12,7 +12,7 @@ from calibrators.agents import get_agent
 from calibrators.agents.base import action
 from calibrators.estimators.base import get_strategy
 from calibrators.estimators.differences import differences, paper_matrix
-from calibrators.estimators.gauss_newton import design_of
+from calibrators.estimators.gauss_newton import layout_and_values
 from calibrators.measurements import Measurement, Measurements
 from orthoglide_env.instruments.dial import exact_readings, pressed_past_travel, status_of
 from orthoglide_env.instruments.rays import exact_ray_distances, exact_target_boxes
@@ -54,10 +54,10 @@ def test_the_catalogue_appends_carriages_and_platform_faces_to_the_bars() -> Non
         "x-carriage/y", "x-carriage/z", "y-carriage/x", "y-carriage/z", "z-carriage/x",
         "z-carriage/y", "platform/x", "platform/y", "platform/z")
     for k, (name, spec) in enumerate(zip(SLOT_NAMES, SLOTS, strict=True)):
-        assert slot_index(name) == slot_index(spec) == k
+        assert slot_index(name, design=PROTOTYPE) == slot_index(spec, design=PROTOTYPE) == k
         assert layout_from_names([name]) == (spec,)
     with pytest.raises(ValueError, match="carriages with an axis across their drive"):
-        slot_index("x-carriage/x")
+        slot_index("x-carriage/x", design=PROTOTYPE)
     for bad in ("x-carriage/x", "platform/w", "x-carriage/y@0.5", "platform/x@0.5", "w-carriage/y",
                 "platform-leg/x"):
         with pytest.raises(ValueError):
@@ -86,7 +86,7 @@ def test_pybullet_reads_carriages_and_platform_as_the_exact_model(seed: int) -> 
     pressed past travel) and the same pressed-past-travel flags."""
     machine_module = pytest.importorskip("orthoglide_env.sim.pybullet")
     rng = np.random.default_rng(seed)
-    machine = random_machine(rng, "realistic")
+    machine = random_machine(rng, "realistic", design=PROTOTYPE)
     gauges = installed(machine, seed)
     sim = machine_module.OrthoglideMachine(machine, gauges)
     try:
@@ -117,7 +117,7 @@ def test_the_reading_model_is_the_exact_gauge_on_carriages_and_platform() -> Non
     """Stand errors invert the installed rays exactly, and the estimators' model readings
     (predict at the true parameters) are the exact backend's readings on every valid one:
     1e-9 mm is round-off on positions of ~300 mm."""
-    machine = random_machine(5)
+    machine = random_machine(5, design=PROTOTYPE)
     gauges = installed(machine, 3)
     origins, directions = ideal_rays(NEW_SLOTS, machine)
     true_origins = np.array([g.origin for g in gauges])
@@ -136,7 +136,7 @@ def test_the_reading_model_is_the_exact_gauge_on_carriages_and_platform() -> Non
     posture, gauge = np.nonzero(np.isfinite(readings))
     data = Measurements([Measurement(NEW_SLOTS[g], "", 1, readings[p, g], tuple(rho[p]))
                          for p, g in zip(posture, gauge, strict=True)])
-    design, values = design_of(data)
+    design, values = layout_and_values(data)
     model = predict(parameters_of(design, machine, gauges), design)
     zero = {m: model[k] - values[k] for k, m in enumerate(design.mounting)
             if not np.any(design.rho[k])}
@@ -164,7 +164,7 @@ def test_carriage_gauges_alone_see_the_actuator_tilts() -> None:
     with all 27 errors, the six carriage slots and strokes of +-30 mm give the six tilts
     exactly though the fit holds the other 21 errors at zero.  Newton on an exact model
     converges to round-off; 1e-9 rad moves a reading by 3e-8 mm over the strokes."""
-    machine = random_machine(7, "realistic")
+    machine = random_machine(7, "realistic", design=PROTOTYPE)
     carriages = tuple(s for s in NEW_SLOTS if s.part == Part.CARRIAGE)
     strokes = np.outer([-30.0, -15.0, 15.0, 30.0], np.ones(3))
     estimate, truth, names = noise_free_fit(machine, carriages, strokes, "axis_tilt")
@@ -195,7 +195,7 @@ def test_a_platform_gauge_faults_past_its_travel_and_a_lifted_one_never(backend:
     off the face."""
     env = gym.make(LAB, backend=backend, stands=1, gauge_sigma=0.0, gauge_resolution=0.0)
     env.reset(seed=4)
-    here = slot_index("platform/x")
+    here = slot_index("platform/x", design=PROTOTYPE)
 
     def step(op: Op, rho: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> tuple:
         obs, _, _, _, info = env.step(action(op, np.array(rho), stand=0, slot=here))

@@ -12,7 +12,7 @@ import pytest
 import orthoglide_env
 from calibrators.cli import main
 from calibrators.estimators.consider import WORLD_PREFIX, consider_terms
-from calibrators.estimators.gauss_newton import design_of
+from calibrators.estimators.gauss_newton import layout_and_values
 from calibrators.measurements import Measurements
 from calibrators.study.episodes import estimate, measurements_of
 from orthoglide_env.world.conditions import Conditions
@@ -113,7 +113,7 @@ def _growth_error(env: gym.Env, data: Measurements) -> float:
     minus the true growth, each centred within its mounting (whose zero takes a
     constant)."""
     lab = env.unwrapped
-    design, values = design_of(data)
+    design, values = layout_and_values(data)
     times = np.array([[m.time_s for m in data.items]])
     heat = [m.temperature_c for m in data.items]
     temperatures = None if None in heat else np.array([heat])

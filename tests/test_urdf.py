@@ -19,7 +19,7 @@ def test_checked_in_urdf_is_current() -> None:
 def test_urdf_loads_with_the_expected_tree() -> None:
     sim = Simulator()
     try:
-        body = sim.load_urdf_text(write_urdf(random_machine(1, "realistic")))
+        body = sim.load_urdf_text(write_urdf(random_machine(1, "realistic", design=PROTOTYPE)))
         info = [sim.client.getJointInfo(body, j) for j in range(sim.client.getNumJoints(body))]
     finally:
         sim.close()
@@ -36,4 +36,5 @@ def test_urdf_loads_with_the_expected_tree() -> None:
 
 
 def test_machine_errors_change_the_urdf() -> None:
-    assert write_urdf(random_machine(1, "realistic")) != write_urdf(MachineParams())
+    machine = random_machine(1, "realistic", design=PROTOTYPE)
+    assert write_urdf(machine) != write_urdf(MachineParams())

@@ -71,7 +71,7 @@ def random_actions(rng: np.random.Generator) -> np.ndarray:
                                      (int(np.sum(kind >= 6)), 3))
     actions[kind == 5] = PROTOTYPE.rho_max
     for i in np.flatnonzero(kind == 4):
-        actions[i] = paper_posture(str(rng.choice(["XMin", "YMax", "ZMin", "YMin"])))
+        actions[i] = paper_posture(str(rng.choice(["XMin", "YMax", "ZMin", "YMin"])), PROTOTYPE)
     return actions
 
 

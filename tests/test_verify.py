@@ -100,7 +100,7 @@ def test_the_plan_drives_the_compensated_commands(calibrated) -> None:
     plan = json.loads((calibrated / "plan" / "plan.json").read_text())
     rows = list(csv.DictReader((calibrated / "plan" / "readings.csv").open()))
     assert all(r["posture"].endswith(COMPENSATED) for r in rows)
-    papers = np.array([paper_posture(name) for name in PAPER_POSTURES])
+    papers = np.array([paper_posture(name, PROTOTYPE) for name in PAPER_POSTURES])
     for row in rows:
         nominal = _nominal_command(SimpleNamespace(posture=row["posture"]), PROTOTYPE)
         assert np.isfinite(nominal).all(), row["posture"]

@@ -67,7 +67,7 @@ def test_the_package_holds_a_module_per_command() -> None:
 
 def _technician(seed: int):
     """Fills a sheet with the exact readings of a random machine of the paper's preset."""
-    machine = random_machine(seed=seed, preset="paper")
+    machine = random_machine(seed=seed, preset="paper", design=PROTOTYPE)
     gauges = installed_on(machine, install(PAPER_LAYOUT))
 
     def filled(sheet: list) -> Measurements:

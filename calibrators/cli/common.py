@@ -30,7 +30,7 @@ DESIGN_HELP = ("machine design file, JSON or TOML: the nominal dimensions, joint
                "prototype's values; default: the prototype)")
 
 
-def design_of(args: argparse.Namespace) -> MachineDesign:
+def machine_design_of(args: argparse.Namespace) -> MachineDesign:
     """The design of ``--design FILE``, or the prototype."""
     return load_design(getattr(args, "design", None))
 
@@ -48,7 +48,7 @@ def truth_of(args: argparse.Namespace) -> tuple[MachineParams, World | None]:
     names none, and one that names another is refused."""
     if getattr(args, "machine", None):
         return read_machine_file(args.machine, given_design(args))
-    return random_machine(args.seed, args.errors, design_of(args)), None
+    return random_machine(args.seed, args.errors, design=machine_design_of(args)), None
 
 
 def given_design(args: argparse.Namespace) -> MachineDesign | None:

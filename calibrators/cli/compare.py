@@ -20,7 +20,7 @@ from calibrators.cli.common import (
     add_design,
     add_thermometer,
     conditions_of,
-    design_of,
+    machine_design_of,
 )
 from calibrators.cli.estimator_options import DEFAULT_STRATEGY
 from calibrators.study.compare import CHUNK, Config, Trial, run, verify_pybullet
@@ -74,7 +74,7 @@ def _check(args: argparse.Namespace) -> Config:
     return Config(agents, estimators, args.budget, args.errors, sigma, resolution,
                   args.backend, args.seed, args.success_mm,
                   curve_estimator=_curve_estimator(estimators) if args.out else "",
-                  design=design_of(args), conditions=conditions_of(args),
+                  design=machine_design_of(args), conditions=conditions_of(args),
                   thermometer=args.thermometer)
 
 

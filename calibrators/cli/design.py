@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import argparse
 
-from calibrators.cli.common import STDOUT, design_of, write_output
+from calibrators.cli.common import STDOUT, machine_design_of, write_output
 
 
 def run(args: argparse.Namespace) -> None:
-    text = design_of(args).to_json()
+    text = machine_design_of(args).to_json()
     write_output(args.out, text, "design")
 
 

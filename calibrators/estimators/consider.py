@@ -64,7 +64,7 @@ from orthoglide_env.instruments.slots import Part
 from orthoglide_env.model.compensation import interpolation_weights, node_count
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import AXIS_NAMES
-from orthoglide_env.reading_model import Design, TrackerAxis
+from orthoglide_env.reading_model import ReadingLayout, TrackerAxis
 from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.world.table import TRACKER_MPE_PER_M
 from orthoglide_env.world.truth import HOUR, MINUTE, REVOLUTION_MM, UM, bar_bending
@@ -263,7 +263,7 @@ def table_prior(machine: MachineDesign, conditions: Conditions, spacing: float
     return count, vectors[:, keep] * np.sqrt(values[keep])
 
 
-def _drive_terms(design: Design, t: np.ndarray | None, conditions: Conditions,
+def _drive_terms(design: ReadingLayout, t: np.ndarray | None, conditions: Conditions,
                  spacing: float | None) -> list[tuple[str, np.ndarray]]:
     """The carriages' terms: (name, pattern (M or 1, N, 3))."""
     on = conditions.__contains__
@@ -329,7 +329,7 @@ def thermometer_sigma(conditions: Conditions) -> float:
                  / np.sqrt(12.0))
 
 
-def _reading_terms(design: Design, values: np.ndarray, t: np.ndarray | None,
+def _reading_terms(design: ReadingLayout, values: np.ndarray, t: np.ndarray | None,
                    conditions: Conditions, temperatures: np.ndarray | None = None
                    ) -> list[tuple[str, np.ndarray]]:
     """The gauges' own terms: (name, (M, N) zero off the mounting)."""
@@ -411,7 +411,7 @@ def dial_terms(y: np.ndarray, travel: float, conditions: Conditions
     return out
 
 
-def consider_terms(design: Design, values: np.ndarray, times: np.ndarray | None,
+def consider_terms(design: ReadingLayout, values: np.ndarray, times: np.ndarray | None,
                    conditions: Conditions, spacing: float | None = None,
                    temperatures: np.ndarray | None = None) -> Consider:
     """The consider terms of ``design`` read as ``values`` (M, N) at lab ``times`` (M, N)

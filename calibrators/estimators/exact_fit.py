@@ -33,7 +33,7 @@ import numpy as np
 from calibrators.estimators.consider import Consider
 from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.model.errors import ERROR_NAMES
-from orthoglide_env.reading_model import Design, jacobian, predict
+from orthoglide_env.reading_model import ReadingLayout, jacobian, predict
 
 #: A combination is identifiable (and moved by a base-parameter fit) when its information
 #: in scaled units is at least this: the data determine it at least as well as its
@@ -175,7 +175,7 @@ def _centre(values: np.ndarray, mask: np.ndarray, onehot: np.ndarray,
 class _Problem:
     """The least-squares problem of :func:`fit_batch`, for a subset ``rows`` of machines."""
 
-    def __init__(self, design: Design, values: np.ndarray, mask: np.ndarray,
+    def __init__(self, design: ReadingLayout, values: np.ndarray, mask: np.ndarray,
                  sigma: float | np.ndarray,
                  free: np.ndarray, prior: np.ndarray, scale: np.ndarray,
                  world: np.ndarray | None = None) -> None:
@@ -376,7 +376,7 @@ def _scipy_least_squares(problem: _Problem, theta: np.ndarray, max_iterations: i
 SOLVERS = {"gauss-newton": _damped_gauss_newton, "scipy": _scipy_least_squares}
 
 
-def newton_step(design: Design, values: np.ndarray, mask: np.ndarray,
+def newton_step(design: ReadingLayout, values: np.ndarray, mask: np.ndarray,
                 sigma: float | np.ndarray, free: np.ndarray, theta: np.ndarray,
                 prior: np.ndarray, scale: np.ndarray, world: np.ndarray | None = None
                 ) -> np.ndarray:
@@ -398,7 +398,8 @@ def newton_step(design: Design, values: np.ndarray, mask: np.ndarray,
     return theta
 
 
-def fit_batch(design: Design, values: np.ndarray, mask: np.ndarray, sigma: float | np.ndarray,
+def fit_batch(design: ReadingLayout, values: np.ndarray, mask: np.ndarray,
+              sigma: float | np.ndarray,
               free: np.ndarray, fixed: np.ndarray, prior: np.ndarray, scale: np.ndarray,
               max_iterations: int = MAX_ITERATIONS, unmodelled: np.ndarray | None = None,
               solver: str = "gauss-newton", consider: Consider | None = None,
@@ -475,7 +476,7 @@ def fit_batch(design: Design, values: np.ndarray, mask: np.ndarray, sigma: float
     return fit
 
 
-def world_columns(design: Design, consider: Consider) -> np.ndarray:
+def world_columns(design: ReadingLayout, consider: Consider) -> np.ndarray:
     """(M, N, K) each consider term's pattern over the readings (mm per unit coefficient):
     a carriage's pattern times the reading's derivative by that axis's encoder offset (at
     the nominal machine: the machine's errors change it by parts in 1e3 of a term of a few

@@ -62,7 +62,7 @@ from orthoglide_env.model.errors import (
 )
 from orthoglide_env.model.kinematics import direct
 from orthoglide_env.reading_model import (
-    Design,
+    ReadingLayout,
     TrackerAxis,
     predict,
     preset_sigmas,
@@ -93,19 +93,19 @@ LISTED_MISFITS: int = 5
 MAX_OUTLIER_FRACTION: float = 0.05
 
 
-def design_of(data: Measurements) -> tuple[Design, np.ndarray]:
-    """The design and the readings of ``data``; tracker readings turned into the machine's
+def layout_and_values(data: Measurements) -> tuple[ReadingLayout, np.ndarray]:
+    """The reading layout and the readings of ``data``; tracker readings turned into the machine's
     frame (:func:`align_tracker`); a gauge mounting without a Zero reading is refused
     (:func:`~calibrators.estimators.differences.check_zeros`)."""
     if not len(data):
         raise ValueError("no readings to fit")
     check_zeros(data.items)
-    design = Design.of([m.mounting for m in data.items], [m.gauge for m in data.items],
+    design = ReadingLayout.of([m.mounting for m in data.items], [m.gauge for m in data.items],
                        np.array([m.rho for m in data.items], dtype=float), data.design)
     return design, align_tracker(design, np.array([m.reading for m in data.items], dtype=float))
 
 
-def _tracker_rows(design: Design, station: str) -> list[np.ndarray]:
+def _tracker_rows(design: ReadingLayout, station: str) -> list[np.ndarray]:
     """The readings of ``station``'s x, y and z coordinates, each in reading order."""
     return [np.flatnonzero([station_of(design.mountings[m]) == station
                             and isinstance(design.specs[m], TrackerAxis)
@@ -113,7 +113,7 @@ def _tracker_rows(design: Design, station: str) -> list[np.ndarray]:
             for c in range(3)]
 
 
-def tracker_reach(design: Design, data: Measurements) -> float:
+def tracker_reach(design: ReadingLayout, data: Measurements) -> float:
     """The farthest point of ``data`` from its tracker (mm; 0 without one): the norm of its
     three coordinates, which a tracker reads in its own frame."""
     raw = np.array([m.reading for m in data.items], dtype=float)
@@ -125,7 +125,7 @@ def tracker_reach(design: Design, data: Measurements) -> float:
     return reach
 
 
-def align_tracker(design: Design, values: np.ndarray) -> np.ndarray:
+def align_tracker(design: ReadingLayout, values: np.ndarray) -> np.ndarray:
     """Tracker readings in the machine's frame, to within a small rotation: each station's
     points are fitted (best rigid motion) to where the nominal machine puts the TCP, and
     turned back by that fit.  What is left of the station's rotation is of the order of
@@ -229,7 +229,7 @@ class GaussNewtonCalibrator(Calibrator):
         prepared = []
         for k, data in enumerate(datas):
             try:
-                design, values = design_of(data)
+                design, values = layout_and_values(data)
             except ValueError as exc:
                 out[k] = exc
                 prepared.append(None)
@@ -258,7 +258,7 @@ class GaussNewtonCalibrator(Calibrator):
                 out[k] = result
         return out
 
-    def _fit_group(self, design: Design, values: np.ndarray, datas: list[Measurements], *,
+    def _fit_group(self, design: ReadingLayout, values: np.ndarray, datas: list[Measurements], *,
                    params: str, prior: str, fix: dict[str, float], holdout: float, seed: int,
                    solver: str, keep_outliers: bool, sigma: float, tracker_sigma: float,
                    verify: bool, explain: bool, conditions: Conditions,
@@ -376,7 +376,7 @@ class GaussNewtonCalibrator(Calibrator):
         return out
 
     def _estimate(self, data: Measurements, params: str, prior: str, sigma: float,
-                  design: Design, values: np.ndarray, result: BatchFit,
+                  design: ReadingLayout, values: np.ndarray, result: BatchFit,
                   eigenvalues: np.ndarray, mask: np.ndarray, held: np.ndarray,
                   outliers: list[int], causes: list[str], every_residual: np.ndarray,
                   repeated: np.ndarray, misfits: np.ndarray, verify: bool, explain: bool,
@@ -458,7 +458,7 @@ class GaussNewtonCalibrator(Calibrator):
             **_lead(result, every, considered.names, error_cov, conditions, spacing),
         )
 
-    def _verify(self, design: Design, values: np.ndarray, result: BatchFit, mask: np.ndarray,
+    def _verify(self, design: ReadingLayout, values: np.ndarray, result: BatchFit, mask: np.ndarray,
                 data: Measurements, world: np.ndarray | None) -> float | None:
         """Leave one repetition out (runs of repetitions beyond
         :data:`~calibrators.estimators.paper_linear.MAX_FOLDS`, so that the cost stays
@@ -516,7 +516,7 @@ def _lead(result: BatchFit, every: list[str], considered: tuple[str, ...],
             "node_spacing": spacing}
 
 
-def _held_out(design: Design, values: np.ndarray, theta: np.ndarray, train: np.ndarray,
+def _held_out(design: ReadingLayout, values: np.ndarray, theta: np.ndarray, train: np.ndarray,
               test: np.ndarray, world: np.ndarray | None = None) -> np.ndarray:
     """Residuals of the ``test`` readings predicted by ``theta`` (with the fitted terms of
     ``world``, (N, K), when there are), each mounting's zero taken from its ``train``
@@ -535,7 +535,7 @@ def _held_out(design: Design, values: np.ndarray, theta: np.ndarray, train: np.n
     return out
 
 
-def _holdout(design: Design, fraction: float, seed: int) -> np.ndarray:
+def _holdout(design: ReadingLayout, fraction: float, seed: int) -> np.ndarray:
     """A random ``fraction`` of the readings, never a mounting's last remaining one."""
     if not 0 < fraction < 1:
         raise ValueError(f"--holdout must be a fraction in (0, 1), got {fraction:g}")
@@ -650,4 +650,6 @@ def _where(data: Measurements, k: int, residuals: np.ndarray | None = None,
     return f"{place} ({m.gauge.slot}, {m.posture}, repetition {m.repetition}{detail})"
 
 
-__all__ = ["GaussNewtonCalibrator", "ParameterSpace", "design_of"]
+#: The earlier name of :func:`layout_and_values` ("design" means a MachineDesign).
+design_of = layout_and_values
+__all__ = ["GaussNewtonCalibrator", "ParameterSpace", "design_of", "layout_and_values"]

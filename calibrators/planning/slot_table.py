@@ -24,7 +24,7 @@ from orthoglide_env.model.collisions import clearance
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import ERROR_NAMES, MachineParams
 from orthoglide_env.model.kinematics import axis_postures, direct
-from orthoglide_env.reading_model import Design, default_scales, jacobian, predict
+from orthoglide_env.reading_model import ReadingLayout, default_scales, jacobian, predict
 
 #: A plunger goes down only where its tip's predicted distance from the pushed-in end is
 #: at least this many standard deviations of the prediction plus :data:`END_GAP` (mm):
@@ -132,7 +132,7 @@ def slot_table(machine_design: MachineDesign = PROTOTYPE) -> SlotTable:
     at_zero = np.zeros((len(slots), len(ERROR_NAMES) + 4))
     reading = np.zeros((len(slots), len(postures)))
     for k, spec in enumerate(slots):
-        design = Design(("m",), (spec,), np.zeros(len(postures), dtype=int), postures,
+        design = ReadingLayout(("m",), (spec,), np.zeros(len(postures), dtype=int), postures,
                         machine_design)
         scale = default_scales(design.space)
         rows = jacobian(np.zeros(len(scale)), design, np.ones(len(scale), bool), scale)

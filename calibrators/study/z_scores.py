@@ -8,7 +8,7 @@ import numpy as np
 from calibrators.estimators.base import Estimate
 from calibrators.estimators.consider import WORLD_PREFIX
 from calibrators.estimators.exact_fit import z_scores
-from calibrators.estimators.gauss_newton import design_of
+from calibrators.estimators.gauss_newton import layout_and_values
 from calibrators.measurements import Measurements
 from calibrators.study.compare import machine_z_scores
 from orthoglide_env.instruments.gauges import Gauge
@@ -29,8 +29,8 @@ def z_rms(est: Estimate, data: Measurements, machine: MachineParams, gauges: lis
         # compare scores them.
         z = machine_z_scores([est], [machine])[0]
     else:
-        design, _ = design_of(data)
-        truth = parameters_of(design, machine, gauges)
+        layout, _ = layout_and_values(data)
+        truth = parameters_of(layout, machine, gauges)
         free = [est.space.index(n) for n in est.names]
         z = z_scores(est.theta[free], truth[free], est.covariance, est.information, est.scale)
     return float(np.sqrt(np.mean(z**2))) if len(z) else None

@@ -44,7 +44,7 @@ from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import DEFAULT_PRESET, ERROR_NAMES, PRESETS, MachineParams
 from orthoglide_env.model.kinematics import PAPER_POSTURES, direct, paper_posture
 from orthoglide_env.reading_model import (
-    Design,
+    ReadingLayout,
     default_scales,
     jacobian,
     predict,
@@ -249,7 +249,7 @@ def verify(est: Estimate, data: Measurements, conditions: Conditions | None = No
         conditions = Conditions.from_dict(est.conditions) if est.conditions else (
             Conditions("ideal"))
     items = data.items
-    design = Design.of([m.mounting for m in items], [m.gauge for m in items],
+    design = ReadingLayout.of([m.mounting for m in items], [m.gauge for m in items],
                        np.array([m.rho for m in items], dtype=float), data.design)
     values = np.array([m.reading for m in items], dtype=float)
     space = design.space
@@ -269,7 +269,7 @@ def verify(est: Estimate, data: Measurements, conditions: Conditions | None = No
         k = int(np.flatnonzero(~np.isfinite(before_rho).all(axis=1))[0])
         raise ValueError(f"reading {k + 1} ({items[k].posture}): no uncompensated command "
                          "within the control limits puts the tool where this one does")
-    before = predict(theta, Design(design.mountings, design.specs, design.mounting,
+    before = predict(theta, ReadingLayout(design.mountings, design.specs, design.mounting,
                                    before_rho, design.machine_design))
     scale = default_scales(space)
     jac = jacobian(theta, design, np.ones(len(theta), bool), scale)  # (N, P) per scale

@@ -15,8 +15,9 @@ import numpy as np
 from orthoglide_env.envs.base import EngineEnv, Face
 from orthoglide_env.instruments.slots import GaugeSpec
 from orthoglide_env.lab.actions import check_lab_actions
-from orthoglide_env.lab.engine import ACCURACY_UNIT_MM, StepResult
+from orthoglide_env.lab.engine import StepResult
 from orthoglide_env.lab.notebook import Estimator, Record
+from orthoglide_env.lab.rewards import ACCURACY_UNIT_MM
 from orthoglide_env.lab.settings import lab_settings, lab_spaces
 from orthoglide_env.lab.spec import LAB, REWARDS, check_arguments, signature
 

@@ -12,13 +12,13 @@ from typing import Any
 import numpy as np
 
 from orthoglide_env.lab.operations import Op
-from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import check_rho
 
 
 def check_targets(value: Any, shape: tuple[int, ...], *, clip: bool = False,
                   rows: np.ndarray | None = None, name: str = "action",
-                  design: MachineDesign = PROTOTYPE) -> np.ndarray:
+                  design: MachineDesign) -> np.ndarray:
     """Joint targets (mm, float64) from ``value`` of ``shape``: ``(3,)`` for one env,
     ``(N, 3)`` for N, or ``ValueError`` naming the rule.  With ``clip`` finite targets are
     clipped into the joint limits.  ``rows``: which rows must be valid targets (the others
@@ -63,7 +63,7 @@ def _holds_bool(value: Any) -> bool:
 
 
 def check_lab_actions(action: Any, shape: tuple[int, ...], stands: int, slots: int,
-                      rows: np.ndarray | None = None, design: MachineDesign = PROTOTYPE
+                      rows: np.ndarray | None = None, *, design: MachineDesign
                       ) -> tuple[np.ndarray, ...]:
     """``op``, ``rho``, ``stand``, ``slot`` of a lab action (``shape ()``) or of a batch of
     them (``shape (N,)``, each field with the batch axis first), as arrays, or

@@ -2,9 +2,11 @@
 
 ``OrthoglideLab-v0`` (:mod:`orthoglide_env.envs.lab`) and ``OrthoglideCalibration-v0``
 (:mod:`orthoglide_env.envs.calibration`) run a :class:`LabBatch` of one episode; their
-native vector envs run one of N.  Every rule (refusals, the time table, gauge handling,
-overtravel, readings, the tracker, collisions, termination, rewards) is written once here,
-on arrays whose first axis is the episode, and every random draw comes from the episode's
+native vector envs run one of N.  Every rule is written once, on arrays whose first axis
+is the episode: the time costs in :mod:`~orthoglide_env.lab.clock`, the refusals in
+:mod:`~orthoglide_env.lab.refusals`, the rewards in :mod:`~orthoglide_env.lab.rewards`, and
+here the installations, the levers, overtravel, readings, the tracker, collisions and the
+end, each in a method of its name; and every random draw comes from the episode's
 own stream in the order a lone lab draws it: the batched numbers equal the lone lab's to
 the last bit.  What differs between the faces is in their :class:`~orthoglide_env.lab.
 settings.LabSettings`; the machines are behind :class:`~orthoglide_env.lab.machines.
@@ -13,7 +15,6 @@ LabMachines`.
 
 from __future__ import annotations
 
-import contextlib
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -24,22 +25,23 @@ from orthoglide_env.instruments.dial import Status, readings_from_distances, sta
 from orthoglide_env.instruments.gauges import DEFAULT_TRAVEL, Gauge, GaugeArray
 from orthoglide_env.instruments.slots import GaugeSpec, Part, on_platform
 from orthoglide_env.instruments.stands import install_array, installation_errors
+from orthoglide_env.lab.clock import overtravel_seconds, step_seconds, travel_seconds
 from orthoglide_env.lab.machines import ExactMachine, LabMachines, Sight
 from orthoglide_env.lab.notebook import Notebook, Record, predicted_many
-from orthoglide_env.lab.operations import OP_NAMES, TIME, TRACKER_DISTANCE, Op
+from orthoglide_env.lab.operations import OP_NAMES, TRACKER_DISTANCE, Op
+from orthoglide_env.lab.refusals import assembled as assembled  # re-exported: its old home
+from orthoglide_env.lab.refusals import raise_unreachable, refusals
+from orthoglide_env.lab.rewards import ACCURACY_UNIT_MM as ACCURACY_UNIT_MM  # (its old home)
+from orthoglide_env.lab.rewards import SECONDS_PER_HOUR as SECONDS_PER_HOUR  # (its old home)
+from orthoglide_env.lab.rewards import step_rewards
 from orthoglide_env.lab.settings import LabSettings
 from orthoglide_env.model.collisions import PAIR_NAMES, collision_names
 from orthoglide_env.model.errors import AXIS_NAMES, MachineParams
-from orthoglide_env.model.kinematics import UnreachableError, direct
 from orthoglide_env.reading_model import TrackerAxis
-from orthoglide_env.scoring import score
+from orthoglide_env.scoring.truth import score
 from orthoglide_env.world.table import REFERENCE_DEVIATION, REFERENCE_LENGTH_MM
 from orthoglide_env.world.truth import UM, World, draw_range
 
-#: The accuracy reward counts the final TCP error (after the best-fit rigid motion) in
-#: units of this many mm, and time in hours: -error/unit - time_weight * hours.
-ACCURACY_UNIT_MM: float = 0.01
-SECONDS_PER_HOUR: float = 3600.0
 #: Whether each operation code puts the machine somewhere and reads it (a table, where
 #: ``np.isin`` cost 4 % of a lone env's step).
 _READS: np.ndarray = np.isin(np.arange(len(Op)), (Op.MOVE, Op.REMOUNT))
@@ -224,22 +226,21 @@ class LabBatch:
     def step(self, rows: np.ndarray, op: np.ndarray, rho: np.ndarray, stand: np.ndarray,
              slot: np.ndarray) -> StepResult:
         """Apply each row's checked action (see
-        :func:`~orthoglide_env.lab.actions.check_lab_actions`) to its episode."""
-        settings = self.settings
-        self.require()
+        :func:`~orthoglide_env.lab.actions.check_lab_actions`) to its episode: the clock,
+        the refusals, the new installations, the carriages, the levers, a look at the
+        machine (overtravel, crashes), the readings, the end and the reward, in this order
+        (the order of every random draw)."""
+        settings, machines = self.settings, self.require()
         # Where each move or re-mount takes the carriages, and when: the commanded posture
         # in an ideal world.
         goal = np.where((op == Op.REMOUNT)[:, None], 0.0, rho)
-        tracker = TIME.tracker_point_s if settings.tracker else 0.0
-        travel_s = TIME.move(self.rho[rows], goal) + np.where(op == Op.MOVE, tracker,
-                                                              TIME.remount_s)
-        if settings.reference:
-            blocked = (op == Op.REMOUNT) & self._references(slot)
-            travel_s = travel_s + np.where(blocked, TIME.reference_s, 0.0)
+        travel_s = travel_seconds(op, self.rho[rows], goal, settings.tracker, (
+            (op == Op.REMOUNT) & self._references(slot) if settings.reference else None))
         approach, target = self._carriages(rows, goal, self.time[rows] + travel_s)
-        refused, reached = self._refusals(rows, op, rho, stand, slot, target)
+        refused, reached = refusals(machines, rows, op, rho, stand, slot, target,
+                                    self.slot[rows], self.places)
         if settings.strict_moves:
-            self._raise_unreachable(rows, op, rho, reached, target)
+            raise_unreachable(machines, rows, op, rho, reached, target, self.size)
         ok = np.array([not r for r in refused], dtype=bool)
         moves, remounts = ok & (op == Op.MOVE), ok & (op == Op.REMOUNT)
         flicks = ok & ((op == Op.LIFT) | (op == Op.ENGAGE))
@@ -248,22 +249,9 @@ class LabBatch:
         mounted = self._installations(rows[remounts], stand[remounts], slot[remounts],
                                       (self.time[rows] + travel_s)[remounts],
                                       approach[remounts])
-        seconds = np.where(ok, 0.0, TIME.lift_s)
-        seconds[flicks] = TIME.lift_s
-        carried = moves | remounts
-        if carried.any():
-            seconds[carried] = travel_s[carried]
-            self.rho[rows[carried]] = goal[carried]
-            self.tcp[rows[carried]] = np.where(moves[carried, None], reached[carried], np.nan)
-            if self.world is not None:
-                self.actual[rows[carried]] = target[carried]
-                self.approach[rows[carried]] = approach[carried]
-            self.backend.move(rows[carried], target[carried])
-        engages = flicks & (op == Op.ENGAGE)
-        self.engaged[rows[flicks], stand[flicks]] = engages[flicks]
-        # An engaged plunger drops onto its bar: it comes out.
-        self.going_in[rows[engages], stand[engages]] = -1.0
-        self.last_t[rows[engages], stand[engages]] = np.nan
+        seconds = step_seconds(ok, flicks, moves | remounts, travel_s)
+        self._drive(rows, moves, remounts, goal, reached, target, approach)
+        self._flick(rows[flicks], stand[flicks], (op == Op.ENGAGE)[flicks])
         if remounts.any():
             self._mount(rows[remounts], stand[remounts], slot[remounts], mounted)
             self._sync(rows[remounts])
@@ -272,44 +260,17 @@ class LabBatch:
         looks = _READS[op] | presses  # a refused move still checks for a crash
         sight = self._look(rows[looks], (self.time[rows] + seconds)[looks])
         at = np.cumsum(looks) - 1  # row of each looked-at episode in ``sight``
-        overtravel: list[list[str]] = [[] for _ in rows]
-        new_overtravel = np.zeros((len(rows), settings.stands), dtype=bool)
-        if presses.any():
-            pressing = rows[presses]
-            pressed = (sight.pressed[at[presses]] & self.engaged[pressing]
-                       & (self.slot[pressing] >= 0))
-            # A fault lasts until the stand is re-mounted; a momentary overtravel while the
-            # bar presses (staying pressed is not a new one).
-            before = self.faulted if settings.overtravel == "fault" else self.pressed
-            new = pressed & ~before[pressing]
-            if settings.overtravel == "fault":
-                self.faulted[pressing] |= new
-            self.pressed[pressing] = pressed
-            new_overtravel[presses] = new
-            seconds[presses] += TIME.overtravel_s * np.count_nonzero(new, axis=-1)
-            hits = new.any(axis=-1)
-            for r, hit in zip(np.flatnonzero(presses)[hits], new[hits], strict=True):
-                overtravel[r] = [f"stand {k} ({self.mounting[rows[r]][k]})"
-                                 for k in np.flatnonzero(hit)]
+        overtravel, new_overtravel = self._overtravel(rows, presses, sight, at)
+        seconds += overtravel_seconds(new_overtravel)
         values = np.full((len(rows), settings.stands), np.nan)
         if reads.any():
             values[reads] = self._read(rows[reads], seconds[reads], Sight(
                 *(part[at[reads]] for part in sight)))
-        # A reference stand was zeroed on the block, then the block was taken away.
-        if self.block[rows[remounts], stand[remounts]].any():
-            self.block[rows[remounts], stand[remounts]] = 0.0
-            self._sync(rows[remounts])
+        self._take_blocks_away(rows[remounts], stand[remounts])
         self.time[rows] += seconds
         self.steps[rows] += 1
-        collision = [""] * len(rows)
-        crashed = np.zeros(len(rows), dtype=bool)
-        crashed[looks] = sight.crashed.any(axis=-1)
-        for r in np.flatnonzero(crashed & _READS[op]):
-            collision[r] = ", ".join(collision_names(sight.crashed[at[r]]))
-        terminated = (op == Op.STOP) | np.array([bool(c) for c in collision], dtype=bool)
-        truncated = ~terminated & (self.time[rows] >= settings.budget_s)
-        if settings.max_steps is not None:  # a step limit ends a crashed episode too
-            truncated |= self.steps[rows] >= settings.max_steps
+        collision = self._collisions(op, looks, sight, at)
+        terminated, truncated = self._ends(rows, op, collision)
         ended = terminated | truncated
         reward = self._rewards(rows, seconds, ended)
         predicted = np.full(len(rows), np.nan)
@@ -318,6 +279,99 @@ class LabBatch:
                           op, seconds, overtravel, new_overtravel, collision, refused,
                           predicted,
                           ended & (predicted <= settings.success_mm))
+
+    # -- the pieces of a step ------------------------------------------------------------------
+    def _drive(self, rows: np.ndarray, moves: np.ndarray, remounts: np.ndarray,
+               goal: np.ndarray, reached: np.ndarray, target: np.ndarray,
+               approach: np.ndarray) -> None:
+        """Drive the carriages of the ``moves`` and ``remounts`` (masks over ``rows``) to
+        their ``goal`` (commanded; the backend's machines to ``target``, where they are):
+        a move's TCP is where it ``reached``, a re-mount's is solved at the next look."""
+        carried = moves | remounts
+        if not carried.any():
+            return
+        self.rho[rows[carried]] = goal[carried]
+        self.tcp[rows[carried]] = np.where(moves[carried, None], reached[carried], np.nan)
+        if self.world is not None:
+            self.actual[rows[carried]] = target[carried]
+            self.approach[rows[carried]] = approach[carried]
+        self.backend.move(rows[carried], target[carried])
+
+    def _flick(self, rows: np.ndarray, stand: np.ndarray, engages: np.ndarray) -> None:
+        """Lift (or, where ``engages``, engage) the plunger of each ``stand`` of ``rows``."""
+        self.engaged[rows, stand] = engages
+        # An engaged plunger drops onto its bar: it comes out.
+        self.going_in[rows[engages], stand[engages]] = -1.0
+        self.last_t[rows[engages], stand[engages]] = np.nan
+
+    def _overtravel(self, rows: np.ndarray, presses: np.ndarray, sight: Sight, at: np.ndarray
+                    ) -> tuple[list[list[str]], np.ndarray]:
+        """The engaged stands of the ``presses`` (a mask over ``rows``) that ``sight`` (the
+        look at row ``at``) shows newly pushed past their travel: each row's names of them,
+        and them (R, stands).  Under ``overtravel="fault"`` they go out of service until
+        re-mounted; otherwise each press is momentary (staying pressed is not a new one)."""
+        settings = self.settings
+        overtravel: list[list[str]] = [[] for _ in rows]
+        new_overtravel = np.zeros((len(rows), settings.stands), dtype=bool)
+        if not presses.any():
+            return overtravel, new_overtravel
+        pressing = rows[presses]
+        pressed = (sight.pressed[at[presses]] & self.engaged[pressing]
+                   & (self.slot[pressing] >= 0))
+        before = self.faulted if settings.overtravel == "fault" else self.pressed
+        new = pressed & ~before[pressing]
+        if settings.overtravel == "fault":
+            self.faulted[pressing] |= new
+        self.pressed[pressing] = pressed
+        new_overtravel[presses] = new
+        hits = new.any(axis=-1)
+        for r, hit in zip(np.flatnonzero(presses)[hits], new[hits], strict=True):
+            overtravel[r] = [f"stand {k} ({self.mounting[rows[r]][k]})"
+                             for k in np.flatnonzero(hit)]
+        return overtravel, new_overtravel
+
+    def _take_blocks_away(self, rows: np.ndarray, stand: np.ndarray) -> None:
+        """A reference stand was zeroed on the gauge block, then the block is taken away
+        (the stands just mounted: ``stand`` of ``rows``)."""
+        if self.block[rows, stand].any():
+            self.block[rows, stand] = 0.0
+            self._sync(rows)
+
+    def _collisions(self, op: np.ndarray, looks: np.ndarray, sight: Sight, at: np.ndarray
+                    ) -> list[str]:
+        """The parts that collide (", "-joined, "" for none) where a move or re-mount looked
+        (``looks``; the look at row ``at`` of ``sight``)."""
+        collision = [""] * len(op)
+        crashed = np.zeros(len(op), dtype=bool)
+        crashed[looks] = sight.crashed.any(axis=-1)
+        for r in np.flatnonzero(crashed & _READS[op]):
+            collision[r] = ", ".join(collision_names(sight.crashed[at[r]]))
+        return collision
+
+    def _ends(self, rows: np.ndarray, op: np.ndarray, collision: list[str]
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """Which episodes of ``rows`` end now: terminated (a stop, a crash) and truncated
+        (the time budget spent, or the step limit reached, crashed or not)."""
+        settings = self.settings
+        terminated = (op == Op.STOP) | np.array([bool(c) for c in collision], dtype=bool)
+        truncated = ~terminated & (self.time[rows] >= settings.budget_s)
+        if settings.max_steps is not None:
+            truncated |= self.steps[rows] >= settings.max_steps
+        return terminated, truncated
+
+    def _rewards(self, rows: np.ndarray, seconds: np.ndarray, ended: np.ndarray) -> np.ndarray:
+        """The reward of each step of ``rows`` (see :func:`~orthoglide_env.lab.rewards.
+        step_rewards`), with what its kind needs of the notebooks and the truth."""
+        settings = self.settings
+        gains = finals = None
+        if settings.reward == "information":
+            # Each notebook sums its own information, step by step (a loop over episodes).
+            gains = np.array([self.notebooks[i].update_logdet() for i in rows])
+        elif settings.reward != "time":
+            finals = [self.final_tcp_rigid_mm(int(i)) for i in rows[ended]]
+        return step_rewards(settings.reward, seconds, gains=gains,
+                            time_weight=settings.time_weight, final_errors=finals,
+                            ended=ended)
 
     def _carriages(self, rows: np.ndarray, goal: np.ndarray, when: np.ndarray
                    ) -> tuple[np.ndarray, np.ndarray]:
@@ -355,47 +409,6 @@ class LabBatch:
         """Rows ``rows`` of a batch's ``value`` (itself, not a copy, when they are every
         episode)."""
         return value if len(rows) == self.size else value[rows]
-
-    def _raise_unreachable(self, rows: np.ndarray, op: np.ndarray, rho: np.ndarray,
-                           reached: np.ndarray, target: np.ndarray) -> None:
-        """``ValueError`` for the first move its machine cannot be assembled at (naming its
-        env in a batch of many), before anything changes."""
-        bad = np.flatnonzero((op == Op.MOVE) & np.isnan(reached[:, 0]))
-        if not len(bad):
-            return
-        r = int(bad[0])
-        try:
-            direct(self.require()[rows[r]], target[r])
-        except UnreachableError as exc:
-            reason = str(exc)
-        else:  # solved alone, not in the batch: the batch's reason is all there is
-            reason = "the machine cannot be assembled there"
-        where, after = ((f" of env {rows[r]}", "no env moves") if self.size > 1
-                        else ("", "it stays where it was"))
-        raise ValueError(f"action{where} {rho[r].tolist()} mm: {reason} on this machine; "
-                         f"{after}")
-
-    def _refusals(self, rows: np.ndarray, op: np.ndarray, rho: np.ndarray, stand: np.ndarray,
-                  slot: np.ndarray, target: np.ndarray) -> tuple[list[str], np.ndarray]:
-        """Why each well-formed operation cannot be done ("" when it can): a stand that is
-        not mounted cannot be lifted or engaged, a slot holds one stand, and the machine
-        cannot be driven where it cannot assemble; and the TCP (R, 3) where each move
-        takes it (NaN where none), solved to know that."""
-        out = [""] * len(rows)
-        reached = np.full((len(rows), 3), np.nan)
-        stands = self.slot[rows]
-        flick = (op == Op.LIFT) | (op == Op.ENGAGE)
-        for r in np.flatnonzero(flick & (stands[np.arange(len(rows)), stand] < 0)):
-            out[r] = f"stand {stand[r]} is not mounted"
-        others = (stands == slot[:, None]) & (np.arange(self.settings.stands) != stand[:, None])
-        for r in np.flatnonzero((op == Op.REMOUNT) & others.any(axis=-1)):
-            out[r] = f"slot {self.places[slot[r]].slot} already holds a stand"
-        moves = np.flatnonzero(op == Op.MOVE)
-        if len(moves):
-            reached[moves] = assembled(self.require()[rows[moves]], target[moves])
-            for r in moves[np.isnan(reached[moves, 0])]:
-                out[r] = f"the machine cannot assemble at rho = {rho[r].tolist()}"
-        return out, reached
 
     def _installations(self, rows: np.ndarray, stand: np.ndarray, slot: np.ndarray,
                        when: np.ndarray, approach: np.ndarray
@@ -583,21 +596,7 @@ class LabBatch:
         return thermometer.read(self.settings.conditions, temperature,
                                 self.thermometer_offset[rows]).tolist()
 
-    # -- rewards and observations --------------------------------------------------------------
-    def _rewards(self, rows: np.ndarray, seconds: np.ndarray, ended: np.ndarray) -> np.ndarray:
-        settings = self.settings
-        if settings.reward == "time":
-            return -seconds
-        if settings.reward == "information":
-            # Each notebook sums its own information, step by step (a loop over episodes).
-            gains = np.array([self.notebooks[i].update_logdet() for i in rows])
-            with np.errstate(divide="ignore", invalid="ignore"):
-                return np.where(seconds > 0, gains / seconds, 0.0)
-        reward = -settings.time_weight * seconds / SECONDS_PER_HOUR
-        for r in np.flatnonzero(ended):
-            reward[r] -= self.final_tcp_rigid_mm(int(rows[r])) / ACCURACY_UNIT_MM
-        return reward
-
+    # -- the truth and observations ------------------------------------------------------------
     def true_tcp(self, row: int) -> np.ndarray:
         """Where episode ``row``'s TCP truly is now (mm; scoring and fidelity checks)."""
         rows = np.array([row])
@@ -645,20 +644,6 @@ class LabBatch:
     def true_gauges(self, row: int) -> list[Gauge]:
         """Every installation of episode ``row``, in mounting order (scoring only)."""
         return list(self.notebooks[row].installed.values())
-
-
-def assembled(machines: MachineParams, rho: np.ndarray) -> np.ndarray:
-    """The TCP (R, 3) of each machine of a batch at its ``rho`` (R, 3); NaN rows where it
-    cannot be assembled."""
-    try:
-        return direct(machines, rho)
-    except UnreachableError:
-        pass
-    out = np.full((len(rho), 3), np.nan)
-    for r in range(len(rho)):
-        with contextlib.suppress(UnreachableError):
-            out[r] = direct(machines[r], rho[r])
-    return out
 
 
 def _unmounted(shape: tuple[int, int], travel: float, spec: GaugeSpec) -> GaugeArray:

@@ -17,18 +17,18 @@ import numpy as np
 
 from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.instruments.gauges import Gauge, GaugeArray
-from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import ERROR_NAMES, MachineParams
 from orthoglide_env.reading_model import (
-    Design,
     ParameterSpace,
+    ReadingLayout,
     Spec,
     TrackerAxis,
     default_scales,
     jacobian,
     station_of,
 )
-from orthoglide_env.scoring import predicted_tcp_frames
+from orthoglide_env.scoring.predicted import predicted_tcp_frames
 
 
 @dataclass(frozen=True)
@@ -52,7 +52,7 @@ class Notebook:
     and the information the records carry about the machine's errors."""
 
     def __init__(self, gauge_sigma: float, tracker_sigma: float,
-                 design: MachineDesign = PROTOTYPE) -> None:
+                 design: MachineDesign) -> None:
         self.records: list[Record] = []
         self._design = design
         self._installed: dict[str, Gauge] = {}
@@ -84,12 +84,12 @@ class Notebook:
         """Add the records' rows of the Jacobian (at the nominal machine, per unit of each
         parameter's scale, per unit of noise; one batched call) to their mountings' sums:
         the information of a mounting, its zero eliminated, is ``S2 - S1 S1^T / n``."""
-        design = Design.of([r.mounting for r in records], [r.spec for r in records],
-                           np.array([r.rho for r in records]), self._design)
-        space = design.space
-        rows = jacobian(np.zeros(len(space)), design, np.ones(len(space), bool),
+        layout = ReadingLayout.of([r.mounting for r in records], [r.spec for r in records],
+                                  np.array([r.rho for r in records]), self._design)
+        space = layout.space
+        rows = jacobian(np.zeros(len(space)), layout, np.ones(len(space), bool),
                         default_scales(space))
-        for record, row, m in zip(records, rows, design.mounting, strict=True):
+        for record, row, m in zip(records, rows, layout.mounting, strict=True):
             sigma = (self._tracker_sigma if isinstance(record.spec, TrackerAxis)
                      else self._gauge_sigma)
             # The mounting's own columns: the machine's errors and its instrument's.

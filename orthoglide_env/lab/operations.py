@@ -94,10 +94,10 @@ SLOTS: tuple[GaugeSpec, ...] = slot_catalogue(PROTOTYPE)
 SLOT_NAMES: tuple[str, ...] = tuple(s.slot for s in SLOTS)
 
 
-def slot_index(name_or_spec: str | GaugeSpec, *, design: MachineDesign = PROTOTYPE,
+def slot_index(name_or_spec: str | GaugeSpec, *, design: MachineDesign,
                reference: bool = False) -> int:
-    """Index in the slot catalogue of ``design`` (default the prototype's, :data:`SLOTS`;
-    with ``reference`` slots when told) of a slot given by name (``x-leg/y@0.5``,
+    """Index in the slot catalogue of ``design`` (the prototype's is :data:`SLOTS`; with
+    ``reference`` slots when told) of a slot given by name (``x-leg/y@0.5``,
     ``x-carriage/y``, ``platform/x``, ``reference/x``) or spec."""
     key = name_or_spec if isinstance(name_or_spec, str) else name_or_spec.slot
     names = [s.slot for s in slot_catalogue(design, reference)]
@@ -113,7 +113,7 @@ def slot_index(name_or_spec: str | GaugeSpec, *, design: MachineDesign = PROTOTY
 
 #: The stands of the paper's experiment, mounted at the start of an episode (their indices
 #: in the prototype's catalogue).
-PAPER_SLOTS: tuple[int, ...] = tuple(slot_index(s) for s in PAPER_LAYOUT)
+PAPER_SLOTS: tuple[int, ...] = tuple(slot_index(s, design=PROTOTYPE) for s in PAPER_LAYOUT)
 
 #: Laser tracker: repeatability of a coordinate (mm), and how its station is placed
 #: relative to the machine (unknown to the lab: 6 nuisance parameters): any rotation,

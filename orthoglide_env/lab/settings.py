@@ -43,6 +43,7 @@ class LabSettings:
     stands: int
     layout: tuple[GaugeSpec, ...]  # mounted on stands 0, 1, ... at every reset
     travel: float
+    design: MachineDesign  # the machines' design: control limits, validity, slots
     tracker: bool = False  # the tracker is read at every move
     tracker_sigma: float = TRACKER_SIGMA
     thermometer: bool = False  # a room thermometer is read with every reading
@@ -60,7 +61,6 @@ class LabSettings:
     notebook: bool = True  # every reading is written into the episode's notebook
     motion: str = "quasi-static"
     render_mode: str | None = None
-    design: MachineDesign = PROTOTYPE  # the machines' design: control limits, validity, slots
     conditions: Conditions = IDEAL  # the world's effects beyond the geometry
     reference: bool = False  # the lab has the gauge block: its catalogue the reference slots
 

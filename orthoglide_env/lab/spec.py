@@ -172,7 +172,7 @@ class Layout(Arg):
 
 
 @dataclass(frozen=True)
-class Design(Arg):
+class DesignArg(Arg):
     """The machines' :class:`~orthoglide_env.model.design.MachineDesign`, or None (the
     prototype)."""
 
@@ -191,7 +191,7 @@ RENDER_MODE = Choice((None, *RENDER_MODES))
 
 
 @dataclass(frozen=True)
-class World(Arg):
+class ConditionsArg(Arg):
     """The conditions: a name of :data:`CONDITION_NAMES`, a ``Conditions``, or a dict of
     its ``name``, ``effects`` and ``indicator``."""
 
@@ -202,7 +202,10 @@ class World(Arg):
             raise ValueError(f"{name}: {exc}") from None
 
 
-CONDITIONS = World(default=DEFAULT_CONDITIONS)
+#: The earlier names of :class:`DesignArg` and :class:`ConditionsArg` ("design" means a
+#: MachineDesign, "world" a drawn truth).
+Design, World = DesignArg, ConditionsArg
+CONDITIONS = ConditionsArg(default=DEFAULT_CONDITIONS)
 #: ``OrthoglideCalibration-v0``'s arguments.
 CALIBRATION: dict[str, Arg] = {
     "errors": ERRORS, "gauge_sigma": SIGMA, "gauge_resolution": RESOLUTION,
@@ -210,7 +213,7 @@ CALIBRATION: dict[str, Arg] = {
     "backend": Choice(BACKENDS, default="pybullet"), "gauges": Layout(),
     "travel": Number("mm", 0.0, open=True, optional=True),  # None: the design's
     "max_episode_steps": Integer(low=1, optional=True), "render_mode": RENDER_MODE,
-    "clip_actions": FLAG, "design": Design(), "conditions": CONDITIONS,
+    "clip_actions": FLAG, "design": DesignArg(), "conditions": CONDITIONS,
 }
 #: ``OrthoglideLab-v0``'s arguments.
 LAB: dict[str, Arg] = {
@@ -225,7 +228,7 @@ LAB: dict[str, Arg] = {
     "reward": Choice(REWARDS, default="time"), "estimator": FUNCTION,
     "time_weight": Number("", 0.0, default=1.0),
     "success_mm": Number("mm", 0.0, open=True, default=0.01),
-    "travel": Number("mm", 0.0, open=True, optional=True), "design": Design(),
+    "travel": Number("mm", 0.0, open=True, optional=True), "design": DesignArg(),
     "conditions": CONDITIONS, "reference": FLAG, "render_mode": RENDER_MODE,
 }
 #: A native vector env's arguments: ``num_envs``, its single env's (the lab's draws no

@@ -179,8 +179,7 @@ class MachineParams:
                                for key in _SHAPES], axis=-1)
 
     @classmethod
-    def from_vector(cls, vector: np.ndarray, design: MachineDesign = PROTOTYPE
-                    ) -> MachineParams:
+    def from_vector(cls, vector: np.ndarray, design: MachineDesign) -> MachineParams:
         """Inverse of :meth:`to_vector` (leading dimensions are batch dimensions), machines of
         ``design``."""
         vector = np.asarray(vector, dtype=float)
@@ -440,8 +439,7 @@ class ErrorPreset:
         """Standard deviation of each of the 27 errors, in :data:`ERROR_NAMES` order."""
         return np.array([getattr(self, error_group(n)) for n in ERROR_NAMES], dtype=float)
 
-    def sample(self, rng: np.random.Generator, design: MachineDesign = PROTOTYPE
-               ) -> MachineParams:
+    def sample(self, rng: np.random.Generator, design: MachineDesign) -> MachineParams:
         """Draw one machine of ``design`` (the gauge installation errors are drawn by the
         gauges)."""
         return MachineParams(**{key: rng.normal(0.0, getattr(self, key), shape)
@@ -472,14 +470,13 @@ def get_preset(name: str) -> ErrorPreset:
         raise ValueError(f"unknown error preset '{name}'; choose from {sorted(PRESETS)}") from None
 
 
-def random_machine(seed: int | np.random.Generator | None, preset: str = DEFAULT_PRESET,
-                   design: MachineDesign = PROTOTYPE) -> MachineParams:
+def random_machine(seed: int | np.random.Generator | None, preset: str = DEFAULT_PRESET, *,
+                   design: MachineDesign) -> MachineParams:
     """A seeded random machine of ``design`` drawn from a named preset."""
     return get_preset(preset).sample(np.random.default_rng(seed), design)
 
 
-def check_rho(rho: np.ndarray, *, margin: float = 0.0, design: MachineDesign = PROTOTYPE
-              ) -> np.ndarray:
+def check_rho(rho: np.ndarray, *, design: MachineDesign, margin: float = 0.0) -> np.ndarray:
     """Validate control coordinates (shape (..., 3), finite, within ``design``'s control
     limits)."""
     rho = np.asarray(rho, dtype=float)
@@ -495,8 +492,7 @@ def check_rho(rho: np.ndarray, *, margin: float = 0.0, design: MachineDesign = P
     return rho
 
 
-def within_limits(rho: np.ndarray, design: MachineDesign = PROTOTYPE, margin: float = 0.0
-                  ) -> np.ndarray:
+def within_limits(rho: np.ndarray, design: MachineDesign, margin: float = 0.0) -> np.ndarray:
     """Which coordinates of the commands ``rho`` (..., 3) lie within ``design``'s control
     limits, widened by ``margin`` (mm); NaN lies outside.  Every check of the limits asks
     this."""

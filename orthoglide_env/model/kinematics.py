@@ -21,7 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import R_LEG, MachineParams, within_limits
 
 
@@ -61,7 +61,7 @@ def geometry(machine: MachineParams, points: np.ndarray) -> tuple[Geometry, np.n
 
 # --- the paper's model ---------------------------------------------------------------
 def inverse_paper(p: np.ndarray, drho: np.ndarray, lengths: np.ndarray,
-                  nominal: float = PROTOTYPE.L) -> np.ndarray:
+                  nominal: float) -> np.ndarray:
     """Eq. (3): control coordinates ``rho`` (mm) placing the TCP at ``p``.
 
     ``rho_i = p_i + sqrt(L_i^2 - p_j^2 - p_k^2) - drho_i - L`` (the configuration index
@@ -76,7 +76,7 @@ def inverse_paper(p: np.ndarray, drho: np.ndarray, lengths: np.ndarray,
 
 
 def direct_paper(rho: np.ndarray, drho: np.ndarray, lengths: np.ndarray,
-                 nominal: float = PROTOTYPE.L) -> np.ndarray:
+                 nominal: float) -> np.ndarray:
     """Eq. (4): TCP position from control coordinates, the assembly mode's root.
 
     With ``q = L + rho + drho`` (``L``: the design's, ``nominal``), subtracting the
@@ -102,7 +102,7 @@ def direct_paper(rho: np.ndarray, drho: np.ndarray, lengths: np.ndarray,
 
 
 def jacobian_paper(p: np.ndarray, rho: np.ndarray, drho: np.ndarray, lengths: np.ndarray,
-                   nominal: float = PROTOTYPE.L) -> np.ndarray:
+                   nominal: float) -> np.ndarray:
     """Eq. (5): ``dp / d(drho, L)``, shape ``(..., 3, 6)``.
 
     Differentiating eq. (2) gives ``M dp/ddrho = diag(p_i - q_i)`` and
@@ -362,7 +362,7 @@ def check_reachable(machine: MachineParams, p: np.ndarray) -> np.ndarray:
 PAPER_POSTURES: tuple[str, ...] = ("Zero", "XMax", "XMin", "YMax", "YMin", "ZMax", "ZMin")
 
 
-def paper_posture(name: str, design: MachineDesign = PROTOTYPE) -> np.ndarray:
+def paper_posture(name: str, design: MachineDesign) -> np.ndarray:
     """Control coordinates of a paper posture, computed on ``design``'s nominal model (as
     the controller does: it only knows the nominal geometry).
 
@@ -377,8 +377,7 @@ def paper_posture(name: str, design: MachineDesign = PROTOTYPE) -> np.ndarray:
     return axis_postures("XYZ".index(name[0]), np.array([limit]), design)[0]
 
 
-def axis_postures(leg: int, along: np.ndarray, design: MachineDesign = PROTOTYPE
-                  ) -> np.ndarray:
+def axis_postures(leg: int, along: np.ndarray, design: MachineDesign) -> np.ndarray:
     """Control coordinates (N, 3) that put the nominal TCP on the axis of ``leg`` with that
     leg's coordinate at each of ``along`` (N,), mm: ``rho_leg = L sin a`` and the other two
     ``L cos a - L`` (the TCP at ``(L sin a, 0, 0)`` for the x leg), the family of the

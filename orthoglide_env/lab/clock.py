@@ -1,0 +1,41 @@
+"""The lab's clock: the seconds each operation of a step takes, from the time table.
+
+The table itself (:data:`~orthoglide_env.lab.operations.TIME`) says what one operation
+costs; here it is applied to a batch of steps, one entry per episode.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from orthoglide_env.lab.operations import TIME, Op
+
+
+def travel_seconds(op: np.ndarray, before: np.ndarray, goal: np.ndarray, tracker: bool,
+                   blocked: np.ndarray | None = None) -> np.ndarray:
+    """Seconds (R,) each move or re-mount takes to drive the carriages from ``before`` to
+    ``goal`` (R, 3) and settle, and then: a move the tracker's point (where the lab has a
+    tracker), a re-mount its work, and a re-mount at a reference slot (``blocked``, (R,),
+    in a lab with the gauge block) the block's."""
+    tracker_s = TIME.tracker_point_s if tracker else 0.0
+    seconds = TIME.move(before, goal) + np.where(op == Op.MOVE, tracker_s, TIME.remount_s)
+    if blocked is not None:
+        seconds = seconds + np.where(blocked, TIME.reference_s, 0.0)
+    return seconds
+
+
+def step_seconds(ok: np.ndarray, flicks: np.ndarray, carried: np.ndarray,
+                 travel_s: np.ndarray) -> np.ndarray:
+    """Seconds (R,) of each step before any overtravel: a refused operation costs a flick of
+    a lever (the technician tried), as a lift or an engagement does; a move or re-mount
+    (``carried``) its ``travel_s``; a stop nothing."""
+    seconds = np.where(ok, 0.0, TIME.lift_s)
+    seconds[flicks] = TIME.lift_s
+    seconds[carried] = travel_s[carried]
+    return seconds
+
+
+def overtravel_seconds(new: np.ndarray) -> np.ndarray:
+    """Seconds (R,) to check, re-install and re-zero the stands newly pushed past their
+    travel (``new``, (R, stands))."""
+    return TIME.overtravel_s * np.count_nonzero(new, axis=-1)

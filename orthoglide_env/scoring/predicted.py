@@ -1,0 +1,226 @@
+"""Predicted TCP errors: what a machine compensated with a model is expected to miss by,
+in the three frames, when the model's errors are off by a known covariance (first order).
+
+Used by agents and planners to judge an experiment before its truth is known, and by the
+lab to say whether an episode met its target.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from orthoglide_env.model.errors import MachineParams
+from orthoglide_env.model.kinematics import (
+    ERROR_LEGS,
+    cross,
+    dot,
+    tcp_sensitivity,
+    tcp_sensitivity_factors,
+)
+from orthoglide_env.scoring.grid import BLOCK, blocks, commands_many, grid_targets
+from orthoglide_env.scoring.reports import FRAMES, ErrorStats, FrameErrors
+
+#: Error terms of the drives at the commands, mm per unit coefficient: (n, 3) -> (n, 3, K).
+DriveTerms = Callable[[np.ndarray], np.ndarray]
+
+
+def _commanded(models: Sequence[MachineParams], targets: np.ndarray
+               ) -> tuple[np.ndarray, MachineParams, np.ndarray, np.ndarray]:
+    """Which targets (n, 3) each model commands within the control limits (M, n), the
+    models stacked, and the commands and TCPs (M, n, 3) to take derivatives at.
+
+    A model's commands put its own TCP on the target exactly (the inverse is closed form),
+    so the target is the TCP.  Targets without a command are taken at Zero, TCP at the
+    origin (any well-posed point will do), for the callers to drop.  The derivative of
+    the TCP reached at every command over the machine's 27 errors is
+    :func:`~orthoglide_env.model.kinematics.tcp_sensitivity` there (the implicit function
+    theorem): to first order a machine compensated with a model is off by
+    ``jac @ (theta - theta_model)``."""
+    machines = MachineParams.stack(list(models))
+    rho = commands_many(models, targets, machines)  # (M, n, 3)
+    usable = np.isfinite(rho).all(axis=-1)
+    rho = np.where(usable[..., None], rho, 0.0)
+    p = np.where(usable[..., None], targets, 0.0)
+    return usable, machines, rho, p
+
+
+def motion_basis(targets: np.ndarray, frame: str) -> np.ndarray:
+    """Error fields over ``targets`` (m, 3) that the best fit of ``frame`` removes, to
+    first order, as columns of a (3m, k) matrix: none (raw), the 3 constant translations,
+    or those and the 3 small rotations ``omega x target`` (rigid)."""
+    m = len(targets)
+    if frame == "raw":
+        return np.zeros((3 * m, 0))
+    fields = [np.broadcast_to(axis, (m, 3)) for axis in np.eye(3)]
+    if frame == "rigid":
+        fields += [cross(axis, targets) for axis in np.eye(3)]
+    elif frame != "translation":
+        raise ValueError(f"unknown frame '{frame}'; frames are {', '.join(FRAMES)}")
+    return np.stack([f.reshape(-1) for f in fields], axis=-1)
+
+
+def predicted_frame_errors(targets: np.ndarray, jac: np.ndarray,
+                           covariance: np.ndarray) -> FrameErrors:
+    """Expected TCP error over ``targets`` (m, 3) in each frame for a linear error
+    ``jac @ delta`` (jac (m, 3, p)) with ``delta ~ N(0, covariance)``.
+
+    The best fit of a frame is, to first order, the least-squares projection ``P`` off
+    its :func:`motion_basis`; the RMS is ``sqrt(trace(P J C J^T P) / m)`` and the max is
+    the largest per-target root of the expected squared error."""
+    return _predicted_frames(targets, jac[None], covariance[None])[0]
+
+
+def _predicted_frames(targets: np.ndarray, jac: np.ndarray, covariance: np.ndarray
+                      ) -> list[FrameErrors]:
+    """:func:`predicted_frame_errors` of many error models over the same ``targets``:
+    ``jac`` (k, m, 3, p), ``covariance`` (k, p, p)."""
+    per_target = _per_target(targets, jac, covariance)
+    stats = [[ErrorStats(float(r), float(m)) for r, m in zip(
+        np.sqrt(per_target[frame].mean(axis=-1)), np.sqrt(per_target[frame].max(axis=-1)),
+        strict=True)] for frame in FRAMES]
+    return [FrameErrors(*frames) for frames in zip(*stats, strict=True)]
+
+
+def _per_target(targets: np.ndarray, jac: np.ndarray, covariance: np.ndarray
+                ) -> dict[str, np.ndarray]:
+    """Per frame, the expected squared error (mm^2) at each target (k, m) of the error
+    models of :func:`_predicted_frames`."""
+    flat = jac.reshape(len(jac), -1, jac.shape[-1])
+    out = {}
+    for frame in FRAMES:
+        basis = motion_basis(targets, frame)
+        left = flat
+        if basis.shape[1]:
+            q, _ = np.linalg.qr(basis)  # an orthonormal basis: the projection is q q^T
+            left = flat - q @ (q.T @ flat)
+        per_target = np.sum((left @ covariance) * left, axis=-1).reshape(
+            len(jac), -1, 3).sum(-1)
+        out[frame] = np.clip(per_target, 0.0, None)  # round-off of a PSD quadratic form
+    return out
+
+
+def _same_targets(usable: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The models (rows of ``usable``, (M, n)) grouped by the targets they reach: each
+    distinct mask with the indices of its models."""
+    masks, group = np.unique(usable, axis=0, return_inverse=True)
+    return [(mask, np.flatnonzero(np.ravel(group) == k)) for k, mask in enumerate(masks)]
+
+
+def rigid_weights(models: Sequence[MachineParams], grid: np.ndarray | None = None
+                  ) -> np.ndarray:
+    """``W`` (M, 27, 27) of each model: ``trace(W C)`` is the mean square over the grid of
+    the expected TCP error after the best-fit rigid motion (mm^2) for a machine compensated
+    with the model whose errors are off by ``N(0, C)``, i.e. the square of
+    :func:`predicted_tcp_frames`' rigid RMS: ``W = J^T P J / m``, one matrix product per
+    model instead of a quadratic form per target.
+
+    ``J`` is never formed: at each target its column ``e`` is column ``leg(e)`` of a 3 x 3
+    inverse ``A`` times a scalar ``r_e`` (:func:`~orthoglide_env.model.kinematics.
+    tcp_sensitivity_factors`), so ``J^T J`` has the blocks ``sum_t r_a (A^T A)_ab r_b^T``
+    of each pair of legs, and the rigid fit's part ``Q^T J`` has the blocks
+    ``sum_t (Q_t^T A)_a r_a^T``: a third of the memory and of the products."""
+    if not models:
+        return np.zeros((0, 27, 27))
+    targets = grid_targets(grid, models)
+    if len(models) > BLOCK:
+        return np.concatenate([rigid_weights(models[b], targets) for b in blocks(len(models))])
+    usable, machines, rho, p = _commanded(models, targets)
+    inv, row = tcp_sensitivity_factors(machines, rho, p)
+    row = np.where(usable[..., None], row, 0.0)  # unreachable targets count for nothing
+    # The rigid fit's orthonormal basis over each model's reachable targets, zero on the
+    # others: in the common case one set of targets, one basis shared by every model.
+    groups = _same_targets(usable)
+    shared = len(groups) == 1
+    basis = np.zeros((1 if shared else len(models), len(targets), 3, 6))
+    for mask, members in groups:
+        q = np.linalg.qr(motion_basis(targets[mask], "rigid"))[0].reshape(-1, 3, 6)
+        basis[np.ix_([0] if shared else members, np.flatnonzero(mask))] = q
+    columns = [np.flatnonzero(ERROR_LEGS == leg) for leg in range(3)]
+    rows = [row[..., c] for c in columns]  # (M, n, 9) each
+    # Products of 3 x 3 matrices written out: a stack of tens of thousands of small
+    # matmuls costs several times more.
+    legs = [inv[..., a] for a in range(3)]  # (M, n, 3): the inverse's column of each leg
+    out = np.empty((len(models), 27, 27))
+    for a, ca in enumerate(columns):
+        for b, cb in enumerate(columns[a:], start=a):
+            block = np.swapaxes(rows[a] * dot(legs[a], legs[b])[..., None], -1, -2) @ rows[b]
+            out[:, ca[:, None], cb] = block
+            out[:, cb[:, None], ca] = np.swapaxes(block, -1, -2)
+    # Q_t^T A's column of leg a, (M, n, 6), against that leg's entries.
+    taken = np.concatenate([np.swapaxes(
+        basis[..., 0, :] * legs[a][..., 0, None] + basis[..., 1, :] * legs[a][..., 1, None]
+        + basis[..., 2, :] * legs[a][..., 2, None], -1, -2) @ rows[a] for a in range(3)],
+        axis=-1)  # (M, 6, 27) in the order of ``columns``
+    order = np.concatenate(columns)
+    out[:, order[:, None], order] -= np.swapaxes(taken, -1, -2) @ taken
+    return out / usable.sum(axis=-1)[:, None, None]
+
+
+def predicted_tcp_frames(model: MachineParams, covariance: np.ndarray,
+                         grid: np.ndarray | None = None) -> FrameErrors:
+    """Expected TCP error over the grid, in the three frames, of a machine compensated with
+    ``model`` whose 27 errors are off by ``N(0, covariance)``."""
+    return predicted_tcp_frames_many([model], [covariance], grid)[0]
+
+
+def predicted_target_errors(model: MachineParams, covariance: np.ndarray,
+                            targets: np.ndarray, drive: DriveTerms | None = None
+                            ) -> dict[str, np.ndarray]:
+    """Per frame, the expected error (mm, root mean square) at each of ``targets`` (n, 3)
+    of a machine compensated with ``model`` (see :func:`predicted_tcp_frames_many`; the
+    best fit of a frame is over these targets); NaN where ``model`` has no command."""
+    targets = np.asarray(targets, dtype=float)
+    usable, machines, rho, p = _commanded([model], targets)
+    jac, cov = _with_drives(tcp_sensitivity(machines, rho, p), rho, [covariance],
+                            None if drive is None else [drive])
+    mask = usable[0]
+    out = {frame: np.full(len(targets), np.nan) for frame in FRAMES}
+    for frame, values in _per_target(targets[mask], jac[:, mask], cov).items():
+        out[frame][mask] = np.sqrt(values[0])
+    return out
+
+
+def _with_drives(jac: np.ndarray, rho: np.ndarray, covariances: Sequence[np.ndarray],
+                 drives: Sequence[DriveTerms | None] | None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The Jacobians (M, n, 3, 27) and covariances extended by each model's drive terms
+    at its commands ``rho`` (M, n, 3) (a carriage error moves the tool as an encoder
+    offset does), padded with zeros to the largest; unchanged without drives."""
+    covariances = [np.asarray(c, dtype=float) for c in covariances]
+    if drives is None or all(d is None for d in drives):
+        return jac, np.stack(covariances)
+    terms = [np.zeros((*rho.shape[1:], 0)) if d is None else d(rho[m])
+             for m, d in enumerate(drives)]
+    width = max(t.shape[-1] for t in terms)
+    moved = np.zeros((*jac.shape[:3], width))
+    padded = np.zeros((len(covariances), jac.shape[-1] + width, jac.shape[-1] + width))
+    for m, (t, c) in enumerate(zip(terms, covariances, strict=True)):
+        moved[m, ..., :t.shape[-1]] = np.einsum("nia,nak->nik", jac[m, ..., :3], t)
+        padded[m, :len(c), :len(c)] = c
+    return np.concatenate([jac, moved], axis=-1), padded
+
+
+def predicted_tcp_frames_many(models: Sequence[MachineParams],
+                              covariances: Sequence[np.ndarray],
+                              grid: np.ndarray | None = None,
+                              drives: Sequence[DriveTerms | None] | None = None
+                              ) -> list[FrameErrors]:
+    """:func:`predicted_tcp_frames` of each model and covariance (the kinematics batched,
+    and the frames of the models that reach the same targets).  ``drives``: per model,
+    K terms of the drives' error after compensation (their carriage errors at the
+    commands); its covariance is then over the 27 errors and the K terms' coefficients
+    (a carriage error moves the tool as an encoder offset does)."""
+    if not models:
+        return []
+    targets = grid_targets(grid, models)
+    usable, machines, rho, p = _commanded(models, targets)
+    jac, stacked = _with_drives(tcp_sensitivity(machines, rho, p), rho, covariances, drives)
+    out: list[FrameErrors | None] = [None] * len(models)
+    for mask, members in _same_targets(usable):
+        frames = _predicted_frames(targets[mask], jac[members][:, mask], stacked[members])
+        for m, frame in zip(members, frames, strict=True):
+            out[m] = frame
+    return out  # type: ignore[return-value]
+
