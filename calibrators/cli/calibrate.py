@@ -21,7 +21,7 @@ from calibrators.cli.common import (
     given_design,
 )
 from calibrators.cli.output import emit, report, save
-from calibrators.estimators.base import Estimate, Measurements, get_strategy
+from calibrators.estimators.base import Estimate, Measurements
 from calibrators.estimators.consider import WORLD_PREFIX
 from calibrators.estimators.exact_fit import z_scores
 from calibrators.estimators.gauss_newton import design_of
@@ -78,9 +78,8 @@ def _z_rms(est: Estimate, data: Measurements, env: gym.Env) -> float | None:
 
 
 def run(args: argparse.Namespace) -> None:
-    get_strategy(args.strategy)  # an unknown one is refused before the experiment
+    estimator_options.estimator(args)  # an unknown one, or a bad option, is refused early
     agent = get_agent(args.agent)
-    estimator_options.options(args)  # and so are bad options
     machine, world, preset, sigma, resolution = _setup(args)
     conditions = conditions_of(args, world)
     env = gym.make(orthoglide_env.LAB_ENV_ID, errors=preset, gauge_sigma=sigma,

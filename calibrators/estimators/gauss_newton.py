@@ -11,11 +11,12 @@ readings.  It reads any experiment's notebook or measurement file.
 
 from __future__ import annotations
 
-from typing import Any
+import numbers
+from typing import Any, ClassVar
 
 import numpy as np
 
-from calibrators.estimators.base import Calibrator, Estimate, Measurements, register
+from calibrators.estimators.base import Estimate, Estimator, Measurements, register
 from calibrators.estimators.consider import (
     DEFAULT_NODE_SPACING,
     FULL_TERMS,
@@ -27,10 +28,20 @@ from calibrators.estimators.consider import (
     thermometer_sigma,
 )
 from calibrators.estimators.consider import tracker_sigma as tracker_sigma_of
+from calibrators.estimators.constraints import (
+    BOOLEAN,
+    NONE,
+    Constraint,
+    InstanceOf,
+    Interval,
+    Options,
+    Satisfies,
+)
 from calibrators.estimators.differences import check_zeros
 from calibrators.estimators.exact_fit import (
     CHI2_LEVEL,
     RETAIN,
+    SOLVERS,
     BatchFit,
     directions,
     fit_batch,
@@ -41,6 +52,7 @@ from calibrators.estimators.paper_linear import folds
 from calibrators.estimators.parameters import (
     ParameterSpace,
     act_together,
+    check_prior,
     describe,
     fixed_values,
     prior_sigmas,
@@ -69,7 +81,7 @@ from orthoglide_env.reading_model import (
     station_of,
 )
 from orthoglide_env.scoring import best_rigid_motion
-from orthoglide_env.world.conditions import Conditions
+from orthoglide_env.world.conditions import CONDITION_NAMES, Conditions
 
 #: A reading is an outlier when its residual exceeds this many robust standard deviations
 #: (1.4826 x the median absolute residual, or its instrument's sigma when larger): a normal
@@ -152,13 +164,6 @@ def align_tracker(design: Design, values: np.ndarray) -> np.ndarray:
     return out
 
 
-def left_out_preset(name: str) -> ErrorPreset:
-    """The error preset ``name`` (``ValueError`` naming the presets if unknown)."""
-    if name not in PRESETS:
-        raise ValueError(f"unknown left-out preset '{name}'; choose from {sorted(PRESETS)}")
-    return PRESETS[name]
-
-
 def _every_reading(datas: list[Measurements], name: str) -> np.ndarray | None:
     """Field ``name`` of every reading of every experiment (M, N), or None when one
     reading lacks it."""
@@ -166,59 +171,112 @@ def _every_reading(datas: list[Measurements], name: str) -> np.ndarray | None:
     return None if any(None in row for row in rows) else np.array(rows, dtype=float)
 
 
+def _check_fix(fix: Any) -> None:
+    """``ValueError`` unless ``fix`` maps parameter names to finite numbers."""
+    if not isinstance(fix, dict) or not all(
+            isinstance(k, str) and isinstance(v, numbers.Real) and not isinstance(v, bool)
+            and np.isfinite(v) for k, v in fix.items()):
+        raise ValueError("")
+
+
+def _check_terms(terms: Any) -> None:
+    """``ValueError`` unless ``terms`` is a tuple of term families."""
+    if not isinstance(terms, tuple):
+        raise ValueError("")
+    check_families(terms)
+
+
+def _check_conditions(conditions: Any) -> None:
+    if not isinstance(conditions, Conditions) and conditions not in CONDITION_NAMES:
+        raise ValueError("")
+
+
 @register
-class GaussNewtonCalibrator(Calibrator):
-    """The exact model, any parameter set."""
+class GaussNewtonCalibrator(Estimator):
+    """The exact model, any parameter set.
+
+    Parameters: ``params``, the free parameters (a selection of
+    :mod:`calibrators.estimators.parameters`; ``full``: every parameter (``extended``) and,
+    unless ``fit_world`` says otherwise, the terms of
+    :data:`~calibrators.estimators.consider.FULL_TERMS` on a pitch-error table, whose
+    ``node_spacing`` defaults to :data:`~calibrators.estimators.consider.DEFAULT_NODE_SPACING`);
+    ``sigma``, a dial gauge's noise (mm); ``verify``, leave-one-repetition-out verification;
+    ``prior``, the parameters' zero-mean normal prior; ``fix``, parameters held at known
+    values; ``keep_outliers``, flag outliers but keep them in the fit; ``holdout``, the
+    fraction of readings held out (drawn with ``seed``) and predicted; ``solver``, one of
+    :data:`~calibrators.estimators.exact_fit.SOLVERS`; ``tracker_sigma``, a laser tracker
+    coordinate's noise (mm); ``explain``: the words on which combinations the data
+    determine and which not (``identifiable``, ``unidentifiable``; they cost more than the
+    fit on large designs); ``conditions``, the lab's (a name or
+    :class:`~orthoglide_env.world.conditions.Conditions`), whose effects the fit does not
+    model but puts in its covariance (:mod:`calibrators.estimators.consider`); under
+    conditions with the tracker's MPE, its readings' sigma comes from it
+    (:func:`~calibrators.estimators.consider.tracker_sigma`) instead; ``left_out``: the
+    error preset whose sizes the machine errors and stand errors the selection leaves out
+    have a priori (their spread goes into the covariance; ``paper`` or ``nominal``: they do
+    not exist, and only a misfit widens it); ``fit_world``: the conditions' terms of these
+    families (:data:`~calibrators.estimators.consider.TERM_FAMILIES`; True: all) are fitted
+    (each coefficient a parameter ``world.<term>`` with its second moment as a normal
+    prior) instead of considered; ``node_spacing``: the lead error's curve as a
+    controller's pitch-error table with nodes this far apart (mm), with its smoothness
+    prior (:func:`~calibrators.estimators.consider.table_prior`).
+    """
 
     name = "gauss-newton"
+    title = "the exact-model fit"
+    _parameter_constraints: ClassVar[dict[str, list[Constraint]]] = {
+        "params": [InstanceOf(str, "a parameter selection (paper6, extended, full, or a "
+                                   "comma list of groups and names)")],
+        "sigma": [Interval(0, None)],
+        "verify": [BOOLEAN],
+        "prior": [Satisfies(check_prior, "a prior (none, auto, a preset and/or "
+                                         "GROUP=SIGMA or NAME=SIGMA)")],
+        "fix": [NONE, Satisfies(_check_fix, "a dict of parameter names to finite numbers")],
+        "keep_outliers": [BOOLEAN],
+        "holdout": [Interval(0, 1, "left")],  # 0: none held out
+        "seed": [Interval(None, None, integer=True)],
+        "solver": [Options(tuple(SOLVERS))],
+        "tracker_sigma": [Interval(0, None, "neither")],
+        "explain": [BOOLEAN],
+        "conditions": [Satisfies(_check_conditions, f"one of {list(CONDITION_NAMES)} or a "
+                                                    "Conditions")],
+        "left_out": [Options(tuple(sorted(PRESETS)))],
+        "fit_world": [BOOLEAN, Satisfies(_check_terms, f"a tuple of term families "
+                                                       f"{list(TERM_FAMILIES)}")],
+        "node_spacing": [NONE, Interval(0, None, "neither")],
+    }
 
-    def estimate(self, data: Measurements, params: str = "paper6",
-                 sigma: float = DEFAULT_SIGMA, *, verify: bool = True,
-                 **options: Any) -> Estimate:
-        """Fit ``data``; ``sigma`` is a dial gauge's noise (mm), ``options`` those of
-        :meth:`estimate_many`."""
-        result = self.estimate_many([data], params, sigma, verify=verify, **options)[0]
+    def __init__(self, *, params: str = "paper6", sigma: float = DEFAULT_SIGMA,
+                 verify: bool = True, prior: str = "auto", fix: dict[str, float] | None = None,
+                 keep_outliers: bool = False, holdout: float = 0.0, seed: int = 0,
+                 solver: str = "gauss-newton", tracker_sigma: float = TRACKER_SIGMA,
+                 explain: bool = True, conditions: Conditions | str = "ideal",
+                 left_out: str = DEFAULT_PRESET, fit_world: bool | tuple[str, ...] = False,
+                 node_spacing: float | None = None) -> None:
+        self.params, self.sigma, self.verify, self.prior = params, sigma, verify, prior
+        self.fix, self.keep_outliers, self.holdout, self.seed = fix, keep_outliers, holdout, seed
+        self.solver, self.tracker_sigma, self.explain = solver, tracker_sigma, explain
+        self.conditions, self.left_out, self.fit_world = conditions, left_out, fit_world
+        self.node_spacing = node_spacing
+        self._validate_params()
+
+    def fit(self, data: Measurements) -> Estimate:
+        """The estimate of ``data`` (:meth:`fit_many` of one experiment)."""
+        result = self.fit_many([data])[0]
         if isinstance(result, Exception):
             raise result
         return result
 
-    def estimate_many(self, datas: list[Measurements], params: str = "paper6",
-                      sigma: float = DEFAULT_SIGMA, *, verify: bool = True, prior: str = "auto",
-                      fix: dict[str, float] | None = None, keep_outliers: bool = False,
-                      holdout: float = 0.0, seed: int = 0, solver: str = "gauss-newton",
-                      tracker_sigma: float = TRACKER_SIGMA, explain: bool = True,
-                      conditions: Conditions | str = "ideal", left_out: str = DEFAULT_PRESET,
-                      fit_world: bool | tuple[str, ...] = False,
-                      node_spacing: float | None = None) -> list[Estimate | Exception]:
-        """:meth:`estimate` of many experiments; ``tracker_sigma``: a laser tracker
-        coordinate's noise (mm); ``conditions``: the lab's (a name or
-        :class:`~orthoglide_env.world.conditions.Conditions`), whose effects the fit does
-        not model but puts in its covariance (:mod:`calibrators.estimators.consider`);
-        under conditions with the tracker's MPE, its readings' sigma comes from it
-        (:func:`~calibrators.estimators.consider.tracker_sigma`) instead;
-        ``left_out``: the error preset whose sizes the machine errors and stand errors the
-        selection leaves out have a priori (their spread goes into the covariance;
-        ``paper`` or ``nominal``: they do not exist, and only a misfit widens it);
-        ``params`` ``full``: every parameter (``extended``) and, unless ``fit_world`` says
-        otherwise, the terms of :data:`~calibrators.estimators.consider.FULL_TERMS` on a
-        pitch-error table (``node_spacing`` default
-        :data:`~calibrators.estimators.consider.DEFAULT_NODE_SPACING`);
-        ``fit_world``: the conditions' terms of these families
-        (:data:`~calibrators.estimators.consider.TERM_FAMILIES`; True: all) are fitted
-        (each coefficient a parameter ``world.<term>`` with its second moment as a normal
-        prior) instead of considered; ``node_spacing``: the lead error's curve as a
-        controller's pitch-error table with nodes this far apart (mm), with its smoothness
-        prior (:func:`~calibrators.estimators.consider.table_prior`).
-        Those of one design (the same readings of the same mountings at the same
-        postures, as a fixed agent takes them on every machine) are fitted together, in
-        one batched solve.  A failure is returned in
-        place of its estimate, not raised.  ``explain=False`` leaves out the words on
-        which combinations the data determine and which not (``identifiable``,
-        ``unidentifiable``), which cost more than the fit on large designs."""
+    def fit_many(self, datas: list[Measurements]) -> list[Estimate | Exception]:
+        """:meth:`fit` of many experiments: those of one design (the same readings of the
+        same mountings at the same postures, as a fixed agent takes them on every machine)
+        are fitted together, in one batched solve.  A failure is returned in place of its
+        estimate, not raised."""
         out: list[Estimate | Exception] = [ValueError("not fitted")] * len(datas)
-        if isinstance(conditions, str):
-            conditions = Conditions(conditions)
-        if params == "full" and fit_world is False:
+        conditions = (Conditions(self.conditions) if isinstance(self.conditions, str)
+                      else self.conditions)
+        fit_world, node_spacing = self.fit_world, self.node_spacing
+        if self.params == "full" and fit_world is False:
             fit_world = FULL_TERMS
             node_spacing = DEFAULT_NODE_SPACING if node_spacing is None else node_spacing
         terms = check_families(TERM_FAMILIES if fit_world is True else fit_world or ())
@@ -240,11 +298,12 @@ class GaussNewtonCalibrator(Calibrator):
             key = (design.mountings, design.specs, design.rho.tobytes(),
                    design.mounting.tobytes(), reach)
             groups.setdefault(key, []).append(k)
-        options = {"params": params, "prior": prior, "fix": fix or {}, "holdout": holdout,
-                   "seed": seed, "solver": solver, "keep_outliers": keep_outliers,
-                   "sigma": sigma, "tracker_sigma": tracker_sigma, "verify": verify,
-                   "explain": explain, "conditions": conditions,
-                   "left_out": left_out_preset(left_out), "terms": terms,
+        options = {"params": self.params, "prior": self.prior, "fix": self.fix or {},
+                   "holdout": self.holdout, "seed": self.seed, "solver": self.solver,
+                   "keep_outliers": self.keep_outliers, "sigma": self.sigma,
+                   "tracker_sigma": self.tracker_sigma, "verify": self.verify,
+                   "explain": self.explain, "conditions": conditions,
+                   "left_out": PRESETS[self.left_out], "terms": terms,
                    "spacing": node_spacing}
         for members in groups.values():
             design = prepared[members[0]][0]
