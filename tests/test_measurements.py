@@ -18,7 +18,8 @@ from calibrators.cli import main
 from calibrators.estimators import differences as differences_module
 from calibrators.estimators.differences import MissingZeroError, differences
 from calibrators.estimators.gauss_newton import GaussNewtonCalibrator
-from calibrators.estimators.paper_linear import MAX_FOLDS, PaperCalibrator, folds
+from calibrators.estimators.holdout import MAX_FOLDS, folds
+from calibrators.estimators.paper_linear import PaperCalibrator
 from calibrators.measurements import (
     MAX_FIELD_CHARS,
     MAX_LINE_BYTES,

@@ -23,10 +23,10 @@ from calibrators.estimators.consider import (
     check_families,
 )
 from calibrators.estimators.constraints import InvalidParameterError
-from calibrators.estimators.exact_fit import SOLVERS
-from calibrators.estimators.gauss_newton import MAX_OUTLIER_FRACTION, OUTLIER_K
+from calibrators.estimators.outliers import MAX_OUTLIER_FRACTION, OUTLIER_K
 from calibrators.estimators.paper_linear import NeedsExactFit
 from calibrators.estimators.parameters import parse_assignments
+from calibrators.estimators.solvers import SOLVERS
 from calibrators.measurements import Measurements
 from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS
 from orthoglide_env.world.conditions import IDEAL, Conditions

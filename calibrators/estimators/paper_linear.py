@@ -32,29 +32,17 @@ from calibrators.estimators.differences import (
     differences,
     paper_matrix,
 )
+from calibrators.estimators.holdout import MAX_FOLDS as MAX_FOLDS
+from calibrators.estimators.holdout import folds
 from calibrators.estimators.identifiability import analyse
 from calibrators.measurements import Measurements
 from orthoglide_env.instruments.dial import DEFAULT_SIGMA
 from orthoglide_env.instruments.slots import GaugeSpec
 
-#: Held-out sets of the verification: up to this many repetitions each is one; beyond,
-#: this many runs of consecutive ones, so that its cost stays linear in the readings.
-MAX_FOLDS: int = 10
-
 
 class NeedsExactFit(ValueError):
     """Readings or options the linear fit cannot take and the exact-model fit can.  The
     message names no option: each command says how its user reaches that fit."""
-
-
-def folds(data: Measurements) -> list[set[int]]:
-    """The held-out sets of repetitions of the verification (see :data:`MAX_FOLDS`): those
-    with readings away from Zero (the last Zero opens a repetition of its own)."""
-    reps = sorted({m.repetition for m in data.items if not m.is_zero})
-    if not reps:
-        return []
-    return [set(run.tolist()) for run in np.array_split(np.array(reps, dtype=int),
-                                                         min(len(reps), MAX_FOLDS))]
 
 
 @register
