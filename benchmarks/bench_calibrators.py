@@ -17,8 +17,9 @@ import numpy as np
 
 import orthoglide_env
 from calibrators.agents import get_agent
+from calibrators.estimators.catalogue import for_study
 from calibrators.study.compare import Config, run
-from calibrators.study.episodes import estimate, run_episode
+from calibrators.study.episodes import run_episode
 
 
 def episode_times(backend: str, estimator: str, repeats: int = 10) -> np.ndarray:
@@ -27,7 +28,7 @@ def episode_times(backend: str, estimator: str, repeats: int = 10) -> np.ndarray
     for seed in range(repeats):
         start = time.perf_counter()
         episode = run_episode(env, get_agent("paper"), seed)
-        estimate(episode.measurements, estimator, episode.sigma)
+        for_study(estimator, episode.sigma).fit(episode.measurements)
         out.append(time.perf_counter() - start)
     env.close()
     return np.array(out)

@@ -37,19 +37,21 @@ import numpy as np
 
 import orthoglide_env
 from calibrators.agents import get_agent
-from calibrators.estimators.base import get_strategy
+from calibrators.estimators.base import Estimator
 from calibrators.estimators.exact_fit import z_scores
-from calibrators.estimators.gauss_newton import layout_and_values
+from calibrators.estimators.gauss_newton import GaussNewtonCalibrator, layout_and_values
+from calibrators.estimators.paper_linear import PaperCalibrator
 from calibrators.estimators.prediction import predicted_tcp_error
 from calibrators.study.episodes import run_episode
 from orthoglide_env.reading_model import parameters_of
 from orthoglide_env.scoring import FRAMES, score
 
-ESTIMATORS: dict[str, tuple[str, str, str]] = {
-    "paper eq. 10": ("paper", "paper6", "none"),
-    "paper6 exact": ("gauss-newton", "paper6", "none"),
-    "extended, base": ("gauss-newton", "extended", "none"),
-    "extended, prior": ("gauss-newton", "extended", "realistic"),
+ESTIMATORS: dict[str, Estimator] = {
+    "paper eq. 10": PaperCalibrator(params="paper6", verify=False),
+    "paper6 exact": GaussNewtonCalibrator(params="paper6", prior="none", verify=False),
+    "extended, base": GaussNewtonCalibrator(params="extended", prior="none", verify=False),
+    "extended, prior": GaussNewtonCalibrator(params="extended", prior="realistic",
+                                             verify=False),
 }
 MARK = "<!-- estimators table -->"
 
@@ -63,10 +65,9 @@ def run(machines: int, seed: int) -> dict[str, dict[str, list[float]]]:
         data, truth_machine, sigma = episode.measurements, episode.truth, episode.sigma
         design, _ = layout_and_values(data)
         truth = parameters_of(design, truth_machine, env.unwrapped.true_gauges)
-        for name, (strategy, params, prior) in ESTIMATORS.items():
+        for name, estimator in ESTIMATORS.items():
             start = time.perf_counter()
-            est = get_strategy(strategy).estimate(data, params, sigma, verify=False,
-                                                  prior=prior)
+            est = estimator.clone(sigma=sigma).fit(data)
             seconds = time.perf_counter() - start
             scored = score(est.machine, truth_machine).tcp_after
             free = [est.space.index(n) for n in est.names]

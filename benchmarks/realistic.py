@@ -20,8 +20,9 @@ import numpy as np
 
 import orthoglide_env
 from calibrators.agents import get_agent
+from calibrators.estimators.catalogue import for_study
 from calibrators.estimators.differences import differences
-from calibrators.study.episodes import estimate, run_episode
+from calibrators.study.episodes import run_episode
 from orthoglide_env.scoring import FRAMES, score
 
 ESTIMATORS: tuple[str, ...] = ("paper", "paper6", "extended")
@@ -39,7 +40,7 @@ def main() -> None:
         data, truth = episode.measurements, episode.truth
         nominal.append(np.sqrt(np.mean(differences(data).values ** 2)))
         for name in ESTIMATORS:
-            est = estimate(data, name, 0.0)
+            est = for_study(name, 0.0).fit(data)
             report = score(est.machine, truth)
             tcp[name].append([getattr(report.tcp_after, f).rms for f in FRAMES])
             if name == "paper":

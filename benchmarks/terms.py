@@ -26,8 +26,9 @@ import numpy as np
 
 import orthoglide_env
 from calibrators.agents import get_agent
-from calibrators.estimators.base import Estimate, get_strategy
+from calibrators.estimators.base import Estimate
 from calibrators.estimators.consider import FULL_TERMS, WORLD_PREFIX, term_family
+from calibrators.estimators.gauss_newton import GaussNewtonCalibrator
 from calibrators.estimators.prediction import predicted_tcp_error
 from calibrators.study.episodes import machine_seed, run_episode
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
@@ -61,7 +62,8 @@ def main() -> None:
         parser.error(f"--sigma must be positive (mm), got {args.sigma}")
     if not args.resolution >= 0:
         parser.error(f"--resolution must be 0 or more (mm), got {args.resolution}")
-    gn = get_strategy("gauss-newton")
+    fit = GaussNewtonCalibrator(params="full", verify=False, explain=False,
+                                conditions=args.conditions)
     print(f"{args.conditions}, {args.machines} machines, seed {args.seed}, gauge sigma "
           f"{args.sigma} mm read to {args.resolution} mm: share of each "
           f"family's prior variance the full fit removes (median), predicted TCP rigid "
@@ -82,8 +84,7 @@ def main() -> None:
                 episode = run_episode(env, agent, machine_seed(args.seed, m))
             finally:
                 env.close()
-            est = gn.estimate(episode.measurements, "full", episode.sigma, verify=False,
-                              explain=False, conditions=args.conditions)
+            est = fit.clone(sigma=episode.sigma).fit(episode.measurements)
             for family, value in shares(est).items():
                 rows.setdefault(family, []).append(value)
             predicted.append(predicted_tcp_error(est).rigid.rms * UM)

@@ -248,11 +248,17 @@ def test_resume_refuses_a_trial_of_other_error_names_in_one_line(tmp_path, capsy
         (["fit", "GOOD"], ".csv or .json"),
         # What only the exact-model fit can do names the option that chooses it.
         (["calibrate", "--strategy", "paper", "--agent", "tracker", "--backend", "exact"],
-         "reads dial gauges only; the exact-model fit reads a tracker's readings too: use "
-         "--strategy gauss-newton"),
+         "reads dial gauges only; the exact-model fit reads a tracker's readings too: use an "
+         "exact-model estimator, --estimator paper6 or extended"),
         (["fit", "GOOD_CSV", "--strategy", "paper", "--params", "extended"],
-         "not 'extended'; the exact-model fit estimates any parameters: use --strategy "
-         "gauss-newton"),
+         "not 'extended'; the exact-model fit estimates any parameters: use an exact-model "
+         "estimator, --estimator paper6"),
+        (["fit", "GOOD_CSV", "--estimator", "paper", "--prior", "none"],
+         "the paper's linear fit (eq. 10) takes no prior; the exact-model fit does"),
+        (["calibrate", "--estimator", "oracle"], "unknown estimator 'oracle'"),
+        (["calibrate", "--estimator", "full", "--strategy", "paper"], "give one"),
+        (["fit", "GOOD_CSV", "--holdout", "1.5"],
+         "--holdout: estimator 'gauss-newton': parameter 'holdout' must be a number in [0, 1)"),
         (["compare", "--agents", "paper,oracle"], "unknown agent 'oracle'"),
         (["compare", "--agents", ","], "--agents needs"),
         (["compare", "--estimators", "oracle"], "unknown estimator"),
@@ -268,7 +274,8 @@ def test_resume_refuses_a_trial_of_other_error_names_in_one_line(tmp_path, capsy
         (["fit", "GOOD_CSV", "--left-out", "huge"], "--left-out"),
         (["compare", "--address", "auto"], "--engine ray"),
         (["fit", "GOOD_CSV", "--params", "full", "--node-spacing", "0"],
-         "node spacing must be positive"),
+         "--node-spacing: estimator 'gauss-newton': parameter 'node_spacing' must be None or a "
+         "number in (0, inf)"),
         (["fit", "GOOD_CSV", "--params", "full", "--node-spacing", "500"],
          "larger than the drives' travel"),
         (["fit", "GOOD_CSV", "--params", "full", "--terms", "lead,heat"],

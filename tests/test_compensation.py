@@ -13,7 +13,7 @@ import pytest
 import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.cli import main
-from calibrators.estimators.base import get_strategy
+from calibrators.estimators.gauss_newton import GaussNewtonCalibrator
 from calibrators.study.episodes import machine_seed, run_episode
 from calibrators.workflow.compensate import compensate, read_estimate, read_targets, write_estimate
 from orthoglide_env.model.design import PROTOTYPE
@@ -44,9 +44,8 @@ def test_compensated_commands_reach_their_targets_within_the_predicted_error() -
     actual, predicted = [], []
     for index in range(6):
         episode = _tracker_lab(index)
-        est = get_strategy("gauss-newton").estimate(episode.measurements, "full",
-                                                    episode.sigma, verify=False,
-                                                    explain=False, conditions="lab")
+        est = GaussNewtonCalibrator(params="full", sigma=episode.sigma, verify=False,
+                                    explain=False, conditions="lab").fit(episode.measurements)
         assert est.fits_lead
         comp = compensate(est, targets)
         nut = comp.commands + episode.world.lead_error(comp.commands[None],

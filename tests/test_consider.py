@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calibrators.estimators.base import get_strategy
 from calibrators.estimators.consider import consider_terms
 from calibrators.estimators.exact_fit import fit_batch, z_scores
+from calibrators.estimators.gauss_newton import GaussNewtonCalibrator
 from calibrators.estimators.parameters import prior_sigmas, scales, select
 from calibrators.measurements import Measurement, Measurements
 from calibrators.study.episodes import measurements_of
@@ -175,9 +175,9 @@ def test_a_lab_notebook_keeps_each_readings_time_and_the_fit_names_what_it_consi
     for suffix in (".csv", ".json"):
         data.write(tmp_path / f"m{suffix}")
         assert Measurements.read(tmp_path / f"m{suffix}").items == data.items
-    gn = get_strategy("gauss-newton")
-    lab = gn.estimate(data, "extended", episode.sigma, verify=False, conditions="lab")
-    ideal = gn.estimate(data, "extended", episode.sigma, verify=False)
+    lab = GaussNewtonCalibrator(params="extended", sigma=episode.sigma, verify=False,
+                                conditions="lab").fit(data)
+    ideal = GaussNewtonCalibrator(params="extended", sigma=episode.sigma, verify=False).fit(data)
     assert "lead.scale" in lab.considered and not ideal.considered
     # The estimate is the same; only its error bars grow.
     np.testing.assert_array_equal(lab.theta, ideal.theta)
@@ -185,7 +185,8 @@ def test_a_lab_notebook_keeps_each_readings_time_and_the_fit_names_what_it_consi
     with pytest.raises(ValueError, match="time_s"):
         untimed = Measurements([Measurement(m.gauge, m.posture, m.repetition, m.reading, m.rho,
                                             m.mounting) for m in data.items])
-        gn.estimate(untimed, "extended", episode.sigma, verify=False, conditions="lab")
+        GaussNewtonCalibrator(params="extended", sigma=episode.sigma, verify=False,
+                              conditions="lab").fit(untimed)
 
 
 def test_the_trackers_sigma_bounds_its_noise_under_its_mpe() -> None:
@@ -213,21 +214,21 @@ def test_fitting_the_world_keeps_batches_and_ideal_fits_as_they_are() -> None:
     1e-9 of a scale) and names the terms it fitted."""
     from conftest import paper_experiment
 
-    gn = get_strategy("gauss-newton")
     datas, sigma = [], 0.0
     for seed in (3, 4, 5):
         episode, _ = paper_experiment(None, seed, errors="realistic", conditions="lab")
         datas.append(measurements_of(episode.records, episode.time_s))
         sigma = episode.sigma
-    ideal = gn.estimate(datas[0], "extended", sigma, verify=False, fit_world=True)
-    plain = gn.estimate(datas[0], "extended", sigma, verify=False)
+    ideal = GaussNewtonCalibrator(params="extended", sigma=sigma, verify=False,
+                                  fit_world=True).fit(datas[0])
+    plain = GaussNewtonCalibrator(params="extended", sigma=sigma, verify=False).fit(datas[0])
     np.testing.assert_array_equal(ideal.theta, plain.theta)
     assert ideal.names == plain.names
-    batch = gn.estimate_many(datas, "extended", sigma, verify=False, conditions="lab",
-                             fit_world=True)
+    batch = GaussNewtonCalibrator(params="extended", sigma=sigma, verify=False,
+                                  conditions="lab", fit_world=True).fit_many(datas)
     for data, together in zip(datas, batch, strict=True):
-        alone = gn.estimate(data, "extended", sigma, verify=False, conditions="lab",
-                            fit_world=True)
+        alone = GaussNewtonCalibrator(params="extended", sigma=sigma, verify=False,
+                                      conditions="lab", fit_world=True).fit(data)
         assert together.names == alone.names
         assert "world.lead.scale[x]" in alone.names and not alone.considered
         assert set(alone.estimate["world"]) >= {"lead.scale[x]", "backlash.mean"}

@@ -9,6 +9,7 @@ import pytest
 import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.agents.optimal import fixed_plan
+from calibrators.estimators.catalogue import for_study
 from calibrators.planning.planner import (
     N_MACHINE,
     SPREAD_SLACK,
@@ -17,7 +18,7 @@ from calibrators.planning.planner import (
     rigid_weight,
 )
 from calibrators.planning.slot_table import reach, slot_table
-from calibrators.study.episodes import estimate, measurements_of, run_episode
+from calibrators.study.episodes import measurements_of, run_episode
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op, slot_catalogue
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import MachineParams
@@ -230,7 +231,7 @@ def play_without_faults(env, agent, observation, info):
         if terminated or truncated:
             break
     lab = env.unwrapped
-    return lab, estimate(measurements_of(lab.records), "extended", lab.noise.effective_sigma)
+    return lab, for_study("extended", lab.noise.effective_sigma).fit(measurements_of(lab.records))
 
 
 def test_a_wrong_start_does_not_lock_the_active_agent() -> None:

@@ -7,9 +7,8 @@ import pytest
 from conftest import TABLE1 as TABLE1_ERRORS
 from conftest import paper_experiment
 
-from calibrators.estimators.base import get_strategy
 from calibrators.estimators.exact_fit import fit_batch, z_scores
-from calibrators.estimators.gauss_newton import layout_and_values
+from calibrators.estimators.gauss_newton import GaussNewtonCalibrator, layout_and_values
 from calibrators.estimators.parameters import (
     ParameterSpace,
     fixed_values,
@@ -54,7 +53,7 @@ def experiment(machine: MachineParams | None, seed: int, errors: str = "realisti
 @pytest.mark.parametrize("solver", ["gauss-newton", "scipy"])
 def test_noise_free_table1_machine_is_recovered_exactly(solver: str) -> None:
     data, truth, _ = experiment(TABLE1, 0, errors="nominal", sigma=0.0, resolution=0.0)
-    est = get_strategy("gauss-newton").estimate(data, "paper6", 0.0, solver=solver)
+    est = GaussNewtonCalibrator(params="paper6", sigma=0.0, solver=solver).fit(data)
     # Newton on an exact model converges to round-off: 1e-6 mm is the issue's bar and
     # three orders above what the solver reaches (~1e-12 mm).
     assert np.abs(est.theta[:6] - truth[:6]).max() < 1e-6
@@ -110,11 +109,11 @@ def test_batched_fit_is_the_single_fits() -> None:
 def test_a_gauge_zero_is_eliminated() -> None:
     """Shifting every reading of one mounting (a gauge zeroed elsewhere) changes nothing."""
     data, _, sigma = experiment(None, 21)
-    est = get_strategy("gauss-newton").estimate(data, "extended", sigma, verify=False)
+    est = GaussNewtonCalibrator(params="extended", sigma=sigma, verify=False).fit(data)
     for m in data.items:
         if m.gauge.leg == 1 and m.gauge.axis == 0:
             object.__setattr__(m, "reading", m.reading + 0.37)
-    moved = get_strategy("gauss-newton").estimate(data, "extended", sigma, verify=False)
+    moved = GaussNewtonCalibrator(params="extended", sigma=sigma, verify=False).fit(data)
     np.testing.assert_allclose(moved.theta, est.theta, atol=1e-8)
 
 
@@ -174,24 +173,22 @@ def test_parameter_selection_and_prior_errors() -> None:
 
 def test_too_few_readings_and_nothing_identifiable_are_clear_errors() -> None:
     data, _, sigma = experiment(None, 41)
-    gn = get_strategy("gauss-newton")
     few = type(data)(data.items[:8])
     with pytest.raises(ValueError, match="readings cannot determine"):
-        gn.estimate(few, "paper6", sigma)
+        GaussNewtonCalibrator(params="paper6", sigma=sigma).fit(few)
     # The stand shift along a bar's width is invisible to a flat face: nothing to see.
     with pytest.raises(ValueError, match="identify no combination"):
-        gn.estimate(data, "x-leg/y@0.5.shift_z", sigma, prior="none")
+        GaussNewtonCalibrator(params="x-leg/y@0.5.shift_z", sigma=sigma, prior="none").fit(data)
 
 
 def test_a_mistyped_reading_is_flagged_and_left_out() -> None:
     """0.43 typed for 0.043: flagged by its place, and the estimate stays within 3 std of
     the clean fit (the issue's bar)."""
     data, _, sigma = experiment(None, 51, errors="paper")
-    gn = get_strategy("gauss-newton")
-    clean = gn.estimate(data, "paper6", sigma, verify=False)
+    clean = GaussNewtonCalibrator(params="paper6", sigma=sigma, verify=False).fit(data)
     k = next(i for i, m in enumerate(data.items) if m.posture == "YMax" and m.repetition == 2)
     object.__setattr__(data.items[k], "reading", data.items[k].reading * 10 + 0.3)
-    dirty = gn.estimate(data, "paper6", sigma, verify=False)
+    dirty = GaussNewtonCalibrator(params="paper6", sigma=sigma, verify=False).fit(data)
     assert dirty.outliers == [k]
     assert "outlier" in dirty.warnings[-1] and "YMax" in dirty.warnings[-1]
     std = np.sqrt(np.diag(clean.covariance))
@@ -204,10 +201,9 @@ def test_a_mistyped_reading_is_told_apart_from_model_error() -> None:
     it departs from its own repetitions (which share the model's error), and it is named
     as a wrong reading with its residual against the fit without it."""
     data, _, sigma = experiment(None, 3)
-    gn = get_strategy("gauss-newton")
     k = next(i for i, m in enumerate(data.items) if m.posture == "Zero" and m.repetition == 4)
     object.__setattr__(data.items[k], "reading", data.items[k].reading + 0.5)
-    est = gn.estimate(data, "paper6", sigma, verify=False)
+    est = GaussNewtonCalibrator(params="paper6", sigma=sigma, verify=False).fit(data)
     assert est.outliers == [k] and est.outlier_causes == ["reading"]
     # The fit without it predicts the clean reading to ~0.1 mm of model error.
     assert 0.3 < est.outlier_residuals[0] < 0.7
@@ -219,11 +215,10 @@ def test_model_error_is_kept_and_named_as_such() -> None:
     from the model whose repetitions read the same are model error.  They stay in the
     fit (leaving them out would hide the misfit from the chi-square test), no reading is
     called wrong, and the warning says model error."""
-    gn = get_strategy("gauss-newton")
     named = 0
     for seed in range(12):  # chi2/dof 500-5000 on each; a few show readings beyond 4 sigma
         data, _, sigma = experiment(None, seed, sigma=0.002, resolution=0.0)
-        est = gn.estimate(data, "paper6", sigma, verify=False)
+        est = GaussNewtonCalibrator(params="paper6", sigma=sigma, verify=False).fit(data)
         assert est.outliers == [] and est.n_readings == len(data)
         if est.misfits:
             named += 1
@@ -237,7 +232,7 @@ def test_holdout_predicts_the_readings_it_did_not_fit() -> None:
     for a third of 60 readings held out (a chi-square with ~20 dof keeps it within
     +-35% of that 19 times out of 20)."""
     data, _, sigma = experiment(None, 61, errors="paper")
-    est = get_strategy("gauss-newton").estimate(data, "paper6", sigma, holdout=1 / 3, seed=4)
+    est = GaussNewtonCalibrator(params="paper6", sigma=sigma, holdout=1 / 3, seed=4).fit(data)
     assert 0.65 * sigma < est.holdout_rms_mm < 1.5 * 1.35 * sigma
 
 
@@ -248,12 +243,11 @@ def test_extended_estimator_is_honest_and_beats_the_paper_model() -> None:
     its standard error is ~0.03), while the paper's six parameters are rejected by the
     chi-square test and their model-error covariance still covers the real error
     (z-RMS <= 1.5; 60 machines, as its z-RMS over sets of 30 spreads by about 0.1)."""
-    gn = get_strategy("gauss-newton")
     z_ext, z_paper, warned = [], [], []
     for seed in range(60):
         data, truth, sigma = experiment(None, 7000 + seed)
         for params, zs in (("extended", z_ext), ("paper6", z_paper)):
-            est = gn.estimate(data, params, sigma, verify=False)
+            est = GaussNewtonCalibrator(params=params, sigma=sigma, verify=False).fit(data)
             free = [est.space.index(n) for n in est.names]
             zs.extend(z_scores(est.theta[free], truth[free], est.covariance, est.information,
                                est.scale))

@@ -18,8 +18,9 @@ import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.agents.base import action
 from calibrators.agents.paper import PaperAgent
+from calibrators.estimators.catalogue import for_study
 from calibrators.study.compare import Config, agent_episodes, run, run_chunk
-from calibrators.study.episodes import estimate, make_estimator, measurements_of, run_episode
+from calibrators.study.episodes import make_estimator, measurements_of, run_episode
 from calibrators.study.statistics import summary
 from orthoglide_env.lab.operations import SLOTS, TIME, Op, slot_index
 from orthoglide_env.model.design import PROTOTYPE
@@ -145,7 +146,8 @@ def test_accuracy_reward_is_the_estimates_score() -> None:
         if terminated or truncated:
             break
     lab_env = env.unwrapped
-    est = estimate(measurements_of(lab_env.records), "extended", lab_env.noise.effective_sigma)
+    est = for_study("extended", lab_env.noise.effective_sigma).fit(
+        measurements_of(lab_env.records))
     tcp = score(est.machine, lab_env.true_machine).tcp_after.rigid.rms
     hours = obs["time"][0] / 3600
     assert sum(rewards) == pytest.approx(-tcp / 0.01 - 2.0 * hours, rel=1e-9)

@@ -16,9 +16,10 @@ from hypothesis import strategies as st
 from calibrators import measurements
 from calibrators.cli import main
 from calibrators.estimators import differences as differences_module
-from calibrators.estimators.base import get_strategy
 from calibrators.estimators.differences import MissingZeroError, differences
-from calibrators.estimators.paper_linear import MAX_FOLDS, folds
+from calibrators.estimators.gauss_newton import GaussNewtonCalibrator
+from calibrators.estimators.holdout import MAX_FOLDS, folds
+from calibrators.estimators.paper_linear import PaperCalibrator
 from calibrators.measurements import (
     MAX_FIELD_CHARS,
     MAX_LINE_BYTES,
@@ -507,7 +508,7 @@ def test_every_fit_refuses_a_mounting_without_zero(tmp_path, params) -> None:
     data = Measurements.read(_written(tmp_path, csv_file(
         "x,y,Zero,1,0.0", "x,y,XMax,1,0.1", "x,z,XMax,1,0.2", "x,z,XMin,1,0.3")))
     with pytest.raises(MissingZeroError, match=ZERO_LESS):
-        get_strategy("gauss-newton").estimate(data, params)
+        GaussNewtonCalibrator(params=params).fit(data)
 
 
 def test_each_mounting_has_its_own_zero() -> None:
@@ -550,12 +551,12 @@ def test_verification_does_not_depend_on_how_repetitions_are_numbered(noisy_pape
     renumbered = Measurements([
         Measurement(m.gauge, m.posture, renumber[m.repetition], m.reading, m.rho)
         for m in noisy_paper_data.items])
-    paper = get_strategy("paper")
-    before = paper.verify(noisy_paper_data, (0, 1, 2, 3, 4, 5), 0.02)
+    paper = PaperCalibrator(sigma=0.02)
+    before = paper.verify_fit(noisy_paper_data, (0, 1, 2, 3, 4, 5))
     assert before is not None and before > 0
     tracemalloc.start()
     try:
-        assert paper.verify(renumbered, (0, 1, 2, 3, 4, 5), 0.02) == before
+        assert paper.verify_fit(renumbered, (0, 1, 2, 3, 4, 5)) == before
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()

@@ -12,7 +12,7 @@ import pytest
 
 import orthoglide_env
 from calibrators.agents import get_agent
-from calibrators.estimators.base import Estimate, get_strategy
+from calibrators.estimators.base import Estimate
 from calibrators.estimators.consider import (
     FULL_TERMS,
     consider_terms,
@@ -20,6 +20,7 @@ from calibrators.estimators.consider import (
     term_family,
 )
 from calibrators.estimators.exact_fit import fit_batch, world_columns
+from calibrators.estimators.gauss_newton import GaussNewtonCalibrator
 from calibrators.estimators.prediction import predicted_tcp_error
 from calibrators.study.episodes import run_episode
 from orthoglide_env.model.compensation import PitchTable, interpolation_weights, node_count
@@ -154,9 +155,10 @@ def test_full_fits_the_tables_and_its_prediction_carries_the_drives(tracker_lab,
     error bars; each fit's predicted error includes the drives' part (above the
     geometry-only prediction)."""
     data, sigma, truth, world = tracker_lab
-    gn = get_strategy("gauss-newton")
-    full = gn.estimate(data, "full", sigma, verify=False, conditions="lab")
-    extended = gn.estimate(data, "extended", sigma, verify=False, conditions="lab")
+    full = GaussNewtonCalibrator(params="full", sigma=sigma, verify=False,
+                                 conditions="lab").fit(data)
+    extended = GaussNewtonCalibrator(params="extended", sigma=sigma, verify=False,
+                                     conditions="lab").fit(data)
     fitted = {term_family(n[len("world."):]) for n in full.names if n.startswith("world.")}
     assert {"lead", "backlash", "warmup"} <= fitted <= set(FULL_TERMS)
     assert {"periodic", "dial"} <= {term_family(n) for n in full.considered}

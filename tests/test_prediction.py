@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from conftest import paper_experiment
 
-from calibrators.estimators.base import get_strategy
+from calibrators.estimators.gauss_newton import GaussNewtonCalibrator
 from calibrators.estimators.prediction import predicted_tcp_error
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import ERROR_NAMES, MachineParams
@@ -93,7 +93,7 @@ def test_predicted_rms_matches_sampled_true_machines() -> None:
     # the second-order TCP error, ~|delta|^2 / L, is ~2e-3 of the first-order one; its share
     # of the mean square, ~4e-3, is far below the tolerance (13 % of it; the sampled and
     # predicted means differ by 1-2 %).
-    est = get_strategy("gauss-newton").estimate(readings, "paper6", 1e-4, verify=False)
+    est = GaussNewtonCalibrator(params="paper6", sigma=1e-4, verify=False).fit(readings)
     samples = 1000
     rng = np.random.default_rng(2)
     n = len(ERROR_NAMES)

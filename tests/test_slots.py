@@ -10,9 +10,8 @@ import pytest
 import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.agents.base import action
-from calibrators.estimators.base import get_strategy
 from calibrators.estimators.differences import differences, paper_matrix
-from calibrators.estimators.gauss_newton import layout_and_values
+from calibrators.estimators.gauss_newton import GaussNewtonCalibrator, layout_and_values
 from calibrators.measurements import Measurement, Measurements
 from orthoglide_env.instruments.dial import exact_readings, pressed_past_travel, status_of
 from orthoglide_env.instruments.rays import exact_ray_distances, exact_target_boxes
@@ -154,7 +153,7 @@ def noise_free_fit(machine: MachineParams, specs: tuple[GaugeSpec, ...], rho: np
     posture, gauge = np.nonzero(np.isfinite(readings))
     data = Measurements([Measurement(specs[g], "", 1, readings[p, g], tuple(postures[p]))
                          for p, g in zip(posture, gauge, strict=True)])
-    est = get_strategy("gauss-newton").estimate(data, params, 0.0, prior="none", verify=False)
+    est = GaussNewtonCalibrator(params=params, sigma=0.0, prior="none", verify=False).fit(data)
     assert not est.warnings
     return est.theta[:len(ERROR_NAMES)], machine.to_vector(), est.names
 

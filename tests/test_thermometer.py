@@ -11,10 +11,11 @@ import pytest
 
 import orthoglide_env
 from calibrators.cli import main
+from calibrators.estimators.catalogue import for_study
 from calibrators.estimators.consider import WORLD_PREFIX, consider_terms
 from calibrators.estimators.gauss_newton import layout_and_values
 from calibrators.measurements import Measurements
-from calibrators.study.episodes import estimate, measurements_of
+from calibrators.study.episodes import measurements_of
 from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.world.machine_file import machine_dict
 from orthoglide_env.world.table import EFFECTS
@@ -103,7 +104,7 @@ def test_the_thermometer_changes_nothing_else() -> None:
     stripped = Measurements([replace(m, temperature_c=None) for m in warm.items], 900.0)
     conditions = Conditions("workshop")
     sigma = off.unwrapped.noise.effective_sigma
-    plain, again = (estimate(d, "full", sigma, conditions) for d in (bare, stripped))
+    plain, again = (for_study("full", sigma, conditions).fit(d) for d in (bare, stripped))
     np.testing.assert_array_equal(plain.theta, again.theta)
     np.testing.assert_array_equal(plain.covariance, again.covariance)
 
@@ -118,7 +119,7 @@ def _growth_error(env: gym.Env, data: Measurements) -> float:
     heat = [m.temperature_c for m in data.items]
     temperatures = None if None in heat else np.array([heat])
     terms = consider_terms(design, values[None], times, GROWTH, temperatures=temperatures)
-    est = estimate(data, "full", lab.noise.effective_sigma, GROWTH)
+    est = for_study("full", lab.noise.effective_sigma, GROWTH).fit(data)
     k = terms.drive.shape[-1]
     fitted = np.zeros(len(design))
     for j, name in enumerate(terms.names[k:]):

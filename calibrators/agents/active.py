@@ -34,6 +34,7 @@ import numpy as np
 
 from calibrators.agents.base import Agent, action, register
 from calibrators.agents.optimal import fixed_plan, lab_setup
+from calibrators.estimators.catalogue import for_study
 from calibrators.planning.planner import N_MACHINE, N_STAND, ZERO_SCALE, Planner, Step
 from orthoglide_env.instruments.stands import stand_names
 from orthoglide_env.lab.operations import Op
@@ -119,13 +120,13 @@ class ActiveAgent(Agent):
     def _refit(self) -> None:
         """Replace the filter's mean by the extended estimator's fit of the notebook."""
         # Imported here: the experiment module imports the agents package.
-        from calibrators.study.episodes import estimate, measurements_of
+        from calibrators.study.episodes import measurements_of
 
         records = self.env.records
         planner = self.planner
         try:
-            est = estimate(measurements_of(records, design=planner.design), "extended",
-                           planner.sigma)
+            est = for_study("extended", planner.sigma).fit(
+                measurements_of(records, design=planner.design))
         except (ValueError, RuntimeError, np.linalg.LinAlgError):
             return  # the filter goes on alone; the next refit has more data
         theta = dict(zip(est.space, est.theta, strict=True))

@@ -17,7 +17,6 @@ from calibrators.cli.common import (
     given_design,
 )
 from calibrators.cli.output import emit, report, save
-from calibrators.estimators.base import get_strategy
 from calibrators.study.episodes import DEFAULT_BUDGET_S, machine_seed, run_episode
 from calibrators.study.labs import make_lab
 from calibrators.study.z_scores import z_rms
@@ -53,9 +52,8 @@ def _setup(args: argparse.Namespace
 
 
 def run(args: argparse.Namespace) -> None:
-    get_strategy(args.strategy)  # an unknown one is refused before the experiment
+    estimator_options.estimator(args)  # an unknown one, or a bad option, is refused early
     agent = get_agent(args.agent)
-    estimator_options.options(args)  # and so are bad options
     machine, world, preset, sigma, resolution = _setup(args)
     conditions = conditions_of(args, world)
     env = make_lab(agent, errors=preset, gauge_sigma=sigma, gauge_resolution=resolution,

@@ -23,9 +23,10 @@ from calibrators.cli.common import (
     machine_design_of,
 )
 from calibrators.cli.estimator_options import DEFAULT_STRATEGY
+from calibrators.estimators.catalogue import CATALOGUE, get_estimator
 from calibrators.study.compare import CHUNK, Config, Trial, run, verify_pybullet
 from calibrators.study.engines import ENGINES, RAY_INSTALL_HINT, ray_available
-from calibrators.study.episodes import DEFAULT_BUDGET_S, ESTIMATORS, get_estimator
+from calibrators.study.episodes import DEFAULT_BUDGET_S
 from calibrators.study.statistics import paired, summary
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.model.design import PROTOTYPE
@@ -224,7 +225,7 @@ def _print(trials: list[Trial], config: Config, machines: int, seconds: float,
             example = example if len(example) <= 110 else example[:107] + "..."
             print(f"{r['agent']} x {r['estimator']}: {seen['trials']} of {r['machines']} "
                   f"fits warn: {kind} (e.g. {example})")
-    exact = [name for name, spec in ESTIMATORS.items() if spec.strategy == DEFAULT_STRATEGY]
+    exact = [name for name, est in CATALOGUE.items() if est.name == DEFAULT_STRATEGY]
     if any(r["failed"] and r["estimator"] not in exact for r in rows):
         print(f"the exact-model estimators read any agent's readings: --estimators "
               f"{','.join(exact)}")
@@ -273,7 +274,7 @@ def add(p: argparse.ArgumentParser) -> None:
                    help=f"comma list of agents ({', '.join(agents_available())}, or "
                         "policy:FILE, a learned policy) (default: %(default)s)")
     p.add_argument("--estimators", default="paper,extended",
-                   help=f"comma list of estimators ({', '.join(ESTIMATORS)}) "
+                   help=f"comma list of estimators ({', '.join(CATALOGUE)}) "
                         "(default: %(default)s)")
     p.add_argument("--budget", type=float, default=DEFAULT_BUDGET_S,
                    help="lab time budget of every agent (s, default %(default)s)")

@@ -1,15 +1,20 @@
-"""The estimator interface: estimates and the registry of strategies.
+"""The estimator interface: the :class:`Estimate`, the :class:`Estimator` base class and
+the registry of estimator classes.
 
-A strategy's ``estimate(measurements, params, sigma)`` turns readings into an
-:class:`Estimate`.  It reads a lab notebook (an agent's experiment,
-:mod:`calibrators.study.episodes`) exactly as it reads a real machine's measurement file.
+An estimator is configured when it is constructed (``GaussNewtonCalibrator(params="full",
+sigma=0.01)``, checked there) and its ``fit(measurements)`` returns an :class:`Estimate`.
+It reads a lab notebook (an agent's experiment, :mod:`calibrators.study.episodes`) exactly
+as it reads a real machine's measurement file.  The configured instances that commands
+name (``paper``, ``paper6``, ``extended``, ``full``, ...) are in
+:mod:`calibrators.estimators.catalogue`.
 
-Strategies register themselves by name with :func:`register`; every module of this
-package is imported by :func:`available`, so adding a strategy is adding one module.
+Estimator classes register themselves by name with :func:`register`; every module of this
+package is imported by :func:`available`, so adding one is adding one module.
 """
 
 from __future__ import annotations
 
+import inspect
 import json
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields
@@ -25,6 +30,7 @@ from calibrators.estimators.consider import (
     lead_terms,
     table_prior,
 )
+from calibrators.estimators.constraints import Constraint, InvalidParameterError, validate_params
 from calibrators.measurements import Measurements
 from calibrators.registry import Registry
 from orthoglide_env.instruments.dial import DEFAULT_SIGMA
@@ -315,21 +321,82 @@ _ARRAY_FIELDS: tuple[str, ...] = ("drho", "dL", "covariance", "residuals", "sing
                                   "error_covariance", "lead_values", "lead_covariance")
 
 
-class Calibrator:
-    """Base class of strategies: an estimator of readings."""
+class Estimator:
+    """Base class of estimators, in scikit-learn's shape: every choice is a keyword of
+    ``__init__``, stored as an attribute of that name and checked there against the class's
+    :attr:`_parameter_constraints` (:func:`~calibrators.estimators.constraints.validate_params`);
+    :meth:`fit` turns readings into an :class:`Estimate`."""
 
+    #: The registered name, written into every estimate's ``strategy``.
     name: ClassVar[str] = ""
+    #: What the estimator is called in its messages.
+    title: ClassVar[str] = ""
+    #: Per parameter of ``__init__``, the kinds of value it takes (any one suffices).
+    _parameter_constraints: ClassVar[dict[str, list[Constraint]]] = {}
 
-    def estimate(self, data: Measurements, params: str = "paper6",
-                 sigma: float = DEFAULT_SIGMA,
-                 *, verify: bool = True, **options: Any) -> Estimate:
-        """Estimate from ``data``; ``options`` are the estimator's own (see
-        :meth:`calibrators.estimators.gauss_newton.GaussNewtonCalibrator.estimate_many`);
-        ``sigma``: a dial gauge's repeatability (mm)."""
+    def _validate_params(self) -> None:
+        validate_params(f"estimator '{self.name}'", self.get_params(),
+                        self._parameter_constraints)
+
+    @classmethod
+    def parameter_names(cls) -> list[str]:
+        """The parameters of ``__init__``, in its order."""
+        return [p.name for p in inspect.signature(cls.__init__).parameters.values()
+                if p.kind is inspect.Parameter.KEYWORD_ONLY]
+
+    @classmethod
+    def takes(cls, parameter: str) -> bool:
+        """Whether the estimator has the parameter ``parameter``."""
+        return parameter in cls.parameter_names()
+
+    def get_params(self) -> dict[str, Any]:
+        """The configuration, by parameter."""
+        return {name: getattr(self, name) for name in self.parameter_names()}
+
+    def clone(self, **config: Any) -> Estimator:
+        """A new estimator of this class, configured as this one but for ``config``; a
+        parameter the class does not take is refused (:meth:`refuse`)."""
+        unknown = [key for key in config if not self.takes(key)]
+        if unknown:
+            raise self.refuse(unknown)
+        return type(self)(**{**self.get_params(), **config})
+
+    @classmethod
+    def refuse(cls, unknown: list[str]) -> ValueError:
+        """The error for the parameters ``unknown`` that the class does not take."""
+        return InvalidParameterError(
+            f"estimator '{cls.name}' takes no {', '.join(unknown)}; its parameters are "
+            f"{', '.join(cls.parameter_names())}", unknown[0])
+
+    def fit(self, data: Measurements) -> Estimate:
+        """The estimate of the readings ``data``."""
         raise NotImplementedError
 
+    def fit_many(self, datas: list[Measurements]) -> list[Estimate | Exception]:
+        """:meth:`fit` of each experiment, a failure in place of its estimate; an estimator
+        that can batch experiments overrides it, to the same results."""
+        out: list[Estimate | Exception] = []
+        for data in datas:
+            try:
+                out.append(self.fit(data))
+            except (ValueError, RuntimeError, np.linalg.LinAlgError) as exc:
+                out.append(exc)
+        return out
 
-STRATEGIES: Registry[Calibrator] = Registry("strategy", "calibrators.estimators")
+    def estimate(self, data: Measurements, params: str = "paper6",
+                 sigma: float = DEFAULT_SIGMA, **options: Any) -> Estimate:
+        """The call-time form of earlier scripts: :meth:`fit` of this estimator configured
+        with ``params``, ``sigma`` and ``options``."""
+        return self.clone(params=params, sigma=sigma, **options).fit(data)
+
+    def __repr__(self) -> str:
+        changed = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
+        return f"{type(self).__name__}({changed})"
+
+
+#: The earlier name of :class:`Estimator`, kept for earlier scripts.
+Calibrator = Estimator
+STRATEGIES: Registry[Estimator] = Registry("strategy", "calibrators.estimators")
 register = STRATEGIES.register
 available = STRATEGIES.available
 get_strategy = STRATEGIES.get

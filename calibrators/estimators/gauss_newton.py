@@ -11,11 +11,12 @@ readings.  It reads any experiment's notebook or measurement file.
 
 from __future__ import annotations
 
-from typing import Any
+import numbers
+from typing import Any, ClassVar
 
 import numpy as np
 
-from calibrators.estimators.base import Calibrator, Estimate, Measurements, register
+from calibrators.estimators.base import Estimate, Estimator, Measurements, register
 from calibrators.estimators.consider import (
     DEFAULT_NODE_SPACING,
     FULL_TERMS,
@@ -27,20 +28,39 @@ from calibrators.estimators.consider import (
     thermometer_sigma,
 )
 from calibrators.estimators.consider import tracker_sigma as tracker_sigma_of
+from calibrators.estimators.constraints import (
+    BOOLEAN,
+    NONE,
+    Constraint,
+    InstanceOf,
+    Interval,
+    Options,
+    Satisfies,
+)
 from calibrators.estimators.differences import check_zeros
 from calibrators.estimators.exact_fit import (
     CHI2_LEVEL,
     RETAIN,
+    SOLVERS,
     BatchFit,
     directions,
     fit_batch,
-    newton_step,
     world_columns,
 )
-from calibrators.estimators.paper_linear import folds
+from calibrators.estimators.holdout import held_out_residuals, holdout_mask, verification_rms
+from calibrators.estimators.outliers import CAUSE_WORDS as CAUSE_WORDS
+from calibrators.estimators.outliers import (
+    LISTED_MISFITS,
+    model_misfits,
+    next_outlier,
+    repetition_means,
+)
+from calibrators.estimators.outliers import MAX_OUTLIER_FRACTION as MAX_OUTLIER_FRACTION
+from calibrators.estimators.outliers import OUTLIER_K as OUTLIER_K
 from calibrators.estimators.parameters import (
     ParameterSpace,
     act_together,
+    check_prior,
     describe,
     fixed_values,
     prior_sigmas,
@@ -64,35 +84,15 @@ from orthoglide_env.model.kinematics import direct
 from orthoglide_env.reading_model import (
     ReadingLayout,
     TrackerAxis,
-    predict,
     preset_sigmas,
     station_of,
 )
 from orthoglide_env.scoring import best_rigid_motion
-from orthoglide_env.world.conditions import Conditions
+from orthoglide_env.world.conditions import CONDITION_NAMES, Conditions
 
-#: A reading is an outlier when its residual exceeds this many robust standard deviations
-#: (1.4826 x the median absolute residual, or its instrument's sigma when larger): a normal
-#: reading does so with probability 6e-5, so 60 readings flag a good one once in 270 fits.
-OUTLIER_K: float = 4.0
 #: What to do about an estimate outside the validity range.
 VALIDITY_HINT: str = ("free more parameters, e.g. --params extended, or take readings at "
                       "more postures")
-#: What the report says of a flagged reading, by its cause (:func:`_worst` for the left
-#: out ones, :func:`_misfits` for model error).
-CAUSE_WORDS: dict[str, str] = {
-    "reading": "unlike its repetitions: a mistyped or misread reading",
-    "unrepeated": "no repetition to tell a wrong reading from model error (repeat it to "
-                  "tell)",
-    "model": "its repetitions read the same: model error, kept in the fit",
-}
-#: The warning on model error names this many readings, then counts the rest.
-LISTED_MISFITS: int = 5
-#: At most this fraction of the readings is flagged; beyond it the model, not the
-#: readings, is wrong, and the warning says so.
-MAX_OUTLIER_FRACTION: float = 0.05
-
-
 def layout_and_values(data: Measurements) -> tuple[ReadingLayout, np.ndarray]:
     """The reading layout and the readings of ``data``; tracker readings turned into the machine's
     frame (:func:`align_tracker`); a gauge mounting without a Zero reading is refused
@@ -152,13 +152,6 @@ def align_tracker(design: ReadingLayout, values: np.ndarray) -> np.ndarray:
     return out
 
 
-def left_out_preset(name: str) -> ErrorPreset:
-    """The error preset ``name`` (``ValueError`` naming the presets if unknown)."""
-    if name not in PRESETS:
-        raise ValueError(f"unknown left-out preset '{name}'; choose from {sorted(PRESETS)}")
-    return PRESETS[name]
-
-
 def _every_reading(datas: list[Measurements], name: str) -> np.ndarray | None:
     """Field ``name`` of every reading of every experiment (M, N), or None when one
     reading lacks it."""
@@ -166,59 +159,112 @@ def _every_reading(datas: list[Measurements], name: str) -> np.ndarray | None:
     return None if any(None in row for row in rows) else np.array(rows, dtype=float)
 
 
+def _check_fix(fix: Any) -> None:
+    """``ValueError`` unless ``fix`` maps parameter names to finite numbers."""
+    if not isinstance(fix, dict) or not all(
+            isinstance(k, str) and isinstance(v, numbers.Real) and not isinstance(v, bool)
+            and np.isfinite(v) for k, v in fix.items()):
+        raise ValueError("")
+
+
+def _check_terms(terms: Any) -> None:
+    """``ValueError`` unless ``terms`` is a tuple of term families."""
+    if not isinstance(terms, tuple):
+        raise ValueError("")
+    check_families(terms)
+
+
+def _check_conditions(conditions: Any) -> None:
+    if not isinstance(conditions, Conditions) and conditions not in CONDITION_NAMES:
+        raise ValueError("")
+
+
 @register
-class GaussNewtonCalibrator(Calibrator):
-    """The exact model, any parameter set."""
+class GaussNewtonCalibrator(Estimator):
+    """The exact model, any parameter set.
+
+    Parameters: ``params``, the free parameters (a selection of
+    :mod:`calibrators.estimators.parameters`; ``full``: every parameter (``extended``) and,
+    unless ``fit_world`` says otherwise, the terms of
+    :data:`~calibrators.estimators.consider.FULL_TERMS` on a pitch-error table, whose
+    ``node_spacing`` defaults to :data:`~calibrators.estimators.consider.DEFAULT_NODE_SPACING`);
+    ``sigma``, a dial gauge's noise (mm); ``verify``, leave-one-repetition-out verification;
+    ``prior``, the parameters' zero-mean normal prior; ``fix``, parameters held at known
+    values; ``keep_outliers``, flag outliers but keep them in the fit; ``holdout``, the
+    fraction of readings held out (drawn with ``seed``) and predicted; ``solver``, one of
+    :data:`~calibrators.estimators.solvers.SOLVERS`; ``tracker_sigma``, a laser tracker
+    coordinate's noise (mm); ``explain``: the words on which combinations the data
+    determine and which not (``identifiable``, ``unidentifiable``; they cost more than the
+    fit on large designs); ``conditions``, the lab's (a name or
+    :class:`~orthoglide_env.world.conditions.Conditions`), whose effects the fit does not
+    model but puts in its covariance (:mod:`calibrators.estimators.consider`); under
+    conditions with the tracker's MPE, its readings' sigma comes from it
+    (:func:`~calibrators.estimators.consider.tracker_sigma`) instead; ``left_out``: the
+    error preset whose sizes the machine errors and stand errors the selection leaves out
+    have a priori (their spread goes into the covariance; ``paper`` or ``nominal``: they do
+    not exist, and only a misfit widens it); ``fit_world``: the conditions' terms of these
+    families (:data:`~calibrators.estimators.consider.TERM_FAMILIES`; True: all) are fitted
+    (each coefficient a parameter ``world.<term>`` with its second moment as a normal
+    prior) instead of considered; ``node_spacing``: the lead error's curve as a
+    controller's pitch-error table with nodes this far apart (mm), with its smoothness
+    prior (:func:`~calibrators.estimators.consider.table_prior`).
+    """
 
     name = "gauss-newton"
+    title = "the exact-model fit"
+    _parameter_constraints: ClassVar[dict[str, list[Constraint]]] = {
+        "params": [InstanceOf(str, "a parameter selection (paper6, extended, full, or a "
+                                   "comma list of groups and names)")],
+        "sigma": [Interval(0, None)],
+        "verify": [BOOLEAN],
+        "prior": [Satisfies(check_prior, "a prior (none, auto, a preset and/or "
+                                         "GROUP=SIGMA or NAME=SIGMA)")],
+        "fix": [NONE, Satisfies(_check_fix, "a dict of parameter names to finite numbers")],
+        "keep_outliers": [BOOLEAN],
+        "holdout": [Interval(0, 1, "left")],  # 0: none held out
+        "seed": [Interval(None, None, integer=True)],
+        "solver": [Options(tuple(SOLVERS))],
+        "tracker_sigma": [Interval(0, None, "neither")],
+        "explain": [BOOLEAN],
+        "conditions": [Satisfies(_check_conditions, f"one of {list(CONDITION_NAMES)} or a "
+                                                    "Conditions")],
+        "left_out": [Options(tuple(sorted(PRESETS)))],
+        "fit_world": [BOOLEAN, Satisfies(_check_terms, f"a tuple of term families "
+                                                       f"{list(TERM_FAMILIES)}")],
+        "node_spacing": [NONE, Interval(0, None, "neither")],
+    }
 
-    def estimate(self, data: Measurements, params: str = "paper6",
-                 sigma: float = DEFAULT_SIGMA, *, verify: bool = True,
-                 **options: Any) -> Estimate:
-        """Fit ``data``; ``sigma`` is a dial gauge's noise (mm), ``options`` those of
-        :meth:`estimate_many`."""
-        result = self.estimate_many([data], params, sigma, verify=verify, **options)[0]
+    def __init__(self, *, params: str = "paper6", sigma: float = DEFAULT_SIGMA,
+                 verify: bool = True, prior: str = "auto", fix: dict[str, float] | None = None,
+                 keep_outliers: bool = False, holdout: float = 0.0, seed: int = 0,
+                 solver: str = "gauss-newton", tracker_sigma: float = TRACKER_SIGMA,
+                 explain: bool = True, conditions: Conditions | str = "ideal",
+                 left_out: str = DEFAULT_PRESET, fit_world: bool | tuple[str, ...] = False,
+                 node_spacing: float | None = None) -> None:
+        self.params, self.sigma, self.verify, self.prior = params, sigma, verify, prior
+        self.fix, self.keep_outliers, self.holdout, self.seed = fix, keep_outliers, holdout, seed
+        self.solver, self.tracker_sigma, self.explain = solver, tracker_sigma, explain
+        self.conditions, self.left_out, self.fit_world = conditions, left_out, fit_world
+        self.node_spacing = node_spacing
+        self._validate_params()
+
+    def fit(self, data: Measurements) -> Estimate:
+        """The estimate of ``data`` (:meth:`fit_many` of one experiment)."""
+        result = self.fit_many([data])[0]
         if isinstance(result, Exception):
             raise result
         return result
 
-    def estimate_many(self, datas: list[Measurements], params: str = "paper6",
-                      sigma: float = DEFAULT_SIGMA, *, verify: bool = True, prior: str = "auto",
-                      fix: dict[str, float] | None = None, keep_outliers: bool = False,
-                      holdout: float = 0.0, seed: int = 0, solver: str = "gauss-newton",
-                      tracker_sigma: float = TRACKER_SIGMA, explain: bool = True,
-                      conditions: Conditions | str = "ideal", left_out: str = DEFAULT_PRESET,
-                      fit_world: bool | tuple[str, ...] = False,
-                      node_spacing: float | None = None) -> list[Estimate | Exception]:
-        """:meth:`estimate` of many experiments; ``tracker_sigma``: a laser tracker
-        coordinate's noise (mm); ``conditions``: the lab's (a name or
-        :class:`~orthoglide_env.world.conditions.Conditions`), whose effects the fit does
-        not model but puts in its covariance (:mod:`calibrators.estimators.consider`);
-        under conditions with the tracker's MPE, its readings' sigma comes from it
-        (:func:`~calibrators.estimators.consider.tracker_sigma`) instead;
-        ``left_out``: the error preset whose sizes the machine errors and stand errors the
-        selection leaves out have a priori (their spread goes into the covariance;
-        ``paper`` or ``nominal``: they do not exist, and only a misfit widens it);
-        ``params`` ``full``: every parameter (``extended``) and, unless ``fit_world`` says
-        otherwise, the terms of :data:`~calibrators.estimators.consider.FULL_TERMS` on a
-        pitch-error table (``node_spacing`` default
-        :data:`~calibrators.estimators.consider.DEFAULT_NODE_SPACING`);
-        ``fit_world``: the conditions' terms of these families
-        (:data:`~calibrators.estimators.consider.TERM_FAMILIES`; True: all) are fitted
-        (each coefficient a parameter ``world.<term>`` with its second moment as a normal
-        prior) instead of considered; ``node_spacing``: the lead error's curve as a
-        controller's pitch-error table with nodes this far apart (mm), with its smoothness
-        prior (:func:`~calibrators.estimators.consider.table_prior`).
-        Those of one design (the same readings of the same mountings at the same
-        postures, as a fixed agent takes them on every machine) are fitted together, in
-        one batched solve.  A failure is returned in
-        place of its estimate, not raised.  ``explain=False`` leaves out the words on
-        which combinations the data determine and which not (``identifiable``,
-        ``unidentifiable``), which cost more than the fit on large designs."""
+    def fit_many(self, datas: list[Measurements]) -> list[Estimate | Exception]:
+        """:meth:`fit` of many experiments: those of one design (the same readings of the
+        same mountings at the same postures, as a fixed agent takes them on every machine)
+        are fitted together, in one batched solve.  A failure is returned in place of its
+        estimate, not raised."""
         out: list[Estimate | Exception] = [ValueError("not fitted")] * len(datas)
-        if isinstance(conditions, str):
-            conditions = Conditions(conditions)
-        if params == "full" and fit_world is False:
+        conditions = (Conditions(self.conditions) if isinstance(self.conditions, str)
+                      else self.conditions)
+        fit_world, node_spacing = self.fit_world, self.node_spacing
+        if self.params == "full" and fit_world is False:
             fit_world = FULL_TERMS
             node_spacing = DEFAULT_NODE_SPACING if node_spacing is None else node_spacing
         terms = check_families(TERM_FAMILIES if fit_world is True else fit_world or ())
@@ -240,11 +286,12 @@ class GaussNewtonCalibrator(Calibrator):
             key = (design.mountings, design.specs, design.rho.tobytes(),
                    design.mounting.tobytes(), reach)
             groups.setdefault(key, []).append(k)
-        options = {"params": params, "prior": prior, "fix": fix or {}, "holdout": holdout,
-                   "seed": seed, "solver": solver, "keep_outliers": keep_outliers,
-                   "sigma": sigma, "tracker_sigma": tracker_sigma, "verify": verify,
-                   "explain": explain, "conditions": conditions,
-                   "left_out": left_out_preset(left_out), "terms": terms,
+        options = {"params": self.params, "prior": self.prior, "fix": self.fix or {},
+                   "holdout": self.holdout, "seed": self.seed, "solver": self.solver,
+                   "keep_outliers": self.keep_outliers, "sigma": self.sigma,
+                   "tracker_sigma": self.tracker_sigma, "verify": self.verify,
+                   "explain": self.explain, "conditions": conditions,
+                   "left_out": PRESETS[self.left_out], "terms": terms,
                    "spacing": node_spacing}
         for members in groups.values():
             design = prepared[members[0]][0]
@@ -315,7 +362,7 @@ class GaussNewtonCalibrator(Calibrator):
                              world=None if world is None else world[rows])
 
         m_count = len(values)
-        held = _holdout(design, holdout, seed) if holdout else np.zeros(values.shape[1], bool)
+        held = holdout_mask(design, holdout, seed) if holdout else np.zeros(values.shape[1], bool)
         mask = np.tile(~held, (m_count, 1))
         results = fit(np.arange(m_count), mask).split()
         outliers: list[list[int]] = [[] for _ in range(m_count)]
@@ -325,8 +372,8 @@ class GaussNewtonCalibrator(Calibrator):
         while len(pending):
             pending = np.array([m for m in pending if results[m].converged[0] and len(
                 outliers[m]) < MAX_OUTLIER_FRACTION * values.shape[1]], dtype=int)
-            flagged, why = _worst(np.array([results[m].residuals[0] for m in pending]),
-                                  group, noise)
+            flagged, why = next_outlier(np.array([results[m].residuals[0] for m in pending]),
+                                        group, noise)
             for m, k, cause in zip(pending, flagged, why, strict=True):
                 if k >= 0:
                     outliers[m].append(int(k))
@@ -354,11 +401,11 @@ class GaussNewtonCalibrator(Calibrator):
         every = residuals.copy()
         converged = np.array([r.converged[0] for r in results])
         for m in np.flatnonzero(~mask.all(axis=1) & converged):
-            every[m] = np.where(mask[m], residuals[m], _held_out(
+            every[m] = np.where(mask[m], residuals[m], held_out_residuals(
                 design, values[m], results[m].theta[0], mask[m], ~mask[m],
                 None if world is None else world[m]))
-        repeated, _ = _repetition_means(every, group)
-        misfits = _misfits(residuals, group, noise)
+        repeated, _ = repetition_means(every, group)
+        misfits = model_misfits(residuals, group, noise)
         for m, result in enumerate(results):
             if not result.converged[0]:
                 out.append(RuntimeError("the exact-model fit did not converge"))
@@ -431,14 +478,14 @@ class GaussNewtonCalibrator(Calibrator):
                                "look for a gauge that moved or a slipping stand"))
         residuals = result.residuals[0]
         if held.any():
-            residuals = np.where(held, _held_out(design, values, theta, mask, held, world),
-                                 residuals)
+            residuals = np.where(held, held_out_residuals(design, values, theta, mask, held,
+                                                          world), residuals)
         return Estimate(
             strategy=self.name, params=params, drho=theta[:3], dL=theta[3:6], covariance=cov,
             residuals=residuals, singular_values=np.sqrt(np.clip(eigenvalues, 0, None)),
             crlb=np.sqrt(np.diag(result.covariance[0])), weak_directions=[],
             n_readings=int(mask.sum()), experiment_time_s=data.experiment_time_s,
-            verification_rms_mm=self._verify(design, values, result, mask, data, world)
+            verification_rms_mm=verification_rms(design, values, result, mask, data, world)
             if verify else None,
             iterations=int(result.iterations[0]), sigma=sigma,
             # Physical units, for readings of unit variance (as the paper's fit reports it).
@@ -457,33 +504,6 @@ class GaussNewtonCalibrator(Calibrator):
             considered=considered.effects,
             **_lead(result, every, considered.names, error_cov, conditions, spacing),
         )
-
-    def _verify(self, design: ReadingLayout, values: np.ndarray, result: BatchFit, mask: np.ndarray,
-                data: Measurements, world: np.ndarray | None) -> float | None:
-        """Leave one repetition out (runs of repetitions beyond
-        :data:`~calibrators.estimators.paper_linear.MAX_FOLDS`, so that the cost stays
-        linear in the readings): fit without it (one Gauss-Newton step from the fit of
-        all, :func:`~calibrators.estimators.exact_fit.newton_step`), predict its readings
-        (each mounting's zero from the rest); the RMS over every held-out reading (mm)."""
-        reps = np.array([m.repetition for m in data.items])
-        errors = []
-        held_out = folds(data)
-        if len(held_out) < 2:
-            return None  # nothing to hold out: one repetition is the whole experiment
-        for held in held_out:
-            test = mask & np.isin(reps, list(held))
-            train = mask & ~test
-            try:
-                theta = newton_step(design, values[None], train[None], result.sigma,
-                                    result.free, result.theta, result.prior, result.scale,
-                                    world=None if world is None else world[None])[0]
-            except np.linalg.LinAlgError:
-                continue
-            held = _held_out(design, values, theta, train, test, world)[test]
-            errors.append(held[np.isfinite(held)])
-        errors = np.concatenate(errors) if errors else np.zeros(0)
-        return float(np.sqrt(np.mean(errors**2))) if errors.size else None
-
 
 def _lead(result: BatchFit, every: list[str], considered: tuple[str, ...],
           error_cov: np.ndarray, conditions: Conditions, spacing: float | None
@@ -516,129 +536,6 @@ def _lead(result: BatchFit, every: list[str], considered: tuple[str, ...],
             "node_spacing": spacing}
 
 
-def _held_out(design: ReadingLayout, values: np.ndarray, theta: np.ndarray, train: np.ndarray,
-              test: np.ndarray, world: np.ndarray | None = None) -> np.ndarray:
-    """Residuals of the ``test`` readings predicted by ``theta`` (with the fitted terms of
-    ``world``, (N, K), when there are), each mounting's zero taken from its ``train``
-    readings (NaN where a mounting has none)."""
-    out = np.full(len(values), np.nan)
-    if not test.any():
-        return out  # the usual fit: every reading used, none to predict
-    n = len(design.space.names)
-    raw = values - predict(theta[:n], design)
-    if world is not None:
-        raw -= world @ theta[n:]
-    for k in range(len(design.mountings)):
-        mine = design.mounting == k
-        if (mine & train).any():
-            out[mine & test] = raw[mine & test] - raw[mine & train].mean()
-    return out
-
-
-def _holdout(design: ReadingLayout, fraction: float, seed: int) -> np.ndarray:
-    """A random ``fraction`` of the readings, never a mounting's last remaining one."""
-    if not 0 < fraction < 1:
-        raise ValueError(f"--holdout must be a fraction in (0, 1), got {fraction:g}")
-    rng = np.random.default_rng(seed)
-    held = np.zeros(len(design), dtype=bool)
-    held[rng.permutation(len(design))[: round(fraction * len(design))]] = True
-    for k in range(len(design.mountings)):
-        mine = np.flatnonzero(design.mounting == k)
-        if held[mine].all():
-            held[mine[0]] = False
-    return held
-
-
-def _repetition_means(residuals: np.ndarray, group: np.ndarray
-                      ) -> tuple[np.ndarray, np.ndarray]:
-    """Per reading of each machine (``residuals`` (..., N)), the mean residual of its
-    repetitions (the other finite residuals of its group; NaN without one) and how many
-    there are, in one pass over every machine's readings.  Each machine's bins are its
-    own, filled in the order of its readings: its numbers are those it gets alone."""
-    used = np.isfinite(residuals)
-    r = np.where(used, residuals, 0.0)
-    size = int(group.max()) + 1 if group.size else 0
-    machines = int(np.prod(residuals.shape[:-1], dtype=int))
-    bins = (group + size * np.arange(machines)[:, None]).ravel()
-
-    def per_reading(weights: np.ndarray) -> np.ndarray:
-        sums = np.bincount(bins, weights.ravel(), minlength=machines * size)
-        return np.take_along_axis(sums.reshape(machines, size),
-                                  np.broadcast_to(group, (machines, len(group))), axis=1)
-
-    total = per_reading(r).reshape(residuals.shape) - r
-    count = per_reading(used.astype(float)).reshape(residuals.shape) - used
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(count > 0, total / count, np.nan), count
-
-
-def _nanmedian(values: np.ndarray) -> np.ndarray:
-    """``np.nanmedian`` of each row (M, N) over its last axis, to the bit (the mean of the
-    two middle finite values, or the middle one twice), and NaN for a row without one,
-    with no warning: the rows of a batch at once."""
-    ordered = np.sort(values, axis=-1)  # NaN last
-    count = np.sum(~np.isnan(values), axis=-1)
-    low, high = (np.maximum(i, 0)[:, None] for i in ((count - 1) // 2, count // 2))
-    middle = (np.take_along_axis(ordered, low, -1) + np.take_along_axis(ordered, high, -1))
-    return np.where(count > 0, middle[:, 0] / 2, np.nan)
-
-
-def _first_max(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each row's (M, N) first largest finite value's index and the value, (-1, NaN) for a
-    row without one (``np.nanargmax``'s choice)."""
-    finite = np.isfinite(values).any(axis=-1)
-    index = np.where(finite, np.argmax(np.where(np.isnan(values), -np.inf, values), axis=-1),
-                     -1)
-    return index, np.where(finite, np.take_along_axis(
-        values, np.maximum(index, 0)[:, None], -1)[:, 0], np.nan)
-
-
-def _worst(residuals: np.ndarray, group: np.ndarray, noise: np.ndarray
-           ) -> tuple[np.ndarray, list[str]]:
-    """The reading to leave out next of each machine (``residuals`` (M, N)), -1 for none,
-    and why.  First the reading furthest from its repetitions, beyond :data:`OUTLIER_K`
-    robust standard deviations of that spread (``reading``: a mistyped or misread one; the
-    model cannot tell it, since repetitions share the model's error); else the unrepeated
-    reading furthest from the model, beyond as many of the residuals' (``unrepeated``).  A
-    repeated reading far from the model whose repetitions agree is model error and is not
-    left out (:func:`_misfits`)."""
-    if not len(residuals):
-        return np.zeros(0, dtype=int), []
-    sigma = weighting_sigma(noise)  # gauges and a tracker differ
-    repeated, count = _repetition_means(residuals, group)
-    # In units of its own spread: a reading and the mean of n others differ by
-    # sigma * sqrt(1 + 1/n) when both are only noise.
-    with np.errstate(divide="ignore"):
-        departure = np.abs(residuals - repeated) / (sigma * np.sqrt(1 + 1 / count))
-    # A row with a finite value has a finite median: the comparisons below see no NaN.
-    spread = 1.4826 * _nanmedian(departure)
-    k, worst = _first_max(departure)
-    with np.errstate(invalid="ignore"):
-        reading = (k >= 0) & (worst > OUTLIER_K * np.maximum(1.0, spread))
-    score = np.abs(residuals) / sigma
-    robust = 1.4826 * _nanmedian(score)
-    score[count > 0] = np.nan
-    j, worst = _first_max(score)
-    with np.errstate(invalid="ignore"):
-        unrepeated = ~reading & (j >= 0) & (worst > OUTLIER_K * np.maximum(1.0, robust))
-    index = np.where(reading, k, np.where(unrepeated, j, -1))
-    return index, ["reading" if r else "unrepeated" if u else ""
-                   for r, u in zip(reading, unrepeated, strict=True)]
-
-
-def _misfits(residuals: np.ndarray, group: np.ndarray, noise: np.ndarray
-             ) -> list[np.ndarray]:
-    """Of each machine (``residuals`` (M, N)), the used readings beyond :data:`OUTLIER_K`
-    robust standard deviations of the residuals whose repetitions read with them: model
-    error, kept."""
-    score = np.abs(residuals) / weighting_sigma(noise)
-    robust = 1.4826 * _nanmedian(score)
-    _, count = _repetition_means(residuals, group)
-    with np.errstate(invalid="ignore"):
-        far = (score > OUTLIER_K * np.maximum(1.0, robust)[:, None]) & (count > 0)
-    return [np.flatnonzero(row) for row in far]
-
-
 def _where(data: Measurements, k: int, residuals: np.ndarray | None = None,
            repeated: np.ndarray | None = None) -> str:
     m = data.items[k]
@@ -650,6 +547,7 @@ def _where(data: Measurements, k: int, residuals: np.ndarray | None = None,
     return f"{place} ({m.gauge.slot}, {m.posture}, repetition {m.repetition}{detail})"
 
 
-#: The earlier name of :func:`layout_and_values` ("design" means a MachineDesign).
+#: The earlier name of :func:`layout_and_values`, kept for scripts that import it.
 design_of = layout_and_values
+
 __all__ = ["GaussNewtonCalibrator", "ParameterSpace", "design_of", "layout_and_values"]

@@ -8,17 +8,23 @@ solved with the Moore-Penrose pseudo-inverse for the full set or for drho or dL 
 
 from __future__ import annotations
 
-from typing import Any
+from typing import ClassVar
 
 import numpy as np
 
 from calibrators.estimators.base import (
     PARAM_NAMES,
     PARAM_SETS,
-    Calibrator,
     Estimate,
-    check_params,
+    Estimator,
     register,
+)
+from calibrators.estimators.constraints import (
+    BOOLEAN,
+    Constraint,
+    Interval,
+    InvalidParameterError,
+    Options,
 )
 from calibrators.estimators.differences import (
     Differences,
@@ -26,14 +32,12 @@ from calibrators.estimators.differences import (
     differences,
     paper_matrix,
 )
+from calibrators.estimators.holdout import MAX_FOLDS as MAX_FOLDS
+from calibrators.estimators.holdout import folds
 from calibrators.estimators.identifiability import analyse
 from calibrators.measurements import Measurements
 from orthoglide_env.instruments.dial import DEFAULT_SIGMA
 from orthoglide_env.instruments.slots import GaugeSpec
-
-#: Held-out sets of the verification: up to this many repetitions each is one; beyond,
-#: this many runs of consecutive ones, so that its cost stays linear in the readings.
-MAX_FOLDS: int = 10
 
 
 class NeedsExactFit(ValueError):
@@ -41,50 +45,54 @@ class NeedsExactFit(ValueError):
     message names no option: each command says how its user reaches that fit."""
 
 
-def folds(data: Measurements) -> list[set[int]]:
-    """The held-out sets of repetitions of the verification (see :data:`MAX_FOLDS`): those
-    with readings away from Zero (the last Zero opens a repetition of its own)."""
-    reps = sorted({m.repetition for m in data.items if not m.is_zero})
-    if not reps:
-        return []
-    return [set(run.tolist()) for run in np.array_split(np.array(reps, dtype=int),
-                                                         min(len(reps), MAX_FOLDS))]
-
-
 @register
-class PaperCalibrator(Calibrator):
-    """The paper's linear least-squares solution of eq. (10)."""
+class PaperCalibrator(Estimator):
+    """The paper's linear least-squares solution of eq. (10).
+
+    Parameters: ``params``, the parameter set (:data:`~calibrators.estimators.base.PARAM_SETS`);
+    ``sigma``, a dial gauge's repeatability (mm); ``verify``, leave-one-repetition-out
+    verification.  What only the exact-model fit takes (a prior, fixed parameters, the
+    lab's conditions, ...) is refused with :class:`NeedsExactFit`.
+    """
 
     name = "paper"
+    title = "the paper's linear fit (eq. 10)"
+    _parameter_constraints: ClassVar[dict[str, list[Constraint]]] = {
+        "params": [Options(tuple(PARAM_SETS))],
+        "sigma": [Interval(0, None)],
+        "verify": [BOOLEAN],
+    }
 
-    def solve(self, rows: Differences, free: tuple[int, ...], sigma: float
-              ) -> tuple[np.ndarray, np.ndarray]:
+    def __init__(self, *, params: str = "paper6", sigma: float = DEFAULT_SIGMA,
+                 verify: bool = True) -> None:
+        self.params, self.sigma, self.verify = params, sigma, verify
+        self._validate_params()
+
+    def _validate_params(self) -> None:
+        try:
+            super()._validate_params()
+        except InvalidParameterError as exc:
+            if exc.parameter != "params":
+                raise
+            raise NeedsExactFit(f"{self.title} estimates {list(PARAM_SETS)} only, not "
+                                f"'{self.params}'; the exact-model fit estimates any "
+                                "parameters") from None
+
+    @classmethod
+    def refuse(cls, unknown: list[str]) -> ValueError:
+        return NeedsExactFit(f"{cls.title} takes no {', '.join(unknown)}; the exact-model "
+                             "fit does")
+
+    def solve(self, rows: Differences, free: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
         """Parameters (all six, fixed ones 0) and their covariance over the free ones."""
         pinv = np.linalg.pinv(paper_matrix(rows)[:, list(free)])
         theta = np.zeros(6)
         theta[list(free)] = pinv @ rows.values
-        return theta, sigma**2 * pinv @ rows.cov_unit @ pinv.T
+        return theta, self.sigma**2 * pinv @ rows.cov_unit @ pinv.T
 
-    def estimate(self, data: Measurements, params: str = "paper6", sigma: float = DEFAULT_SIGMA,
-                 *, verify: bool = True, **options: Any) -> Estimate:
-        used = [name for name, given in (
-            ("prior", options.get("prior", "none") not in ("auto", "none")),
-            ("fix", bool(options.get("fix"))), ("holdout", bool(options.get("holdout"))),
-            ("keep_outliers", bool(options.get("keep_outliers"))),
-            ("solver", options.get("solver", "gauss-newton") != "gauss-newton"),
-            ("fit_world", bool(options.get("fit_world"))),
-            ("node_spacing", options.get("node_spacing") is not None),
-            ("conditions", str(getattr(options.get("conditions", "ideal"), "name",
-                                       options.get("conditions", "ideal"))) != "ideal"))
-            if given]
-        if used:
-            raise NeedsExactFit(f"the paper's linear fit (eq. 10) takes no "
-                                f"{', '.join(used)}; the exact-model fit does")
-        if params not in PARAM_SETS:
-            raise NeedsExactFit(f"the paper's linear fit (eq. 10) estimates "
-                                f"{list(PARAM_SETS)} only, not '{params}'; the exact-model "
-                                "fit estimates any parameters")
-        free = check_params(params)
+    def fit(self, data: Measurements) -> Estimate:
+        """The estimate of ``data``: readings of dial gauges only."""
+        free = PARAM_SETS[self.params]
         if any(not isinstance(m.gauge, GaugeSpec) for m in data.items):
             raise NeedsExactFit("the paper's linear fit (eq. 10) reads dial gauges only; "
                                 "the exact-model fit reads a tracker's readings too")
@@ -92,20 +100,20 @@ class PaperCalibrator(Calibrator):
         if len(rows) < len(free):
             raise ValueError(f"only {len(rows)} usable differences for {len(free)} parameters: "
                              "too many readings were not valid")
-        theta, cov = self.solve(rows, free, sigma)
-        ident = analyse(paper_matrix(rows)[:, list(free)], rows.cov_unit, sigma,
+        theta, cov = self.solve(rows, free)
+        ident = analyse(paper_matrix(rows)[:, list(free)], rows.cov_unit, self.sigma,
                         tuple(PARAM_NAMES[k] for k in free))
         return Estimate(
-            strategy=self.name, params=params, drho=theta[:3], dL=theta[3:], covariance=cov,
-            residuals=rows.values - paper_matrix(rows) @ theta,
+            strategy=self.name, params=self.params, drho=theta[:3], dL=theta[3:],
+            covariance=cov, residuals=rows.values - paper_matrix(rows) @ theta,
             singular_values=ident.singular_values, crlb=ident.crlb,
             weak_directions=ident.weak_directions, n_readings=len(data),
             experiment_time_s=data.experiment_time_s,
-            verification_rms_mm=self.verify(data, free, sigma) if verify else None,
-            sigma=sigma, fisher=ident.fisher, readings=data,
+            verification_rms_mm=self.verify_fit(data, free) if self.verify else None,
+            sigma=self.sigma, fisher=ident.fisher, readings=data,
         )
 
-    def verify(self, data: Measurements, free: tuple[int, ...], sigma: float) -> float | None:
+    def verify_fit(self, data: Measurements, free: tuple[int, ...]) -> float | None:
         """Leave-one-repetition-out (runs of repetitions beyond :data:`MAX_FOLDS`): fit
         without them, predict their differences; the RMS over every held-out difference
         (mm).  None with fewer than two repetitions.  A held-out set that cannot be fitted
@@ -123,6 +131,6 @@ class PaperCalibrator(Calibrator):
                 continue
             if len(train) < len(free) or not len(test):
                 continue
-            theta, _ = self.solve(train, free, sigma)
+            theta, _ = self.solve(train, free)
             errors.append(test.values - paper_matrix(test) @ theta)
         return float(np.sqrt(np.mean(np.concatenate(errors) ** 2))) if errors else None

@@ -107,6 +107,22 @@ def _preset_sigmas(preset_name: str, space: ParameterSpace) -> np.ndarray:
     return preset_sigmas(PRESETS[preset_name], space)
 
 
+def check_prior(prior: str) -> None:
+    """``ValueError`` saying what is wrong with the form of ``prior`` (which names and groups
+    exist depends on the readings' mountings, and is checked when they are fitted)."""
+    for token in (t.strip() for t in str(prior).split(",") if t.strip()):
+        if token in ("none", "auto"):
+            continue
+        if "=" not in token:
+            if token not in PRESETS:
+                raise ValueError(f"unknown prior '{token}': use none, auto, a preset "
+                                 f"({', '.join(sorted(PRESETS))}) or GROUP=SIGMA")
+            continue
+        (key, value), = parse_assignments([token], "prior").items()
+        if value <= 0:
+            raise ValueError(f"prior sigma of '{key}' must be > 0, got {value:g}")
+
+
 def prior_sigmas(prior: str, space: ParameterSpace, free: np.ndarray) -> np.ndarray:
     """Prior sigma of every parameter (``inf``: no prior).  ``prior``: ``none``, ``auto``,
     a preset name and/or ``GROUP=SIGMA`` / ``NAME=SIGMA`` overrides, comma-separated."""

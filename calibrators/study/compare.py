@@ -27,13 +27,12 @@ import numpy as np
 import orthoglide_env
 from calibrators.agents import Agent, get_agent
 from calibrators.estimators.base import Estimate
+from calibrators.estimators.catalogue import for_study, get_estimator
 from calibrators.estimators.prediction import predicted_rigid_mm
 from calibrators.study.engines import results
 from calibrators.study.episodes import (
     DEFAULT_BUDGET_S,
     Episode,
-    estimate_many,
-    get_estimator,
     machine_seed,
     measurements_of,
     run_episode,
@@ -187,8 +186,8 @@ def _curves(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
         datas = [measurements_of(e.run.records, e.run.time_s, until_s=fraction * e.run.time_s,
                                  design=e.run.truth.design)
                  for e in episodes]
-        fitted = estimates if fraction == 1.0 else estimate_many(
-            datas, name, episodes[0].run.sigma, config.conditions, config.errors)
+        fitted = estimates if fraction == 1.0 else for_study(
+            name, episodes[0].run.sigma, config.conditions, config.errors).fit_many(datas)
         for k, (episode, report) in enumerate(zip(episodes, _score(episodes, fitted),
                                                   strict=True)):
             points[k].append([fraction * episode.run.time_s, report.tcp_after.rigid.rms])
@@ -250,8 +249,8 @@ def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]
                 continue
             # The machines' preset sizes the errors an estimator leaves out: its a-priori
             # belief of what the machine holds, not the machine itself.
-            estimates = estimate_many([e.run.measurements for e in mine], name,
-                                      mine[0].run.sigma, config.conditions, config.errors)
+            estimates = for_study(name, mine[0].run.sigma, config.conditions,
+                                  config.errors).fit_many([e.run.measurements for e in mine])
             curves = (_curves(mine, name, estimates, config)
                       if name == config.curve_estimator
                       else [[] for _ in mine])

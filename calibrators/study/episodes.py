@@ -22,14 +22,19 @@ import numpy as np
 
 from calibrators.agents import Agent
 from calibrators.agents.base import PlannedAgent
-from calibrators.estimators.base import Estimate, get_strategy
+
+# The catalogue moved to calibrators.estimators.catalogue; its names stay here for
+# earlier scripts.
+from calibrators.estimators.catalogue import CATALOGUE as ESTIMATORS  # noqa: F401
+from calibrators.estimators.catalogue import estimate as estimate
+from calibrators.estimators.catalogue import estimate_many as estimate_many
+from calibrators.estimators.catalogue import for_study, get_estimator
 from calibrators.measurements import ZERO_RHO, Measurement, Measurements, paper_rhos
 from orthoglide_env.envs.lab import Record
 from orthoglide_env.lab.operations import DEFAULT_BUDGET_S as DEFAULT_BUDGET_S  # every command's
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
-from orthoglide_env.model.errors import DEFAULT_PRESET, MachineParams
-from orthoglide_env.world.conditions import IDEAL, Conditions
+from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.world.truth import World
 
 #: Paper postures by their control coordinates, to label the notebook's readings.
@@ -58,78 +63,6 @@ def measurements_of(records: list[Record], time_s: float = 0.0,
     return Measurements(items, time_s if until_s is None else min(time_s, until_s), design)
 
 
-@dataclass(frozen=True)
-class EstimatorSpec:
-    """An estimator of the comparison: a strategy's estimate with its options."""
-
-    strategy: str
-    params: str
-    prior: str = "auto"
-    #: The lab's effects fitted (with their sizes as priors), not only considered: the
-    #: term families of :data:`~calibrators.estimators.consider.TERM_FAMILIES`, or True
-    #: for all.
-    fit_world: bool | tuple[str, ...] = False
-
-
-#: The estimators ``compare`` offers, by name.
-ESTIMATORS: dict[str, EstimatorSpec] = {
-    "paper": EstimatorSpec("paper", "paper6", "none"),
-    "paper6": EstimatorSpec("gauss-newton", "paper6", "none"),
-    "extended": EstimatorSpec("gauss-newton", "extended", "auto"),
-    "extended-base": EstimatorSpec("gauss-newton", "extended", "none"),
-    "extended-world": EstimatorSpec("gauss-newton", "extended", "auto", fit_world=True),
-    "full": EstimatorSpec("gauss-newton", "full", "auto"),
-}
-
-
-def get_estimator(name: str) -> EstimatorSpec:
-    if name not in ESTIMATORS:
-        raise ValueError(f"unknown estimator '{name}'; choose from {list(ESTIMATORS)}")
-    return ESTIMATORS[name]
-
-
-def _world_options(strategy: object, spec: EstimatorSpec, conditions: Conditions,
-                   left_out: str) -> dict[str, Any]:
-    """What an exact-model fit knows beyond its readings: the effects of ``conditions``
-    (which it fits, or puts into its covariance), and the errors it leaves out at the
-    sizes of the preset ``left_out``; the paper's linear fit is the paper's, white noise
-    only."""
-    return ({"conditions": conditions, "left_out": left_out, "fit_world": spec.fit_world}
-            if hasattr(strategy, "estimate_many") else {})
-
-
-def estimate(data: Measurements, name: str, sigma: float, conditions: Conditions = IDEAL,
-             left_out: str = DEFAULT_PRESET) -> Estimate:
-    """Estimate with the named estimator of :data:`ESTIMATORS`, for readings taken under
-    ``conditions`` on a machine whose errors are of the preset ``left_out``'s size."""
-    spec = get_estimator(name)
-    strategy = get_strategy(spec.strategy)
-    return strategy.estimate(data, spec.params, sigma, verify=False, prior=spec.prior,
-                             **_world_options(strategy, spec, conditions, left_out))
-
-
-def estimate_many(datas: list[Measurements], name: str, sigma: float,
-                  conditions: Conditions = IDEAL, left_out: str = DEFAULT_PRESET
-                  ) -> list[Estimate | Exception]:
-    """:func:`estimate` of many experiments, batched where the estimator can (experiments
-    of one design are fitted together, without the words on what the data determine); a
-    failure comes back in place of its estimate."""
-    spec = get_estimator(name)
-    strategy = get_strategy(spec.strategy)
-    if hasattr(strategy, "estimate_many"):
-        # A comparison scores estimates; it has no reader for their words.
-        return strategy.estimate_many(datas, spec.params, sigma, verify=False,
-                                      prior=spec.prior, explain=False,
-                                      **_world_options(strategy, spec, conditions, left_out))
-    out: list[Estimate | Exception] = []
-    for data in datas:
-        try:
-            out.append(estimate(data, name, sigma, conditions, left_out))
-        except (ValueError, RuntimeError, np.linalg.LinAlgError) as exc:
-            out.append(exc)
-    return out
-
-
 def make_estimator(name: str = "extended", design: MachineDesign = PROTOTYPE
                    ) -> Callable[[list[Record], float], MachineParams]:
     """The lab env's ``estimator`` for its accuracy reward: notebook and sigma to the
@@ -137,7 +70,7 @@ def make_estimator(name: str = "extended", design: MachineDesign = PROTOTYPE
     get_estimator(name)
 
     def estimator(records: list[Record], sigma: float) -> MachineParams:
-        return estimate(measurements_of(records, design=design), name, sigma).machine
+        return for_study(name, sigma).fit(measurements_of(records, design=design)).machine
 
     return estimator
 
