@@ -15,7 +15,12 @@ from typing import Any
 
 from calibrators.cli.common import UsageError
 from calibrators.estimators.base import Estimate, Estimator
-from calibrators.estimators.catalogue import CATALOGUE, get_estimator
+from calibrators.estimators.catalogue import (
+    CATALOGUE,
+    DEFAULT_ESTIMATOR,
+    for_readings,
+    get_estimator,
+)
 from calibrators.estimators.consider import (
     DEFAULT_NODE_SPACING,
     FULL_TERMS,
@@ -31,10 +36,6 @@ from calibrators.measurements import Measurements
 from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS
 from orthoglide_env.world.conditions import IDEAL, Conditions
 
-#: What ``calibrate`` and ``fit`` fit without ``--estimator``: every error and, under a
-#: real lab's conditions, its terms, because a fit of fewer parameters than the machine
-#: has can hand a user a wrong number with small error bars.
-DEFAULT_ESTIMATOR = "full"
 #: ``--strategy``'s names (the estimator classes' names) and the catalogue's estimators
 #: they stand for.
 STRATEGIES: dict[str, str] = {"gauss-newton": "full", "paper": "paper"}
@@ -170,17 +171,15 @@ def estimator(args: argparse.Namespace, sigma: float | None = None,
     try:
         chosen = get_estimator(name)
         given = config(args)
-        if conditions.name != IDEAL.name or chosen.takes("conditions"):
-            given["conditions"] = conditions
         # The machine's preset and the run's seed (which draws the hold-out) are facts
         # of the run; an estimator that has no use for them is not refused for them.
-        context = {"left_out": left_out(args), "seed": args.seed,
-                   **({} if sigma is None else {"sigma": sigma})}
+        context = {"left_out": left_out(args), "seed": args.seed}
         given.update({key: value for key, value in context.items()
                       if chosen.takes(key) and key not in given})
-        return chosen.clone(**given)
+        chosen = chosen.clone(**given)
+        return chosen if sigma is None else for_readings(chosen, sigma, conditions)
     except NeedsExactFit as exc:
-        raise _use_exact(exc) from None
+        raise use_exact(exc) from None
     except InvalidParameterError as exc:
         flags = [o.flag for o in OPTIONS if o.parameter == exc.parameter]
         raise UsageError(f"{flags[0] if flags else '--estimator'}: {exc}") from None
@@ -190,7 +189,7 @@ def estimator(args: argparse.Namespace, sigma: float | None = None,
         raise UsageError(str(exc)) from None
 
 
-def _use_exact(exc: NeedsExactFit) -> UsageError:
+def use_exact(exc: NeedsExactFit) -> UsageError:
     """What the paper's fit refuses, with the estimators that can."""
     exact = [n for n, est in CATALOGUE.items() if est.name == DEFAULT_STRATEGY]
     return UsageError(f"{exc}: use an exact-model estimator, --estimator {' or '.join(exact)}")
@@ -213,4 +212,4 @@ def estimate(args: argparse.Namespace, data: Measurements, sigma: float,
     try:
         return estimator(args, sigma, conditions).fit(data)
     except NeedsExactFit as exc:
-        raise _use_exact(exc) from None
+        raise use_exact(exc) from None

@@ -38,19 +38,18 @@ def run(args: argparse.Namespace) -> None:
         raise UsageError(f"--plan {args.plan}: the readings are of another design than the "
                          f"plan's: {str(exc).splitlines()[0]}") from None
     try:
-        fit = Fit(data, strategy=args.strategy, params=estimator_options.params_of(args),
-                  sigma=args.sigma, resolution=args.resolution,
-                  conditions=conditions_of(args), plan=plan,
-                  options=estimator_options.options(args))
+        fit = Fit(data, estimator=estimator_options.estimator(args), sigma=args.sigma,
+                  resolution=args.resolution, conditions=conditions_of(args), plan=plan)
     except SheetError as exc:
         raise UsageError(f"--plan {args.plan}: {exc}") from None
+    except NeedsExactFit as exc:
+        raise estimator_options.use_exact(exc) from None
     if args.to_csv:
         data.to_csv(args.to_csv)
     try:
         est = fit.run().estimate
     except NeedsExactFit as exc:
-        raise UsageError(f"{exc}: use --strategy {estimator_options.DEFAULT_STRATEGY}"
-                         ) from None
+        raise estimator_options.use_exact(exc) from None
     save(est, args)
     emit(report(est, None), args.json)
 

@@ -35,6 +35,12 @@ CATALOGUE: dict[str, Estimator] = {
 }
 
 
+#: What ``calibrate``, ``fit`` and :class:`calibrators.workflow.fit.Fit` fit unless told:
+#: every error and, under a real lab's conditions, its terms, because a fit of fewer
+#: parameters than the machine has can hand a user a wrong number with small error bars.
+DEFAULT_ESTIMATOR = "full"
+
+
 def get_estimator(name: str, **config: Any) -> Estimator:
     """A new estimator configured as the catalogue's ``name``, but for ``config`` (any of
     its class's parameters, e.g. ``sigma``, ``conditions``, ``left_out``, ``verify``); an
@@ -43,6 +49,18 @@ def get_estimator(name: str, **config: Any) -> Estimator:
     if name not in CATALOGUE:
         raise ValueError(f"unknown estimator '{name}'; choose from {list(CATALOGUE)}")
     return CATALOGUE[name].clone(**config)
+
+
+def for_readings(estimator: Estimator, sigma: float, conditions: Conditions = IDEAL
+                 ) -> Estimator:
+    """``estimator`` set for readings of noise ``sigma`` (mm, one reading's standard
+    deviation) taken under ``conditions``; one that does not take the lab's conditions
+    (the paper's linear fit) is refused for any but ideal ones, since it would read their
+    effects as white noise."""
+    given: dict[str, Any] = {"sigma": sigma}
+    if conditions.name != IDEAL.name or estimator.takes("conditions"):
+        given["conditions"] = conditions
+    return estimator.clone(**given)
 
 
 def for_study(name: str, sigma: float, conditions: Conditions = IDEAL,
