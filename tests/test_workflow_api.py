@@ -126,7 +126,7 @@ def test_a_fit_refuses_a_sheet_its_plan_does_not_hold(staged) -> None:
         Fit(readings, plan=shifted)
     with pytest.raises(ValueError, match="sigma"):
         Fit(readings, sigma=-1.0)
-    with pytest.raises(ValueError, match="unknown estimator .guesswork."):
+    with pytest.raises(ValueError, match="unknown estimator 'guesswork'"):
         Fit(readings, estimator="guesswork")
 
 
