@@ -139,14 +139,17 @@ class Belief:
         # The posture, and its index in the table: a plan starts at Zero, and moves only
         # to candidate postures.
         self.rho, self.here = np.zeros(3), self.table.zero
-        self.rows = np.zeros((len(self.slots), len(self.table.postures), n))
+        k, p = len(self.slots), len(self.table.postures)
+        self.rows = np.zeros((k, p, n))
         # An upper bound of each stand's spread at every posture (see _reach).
-        self.spread_bound = np.zeros((len(self.slots), len(self.table.postures)))
-        # Each stand's columns of the unknowns its rows touch and its rows over them,
-        # padded to N_MACHINE + N_STAND (the most a mounting touches) with zero rows at
-        # column 0.
-        self.touched: list[tuple[np.ndarray, np.ndarray]] = [
-            (np.arange(0), np.zeros((0, 0)))] * len(self.slots)
+        self.spread_bound = np.zeros((k, p))
+        # Each stand's columns of the unknowns its rows touch (K, T) and its rows over
+        # them (K, P, T), padded to T = N_MACHINE + N_STAND (the most a mounting touches)
+        # with zero rows at column 0.
+        self.touched_columns = np.zeros((k, N_MACHINE + N_STAND), dtype=int)
+        self.touched_rows = np.zeros((k, p, N_MACHINE + N_STAND))
+        # Whether a fork shares the rows (they are copied before they change).
+        self.rows_shared = False
         for k in range(len(self.slots)):
             self._set_rows(k)
         # Where an engaged gauge was seen not to read (its tip beyond the travel): it will
@@ -172,15 +175,20 @@ class Belief:
 
     def _set_rows(self, stand: int) -> None:
         """Make ``stand``'s rows those of its present mounting (:meth:`rows_of`), also
-        over the unknowns they touch (``touched``: columns, rows); its spread bound is the
-        prior spread (its unknowns are as wide as a priori, the machine's at most)."""
+        over the unknowns they touch (``touched_columns``, ``touched_rows``); its spread
+        bound is the prior spread (its unknowns are as wide as a priori, the machine's at
+        most)."""
+        if self.rows_shared:
+            self.rows, self.touched_rows = self.rows.copy(), self.touched_rows.copy()
+            self.touched_columns = self.touched_columns.copy()
+            self.rows_shared = False
         self.rows[stand] = self.rows_of(stand)
         self.spread_bound[stand] = self.table.prior_spread[max(self.slots[stand], 0)]
         used = np.flatnonzero(np.any(self.rows[stand] != 0.0, axis=0))
-        cols = np.zeros(N_MACHINE + N_STAND, dtype=int)
-        rows = np.zeros((len(self.table.postures), len(cols)))
-        cols[:len(used)], rows[:, :len(used)] = used, self.rows[stand][:, used]
-        self.touched[stand] = (cols, rows)
+        self.touched_columns[stand] = 0
+        self.touched_rows[stand] = 0.0
+        self.touched_columns[stand, :len(used)] = used
+        self.touched_rows[stand, :, :len(used)] = self.rows[stand][:, used]
 
     def predicted_tips(self, postures: np.ndarray | slice = slice(None)) -> np.ndarray:
         """Predicted tip distance of every stand's gauge at ``postures`` (K, P'), mm:

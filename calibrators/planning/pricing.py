@@ -18,13 +18,16 @@ geometry's bounds shortlist the moves and the world prices only those and Zero
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
 
 from calibrators.planning.belief import N_MACHINE, Belief, rigid_factor
+from calibrators.planning.slot_table import slot_table
 from calibrators.planning.world_terms import directions
 from orthoglide_env.lab.operations import TIME
+from orthoglide_env.model.design import MachineDesign
 
 #: :meth:`Pricer.top_rates` prices at least this many moves of the highest bounds first,
 #: then only those whose bound can still beat the best of them.
@@ -44,6 +47,16 @@ BOUND_SLACK: float = 1e-9
 #: 330 s (24.3) and cost the ``active`` sweep a quarter more time; 8 costs it nothing
 #: over the geometry's alone.
 WORLD_SHORTLIST: int = 8
+
+
+@lru_cache(maxsize=2048)
+def drive_seconds(design: MachineDesign, rho: tuple[float, float, float]) -> np.ndarray:
+    """Seconds (P,) to drive from ``rho`` to each of the design's candidate postures and
+    settle (:meth:`~orthoglide_env.lab.operations.TimeTable.move`), read-only: a plan
+    starts its moves from the same few postures again and again."""
+    seconds = TIME.move(np.array(rho)[None], slot_table(design).postures)
+    seconds.flags.writeable = False
+    return seconds
 
 
 class PricedMoves(NamedTuple):
@@ -104,7 +117,8 @@ class Pricer(Belief):
         after = safe & (engaged | here)[:, None]
         reads = np.where(after, contact, 0.0)
         flicks = np.sum(after != engaged[:, None], axis=0)
-        seconds = TIME.move(self.rho[None], self.table.postures) + TIME.lift_s * flicks
+        drive = drive_seconds(self.design, tuple(float(v) for v in self.rho))
+        seconds = drive + TIME.lift_s * flicks
         return seconds, after, reads
 
     def _rows(self, reads: np.ndarray, postures: np.ndarray) -> np.ndarray:
@@ -146,8 +160,8 @@ class Pricer(Belief):
         little of what is left (``G`` small), as they do after the first minutes.  For I
         the form is ``(C F)(C F)'`` (``F``: :func:`rigid_factor`), so a row's is the
         square of its product with ``C F``, r columns instead of every unknown's."""
-        c, cols = self.covariance, np.array([cols for cols, _ in self.touched])  # (K, T)
-        part = np.stack([rows[postures] for _, rows in self.touched])  # (K, L, T)
+        c, cols = self.covariance, self.touched_columns  # (K, T)
+        part = self.touched_rows[:, postures]  # (K, L, T)
         if self.criterion == "D":
             left, right = part @ c[cols[:, :, None], cols[:, None, :]], part
         else:

@@ -33,11 +33,12 @@ class Planner(Pricer):
     chooses and takes its next operations."""
 
     def fork(self) -> Planner:
-        """A copy to try operations on (the table is shared, the state copied)."""
+        """A copy to try operations on (the table is shared, the state copied; the rows,
+        which change only at a re-mount, are shared until either copy changes them)."""
         trial = copy.copy(self)
         trial.slots, trial.engaged, trial.steps = list(self.slots), list(self.engaged), []
-        trial.covariance, trial.rows = self.covariance.copy(), self.rows.copy()
-        trial.touched = list(self.touched)
+        trial.covariance = self.covariance.copy()
+        self.rows_shared = trial.rows_shared = True
         trial.silent = self.silent.copy()
         trial.spread_bound = self.spread_bound.copy()
         trial.mean = None if self.mean is None else self.mean.copy()
