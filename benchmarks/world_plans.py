@@ -26,7 +26,7 @@ import time
 import numpy as np
 
 from calibrators.agents.optimal import fixed_plan
-from calibrators.planning.planner import Planner
+from calibrators.planning.search import Planner
 from calibrators.planning.slot_table import slot_table
 from calibrators.planning.world_terms import directions
 from orthoglide_env.instruments.dial import weighting_sigma
@@ -87,7 +87,7 @@ def replayed_mm(steps: tuple, sigma: float, budget: float, conditions: Condition
     index = {tuple(p): i for i, p in enumerate(planner.table.postures)}
     for step in steps:
         if step.op == Op.MOVE:
-            planner.move(index[tuple(step.rho)], planner.options())
+            planner.move(index[tuple(step.rho)], planner.priced_moves())
             planner.expect_readings()
         elif step.op == Op.REMOUNT:
             planner.remount(step.stand, step.slot)

@@ -10,13 +10,8 @@ import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.agents.optimal import fixed_plan
 from calibrators.estimators.catalogue import for_study
-from calibrators.planning.planner import (
-    N_MACHINE,
-    SPREAD_SLACK,
-    Planner,
-    greedy_plan,
-    rigid_weight,
-)
+from calibrators.planning.belief import N_MACHINE, SPREAD_SLACK, rigid_weight
+from calibrators.planning.search import Planner, greedy_plan
 from calibrators.planning.slot_table import reach, slot_table
 from calibrators.study.episodes import measurements_of, run_episode
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op, slot_catalogue
@@ -58,7 +53,7 @@ def test_the_price_of_a_move_is_what_taking_it_changes(criterion: str) -> None:
     rng = np.random.default_rng(0)
     rows_so_far = []
     for _ in range(4):
-        options = p.options()
+        options = p.priced_moves()
         posture = rng.choice(np.flatnonzero(options.gain > 0))
         trial = p.fork()
         before = (trial.predicted_rigid_mm() ** 2 if criterion == "I"
@@ -97,7 +92,7 @@ def test_the_best_move_is_the_best_of_every_move_priced(criterion: str) -> None:
     for step in range(40):
         if step == 12:
             p.remount(2, next(s for s in range(len(slot_table().tip)) if s not in p.slots))
-        options = p.options()
+        options = p.priced_moves()
         rate = p.affordable_rates(options)
         full = int(np.argmax(rate)) if rate.max() > 0 else None
         choice = p.best_move()
@@ -299,3 +294,18 @@ def test_the_filter_computes_only_the_spreads_that_decide_its_reach(monkeypatch)
         assert np.all(spread <= p.spread_bound + SPREAD_SLACK)
         p.move(*p.best_move())
     assert 0 < mine < every / 10
+
+
+def test_planner_module_keeps_its_earlier_names() -> None:
+    """The planner's earlier module and names still import, and name the split modules'
+    objects (``Step`` the planned operation, ``Options`` the priced moves)."""
+    from calibrators.design import planner as old
+    from calibrators.planning import belief, pricing, search
+    from calibrators.planning import planner as new
+
+    assert old is new
+    assert new.Step is belief.PlannedOperation and new.Options is pricing.PricedMoves
+    assert new.Planner is search.Planner and new.greedy_plan is search.greedy_plan
+    assert issubclass(search.Planner, pricing.Pricer) and issubclass(pricing.Pricer, belief.Belief)
+    p = planner(budget_s=60.0)
+    assert np.array_equal(p.options().gain, p.priced_moves().gain)

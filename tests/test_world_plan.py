@@ -8,7 +8,9 @@ import pytest
 
 from calibrators.agents import get_agent
 from calibrators.agents.optimal import fixed_plan
-from calibrators.planning.planner import N_MACHINE, WORLD_SHORTLIST, Planner, greedy_plan
+from calibrators.planning.belief import N_MACHINE
+from calibrators.planning.pricing import WORLD_SHORTLIST
+from calibrators.planning.search import Planner, greedy_plan
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
@@ -47,7 +49,7 @@ def test_lab_terms_enlarge_the_state_and_the_predicted_error() -> None:
         posture = choice[0]
         ideal.move(posture, choice[1])
         ideal.expect_readings()
-        lab.move(posture, lab.options())
+        lab.move(posture, lab.priced_moves())
         lab.expect_readings()
     bias = lab.world.bias(lab.weight)
     assert bias > 0
@@ -84,7 +86,7 @@ def test_the_price_of_a_move_under_lab_is_what_taking_it_changes() -> None:
     p = planner(LAB)
     rng = np.random.default_rng(0)
     for _ in range(3):
-        options = p.options()
+        options = p.priced_moves()
         posture = int(rng.choice(np.flatnonzero(options.seconds < 10)))
         trial = p.fork()
         before = trial.predicted_rigid_mm() ** 2
@@ -149,7 +151,7 @@ def test_the_world_prices_the_bounds_shortlist_and_zero() -> None:
     ceiling = p._gain_bounds(reads, live) / seconds[live]
     top = live[np.argsort(-ceiling, kind="stable")[:WORLD_SHORTLIST]]
     assert set(priced) == set(top) | {p.table.zero}
-    every = p.options()
+    every = p.priced_moves()
     assert np.allclose(options.gain[priced], every.gain[priced], rtol=1e-9, atol=0.0)
     choice = p.best_move()
     assert choice is not None and choice[0] == priced[np.argmax(rate[priced])]
@@ -160,7 +162,7 @@ def test_a_lab_plan_ends_only_when_no_move_pays() -> None:
     shortlist, falls under the stop rule (or gains nothing)."""
     p = planner(LAB, budget_s=600.0)
     greedy_plan(p, remounts=False)
-    rate = p.affordable_rates(p.options())
+    rate = p.affordable_rates(p.priced_moves())
     assert p._ends(float(np.max(rate)))
 
 

@@ -1,7 +1,7 @@
 """``active``: sequential Bayesian design, one operation at a time.
 
-The agent keeps the linearised extended estimator as a filter (:class:`calibrators.planning.planner.
-Planner` with :meth:`~calibrators.planning.planner.Planner.observe`): the 27 machine errors and each
+The agent keeps the linearised extended estimator as a filter (:class:`calibrators.planning.search.
+Planner` with :meth:`~calibrators.planning.belief.Belief.observe`): the 27 machine errors and each
 mounting's stand and zero, with the estimators' priors, updated in closed form after every
 reading.  Before each move it prices every candidate move by the expected fall of the predicted TCP
 error after the best-fit rigid motion per second, and takes the best.  Its stands move
@@ -35,7 +35,8 @@ import numpy as np
 from calibrators.agents.base import Agent, action, register
 from calibrators.agents.optimal import fixed_plan, lab_setup
 from calibrators.estimators.catalogue import for_study
-from calibrators.planning.planner import N_MACHINE, N_STAND, ZERO_SCALE, Planner, Step
+from calibrators.planning.belief import N_MACHINE, N_STAND, ZERO_SCALE, PlannedOperation
+from calibrators.planning.search import Planner
 from orthoglide_env.instruments.stands import stand_names
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.model.errors import ERROR_NAMES
@@ -64,8 +65,8 @@ class ActiveAgent(Agent):
         steps, _ = fixed_plan(*setup, criterion=self.criterion)
         self.remounts = [s for s in steps if s.op == Op.REMOUNT]
         self.readings: dict[int, list[tuple[int, float]]] = {k: [] for k in range(len(slots))}
-        self.queue: list[Step] = []
-        self.last: Step | None = None
+        self.queue: list[PlannedOperation] = []
+        self.last: PlannedOperation | None = None
         self.fitted = float(observation["time"][0])
         self._observe(observation, {})
 
@@ -96,7 +97,7 @@ class ActiveAgent(Agent):
             self.readings[k].append((planner.here, value))
 
     # -- what to do next -------------------------------------------------------------------
-    def _next(self, now: float) -> Step:
+    def _next(self, now: float) -> PlannedOperation:
         planner = self.planner
         if self.queue:
             return self.queue.pop(0)
@@ -104,7 +105,7 @@ class ActiveAgent(Agent):
             self._refit()
             self.fitted = now
         if self.target_mm > 0 and planner.predicted_rigid_mm() <= self.target_mm:
-            return Step(Op.STOP)
+            return PlannedOperation(Op.STOP)
         start = len(planner.steps)
         if self.remounts and self.remounts[0].time_s <= now:
             remount = self.remounts.pop(0)
@@ -112,7 +113,7 @@ class ActiveAgent(Agent):
         else:
             choice = planner.best_move()
             if choice is None:
-                return Step(Op.STOP)
+                return PlannedOperation(Op.STOP)
             planner.move(*choice)
         self.queue = list(planner.steps[start:])
         return self.queue.pop(0)

@@ -1,6 +1,6 @@
 """``optimal``: a fixed experiment designed before the first reading.
 
-The plan is made on the nominal machine by :func:`calibrators.planning.planner.greedy_plan`: from
+The plan is made on the nominal machine by :func:`calibrators.planning.search.greedy_plan`: from
 the stands where they stand, the move (with the lifts and engages it needs) or the
 re-mount that buys the most fall of the predicted TCP error after the best-fit rigid
 motion per second of lab time, again and again until the budget is spent.  A plan knows
@@ -22,7 +22,8 @@ import gymnasium as gym
 import numpy as np
 
 from calibrators.agents.base import PlannedAgent, action, register
-from calibrators.planning.planner import Planner, Step, greedy_plan
+from calibrators.planning.belief import PlannedOperation
+from calibrators.planning.search import Planner, greedy_plan
 from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.world.conditions import Conditions
@@ -32,7 +33,7 @@ from orthoglide_env.world.conditions import Conditions
 def fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
                budget_s: float, design: MachineDesign = PROTOTYPE,
                conditions: Conditions | None = None, criterion: str = "I",
-               remounts: bool = True) -> tuple[tuple[Step, ...], float]:
+               remounts: bool = True) -> tuple[tuple[PlannedOperation, ...], float]:
     """The greedy plan from stands at ``slots`` (-1: none) with plungers ``engaged`` on a
     machine of ``design`` in a lab of ``conditions`` (None: ideal), re-mounting stands
     or not, and the TCP error after rigid motion it predicts (mm)."""

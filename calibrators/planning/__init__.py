@@ -1,1 +1,5 @@
-"""Experiment design on the linearised model."""
+"""Experiment planning on the linearised model: :mod:`~calibrators.planning.belief` (what an
+experiment knows), :mod:`~calibrators.planning.pricing` (what each move costs and gains),
+:mod:`~calibrators.planning.search` (the greedy choice), :mod:`~calibrators.planning.
+slot_table` (what a gauge does where) and :mod:`~calibrators.planning.world_terms` (the
+lab's world)."""

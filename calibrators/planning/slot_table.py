@@ -1,7 +1,7 @@
 """The slot table: what a gauge at each slot of a design's catalogue would do at each
 candidate posture of the nominal machine, and where its plunger may safely go down.
 
-An experiment's designer (:mod:`calibrators.planning.planner`) and the world's terms it
+An experiment's designer (:mod:`calibrators.planning.belief`) and the world's terms it
 weighs (:mod:`calibrators.planning.world_terms`) both read it; it is computed once per
 process and design (seconds).
 """

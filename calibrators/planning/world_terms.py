@@ -3,8 +3,8 @@ geometry, under ``lab`` or ``workshop`` conditions.
 
 The ``full`` estimator fits some of the world's effects and considers the rest
 (:mod:`calibrators.estimators.consider`); a design that ignores them prices readings that
-drift, lag and err as if they did not.  The planner (:class:`~calibrators.planning.planner.
-Planner`) then carries, with the patterns and second moments of
+drift, lag and err as if they did not.  The planner's belief (:class:`~calibrators.planning.belief.
+Belief`) then carries, with the patterns and second moments of
 :mod:`~calibrators.estimators.consider` (one source of truth):
 
 * fitted unknowns, each of unit prior in its pattern's size (a few, per axis and per

@@ -1,0 +1,358 @@
+"""What an experiment being designed knows: where its stands are, whose plunger is down, its
+posture, clock and operations so far, and its Gaussian belief about the unknowns.
+
+The unknowns are Gaussian, each in units of its a-priori size: the machine's 27 errors
+and each stand's installation (the realistic preset's sigmas, the estimators' priors),
+and each dial's zero (:data:`ZERO_SCALE`, diffuse: the estimators eliminate it).  A
+reading is a row of derivatives at the nominal machine divided by the gauge's sigma, so
+the covariance after any set of readings follows by Bayesian (Woodbury) updates: the
+error a design leaves is known before anything is read.  Two criteria:
+
+============  ==================================================================
+criterion     the gain of a set of readings
+============  ==================================================================
+I (default)   the fall of the predicted mean-square TCP error over the scoring
+              grid after the best-fit rigid motion (what a user has after
+              touching off the workpiece; :mod:`orthoglide_env.scoring`)
+D             the rise of log det of the information about every unknown, in
+              units of its a-priori size (the lab env's ``information`` reward)
+============  ==================================================================
+
+A reading counts with the probability that the tip touches (it may leave the bar's reach
+at the far end of the travel); a plunger goes down only where the tip stays
+:data:`~calibrators.planning.slot_table.SAFETY_SIGMAS` of its predicted spread plus
+:data:`~calibrators.planning.slot_table.END_GAP` off the pushed-in end (the candidates and
+what a gauge does there: :mod:`calibrators.planning.slot_table`).
+A fixed plan knows each reading only a priori, so its margins are wide (up to ~3 mm);
+a belief that has seen readings (:meth:`Belief.observe`) predicts them to microns and
+may use the whole travel: that is what the ``active`` agent buys with its feedback.
+
+Under ``lab`` or ``workshop`` conditions the state also holds the world's unknowns, and
+the indicators' curves bias the estimate (:mod:`calibrators.planning.world_terms`).
+
+The prices of moves: :mod:`calibrators.planning.pricing`; the choice among them:
+:mod:`calibrators.planning.search`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import lru_cache
+from typing import NamedTuple
+
+import numpy as np
+
+from calibrators.planning.slot_table import END_GAP, reach, slot_table
+from calibrators.planning.world_terms import world_terms
+from orthoglide_env.lab.operations import TIME, Op
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.errors import ERROR_NAMES, MachineParams
+from orthoglide_env.reading_model import ParameterSpace, default_scales
+from orthoglide_env.scoring import rigid_weights
+from orthoglide_env.world.conditions import Conditions
+
+N_MACHINE = len(ERROR_NAMES)
+#: Unknowns of one mounting besides the machine's: four of its stand, then its zero.
+N_STAND = 5
+#: A dial's zero, a priori (mm): wide enough to be eliminated by the first reading, as the
+#: estimators do exactly.
+ZERO_SCALE: float = 10.0
+CRITERIA: tuple[str, ...] = ("I", "D")
+#: Widening (mm) of a remembered spread before it is taken for an upper bound of the
+#: present one (:meth:`Belief._reach`): far above the rounding of a spread (under 1e-6
+#: mm even where it is nearly zero) and far below the microns that decide a margin.
+SPREAD_SLACK: float = 1e-5
+
+
+@lru_cache(maxsize=2)
+def rigid_weight(design: MachineDesign = PROTOTYPE) -> np.ndarray:
+    """``W`` (27, 27): ``trace(W C)`` is the predicted mean-square TCP error over the
+    scoring grid after the best-fit rigid motion (mm^2) for machine errors off by
+    ``N(0, C)`` in units of their scale (the quadratic form of
+    :func:`orthoglide_env.scoring.predicted_frame_errors`)."""
+    scale = default_scales(ParameterSpace())
+    return rigid_weights([MachineParams(design=design)])[0] * np.outer(scale, scale)
+
+
+@lru_cache(maxsize=2)
+def rigid_factor(design: MachineDesign = PROTOTYPE) -> np.ndarray:
+    """``F`` (27, r) with ``F F' = W`` (:func:`rigid_weight`): ``W`` has rank ``r``, 12 on
+    the prototype, as many errors only move the tool rigidly or as others do.  The
+    eigenvalues below 1e-12 of the largest are the rounding of those zeros."""
+    value, vector = np.linalg.eigh(rigid_weight(design))
+    keep = value > 1e-12 * value[-1]
+    return vector[:, keep] * np.sqrt(value[keep])
+
+
+class PlannedOperation(NamedTuple):
+    """One lab operation of a plan (the fields of the lab env's action) and the lab time
+    at which the plan starts it."""
+
+    op: Op
+    rho: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    stand: int = 0
+    slot: int = 0
+    time_s: float = 0.0
+
+
+@dataclass
+class Belief:
+    """An experiment being designed: stands, plungers, posture, clock, and the covariance
+    (in units of each unknown's scale) of the 27 machine errors, then :data:`N_STAND`
+    unknowns per stand's current mounting (a mounting left behind by a re-mount is
+    marginalised out: nothing reads it again).
+
+    ``slots``: each stand's index in the design's slot catalogue (:func:`~orthoglide_env.
+    lab.operations.slot_catalogue`, the lab's) (-1: none);
+    ``engaged``: whose plunger is down; ``sigma``: a reading's standard deviation (mm).
+    ``observe`` turns it into a filter: it then also holds the mean of the unknowns and
+    predicts the tips from them.  ``design``: the machine's design (its candidate postures,
+    slot table and scoring grid).  ``conditions``: the lab's world; under ``lab`` or
+    ``workshop`` the state also holds the world's unknowns (:mod:`~calibrators.planning.
+    world_terms`: drift, backlash, the indicators' curves) and the plan may stop early;
+    None or ``ideal``: the geometry alone."""
+
+    slots: list[int]
+    engaged: list[bool]
+    sigma: float
+    budget_s: float
+    criterion: str = "I"
+    time_s: float = 0.0
+    design: MachineDesign = PROTOTYPE
+    steps: list[PlannedOperation] = field(default_factory=list)
+    conditions: Conditions | None = None
+
+    def __post_init__(self) -> None:
+        self.table = slot_table(self.design)
+        if self.criterion not in CRITERIA:
+            raise ValueError(f"unknown criterion '{self.criterion}'; choose from {CRITERIA}")
+        if not (np.isfinite(self.sigma) and self.sigma > 0):
+            raise ValueError(f"sigma must be a positive number, got {self.sigma}")
+        self.slots = [int(s) for s in self.slots]
+        self.engaged = [bool(e) and s >= 0 for s, e in zip(self.slots, self.engaged,
+                                                           strict=True)]
+        n = N_MACHINE + N_STAND * len(self.slots)
+        self.world = world_terms(self.conditions, self.design, self.table, len(self.slots), n)
+        n += self.world.count if self.world is not None else 0
+        self.covariance = np.eye(n)
+        self.mean: np.ndarray | None = None  # set by observe()
+        # The posture, and its index in the table: a plan starts at Zero, and moves only
+        # to candidate postures.
+        self.rho, self.here = np.zeros(3), self.table.zero
+        k, p = len(self.slots), len(self.table.postures)
+        self.rows = np.zeros((k, p, n))
+        # An upper bound of each stand's spread at every posture (see _reach).
+        self.spread_bound = np.zeros((k, p))
+        # Each stand's columns of the unknowns its rows touch (K, T) and its rows over
+        # them (K, P, T), padded to T = N_MACHINE + N_STAND (the most a mounting touches)
+        # with zero rows at column 0.
+        self.touched_columns = np.zeros((k, N_MACHINE + N_STAND), dtype=int)
+        self.touched_rows = np.zeros((k, p, N_MACHINE + N_STAND))
+        # Whether a fork shares the rows (they are copied before they change).
+        self.rows_shared = False
+        for k in range(len(self.slots)):
+            self._set_rows(k)
+        # Where an engaged gauge was seen not to read (its tip beyond the travel): it will
+        # not read there again until its stand moves.
+        self.silent = np.zeros((len(self.slots), len(self.table.postures)), dtype=bool)
+
+    @property
+    def weight(self) -> np.ndarray:
+        return rigid_weight(self.design)
+
+    # -- the model of a reading -----------------------------------------------------------
+    def _columns(self, stand: int) -> np.ndarray:
+        start = N_MACHINE + N_STAND * stand
+        return np.concatenate((np.arange(N_MACHINE), np.arange(start, start + N_STAND)))
+
+    def rows_of(self, stand: int) -> np.ndarray:
+        """Rows (P, n) in mm per unit scale of a reading of ``stand`` at every posture."""
+        out = np.zeros((len(self.table.postures), len(self.covariance)))
+        if self.slots[stand] >= 0:
+            out[:, self._columns(stand)[:-1]] = self.table.change[self.slots[stand]]
+            out[:, self._columns(stand)[-1]] = ZERO_SCALE
+        return out
+
+    def _set_rows(self, stand: int) -> None:
+        """Make ``stand``'s rows those of its present mounting (:meth:`rows_of`), also
+        over the unknowns they touch (``touched_columns``, ``touched_rows``); its spread
+        bound is the prior spread (its unknowns are as wide as a priori, the machine's at
+        most)."""
+        if self.rows_shared:
+            self.rows, self.touched_rows = self.rows.copy(), self.touched_rows.copy()
+            self.touched_columns = self.touched_columns.copy()
+            self.rows_shared = False
+        self.rows[stand] = self.rows_of(stand)
+        self.spread_bound[stand] = self.table.prior_spread[max(self.slots[stand], 0)]
+        used = np.flatnonzero(np.any(self.rows[stand] != 0.0, axis=0))
+        self.touched_columns[stand] = 0
+        self.touched_rows[stand] = 0.0
+        self.touched_columns[stand, :len(used)] = used
+        self.touched_rows[stand, :, :len(used)] = self.rows[stand][:, used]
+
+    def predicted_tips(self, postures: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """Predicted tip distance of every stand's gauge at ``postures`` (K, P'), mm:
+        nominal for a plan, from the mean once readings were observed.  (An empty stand
+        gets slot 0's: it is masked later.)"""
+        slots = np.maximum(np.array(self.slots), 0)
+        tip = self.table.tip[slots][:, postures]
+        if self.mean is None:
+            return tip
+        for k, slot in enumerate(slots):
+            change = self.table.change[slot][postures] @ self.mean[self._columns(k)[:-1]]
+            tip[k] += self.table.sign[slot] * change
+        return tip
+
+    def _spread(self, stand: int, postures: np.ndarray) -> np.ndarray:
+        """Standard deviation (L,) of ``stand``'s predicted tip at ``postures`` (L,), mm,
+        from the covariance.  A posture's value is the same to the bit whichever others
+        are computed with it: the rows go to BLAS in an even count (its kernels take a
+        lone last row their own way, a few ulps off)."""
+        cols = self._columns(stand)[:-1]
+        even = np.append(postures, postures[-1]) if len(postures) % 2 else postures
+        change = self.table.change[self.slots[stand], even]
+        product = change @ self.covariance[cols[:, None], cols]
+        return np.sqrt(np.clip(np.sum(product * change, axis=-1), 0.0, None))[:len(postures)]
+
+    def _reach(self, postures: np.ndarray | slice = slice(None)
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`reach` of every stand at ``postures`` (nothing for an empty stand, no
+        contact where it was seen not to read).
+
+        Once readings were observed, a spread is computed only where the answer depends
+        on it.  Not where the tip misses its bar or a bar presses the gauge, nor where
+        the tip is less than :data:`END_GAP` off the end, and not where the stand's
+        spread bound (``spread_bound``) already leaves the tip safe and touching
+        (contact exactly 1): the spread, at most the bound, would leave it so too.  The
+        bound is the prior spread at a mounting, then each spread as last computed,
+        plus :data:`SPREAD_SLACK`: readings only shrink the covariance, so a spread
+        never grows until its stand is re-mounted."""
+        slots = np.array(self.slots)
+        mounted = (slots >= 0)[:, None]
+        if self.mean is None:
+            safe, contact = (a[np.maximum(slots, 0)][:, postures]
+                             for a in self.table.prior_reach)
+        else:
+            tip = self.predicted_tips(postures)
+            spread = self.spread_bound[:, postures] + SPREAD_SLACK
+            safe, contact = reach(self.table, np.maximum(slots, 0), tip, spread, postures)
+            index = np.arange(len(self.table.postures))[postures]
+            with np.errstate(invalid="ignore"):
+                open_ = ((tip >= END_GAP) & (contact < 1.0)
+                         & ~self.table.pressed[np.maximum(slots, 0)][:, postures] & mounted)
+            stands = np.flatnonzero(open_.any(axis=1))
+            for k in stands:
+                at = np.flatnonzero(open_[k])
+                spread[k, at] = self.spread_bound[k, index[at]] = self._spread(k, index[at])
+            if stands.size:
+                safe, contact = reach(self.table, np.maximum(slots, 0), tip, spread, postures)
+        return safe & mounted, np.where(self.silent[:, postures], 0.0, contact) * mounted
+
+    def predicted_rigid_mm(self) -> float:
+        """Predicted TCP error RMS after the best-fit rigid motion (mm), the considered
+        world terms' bias included."""
+        n = N_MACHINE
+        square = np.trace(self.weight @ self.covariance[:n, :n])
+        if self.world is not None:
+            square += self.world.bias(self.weight)
+        return float(np.sqrt(max(square, 0.0)))
+
+    def _criterion_value(self) -> float:
+        """What the plan drives down: the predicted mean-square TCP error (I), or the log
+        det of the covariance (D)."""
+        if self.criterion == "D":
+            return float(np.linalg.slogdet(self.covariance)[1])
+        return self.predicted_rigid_mm() ** 2
+
+
+    # -- taking readings and mountings ----------------------------------------------------
+    def _add(self, rows: np.ndarray, innovations: np.ndarray | None = None,
+             considered: np.ndarray | None = None) -> None:
+        """Bayesian update with whitened ``rows`` (R, n) (and, when filtering, their
+        whitened innovations; with world terms, their whitened rows over the considered
+        ones)."""
+        if len(rows) == 0:
+            return
+        b = self.covariance @ rows.T
+        m = np.eye(len(rows)) + rows @ b
+        gain = np.linalg.solve(m, b.T).T  # (n, R)
+        if self.world is not None:
+            self.world.update(gain, rows, considered)
+        if self.mean is not None and innovations is not None:
+            self.mean = self.mean + gain @ innovations
+        self.covariance = self.covariance - gain @ b.T
+        self.covariance = (self.covariance + self.covariance.T) / 2
+
+    def expect_readings(self, stands: np.ndarray | None = None,
+                        weights: np.ndarray | None = None) -> None:
+        """Count readings of ``stands`` here, each with its probability (a plan's; default:
+        :meth:`reading_here`)."""
+        if stands is None:
+            stands, weights = self.reading_here()
+        rows, considered = self._rows_here(stands)
+        weight = np.sqrt(weights)[:, None]
+        self._add(rows * weight / self.sigma, considered=considered * weight / self.sigma)
+
+    def _rows_here(self, stands: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rows (R, n) of readings of ``stands`` here and now, mm per unit, and (with
+        world terms) their rows over the considered terms (R, m)."""
+        rows = self.rows[stands, self.here]
+        if self.world is None:
+            return rows, np.zeros((len(stands), 0))
+        fitted, considered = self.world.rows(
+            np.array(self.slots), np.array([self.here]), np.array([self.time_s]),
+            self.world.approach[None], stands)
+        rows = rows.copy()
+        rows[:, self.world.start:] += fitted[:, 0]
+        return rows, considered[:, 0]
+
+    def observe(self, stands: list[int], values: list[float]) -> None:
+        """Readings (mm) of ``stands`` taken here (every other engaged stand read nothing):
+        update the mean and the covariance."""
+        if self.mean is None:
+            self.mean = np.zeros(len(self.covariance))
+        quiet = [k for k, down in enumerate(self.engaged) if down and k not in stands]
+        self.silent[quiet, self.here] = True
+        stands_ = np.asarray(stands, dtype=int)
+        if not stands_.size:
+            return
+        rows, considered = self._rows_here(stands_)
+        nominal = self.table.reading[[self.slots[k] for k in stands_], self.here]
+        predicted = nominal + rows @ self.mean
+        self._add(rows / self.sigma, (np.asarray(values, dtype=float) - predicted) / self.sigma,
+                  considered / self.sigma)
+
+    def retire(self, stand: int) -> None:
+        """A stand that reads no more (pushed past its travel) until it is re-mounted."""
+        self.slots[stand] = -1
+        self.engaged[stand] = False
+        self._set_rows(stand)
+
+    def remount(self, stand: int, slot: int) -> None:
+        """Move ``stand`` to ``slot`` (the machine drives to Zero first): a new mounting
+        with fresh unknowns, its plunger down."""
+        if slot in self.slots:
+            raise ValueError(f"slot {slot} already holds a stand")
+        self.steps.append(PlannedOperation(Op.REMOUNT, stand=stand, slot=slot, time_s=self.time_s))
+        self.time_s += float(TIME.move(self.rho, np.zeros(3))) + TIME.remount_s
+        cols = self._columns(stand)[N_MACHINE:]
+        if self.world is not None:
+            self.world.moved(self.rho, np.zeros(3))
+            cols = np.r_[cols, self.world.stand_columns(stand)]
+            self.world.remounted(stand, cols, self.time_s)
+        self.rho, self.here = np.zeros(3), self.table.zero
+        self.covariance[cols, :] = 0.0
+        self.covariance[:, cols] = 0.0
+        self.covariance[cols, cols] = 1.0
+        if self.mean is not None:
+            self.mean[cols] = 0.0
+        self.slots[stand] = slot
+        self.engaged[stand] = True
+        self._set_rows(stand)
+        self.silent[stand] = False
+
+    def reading_here(self) -> tuple[np.ndarray, np.ndarray]:
+        """Stands down here and the probability that each reads."""
+        _, contact = self._reach(np.array([self.here]))
+        down = np.flatnonzero(self.engaged)
+        return down, contact[down, 0]

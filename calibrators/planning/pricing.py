@@ -1,0 +1,219 @@
+"""The price of every candidate move: its seconds in lab time, the plungers it flicks, how
+likely each stand reads after it, and what its readings gain.
+
+A move costs its drive and settle with the lab's time table
+(:data:`~orthoglide_env.lab.operations.TIME`), and a lever flick for every plunger lifted
+first (a bar could press it past its travel there) or let down (safe both here and
+there); a re-mount costs its two minutes (:meth:`~calibrators.planning.belief.Belief.
+remount`).
+
+Choosing a move prices exactly only the moves that may win: a move where no stand reads
+gains nothing, and every other one's gain has a cheap upper bound
+(:meth:`Pricer.top_rates`), so the choice is the one pricing every move makes.
+
+Under ``lab`` or ``workshop`` conditions the world's gain has no cheap bound, so the
+geometry's bounds shortlist the moves and the world prices only those and Zero
+(:data:`WORLD_SHORTLIST`): a heuristic, like the greedy choice itself.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from typing import NamedTuple
+
+import numpy as np
+
+from calibrators.planning.belief import N_MACHINE, Belief, rigid_factor
+from calibrators.planning.slot_table import slot_table
+from calibrators.planning.world_terms import directions
+from orthoglide_env.lab.operations import TIME
+from orthoglide_env.model.design import MachineDesign
+
+#: :meth:`Pricer.top_rates` prices at least this many moves of the highest bounds first,
+#: then only those whose bound can still beat the best of them.
+FIRST_PRICED: int = 8
+#: Relative widening of a gain's upper bound for the rounding of the gain and the bound
+#: (both ~1e-15 relative; a real difference between two moves is far larger).
+BOUND_SLACK: float = 1e-9
+#: Under the world's terms, the moves priced with them at each step: this many of the
+#: highest geometric gain bounds per second (:meth:`Pricer._gain_bounds`), and Zero,
+#: whose revisit buys the world's drift and next to no geometry.  The world's gain has
+#: no cheap bound (a reading may add to or take from the considered terms' bias), so
+#: the geometry's bound shortlists and the world prices.  Measured with
+#: ``benchmarks/world_plans.py``-style plans from the paper's stands (predicted TCP error
+#: after rigid motion under the plan's world, pricing every move against this): lab, one
+#: hour, 4.80 against 5.25 µm; workshop, one hour, 4.99 against 4.95; lab, 330 s, 24.9
+#: against 24.3.  A greedy plan is a heuristic either way.  32 did a little better at
+#: 330 s (24.3) and cost the ``active`` sweep a quarter more time; 8 costs it nothing
+#: over the geometry's alone.
+WORLD_SHORTLIST: int = 8
+
+
+@lru_cache(maxsize=2048)
+def drive_seconds(design: MachineDesign, rho: tuple[float, float, float]) -> np.ndarray:
+    """Seconds (P,) to drive from ``rho`` to each of the design's candidate postures and
+    settle (:meth:`~orthoglide_env.lab.operations.TimeTable.move`), read-only: a plan
+    starts its moves from the same few postures again and again."""
+    seconds = TIME.move(np.array(rho)[None], slot_table(design).postures)
+    seconds.flags.writeable = False
+    return seconds
+
+
+class PricedMoves(NamedTuple):
+    """Every candidate move priced (P postures, K stands)."""
+
+    gain: np.ndarray  # (P,) (NaN: not priced, see Pricer.top_rates)
+    seconds: np.ndarray  # (P,)
+    engaged: np.ndarray  # (K, P) plungers down after the move
+    reads: np.ndarray  # (K, P) probability that each of them reads there
+
+
+#: The earlier name of :class:`PricedMoves`, kept for earlier scripts.
+Options = PricedMoves
+
+
+class Pricer(Belief):
+    """A belief that prices the moves open to it (:class:`PricedMoves`)."""
+
+    def priced_moves(self) -> PricedMoves:
+        """Every candidate move priced: its gain, its seconds, the plungers down after it
+        and how likely each reads."""
+        seconds, after, reads = self._moves()
+        gain = np.zeros(len(seconds))
+        live = np.flatnonzero(reads.any(axis=0))
+        gain[live] = self._price(reads, seconds, live)
+        return PricedMoves(gain, seconds, after, reads)
+
+    #: The earlier name of :meth:`priced_moves`, kept for earlier scripts.
+    options = priced_moves
+
+    def _price(self, reads: np.ndarray, seconds: np.ndarray, postures: np.ndarray
+               ) -> np.ndarray:
+        """Gain (L,) of the moves to ``postures`` (L,) (``reads`` as in :meth:`_rows`,
+        ``seconds`` of every move): the geometry's alone, or with the world's terms their
+        rows too, at the time and from the direction each move arrives, and for I the
+        considered terms' bias (:meth:`~calibrators.planning.world_terms.WorldTerms.gains`)."""
+        rows = self._rows(reads, postures)
+        if self.world is None:
+            return self._gains(rows)
+        weight = np.sqrt(reads.T[postures])[:, :, None] / self.sigma
+        fitted, considered = self.world.rows(
+            np.array(self.slots), postures, self.time_s + seconds[postures],
+            directions(self.rho, self.table.postures[postures], self.world.approach))
+        rows[..., self.world.start:] += np.swapaxes(fitted, 0, 1) * weight
+        if self.criterion == "D":
+            return self._gains(rows)
+        return self.world.gains(rows, np.swapaxes(considered, 0, 1) * weight,
+                                self.covariance, rigid_factor(self.design))
+
+    def _moves(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The seconds (P,) of every candidate move, the plungers down after it (K, P) and
+        how likely each reads there (K, P).  A plunger is let down only where it is safe
+        both here and there (let down here, it reads there), and lifted where it is not
+        safe there."""
+        safe, contact = self._reach()
+        here = safe[:, self.here]
+        engaged = np.array(self.engaged, dtype=bool)
+        after = safe & (engaged | here)[:, None]
+        reads = np.where(after, contact, 0.0)
+        flicks = np.sum(after != engaged[:, None], axis=0)
+        drive = drive_seconds(self.design, tuple(float(v) for v in self.rho))
+        seconds = drive + TIME.lift_s * flicks
+        return seconds, after, reads
+
+    def _rows(self, reads: np.ndarray, postures: np.ndarray) -> np.ndarray:
+        """Whitened rows (L, K, n) of the readings at ``postures`` (L,), each stand's
+        weighted by its probability of reading (``reads``, K by every posture).
+
+        Only postures where some stand reads need pricing: elsewhere every row is zero,
+        the update nil and the gain exactly 0 (``_gains`` would give ``trace(solve(I,
+        0))`` or ``slogdet(I)``, zeros that differ at most in their sign).  A posture's
+        gain is computed alone (stacked products and solves work item by item), so it is
+        the same to the bit whichever others are priced with it."""
+        return (np.swapaxes(self.rows[:, postures], 0, 1)
+                * np.sqrt(reads.T[postures])[:, :, None] / self.sigma)
+
+    def _gains(self, rows: np.ndarray) -> np.ndarray:
+        """Gain of adding each batch of whitened rows (B, K, n) to the covariance."""
+        b = rows @ self.covariance
+        m = np.eye(rows.shape[1]) + rows @ np.swapaxes(b, 1, 2)
+        if self.criterion == "D":
+            return np.linalg.slogdet(m)[1]
+        bm = b[..., :N_MACHINE]
+        return np.trace(np.linalg.solve(m, (bm @ self.weight) @ np.swapaxes(bm, 1, 2)),
+                        axis1=1, axis2=2)
+
+    def _gain_bounds(self, reads: np.ndarray, postures: np.ndarray) -> np.ndarray:
+        """An upper bound (L,) on the gain of the readings at ``postures`` (L,) (``reads``
+        as in :meth:`_rows`), valid for any rows and covariance, at a fraction of the
+        price of the gain.
+
+        With a posture's whitened rows ``R``, ``G = R C R'`` and, for I, ``Q = R C V C
+        R'`` (``V``: the rigid weight padded with zeros to every unknown, positive
+        semi-definite): I's gain is ``trace((1 + G)^-1 Q)``, and since ``G >= 0`` makes
+        ``(1 + G)^-1 <= 1`` and ``Q >= 0``, it is at most ``trace(Q)``; D's gain is ``log
+        det(1 + G)``, the sum of ``log(1 + g)`` over the eigenvalues ``g >= 0`` of ``G``,
+        at most ``trace(G)``.  Either trace is a sum of one quadratic form per row (of
+        ``C V C`` or ``C``): a stand's whitened row is its row scaled by ``sqrt(reads) /
+        sigma``, so its form is that of its row over the unknowns it touches, times
+        ``reads / sigma^2``.  The bound is tight where a posture's readings pin down
+        little of what is left (``G`` small), as they do after the first minutes.  For I
+        the form is ``(C F)(C F)'`` (``F``: :func:`rigid_factor`), so a row's is the
+        square of its product with ``C F``, r columns instead of every unknown's."""
+        c, cols = self.covariance, self.touched_columns  # (K, T)
+        part = self.touched_rows[:, postures]  # (K, L, T)
+        if self.criterion == "D":
+            left, right = part @ c[cols[:, :, None], cols[:, None, :]], part
+        else:
+            left = right = part @ (c[:, :N_MACHINE] @ rigid_factor(self.design))[cols]
+        return np.sum(reads[:, postures] * np.sum(left * right, axis=-1), axis=0) / self.sigma**2
+
+    def affordable_rates(self, priced: PricedMoves) -> np.ndarray:
+        """Gain per second of every move that fits in the budget (-inf otherwise)."""
+        fits = self.time_s + priced.seconds <= self.budget_s
+        return np.where(fits, priced.gain / priced.seconds, -np.inf)
+
+    def top_rates(self, count: int) -> tuple[np.ndarray, PricedMoves]:
+        """Gain per second (P,) of the affordable moves that may be among the ``count``
+        best, exactly as :meth:`affordable_rates` over :meth:`priced_moves` has them, and -inf
+        for the others, whose rates are below the ``count``-th best (NaN gains in the
+        priced moves: not priced).
+
+        Each move's gain has an upper bound (:meth:`_gain_bounds`), widened by
+        :data:`BOUND_SLACK` for the rounding of both.  The moves of the highest bounds
+        per second are priced first; then every move whose bound per second reaches the
+        ``count``-th best rate found, which can only rise as more are priced, so a move
+        left out can neither beat nor tie it.  A move where no stand reads gains nothing
+        (its rate 0) and is not priced either.
+
+        With the world's terms only the :data:`WORLD_SHORTLIST` moves of the highest
+        bounds per second and Zero are priced, with the world's terms
+        (:meth:`_price`): their rates are returned, -inf for the others."""
+        wanted = count if self.world is None else max(count, WORLD_SHORTLIST)
+        seconds, after, reads = self._moves()
+        fits = self.time_s + seconds <= self.budget_s
+        live = np.flatnonzero(fits & reads.any(axis=0))
+        gain = np.full(len(seconds), np.nan)
+        rate = np.full(len(seconds), -np.inf)
+
+        def price(moves: np.ndarray) -> None:
+            postures = live[moves]
+            gain[postures] = self._gains(self._rows(reads, postures))
+            rate[postures] = gain[postures] / seconds[postures]
+
+        if live.size:
+            bound = self._gain_bounds(reads, live)
+            bound = bound + BOUND_SLACK * (np.abs(bound) + np.max(np.abs(bound)))
+            ceiling = bound / seconds[live]
+            order = np.argsort(-ceiling, kind="stable")
+            if self.world is not None:
+                moves = np.union1d(live[order[:wanted]],
+                                   np.intersect1d(live, [self.table.zero]))
+                gain[moves] = self._price(reads, seconds, moves)
+                rate[moves] = gain[moves] / seconds[moves]
+                return rate, PricedMoves(gain, seconds, after, reads)
+            first, rest = np.split(order, [max(FIRST_PRICED, wanted)])
+            price(first)
+            if rest.size:
+                price(rest[ceiling[rest] >= np.sort(rate[live[first]])[-wanted]])
+        return rate, PricedMoves(gain, seconds, after, reads)
