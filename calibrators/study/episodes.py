@@ -1,4 +1,4 @@
-"""Running agents in the lab, and what estimators make of their notebooks.
+"""The one agent <-> lab episode loop, and the notebook it leaves as measurements.
 
 An experiment is an agent's episode in ``OrthoglideLab-v0``; its result is the lab
 notebook (``env.unwrapped.records``) as :class:`~calibrators.measurements.Measurements`,
