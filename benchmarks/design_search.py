@@ -33,13 +33,14 @@ from calibrators.planning.search import Planner, greedy_plan
 from calibrators.planning.slot_table import slot_table
 from calibrators.study.episodes import DEFAULT_BUDGET_S, run_episode
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op
+from orthoglide_env.model.design import PROTOTYPE
 
 SIGMA = float(np.hypot(0.01, 0.01 / np.sqrt(12)))
 
 
 def opening(budget: float, criterion: str = "I") -> Planner:
     planner = Planner(list(PAPER_SLOTS), [True] * len(PAPER_SLOTS), SIGMA, budget,
-                      criterion=criterion)
+                      criterion=criterion, design=PROTOTYPE)
     down, chance = planner.reading_here()
     planner.expect_readings(down, chance)
     return planner
@@ -68,7 +69,7 @@ def main() -> None:
     parser.add_argument("--no-exhaustive", action="store_true",
                         help="skip the slow search (minutes)")
     args = parser.parse_args()
-    slot_table()
+    slot_table(PROTOTYPE)
     rows = []
     env = gym.make(orthoglide_env.LAB_ENV_ID, gauge_sigma=0.01)
     run_episode(env, get_agent("paper"), 0)

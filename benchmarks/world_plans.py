@@ -82,7 +82,7 @@ def replayed_mm(steps: tuple, sigma: float, budget: float, conditions: Condition
     """The TCP error after rigid motion that a planner under ``conditions`` predicts for
     ``steps`` (a plan made under any conditions), replayed with its readings expected."""
     planner = Planner(list(PAPER_SLOTS), [True] * len(PAPER_SLOTS), sigma, budget,
-                      conditions=conditions)
+                      conditions=conditions, design=PROTOTYPE)
     planner.expect_readings()
     index = {tuple(p): i for i, p in enumerate(planner.table.postures)}
     for step in steps:

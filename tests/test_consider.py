@@ -169,7 +169,7 @@ def test_a_lab_notebook_keeps_each_readings_time_and_the_fit_names_what_it_consi
     from conftest import paper_experiment
 
     episode, _ = paper_experiment(None, 11, errors="realistic", conditions="lab")
-    data = measurements_of(episode.records, episode.time_s)
+    data = measurements_of(episode.records, episode.time_s, design=PROTOTYPE)
     assert all(m.time_s is not None for m in data.items)
     assert [m.time_s for m in data.items] == [r.time_s for r in episode.records]
     for suffix in (".csv", ".json"):
@@ -217,7 +217,7 @@ def test_fitting_the_world_keeps_batches_and_ideal_fits_as_they_are() -> None:
     datas, sigma = [], 0.0
     for seed in (3, 4, 5):
         episode, _ = paper_experiment(None, seed, errors="realistic", conditions="lab")
-        datas.append(measurements_of(episode.records, episode.time_s))
+        datas.append(measurements_of(episode.records, episode.time_s, design=PROTOTYPE))
         sigma = episode.sigma
     ideal = GaussNewtonCalibrator(params="extended", sigma=sigma, verify=False,
                                   fit_world=True).fit(datas[0])

@@ -26,7 +26,7 @@ SIGMA = 0.01
 
 def planner(criterion: str = "I", budget_s: float = 600.0) -> Planner:
     p = Planner(list(PAPER_SLOTS), [True] * len(PAPER_SLOTS), SIGMA, budget_s,
-                criterion=criterion)
+                criterion=criterion, design=PROTOTYPE)
     p.expect_readings()  # the readings of the lab's opening, at Zero
     return p
 
@@ -41,7 +41,7 @@ def test_predicted_error_is_the_scorings_prediction() -> None:
     covariance = p.covariance[:N_MACHINE, :N_MACHINE] * np.outer(scale, scale)
     expected = predicted_tcp_frames(MachineParams(), covariance).rigid.rms
     assert p.predicted_rigid_mm() == pytest.approx(expected, rel=1e-9)
-    assert np.allclose(rigid_weight(), rigid_weight().T)
+    assert np.allclose(rigid_weight(PROTOTYPE), rigid_weight(PROTOTYPE).T)
 
 
 @pytest.mark.parametrize("criterion", ["I", "D"])
@@ -70,7 +70,8 @@ def test_the_price_of_a_move_is_what_taking_it_changes(criterion: str) -> None:
         rows_so_far.append(rows)
         p._add(rows)
     # Start again from the prior: identity plus every row's information.
-    q = Planner(list(PAPER_SLOTS), [True] * 6, SIGMA, 600.0, criterion=criterion)
+    q = Planner(list(PAPER_SLOTS), [True] * 6, SIGMA, 600.0, criterion=criterion,
+                design=PROTOTYPE)
     down, chance = q.reading_here()
     first = q.rows[down, q.here] * np.sqrt(chance)[:, None] / SIGMA
     info = first.T @ first + sum(r.T @ r for r in rows_so_far)
@@ -91,7 +92,7 @@ def test_the_best_move_is_the_best_of_every_move_priced(criterion: str) -> None:
     priced = live = 0
     for step in range(40):
         if step == 12:
-            p.remount(2, next(s for s in range(len(slot_table().tip)) if s not in p.slots))
+            p.remount(2, next(s for s in range(len(slot_table(PROTOTYPE).tip)) if s not in p.slots))
         options = p.priced_moves()
         rate = p.affordable_rates(options)
         full = int(np.argmax(rate)) if rate.max() > 0 else None
@@ -111,7 +112,7 @@ def test_the_best_move_is_the_best_of_every_move_priced(criterion: str) -> None:
             p.expect_readings()
         else:  # a filter: readings near their nominal values
             stands, _ = p.reading_here()
-            nominal = slot_table().reading[[p.slots[k] for k in stands], p.here]
+            nominal = slot_table(PROTOTYPE).reading[[p.slots[k] for k in stands], p.here]
             p.observe(list(stands), list(nominal + rng.normal(0.0, 0.05, len(stands))))
     assert choice is None and priced < live / 2
     assert p.mean is not None
@@ -121,7 +122,7 @@ def test_the_tcp_on_an_axis_keeps_that_legs_gauges_at_their_zero_distance() -> N
     """The candidates hold the paper's postures, and wherever the TCP is on a leg's axis
     every gauge of that leg that meets its target is as far from it as at Zero (nominal
     machine): readings a plan can count on."""
-    table = slot_table()
+    table = slot_table(PROTOTYPE)
     slots = slot_catalogue(PROTOTYPE)
     for leg in range(3):
         along = np.union1d(np.arange(PROTOTYPE.rho_min, PROTOTYPE.rho_max + 1e-9, 20.0),
@@ -143,7 +144,7 @@ def test_a_plan_spends_at_most_its_budget_and_the_lab_charges_what_it_planned() 
     optimal agent ends exactly when its plan says, within the budget, and no gauge is
     pressed past its travel (the plan keeps three a-priori sigmas clear)."""
     budget = 600.0
-    steps, predicted = fixed_plan(tuple(PAPER_SLOTS), (True,) * 6, SIGMA, budget)
+    steps, predicted = fixed_plan(tuple(PAPER_SLOTS), (True,) * 6, SIGMA, budget, PROTOTYPE)
     assert steps[-1].op == Op.STOP
     assert steps[-1].time_s <= budget
     # No dial rounding: the agent plans for the same sigma as this test.
@@ -175,7 +176,7 @@ def test_the_designed_plan_beats_the_papers_experiment_at_equal_time() -> None:
     paper_time = float(lab.records[-1].time_s)
     paper_predicted = lab.predicted_tcp_rigid_mm()
     _, designed = fixed_plan(tuple(PAPER_SLOTS), (True,) * 6, lab.noise.effective_sigma,
-                             paper_time)
+                             paper_time, PROTOTYPE)
     assert designed < paper_predicted
 
 
@@ -191,7 +192,7 @@ def test_remounts_are_taken_when_they_pay() -> None:
     assert any(s.op == Op.REMOUNT for s in steps)
     assert moving.predicted_rigid_mm() < staying.predicted_rigid_mm()
     q = planner()
-    q.remount(0, len(slot_table().tip) - 1)
+    q.remount(0, len(slot_table(PROTOTYPE).tip) - 1)
     block = q.covariance[N_MACHINE:N_MACHINE + 5]
     assert np.allclose(block[:, N_MACHINE:N_MACHINE + 5], np.eye(5))
     assert np.allclose(np.delete(block, np.s_[N_MACHINE:N_MACHINE + 5], axis=1), 0.0)
@@ -226,7 +227,8 @@ def play_without_faults(env, agent, observation, info):
         if terminated or truncated:
             break
     lab = env.unwrapped
-    return lab, for_study("extended", lab.noise.effective_sigma).fit(measurements_of(lab.records))
+    data = measurements_of(lab.records, design=PROTOTYPE)
+    return lab, for_study("extended", lab.noise.effective_sigma).fit(data)
 
 
 def test_a_wrong_start_does_not_lock_the_active_agent() -> None:
@@ -263,7 +265,7 @@ def test_the_filter_computes_only_the_spreads_that_decide_its_reach(monkeypatch)
     bar, or far from both ends of its travel)."""
     p = planner(budget_s=3600.0)
     rng = np.random.default_rng(5)
-    table = slot_table()
+    table = slot_table(PROTOTYPE)
     computed = [0]
     spread_of = Planner._spread
 

@@ -147,7 +147,7 @@ def test_accuracy_reward_is_the_estimates_score() -> None:
             break
     lab_env = env.unwrapped
     est = for_study("extended", lab_env.noise.effective_sigma).fit(
-        measurements_of(lab_env.records))
+        measurements_of(lab_env.records, design=PROTOTYPE))
     tcp = score(est.machine, lab_env.true_machine).tcp_after.rigid.rms
     hours = obs["time"][0] / 3600
     assert sum(rewards) == pytest.approx(-tcp / 0.01 - 2.0 * hours, rel=1e-9)

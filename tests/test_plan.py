@@ -155,7 +155,7 @@ def test_the_words_say_where_the_plunger_points(spec: GaugeSpec) -> None:
 def test_each_re_mount_has_its_picture(tmp_path) -> None:
     """A re-mount step gets a picture of the stands after it, the moved one highlighted;
     the set-up gets one of all."""
-    paper = make_procedure("paper", 3600)
+    paper = make_procedure("paper", 3600, PROTOTYPE)
     moved = Step(len(paper.steps) + 1, "re-mount", "Move stand 1.", 120.0, paper.total_s,
                  stand=1, slot="x-leg/y@0.8")
     procedure = Procedure(paper.agent, paper.budget_s, paper.conditions, paper.design,

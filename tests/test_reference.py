@@ -31,7 +31,7 @@ def read_references(env: gym.Env, seed: int) -> list:
     """The reference procedure alone on machine ``seed``: its records of reference
     mountings."""
     env.reset(seed=seed)
-    for act in reference_steps(env.unwrapped.n_stands):
+    for act in reference_steps(env.unwrapped.n_stands, PROTOTYPE):
         env.step(act)
     return [r for r in env.unwrapped.records if r.spec.part == Part.REFERENCE]
 
@@ -137,7 +137,7 @@ def test_an_agent_with_the_reference_keeps_its_time_back() -> None:
     env = reference_lab(gauge_sigma=0.02, gauge_resolution=0.01, budget_s=1800.0)
     observation, _ = env.reset(seed=7)
     agent.reset(env, observation, np.random.default_rng(0))
-    assert agent.inner.reserved_s == reference_seconds(6)
+    assert agent.inner.reserved_s == reference_seconds(6, PROTOTYPE)
     ops = [int(a["op"]) for a in agent.plan]
     assert ops[-1] == Op.STOP and ops.count(Op.STOP) == 1
 
@@ -158,7 +158,7 @@ def test_a_measurement_file_carries_reference_readings(tmp_path) -> None:
     says the zeroing reading is through the block)."""
     env = reference_lab(gauge_sigma=0.02, gauge_resolution=0.01)
     read_references(env, seed=2)
-    data = measurements_of(list(env.unwrapped.records))
+    data = measurements_of(list(env.unwrapped.records), design=PROTOTYPE)
     for suffix in ("csv", "json"):
         path = tmp_path / f"readings.{suffix}"
         data.write(path)

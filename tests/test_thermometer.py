@@ -16,6 +16,7 @@ from calibrators.estimators.consider import WORLD_PREFIX, consider_terms
 from calibrators.estimators.gauss_newton import layout_and_values
 from calibrators.measurements import Measurements
 from calibrators.study.episodes import measurements_of
+from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.world.machine_file import machine_dict
 from orthoglide_env.world.table import EFFECTS
@@ -99,8 +100,8 @@ def test_the_thermometer_changes_nothing_else() -> None:
     assert all(r.temperature_c is None for r in off.unwrapped.records)
     assert [replace(r, temperature_c=None) for r in on.unwrapped.records] == (
         off.unwrapped.records)
-    bare = measurements_of(off.unwrapped.records, 900.0)
-    warm = measurements_of(on.unwrapped.records, 900.0)
+    bare = measurements_of(off.unwrapped.records, 900.0, design=PROTOTYPE)
+    warm = measurements_of(on.unwrapped.records, 900.0, design=PROTOTYPE)
     stripped = Measurements([replace(m, temperature_c=None) for m in warm.items], 900.0)
     conditions = Conditions("workshop")
     sigma = off.unwrapped.noise.effective_sigma
@@ -149,7 +150,7 @@ def test_the_fit_against_the_thermometer_recovers_the_stands_growth_better(seed:
     which leaves 0.4-0.6 um here.  (Under the drawn walk alone, 0.3 K per root hour, the
     room is nearly linear in the clock over an hour: 0.04 um against 0.04-0.2 um.)"""
     env, _ = _hour(GROWTH, True, seed=seed, swing=True)
-    data = measurements_of(env.unwrapped.records, 3600.0)
+    data = measurements_of(env.unwrapped.records, 3600.0, design=PROTOTYPE)
     clock = Measurements([replace(m, temperature_c=None) for m in data.items], 3600.0)
     with_thermometer, without = _growth_error(env, data), _growth_error(env, clock)
     assert with_thermometer < 1e-4
@@ -176,7 +177,7 @@ def test_a_bad_temperature_in_a_sheet_is_one_line_and_exit_2(tmp_path, capsys, c
 
 def test_a_sheets_temperatures_survive_both_formats(tmp_path) -> None:
     env, _ = _hour("lab", True, budget_s=300.0)
-    data = measurements_of(env.unwrapped.records, 300.0)
+    data = measurements_of(env.unwrapped.records, 300.0, design=PROTOTYPE)
     for suffix in (".csv", ".json"):
         data.write(tmp_path / f"m{suffix}")
         back = Measurements.read(tmp_path / f"m{suffix}")

@@ -21,7 +21,7 @@ LAB = Conditions("lab")
 
 def planner(conditions: Conditions | None, budget_s: float = 120.0) -> Planner:
     p = Planner(list(PAPER_SLOTS), [True] * len(PAPER_SLOTS), SIGMA, budget_s,
-                conditions=conditions)
+                conditions=conditions, design=PROTOTYPE)
     p.expect_readings()  # the readings of the lab's opening, at Zero
     return p
 

@@ -25,13 +25,13 @@ from calibrators.agents.base import PlannedAgent, action, register
 from calibrators.planning.belief import PlannedOperation
 from calibrators.planning.search import Planner, greedy_plan
 from orthoglide_env.instruments.dial import weighting_sigma
-from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.world.conditions import Conditions
 
 
 @lru_cache(maxsize=8)
 def fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
-               budget_s: float, design: MachineDesign = PROTOTYPE,
+               budget_s: float, design: MachineDesign,
                conditions: Conditions | None = None, criterion: str = "I",
                remounts: bool = True) -> tuple[tuple[PlannedOperation, ...], float]:
     """The greedy plan from stands at ``slots`` (-1: none) with plungers ``engaged`` on a

@@ -16,7 +16,7 @@ import numpy as np
 
 from calibrators.agents.base import PlannedAgent, action, register
 from orthoglide_env.lab.operations import Op
-from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.kinematics import paper_posture
 
 #: Times each leg's Zero -> Max -> Min is gone through (section 4 of the paper).
@@ -44,7 +44,7 @@ class PaperAgent(PlannedAgent):
 
 @lru_cache(maxsize=64)
 def paper_plan(legs: tuple[int, ...], engaged: tuple[bool, ...], repetitions: int,
-               design: MachineDesign = PROTOTYPE) -> tuple[dict[str, Any], ...]:
+               design: MachineDesign) -> tuple[dict[str, Any], ...]:
     """The paper's procedure for stands on ``legs`` (-1: none) engaged as ``engaged``, at
     the paper postures of ``design``: the same on every machine of a sweep, so made
     once."""

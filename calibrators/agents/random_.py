@@ -27,7 +27,7 @@ from orthoglide_env.instruments.stands import install, installed_on
 from orthoglide_env.lab.operations import Op, slot_catalogue
 from orthoglide_env.model.boxes import collision_boxes
 from orthoglide_env.model.collisions import clearance
-from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import UnreachableError, direct
 
@@ -38,7 +38,7 @@ MARGIN: float = 2.0
 TRIES: int = 50
 
 
-def is_safe(rho: np.ndarray, slots: list[int], design: MachineDesign = PROTOTYPE) -> bool:
+def is_safe(rho: np.ndarray, slots: list[int], design: MachineDesign) -> bool:
     """Whether the nominal machine of ``design`` reaches ``rho`` with parts apart and the
     gauges at ``slots`` (engaged; indices in the design's slot catalogue) neither pressed
     nor within the margin of being pressed, the platform gauges on their faces within

@@ -32,7 +32,7 @@ import numpy as np
 
 from calibrators.agents.base import Agent, PlannedAgent, action
 from orthoglide_env.lab.operations import TIME, Op, slot_index
-from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.world.table import REFERENCE_LENGTH_MM
 
 #: The name's suffix that adds the procedure to an agent.
@@ -44,7 +44,7 @@ POSTURES: tuple[tuple[float, float, float], ...] = (
     (-1.5, 0.0, 0.0), (-0.5, 4.0, 0.0), (0.5, 0.0, 4.0), (1.5, -4.0, -4.0))
 
 
-def reference_steps(stands: int, design: MachineDesign = PROTOTYPE) -> list[dict[str, Any]]:
+def reference_steps(stands: int, design: MachineDesign) -> list[dict[str, Any]]:
     """The procedure's lab actions (after the agent's experiment, its last step a stop),
     for a lab of ``stands`` stands, every one mounted, on machines of ``design``."""
     steps = [action(Op.LIFT, stand=k) for k in range(1, stands)]
@@ -59,7 +59,7 @@ def reference_steps(stands: int, design: MachineDesign = PROTOTYPE) -> list[dict
     return [*steps, action(Op.STOP)]
 
 
-def reference_seconds(stands: int, design: MachineDesign = PROTOTYPE) -> float:
+def reference_seconds(stands: int, design: MachineDesign) -> float:
     """What :func:`reference_steps` costs at most by the time table: from the farthest
     corner of ``design``'s travel, every lift and move as long as it can be."""
     far = float(TIME.move(np.full(3, design.rho_min), np.full(3, design.rho_max)))

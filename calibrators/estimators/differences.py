@@ -10,7 +10,7 @@ is the one of the data actually used.
 from __future__ import annotations
 
 from collections.abc import Collection
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -19,7 +19,7 @@ from orthoglide_env.instruments.rays import exact_ray_distances
 from orthoglide_env.instruments.slots import GaugeSpec, Part
 from orthoglide_env.instruments.stands import install
 from orthoglide_env.model.boxes import collision_boxes
-from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import PAPER_POSTURES, direct, paper_posture
 
@@ -43,7 +43,7 @@ class Differences:
     values: np.ndarray  # mm
     cov_unit: np.ndarray  # covariance of ``values`` for readings of unit variance
     mountings: tuple[str, ...] = ()
-    design: MachineDesign = PROTOTYPE  # the design of the machine read
+    design: MachineDesign = field(kw_only=True)  # the design of the machine read
 
     def __len__(self) -> int:
         return len(self.values)
@@ -100,7 +100,7 @@ def differences(data: Measurements, repetitions: Collection[int] | None = None) 
            + np.diag([1 / len(groups[k]) for k in keys]))
     rho = np.array([k[2] for k in keys], dtype=float).reshape(-1, 3)
     return Differences(tuple(k[1] for k in keys), tuple(labels[k[2]] for k in keys), rho,
-                       values, cov, tuple(k[0] for k in keys), data.design)
+                       values, cov, tuple(k[0] for k in keys), design=data.design)
 
 
 def model_differences(theta: np.ndarray, rows: Differences) -> np.ndarray:

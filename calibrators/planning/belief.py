@@ -45,7 +45,7 @@ import numpy as np
 from calibrators.planning.slot_table import END_GAP, reach, slot_table
 from calibrators.planning.world_terms import world_terms
 from orthoglide_env.lab.operations import TIME, Op
-from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import ERROR_NAMES, MachineParams
 from orthoglide_env.reading_model import ParameterSpace, default_scales
 from orthoglide_env.scoring import rigid_weights
@@ -65,7 +65,7 @@ SPREAD_SLACK: float = 1e-5
 
 
 @lru_cache(maxsize=2)
-def rigid_weight(design: MachineDesign = PROTOTYPE) -> np.ndarray:
+def rigid_weight(design: MachineDesign) -> np.ndarray:
     """``W`` (27, 27): ``trace(W C)`` is the predicted mean-square TCP error over the
     scoring grid after the best-fit rigid motion (mm^2) for machine errors off by
     ``N(0, C)`` in units of their scale (the quadratic form of
@@ -75,7 +75,7 @@ def rigid_weight(design: MachineDesign = PROTOTYPE) -> np.ndarray:
 
 
 @lru_cache(maxsize=2)
-def rigid_factor(design: MachineDesign = PROTOTYPE) -> np.ndarray:
+def rigid_factor(design: MachineDesign) -> np.ndarray:
     """``F`` (27, r) with ``F F' = W`` (:func:`rigid_weight`): ``W`` has rank ``r``, 12 on
     the prototype, as many errors only move the tool rigidly or as others do.  The
     eigenvalues below 1e-12 of the largest are the rounding of those zeros."""
@@ -118,7 +118,7 @@ class Belief:
     budget_s: float
     criterion: str = "I"
     time_s: float = 0.0
-    design: MachineDesign = PROTOTYPE
+    design: MachineDesign = field(kw_only=True)
     steps: list[PlannedOperation] = field(default_factory=list)
     conditions: Conditions | None = None
 

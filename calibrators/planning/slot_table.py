@@ -21,7 +21,7 @@ from orthoglide_env.instruments.stands import install, installed_on
 from orthoglide_env.lab.operations import slot_catalogue
 from orthoglide_env.model.boxes import collision_boxes
 from orthoglide_env.model.collisions import clearance
-from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import ERROR_NAMES, MachineParams
 from orthoglide_env.model.kinematics import axis_postures, direct
 from orthoglide_env.reading_model import ReadingLayout, default_scales, jacobian, predict
@@ -40,7 +40,7 @@ PRESS_MARGIN: float = 3.0
 #: nominal model (mm): more than the machine errors move them.
 CLEARANCE: float = 3.0
 
-def candidate_postures(design: MachineDesign = PROTOTYPE) -> np.ndarray:
+def candidate_postures(design: MachineDesign) -> np.ndarray:
     """Postures an experiment may visit (P, 3): a 20 mm grid of the machine design's joint
     cube; denser tubes along each axis (20 mm along it, 10 mm across from -40 to +20
     mm), where the gauges on that axis's bars stay within their travel; and the postures
@@ -111,7 +111,7 @@ def reach(table: SlotTable, slots: np.ndarray, tip: np.ndarray, spread: np.ndarr
 
 
 @lru_cache(maxsize=2)
-def slot_table(machine_design: MachineDesign = PROTOTYPE) -> SlotTable:
+def slot_table(machine_design: MachineDesign) -> SlotTable:
     """The :class:`SlotTable` of every slot of the design's catalogue over the
     :func:`candidate_postures` the nominal machine of ``machine_design`` reaches with its
     parts :data:`CLEARANCE` apart (once per process and design: seconds)."""

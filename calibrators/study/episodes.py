@@ -42,7 +42,7 @@ _PAPER_RHO: dict[tuple[float, ...], str] = {v: k for k, v in paper_rhos(PROTOTYP
 
 
 def measurements_of(records: list[Record], time_s: float = 0.0,
-                    until_s: float | None = None, design: MachineDesign = PROTOTYPE
+                    until_s: float | None = None, *, design: MachineDesign
                     ) -> Measurements:
     """The notebook as measurements (only what was read by ``until_s`` seconds, if given)
     of a machine of ``design``.  A reading at a paper posture of the prototype is labelled

@@ -35,7 +35,7 @@ from calibrators.study.episodes import measurements_of, run_episode
 from calibrators.study.labs import nominal_lab, nominal_options
 from orthoglide_env.instruments.slots import PLATFORM_AIM, GaugeSpec, Part
 from orthoglide_env.lab.operations import DEFAULT_BUDGET_S, Op
-from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import AXIS_NAMES, LEG_NAMES
 from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.world.table import REFERENCE_LENGTH_MM
@@ -137,7 +137,7 @@ def planned_agents() -> list[str]:
     return [name for name in available() if isinstance(get_agent(name), PlannedAgent)]
 
 
-def place_words(spec: GaugeSpec, design: MachineDesign = PROTOTYPE) -> str:
+def place_words(spec: GaugeSpec, design: MachineDesign) -> str:
     """Where a stand goes and how its dial is read, in a technician's words: the part and
     face, the distance from a named hinge, the measuring direction and which way a
     reading is positive on the sheet (along the world axis, as every reading is)."""
@@ -212,7 +212,7 @@ def _planned(agent_name: str) -> PlannedAgent:
     return agent
 
 
-def make_procedure(agent_name: str, budget_s: float, design: MachineDesign = PROTOTYPE,
+def make_procedure(agent_name: str, budget_s: float, design: MachineDesign,
                    conditions: Conditions | None = None, seed: int = 0) -> Procedure:
     """The procedure of agent ``agent_name``'s experiment within ``budget_s`` seconds on a
     machine of ``design`` under ``conditions`` (default ideal): :meth:`Plan.run`.

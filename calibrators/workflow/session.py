@@ -34,7 +34,7 @@ from calibrators.workflow.plan import SHEET_FILE, describe_step
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.lab.notebook import Record
 from orthoglide_env.lab.operations import Op, slot_catalogue
-from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.world.conditions import Conditions
 
 #: What an answer is asked for: (step number, what to do, stand (1, 2, ...), gauge name,
@@ -48,7 +48,7 @@ class Session:
     replayed when it exists."""
 
     def __init__(self, agent_name: str, budget_s: float, notebook: str | Path, *,
-                 design: MachineDesign = PROTOTYPE, conditions: Conditions | None = None,
+                 design: MachineDesign, conditions: Conditions | None = None,
                  seed: int = 0, target_mm: float = 0.0, sigma: float = DEFAULT_SIGMA,
                  resolution: float = DEFAULT_RESOLUTION) -> None:
         if not budget_s > 0:
