@@ -24,7 +24,8 @@ from calibrators.cli.common import (
 )
 from calibrators.cli.estimator_options import DEFAULT_STRATEGY
 from calibrators.estimators.catalogue import CATALOGUE, get_estimator
-from calibrators.study.compare import CHUNK, Config, Trial, run, verify_pybullet
+from calibrators.study.compare import CHUNK, Config, Trial, run
+from calibrators.study.crosscheck import verify_pybullet
 from calibrators.study.engines import ENGINES, RAY_INSTALL_HINT, ray_available
 from calibrators.study.episodes import DEFAULT_BUDGET_S
 from calibrators.study.statistics import paired, summary
