@@ -15,7 +15,6 @@ import numpy as np
 from scipy.special import ndtr
 
 from orthoglide_env.instruments.dial import pressed_past_travel
-from orthoglide_env.instruments.gauges import DEFAULT_TRAVEL
 from orthoglide_env.instruments.rays import exact_ray_distances, exact_target_boxes
 from orthoglide_env.instruments.stands import install, installed_on
 from orthoglide_env.lab.operations import slot_catalogue
@@ -76,7 +75,7 @@ class SlotTable:
     at_zero: np.ndarray  # (S, 31) the derivative at Zero, which ``change`` is taken from
     sign: np.ndarray  # (S,) reading = sign * (tip - tip at Zero)
     reading: np.ndarray  # (S, P) nominal reading, zeroed at Zero, of the reading model
-    travel: float = DEFAULT_TRAVEL
+    travel: float  # the design's gauge travel, mm
 
     @cached_property
     def prior_spread(self) -> np.ndarray:

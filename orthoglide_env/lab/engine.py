@@ -22,7 +22,7 @@ import numpy as np
 
 from orthoglide_env.instruments import thermometer
 from orthoglide_env.instruments.dial import Status, readings_from_distances, status_of
-from orthoglide_env.instruments.gauges import DEFAULT_TRAVEL, Gauge, GaugeArray
+from orthoglide_env.instruments.gauges import Gauge, GaugeArray
 from orthoglide_env.instruments.slots import GaugeSpec, Part, on_platform
 from orthoglide_env.instruments.stands import install_array, installation_errors
 from orthoglide_env.lab.clock import overtravel_seconds, step_seconds, travel_seconds
@@ -650,7 +650,7 @@ def _unmounted(shape: tuple[int, int], travel: float, spec: GaugeSpec) -> GaugeA
     """Gauges of stands that are not mounted: no ray (NaN), so nothing reads or presses
     (named after ``spec``, any slot)."""
     return GaugeArray(origin=np.full((*shape, 3), np.nan), direction=np.full((*shape, 3), np.nan),
-                      sign=np.ones(shape), travel=travel, zero=DEFAULT_TRAVEL / 2,
+                      sign=np.ones(shape), travel=travel, zero=travel / 2,
                       leg=spec.leg, axis=spec.axis, at=spec.at)
 
 
