@@ -249,7 +249,8 @@ def print_table(rows: list[dict], minutes: float, steps: int) -> None:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()),
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     parser.add_argument("--steps", type=int, default=120_000, help="training steps")
     parser.add_argument("--max-minutes", type=float, default=0.0,
                         help="end training after this many minutes, evaluations included "
@@ -258,7 +259,8 @@ def main() -> None:
     parser.add_argument("--subprocesses", action="store_true",
                         help="one process per env (SubprocVecEnv) instead of one for all")
     parser.add_argument("--reward", default="information",
-                        choices=["information", "accuracy"])
+                        choices=["information", "accuracy"],
+                        help="information gained per second, or the fall of the TCP error")
     parser.add_argument("--budget", type=float, default=600.0,
                         help="lab seconds of a training episode; the policy stops there")
     parser.add_argument("--conditions", default="lab", choices=CONDITION_NAMES,
@@ -275,7 +277,8 @@ def main() -> None:
     parser.add_argument("--machines", type=int, default=20,
                         help="held-out machines of the final table")
     parser.add_argument("--jobs", type=int, default=1, help="processes of the final table")
-    parser.add_argument("--out", type=Path, default=Path("results/policy.zip"))
+    parser.add_argument("--out", type=Path, default=Path("results/policy.zip"),
+                        help="the trained policy's file")
     args = parser.parse_args()
     if args.eval_seed < 1:
         parser.error("--eval-seed must be >= 1: seed 0's machines include training machines")

@@ -7,7 +7,13 @@ import numpy as np
 import pytest
 
 from calibrators.study.compare import Trial
-from calibrators.study.statistics import median_interval, paired, summary, warning_kind
+from calibrators.study.statistics import (
+    median_interval,
+    paired,
+    summary,
+    warning_kind,
+    warning_title,
+)
 
 
 def _trial(agent: str, machine: int, rigid: float, *, before: float = 0.5,
@@ -66,3 +72,17 @@ def test_warnings_of_one_kind_are_counted_together() -> None:
     assert warning_kind("3 outlier reading(s) left out: reading 7 (x-leg/y)") == \
         warning_kind("12 outlier reading(s) left out: reading 1 (z-leg/x)") == \
         "N outlier reading(s) left out"
+
+
+def test_a_warning_kind_reads_without_its_placeholder() -> None:
+    """The kind groups warnings by replacing their numbers; the line a user reads says
+    "readings", not "N reading(s)", since the trials' count stands beside it."""
+    text = ("3 reading(s) the model does not fit, though their repetitions read the same: "
+            "reading 31 (y-leg/x@0.5, YMin)")
+    assert warning_kind(text) == ("N reading(s) the model does not fit, though their "
+                                  "repetitions read the same")
+    assert warning_title(warning_kind(text)) == ("readings the model does not fit, though "
+                                                 "their repetitions read the same")
+    assert warning_title("N outlier reading(s) left out") == "outlier readings left out"
+    assert warning_title("the model does not explain the readings") == (
+        "the model does not explain the readings")

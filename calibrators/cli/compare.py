@@ -28,7 +28,7 @@ from calibrators.study.compare import CHUNK, Config, Trial, run
 from calibrators.study.crosscheck import verify_pybullet
 from calibrators.study.engines import ENGINES, RAY_INSTALL_HINT, ray_available
 from calibrators.study.episodes import DEFAULT_BUDGET_S
-from calibrators.study.statistics import paired, summary
+from calibrators.study.statistics import paired, summary, warning_title
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS
@@ -225,7 +225,7 @@ def _print(trials: list[Trial], config: Config, machines: int, seconds: float,
             example = seen["example"].split(":", 1)[-1].strip()
             example = example if len(example) <= 110 else example[:107] + "..."
             print(f"{r['agent']} x {r['estimator']}: {seen['trials']} of {r['machines']} "
-                  f"fits warn: {kind} (e.g. {example})")
+                  f"fits warn: {warning_title(kind)} (e.g. {example})")
     exact = [name for name, est in CATALOGUE.items() if est.name == DEFAULT_STRATEGY]
     if any(r["failed"] and r["estimator"] not in exact for r in rows):
         print(f"the exact-model estimators read any agent's readings: --estimators "

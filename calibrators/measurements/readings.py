@@ -142,11 +142,15 @@ class Measurements:
     @classmethod
     def from_csv(cls, path: str | Path, design: MachineDesign | None = None) -> Measurements:
         """Read a CSV file of readings on a machine of ``design`` (None: the prototype):
-        a CSV has no place to name its design."""
+        a CSV has no place to name its design.  Nor its experiment time: it is taken as
+        the last reading's ``time_s`` (0 without the column), the least the experiment
+        took."""
         path = Path(path)
         design = PROTOTYPE if design is None else design
         with _opened(path) as handle:
-            return cls(read_csv(handle, path, design), design=design)
+            items = read_csv(handle, path, design)
+        seconds = max((m.time_s for m in items if m.time_s is not None), default=0.0)
+        return cls(items, seconds, design=design)
 
     def write(self, path: str | Path) -> None:
         """Write ``path`` in the format its extension names (.csv or .json)."""

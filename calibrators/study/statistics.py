@@ -59,6 +59,12 @@ def warning_kind(text: str) -> str:
     return re.sub(r"\d+", "N", text.split(":", 1)[0])
 
 
+def warning_title(kind: str) -> str:
+    """A :func:`warning_kind` as a reader sees it: "N reading(s) the model does not fit"
+    reads "readings the model does not fit" (the count is the trials', given beside it)."""
+    return re.sub(r"\bN ((?:\w+ )*?)(\w+)\(s\)", r"\1\2s", kind)
+
+
 def summary(trials: list[Trial], target_mm: float = 0.01) -> list[dict]:
     """One row per agent x estimator, in the order they first appear.  Accuracy is over
     every trial: a failed one counts with its machine's uncalibrated error
