@@ -86,3 +86,16 @@ def test_a_warning_kind_reads_without_its_placeholder() -> None:
     assert warning_title("N outlier reading(s) left out") == "outlier readings left out"
     assert warning_title("the model does not explain the readings") == (
         "the model does not explain the readings")
+
+
+def test_a_paired_row_counts_the_machines_with_a_failed_fit() -> None:
+    """Where a fit failed, the ratio compares uncalibrated machines: the row says on how
+    many of its machines that happened (either side), so a ratio of 1 over failures is
+    not read as a tie of two calibrations."""
+    trials = [t for m in range(6) for t in (
+        _trial("a", m, 0.5 if m < 2 else 0.01, failed="no Zero" if m < 2 else ""),
+        _trial("b", m, 0.5 if m in (1, 3) else 0.02, failed="no Zero" if m in (1, 3) else ""))]
+    (pair,) = paired(trials)
+    assert pair["machines"] == 6 and pair["failed"] == 3  # machines 0, 1 and 3
+    clean = [t for t in trials if t.machine >= 4]
+    assert paired(clean)[0]["failed"] == 0

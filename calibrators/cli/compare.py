@@ -239,7 +239,9 @@ def _print(trials: list[Trial], config: Config, machines: int, seconds: float,
                         if pair["ratio_ci95"] else "-")
             print(f"  {pair['estimator']:15}{pair['agent']:>10} / {pair['against']:10}"
                   f"{pair['ratio_median']:8.3f} {interval:>16}  wins {pair['win_rate']:4.0%} "
-                  f"of {pair['machines']}")
+                  f"of {pair['machines']}" + (
+                      f" ({pair['failed']} with a failed fit, counted uncalibrated)"
+                      if pair["failed"] else ""))
     return rows
 
 

@@ -122,12 +122,14 @@ def paired(trials: list[Trial]) -> list[dict]:
     ``against``: below 1, ``agent`` is the more accurate) with its 95 % interval, and the
     fraction of machines where ``agent``'s error is the smaller (``win_rate``; a tie
     counts a half).  Failed trials count with their uncalibrated error, as in
-    :func:`summary`."""
+    :func:`summary`; ``failed`` is how many of the machines had a failed fit on either
+    side."""
     rows = []
     agents = list(dict.fromkeys(t.agent for t in trials))
     for name in dict.fromkeys(t.estimator for t in trials):
         error = {(t.agent, t.machine): _rms(t.tcp_after, "rigid")
                  for t in trials if t.estimator == name}
+        failed = {(t.agent, t.machine) for t in trials if t.estimator == name and t.failed}
         for k, agent in enumerate(agents):
             for against in agents[k + 1:]:
                 both = sorted(m for a, m in error if a == agent
@@ -146,5 +148,7 @@ def paired(trials: list[Trial]) -> list[dict]:
                     "ratio_ci95": (list(median_interval(ratio))
                                    if len(both) >= MIN_INTERVAL else None),
                     "win_rate": float(np.mean((mine < theirs) + 0.5 * (mine == theirs))),
+                    "failed": sum((agent, m) in failed or (against, m) in failed
+                                  for m in both),
                 })
     return rows
