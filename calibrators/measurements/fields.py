@@ -157,8 +157,11 @@ def _posture(label: object, rho: Iterable[object] | None, design: MachineDesign
         return label, values
     if max(abs(a - b) for a, b in zip(values, paper, strict=True)) > PAPER_RHO_TOLERANCE:
         raise FieldError("posture", f"{label} is the paper posture at rho "
-                                    f"({', '.join(_compact(v) for v in paper)}): label a "
-                                    f"posture of your own with a name of your own")
+                                    f"({', '.join(_compact(v) for v in paper)}) on the design "
+                                    f"the readings are read with, not at "
+                                    f"({', '.join(_compact(v) for v in values)}): readings of "
+                                    f"another design are read with that design (--design), "
+                                    f"and a posture of your own needs a name of your own")
     return label, paper
 
 

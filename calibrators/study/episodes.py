@@ -37,19 +37,16 @@ from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.world.truth import World
 
-#: Paper postures by their control coordinates, to label the notebook's readings.
-_PAPER_RHO: dict[tuple[float, ...], str] = {v: k for k, v in paper_rhos(PROTOTYPE).items()}
-
 
 def measurements_of(records: list[Record], time_s: float = 0.0,
                     until_s: float | None = None, *, design: MachineDesign
                     ) -> Measurements:
     """The notebook as measurements (only what was read by ``until_s`` seconds, if given)
-    of a machine of ``design``.  A reading at a paper posture of the prototype is labelled
-    with its name (a measurement file's paper postures are the prototype's); each Zero
+    of a machine of ``design``.  A reading at a paper posture of ``design`` is labelled
+    with its name (a measurement file's paper postures are its design's); each Zero
     reading of a mounting opens its next repetition (the file format's meaning), so the
     paper's procedure is numbered as the paper numbers it."""
-    labels = _PAPER_RHO if design == PROTOTYPE else {}
+    labels = {rho: name for name, rho in paper_rhos(design).items()}
     zeros: dict[str, int] = {}
     items = []
     for r in records:
