@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import csv
 import dataclasses
 import json
 import re
@@ -169,6 +170,12 @@ def test_compare_writes_table_csv_and_plots(tmp_path, capsys) -> None:
     assert "--estimators" in named and named <= options_of("compare"), named
     for name in ("trials.jsonl", "summary.csv", "accuracy_vs_time.png", "boxes.png"):
         assert (tmp_path / name).stat().st_size > 0
+    # Every row of the summary names the world its numbers hold in, as the table does.
+    world = "realistic errors, ideal conditions, gauge sigma 0.02 mm, budget 3600 s, exact backend"
+    assert f"2 machines ({world})" in text
+    with (tmp_path / "summary.csv").open() as handle:
+        summary_rows = list(csv.DictReader(handle))
+    assert len(summary_rows) == 2 * 3 and {r["world"] for r in summary_rows} == {world}
     lines = (tmp_path / "trials.jsonl").read_text().splitlines()
     assert len(lines) == 2 * 2 * 3
     for line in lines:

@@ -195,9 +195,7 @@ def _print(trials: list[Trial], config: Config, machines: int, seconds: float,
         print(json.dumps({"config": _config_dict(config, machines), "rows": rows,
                           "paired": pairs}, allow_nan=False))
         return rows
-    print(f"{machines} machines ({config.errors} errors, {config.conditions.label} conditions"
-          f"{', a thermometer' if config.thermometer else ''}, gauge sigma {config.sigma} mm, "
-          f"budget {config.budget_s:g} s, {config.backend} backend), {seconds:.1f} s. TCP error "
+    print(f"{machines} machines ({config.world}), {seconds:.1f} s. TCP error "
           "RMS over the workspace after calibration (mm), median over machines with its "
           "95 % interval; rigid = after the best-fit rigid motion (the headline), raw = "
           "world frame; a failed trial counts as its uncalibrated machine; success: rigid "
@@ -253,13 +251,13 @@ def _write(trials: list[Trial], rows: list[dict], out: Path, config: Config) -> 
     summary_csv = out / "summary.csv"
     with summary_csv.open("w", newline="") as handle:
         writer = csv.writer(handle)
-        writer.writerow(["agent", "estimator", "machines", "failed", "time_s_median",
+        writer.writerow(["world", "agent", "estimator", "machines", "failed", "time_s_median",
                          *(f"tcp_after_{f}_median_mm" for f in FRAMES),
                          "tcp_after_rigid_ci95_low_mm", "tcp_after_rigid_ci95_high_mm",
                          "tcp_after_rigid_p95_mm", "z_rms", "chi2_rejected", "success_rate",
                          "predicted_success_rate"])
         for r in rows:
-            writer.writerow([r["agent"], r["estimator"], r["machines"], r["failed"],
+            writer.writerow([config.world, r["agent"], r["estimator"], r["machines"], r["failed"],
                              r["time_s"]["median"],
                              *(r["tcp_after_mm"][f]["median"] for f in FRAMES),
                              *(r["tcp_after_mm"]["rigid"]["ci95"] or (None, None)),

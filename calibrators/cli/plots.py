@@ -50,10 +50,9 @@ def accuracy_vs_time(trials: list[Trial], config: Config, out: Path) -> Path:
     ax.set_title(f"Accuracy against lab time ({name} estimator)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
-    return _save(plt, fig, ax, f"Median over {len({t.machine for t in trials})} "
-                 f"{config.errors} machines; gauge sigma {config.sigma} mm; budget "
-                 f"{config.budget_s:g} s. Each point re-estimates from the readings taken so "
-                 "far.", out / "accuracy_vs_time.png")
+    return _save(plt, fig, ax, f"Median over {len({t.machine for t in trials})} machines "
+                 f"({config.world}). Each point re-estimates from the readings taken so far.",
+                 out / "accuracy_vs_time.png", wrap=True)
 
 
 def boxes(trials: list[Trial], config: Config, out: Path) -> Path:
@@ -73,6 +72,7 @@ def boxes(trials: list[Trial], config: Config, out: Path) -> Path:
     ax.boxplot(data, tick_labels=labels)
     ax.set_title("Accuracy per agent x estimator")
     ax.grid(True, axis="y", which="both", alpha=0.3)
-    return _save(plt, fig, ax, "Boxes: quartiles over machines, whiskers 1.5 IQR. Failed "
+    return _save(plt, fig, ax, f"{len({t.machine for t in trials})} machines "
+                 f"({config.world}). Boxes: quartiles over machines, whiskers 1.5 IQR. Failed "
                  "estimates (an estimator that cannot read an agent's instrument) are left out.",
                  out / "boxes.png", wrap=True)

@@ -86,6 +86,16 @@ class Config:
     #: The lab has a room thermometer.
     thermometer: bool = False
 
+    @property
+    def world(self) -> str:
+        """The world the comparison's numbers hold in, in words, as every output names it:
+        the error preset, the conditions (and their effects when not all act), the
+        thermometer, the gauges' sigma, the budget, the back-end and a custom design."""
+        design = "" if self.design == PROTOTYPE else f", design L {self.design.L:g} mm"
+        return (f"{self.errors} errors, {self.conditions.label} conditions"
+                f"{', a thermometer' if self.thermometer else ''}, gauge sigma {self.sigma} mm, "
+                f"budget {self.budget_s:g} s, {self.backend} backend{design}")
+
     def lab_kwargs(self, agent: Agent) -> dict[str, Any]:
         """The lab env's arguments of this comparison for ``agent`` (with the tracker or
         the gauge block when it needs one)."""
