@@ -22,8 +22,7 @@ from calibrators.cli.common import (
     conditions_of,
     machine_design_of,
 )
-from calibrators.cli.estimator_options import DEFAULT_STRATEGY
-from calibrators.estimators.catalogue import CATALOGUE, get_estimator
+from calibrators.estimators.catalogue import CATALOGUE, exact_estimators, get_estimator
 from calibrators.study.compare import CHUNK, Config, Trial, run
 from calibrators.study.crosscheck import verify_pybullet
 from calibrators.study.engines import ENGINES, RAY_INSTALL_HINT, ray_available
@@ -224,7 +223,7 @@ def _print(trials: list[Trial], config: Config, machines: int, seconds: float,
             example = example if len(example) <= 110 else example[:107] + "..."
             print(f"{r['agent']} x {r['estimator']}: {seen['trials']} of {r['machines']} "
                   f"fits warn: {warning_title(kind)} (e.g. {example})")
-    exact = [name for name, est in CATALOGUE.items() if est.name == DEFAULT_STRATEGY]
+    exact = exact_estimators()
     if any(r["failed"] and r["estimator"] not in exact for r in rows):
         print(f"the exact-model estimators read any agent's readings: --estimators "
               f"{','.join(exact)}")

@@ -18,6 +18,7 @@ from calibrators.estimators.base import Estimate, Estimator
 from calibrators.estimators.catalogue import (
     CATALOGUE,
     DEFAULT_ESTIMATOR,
+    exact_estimators,
     for_readings,
     get_estimator,
 )
@@ -39,8 +40,6 @@ from orthoglide_env.world.conditions import IDEAL, Conditions
 #: ``--strategy``'s names (the estimator classes' names) and the catalogue's estimators
 #: they stand for.
 STRATEGIES: dict[str, str] = {"gauss-newton": "full", "paper": "paper"}
-#: The strategy of the exact-model fit, which reads any experiment.
-DEFAULT_STRATEGY = "gauss-newton"
 
 
 @dataclass(frozen=True)
@@ -191,7 +190,7 @@ def estimator(args: argparse.Namespace, sigma: float | None = None,
 
 def use_exact(exc: NeedsExactFit) -> UsageError:
     """What the paper's fit refuses, with the estimators that can."""
-    exact = [n for n, est in CATALOGUE.items() if est.name == DEFAULT_STRATEGY]
+    exact = exact_estimators()
     return UsageError(f"{exc}: use an exact-model estimator, --estimator {' or '.join(exact)}")
 
 

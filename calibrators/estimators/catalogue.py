@@ -41,6 +41,13 @@ CATALOGUE: dict[str, Estimator] = {
 DEFAULT_ESTIMATOR = "full"
 
 
+def exact_estimators() -> list[str]:
+    """The catalogue's names whose fit is the exact model's, which reads any agent's
+    readings (a tracker's, a world's): what a refusal of the paper's fit points to."""
+    return [name for name, est in CATALOGUE.items()
+            if isinstance(est, GaussNewtonCalibrator)]
+
+
 def get_estimator(name: str, **config: Any) -> Estimator:
     """A new estimator configured as the catalogue's ``name``, but for ``config`` (any of
     its class's parameters, e.g. ``sigma``, ``conditions``, ``left_out``, ``verify``); an
