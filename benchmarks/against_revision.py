@@ -10,8 +10,9 @@ and the ratio of this tree's median to ``REV``'s.  ``REV`` is checked out into a
 temporary git worktree and imported ahead of the installed package (``PYTHONPATH``); the
 probe prints the file it imported, so a run that timed the wrong tree says so.
 
-The probe uses only what every revision since the native vector env offers:
-``gym.make(ENV_ID, backend="exact")`` for N = 1, the native vector entry point otherwise,
+The probe uses only what every revision since the conditions (``6a01dcd``) offers:
+``gym.make(ENV_ID, backend="exact", conditions="ideal")`` for N = 1 (the textbook world,
+the default before issue 37), the native vector entry point otherwise,
 small random moves around Zero as in a calibration (``bench_vector.py``), autoresets
 included.
 """
@@ -37,7 +38,7 @@ import numpy as np
 import orthoglide_env
 n, seconds = int(sys.argv[1]), float(sys.argv[2])
 if n == 1:
-    env = gym.make(orthoglide_env.ENV_ID, backend="exact")
+    env = gym.make(orthoglide_env.ENV_ID, backend="exact", conditions="ideal")
     env.reset(seed=0)
 
     def step(a):
@@ -45,7 +46,8 @@ if n == 1:
             env.reset()
 else:
     env = gym.make_vec(orthoglide_env.ENV_ID, num_envs=n,
-                       vectorization_mode="vector_entry_point", backend="exact")
+                       vectorization_mode="vector_entry_point", backend="exact",
+                       conditions="ideal")
     env.reset(seed=0)
     step = env.step
 rng = np.random.default_rng(0)

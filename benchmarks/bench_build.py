@@ -71,7 +71,7 @@ def main() -> None:
     disconnect = per_call(lambda: clients.pop().close(), 20)
     clear = per_call(shared.clear, 20)
     shared.close()
-    env = gym.make(orthoglide_env.ENV_ID, backend="pybullet")
+    env = gym.make(orthoglide_env.ENV_ID, backend="pybullet", conditions="ideal")
     env.reset(seed=0)
     seeds = iter(range(1, 10**6))
     reset = per_call(lambda: env.reset(seed=next(seeds)), args.machines)

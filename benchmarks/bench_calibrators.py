@@ -20,10 +20,11 @@ from calibrators.agents import get_agent
 from calibrators.estimators.catalogue import for_study
 from calibrators.study.compare import Config, run
 from calibrators.study.episodes import run_episode
+from orthoglide_env.world.conditions import IDEAL
 
 
 def episode_times(backend: str, estimator: str, repeats: int = 10) -> np.ndarray:
-    env = gym.make(orthoglide_env.LAB_ENV_ID, backend=backend)
+    env = gym.make(orthoglide_env.LAB_ENV_ID, backend=backend, conditions="ideal")
     out = []
     for seed in range(repeats):
         start = time.perf_counter()
@@ -43,7 +44,7 @@ def main() -> None:
         for estimator in ("paper", "paper6", "extended"):
             t = episode_times(backend, estimator)
             print(f"  {backend:9}{estimator:10}{1e3 * np.median(t):8.1f} ms")
-    config = Config(("paper",), ("paper", "extended"))
+    config = Config(("paper",), ("paper", "extended"), conditions=IDEAL)
     for jobs in (1, 2):
         start = time.perf_counter()
         run(config, args.machines, jobs=jobs)

@@ -40,7 +40,7 @@ import orthoglide_env  # noqa: E402
 from calibrators.agents import get_agent  # noqa: E402
 from calibrators.study.compare import CHUNK, Config, Trial, run_chunk  # noqa: E402
 from calibrators.study.episodes import run_episode, run_episodes  # noqa: E402
-from orthoglide_env.world.conditions import Conditions  # noqa: E402
+from orthoglide_env.world.conditions import IDEAL, Conditions  # noqa: E402
 
 #: Machines per chunk of the per-machine path: one, every stage a batch of one.
 PER_MACHINE_CHUNK: int = 1
@@ -78,11 +78,12 @@ def episodes_only(machines: int, per_machine: int) -> tuple[float, float]:
     start = time.perf_counter()
     for first in range(0, machines, CHUNK):
         chunk = seeds[first:first + CHUNK]
-        envs = gym.make_vec(orthoglide_env.LAB_ENV_ID, num_envs=len(chunk), gauge_sigma=0.01)
+        envs = gym.make_vec(orthoglide_env.LAB_ENV_ID, num_envs=len(chunk), gauge_sigma=0.01,
+                             conditions="ideal")
         run_episodes(envs, [get_agent("paper") for _ in chunk], chunk)
         envs.close()
     batched = (time.perf_counter() - start) / machines
-    env = gym.make(orthoglide_env.LAB_ENV_ID, gauge_sigma=0.01)
+    env = gym.make(orthoglide_env.LAB_ENV_ID, gauge_sigma=0.01, conditions="ideal")
     start = time.perf_counter()
     for seed in seeds[:per_machine]:
         run_episode(env, get_agent("paper"), seed)
@@ -93,7 +94,7 @@ MEMORY_RUN = """
 import resource, sys, time
 from calibrators.study.compare import Config, run
 start = time.perf_counter()
-trials = run(Config(("paper",), ("paper",)), int(sys.argv[1]))
+trials = run(Config(("paper",), ("paper",), conditions=IDEAL), int(sys.argv[1]))
 print(len(trials), time.perf_counter() - start,
       resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
 """
@@ -104,7 +105,7 @@ def world_costs(args: argparse.Namespace) -> None:
     print(f"{'estimator':12}{'ideal ms/machine':>20}{args.conditions + ' ms/machine':>24}"
           f"{'ratio':>8}")
     for name in args.estimators.split(","):
-        ideal = Config(("paper",), (name,))
+        ideal = Config(("paper",), (name,), conditions=IDEAL)
         world = replace(ideal, conditions=Conditions(args.conditions))
         for config in (ideal, world):
             run_chunk(config, [args.machines + 1], set(), batched=True)
@@ -137,7 +138,7 @@ def main() -> None:
     print(f"{'estimator':12}{'batched ms/machine':>20}{'per-machine ms/machine':>24}"
           f"{'ratio':>8}{'largest gap mm':>16}")
     for name in args.estimators.split(","):
-        config = Config(("paper",), (name,))
+        config = Config(("paper",), (name,), conditions=IDEAL)
         # Warm up both paths (imports, cached tables) on machines outside the timed ones.
         for batched in (True, False):
             run_chunk(config, [args.machines + 1], set(), batched=batched)

@@ -24,7 +24,8 @@ import orthoglide_env
 
 
 def make(backend: str, motion: str = "quasi-static"):
-    return lambda: gym.make(orthoglide_env.ENV_ID, backend=backend, motion=motion)
+    return lambda: gym.make(orthoglide_env.ENV_ID, backend=backend, motion=motion,
+                            conditions="ideal")
 
 
 def single(backend: str, steps: int, motion: str = "quasi-static") -> float:

@@ -34,7 +34,7 @@ TARGET_READINGS, TARGET_S = 1_000_000, 60.0
 def paper_file(readings: int, path: Path, seed: int = 3) -> None:
     """The paper's experiment on machine ``seed``, repeated to ``readings`` rows."""
     env = gym.make(orthoglide_env.LAB_ENV_ID, backend="exact", errors="realistic",
-                   gauge_sigma=0.02)
+                   conditions="ideal", gauge_sigma=0.02)
     try:
         episode = run_episode(env, get_agent("paper"), seed)
     finally:

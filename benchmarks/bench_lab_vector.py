@@ -46,16 +46,16 @@ def main() -> None:
     args = round_arguments(__doc__.splitlines()[0])
     # Rough rates (steps/s) only size the rounds; the table is measured below.
     configs: dict[str, tuple[int, int, Callable[[int], Callable[[], float]]]] = {
-        "single lab": (1, 300, lambda s: single_runner(gym.make(ID), [
+        "single lab": (1, 300, lambda s: single_runner(gym.make(ID, conditions="ideal"), [
             {key: value[0] for key, value in a.items()} for a in plan(s, 1)])),
-        "native N=1": (1, 300, lambda s: vector_runner(gym.make_vec(ID, num_envs=1),
-                                                       plan(s, 1))),
-        "native N=64": (64, 8000, lambda s: vector_runner(gym.make_vec(ID, num_envs=64),
-                                                          plan(s, 64))),
+        "native N=1": (1, 300, lambda s: vector_runner(
+            gym.make_vec(ID, conditions="ideal", num_envs=1), plan(s, 1))),
+        "native N=64": (64, 8000, lambda s: vector_runner(
+            gym.make_vec(ID, conditions="ideal", num_envs=64), plan(s, 64))),
         "native N=1024": (1024, 20000, lambda s: vector_runner(
-            gym.make_vec(ID, num_envs=1024), plan(s, 1024))),
+            gym.make_vec(ID, conditions="ideal", num_envs=1024), plan(s, 1024))),
         "AsyncVectorEnv x2": (2, 300, lambda s: vector_runner(gym.make_vec(
-            ID, num_envs=2, vectorization_mode="async"), plan(s, 2))),
+            ID, conditions="ideal", num_envs=2, vectorization_mode="async"), plan(s, 2))),
     }
     runners = {}
     for name, (n, guess, make) in configs.items():

@@ -44,7 +44,7 @@ def plan(steps: int, n: int | None) -> np.ndarray:
 
 
 def native(n: int) -> gym.vector.VectorEnv:
-    return gym.make_vec(ID, num_envs=n, vectorization_mode="vector_entry_point",
+    return gym.make_vec(ID, conditions="ideal", num_envs=n, vectorization_mode="vector_entry_point",
                         backend="exact")
 
 
@@ -59,7 +59,8 @@ def memory_per_thousand() -> dict[str, tuple[float, float]]:
     out = {}
     for name, build in (("native vector env", lambda: native(1000)),
                         ("1000 separate envs", lambda: gym.make_vec(
-                            ID, num_envs=1000, vectorization_mode="sync", backend="exact"))):
+                            ID, conditions="ideal", num_envs=1000, vectorization_mode="sync",
+                            backend="exact"))):
         gc.collect()
         tracemalloc.start()
         envs = build()
@@ -79,15 +80,17 @@ def main() -> None:
     args = round_arguments(__doc__.splitlines()[0])
     # Rough rates (steps/s) only size the rounds; the table is measured below.
     configs: dict[str, tuple[int, int, Callable[[int], Callable[[], float]]]] = {
-        "single env": (1, 1000, lambda s: single_runner(gym.make(ID, backend="exact"),
-                                                        plan(s, None))),
+        "single env": (1, 1000, lambda s: single_runner(
+            gym.make(ID, conditions="ideal", backend="exact"), plan(s, None))),
         "native N=1": (1, 1000, lambda s: vector_runner(native(1), plan(s, 1))),
         "native N=64": (64, 20000, lambda s: vector_runner(native(64), plan(s, 64))),
         "native N=1024": (1024, 30000, lambda s: vector_runner(native(1024), plan(s, 1024))),
         "SyncVectorEnv x8": (8, 1000, lambda s: vector_runner(gym.make_vec(
-            ID, num_envs=8, vectorization_mode="sync", backend="exact"), plan(s, 8))),
+            ID, conditions="ideal", num_envs=8, vectorization_mode="sync", backend="exact"),
+            plan(s, 8))),
         "AsyncVectorEnv x2": (2, 1000, lambda s: vector_runner(gym.make_vec(
-            ID, num_envs=2, vectorization_mode="async", backend="exact"), plan(s, 2))),
+            ID, conditions="ideal", num_envs=2, vectorization_mode="async", backend="exact"),
+            plan(s, 2))),
     }
     runners = {}
     for name, (n, guess, make) in configs.items():

@@ -71,7 +71,7 @@ def main() -> None:
     args = parser.parse_args()
     slot_table(PROTOTYPE)
     rows = []
-    env = gym.make(orthoglide_env.LAB_ENV_ID, gauge_sigma=0.01)
+    env = gym.make(orthoglide_env.LAB_ENV_ID, gauge_sigma=0.01, conditions="ideal")
     run_episode(env, get_agent("paper"), 0)
     lab = env.unwrapped
     rows.append(("paper's experiment", lab.predicted_tcp_rigid_mm(), lab.records[-1].time_s,

@@ -41,10 +41,11 @@ import gymnasium as gym, numpy as np
 import orthoglide_env
 from calibrators.experiment import machine_seed
 env = gym.make(orthoglide_env.LAB_ENV_ID, errors="realistic", gauge_sigma=0.02,
-               gauge_resolution=0.01, backend="exact", budget_s=600.0)
+               gauge_resolution=0.01, backend="exact", budget_s=600.0, conditions="ideal")
 observation, _ = env.reset(seed=machine_seed(2, 0))
 proc = subprocess.Popen([sys.executable, "-m", "calibrators.cli", "session", "--agent",
-                        "active", "--budget", "600", "--seed", "2", "--out", "session",
+                        "active", "--budget", "600", "--seed", "2", "--conditions", "ideal",
+                        "--out", "session",
                         "--json"], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
 for line in proc.stdout:
     print(line, end="")
@@ -67,15 +68,15 @@ CASES: dict[str, list[str]] = {
                       "--machines 2 --seed 1 --conditions ideal --jobs 1 --out out"],
     "compare-lab": [f"{CLI} compare --agents {AGENTS} --estimators {ESTIMATORS} "
                     "--machines 2 --seed 1 --conditions lab --jobs 1 --out out"],
-    "calibrate": [f"{CLI} calibrate --seed 5 --backend exact --json",
-                  f"{CLI} calibrate --seed 5 --backend pybullet --json",
+    "calibrate": [f"{CLI} calibrate --seed 5 --backend exact --conditions ideal --json",
+                  f"{CLI} calibrate --seed 5 --backend pybullet --conditions ideal --json",
                   f"{CLI} calibrate --seed 5 --conditions lab --agent active --params full "
                   "--json"],
     "fit": [f"{CLI} calibrate --seed 6 --conditions lab --agent optimal --params full "
             "--save-measurements readings.csv --save-truth truth.json",
             f"{CLI} fit readings.csv --conditions lab --holdout 0.2 --save-estimate est.json",
             f"{CLI} fit readings.csv --conditions lab --params extended --json",
-            f"{CLI} plan --agent paper --out plan",
+            f"{CLI} plan --agent paper --conditions ideal --out plan",
             f"{CLI} plan --agent optimal --conditions lab --budget 1200 --out plan-lab",
             f"{CLI} plan --agent paper --verify est.json --conditions lab --out verify",
             "printf 'x,y,z\\n0,0,0\\n10,-20,5\\n-30,25,-15\\n' > targets.csv",

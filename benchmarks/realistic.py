@@ -32,7 +32,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--machines", type=int, default=200)
     args = parser.parse_args()
-    env = gym.make(orthoglide_env.LAB_ENV_ID, gauge_sigma=0.0, gauge_resolution=0.0)
+    env = gym.make(orthoglide_env.LAB_ENV_ID, gauge_sigma=0.0, gauge_resolution=0.0,
+                   conditions="ideal")
     nominal, residual = [], []
     tcp: dict[str, list] = {name: [] for name in ("uncalibrated", *ESTIMATORS)}
     for k in range(args.machines):

@@ -16,6 +16,7 @@ import numpy as np
 
 from calibrators.study.compare import Config, run
 from orthoglide_env.model.errors import ERROR_NAMES
+from orthoglide_env.world.conditions import IDEAL
 
 
 def main() -> None:
@@ -25,6 +26,7 @@ def main() -> None:
     parser.add_argument("--resolution", type=float, default=0.0)
     args = parser.parse_args()
     config = Config(("paper",), ("paper", "paper6"), errors="paper", sigma=args.sigma,
+                    conditions=IDEAL,
                     resolution=args.resolution, seed=11)
     trials = run(config, args.machines, jobs=2)
     print(f"{args.machines} paper-preset machines, sigma {args.sigma} mm, resolution "

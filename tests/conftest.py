@@ -15,7 +15,7 @@ from calibrators.study.episodes import Episode, run_episode
 from orthoglide_env.model.design import PROTOTYPE
 
 #: Rows of eq. (10) as (posture, index of the gauge in the paper layout).  The paper's
-#: labels of rows 9-12 are misprinted (docs/calibrators.md); these are the physical ones.
+#: labels of rows 9-12 are misprinted (docs/estimators.md); these are the physical ones.
 #: The paper's Table 1: the machine its experiment identified (mm).
 TABLE1: dict[str, list[float]] = {"drho": [4.66, -5.36, 1.46], "dL": [5.20, -5.96, 3.16]}
 
@@ -61,8 +61,10 @@ def paper_experiment(machine: dict | None = None, seed: int = 0, **lab: Any
                      ) -> tuple[Episode, Any]:
     """The ``paper`` agent's episode in an exact-backend lab (``lab``: the lab's other
     arguments) on ``machine`` (a machine-file dict; default: drawn from the seed), and the
-    lab it left (for its truth)."""
-    env = gym.make(orthoglide_env.LAB_ENV_ID, backend="exact", **lab)
+    lab it left (for its truth).  The world is the textbook's unless ``lab`` names other
+    conditions: the paper's numbers are of that world."""
+    env = gym.make(orthoglide_env.LAB_ENV_ID, backend="exact",
+                   **{"conditions": "ideal", **lab})
     try:
         episode = run_episode(env, get_agent("paper"), seed,
                               None if machine is None else {"machine": machine})

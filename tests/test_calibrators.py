@@ -79,7 +79,7 @@ def test_paper_design_matches_eq10_and_its_conditioning() -> None:
 
 
 def test_crlb_of_the_paper_design_is_about_43_sigma() -> None:
-    """docs/calibrators.md: with independent noise sigma on each of the twelve differences,
+    """docs/estimators.md: with independent noise sigma on each of the twelve differences,
     each parameter's std is ~43 sigma.  Our differences average 3 repetitions against 5
     Zero readings (the lab reads every gauge as the episode opens, then at the leg's 4
     Zero visits), so their variance is sigma^2 (1/3 + 1/5) with covariance sigma^2/5
@@ -123,6 +123,7 @@ def test_statistics_against_the_cramer_rao_bound(strategy: str) -> None:
     -0.14 to -0.21 mm, 4-6 standard errors), so its RMS exceeds its bound; it must never
     beat the bound by more than the sampling band."""
     env = gym.make(orthoglide_env.LAB_ENV_ID, backend="exact", errors="paper", gauge_sigma=0.01,
+                   conditions="ideal",
                    gauge_resolution=0.0)
     errors, stds, crlbs = [], [], []
     for seed in range(200):

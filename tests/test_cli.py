@@ -69,7 +69,8 @@ def test_calibrate_json_contract_and_exact_recovery(capsys, machine_file, solver
     asked, so an exact-model fit of the paper's six parameters recovers Table 1 to the
     issue's 1e-6 mm (the default frees every error, which 66 readings cannot all tell)."""
     out = run_json(capsys, ["calibrate", "--machine", machine_file, "--backend", "exact",
-                            "--solver", solver, "--params", "paper6", "--json"])
+                            "--solver", solver, "--params", "paper6", "--conditions", "ideal",
+                            "--json"])
     assert set(out) >= {"estimate", "std", "chi2_dof", "warnings", "residuals", "identifiable",
                         "predicted_tcp_error_mm", "truth", "tcp_error_before_mm",
                         "tcp_error_after_mm"}
@@ -92,7 +93,7 @@ def test_the_default_fit_frees_every_error(capsys) -> None:
     """Without --params the exact-model fit is ``full``: under ideal conditions every
     error of ``extended`` and nothing more, so the same numbers; the paper's linear fit
     keeps its six."""
-    base = ["calibrate", "--seed", "3", "--backend", "exact", "--json"]
+    base = ["calibrate", "--seed", "3", "--backend", "exact", "--conditions", "ideal", "--json"]
     default = run_json(capsys, base)
     extended = run_json(capsys, [*base, "--params", "extended"])
     assert default["params"] == "full" and default["free"] == extended["free"]
@@ -162,7 +163,8 @@ def options_of(command: str) -> set[str]:
 
 def test_compare_writes_table_csv_and_plots(tmp_path, capsys) -> None:
     assert main(["compare", "--machines", "2", "--agents", "paper,tracker", "--estimators",
-                 "paper,paper6,extended", "--quiet", "--out", str(tmp_path)]) == 0
+                 "paper,paper6,extended", "--conditions", "ideal", "--quiet", "--out",
+                 str(tmp_path)]) == 0
     text = capsys.readouterr().out
     assert "TCP after (rigid) med" in text and "tracker x paper: 2 of 2 failed" in text
     # What a failure suggests exists.
@@ -254,7 +256,8 @@ def test_resume_refuses_a_trial_of_other_error_names_in_one_line(tmp_path, capsy
         (["fit", "BAD_CSV"], "column 5"),
         (["fit", "GOOD"], ".csv or .json"),
         # What only the exact-model fit can do names the option that chooses it.
-        (["calibrate", "--strategy", "paper", "--agent", "tracker", "--backend", "exact"],
+        (["calibrate", "--strategy", "paper", "--agent", "tracker", "--backend", "exact",
+          "--conditions", "ideal"],
          "reads dial gauges only; the exact-model fit reads a tracker's readings too: use an "
          "exact-model estimator, --estimator paper6 or extended"),
         (["fit", "GOOD_CSV", "--strategy", "paper", "--params", "extended"],

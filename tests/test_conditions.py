@@ -119,7 +119,7 @@ def test_gravity_and_the_gauges_force_deflect_the_tcp() -> None:
     indicators' forces add (about 0.5 N each passed to the platform); elsewhere the
     deflection changes with the posture."""
     conditions = Conditions("lab", ("compliance",))
-    deflected, straight = lab(conditions), lab(Conditions())
+    deflected, straight = lab(conditions), lab(Conditions("ideal"))
     deflected.reset(seed=6), straight.reset(seed=6)
     sag = deflected.tcp() - straight.tcp()
     weight = EFFECTS["compliance"]["weight"].lab[0]
@@ -204,7 +204,7 @@ def test_bad_conditions_are_refused_by_both_envs(env_id: str, value, words: str)
 @pytest.mark.parametrize("args, words", [
     (["--conditions", "indoors"], "invalid choice: 'indoors'"),
     (["--conditions", "lab", "--effects", "lead,rust"], "unknown effect(s) ['rust']"),
-    (["--effects", "lead"], "the ideal conditions have no effects"),
+    (["--conditions", "ideal", "--effects", "lead"], "the ideal conditions have no effects"),
 ])
 def test_bad_conditions_exit_2_with_one_line(args: list[str], words: str) -> None:
     result = subprocess.run([sys.executable, "-m", "calibrators.cli", "calibrate", *args],

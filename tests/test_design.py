@@ -148,8 +148,9 @@ def test_a_plan_spends_at_most_its_budget_and_the_lab_charges_what_it_planned() 
     assert steps[-1].op == Op.STOP
     assert steps[-1].time_s <= budget
     # No dial rounding: the agent plans for the same sigma as this test.
+    # The plan above is the textbook world's (fixed_plan is given no conditions).
     env = gym.make(orthoglide_env.LAB_ENV_ID, gauge_sigma=SIGMA, gauge_resolution=0.0,
-                   budget_s=budget)
+                   budget_s=budget, conditions="ideal")
     for seed in range(3):
         agent = get_agent("optimal")
         observation, info = env.reset(seed=seed)

@@ -79,7 +79,8 @@ def test_same_seed_and_actions_replay_exactly(backend: str) -> None:
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_paper_sequence_matches_exact_model_with_ideal_gauges(backend: str) -> None:
-    env = make(backend, gauge_sigma=0.0, gauge_resolution=0.0)
+    # The textbook world: the readings are the geometry's alone.
+    env = make(backend, gauge_sigma=0.0, gauge_resolution=0.0, conditions="ideal")
     obs, _ = env.reset(seed=5)
     truth, gauges = env.unwrapped.true_machine, env.unwrapped.true_gauges
     zero = exact_readings(truth, gauges, np.zeros(3))

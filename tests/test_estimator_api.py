@@ -138,7 +138,8 @@ def test_estimator_and_strategy_name_one_estimator(tmp_path, capsys) -> None:
     ``--estimator full``: the same JSON to the byte."""
     machine = tmp_path / "m.json"
     machine.write_text(json.dumps({"drho": [0.5, -0.3, 0.2], "dL": [0.1, 0.2, -0.4]}))
-    base = ["calibrate", "--machine", str(machine), "--backend", "exact", "--json"]
+    base = ["calibrate", "--machine", str(machine), "--backend", "exact", "--conditions",
+            "ideal", "--json"]
     outputs = []
     for words in (["--strategy", "paper"], ["--estimator", "paper"],
                   ["--strategy", "gauss-newton", "--params", "paper6"],

@@ -24,7 +24,7 @@ def paper_design() -> Measurements:
 
 def test_eq10_singular_values_and_condition() -> None:
     ident = analyse(eq10(), np.eye(12), 1.0)
-    # docs/calibrators.md's values, printed to 3 significant digits.
+    # docs/estimators.md's values, printed to 3 significant digits.
     np.testing.assert_allclose(ident.singular_values,
                                [1.01, 0.683, 0.683, 0.0166, 0.0164, 0.0164], rtol=5e-3)
     assert ident.condition_number == pytest.approx(61.9, abs=0.1)
@@ -39,7 +39,7 @@ def test_exact_model_design_has_eq10_singular_values(paper_design) -> None:
 
 
 def test_crlb_is_43_sigma_for_independent_differences() -> None:
-    """docs/calibrators.md: twelve independent differences of noise sigma bound every parameter's
+    """docs/estimators.md: twelve independent differences of noise sigma bound every parameter's
     standard deviation at about 43 sigma."""
     ident = analyse(eq10(), np.eye(12), 0.01)
     np.testing.assert_allclose(ident.crlb / 0.01, 43.0, rtol=0.02)

@@ -25,6 +25,8 @@ from calibrators.study.statistics import summary
 from orthoglide_env.lab.operations import SLOTS, TIME, Op, slot_index
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.scoring import score
+from orthoglide_env.world.conditions import IDEAL
+from orthoglide_env.world.machine_file import machine_dict
 
 LAB = orthoglide_env.LAB_ENV_ID
 
@@ -71,7 +73,8 @@ def test_without_lifting_the_min_postures_press_other_legs_gauges() -> None:
 
 
 def test_a_remount_is_a_new_installation_with_its_own_zero() -> None:
-    env = lab(gauge_sigma=0.0, gauge_resolution=0.0)
+    # The textbook world: no creep or give moves the new mounting off its zero.
+    env = lab(gauge_sigma=0.0, gauge_resolution=0.0, conditions="ideal")
     obs, _ = env.reset(seed=1)
     env.step(action(Op.MOVE, [40.0, 0.0, 0.0]))
     slot = slot_index("x-leg/y@0.2", design=PROTOTYPE)
@@ -135,7 +138,9 @@ def test_information_reward_adds_up_to_the_designs_log_det() -> None:
 
 
 def test_accuracy_reward_is_the_estimates_score() -> None:
-    env = lab(reward="accuracy", estimator=make_estimator("extended"), time_weight=2.0)
+    # The textbook world, which the estimator below is told (for_study's default).
+    env = lab(reward="accuracy", estimator=make_estimator("extended"), time_weight=2.0,
+              conditions="ideal")
     obs, _ = env.reset(seed=7)
     agent = get_agent("paper")
     agent.reset(env, obs, np.random.default_rng(0))
@@ -156,8 +161,9 @@ def test_accuracy_reward_is_the_estimates_score() -> None:
 
 def test_tracker_agent_reaches_micrometres_with_honest_error_bars() -> None:
     """27 tracker points, sigma 0.005 mm, frame unknown: a few micrometres after the
-    best-fit rigid motion (the issue's 0.006 mm); the design's own prediction agrees."""
-    trials = run(Config(("tracker",), ("extended",), seed=11), 3, jobs=1)
+    best-fit rigid motion (the issue's 0.006 mm, in the textbook world); the design's own
+    prediction agrees."""
+    trials = run(Config(("tracker",), ("extended",), seed=11, conditions=IDEAL), 3, jobs=1)
     for t in trials:
         assert not t.failed and t.tcp_after["rigid"] < 0.006
         assert t.predicted_rigid_mm < 0.01
@@ -277,10 +283,11 @@ def test_calibrate_and_compare_run_the_same_experiment(capsys) -> None:
     the paper agent's readings, and so the paper estimator's estimate, are the same."""
     from calibrators.cli import main
 
-    config = Config(("paper",), ("paper",), seed=1, sigma=0.01)
+    # The textbook world: the paper's linear fit reads no other.
+    config = Config(("paper",), ("paper",), seed=1, sigma=0.01, conditions=IDEAL)
     trial = run_chunk(config, [0], set())[0]
     assert main(["calibrate", "--backend", "exact", "--strategy", "paper", "--sigma", "0.01",
-                 "--seed", str(config.seed), "--json"]) == 0
+                 "--seed", str(config.seed), "--conditions", "ideal", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     error = np.subtract(out["estimate"]["drho"], out["truth"]["drho"])
     np.testing.assert_allclose(error, trial.error[:3], rtol=0, atol=1e-9)
@@ -306,7 +313,8 @@ def test_calibrate_and_compare_without_options_run_the_same_experiment(tmp_path,
     config = _check(build_parser().parse_args(["compare", "--seed", str(seed)]))
     assert "paper" in config.agents
     compared = agent_episodes(config, "paper", [0])[0].run
-    assert calibrated["truth"] == compared.truth.to_dict()
+    # Both in the default world, the real lab's: the same machine and the same world.
+    assert calibrated["truth"] == machine_dict(compared.truth, compared.world)
     assert calibrated["experiment_time_s"] == compared.time_s
     mine, theirs = Measurements.read(path).items, compared.measurements.items
     assert [(m.mounting, m.gauge, m.rho, m.repetition, m.reading) for m in mine] == [

@@ -178,7 +178,8 @@ def test_calibrate_paper_on_the_small_design_recovers_the_paper_parameters(
         tmp_path, capsys) -> None:
     path = _write(tmp_path / "paper.json", '{"drho": [0.5, -0.3, 0.2], "dL": [-0.4, 0.6, 0.1]}')
     report = _json(capsys, ["calibrate", "--machine", str(path), "--design", str(SMALL_FILE),
-                            "--agent", "paper", "--params", "paper6", "--json"])
+                            "--agent", "paper", "--params", "paper6", "--conditions", "ideal",
+                            "--json"])
     for key in ("drho", "dL"):
         np.testing.assert_allclose(report["estimate"][key], report["truth"][key], atol=1e-6)
     assert report["experiment_time_s"] > 0
@@ -188,7 +189,7 @@ def test_fit_reads_the_design_of_a_json_readings_file_or_takes_it_from_the_comma
         tmp_path, capsys) -> None:
     path = _write(tmp_path / "paper.json", '{"drho": [0.5, -0.3, 0.2], "dL": [-0.4, 0.6, 0.1]}')
     common = ["--machine", str(path), "--design", str(SMALL_FILE), "--backend", "exact",
-              "--json"]
+              "--conditions", "ideal", "--json"]
     fits = {}
     noise = ["--sigma", "0", "--resolution", "0", "--params", "paper6", "--json"]
     for suffix in ("json", "csv"):
@@ -286,7 +287,7 @@ def test_the_calibration_env_takes_its_design(backend: str) -> None:
     from orthoglide_env.instruments.dial import exact_readings
 
     env = gym.make(orthoglide_env.ENV_ID, design=SMALL, errors="paper", backend=backend,
-                   gauge_sigma=0.0, gauge_resolution=0.0)
+                   gauge_sigma=0.0, gauge_resolution=0.0, conditions="ideal")
     try:
         calibration = env.unwrapped
         assert (env.action_space.low.min(), env.action_space.high.max()) == (
@@ -464,8 +465,9 @@ def test_pose_reads_a_machine_file_of_its_own_design(builder, capsys, kind) -> N
     """An estimate, or the compensation's machine.json, names its design: pose uses it
     without --design, and refuses a --design that is another in one line."""
     capsys.readouterr()
+    # The textbook world: the tool is where the geometry alone puts it.
     assert main(["pose", "--machine", str(builder[kind]), "--rho", "0", "0", "0",
-                 "--noise-free", "--json"]) == 0
+                 "--noise-free", "--conditions", "ideal", "--json"]) == 0
     tcp = json.loads(capsys.readouterr().out)["tcp_model"]
     machine, _ = read_machine_file(builder[kind])
     assert machine.design == MachineDesign.from_dict(BUILDER)

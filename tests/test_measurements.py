@@ -666,7 +666,7 @@ def test_fit_recovers_a_small_machine_from_its_saved_readings(tmp_path, capsys) 
     # The paper's six parameters: what 66 noise-free readings determine exactly.
     design = ["--design", str(SMALL_FILE), "--params", "paper6"]
     assert main(["calibrate", "--machine", str(machine), *design, "--backend", "exact",
-                 "--save-measurements", str(saved), "--json"]) == 0
+                 "--conditions", "ideal", "--save-measurements", str(saved), "--json"]) == 0
     truth = json.loads(capsys.readouterr().out)["truth"]
     assert main(["fit", str(saved), *design, "--sigma", "0", "--resolution", "0",
                  "--json"]) == 0

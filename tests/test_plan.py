@@ -61,13 +61,14 @@ def test_the_paper_plan_is_the_lab_experiment(paper_plan, capsys) -> None:
 
 
 def _filled(paper_plan: Path, tmp_path: Path, capsys) -> Path:
-    """The sheet filled by a technician on the Table 1 machine: the lab's readings of it,
-    row by row (each row checked to be the same gauge and posture)."""
+    """The sheet filled by a technician on the Table 1 machine: the textbook world's lab's
+    readings of it, row by row (each row checked to be the same gauge and posture)."""
     machine = tmp_path / "m.json"
     machine.write_text(json.dumps(TABLE1))
     readings = tmp_path / "lab.csv"
     assert main(["calibrate", "--agent", "paper", "--machine", str(machine), "--backend",
-                 "exact", "--params", "paper6", "--save-measurements", str(readings)]) == 0
+                 "exact", "--params", "paper6", "--conditions", "ideal", "--save-measurements",
+                 str(readings)]) == 0
     capsys.readouterr()
     lab = list(csv.DictReader(readings.open()))
     rows = list(csv.DictReader((paper_plan / "readings.csv").open()))
@@ -85,11 +86,12 @@ def _filled(paper_plan: Path, tmp_path: Path, capsys) -> Path:
 
 def test_the_filled_sheet_fits_as_it_is(paper_plan, tmp_path, capsys) -> None:
     """`fit --plan` reads the filled sheet and recovers Table 1 exactly (noise-free, the
-    paper's six parameters: the issue's 1e-6 mm)."""
+    paper's six parameters: the issue's 1e-6 mm).  The sheet is filled from the exact
+    model, the textbook world's readings, which --conditions names over the plan's."""
     sheet = _filled(paper_plan, tmp_path, capsys)
     out = run_json(capsys, ["fit", str(sheet), "--plan", str(paper_plan / "plan.json"),
                             "--params", "paper6", "--sigma", "0", "--resolution", "0",
-                            "--json"])
+                            "--conditions", "ideal", "--json"])
     np.testing.assert_allclose(out["estimate"]["drho"], TABLE1["drho"], atol=1e-6)
     np.testing.assert_allclose(out["estimate"]["dL"], TABLE1["dL"], atol=1e-6)
 

@@ -192,7 +192,9 @@ def test_a_platform_gauge_faults_past_its_travel_and_a_lifted_one_never(backend:
     overtravel (a fault, 120 s); lifted it lets the platform move anywhere, and engaged
     again at Zero it reads its old zero.  Moving away from the stand only lifts the tip
     off the face."""
-    env = gym.make(LAB, backend=backend, stands=1, gauge_sigma=0.0, gauge_resolution=0.0)
+    # The textbook world: the tip's travel is the platform's, with no give or creep.
+    env = gym.make(LAB, backend=backend, stands=1, gauge_sigma=0.0, gauge_resolution=0.0,
+                   conditions="ideal")
     env.reset(seed=4)
     here = slot_index("platform/x", design=PROTOTYPE)
 

@@ -26,7 +26,7 @@ from orthoglide_env.world.truth import World
 
 #: Help of ``--design``, on every command that builds a machine.
 DESIGN_HELP = ("machine design file, JSON or TOML: the nominal dimensions, joint limits and "
-               "link shapes (see the README's 'Machine designs'; keys left out take the "
+               "link shapes (see docs/machines.md; keys left out take the "
                "prototype's values; default: the prototype)")
 
 
@@ -94,21 +94,22 @@ def add_conditions(p: argparse.ArgumentParser, replays: bool = False,
     whose world (when it holds one) gives the conditions; ``measured``: the command fits
     readings taken under them (a real machine's)."""
     default = (f"the machine file's world, else {DEFAULT_CONDITIONS}" if replays
-               else DEFAULT_CONDITIONS)
+               else f"{READINGS_CONDITIONS}: name lab for a real lab's readings, which then "
+               "need each reading's time_s" if measured else DEFAULT_CONDITIONS)
     what = ("the world the readings were taken in, whose effects beyond the geometry the "
             "fit puts into its error bars" if measured else "the world beyond the geometry")
     p.add_argument("--conditions", choices=CONDITION_NAMES, default=None,
                    help=f"{what}: ideal (none), lab (a controlled "
                    "room, a well-kept machine) or workshop (a shop floor, an ordinary "
-                   "machine); the README's 'Conditions' lists every effect and its size "
+                   "machine); docs/conditions.md lists every effect and its size "
                    f"(default: {default})")
     p.add_argument("--effects", metavar="LIST", default=None,
                    help="only these effects of --conditions act, comma-separated: "
                    f"{','.join(EFFECT_NAMES)} (default: all of them)")
     p.add_argument("--indicator", choices=INDICATORS, default=None,
                    help="the gauges' indicators under lab or workshop conditions: dial "
-                   "(ISO 463) or digital (its own error rows in the README's "
-                   "'Conditions'; read it at 1 um with --resolution 0.001 where the "
+                   "(ISO 463) or digital (its own error rows in docs/conditions.md; read it at "
+                   "1 um with --resolution 0.001 where the "
                    "command has it) (default: dial)")
 
 
@@ -117,19 +118,28 @@ def add_thermometer(p: argparse.ArgumentParser) -> None:
     p.add_argument("--thermometer", action="store_true",
                    help="the lab has a room thermometer: every reading carries the room's "
                    "temperature, against which the full estimator fits the stands' growth "
-                   "(its error: the README's 'Conditions', rows thermometer)")
+                   "(its error: docs/conditions.md, rows thermometer)")
 
 
-def conditions_of(args: argparse.Namespace, world: World | None = None) -> Conditions:
-    """The conditions of ``--conditions`` and ``--effects``, or those of a machine file's
-    ``world`` (which the options, when given, must name); :class:`UsageError` if bad."""
+#: The world a command that fits readings takes them to come from when not told: none
+#: beyond the geometry.  Unlike a world a command builds (``DEFAULT_CONDITIONS``), a
+#: readings file may carry no time, which a real lab's terms need; so it is named, not
+#: assumed.
+READINGS_CONDITIONS = "ideal"
+
+
+def conditions_of(args: argparse.Namespace, world: World | None = None,
+                  default: str = DEFAULT_CONDITIONS) -> Conditions:
+    """The conditions of ``--conditions`` and ``--effects`` (``default``'s name when not
+    given), or those of a machine file's ``world`` (which the options, when given, must
+    name); :class:`UsageError` if bad."""
     effects = None if args.effects is None else tuple(
         e.strip() for e in args.effects.split(",") if e.strip())
     indicator = getattr(args, "indicator", None)
     if world is not None and args.conditions is None and effects is None and indicator is None:
         return world.conditions
     try:
-        conditions = Conditions(args.conditions or DEFAULT_CONDITIONS, effects,
+        conditions = Conditions(args.conditions or default, effects,
                                 indicator or "dial")
     except ValueError as exc:
         option = "--indicator" if "indicator" in str(exc) else "--effects"
@@ -143,8 +153,8 @@ def conditions_of(args: argparse.Namespace, world: World | None = None) -> Condi
 
 def add_machine(p: argparse.ArgumentParser) -> None:
     p.add_argument("--machine", required=True, metavar="FILE",
-                   help="machine JSON file: errors in mm and rad, see the README's "
-                   "'Machine files' (required; a file holding {} is the nominal machine)")
+                   help="machine JSON file: errors in mm and rad, see docs/machines.md "
+                   "(required; a file holding {} is the nominal machine)")
     add_design(p)
 
 

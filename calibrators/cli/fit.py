@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 
 from calibrators.cli import estimator_options
 from calibrators.cli.common import (
+    READINGS_CONDITIONS,
     UsageError,
     add_conditions,
     conditions_of,
@@ -16,6 +17,7 @@ from calibrators.cli.common import (
 from calibrators.measurements import Measurements
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.model.design import MachineDesign
+from orthoglide_env.world.conditions import Conditions
 
 if TYPE_CHECKING:
     from calibrators.workflow.plan import Procedure
@@ -39,7 +41,7 @@ def run(args: argparse.Namespace) -> None:
                          f"plan's: {str(exc).splitlines()[0]}") from None
     try:
         fit = Fit(data, estimator=estimator_options.estimator(args), sigma=args.sigma,
-                  resolution=args.resolution, conditions=conditions_of(args), plan=plan)
+                  resolution=args.resolution, conditions=_conditions(args, plan), plan=plan)
     except SheetError as exc:
         raise UsageError(f"--plan {args.plan}: {exc}") from None
     except NeedsExactFit as exc:
@@ -52,6 +54,15 @@ def run(args: argparse.Namespace) -> None:
         raise estimator_options.use_exact(exc) from None
     save(est, args)
     emit(report(est, None), args.json)
+
+
+def _conditions(args: argparse.Namespace, plan: Procedure | None) -> Conditions:
+    """The world the readings were taken in: the options', else the plan's (it was planned
+    for it), else :data:`READINGS_CONDITIONS`."""
+    given = (args.conditions, args.effects, args.indicator) != (None, None, None)
+    if plan is not None and not given:
+        return Conditions.from_dict(plan.conditions)
+    return conditions_of(args, default=READINGS_CONDITIONS)
 
 
 def _read_plan(path: str) -> Procedure:
@@ -73,7 +84,7 @@ def _design(args: argparse.Namespace, plan: Procedure | None) -> MachineDesign |
 
 
 def add(p: argparse.ArgumentParser) -> None:
-    p.add_argument("file", help="readings, .csv or .json (README: the measurement file)")
+    p.add_argument("file", help="readings, .csv or .json (docs/measurements.md)")
     p.add_argument("--sigma", type=float, default=DEFAULT_SIGMA,
                    help="gauge repeatability (mm, default %(default)s)")
     p.add_argument("--resolution", type=float, default=DEFAULT_RESOLUTION,
@@ -81,7 +92,7 @@ def add(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0,
                    help="seed of the --holdout draw (default: %(default)s)")
     p.add_argument("--design", metavar="FILE", help="design of the machine the readings come "
-                   "from, JSON or TOML (see the README's 'Machine designs'; default: the "
+                   "from, JSON or TOML (see docs/machines.md; default: the "
                    "readings file's, else the prototype)")
     estimator_options.add(p)
     add_conditions(p, measured=True)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from calibrators.cli.common import add_conditions, conditions_of
+from calibrators.cli.common import READINGS_CONDITIONS, add_conditions, conditions_of
 
 
 def run(args: argparse.Namespace) -> None:
@@ -17,7 +17,8 @@ def run(args: argparse.Namespace) -> None:
     est = read_estimate(args.estimate)
     data = Measurements.read(args.readings, est.readings.design)
     given = args.conditions is not None or args.effects is not None
-    result = Verify(est, data, conditions_of(args) if given else None).run()
+    result = Verify(est, data, conditions_of(args, default=READINGS_CONDITIONS) if given
+                    else None).run()
     if args.json:
         print(json.dumps(result.to_dict()))
         return

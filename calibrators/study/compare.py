@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from contextlib import closing
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cache, partial
 from typing import Any
 
@@ -54,7 +54,7 @@ from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import DEFAULT_PRESET, ERROR_NAMES, MachineParams
 from orthoglide_env.reading_model import ParameterSpace, default_scales
 from orthoglide_env.scoring import FRAMES, ScoreReport, score_batch, uncalibrated_errors
-from orthoglide_env.world.conditions import IDEAL, Conditions
+from orthoglide_env.world.conditions import DEFAULT_CONDITIONS, Conditions
 from orthoglide_env.world.truth import World
 
 #: Fractions of an episode's time at which the accuracy-versus-time curve re-estimates.
@@ -82,7 +82,7 @@ class Config:
     #: The machines' design.
     design: MachineDesign = PROTOTYPE
     #: The world beyond the geometry.
-    conditions: Conditions = IDEAL
+    conditions: Conditions = field(default_factory=lambda: Conditions(DEFAULT_CONDITIONS))
     #: The lab has a room thermometer.
     thermometer: bool = False
 

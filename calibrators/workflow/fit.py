@@ -44,7 +44,8 @@ class Fit:
     def __init__(self, readings: Measurements, *,
                  estimator: str | Estimator = DEFAULT_ESTIMATOR,
                  sigma: float = DEFAULT_SIGMA, resolution: float = DEFAULT_RESOLUTION,
-                 conditions: Conditions = IDEAL, plan: Procedure | None = None) -> None:
+                 conditions: Conditions | None = None, plan: Procedure | None = None
+                 ) -> None:
         check_noise(sigma, resolution, names=("sigma", "resolution"))
         chosen = get_estimator(estimator) if isinstance(estimator, str) else estimator
         if plan is not None:
@@ -52,6 +53,9 @@ class Fit:
                 raise SheetError("the plan is for a machine of another design than the "
                                  "readings'")
             check_sheet(readings, plan)
+        if conditions is None:
+            # The world the plan was made for, else none beyond the geometry.
+            conditions = IDEAL if plan is None else Conditions.from_dict(plan.conditions)
         self.readings, self.conditions = readings, conditions
         # A reading's noise: the repeatability and the dial's rounding.
         self.sigma = GaugeNoise(sigma, resolution).effective_sigma

@@ -37,7 +37,7 @@ from orthoglide_env.instruments.slots import PLATFORM_AIM, GaugeSpec, Part
 from orthoglide_env.lab.operations import DEFAULT_BUDGET_S, Op
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import AXIS_NAMES, LEG_NAMES
-from orthoglide_env.world.conditions import Conditions
+from orthoglide_env.world.conditions import DEFAULT_CONDITIONS, Conditions
 from orthoglide_env.world.table import REFERENCE_LENGTH_MM
 
 #: The sheet's columns: the measurement file's, and the step each reading belongs to.
@@ -177,7 +177,8 @@ def place_words(spec: GaugeSpec, design: MachineDesign) -> str:
 
 class Plan:
     """The plan of an experiment, configured: agent ``agent``'s experiment within
-    ``budget_s`` seconds on a machine of ``design`` under ``conditions`` (default ideal),
+    ``budget_s`` seconds on a machine of ``design`` under ``conditions`` (default
+    :data:`~orthoglide_env.world.conditions.DEFAULT_CONDITIONS`, the real lab),
     a random agent's choices drawn from ``seed``.  ``ValueError`` at construction for a
     budget that is not positive, or an agent that decides as it reads; :meth:`run` makes
     the :class:`Procedure`."""
@@ -192,7 +193,7 @@ class Plan:
                              f"{budget_s:g}")
         _planned(agent)
         self.design, self.agent, self.budget_s, self.seed = design, agent, float(budget_s), seed
-        self.conditions = Conditions("ideal") if conditions is None else conditions
+        self.conditions = Conditions(DEFAULT_CONDITIONS) if conditions is None else conditions
 
     def run(self) -> Procedure:
         """The procedure: the experiment played on the design's nominal machine in the
@@ -215,9 +216,10 @@ def _planned(agent_name: str) -> PlannedAgent:
 def make_procedure(agent_name: str, budget_s: float, design: MachineDesign,
                    conditions: Conditions | None = None, seed: int = 0) -> Procedure:
     """The procedure of agent ``agent_name``'s experiment within ``budget_s`` seconds on a
-    machine of ``design`` under ``conditions`` (default ideal): :meth:`Plan.run`.
+    machine of ``design`` under ``conditions`` (default
+    :data:`~orthoglide_env.world.conditions.DEFAULT_CONDITIONS`, the real lab): :meth:`Plan.run`.
     ``ValueError`` for an agent that decides as it reads."""
-    conditions = Conditions("ideal") if conditions is None else conditions
+    conditions = Conditions(DEFAULT_CONDITIONS) if conditions is None else conditions
     agent = _planned(agent_name)
     with closing(nominal_lab(agent, design, conditions, budget_s)) as env:
         writer = _StepWriter(env.unwrapped, agent_name, design)

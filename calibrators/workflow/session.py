@@ -35,7 +35,7 @@ from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.lab.notebook import Record
 from orthoglide_env.lab.operations import Op, slot_catalogue
 from orthoglide_env.model.design import MachineDesign
-from orthoglide_env.world.conditions import Conditions
+from orthoglide_env.world.conditions import DEFAULT_CONDITIONS, Conditions
 
 #: What an answer is asked for: (step number, what to do, stand (1, 2, ...), gauge name,
 #: rho, lab clock (s)); it returns the reading (mm) or None (the gauge gave none).
@@ -68,7 +68,7 @@ class Session:
         self.notebook = Path(notebook)
         self.replay = _read_notebook(self.notebook)
         self.env = nominal_lab(self.agent, design,
-                               Conditions("ideal") if conditions is None else conditions,
+                               Conditions(DEFAULT_CONDITIONS) if conditions is None else conditions,
                                budget_s, sigma=sigma, resolution=resolution)
         self.answered = 0
 

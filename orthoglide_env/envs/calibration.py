@@ -163,8 +163,14 @@ class OrthoglideCalibrationEnv(CalibrationFace, EngineEnv):
 
     Version history
     ---------------
+    * v0 (issue 37): ``conditions`` defaults to ``"lab"``
+      (:data:`~orthoglide_env.world.conditions.DEFAULT_CONDITIONS`), was ``"ideal"``.  The
+      spaces, and every stream under a named ``conditions``, are unchanged, so the id keeps
+      its version (Gymnasium bumps it when an env's dynamics or spaces change); an env
+      built without ``conditions`` now meets the real lab's world.  Pass
+      ``conditions="ideal"`` for the earlier default's numbers, bit for bit.
     * v0: ``conditions`` (``"ideal"``, ``"lab"``, ``"workshop"``, a ``Conditions`` or its
-      dict; default ``ideal``, whose numbers are unchanged bit for bit) adds the world
+      dict; then default ``ideal``, whose numbers were unchanged bit for bit) adds the world
       beyond the geometry, as ``OrthoglideLab-v0`` describes it: ``joints`` are then the
       encoders' (the commanded positions), not where the carriages are; ``true_world``
       holds the drawn world.

@@ -169,7 +169,8 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
     ``slot_positions`` must include 0.5, where the paper's stands open every episode),
     ``conditions`` (the world beyond the geometry: ``"ideal"``, ``"lab"``, ``"workshop"``,
     a :class:`~orthoglide_env.world.conditions.Conditions` naming which effects act, or its
-    dict; default ``"ideal"``), ``reference`` (the lab has a gauge block: the catalogue's
+    dict; default ``"lab"``, :data:`~orthoglide_env.world.conditions.DEFAULT_CONDITIONS`),
+    ``reference`` (the lab has a gauge block: the catalogue's
     ``reference`` slots, see :mod:`orthoglide_env.instruments.slots`; default False),
     ``render_mode``.  A bad argument raises ``ValueError``
     naming it and its rule.
@@ -199,6 +200,11 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
 
     Version history
     ---------------
+    * v0 (issue 37): ``conditions`` defaults to ``"lab"`` (was ``"ideal"``).  The spaces,
+      and every stream under a named ``conditions``, are unchanged, so the id keeps its
+      version (Gymnasium bumps it when an env's dynamics or spaces change); a lab built
+      without ``conditions`` now draws the real lab's world each episode.  Pass
+      ``conditions="ideal"`` for the earlier default's numbers, bit for bit.
     * v0: ``reference`` adds the gauge block: three more slots, ``reference/x``, ``/y``,
       ``/z`` (after the design's catalogue, whose indices stay), a platform gauge zeroed
       against the block held to the face at Zero and then reading the bare face a block's
@@ -206,8 +212,8 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
       space and stream as before.
     * v0: ``thermometer`` (default False: numbers unchanged, bit for bit) adds a room
       thermometer whose reading each record carries; the ``thermometer`` effect its error.
-    * v0: ``conditions`` adds the world beyond the geometry (default ``ideal``: numbers
-      unchanged, bit for bit); the ``machine`` reset option may carry its ``world``.
+    * v0: ``conditions`` adds the world beyond the geometry (then default ``ideal``:
+      numbers unchanged, bit for bit); the ``machine`` reset option may carry its ``world``.
     * v0: the slot catalogue is the design's (was the prototype's for every design, and a
       design with other ``slot_positions`` was refused).
     * v0: the constructor's arguments and defaults are its table in
