@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -165,3 +166,45 @@ def test_each_re_mount_has_its_picture(tmp_path) -> None:
     pictures = draw_pictures(procedure, PROTOTYPE, tmp_path)
     assert pictures == {1: "setup.png", moved.number: f"step-{moved.number}.png"}
     assert all((tmp_path / name).read_bytes()[:4] == b"\x89PNG" for name in pictures.values())
+
+
+def test_the_sheet_names_each_readings_stand_across_a_re_mount(tmp_path) -> None:
+    """Each row of the sheet names the stand it is read on: the stand the set-up put at its
+    gauge's place, and after a re-mount the moved stand at its new place (stand 1 leaves
+    x-leg/y@0.5 for x-leg/y@0.8: a reading there is stand 1's, none is left at 0.5)."""
+    from calibrators.measurements import Measurement
+    from calibrators.workflow.page import stand_numbers
+    from orthoglide_env.instruments.slots import layout_from_names
+
+    paper = make_procedure("paper", 3600, PROTOTYPE)
+    moved_to = layout_from_names(["x-leg/y@0.8"])[0]
+    moved = Step(len(paper.steps) + 1, "re-mount", "Move stand 1.", 120.0, paper.total_s,
+                 stand=1, slot="x-leg/y@0.8", rows=[len(paper.sheet) + 1])
+    extra = Measurement(moved_to, "Zero", 1, 0.0, (0.0, 0.0, 0.0), "x-leg/y@0.8#2",
+                        step=moved.number)
+    procedure = Procedure(paper.agent, paper.budget_s, paper.conditions, paper.design,
+                          paper.stands, [*paper.steps, moved], [*paper.sheet, extra])
+    numbers = stand_numbers(procedure)
+    held = {s["stand"]: s["slot"] for s in paper.stands}
+    for m, n in zip(paper.sheet, numbers, strict=False):
+        assert held[n] == m.gauge.slot
+    assert numbers[-1] == 1 and set(numbers) == set(held)
+
+
+def test_the_page_draws_d_and_prints_as_a_pdf(paper_plan, tmp_path) -> None:
+    """The page shows the picture of a leg's bars (what "+d/2" refers to) and a stand
+    column in its sheet; with pdf=True the same page is a PDF with at least a page for the
+    rules, the bars, the steps, the set-up's picture and the sheet's rows (40 a page)."""
+    from calibrators.workflow.page import BARS_FILE, PDF_FILE, write_page
+
+    html = (paper_plan / "procedure.html").read_text()
+    assert f'<img src="{BARS_FILE}"' in html and "<th>stand</th><th>mounting</th>" in html
+    assert (paper_plan / BARS_FILE).read_bytes()[:4] == b"\x89PNG"
+    procedure = Procedure.read(paper_plan / "plan.json")
+    procedure = Procedure(procedure.agent, procedure.budget_s, procedure.conditions,
+                          procedure.design, procedure.stands, procedure.steps,
+                          make_procedure("paper", 3600, PROTOTYPE).sheet)
+    write_page(procedure, tmp_path, pdf=True)
+    pdf = (tmp_path / PDF_FILE).read_bytes()
+    pages = len(re.findall(rb"/Type /Page\b", pdf))
+    assert pdf[:5] == b"%PDF-" and pages >= 4 + -(-len(procedure.sheet) // 40)

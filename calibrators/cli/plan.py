@@ -10,7 +10,10 @@ It writes into ``--out DIR``:
   row per reading to take, in step order, with its ``step``;
 * ``setup.png`` and ``step-N.png``: the machine at Zero with the stands mounted at set-up
   and after each re-mount, each stand marked and labelled (the moved one in red);
-* ``procedure.html``: a printable page with all of it (print it to PDF from a browser).
+* ``bars.png``: a leg's two bars and the distance d between them that a stand's place
+  (+d/2, -d/2) refers to;
+* ``procedure.html``: a printable page with all of it, the sheet with a stand column;
+* with ``--pdf``, ``procedure.pdf``: the same page as a PDF to print.
 """
 
 from __future__ import annotations
@@ -25,8 +28,8 @@ from calibrators.cli.common import (
     held_design,
 )
 from calibrators.workflow.compensate import read_estimate
+from calibrators.workflow.page import PDF_FILE, write_page
 from calibrators.workflow.page import page as page  # the page's earlier path
-from calibrators.workflow.page import write_page
 from calibrators.workflow.plan import Plan, planned_agents
 from calibrators.workflow.verify import VerificationPlan
 from orthoglide_env.lab.operations import DEFAULT_BUDGET_S
@@ -52,9 +55,10 @@ def run(args: argparse.Namespace) -> None:
     plan_path, sheet_path = procedure.write(args.out)
     then = (f"orthoglide verify {args.verify} readings.csv" if args.verify
             else "orthoglide fit readings.csv --plan plan.json")
-    page_path, pictures = write_page(procedure, args.out, then)
-    print(f"{procedure.summary()}; wrote {page_path}, {sheet_path}, {plan_path} and "
-          f"{len(pictures)} pictures")
+    page_path, pictures = write_page(procedure, args.out, then, pdf=args.pdf)
+    pdf = f", {page_path.with_name(PDF_FILE)}" if args.pdf else ""
+    print(f"{procedure.summary()}; wrote {page_path}{pdf}, {sheet_path}, {plan_path} and "
+          f"{len(pictures) + 1} pictures")
     for note in procedure.notes:
         print(f"note: {note}")
 
@@ -75,6 +79,8 @@ def add(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, metavar="DIR",
                    help="folder to write plan.json, readings.csv, the pictures and "
                         "procedure.html into (made if missing; files replaced)")
+    p.add_argument("--pdf", action="store_true",
+                   help="also write the page as procedure.pdf, to print")
     add_design(p)
     add_conditions(p)
     p.set_defaults(func=run)

@@ -2,9 +2,11 @@
 
 :func:`write_page` writes into a plan's folder ``setup.png`` and ``step-N.png`` (the
 machine at Zero with the stands mounted at set-up and after each re-mount, each stand
-marked and labelled, the moved one in red) and ``procedure.html``, a printable page with
-the stands, the steps, their pictures and the sheet to fill in (print it to PDF from a
-browser).
+marked and labelled, the moved one in red), ``bars.png`` (a leg's two bars, the distance
+d between them that a stand's place "+d/2" or "-d/2" refers to, and where along a bar a
+stand's "at" is measured from), ``procedure.html``, a printable page with the stands, the
+steps, their pictures and the sheet to fill in, and ``procedure.pdf``, the same to print
+(:mod:`calibrators.workflow.page_pdf`).
 """
 
 from __future__ import annotations
@@ -17,23 +19,98 @@ from orthoglide_env.lab.operations import slot_catalogue
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import MachineParams
 
-#: The page's file name in a plan's folder.
-PAGE_FILE = "procedure.html"
+#: The page's file name in a plan's folder, and its PDF's.
+PAGE_FILE, PDF_FILE = "procedure.html", "procedure.pdf"
+#: The picture of a leg's bars and the distance d between them.
+BARS_FILE = "bars.png"
 #: The command that reads a plan's filled sheet, as the page names it.
 FIT_COMMAND = "orthoglide fit readings.csv --plan plan.json"
 
 
-def write_page(procedure: Procedure, folder: str | Path, then: str = FIT_COMMAND
-               ) -> tuple[Path, dict[int, str]]:
+def write_page(procedure: Procedure, folder: str | Path, then: str = FIT_COMMAND,
+               pdf: bool = False) -> tuple[Path, dict[int, str]]:
     """Write the pictures and :data:`PAGE_FILE` of ``procedure`` into ``folder`` (made if
-    missing); ``then``: the command that reads the filled sheet.  The page's path, and the
-    pictures' file names by step number."""
+    missing), and with ``pdf`` :data:`PDF_FILE` too; ``then``: the command that reads the
+    filled sheet.  The page's path, and the pictures' file names by step number."""
+    from calibrators.workflow.page_pdf import write_pdf
+
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    drawn = pictures(procedure, MachineDesign.from_dict(procedure.design), folder)
+    design = MachineDesign.from_dict(procedure.design)
+    drawn = pictures(procedure, design, folder)
+    draw_bars(design, folder / BARS_FILE)
     path = folder / PAGE_FILE
     path.write_text(page(procedure, drawn, then), encoding="utf-8")
+    if pdf:
+        write_pdf(procedure, folder, drawn, then, folder / PDF_FILE)
     return path, drawn
+
+
+def draw_bars(design: MachineDesign, out: Path) -> Path:
+    """A leg's parallelogram seen square on: its two bars, d apart, the bar at +d/2 and
+    the one at -d/2 named, and a stand's place ``at`` measured from the centre of the
+    platform-end hinge; what a stand's place in words refers to."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot as plt
+
+    length, d = design.L, design.d
+    figure, axes = plt.subplots(figsize=(9, 3.6), dpi=100)
+    try:
+        for sign, words in ((1, "bar at +d/2: a stand measuring square to this picture "
+                             "touches it"),
+                            (-1, "bar at -d/2: a stand measuring up this picture\ntouches "
+                             "it from below")):
+            axes.plot([0, length], [sign * d / 2] * 2, color="dimgray", lw=7,
+                      solid_capstyle="round")
+            axes.text(0.78 * length if sign < 0 else length / 2,
+                      sign * d / 2 + sign * 0.22 * d, words, ha="center", va="center",
+                      fontsize=9)
+            for end in (0, length):
+                axes.plot(end, sign * d / 2, "o", ms=9, mfc="white", mec="black")
+            axes.plot([length, 1.07 * length], [sign * d / 2] * 2, color="red", lw=0.6)
+        axes.plot([0, length], [0, 0], "k-.", lw=0.8)
+        axes.annotate("", (1.05 * length, d / 2), xytext=(1.05 * length, -d / 2),
+                      arrowprops={"arrowstyle": "<->", "lw": 1.5, "color": "red"})
+        axes.text(1.07 * length, 0, f"d = {d:g} mm", color="red", va="center",
+                  fontsize=11, fontweight="bold")
+        at = 0.4 * length
+        axes.annotate("", (0, -1.0 * d), xytext=(at, -1.0 * d),
+                      arrowprops={"arrowstyle": "<->", "lw": 1.2, "color": "navy"})
+        axes.text(at / 2, -1.08 * d, "at × L from the centre of\nthe platform-end hinge",
+                  color="navy", ha="center", va="top", fontsize=9)
+        axes.plot([at, at], [-d / 2 - 0.05 * d, -0.9 * d], color="navy", lw=3)
+        axes.text(at - 0.01 * length, -0.75 * d, "stand", color="navy", fontsize=9, ha="right")
+        axes.text(0, 0.05 * d, "platform end", ha="left", va="bottom", fontsize=9)
+        axes.text(length, 0.05 * d, "carriage end", ha="right", va="bottom", fontsize=9)
+        axes.set_title(f"A leg's two bars, L = {length:g} mm long, d apart along the hinges' "
+                       "axis (z on the x leg, x on the y leg, y on the z leg)", fontsize=10)
+        axes.set_xlim(-0.05 * length, 1.25 * length)
+        axes.set_ylim(-1.5 * d, 0.95 * d)
+        axes.set_aspect("equal")
+        axes.set_axis_off()
+        figure.tight_layout()
+        figure.savefig(out)
+    finally:
+        plt.close(figure)
+    return out
+
+
+def stand_numbers(procedure: Procedure) -> list[int | None]:
+    """The number of the stand each row of the sheet is read on (None: the tracker's), by
+    the stands the set-up mounts and each re-mount's move."""
+    from calibrators.measurements.record import gauge_name
+
+    held = {s["slot"]: s["stand"] for s in procedure.stands}
+    out: list[int | None] = [None] * len(procedure.sheet)
+    for step in procedure.steps:
+        if step.action == "re-mount":
+            held = {slot: k for slot, k in held.items() if k != step.stand}
+            held[step.slot] = step.stand
+        for row in step.rows:
+            out[row - 1] = held.get(gauge_name(procedure.sheet[row - 1].gauge))
+    return out
 
 
 def pictures(procedure: Procedure, design: MachineDesign, out: Path) -> dict[int, str]:
@@ -80,10 +157,12 @@ def page(procedure: Procedure, pictures: dict[int, str], then: str = FIT_COMMAND
     stands = "".join(f"<tr><td>{s['stand']}</td><td>{e(s['slot'])}</td><td>{e(s['place'])}</td>"
                      "</tr>" for s in procedure.stands)
     sheet = "".join(
-        f"<tr><td>{k}</td><td>{m.step}</td><td>{e(m.mounting)}</td><td>{e(m.posture)}</td>"
+        f"<tr><td>{k}</td><td>{m.step}</td><td>{'' if n is None else n}</td>"
+        f"<td>{e(m.mounting)}</td><td>{e(m.posture)}</td>"
         f"<td>{', '.join(f'{v:g}' for v in m.rho)}</td><td>{m.repetition}</td>"
         f"<td>{'' if m.time_s is None else f'{m.time_s:.0f}'}</td><td class='blank'></td></tr>"
-        for k, m in enumerate(procedure.sheet, start=1))
+        for k, (m, n) in enumerate(zip(procedure.sheet, stand_numbers(procedure),
+                                       strict=True), start=1))
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8">
 <title>Calibration procedure: {e(procedure.agent)}</title>
@@ -122,6 +201,12 @@ driving at 20 mm/s, 5 s to settle and read, 3 s per plunger lever, 120 s per re-
 Read the dials to their resolution (0.01 mm for the usual dial).</li>
 </ul>
 {''.join(f"<p><b>Note:</b> {e(n)}.</p>" for n in procedure.notes)}
+<h2>Where a stand goes on a bar</h2>
+<p>Each leg has two parallel bars, d apart. A stand's place names its bar by its side,
++d/2 or -d/2, and the distance along the bar from the centre of the platform-end
+hinge:</p>
+<p><img src="{BARS_FILE}" alt="A leg's two bars, the distance d between them, and where a
+stand's place along a bar is measured from"></p>
 <h2>The stands at set-up</h2>
 <table><tr><th>stand</th><th>slot</th><th>where, and which way it reads plus</th></tr>
 {stands}</table>
@@ -130,7 +215,7 @@ Read the dials to their resolution (0.01 mm for the usual dial).</li>
 <th>sheet rows</th></tr>
 {''.join(rows)}</table>
 <h2>Readings sheet</h2>
-<table><tr><th>row</th><th>step</th><th>stand (mounting)</th><th>posture</th>
+<table><tr><th>row</th><th>step</th><th>stand</th><th>mounting</th><th>posture</th>
 <th>rho (mm)</th><th>repetition</th><th>time (s)</th><th>reading (mm)</th></tr>
 {sheet}</table>
 </body></html>
