@@ -228,6 +228,12 @@ def test_compare_json_contract_and_resume(tmp_path) -> None:
     out = tmp_path / "run"
     first = orthoglide("--out", str(out))
     assert first.returncode == 0
+    # The JSON holds the text's table, warning and paired lines: the same lines as the
+    # text run prints (but the heading's seconds), and the world they hold in.
+    shown = json.loads(whole.stdout)
+    text = shown["table"] + shown["warnings"] + shown["paired_table"]
+    assert len(shown["table"]) == 2 + len(rows) and shown["world"] in shown["table"][0]
+    assert first.stdout.splitlines()[1:len(text)] == text[1:]
     lines = (out / "trials.jsonl").read_text().splitlines()
     # Lose the last machine's trials, as an interrupt would, and resume.
     (out / "trials.jsonl").write_text("\n".join(lines[: -4]) + "\n")

@@ -187,59 +187,78 @@ def run_command(args: argparse.Namespace) -> None:
 
 def _print(trials: list[Trial], config: Config, machines: int, seconds: float,
            as_json: bool) -> list[dict]:
-    """Print the summary of ``trials`` (and the paired comparisons of its agents) as text
-    or JSON; return its rows."""
+    """Print the summary of ``trials`` (and the paired comparisons of its agents) as text,
+    or as JSON holding the same text's table and warning lines beside the numbers; return
+    its rows."""
     rows, pairs = summary(trials, config.target_mm), paired(trials)
+    table, warnings, pair_lines = _lines(rows, pairs, config, machines, seconds)
     if as_json:
-        print(json.dumps({"config": _config_dict(config, machines), "rows": rows,
-                          "paired": pairs}, allow_nan=False))
+        print(json.dumps({"config": _config_dict(config, machines), "world": config.world,
+                          "rows": rows, "paired": pairs,
+                          "table": table, "warnings": warnings, "paired_table": pair_lines},
+                         allow_nan=False))
         return rows
-    print(f"{machines} machines ({config.world}), {seconds:.1f} s. TCP error "
-          "RMS over the workspace after calibration (mm), median over machines with its "
-          "95 % interval; rigid = after the best-fit rigid motion (the headline), raw = "
-          "world frame; a failed trial counts as its uncalibrated machine; success: rigid "
-          f"error against the truth <= {config.target_mm:g} mm (predicted: by the estimate "
-          "itself)")
+    print("\n".join(table + warnings + pair_lines))
+    return rows
+
+
+def _lines(rows: list[dict], pairs: list[dict], config: Config, machines: int,
+           seconds: float) -> tuple[list[str], list[str], list[str]]:
+    """The text of the summary: the table (its heading, header and one line per row), the
+    warnings (failed fits, each kind of warning with an example, a hint), and the paired
+    comparisons."""
+    table = [
+        f"{machines} machines ({config.world}), {seconds:.1f} s. TCP error "
+        "RMS over the workspace after calibration (mm), median over machines with its "
+        "95 % interval; rigid = after the best-fit rigid motion (the headline), raw = "
+        "world frame; a failed trial counts as its uncalibrated machine; success: rigid "
+        f"error against the truth <= {config.target_mm:g} mm (predicted: by the estimate "
+        "itself)"]
     # Wide enough for the longest agent name (a policy file's, AGENT+reference).
     width = max([10, *(len(r["agent"]) + 1 for r in rows)])
-    print(f"{'agent':{width}}{'estimator':15}{'TCP after (rigid) med':>22}{'95 % interval':>18}"
-          f"{'p95':>9}{'(raw) med':>11}{'time s med':>11}{'z-RMS':>8}{'chi2 rej':>9}"
-          f"{'success':>9}{'predicted':>10}{'failed':>8}")
+    table.append(f"{'agent':{width}}{'estimator':15}{'TCP after (rigid) med':>22}"
+                 f"{'95 % interval':>18}{'p95':>9}{'(raw) med':>11}{'time s med':>11}"
+                 f"{'z-RMS':>8}{'chi2 rej':>9}{'success':>9}{'predicted':>10}{'failed':>8}")
     for r in rows:
         rigid, raw = r["tcp_after_mm"]["rigid"], r["tcp_after_mm"]["raw"]
         interval = (f"[{rigid['ci95'][0]:.4f}, {rigid['ci95'][1]:.4f}]" if rigid["ci95"]
                     else "-")
-        print(f"{r['agent']:{width}}{r['estimator']:15}{_show(rigid['median'], 22, 4)}"
-              f"{interval:>18}{_show(rigid['p95'], 9, 4)}{_show(raw['median'], 11, 3)}"
-              f"{r['time_s']['median']:11.0f}{_show(r['z_rms'], 8, 2)}"
-              f"{_show(r['chi2_rejected'], 9, 2)}{r['success_rate']:9.0%}"
-              f"{r['predicted_success_rate']:10.0%}{r['failed']:8d}")
+        table.append(
+            f"{r['agent']:{width}}{r['estimator']:15}{_show(rigid['median'], 22, 4)}"
+            f"{interval:>18}{_show(rigid['p95'], 9, 4)}{_show(raw['median'], 11, 3)}"
+            f"{r['time_s']['median']:11.0f}{_show(r['z_rms'], 8, 2)}"
+            f"{_show(r['chi2_rejected'], 9, 2)}{r['success_rate']:9.0%}"
+            f"{r['predicted_success_rate']:10.0%}{r['failed']:8d}")
+    warnings = []
     for r in rows:
         if r["failed"]:
-            print(f"{r['agent']} x {r['estimator']}: {r['failed']} of {r['machines']} failed "
-                  f"({r['failure']}), counted as uncalibrated")
+            warnings.append(f"{r['agent']} x {r['estimator']}: {r['failed']} of "
+                            f"{r['machines']} failed ({r['failure']}), counted as uncalibrated")
         for kind, seen in r["warnings"].items():
             example = seen["example"].split(":", 1)[-1].strip()
             example = example if len(example) <= 110 else example[:107] + "..."
-            print(f"{r['agent']} x {r['estimator']}: {seen['trials']} of {r['machines']} "
-                  f"fits warn: {warning_title(kind)} (e.g. {example})")
+            warnings.append(f"{r['agent']} x {r['estimator']}: {seen['trials']} of "
+                            f"{r['machines']} fits warn: {warning_title(kind)} "
+                            f"(e.g. {example})")
     exact = exact_estimators()
     if any(r["failed"] and r["estimator"] not in exact for r in rows):
-        print(f"the exact-model estimators read any agent's readings: --estimators "
-              f"{','.join(exact)}")
+        warnings.append(f"the exact-model estimators read any agent's readings: --estimators "
+                        f"{','.join(exact)}")
+    pair_lines = []
     if pairs:
-        print("paired on the same machines: median ratio of the TCP errors after rigid "
-              "motion (agent / against; below 1 the agent is better) with its 95 % interval, "
-              "and the agent's win rate")
+        pair_lines.append("paired on the same machines: median ratio of the TCP errors after "
+                          "rigid motion (agent / against; below 1 the agent is better) with "
+                          "its 95 % interval, and the agent's win rate")
         for pair in pairs:
             interval = (f"[{pair['ratio_ci95'][0]:.3f}, {pair['ratio_ci95'][1]:.3f}]"
                         if pair["ratio_ci95"] else "-")
-            print(f"  {pair['estimator']:15}{pair['agent']:>10} / {pair['against']:10}"
-                  f"{pair['ratio_median']:8.3f} {interval:>16}  wins {pair['win_rate']:4.0%} "
-                  f"of {pair['machines']}" + (
-                      f" ({pair['failed']} with a failed fit, counted uncalibrated)"
-                      if pair["failed"] else ""))
-    return rows
+            pair_lines.append(
+                f"  {pair['estimator']:15}{pair['agent']:>10} / {pair['against']:10}"
+                f"{pair['ratio_median']:8.3f} {interval:>16}  wins {pair['win_rate']:4.0%} "
+                f"of {pair['machines']}" + (
+                    f" ({pair['failed']} with a failed fit, counted uncalibrated)"
+                    if pair["failed"] else ""))
+    return table, warnings, pair_lines
 
 
 def _show(value: float | None, width: int, digits: int) -> str:
@@ -320,5 +339,7 @@ def add(p: argparse.ArgumentParser) -> None:
                         "model and report the largest reading and TCP differences")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true",
-                   help="print one JSON object: the config and one row per agent x estimator")
+                   help="print one JSON object: the config, its world, one row per agent x "
+                   "estimator, the paired comparisons, and the text's table, warning and "
+                   "paired lines (table, warnings, paired_table)")
     p.set_defaults(func=run_command)
