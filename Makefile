@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: run test lint bench clean
+.PHONY: run test docs lint bench clean
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -13,16 +13,23 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 run: $(STAMP)
-	rm -rf results/compare
-	@echo "make run compares the paper's dial-gauge procedure and a laser tracker (agents), each read by \
-	the paper's 6-parameter model and by the model of all 27 machine errors (estimators), \
-	on the same 200 random machines:"
-	$(BIN)/orthoglide compare --agents paper,tracker --estimators paper6,extended \
-		--machines 200 --seed 1 --jobs 2 --out results/compare
+	@echo "make run: the paper's dial-gauge procedure, a designed gauge experiment (optimal) and a \
+	laser tracker (agents), each read by the full model of the machine's errors and the lab's terms \
+	(estimator), on the same 10 realistic machines in the real lab (--conditions lab), one hour \
+	of lab time at most:"
+	$(BIN)/orthoglide compare --agents paper,optimal,tracker --estimators full \
+		--machines 10 --seed 1 --conditions lab --jobs 2
+	@echo
+	@echo "Next: docs/getting-started.md; an RL researcher docs/env.md, a calibration researcher \
+	docs/compare.md and docs/benchmarks.md, a machine builder docs/workflow.md (make docs builds \
+	the site into docs/_build/html)."
 
 test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest -q -n auto
+
+docs: $(STAMP)
+	$(BIN)/python -m sphinx -W --keep-going -b html docs docs/_build/html
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/fidelity.py --machines 200
@@ -42,4 +49,4 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/speed_against_revision.py --rev 02c124b
 
 clean:
-	rm -rf $(VENV) results .pytest_cache
+	rm -rf $(VENV) results .pytest_cache docs/_build

@@ -1,6 +1,6 @@
 """Estimators on the paper's experiment: what each makes of the same readings.
 
-    python benchmarks/estimators.py [--machines 50] [--seed 0] [--write-readme]
+    python benchmarks/estimators.py [--machines 50] [--seed 0] [--write-docs]
 
 Realistic machines (27 errors), gauges with sigma 0.01 mm and a 0.01 mm dial, installed
 with the preset's stand errors; the paper's experiment (the ``paper`` agent: 7 postures, 6
@@ -58,7 +58,7 @@ MARK = "<!-- estimators table -->"
 
 def run(machines: int, seed: int) -> dict[str, dict[str, list[float]]]:
     env = gym.make(orthoglide_env.LAB_ENV_ID, errors="realistic", gauge_sigma=0.01,
-                   gauge_resolution=0.01, backend="exact")
+                   conditions="ideal", gauge_resolution=0.01, backend="exact")
     results: dict[str, dict[str, list[float]]] = {name: {} for name in ESTIMATORS}
     for k in range(machines):
         episode = run_episode(env, get_agent("paper"), seed * 100_003 + k)
@@ -110,29 +110,29 @@ def table(results: dict[str, dict[str, list[float]]], machines: int) -> str:
     return "\n".join(lines)
 
 
-def write_readme(text: str, readme: Path) -> None:
-    """Replace the table between the two markers in the README."""
-    content = readme.read_text()
+def write_page(text: str, page: Path) -> None:
+    """Replace the table between the two markers of the measured results' page."""
+    content = page.read_text()
     pattern = re.compile(f"{re.escape(MARK)}.*?{re.escape(MARK)}", re.S)
     if not pattern.search(content):
-        raise SystemExit(f"{readme} has no pair of '{MARK}' markers")
-    readme.write_text(pattern.sub(lambda _: f"{MARK}\n{text}\n{MARK}", content))
+        raise SystemExit(f"{page} has no pair of '{MARK}' markers")
+    page.write_text(pattern.sub(lambda _: f"{MARK}\n{text}\n{MARK}", content))
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--machines", type=int, default=50)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--write-readme", action="store_true",
-                        help="put the table into README.md between its markers")
+    parser.add_argument("--write-docs", action="store_true",
+                        help="put the table into docs/benchmarks.md between its markers")
     args = parser.parse_args()
     start = time.perf_counter()
     results = run(args.machines, args.seed)
     text = table(results, args.machines)
     print(text)
     print(f"{time.perf_counter() - start:.0f} s")
-    if args.write_readme:
-        write_readme(text, Path(__file__).resolve().parent.parent / "README.md")
+    if args.write_docs:
+        write_page(text, Path(__file__).resolve().parent.parent / "docs" / "benchmarks.md")
 
 
 if __name__ == "__main__":

@@ -73,9 +73,9 @@ BASELINES: tuple[str, ...] = ("random", "paper", "optimal", "active")
 
 @dataclass(frozen=True)
 class Lab:
-    """The lab of training and of every evaluation (the README's real-world comparison:
-    ``lab`` conditions, dials of sigma 0.02 mm, the default hour for every agent; the
-    policy stops after its training episodes' time)."""
+    """The lab of training and of every evaluation (docs/agents.md, 'A learned agent', the
+    real-world comparison: ``lab`` conditions, dials of sigma 0.02 mm, the default hour for
+    every agent; the policy stops after its training episodes' time)."""
 
     errors: str = DEFAULT_PRESET
     sigma: float = DEFAULT_SIGMA

@@ -213,14 +213,15 @@ def test_bad_conditions_exit_2_with_one_line(args: list[str], words: str) -> Non
     assert words in result.stderr and len(result.stderr.strip().splitlines()) == 1
 
 
-def test_the_readme_shows_the_conditions_table() -> None:
-    """The README's table is the module's, row for row (one source for every size)."""
+def test_the_docs_show_the_conditions_table() -> None:
+    """docs/conditions.md's table is the module's, row for row (one source for every
+    size)."""
     from pathlib import Path
 
     from calibrators.cli.conditions import table
 
-    readme = (Path(__file__).parents[1] / "README.md").read_text()
-    assert table() in readme
+    page = (Path(__file__).parents[1] / "docs" / "conditions.md").read_text()
+    assert table() in page
 
 
 def _episode(options: dict | None, seed: int) -> tuple[list[np.ndarray], gym.Env]:

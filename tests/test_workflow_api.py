@@ -1,4 +1,4 @@
-"""The real-machine workflow's Python API (``calibrators.workflow``): the README's example
+"""The real-machine workflow's Python API (``calibrators.workflow``): docs/workflow.md's example
 runs as it is printed, each stage checks its parameters at construction, and each result
 writes its files and comes back from its JSON."""
 
@@ -36,8 +36,8 @@ SMALL = ROOT / "examples" / "designs" / "small.json"
 
 
 def readme_block() -> str:
-    """The Python block of the README's section 'The workflow in Python'."""
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    """The Python block of the section 'The workflow in Python' of docs/workflow.md."""
+    text = (ROOT / "docs" / "workflow.md").read_text(encoding="utf-8")
     section = text.split("## The workflow in Python\n", 1)[1].split("\n## ", 1)[0]
     found = re.search(r"```python\n(.*?)```", section, re.S)
     assert found, "the section holds no Python block"
@@ -52,7 +52,7 @@ def test_the_readmes_workflow_runs_as_printed() -> None:
     assert len(block.splitlines()) <= 35
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
-        exec(compile(block, "README.md", "exec"), {"__name__": "readme"})
+        exec(compile(block, "docs/workflow.md", "exec"), {"__name__": "readme"})
     command, passed = out.getvalue().rsplit(" ", 1)
     assert passed.strip() == "True"
     assert not np.allclose(json.loads(command), [20, -10, 5], atol=1e-3)

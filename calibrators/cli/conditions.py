@@ -1,5 +1,5 @@
 """``orthoglide conditions``: the table of the real lab's effects, their sizes under the
-``lab`` and ``workshop`` conditions and their sources (the README shows the same)."""
+``lab`` and ``workshop`` conditions and their sources (docs/conditions.md shows the same)."""
 
 from __future__ import annotations
 

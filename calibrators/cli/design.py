@@ -16,7 +16,7 @@ def run(args: argparse.Namespace) -> None:
 def add(p: argparse.ArgumentParser) -> None:
     p.description = ("Print a machine design as JSON, every key given: the prototype's, or "
         "with --design the file's, its left-out keys filled in. A copy is a starting point "
-        "for a design file of another machine (see the README's 'Machine designs').")
+        "for a design file of another machine (see docs/machines.md, 'Machine designs').")
     p.add_argument("--design", metavar="FILE",
                    help="design file (JSON or TOML) to complete and print instead")
     p.add_argument("-o", "--out", default=STDOUT, metavar="FILE",

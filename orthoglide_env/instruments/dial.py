@@ -1,8 +1,8 @@
 """What a dial gauge shows: the reading of a ray distance, its status (contact,
 overtravel), and the repeatability noise and display step.
 
-Reading convention (the README's Conventions): the coordinate of the touched surface point along the
-gauge's world measuring axis, relative to the gauge's zero, in mm::
+Reading convention (docs/getting-started.md, Conventions): the coordinate of the touched
+surface point along the gauge's world measuring axis, relative to the gauge's zero, in mm::
 
     reading = sign * (t - zero),  sign = direction . e_axis  (+1 or -1 nominally)
 

@@ -5,7 +5,7 @@ temperature-controlled room, a well-kept machine: C3 screws, preloaded nuts, goo
 instruments) and the ``workshop`` ones (a shop floor, an ordinary machine: C5 screws,
 precision nuts) a machine's value is drawn uniformly in the row's range; a ``signed``
 row then takes a random sign.  A range whose ends are equal is a fixed value.  The
-README shows this table (``orthoglide conditions`` prints it).
+docs/conditions.md shows this table (``orthoglide conditions`` prints it).
 
 Positions along a drive are measured from the back end of its travel (``rho_min``, where
 the screw's fixed bearing is assumed to be); the stroke is ``rho_max - rho_min``.
