@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -23,6 +23,9 @@ from orthoglide_env.world.conditions import (
 )
 from orthoglide_env.world.machine_file import read_machine_file
 from orthoglide_env.world.truth import World
+
+if TYPE_CHECKING:
+    from calibrators.agents import Agent
 
 #: Help of ``--design``, on every command that builds a machine.
 DESIGN_HELP = ("machine design file, JSON or TOML: the nominal dimensions, joint limits and "
@@ -118,6 +121,38 @@ def add_thermometer(p: argparse.ArgumentParser) -> None:
                    help="the lab has a room thermometer: every reading carries the room's "
                    "temperature, against which the full estimator fits the stands' growth "
                    "(its error: the README's 'Conditions', rows thermometer)")
+
+
+def add_instruments(p: argparse.ArgumentParser) -> None:
+    """``--instruments``: what the lab owns."""
+    p.add_argument("--instruments", metavar="LIST", default=None,
+                   help="what the lab owns, comma-separated: dial, interferometer, tracker "
+                   "(step-gauge and ballbar are not yet available); an agent that needs "
+                   "one the lab does not own is refused (default: the dial gauges, and the "
+                   "tracker for an agent that reads one; docs/instruments.md)")
+
+
+def instruments_of(args: argparse.Namespace, agents: tuple[Agent, ...] = ()
+                   ) -> tuple[str, ...]:
+    """The instruments of ``--instruments`` (empty when not given: today's lab), each of
+    ``agents`` checked against them; :class:`UsageError` in one line if bad."""
+    # (Here, not at the top: the labs import Gymnasium, which --help does without.)
+    from calibrators.study.labs import lab_kwargs
+    from orthoglide_env.instruments.interferometer import check_instruments
+    if args.instruments is None:
+        owned: tuple[str, ...] = ()
+    else:
+        try:
+            owned = check_instruments([n.strip() for n in args.instruments.split(",")
+                                       if n.strip()])
+        except ValueError as exc:
+            raise UsageError(f"--instruments: {exc}") from None
+    for agent in agents:
+        try:
+            lab_kwargs(agent, owned)
+        except ValueError as exc:
+            raise UsageError(f"{exc}: add it to --instruments") from None
+    return owned
 
 
 def conditions_of(args: argparse.Namespace, world: World | None = None) -> Conditions:

@@ -24,6 +24,7 @@ from calibrators.measurements.fields import (
     _show,
 )
 from calibrators.measurements.record import Measurement, _measurement, _Readings
+from orthoglide_env.instruments.interferometer import InterferometerAxis
 from orthoglide_env.model.design import MachineDesign
 
 _INTEGER = re.compile(r"[+-]?[0-9]+")
@@ -135,10 +136,13 @@ def read_csv(handle: BinaryIO, path: Path, design: MachineDesign) -> list[Measur
 
 def write_csv(items: list[Measurement], path: Path) -> None:
     """Write ``items`` as CSV: the header :data:`COLUMNS`, then one reading per row (without
-    the ``time_s`` or ``temperature_c`` column when no reading has one)."""
+    the ``time_s`` or ``temperature_c`` column when no reading has one, nor the
+    ``instrument`` column when no reading is an interferometer's)."""
     keep = [k for k, name in enumerate(COLUMNS)
-            if name not in ("time_s", "temperature_c")
-            or any(getattr(m, name) is not None for m in items)]
+            if name not in ("time_s", "temperature_c", "instrument")
+            or (name == "instrument" and any(isinstance(m.gauge, InterferometerAxis)
+                                             for m in items))
+            or (name != "instrument" and any(getattr(m, name) is not None for m in items))]
     with path.open("w", newline="", encoding="utf-8") as handle:
         writer = csv.writer(handle)
         writer.writerow([COLUMNS[k] for k in keep])
