@@ -15,7 +15,7 @@ from calibrators.agents import get_agent
 from calibrators.agents.base import PlannedAgent, action
 from calibrators.agents.iso230 import drive_steps, runs_for, targets_of
 from calibrators.estimators.catalogue import get_estimator
-from calibrators.measurements import Measurement, Measurements, MeasurementFileError
+from calibrators.measurements import Measurement, MeasurementFileError, Measurements
 from calibrators.study.episodes import machine_seed, run_episode
 from calibrators.study.labs import lab_kwargs
 from orthoglide_env.instruments.interferometer import InterferometerAxis
@@ -33,7 +33,7 @@ class DrivesOnly(PlannedAgent):
     name = "drives-only"
 
     def make_plan(self, observation: dict) -> list[dict]:
-        return drive_steps(len(observation["slot"]), self.env.design, 1) + [action(Op.STOP)]
+        return [*drive_steps(len(observation["slot"]), self.env.design, 1), action(Op.STOP)]
 
 
 def _episode(conditions: Conditions, seed: int = 0):
