@@ -147,3 +147,19 @@ def test_iso230_2_plans_the_standard_and_shortens_runs_to_the_budget():
     assert np.all(np.diff(targets) > 0) and np.ptp(np.diff(targets)) > 1.0
     assert runs_for(3 * 3600.0, PROTOTYPE) == 5
     assert runs_for(3600.0, PROTOTYPE) == 1
+
+
+@pytest.mark.parametrize(("argv", "words"), [
+    (["compare", "--agents", "iso230-2", "--conditions", "lab", "--machines", "1"],
+     "needs the interferometer"),
+    (["compare", "--agents", "tracker", "--instruments", "dial", "--machines", "1"],
+     "needs the tracker"),
+    (["calibrate", "--instruments", "dial,laser"], "unknown instrument"),
+    (["compare", "--instruments", "dial,step-gauge", "--machines", "1"], "not yet available"),
+    (["plan", "--instruments", "dial,interferometer", "--out", "unused"],
+     "does not yet take the interferometer")])
+def test_the_commands_refuse_a_lab_without_what_they_need(argv, words, capsys):
+    from calibrators.cli import main
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert words in err and "\n" not in err

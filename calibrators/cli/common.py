@@ -155,6 +155,20 @@ def instruments_of(args: argparse.Namespace, agents: tuple[Agent, ...] = ()
     return owned
 
 
+def workflow_instruments(args: argparse.Namespace, agent: str, command: str) -> None:
+    """``--instruments`` of a workflow ``command`` (``plan``, ``session``), checked with
+    ``agent``: the sheets and prompts are the dial gauges' and the tracker's, so a lab
+    with the interferometer is refused in one line (:class:`UsageError`)."""
+    from calibrators.agents import get_agent
+    try:
+        owned = instruments_of(args, (get_agent(agent),))
+    except ValueError as exc:  # an unknown agent
+        raise UsageError(str(exc)) from None
+    if "interferometer" in owned:
+        raise UsageError(f"--instruments: {command} does not yet take the interferometer "
+                         "(its sheets and prompts are to come); compare and calibrate run it")
+
+
 def conditions_of(args: argparse.Namespace, world: World | None = None) -> Conditions:
     """The conditions of ``--conditions`` and ``--effects``, or those of a machine file's
     ``world`` (which the options, when given, must name); :class:`UsageError` if bad."""
