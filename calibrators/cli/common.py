@@ -17,6 +17,7 @@ from orthoglide_env.model.errors import MachineParams, check_rho, random_machine
 from orthoglide_env.world.conditions import (
     CONDITION_NAMES,
     DEFAULT_CONDITIONS,
+    DRIVES,
     EFFECT_NAMES,
     INDICATORS,
     Conditions,
@@ -113,6 +114,11 @@ def add_conditions(p: argparse.ArgumentParser, replays: bool = False,
                    "(ISO 463) or digital (its own error rows in the README's "
                    "'Conditions'; read it at 1 um with --resolution 0.001 where the "
                    "command has it) (default: dial)")
+    p.add_argument("--drives", choices=DRIVES, default=None,
+                   help="the machine's drives under lab or workshop conditions: screw "
+                   "(semi-closed loop, the encoders on the motors) or scales (closed loop "
+                   "on linear scales: no lead, periodic error, warm-up or lost motion, but "
+                   "the scale's grade and expansion; docs/instruments.md) (default: screw)")
 
 
 def add_thermometer(p: argparse.ArgumentParser) -> None:
@@ -175,13 +181,16 @@ def conditions_of(args: argparse.Namespace, world: World | None = None) -> Condi
     effects = None if args.effects is None else tuple(
         e.strip() for e in args.effects.split(",") if e.strip())
     indicator = getattr(args, "indicator", None)
-    if world is not None and args.conditions is None and effects is None and indicator is None:
+    drives = getattr(args, "drives", None)
+    if (world is not None and args.conditions is None and effects is None
+            and indicator is None and drives is None):
         return world.conditions
     try:
         conditions = Conditions(args.conditions or DEFAULT_CONDITIONS, effects,
-                                indicator or "dial")
+                                indicator or "dial", drives or "screw")
     except ValueError as exc:
-        option = "--indicator" if "indicator" in str(exc) else "--effects"
+        option = next((f"--{word}" for word in ("indicator", "drives") if word in str(exc)),
+                      "--effects")
         raise UsageError(f"{option}: {exc}") from None
     if world is not None and conditions != world.conditions:
         raise UsageError(f"--conditions {conditions.label}: the machine file's world was drawn "

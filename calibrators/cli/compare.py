@@ -145,6 +145,8 @@ def _config_dict(config: Config, machines: int) -> dict:
     conditions = data.pop("conditions")
     data.update(conditions=conditions.name, effects=list(conditions.effects),
                 indicator=conditions.indicator)
+    if conditions.drives != "screw":
+        data["drives"] = conditions.drives
     return data
 
 

@@ -52,7 +52,10 @@ force, and the gauge block's deviation from its nominal length (a reference gaug
 zeroing reading; its grade allows 0.2 um under ``lab``, 0.8 um in the workshop:
 :data:`~orthoglide_env.world.table.REFERENCE_DEVIATION`), and an interferometer's
 dead path: the room's drift grows the 100 mm from the drive's back end to where its count
-was zeroed, about 0.3 um per hour of a set-up under ``lab``.  A tracker's noise under
+was zeroed, about 0.3 um per hour of a set-up under ``lab``; and with linear scales
+(``drives="scales"``), the scale's expansion against the steel's (3.5 ppm/K over the
+stroke: 0.2 um per hour of the lab's drift; its part at the room's offset is the
+grade's linear term).  A tracker's noise under
 conditions with its MPE is not a term but its readings' sigma (:func:`tracker_sigma`);
 an interferometer's scatter likewise (:func:`~orthoglide_env.instruments.interferometer.
 sigma`), and its scale error (laser, air, material sensor) is a term per set-up,

@@ -185,3 +185,20 @@ INSTRUMENT_ERRORS: dict[str, dict[str, Size]] = {
                       "floor"),
     },
 }
+
+#: Closed-loop drives (conditions with ``drives="scales"``): a linear scale beside each
+#: drive reads the carriage, so the screw's lead error, its periodic error, its growth
+#: as it warms and the nut's reversal no longer reach the carriage (HEIDENHAIN, "Exposed
+#: linear encoders", introduction; the feed-transmission accuracy article).  What is
+#: left is the scale's own error and its expansion.
+SCALES: dict[str, Size] = {
+    "grade": Size((0, 3), (0, 5), "um", "the scale's error along the stroke, linear, at "
+                  "the stroke's end: its accuracy grade +-a bounds the error over any 1 m, "
+                  "and the 160 mm stroke lies in one", "HEIDENHAIN sealed linear encoders: "
+                  "grades +-3 and +-5 um (exposed LIP: +-1 um); the grade's definition: "
+                  "HEIDENHAIN, 'Positionsabweichungen ueber den Messweg'", signed=True),
+    "expansion": Size((8, 8), (8, 8), "um/(m K)", "the scale's expansion (glass): the "
+                      "carriage follows it with the room instead of the screw's steel",
+                      "assumption: about 8 ppm/K for a glass scale (the LC/LS coefficient "
+                      "was not found; Invar about 1, Zerodur about 0)"),
+}
