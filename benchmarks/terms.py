@@ -4,13 +4,15 @@ against its prior, per family of terms, and what the drives' lead error left cos
     python benchmarks/terms.py [--machines 5] [--agents paper,optimal,tracker]
                                [--conditions lab] [--seed 1] [--sigma 0.02]
                                [--resolution 0.01] [--instruments dial,interferometer]
+                               [--budget 3600]
 
-Per agent (each its one-hour experiment under the conditions, the ``realistic``
-preset), per family of terms (:data:`calibrators.estimators.consider.TERM_FAMILIES`):
-the share of the prior's variance the readings remove, ``1 - trace(posterior) /
-trace(prior)`` over the family's coefficients (each has a unit prior), median over the
-machines.  Near 1 the instrument identifies the family, near 0 nothing sees it; the
-periodic and dial families are considered, not fitted (their share is 0 by
+Per agent (each its experiment of ``--budget`` seconds under the conditions, the
+``realistic`` preset), per family of terms
+(:data:`calibrators.estimators.consider.TERM_FAMILIES`): the share of the prior's
+variance the readings remove, ``1 - trace(posterior) / trace(prior)`` over the family's
+coefficients (each has a unit prior), median over the machines.  Near 1 the instrument
+identifies the family, near 0 nothing sees it; the dial family is considered, not fitted,
+and so is the periodic one unless an interferometer read (a share of 0, or "-", by
 construction).  The pitch table's coefficients whiten its prior, so that share weighs
 a direction the prior allows a nanometre as much as one it allows microns; the column
 ``lead um2`` gives the share of the lead error's variance itself, over the table's
@@ -44,6 +46,7 @@ from calibrators.study.episodes import machine_seed, run_episode
 from calibrators.study.labs import lab_id, lab_kwargs
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.instruments.interferometer import check_instruments
+from orthoglide_env.lab.operations import DEFAULT_BUDGET_S
 from orthoglide_env.model.errors import AXIS_NAMES
 from orthoglide_env.scoring import score
 from orthoglide_env.world.conditions import Conditions
@@ -91,6 +94,8 @@ def main() -> None:
                         help="the gauges' reading sigma (mm, default %(default)s)")
     parser.add_argument("--resolution", type=float, default=DEFAULT_RESOLUTION,
                         help="the dials' resolution (mm, default %(default)s)")
+    parser.add_argument("--budget", type=float, default=DEFAULT_BUDGET_S,
+                        help="each experiment's lab time (s, default %(default)s)")
     parser.add_argument("--instruments", default=None,
                         help="what the lab owns, comma-separated (default: the dial gauges "
                         "and the tracker for an agent that reads one)")
@@ -108,7 +113,8 @@ def main() -> None:
         parser.error(str(exc))
     fit = GaussNewtonCalibrator(params="full", verify=False, explain=False,
                                 conditions=args.conditions)
-    print(f"{args.conditions}, {args.machines} machines, seed {args.seed}, gauge sigma "
+    print(f"{args.conditions}, {args.machines} machines, seed {args.seed}, budget "
+          f"{args.budget:g} s, instruments {args.instruments or 'dial'}, gauge sigma "
           f"{args.sigma} mm read to {args.resolution} mm: share of each "
           f"family's prior variance the full fit removes (median), predicted TCP rigid "
           f"(um) with / without the drives' part, and the true one")
@@ -121,7 +127,7 @@ def main() -> None:
         rows: dict[str, list[float]] = {}
         predicted, geometric, true, physical = [], [], [], []
         kwargs = lab_kwargs(agent, owned, backend="exact", conditions=args.conditions,
-                            errors="realistic", gauge_sigma=args.sigma,
+                            errors="realistic", gauge_sigma=args.sigma, budget_s=args.budget,
                             gauge_resolution=args.resolution)
         for m in range(args.machines):
             env = gym.make(lab_id(kwargs), **kwargs)
