@@ -188,7 +188,8 @@ class GaussNewtonCalibrator(Estimator):
     Parameters: ``params``, the free parameters (a selection of
     :mod:`calibrators.estimators.parameters`; ``full``: every parameter (``extended``) and,
     unless ``fit_world`` says otherwise, the terms of
-    :data:`~calibrators.estimators.consider.FULL_TERMS` on a pitch-error table, whose
+    :data:`~calibrators.estimators.consider.FULL_TERMS` (and, of readings that hold a laser
+    interferometer's, the screw's periodic error) on a pitch-error table, whose
     ``node_spacing`` defaults to :data:`~calibrators.estimators.consider.DEFAULT_NODE_SPACING`);
     ``sigma``, a dial gauge's noise (mm); ``verify``, leave-one-repetition-out verification;
     ``prior``, the parameters' zero-mean normal prior; ``fix``, parameters held at known
