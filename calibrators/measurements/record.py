@@ -191,8 +191,7 @@ class Measurement:
             at = repr(float(self.gauge.at)) if self.gauge.part == Part.BAR else ""
         return [self.mounting, leg, axis, at, self.posture, *(repr(v) for v in self.rho),
                 str(self.repetition), repr(self.reading),
-                *("" if v is None else repr(v) for v in (self.time_s, self.temperature_c)),
-                instrument_of(self.gauge)]
+                *("" if v is None else repr(v) for v in (self.time_s, self.temperature_c))]
 
 
 def instrument_of(gauge: GaugeSpec | TrackerAxis | InterferometerAxis) -> str:
