@@ -19,12 +19,15 @@ from __future__ import annotations
 import importlib.abc
 import importlib.util
 import sys
+import warnings
 from types import ModuleType
 
 from orthoglide_env.model.design import MachineDesign
 
 ENV_ID = "OrthoglideCalibration-v0"
 LAB_ENV_ID = "OrthoglideLab-v0"
+#: The lab whose spaces carry the interferometer (its ``align`` operation and reading).
+LAB_V1_ENV_ID = "OrthoglideLab-v1"
 FLAT_LAB_ENV_ID = "OrthoglideLabFlat-v0"
 
 
@@ -41,6 +44,13 @@ def _register(gymnasium: ModuleType) -> None:
         gymnasium.register(
             id=LAB_ENV_ID, entry_point="orthoglide_env.envs.lab:OrthoglideLabEnv",
             vector_entry_point="orthoglide_env.envs.lab_vector:OrthoglideLabVectorEnv")
+    if LAB_V1_ENV_ID not in gymnasium.registry:
+        # v1 adds the interferometer to v0's spaces; v0 is not out of date (it stays the
+        # lab of every lab without one), so Gymnasium's note that a v1 exists is not said.
+        warnings.filterwarnings("ignore", message=f".*{LAB_ENV_ID} is out of date")
+        gymnasium.register(
+            id=LAB_V1_ENV_ID, entry_point="orthoglide_env.envs.lab:OrthoglideLabV1Env",
+            vector_entry_point="orthoglide_env.envs.lab_vector:OrthoglideLabV1VectorEnv")
     if FLAT_LAB_ENV_ID not in gymnasium.registry:
         # The lab with one Box of actions and one of observations, for off-the-shelf
         # learners.
@@ -76,4 +86,4 @@ if "gymnasium" in sys.modules:
 elif not any(isinstance(f, _RegisterOnImport) for f in sys.meta_path):
     sys.meta_path.insert(0, _RegisterOnImport())
 
-__all__ = ["ENV_ID", "FLAT_LAB_ENV_ID", "LAB_ENV_ID", "MachineDesign"]
+__all__ = ["ENV_ID", "FLAT_LAB_ENV_ID", "LAB_ENV_ID", "LAB_V1_ENV_ID", "MachineDesign"]

@@ -23,6 +23,7 @@ from functools import cached_property
 import numpy as np
 
 from orthoglide_env.instruments.gauges import Gauge, spec_arrays
+from orthoglide_env.instruments.interferometer import InterferometerAxis
 from orthoglide_env.instruments.rays import boxes_at, face_distances, face_normals, plane_distances
 from orthoglide_env.instruments.slots import GaugeSpec, Part, on_platform
 from orthoglide_env.instruments.stands import (
@@ -76,7 +77,11 @@ class TrackerAxis:
         return f"tracker/{AXIS_NAMES[self.component]}"
 
 
-Spec = GaugeSpec | TrackerAxis
+#: What a reading reads: a dial gauge's slot, a tracker's coordinate, or an
+#: interferometer's drive (whose model reading is the carriage's offset along it: its
+#: derivative by that drive's ``drho`` is 1, by every other error 0, and the zero of its
+#: set-up takes the offset itself).
+Spec = GaugeSpec | TrackerAxis | InterferometerAxis
 
 
 def station_of(mounting: str) -> str:
@@ -266,6 +271,9 @@ def predict(theta: np.ndarray, layout: ReadingLayout) -> np.ndarray:
             for m, (name, spec) in enumerate(zip(layout.mountings, layout.specs, strict=True)):
                 if isinstance(spec, TrackerAxis) and station_of(name) == station:
                     values[..., m] = seen[..., spec.component]
+    for m, spec in enumerate(layout.specs):
+        if isinstance(spec, InterferometerAxis):
+            values[..., m] = theta[..., None, spec.axis]
     rows = values[..., layout.posture_index, layout.mounting]
     through = np.flatnonzero(layout.through)
     if len(through):
@@ -351,6 +359,9 @@ def _derivatives(theta: np.ndarray, layout: ReadingLayout, wanted: np.ndarray) -
         _gauge_derivatives(theta, layout, machine, p, (inv, row), rows,
                            where[layout.mounting[rows]], at[rows], out,
                            stands=bool(wanted[N_MACHINE:N_MACHINE + 4 * len(gauges)].any()))
+    for m, spec in enumerate(layout.specs):
+        if isinstance(spec, InterferometerAxis):
+            out[:, layout.mounting == m, spec.axis] = 1.0
     start = N_MACHINE + 4 * len(gauges)
     for k, station in enumerate(space.stations):
         rows = np.flatnonzero([isinstance(layout.specs[m], TrackerAxis)

@@ -14,7 +14,7 @@ import orthoglide_env
 from calibrators.study.compare import Config, run_chunk
 from calibrators.study.episodes import make_estimator
 from orthoglide_env.envs.lab_vector import OrthoglideLabVectorEnv
-from orthoglide_env.lab.operations import PAPER_SLOTS, SLOTS, Op
+from orthoglide_env.lab.operations import PAPER_SLOTS, SLOTS, V0_OPS, Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
 
@@ -28,7 +28,7 @@ def random_actions(rng: np.random.Generator, stands: int) -> dict[str, np.ndarra
     """Per env: mostly moves (small ones that read, across the cube where gauges lose
     their bars, the pressing posture, the crash corner), lever flicks, re-mounts (some
     onto taken slots) and stops."""
-    op = rng.choice(len(Op), size=N, p=[0.6, 0.12, 0.12, 0.12, 0.04])
+    op = rng.choice(V0_OPS, size=N, p=[0.6, 0.12, 0.12, 0.12, 0.04])
     kind = rng.integers(10, size=N)
     rho = rng.uniform(-15, 15, (N, 3))
     rho[kind >= 6] = rng.uniform(PROTOTYPE.rho_min, PROTOTYPE.rho_max, (int(np.sum(kind >= 6)), 3))

@@ -14,12 +14,14 @@ from orthoglide_env.lab.operations import Op
 class Agent:
     """Base class: ``reset`` once per episode (after the env's reset), then ``act`` until
     the episode ends.  ``needs_tracker``: the lab must have a laser tracker;
-    ``needs_reference``: the gauge block.  ``reserved_s``: seconds of the budget an agent
+    ``needs_reference``: the gauge block; ``needs_instruments``: the other instruments the
+    lab must own (``interferometer``).  ``reserved_s``: seconds of the budget an agent
     that plans to the budget leaves to what follows it (:mod:`calibrators.agents.reference`)."""
 
     name: ClassVar[str] = ""
     needs_tracker: ClassVar[bool] = False
     needs_reference: ClassVar[bool] = False
+    needs_instruments: ClassVar[tuple[str, ...]] = ()
     reserved_s: float = 0.0
 
     def reset(self, env: gym.Env, observation: dict[str, np.ndarray],

@@ -40,7 +40,7 @@ from gymnasium.spaces import flatten, flatten_space
 
 from calibrators.agents.base import Agent, action
 from orthoglide_env.envs.wrappers import flat_action_space, lab_action
-from orthoglide_env.lab.operations import OP_NAMES, SLOT_NAMES, Op, slot_catalogue
+from orthoglide_env.lab.operations import OP_NAMES, SLOT_NAMES, V0_OPS, Op, slot_catalogue
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 
 #: The entry of the policy zip that holds the :class:`PolicySpec` (JSON).
@@ -99,7 +99,7 @@ def spec_of(env: gym.Env, algorithm: str, env_kwargs: dict[str, Any],
     lab = env.unwrapped
     rms = getattr(normaliser, "obs_rms", None)
     return PolicySpec(
-        algorithm=algorithm, slots=tuple(s.slot for s in lab.slots), ops=OP_NAMES,
+        algorithm=algorithm, slots=tuple(s.slot for s in lab.slots), ops=OP_NAMES[:V0_OPS],
         stands=int(lab.n_stands),
         observation_size=int(env.observation_space.shape[0]),
         action_size=int(env.action_space.shape[0]), budget_s=float(lab.budget_s),
@@ -139,11 +139,11 @@ def read_spec(path: str | Path) -> PolicySpec:
     if spec.version != SPEC_VERSION:
         raise ValueError(f"policy file '{path}' has layout version {spec.version}, this "
                          f"workbench reads {SPEC_VERSION}: retrain it")
-    if not _a_catalogue(spec.slots) or spec.ops != OP_NAMES:
+    if not _a_catalogue(spec.slots) or spec.ops != OP_NAMES[:V0_OPS]:
         raise ValueError(
             f"policy file '{path}' was trained on a lab with {len(spec.slots)} slots and "
             f"operations {list(spec.ops)}; this lab has a design's slot catalogue (the "
-            f"prototype's: {len(SLOT_NAMES)} slots) and {list(OP_NAMES)}: its actions and "
+            f"prototype's: {len(SLOT_NAMES)} slots) and {list(OP_NAMES[:V0_OPS])}: its actions and "
             "observations mean other things here, retrain it (examples/train_policy.py)")
     return spec
 

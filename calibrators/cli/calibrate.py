@@ -12,9 +12,11 @@ from calibrators.cli import estimator_options
 from calibrators.cli.common import (
     add_conditions,
     add_design,
+    add_instruments,
     add_thermometer,
     conditions_of,
     given_design,
+    instruments_of,
 )
 from calibrators.cli.output import emit, report, save
 from calibrators.study.episodes import DEFAULT_BUDGET_S, machine_seed, run_episode
@@ -58,7 +60,8 @@ def run(args: argparse.Namespace) -> None:
     conditions = conditions_of(args, world)
     env = make_lab(agent, errors=preset, gauge_sigma=sigma, gauge_resolution=resolution,
                    backend=args.backend, thermometer=args.thermometer, budget_s=args.budget,
-                   design=machine.design, conditions=conditions)
+                   design=machine.design, conditions=conditions,
+                   instruments=instruments_of(args, (agent,)))
     with closing(env):
         # A random machine is drawn by the lab from the seed, as ``compare`` draws its first
         # one: the same seed gives the same machine, installation and readings there and here.
@@ -90,6 +93,7 @@ def add(p: argparse.ArgumentParser) -> None:
     add_design(p)
     add_conditions(p, replays=True)
     add_thermometer(p)
+    add_instruments(p)
     p.add_argument("--backend", choices=["pybullet", "exact"], default="pybullet",
                    help="simulator of the virtual machine (default: %(default)s)")
     group = p.add_mutually_exclusive_group()

@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -17,12 +17,16 @@ from orthoglide_env.model.errors import MachineParams, check_rho, random_machine
 from orthoglide_env.world.conditions import (
     CONDITION_NAMES,
     DEFAULT_CONDITIONS,
+    DRIVES,
     EFFECT_NAMES,
     INDICATORS,
     Conditions,
 )
 from orthoglide_env.world.machine_file import read_machine_file
 from orthoglide_env.world.truth import World
+
+if TYPE_CHECKING:
+    from calibrators.agents import Agent
 
 #: Help of ``--design``, on every command that builds a machine.
 DESIGN_HELP = ("machine design file, JSON or TOML: the nominal dimensions, joint limits and "
@@ -111,6 +115,11 @@ def add_conditions(p: argparse.ArgumentParser, replays: bool = False,
                    "(ISO 463) or digital (its own error rows in docs/conditions.md; read it at "
                    "1 um with --resolution 0.001 where the "
                    "command has it) (default: dial)")
+    p.add_argument("--drives", choices=DRIVES, default=None,
+                   help="the machine's drives under lab or workshop conditions: screw "
+                   "(semi-closed loop, the encoders on the motors) or scales (closed loop "
+                   "on linear scales: no lead, periodic error, warm-up or lost motion, but "
+                   "the scale's grade and expansion; docs/instruments.md) (default: screw)")
 
 
 def add_thermometer(p: argparse.ArgumentParser) -> None:
@@ -128,6 +137,52 @@ def add_thermometer(p: argparse.ArgumentParser) -> None:
 READINGS_CONDITIONS = "ideal"
 
 
+def add_instruments(p: argparse.ArgumentParser) -> None:
+    """``--instruments``: what the lab owns."""
+    p.add_argument("--instruments", metavar="LIST", default=None,
+                   help="what the lab owns, comma-separated: dial, interferometer, tracker "
+                   "(step-gauge and ballbar are not yet available); an agent that needs "
+                   "one the lab does not own is refused (default: the dial gauges, and the "
+                   "tracker for an agent that reads one; docs/instruments.md)")
+
+
+def instruments_of(args: argparse.Namespace, agents: tuple[Agent, ...] = ()
+                   ) -> tuple[str, ...]:
+    """The instruments of ``--instruments`` (empty when not given: today's lab), each of
+    ``agents`` checked against them; :class:`UsageError` in one line if bad."""
+    # (Here, not at the top: the labs import Gymnasium, which --help does without.)
+    from calibrators.study.labs import lab_kwargs
+    from orthoglide_env.instruments.interferometer import check_instruments
+    if args.instruments is None:
+        owned: tuple[str, ...] = ()
+    else:
+        try:
+            owned = check_instruments([n.strip() for n in args.instruments.split(",")
+                                       if n.strip()])
+        except ValueError as exc:
+            raise UsageError(f"--instruments: {exc}") from None
+    for agent in agents:
+        try:
+            lab_kwargs(agent, owned)
+        except ValueError as exc:
+            raise UsageError(f"{exc}: add it to --instruments") from None
+    return owned
+
+
+def workflow_instruments(args: argparse.Namespace, agent: str, command: str) -> None:
+    """``--instruments`` of a workflow ``command`` (``plan``, ``session``), checked with
+    ``agent``: the sheets and prompts are the dial gauges' and the tracker's, so a lab
+    with the interferometer is refused in one line (:class:`UsageError`)."""
+    from calibrators.agents import get_agent
+    try:
+        owned = instruments_of(args, (get_agent(agent),))
+    except ValueError as exc:  # an unknown agent
+        raise UsageError(str(exc)) from None
+    if "interferometer" in owned:
+        raise UsageError(f"--instruments: {command} does not yet take the interferometer "
+                         "(its sheets and prompts are to come); compare and calibrate run it")
+
+
 def conditions_of(args: argparse.Namespace, world: World | None = None,
                   default: str = DEFAULT_CONDITIONS) -> Conditions:
     """The conditions of ``--conditions`` and ``--effects`` (``default``'s name when not
@@ -136,13 +191,16 @@ def conditions_of(args: argparse.Namespace, world: World | None = None,
     effects = None if args.effects is None else tuple(
         e.strip() for e in args.effects.split(",") if e.strip())
     indicator = getattr(args, "indicator", None)
-    if world is not None and args.conditions is None and effects is None and indicator is None:
+    drives = getattr(args, "drives", None)
+    if (world is not None and args.conditions is None and effects is None
+            and indicator is None and drives is None):
         return world.conditions
     try:
         conditions = Conditions(args.conditions or default, effects,
-                                indicator or "dial")
+                                indicator or "dial", drives or "screw")
     except ValueError as exc:
-        option = "--indicator" if "indicator" in str(exc) else "--effects"
+        option = next((f"--{word}" for word in ("indicator", "drives") if word in str(exc)),
+                      "--effects")
         raise UsageError(f"{option}: {exc}") from None
     if world is not None and conditions != world.conditions:
         raise UsageError(f"--conditions {conditions.label}: the machine file's world was drawn "

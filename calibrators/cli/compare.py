@@ -18,8 +18,10 @@ from calibrators.cli.common import (
     UsageError,
     add_conditions,
     add_design,
+    add_instruments,
     add_thermometer,
     conditions_of,
+    instruments_of,
     machine_design_of,
 )
 from calibrators.estimators.catalogue import CATALOGUE, exact_estimators, get_estimator
@@ -70,13 +72,14 @@ def _check(args: argparse.Namespace) -> Config:
     for ok, problem in rules:
         if not ok:
             raise UsageError(problem)
+    instruments = instruments_of(args, tuple(get_agent(name) for name in agents))
     # The gauge noise was checked with every command's (calibrators.cli.run).
     sigma, resolution = (0.0, 0.0) if args.noise_free else (args.sigma, args.resolution)
     return Config(agents, estimators, args.budget, args.errors, sigma, resolution,
                   args.backend, args.seed, args.success_mm,
                   curve_estimator=_curve_estimator(estimators) if args.out else "",
                   design=machine_design_of(args), conditions=conditions_of(args),
-                  thermometer=args.thermometer)
+                  thermometer=args.thermometer, instruments=instruments)
 
 
 def _curve_estimator(estimators: tuple[str, ...]) -> str:
@@ -135,9 +138,15 @@ def _config_dict(config: Config, machines: int) -> dict:
     design = data.pop("design")
     if design != PROTOTYPE:
         data["design"] = design.to_dict()
+    if not data["instruments"]:
+        del data["instruments"]  # today's lab: runs kept before instruments resume
+    else:
+        data["instruments"] = list(data["instruments"])
     conditions = data.pop("conditions")
     data.update(conditions=conditions.name, effects=list(conditions.effects),
                 indicator=conditions.indicator)
+    if conditions.drives != "screw":
+        data["drives"] = conditions.drives
     return data
 
 
@@ -311,6 +320,7 @@ def add(p: argparse.ArgumentParser) -> None:
     add_design(p)
     add_conditions(p)
     add_thermometer(p)
+    add_instruments(p)
     p.add_argument("--backend", choices=["exact", "pybullet"], default="exact",
                    help="simulator (default %(default)s)")
     p.add_argument("--success-mm", "--target", dest="success_mm", type=float, default=0.01,

@@ -24,8 +24,10 @@ from calibrators.cli.common import (
     UsageError,
     add_conditions,
     add_design,
+    add_instruments,
     conditions_of,
     held_design,
+    workflow_instruments,
 )
 from calibrators.workflow.compensate import read_estimate
 from calibrators.workflow.page import PDF_FILE, write_page
@@ -40,6 +42,7 @@ def run(args: argparse.Namespace) -> None:
     if not args.budget > 0:
         raise UsageError(f"--budget must be a positive number of seconds, got {args.budget:g}")
     conditions = conditions_of(args, None)
+    workflow_instruments(args, args.agent, "plan")
     try:
         if args.verify:
             est = read_estimate(args.verify)
@@ -83,4 +86,5 @@ def add(p: argparse.ArgumentParser) -> None:
                    help="also write the page as procedure.pdf, to print")
     add_design(p)
     add_conditions(p)
+    add_instruments(p)
     p.set_defaults(func=run)

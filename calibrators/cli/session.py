@@ -11,7 +11,14 @@ from typing import Any
 
 import numpy as np
 
-from calibrators.cli.common import UsageError, add_conditions, add_design, conditions_of
+from calibrators.cli.common import (
+    UsageError,
+    add_conditions,
+    add_design,
+    add_instruments,
+    conditions_of,
+    workflow_instruments,
+)
 from orthoglide_env.lab.operations import DEFAULT_BUDGET_S
 from orthoglide_env.model.design import load_design
 
@@ -20,6 +27,7 @@ def run(args: argparse.Namespace) -> None:
     from calibrators.study.episodes import machine_seed
     from calibrators.workflow.session import Session, parse_answer
 
+    workflow_instruments(args, args.agent, "session")
     out = Path(args.out)
     notebook = out / "notebook.jsonl"
     if notebook.exists() and not args.resume:
@@ -89,4 +97,5 @@ def add(p: argparse.ArgumentParser) -> None:
                         "{\"ask\": {step, text, stand, gauge, rho, time_s}} per reading")
     add_design(p)
     add_conditions(p)
+    add_instruments(p)
     p.set_defaults(func=run)

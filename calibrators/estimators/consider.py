@@ -50,8 +50,16 @@ structure's growth with the room (a similarity the legs' parallelism does not se
 indicator's retrace, the drives' compliance under the platform's weight and the gauges'
 force, and the gauge block's deviation from its nominal length (a reference gauge's
 zeroing reading; its grade allows 0.2 um under ``lab``, 0.8 um in the workshop:
-:data:`~orthoglide_env.world.table.REFERENCE_DEVIATION`).  A tracker's noise under
-conditions with its MPE is not a term but its readings' sigma (:func:`tracker_sigma`).
+:data:`~orthoglide_env.world.table.REFERENCE_DEVIATION`), and an interferometer's
+dead path: the room's drift grows the 100 mm from the drive's back end to where its count
+was zeroed, about 0.3 um per hour of a set-up under ``lab``; and with linear scales
+(``drives="scales"``), the scale's expansion against the steel's (3.5 ppm/K over the
+stroke: 0.2 um per hour of the lab's drift; its part at the room's offset is the
+grade's linear term).  A tracker's noise under
+conditions with its MPE is not a term but its readings' sigma (:func:`tracker_sigma`);
+an interferometer's scatter likewise (:func:`~orthoglide_env.instruments.interferometer.
+sigma`), and its scale error (laser, air, material sensor) is a term per set-up,
+``interferometer.scale``, on the displacement from its zero.
 """
 
 from __future__ import annotations
@@ -60,11 +68,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from orthoglide_env.instruments.slots import Part
+from orthoglide_env.instruments.interferometer import InterferometerAxis, scale_second_moment
+from orthoglide_env.instruments.slots import GaugeSpec, Part
 from orthoglide_env.model.compensation import interpolation_weights, node_count
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import AXIS_NAMES
-from orthoglide_env.reading_model import ReadingLayout, TrackerAxis
+from orthoglide_env.reading_model import ReadingLayout
 from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.world.table import TRACKER_MPE_PER_M
 from orthoglide_env.world.truth import HOUR, MINUTE, REVOLUTION_MM, UM, bar_bending
@@ -340,11 +349,18 @@ def _reading_terms(design: ReadingLayout, values: np.ndarray, t: np.ndarray | No
     # would take its parts as uncorrelated, where they add up or cancel).
     give_all = np.zeros((len(values), n))
     gives = False
+    laser = np.sqrt(scale_second_moment(conditions))
     for k, name in enumerate(design.mountings):
-        if isinstance(design.specs[k], TrackerAxis):
-            continue
         rows = np.flatnonzero(design.mounting == k)
         spec = design.specs[k]
+        if isinstance(spec, InterferometerAxis) and laser:
+            # Its scale error, on the displacement from where its count was zeroed.
+            moved = design.rho[rows, spec.axis] - design.rho[rows[0], spec.axis]
+            out.append((f"interferometer.scale[{name}]",
+                        _on_rows(np.broadcast_to(laser * moved, (len(values), len(rows))),
+                                 rows, n)))
+        if not isinstance(spec, GaugeSpec):
+            continue
         # The measuring force grows as the plunger goes in, and the stand (and a bar,
         # between its hinges) yields under it: a known gain on the readings.
         give = _fixed("stands", "give", conditions) * UM if on("stands") else 0.0

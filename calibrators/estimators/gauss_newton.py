@@ -69,6 +69,8 @@ from calibrators.estimators.parameters import (
     sparse_basis,
 )
 from orthoglide_env.instruments.dial import DEFAULT_SIGMA, weighting_sigma
+from orthoglide_env.instruments.interferometer import InterferometerAxis
+from orthoglide_env.instruments.interferometer import sigma as interferometer_sigma
 from orthoglide_env.lab.operations import TRACKER_SIGMA
 from orthoglide_env.model.compensation import node_count
 from orthoglide_env.model.errors import (
@@ -186,7 +188,8 @@ class GaussNewtonCalibrator(Estimator):
     Parameters: ``params``, the free parameters (a selection of
     :mod:`calibrators.estimators.parameters`; ``full``: every parameter (``extended``) and,
     unless ``fit_world`` says otherwise, the terms of
-    :data:`~calibrators.estimators.consider.FULL_TERMS` on a pitch-error table, whose
+    :data:`~calibrators.estimators.consider.FULL_TERMS` (and, of readings that hold a laser
+    interferometer's, the screw's periodic error) on a pitch-error table, whose
     ``node_spacing`` defaults to :data:`~calibrators.estimators.consider.DEFAULT_NODE_SPACING`);
     ``sigma``, a dial gauge's noise (mm); ``verify``, leave-one-repetition-out verification;
     ``prior``, the parameters' zero-mean normal prior; ``fix``, parameters held at known
@@ -264,7 +267,8 @@ class GaussNewtonCalibrator(Estimator):
         conditions = (Conditions(self.conditions) if isinstance(self.conditions, str)
                       else self.conditions)
         fit_world, node_spacing = self.fit_world, self.node_spacing
-        if self.params == "full" and fit_world is False:
+        full = self.params == "full" and fit_world is False
+        if full:
             fit_world = FULL_TERMS
             node_spacing = DEFAULT_NODE_SPACING if node_spacing is None else node_spacing
         terms = check_families(TERM_FAMILIES if fit_world is True else fit_world or ())
@@ -296,9 +300,14 @@ class GaussNewtonCalibrator(Estimator):
         for members in groups.values():
             design = prepared[members[0]][0]
             values = np.stack([prepared[k][1] for k in members])
+            seen = dict(options)
+            if full and any(isinstance(s, InterferometerAxis) for s in design.specs):
+                # An interferometer reads a carriage to 0.1 um: the screw's periodic error
+                # is plain in its readings, and fitted, not considered.
+                seen["terms"] = check_families((*terms, "periodic"))
             try:
                 results = self._fit_group(design, values, [datas[k] for k in members],
-                                          **options)
+                                          **seen)
             except (ValueError, RuntimeError, np.linalg.LinAlgError) as exc:
                 results = [exc] * len(members)
             for k, result in zip(members, results, strict=True):
@@ -354,6 +363,10 @@ class GaussNewtonCalibrator(Estimator):
             # The thermometer's rounding, through the stands' arms, is white on a reading.
             sigma = float(np.hypot(sigma, thermometer_sigma(conditions)))
         noise = np.where(tracked, tracker_sigma, sigma)
+        lasers = np.array([isinstance(design.specs[m], InterferometerAxis)
+                           for m in design.mounting])
+        if lasers.any():
+            noise = np.where(lasers, interferometer_sigma(conditions), noise)
 
         def fit(rows: np.ndarray, mask: np.ndarray) -> BatchFit:
             return fit_batch(design, values[rows], mask[rows], noise, free, fixed, priors,

@@ -13,6 +13,7 @@ from typing import BinaryIO
 
 from calibrators.measurements.fields import (
     COLUMNS,
+    INSTRUMENT_COLUMN,
     MAX_FIELD_CHARS,
     MAX_LINE_BYTES,
     NUMBER_FIELDS,
@@ -23,7 +24,13 @@ from calibrators.measurements.fields import (
     _required,
     _show,
 )
-from calibrators.measurements.record import Measurement, _measurement, _Readings
+from calibrators.measurements.record import (
+    Measurement,
+    _measurement,
+    _Readings,
+    instrument_of,
+)
+from orthoglide_env.instruments.interferometer import InterferometerAxis
 from orthoglide_env.model.design import MachineDesign
 
 _INTEGER = re.compile(r"[+-]?[0-9]+")
@@ -135,11 +142,14 @@ def read_csv(handle: BinaryIO, path: Path, design: MachineDesign) -> list[Measur
 
 def write_csv(items: list[Measurement], path: Path) -> None:
     """Write ``items`` as CSV: the header :data:`COLUMNS`, then one reading per row (without
-    the ``time_s`` or ``temperature_c`` column when no reading has one)."""
+    the ``time_s`` or ``temperature_c`` column when no reading has one, nor the
+    ``instrument`` column when no reading is an interferometer's)."""
     keep = [k for k, name in enumerate(COLUMNS)
             if name not in ("time_s", "temperature_c")
             or any(getattr(m, name) is not None for m in items)]
+    kinds = any(isinstance(m.gauge, InterferometerAxis) for m in items)
     with path.open("w", newline="", encoding="utf-8") as handle:
         writer = csv.writer(handle)
-        writer.writerow([COLUMNS[k] for k in keep])
-        writer.writerows([row[k] for k in keep] for row in (m.csv_row() for m in items))
+        writer.writerow([COLUMNS[k] for k in keep] + ([INSTRUMENT_COLUMN] if kinds else []))
+        writer.writerows([row[k] for k in keep] + ([instrument_of(m.gauge)] if kinds else [])
+                         for m, row in ((m, m.csv_row()) for m in items))

@@ -38,9 +38,15 @@ MAX_ROOM_C: float = 50.0
 #: The columns :meth:`Measurements.to_csv` writes, in order.
 COLUMNS: tuple[str, ...] = ("mounting", "leg", "axis", "at", "posture", "rho_x", "rho_y",
                             "rho_z", "repetition", "reading_mm", "time_s", "temperature_c")
+#: The column written after :data:`COLUMNS` when a reading is an interferometer's (a file
+#: without one reads and writes as before).
+INSTRUMENT_COLUMN: str = "instrument"
+#: The ``instrument`` column's values: a dial gauge's (the default where it is empty or
+#: absent), a tracker's (also told by ``leg`` ``tracker``) and an interferometer's.
+INSTRUMENT_KINDS: tuple[str, ...] = ("dial", "tracker", "interferometer")
 RHO_FIELDS: tuple[str, str, str] = ("rho_x", "rho_y", "rho_z")
 #: Every name a CSV column or a JSON reading's key may have.
-FIELDS: tuple[str, ...] = (*COLUMNS, "gauge", "step")
+FIELDS: tuple[str, ...] = (*COLUMNS, "gauge", "step", INSTRUMENT_COLUMN)
 NUMBER_FIELDS: frozenset[str] = frozenset({"at", *RHO_FIELDS, "repetition", "reading_mm",
                                           "time_s", "temperature_c", "step"})
 JSON_KEYS: tuple[str, ...] = ("readings", "experiment_time_s", "design")
@@ -175,8 +181,10 @@ def _fields_problem(names: Collection[str], kind: str) -> str | None:
         return f"the {kind} 'reading_mm' is required"
     if "gauge" in names and {"leg", "axis", "at"} & set(names):
         return "give the gauge as 'gauge' or as 'leg', 'axis' (and 'at'), not both"
-    if "gauge" not in names and not {"leg", "axis"} <= set(names):
-        return "the gauge is missing: give 'gauge', or 'leg' and 'axis'"
+    if "gauge" not in names and not ({"leg", "axis"} <= set(names)
+                                     or {"instrument", "axis"} <= set(names)):
+        return ("the gauge is missing: give 'gauge', or 'leg' and 'axis' (an "
+                "interferometer's: 'instrument' and 'axis')")
     rho = [name for name in RHO_FIELDS if name in names]
     if 0 < len(rho) < 3:
         return "rho needs all of rho_x, rho_y and rho_z"

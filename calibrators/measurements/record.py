@@ -13,6 +13,7 @@ from calibrators.measurements import fields
 from calibrators.measurements.fields import (
     _READING_RULE,
     _TRACKER_RULE,
+    INSTRUMENT_KINDS,
     MAX_EXPERIMENT_TIME_S,
     MAX_READING_MM,
     MAX_ROOM_C,
@@ -31,6 +32,7 @@ from calibrators.measurements.fields import (
     _show,
     rho_label,
 )
+from orthoglide_env.instruments.interferometer import InterferometerAxis
 from orthoglide_env.instruments.slots import NO_LEG, GaugeSpec, Part, layout_from_names, on_platform
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import AXIS_NAMES, LEG_NAMES
@@ -43,6 +45,8 @@ def default_mounting(gauge: GaugeSpec | TrackerAxis) -> str:
     coordinate of the one tracker station (``tracker.x``)."""
     if isinstance(gauge, TrackerAxis):
         return f"tracker.{AXIS_NAMES[gauge.component]}"
+    if isinstance(gauge, InterferometerAxis):
+        return f"interferometer.{AXIS_NAMES[gauge.axis]}"
     return gauge_name(gauge)
 
 
@@ -66,7 +70,7 @@ class Measurement:
     :class:`FieldError` (a ValueError) naming the field.
     """
 
-    gauge: GaugeSpec | TrackerAxis
+    gauge: GaugeSpec | TrackerAxis | InterferometerAxis
     posture: str
     repetition: int
     reading: float
@@ -150,6 +154,8 @@ class Measurement:
             out["temperature_c"] = self.temperature_c
         if self.step is not None:
             out["step"] = self.step
+        if isinstance(self.gauge, InterferometerAxis):
+            out["instrument"] = "interferometer"
         return out
 
     @classmethod
@@ -178,12 +184,21 @@ class Measurement:
         ``repr``, so reading the file back gives the identical floats."""
         if isinstance(self.gauge, TrackerAxis):
             leg, axis, at = "tracker", AXIS_NAMES[self.gauge.component], ""
+        elif isinstance(self.gauge, InterferometerAxis):
+            leg, axis, at = "", AXIS_NAMES[self.gauge.axis], ""
         else:
             leg, axis = part_label(self.gauge), AXIS_NAMES[self.gauge.axis]
             at = repr(float(self.gauge.at)) if self.gauge.part == Part.BAR else ""
         return [self.mounting, leg, axis, at, self.posture, *(repr(v) for v in self.rho),
                 str(self.repetition), repr(self.reading),
                 *("" if v is None else repr(v) for v in (self.time_s, self.temperature_c))]
+
+
+def instrument_of(gauge: GaugeSpec | TrackerAxis | InterferometerAxis) -> str:
+    """The ``instrument`` column of a reading of ``gauge``."""
+    if isinstance(gauge, InterferometerAxis):
+        return "interferometer"
+    return "tracker" if isinstance(gauge, TrackerAxis) else "dial"
 
 
 #: The ``leg`` column of a carriage gauge: its leg's name with this suffix.
@@ -203,9 +218,11 @@ _spec = functools.lru_cache(maxsize=4096)(GaugeSpec)
 
 
 @functools.lru_cache(maxsize=4096)
-def _named_gauge(name: str) -> GaugeSpec | TrackerAxis:
+def _named_gauge(name: str) -> GaugeSpec | TrackerAxis | InterferometerAxis:
     if name.startswith("tracker/") and name[len("tracker/"):] in AXIS_NAMES:
         return TrackerAxis(AXIS_NAMES.index(name[len("tracker/"):]))
+    if name.startswith("interferometer/") and name[len("interferometer/"):] in AXIS_NAMES:
+        return InterferometerAxis(AXIS_NAMES.index(name[len("interferometer/"):]))
     try:
         return layout_from_names([name])[0]
     except ValueError as exc:
@@ -214,7 +231,41 @@ def _named_gauge(name: str) -> GaugeSpec | TrackerAxis:
                                   f"got {_show(name)}") from None
 
 
-def _gauge(fields: Mapping[str, object]) -> GaugeSpec | TrackerAxis:
+def _gauge(fields: Mapping[str, object]) -> GaugeSpec | TrackerAxis | InterferometerAxis:
+    # Empty or absent: the reading's gauge says which (a file from before the column).
+    instrument = _given(fields, "instrument")
+    if instrument is not None and instrument not in INSTRUMENT_KINDS:
+        raise FieldError("instrument", f"must be one of {', '.join(INSTRUMENT_KINDS)} "
+                                       f"(empty: dial), got {_show(instrument)}")
+    gauge = _instrument_gauge(fields) if instrument == "interferometer" else _plain_gauge(
+        fields)
+    if instrument is not None and instrument != instrument_of(gauge):
+        raise FieldError("instrument", f"{instrument} for a reading of "
+                                       f"{gauge_name(gauge)}, which is a "
+                                       f"{instrument_of(gauge)}'s")
+    return gauge
+
+
+def _instrument_gauge(fields: Mapping[str, object]) -> InterferometerAxis:
+    """An interferometer reading's drive: its ``axis`` (or ``gauge`` ``interferometer/x``),
+    and no leg or place."""
+    if "gauge" in fields:
+        return _plain_gauge(fields)  # type: ignore[return-value]
+    axis = _given(fields, "axis")
+    if axis is None:
+        raise FieldError("axis", "empty: an interferometer reading needs the drive it reads "
+                                 f"({', '.join(AXIS_NAMES)})")
+    if axis not in AXIS_NAMES:
+        raise FieldError("axis", f"an interferometer reads a drive: one of "
+                                 f"{', '.join(AXIS_NAMES)}, got {_show(axis)}")
+    for name in ("leg", "at"):
+        if _given(fields, name) is not None:
+            raise FieldError(name, f"an interferometer reading has no {name}: leave it "
+                                   f"empty, got {_show(fields[name])}")
+    return InterferometerAxis(AXIS_NAMES.index(axis))
+
+
+def _plain_gauge(fields: Mapping[str, object]) -> GaugeSpec | TrackerAxis | InterferometerAxis:
     if "gauge" in fields:
         name = _required(fields, "gauge")
         if not isinstance(name, str):

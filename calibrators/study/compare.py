@@ -24,7 +24,6 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-import orthoglide_env
 from calibrators.agents import Agent, get_agent
 from calibrators.estimators.base import Estimate
 from calibrators.estimators.catalogue import for_study, get_estimator
@@ -38,7 +37,7 @@ from calibrators.study.episodes import (
     run_episode,
     run_episodes,
 )
-from calibrators.study.labs import lab_kwargs
+from calibrators.study.labs import lab_id, lab_kwargs
 
 # The statistics lived here; scripts that import them from this module keep working.
 from calibrators.study.statistics import (  # noqa: F401
@@ -85,6 +84,9 @@ class Config:
     conditions: Conditions = field(default_factory=lambda: Conditions(DEFAULT_CONDITIONS))
     #: The lab has a room thermometer.
     thermometer: bool = False
+    #: What the lab owns (empty: today's lab, see :func:`~calibrators.study.labs.
+    #: lab_kwargs`).
+    instruments: tuple[str, ...] = ()
 
     @property
     def world(self) -> str:
@@ -92,8 +94,10 @@ class Config:
         the error preset, the conditions (and their effects when not all act), the
         thermometer, the gauges' sigma, the budget, the back-end and a custom design."""
         design = "" if self.design == PROTOTYPE else f", design L {self.design.L:g} mm"
+        owned = f", instruments {'+'.join(self.instruments)}" if self.instruments else ""
         return (f"{self.errors} errors, {self.conditions.label} conditions"
-                f"{', a thermometer' if self.thermometer else ''}, gauge sigma {self.sigma} mm, "
+                f"{', a thermometer' if self.thermometer else ''}{owned}, gauge sigma "
+                f"{self.sigma} mm, "
                 f"budget {self.budget_s:g} s, {self.backend} backend{design}")
 
     def lab_kwargs(self, agent: Agent) -> dict[str, Any]:
@@ -102,7 +106,8 @@ class Config:
         return lab_kwargs(agent, errors=self.errors, gauge_sigma=self.sigma,
                           gauge_resolution=self.resolution, backend=self.backend,
                           budget_s=self.budget_s, design=self.design,
-                          conditions=self.conditions, thermometer=self.thermometer)
+                          conditions=self.conditions, thermometer=self.thermometer,
+                          instruments=self.instruments)
 
 
 @cache
@@ -275,11 +280,11 @@ def agent_episodes(config: Config, agent_name: str, runs: list[int], batched: bo
     seeds = [machine_seed(config.seed, i) for i in runs]
     kwargs = config.lab_kwargs(get_agent(agent_name))
     if batched and config.backend == "exact":
-        with closing(gym.make_vec(orthoglide_env.LAB_ENV_ID, num_envs=len(runs),
+        with closing(gym.make_vec(lab_id(kwargs), num_envs=len(runs),
                                   vectorization_mode="vector_entry_point", **kwargs)) as envs:
             done = run_episodes(envs, [get_agent(agent_name) for _ in runs], seeds)
     else:
-        with closing(gym.make(orthoglide_env.LAB_ENV_ID, **kwargs)) as env:
+        with closing(gym.make(lab_id(kwargs), **kwargs)) as env:
             done = [run_episode(env, get_agent(agent_name), seed) for seed in seeds]
     return [_Episode(agent_name, index, e) for index, e in zip(runs, done, strict=True)]
 

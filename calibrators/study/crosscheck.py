@@ -10,10 +10,10 @@ from functools import partial
 import gymnasium as gym
 import numpy as np
 
-import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.study.compare import Config
 from calibrators.study.episodes import machine_seed, run_episodes
+from calibrators.study.labs import lab_id
 
 
 def verify_pybullet(config: Config, machines: int) -> dict[str, float]:
@@ -28,7 +28,7 @@ def verify_pybullet(config: Config, machines: int) -> dict[str, float]:
             kwargs = {**config.lab_kwargs(agent), "gauge_sigma": 0.0,
                       "gauge_resolution": 0.0}
             envs = gym.vector.SyncVectorEnv([
-                partial(gym.make, orthoglide_env.LAB_ENV_ID, **{**kwargs, "backend": backend})
+                partial(gym.make, lab_id(kwargs), **{**kwargs, "backend": backend})
                 for backend in ("exact", "pybullet")])
             seed = machine_seed(config.seed, index)
             with closing(envs):

@@ -138,6 +138,10 @@ def run_episodes(envs: gym.vector.VectorEnv, agents: list[Agent], seeds: list[in
     for i, agent in enumerate(agents):
         agent.reset(labs[i], _row(observation, i), agent_rng(seeds[i]))
     idle = {"op": int(Op.LIFT), "rho": np.zeros(3), "stand": 0, "slot": 0}
+    if "axis" in envs.single_action_space.spaces:
+        # OrthoglideLab-v1's: only an align uses it, and an agent's other actions leave
+        # it out.
+        idle["axis"] = 0
     # Plans decided at reset are played as arrays, every machine's step t at once.
     plans = (_plan_arrays([a.plan for a in agents], idle)  # type: ignore[attr-defined]
              if all(type(a).act is PlannedAgent.act for a in agents) else None)
@@ -154,7 +158,8 @@ def run_episodes(envs: gym.vector.VectorEnv, agents: list[Agent], seeds: list[in
             moves = [idle if out[i] is not None else agent.act(_row(observation, i),
                                                                _InfoRow(info, i))
                      for i, agent in enumerate(agents)]
-            actions = {key: np.array([m[key] for m in moves]) for key in idle}
+            actions = {key: np.array([m.get(key, idle[key]) for m in moves])
+                       for key in idle}
         if lockstep:
             actions = {key: np.repeat(value[:1], len(seeds), axis=0)
                        for key, value in actions.items()}
@@ -208,8 +213,9 @@ def _plan_arrays(plans: list[list[dict[str, Any]]], idle: dict[str, Any]
     """Every machine's plan as arrays ``(machines, steps, ...)`` per action field, a short
     plan padded with ``idle`` (what an ended episode is kept busy with)."""
     length = max(len(plan) for plan in plans)
-    return {key: np.array([[a[key] for a in plan] + [idle[key]] * (length - len(plan))
-                           for plan in plans]) for key in idle}
+    return {key: np.array([[a.get(key, idle[key]) for a in plan]
+                           + [idle[key]] * (length - len(plan)) for plan in plans])
+            for key in idle}
 
 
 def _row(observation: dict[str, np.ndarray], i: int) -> dict[str, np.ndarray]:

@@ -22,24 +22,48 @@ from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.world.machine_file import machine_dict
 
 
-def lab_kwargs(agent: Agent, **settings: Any) -> dict[str, Any]:
+def lab_kwargs(agent: Agent, instruments: tuple[str, ...] = (), **settings: Any
+               ) -> dict[str, Any]:
     """The lab env's arguments: ``settings`` (budget, design, conditions, noise, ...) and
-    the instruments ``agent`` needs beyond the gauges (``tracker``, ``reference``)."""
-    return {**settings, "tracker": agent.needs_tracker, "reference": agent.needs_reference}
+    the instruments ``agent`` needs beyond the gauges (``tracker``, ``reference``).
+    ``instruments``: what the lab owns (names of :data:`~orthoglide_env.instruments.
+    interferometer.INSTRUMENT_NAMES`; empty: today's lab, the dial gauges and the tracker
+    for an agent that reads one); ``ValueError`` in one line when ``agent`` needs one the
+    lab does not own.  The tracker is read only by an agent that needs it."""
+    owned = tuple(instruments) or ("dial", *(("tracker",) if agent.needs_tracker else ()))
+    needs = (*(("tracker",) if agent.needs_tracker else ()), *agent.needs_instruments)
+    missing = [n for n in needs if n not in owned]
+    if missing:
+        raise ValueError(f"agent '{agent.name}' needs the {missing[0]}, which the lab does "
+                         f"not own (instruments {','.join(owned)})")
+    kwargs = {**settings, "tracker": agent.needs_tracker, "reference": agent.needs_reference}
+    if instruments:
+        kwargs["instruments"] = [n for n in owned if n != "tracker"]
+    return kwargs
+
+
+def lab_id(kwargs: dict[str, Any]) -> str:
+    """The lab env that takes ``kwargs``: ``OrthoglideLab-v1`` for a lab with the
+    interferometer, else ``OrthoglideLab-v0``."""
+    return (orthoglide_env.LAB_V1_ENV_ID if "interferometer" in kwargs.get("instruments", ())
+            else orthoglide_env.LAB_ENV_ID)
 
 
 def make_lab(agent: Agent, **settings: Any) -> gym.Env:
-    """A lone lab (``OrthoglideLab-v0``) of :func:`lab_kwargs` for ``agent``."""
-    return gym.make(orthoglide_env.LAB_ENV_ID, **lab_kwargs(agent, **settings))
+    """A lone lab (:func:`lab_id`'s) of :func:`lab_kwargs` for ``agent``."""
+    kwargs = lab_kwargs(agent, **settings)
+    return gym.make(lab_id(kwargs), **kwargs)
 
 
 def nominal_lab(agent: Agent, design: MachineDesign, conditions: Conditions,
-                budget_s: float, *, sigma: float = 0.0, resolution: float = 0.0) -> gym.Env:
+                budget_s: float, *, sigma: float = 0.0, resolution: float = 0.0,
+                instruments: tuple[str, ...] = ()) -> gym.Env:
     """The exact-model lab of the nominal machine of ``design`` for ``agent`` (reset it
-    with :func:`nominal_options`), gauges of noise ``sigma`` and dial ``resolution``."""
+    with :func:`nominal_options`), gauges of noise ``sigma`` and dial ``resolution``,
+    owning ``instruments`` (:func:`lab_kwargs`)."""
     return make_lab(agent, backend="exact", errors="nominal", gauge_sigma=sigma,
                     gauge_resolution=resolution, budget_s=budget_s, design=design,
-                    conditions=conditions)
+                    conditions=conditions, instruments=instruments)
 
 
 def nominal_options(design: MachineDesign) -> dict[str, Any]:

@@ -21,7 +21,8 @@ from orthoglide_env.lab.rewards import ACCURACY_UNIT_MM
 from orthoglide_env.lab.settings import lab_settings, lab_spaces
 from orthoglide_env.lab.spec import LAB, REWARDS, check_arguments, signature
 
-__all__ = ["ACCURACY_UNIT_MM", "REWARDS", "Estimator", "OrthoglideLabEnv", "Record"]
+__all__ = ["ACCURACY_UNIT_MM", "REWARDS", "Estimator", "OrthoglideLabEnv",
+           "OrthoglideLabV1Env", "Record"]
 
 
 class LabFace(Face):
@@ -31,7 +32,8 @@ class LabFace(Face):
     def _actions(self, actions: Any, shape: tuple[int, ...], used: np.ndarray | None
                  ) -> tuple[np.ndarray, ...]:
         return check_lab_actions(actions, shape, self.settings.stands, len(self.slots),
-                                 rows=used, design=self.settings.design)
+                                 rows=used, design=self.settings.design,
+                                 version=self.settings.version)
 
     @property
     def slots(self) -> tuple[GaugeSpec, ...]:
@@ -198,6 +200,19 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
     does not move: the machine, its world and every reading are those of a lab without
     one.
 
+    Instruments
+    -----------
+    ``instruments`` lists what the lab owns (names in
+    :data:`~orthoglide_env.instruments.interferometer.INSTRUMENT_NAMES`; an unknown one, or
+    one not yet available, raises ``ValueError``).  In ``OrthoglideLab-v1`` with the
+    ``interferometer``, ``align`` drives to Zero, sets the interferometer up along drive
+    ``axis`` (the retroreflector on its carriage) and zeroes it there (the first set-up
+    also waits for its material sensor to settle; :data:`~orthoglide_env.lab.operations.
+    TIME`); from then on every move also reads it (with its dwell): the carriage's
+    displacement from the zero less the commanded one, in mm, with the instrument's own
+    errors (:mod:`orthoglide_env.instruments.interferometer`).  Each set-up is a mounting
+    of the notebook (``interferometer.x#1``).  ``align`` in a lab without it is refused.
+
     Version history
     ---------------
     * v0 (issue 37): ``conditions`` defaults to ``"lab"`` (was ``"ideal"``).  The spaces,
@@ -205,6 +220,17 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
       version (Gymnasium bumps it when an env's dynamics or spaces change); a lab built
       without ``conditions`` now draws the real lab's world each episode.  Pass
       ``conditions="ideal"`` for the earlier default's numbers, bit for bit.
+    * v1 (``OrthoglideLab-v1``, :class:`OrthoglideLabV1Env`): the lab may own a laser
+      interferometer (``instruments=["dial", "interferometer"]``, see Instruments).  The
+      action's ``op`` gains 5, ``align``, and the action a key ``axis`` (Discrete(3), the
+      drive to set it up along; other operations may leave it out); the observation gains
+      ``interferometer`` (mm, Box(-1, 1, (1,)): its reading, 0 when it did not read),
+      ``interferometer_valid`` (1 when it read) and ``interferometer_axis`` (Discrete(4):
+      the drive it is set up along, 3 for none).  ``OrthoglideLab-v0`` keeps its spaces
+      and refuses the interferometer with ``ValueError``.
+    * v0: ``instruments`` names what the lab owns (``dial``, ``tracker``; the default is
+      the dial gauges, and the tracker where ``tracker=True``); ``step-gauge`` and
+      ``ballbar`` are refused as not yet available.
     * v0: ``reference`` adds the gauge block: three more slots, ``reference/x``, ``/y``,
       ``/z`` (after the design's catalogue, whose indices stay), a platform gauge zeroed
       against the block held to the face at Zero and then reading the bare face a block's
@@ -224,8 +250,11 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
 
     __signature__ = signature(LAB)
 
+    #: The env's version: 1 adds the interferometer to the spaces (see the history).
+    version: int = 0
+
     def __init__(self, **kwargs: Any) -> None:
-        settings = lab_settings(check_arguments(LAB, kwargs))
+        settings = lab_settings(check_arguments(LAB, kwargs), self.version)
         self.design, self.conditions = settings.design, settings.conditions
         self.preset, self.noise = settings.preset, settings.noise
         self.backend_name, self.n_stands = settings.backend, settings.stands
@@ -234,6 +263,7 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
         self.estimator = settings.estimator
         self.time_weight, self.success_mm = settings.time_weight, settings.success_mm
         self.travel, self.reference = settings.travel, settings.reference
+        self.instruments = settings.instruments
         self._start_engine(settings, lab_spaces(settings))
 
     # -- the episode, as the lab's notebook and clock show it -------------------------------
@@ -274,3 +304,11 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
         """TCP error RMS after the best-fit rigid motion that the records' information
         predicts (at the nominal machine, a priori sizes from the realistic preset)."""
         return self._batch.notebooks[0].predicted_tcp_rigid_mm()
+
+
+class OrthoglideLabV1Env(OrthoglideLabEnv):
+    """``OrthoglideLab-v1``: :class:`OrthoglideLabEnv` (whose docstring is the spec) whose
+    spaces carry the interferometer: the ``align`` operation, the action's ``axis`` and
+    the observation's ``interferometer`` keys."""
+
+    version = 1

@@ -40,9 +40,12 @@ class OrthoglideLabVectorEnv(LabFace, EngineVectorEnv):
 
     __signature__ = signature(LAB_VECTOR)
 
+    #: The lab's version (:class:`~orthoglide_env.envs.lab.OrthoglideLabEnv`'s history).
+    version: int = 0
+
     def __init__(self, **kwargs: Any) -> None:
         args = check_arguments(LAB_VECTOR, kwargs)
-        settings = lab_settings(args)
+        settings = lab_settings(args, self.version)
         self.design = settings.design
         self._start_engine(settings, args["num_envs"], args["autoreset_mode"],
                            lab_spaces(settings))
@@ -83,7 +86,7 @@ class SubLab:
         self.noise, self.n_stands, self.tracker = settings.noise, settings.stands, settings.tracker
         self.budget_s, self.travel = settings.budget_s, settings.travel
         self.design, self.slots = settings.design, settings.slots
-        self.reference = settings.reference
+        self.reference, self.instruments = settings.reference, settings.instruments
         self.conditions = settings.conditions
         self.action_space: spaces.Dict = envs.single_action_space
         self.observation_space: spaces.Dict = envs.single_observation_space
@@ -96,3 +99,9 @@ class SubLab:
     def records(self) -> list[Record]:
         return self._envs.records[self.index]
 
+
+class OrthoglideLabV1VectorEnv(OrthoglideLabVectorEnv):
+    """``OrthoglideLab-v1``'s native vector env: :class:`OrthoglideLabVectorEnv` with the
+    interferometer in its spaces."""
+
+    version = 1

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from orthoglide_env.lab.operations import Op
+from orthoglide_env.lab.operations import V0_OPS, Op
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import check_rho
 
@@ -63,19 +63,31 @@ def _holds_bool(value: Any) -> bool:
 
 
 def check_lab_actions(action: Any, shape: tuple[int, ...], stands: int, slots: int,
-                      rows: np.ndarray | None = None, *, design: MachineDesign
-                      ) -> tuple[np.ndarray, ...]:
+                      rows: np.ndarray | None = None, *, design: MachineDesign,
+                      version: int = 0) -> tuple[np.ndarray, ...]:
     """``op``, ``rho``, ``stand``, ``slot`` of a lab action (``shape ()``) or of a batch of
     them (``shape (N,)``, each field with the batch axis first), as arrays, or
     ``ValueError`` naming the field (and the env).  ``slots``: the size of the lab's slot
     catalogue; ``rows``: the envs whose action is used (the others are not checked);
-    ``rho`` is checked where the operation is a move."""
-    if not isinstance(action, dict) or set(action) != {"op", "rho", "stand", "slot"}:
-        raise ValueError("action must be a dict with keys op, rho, stand, slot")
+    ``rho`` is checked where the operation is a move.  ``version`` 1 (``OrthoglideLab-v1``)
+    adds the ``align`` operation and its ``axis`` field (which other operations may leave
+    out); an align's axis is returned in its ``slot``."""
+    keys = {"op", "rho", "stand", "slot"}
+    if not isinstance(action, dict) or not (set(action) == keys or (
+            version >= 1 and set(action) == keys | {"axis"})):
+        raise ValueError("action must be a dict with keys op, rho, stand, slot"
+                         + (" and, for align, axis" if version >= 1 else ""))
     used = np.ones(shape, dtype=bool) if rows is None else np.asarray(rows, dtype=bool)
-    op = _integers(action["op"], "op", len(Op), shape, used)
+    op = _integers(action["op"], "op", len(Op) if version >= 1 else V0_OPS, shape, used)
     stand = _integers(action["stand"], "stand", stands, shape, used)
     slot = _integers(action["slot"], "slot", slots, shape, used)
+    aligning = used & (op == Op.ALIGN)
+    if aligning.any():
+        if "axis" not in action:
+            raise ValueError("action axis is needed by align: the drive (0, 1, 2 for x, y, "
+                             "z) to set the interferometer up along")
+        axis = _integers(action["axis"], "axis", 3, shape, aligning)
+        slot = np.where(aligning, axis, slot)
     moving = used & (op == Op.MOVE)
     rho = np.zeros((*shape, 3))
     if moving.any():

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from orthoglide_env.instruments import thermometer
+from orthoglide_env.instruments import interferometer, thermometer
 from orthoglide_env.instruments.dial import Status, readings_from_distances, status_of
 from orthoglide_env.instruments.gauges import Gauge, GaugeArray
 from orthoglide_env.instruments.slots import GaugeSpec, Part, on_platform
@@ -44,7 +44,7 @@ from orthoglide_env.world.truth import UM, World, draw_range
 
 #: Whether each operation code puts the machine somewhere and reads it (a table, where
 #: ``np.isin`` cost 4 % of a lone env's step).
-_READS: np.ndarray = np.isin(np.arange(len(Op)), (Op.MOVE, Op.REMOUNT))
+_READS: np.ndarray = np.isin(np.arange(len(Op)), (Op.MOVE, Op.REMOUNT, Op.ALIGN))
 
 
 @dataclass
@@ -106,6 +106,17 @@ class LabBatch:
         self.tracker_position = np.zeros((n, 3))
         self.tracker_reading = np.zeros((n, 3))
         self.thermometer_offset = np.zeros(n)  # K, each lab's thermometer (the truth)
+        # The interferometer (a lab that owns one): the drive it is set up along (-1: none),
+        # its set-ups so far, its count and the command where it was zeroed (-1: zero it at
+        # its next reading), its reading now (NaN: none this step), and each lab's errors
+        # (the truth): scale error and material sensor's error (K).
+        self.laser_axis = np.full(n, -1, dtype=np.int64)
+        self.laser_setups = np.zeros(n, dtype=np.int64)
+        self.laser_zero = np.full(n, np.nan)
+        self.laser_zero_rho = np.zeros(n)
+        self.laser_reading = np.full(n, np.nan)
+        self.laser_scale = np.zeros(n)
+        self.laser_sensor = np.zeros(n)
         # The world beyond the geometry (None under ideal conditions): its drawn truth, the
         # carriages' actual positions, each axis's last direction of travel and each
         # plunger's (+1: going in) and its last ray distance.
@@ -152,6 +163,7 @@ class LabBatch:
         specs = settings.layout if layout is None else layout
         first = [self.place(spec) for spec in specs]
         drawn, rotations, positions, errors, worlds, offsets = [], [], [], [], [], []
+        lasers: list[tuple[float, float]] = []
         for stream in streams:
             drawn.append(settings.preset.sample(stream, settings.design) if machine is None
                          else machine)
@@ -165,6 +177,8 @@ class LabBatch:
                               if world is None else world)
             if settings.thermometer:
                 offsets.append(thermometer.draw_offset(settings.conditions, stream))
+            if settings.interferometer:
+                lasers.append(interferometer.draw_errors(settings.conditions, stream))
         blocks = np.full(len(rows), REFERENCE_LENGTH_MM)
         if settings.reference and settings.conditions.active:
             # Drawn last: a lab without the block draws what it always drew.
@@ -215,6 +229,10 @@ class LabBatch:
             self.tracker_position[rows] = positions
         if settings.thermometer:
             self.thermometer_offset[rows] = offsets
+        if settings.interferometer:
+            self.laser_scale[rows], self.laser_sensor[rows] = np.array(lasers).T
+        self.laser_axis[rows], self.laser_setups[rows] = -1, 0
+        self.laser_reading[rows] = np.nan
         self._sync(rows)
         if world is not None:
             self.backend.move(rows, self.actual[rows])
@@ -233,24 +251,34 @@ class LabBatch:
         settings, machines = self.settings, self.require()
         # Where each move or re-mount takes the carriages, and when: the commanded posture
         # in an ideal world.
-        goal = np.where((op == Op.REMOUNT)[:, None], 0.0, rho)
+        aligns = op == Op.ALIGN  # (its axis is in ``slot``)
+        goal = np.where(((op == Op.REMOUNT) | aligns)[:, None], 0.0, rho)
+        laser = self.laser_axis[rows] >= 0
         travel_s = travel_seconds(op, self.rho[rows], goal, settings.tracker, (
-            (op == Op.REMOUNT) & self._references(slot) if settings.reference else None))
+            (op == Op.REMOUNT) & self._references(slot) if settings.reference else None),
+            *((laser, self.laser_setups[rows] == 0) if settings.interferometer else ()))
         approach, target = self._carriages(rows, goal, self.time[rows] + travel_s)
         refused, reached = refusals(machines, rows, op, rho, stand, slot, target,
                                     self.slot[rows], self.places)
+        if aligns.any() and not settings.interferometer:
+            for r in np.flatnonzero(aligns):
+                refused[r] = ("the lab has no interferometer (instruments="
+                              f"{list(settings.instruments)})")
         if settings.strict_moves:
             raise_unreachable(machines, rows, op, rho, reached, target, self.size)
         ok = np.array([not r for r in refused], dtype=bool)
         moves, remounts = ok & (op == Op.MOVE), ok & (op == Op.REMOUNT)
+        aligned = ok & aligns
         flicks = ok & ((op == Op.LIFT) | (op == Op.ENGAGE))
         # New installations first (they draw from the streams before the readings do, and
         # may fail): nothing is stored before they are made.
         mounted = self._installations(rows[remounts], stand[remounts], slot[remounts],
                                       (self.time[rows] + travel_s)[remounts],
                                       approach[remounts])
-        seconds = step_seconds(ok, flicks, moves | remounts, travel_s)
-        self._drive(rows, moves, remounts, goal, reached, target, approach)
+        seconds = step_seconds(ok, flicks, moves | remounts | aligned, travel_s)
+        self._drive(rows, moves, remounts | aligned, goal, reached, target, approach)
+        if aligned.any():
+            self._align(rows[aligned], slot[aligned])
         self._flick(rows[flicks], stand[flicks], (op == Op.ENGAGE)[flicks])
         if remounts.any():
             self._mount(rows[remounts], stand[remounts], slot[remounts], mounted)
@@ -263,6 +291,7 @@ class LabBatch:
         overtravel, new_overtravel = self._overtravel(rows, presses, sight, at)
         seconds += overtravel_seconds(new_overtravel)
         values = np.full((len(rows), settings.stands), np.nan)
+        self.laser_reading[rows] = np.nan
         if reads.any():
             values[reads] = self._read(rows[reads], seconds[reads], Sight(
                 *(part[at[reads]] for part in sight)))
@@ -296,6 +325,36 @@ class LabBatch:
             self.actual[rows[carried]] = target[carried]
             self.approach[rows[carried]] = approach[carried]
         self.backend.move(rows[carried], target[carried])
+
+    def _align(self, rows: np.ndarray, axis: np.ndarray) -> None:
+        """Set the interferometer of ``rows`` up along drive ``axis``: a new set-up, its
+        count zeroed at its first reading (at Zero, where the step drove)."""
+        self.laser_axis[rows] = axis
+        self.laser_setups[rows] += 1
+        self.laser_zero[rows] = np.nan
+
+    def _laser(self, rows: np.ndarray, when: np.ndarray, draws: np.ndarray) -> np.ndarray:
+        """What the interferometers of ``rows`` (each set up) read at lab time ``when``
+        with standard normal ``draws``: the carriage's displacement from the zero as the
+        instrument measures it (the machine grown with the room, then compensated at its
+        material sensor's temperature), less the command's (mm)."""
+        settings, axis = self.settings, self.laser_axis[rows]
+        at = self.rho if self.world is None else self.actual
+        raw = at[rows, axis] - settings.design.rho_min
+        factor = interferometer.compensation(settings.conditions, self.laser_scale[rows],
+                                             self.laser_sensor[rows], np.zeros(len(rows)))
+        if self.world is not None:
+            world = self._of(self.world, rows)
+            raw = raw * world.scale(when)
+            factor = interferometer.compensation(settings.conditions, self.laser_scale[rows],
+                                                 self.laser_sensor[rows],
+                                                 world.temperature(when))
+        fresh = np.isnan(self.laser_zero[rows])
+        self.laser_zero[rows[fresh]] = raw[fresh]
+        self.laser_zero_rho[rows[fresh]] = self.rho[rows[fresh], axis[fresh]]
+        moved = self.rho[rows, axis] - self.laser_zero_rho[rows]
+        return (factor * (raw - self.laser_zero[rows]) - moved
+                + interferometer.sigma(settings.conditions) * draws)
 
     def _flick(self, rows: np.ndarray, stand: np.ndarray, engages: np.ndarray) -> None:
         """Lift (or, where ``engages``, engage) the plunger of each ``stand`` of ``rows``."""
@@ -541,6 +600,8 @@ class LabBatch:
         self.status[rows] = status
         good = status == Status.VALID
         draws = np.zeros(ideal.shape)
+        laser = self.laser_axis[rows] >= 0
+        laser_draws = np.zeros(len(rows))
         counts = mounted.sum(axis=1).tolist()
         for r, i in enumerate(rows.tolist()):
             # A lone lab draws one number per mounted gauge, then the tracker's three.
@@ -554,6 +615,11 @@ class LabBatch:
                 else:
                     noise = stream.normal(0.0, settings.tracker_sigma, 3)
                 self.tracker_reading[i] = seen + noise
+            if laser[r]:
+                laser_draws[r] = stream.normal()
+        if laser.any():
+            self.laser_reading[rows[laser]] = self._laser(
+                rows[laser], (self.time[rows] + pending)[laser], laser_draws[laser])
         if self.world is not None:
             # The same draws, scaled up where a digital indicator scatters more: a batch
             # draws what a lone lab draws.
@@ -585,6 +651,12 @@ class LabBatch:
                 self.notebooks[i].records.extend(
                     Record(TrackerAxis(c), f"tracker.{AXIS_NAMES[c]}", rho[r], tracker[r][c],
                            steps[r], stamps[r], room[r]) for c in range(3))
+        for r in np.flatnonzero(self.laser_axis[rows] >= 0).tolist():
+            i, axis = index[r], int(self.laser_axis[index[r]])
+            self.notebooks[i].records.append(Record(
+                interferometer.InterferometerAxis(axis),
+                interferometer.mounting_name(axis, int(self.laser_setups[i])), rho[r],
+                float(self.laser_reading[i]), steps[r], stamps[r], room[r]))
 
     def _room(self, rows: np.ndarray, when: np.ndarray) -> list[float | None]:
         """What the thermometer of each of ``rows`` reads (C) at lab time ``when``; None
@@ -639,7 +711,17 @@ class LabBatch:
             "tracker": np.where(tracked[:, None], self.tracker_reading[rows], 0.0),
             "tracker_valid": tracked.astype(np.int8)[:, None],
             "time": self.time[rows][:, None].copy(),
+            **(self._laser_observation(rows, fresh) if self.settings.version >= 1 else {}),
         }
+
+    def _laser_observation(self, rows: np.ndarray, fresh: np.ndarray
+                           ) -> dict[str, np.ndarray]:
+        """``OrthoglideLab-v1``'s interferometer keys of ``rows``' observations."""
+        read = fresh & np.isfinite(self.laser_reading[rows])
+        axis = self.laser_axis[rows]
+        return {"interferometer": np.where(read, self.laser_reading[rows], 0.0)[:, None],
+                "interferometer_valid": read.astype(np.int8)[:, None],
+                "interferometer_axis": np.where(axis >= 0, axis, 3).astype(np.int64)}
 
     def true_gauges(self, row: int) -> list[Gauge]:
         """Every installation of episode ``row``, in mounting order (scoring only)."""

@@ -26,6 +26,16 @@ length reference        60        on top of a re-mount at a reference slot: wipe
                                   warms it), zero the dial on it, take it away
 overtravel              120       an engaged gauge pushed past its travel: check it,
                                   re-install and re-zero it (it reads nothing until then)
+interferometer set-up   600       (``align``, a lab with the interferometer) mount the
+                                  retroreflector on a carriage, align the beam with its
+                                  drive, zero the count at Zero; assumption: 20-40 min on a
+                                  machine tool, less on a 160 mm drive with a swivel mirror
+interferometer soak     600       before the first set-up: the material sensor settles
+                                  (at least 10 min, Agilent Laser and Optics User's Manual,
+                                  ch. 12)
+interferometer target   2         on top of a move's settle and read while it is set up:
+                                  the dwell it averages over; assumption: 2-4 s per
+                                  ISO 230-2 target
 ======================  ========  ==========================================================
 """
 
@@ -52,6 +62,9 @@ class TimeTable:
     tracker_point_s: float = 3.0
     overtravel_s: float = 120.0
     reference_s: float = 60.0
+    interferometer_setup_s: float = 600.0
+    interferometer_soak_s: float = 600.0
+    interferometer_target_s: float = 2.0
 
     def move(self, start: np.ndarray, target: np.ndarray) -> np.ndarray:
         """Seconds to drive from ``start`` to ``target`` (axes together) and settle; shapes
@@ -130,6 +143,11 @@ class Op(IntEnum):
     ENGAGE = 2  # let it down on its bar again (same zero: the stand did not move)
     REMOUNT = 3  # move stand ``stand`` to ``slot`` (at Zero), new installation, new zero
     STOP = 4  # the experiment is over
+    ALIGN = 5  # set the interferometer up along drive ``axis`` (``OrthoglideLab-v1``)
+
+
+#: The operations of ``OrthoglideLab-v0``'s action (every one before ``ALIGN``).
+V0_OPS: int = int(Op.ALIGN)
 
 
 OP_NAMES: tuple[str, ...] = tuple(op.name.lower() for op in Op)

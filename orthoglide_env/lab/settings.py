@@ -20,9 +20,17 @@ import numpy as np
 from gymnasium import spaces
 
 from orthoglide_env.instruments.dial import GaugeNoise, check_noise
+from orthoglide_env.instruments.interferometer import check_instruments
 from orthoglide_env.instruments.slots import PAPER_LAYOUT, GaugeSpec
 from orthoglide_env.lab.notebook import Estimator
-from orthoglide_env.lab.operations import TIME, TRACKER_SIGMA, Op, slot_catalogue, slot_index
+from orthoglide_env.lab.operations import (
+    TIME,
+    TRACKER_SIGMA,
+    V0_OPS,
+    Op,
+    slot_catalogue,
+    slot_index,
+)
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import ErrorPreset, get_preset
 from orthoglide_env.sim.display import display_problem, require_display
@@ -63,6 +71,13 @@ class LabSettings:
     render_mode: str | None = None
     conditions: Conditions = IDEAL  # the world's effects beyond the geometry
     reference: bool = False  # the lab has the gauge block: its catalogue the reference slots
+    instruments: tuple[str, ...] = ("dial",)  # what the lab owns (interferometer.INSTRUMENT_NAMES)
+    version: int = 0  # the lab env's version: v1's spaces carry the interferometer
+
+    @property
+    def interferometer(self) -> bool:
+        """Whether the lab owns a laser interferometer (``align`` sets it up)."""
+        return "interferometer" in self.instruments
 
     @cached_property
     def slots(self) -> tuple[GaugeSpec, ...]:
@@ -76,8 +91,13 @@ class LabSettings:
         every stand pushed past its travel): the clock never passes budget + this."""
         far = TIME.move(np.full(3, self.design.rho_min), np.full(3, self.design.rho_max))
         block = TIME.reference_s if self.reference else 0.0
-        return (far + TIME.remount_s + block + TIME.tracker_point_s
-                + TIME.overtravel_s * self.stands)
+        longest = (far + TIME.remount_s + block + TIME.tracker_point_s
+                   + TIME.overtravel_s * self.stands)
+        if not self.interferometer:
+            return longest
+        setup = (far + TIME.interferometer_setup_s + TIME.interferometer_soak_s
+                 + TIME.overtravel_s * self.stands)
+        return max(longest, setup)
 
 
 def _picture(backend: str, render_mode: str | None) -> None:
@@ -107,8 +127,8 @@ def _shared(args: dict[str, Any], design: MachineDesign) -> dict[str, Any]:
             "conditions": args["conditions"]}
 
 
-def lab_settings(args: dict[str, Any]) -> LabSettings:
-    """The settings of ``OrthoglideLab-v0`` from its checked arguments
+def lab_settings(args: dict[str, Any], version: int = 0) -> LabSettings:
+    """The settings of ``OrthoglideLab-v<version>`` from its checked arguments
     (:data:`orthoglide_env.lab.spec.LAB`)."""
     if args["reward"] == "accuracy" and args["estimator"] is None:
         raise ValueError("reward 'accuracy' needs an estimator: records -> machine, e.g. "
@@ -125,10 +145,20 @@ def lab_settings(args: dict[str, Any]) -> LabSettings:
         raise ValueError(f"the lab mounts its stands at the paper's mid-leg slots (e.g. "
                          f"'{PAPER_LAYOUT[0].slot}') at every reset: the design's "
                          f"slot_positions {list(design.slot_positions)} must include {mid}")
+    instruments = args["instruments"] or ("dial",)
+    # ``tracker=True`` and an instrument list naming the tracker say the same.
+    tracker = args["tracker"] or "tracker" in instruments
+    if tracker and "tracker" not in instruments:
+        instruments = check_instruments((*instruments, "tracker"))
+    if "interferometer" in instruments and version < 1:
+        raise ValueError("instruments: the interferometer needs OrthoglideLab-v1 (its action "
+                         "has the align operation and an axis, its observation the "
+                         "interferometer's reading)")
     return LabSettings(
         **_shared(args, design), stands=stands,
         layout=tuple(slots[slot_index(spec, design=design)] for spec in PAPER_LAYOUT[:stands]),
-        tracker=args["tracker"], tracker_sigma=args["tracker_sigma"],
+        instruments=instruments, version=version,
+        tracker=tracker, tracker_sigma=args["tracker_sigma"],
         thermometer=args["thermometer"],
         budget_s=args["budget_s"], reward=args["reward"], estimator=args["estimator"],
         time_weight=args["time_weight"], success_mm=args["success_mm"],
@@ -148,11 +178,13 @@ def calibration_settings(args: dict[str, Any]) -> LabSettings:
 def lab_spaces(settings: LabSettings) -> tuple[spaces.Dict, spaces.Dict]:
     """``OrthoglideLab-v0``'s action and observation spaces."""
     n, design = settings.stands, settings.design
+    v1 = settings.version >= 1
     action_space = spaces.Dict({
-        "op": spaces.Discrete(len(Op)),
+        "op": spaces.Discrete(len(Op) if v1 else V0_OPS),
         "rho": spaces.Box(design.rho_min, design.rho_max, shape=(3,), dtype=np.float64),
         "stand": spaces.Discrete(n),
         "slot": spaces.Discrete(len(settings.slots)),
+        **({"axis": spaces.Discrete(3)} if v1 else {}),
     })
     observation_space = spaces.Dict({
         # A valid reading lies within +-travel/2 of its zero; the box leaves another
@@ -169,6 +201,10 @@ def lab_spaces(settings: LabSettings) -> tuple[spaces.Dict, spaces.Dict]:
         "tracker_valid": spaces.MultiBinary(1),
         "time": spaces.Box(0.0, settings.budget_s + settings.longest_step(), shape=(1,),
                            dtype=np.float64),
+        # The carriage's deviation from its command along the set-up drive: tens of um.
+        **({"interferometer": spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float64),
+            "interferometer_valid": spaces.MultiBinary(1),
+            "interferometer_axis": spaces.Discrete(4)} if v1 else {}),
     })
     return action_space, observation_space
 

@@ -22,6 +22,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
+from orthoglide_env.instruments.interferometer import INSTRUMENT_NAMES, check_instruments
 from orthoglide_env.instruments.slots import GaugeSpec, layout_from_names
 from orthoglide_env.lab.operations import DEFAULT_BUDGET_S, PAPER_SLOTS, TRACKER_SIGMA
 from orthoglide_env.model.design import MachineDesign
@@ -182,6 +183,11 @@ class DesignArg(Arg):
         return value
 
 
+INSTRUMENTS = Kind(f"a list of instrument names from {list(INSTRUMENT_NAMES)}, or None",
+                   lambda v: v is None or (isinstance(v, list | tuple) and all(
+                       isinstance(n, str) for n in v)),
+                   lambda v: None if v is None else check_instruments(v))
+
 # Arguments both envs take, by the same rule in the same words.
 ERRORS = Choice(tuple(sorted(PRESETS)), "the name of an error preset, one of",
                 default=DEFAULT_PRESET)
@@ -230,6 +236,8 @@ LAB: dict[str, Arg] = {
     "success_mm": Number("mm", 0.0, open=True, default=0.01),
     "travel": Number("mm", 0.0, open=True, optional=True), "design": DesignArg(),
     "conditions": CONDITIONS, "reference": FLAG, "render_mode": RENDER_MODE,
+    # None: what the lab owns without it, its dial gauges and a tracker where ``tracker``.
+    "instruments": INSTRUMENTS,
 }
 #: A native vector env's arguments: ``num_envs``, its single env's (the lab's draws no
 #: picture) and ``autoreset_mode``.

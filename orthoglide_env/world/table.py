@@ -154,3 +154,51 @@ REFERENCE_DEVIATION: Size = Size(
     (0, 0.20), (0, 0.80), "um", "the gauge block's length minus its nominal length",
     "ISO 3650 (DIN 861) limit deviation of a 25-50 mm block: grade 0 +-0.20 um (lab), "
     "grade 2 +-0.80 um (workshop)", signed=True)
+
+#: The instruments a lab may own beyond its dial gauges, and their own errors, drawn per
+#: lab under ``lab`` or ``workshop`` (an ideal world's instruments have their noise only).
+#: Kept apart from :data:`EFFECTS`: an instrument's errors act where the lab owns it,
+#: whatever effects the world has.
+INSTRUMENT_ERRORS: dict[str, dict[str, Size]] = {
+    "interferometer": {
+        "laser": Size((0.1, 0.1), (0.1, 0.1), "ppm", "the laser's own accuracy (vacuum "
+                      "wavelength): a scale error of every displacement read, either sign",
+                      "HP 5528A User's Guide, error budget worksheet step 7: 0.1 ppm",
+                      signed=True),
+        "air": Size((0, 1.5), (0, 1.5), "ppm", "the air compensation's error (the index of "
+                    "air from the air sensor): a scale error per lab", "HP 5528A User's "
+                    "Guide, worksheet step 4b: 1.5 ppm with the air sensor (1 ppm per 1 K, "
+                    "2.5 mmHg or about 80 % RH, section 19)", signed=True),
+        "material_sensor": Size((0, 0.1), (0, 0.1), "K", "the material temperature sensor's "
+                                "error: the machine's expansion is compensated from it, so "
+                                "it leaves (steel's coefficient) x (this) as a scale error",
+                                "HP 10757 material sensor: +-0.10 C", signed=True),
+        "alignment": Size((0, 0.2), (0, 0.5), "mrad", "angle between the beam and the "
+                          "carriage's travel after alignment: the reading is short by "
+                          "1 - cos of it", "assumption: an aligned beam within 0.2 mrad "
+                          "(lab) or 0.5 mrad (workshop); cosine error per HP 5528A "
+                          "section 6"),
+        "noise": Size((0.1, 0.1), (0.3, 0.3), "um", "a reading's scatter (standard "
+                      "deviation): air turbulence, vibration and the carriage's settling, "
+                      "averaged over the dwell", "assumption: 1 nm resolution (XL-80 "
+                      "datasheet, secondary) but 0.1 um in a still room, 0.3 um on a shop "
+                      "floor"),
+    },
+}
+
+#: Closed-loop drives (conditions with ``drives="scales"``): a linear scale beside each
+#: drive reads the carriage, so the screw's lead error, its periodic error, its growth
+#: as it warms and the nut's reversal no longer reach the carriage (HEIDENHAIN, "Exposed
+#: linear encoders", introduction; the feed-transmission accuracy article).  What is
+#: left is the scale's own error and its expansion.
+SCALES: dict[str, Size] = {
+    "grade": Size((0, 3), (0, 5), "um", "the scale's error along the stroke, linear, at "
+                  "the stroke's end: its accuracy grade +-a bounds the error over any 1 m, "
+                  "and the 160 mm stroke lies in one", "HEIDENHAIN sealed linear encoders: "
+                  "grades +-3 and +-5 um (exposed LIP: +-1 um); the grade's definition: "
+                  "HEIDENHAIN, 'Positionsabweichungen ueber den Messweg'", signed=True),
+    "expansion": Size((8, 8), (8, 8), "um/(m K)", "the scale's expansion (glass): the "
+                      "carriage follows it with the room instead of the screw's steel",
+                      "assumption: about 8 ppm/K for a glass scale (the LC/LS coefficient "
+                      "was not found; Invar about 1, Zerodur about 0)"),
+}

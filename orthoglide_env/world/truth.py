@@ -30,7 +30,7 @@ import numpy as np
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.kinematics import direct_paper, jacobian_paper
 from orthoglide_env.world.conditions import Conditions
-from orthoglide_env.world.table import EFFECTS, TRACKER_MPE_PER_M
+from orthoglide_env.world.table import EFFECTS, SCALES, TRACKER_MPE_PER_M
 
 UM: float = 1e-3  # mm
 #: The reference temperature (C, ISO 1) that :meth:`World.temperature` is measured from.
@@ -277,6 +277,11 @@ class World:
         warm = self.warm_amplitude * x * (1 - np.exp(-np.asarray(time)[:, None]
                                                      / self.warm_tau))
         out = rho + self.lead_error(rho, design) - self.backlash / 2 * approach + warm
+        if self.conditions.drives == "scales" and "room" in self.conditions:
+            # The carriage follows its scale, not the screw's steel, as the room changes:
+            # the structure's growth (:meth:`scale`) is the steel's.
+            glass = SCALES["expansion"].lab[0] - _fixed(self.conditions, "room", "expansion")
+            out = out + glass * 1e-6 * self.temperature(time)[:, None] * (rho - design.rho_min)
         compliance = _fixed(self.conditions, "compliance", "actuator") * UM
         if compliance:
             # Generalised load of the weight on each drive, J^T F, from the paper's model

@@ -1,0 +1,165 @@
+"""The interferometer's readings in the fit and in measurement files: its model rows, the
+``full`` fit of its readings as the controller's pitch table, the file's ``instrument``
+column, and the ``iso230-2`` agent's refusal in a lab without one."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import orthoglide_env
+from calibrators.agents import get_agent
+from calibrators.agents.base import PlannedAgent, action
+from calibrators.agents.iso230 import drive_steps, runs_for, targets_of
+from calibrators.estimators.catalogue import get_estimator
+from calibrators.measurements import Measurement, MeasurementFileError, Measurements
+from calibrators.study.episodes import machine_seed, run_episode
+from calibrators.study.labs import lab_kwargs
+from orthoglide_env.instruments.interferometer import InterferometerAxis
+from orthoglide_env.lab.operations import Op
+from orthoglide_env.model.design import PROTOTYPE
+from orthoglide_env.reading_model import ReadingLayout, jacobian, predict
+from orthoglide_env.world.conditions import Conditions
+
+OWNED = ["dial", "interferometer"]
+
+
+class DrivesOnly(PlannedAgent):
+    """The ``iso230-2`` procedure's drives, one run each, and nothing else."""
+
+    name = "drives-only"
+
+    def make_plan(self, observation: dict) -> list[dict]:
+        return [*drive_steps(len(observation["slot"]), self.env.design, 1), action(Op.STOP)]
+
+
+def _episode(conditions: Conditions, seed: int = 0):
+    env = gym.make(orthoglide_env.LAB_V1_ENV_ID, backend="exact", conditions=conditions,
+                   errors="realistic", instruments=OWNED)
+    return run_episode(env, DrivesOnly(), machine_seed(1, seed))
+
+
+def test_an_interferometer_row_moves_with_its_drive_only():
+    """Its model reading is its drive's offset: the Jacobian's row is 1 on that drive's
+    drho and 0 on every other error, as the finite difference of the model says."""
+    rho = np.array([[0.0, 0.0, 0.0], [0.0, 30.0, 0.0], [0.0, -60.0, 0.0]])
+    layout = ReadingLayout.of(["interferometer.y"] * 3, [InterferometerAxis(1)] * 3, rho,
+                              PROTOTYPE)
+    n = len(layout.space)
+    rows = jacobian(np.zeros(n), layout, np.ones(n, bool), np.ones(n))
+    expected = np.zeros((3, n))
+    expected[:, 1] = 1.0
+    assert np.array_equal(rows, expected)
+    step = np.zeros(n)
+    step[1] = 1e-3
+    assert np.allclose((predict(step, layout) - predict(np.zeros(n), layout)) / 1e-3, 1.0)
+
+
+def test_the_full_fit_recovers_the_pitch_table_within_its_error_bars():
+    """Under the lead error alone, the drives' readings give the pitch table: at every
+    node the fitted value is within 4 of its reported standard deviations (plus 0.05 um
+    for the table's linear interpolation between nodes of a smooth curve) of the true
+    smooth lead error there (the periodic part is fitted apart, and the table is 0 at its
+    reference node, the stroke's back end)."""
+    conditions = Conditions("lab", ("lead",))
+    episode = _episode(conditions)
+    est = get_estimator("full", sigma=episode.sigma, conditions=conditions,
+                        verify=False).fit(episode.measurements)
+    table = est.pitch_table
+    world = episode.world
+    x = (table.nodes - PROTOTYPE.rho_min) / (PROTOTYPE.rho_max - PROTOTYPE.rho_min)
+    truth = (world.lead_scale[0][:, None] * x + world.lead_a1[0][:, None] * np.sin(np.pi * x)
+             + world.lead_a2[0][:, None] * np.sin(2 * np.pi * x))
+    assert np.all(np.abs(table.values - truth) <= 4 * table.sigma + 5e-5)
+    # The table is told apart from its prior: its nodes are known to a few tenths of a um.
+    assert np.median(table.sigma[:, 1:]) < 0.5e-3
+
+
+def test_the_fit_is_honest_with_every_effect():
+    """Under every lab effect the drives' readings fit to chi2/dof about 1 (its 99.9 %
+    band for ~100 degrees of freedom is [0.6, 1.5]): the model rows of the
+    interferometer, its periodic error and the world's drive terms explain them."""
+    conditions = Conditions("lab")
+    episode = _episode(conditions, seed=1)
+    est = get_estimator("full", sigma=episode.sigma, conditions=conditions,
+                        verify=False).fit(episode.measurements)
+    assert 0.6 < est.chi2 / est.dof < 1.5
+    assert any(name.startswith("world.lead.periodic") for name in est.names)
+
+
+def test_a_file_with_the_instrument_column_reads_back(tmp_path: Path):
+    episode = _episode(Conditions("lab"))
+    path = tmp_path / "readings.csv"
+    episode.measurements.write(path)
+    header = path.read_text().splitlines()[0].split(",")
+    assert header[-1] == "instrument"
+    again = Measurements.read(path)
+    assert [m.gauge for m in again.items] == [m.gauge for m in episode.measurements.items]
+    assert [m.reading for m in again.items] == [m.reading for m in episode.measurements.items]
+
+
+def _csv(tmp_path: Path, header: str, row: str) -> Path:
+    path = tmp_path / "one.csv"
+    path.write_text(f"{header}\n{row}\n")
+    return path
+
+
+@pytest.mark.parametrize(("row", "words"), [
+    (",,,,0,10,0,1,0.001,interferometer", "axis"),
+    (",x,y,,0,10,0,1,0.001,interferometer", "no leg"),
+    (",,w,,0,10,0,1,0.001,interferometer", "drive"),
+    (",x,y,,0,10,0,1,0.001,laser", "instrument"),
+    (",tracker,y,,0,10,0,1,0.001,dial", "tracker's")])
+def test_a_bad_instrument_row_is_refused_in_one_line(tmp_path: Path, row: str, words: str):
+    header = "mounting,leg,axis,at,rho_x,rho_y,rho_z,repetition,reading_mm,instrument"
+    with pytest.raises(MeasurementFileError, match=words) as info:
+        Measurements.read(_csv(tmp_path, header, row))
+    assert "\n" not in str(info.value)
+
+
+def test_a_file_without_the_column_reads_as_before(tmp_path: Path):
+    header = "mounting,leg,axis,at,rho_x,rho_y,rho_z,repetition,reading_mm"
+    data = Measurements.read(_csv(tmp_path, header, ",tracker,y,,0,10,0,1,5.0"))
+    assert data.items[0] == Measurement(data.items[0].gauge, "", 1, 5.0, (0.0, 10.0, 0.0))
+    assert data.items[0].gauge.slot == "tracker/y"
+
+
+def test_iso230_2_needs_the_interferometer():
+    agent = get_agent("iso230-2")
+    with pytest.raises(ValueError, match="needs the interferometer"):
+        lab_kwargs(agent, ("dial",))
+    with pytest.raises(ValueError, match="needs the interferometer"):
+        lab_kwargs(agent)  # today's lab owns the dial gauges only
+    env = gym.make(orthoglide_env.LAB_V1_ENV_ID, backend="exact", conditions="lab")
+    observation, _ = env.reset(seed=0)
+    with pytest.raises(ValueError, match="needs a lab with the interferometer"):
+        agent.reset(env, observation, np.random.default_rng(0))
+
+
+def test_iso230_2_plans_the_standard_and_shortens_runs_to_the_budget():
+    """Targets spread over the stroke with unequal spacings (ISO 230-2 asks for them),
+    the standard's 5 runs when the budget allows, one when an hour leaves no more."""
+    targets = targets_of(PROTOTYPE)
+    assert targets[0] > PROTOTYPE.rho_min and targets[-1] < PROTOTYPE.rho_max
+    assert np.all(np.diff(targets) > 0) and np.ptp(np.diff(targets)) > 1.0
+    assert runs_for(3 * 3600.0, PROTOTYPE) == 5
+    assert runs_for(3600.0, PROTOTYPE) == 1
+
+
+@pytest.mark.parametrize(("argv", "words"), [
+    (["compare", "--agents", "iso230-2", "--conditions", "lab", "--machines", "1"],
+     "needs the interferometer"),
+    (["compare", "--agents", "tracker", "--instruments", "dial", "--machines", "1"],
+     "needs the tracker"),
+    (["calibrate", "--instruments", "dial,laser"], "unknown instrument"),
+    (["compare", "--instruments", "dial,step-gauge", "--machines", "1"], "not yet available"),
+    (["plan", "--instruments", "dial,interferometer", "--out", "unused"],
+     "does not yet take the interferometer")])
+def test_the_commands_refuse_a_lab_without_what_they_need(argv, words, capsys):
+    from calibrators.cli import main
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert words in err and "\n" not in err
