@@ -5,7 +5,7 @@ A policy file is the zip stable-baselines3 saves, with one more entry,
 the sizes of the flat observation and action, the lab time of a training episode) and
 the observation normalisation it learned behind (``VecNormalize``'s running mean and
 variance).  The agent wraps its lab env in the training env's mapping
-(:class:`~orthoglide_env.envs.wrappers.FlatLabActions` and ``FlattenObservation``), normalises
+(:class:`~orthoglide_env.wrappers.FlatLabActions` and ``FlattenObservation``), normalises
 each observation as training did, and draws its action from the policy's distribution
 with the agent's own random stream (seeded per machine by ``compare``: an episode is
 reproducible) until it has used the lab time of a training episode; then it stops, since
@@ -39,9 +39,9 @@ import numpy as np
 from gymnasium.spaces import flatten, flatten_space
 
 from calibrators.agents.base import Agent, action
-from orthoglide_env.envs.wrappers import flat_action_space, lab_action
 from orthoglide_env.lab.operations import OP_NAMES, SLOT_NAMES, Op, slot_catalogue
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.wrappers import flat_action_space, lab_action
 
 #: The entry of the policy zip that holds the :class:`PolicySpec` (JSON).
 SPEC_ENTRY: str = "orthoglide_policy.json"
