@@ -103,11 +103,11 @@ class DesignLab(gym.Wrapper):
     ==================  ==========================================================
 
     :meth:`action_masks` (as sb3-contrib's ``MaskablePPO`` asks for it) is False on the
-    operations that are not candidates now: a move where no stand reads a priori, or that
-    would end past the budget; a re-mount at a slot a stand holds (the lab refuses one held
-    by another stand), or past the budget.  Stop is always open.  A masked action is still
-    done as the lab does it (a refused re-mount costs its lever flick), so the action
-    space's every element is a valid action.
+    operations that are not candidates now: a move where no stand reads a priori more likely
+    than not, or that would end past the budget; a re-mount at a slot a stand holds (the
+    lab refuses one held by another stand), or past the budget.  Stop is always open.  A
+    masked action is still done as the lab does it (a refused re-mount costs its lever
+    flick), so the action space's every element is a valid action.
 
     Observation space (``Box``, float32)
     ------------------------------------
@@ -164,19 +164,9 @@ class DesignLab(gym.Wrapper):
         sigma = float(lab.noise.effective_sigma)
         self.belief = DesignBelief(lab.design, lab.n_stands, weighting_sigma(sigma),
                                    lab.budget_s)
-        belief = self.belief
-        self.action_space = spaces.Discrete(belief.n_actions)
-        top = float(belief.log_mean_squares()[-1])  # the prior's: readings only lower them
-        r, k, s = belief.factor.shape[1], belief.n_stands, belief.n_slots
-        low = np.concatenate((np.full(r + 1, np.log10(1e-6)), np.zeros(k * (s + 3)),
-                              -np.ones(3), [0.0]))
-        longest = lab.settings.longest_step()
-        high = np.concatenate((np.full(r + 1, top + 1.0), np.ones(k * (s + 3)), np.ones(3),
-                               [(lab.budget_s + longest) / lab.budget_s]))
-        self.observation_space = spaces.Box(low.astype(np.float32), high.astype(np.float32),
-                                            dtype=np.float32)
-        low_rho, high_rho = lab.action_space["rho"].low, lab.action_space["rho"].high
-        self._rho_middle, self._rho_half = (high_rho + low_rho) / 2, (high_rho - low_rho) / 2
+        self.action_space = spaces.Discrete(self.belief.n_actions)
+        low, high = self.belief.observation_bounds(lab.settings.longest_step())
+        self.observation_space = spaces.Box(low, high, dtype=np.float32)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
               ) -> tuple[np.ndarray, dict[str, Any]]:
@@ -218,14 +208,7 @@ class DesignLab(gym.Wrapper):
         return float(np.sqrt(self.belief.predicted_mse()))
 
     def _observation(self) -> np.ndarray:
-        belief = self.belief
-        stands = np.zeros((belief.n_stands, belief.n_slots + 3))
-        stands[np.arange(belief.n_stands), np.where(belief.slots >= 0, belief.slots,
-                                                    belief.n_slots)] = 1.0
-        stands[:, -2], stands[:, -1] = belief.engaged, belief.faulted
-        rho = (belief.rho - self._rho_middle) / self._rho_half
-        return np.concatenate((belief.log_mean_squares(), stands.ravel(), rho,
-                               [belief.time_s / belief.budget_s])).astype(np.float32)
+        return self.belief.observation()
 
 
 def design_lab_env(reward: str = "mse", per: str = "step", **kwargs: Any) -> DesignLab:

@@ -14,6 +14,7 @@ from gymnasium.utils.env_checker import check_env
 import orthoglide_env
 from calibrators.planning.search import Planner
 from orthoglide_env.instruments.dial import weighting_sigma
+from orthoglide_env.lab.design_belief import READ_PROBABILITY
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.lab.rewards import ACCURACY_UNIT_MM
 from orthoglide_env.wrappers import DesignLab, DesignLabVector, design_lab_env
@@ -68,8 +69,8 @@ def test_bad_arguments_are_refused() -> None:
 
 def test_the_move_mask_is_the_planners_candidate_moves() -> None:
     """The moves open are those where the experiment planner, in the same state and a
-    priori, expects some stand to read and which end within the budget; the lever flicks
-    of each move are the planner's."""
+    priori, expects some stand to read more likely than not and which end within the
+    budget; the lever flicks of each move are the planner's."""
     env = design(conditions="lab")
     env.reset(seed=2)
     candidate_moves(env, np.random.default_rng(0), 6)
@@ -86,7 +87,9 @@ def test_the_move_mask_is_the_planners_candidate_moves() -> None:
     np.testing.assert_allclose(mine[0], seconds, rtol=0, atol=1e-12)
     fits = belief.time_s + seconds <= BUDGET_S
     np.testing.assert_array_equal(env.action_masks()[:belief.n_postures],
-                                  reads.any(axis=0) & fits)
+                                  (reads >= READ_PROBABILITY).any(axis=0) & fits)
+    # Some moves the planner would price read less likely than that: they are closed.
+    assert np.any(reads.any(axis=0) & ~(reads >= READ_PROBABILITY).any(axis=0))
     assert 0 < env.action_masks()[:belief.n_postures].sum() < belief.n_postures
 
 

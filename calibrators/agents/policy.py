@@ -39,6 +39,9 @@ import numpy as np
 from gymnasium.spaces import flatten, flatten_space
 
 from calibrators.agents.base import Agent, action
+from orthoglide_env import DESIGN_LAB_ENV_ID, FLAT_LAB_ENV_ID
+from orthoglide_env.instruments.dial import weighting_sigma
+from orthoglide_env.lab.design_belief import DesignBelief
 from orthoglide_env.lab.operations import OP_NAMES, SLOT_NAMES, Op, slot_catalogue
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.wrappers import flat_action_space, lab_action
@@ -71,6 +74,9 @@ class PolicySpec:
     #: The training lab's machine design (``MachineDesign.to_dict``); None: the prototype
     #: (files saved before designs were recorded).
     design: dict[str, Any] | None = None
+    #: The env id (and version) the policy acted in: the flat lab, or the design view
+    #: (``OrthoglideLabDesign-v0``, whose discrete operations the policy chooses).
+    env_id: str = FLAT_LAB_ENV_ID
 
     def to_json(self) -> str:
         return json.dumps(asdict(self))
@@ -94,20 +100,24 @@ class PolicySpec:
 
 def spec_of(env: gym.Env, algorithm: str, env_kwargs: dict[str, Any],
             normaliser: Any | None = None) -> PolicySpec:
-    """The spec of a policy trained on the flat lab ``env`` (``normaliser``: the training
+    """The spec of a policy trained on ``env``, the flat lab or the design view
+    (:class:`~orthoglide_env.wrappers.DesignLab`) (``normaliser``: the training
     VecNormalize, or None)."""
     lab = env.unwrapped
     rms = getattr(normaliser, "obs_rms", None)
+    discrete = isinstance(env.action_space, gym.spaces.Discrete)
     return PolicySpec(
         algorithm=algorithm, slots=tuple(s.slot for s in lab.slots), ops=OP_NAMES,
         stands=int(lab.n_stands),
         observation_size=int(env.observation_space.shape[0]),
-        action_size=int(env.action_space.shape[0]), budget_s=float(lab.budget_s),
+        action_size=int(env.action_space.n if discrete else env.action_space.shape[0]),
+        budget_s=float(lab.budget_s),
         env=dict(env_kwargs),
         obs_mean=tuple(float(v) for v in rms.mean) if rms is not None else (),
         obs_var=tuple(float(v) for v in rms.var) if rms is not None else (),
         clip_obs=float(getattr(normaliser, "clip_obs", 10.0)),
         epsilon=float(getattr(normaliser, "epsilon", 1e-8)), design=lab.design.to_dict(),
+        env_id=DESIGN_LAB_ENV_ID if discrete else FLAT_LAB_ENV_ID,
     )
 
 
@@ -139,6 +149,9 @@ def read_spec(path: str | Path) -> PolicySpec:
     if spec.version != SPEC_VERSION:
         raise ValueError(f"policy file '{path}' has layout version {spec.version}, this "
                          f"workbench reads {SPEC_VERSION}: retrain it")
+    if spec.env_id not in (FLAT_LAB_ENV_ID, DESIGN_LAB_ENV_ID):
+        raise ValueError(f"policy file '{path}' acted in env '{spec.env_id}'; this workbench "
+                         f"plays {FLAT_LAB_ENV_ID} and {DESIGN_LAB_ENV_ID}: retrain it")
     if not _a_catalogue(spec.slots) or spec.ops != OP_NAMES:
         raise ValueError(
             f"policy file '{path}' was trained on a lab with {len(spec.slots)} slots and "
@@ -169,6 +182,12 @@ def _load_model(path: str, modified_ns: int, algorithm: str) -> Any:
         raise RuntimeError(f"running a learned policy needs stable-baselines3: "
                            f"{INSTALL_HINT}") from None
     cls = getattr(stable_baselines3, algorithm, None)
+    if cls is None and algorithm == "MaskablePPO":
+        try:
+            from sb3_contrib import MaskablePPO as cls
+        except ImportError:
+            raise RuntimeError(f"running a MaskablePPO policy needs sb3-contrib: "
+                               f"{INSTALL_HINT}") from None
     if cls is None:
         raise ValueError(f"policy file '{path}' names an unknown algorithm '{algorithm}'")
     return cls.load(path, device="cpu")
@@ -185,7 +204,9 @@ class PolicyAgent(Agent):
         self.spec = read_spec(self.path)
         self.model = _load_model(str(self.path.resolve()), self.path.stat().st_mtime_ns,
                                  self.spec.algorithm)
-        sizes = (self.model.observation_space.shape, self.model.action_space.shape)
+        space = self.model.action_space
+        actions = (space.n,) if isinstance(space, gym.spaces.Discrete) else space.shape
+        sizes = (self.model.observation_space.shape, actions)
         if sizes != ((self.spec.observation_size,), (self.spec.action_size,)):
             raise ValueError(f"policy file '{self.path}': the network's spaces {sizes} differ "
                              "from its spec: the file is damaged")
@@ -193,6 +214,24 @@ class PolicyAgent(Agent):
     def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
               rng: np.random.Generator) -> None:
         super().reset(env, observation, rng)
+        self._check_lab()
+        # The spaces alone: a lab in a vector env is no gymnasium.Env to wrap.
+        self.spaces = (self.env.observation_space, self.env.action_space)
+        sizes = (flatten_space(self.spaces[0]).shape[0], flat_action_space(self.spaces[1]).shape[0])
+        self._check_sizes(sizes)
+
+    def _check_sizes(self, sizes: tuple[int, int]) -> None:
+        """Refuse a lab whose observation and action sizes are not the training lab's."""
+        if sizes != (self.spec.observation_size, self.spec.action_size):
+            raise ValueError(
+                f"policy file '{self.path}' was trained on a lab of {self.spec.stands} "
+                f"stands with {self.spec.observation_size} observations and "
+                f"{self.spec.action_size} actions; this lab ({self.env.n_stands} stands, "
+                f"tracker {'on' if self.env.tracker else 'off'}) has {sizes[0]} and "
+                f"{sizes[1]}")
+
+    def _check_lab(self) -> None:
+        """Refuse a lab of another slot catalogue or design than the training lab's."""
         slots = tuple(s.slot for s in self.env.slots)
         if self.spec.slots != slots:
             raise ValueError(
@@ -210,16 +249,6 @@ class PolicyAgent(Agent):
                 f"lab's: L = {here.L:g} mm, [{here.rho_min:g}, {here.rho_max:g}] mm): its "
                 "actions and observations mean other things here, retrain it on this design "
                 "(examples/train_policy.py)")
-        # The spaces alone: a lab in a vector env is no gymnasium.Env to wrap.
-        self.spaces = (self.env.observation_space, self.env.action_space)
-        sizes = (flatten_space(self.spaces[0]).shape[0], flat_action_space(self.spaces[1]).shape[0])
-        if sizes != (self.spec.observation_size, self.spec.action_size):
-            raise ValueError(
-                f"policy file '{self.path}' was trained on a lab of {self.spec.stands} "
-                f"stands with {self.spec.observation_size} observations and "
-                f"{self.spec.action_size} actions; this lab ({self.env.n_stands} stands, "
-                f"tracker {'on' if self.env.tracker else 'off'}) has {sizes[0]} and "
-                f"{sizes[1]}")
 
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
         if observation["time"][0] >= self.spec.budget_s:
@@ -237,3 +266,50 @@ class PolicyAgent(Agent):
             tensor, _ = self.model.policy.obs_to_tensor(flat)
             normal = self.model.policy.get_distribution(tensor).distribution
             return normal.mean.numpy()[0], normal.stddev.numpy()[0]
+
+
+class DesignPolicyAgent(PolicyAgent):
+    """Plays a policy trained on the design view (``OrthoglideLabDesign-v0``,
+    :class:`~orthoglide_env.wrappers.DesignLab`): it keeps the view's belief from the lab's
+    observations, takes the policy's most likely operation among the open ones (its
+    mask), and plays it as the lab actions it is (a move's lever flicks, then the move),
+    until the lab time of a training episode is used.  The belief runs on the training
+    episode's budget, so that the observed clock and the mask mean what they meant in
+    training."""
+
+    def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
+              rng: np.random.Generator) -> None:
+        Agent.reset(self, env, observation, rng)
+        self._check_lab()
+        lab = self.env
+        self.belief = DesignBelief(lab.design, lab.n_stands,
+                                   weighting_sigma(float(lab.noise.effective_sigma)),
+                                   self.spec.budget_s)
+        self._check_sizes((len(self.belief.observation()), self.belief.n_actions))
+        self.belief.start(observation)
+        self.queue: list[dict[str, Any]] = []
+        self.last: dict[str, Any] | None = None
+
+    def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
+        if self.last is not None:
+            self.belief.observe(self.last, observation, bool(info.get("refused")))
+        if not self.queue:
+            if observation["time"][0] >= self.spec.budget_s:
+                return action(Op.STOP)
+            self.queue = self.belief.operations(self.decide())
+        self.last = self.queue.pop(0)
+        return action(self.last["op"], self.last["rho"], self.last["stand"], self.last["slot"])
+
+    def decide(self) -> int:
+        """The policy's most likely open operation now (the time a decision costs)."""
+        choice, _ = self.model.predict(self.belief.observation(),
+                                       action_masks=self.belief.action_mask(),
+                                       deterministic=True)
+        return int(choice)
+
+
+def policy_agent(path: str | Path) -> PolicyAgent:
+    """The agent that plays the policy file ``path``: of the flat lab or of the design
+    view, as its spec says."""
+    spec = read_spec(path)
+    return DesignPolicyAgent(path) if spec.env_id == DESIGN_LAB_ENV_ID else PolicyAgent(path)

@@ -44,6 +44,10 @@ ZERO_SCALE: float = 10.0
 #: observed: (0.01 µm)^2, far below what any reading resolves, so the log stays finite
 #: where an eigenvalue is a rounding of zero.
 LOG_FLOOR: float = 1e-6
+#: A move is a candidate when some stand reads there at least this likely, a priori: the
+#: planner prices a move whose every reading is unlikely (down to 1e-144 at the far end
+#: of a gauge's travel) at next to nothing, and a learner would only spend time there.
+READ_PROBABILITY: float = 0.5
 
 
 @lru_cache(maxsize=2)
@@ -177,6 +181,34 @@ class DesignBelief:
         values = np.append(self.error_spectrum(), self.predicted_mse())
         return np.log10(values / ACCURACY_UNIT_MM**2 + LOG_FLOOR)
 
+    # -- what a learner observes ------------------------------------------------------------
+    def observation(self) -> np.ndarray:
+        """The observation of the design view (float32; its parts:
+        :class:`~orthoglide_env.wrappers.DesignLab`): :meth:`log_mean_squares`, each
+        stand's slot one-hot (then "not mounted"), engaged and out of service, the posture
+        scaled to [-1, 1] over the design's control limits, and the time used over the
+        budget."""
+        stands = np.zeros((self.n_stands, self.n_slots + 3))
+        stands[np.arange(self.n_stands), np.where(self.slots >= 0, self.slots, self.n_slots)] = 1
+        stands[:, -2], stands[:, -1] = self.engaged, self.faulted
+        low, high = self.design.rho_min, self.design.rho_max
+        rho = (2 * self.rho - (high + low)) / (high - low)
+        return np.concatenate((self.log_mean_squares(), stands.ravel(), rho,
+                               [self.time_s / self.budget_s])).astype(np.float32)
+
+    def observation_bounds(self, longest_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds (float32) of every :meth:`observation` of a lab whose longest step takes
+        ``longest_s``: the logs lie between that of :data:`LOG_FLOOR` and a decade above the
+        prior's mean square (readings only shrink the covariance), the clock stops within a
+        step of the budget."""
+        top = float(np.log10(np.trace(self.weight) / ACCURACY_UNIT_MM**2 + LOG_FLOOR)) + 1.0
+        logs, stands = self.factor.shape[1] + 1, self.n_stands * (self.n_slots + 3)
+        low = np.concatenate((np.full(logs, np.log10(LOG_FLOOR)), np.zeros(stands),
+                              -np.ones(3), [0.0]))
+        high = np.concatenate((np.full(logs, top), np.ones(stands), np.ones(3),
+                               [(self.budget_s + longest_s) / self.budget_s]))
+        return low.astype(np.float32), high.astype(np.float32)
+
     # -- the candidate operations -----------------------------------------------------------
     def moves(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Every candidate move's seconds (P,), the plungers down after it (K, P) and how
@@ -194,11 +226,12 @@ class DesignBelief:
 
     def action_mask(self) -> np.ndarray:
         """Which operations are candidates now (``n_actions``,): a move where some stand
-        reads and which ends within the budget; a re-mount at a slot no stand holds, ending
-        within the budget (a re-mount onto a held slot is what the lab refuses; onto its
-        own, a new installation where it stands, buys nothing a planner weighs); stop."""
+        reads at least :data:`READ_PROBABILITY` likely and which ends within the budget; a
+        re-mount at a slot no stand holds, ending within the budget (a re-mount onto a held
+        slot is what the lab refuses; onto its own, a new installation where it stands,
+        buys nothing a planner weighs); stop."""
         seconds, _, reads = self.moves()
-        moves = reads.any(axis=0) & (self.time_s + seconds <= self.budget_s)
+        moves = (reads >= READ_PROBABILITY).any(axis=0) & (self.time_s + seconds <= self.budget_s)
         remount_s = float(TIME.move(self.rho, np.zeros(3))) + TIME.remount_s
         free = ~np.isin(np.arange(self.n_slots), self.slots)
         fits = self.time_s + remount_s <= self.budget_s
