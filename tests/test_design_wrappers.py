@@ -5,6 +5,7 @@ the predicted TCP error as the reward."""
 from __future__ import annotations
 
 import warnings
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -12,11 +13,21 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import orthoglide_env
+from calibrators.agents.names import get_agent
+from calibrators.agents.policy import (
+    DesignPolicyAgent,
+    numpy_logits,
+    read_spec,
+    save_policy,
+    spec_of,
+)
 from calibrators.planning.search import Planner
+from calibrators.study.episodes import run_episode
 from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.lab.design_belief import READ_PROBABILITY
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.lab.rewards import ACCURACY_UNIT_MM
+from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.wrappers import DesignLab, DesignLabVector, design_lab_env
 
 ID = orthoglide_env.DESIGN_LAB_ENV_ID
@@ -227,3 +238,48 @@ def test_op_codes_of_a_move_are_flicks_then_the_move() -> None:
     ops = belief.operations(posture)
     assert [o["op"] for o in ops[:-1]] == [Op.LIFT] * (len(ops) - 1) and ops[-1]["op"] == Op.MOVE
     assert env.step(posture)[-1]["lab_steps"] == len(ops)
+
+
+SMALL = Path(__file__).resolve().parents[1] / "examples" / "designs" / "small.json"
+LAB = {"conditions": "lab", "gauge_sigma": 0.02, "budget_s": 300.0}
+
+
+@pytest.fixture(scope="module")
+def masked_policy(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A tiny MaskablePPO policy of the design view saved to a file."""
+    sb3_contrib = pytest.importorskip("sb3_contrib")
+    env = design_lab_env(**LAB)
+    model = sb3_contrib.MaskablePPO("MlpPolicy", env, n_steps=64, batch_size=32, n_epochs=1,
+                                    seed=0, device="cpu")
+    model.learn(total_timesteps=64)
+    path = tmp_path_factory.mktemp("policy") / "masked.zip"
+    return save_policy(model, path, spec_of(env, "MaskablePPO", LAB))
+
+
+def test_a_design_policy_file_records_its_view_and_plays_in_the_lab(masked_policy: Path
+                                                                   ) -> None:
+    """``policy:FILE`` of a design-view policy keeps the view's belief from the lab's own
+    observations, and takes the network's most likely open operation: the same as
+    MaskablePPO's deterministic prediction in the wrapper."""
+    assert read_spec(masked_policy).env_id == ID
+    agent = get_agent(f"policy:{masked_policy}")
+    assert isinstance(agent, DesignPolicyAgent)
+    episode = run_episode(gym.make(orthoglide_env.LAB_ENV_ID, **LAB), agent, seed=4)
+    assert episode.measurements.experiment_time_s <= LAB["budget_s"]
+    wrapped = design_lab_env(**LAB)
+    observation, _ = wrapped.reset(seed=4)
+    for _ in range(5):
+        mask = wrapped.action_masks()
+        expected, _ = agent.model.predict(observation, action_masks=mask, deterministic=True)
+        logits = numpy_logits(agent.model, observation)
+        # float32 logits of the same network: equal to torch's rounding (~1e-6 of ~1).
+        assert int(np.argmax(np.where(mask, logits, -np.inf))) == int(expected)
+        observation, *_ = wrapped.step(int(expected))
+
+
+def test_a_design_policy_is_refused_on_a_lab_of_another_design(masked_policy: Path) -> None:
+    env = gym.make(orthoglide_env.LAB_ENV_ID, design=MachineDesign.from_file(SMALL), **LAB)
+    observation, _ = env.reset(seed=0)
+    agent = get_agent(f"policy:{masked_policy}")
+    with pytest.raises(ValueError, match=r"another design \(L = 310.25 mm.*retrain"):
+        agent.reset(env, observation, np.random.default_rng(0))

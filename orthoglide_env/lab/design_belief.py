@@ -105,6 +105,9 @@ class DesignBelief:
             len(self.table.postures), len(self.table.tip), int(stands))
         self.n_actions = self.n_postures + self.n_stands * self.n_slots + 1
         self.weight, self.factor = rigid_weight(design), rigid_factor(design)
+        # Seconds to drive from a candidate posture to every other: a policy comes back to
+        # the same few postures, and a decision costs microseconds.
+        self._drive: dict[int, np.ndarray] = {}
         self.start({"slot": np.full(stands, self.n_slots), "engaged": np.zeros(stands),
                     "faulted": np.zeros(stands), "valid": np.zeros(stands),
                     "time": np.zeros(1)})
@@ -137,6 +140,7 @@ class DesignBelief:
             self._read(observation)
 
     def _sync(self, observation: dict[str, np.ndarray]) -> None:
+        self._moves: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         slot = np.asarray(observation["slot"], dtype=int)
         # A stand at a slot beyond the design's catalogue (or none) has no rows here.
         self.slots = np.where(slot < self.n_slots, slot, -1)
@@ -165,7 +169,8 @@ class DesignBelief:
     def predicted_mse(self) -> float:
         """Predicted mean-square TCP error after the best-fit rigid motion (mm^2)."""
         n = N_MACHINE
-        return float(max(np.trace(self.weight @ self.covariance[:n, :n]), 0.0))
+        # trace(W C) of two symmetric matrices, without their product.
+        return float(max(np.sum(self.weight * self.covariance[:n, :n]), 0.0))
 
     def error_spectrum(self) -> np.ndarray:
         """Eigenvalues (r,), largest first, of the predicted TCP error's covariance in the
@@ -214,15 +219,20 @@ class DesignBelief:
         """Every candidate move's seconds (P,), the plungers down after it (K, P) and how
         likely each reads there (K, P), a priori: a plunger is let down only where it is
         safe both here and there (let down here, it reads there) and lifted where it is
-        not safe there; a stand out of service stays up."""
+        not safe there; a stand out of service stays up.  (Computed once per state.)"""
+        if self._moves is not None:
+            return self._moves
         safe, contact = (a[np.maximum(self.slots, 0)] for a in self.table.prior_reach)
         usable = ((self.slots >= 0) & ~self.faulted)[:, None]
         safe = safe & usable
         after = safe & (self.engaged | safe[:, self.here])[:, None]
         reads = np.where(after, contact, 0.0)
         flicks = np.sum(after != self.engaged[:, None], axis=0)
-        seconds = TIME.move(self.rho[None], self.table.postures) + TIME.lift_s * flicks
-        return seconds, after, reads
+        if self.here not in self._drive:
+            self._drive[self.here] = TIME.move(self.rho[None], self.table.postures)
+        seconds = self._drive[self.here] + TIME.lift_s * flicks
+        self._moves = (seconds, after, reads)
+        return self._moves
 
     def action_mask(self) -> np.ndarray:
         """Which operations are candidates now (``n_actions``,): a move where some stand
