@@ -13,6 +13,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import orthoglide_env
+from calibrators.agents.base import action
 from calibrators.agents.names import get_agent
 from calibrators.agents.policy import (
     DesignPolicyAgent,
@@ -186,9 +187,9 @@ def test_the_observation_never_depends_on_the_truth() -> None:
     # the same places read on both machines.
     _, _, reads = one.belief.moves()
     sure = np.flatnonzero(one.action_masks()[:1500] & np.all((reads == 0) | (reads == 1), axis=0))
-    for action in np.random.default_rng(5).choice(sure, 10, replace=False):
-        a, *_ = one.step(int(action))
-        b, *_ = two.step(int(action))
+    for chosen in np.random.default_rng(5).choice(sure, 10, replace=False):
+        a, *_ = one.step(int(chosen))
+        b, *_ = two.step(int(chosen))
         places = [[(r.mounting, r.rho) for r in e.unwrapped.records] for e in (one, two)]
         assert places[0] == places[1]
         readings = [[r.reading for r in e.unwrapped.records] for e in (one, two)]
@@ -259,8 +260,10 @@ def masked_policy(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_a_design_policy_file_records_its_view_and_plays_in_the_lab(masked_policy: Path
                                                                    ) -> None:
     """``policy:FILE`` of a design-view policy keeps the view's belief from the lab's own
-    observations, and takes the network's most likely open operation: the same as
-    MaskablePPO's deterministic prediction in the wrapper."""
+    observations (the wrapper's, step for step) and draws open operations from the
+    network's distribution, whose logits it computes as torch does."""
+    import torch
+
     assert read_spec(masked_policy).env_id == ID
     agent = get_agent(f"policy:{masked_policy}")
     assert isinstance(agent, DesignPolicyAgent)
@@ -268,13 +271,27 @@ def test_a_design_policy_file_records_its_view_and_plays_in_the_lab(masked_polic
     assert episode.measurements.experiment_time_s <= LAB["budget_s"]
     wrapped = design_lab_env(**LAB)
     observation, _ = wrapped.reset(seed=4)
+    lab = gym.make(orthoglide_env.LAB_ENV_ID, **LAB)
+    raw, info = lab.reset(seed=4)
+    agent.reset(lab, raw, np.random.default_rng(0))
     for _ in range(5):
-        mask = wrapped.action_masks()
-        expected, _ = agent.model.predict(observation, action_masks=mask, deterministic=True)
+        np.testing.assert_array_equal(agent.belief.observation(), observation)
+        with torch.no_grad():
+            tensor, _ = agent.model.policy.obs_to_tensor(observation)
+            expected = agent.model.policy.get_distribution(tensor).distribution.logits[0]
         logits = numpy_logits(agent.model, observation)
-        # float32 logits of the same network: equal to torch's rounding (~1e-6 of ~1).
-        assert int(np.argmax(np.where(mask, logits, -np.inf))) == int(expected)
-        observation, *_ = wrapped.step(int(expected))
+        # The same float32 network: log-softmax equal to torch's to its rounding (~1e-6).
+        np.testing.assert_allclose(logits - np.logaddexp.reduce(logits), expected.numpy(),
+                                   atol=1e-5)
+        mask = wrapped.action_masks()
+        assert all(mask[agent.decide()] for _ in range(50))
+        operation = agent.decide()
+        observation, *_ = wrapped.step(operation)
+        for step in agent.belief.operations(operation):
+            agent.last = step
+            raw, _, _, _, info = lab.step(action(step["op"], step["rho"], step["stand"],
+                                                 step["slot"]))
+            agent.belief.observe(step, raw, bool(info["refused"]))
 
 
 def test_a_design_policy_is_refused_on_a_lab_of_another_design(masked_policy: Path) -> None:

@@ -271,11 +271,11 @@ class PolicyAgent(Agent):
 class DesignPolicyAgent(PolicyAgent):
     """Plays a policy trained on the design view (``OrthoglideLabDesign-v0``,
     :class:`~orthoglide_env.wrappers.DesignLab`): it keeps the view's belief from the lab's
-    observations, takes the policy's most likely operation among the open ones (its
-    mask), and plays it as the lab actions it is (a move's lever flicks, then the move),
-    until the lab time of a training episode is used.  The belief runs on the training
-    episode's budget, so that the observed clock and the mask mean what they meant in
-    training."""
+    observations, draws the policy's operation among the open ones (its mask) with the
+    agent's random stream, and plays it as the lab actions it is (a move's lever flicks,
+    then the move), until the lab time of a training episode is used.  The belief runs on
+    the training episode's budget, so that the observed clock and the mask mean what they
+    meant in training."""
 
     def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
               rng: np.random.Generator) -> None:
@@ -301,10 +301,15 @@ class DesignPolicyAgent(PolicyAgent):
         return action(self.last["op"], self.last["rho"], self.last["stand"], self.last["slot"])
 
     def decide(self) -> int:
-        """The policy's most likely open operation now: its network's logits, in NumPy
-        (:func:`numpy_logits`), the largest where the mask is open."""
+        """An operation drawn from the policy's distribution over the open ones (its
+        network's logits, in NumPy: :func:`numpy_logits`), with the agent's random stream:
+        the largest of the logits plus Gumbel noise where the mask is open, a draw of the
+        masked softmax.  Drawn and not the most likely one: a policy trained for a few
+        minutes still spreads its choices, and its most likely operation, played alone,
+        comes back to one posture again and again (the flat agent's finding too)."""
         logits = numpy_logits(self.model, self.belief.observation())
-        return int(np.argmax(np.where(self.belief.action_mask(), logits, -np.inf)))
+        noisy = logits + self.rng.gumbel(size=logits.shape)
+        return int(np.argmax(np.where(self.belief.action_mask(), noisy, -np.inf)))
 
 
 @lru_cache(maxsize=4)
