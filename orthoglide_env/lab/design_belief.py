@@ -48,6 +48,9 @@ LOG_FLOOR: float = 1e-6
 #: planner prices a move whose every reading is unlikely (down to 1e-144 at the far end
 #: of a gauge's travel) at next to nothing, and a learner would only spend time there.
 READ_PROBABILITY: float = 0.5
+#: Stand configurations whose reach a belief keeps (about 80 kB each on the prototype):
+#: an episode meets a few, a training run thousands.
+REACH_KEPT: int = 256
 
 
 @lru_cache(maxsize=2)
@@ -105,8 +108,10 @@ class DesignBelief:
             len(self.table.postures), len(self.table.tip), int(stands))
         self.n_actions = self.n_postures + self.n_stands * self.n_slots + 1
         self.weight, self.factor = rigid_weight(design), rigid_factor(design)
-        # Seconds to drive from a candidate posture to every other: a policy comes back to
-        # the same few postures, and a decision costs microseconds.
+        # What depends only on where the stands are and on the posture, kept: a decision
+        # then costs tens of microseconds (each stand's a-priori reach at every posture by
+        # slots and service; the seconds to drive from a posture to every other).
+        self._reach: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
         self._drive: dict[int, np.ndarray] = {}
         self.start({"slot": np.full(stands, self.n_slots), "engaged": np.zeros(stands),
                     "faulted": np.zeros(stands), "valid": np.zeros(stands),
@@ -178,12 +183,15 @@ class DesignBelief:
         :meth:`predicted_mse`."""
         n = N_MACHINE
         block = self.factor.T @ self.covariance[:n, :n] @ self.factor
+        # A covariance's eigenvalues are >= 0; the rounding of a resolved one may not be.
         return np.clip(np.linalg.eigvalsh((block + block.T) / 2), 0.0, None)[::-1]
 
     def log_mean_squares(self) -> np.ndarray:
-        """``log10`` of :meth:`error_spectrum` and of :meth:`predicted_mse`, each in units
-        of ``ACCURACY_UNIT_MM`` squared plus :data:`LOG_FLOOR` (r + 1,)."""
-        values = np.append(self.error_spectrum(), self.predicted_mse())
+        """``log10`` of :meth:`error_spectrum` and of its sum (:meth:`predicted_mse`, to
+        rounding), each in units of ``ACCURACY_UNIT_MM`` squared plus :data:`LOG_FLOOR`
+        (r + 1,)."""
+        spectrum = self.error_spectrum()
+        values = np.append(spectrum, np.sum(spectrum))
         return np.log10(values / ACCURACY_UNIT_MM**2 + LOG_FLOOR)
 
     # -- what a learner observes ------------------------------------------------------------
@@ -222,9 +230,13 @@ class DesignBelief:
         not safe there; a stand out of service stays up.  (Computed once per state.)"""
         if self._moves is not None:
             return self._moves
-        safe, contact = (a[np.maximum(self.slots, 0)] for a in self.table.prior_reach)
-        usable = ((self.slots >= 0) & ~self.faulted)[:, None]
-        safe = safe & usable
+        key = self.slots.tobytes() + self.faulted.tobytes()
+        if key not in self._reach:
+            if len(self._reach) >= REACH_KEPT:
+                self._reach.clear()
+            safe, contact = (a[np.maximum(self.slots, 0)] for a in self.table.prior_reach)
+            self._reach[key] = (safe & ((self.slots >= 0) & ~self.faulted)[:, None], contact)
+        safe, contact = self._reach[key]
         after = safe & (self.engaged | safe[:, self.here])[:, None]
         reads = np.where(after, contact, 0.0)
         flicks = np.sum(after != self.engaged[:, None], axis=0)
@@ -243,9 +255,9 @@ class DesignBelief:
         seconds, _, reads = self.moves()
         moves = (reads >= READ_PROBABILITY).any(axis=0) & (self.time_s + seconds <= self.budget_s)
         remount_s = float(TIME.move(self.rho, np.zeros(3))) + TIME.remount_s
-        free = ~np.isin(np.arange(self.n_slots), self.slots)
-        fits = self.time_s + remount_s <= self.budget_s
-        remounts = np.tile(free & fits, self.n_stands)
+        free = np.full(self.n_slots, self.time_s + remount_s <= self.budget_s)
+        free[self.slots[self.slots >= 0]] = False
+        remounts = np.tile(free, self.n_stands)
         return np.concatenate((moves, remounts, [True]))
 
     def operations(self, action: int) -> list[dict[str, object]]:
