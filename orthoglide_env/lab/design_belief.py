@@ -73,6 +73,17 @@ def rigid_factor(design: MachineDesign) -> np.ndarray:
     return vector[:, keep] * np.sqrt(value[keep])
 
 
+@lru_cache(maxsize=2)
+def drive_seconds(design: MachineDesign) -> np.ndarray:
+    """Seconds (P, P) to drive from each of the design's candidate postures to each and
+    settle (:meth:`~orthoglide_env.lab.operations.TimeTable.move`), read-only: 18 MB on the
+    prototype, computed once per process and design (a tenth of a second)."""
+    postures = slot_table(design).postures
+    seconds = TIME.move(postures[:, None], postures[None])
+    seconds.flags.writeable = False
+    return seconds
+
+
 def woodbury_gain(covariance: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The gain ``K`` (n, R) of whitened readings ``rows`` (R, n) on a belief of
     ``covariance`` (n, n), and ``B = C R'`` (n, R): the posterior is :func:`shrunk`."""
@@ -108,11 +119,9 @@ class DesignBelief:
             len(self.table.postures), len(self.table.tip), int(stands))
         self.n_actions = self.n_postures + self.n_stands * self.n_slots + 1
         self.weight, self.factor = rigid_weight(design), rigid_factor(design)
-        # What depends only on where the stands are and on the posture, kept: a decision
-        # then costs tens of microseconds (each stand's a-priori reach at every posture by
-        # slots and service; the seconds to drive from a posture to every other).
+        # Each stand's a-priori reach at every posture, by slots and service, kept: a
+        # decision then costs tens of microseconds.
         self._reach: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
-        self._drive: dict[int, np.ndarray] = {}
         self.start({"slot": np.full(stands, self.n_slots), "engaged": np.zeros(stands),
                     "faulted": np.zeros(stands), "valid": np.zeros(stands),
                     "time": np.zeros(1)})
@@ -239,10 +248,8 @@ class DesignBelief:
         safe, contact = self._reach[key]
         after = safe & (self.engaged | safe[:, self.here])[:, None]
         reads = np.where(after, contact, 0.0)
-        flicks = np.sum(after != self.engaged[:, None], axis=0)
-        if self.here not in self._drive:
-            self._drive[self.here] = TIME.move(self.rho[None], self.table.postures)
-        seconds = self._drive[self.here] + TIME.lift_s * flicks
+        flicks = np.count_nonzero(after != self.engaged[:, None], axis=0)
+        seconds = drive_seconds(self.design)[self.here] + TIME.lift_s * flicks
         self._moves = (seconds, after, reads)
         return self._moves
 
