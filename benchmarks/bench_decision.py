@@ -8,8 +8,9 @@ Each agent plays its episodes through the lab env (``OrthoglideLab-v0``), as ``c
 plays them; every ``act`` call is timed.  A decision is a call that chose a new operation
 (a move with its lever flicks, a re-mount, stop); the calls that play a chosen
 operation's further lab actions are counted in the agent's time but are not decisions.
-The table gives each agent's seconds per decision and per episode (the agent's, and the
-lab's steps beside them), and their ratio; the issue's targets are a decision at least
+The table gives each agent's seconds per decision (all its ``act`` time, taking in the
+readings included; and the choice alone, :data:`CHOICE`) and per episode (the agent's,
+and the lab's steps beside them), and their ratios; the issue's targets are a decision at least
 100x cheaper than ``active``'s, and a whole episode at least 10x.  Without ``--policy`` the
 policy is an untrained MaskablePPO network of ``examples/train_masked.py``'s shape: a
 decision costs the same whatever the weights.  Needs sb3-contrib (``pip install -e
@@ -45,13 +46,29 @@ def untrained_policy(kwargs: dict, folder: Path) -> Path:
     return save_policy(model, folder / "untrained.zip", spec_of(env, "MaskablePPO", kwargs))
 
 
-def play(name: str, kwargs: dict, seed: int, machine: int) -> tuple[float, float, int, int]:
+#: Each agent's method that chooses its next operation (the choice alone, without taking
+#: in the readings): the policy's network over its mask, the planner's pricing.
+CHOICE = {"policy": "decide", "active": "_next"}
+
+
+def play(label: str, name: str, kwargs: dict, seed: int, machine: int) -> list[float]:
     """One episode of agent ``name``: its seconds in ``act``, the lab's seconds in ``step``,
-    its decisions and its lab steps."""
+    its decisions, its lab steps and its seconds in its choice (:data:`CHOICE`)."""
     env = gym.make(orthoglide_env.LAB_ENV_ID, **kwargs)
     observation, info = env.reset(seed=machine_seed(seed, machine))
     agent = get_agent(name)
     agent.reset(env, observation, agent_rng(machine_seed(seed, machine)))
+    choosing = [0.0]
+    choose = getattr(agent, CHOICE[label])
+
+    def timed(*args: object) -> object:
+        start = time.perf_counter()
+        try:
+            return choose(*args)
+        finally:
+            choosing[0] += time.perf_counter() - start
+
+    setattr(agent, CHOICE[label], timed)
     acting = stepping = 0.0
     decisions = steps = 0
     while True:
@@ -64,7 +81,7 @@ def play(name: str, kwargs: dict, seed: int, machine: int) -> tuple[float, float
         acting += middle - start
         steps += 1
         if terminated or truncated:
-            return acting, stepping, decisions, steps
+            return [acting, stepping, decisions, steps, choosing[0]]
 
 
 def main() -> None:
@@ -88,22 +105,23 @@ def main() -> None:
         agents = {"policy": POLICY_PREFIX + str(policy), "active": "active"}
         # One episode each first: the slot table, the fixed plan and torch start once per
         # process, a cost no decision of a sweep pays again.
-        for name in agents.values():
-            play(name, kwargs, args.seed, 0)
+        for label, name in agents.items():
+            play(label, name, kwargs, args.seed, 0)
         totals = {}
         for label, name in agents.items():
-            runs = [play(name, kwargs, args.seed, m) for m in range(args.machines)]
+            runs = [play(label, name, kwargs, args.seed, m) for m in range(args.machines)]
             totals[label] = np.sum(runs, axis=0)
     print(f"{args.machines} machines, seed {args.seed}, {args.conditions} conditions, sigma "
           f"{args.sigma} mm, budget {args.budget:g} s")
-    print(f"{'agent':8}{'ms/decision':>13}{'decisions':>11}{'agent s/episode':>17}"
-          f"{'lab s/episode':>15}{'lab steps':>11}")
-    for label, (acting, stepping, decisions, steps) in totals.items():
-        print(f"{label:8}{1e3 * acting / decisions:13.3f}{decisions / args.machines:11.1f}"
-              f"{acting / args.machines:17.3f}{stepping / args.machines:15.3f}"
-              f"{steps / args.machines:11.1f}")
+    print(f"{'agent':8}{'ms/decision':>13}{'ms/choice':>11}{'decisions':>11}"
+          f"{'agent s/episode':>17}{'lab s/episode':>15}{'lab steps':>11}")
+    for label, (acting, stepping, decisions, steps, choosing) in totals.items():
+        print(f"{label:8}{1e3 * acting / decisions:13.3f}{1e3 * choosing / decisions:11.3f}"
+              f"{decisions / args.machines:11.1f}{acting / args.machines:17.3f}"
+              f"{stepping / args.machines:15.3f}{steps / args.machines:11.1f}")
     p, a = totals["policy"], totals["active"]
-    print(f"active / policy: {(a[0] / a[2]) / (p[0] / p[2]):.0f}x per decision, "
+    print(f"active / policy: {(a[0] / a[2]) / (p[0] / p[2]):.0f}x per decision (all of act), "
+          f"{(a[4] / a[2]) / (p[4] / p[2]):.0f}x per choice, "
           f"{(a[0] + a[1]) / (p[0] + p[1]):.1f}x per episode (agent and lab)")
 
 
