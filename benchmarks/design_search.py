@@ -30,9 +30,9 @@ import numpy as np
 import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.planning.search import Planner, greedy_plan
-from calibrators.planning.slot_table import slot_table
 from calibrators.study.episodes import DEFAULT_BUDGET_S, run_episode
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op
+from orthoglide_env.lab.slot_table import slot_table
 from orthoglide_env.model.design import PROTOTYPE
 
 SIGMA = float(np.hypot(0.01, 0.01 / np.sqrt(12)))

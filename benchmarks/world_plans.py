@@ -27,10 +27,10 @@ import numpy as np
 
 from calibrators.agents.optimal import fixed_plan
 from calibrators.planning.search import Planner
-from calibrators.planning.slot_table import slot_table
 from calibrators.planning.world_terms import directions
 from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op
+from orthoglide_env.lab.slot_table import slot_table
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
 

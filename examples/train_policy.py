@@ -11,7 +11,7 @@ machines.
 
 PPO learns on ``OrthoglideLab-v0`` under ``--conditions`` (default ``lab``: the screws,
 heat and indicators of a real lab, the world every agent is compared in) through its flat
-view (one Box of actions, one of observations, :mod:`orthoglide_env.envs.wrappers`),
+view (one Box of actions, one of observations, :mod:`orthoglide_env.wrappers`),
 several envs in parallel, observations normalised by ``VecNormalize`` (its statistics are
 saved with the policy: the agent ``policy:FILE`` normalises as training did).  Every
 ``--every`` steps the policy so far is saved and played on the first ``--curve-machines``
@@ -47,12 +47,12 @@ from calibrators.agents.names import POLICY_PREFIX
 from calibrators.agents.policy import PolicySpec, save_policy, spec_of
 from calibrators.study import compare, statistics
 from calibrators.study.episodes import DEFAULT_BUDGET_S, make_estimator
-from orthoglide_env.envs.wrappers import flat_lab_env
 from orthoglide_env.instruments.dial import DEFAULT_SIGMA
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import DEFAULT_PRESET
 from orthoglide_env.world.conditions import CONDITION_NAMES, Conditions
+from orthoglide_env.wrappers import flat_lab_env
 
 LAB = Conditions("lab")
 

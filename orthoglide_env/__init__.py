@@ -29,6 +29,7 @@ LAB_ENV_ID = "OrthoglideLab-v0"
 #: The lab whose spaces carry the interferometer (its ``align`` operation and reading).
 LAB_V1_ENV_ID = "OrthoglideLab-v1"
 FLAT_LAB_ENV_ID = "OrthoglideLabFlat-v0"
+DESIGN_LAB_ENV_ID = "OrthoglideLabDesign-v0"
 
 
 def _register(gymnasium: ModuleType) -> None:
@@ -55,7 +56,12 @@ def _register(gymnasium: ModuleType) -> None:
         # The lab with one Box of actions and one of observations, for off-the-shelf
         # learners.
         gymnasium.register(id=FLAT_LAB_ENV_ID,
-                           entry_point="orthoglide_env.envs.wrappers:flat_lab_env")
+                           entry_point="orthoglide_env.wrappers:flat_lab_env")
+    if DESIGN_LAB_ENV_ID not in gymnasium.registry:
+        # The lab as an experiment's design: the planner's candidate operations, masked.
+        gymnasium.register(id=DESIGN_LAB_ENV_ID,
+                           entry_point="orthoglide_env.wrappers:design_lab_env",
+                           vector_entry_point="orthoglide_env.wrappers:DesignLabVector")
 
 
 class _RegisterOnImport(importlib.abc.MetaPathFinder):
@@ -86,4 +92,5 @@ if "gymnasium" in sys.modules:
 elif not any(isinstance(f, _RegisterOnImport) for f in sys.meta_path):
     sys.meta_path.insert(0, _RegisterOnImport())
 
-__all__ = ["ENV_ID", "FLAT_LAB_ENV_ID", "LAB_ENV_ID", "LAB_V1_ENV_ID", "MachineDesign"]
+__all__ = ["DESIGN_LAB_ENV_ID", "ENV_ID", "FLAT_LAB_ENV_ID", "LAB_ENV_ID", "LAB_V1_ENV_ID",
+           "MachineDesign"]

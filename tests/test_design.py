@@ -12,9 +12,9 @@ from calibrators.agents.optimal import fixed_plan
 from calibrators.estimators.catalogue import for_study
 from calibrators.planning.belief import N_MACHINE, SPREAD_SLACK, rigid_weight
 from calibrators.planning.search import Planner, greedy_plan
-from calibrators.planning.slot_table import reach, slot_table
 from calibrators.study.episodes import measurements_of, run_episode
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op, slot_catalogue
+from orthoglide_env.lab.slot_table import reach, slot_table
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import PAPER_POSTURES, axis_postures, paper_posture

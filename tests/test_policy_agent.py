@@ -19,9 +19,9 @@ from calibrators.agents.policy import SPEC_ENTRY, PolicySpec, _load_model, save_
 from calibrators.cli import main
 from calibrators.study import compare, statistics
 from calibrators.study.episodes import run_episode
-from orthoglide_env.envs.wrappers import flat_lab_env
 from orthoglide_env.lab.operations import SLOT_NAMES
 from orthoglide_env.model.design import MachineDesign
+from orthoglide_env.wrappers import flat_lab_env
 
 LAB = {"errors": "realistic", "gauge_sigma": 0.01, "budget_s": 600.0}
 

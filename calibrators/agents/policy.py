@@ -5,7 +5,7 @@ A policy file is the zip stable-baselines3 saves, with one more entry,
 the sizes of the flat observation and action, the lab time of a training episode) and
 the observation normalisation it learned behind (``VecNormalize``'s running mean and
 variance).  The agent wraps its lab env in the training env's mapping
-(:class:`~orthoglide_env.envs.wrappers.FlatLabActions` and ``FlattenObservation``), normalises
+(:class:`~orthoglide_env.wrappers.FlatLabActions` and ``FlattenObservation``), normalises
 each observation as training did, and draws its action from the policy's distribution
 with the agent's own random stream (seeded per machine by ``compare``: an episode is
 reproducible) until it has used the lab time of a training episode; then it stops, since
@@ -39,9 +39,12 @@ import numpy as np
 from gymnasium.spaces import flatten, flatten_space
 
 from calibrators.agents.base import Agent, action
-from orthoglide_env.envs.wrappers import flat_action_space, lab_action
+from orthoglide_env import DESIGN_LAB_ENV_ID, FLAT_LAB_ENV_ID
+from orthoglide_env.instruments.dial import weighting_sigma
+from orthoglide_env.lab.design_belief import DesignBelief
 from orthoglide_env.lab.operations import OP_NAMES, SLOT_NAMES, V0_OPS, Op, slot_catalogue
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
+from orthoglide_env.wrappers import flat_action_space, lab_action
 
 #: The entry of the policy zip that holds the :class:`PolicySpec` (JSON).
 SPEC_ENTRY: str = "orthoglide_policy.json"
@@ -71,6 +74,9 @@ class PolicySpec:
     #: The training lab's machine design (``MachineDesign.to_dict``); None: the prototype
     #: (files saved before designs were recorded).
     design: dict[str, Any] | None = None
+    #: The env id (and version) the policy acted in: the flat lab, or the design view
+    #: (``OrthoglideLabDesign-v0``, whose discrete operations the policy chooses).
+    env_id: str = FLAT_LAB_ENV_ID
 
     def to_json(self) -> str:
         return json.dumps(asdict(self))
@@ -94,20 +100,24 @@ class PolicySpec:
 
 def spec_of(env: gym.Env, algorithm: str, env_kwargs: dict[str, Any],
             normaliser: Any | None = None) -> PolicySpec:
-    """The spec of a policy trained on the flat lab ``env`` (``normaliser``: the training
+    """The spec of a policy trained on ``env``, the flat lab or the design view
+    (:class:`~orthoglide_env.wrappers.DesignLab`) (``normaliser``: the training
     VecNormalize, or None)."""
     lab = env.unwrapped
     rms = getattr(normaliser, "obs_rms", None)
+    discrete = isinstance(env.action_space, gym.spaces.Discrete)
     return PolicySpec(
         algorithm=algorithm, slots=tuple(s.slot for s in lab.slots), ops=OP_NAMES[:V0_OPS],
         stands=int(lab.n_stands),
         observation_size=int(env.observation_space.shape[0]),
-        action_size=int(env.action_space.shape[0]), budget_s=float(lab.budget_s),
+        action_size=int(env.action_space.n if discrete else env.action_space.shape[0]),
+        budget_s=float(lab.budget_s),
         env=dict(env_kwargs),
         obs_mean=tuple(float(v) for v in rms.mean) if rms is not None else (),
         obs_var=tuple(float(v) for v in rms.var) if rms is not None else (),
         clip_obs=float(getattr(normaliser, "clip_obs", 10.0)),
         epsilon=float(getattr(normaliser, "epsilon", 1e-8)), design=lab.design.to_dict(),
+        env_id=DESIGN_LAB_ENV_ID if discrete else FLAT_LAB_ENV_ID,
     )
 
 
@@ -139,6 +149,9 @@ def read_spec(path: str | Path) -> PolicySpec:
     if spec.version != SPEC_VERSION:
         raise ValueError(f"policy file '{path}' has layout version {spec.version}, this "
                          f"workbench reads {SPEC_VERSION}: retrain it")
+    if spec.env_id not in (FLAT_LAB_ENV_ID, DESIGN_LAB_ENV_ID):
+        raise ValueError(f"policy file '{path}' acted in env '{spec.env_id}'; this workbench "
+                         f"plays {FLAT_LAB_ENV_ID} and {DESIGN_LAB_ENV_ID}: retrain it")
     if not _a_catalogue(spec.slots) or spec.ops != OP_NAMES[:V0_OPS]:
         raise ValueError(
             f"policy file '{path}' was trained on a lab with {len(spec.slots)} slots and "
@@ -169,6 +182,12 @@ def _load_model(path: str, modified_ns: int, algorithm: str) -> Any:
         raise RuntimeError(f"running a learned policy needs stable-baselines3: "
                            f"{INSTALL_HINT}") from None
     cls = getattr(stable_baselines3, algorithm, None)
+    if cls is None and algorithm == "MaskablePPO":
+        try:
+            from sb3_contrib import MaskablePPO as cls
+        except ImportError:
+            raise RuntimeError(f"running a MaskablePPO policy needs sb3-contrib: "
+                               f"{INSTALL_HINT}") from None
     if cls is None:
         raise ValueError(f"policy file '{path}' names an unknown algorithm '{algorithm}'")
     return cls.load(path, device="cpu")
@@ -185,7 +204,9 @@ class PolicyAgent(Agent):
         self.spec = read_spec(self.path)
         self.model = _load_model(str(self.path.resolve()), self.path.stat().st_mtime_ns,
                                  self.spec.algorithm)
-        sizes = (self.model.observation_space.shape, self.model.action_space.shape)
+        space = self.model.action_space
+        actions = (space.n,) if isinstance(space, gym.spaces.Discrete) else space.shape
+        sizes = (self.model.observation_space.shape, actions)
         if sizes != ((self.spec.observation_size,), (self.spec.action_size,)):
             raise ValueError(f"policy file '{self.path}': the network's spaces {sizes} differ "
                              "from its spec: the file is damaged")
@@ -193,6 +214,24 @@ class PolicyAgent(Agent):
     def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
               rng: np.random.Generator) -> None:
         super().reset(env, observation, rng)
+        self._check_lab()
+        # The spaces alone: a lab in a vector env is no gymnasium.Env to wrap.
+        self.spaces = (self.env.observation_space, self.env.action_space)
+        sizes = (flatten_space(self.spaces[0]).shape[0], flat_action_space(self.spaces[1]).shape[0])
+        self._check_sizes(sizes)
+
+    def _check_sizes(self, sizes: tuple[int, int]) -> None:
+        """Refuse a lab whose observation and action sizes are not the training lab's."""
+        if sizes != (self.spec.observation_size, self.spec.action_size):
+            raise ValueError(
+                f"policy file '{self.path}' was trained on a lab of {self.spec.stands} "
+                f"stands with {self.spec.observation_size} observations and "
+                f"{self.spec.action_size} actions; this lab ({self.env.n_stands} stands, "
+                f"tracker {'on' if self.env.tracker else 'off'}) has {sizes[0]} and "
+                f"{sizes[1]}")
+
+    def _check_lab(self) -> None:
+        """Refuse a lab of another slot catalogue or design than the training lab's."""
         slots = tuple(s.slot for s in self.env.slots)
         if self.spec.slots != slots:
             raise ValueError(
@@ -210,16 +249,6 @@ class PolicyAgent(Agent):
                 f"lab's: L = {here.L:g} mm, [{here.rho_min:g}, {here.rho_max:g}] mm): its "
                 "actions and observations mean other things here, retrain it on this design "
                 "(examples/train_policy.py)")
-        # The spaces alone: a lab in a vector env is no gymnasium.Env to wrap.
-        self.spaces = (self.env.observation_space, self.env.action_space)
-        sizes = (flatten_space(self.spaces[0]).shape[0], flat_action_space(self.spaces[1]).shape[0])
-        if sizes != (self.spec.observation_size, self.spec.action_size):
-            raise ValueError(
-                f"policy file '{self.path}' was trained on a lab of {self.spec.stands} "
-                f"stands with {self.spec.observation_size} observations and "
-                f"{self.spec.action_size} actions; this lab ({self.env.n_stands} stands, "
-                f"tracker {'on' if self.env.tracker else 'off'}) has {sizes[0]} and "
-                f"{sizes[1]}")
 
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
         if observation["time"][0] >= self.spec.budget_s:
@@ -237,3 +266,101 @@ class PolicyAgent(Agent):
             tensor, _ = self.model.policy.obs_to_tensor(flat)
             normal = self.model.policy.get_distribution(tensor).distribution
             return normal.mean.numpy()[0], normal.stddev.numpy()[0]
+
+
+class DesignPolicyAgent(PolicyAgent):
+    """Plays a policy trained on the design view (``OrthoglideLabDesign-v0``,
+    :class:`~orthoglide_env.wrappers.DesignLab`): it keeps the view's belief from the lab's
+    observations, draws the policy's operation among the open ones (its mask) with the
+    agent's random stream, and plays it as the lab actions it is (a move's lever flicks,
+    then the move), until the lab time of a training episode is used.  The belief runs on
+    the training episode's budget, so that the observed clock and the mask mean what they
+    meant in training."""
+
+    def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
+              rng: np.random.Generator) -> None:
+        Agent.reset(self, env, observation, rng)
+        self._check_lab()
+        lab = self.env
+        self.belief = DesignBelief(lab.design, lab.n_stands,
+                                   weighting_sigma(float(lab.noise.effective_sigma)),
+                                   self.spec.budget_s)
+        self._check_sizes((len(self.belief.observation()), self.belief.n_actions))
+        self.belief.start(observation)
+        self.queue: list[dict[str, Any]] = []
+        self.last: dict[str, Any] | None = None
+
+    def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
+        if self.last is not None:
+            self.belief.observe(self.last, observation, bool(info.get("refused")))
+        if not self.queue:
+            if observation["time"][0] >= self.spec.budget_s:
+                return action(Op.STOP)
+            self.queue = self.belief.operations(self.decide())
+        self.last = self.queue.pop(0)
+        return action(self.last["op"], self.last["rho"], self.last["stand"], self.last["slot"])
+
+    def decide(self) -> int:
+        """An operation drawn from the policy's distribution over the open ones (its
+        network's logits, in NumPy: :func:`numpy_logits`), with the agent's random stream:
+        the largest of the logits plus Gumbel noise where the mask is open, a draw of the
+        masked softmax.  Drawn and not the most likely one: a policy trained for a few
+        minutes still spreads its choices, and its most likely operation, played alone,
+        comes back to one posture again and again (the flat agent's finding too)."""
+        logits = numpy_logits(self.model, self.belief.observation())
+        noisy = logits + self.rng.gumbel(size=logits.shape)
+        return int(np.argmax(np.where(self.belief.action_mask(), noisy, -np.inf)))
+
+
+@lru_cache(maxsize=4)
+def _layers(model: Any) -> tuple[tuple[np.ndarray, np.ndarray, str], ...]:
+    """The actor of an on-policy stable-baselines3 model with a flat observation as
+    (weight, bias, activation after it) layers in NumPy (float32): a decision then costs
+    tens of microseconds, where torch's dispatch and sb3's checks cost a millisecond."""
+    import torch
+
+    policy = model.policy
+    if not isinstance(policy.features_extractor, _flatten_extractor()):
+        raise ValueError("a design-view policy reads its flat observation as it is "
+                         f"(FlattenExtractor), not through {type(policy.features_extractor)}")
+    modules = [*policy.mlp_extractor.policy_net, policy.action_net]
+    activations = {torch.nn.Tanh: "tanh", torch.nn.ReLU: "relu"}
+    layers: list[tuple[np.ndarray, np.ndarray, str]] = []
+    for module in modules:
+        if isinstance(module, torch.nn.Linear):
+            layers.append((module.weight.detach().numpy().copy(),
+                           module.bias.detach().numpy().copy(), ""))
+        elif type(module) in activations and layers:
+            weight, bias, _ = layers[-1]
+            layers[-1] = (weight, bias, activations[type(module)])
+        else:
+            raise ValueError(f"a design-view policy's network has a layer {module} that "
+                             "this agent cannot play: Linear, Tanh and ReLU only")
+    return tuple(layers)
+
+
+def _flatten_extractor() -> type:
+    from stable_baselines3.common.torch_layers import FlattenExtractor
+
+    return FlattenExtractor
+
+
+def numpy_logits(model: Any, observation: np.ndarray) -> np.ndarray:
+    """The action logits of ``model``'s actor (a MaskablePPO ``MlpPolicy``) for one flat
+    ``observation``, in NumPy and in float32 as torch computes them (equal to its
+    rounding)."""
+    x = np.asarray(observation, dtype=np.float32)
+    for weight, bias, activation in _layers(model):
+        x = weight @ x + bias
+        if activation == "tanh":
+            x = np.tanh(x)
+        elif activation == "relu":
+            x = np.maximum(x, 0.0)
+    return x
+
+
+def policy_agent(path: str | Path) -> PolicyAgent:
+    """The agent that plays the policy file ``path``: of the flat lab or of the design
+    view, as its spec says."""
+    spec = read_spec(path)
+    return DesignPolicyAgent(path) if spec.env_id == DESIGN_LAB_ENV_ID else PolicyAgent(path)

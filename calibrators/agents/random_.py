@@ -4,7 +4,7 @@ The floor any designed experiment must beat.  At every step it picks, at random,
 a random posture of the joint cube (60 %), lifting or engaging a random stand (20 %), or
 re-mounting a random stand on a random free slot (20 %).  It uses what a careful
 technician knows, the nominal machine: a move is only made to a posture the nominal model
-reaches with every part :data:`~calibrators.planning.slot_table.CLEARANCE` clear of the others
+reaches with every part :data:`~orthoglide_env.lab.slot_table.CLEARANCE` clear of the others
 and no engaged gauge pressed within :data:`MARGIN` of its travel, and a gauge is only
 engaged where that holds.  An engaged platform gauge allows only postures where it reads
 (within its travel of where it was zeroed): past its face the whole platform would run
@@ -19,12 +19,12 @@ import gymnasium as gym
 import numpy as np
 
 from calibrators.agents.base import Agent, action, register
-from calibrators.planning.slot_table import CLEARANCE
 from orthoglide_env.instruments.dial import pressed_past_travel
 from orthoglide_env.instruments.rays import exact_ray_distances, exact_target_boxes
 from orthoglide_env.instruments.slots import on_platform
 from orthoglide_env.instruments.stands import install, installed_on
 from orthoglide_env.lab.operations import Op, slot_catalogue
+from orthoglide_env.lab.slot_table import CLEARANCE
 from orthoglide_env.model.boxes import collision_boxes
 from orthoglide_env.model.collisions import clearance
 from orthoglide_env.model.design import MachineDesign

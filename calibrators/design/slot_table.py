@@ -1,9 +1,9 @@
-"""Moved to :mod:`calibrators.planning.slot_table`;
+"""Moved to :mod:`orthoglide_env.lab.slot_table`;
 this path stays so that earlier scripts' imports work
 (it is that module, not a copy)."""
 
 import sys
 
-from calibrators.planning import slot_table
+from orthoglide_env.lab import slot_table
 
 sys.modules[__name__] = slot_table

@@ -20,9 +20,9 @@ D             the rise of log det of the information about every unknown, in
 
 A reading counts with the probability that the tip touches (it may leave the bar's reach
 at the far end of the travel); a plunger goes down only where the tip stays
-:data:`~calibrators.planning.slot_table.SAFETY_SIGMAS` of its predicted spread plus
-:data:`~calibrators.planning.slot_table.END_GAP` off the pushed-in end (the candidates and
-what a gauge does there: :mod:`calibrators.planning.slot_table`).
+:data:`~orthoglide_env.lab.slot_table.SAFETY_SIGMAS` of its predicted spread plus
+:data:`~orthoglide_env.lab.slot_table.END_GAP` off the pushed-in end (the candidates and
+what a gauge does there: :mod:`orthoglide_env.lab.slot_table`).
 A fixed plan knows each reading only a priori, so its margins are wide (up to ~3 mm);
 a belief that has seen readings (:meth:`Belief.observe`) predicts them to microns and
 may use the whole travel: that is what the ``active`` agent buys with its feedback.
@@ -37,51 +37,30 @@ The prices of moves: :mod:`calibrators.planning.pricing`; the choice among them:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
 
-from calibrators.planning.slot_table import END_GAP, reach, slot_table
 from calibrators.planning.world_terms import world_terms
+from orthoglide_env.lab.design_belief import (
+    N_MACHINE,
+    N_STAND,
+    ZERO_SCALE,
+    rigid_factor,  # noqa: F401  (the planner's modules import it from here)
+    rigid_weight,
+    shrunk,
+    woodbury_gain,
+)
 from orthoglide_env.lab.operations import TIME, Op
+from orthoglide_env.lab.slot_table import END_GAP, reach, slot_table
 from orthoglide_env.model.design import MachineDesign
-from orthoglide_env.model.errors import ERROR_NAMES, MachineParams
-from orthoglide_env.reading_model import ParameterSpace, default_scales
-from orthoglide_env.scoring import rigid_weights
 from orthoglide_env.world.conditions import Conditions
 
-N_MACHINE = len(ERROR_NAMES)
-#: Unknowns of one mounting besides the machine's: four of its stand, then its zero.
-N_STAND = 5
-#: A dial's zero, a priori (mm): wide enough to be eliminated by the first reading, as the
-#: estimators do exactly.
-ZERO_SCALE: float = 10.0
 CRITERIA: tuple[str, ...] = ("I", "D")
 #: Widening (mm) of a remembered spread before it is taken for an upper bound of the
 #: present one (:meth:`Belief._reach`): far above the rounding of a spread (under 1e-6
 #: mm even where it is nearly zero) and far below the microns that decide a margin.
 SPREAD_SLACK: float = 1e-5
-
-
-@lru_cache(maxsize=2)
-def rigid_weight(design: MachineDesign) -> np.ndarray:
-    """``W`` (27, 27): ``trace(W C)`` is the predicted mean-square TCP error over the
-    scoring grid after the best-fit rigid motion (mm^2) for machine errors off by
-    ``N(0, C)`` in units of their scale (the quadratic form of
-    :func:`orthoglide_env.scoring.predicted_frame_errors`)."""
-    scale = default_scales(ParameterSpace())
-    return rigid_weights([MachineParams(design=design)])[0] * np.outer(scale, scale)
-
-
-@lru_cache(maxsize=2)
-def rigid_factor(design: MachineDesign) -> np.ndarray:
-    """``F`` (27, r) with ``F F' = W`` (:func:`rigid_weight`): ``W`` has rank ``r``, 12 on
-    the prototype, as many errors only move the tool rigidly or as others do.  The
-    eigenvalues below 1e-12 of the largest are the rounding of those zeros."""
-    value, vector = np.linalg.eigh(rigid_weight(design))
-    keep = value > 1e-12 * value[-1]
-    return vector[:, keep] * np.sqrt(value[keep])
 
 
 class PlannedOperation(NamedTuple):
@@ -273,15 +252,12 @@ class Belief:
         ones)."""
         if len(rows) == 0:
             return
-        b = self.covariance @ rows.T
-        m = np.eye(len(rows)) + rows @ b
-        gain = np.linalg.solve(m, b.T).T  # (n, R)
+        gain, b = woodbury_gain(self.covariance, rows)  # (n, R)
         if self.world is not None:
             self.world.update(gain, rows, considered)
         if self.mean is not None and innovations is not None:
             self.mean = self.mean + gain @ innovations
-        self.covariance = self.covariance - gain @ b.T
-        self.covariance = (self.covariance + self.covariance.T) / 2
+        self.covariance = shrunk(self.covariance, gain, b)
 
     def expect_readings(self, stands: np.ndarray | None = None,
                         weights: np.ndarray | None = None) -> None:

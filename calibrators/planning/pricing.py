@@ -24,9 +24,9 @@ from typing import NamedTuple
 import numpy as np
 
 from calibrators.planning.belief import N_MACHINE, Belief, rigid_factor
-from calibrators.planning.slot_table import slot_table
 from calibrators.planning.world_terms import directions
 from orthoglide_env.lab.operations import TIME
+from orthoglide_env.lab.slot_table import slot_table
 from orthoglide_env.model.design import MachineDesign
 
 #: :meth:`Pricer.top_rates` prices at least this many moves of the highest bounds first,

@@ -55,7 +55,7 @@ from calibrators.estimators.consider import (
     warmup_curves,
     warmup_sizes,
 )
-from calibrators.planning.slot_table import SlotTable
+from orthoglide_env.lab.slot_table import SlotTable
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.reading_model import ParameterSpace, default_scales
 from orthoglide_env.world.conditions import Conditions

@@ -1,0 +1,129 @@
+"""The time a decision costs: a masked policy on the design view against ``active``, in one
+run on the same machines of the same lab.
+
+    python benchmarks/bench_decision.py [--policy results/masked.zip] [--machines 5]
+        [--budget 330] [--conditions lab] [--sigma 0.02] [--seed 1]
+
+Each agent plays its episodes through the lab env (``OrthoglideLab-v0``), as ``compare``
+plays them; every ``act`` call is timed.  A decision is a call that chose a new operation
+(a move with its lever flicks, a re-mount, stop); the calls that play a chosen
+operation's further lab actions are counted in the agent's time but are not decisions.
+The table gives each agent's seconds per decision (all its ``act`` time, taking in the
+readings included; and the choice alone, :data:`CHOICE`) and per episode (the agent's,
+and the lab's steps beside them), and their ratios; the issue's targets are a decision at least
+100x cheaper than ``active``'s, and a whole episode at least 10x.  Without ``--policy`` the
+policy is an untrained MaskablePPO network of ``examples/train_masked.py``'s shape: a
+decision costs the same whatever the weights.  Needs sb3-contrib (``pip install -e
+'.[rl]'``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+import time
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+
+import orthoglide_env
+from calibrators.agents import get_agent
+from calibrators.agents.names import POLICY_PREFIX
+from calibrators.agents.policy import save_policy, spec_of
+from calibrators.study.episodes import agent_rng, machine_seed
+from orthoglide_env.wrappers import design_lab_env
+
+
+def untrained_policy(kwargs: dict, folder: Path) -> Path:
+    """An untrained MaskablePPO policy file of the training script's network."""
+    from sb3_contrib import MaskablePPO
+
+    env = design_lab_env(**kwargs)
+    model = MaskablePPO("MlpPolicy", env, seed=0, device="cpu",
+                        policy_kwargs={"net_arch": [128, 128]})
+    return save_policy(model, folder / "untrained.zip", spec_of(env, "MaskablePPO", kwargs))
+
+
+#: Each agent's method that chooses its next operation (the choice alone, without taking
+#: in the readings): the policy's network over its mask, the planner's pricing.
+CHOICE = {"policy": "decide", "active": "_next"}
+
+
+def play(label: str, name: str, kwargs: dict, seed: int, machine: int) -> list[float]:
+    """One episode of agent ``name``: its seconds in ``act``, the lab's seconds in ``step``,
+    its decisions, its lab steps and its seconds in its choice (:data:`CHOICE`)."""
+    env = gym.make(orthoglide_env.LAB_ENV_ID, **kwargs)
+    observation, info = env.reset(seed=machine_seed(seed, machine))
+    agent = get_agent(name)
+    agent.reset(env, observation, agent_rng(machine_seed(seed, machine)))
+    choosing = [0.0]
+    choose = getattr(agent, CHOICE[label])
+
+    def timed(*args: object) -> object:
+        start = time.perf_counter()
+        try:
+            return choose(*args)
+        finally:
+            choosing[0] += time.perf_counter() - start
+
+    setattr(agent, CHOICE[label], timed)
+    acting = stepping = 0.0
+    decisions = steps = 0
+    while True:
+        decisions += not agent.queue
+        start = time.perf_counter()
+        action = agent.act(observation, info)
+        middle = time.perf_counter()
+        observation, _, terminated, truncated, info = env.step(action)
+        stepping += time.perf_counter() - middle
+        acting += middle - start
+        steps += 1
+        if terminated or truncated:
+            return [acting, stepping, decisions, steps, choosing[0]]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--policy", type=Path, default=None,
+                        help="a design-view policy file (default: an untrained network)")
+    parser.add_argument("--machines", type=int, default=5)
+    parser.add_argument("--budget", type=float, default=330.0)
+    parser.add_argument("--conditions", default="lab")
+    parser.add_argument("--sigma", type=float, default=0.02)
+    parser.add_argument("--seed", type=int, default=1)
+    args = parser.parse_args()
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    import torch
+
+    torch.set_num_threads(1)
+    kwargs = {"conditions": args.conditions, "gauge_sigma": args.sigma,
+              "budget_s": args.budget}
+    with tempfile.TemporaryDirectory() as folder:
+        policy = args.policy or untrained_policy(kwargs, Path(folder))
+        agents = {"policy": POLICY_PREFIX + str(policy), "active": "active"}
+        # One episode each first: the slot table, the fixed plan and torch start once per
+        # process, a cost no decision of a sweep pays again.
+        for label, name in agents.items():
+            play(label, name, kwargs, args.seed, 0)
+        totals = {}
+        for label, name in agents.items():
+            runs = [play(label, name, kwargs, args.seed, m) for m in range(args.machines)]
+            totals[label] = np.sum(runs, axis=0)
+    print(f"{args.machines} machines, seed {args.seed}, {args.conditions} conditions, sigma "
+          f"{args.sigma} mm, budget {args.budget:g} s")
+    print(f"{'agent':8}{'ms/decision':>13}{'ms/choice':>11}{'decisions':>11}"
+          f"{'agent s/episode':>17}{'lab s/episode':>15}{'lab steps':>11}")
+    for label, (acting, stepping, decisions, steps, choosing) in totals.items():
+        print(f"{label:8}{1e3 * acting / decisions:13.3f}{1e3 * choosing / decisions:11.3f}"
+              f"{decisions / args.machines:11.1f}{acting / args.machines:17.3f}"
+              f"{stepping / args.machines:15.3f}{steps / args.machines:11.1f}")
+    p, a = totals["policy"], totals["active"]
+    print(f"active / policy: {(a[0] / a[2]) / (p[0] / p[2]):.0f}x per decision (all of act), "
+          f"{(a[4] / a[2]) / (p[4] / p[2]):.0f}x per choice, "
+          f"{(a[0] + a[1]) / (p[0] + p[1]):.1f}x per episode (agent and lab)")
+
+
+if __name__ == "__main__":
+    main()

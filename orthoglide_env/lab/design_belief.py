@@ -1,0 +1,284 @@
+"""What the readings so far determine, at the nominal machine: the Gaussian belief of an
+experiment as it runs, updated in closed form, and the candidate operations open to it.
+
+The unknowns are Gaussian, each in units of its a-priori size: the machine's 27 errors
+(the realistic preset's sigmas, the estimators' priors), then :data:`N_STAND` per stand's
+present mounting, its stand's four installation errors and its dial's zero
+(:data:`ZERO_SCALE`, diffuse: the estimators eliminate it).  A reading is a row of
+derivatives at the nominal machine divided by the gauge's sigma, so each reading updates
+the covariance by a rank-one (Woodbury) step, and the predicted mean-square TCP error
+after the best-fit rigid motion is ``trace(W C)`` (:func:`rigid_weight`): microseconds,
+never a fit.  The readings' values do not enter: at the nominal machine the covariance
+depends on where and by which mounting each reading was taken, not on what it read, so
+two machines read at the same places have the same belief.
+
+The experiment planner (``calibrators.planning.belief``) builds on the same rows and
+update; :class:`DesignBelief` is the lean form the env's design wrappers
+(:mod:`orthoglide_env.wrappers`) keep for a learner: geometry only (the ``lab`` world's
+drift and indicator curves are not in it), the candidate operations of the slot table
+(:mod:`orthoglide_env.lab.slot_table`) as actions, and a plunger let down only where the
+a-priori spread of its reading keeps it safe, as a fixed plan does.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from orthoglide_env.lab.operations import TIME, Op
+from orthoglide_env.lab.rewards import ACCURACY_UNIT_MM
+from orthoglide_env.lab.slot_table import SlotTable, slot_table
+from orthoglide_env.model.design import MachineDesign
+from orthoglide_env.model.errors import ERROR_NAMES, MachineParams
+from orthoglide_env.reading_model import ParameterSpace, default_scales
+from orthoglide_env.scoring import rigid_weights
+
+N_MACHINE = len(ERROR_NAMES)
+#: Unknowns of one mounting besides the machine's: four of its stand, then its zero.
+N_STAND = 5
+#: A dial's zero, a priori (mm): wide enough to be eliminated by the first reading, as the
+#: estimators do exactly.
+ZERO_SCALE: float = 10.0
+#: Added to every mean square (in units of ``ACCURACY_UNIT_MM`` squared) before its log is
+#: observed: (0.01 µm)^2, far below what any reading resolves, so the log stays finite
+#: where an eigenvalue is a rounding of zero.
+LOG_FLOOR: float = 1e-6
+#: A move is a candidate when some stand reads there at least this likely, a priori: the
+#: planner prices a move whose every reading is unlikely (down to 1e-144 at the far end
+#: of a gauge's travel) at next to nothing, and a learner would only spend time there.
+READ_PROBABILITY: float = 0.5
+#: Stand configurations whose reach a belief keeps (about 80 kB each on the prototype):
+#: an episode meets a few, a training run thousands.
+REACH_KEPT: int = 256
+
+
+@lru_cache(maxsize=2)
+def rigid_weight(design: MachineDesign) -> np.ndarray:
+    """``W`` (27, 27): ``trace(W C)`` is the predicted mean-square TCP error over the
+    scoring grid after the best-fit rigid motion (mm^2) for machine errors off by
+    ``N(0, C)`` in units of their scale (the quadratic form of
+    :func:`orthoglide_env.scoring.predicted_frame_errors`)."""
+    scale = default_scales(ParameterSpace())
+    return rigid_weights([MachineParams(design=design)])[0] * np.outer(scale, scale)
+
+
+@lru_cache(maxsize=2)
+def rigid_factor(design: MachineDesign) -> np.ndarray:
+    """``F`` (27, r) with ``F F' = W`` (:func:`rigid_weight`): ``W`` has rank ``r``, 12 on
+    the prototype, as many errors only move the tool rigidly or as others do.  The
+    eigenvalues below 1e-12 of the largest are the rounding of those zeros."""
+    value, vector = np.linalg.eigh(rigid_weight(design))
+    keep = value > 1e-12 * value[-1]
+    return vector[:, keep] * np.sqrt(value[keep])
+
+
+@lru_cache(maxsize=2)
+def drive_seconds(design: MachineDesign) -> np.ndarray:
+    """Seconds (P, P) to drive from each of the design's candidate postures to each and
+    settle (:meth:`~orthoglide_env.lab.operations.TimeTable.move`), read-only: 18 MB on the
+    prototype, computed once per process and design (a tenth of a second)."""
+    postures = slot_table(design).postures
+    seconds = TIME.move(postures[:, None], postures[None])
+    seconds.flags.writeable = False
+    return seconds
+
+
+def woodbury_gain(covariance: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The gain ``K`` (n, R) of whitened readings ``rows`` (R, n) on a belief of
+    ``covariance`` (n, n), and ``B = C R'`` (n, R): the posterior is :func:`shrunk`."""
+    b = covariance @ rows.T
+    m = np.eye(len(rows)) + rows @ b
+    return np.linalg.solve(m, b.T).T, b
+
+
+def shrunk(covariance: np.ndarray, gain: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The covariance after the readings of gain ``gain`` and ``B`` (:func:`woodbury_gain`),
+    kept symmetric."""
+    covariance = covariance - gain @ b.T
+    return (covariance + covariance.T) / 2
+
+
+class DesignBelief:
+    """A lab experiment's belief as it runs (see the module), and its candidate operations:
+    a move to each of the slot table's ``P`` postures (with the lever flicks it needs),
+    a re-mount of each of ``K`` stands at each of the ``S`` slots of the design's
+    catalogue, and stop: ``P + K S + 1`` operations, in that order.
+
+    ``sigma``: a reading's standard deviation (mm), ``budget_s``: the lab's time budget.
+    It follows the lab from its observations (:meth:`start`, :meth:`observe`), never from
+    its truth."""
+
+    def __init__(self, design: MachineDesign, stands: int, sigma: float, budget_s: float
+                 ) -> None:
+        if not (np.isfinite(sigma) and sigma > 0):
+            raise ValueError(f"sigma must be a positive number, got {sigma}")
+        self.design, self.sigma, self.budget_s = design, float(sigma), float(budget_s)
+        self.table: SlotTable = slot_table(design)
+        self.n_postures, self.n_slots, self.n_stands = (
+            len(self.table.postures), len(self.table.tip), int(stands))
+        self.n_actions = self.n_postures + self.n_stands * self.n_slots + 1
+        self.weight, self.factor = rigid_weight(design), rigid_factor(design)
+        # Each stand's a-priori reach at every posture, by slots and service, kept: a
+        # decision then costs tens of microseconds.
+        self._reach: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+        self.start({"slot": np.full(stands, self.n_slots), "engaged": np.zeros(stands),
+                    "faulted": np.zeros(stands), "valid": np.zeros(stands),
+                    "time": np.zeros(1)})
+
+    # -- following the lab ------------------------------------------------------------------
+    def start(self, observation: dict[str, np.ndarray]) -> None:
+        """A fresh belief at Zero from the lab's first observation (its readings at Zero)."""
+        self.covariance = np.eye(N_MACHINE + N_STAND * self.n_stands)
+        self.here, self.rho = self.table.zero, np.zeros(3)
+        self._sync(observation)
+        self._read(observation)
+
+    def observe(self, operation: dict[str, object], observation: dict[str, np.ndarray],
+                refused: bool) -> None:
+        """Take in the lab's observation after ``operation`` (a lab action, as
+        :meth:`operations` gives them): a move's readings, a re-mount's fresh unknowns and
+        its readings at Zero.  A refused operation changes nothing but the clock."""
+        if not refused and operation["op"] == Op.REMOUNT:
+            cols = self._columns(int(operation["stand"]))[N_MACHINE:]
+            # A mounting left behind is marginalised out: nothing reads it again.
+            self.covariance[cols, :] = 0.0
+            self.covariance[:, cols] = 0.0
+            self.covariance[cols, cols] = 1.0
+            self.here, self.rho = self.table.zero, np.zeros(3)
+        if not refused and operation["op"] == Op.MOVE:
+            self.rho = np.asarray(operation["rho"], dtype=float)
+            self.here = int(np.flatnonzero(np.all(self.table.postures == self.rho, axis=1))[0])
+        self._sync(observation)
+        if not refused and operation["op"] in (Op.MOVE, Op.REMOUNT):
+            self._read(observation)
+
+    def _sync(self, observation: dict[str, np.ndarray]) -> None:
+        self._moves: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        slot = np.asarray(observation["slot"], dtype=int)
+        # A stand at a slot beyond the design's catalogue (or none) has no rows here.
+        self.slots = np.where(slot < self.n_slots, slot, -1)
+        self.engaged = np.asarray(observation["engaged"], dtype=bool) & (self.slots >= 0)
+        self.faulted = np.asarray(observation["faulted"], dtype=bool)
+        self.time_s = float(observation["time"][0])
+
+    def _columns(self, stand: int) -> np.ndarray:
+        start = N_MACHINE + N_STAND * stand
+        return np.concatenate((np.arange(N_MACHINE), np.arange(start, start + N_STAND)))
+
+    def _read(self, observation: dict[str, np.ndarray]) -> None:
+        """Add the valid readings of the observation, taken here."""
+        stands = np.flatnonzero(np.asarray(observation["valid"], dtype=bool) & (self.slots >= 0))
+        if not stands.size:
+            return
+        rows = np.zeros((len(stands), len(self.covariance)))
+        for r, k in enumerate(stands):
+            cols = self._columns(k)
+            rows[r, cols[:-1]] = self.table.change[self.slots[k], self.here]
+            rows[r, cols[-1]] = ZERO_SCALE
+        gain, b = woodbury_gain(self.covariance, rows / self.sigma)
+        self.covariance = shrunk(self.covariance, gain, b)
+
+    # -- what it predicts -------------------------------------------------------------------
+    def predicted_mse(self) -> float:
+        """Predicted mean-square TCP error after the best-fit rigid motion (mm^2)."""
+        n = N_MACHINE
+        # trace(W C) of two symmetric matrices, without their product.
+        return float(max(np.sum(self.weight * self.covariance[:n, :n]), 0.0))
+
+    def error_spectrum(self) -> np.ndarray:
+        """Eigenvalues (r,), largest first, of the predicted TCP error's covariance in the
+        ``r`` directions the rigid-motion score sees (``F' C F``, mm^2): their sum is
+        :meth:`predicted_mse`."""
+        n = N_MACHINE
+        block = self.factor.T @ self.covariance[:n, :n] @ self.factor
+        # A covariance's eigenvalues are >= 0; the rounding of a resolved one may not be.
+        return np.clip(np.linalg.eigvalsh((block + block.T) / 2), 0.0, None)[::-1]
+
+    def log_mean_squares(self) -> np.ndarray:
+        """``log10`` of :meth:`error_spectrum` and of its sum (:meth:`predicted_mse`, to
+        rounding), each in units of ``ACCURACY_UNIT_MM`` squared plus :data:`LOG_FLOOR`
+        (r + 1,)."""
+        spectrum = self.error_spectrum()
+        values = np.append(spectrum, np.sum(spectrum))
+        return np.log10(values / ACCURACY_UNIT_MM**2 + LOG_FLOOR)
+
+    # -- what a learner observes ------------------------------------------------------------
+    def observation(self) -> np.ndarray:
+        """The observation of the design view (float32; its parts:
+        :class:`~orthoglide_env.wrappers.DesignLab`): :meth:`log_mean_squares`, each
+        stand's slot one-hot (then "not mounted"), engaged and out of service, the posture
+        scaled to [-1, 1] over the design's control limits, and the time used over the
+        budget."""
+        stands = np.zeros((self.n_stands, self.n_slots + 3))
+        stands[np.arange(self.n_stands), np.where(self.slots >= 0, self.slots, self.n_slots)] = 1
+        stands[:, -2], stands[:, -1] = self.engaged, self.faulted
+        low, high = self.design.rho_min, self.design.rho_max
+        rho = (2 * self.rho - (high + low)) / (high - low)
+        return np.concatenate((self.log_mean_squares(), stands.ravel(), rho,
+                               [self.time_s / self.budget_s])).astype(np.float32)
+
+    def observation_bounds(self, longest_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds (float32) of every :meth:`observation` of a lab whose longest step takes
+        ``longest_s``: the logs lie between that of :data:`LOG_FLOOR` and a decade above the
+        prior's mean square (readings only shrink the covariance), the clock stops within a
+        step of the budget."""
+        top = float(np.log10(np.trace(self.weight) / ACCURACY_UNIT_MM**2 + LOG_FLOOR)) + 1.0
+        logs, stands = self.factor.shape[1] + 1, self.n_stands * (self.n_slots + 3)
+        low = np.concatenate((np.full(logs, np.log10(LOG_FLOOR)), np.zeros(stands),
+                              -np.ones(3), [0.0]))
+        high = np.concatenate((np.full(logs, top), np.ones(stands), np.ones(3),
+                               [(self.budget_s + longest_s) / self.budget_s]))
+        return low.astype(np.float32), high.astype(np.float32)
+
+    # -- the candidate operations -----------------------------------------------------------
+    def moves(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every candidate move's seconds (P,), the plungers down after it (K, P) and how
+        likely each reads there (K, P), a priori: a plunger is let down only where it is
+        safe both here and there (let down here, it reads there) and lifted where it is
+        not safe there; a stand out of service stays up.  (Computed once per state.)"""
+        if self._moves is not None:
+            return self._moves
+        key = self.slots.tobytes() + self.faulted.tobytes()
+        if key not in self._reach:
+            if len(self._reach) >= REACH_KEPT:
+                self._reach.clear()
+            safe, contact = (a[np.maximum(self.slots, 0)] for a in self.table.prior_reach)
+            self._reach[key] = (safe & ((self.slots >= 0) & ~self.faulted)[:, None], contact)
+        safe, contact = self._reach[key]
+        after = safe & (self.engaged | safe[:, self.here])[:, None]
+        reads = np.where(after, contact, 0.0)
+        flicks = np.count_nonzero(after != self.engaged[:, None], axis=0)
+        seconds = drive_seconds(self.design)[self.here] + TIME.lift_s * flicks
+        self._moves = (seconds, after, reads)
+        return self._moves
+
+    def action_mask(self) -> np.ndarray:
+        """Which operations are candidates now (``n_actions``,): a move where some stand
+        reads at least :data:`READ_PROBABILITY` likely and which ends within the budget; a
+        re-mount at a slot no stand holds, ending within the budget (a re-mount onto a held
+        slot is what the lab refuses; onto its own, a new installation where it stands,
+        buys nothing a planner weighs); stop."""
+        seconds, _, reads = self.moves()
+        moves = (reads >= READ_PROBABILITY).any(axis=0) & (self.time_s + seconds <= self.budget_s)
+        remount_s = float(TIME.move(self.rho, np.zeros(3))) + TIME.remount_s
+        free = np.full(self.n_slots, self.time_s + remount_s <= self.budget_s)
+        free[self.slots[self.slots >= 0]] = False
+        remounts = np.tile(free, self.n_stands)
+        return np.concatenate((moves, remounts, [True]))
+
+    def operations(self, action: int) -> list[dict[str, object]]:
+        """The lab actions that operation ``action`` is: a move's lever flicks (by stand)
+        then the move, a re-mount, or stop."""
+        if not 0 <= action < self.n_actions:
+            raise ValueError(f"an operation is an integer in [0, {self.n_actions}), got {action}")
+        idle = {"rho": np.zeros(3), "stand": 0, "slot": 0}
+        if action == self.n_actions - 1:
+            return [{**idle, "op": Op.STOP}]
+        if action >= self.n_postures:
+            stand, slot = divmod(action - self.n_postures, self.n_slots)
+            return [{**idle, "op": Op.REMOUNT, "stand": stand, "slot": slot}]
+        _, after, _ = self.moves()
+        flicks = [{**idle, "op": Op.ENGAGE if down else Op.LIFT, "stand": k}
+                  for k, down in enumerate(after[:, action]) if down != self.engaged[k]]
+        return [*flicks, {**idle, "op": Op.MOVE, "rho": self.table.postures[action].copy()}]

@@ -1,0 +1,302 @@
+"""The lab's design view (``OrthoglideLabDesign-v0``): the planner's candidate operations as
+masked discrete actions, an observation of what the readings determine, and the fall of
+the predicted TCP error as the reward."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import orthoglide_env
+from calibrators.agents.base import action
+from calibrators.agents.names import get_agent
+from calibrators.agents.policy import (
+    DesignPolicyAgent,
+    numpy_logits,
+    read_spec,
+    save_policy,
+    spec_of,
+)
+from calibrators.planning.search import Planner
+from calibrators.study.episodes import run_episode
+from orthoglide_env.instruments.dial import weighting_sigma
+from orthoglide_env.lab.design_belief import READ_PROBABILITY
+from orthoglide_env.lab.operations import Op
+from orthoglide_env.lab.rewards import ACCURACY_UNIT_MM
+from orthoglide_env.model.design import MachineDesign
+from orthoglide_env.wrappers import DesignLab, DesignLabVector, design_lab_env
+
+ID = orthoglide_env.DESIGN_LAB_ENV_ID
+BUDGET_S = 900.0
+
+
+def design(**kwargs) -> DesignLab:
+    kwargs.setdefault("conditions", "ideal")
+    kwargs.setdefault("gauge_sigma", 0.02)
+    kwargs.setdefault("budget_s", BUDGET_S)
+    return design_lab_env(**kwargs)
+
+
+def candidate_moves(env: DesignLab, rng: np.random.Generator, count: int) -> list[int]:
+    """``count`` operations chosen at random among the unmasked moves, stepping ``env``."""
+    taken = []
+    for _ in range(count):
+        mask = env.action_masks()
+        action = int(rng.choice(np.flatnonzero(mask[:env.belief.n_postures])))
+        env.step(action)
+        taken.append(action)
+    return taken
+
+
+def test_the_spaces_and_check_env() -> None:
+    env = gym.make(ID, conditions="ideal", budget_s=BUDGET_S)
+    belief = env.get_wrapper_attr("belief")
+    # Prototype: 1500 candidate postures, 6 stands x 39 slots, stop.
+    assert env.action_space == gym.spaces.Discrete(1500 + 6 * 39 + 1)
+    assert belief.factor.shape == (27, 12)
+    assert env.observation_space.shape == (12 + 1 + 6 * (39 + 3) + 3 + 1,)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(design(), skip_render_check=True)
+    # The one warning left says the env is a wrapper, which it is by design (the raw lab's
+    # own check is in test_lab.py).
+    messages = [str(w.message) for w in caught]
+    assert all("different from the unwrapped version" in m for m in messages), messages
+
+
+def test_bad_arguments_are_refused() -> None:
+    for kwargs in ({"reward": "accuracy"}, {"per": "hour"}, {"reference": True}):
+        with pytest.raises(ValueError):
+            design(**kwargs)
+    env = design()
+    env.reset(seed=0)
+    with pytest.raises(ValueError):
+        env.step(env.action_space.n)
+
+
+def test_the_move_mask_is_the_planners_candidate_moves() -> None:
+    """The moves open are those where the experiment planner, in the same state and a
+    priori, expects some stand to read more likely than not and which end within the
+    budget; the lever flicks of each move are the planner's."""
+    env = design(conditions="lab")
+    env.reset(seed=2)
+    candidate_moves(env, np.random.default_rng(0), 6)
+    belief = env.belief
+    lab = env.unwrapped
+    planner = Planner([int(s) for s in belief.slots], list(belief.engaged),
+                      weighting_sigma(float(lab.noise.effective_sigma)), BUDGET_S,
+                      design=lab.design)
+    planner.rho, planner.here, planner.time_s = belief.rho.copy(), belief.here, belief.time_s
+    seconds, after, reads = planner._moves()
+    mine = belief.moves()
+    np.testing.assert_array_equal(mine[1], after)
+    np.testing.assert_array_equal(mine[2], reads)
+    np.testing.assert_allclose(mine[0], seconds, rtol=0, atol=1e-12)
+    fits = belief.time_s + seconds <= BUDGET_S
+    np.testing.assert_array_equal(env.action_masks()[:belief.n_postures],
+                                  (reads >= READ_PROBABILITY).any(axis=0) & fits)
+    # Some moves the planner would price read less likely than that: they are closed.
+    assert np.any(reads.any(axis=0) & ~(reads >= READ_PROBABILITY).any(axis=0))
+    assert 0 < env.action_masks()[:belief.n_postures].sum() < belief.n_postures
+
+
+def test_a_masked_remount_is_one_the_lab_refuses_or_no_candidate() -> None:
+    """A re-mount is masked exactly where its slot is held: by another stand the lab
+    refuses it, by itself it is a new installation where it stands; an open one the lab
+    does."""
+    env = design()
+    env.reset(seed=1)
+    belief = env.belief
+    start = belief.n_postures
+    masks = env.action_masks()[start:-1].reshape(belief.n_stands, belief.n_slots)
+    held = belief.slots[belief.slots >= 0]
+    assert np.array_equal(~masks, np.isin(np.arange(belief.n_slots), held)[None].repeat(6, 0))
+    for stand in range(belief.n_stands):
+        for slot in held:
+            twin = design()
+            twin.reset(seed=1)
+            info = twin.step(start + stand * belief.n_slots + int(slot))[-1]
+            assert bool(info["refused"]) == (belief.slots[stand] != slot), (stand, slot)
+    free = np.flatnonzero(masks[0])
+    twin = design()
+    twin.reset(seed=1)
+    info = twin.step(start + int(free[0]))[-1]
+    assert info["refused"] == "" and twin.belief.slots[0] == free[0]
+
+
+def test_the_mask_closes_what_the_budget_cannot_pay() -> None:
+    env = design(budget_s=60.0)
+    env.reset(seed=0)
+    mask = env.action_masks()
+    belief = env.belief
+    # A re-mount takes two minutes: none fits in one.
+    assert not mask[belief.n_postures:-1].any() and mask[-1]
+    seconds, _, _ = belief.moves()
+    assert not mask[:belief.n_postures][seconds > 60.0].any()
+
+
+def test_the_reward_is_the_fall_of_the_predicted_error_the_lab_computes() -> None:
+    """The reward is the fall of the belief's predicted mean square, and that prediction
+    is the lab notebook's own (its information summed from the records' Jacobian, an
+    independent path): they differ only by the dial zero's prior of 10 mm, which the
+    notebook eliminates exactly, a relative difference below (0.02 / 10)^2 per reading."""
+    env = design(gauge_resolution=0.0)
+    _, info = env.reset(seed=3)
+    rng = np.random.default_rng(1)
+    before = info["predicted_rigid_mm"] ** 2
+    for step in range(8):
+        mask = env.action_masks()
+        # Two re-mounts among the moves: they reset a stand's unknowns.
+        action = (env.belief.n_postures + int(np.flatnonzero(mask[env.belief.n_postures:-1])[0])
+                  if step in (3, 6) else int(rng.choice(np.flatnonzero(mask[:1500]))))
+        _, reward, terminated, truncated, info = env.step(action)
+        after = info["predicted_rigid_mm"] ** 2
+        assert reward == pytest.approx((before - after) / ACCURACY_UNIT_MM**2, rel=1e-12)
+        notebook = env.unwrapped.predicted_tcp_rigid_mm()
+        assert info["predicted_rigid_mm"] == pytest.approx(notebook, rel=1e-4)
+        before = after
+        assert not (terminated or truncated)
+
+
+def test_the_log_reward_per_second() -> None:
+    env = design(reward="log_mse", per="second")
+    _, info = env.reset(seed=3)
+    start = env.belief.time_s
+    action = int(np.flatnonzero(env.action_masks())[0])
+    _, reward, *_, after = env.step(action)
+    seconds = env.belief.time_s - start
+    expected = 2 * np.log(info["predicted_rigid_mm"] / after["predicted_rigid_mm"]) / seconds
+    assert reward == pytest.approx(expected, rel=1e-12) and reward > 0
+
+
+def test_the_observation_never_depends_on_the_truth() -> None:
+    """Two different machines in different worlds (lab conditions), read at the same
+    places by the same mountings: different readings, the same observation."""
+    one, two = design(conditions="lab"), design(conditions="lab")
+    a, _ = one.reset(seed=10)
+    b, _ = two.reset(seed=11)
+    assert not np.array_equal(one.unwrapped.true_machine.to_vector(),
+                              two.unwrapped.true_machine.to_vector())
+    np.testing.assert_array_equal(a, b)
+    # Moves whose every stand surely reads or surely does not (a priori contact 1 or 0):
+    # the same places read on both machines.
+    _, _, reads = one.belief.moves()
+    sure = np.flatnonzero(one.action_masks()[:1500] & np.all((reads == 0) | (reads == 1), axis=0))
+    for chosen in np.random.default_rng(5).choice(sure, 10, replace=False):
+        a, *_ = one.step(int(chosen))
+        b, *_ = two.step(int(chosen))
+        places = [[(r.mounting, r.rho) for r in e.unwrapped.records] for e in (one, two)]
+        assert places[0] == places[1]
+        readings = [[r.reading for r in e.unwrapped.records] for e in (one, two)]
+        assert readings[0][-1] != readings[1][-1]
+        np.testing.assert_array_equal(a, b)
+
+
+def test_the_vector_form_is_a_loop_of_single_envs() -> None:
+    envs = gym.make_vec(ID, num_envs=2, conditions="lab", budget_s=BUDGET_S, gauge_sigma=0.02)
+    assert isinstance(envs.unwrapped, DesignLabVector)
+    singles = [design(conditions="lab"), design(conditions="lab")]
+    obs, _ = envs.reset(seed=7)
+    for i, env in enumerate(singles):
+        np.testing.assert_array_equal(obs[i], env.reset(seed=7 + i)[0])
+    rng = np.random.default_rng(2)
+    for _ in range(6):
+        masks = envs.unwrapped.action_masks()
+        np.testing.assert_array_equal(masks, [env.action_masks() for env in singles])
+        actions = np.array([rng.choice(np.flatnonzero(m)) for m in masks])
+        obs, rewards, terms, truncs, _ = envs.step(actions)
+        for i, env in enumerate(singles):
+            o, r, term, trunc, _ = env.step(int(actions[i]))
+            np.testing.assert_array_equal(obs[i], o)
+            assert (rewards[i], terms[i], truncs[i]) == (r, term, trunc)
+            if term or trunc:
+                env.reset()
+
+
+def test_masked_ppo_trains_and_acts_within_the_mask() -> None:
+    """The optional learner: sb3-contrib's MaskablePPO on the design view as it is."""
+    sb3_contrib = pytest.importorskip("sb3_contrib")
+    env = design(budget_s=300.0)
+    model = sb3_contrib.MaskablePPO("MlpPolicy", env, n_steps=32, batch_size=16, n_epochs=1,
+                                    seed=0, device="cpu")
+    model.learn(total_timesteps=64)
+    obs, _ = env.reset(seed=1)
+    action, _ = model.predict(obs, action_masks=env.action_masks(), deterministic=True)
+    assert env.action_masks()[int(action)]
+
+
+def test_op_codes_of_a_move_are_flicks_then_the_move() -> None:
+    env = design()
+    env.reset(seed=0)
+    belief = env.belief
+    _, after, _ = belief.moves()
+    posture = int(np.flatnonzero(after.sum(axis=0) < belief.engaged.sum())[0])
+    ops = belief.operations(posture)
+    assert [o["op"] for o in ops[:-1]] == [Op.LIFT] * (len(ops) - 1) and ops[-1]["op"] == Op.MOVE
+    assert env.step(posture)[-1]["lab_steps"] == len(ops)
+
+
+SMALL = Path(__file__).resolve().parents[1] / "examples" / "designs" / "small.json"
+LAB = {"conditions": "lab", "gauge_sigma": 0.02, "budget_s": 300.0}
+
+
+@pytest.fixture(scope="module")
+def masked_policy(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A tiny MaskablePPO policy of the design view saved to a file."""
+    sb3_contrib = pytest.importorskip("sb3_contrib")
+    env = design_lab_env(**LAB)
+    model = sb3_contrib.MaskablePPO("MlpPolicy", env, n_steps=64, batch_size=32, n_epochs=1,
+                                    seed=0, device="cpu")
+    model.learn(total_timesteps=64)
+    path = tmp_path_factory.mktemp("policy") / "masked.zip"
+    return save_policy(model, path, spec_of(env, "MaskablePPO", LAB))
+
+
+def test_a_design_policy_file_records_its_view_and_plays_in_the_lab(masked_policy: Path
+                                                                   ) -> None:
+    """``policy:FILE`` of a design-view policy keeps the view's belief from the lab's own
+    observations (the wrapper's, step for step) and draws open operations from the
+    network's distribution, whose logits it computes as torch does."""
+    import torch
+
+    assert read_spec(masked_policy).env_id == ID
+    agent = get_agent(f"policy:{masked_policy}")
+    assert isinstance(agent, DesignPolicyAgent)
+    episode = run_episode(gym.make(orthoglide_env.LAB_ENV_ID, **LAB), agent, seed=4)
+    assert episode.measurements.experiment_time_s <= LAB["budget_s"]
+    wrapped = design_lab_env(**LAB)
+    observation, _ = wrapped.reset(seed=4)
+    lab = gym.make(orthoglide_env.LAB_ENV_ID, **LAB)
+    raw, info = lab.reset(seed=4)
+    agent.reset(lab, raw, np.random.default_rng(0))
+    for _ in range(5):
+        np.testing.assert_array_equal(agent.belief.observation(), observation)
+        with torch.no_grad():
+            tensor, _ = agent.model.policy.obs_to_tensor(observation)
+            expected = agent.model.policy.get_distribution(tensor).distribution.logits[0]
+        logits = numpy_logits(agent.model, observation)
+        # The same float32 network: log-softmax equal to torch's to its rounding (~1e-6).
+        np.testing.assert_allclose(logits - np.logaddexp.reduce(logits), expected.numpy(),
+                                   atol=1e-5)
+        mask = wrapped.action_masks()
+        assert all(mask[agent.decide()] for _ in range(50))
+        operation = agent.decide()
+        observation, *_ = wrapped.step(operation)
+        for step in agent.belief.operations(operation):
+            agent.last = step
+            raw, _, _, _, info = lab.step(action(step["op"], step["rho"], step["stand"],
+                                                 step["slot"]))
+            agent.belief.observe(step, raw, bool(info["refused"]))
+
+
+def test_a_design_policy_is_refused_on_a_lab_of_another_design(masked_policy: Path) -> None:
+    env = gym.make(orthoglide_env.LAB_ENV_ID, design=MachineDesign.from_file(SMALL), **LAB)
+    observation, _ = env.reset(seed=0)
+    agent = get_agent(f"policy:{masked_policy}")
+    with pytest.raises(ValueError, match=r"another design \(L = 310.25 mm.*retrain"):
+        agent.reset(env, observation, np.random.default_rng(0))
