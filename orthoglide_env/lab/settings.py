@@ -27,6 +27,7 @@ from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import ErrorPreset, get_preset
 from orthoglide_env.sim.display import display_problem, require_display
 from orthoglide_env.world.conditions import IDEAL, Conditions
+from orthoglide_env.world.faults import NO_FAULTS, Faults
 
 #: Encoders may read a hair outside the control limits after settling (solver residue
 #: ~1e-9 mm); the observation box leaves this margin so an observation is always inside.
@@ -63,6 +64,7 @@ class LabSettings:
     render_mode: str | None = None
     conditions: Conditions = IDEAL  # the world's effects beyond the geometry
     reference: bool = False  # the lab has the gauge block: its catalogue the reference slots
+    faults: Faults = NO_FAULTS  # what can go wrong in the session (orthoglide_env.lab.faults)
 
     @cached_property
     def slots(self) -> tuple[GaugeSpec, ...]:
@@ -125,8 +127,12 @@ def lab_settings(args: dict[str, Any]) -> LabSettings:
         raise ValueError(f"the lab mounts its stands at the paper's mid-leg slots (e.g. "
                          f"'{PAPER_LAYOUT[0].slot}') at every reset: the design's "
                          f"slot_positions {list(design.slot_positions)} must include {mid}")
+    faults = args["faults"]
+    if "thermal-step" in faults.kinds and "room" not in args["conditions"]:
+        raise ValueError("faults: 'thermal-step' steps the room's temperature: it needs "
+                         "conditions 'lab' or 'workshop' with the room effect")
     return LabSettings(
-        **_shared(args, design), stands=stands,
+        **_shared(args, design), stands=stands, faults=faults,
         layout=tuple(slots[slot_index(spec, design=design)] for spec in PAPER_LAYOUT[:stands]),
         tracker=args["tracker"], tracker_sigma=args["tracker_sigma"],
         thermometer=args["thermometer"],
