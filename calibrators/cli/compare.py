@@ -18,8 +18,10 @@ from calibrators.cli.common import (
     UsageError,
     add_conditions,
     add_design,
+    add_faults,
     add_thermometer,
     conditions_of,
+    faults_of,
     machine_design_of,
 )
 from calibrators.estimators.catalogue import CATALOGUE, exact_estimators, get_estimator
@@ -76,7 +78,7 @@ def _check(args: argparse.Namespace) -> Config:
                   args.backend, args.seed, args.success_mm,
                   curve_estimator=_curve_estimator(estimators) if args.out else "",
                   design=machine_design_of(args), conditions=conditions_of(args),
-                  thermometer=args.thermometer)
+                  thermometer=args.thermometer, faults=faults_of(args))
 
 
 def _curve_estimator(estimators: tuple[str, ...]) -> str:
@@ -135,6 +137,9 @@ def _config_dict(config: Config, machines: int) -> dict:
     design = data.pop("design")
     if design != PROTOTYPE:
         data["design"] = design.to_dict()
+    faults = data.pop("faults")
+    if faults.active:  # a run without faults keeps the config a run before them kept
+        data["faults"] = list(faults.kinds)
     conditions = data.pop("conditions")
     data.update(conditions=conditions.name, effects=list(conditions.effects),
                 indicator=conditions.indicator)
@@ -189,7 +194,7 @@ def _print(trials: list[Trial], config: Config, machines: int, seconds: float,
            as_json: bool) -> list[dict]:
     """Print the summary of ``trials`` (and the paired comparisons of its agents) as text
     or JSON; return its rows."""
-    rows, pairs = summary(trials, config.target_mm), paired(trials)
+    rows, pairs = summary(trials, config.target_mm, config.faults.active), paired(trials)
     if as_json:
         print(json.dumps({"config": _config_dict(config, machines), "rows": rows,
                           "paired": pairs}, allow_nan=False))
@@ -218,6 +223,13 @@ def _print(trials: list[Trial], config: Config, machines: int, seconds: float,
         if r["failed"]:
             print(f"{r['agent']} x {r['estimator']}: {r['failed']} of {r['machines']} failed "
                   f"({r['failure']}), counted as uncalibrated")
+        if "faults_detected" in r:
+            detected = r["faults_detected"]
+            print(f"{r['agent']} x {r['estimator']}: faults named in "
+                  + ("no trial with a fault" if detected is None
+                     else f"{detected:.0%} of the trials with one")
+                  + f"; silent failures (off by > 3 sigma, no warning) "
+                  f"{r['silent_failures']:.1%}")
         for kind, seen in r["warnings"].items():
             example = seen["example"].split(":", 1)[-1].strip()
             example = example if len(example) <= 110 else example[:107] + "..."
@@ -292,6 +304,7 @@ def add(p: argparse.ArgumentParser) -> None:
     add_design(p)
     add_conditions(p)
     add_thermometer(p)
+    add_faults(p)
     p.add_argument("--backend", choices=["exact", "pybullet"], default="exact",
                    help="simulator (default %(default)s)")
     p.add_argument("--success-mm", "--target", dest="success_mm", type=float, default=0.01,

@@ -47,6 +47,7 @@ from calibrators.estimators.exact_fit import (
     fit_batch,
     world_columns,
 )
+from calibrators.estimators.faults import PREFIX, drive_sensitivities, find_faults
 from calibrators.estimators.holdout import held_out_residuals, holdout_mask, verification_rms
 from calibrators.estimators.outliers import CAUSE_WORDS as CAUSE_WORDS
 from calibrators.estimators.outliers import (
@@ -93,13 +94,16 @@ from orthoglide_env.world.conditions import CONDITION_NAMES, Conditions
 #: What to do about an estimate outside the validity range.
 VALIDITY_HINT: str = ("free more parameters, e.g. --params extended, or take readings at "
                       "more postures")
-def layout_and_values(data: Measurements) -> tuple[ReadingLayout, np.ndarray]:
+def layout_and_values(data: Measurements, zeros: bool = True
+                      ) -> tuple[ReadingLayout, np.ndarray]:
     """The reading layout and the readings of ``data``; tracker readings turned into the machine's
     frame (:func:`align_tracker`); a gauge mounting without a Zero reading is refused
-    (:func:`~calibrators.estimators.differences.check_zeros`)."""
+    (:func:`~calibrators.estimators.differences.check_zeros`) unless ``zeros`` is False (a
+    stand found moved, whose new mounting's zero the fit estimates)."""
     if not len(data):
         raise ValueError("no readings to fit")
-    check_zeros(data.items)
+    if zeros:
+        check_zeros(data.items)
     design = ReadingLayout.of([m.mounting for m in data.items], [m.gauge for m in data.items],
                        np.array([m.rho for m in data.items], dtype=float), data.design)
     return design, align_tracker(design, np.array([m.reading for m in data.items], dtype=float))
@@ -259,7 +263,44 @@ class GaussNewtonCalibrator(Estimator):
         """:meth:`fit` of many experiments: those of one design (the same readings of the
         same mountings at the same postures, as a fixed agent takes them on every machine)
         are fitted together, in one batched solve.  A failure is returned in place of its
-        estimate, not raised."""
+        estimate, not raised.  Each fit's faults are named in its warnings
+        (:mod:`calibrators.estimators.faults`); a knocked stand or a skipped row is
+        refitted with its readings repaired."""
+        out = self._fit_all(datas)
+        for k, est in enumerate(out):
+            if isinstance(est, Estimate):
+                out[k] = self._with_faults(est)
+        return out
+
+    def _with_faults(self, est: Estimate) -> Estimate:
+        """``est`` with the faults its readings show named first in its warnings, refitted
+        on the readings repaired when one is repairable."""
+        used = np.ones(len(est.residuals), dtype=bool)
+        used[est.outliers] = False
+        residuals = est.residuals.copy()
+        residuals[est.outliers] = est.outlier_residuals
+        design, values = layout_and_values(est.readings)
+        found = find_faults(est.readings, residuals, used, est.outliers,
+                            weighting_sigma(self.sigma),
+                            drives=drive_sensitivities(design, values, est.theta, used))
+        if not found:
+            return est
+        texts = [f.text for f in found]
+        repaired = next((f.repaired for f in found if f.repaired is not None), None)
+        if repaired is not None:
+            refit = self._fit_all([repaired], zeros=False)[0]
+            if isinstance(refit, Estimate):
+                est = refit
+            else:
+                texts.append(f"{PREFIX}: the refit on the repaired readings failed ({refit}); "
+                             "this estimate is of the readings as written")
+        est.warnings = texts + est.warnings
+        return est
+
+    def _fit_all(self, datas: list[Measurements], zeros: bool = True
+                 ) -> list[Estimate | Exception]:
+        """The fits of :meth:`fit_many`, before their faults are looked for (``zeros``:
+        of :func:`layout_and_values`)."""
         out: list[Estimate | Exception] = [ValueError("not fitted")] * len(datas)
         conditions = (Conditions(self.conditions) if isinstance(self.conditions, str)
                       else self.conditions)
@@ -275,7 +316,7 @@ class GaussNewtonCalibrator(Estimator):
         prepared = []
         for k, data in enumerate(datas):
             try:
-                design, values = layout_and_values(data)
+                design, values = layout_and_values(data, zeros)
             except ValueError as exc:
                 out[k] = exc
                 prepared.append(None)

@@ -55,6 +55,7 @@ from orthoglide_env.model.errors import DEFAULT_PRESET, ERROR_NAMES, MachinePara
 from orthoglide_env.reading_model import ParameterSpace, default_scales
 from orthoglide_env.scoring import FRAMES, ScoreReport, score_batch, uncalibrated_errors
 from orthoglide_env.world.conditions import IDEAL, Conditions
+from orthoglide_env.world.faults import NO_FAULTS, Faults, happened
 from orthoglide_env.world.truth import World
 
 #: Fractions of an episode's time at which the accuracy-versus-time curve re-estimates.
@@ -85,6 +86,8 @@ class Config:
     conditions: Conditions = IDEAL
     #: The lab has a room thermometer.
     thermometer: bool = False
+    #: What can go wrong in the lab (orthoglide_env.world.faults).
+    faults: Faults = NO_FAULTS
 
     @property
     def world(self) -> str:
@@ -92,6 +95,8 @@ class Config:
         the error preset, the conditions (and their effects when not all act), the
         thermometer, the gauges' sigma, the budget, the back-end and a custom design."""
         design = "" if self.design == PROTOTYPE else f", design L {self.design.L:g} mm"
+        if self.faults.active:
+            design += f", faults {self.faults.label}"
         return (f"{self.errors} errors, {self.conditions.label} conditions"
                 f"{', a thermometer' if self.thermometer else ''}, gauge sigma {self.sigma} mm, "
                 f"budget {self.budget_s:g} s, {self.backend} backend{design}")
@@ -102,7 +107,8 @@ class Config:
         return lab_kwargs(agent, errors=self.errors, gauge_sigma=self.sigma,
                           gauge_resolution=self.resolution, backend=self.backend,
                           budget_s=self.budget_s, design=self.design,
-                          conditions=self.conditions, thermometer=self.thermometer)
+                          conditions=self.conditions, thermometer=self.thermometer,
+                          **({"faults": self.faults} if self.faults.active else {}))
 
 
 @cache
@@ -178,6 +184,7 @@ def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
                 std[ERROR_NAMES.index(n)] = np.sqrt(est.covariance[k, k])
         out.append(Trial(
             episode.agent, name, episode.machine, time_s=run.time_s, readings=count,
+            faults=happened(run.faults),
             predicted_rigid_mm=next(predicted), chi2_rejected=est.chi2_rejected,
             z=next(z_scores).tolist(),
             error=(est.theta[:len(ERROR_NAMES)] - run.truth.to_vector()).tolist(),

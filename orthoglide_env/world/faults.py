@@ -125,3 +125,11 @@ def draw_size(kind: str, stream: np.random.Generator, condition: str) -> float:
     low, high = size_row(kind, "size", condition)
     value = stream.uniform(low, high)
     return float(value * stream.choice((-1.0, 1.0))) if row.signed else float(value)
+
+
+def happened(events: list[dict[str, Any]]) -> list[str]:
+    """The kinds of the fault ``events`` (``FaultEvent.to_dict``) that acted on something
+    (a knock of no mounted stand did not), each once, in :data:`FAULT_KINDS` order."""
+    acted = {e["kind"] for e in events
+             if e["stand"] >= 0 or e["kind"] in ("thermal-step", "lost-steps")}
+    return [k for k in FAULT_KINDS if k in acted]
