@@ -47,7 +47,14 @@ from calibrators.estimators.exact_fit import (
     fit_batch,
     world_columns,
 )
-from calibrators.estimators.faults import PREFIX, drive_sensitivities, find_faults
+from calibrators.estimators.faults import (
+    MAX_REPAIRS,
+    PREFIX,
+    Finding,
+    drive_sensitivities,
+    find_faults,
+    sign_slips_against_nominal,
+)
 from calibrators.estimators.holdout import held_out_residuals, holdout_mask, verification_rms
 from calibrators.estimators.outliers import CAUSE_WORDS as CAUSE_WORDS
 from calibrators.estimators.outliers import (
@@ -270,32 +277,58 @@ class GaussNewtonCalibrator(Estimator):
         for k, est in enumerate(out):
             if isinstance(est, Estimate):
                 out[k] = self._with_faults(est)
+            elif isinstance(est, RuntimeError):
+                out[k] = self._without_slips(datas[k], est)
         return out
+
+    def _without_slips(self, data: Measurements, failure: RuntimeError
+                       ) -> Estimate | Exception:
+        """A fit of ``data`` that did not converge (``failure``) done again without the
+        readings written with the wrong sign, when the nominal machine shows some."""
+        try:
+            design, values = layout_and_values(data)
+        except ValueError:
+            return failure
+        found = sign_slips_against_nominal(data, design, values)
+        if not found:
+            return failure
+        est = self._fit_all([found[0].repaired])[0]  # type: ignore[list-item]
+        if isinstance(est, Estimate):
+            est.warnings = [f.text for f in found] + est.warnings
+        return est
 
     def _with_faults(self, est: Estimate) -> Estimate:
         """``est`` with the faults its readings show named first in its warnings, refitted
         on the readings repaired when one is repairable."""
+        texts: list[str] = []
+        named: set[tuple[str, str]] = set()
+        # Each pass repairs one fault and fits again; the next finds what is left.
+        for _ in range(MAX_REPAIRS + 1):
+            found = [f for f in self._faults(est) if (f.kind, f.where) not in named]
+            texts += [f.text for f in found]
+            named |= {(f.kind, f.where) for f in found}
+            repaired = next((f.repaired for f in found if f.repaired is not None), None)
+            if repaired is None:
+                break
+            refit = self._fit_all([repaired], zeros=False)[0]
+            if not isinstance(refit, Estimate):
+                texts.append(f"{PREFIX}: the refit on the repaired readings failed ({refit}); "
+                             "this estimate is of the readings as written")
+                break
+            est = refit
+        est.warnings = texts + est.warnings
+        return est
+
+    def _faults(self, est: Estimate) -> list[Finding]:
+        """The faults ``est``'s readings show (:func:`find_faults`)."""
         used = np.ones(len(est.residuals), dtype=bool)
         used[est.outliers] = False
         residuals = est.residuals.copy()
         residuals[est.outliers] = est.outlier_residuals
-        design, values = layout_and_values(est.readings)
-        found = find_faults(est.readings, residuals, used, est.outliers,
-                            weighting_sigma(self.sigma),
-                            drives=drive_sensitivities(design, values, est.theta, used))
-        if not found:
-            return est
-        texts = [f.text for f in found]
-        repaired = next((f.repaired for f in found if f.repaired is not None), None)
-        if repaired is not None:
-            refit = self._fit_all([repaired], zeros=False)[0]
-            if isinstance(refit, Estimate):
-                est = refit
-            else:
-                texts.append(f"{PREFIX}: the refit on the repaired readings failed ({refit}); "
-                             "this estimate is of the readings as written")
-        est.warnings = texts + est.warnings
-        return est
+        design, values = layout_and_values(est.readings, zeros=False)
+        return find_faults(est.readings, residuals, used, est.outliers,
+                           weighting_sigma(self.sigma),
+                           drives=drive_sensitivities(design, values, est.theta, used))
 
     def _fit_all(self, datas: list[Measurements], zeros: bool = True
                  ) -> list[Estimate | Exception]:

@@ -12,8 +12,8 @@ stops (at its target predicted error, or when nothing is worth the time) or at t
 
 An impossible answer is asked again (the question then holds ``again``, the reason): one
 outside the gauge's travel, or one whose change since the stand's last answer differs
-from the nominal machine's by more than any machine of the workspace's errors explains
-(:data:`JUMP_MM`).  A stand that reads far from 0 back at Zero, where its dial was zeroed,
+from the nominal machine's by more than a machine's errors explain
+(:data:`~calibrators.estimators.faults.NOMINAL_MM`).  A stand that reads far from 0 back at Zero, where its dial was zeroed,
 may have been knocked: the session says so and asks for the reading again after a
 re-zero; an answer near 0 then starts a new mounting of that stand from that reading on
 (its own zero for the fit), the same answer again keeps the old one.
@@ -35,6 +35,7 @@ import numpy as np
 
 from calibrators.agents import get_agent
 from calibrators.agents.base import PlannedAgent
+from calibrators.estimators.faults import NOMINAL_MM
 from calibrators.measurements import Measurements, gauge_name
 from calibrators.study.episodes import run_episode
 from calibrators.study.labs import nominal_lab, nominal_options
@@ -45,10 +46,6 @@ from orthoglide_env.lab.operations import Op, slot_catalogue
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.world.conditions import Conditions
 
-#: A reading's change since the stand's last one may differ from the nominal machine's by
-#: at most this (mm) before the session asks again: an assumption, several times what the
-#: realistic preset's errors change a reading by over the workspace.
-JUMP_MM: float = 1.0
 #: Back at Zero, a stand reading more than this many of its sigma (plus the dial's
 #: resolution) from 0 may have been knocked.
 ZERO_K: float = 5.0
@@ -190,7 +187,7 @@ class Session:
             return None
         before, nominal = self.last[mounting]
         jump = (value - before) - (record.reading - nominal)
-        if abs(jump) > JUMP_MM:
+        if abs(jump) > NOMINAL_MM:
             return (f"{value:+.3f} mm is {jump:+.3f} mm from what the move explains since "
                     f"its last reading {before:+.3f} mm: read it again")
         if not any(record.rho) and abs(value) > self.tolerance:
