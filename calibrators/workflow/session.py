@@ -13,8 +13,8 @@ stops (at its target predicted error, or when nothing is worth the time) or at t
 An impossible answer is asked again (the question then holds ``again``, the reason): one
 outside the gauge's travel, or one whose change since the stand's last answer differs
 from the nominal machine's by more than a machine's errors explain
-(:data:`~calibrators.estimators.faults.NOMINAL_MM`).  A stand that reads far from 0 back at Zero, where its dial was zeroed,
-may have been knocked: the session says so and asks for the reading again after a
+(:data:`~calibrators.estimators.faults.NOMINAL_MM`).  A stand that reads far from 0 back
+at Zero, where its dial was zeroed, may have been knocked: the session says so and asks for the reading again after a
 re-zero; an answer near 0 then starts a new mounting of that stand from that reading on
 (its own zero for the fit), the same answer again keeps the old one.
 
