@@ -14,9 +14,10 @@ An impossible answer is asked again (the question then holds ``again``, the reas
 outside the gauge's travel, or one whose change since the stand's last answer differs
 from the nominal machine's by more than a machine's errors explain
 (:data:`~calibrators.estimators.faults.NOMINAL_MM`).  A stand that reads far from 0 back
-at Zero, where its dial was zeroed, may have been knocked: the session says so and asks for the reading again after a
-re-zero; an answer near 0 then starts a new mounting of that stand from that reading on
-(its own zero for the fit), the same answer again keeps the old one.
+at Zero, where its dial was zeroed, may have been knocked: the session says so and asks for
+the reading again after a re-zero; an answer near 0 then starts a new mounting of that
+stand from that reading on (its own zero for the fit), the same answer again keeps the old
+one.
 
 The episode is :func:`~calibrators.study.episodes.run_episode`'s, the session watching each
 step (:class:`~calibrators.study.episodes.Watcher`) to say it and ask its readings.
