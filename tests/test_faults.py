@@ -11,10 +11,22 @@ import pytest
 import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.study.episodes import run_episode
-from orthoglide_env.world.faults import FAULT_KINDS, Faults, as_faults, happened
+from orthoglide_env.world.faults import (
+    FAULT_KINDS,
+    Faults,
+    as_faults,
+    fault_stream,
+    happened,
+    schedule,
+)
+
+#: Seed 1's fault stream (:func:`fault_stream` of ``default_rng(1)``) schedules the first
+#: fault of every kind list below at 183 s of a 20-minute budget.
+SEED, BUDGET, FIRST_S = 1, 1200.0, 183.0
 
 
-def episode(faults: str | None, seed: int, agent: str = "optimal", budget: float = 1800.0):
+def episode(faults: str | None, seed: int = SEED, agent: str = "optimal",
+            budget: float = BUDGET):
     """One episode of ``agent`` under ``lab`` conditions (explicit: the default changes)."""
     kwargs = {"faults": faults} if faults else {}
     env = gym.make(orthoglide_env.LAB_ENV_ID, conditions="lab", errors="realistic",
@@ -25,12 +37,20 @@ def episode(faults: str | None, seed: int, agent: str = "optimal", budget: float
 @pytest.fixture(scope="module")
 def pair():
     """The same machine and seed without faults and with every kind of fault."""
-    return episode(None, 11), episode(",".join(FAULT_KINDS), 11)
+    return episode(None), episode(",".join(FAULT_KINDS))
+
+
+def test_a_seed_schedules_its_faults_before_the_episode_draws() -> None:
+    for kinds in (FAULT_KINDS, ("knock",), ("sign",)):
+        events = schedule(Faults(kinds), fault_stream(np.random.default_rng(SEED)), "lab",
+                          BUDGET)
+        assert round(events[0][0]) == FIRST_S
 
 
 def test_until_the_first_fault_the_readings_are_those_of_a_lab_without(pair) -> None:
     clean, faulted = pair
-    assert faulted.faults, "half an hour at these rates met no fault: pick another seed"
+    # It acts at the first look at the machine from its time on.
+    assert faulted.faults and faulted.faults[0]["time_s"] >= FIRST_S
     first = faulted.faults[0]["step"]
     before = [(r.mounting, r.rho, r.reading) for r in clean.records if r.step < first]
     assert before == [(r.mounting, r.rho, r.reading) for r in faulted.records if r.step < first]
@@ -38,7 +58,7 @@ def test_until_the_first_fault_the_readings_are_those_of_a_lab_without(pair) -> 
 
 
 def test_a_knock_moves_its_mounting_readings_by_its_size_and_nothing_else() -> None:
-    clean, knocked = episode(None, 5), episode("knock", 5)
+    clean, knocked = episode(None), episode("knock")
     events = [e for e in knocked.faults if e["stand"] >= 0]
     assert events, "no knock acted on this seed"
     event = events[0]
@@ -60,7 +80,7 @@ def test_a_knock_moves_its_mounting_readings_by_its_size_and_nothing_else() -> N
 
 
 def test_a_sign_slip_negates_one_written_reading() -> None:
-    clean, slipped = episode(None, 2), episode("sign", 2)
+    clean, slipped = episode(None), episode("sign")
     events = [e for e in slipped.faults if e["stand"] >= 0]
     assert events, "no sign slip acted on this seed"
     a = [(r.mounting, r.step, r.reading) for r in clean.records]

@@ -40,6 +40,7 @@ from orthoglide_env.model.collisions import PAIR_NAMES, collision_names
 from orthoglide_env.model.errors import AXIS_NAMES, MachineParams
 from orthoglide_env.reading_model import TrackerAxis
 from orthoglide_env.scoring.truth import score
+from orthoglide_env.world.faults import fault_stream
 from orthoglide_env.world.table import REFERENCE_DEVIATION, REFERENCE_LENGTH_MM
 from orthoglide_env.world.truth import UM, World, draw_range
 
@@ -155,6 +156,8 @@ class LabBatch:
         settings = self.settings
         specs = settings.layout if layout is None else layout
         first = [self.place(spec) for spec in specs]
+        # Seeded before the episode's stream draws: a seed's faults are known from it alone.
+        own = None if self.faults is None else [fault_stream(s) for s in streams]
         drawn, rotations, positions, errors, worlds, offsets = [], [], [], [], [], []
         for stream in streams:
             drawn.append(settings.preset.sample(stream, settings.design) if machine is None
@@ -209,7 +212,7 @@ class LabBatch:
         self.gauges = self.gauges.with_rows((rows[:, None], np.arange(len(first))), installed)
         names = [spec.slot for spec in specs]
         if self.faults is not None:
-            self.faults.reset(rows, streams)
+            self.faults.reset(rows, own)  # type: ignore[arg-type]
         for r, i in enumerate(rows):
             self.streams[i] = streams[r]
             self.mounting[i] = names + [""] * (settings.stands - len(first))

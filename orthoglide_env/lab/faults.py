@@ -21,7 +21,6 @@ from orthoglide_env.world.faults import (
     FaultEvent,
     Faults,
     draw_size,
-    fault_stream,
     schedule,
 )
 
@@ -49,9 +48,11 @@ class LabFaults:
         self.previous = np.full((n, s), np.nan)  # the one before the latest reading
 
     def reset(self, rows: np.ndarray, streams: list[np.random.Generator]) -> None:
-        """New episodes ``rows``, their fault streams seeded from ``streams``."""
+        """New episodes ``rows`` with their fault ``streams``
+        (:func:`~orthoglide_env.world.faults.fault_stream` of the episodes' streams before
+        these draw)."""
         for r, i in enumerate(rows.tolist()):
-            own = fault_stream(streams[r])
+            own = streams[r]
             self.streams[i] = own
             self.pending[i] = schedule(self.faults, own, self.condition, self.horizon_s)
             self.log[i] = []
