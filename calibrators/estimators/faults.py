@@ -178,20 +178,38 @@ def _realigned(data: Measurements, mounting: str, first: int) -> Measurements:
     return replace(data, items=items)
 
 
-def sign_slips_against_nominal(data: Measurements, design: ReadingLayout,
-                               values: np.ndarray) -> list[Finding]:
-    """The readings of ``data`` that the nominal machine (each mounting's zero the median
-    of its readings' offsets) puts more than :data:`NOMINAL_MM` away while their negative
-    is within it: sign slips large enough to stop a fit from converging, each with the
-    readings without it."""
+def _against_nominal(design: ReadingLayout, values: np.ndarray) -> np.ndarray:
+    """Each reading minus the nominal machine's, each mounting's zero the median of its
+    readings' offsets."""
     every = np.ones(len(values), dtype=bool)
     raw = held_out_residuals(design, values, np.zeros(len(design.space.names)), every, every)
     for k in range(len(design.mountings)):
         mine = design.mounting == k
         raw[mine] -= np.median(raw[mine]) if mine.any() else 0.0
+    return raw
+
+
+def slips_against_nominal(data: Measurements, design: ReadingLayout, values: np.ndarray,
+                          level: float = LEVEL) -> list[Finding]:
+    """What stops a fit of ``data`` from converging, found against the nominal machine:
+    the readings it puts more than :data:`NOMINAL_MM` away while their negative is within
+    it (sign slips, each with the readings without them), else a mounting whose rows are
+    written late (:func:`_late` on the nominal residuals, in units of their robust spread),
+    with the rows put back."""
+    raw = _against_nominal(design, values)
     gauge = np.array([not isinstance(m.gauge, TrackerAxis) for m in data.items])
     slips = np.flatnonzero(gauge & (np.abs(raw) > NOMINAL_MM)
                            & (np.abs(raw - 2 * values) < NOMINAL_MM))
+    if not len(slips):
+        spread = 1.4826 * float(np.median(np.abs(raw[gauge])))
+        for name, ks in _mountings(data, gauge).items():
+            first = _late(values, raw, ks, spread, level)
+            if first is not None:
+                return [Finding("skip", f"{PREFIX} skip: {name}, from {_place(data, first)} on "
+                                "each reading fits the posture before its own better: a row "
+                                "skipped on the sheet (fitted with the rows put back)",
+                                _realigned(data, name, first), name)]
+        return []
     kept = replace(data, items=[m for k, m in enumerate(data.items) if k not in set(slips)])
     return [Finding("sign", f"{PREFIX} sign: {_place(data, k)} "
                     f"({data.items[k].mounting or data.items[k].gauge.slot}) reads "

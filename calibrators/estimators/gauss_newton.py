@@ -53,7 +53,7 @@ from calibrators.estimators.faults import (
     Finding,
     drive_sensitivities,
     find_faults,
-    sign_slips_against_nominal,
+    slips_against_nominal,
 )
 from calibrators.estimators.holdout import held_out_residuals, holdout_mask, verification_rms
 from calibrators.estimators.outliers import CAUSE_WORDS as CAUSE_WORDS
@@ -284,12 +284,13 @@ class GaussNewtonCalibrator(Estimator):
     def _without_slips(self, data: Measurements, failure: RuntimeError
                        ) -> Estimate | Exception:
         """A fit of ``data`` that did not converge (``failure``) done again without the
-        readings written with the wrong sign, when the nominal machine shows some."""
+        readings written with the wrong sign, or with rows written late put back, when the
+        nominal machine shows them (:func:`slips_against_nominal`)."""
         try:
             design, values = layout_and_values(data)
         except ValueError:
             return failure
-        found = sign_slips_against_nominal(data, design, values)
+        found = slips_against_nominal(data, design, values)
         if not found:
             return failure
         est = self._fit_all([found[0].repaired])[0]  # type: ignore[list-item]
