@@ -260,13 +260,15 @@ def _show(value: float | None, width: int, digits: int) -> str:
 
 def _write(trials: list[Trial], rows: list[dict], out: Path, config: Config) -> list[Path]:
     summary_csv = out / "summary.csv"
+    # A run with faults has their columns last; one without, the columns it always had.
+    faults = ("faults_detected", "silent_failures") if config.faults.active else ()
     with summary_csv.open("w", newline="") as handle:
         writer = csv.writer(handle)
         writer.writerow(["world", "agent", "estimator", "machines", "failed", "time_s_median",
                          *(f"tcp_after_{f}_median_mm" for f in FRAMES),
                          "tcp_after_rigid_ci95_low_mm", "tcp_after_rigid_ci95_high_mm",
                          "tcp_after_rigid_p95_mm", "z_rms", "chi2_rejected", "success_rate",
-                         "predicted_success_rate"])
+                         "predicted_success_rate", *faults])
         for r in rows:
             writer.writerow([config.world, r["agent"], r["estimator"], r["machines"], r["failed"],
                              r["time_s"]["median"],
@@ -274,7 +276,7 @@ def _write(trials: list[Trial], rows: list[dict], out: Path, config: Config) -> 
                              *(r["tcp_after_mm"]["rigid"]["ci95"] or (None, None)),
                              r["tcp_after_mm"]["rigid"]["p95"], r["z_rms"],
                              r["chi2_rejected"], r["success_rate"],
-                             r["predicted_success_rate"]])
+                             r["predicted_success_rate"], *(r[k] for k in faults)])
     from calibrators.cli.plots import accuracy_vs_time, boxes
 
     return [out / TRIALS_FILE, summary_csv, accuracy_vs_time(trials, config, out),
