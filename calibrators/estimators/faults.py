@@ -220,12 +220,14 @@ def slips_against_nominal(data: Measurements, design: ReadingLayout, values: np.
 
 def find_faults(data: Measurements, residuals: np.ndarray, used: np.ndarray,
                 outliers: list[int], sigma: float, level: float = LEVEL,
-                drives: np.ndarray | None = None) -> list[Finding]:
+                drives: np.ndarray | None = None, structural: bool = True) -> list[Finding]:
     """The faults a fit of ``data`` shows: its ``residuals`` (mm, per reading), the readings
     it ``used``, its left-out ``outliers``, the gauges' ``sigma`` (mm) and the residuals'
     sensitivities to the drives' offsets (:func:`drive_sensitivities`; None: drives not
     looked at).  A drive's change steps several stands at once: it is named instead of
-    the stands' steps when its test is stronger than each of theirs."""
+    the stands' steps when its test is stronger than each of theirs.  ``structural``: look
+    for steps and late rows at all (their tests hold where the model can fit the machine;
+    outliers are named whatever the model)."""
     values = np.array([m.reading for m in data.items])
     gauge = np.array([not isinstance(m.gauge, TrackerAxis) for m in data.items])
     finite = used & gauge & np.isfinite(residuals)
@@ -237,7 +239,8 @@ def find_faults(data: Measurements, residuals: np.ndarray, used: np.ndarray,
     groups = _mountings(data, finite)
     # Rows written late are far from the model, and mostly left out: all of a mounting's
     # readings are followed, in order.
-    for name, ks in _mountings(data, gauge & np.isfinite(residuals)).items():
+    followed = gauge & np.isfinite(residuals) if structural else np.zeros(len(values), bool)
+    for name, ks in _mountings(data, followed).items():
         first = _late(values, residuals, ks, spread, level)
         if first is not None:
             found.append(Finding("skip", f"{PREFIX} skip: {name}, from {_place(data, first)} "
@@ -262,6 +265,8 @@ def find_faults(data: Measurements, residuals: np.ndarray, used: np.ndarray,
                                  f"reads {values[k]:+.3f} mm where the model expects "
                                  f"{values[k] - residuals[k]:+.3f} mm: written with the wrong "
                                  "sign (left out)", where=names[k]))
+    if not structural:
+        return found
     steps = change_points(residuals, groups, spread, level)
     drive = None if drives is None else drive_steps(residuals, drives, finite, spread, level)
     if drive is not None and all(drive[3] >= s[3] for s in steps):

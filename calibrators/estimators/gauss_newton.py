@@ -16,7 +16,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from calibrators.estimators.base import Estimate, Estimator, Measurements, register
+from calibrators.estimators.base import PARAM_NAMES, Estimate, Estimator, Measurements, register
 from calibrators.estimators.consider import (
     DEFAULT_NODE_SPACING,
     FULL_TERMS,
@@ -326,10 +326,14 @@ class GaussNewtonCalibrator(Estimator):
         used[est.outliers] = False
         residuals = est.residuals.copy()
         residuals[est.outliers] = est.outlier_residuals
+        # A model of the paper's six errors alone cannot fit a machine with more: its
+        # residuals step and drift where nothing went wrong.
+        structural = any(n in ERROR_NAMES and n not in PARAM_NAMES for n in est.names)
         design, values = layout_and_values(est.readings, zeros=False)
         return find_faults(est.readings, residuals, used, est.outliers,
-                           weighting_sigma(self.sigma),
-                           drives=drive_sensitivities(design, values, est.theta, used))
+                           weighting_sigma(self.sigma), structural=structural,
+                           drives=drive_sensitivities(design, values, est.theta, used)
+                           if structural else None)
 
     def _fit_all(self, datas: list[Measurements], zeros: bool = True
                  ) -> list[Estimate | Exception]:
