@@ -13,7 +13,7 @@ episode's fault stream (:func:`~orthoglide_env.world.faults.fault_stream`).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
@@ -23,9 +23,6 @@ from orthoglide_env.world.faults import (
     draw_size,
     schedule,
 )
-
-if TYPE_CHECKING:
-    from orthoglide_env.lab.engine import LabBatch
 
 
 class LabFaults:
@@ -68,14 +65,15 @@ class LabFaults:
         self.sign[rows, stand] = self.late[rows, stand] = False
         self.last[rows, stand] = self.previous[rows, stand] = np.nan
 
-    def fire(self, batch: LabBatch, rows: np.ndarray, when: np.ndarray) -> None:
-        """Let the faults of ``rows`` due by lab time ``when`` act."""
+    def fire(self, batch: Any, rows: np.ndarray, when: np.ndarray) -> None:
+        """Let the faults of ``rows`` due by lab time ``when`` act on ``batch`` (the
+        :class:`~orthoglide_env.lab.engine.LabBatch` that holds these faults)."""
         for r, i in enumerate(rows.tolist()):
             while self.pending[i] and self.pending[i][0][0] <= when[r]:
                 _, kind = self.pending[i].pop(0)
                 self._act(batch, i, kind, float(when[r]))
 
-    def _act(self, batch: LabBatch, i: int, kind: str, when: float) -> None:
+    def _act(self, batch: Any, i: int, kind: str, when: float) -> None:
         stream: np.random.Generator = self.streams[i]  # type: ignore[assignment]
         size = draw_size(kind, stream, self.condition)
         event = FaultEvent(kind, when, int(batch.steps[i]), size=size)
