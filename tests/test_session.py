@@ -17,6 +17,7 @@ from calibrators.measurements import Measurements
 from calibrators.study.episodes import machine_seed
 from calibrators.workflow.session import parse_answer
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
+from orthoglide_env.model.design import PROTOTYPE
 
 SEED, BUDGET = 2, "600"
 
@@ -121,3 +122,62 @@ def test_a_planned_agent_is_sent_to_plan(tmp_path) -> None:
                            "paper", "--out", str(tmp_path)], capture_output=True, text=True,
                           timeout=120)
     assert proc.returncode == 2 and "orthoglide plan" in proc.stderr
+
+
+def _answering(env: gym.Env, observation: dict, slip):
+    """A say and an answer of a session whose readings come from ``env`` (stepped with each
+    action the session announces); ``slip(question, true_value)`` may answer otherwise."""
+    state = {"observation": observation}
+
+    def say(text, action=None):
+        if action is not None:
+            state["observation"], *_ = env.step(
+                {"op": int(action["op"]), "rho": np.asarray(action["rho"], dtype=float),
+                 "stand": int(action["stand"]), "slot": int(action["slot"])})
+
+    def answer(question):
+        k = question["stand"] - 1
+        obs = state["observation"]
+        value = float(obs["gauges"][k]) if obs["valid"][k] else None
+        return slip(question, value)
+
+    return say, answer
+
+
+def test_an_impossible_reading_is_asked_again_and_a_knock_offers_a_re_zero(tmp_path) -> None:
+    from calibrators.workflow.session import Session
+
+    env = gym.make(orthoglide_env.LAB_ENV_ID, errors="realistic", gauge_sigma=DEFAULT_SIGMA,
+                   gauge_resolution=DEFAULT_RESOLUTION, backend="exact", budget_s=600.0,
+                   conditions="ideal")
+    observation, _ = env.reset(seed=machine_seed(SEED, 0))
+    asked_again: list[str] = []
+    state = {"asked": 0, "knocked": None}
+
+    def slip(question, value):
+        if "again" in question:
+            asked_again.append(question["again"])
+            # After the offer of a re-zero the dial is re-zeroed: it reads 0 at Zero.
+            return 0.0 if "re-zero" in question["again"] else value
+        state["asked"] += 1
+        if state["asked"] >= 10 and value is not None and not state.get("slipped"):
+            state["slipped"] = True
+            return 7.5  # beyond the 10 mm gauge's +-5 mm about its zero
+        at_zero = not any(question["rho"])
+        if at_zero and state["asked"] > 20 and state["knocked"] is None and value is not None:
+            state["knocked"] = question["stand"]
+            return value + 0.3  # the stand was knocked: 0.3 mm off its zero
+        return value
+
+    session = Session("active", 600.0, tmp_path / "notebook.jsonl", design=PROTOTYPE,
+                      seed=machine_seed(SEED, 0))
+    say, answer = _answering(env, observation, slip)
+    data = session.run(answer, say)
+    env.close()
+    assert any("outside the gauge's travel" in reason for reason in asked_again)
+    assert state["knocked"] is not None, "the session never came back to Zero"
+    assert any("may have been knocked; re-zero its dial" in reason for reason in asked_again)
+    renamed = [m for m in data.items if m.mounting.endswith("+re-zeroed")]
+    # From the re-zero on the stand's readings are a new mounting, which starts at Zero.
+    assert renamed and renamed[0].is_zero and renamed[0].reading == 0.0
+    assert 7.5 not in [m.reading for m in data.items]

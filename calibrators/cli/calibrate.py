@@ -12,9 +12,11 @@ from calibrators.cli import estimator_options
 from calibrators.cli.common import (
     add_conditions,
     add_design,
+    add_faults,
     add_instruments,
     add_thermometer,
     conditions_of,
+    faults_of,
     given_design,
     instruments_of,
 )
@@ -58,10 +60,12 @@ def run(args: argparse.Namespace) -> None:
     agent = get_agent(args.agent)
     machine, world, preset, sigma, resolution = _setup(args)
     conditions = conditions_of(args, world)
+    faults = faults_of(args)
     env = make_lab(agent, errors=preset, gauge_sigma=sigma, gauge_resolution=resolution,
                    backend=args.backend, thermometer=args.thermometer, budget_s=args.budget,
                    design=machine.design, conditions=conditions,
-                   instruments=instruments_of(args, (agent,)))
+                   instruments=instruments_of(args, (agent,)),
+                   **({"faults": faults} if faults.active else {}))
     with closing(env):
         # A random machine is drawn by the lab from the seed, as ``compare`` draws its first
         # one: the same seed gives the same machine, installation and readings there and here.
@@ -75,8 +79,11 @@ def run(args: argparse.Namespace) -> None:
         est = estimator_options.estimate(args, data, episode.sigma, conditions)
         save(est, args)
         lab = env.unwrapped
-        emit(report(est, episode.truth, z_rms(est, data, lab.true_machine, lab.true_gauges),
-                    episode.world), args.json)
+        shown = report(est, episode.truth, z_rms(est, data, lab.true_machine, lab.true_gauges),
+                       episode.world)
+        if faults.active:
+            shown["faults"] = episode.faults  # the truth, beside the score
+        emit(shown, args.json)
 
 
 def add(p: argparse.ArgumentParser) -> None:
@@ -94,6 +101,7 @@ def add(p: argparse.ArgumentParser) -> None:
     add_conditions(p, replays=True)
     add_thermometer(p)
     add_instruments(p)
+    add_faults(p)
     p.add_argument("--backend", choices=["pybullet", "exact"], default="pybullet",
                    help="simulator of the virtual machine (default: %(default)s)")
     group = p.add_mutually_exclusive_group()

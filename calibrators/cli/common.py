@@ -22,6 +22,7 @@ from orthoglide_env.world.conditions import (
     INDICATORS,
     Conditions,
 )
+from orthoglide_env.world.faults import FAULT_KINDS, Faults, as_faults
 from orthoglide_env.world.machine_file import read_machine_file
 from orthoglide_env.world.truth import World
 
@@ -120,6 +121,22 @@ def add_conditions(p: argparse.ArgumentParser, replays: bool = False,
                    "(semi-closed loop, the encoders on the motors) or scales (closed loop "
                    "on linear scales: no lead, periodic error, warm-up or lost motion, but "
                    "the scale's grade and expansion; docs/instruments.md) (default: screw)")
+
+
+def add_faults(p: argparse.ArgumentParser) -> None:
+    """``--faults``: what can go wrong in the lab."""
+    p.add_argument("--faults", metavar="LIST", default=None,
+                   help="faults that can happen in the lab, comma-separated: "
+                   f"{','.join(FAULT_KINDS)}, each at its rate and size in "
+                   "docs/faults.md (default: none)")
+
+
+def faults_of(args: argparse.Namespace) -> Faults:
+    """The faults of ``--faults``; :class:`UsageError` naming the kinds if bad."""
+    try:
+        return as_faults(args.faults)
+    except ValueError as exc:
+        raise UsageError(f"--faults: {exc}") from None
 
 
 def add_thermometer(p: argparse.ArgumentParser) -> None:

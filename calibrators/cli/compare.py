@@ -18,9 +18,11 @@ from calibrators.cli.common import (
     UsageError,
     add_conditions,
     add_design,
+    add_faults,
     add_instruments,
     add_thermometer,
     conditions_of,
+    faults_of,
     instruments_of,
     machine_design_of,
 )
@@ -79,7 +81,8 @@ def _check(args: argparse.Namespace) -> Config:
                   args.backend, args.seed, args.success_mm,
                   curve_estimator=_curve_estimator(estimators) if args.out else "",
                   design=machine_design_of(args), conditions=conditions_of(args),
-                  thermometer=args.thermometer, instruments=instruments)
+                  thermometer=args.thermometer, instruments=instruments,
+                  faults=faults_of(args))
 
 
 def _curve_estimator(estimators: tuple[str, ...]) -> str:
@@ -142,6 +145,9 @@ def _config_dict(config: Config, machines: int) -> dict:
         del data["instruments"]  # today's lab: runs kept before instruments resume
     else:
         data["instruments"] = list(data["instruments"])
+    faults = data.pop("faults")
+    if faults.active:  # a run without faults keeps the config a run before them kept
+        data["faults"] = list(faults.kinds)
     conditions = data.pop("conditions")
     data.update(conditions=conditions.name, effects=list(conditions.effects),
                 indicator=conditions.indicator)
@@ -199,7 +205,7 @@ def _print(trials: list[Trial], config: Config, machines: int, seconds: float,
     """Print the summary of ``trials`` (and the paired comparisons of its agents) as text,
     or as JSON holding the same text's table and warning lines beside the numbers; return
     its rows."""
-    rows, pairs = summary(trials, config.target_mm), paired(trials)
+    rows, pairs = summary(trials, config.target_mm, config.faults.active), paired(trials)
     table, warnings, pair_lines = _lines(rows, pairs, config, machines, seconds)
     if as_json:
         print(json.dumps({"config": _config_dict(config, machines), "world": config.world,
@@ -243,6 +249,13 @@ def _lines(rows: list[dict], pairs: list[dict], config: Config, machines: int,
         if r["failed"]:
             warnings.append(f"{r['agent']} x {r['estimator']}: {r['failed']} of "
                             f"{r['machines']} failed ({r['failure']}), counted as uncalibrated")
+        if "faults_detected" in r:
+            detected = r["faults_detected"]
+            warnings.append(f"{r['agent']} x {r['estimator']}: faults named in "
+                            + ("no trial with a fault" if detected is None
+                               else f"{detected:.0%} of the trials with one")
+                            + "; silent failures (off by > 3 sigma, no warning) "
+                            f"{r['silent_failures']:.1%}")
         for kind, seen in r["warnings"].items():
             example = seen["example"].split(":", 1)[-1].strip()
             example = example if len(example) <= 110 else example[:107] + "..."
@@ -276,13 +289,15 @@ def _show(value: float | None, width: int, digits: int) -> str:
 
 def _write(trials: list[Trial], rows: list[dict], out: Path, config: Config) -> list[Path]:
     summary_csv = out / "summary.csv"
+    # A run with faults has their columns last; one without, the columns it always had.
+    faults = ("faults_detected", "silent_failures") if config.faults.active else ()
     with summary_csv.open("w", newline="") as handle:
         writer = csv.writer(handle)
         writer.writerow(["world", "agent", "estimator", "machines", "failed", "time_s_median",
                          *(f"tcp_after_{f}_median_mm" for f in FRAMES),
                          "tcp_after_rigid_ci95_low_mm", "tcp_after_rigid_ci95_high_mm",
                          "tcp_after_rigid_p95_mm", "z_rms", "chi2_rejected", "success_rate",
-                         "predicted_success_rate"])
+                         "predicted_success_rate", *faults])
         for r in rows:
             writer.writerow([config.world, r["agent"], r["estimator"], r["machines"], r["failed"],
                              r["time_s"]["median"],
@@ -290,7 +305,7 @@ def _write(trials: list[Trial], rows: list[dict], out: Path, config: Config) -> 
                              *(r["tcp_after_mm"]["rigid"]["ci95"] or (None, None)),
                              r["tcp_after_mm"]["rigid"]["p95"], r["z_rms"],
                              r["chi2_rejected"], r["success_rate"],
-                             r["predicted_success_rate"]])
+                             r["predicted_success_rate"], *(r[k] for k in faults)])
     from calibrators.cli.plots import accuracy_vs_time, boxes
 
     return [out / TRIALS_FILE, summary_csv, accuracy_vs_time(trials, config, out),
@@ -321,6 +336,7 @@ def add(p: argparse.ArgumentParser) -> None:
     add_conditions(p)
     add_thermometer(p)
     add_instruments(p)
+    add_faults(p)
     p.add_argument("--backend", choices=["exact", "pybullet"], default="exact",
                    help="simulator (default %(default)s)")
     p.add_argument("--success-mm", "--target", dest="success_mm", type=float, default=0.01,

@@ -192,6 +192,11 @@ def print_table(data: dict[str, Any]) -> None:
                 f"{data[key][f]['rms']:10.4f} /{data[key][f]['max']:7.4f}" for f in FRAMES))
     if data.get("z_rms") is not None:
         print(f"z-RMS of the identifiable combinations against the truth: {data['z_rms']:.2f}")
+    for event in data.get("faults", ()):
+        where = (f"stand {event['mounting']}" if event["stand"] >= 0 else
+                 f"joint {event['joint']}" if event["joint"] >= 0 else "the room")
+        print(f"fault (the truth): {event['kind']} at step {event['step']} "
+              f"({event['time_s']:.0f} s), {where}, size {event['size']:+.4g}")
     # Last, where a reader's eye ends: what the fit says against itself.
     for warning in data["warnings"]:
         print(f"warning: {warning}")

@@ -51,7 +51,8 @@ def run(args: argparse.Namespace) -> None:
 
     def answer(question: dict[str, Any]) -> float | None:
         prompt = (json.dumps({"ask": question}) if args.json else
-                  f"  stand {question['stand']} ({question['gauge']}): reading in mm "
+                  (f"  {question['again']}\n" if "again" in question else "")
+                  + f"  stand {question['stand']} ({question['gauge']}): reading in mm "
                   "(- for none)? ")
         while True:
             print(prompt, end="\n" if args.json else "", flush=True)

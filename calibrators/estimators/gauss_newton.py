@@ -16,7 +16,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from calibrators.estimators.base import Estimate, Estimator, Measurements, register
+from calibrators.estimators.base import PARAM_NAMES, Estimate, Estimator, Measurements, register
 from calibrators.estimators.consider import (
     DEFAULT_NODE_SPACING,
     FULL_TERMS,
@@ -46,6 +46,14 @@ from calibrators.estimators.exact_fit import (
     directions,
     fit_batch,
     world_columns,
+)
+from calibrators.estimators.faults import (
+    MAX_REPAIRS,
+    PREFIX,
+    Finding,
+    drive_sensitivities,
+    find_faults,
+    slips_against_nominal,
 )
 from calibrators.estimators.holdout import held_out_residuals, holdout_mask, verification_rms
 from calibrators.estimators.outliers import CAUSE_WORDS as CAUSE_WORDS
@@ -95,13 +103,16 @@ from orthoglide_env.world.conditions import CONDITION_NAMES, Conditions
 #: What to do about an estimate outside the validity range.
 VALIDITY_HINT: str = ("free more parameters, e.g. --params extended, or take readings at "
                       "more postures")
-def layout_and_values(data: Measurements) -> tuple[ReadingLayout, np.ndarray]:
+def layout_and_values(data: Measurements, zeros: bool = True
+                      ) -> tuple[ReadingLayout, np.ndarray]:
     """The reading layout and the readings of ``data``; tracker readings turned into the machine's
     frame (:func:`align_tracker`); a gauge mounting without a Zero reading is refused
-    (:func:`~calibrators.estimators.differences.check_zeros`)."""
+    (:func:`~calibrators.estimators.differences.check_zeros`) unless ``zeros`` is False (a
+    stand found moved, whose new mounting's zero the fit estimates)."""
     if not len(data):
         raise ValueError("no readings to fit")
-    check_zeros(data.items)
+    if zeros:
+        check_zeros(data.items)
     design = ReadingLayout.of([m.mounting for m in data.items], [m.gauge for m in data.items],
                        np.array([m.rho for m in data.items], dtype=float), data.design)
     return design, align_tracker(design, np.array([m.reading for m in data.items], dtype=float))
@@ -262,7 +273,75 @@ class GaussNewtonCalibrator(Estimator):
         """:meth:`fit` of many experiments: those of one design (the same readings of the
         same mountings at the same postures, as a fixed agent takes them on every machine)
         are fitted together, in one batched solve.  A failure is returned in place of its
-        estimate, not raised."""
+        estimate, not raised.  Each fit's faults are named in its warnings
+        (:mod:`calibrators.estimators.faults`); a knocked stand or a skipped row is
+        refitted with its readings repaired."""
+        out = self._fit_all(datas)
+        for k, est in enumerate(out):
+            if isinstance(est, Estimate):
+                out[k] = self._with_faults(est)
+            elif isinstance(est, RuntimeError):
+                out[k] = self._without_slips(datas[k], est)
+        return out
+
+    def _without_slips(self, data: Measurements, failure: RuntimeError
+                       ) -> Estimate | Exception:
+        """A fit of ``data`` that did not converge (``failure``) done again without the
+        readings written with the wrong sign, or with rows written late put back, when the
+        nominal machine shows them (:func:`slips_against_nominal`)."""
+        try:
+            design, values = layout_and_values(data)
+        except ValueError:
+            return failure
+        found = slips_against_nominal(data, design, values)
+        if not found:
+            return failure
+        est = self._fit_all([found[0].repaired])[0]  # type: ignore[list-item]
+        if isinstance(est, Estimate):
+            est.warnings = [f.text for f in found] + est.warnings
+        return est
+
+    def _with_faults(self, est: Estimate) -> Estimate:
+        """``est`` with the faults its readings show named first in its warnings, refitted
+        on the readings repaired when one is repairable."""
+        texts: list[str] = []
+        named: set[tuple[str, str]] = set()
+        # Each pass repairs one fault and fits again; the next finds what is left.
+        for _ in range(MAX_REPAIRS + 1):
+            found = [f for f in self._faults(est) if (f.kind, f.where) not in named]
+            texts += [f.text for f in found]
+            named |= {(f.kind, f.where) for f in found}
+            repaired = next((f.repaired for f in found if f.repaired is not None), None)
+            if repaired is None:
+                break
+            refit = self._fit_all([repaired], zeros=False)[0]
+            if not isinstance(refit, Estimate):
+                texts.append(f"{PREFIX}: the refit on the repaired readings failed ({refit}); "
+                             "this estimate is of the readings as written")
+                break
+            est = refit
+        est.warnings = texts + est.warnings
+        return est
+
+    def _faults(self, est: Estimate) -> list[Finding]:
+        """The faults ``est``'s readings show (:func:`find_faults`)."""
+        used = np.ones(len(est.residuals), dtype=bool)
+        used[est.outliers] = False
+        residuals = est.residuals.copy()
+        residuals[est.outliers] = est.outlier_residuals
+        # A model of the paper's six errors alone cannot fit a machine with more: its
+        # residuals step and drift where nothing went wrong.
+        structural = any(n in ERROR_NAMES and n not in PARAM_NAMES for n in est.names)
+        design, values = layout_and_values(est.readings, zeros=False)
+        return find_faults(est.readings, residuals, used, est.outliers,
+                           weighting_sigma(self.sigma), structural=structural,
+                           drives=drive_sensitivities(design, values, est.theta, used)
+                           if structural else None)
+
+    def _fit_all(self, datas: list[Measurements], zeros: bool = True
+                 ) -> list[Estimate | Exception]:
+        """The fits of :meth:`fit_many`, before their faults are looked for (``zeros``:
+        of :func:`layout_and_values`)."""
         out: list[Estimate | Exception] = [ValueError("not fitted")] * len(datas)
         conditions = (Conditions(self.conditions) if isinstance(self.conditions, str)
                       else self.conditions)
@@ -279,7 +358,7 @@ class GaussNewtonCalibrator(Estimator):
         prepared = []
         for k, data in enumerate(datas):
             try:
-                design, values = layout_and_values(data)
+                design, values = layout_and_values(data, zeros)
             except ValueError as exc:
                 out[k] = exc
                 prepared.append(None)

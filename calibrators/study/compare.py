@@ -54,6 +54,7 @@ from orthoglide_env.model.errors import DEFAULT_PRESET, ERROR_NAMES, MachinePara
 from orthoglide_env.reading_model import ParameterSpace, default_scales
 from orthoglide_env.scoring import FRAMES, ScoreReport, score_batch, uncalibrated_errors
 from orthoglide_env.world.conditions import DEFAULT_CONDITIONS, Conditions
+from orthoglide_env.world.faults import NO_FAULTS, Faults, happened
 from orthoglide_env.world.truth import World
 
 #: Fractions of an episode's time at which the accuracy-versus-time curve re-estimates.
@@ -87,6 +88,8 @@ class Config:
     #: What the lab owns (empty: today's lab, see :func:`~calibrators.study.labs.
     #: lab_kwargs`).
     instruments: tuple[str, ...] = ()
+    #: What can go wrong in the lab (orthoglide_env.world.faults).
+    faults: Faults = NO_FAULTS
 
     @property
     def world(self) -> str:
@@ -95,6 +98,8 @@ class Config:
         thermometer, the gauges' sigma, the budget, the back-end and a custom design."""
         design = "" if self.design == PROTOTYPE else f", design L {self.design.L:g} mm"
         owned = f", instruments {'+'.join(self.instruments)}" if self.instruments else ""
+        if self.faults.active:
+            design += f", faults {self.faults.label}"
         return (f"{self.errors} errors, {self.conditions.label} conditions"
                 f"{', a thermometer' if self.thermometer else ''}{owned}, gauge sigma "
                 f"{self.sigma} mm, "
@@ -107,7 +112,8 @@ class Config:
                           gauge_resolution=self.resolution, backend=self.backend,
                           budget_s=self.budget_s, design=self.design,
                           conditions=self.conditions, thermometer=self.thermometer,
-                          instruments=self.instruments)
+                          instruments=self.instruments,
+                          **({"faults": self.faults} if self.faults.active else {}))
 
 
 @cache
@@ -183,6 +189,7 @@ def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
                 std[ERROR_NAMES.index(n)] = np.sqrt(est.covariance[k, k])
         out.append(Trial(
             episode.agent, name, episode.machine, time_s=run.time_s, readings=count,
+            faults=happened(run.faults),
             predicted_rigid_mm=next(predicted), chi2_rejected=est.chi2_rejected,
             z=next(z_scores).tolist(),
             error=(est.theta[:len(ERROR_NAMES)] - run.truth.to_vector()).tolist(),

@@ -14,7 +14,7 @@ experiment of ``compare --seed s``'s first machine.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import gymnasium as gym
@@ -94,6 +94,8 @@ class Episode:
     truth: MachineParams
     info: dict[str, Any]
     world: World | None = None  # the machine's world beyond its geometry (None: ideal)
+    #: The faults that happened (``FaultEvent.to_dict``; none in a lab without faults).
+    faults: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def measurements(self) -> Measurements:
@@ -179,7 +181,7 @@ def run_episodes(envs: gym.vector.VectorEnv, agents: list[Agent], seeds: list[in
                 truth, world = _truth(envs, i)
                 out[i] = Episode(list(lab.records), float(observation["time"][i, 0]),
                                  lab.noise.effective_sigma, truth, dict(_InfoRow(info, i)),
-                                 world)
+                                 world, _faults(envs, i))
         if all(e is not None for e in out):
             return out  # type: ignore[return-value]
 
@@ -190,6 +192,13 @@ def run_episode(env: gym.Env, agent: Agent, seed: int, options: dict | None = No
     (and ``options``), worked by ``agent`` until the episode ends, seen by ``watch``."""
     return run_episodes(gym.vector.SyncVectorEnv([lambda: env]), [agent], [seed], options,
                         watch=watch)[0]
+
+
+def _faults(envs: gym.vector.VectorEnv, i: int) -> list[dict[str, Any]]:
+    """The faults that happened in env ``i``'s episode, for scoring only."""
+    if isinstance(envs, gym.vector.SyncVectorEnv):
+        return envs.envs[i].unwrapped.true_faults
+    return envs.unwrapped.true_faults(i)
 
 
 def _labs(envs: gym.vector.VectorEnv) -> list[Any]:

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 from scipy import special
+from scipy.stats import norm
 
 from calibrators.study.trials import Trial
 from orthoglide_env.scoring import FRAMES
@@ -65,13 +66,46 @@ def warning_title(kind: str) -> str:
     return re.sub(r"\bN ((?:\w+ )*?)(\w+)\(s\)", r"\1\2s", kind)
 
 
-def summary(trials: list[Trial], target_mm: float = 0.01) -> list[dict]:
+#: A silent failure's threshold: an error beyond 3 sigma along one determined combination,
+#: as often as a normal deviate passes 3 sigma (0.27 %) over all of a trial's combinations
+#: (Bonferroni), so honest error bars give at most 0.27 % of silent failures.
+SILENT_SIGMAS: float = 3.0
+
+
+def named(trial: Trial, kind: str) -> bool:
+    """Whether ``trial``'s estimate named a fault of ``kind`` in its warnings
+    (:mod:`calibrators.estimators.faults`)."""
+    return any(w.startswith("fault ") and kind in w.split(":", 1)[0] for w in trial.warnings)
+
+
+def silent(trial: Trial) -> bool:
+    """Whether ``trial``'s estimate is off by more than :data:`SILENT_SIGMAS` along a
+    determined combination (its z-scores, the level spread over their count) with no
+    warning."""
+    if trial.failed or not trial.z or trial.warnings:
+        return False
+    tail = 2 * norm.sf(SILENT_SIGMAS) / len(trial.z)
+    return bool(np.max(np.abs(trial.z)) > norm.isf(tail / 2))
+
+
+def fault_keys(trials: list[Trial]) -> dict[str, float | None]:
+    """``faults_detected``: of the trials in which a fault acted, the fraction whose
+    estimate named one of their kinds (None without one); ``silent_failures``: the fraction
+    of all trials that fail silently (:func:`silent`)."""
+    faulted = [t for t in trials if t.faults]
+    return {"faults_detected": float(np.mean([any(named(t, k) for k in t.faults)
+                                              for t in faulted])) if faulted else None,
+            "silent_failures": float(np.mean([silent(t) for t in trials])) if trials else None}
+
+
+def summary(trials: list[Trial], target_mm: float = 0.01, faults: bool = False) -> list[dict]:
     """One row per agent x estimator, in the order they first appear.  Accuracy is over
     every trial: a failed one counts with its machine's uncalibrated error
     (``failed_counted_as``).  ``success_rate``: the TCP error after rigid motion, against
     the truth, is at most ``target_mm``; ``predicted_success_rate``: the error an estimate
     predicts for itself is (a failed trial succeeds at neither).  ``warnings``: how many
-    trials' estimates gave each kind of warning, with the first one's text."""
+    trials' estimates gave each kind of warning, with the first one's text.  ``faults`` (a
+    lab with faults): the rows hold :func:`fault_keys` too."""
     rows = []
     for agent, name in dict.fromkeys((t.agent, t.estimator) for t in trials):
         mine = [t for t in trials if t.agent == agent and t.estimator == name]
@@ -106,6 +140,7 @@ def summary(trials: list[Trial], target_mm: float = 0.01) -> list[dict]:
                                                      and t.predicted_rigid_mm <= target_mm
                                                      for t in mine])),
             "warnings": warned,
+            **(fault_keys(mine) if faults else {}),
         })
     return rows
 

@@ -31,6 +31,8 @@ class Trial:
     std: list[float] = field(default_factory=list)  # reported, NaN where fixed
     curve: list[list[float]] = field(default_factory=list)  # [seconds, rigid RMS mm]
     warnings: list[str] = field(default_factory=list)  # the estimate's
+    #: The kinds of fault that acted in the episode (a lab with faults; the truth).
+    faults: list[str] = field(default_factory=list)
 
     @property
     def key(self) -> tuple[str, str, int]:
@@ -46,6 +48,8 @@ class Trial:
         where a number is not one (NaN: the std of an error the fit held fixed, or what a
         failed trial never had)."""
         data = {**asdict(self), "names": list(self.names)}
+        if not self.faults:
+            del data["faults"]  # a line as a lab without faults always wrote it
         return json.dumps(leaves(data, lambda v: None if v != v else v), allow_nan=False)
 
     @classmethod

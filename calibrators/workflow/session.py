@@ -10,6 +10,15 @@ notebook file at once, so a crash loses nothing; a session started again on that
 replays it (``resume``) and goes on where it stopped.  The session ends when the agent
 stops (at its target predicted error, or when nothing is worth the time) or at the budget.
 
+An impossible answer is asked again (the question then holds ``again``, the reason): one
+outside the gauge's travel, or one whose change since the stand's last answer differs
+from the nominal machine's by more than a machine's errors explain
+(:data:`~calibrators.estimators.faults.NOMINAL_MM`).  A stand that reads far from 0 back
+at Zero, where its dial was zeroed, may have been knocked: the session says so and asks for
+the reading again after a re-zero; an answer near 0 then starts a new mounting of that
+stand from that reading on (its own zero for the fit), the same answer again keeps the old
+one.
+
 The episode is :func:`~calibrators.study.episodes.run_episode`'s, the session watching each
 step (:class:`~calibrators.study.episodes.Watcher`) to say it and ask its readings.
 """
@@ -27,6 +36,7 @@ import numpy as np
 
 from calibrators.agents import get_agent
 from calibrators.agents.base import PlannedAgent
+from calibrators.estimators.faults import NOMINAL_MM
 from calibrators.measurements import Measurements, gauge_name
 from calibrators.study.episodes import run_episode
 from calibrators.study.labs import nominal_lab, nominal_options
@@ -36,6 +46,10 @@ from orthoglide_env.lab.notebook import Record
 from orthoglide_env.lab.operations import Op, slot_catalogue
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.world.conditions import DEFAULT_CONDITIONS, Conditions
+
+#: Back at Zero, a stand reading more than this many of its sigma (plus the dial's
+#: resolution) from 0 may have been knocked.
+ZERO_K: float = 5.0
 
 #: What an answer is asked for: (step number, what to do, stand (1, 2, ...), gauge name,
 #: rho, lab clock (s)); it returns the reading (mm) or None (the gauge gave none).
@@ -65,6 +79,9 @@ class Session:
         elif target_mm:
             raise ValueError(f"agent '{agent_name}' has no target error to stop at")
         self.design, self.seed = design, seed
+        self.tolerance = ZERO_K * sigma + resolution
+        self.last: dict[str, tuple[float, float]] = {}  # mounting: (answer, nominal reading)
+        self.rezeroed: dict[str, str] = {}  # a lab mounting's name: the name it goes by now
         self.notebook = Path(notebook)
         self.replay = _read_notebook(self.notebook)
         self.env = nominal_lab(self.agent, design,
@@ -128,7 +145,7 @@ class Session:
                                      "not this session's notebook")
                 value = given["reading_mm"]
             else:
-                value = answer(question)
+                value = self._checked(question, record, answer)
                 with self.notebook.open("a", encoding="utf-8") as handle:
                     handle.write(json.dumps({"step": number, "stand": stand + 1,
                                              "gauge": question["gauge"],
@@ -137,8 +154,55 @@ class Session:
             observation["valid"][stand] = value is not None
             observation["gauges"][stand] = 0.0 if value is None else value
             if value is not None:
-                kept.append(replace(record, reading=float(value)))
+                mounting = self._mounting(record, float(value))
+                kept.append(replace(record, reading=float(value), mounting=mounting))
         records[:] = kept
+
+    def _checked(self, question: dict[str, Any], record: Record, answer: Answer
+                 ) -> float | None:
+        """The answer to ``question`` (of the nominal lab's ``record``), asked again with
+        the reason when it is impossible or when a stand back at Zero reads far from its
+        zero (a re-zero offered: an answer near 0 then starts a new mounting); the second
+        answer stands."""
+        value = answer(question)
+        reason = None if value is None else self._impossible(record, value)
+        if reason is None:
+            return value
+        again = answer({**question, "again": reason})
+        if (again is not None and "re-zero" in reason and abs(again) <= self.tolerance
+                and again != value):
+            mounting = self.rezeroed.get(record.mounting, record.mounting)
+            self.rezeroed[record.mounting] = f"{mounting}+re-zeroed"
+        return again
+
+    def _impossible(self, record: Record, value: float) -> str | None:
+        """Why ``value`` cannot be ``record``'s reading, or why it is suspect; None if it
+        is neither."""
+        # A reading at the end of the travel may pass it by its noise and rounding.
+        reach = self.env.unwrapped.travel / 2 + self.tolerance
+        if abs(value) > reach:
+            return (f"{value:+.3f} mm is outside the gauge's travel (+-{reach:g} mm about "
+                    "its zero, with its noise): read it again")
+        mounting = self.rezeroed.get(record.mounting, record.mounting)
+        if mounting not in self.last:
+            return None
+        before, nominal = self.last[mounting]
+        jump = (value - before) - (record.reading - nominal)
+        if abs(jump) > NOMINAL_MM:
+            return (f"{value:+.3f} mm is {jump:+.3f} mm from what the move explains since "
+                    f"its last reading {before:+.3f} mm: read it again")
+        if not any(record.rho) and abs(value) > self.tolerance:
+            return (f"back at Zero the stand reads {value:+.3f} mm, where its dial was "
+                    "zeroed: it may have been knocked; re-zero its dial and give the "
+                    "reading again (the same answer keeps the old zero)")
+        return None
+
+    def _mounting(self, record: Record, value: float) -> str:
+        """The mounting ``record``'s answer ``value`` belongs to (a re-zeroed stand's new
+        one), which remembers it."""
+        mounting = self.rezeroed.get(record.mounting, record.mounting)
+        self.last[mounting] = (value, record.reading)
+        return mounting
 
 
 class _Asker:

@@ -204,6 +204,14 @@ class EngineEnv(Face, gym.Env):
         return None if world is None else world[0]
 
     @property
+    def true_faults(self) -> list[dict[str, Any]]:
+        """The faults that happened so far in this episode (their ``FaultEvent.to_dict``;
+        empty in a lab without faults): the truth, for scoring only."""
+        self._require()
+        faults = self._batch.faults
+        return [] if faults is None else [e.to_dict() for e in faults.log[0]]
+
+    @property
     def true_gauges(self) -> list[Gauge]:
         """Every installation of the episode, in mounting order (scoring only)."""
         self._require()

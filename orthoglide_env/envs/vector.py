@@ -183,6 +183,13 @@ class EngineVectorEnv(Face, VectorEnv):
         self._batch.require()
         return self._batch.world
 
+    def true_faults(self, i: int) -> list[dict[str, Any]]:
+        """The faults that happened so far in env ``i``'s episode (empty in a lab without
+        faults; scoring only)."""
+        self._batch.require()
+        faults = self._batch.faults
+        return [] if faults is None else [e.to_dict() for e in faults.log[i]]
+
     # -- episodes and streams -----------------------------------------------------------------
     def _start(self, rows: np.ndarray, seeds: list[int | None], machine: MachineParams | None,
                layout: tuple[GaugeSpec, ...] | None, obs: dict[str, np.ndarray],

@@ -26,6 +26,7 @@ from orthoglide_env.instruments.gauges import Gauge, GaugeArray
 from orthoglide_env.instruments.slots import GaugeSpec, Part, on_platform
 from orthoglide_env.instruments.stands import install_array, installation_errors
 from orthoglide_env.lab.clock import overtravel_seconds, step_seconds, travel_seconds
+from orthoglide_env.lab.faults import LabFaults
 from orthoglide_env.lab.machines import ExactMachine, LabMachines, Sight
 from orthoglide_env.lab.notebook import Notebook, Record, predicted_many
 from orthoglide_env.lab.operations import OP_NAMES, TRACKER_DISTANCE, Op
@@ -39,6 +40,7 @@ from orthoglide_env.model.collisions import PAIR_NAMES, collision_names
 from orthoglide_env.model.errors import AXIS_NAMES, MachineParams
 from orthoglide_env.reading_model import TrackerAxis
 from orthoglide_env.scoring.truth import score
+from orthoglide_env.world.faults import fault_stream
 from orthoglide_env.world.table import REFERENCE_DEVIATION, REFERENCE_LENGTH_MM
 from orthoglide_env.world.truth import UM, World, draw_range
 
@@ -133,6 +135,9 @@ class LabBatch:
         # names (its index then lies past the catalogue's).
         self.places: list[GaugeSpec] = list(self.slots)
         self._place_index = {spec.slot: k for k, spec in enumerate(self.slots)}
+        # What has gone wrong so far (None: a lab without faults).
+        self.faults = (LabFaults(settings.faults, settings.conditions.name, settings.budget_s,
+                                 n, s) if settings.faults.active else None)
 
     def place(self, spec: GaugeSpec) -> int:
         """The index of ``spec`` in :attr:`places` (added when new)."""
@@ -162,6 +167,8 @@ class LabBatch:
         settings = self.settings
         specs = settings.layout if layout is None else layout
         first = [self.place(spec) for spec in specs]
+        # Seeded before the episode's stream draws: a seed's faults are known from it alone.
+        own = None if self.faults is None else [fault_stream(s) for s in streams]
         drawn, rotations, positions, errors, worlds, offsets = [], [], [], [], [], []
         lasers: list[tuple[float, float]] = []
         for stream in streams:
@@ -218,6 +225,8 @@ class LabBatch:
             (len(rows), settings.stands), settings.travel, self.slots[0]))
         self.gauges = self.gauges.with_rows((rows[:, None], np.arange(len(first))), installed)
         names = [spec.slot for spec in specs]
+        if self.faults is not None:
+            self.faults.reset(rows, own)  # type: ignore[arg-type]
         for r, i in enumerate(rows):
             self.streams[i] = streams[r]
             self.mounting[i] = names + [""] * (settings.stands - len(first))
@@ -540,6 +549,8 @@ class LabBatch:
         self.faulted[rows, stand] = False
         self.pressed[rows, stand] = False
         self.count[rows, stand] += 1
+        if self.faults is not None:
+            self.faults.remounted(rows, stand)
         for r, (i, k, s) in enumerate(zip(rows, stand, slot, strict=True)):
             name = f"{self.places[s].slot}#{self.mounts[i]}"
             self.mounting[i][k] = name
@@ -565,6 +576,9 @@ class LabBatch:
             return Sight(np.zeros((0, stands)), np.zeros((0, stands), dtype=bool),
                          np.zeros((0, len(PAIR_NAMES)), dtype=bool), np.zeros((0, 3)))
         at = self.rho if self.world is None else self.actual
+        if self.faults is not None:
+            self.faults.fire(self, rows, when)
+            at = self.faults.moved(at)
         sight = self.backend.look(rows, self._of(self.require(), rows), self._seen(rows),
                                   *(self._of(x, rows) for x in (at, self.tcp, self.engaged)))
         self.tcp[rows] = sight.tcp
@@ -627,6 +641,8 @@ class LabBatch:
         noisy = settings.noise.applied(ideal, draws)
         valid = good & mounted & self.engaged[rows] & ~self.faulted[rows]
         values = np.where(valid, noisy, np.nan)
+        if self.faults is not None:
+            values = self.faults.shown(rows, values)
         if settings.notebook:
             self._write(rows, pending, valid, values)
         return values
@@ -636,6 +652,8 @@ class LabBatch:
         """Write the ``valid`` gauge ``values`` (and the tracker's) of ``rows`` into their
         notebooks, from plain lists (one Record per reading)."""
         settings = self.settings
+        if self.faults is not None:
+            valid, values = self.faults.written(rows, valid, values)
         index, rho = rows.tolist(), [tuple(p) for p in self.rho[rows].tolist()]
         steps, stamps = self.steps[rows].tolist(), (self.time[rows] + pending).tolist()
         read, slots = values.tolist(), self.slot[rows].tolist()

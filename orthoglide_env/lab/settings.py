@@ -35,6 +35,7 @@ from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import ErrorPreset, get_preset
 from orthoglide_env.sim.display import display_problem, require_display
 from orthoglide_env.world.conditions import IDEAL, Conditions
+from orthoglide_env.world.faults import NO_FAULTS, Faults
 
 #: Encoders may read a hair outside the control limits after settling (solver residue
 #: ~1e-9 mm); the observation box leaves this margin so an observation is always inside.
@@ -73,6 +74,7 @@ class LabSettings:
     reference: bool = False  # the lab has the gauge block: its catalogue the reference slots
     instruments: tuple[str, ...] = ("dial",)  # what the lab owns (interferometer.INSTRUMENT_NAMES)
     version: int = 0  # the lab env's version: v1's spaces carry the interferometer
+    faults: Faults = NO_FAULTS  # what can go wrong in the session (orthoglide_env.lab.faults)
 
     @property
     def interferometer(self) -> bool:
@@ -154,8 +156,12 @@ def lab_settings(args: dict[str, Any], version: int = 0) -> LabSettings:
         raise ValueError("instruments: the interferometer needs OrthoglideLab-v1 (its action "
                          "has the align operation and an axis, its observation the "
                          "interferometer's reading)")
+    faults = args["faults"]
+    if "thermal-step" in faults.kinds and "room" not in args["conditions"]:
+        raise ValueError("faults: 'thermal-step' steps the room's temperature: it needs "
+                         "conditions 'lab' or 'workshop' with the room effect")
     return LabSettings(
-        **_shared(args, design), stands=stands,
+        **_shared(args, design), stands=stands, faults=faults,
         layout=tuple(slots[slot_index(spec, design=design)] for spec in PAPER_LAYOUT[:stands]),
         instruments=instruments, version=version,
         tracker=tracker, tracker_sigma=args["tracker_sigma"],

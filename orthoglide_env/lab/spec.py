@@ -29,6 +29,7 @@ from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS
 from orthoglide_env.sim.motion import MOTION_MODES
 from orthoglide_env.world.conditions import DEFAULT_CONDITIONS, as_conditions
+from orthoglide_env.world.faults import as_faults
 
 BACKENDS: tuple[str, ...] = ("pybullet", "exact")
 RENDER_MODES: tuple[str, ...] = ("rgb_array", "human")
@@ -212,6 +213,20 @@ class ConditionsArg(Arg):
 #: MachineDesign, "world" a drawn truth).
 Design, World = DesignArg, ConditionsArg
 CONDITIONS = ConditionsArg(default=DEFAULT_CONDITIONS)
+
+
+@dataclass(frozen=True)
+class FaultsArg(Arg):
+    """The faults that can happen: None, a list of kinds or a comma-separated string
+    (:data:`~orthoglide_env.world.faults.FAULT_KINDS`), or a ``Faults``."""
+
+    def check(self, name: str, value: Any) -> Any:
+        try:
+            return as_faults(value)
+        except ValueError as exc:
+            raise ValueError(f"{name}: {exc}") from None
+
+
 #: ``OrthoglideCalibration-v0``'s arguments.
 CALIBRATION: dict[str, Arg] = {
     "errors": ERRORS, "gauge_sigma": SIGMA, "gauge_resolution": RESOLUTION,
@@ -238,6 +253,7 @@ LAB: dict[str, Arg] = {
     "conditions": CONDITIONS, "reference": FLAG, "render_mode": RENDER_MODE,
     # None: what the lab owns without it, its dial gauges and a tracker where ``tracker``.
     "instruments": INSTRUMENTS,
+    "faults": FaultsArg(),
 }
 #: A native vector env's arguments: ``num_envs``, its single env's (the lab's draws no
 #: picture) and ``autoreset_mode``.

@@ -202,3 +202,44 @@ SCALES: dict[str, Size] = {
                       "assumption: about 8 ppm/K for a glass scale (the LC/LS coefficient "
                       "was not found; Invar about 1, Zerodur about 0)"),
 }
+#: Faults (a lab built with ``faults=``): things that go wrong in a session, each kind's
+#: ``rate`` (events per hour of lab time, a Poisson process) and ``size``.  Under ``ideal``
+#: conditions they take the ``lab`` column.  None of these has a sourced number here: they
+#: are assumptions, set so that one hour of work meets about one of each kind asked for.
+FAULTS: dict[str, dict[str, Size]] = {
+    "knock": {
+        "rate": Size((0.5, 0.5), (1, 1), "1/h", "a stand is knocked", "assumption"),
+        "size": Size((0.01, 0.05), (0.02, 0.1), "mm", "its mounting moves along the "
+                     "measuring axis by this, from that reading until it is re-mounted",
+                     "assumption: a bump on a magnetic stand's arm, tens of um", signed=True),
+    },
+    "stick": {
+        "rate": Size((0.5, 0.5), (1, 1), "1/h", "a plunger sticks", "assumption"),
+        "size": Size((1, 3), (1, 3), "readings", "the dial shows its previous value for "
+                     "this many readings (whole readings, rounded down)", "assumption"),
+    },
+    "sign": {
+        "rate": Size((0.5, 0.5), (1, 1), "1/h", "a reading written with the wrong sign",
+                     "assumption: a transcription slip"),
+        "size": Size((1, 1), (1, 1), "readings", "one reading", "assumption"),
+    },
+    "skip": {
+        "rate": Size((0.5, 0.5), (1, 1), "1/h", "a row skipped on the sheet",
+                     "assumption: a transcription slip"),
+        "size": Size((1, 1), (1, 1), "rows", "from that reading on, the stand's readings "
+                     "are written one row late (each against the next posture) until it is "
+                     "re-mounted", "assumption"),
+    },
+    "thermal-step": {
+        "rate": Size((0.5, 0.5), (1, 1), "1/h", "a door opened", "assumption"),
+        "size": Size((0.5, 2), (1, 4), "K", "a step in the room's temperature",
+                     "assumption: a controlled room's door, a shop's gate", signed=True),
+    },
+    "lost-steps": {
+        "rate": Size((0.5, 0.5), (1, 1), "1/h", "a drive loses steps", "assumption"),
+        "size": Size((0.025, 0.1), (0.025, 0.1), "mm", "one joint's carriage is off by "
+                     "this from that move on (the encoder reads the command)",
+                     "assumption: 1-4 full steps of 25 um (a 5 mm lead, 200 steps a turn)",
+                     signed=True),
+    },
+}
