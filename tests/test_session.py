@@ -18,6 +18,7 @@ from calibrators.study.episodes import machine_seed
 from calibrators.workflow.session import parse_answer
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.model.design import PROTOTYPE
+from orthoglide_env.world.conditions import DEFAULT_CONDITIONS
 
 SEED, BUDGET = 2, "600"
 
@@ -99,7 +100,9 @@ def test_a_piped_session_is_calibrate_and_resumes(calibrated, tmp_path, capsys) 
     theirs = Measurements.read(readings)
     assert mine.items == theirs.items
     assert [m.time_s for m in mine.items] == [m.time_s for m in theirs.items]
-    assert main(["fit", str(tmp_path / "s" / "readings.csv"), "--json"]) == 0
+    # Both ran in the default world, the real lab's, which a file of readings does not name.
+    assert main(["fit", str(tmp_path / "s" / "readings.csv"), "--conditions",
+                 DEFAULT_CONDITIONS, "--json"]) == 0
     fitted = json.loads(capsys.readouterr().out)
     assert fitted["estimate"] == cal["estimate"]
 

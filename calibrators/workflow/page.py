@@ -42,7 +42,8 @@ def write_page(procedure: Procedure, folder: str | Path, then: str = FIT_COMMAND
     path = folder / PAGE_FILE
     path.write_text(page(procedure, drawn, then), encoding="utf-8")
     if pdf:
-        write_pdf(procedure, folder, drawn, then, folder / PDF_FILE)
+        write_pdf(procedure, folder, drawn, BARS_FILE, stand_numbers(procedure), then,
+                  folder / PDF_FILE)
     return path, drawn
 
 

@@ -22,21 +22,20 @@ WIDTH, LINES = 95, 62
 SHEET_ROWS = 40
 
 
-def write_pdf(procedure: Procedure, folder: Path, pictures: dict[int, str], then: str,
-              out: Path) -> Path:
+def write_pdf(procedure: Procedure, folder: Path, pictures: dict[int, str], bars: str,
+              stands: list[int | None], then: str, out: Path) -> Path:
     """Write the PDF of ``procedure``'s page to ``out``; ``folder`` holds the pictures
-    (``pictures``: file names by step number, and :data:`~calibrators.workflow.page.
-    BARS_FILE`), ``then`` the command that reads the filled sheet."""
+    (``pictures``: file names by step number; ``bars``: the picture of a leg's bars),
+    ``stands`` the stand of each row of the sheet, ``then`` the command that reads the
+    filled sheet."""
     import matplotlib
 
     matplotlib.use("Agg")
     from matplotlib.backends.backend_pdf import PdfPages
 
-    from calibrators.workflow.page import BARS_FILE, stand_numbers
-
     with PdfPages(out, metadata={"Title": f"Calibration procedure: {procedure.agent}"}) as pdf:
         _text_pages(pdf, _opening(procedure, then))
-        _picture_page(pdf, folder / BARS_FILE, "Where a stand goes on a bar: each leg has "
+        _picture_page(pdf, folder / bars, "Where a stand goes on a bar: each leg has "
                       "two parallel bars, d apart; a stand's place names its bar by its side, "
                       "+d/2 or -d/2, and the distance along it from the centre of the "
                       "platform-end hinge.")
@@ -53,7 +52,7 @@ def write_pdf(procedure: Procedure, folder: Path, pictures: dict[int, str], then
         for number, name in pictures.items():
             step = procedure.steps[number - 1]
             _picture_page(pdf, folder / name, f"Step {number}: {step.text}")
-        _sheet_pages(pdf, procedure, stand_numbers(procedure))
+        _sheet_pages(pdf, procedure, stands)
     return out
 
 
