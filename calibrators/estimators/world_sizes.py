@@ -85,7 +85,12 @@ def restricted_statistics(design: ReadingLayout, values: np.ndarray, mask: np.nd
     n = len(design.space.names)
     rows = (mask, np.eye(len(design.mountings))[design.mounting], design.mounting)
     y = centre((values - predict(theta[:, :n], design)) * weight, *rows)
-    jac = centre(jacobian(theta[:, :n], design, free[:n], scale[:n]) * weight[:, None], *rows)
+    # Each mounting's gain goes with the geometry: a remounted gauge's lever and cosine
+    # error scale its readings, which a stand's parameters hold only for its first
+    # mounting, and a dial's error curve over a short stroke is nearly such a gain.
+    gains = (values * weight)[..., None] * rows[1][None]
+    jac = centre(np.concatenate([jacobian(theta[:, :n], design, free[:n], scale[:n])
+                                 * weight[:, None], gains], axis=-1), *rows)
     c = centre(columns * weight[:, None], *rows)
     values_, vectors = np.linalg.eigh(transposed(jac) @ jac)
     keep = values_ > RANK_TOL * values_[:, -1:]
