@@ -12,6 +12,7 @@ readings.  It reads any experiment's notebook or measurement file.
 from __future__ import annotations
 
 import numbers
+from collections.abc import Callable
 from typing import Any, ClassVar
 
 import numpy as np
@@ -543,7 +544,8 @@ class GaussNewtonCalibrator(Estimator):
         )
 
 def _world_terms(design: ReadingLayout, values: np.ndarray, datas: list[Measurements],
-                 conditions: Conditions, spacing: float | None) -> Any:
+                 conditions: Conditions, spacing: float | None
+                 ) -> Callable[[str], Consider]:
     """The consider terms of these readings under the named conditions, every effect
     acting and the told conditions' indicator: what the told world is measured against."""
     times, temperatures = (_every_reading(datas, name) for name in ("time_s", "temperature_c"))
