@@ -20,7 +20,13 @@ import sys
 from importlib import metadata
 from types import ModuleType
 
-from calibrators.cli.parser import Parser, UsageError
+try:
+    from calibrators.cli.parser import Parser, UsageError
+except KeyboardInterrupt:
+    # Ctrl-C while the command line loads (the console script imports this package
+    # before main runs): one line and SIGINT's status, as main gives.
+    print("orthoglide: interrupted", file=sys.stderr)
+    raise SystemExit(130) from None
 
 #: Each command, in the order ``orthoglide --help`` lists them, with its line there.  A
 #: command's module (``calibrators.cli.NAME``: its options and what it does) is imported

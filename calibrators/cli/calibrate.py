@@ -17,6 +17,7 @@ from calibrators.cli.common import (
     add_thermometer,
     conditions_of,
     faults_of,
+    fit_conditions_of,
     given_design,
     instruments_of,
 )
@@ -76,7 +77,8 @@ def run(args: argparse.Namespace) -> None:
             data.write(args.save_measurements)
         if args.save_truth:
             write_machine_file(args.save_truth, episode.truth, episode.world)
-        est = estimator_options.estimate(args, data, episode.sigma, conditions)
+        est = estimator_options.estimate(args, data, episode.sigma,
+                                         fit_conditions_of(args, conditions))
         save(est, args)
         lab = env.unwrapped
         shown = report(est, episode.truth, z_rms(est, data, lab.true_machine, lab.true_gauges),
@@ -98,7 +100,7 @@ def add(p: argparse.ArgumentParser) -> None:
                         "of the gauge installation only (default: realistic, or none with "
                         "--machine)")
     add_design(p)
-    add_conditions(p, replays=True)
+    add_conditions(p, replays=True, told=True)
     add_thermometer(p)
     add_instruments(p)
     add_faults(p)

@@ -15,6 +15,7 @@ from calibrators.cli.parser import UsageError as UsageError
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign, load_design
 from orthoglide_env.model.errors import MachineParams, check_rho, random_machine
 from orthoglide_env.world.conditions import (
+    AUTO,
     CONDITION_NAMES,
     DEFAULT_CONDITIONS,
     DRIVES,
@@ -94,20 +95,30 @@ def add_design(p: argparse.ArgumentParser) -> None:
 
 
 def add_conditions(p: argparse.ArgumentParser, replays: bool = False,
-                   measured: bool = False) -> None:
+                   measured: bool = False, told: bool = False) -> None:
     """``--conditions`` and ``--effects``; ``replays``: the command takes a machine file,
     whose world (when it holds one) gives the conditions; ``measured``: the command fits
-    readings taken under them (a real machine's)."""
+    readings taken under them (a real machine's), and ``auto`` has the fit estimate
+    them; ``told``: the command draws a lab's readings and fits them, and
+    ``--fit-conditions`` tells the fit another world than the lab's."""
     default = (f"the machine file's world, else {DEFAULT_CONDITIONS}" if replays
                else f"{READINGS_CONDITIONS}: name lab for a real lab's readings, which then "
                "need each reading's time_s" if measured else DEFAULT_CONDITIONS)
     what = ("the world the readings were taken in, whose effects beyond the geometry the "
             "fit puts into its error bars" if measured else "the world beyond the geometry")
-    p.add_argument("--conditions", choices=CONDITION_NAMES, default=None,
+    auto = (", or auto: the fit estimates them from the readings (docs/world.md)"
+            if measured else "")
+    p.add_argument("--conditions", choices=(*CONDITION_NAMES, AUTO) if measured or told
+                   else CONDITION_NAMES, default=None,
                    help=f"{what}: ideal (none), lab (a controlled "
                    "room, a well-kept machine) or workshop (a shop floor, an ordinary "
-                   "machine); docs/conditions.md lists every effect and its size "
+                   f"machine){auto}; docs/conditions.md lists every effect and its size "
                    f"(default: {default})")
+    if told:
+        p.add_argument("--fit-conditions", choices=(*CONDITION_NAMES, AUTO), default=None,
+                       help="the world the fit is told, when not the lab's: ideal, lab, "
+                       "workshop, or auto: the fit estimates it from the readings "
+                       "(docs/world.md) (default: --conditions)")
     p.add_argument("--effects", metavar="LIST", default=None,
                    help="only these effects of --conditions act, comma-separated: "
                    f"{','.join(EFFECT_NAMES)} (default: all of them)")
@@ -212,8 +223,16 @@ def conditions_of(args: argparse.Namespace, world: World | None = None,
     if (world is not None and args.conditions is None and effects is None
             and indicator is None and drives is None):
         return world.conditions
+    if args.conditions == AUTO and hasattr(args, "fit_conditions"):
+        raise UsageError("--conditions auto: the lab draws its readings from a named world "
+                         "(ideal, lab or workshop); give it with --conditions and tell the "
+                         "fit --fit-conditions auto")
+    if args.conditions == AUTO and (effects is not None or indicator is not None):
+        raise UsageError("--conditions auto estimates the world from the readings: leave "
+                         "--effects and --indicator out")
     try:
-        conditions = Conditions(args.conditions or default, effects,
+        conditions = Conditions(default if args.conditions in (None, AUTO)
+                                else args.conditions, effects,
                                 indicator or "dial", drives or "screw")
     except ValueError as exc:
         option = next((f"--{word}" for word in ("indicator", "drives") if word in str(exc)),
@@ -224,6 +243,19 @@ def conditions_of(args: argparse.Namespace, world: World | None = None,
                          f"under {world.conditions.label}; leave --conditions, --effects "
                          "and --indicator out to replay it")
     return conditions
+
+
+def fit_conditions_of(args: argparse.Namespace, conditions: Conditions
+                      ) -> Conditions | str:
+    """The world the fit is told: ``--conditions`` of a command that fits readings
+    (``auto`` as is), else ``--fit-conditions`` (the lab's gauges' indicator with
+    it), else the lab's ``conditions``."""
+    told = getattr(args, "fit_conditions", None)
+    if told is None:
+        return AUTO if args.conditions == AUTO else conditions
+    if told in (AUTO, "ideal"):
+        return told if told == AUTO else Conditions(told)
+    return Conditions(told, indicator=conditions.indicator, drives=conditions.drives)
 
 
 def add_machine(p: argparse.ArgumentParser) -> None:

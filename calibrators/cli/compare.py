@@ -23,6 +23,7 @@ from calibrators.cli.common import (
     add_thermometer,
     conditions_of,
     faults_of,
+    fit_conditions_of,
     instruments_of,
     machine_design_of,
 )
@@ -77,12 +78,15 @@ def _check(args: argparse.Namespace) -> Config:
     instruments = instruments_of(args, tuple(get_agent(name) for name in agents))
     # The gauge noise was checked with every command's (calibrators.cli.run).
     sigma, resolution = (0.0, 0.0) if args.noise_free else (args.sigma, args.resolution)
+    conditions = conditions_of(args)
     return Config(agents, estimators, args.budget, args.errors, sigma, resolution,
                   args.backend, args.seed, args.success_mm,
                   curve_estimator=_curve_estimator(estimators) if args.out else "",
-                  design=machine_design_of(args), conditions=conditions_of(args),
+                  design=machine_design_of(args), conditions=conditions,
                   thermometer=args.thermometer, instruments=instruments,
-                  faults=faults_of(args))
+                  faults=faults_of(args),
+                  fit_conditions=None if args.fit_conditions is None
+                  else fit_conditions_of(args, conditions), world_check=args.check_world)
 
 
 def _curve_estimator(estimators: tuple[str, ...]) -> str:
@@ -153,6 +157,12 @@ def _config_dict(config: Config, machines: int) -> dict:
                 indicator=conditions.indicator)
     if conditions.drives != "screw":
         data["drives"] = conditions.drives
+    # Left out when off, so that the runs kept before they existed resume.
+    told = data.pop("fit_conditions")
+    if told is not None:
+        data["fit_conditions"] = getattr(told, "label", told)
+    if data.pop("world_check"):
+        data["world_check"] = True
     return data
 
 
@@ -333,7 +343,11 @@ def add(p: argparse.ArgumentParser) -> None:
     p.add_argument("--resolution", type=float, default=DEFAULT_RESOLUTION,
                    help="gauge display resolution (mm, default %(default)s)")
     add_design(p)
-    add_conditions(p)
+    add_conditions(p, told=True)
+    p.add_argument("--check-world", action="store_true",
+                   help="the exact-model fits test whether the readings show a world worse "
+                   "than the one they are told, and warn (warning 'world') with the effects "
+                   "that show it (docs/world.md)")
     add_thermometer(p)
     add_instruments(p)
     add_faults(p)

@@ -97,6 +97,11 @@ OPTIONS: tuple[Option, ...] = (
         "help": f"fit the lead error as a controller's pitch-error table with nodes this far "
                 f"apart, with a smoothness prior (default with --params full: "
                 f"{DEFAULT_NODE_SPACING:g})"}),
+    Option("--check-world", "world_check", {
+        "action": "store_const", "const": True,
+        "help": "test whether the readings show a world worse than the conditions the fit "
+                "is told, and warn (warning 'world') with the effects that show it (see "
+                "docs/world.md)"}),
     Option("--left-out", "left_out", {
         "choices": sorted(PRESETS),
         "help": "the error preset whose sizes the errors --params leaves out have a priori: "

@@ -11,6 +11,7 @@ from calibrators.cli.common import (
     UsageError,
     add_conditions,
     conditions_of,
+    fit_conditions_of,
     given_design,
     held_design,
 )
@@ -41,7 +42,8 @@ def run(args: argparse.Namespace) -> None:
                          f"plan's: {str(exc).splitlines()[0]}") from None
     try:
         fit = Fit(data, estimator=estimator_options.estimator(args), sigma=args.sigma,
-                  resolution=args.resolution, conditions=_conditions(args, plan), plan=plan)
+                  resolution=args.resolution,
+                  conditions=fit_conditions_of(args, _conditions(args, plan)), plan=plan)
     except SheetError as exc:
         raise UsageError(f"--plan {args.plan}: {exc}") from None
     except NeedsExactFit as exc:

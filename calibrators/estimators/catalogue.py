@@ -58,27 +58,31 @@ def get_estimator(name: str, **config: Any) -> Estimator:
     return CATALOGUE[name].clone(**config)
 
 
-def for_readings(estimator: Estimator, sigma: float, conditions: Conditions = IDEAL
+def for_readings(estimator: Estimator, sigma: float, conditions: Conditions | str = IDEAL
                  ) -> Estimator:
     """``estimator`` set for readings of noise ``sigma`` (mm, one reading's standard
-    deviation) taken under ``conditions``; one that does not take the lab's conditions
-    (the paper's linear fit) is refused for any but ideal ones, since it would read their
-    effects as white noise."""
+    deviation) taken under ``conditions`` (or ``"auto"``: the fit estimates them from
+    the readings); one that does not take the lab's conditions (the paper's linear fit)
+    is refused for any but ideal ones, since it would read their effects as white
+    noise."""
     given: dict[str, Any] = {"sigma": sigma}
-    if conditions.name != IDEAL.name or estimator.takes("conditions"):
+    if getattr(conditions, "name", conditions) != IDEAL.name or estimator.takes("conditions"):
         given["conditions"] = conditions
     return estimator.clone(**given)
 
 
-def for_study(name: str, sigma: float, conditions: Conditions = IDEAL,
-              left_out: str = DEFAULT_PRESET) -> Estimator:
+def for_study(name: str, sigma: float, conditions: Conditions | str = IDEAL,
+              left_out: str = DEFAULT_PRESET, world_check: bool = False) -> Estimator:
     """The catalogue's ``name`` as a study runs it, on readings of noise ``sigma`` (mm)
-    taken under ``conditions`` on a machine whose errors are of the preset ``left_out``'s
-    size: without verification or the words on what the data determine (a study scores
-    estimates and reads neither).  An estimator that does not take the lab's conditions
-    (the paper's linear fit) reads the readings as the paper does, white noise only."""
+    taken under ``conditions`` (or ``"auto"``) on a machine whose errors are of the
+    preset ``left_out``'s size: without verification or the words on what the data
+    determine (a study scores estimates and reads neither); ``world_check``: with the
+    test that the readings show a worse world than told.  An estimator that does not take
+    the lab's conditions (the paper's linear fit) reads the readings as the paper does,
+    white noise only."""
     estimator = get_estimator(name, sigma=sigma, verify=False)
-    lab = {"conditions": conditions, "left_out": left_out, "explain": False}
+    lab = {"conditions": conditions, "left_out": left_out, "explain": False,
+           **({"world_check": True} if world_check else {})}
     return estimator.clone(**{key: value for key, value in lab.items()
                               if estimator.takes(key)})
 

@@ -12,6 +12,7 @@ readings.  It reads any experiment's notebook or measurement file.
 from __future__ import annotations
 
 import numbers
+from collections.abc import Callable
 from typing import Any, ClassVar
 
 import numpy as np
@@ -76,6 +77,14 @@ from calibrators.estimators.parameters import (
     select,
     sparse_basis,
 )
+from calibrators.estimators.world_sizes import (
+    family_index,
+    judge,
+    restricted_statistics,
+    scaled,
+    told_scales,
+    warning,
+)
 from orthoglide_env.instruments.dial import DEFAULT_SIGMA, weighting_sigma
 from orthoglide_env.instruments.interferometer import InterferometerAxis
 from orthoglide_env.instruments.interferometer import sigma as interferometer_sigma
@@ -98,7 +107,7 @@ from orthoglide_env.reading_model import (
     station_of,
 )
 from orthoglide_env.scoring import best_rigid_motion
-from orthoglide_env.world.conditions import CONDITION_NAMES, Conditions
+from orthoglide_env.world.conditions import AUTO, CONDITION_NAMES, Conditions
 
 #: What to do about an estimate outside the validity range.
 VALIDITY_HINT: str = ("free more parameters, e.g. --params extended, or take readings at "
@@ -187,8 +196,16 @@ def _check_terms(terms: Any) -> None:
     check_families(terms)
 
 
+#: The world whose terms the readings' world is measured against
+#: (:mod:`calibrators.estimators.world_sizes`): the table's worst, where every effect acts.
+BASE_WORLD: str = "workshop"
+#: The floor of a world the fit estimates, the table's best beyond the ideal: a family the
+#: readings cannot see is carried at the lab's size, not at none.
+FLOOR_WORLD: str = "lab"
+
+
 def _check_conditions(conditions: Any) -> None:
-    if not isinstance(conditions, Conditions) and conditions not in CONDITION_NAMES:
+    if not isinstance(conditions, Conditions) and conditions not in (*CONDITION_NAMES, AUTO):
         raise ValueError("")
 
 
@@ -221,7 +238,11 @@ class GaussNewtonCalibrator(Estimator):
     (each coefficient a parameter ``world.<term>`` with its second moment as a normal
     prior) instead of considered; ``node_spacing``: the lead error's curve as a
     controller's pitch-error table with nodes this far apart (mm), with its smoothness
-    prior (:func:`~calibrators.estimators.consider.table_prior`).
+    prior (:func:`~calibrators.estimators.consider.table_prior`); ``conditions="auto"``:
+    the fit estimates the world from the readings, each effect family's size between the
+    ``lab``'s and twice the ``workshop``'s (:mod:`calibrators.estimators.world_sizes`);
+    ``world_check``: a warning of kind ``world`` when the readings show a world worse than
+    the named ``conditions``, with the effects that show it.
     """
 
     name = "gauss-newton"
@@ -240,8 +261,9 @@ class GaussNewtonCalibrator(Estimator):
         "solver": [Options(tuple(SOLVERS))],
         "tracker_sigma": [Interval(0, None, "neither")],
         "explain": [BOOLEAN],
-        "conditions": [Satisfies(_check_conditions, f"one of {list(CONDITION_NAMES)} or a "
+        "conditions": [Satisfies(_check_conditions, f"one of {[*CONDITION_NAMES, AUTO]} or a "
                                                     "Conditions")],
+        "world_check": [BOOLEAN],
         "left_out": [Options(tuple(sorted(PRESETS)))],
         "fit_world": [BOOLEAN, Satisfies(_check_terms, f"a tuple of term families "
                                                        f"{list(TERM_FAMILIES)}")],
@@ -254,12 +276,12 @@ class GaussNewtonCalibrator(Estimator):
                  solver: str = "gauss-newton", tracker_sigma: float = TRACKER_SIGMA,
                  explain: bool = True, conditions: Conditions | str = "ideal",
                  left_out: str = DEFAULT_PRESET, fit_world: bool | tuple[str, ...] = False,
-                 node_spacing: float | None = None) -> None:
+                 node_spacing: float | None = None, world_check: bool = False) -> None:
         self.params, self.sigma, self.verify, self.prior = params, sigma, verify, prior
         self.fix, self.keep_outliers, self.holdout, self.seed = fix, keep_outliers, holdout, seed
         self.solver, self.tracker_sigma, self.explain = solver, tracker_sigma, explain
         self.conditions, self.left_out, self.fit_world = conditions, left_out, fit_world
-        self.node_spacing = node_spacing
+        self.node_spacing, self.world_check = node_spacing, world_check
         self._validate_params()
 
     def fit(self, data: Measurements) -> Estimate:
@@ -343,8 +365,9 @@ class GaussNewtonCalibrator(Estimator):
         """The fits of :meth:`fit_many`, before their faults are looked for (``zeros``:
         of :func:`layout_and_values`)."""
         out: list[Estimate | Exception] = [ValueError("not fitted")] * len(datas)
-        conditions = (Conditions(self.conditions) if isinstance(self.conditions, str)
-                      else self.conditions)
+        auto = self.conditions == AUTO
+        conditions = (Conditions(BASE_WORLD if auto else self.conditions)
+                      if isinstance(self.conditions, str) else self.conditions)
         fit_world, node_spacing = self.fit_world, self.node_spacing
         full = self.params == "full" and fit_world is False
         if full:
@@ -375,7 +398,8 @@ class GaussNewtonCalibrator(Estimator):
                    "tracker_sigma": self.tracker_sigma, "verify": self.verify,
                    "explain": self.explain, "conditions": conditions,
                    "left_out": PRESETS[self.left_out], "terms": terms,
-                   "spacing": node_spacing}
+                   "spacing": node_spacing, "auto": auto,
+                   "world_check": self.world_check}
         for members in groups.values():
             design = prepared[members[0]][0]
             values = np.stack([prepared[k][1] for k in members])
@@ -397,8 +421,8 @@ class GaussNewtonCalibrator(Estimator):
                    params: str, prior: str, fix: dict[str, float], holdout: float, seed: int,
                    solver: str, keep_outliers: bool, sigma: float, tracker_sigma: float,
                    verify: bool, explain: bool, conditions: Conditions,
-                   left_out: ErrorPreset, terms: tuple[str, ...], spacing: float | None
-                   ) -> list[Estimate | Exception]:
+                   left_out: ErrorPreset, terms: tuple[str, ...], spacing: float | None,
+                   auto: bool, world_check: bool) -> list[Estimate | Exception]:
         """Fit the experiments ``values`` (M, N) of one ``design`` together."""
         space = design.space
         times, temperatures = (_every_reading(datas, name) for name in ("time_s",
@@ -422,17 +446,6 @@ class GaussNewtonCalibrator(Estimator):
         spread = preset_sigmas(left_out, space)
         names = list(space.names)
         world = None
-        fitted, consider = consider.split(terms)
-        if not fitted.empty:
-            # The terms' coefficients, in units of their root second moment, join the
-            # parameters with a unit normal prior.
-            world = world_columns(design, fitted)
-            names += [f"{WORLD_PREFIX}{n}" for n in fitted.names]
-            k = world.shape[-1]
-            free, fixed, priors, scale, unmodelled, spread = (
-                np.concatenate([a, np.full(k, v, dtype=a.dtype)])
-                for a, v in ((free, True), (fixed, 0.0), (priors, 1.0), (scale, 1.0),
-                             (unmodelled, False), (spread, 0.0)))
         tracked = np.array([isinstance(design.specs[m], TrackerAxis)
                             for m in design.mounting])
         if "tracker" in conditions and tracked.any():
@@ -446,6 +459,24 @@ class GaussNewtonCalibrator(Estimator):
                            for m in design.mounting])
         if lasers.any():
             noise = np.where(lasers, interferometer_sigma(conditions), noise)
+        held = holdout_mask(design, holdout, seed) if holdout else np.zeros(values.shape[1], bool)
+        base_of = _world_terms(design, values, datas, conditions, spacing)
+        told_terms = consider
+        if auto:
+            consider = scaled(consider, _estimated_world(
+                design, values, np.tile(~held, (len(values), 1)), noise, free, fixed, priors,
+                scale, unmodelled, spread, solver, consider, base_of(FLOOR_WORLD)))
+        fitted, consider = consider.split(terms)
+        if not fitted.empty:
+            # The terms' coefficients, in units of their root second moment, join the
+            # parameters with a unit normal prior.
+            world = world_columns(design, fitted)
+            names += [f"{WORLD_PREFIX}{n}" for n in fitted.names]
+            k = world.shape[-1]
+            free, fixed, priors, scale, unmodelled, spread = (
+                np.concatenate([a, np.full(k, v, dtype=a.dtype)])
+                for a, v in ((free, True), (fixed, 0.0), (priors, 1.0), (scale, 1.0),
+                             (unmodelled, False), (spread, 0.0)))
 
         def fit(rows: np.ndarray, mask: np.ndarray) -> BatchFit:
             return fit_batch(design, values[rows], mask[rows], noise, free, fixed, priors,
@@ -454,7 +485,6 @@ class GaussNewtonCalibrator(Estimator):
                              world=None if world is None else world[rows])
 
         m_count = len(values)
-        held = holdout_mask(design, holdout, seed) if holdout else np.zeros(values.shape[1], bool)
         mask = np.tile(~held, (m_count, 1))
         results = fit(np.arange(m_count), mask).split()
         outliers: list[list[int]] = [[] for _ in range(m_count)]
@@ -498,6 +528,13 @@ class GaussNewtonCalibrator(Estimator):
                 None if world is None else world[m]))
         repeated, _ = repetition_means(every, group)
         misfits = model_misfits(residuals, group, noise)
+        # The readings the model does not fit are its own errors, not the world's sizes.
+        fitting = mask.copy()
+        for m, rows in enumerate(misfits):
+            fitting[m, rows] = False
+        judged = ([None] * m_count if auto or not world_check else _world_warnings(
+            design, values, fitting, noise, np.stack([r.theta[0] for r in results]), free,
+            scale, told_terms, base_of(BASE_WORLD), conditions.label))
         for m, result in enumerate(results):
             if not result.converged[0]:
                 out.append(RuntimeError("the exact-model fit did not converge"))
@@ -511,7 +548,7 @@ class GaussNewtonCalibrator(Estimator):
                                           causes[m], every[m], repeated[m], misfits[m],
                                           verify, explain, consider, names,
                                           None if world is None else world[m],
-                                          conditions, spacing))
+                                          conditions, spacing, judged[m]))
         return out
 
     def _estimate(self, data: Measurements, params: str, prior: str, sigma: float,
@@ -520,7 +557,8 @@ class GaussNewtonCalibrator(Estimator):
                   outliers: list[int], causes: list[str], every_residual: np.ndarray,
                   repeated: np.ndarray, misfits: np.ndarray, verify: bool, explain: bool,
                   considered: Consider, every: list[str], world: np.ndarray | None,
-                  conditions: Conditions, spacing: float | None) -> Estimate:
+                  conditions: Conditions, spacing: float | None, judged: str | None
+                  ) -> Estimate:
         space = design.space
         names = [n for n, f in zip(every, result.free, strict=True) if f]
         idx = np.flatnonzero(result.free)
@@ -531,7 +569,7 @@ class GaussNewtonCalibrator(Estimator):
         error_cov = result.error_covariance[0].copy()
         error_cov[np.ix_(idx, idx)] = cov
         theta = result.theta[0]
-        warnings = []
+        warnings = [] if judged is None else [judged]
         if result.misfit[0]:
             beyond = [g not in ("drho", "dL", "tracker_rotation") for g in space.groups]
             hint = ("try --params extended" if not result.free[:len(beyond)][beyond].any() else
@@ -596,6 +634,57 @@ class GaussNewtonCalibrator(Estimator):
             considered=considered.effects,
             **_lead(result, every, considered.names, error_cov, conditions, spacing),
         )
+
+def _world_terms(design: ReadingLayout, values: np.ndarray, datas: list[Measurements],
+                 conditions: Conditions, spacing: float | None
+                 ) -> Callable[[str], Consider]:
+    """The consider terms of these readings under the named conditions, every effect
+    acting and the told conditions' indicator: what the told world is measured against."""
+    times, temperatures = (_every_reading(datas, name) for name in ("time_s", "temperature_c"))
+    indicator = conditions.indicator
+
+    def of(name: str) -> Consider:
+        return consider_terms(design, values, times, Conditions(name, indicator=indicator),
+                              spacing, temperatures)
+
+    return of
+
+
+def _estimated_world(design: ReadingLayout, values: np.ndarray, mask: np.ndarray,
+                     noise: np.ndarray, free: np.ndarray, fixed: np.ndarray,
+                     priors: np.ndarray, scale: np.ndarray, unmodelled: np.ndarray,
+                     spread: np.ndarray, solver: str, base: Consider, floor: Consider
+                     ) -> np.ndarray:
+    """(M, F) the families' scales of ``base``'s terms that the readings show
+    (:mod:`calibrators.estimators.world_sizes`), at least ``floor``'s: the geometry is
+    fitted first with every base term considered, then the scales are the restricted
+    likelihood's maximum over what it leaves."""
+    geometry = fit_batch(design, values, mask, noise, free, fixed, priors, scale,
+                         unmodelled=unmodelled, solver=solver, left_out=spread)
+    columns = world_columns(design, base)
+    gram, b = restricted_statistics(design, values, mask, 1.0 / weighting_sigma(noise),
+                                    geometry.theta, free, scale, columns)
+    lowest = told_scales(base, floor, columns, world_columns(design, floor))
+    member = family_index(base.names)
+    return np.maximum(judge(gram, b, member, lowest).estimated, lowest)
+
+
+def _world_warnings(design: ReadingLayout, values: np.ndarray, mask: np.ndarray,
+                    noise: np.ndarray, theta: np.ndarray, free: np.ndarray,
+                    scale: np.ndarray, told: Consider, base: Consider, label: str
+                    ) -> list[str | None]:
+    """Per machine, the words of the test that its readings show a world worse than the
+    ``told`` terms' (:func:`~calibrators.estimators.world_sizes.warning`), or None."""
+    columns = world_columns(design, base)
+    n = len(design.space.names)
+    gram, b = restricted_statistics(design, values, mask, 1.0 / weighting_sigma(noise),
+                                    theta[:, :n], free[:n], scale[:n], columns)
+    told_columns = (world_columns(design, told) if not told.empty
+                    else np.zeros((*values.shape, 0)))
+    sizes = judge(gram, b, family_index(base.names),
+                  told_scales(base, told, columns, told_columns))
+    return [warning(sizes, m, label) for m in range(len(values))]
+
 
 def _lead(result: BatchFit, every: list[str], considered: tuple[str, ...],
           error_cov: np.ndarray, conditions: Conditions, spacing: float | None

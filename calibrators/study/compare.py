@@ -90,6 +90,17 @@ class Config:
     instruments: tuple[str, ...] = ()
     #: What can go wrong in the lab (orthoglide_env.world.faults).
     faults: Faults = NO_FAULTS
+    #: The world the fits are told, when not ``conditions``: other conditions, or
+    #: ``"auto"``, which has the fit estimate it from the readings.
+    fit_conditions: Conditions | str | None = None
+    #: The fits test whether the readings show a world worse than the one they were told
+    #: (a warning of kind ``world``).
+    world_check: bool = False
+
+    @property
+    def told(self) -> Conditions | str:
+        """The world the fits are told."""
+        return self.conditions if self.fit_conditions is None else self.fit_conditions
 
     @property
     def world(self) -> str:
@@ -97,10 +108,12 @@ class Config:
         the error preset, the conditions (and their effects when not all act), the
         thermometer, the gauges' sigma, the budget, the back-end and a custom design."""
         design = "" if self.design == PROTOTYPE else f", design L {self.design.L:g} mm"
+        told = ("" if self.fit_conditions is None else
+                f" (the fit told {getattr(self.told, 'label', self.told)})")
         owned = f", instruments {'+'.join(self.instruments)}" if self.instruments else ""
         if self.faults.active:
             design += f", faults {self.faults.label}"
-        return (f"{self.errors} errors, {self.conditions.label} conditions"
+        return (f"{self.errors} errors, {self.conditions.label} conditions{told}"
                 f"{', a thermometer' if self.thermometer else ''}{owned}, gauge sigma "
                 f"{self.sigma} mm, "
                 f"budget {self.budget_s:g} s, {self.backend} backend{design}")
@@ -209,7 +222,8 @@ def _curves(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
                                  design=e.run.truth.design)
                  for e in episodes]
         fitted = estimates if fraction == 1.0 else for_study(
-            name, episodes[0].run.sigma, config.conditions, config.errors).fit_many(datas)
+            name, episodes[0].run.sigma, config.told, config.errors,
+            config.world_check).fit_many(datas)
         for k, (episode, report) in enumerate(zip(episodes, _score(episodes, fitted),
                                                   strict=True)):
             points[k].append([fraction * episode.run.time_s, report.tcp_after.rigid.rms])
@@ -271,8 +285,9 @@ def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]
                 continue
             # The machines' preset sizes the errors an estimator leaves out: its a-priori
             # belief of what the machine holds, not the machine itself.
-            estimates = for_study(name, mine[0].run.sigma, config.conditions,
-                                  config.errors).fit_many([e.run.measurements for e in mine])
+            estimates = for_study(name, mine[0].run.sigma, config.told, config.errors,
+                                  config.world_check).fit_many(
+                [e.run.measurements for e in mine])
             curves = (_curves(mine, name, estimates, config)
                       if name == config.curve_estimator
                       else [[] for _ in mine])

@@ -33,6 +33,10 @@ _THREAD_VARIABLES: tuple[str, ...] = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
 Item = TypeVar("Item")
 Result = TypeVar("Result")
 
+#: How long (s) a stopped worker has to end before it is killed: a terminated one ends at
+#: once, but one in a C extension that holds off the signal on a loaded machine may not.
+STOP_GRACE_S: float = 5.0
+
 #: Marks the end of the items (an item may be None).
 _NONE = object()
 
@@ -140,7 +144,10 @@ def _pool(function: Callable[[Item], Result], items: list[Item], jobs: int
     finally:
         for process, connection in workers:
             connection.close()
-            process.join()
+            process.join(STOP_GRACE_S)
+            if process.is_alive():
+                process.kill()
+                process.join()
 
 
 def _hand(connection: Connection, todo: Iterator[Item], busy: dict[Connection, Item]

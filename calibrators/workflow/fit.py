@@ -33,7 +33,8 @@ ESTIMATE_FILE = "estimate.json"
 class Fit:
     """The fit, configured: the measured ``readings`` (a filled sheet of ``plan``, when
     given, is checked against its steps), read with gauges of repeatability ``sigma`` and
-    display ``resolution`` (mm), taken under ``conditions``, fitted by ``estimator``: a
+    display ``resolution`` (mm), taken under ``conditions`` (``"auto"``: the fit
+    estimates them), fitted by ``estimator``: a
     name of :data:`~calibrators.estimators.catalogue.CATALOGUE` or an estimator configured
     with :func:`~calibrators.estimators.get_estimator` (its noise and conditions are set
     from this fit's).  At construction, ``ValueError`` for an unknown estimator, bad noise
@@ -44,7 +45,7 @@ class Fit:
     def __init__(self, readings: Measurements, *,
                  estimator: str | Estimator = DEFAULT_ESTIMATOR,
                  sigma: float = DEFAULT_SIGMA, resolution: float = DEFAULT_RESOLUTION,
-                 conditions: Conditions | None = None, plan: Procedure | None = None
+                 conditions: Conditions | str | None = None, plan: Procedure | None = None
                  ) -> None:
         check_noise(sigma, resolution, names=("sigma", "resolution"))
         chosen = get_estimator(estimator) if isinstance(estimator, str) else estimator

@@ -15,6 +15,9 @@ from typing import Any
 from orthoglide_env.world.table import EFFECTS, SCALES
 
 CONDITION_NAMES: tuple[str, ...] = ("ideal", "lab", "workshop")
+#: What a fit may be told in place of a name: estimate the world from the readings
+#: (:mod:`calibrators.estimators.world_sizes`); a lab's world always has a name.
+AUTO: str = "auto"
 #: The gauges' indicators: mechanical dials (ISO 463) or digital ones.
 INDICATORS: tuple[str, ...] = ("dial", "digital")
 EFFECT_NAMES: tuple[str, ...] = tuple(EFFECTS)

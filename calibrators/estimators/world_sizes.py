@@ -1,0 +1,212 @@
+"""How bad the world is, from the readings: the sizes of the lab's effect families as
+variance components.
+
+The consider terms (:mod:`calibrators.estimators.consider`) carry each effect's pattern
+over the readings with a coefficient whose second moment the conditions' table gives.  A
+fit told a better world than the one its readings came from carries them too small, and
+its error bars are too narrow.  The readings show it: what the geometry cannot absorb of
+each family's patterns is left in the residuals.
+
+Here every family ``f`` of :data:`~calibrators.estimators.consider.TERM_FAMILIES` gets
+one scale ``lambda_f`` on the second moments of its terms under a *base* world, the
+table's worst (``workshop``): the readings, whitened and with each mounting's zero
+eliminated, are ``y = J delta + C x + e`` with the geometry ``delta`` a fixed effect,
+``x_k ~ N(0, lambda_f(k))`` and ``e ~ N(0, I)``.  Projecting out ``J`` leaves the
+restricted (REML) likelihood of the ``lambda``; its maximum is found by expectation-
+maximisation over the terms' coefficients (each step raises the likelihood, and a scale
+that the readings do not support goes to zero instead of below it).
+
+The told world is a point of the same family, ``lambda_f = rho_f``: its terms' energy over
+the base's (0 for ``ideal``).  The likelihood ratio of the best scales at least as large
+as the told ones against the told ones tests whether the readings show a worse world
+(:data:`WORLD_LEVEL`); a family is named when its own ratio passes the test alone.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from calibrators.estimators.consider import TERM_FAMILIES, Consider, term_family
+from calibrators.estimators.solvers import centre, transposed
+from orthoglide_env.reading_model import ReadingLayout, jacobian, predict
+
+#: Significance of the test that the readings show a world worse than the one told: the
+#: chi-square test of the model's (:data:`~calibrators.estimators.exact_fit.CHI2_LEVEL`).
+WORLD_LEVEL: float = 1e-3
+#: Expectation-maximisation steps: the scales move by under 1 % per step after ~30 on the
+#: designs of the study (a family the readings see well converges in a few).
+ITERATIONS: int = 60
+#: A scale below this (of the base world's second moment) is taken as none: 1e-6 of the
+#: workshop's is below a nanometre on every term.
+FLOOR: float = 1e-6
+#: A term is weighed when at least this share of its pattern's energy is left off the
+#: geometry and the mountings' zeros: a small remainder magnifies the model's own errors
+#: (a gain on a gauge's readings, which its stand's geometry does not hold) into a huge
+#: size of the term (a dial's error curve over a short stroke is nearly linear in the
+#: reading).  Assumption: 5 %.
+VISIBLE: float = 0.05
+#: The largest scale the readings may give a family, over the base world's: the table
+#: sizes no world beyond the workshop, and the readings of a misfit of the model's own
+#: can ask for any.  Assumption: twice the workshop's size (four times its second moment).
+CEILING: float = 4.0
+#: Directions of the geometry's Jacobian below this fraction of its largest singular value
+#: squared are not projected out: they are round-off, not parameters.
+RANK_TOL: float = 1e-12
+
+
+@dataclass(frozen=True)
+class WorldSizes:
+    """The readings' world against the told one, per machine (M) and family (F =
+    ``families``): ``estimated`` each family's second moment over the base world's (the
+    restricted likelihood's maximum), ``told`` the told world's, ``statistic`` twice the
+    log likelihood ratio of the scales at least the told ones against them, ``named``
+    (M, F) the families whose own ratio passes the test, ``worse`` (M,) the test."""
+
+    families: tuple[str, ...]
+    estimated: np.ndarray
+    told: np.ndarray
+    statistic: np.ndarray
+    named: np.ndarray
+    worse: np.ndarray
+
+
+def restricted_statistics(design: ReadingLayout, values: np.ndarray, mask: np.ndarray,
+                          weight: np.ndarray, theta: np.ndarray, free: np.ndarray,
+                          scale: np.ndarray, columns: np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray]:
+    """``G = C^T P C`` (M, K, K) and ``b = C^T P y`` (M, K), zero on a term less than
+    :data:`VISIBLE` of whose energy is left off the geometry: the terms' reading patterns
+    ``columns`` (M, N, K, mm per unit coefficient) and the readings ``values`` (M, N) less
+    the geometry at ``theta`` (M, P over ``design.space``), whitened by ``weight`` (N,),
+    each mounting's zero eliminated over ``mask``, and ``P`` the projector off the
+    geometry's Jacobian over ``free`` (scaled by ``scale``)."""
+    n = len(design.space.names)
+    rows = (mask, np.eye(len(design.mountings))[design.mounting], design.mounting)
+    y = centre((values - predict(theta[:, :n], design)) * weight, *rows)
+    # Each mounting's gain goes with the geometry: a remounted gauge's lever and cosine
+    # error scale its readings, which a stand's parameters hold only for its first
+    # mounting, and a dial's error curve over a short stroke is nearly such a gain.
+    gains = (values * weight)[..., None] * rows[1][None]
+    jac = centre(np.concatenate([jacobian(theta[:, :n], design, free[:n], scale[:n])
+                                 * weight[:, None], gains], axis=-1), *rows)
+    c = centre(columns * weight[:, None], *rows)
+    values_, vectors = np.linalg.eigh(transposed(jac) @ jac)
+    keep = values_ > RANK_TOL * values_[:, -1:]
+    # An orthonormal basis of the Jacobian's columns: J V / sqrt(lambda) where kept.
+    basis = (jac @ vectors) / np.sqrt(np.where(keep, values_, 1.0))[:, None, :] * keep[:, None]
+    py = y - (basis @ (transposed(basis) @ y[..., None]))[..., 0]
+    pc = c - basis @ (transposed(basis) @ c)
+    gram, b = transposed(c) @ pc, (transposed(c) @ py[..., None])[..., 0]
+    energy = np.einsum("mnk,mnk->mk", c, c)
+    seen = np.diagonal(gram, axis1=1, axis2=2) >= VISIBLE * energy
+    return gram * seen[:, :, None] * seen[:, None, :], b * seen
+
+
+def log_likelihood(gram: np.ndarray, b: np.ndarray, variances: np.ndarray) -> np.ndarray:
+    """(M,) the restricted log likelihood (up to a constant) of the terms' ``variances``
+    (M, K): ``-1/2 [log det(I + S G S) - b S (I + S G S)^-1 S b]`` with ``S`` their roots."""
+    root = np.sqrt(variances)
+    inner = root[:, :, None] * gram * root[:, None, :] + np.eye(gram.shape[-1])
+    _, logdet = np.linalg.slogdet(inner)
+    sb = root * b
+    solved = np.linalg.solve(inner, sb[..., None])[..., 0]
+    return -0.5 * (logdet - np.einsum("mk,mk->m", sb, solved))
+
+
+def estimate_scales(gram: np.ndarray, b: np.ndarray, member: np.ndarray, count: int,
+                    start: np.ndarray) -> np.ndarray:
+    """(M, F) each family's scale at the restricted likelihood's maximum, by
+    expectation-maximisation from ``start`` (M, F); ``member`` (K,) each term's family
+    index.  Each step sets a family's scale to its terms' mean posterior second moment,
+    within [:data:`FLOOR`, :data:`CEILING`]."""
+    scales = np.maximum(start, FLOOR)
+    sizes = np.bincount(member, minlength=count).astype(float)
+    present = sizes > 0
+    eye = np.eye(gram.shape[-1])
+    for _ in range(ITERATIONS):
+        root = np.sqrt(scales[:, member])
+        # Posterior of the coefficients in units of their prior: (I + S G S)^-1.
+        inner = root[:, :, None] * gram * root[:, None, :] + eye
+        cov = np.linalg.inv(inner)
+        mean = (cov @ (root * b)[..., None])[..., 0]
+        moment = (mean**2 + np.diagonal(cov, axis1=1, axis2=2)) * root**2
+        summed = np.zeros_like(scales)
+        np.add.at(summed.T, member, moment.T)
+        scales = np.where(present, np.clip(summed / np.maximum(sizes, 1.0), FLOOR, CEILING),
+                          0.0)
+    return scales
+
+
+def family_index(names: tuple[str, ...]) -> np.ndarray:
+    """(K,) each term's family's index in :data:`TERM_FAMILIES`."""
+    return np.array([TERM_FAMILIES.index(term_family(n)) for n in names], dtype=int)
+
+
+def told_scales(base: Consider, told: Consider, base_columns: np.ndarray,
+                told_columns: np.ndarray) -> np.ndarray:
+    """(M, F) the told world's second moment over the base world's, per family: the energy
+    of its terms' reading patterns over the base's (0 where it has none)."""
+    out = np.zeros((len(base_columns), len(TERM_FAMILIES)))
+    for f in range(len(TERM_FAMILIES)):
+        mine = family_index(base.names) == f
+        theirs = (family_index(told.names) == f if len(told.names)
+                  else np.zeros(0, dtype=bool))
+        energy = np.sum(base_columns[..., mine] ** 2, axis=(1, 2))
+        out[:, f] = np.divide(np.sum(told_columns[..., theirs] ** 2, axis=(1, 2)), energy,
+                              out=np.zeros(len(energy)), where=energy > 0)
+    return out
+
+
+def judge(gram: np.ndarray, b: np.ndarray, member: np.ndarray, told: np.ndarray
+          ) -> WorldSizes:
+    """The restricted likelihood's scales (:func:`estimate_scales`, started at the told
+    ones and at the base's, the better kept) tested against the ``told`` ones (M, F)."""
+    from scipy import stats
+
+    count = told.shape[1]
+    present = np.bincount(member, minlength=count) > 0
+    candidates = [estimate_scales(gram, b, member, count, start)
+                  for start in (np.maximum(told, FLOOR), np.ones_like(told))]
+    likelihoods = [log_likelihood(gram, b, c[:, member]) for c in candidates]
+    estimated = np.where((likelihoods[0] >= likelihoods[1])[:, None], *candidates)
+    worse_scales = np.maximum(estimated, told)
+    at_told = log_likelihood(gram, b, told[:, member])
+    best = log_likelihood(gram, b, worse_scales[:, member])
+    statistic = np.maximum(2 * (best - at_told), 0.0)
+    named = np.zeros(told.shape, dtype=bool)
+    alone = stats.chi2.isf(WORLD_LEVEL, 1)
+    for f in np.flatnonzero(present):
+        back = worse_scales.copy()
+        back[:, f] = told[:, f]
+        named[:, f] = 2 * (best - log_likelihood(gram, b, back[:, member])) > alone
+    joint = stats.chi2.isf(WORLD_LEVEL, int(present.sum()))
+    return WorldSizes(TERM_FAMILIES, estimated, told, statistic, named,
+                      (statistic > joint) & named.any(axis=1))
+
+
+def scaled(consider: Consider, scales: np.ndarray) -> Consider:
+    """``consider`` with each term's pattern times the root of its family's scale, per
+    machine (``scales`` (M, F))."""
+    root = np.sqrt(scales[:, family_index(consider.names)])  # (M, K + J)
+    k = consider.drive.shape[-1]
+    return Consider(consider.names, consider.drive * root[:, None, None, :k],
+                    consider.reading * root[:, None, k:])
+
+
+def warning(sizes: WorldSizes, m: int, told_name: str) -> str | None:
+    """The words of machine ``m``'s test: None unless the readings show a world worse
+    than ``told_name``'s, else which effects and by how much."""
+    if not sizes.worse[m]:
+        return None
+    parts = []
+    for f in np.flatnonzero(sizes.named[m]):
+        est, told = sizes.estimated[m, f], sizes.told[m, f]
+        size = (f"about {np.sqrt(est / told):.1f}x the told size" if told > 0
+                else f"about {np.sqrt(est):.1f}x the workshop's size")
+        parts.append(f"{sizes.families[f]} ({size})")
+    return (f"world: the readings show a world worse than the {told_name} conditions the "
+            f"fit was told (likelihood ratio {sizes.statistic[m]:.0f}, test at "
+            f"{WORLD_LEVEL:g}): {', '.join(parts)}; its error bars are too narrow; fit "
+            "with --conditions auto, or name the conditions the readings were taken in")
