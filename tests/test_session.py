@@ -60,7 +60,9 @@ def _drive(out: Path, stop_after: int | None = None, resume: bool = False,
                 value = float(observation["gauges"][k]) if observation["valid"][k] else None
                 proc.stdin.write(json.dumps({"reading_mm": value}) + "\n")
                 proc.stdin.flush()
-                answered += 1
+                # A reading asked again (an answer the session finds suspect) is one
+                # reading, answered the same: the notebook holds it once.
+                answered += "again" not in item["ask"]
         proc.wait(timeout=600)
     finally:
         env.close()

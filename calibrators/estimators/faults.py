@@ -16,9 +16,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from itertools import pairwise
+from statistics import NormalDist
 
 import numpy as np
-from scipy.stats import norm
 
 from calibrators.estimators.holdout import held_out_residuals
 from calibrators.measurements import Measurements
@@ -47,6 +47,12 @@ NOMINAL_MM: float = 2.5
 MAX_REPAIRS: int = 3
 #: The prefix of every warning of this module: ``fault <kind>: ...``.
 PREFIX: str = "fault"
+
+
+def _isf(p: float) -> float:
+    """The standard normal's upper ``p`` quantile (the standard library's, so that
+    ``--help`` imports no scipy; exact for small ``p`` by symmetry)."""
+    return -NormalDist().inv_cdf(p)
 
 
 @dataclass
@@ -83,7 +89,7 @@ def change_points(residuals: np.ndarray, groups: dict[str, np.ndarray], spread: 
     splits = sum(max(0, len(ks) - 2 * MIN_SEGMENT + 1) for ks in groups.values())
     if not splits:
         return []
-    threshold = norm.isf(level / (2 * splits))
+    threshold = _isf(level / (2 * splits))
     found = []
     for name, ks in groups.items():
         r, n = residuals[ks], len(ks)
@@ -130,7 +136,7 @@ def drive_steps(residuals: np.ndarray, drives: np.ndarray, used: np.ndarray, spr
         z = np.where(info > 0, np.abs(score) / (spread * np.sqrt(info)), 0.0)
     z[:, :MIN_SEGMENT] = z[:, len(ks) - MIN_SEGMENT + 1:] = 0.0
     drive, at = np.unravel_index(int(np.argmax(z)), z.shape)
-    if z[drive, at] <= norm.isf(level / (2 * z.size)):
+    if z[drive, at] <= _isf(level / (2 * z.size)):
         return None
     return int(drive), int(ks[at]), float(score[drive, at] / info[drive, at]), float(
         z[drive, at])
@@ -159,9 +165,9 @@ def _late(values: np.ndarray, residuals: np.ndarray, ks: np.ndarray, spread: flo
     count = np.arange(len(gain), 0, -1)
     # Under no skip the gain's mean is at most 0; its scale grows with the moves between
     # readings, so a chi-square bound on the shifted residuals is asked for as well.
-    fits = np.cumsum(shifted[::-1])[::-1] / spread**2 <= count + norm.isf(level) * np.sqrt(
+    fits = np.cumsum(shifted[::-1])[::-1] / spread**2 <= count + _isf(level) * np.sqrt(
         2 * count)
-    ok = (gain > norm.isf(level / len(gain)) * np.sqrt(2 * count) + count) & fits
+    ok = (gain > _isf(level / len(gain)) * np.sqrt(2 * count) + count) & fits
     ok[len(gain) - MIN_SEGMENT + 1:] = False
     return int(ks[1:][np.argmax(ok)]) if ok.any() else None
 
