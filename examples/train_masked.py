@@ -34,20 +34,26 @@ machine.  The same command and seed give the same policy (one torch thread, CPU)
 from __future__ import annotations
 
 import argparse
-import csv
 import os
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from training_curve import (
+    add_options,
+    check_options,
+    curve_callback,
+    mean_episode_reward,
+    median_rigid,
+    plot_curve,
+)
 
 from calibrators.agents.names import POLICY_PREFIX
 from calibrators.agents.policy import save_policy, spec_of
 from calibrators.study import compare, statistics
-from orthoglide_env.instruments.dial import DEFAULT_SIGMA
 from orthoglide_env.model.errors import DEFAULT_PRESET
-from orthoglide_env.world.conditions import CONDITION_NAMES, Conditions
+from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.wrappers import DESIGN_PER, DESIGN_REWARDS, design_lab_env
 
 #: The estimator that scores every evaluation (the comparison's headline).
@@ -70,11 +76,6 @@ def config(args: argparse.Namespace, agents: tuple[str, ...]) -> compare.Config:
                           conditions=Conditions(args.conditions))
 
 
-def median_rigid(row: dict) -> float:
-    value = row["tcp_after_mm"]["rigid"]["median"]
-    return float("nan") if value is None else value
-
-
 def make_vec_env(n_envs: int, kwargs: dict[str, Any], seed: int) -> Any:
     """``n_envs`` design views as a stable-baselines3 ``DummyVecEnv``, env ``k`` seeded
     ``seed + k``, each in a ``Monitor`` that keeps its episodes' final predicted error."""
@@ -89,132 +90,38 @@ def make_vec_env(n_envs: int, kwargs: dict[str, Any], seed: int) -> Any:
     return vec
 
 
-def make_curve_callback(args: argparse.Namespace, kwargs: dict[str, Any]) -> Any:
-    """Every ``--every`` steps: save the policy, score it on the curve machines, append a
-    row to ``<out>.curve.csv``; end training after ``--max-minutes`` (0: no limit)."""
-    from stable_baselines3.common.callbacks import BaseCallback
+def curve_score(args: argparse.Namespace, kwargs: dict[str, Any]
+                ) -> Any:
+    """A learning-curve point: the policy saved at the path it is given and scored on the
+    curve machines, with its training episodes' reward and final predicted error."""
 
-    class Curve(BaseCallback):
-        def _on_training_start(self) -> None:
-            self.start = time.perf_counter()
-            self.next = 0
-            self.rows: list[dict[str, float]] = []
-            self.path = args.out.with_suffix(".last.zip")
+    def score(model: Any, path: Path) -> dict[str, float]:
+        save_policy(model, path, spec_of(design_lab_env(**kwargs), "MaskablePPO", kwargs))
+        row = statistics.summary(compare.run(config(args, (POLICY_PREFIX + str(path),)),
+                                             args.curve_machines))[0]
+        predicted = [e["predicted_rigid_mm"] for e in model.ep_info_buffer]
+        return {"mean_episode_reward": mean_episode_reward(model),
+                "training_predicted_mm": (float(np.median(predicted)) if predicted
+                                          else float("nan")),
+                "tcp_rigid_median_mm": median_rigid(row)}
 
-        def _on_step(self) -> bool:
-            if self.num_timesteps >= self.next:
-                self.next += args.every
-                self.record()
-            minutes = (time.perf_counter() - self.start) / 60
-            return not 0 < args.max_minutes <= minutes
-
-        def _on_training_end(self) -> None:
-            self.record()
-
-        def record(self) -> None:
-            minutes = (time.perf_counter() - self.start) / 60
-            episodes = list(self.model.ep_info_buffer)
-            save_policy(self.model, self.path, spec_of(design_lab_env(**kwargs),
-                                                       "MaskablePPO", kwargs))
-            setup = config(args, (POLICY_PREFIX + str(self.path),))
-            row = statistics.summary(compare.run(setup, args.curve_machines))[0]
-            self.rows.append({
-                "steps": self.num_timesteps, "minutes": round(minutes, 2),
-                "mean_episode_reward": (float(np.mean([e["r"] for e in episodes]))
-                                        if episodes else float("nan")),
-                "training_predicted_mm": (float(np.median([e["predicted_rigid_mm"]
-                                                           for e in episodes]))
-                                          if episodes else float("nan")),
-                "tcp_rigid_median_mm": median_rigid(row)})
-            write_curve(self.rows, args.out.with_suffix(".curve.csv"))
-            r = self.rows[-1]
-            print(f"{r['steps']:>8d} steps {r['minutes']:6.1f} min  mean episode reward "
-                  f"{r['mean_episode_reward']:7.3f}  training episodes' predicted "
-                  f"{r['training_predicted_mm']:.4f} mm  held-out TCP (rigid) median "
-                  f"{r['tcp_rigid_median_mm']:.4f} mm", flush=True)
-
-    return Curve()
-
-
-def write_curve(rows: list[dict[str, float]], path: Path) -> None:
-    with path.open("w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-
-
-def plot_curve(rows: list[dict[str, float]], baselines: list[dict], world: str,
-               path: Path) -> Path:
-    """Mean episode reward, and the held-out TCP error against training steps with the
-    baselines' medians on the same machines as horizontal lines."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    steps = [r["steps"] for r in rows]
-    fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
-    top.plot(steps, [r["mean_episode_reward"] for r in rows], marker="o")
-    top.set_ylabel("mean episode reward\n(log fall of predicted MSE)")
-    bottom.plot(steps, [r["tcp_rigid_median_mm"] for r in rows], marker="o", color="k",
-                label="masked policy")
-    for k, row in enumerate(baselines):
-        bottom.axhline(median_rigid(row), linestyle="--", linewidth=1, color=f"C{1 + k}",
-                       label=row["agent"])
-    bottom.set_yscale("log")
-    bottom.set_ylabel("TCP error after rigid motion,\nmedian (mm)")
-    bottom.set_xlabel("training steps")
-    bottom.legend(fontsize=8)
-    fig.text(0.01, 0.005, f"{world}; {ESTIMATOR}; curve machines of the held-out seed",
-             fontsize=7)
-    fig.tight_layout(rect=(0, 0.02, 1, 1))
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return score
 
 
 def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()),
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    parser.add_argument("--steps", type=int, default=100_000, help="training steps")
-    parser.add_argument("--max-minutes", type=float, default=0.0,
-                        help="end training after this many minutes, evaluations included "
-                             "(0: no limit; the curve says how many steps were done)")
-    parser.add_argument("--envs", type=int, default=4, help="envs stepped in turn")
+    add_options(parser, steps=100_000, envs=4, envs_help="envs stepped in turn",
+                budget=330.0, budget_help="lab seconds of an episode, in training and "
+                "evaluation", every=10_000, out="results/masked.zip")
     parser.add_argument("--reward", default="log_mse", choices=DESIGN_REWARDS,
                         help="the fall of the predicted mean-square TCP error, or of its log")
     parser.add_argument("--per", default="step", choices=DESIGN_PER,
                         help="the reward per step or per second")
-    parser.add_argument("--budget", type=float, default=330.0,
-                        help="lab seconds of an episode, in training and evaluation")
-    parser.add_argument("--conditions", default="lab", choices=CONDITION_NAMES,
-                        help="the world of training and evaluation")
-    parser.add_argument("--sigma", type=float, default=DEFAULT_SIGMA,
-                        help="the dials' standard deviation (mm)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of training")
-    parser.add_argument("--eval-seed", type=int, default=1,
-                        help="comparison seed of the held-out machines (>= 1)")
-    parser.add_argument("--every", type=int, default=10_000,
-                        help="steps between two points of the learning curve")
-    parser.add_argument("--curve-machines", type=int, default=6,
-                        help="held-out machines of each learning-curve point")
-    parser.add_argument("--machines", type=int, default=20,
-                        help="held-out machines of the final table")
     parser.add_argument("--baselines", default=BASELINES,
                         help="agents of the curve's lines and the final table")
-    parser.add_argument("--jobs", type=int, default=1, help="processes of the final table")
-    parser.add_argument("--out", type=Path, default=Path("results/masked.zip"),
-                        help="the trained policy's file")
     args = parser.parse_args(argv)
-    if args.eval_seed < 1:
-        parser.error("--eval-seed must be >= 1: seed 0's machines include training machines")
-    if not (np.isfinite(args.sigma) and args.sigma > 0):
-        parser.error(f"--sigma must be a positive number of mm, got {args.sigma}")
-    if not (np.isfinite(args.budget) and args.budget > 0):
-        parser.error(f"--budget must be a positive number of seconds, got {args.budget}")
-    for name in ("steps", "envs", "every", "curve_machines", "machines", "jobs"):
-        if getattr(args, name) < 1:
-            parser.error(f"--{name.replace('_', '-')} must be at least 1")
+    check_options(parser, args)
     return args
 
 
@@ -238,7 +145,7 @@ def main(argv: list[str] | None = None) -> None:
     model = MaskablePPO("MlpPolicy", vec, n_steps=256, batch_size=256, n_epochs=5,
                         gamma=1.0, gae_lambda=0.95, ent_coef=0.01, seed=args.seed,
                         device="cpu", policy_kwargs={"net_arch": [128, 128]}, verbose=0)
-    curve = make_curve_callback(args, kwargs)
+    curve = curve_callback(args.out, args.every, args.max_minutes, curve_score(args, kwargs))
     start = time.perf_counter()
     model.learn(total_timesteps=args.steps, callback=curve)
     minutes = (time.perf_counter() - start) / 60
@@ -246,7 +153,10 @@ def main(argv: list[str] | None = None) -> None:
     vec.close()
     print(f"wrote {args.out} ({model.num_timesteps} steps in {minutes:.1f} min)")
     world = config(args, ()).world
-    print(f"wrote {plot_curve(curve.rows, levels, world, args.out.with_suffix('.curve.png'))}")
+    path = plot_curve(curve.rows, levels, args.out.with_suffix(".curve.png"),
+                      reward_label="mean episode reward\n(log fall of predicted MSE)",
+                      footnote=f"{world}; {ESTIMATOR}; curve machines of the held-out seed")
+    print(f"wrote {path}")
     from calibrators.cli import main as orthoglide
 
     orthoglide(["compare", "--agents", ",".join((POLICY_PREFIX + str(args.out), *baselines)),

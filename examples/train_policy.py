@@ -33,7 +33,6 @@ machine.
 from __future__ import annotations
 
 import argparse
-import csv
 import os
 import time
 from dataclasses import dataclass
@@ -41,6 +40,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from training_curve import (
+    add_options,
+    check_options,
+    curve_callback,
+    mean_episode_reward,
+    median_rigid,
+    plot_curve,
+)
 
 from calibrators.agents import available
 from calibrators.agents.names import POLICY_PREFIX
@@ -51,7 +58,7 @@ from orthoglide_env.instruments.dial import DEFAULT_SIGMA
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import DEFAULT_PRESET
-from orthoglide_env.world.conditions import CONDITION_NAMES, Conditions
+from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.wrappers import flat_lab_env
 
 LAB = Conditions("lab")
@@ -144,53 +151,18 @@ def evaluate(path: Path, lab: Lab, seed: int, machines: int) -> list[dict]:
     return statistics.summary(compare.run(config, machines), config.target_mm)
 
 
-def median_rigid(row: dict) -> float:
-    value = row["tcp_after_mm"]["rigid"]["median"]
-    return float("nan") if value is None else value
+def curve_score(lab: Lab, env_kwargs: dict[str, Any], seed: int, machines: int) -> Any:
+    """A learning-curve point: the policy (with its normaliser) saved at the path it is
+    given and scored on ``machines`` held-out machines of ``seed``, with the mean reward
+    of its last 100 training episodes."""
 
+    def score(model: Any, path: Path) -> dict[str, float]:
+        save_policy(model, path, policy_spec(env_kwargs, model.get_vec_normalize_env()))
+        row = evaluate(path, lab, seed, machines)[0]
+        return {"mean_episode_reward": mean_episode_reward(model),
+                "tcp_rigid_median_mm": median_rigid(row)}
 
-def make_curve_callback(lab: Lab, out: Path, env_kwargs: dict[str, Any], every: int,
-                        seed: int, machines: int, max_minutes: float) -> Any:
-    """A callback that, every ``every`` steps, saves the policy to ``<out>.last.zip``,
-    scores it on ``machines`` held-out machines and appends a row to ``<out>.curve.csv``:
-    steps, minutes of training, mean reward of the last 100 episodes, median TCP error.
-    It ends training after ``max_minutes`` (0: no limit)."""
-    from stable_baselines3.common.callbacks import BaseCallback
-
-    class Curve(BaseCallback):
-        def _on_training_start(self) -> None:
-            self.start = time.perf_counter()
-            self.next = 0
-            self.rows: list[dict[str, float]] = []
-            self.path = out.with_suffix(".last.zip")
-
-        def _on_step(self) -> bool:
-            if self.num_timesteps >= self.next:
-                self.next += every
-                self.record()
-            minutes = (time.perf_counter() - self.start) / 60
-            return not 0 < max_minutes <= minutes
-
-        def _on_training_end(self) -> None:
-            self.record()
-
-        def record(self) -> None:
-            minutes = (time.perf_counter() - self.start) / 60
-            rewards = [e["r"] for e in self.model.ep_info_buffer]
-            save_policy(self.model, self.path,
-                        policy_spec(env_kwargs, self.model.get_vec_normalize_env()))
-            row = evaluate(self.path, lab, seed, machines)[0]
-            self.rows.append({"steps": self.num_timesteps, "minutes": round(minutes, 2),
-                              "mean_episode_reward": float(np.mean(rewards)) if rewards
-                              else float("nan"),
-                              "tcp_rigid_median_mm": median_rigid(row)})
-            write_curve(self.rows, out.with_suffix(".curve.csv"))
-            r = self.rows[-1]
-            print(f"{r['steps']:>8d} steps {r['minutes']:6.1f} min  mean episode reward "
-                  f"{r['mean_episode_reward']:8.3f}  held-out TCP (rigid) median "
-                  f"{r['tcp_rigid_median_mm']:.4f} mm", flush=True)
-
-    return Curve()
+    return score
 
 
 def policy_spec(env_kwargs: dict[str, Any], normaliser: Any) -> PolicySpec:
@@ -199,41 +171,6 @@ def policy_spec(env_kwargs: dict[str, Any], normaliser: Any) -> PolicySpec:
     ``normaliser``'s statistics."""
     recordable = {k: v for k, v in env_kwargs.items() if k != "estimator"}
     return spec_of(flat_lab_env(**env_kwargs), "PPO", recordable, normaliser)
-
-
-def write_curve(rows: list[dict[str, float]], path: Path) -> None:
-    with path.open("w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-
-
-def plot_curve(rows: list[dict[str, float]], baselines: list[dict], path: Path) -> Path:
-    """Mean episode reward and held-out TCP error against training steps; the baselines'
-    medians (on the final table's machines) as horizontal lines."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    steps = [r["steps"] for r in rows]
-    fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
-    top.plot(steps, [r["mean_episode_reward"] for r in rows], marker="o")
-    top.set_ylabel("mean episode reward")
-    bottom.plot(steps, [r["tcp_rigid_median_mm"] for r in rows], marker="o", color="k",
-                label="policy (curve machines)")
-    for row in baselines:
-        bottom.axhline(median_rigid(row), linestyle="--", linewidth=1,
-                       label=f"{row['agent']} ({row['machines']} machines)",
-                       color=f"C{1 + baselines.index(row)}")
-    bottom.set_yscale("log")
-    bottom.set_ylabel("TCP error after rigid motion,\nmedian (mm)")
-    bottom.set_xlabel("training steps")
-    bottom.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
 
 
 def print_table(rows: list[dict], minutes: float, steps: int) -> None:
@@ -251,39 +188,16 @@ def print_table(rows: list[dict], minutes: float, steps: int) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()),
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    parser.add_argument("--steps", type=int, default=120_000, help="training steps")
-    parser.add_argument("--max-minutes", type=float, default=0.0,
-                        help="end training after this many minutes, evaluations included "
-                             "(0: no limit; the curve says how many steps were done)")
-    parser.add_argument("--envs", type=int, default=8, help="envs stepped in parallel")
+    add_options(parser, steps=120_000, envs=8, envs_help="envs stepped in parallel",
+                budget=600.0, budget_help="lab seconds of a training episode; the policy "
+                "stops there", every=20_000, out="results/policy.zip")
     parser.add_argument("--subprocesses", action="store_true",
                         help="one process per env (SubprocVecEnv) instead of one for all")
     parser.add_argument("--reward", default="information",
                         choices=["information", "accuracy"],
                         help="information gained per second, or the fall of the TCP error")
-    parser.add_argument("--budget", type=float, default=600.0,
-                        help="lab seconds of a training episode; the policy stops there")
-    parser.add_argument("--conditions", default="lab", choices=CONDITION_NAMES,
-                        help="the world of training and evaluation")
-    parser.add_argument("--sigma", type=float, default=DEFAULT_SIGMA,
-                        help="the dials' standard deviation (mm)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of training")
-    parser.add_argument("--eval-seed", type=int, default=1,
-                        help="comparison seed of the held-out machines (>= 1)")
-    parser.add_argument("--every", type=int, default=20_000,
-                        help="steps between two points of the learning curve")
-    parser.add_argument("--curve-machines", type=int, default=6,
-                        help="held-out machines of each learning-curve point")
-    parser.add_argument("--machines", type=int, default=20,
-                        help="held-out machines of the final table")
-    parser.add_argument("--jobs", type=int, default=1, help="processes of the final table")
-    parser.add_argument("--out", type=Path, default=Path("results/policy.zip"),
-                        help="the trained policy's file")
     args = parser.parse_args()
-    if args.eval_seed < 1:
-        parser.error("--eval-seed must be >= 1: seed 0's machines include training machines")
-    if not (np.isfinite(args.sigma) and args.sigma > 0):
-        parser.error(f"--sigma must be a positive number of mm, got {args.sigma}")
+    check_options(parser, args)
     # One thread each: the learner shares the cores with the envs (and other jobs).
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import torch
@@ -298,8 +212,8 @@ def main() -> None:
     model = PPO("MlpPolicy", vec, n_steps=128, batch_size=256, gamma=0.99, seed=args.seed,
                 policy_kwargs={"log_std_init": LOG_STD_INIT}, verbose=0)
     start_near_zero(model)
-    curve = make_curve_callback(lab, args.out, env_kwargs, args.every, args.eval_seed,
-                                args.curve_machines, args.max_minutes)
+    curve = curve_callback(args.out, args.every, args.max_minutes,
+                           curve_score(lab, env_kwargs, args.eval_seed, args.curve_machines))
     start = time.perf_counter()
     model.learn(total_timesteps=args.steps, callback=curve)
     minutes = (time.perf_counter() - start) / 60
@@ -311,7 +225,11 @@ def main() -> None:
     config = lab.config(agents, args.eval_seed)
     rows = statistics.summary(compare.run(config, args.machines, args.jobs), config.target_mm)
     print_table(rows, minutes, model.num_timesteps)
-    print(f"wrote {plot_curve(curve.rows, rows[1:], args.out.with_suffix('.curve.png'))}")
+    path = plot_curve(curve.rows, rows[1:], args.out.with_suffix(".curve.png"),
+                      reward_label="mean episode reward",
+                      footnote=f"{config.world}; {ESTIMATOR}; curve machines of the held-out "
+                      "seed")
+    print(f"wrote {path}")
 
 
 if __name__ == "__main__":
