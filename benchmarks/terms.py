@@ -44,8 +44,8 @@ from calibrators.estimators.gauss_newton import GaussNewtonCalibrator
 from calibrators.estimators.prediction import predicted_tcp_error
 from calibrators.study.episodes import machine_seed, run_episode
 from calibrators.study.labs import lab_id, lab_kwargs
+from orthoglide_env.instruments.catalogue import check_instruments
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
-from orthoglide_env.instruments.interferometer import check_instruments
 from orthoglide_env.lab.operations import DEFAULT_BUDGET_S
 from orthoglide_env.model.errors import AXIS_NAMES
 from orthoglide_env.scoring import score

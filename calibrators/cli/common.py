@@ -180,7 +180,7 @@ def instruments_of(args: argparse.Namespace, agents: tuple[Agent, ...] = ()
     ``agents`` checked against them; :class:`UsageError` in one line if bad."""
     # (Here, not at the top: the labs import Gymnasium, which --help does without.)
     from calibrators.study.labs import lab_kwargs
-    from orthoglide_env.instruments.interferometer import check_instruments
+    from orthoglide_env.instruments.catalogue import check_instruments
     if args.instruments is None:
         owned: tuple[str, ...] = ()
     else:

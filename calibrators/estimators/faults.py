@@ -16,7 +16,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from itertools import pairwise
-from statistics import NormalDist
 
 import numpy as np
 
@@ -50,9 +49,12 @@ PREFIX: str = "fault"
 
 
 def _isf(p: float) -> float:
-    """The standard normal's upper ``p`` quantile (the standard library's, so that
-    ``--help`` imports no scipy; exact for small ``p`` by symmetry)."""
-    return -NormalDist().inv_cdf(p)
+    """The standard normal's upper ``p`` quantile."""
+    # Imported here: a command's --help imports no scipy (and the standard library's
+    # ``statistics`` is shadowed by benchmarks/statistics.py for the benchmark scripts).
+    from scipy.stats import norm
+
+    return float(norm.isf(p))
 
 
 @dataclass

@@ -27,7 +27,7 @@ def lab_kwargs(agent: Agent, instruments: tuple[str, ...] = (), **settings: Any
     """The lab env's arguments: ``settings`` (budget, design, conditions, noise, ...) and
     the instruments ``agent`` needs beyond the gauges (``tracker``, ``reference``).
     ``instruments``: what the lab owns (names of :data:`~orthoglide_env.instruments.
-    interferometer.INSTRUMENT_NAMES`; empty: today's lab, the dial gauges and the tracker
+    catalogue.INSTRUMENT_NAMES`; empty: today's lab, the dial gauges and the tracker
     for an agent that reads one); ``ValueError`` in one line when ``agent`` needs one the
     lab does not own.  The tracker is read only by an agent that needs it."""
     owned = tuple(instruments) or ("dial", *(("tracker",) if agent.needs_tracker else ()))

@@ -203,7 +203,7 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
     Instruments
     -----------
     ``instruments`` lists what the lab owns (names in
-    :data:`~orthoglide_env.instruments.interferometer.INSTRUMENT_NAMES`; an unknown one, or
+    :data:`~orthoglide_env.instruments.catalogue.INSTRUMENT_NAMES`; an unknown one, or
     one not yet available, raises ``ValueError``).  In ``OrthoglideLab-v1`` with the
     ``interferometer``, ``align`` drives to Zero, sets the interferometer up along drive
     ``axis`` (the retroreflector on its carriage) and zeroes it there (the first set-up

@@ -17,7 +17,6 @@ whose zero a fit eliminates as it does a gauge's.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,35 +26,9 @@ from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.world.table import EFFECTS, INSTRUMENT_ERRORS
 from orthoglide_env.world.truth import UM, draw_range
 
-#: Every instrument a lab may own, by the name commands and envs use.
-INSTRUMENT_NAMES: tuple[str, ...] = ("dial", "interferometer", "step-gauge", "ballbar",
-                                     "tracker")
-#: Those the lab can use today; the others are refused in one line.
-AVAILABLE: tuple[str, ...] = ("dial", "interferometer", "tracker")
 #: The stream jump an interferometer's errors are drawn from (the thermometer's is 1): a
 #: lab that owns one draws the same machine, world and noise as one that does not.
 _JUMPS: int = 2
-
-
-def check_instruments(names: Iterable[str]) -> tuple[str, ...]:
-    """``names`` in :data:`INSTRUMENT_NAMES` order, or ``ValueError`` naming an unknown
-    one, one not yet available, or a lab without its dial gauges (its stands carry them)."""
-    names = list(names)
-    if not names or not all(isinstance(n, str) for n in names):
-        raise ValueError(f"instruments must be a list of names from "
-                         f"{list(INSTRUMENT_NAMES)}, got {names!r}")
-    unknown = [n for n in names if n not in INSTRUMENT_NAMES]
-    if unknown:
-        raise ValueError(f"unknown instrument(s) {unknown}; instruments are "
-                         f"{', '.join(INSTRUMENT_NAMES)}")
-    later = [n for n in names if n not in AVAILABLE]
-    if later:
-        raise ValueError(f"instrument(s) {later} not yet available; available: "
-                         f"{', '.join(AVAILABLE)}")
-    if "dial" not in names:
-        raise ValueError("instruments must include 'dial': the lab's stands carry dial "
-                         "gauges")
-    return tuple(n for n in INSTRUMENT_NAMES if n in names)
 
 
 @dataclass(frozen=True)

@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from orthoglide_env.instruments.catalogue import check_instruments
 from orthoglide_env.instruments.dial import GaugeNoise, check_noise
-from orthoglide_env.instruments.interferometer import check_instruments
 from orthoglide_env.instruments.slots import PAPER_LAYOUT, GaugeSpec
 from orthoglide_env.lab.notebook import Estimator
 from orthoglide_env.lab.operations import (
@@ -72,7 +72,7 @@ class LabSettings:
     render_mode: str | None = None
     conditions: Conditions = IDEAL  # the world's effects beyond the geometry
     reference: bool = False  # the lab has the gauge block: its catalogue the reference slots
-    instruments: tuple[str, ...] = ("dial",)  # what the lab owns (interferometer.INSTRUMENT_NAMES)
+    instruments: tuple[str, ...] = ("dial",)  # what the lab owns (catalogue.INSTRUMENT_NAMES)
     version: int = 0  # the lab env's version: v1's spaces carry the interferometer
     faults: Faults = NO_FAULTS  # what can go wrong in the session (orthoglide_env.lab.faults)
 

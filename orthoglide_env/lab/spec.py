@@ -21,8 +21,8 @@ from typing import Any
 import numpy as np
 from gymnasium.vector import AutoresetMode
 
+from orthoglide_env.instruments.catalogue import INSTRUMENT_NAMES, check_instruments
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
-from orthoglide_env.instruments.interferometer import INSTRUMENT_NAMES, check_instruments
 from orthoglide_env.instruments.slots import GaugeSpec, layout_from_names
 from orthoglide_env.lab.operations import DEFAULT_BUDGET_S, PAPER_SLOTS, TRACKER_SIGMA
 from orthoglide_env.model.design import MachineDesign
