@@ -111,12 +111,11 @@ class Config:
         told = ("" if self.fit_conditions is None else
                 f" (the fit told {getattr(self.told, 'label', self.told)})")
         owned = f", instruments {'+'.join(self.instruments)}" if self.instruments else ""
-        if self.faults.active:
-            design += f", faults {self.faults.label}"
+        faults = f", faults {self.faults.label}" if self.faults.active else ""
         return (f"{self.errors} errors, {self.conditions.label} conditions{told}"
                 f"{', a thermometer' if self.thermometer else ''}{owned}, gauge sigma "
                 f"{self.sigma} mm, "
-                f"budget {self.budget_s:g} s, {self.backend} backend{design}")
+                f"budget {self.budget_s:g} s, {self.backend} backend{design}{faults}")
 
     def lab_kwargs(self, agent: Agent) -> dict[str, Any]:
         """The lab env's arguments of this comparison for ``agent`` (with the tracker or
