@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import csv
 import json
-import re
 import subprocess
 import sys
 from pathlib import Path
@@ -173,7 +172,7 @@ def test_the_sheet_names_each_readings_stand_across_a_re_mount(tmp_path) -> None
     gauge's place, and after a re-mount the moved stand at its new place (stand 1 leaves
     x-leg/y@0.5 for x-leg/y@0.8: a reading there is stand 1's, none is left at 0.5)."""
     from calibrators.measurements import Measurement
-    from calibrators.workflow.page import stand_numbers
+    from calibrators.workflow.plan import stand_numbers
     from orthoglide_env.instruments.slots import layout_from_names
 
     paper = make_procedure("paper", 3600, PROTOTYPE)
@@ -191,20 +190,142 @@ def test_the_sheet_names_each_readings_stand_across_a_re_mount(tmp_path) -> None
     assert numbers[-1] == 1 and set(numbers) == set(held)
 
 
-def test_the_page_draws_d_and_prints_as_a_pdf(paper_plan, tmp_path) -> None:
+def _sheet_procedure(paper_plan: Path) -> Procedure:
+    """The paper plan as read back, with its sheet (plan.json holds the steps only)."""
+    procedure = Procedure.read(paper_plan / "plan.json")
+    return Procedure(procedure.agent, procedure.budget_s, procedure.conditions,
+                     procedure.design, procedure.stands, procedure.steps,
+                     make_procedure("paper", 3600, PROTOTYPE).sheet)
+
+
+def _assert_holds_the_procedure(pdf: Path, procedure: Procedure) -> None:
+    """The PDF's text holds every step's words (line breaks and hyphenation aside) and,
+    row by row, the sheet's row, step, stand, mounting, posture and rho, as the page does."""
+    import pypdf
+
+    from calibrators.workflow.plan import rho_words, stand_numbers
+
+    assert pdf.read_bytes()[:5] == b"%PDF-"
+    text = "\n".join(page.extract_text() for page in pypdf.PdfReader(pdf).pages)
+    flat = "".join(text.split())
+    missing = [s.number for s in procedure.steps if "".join(s.text.split()) not in flat]
+    assert not missing, f"steps {missing} are not in the PDF's text"
+    lines = {" ".join(line.split()) for line in text.splitlines()}
+    for k, (m, n) in enumerate(zip(procedure.sheet, stand_numbers(procedure), strict=True),
+                               start=1):
+        row = f"{k} {m.step} {n} {m.mounting} {m.posture} {rho_words(m.rho)} {m.repetition}"
+        assert any(line.startswith(row + " ") for line in lines), row
+
+
+def test_the_page_draws_d_and_its_drawn_pdf_holds_it(paper_plan, tmp_path) -> None:
     """The page shows the picture of a leg's bars (what "+d/2" refers to) and a stand
-    column in its sheet; with pdf=True the same page is a PDF with at least a page for the
-    rules, the bars, the steps, the set-up's picture and the sheet's rows (40 a page)."""
-    from calibrators.workflow.page import BARS_FILE, PDF_FILE, write_page
+    column in its sheet; the PDF drawn with matplotlib (no extra needed) holds the same
+    steps and sheet, with a page for each picture."""
+    import pypdf
+
+    from calibrators.workflow.page import BARS_FILE, stand_numbers
+    from calibrators.workflow.page_pdf import draw_pdf
 
     html = (paper_plan / "procedure.html").read_text()
     assert f'<img src="{BARS_FILE}"' in html and "<th>stand</th><th>mounting</th>" in html
     assert (paper_plan / BARS_FILE).read_bytes()[:4] == b"\x89PNG"
-    procedure = Procedure.read(paper_plan / "plan.json")
-    procedure = Procedure(procedure.agent, procedure.budget_s, procedure.conditions,
-                          procedure.design, procedure.stands, procedure.steps,
-                          make_procedure("paper", 3600, PROTOTYPE).sheet)
+    procedure = _sheet_procedure(paper_plan)
+    out = draw_pdf(procedure, paper_plan, {1: "setup.png"}, BARS_FILE,
+                   stand_numbers(procedure), "orthoglide fit", tmp_path / "drawn.pdf")
+    _assert_holds_the_procedure(out, procedure)
+    # The pages share one table of resources: the pictures are its distinct images.
+    images = {i.name for p in pypdf.PdfReader(out).pages for i in p.images}
+    assert len(images) == 2  # the bars and the set-up
+
+
+def test_the_typeset_pdf_is_the_page_with_its_pictures(paper_plan, tmp_path) -> None:
+    """With the pdf extra the PDF is the HTML page typeset: the same steps and sheet rows,
+    the bars' and the set-up's pictures embedded, A4 pages."""
+    import pypdf
+
+    from calibrators.workflow.page import PDF_FILE, write_page
+    from calibrators.workflow.page_pdf import typeset_problem
+
+    problem = typeset_problem()
+    if problem:
+        pytest.skip(f"the typeset PDF needs the pdf extra: {problem}")
+    procedure = _sheet_procedure(paper_plan)
     write_page(procedure, tmp_path, pdf=True)
-    pdf = (tmp_path / PDF_FILE).read_bytes()
-    pages = len(re.findall(rb"/Type /Page\b", pdf))
-    assert pdf[:5] == b"%PDF-" and pages >= 4 + -(-len(procedure.sheet) // 40)
+    _assert_holds_the_procedure(tmp_path / PDF_FILE, procedure)
+    pages = pypdf.PdfReader(tmp_path / PDF_FILE).pages
+    assert len({i.name for p in pages for i in p.images}) == 2  # bars.png and setup.png
+    # A4 is 595.3 x 841.9 points; WeasyPrint rounds to a hundredth of a point.
+    assert all(abs(float(p.mediabox.width) - 595.28) < 0.1 and
+               abs(float(p.mediabox.height) - 841.89) < 0.1 for p in pages)
+
+
+def test_plan_pdf_without_the_extra_says_so_in_one_line(tmp_path, monkeypatch,
+                                                        capsys) -> None:
+    """Without WeasyPrint `plan --pdf` still writes the PDF, drawn with matplotlib, and one
+    line says so and how to get the typeset page."""
+    monkeypatch.setitem(sys.modules, "weasyprint", None)  # import fails: not installed
+    assert main(["plan", "--agent", "paper", "--out", str(tmp_path), "--pdf"]) == 0
+    notes = [line for line in capsys.readouterr().out.splitlines() if "matplotlib" in line]
+    assert len(notes) == 1 and "pip install -e '.[pdf]'" in notes[0], notes
+    assert "libpango" in notes[0]
+    _assert_holds_the_procedure(tmp_path / "procedure.pdf", _sheet_procedure(tmp_path))
+
+
+def test_the_sheet_names_the_stands_and_fit_reads_them_back(paper_plan, tmp_path,
+                                                            capsys) -> None:
+    """The sheet's stand column is each row's stand (the page's); a filled sheet without
+    the column (an older sheet) fits to the very same estimate, bit for bit."""
+    from calibrators.workflow.plan import stand_numbers
+
+    rows = list(csv.DictReader((paper_plan / "readings.csv").open()))
+    numbers = stand_numbers(_sheet_procedure(paper_plan))
+    assert [r["stand"] for r in rows] == [str(n) for n in numbers]
+    sheet = _filled(paper_plan, tmp_path, capsys)
+    argv = ["--plan", str(paper_plan / "plan.json"), "--conditions", "ideal", "--json"]
+    with_stands = run_json(capsys, ["fit", str(sheet), *argv])
+    filled = list(csv.DictReader(sheet.open()))
+    old = tmp_path / "old.csv"
+    with old.open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=[k for k in filled[0] if k != "stand"],
+                                extrasaction="ignore")
+        writer.writeheader()
+        writer.writerows(filled)
+    without = run_json(capsys, ["fit", str(old), *argv])
+    assert with_stands["estimate"] == without["estimate"]
+
+
+def _fit_with_stand(paper_plan: Path, tmp_path: Path, capsys, mounting: str, rows: list[int],
+                    stand: str) -> subprocess.CompletedProcess:
+    sheet = _filled(paper_plan, tmp_path, capsys)
+    filled = list(csv.DictReader(sheet.open()))
+    for k in rows:
+        assert filled[k - 1]["mounting"] == mounting
+        filled[k - 1]["stand"] = stand
+    with sheet.open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(filled[0]))
+        writer.writeheader()
+        writer.writerows(filled)
+    return subprocess.run([sys.executable, "-m", "calibrators.cli", "fit", str(sheet),
+                           "--plan", str(paper_plan / "plan.json")],
+                          capture_output=True, text=True, timeout=120)
+
+
+def test_a_stand_other_than_the_plans_is_refused(paper_plan, tmp_path, capsys) -> None:
+    """Every reading of a mounting written as stand 5 where the plan mounts stand 2: fit
+    --plan names the first line and both stands, in one line."""
+    rows = [k for k, r in enumerate(csv.DictReader((paper_plan / "readings.csv").open()),
+                                    start=1) if r["mounting"] == "x-leg/z@0.5"]
+    proc = _fit_with_stand(paper_plan, tmp_path, capsys, "x-leg/z@0.5", rows, "5")
+    assert proc.returncode == 2, proc.stderr
+    assert (f"line {rows[0] + 1}: step 1 reads x-leg/z@0.5 on stand 2, not on stand 5"
+            in proc.stderr), proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_a_mounting_on_two_stands_is_refused(paper_plan, tmp_path, capsys) -> None:
+    """One row of a mounting written as another stand than its other rows: the file itself
+    is refused (a mounting is one stand's), naming both lines."""
+    proc = _fit_with_stand(paper_plan, tmp_path, capsys, "x-leg/z@0.5", [10], "5")
+    assert proc.returncode == 2, proc.stderr
+    assert "readings.csv:11: column 14 (stand): mounting 'x-leg/z@0.5' is on stand 2 (line 3)" in \
+        proc.stderr, proc.stderr

@@ -13,7 +13,8 @@ It writes into ``--out DIR``:
 * ``bars.png``: a leg's two bars and the distance d between them that a stand's place
   (+d/2, -d/2) refers to;
 * ``procedure.html``: a printable page with all of it, the sheet with a stand column;
-* with ``--pdf``, ``procedure.pdf``: the same page as a PDF to print.
+* with ``--pdf``, ``procedure.pdf``: the same page as a PDF to print, typeset from the
+  HTML with the ``pdf`` extra, else drawn with matplotlib (and a line says so).
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from calibrators.cli.common import (
 from calibrators.workflow.compensate import read_estimate
 from calibrators.workflow.page import PDF_FILE, write_page
 from calibrators.workflow.page import page as page  # the page's earlier path
+from calibrators.workflow.page_pdf import TYPESET_HINT, typeset_problem
 from calibrators.workflow.plan import Plan, planned_agents
 from calibrators.workflow.verify import VerificationPlan
 from orthoglide_env.lab.operations import DEFAULT_BUDGET_S
@@ -62,6 +64,10 @@ def run(args: argparse.Namespace) -> None:
     pdf = f", {page_path.with_name(PDF_FILE)}" if args.pdf else ""
     print(f"{procedure.summary()}; wrote {page_path}{pdf}, {sheet_path}, {plan_path} and "
           f"{len(pictures) + 1} pictures")
+    problem = typeset_problem() if args.pdf else None
+    if problem:
+        print(f"note: {PDF_FILE} is drawn with matplotlib, not typeset from the page, since "
+              f"{problem}; for the typeset page: {TYPESET_HINT}")
     for note in procedure.notes:
         print(f"note: {note}")
 
@@ -83,7 +89,8 @@ def add(p: argparse.ArgumentParser) -> None:
                    help="folder to write plan.json, readings.csv, the pictures and "
                         "procedure.html into (made if missing; files replaced)")
     p.add_argument("--pdf", action="store_true",
-                   help="also write the page as procedure.pdf, to print")
+                   help="also write the page as procedure.pdf, to print: typeset with the "
+                        "pdf extra (pip install -e '.[pdf]'), else drawn with matplotlib")
     add_design(p)
     add_conditions(p)
     add_instruments(p)

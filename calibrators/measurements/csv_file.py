@@ -36,7 +36,7 @@ from orthoglide_env.model.design import MachineDesign
 _INTEGER = re.compile(r"[+-]?[0-9]+")
 #: The columns that hold what is a reading's own; the rest a file repeats.
 _OWN_FIELDS: tuple[str, ...] = ("reading_mm", "repetition", "time_s", "step",
-                                "temperature_c")
+                                "temperature_c", "stand")
 #: At most this many distinct (gauge, mounting, posture) rows are kept parsed (a few MB).
 MAX_SEEN: int = 100_000
 
@@ -127,7 +127,8 @@ def read_csv(handle: BinaryIO, path: Path, design: MachineDesign) -> list[Measur
                 fields = {name: _cell_value(name, cells[k]) for name, k in own}
                 m = first.again(_required(fields, "reading_mm"),
                                 _given(fields, "repetition", 1), _given(fields, "time_s"),
-                                line, _given(fields, "step"), _given(fields, "temperature_c"))
+                                line, _given(fields, "step"), _given(fields, "temperature_c"),
+                                _given(fields, "stand"))
             readings.add(m, f"line {line}")
         except FieldError as exc:
             place = (f"column {header.index(exc.field) + 1} ({exc.field}): "

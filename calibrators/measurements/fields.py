@@ -46,9 +46,9 @@ INSTRUMENT_COLUMN: str = "instrument"
 INSTRUMENT_KINDS: tuple[str, ...] = ("dial", "tracker", "interferometer")
 RHO_FIELDS: tuple[str, str, str] = ("rho_x", "rho_y", "rho_z")
 #: Every name a CSV column or a JSON reading's key may have.
-FIELDS: tuple[str, ...] = (*COLUMNS, "gauge", "step", INSTRUMENT_COLUMN)
+FIELDS: tuple[str, ...] = (*COLUMNS, "gauge", "step", "stand", INSTRUMENT_COLUMN)
 NUMBER_FIELDS: frozenset[str] = frozenset({"at", *RHO_FIELDS, "repetition", "reading_mm",
-                                          "time_s", "temperature_c", "step"})
+                                          "time_s", "temperature_c", "step", "stand"})
 JSON_KEYS: tuple[str, ...] = ("readings", "experiment_time_s", "design")
 
 ZERO_RHO: tuple[float, float, float] = (0.0, 0.0, 0.0)

@@ -83,6 +83,9 @@ class Measurement:
     temperature_c: float | None = None
     #: The step of a written procedure it was taken at (``orthoglide plan``), if any.
     step: int | None = field(default=None, compare=False)
+    #: The number of the stand it was read on, as the technician numbers the stands
+    #: (``orthoglide plan``'s sheet), if given.
+    stand: int | None = field(default=None, compare=False)
     design: InitVar[MachineDesign] = PROTOTYPE
 
     def __post_init__(self, design: MachineDesign) -> None:
@@ -92,34 +95,36 @@ class Measurement:
         for name, value in (("posture", posture), ("rho", rho), ("mounting", mounting)):
             object.__setattr__(self, name, value)
         self._own(self.reading, self.repetition, self.time_s, self.line, self.step,
-                  self.temperature_c)
+                  self.temperature_c, self.stand)
 
     def _own(self, reading: object, repetition: object, time_s: object,
-             line: int | None, step: object = None, temperature_c: object = None) -> None:
+             line: int | None, step: object = None, temperature_c: object = None,
+             stand: object = None) -> None:
         """Check and set what is this reading's own: its value, repetition, time,
-        procedure step and room temperature."""
+        procedure step, room temperature and stand."""
         limit, rule = ((MAX_TRACKER_MM, _TRACKER_RULE) if isinstance(self.gauge, TrackerAxis)
                        else (MAX_READING_MM, _READING_RULE))
         reading = _real(reading, "reading_mm", -limit, limit, rule)
         time_s = None if time_s is None else _real(
             time_s, "time_s", 0.0, MAX_EXPERIMENT_TIME_S, "s (the lab clock)")
         step = None if step is None else _repetition(step, "step")
+        stand = None if stand is None else _repetition(stand, "stand")
         temperature_c = None if temperature_c is None else _real(
             temperature_c, "temperature_c", MIN_ROOM_C, MAX_ROOM_C, "C (a room's)")
         for name, value in (("repetition", _repetition(repetition)), ("reading", reading),
                             ("time_s", time_s), ("line", line), ("step", step),
-                            ("temperature_c", temperature_c)):
+                            ("temperature_c", temperature_c), ("stand", stand)):
             object.__setattr__(self, name, value)
 
     def again(self, reading: object, repetition: object = 1, time_s: object = None,
               line: int | None = None, step: object = None,
-              temperature_c: object = None) -> Measurement:
+              temperature_c: object = None, stand: object = None) -> Measurement:
         """Another reading of this gauge and mounting at this posture, its own fields
         checked as a new reading's are (what a file repeats is checked once)."""
         out = object.__new__(type(self))
         for name in ("gauge", "posture", "rho", "mounting"):
             object.__setattr__(out, name, getattr(self, name))
-        out._own(reading, repetition, time_s, line, step, temperature_c)
+        out._own(reading, repetition, time_s, line, step, temperature_c, stand)
         return out
 
     @classmethod
@@ -135,7 +140,8 @@ class Measurement:
         for name, value in (("gauge", gauge), ("posture", posture or rho_label(rho)),
                             ("repetition", repetition), ("reading", reading), ("rho", rho),
                             ("mounting", mounting), ("line", None), ("time_s", time_s),
-                            ("temperature_c", temperature_c), ("step", None)):
+                            ("temperature_c", temperature_c), ("step", None),
+                            ("stand", None)):
             object.__setattr__(out, name, value)
         return out
 
@@ -154,6 +160,8 @@ class Measurement:
             out["temperature_c"] = self.temperature_c
         if self.step is not None:
             out["step"] = self.step
+        if self.stand is not None:
+            out["stand"] = self.stand
         if isinstance(self.gauge, InterferometerAxis):
             out["instrument"] = "interferometer"
         return out
@@ -321,7 +329,8 @@ def _measurement(fields: Mapping[str, object], line: int | None, design: Machine
                        _given(fields, "repetition", 1), reading, rho,
                        _given(fields, "mounting", ""), line, design=design,
                        time_s=_given(fields, "time_s"), step=_given(fields, "step"),
-                       temperature_c=_given(fields, "temperature_c"))
+                       temperature_c=_given(fields, "temperature_c"),
+                       stand=_given(fields, "stand"))
 
 
 class _Readings:
@@ -330,6 +339,7 @@ class _Readings:
     def __init__(self) -> None:
         self.items: list[Measurement] = []
         self._mounting: dict[str, tuple[GaugeSpec, str]] = {}
+        self._stand: dict[str, tuple[int, str]] = {}
 
     def add(self, m: Measurement, where: str) -> None:
         if len(self.items) >= fields.MAX_ROWS:
@@ -339,6 +349,12 @@ class _Readings:
             raise FieldError("mounting", f"mounting {_show(m.mounting)} holds gauge "
                                          f"{gauge_name(gauge)} ({first}), not "
                                          f"{gauge_name(m.gauge)}: one stand, one gauge")
+        if m.stand is not None:
+            stand, first = self._stand.setdefault(m.mounting, (m.stand, where))
+            if stand != m.stand:
+                raise FieldError("stand", f"mounting {_show(m.mounting)} is on stand {stand} "
+                                          f"({first}), not stand {m.stand}: a mounting is one "
+                                          "stand's")
         self.items.append(m)
 
 

@@ -5,7 +5,8 @@ machine at Zero with the stands mounted at set-up and after each re-mount, each 
 marked and labelled, the moved one in red), ``bars.png`` (a leg's two bars, the distance
 d between them that a stand's place "+d/2" or "-d/2" refers to, and where along a bar a
 stand's "at" is measured from), ``procedure.html``, a printable page with the stands, the
-steps, their pictures and the sheet to fill in, and ``procedure.pdf``, the same to print
+steps, their pictures and the sheet to fill in, and ``procedure.pdf``, the same to print:
+that page typeset with the ``pdf`` extra, else drawn with matplotlib
 (:mod:`calibrators.workflow.page_pdf`).
 """
 
@@ -14,7 +15,7 @@ from __future__ import annotations
 import html
 from pathlib import Path
 
-from calibrators.workflow.plan import Procedure
+from calibrators.workflow.plan import Procedure, rho_words, stand_numbers
 from orthoglide_env.lab.operations import slot_catalogue
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import MachineParams
@@ -30,9 +31,11 @@ FIT_COMMAND = "orthoglide fit readings.csv --plan plan.json"
 def write_page(procedure: Procedure, folder: str | Path, then: str = FIT_COMMAND,
                pdf: bool = False) -> tuple[Path, dict[int, str]]:
     """Write the pictures and :data:`PAGE_FILE` of ``procedure`` into ``folder`` (made if
-    missing), and with ``pdf`` :data:`PDF_FILE` too; ``then``: the command that reads the
-    filled sheet.  The page's path, and the pictures' file names by step number."""
-    from calibrators.workflow.page_pdf import write_pdf
+    missing), and with ``pdf`` :data:`PDF_FILE` too: the page typeset when
+    :func:`~calibrators.workflow.page_pdf.typeset_problem` finds none, else drawn with
+    matplotlib; ``then``: the command that reads the filled sheet.  The page's path, and
+    the pictures' file names by step number."""
+    from calibrators.workflow.page_pdf import draw_pdf, typeset_pdf, typeset_problem
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -41,9 +44,11 @@ def write_page(procedure: Procedure, folder: str | Path, then: str = FIT_COMMAND
     draw_bars(design, folder / BARS_FILE)
     path = folder / PAGE_FILE
     path.write_text(page(procedure, drawn, then), encoding="utf-8")
-    if pdf:
-        write_pdf(procedure, folder, drawn, BARS_FILE, stand_numbers(procedure), then,
-                  folder / PDF_FILE)
+    if pdf and typeset_problem() is None:
+        typeset_pdf(path, folder / PDF_FILE)
+    elif pdf:
+        draw_pdf(procedure, folder, drawn, BARS_FILE, stand_numbers(procedure), then,
+                 folder / PDF_FILE)
     return path, drawn
 
 
@@ -98,22 +103,6 @@ def draw_bars(design: MachineDesign, out: Path) -> Path:
     return out
 
 
-def stand_numbers(procedure: Procedure) -> list[int | None]:
-    """The number of the stand each row of the sheet is read on (None: the tracker's), by
-    the stands the set-up mounts and each re-mount's move."""
-    from calibrators.measurements.record import gauge_name
-
-    held = {s["slot"]: s["stand"] for s in procedure.stands}
-    out: list[int | None] = [None] * len(procedure.sheet)
-    for step in procedure.steps:
-        if step.action == "re-mount":
-            held = {slot: k for slot, k in held.items() if k != step.stand}
-            held[step.slot] = step.stand
-        for row in step.rows:
-            out[row - 1] = held.get(gauge_name(procedure.sheet[row - 1].gauge))
-    return out
-
-
 def pictures(procedure: Procedure, design: MachineDesign, out: Path) -> dict[int, str]:
     """A picture per mounting: the set-up's stands, then the stands after each re-mount
     with the moved one highlighted; by step number, file names relative to ``out``."""
@@ -160,7 +149,7 @@ def page(procedure: Procedure, pictures: dict[int, str], then: str = FIT_COMMAND
     sheet = "".join(
         f"<tr><td>{k}</td><td>{m.step}</td><td>{'' if n is None else n}</td>"
         f"<td>{e(m.mounting)}</td><td>{e(m.posture)}</td>"
-        f"<td>{', '.join(f'{v:g}' for v in m.rho)}</td><td>{m.repetition}</td>"
+        f"<td>{rho_words(m.rho)}</td><td>{m.repetition}</td>"
         f"<td>{'' if m.time_s is None else f'{m.time_s:.0f}'}</td><td class='blank'></td></tr>"
         for k, (m, n) in enumerate(zip(procedure.sheet, stand_numbers(procedure),
                                        strict=True), start=1))
@@ -173,9 +162,18 @@ table {{ border-collapse: collapse; width: 100%; margin-bottom: 1.5em; }}
 td, th {{ border: 1px solid #888; padding: 0.25em 0.5em; vertical-align: top; }}
 th {{ background: #eee; }}
 td.blank {{ min-width: 8em; }}
+table.sheet td {{ white-space: nowrap; }}
 tr.picture td {{ text-align: center; border: none; }}
 img {{ max-width: 100%; }}
-@media print {{ tr, img {{ page-break-inside: avoid; }} }}
+@page {{ size: A4; margin: 14mm 12mm;
+  @bottom-right {{ content: "page " counter(page) " of " counter(pages); font-size: 8pt; }} }}
+@media print {{
+  body {{ margin: 0; max-width: none; font-size: 10pt; }}
+  table.sheet {{ font-size: 8.5pt; }}
+  table.sheet td {{ padding: 0.35em 0.4em; }}
+  tr, img {{ page-break-inside: avoid; }}
+  h2 {{ page-break-after: avoid; }}
+}}
 </style></head><body>
 <h1>Calibration procedure</h1>
 <p>Agent <b>{e(procedure.agent)}</b>, {len(procedure.steps)} steps,
@@ -194,9 +192,11 @@ dial that reads plus when pressed shows, or minus that.</li>
 <li>Fill in <code>reading_mm</code> in <code>readings.csv</code> row by row, as the steps
 say: sheet row N is line N + 1 of the file (the first line names the columns). A
 mounting such as <code>x-leg/z@0.8#7</code> is the stand's installation at that place (the
-number counts the installations). A row whose gauge gives no reading (out of its travel)
-is deleted. Write the lab clock in <code>time_s</code> when it differs from the planned
-time: it starts at 0 when the set-up ends. Then run <code>{e(then)}</code>.</li>
+number counts the installations). The <code>stand</code> column names the stand each row
+is read on: read that stand's dial (<code>fit --plan</code> refuses a row whose stand is
+not its step's). A row whose gauge gives no reading (out of its travel) is deleted. Write
+the lab clock in <code>time_s</code> when it differs from the planned time: it starts at 0
+when the set-up ends. Then run <code>{e(then)}</code>.</li>
 <li>The set-up is not on the lab's clock. Each step's seconds are the lab's time table:
 driving at 20 mm/s, 5 s to settle and read, 3 s per plunger lever, 120 s per re-mount.
 Read the dials to their resolution (0.01 mm for the usual dial).</li>
@@ -209,15 +209,17 @@ hinge:</p>
 <p><img src="{BARS_FILE}" alt="A leg's two bars, the distance d between them, and where a
 stand's place along a bar is measured from"></p>
 <h2>The stands at set-up</h2>
-<table><tr><th>stand</th><th>slot</th><th>where, and which way it reads plus</th></tr>
+<table><thead><tr><th>stand</th><th>slot</th><th>where, and which way it reads plus</th>
+</tr></thead>
 {stands}</table>
 <h2>Steps</h2>
-<table><tr><th>step</th><th>action</th><th>what to do</th><th>s</th><th>clock (min)</th>
-<th>sheet rows</th></tr>
+<table><thead><tr><th>step</th><th>action</th><th>what to do</th><th>s</th>
+<th>clock (min)</th><th>sheet rows</th></tr></thead>
 {''.join(rows)}</table>
 <h2>Readings sheet</h2>
-<table><tr><th>row</th><th>step</th><th>stand</th><th>mounting</th><th>posture</th>
-<th>rho (mm)</th><th>repetition</th><th>time (s)</th><th>reading (mm)</th></tr>
+<table class="sheet"><thead><tr><th>row</th><th>step</th><th>stand</th><th>mounting</th>
+<th>posture</th><th>rho (mm)</th><th>rep.</th><th>time (s)</th><th>reading (mm)</th></tr>
+</thead>
 {sheet}</table>
 </body></html>
 """

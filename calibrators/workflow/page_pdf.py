@@ -1,7 +1,12 @@
-"""The procedure's page as a PDF, drawn with matplotlib (a dependency already): A4 pages
-of text, the pictures and the readings sheet, for a lab without a browser that prints.
+"""The procedure's page as a PDF to print.
 
-It holds what :func:`calibrators.workflow.page.page` holds: the summary, the rules, the
+With the ``pdf`` extra (WeasyPrint, which needs the system's Pango), :func:`typeset_pdf`
+typesets the very HTML page the technician sees, its pictures included.  Without it,
+:func:`draw_pdf` draws the same content with matplotlib (a dependency already): A4 pages of
+text, the pictures and the readings sheet; :func:`typeset_problem` says why the page could
+not be typeset and :data:`TYPESET_HINT` how to get it typeset.
+
+Both hold what :func:`calibrators.workflow.page.page` holds: the summary, the rules, the
 picture of a leg's bars, the stands, the steps with their pictures, and the sheet with a
 blank column to write each reading in.
 """
@@ -12,7 +17,7 @@ import textwrap
 from pathlib import Path
 from typing import Any
 
-from calibrators.workflow.plan import Procedure
+from calibrators.workflow.plan import Procedure, rho_words
 
 #: A4 portrait, inches.
 A4 = (8.27, 11.69)
@@ -20,9 +25,33 @@ A4 = (8.27, 11.69)
 WIDTH, LINES = 95, 62
 #: Rows of the readings sheet per page.
 SHEET_ROWS = 40
+#: How to get the typeset PDF: the ``pdf`` extra and the system library WeasyPrint loads.
+TYPESET_HINT = ("pip install -e '.[pdf]' in the workbench's folder (WeasyPrint; it needs "
+                "Pango: apt-get install libpango-1.0-0 libpangoft2-1.0-0 on Debian/Ubuntu)")
 
 
-def write_pdf(procedure: Procedure, folder: Path, pictures: dict[int, str], bars: str,
+def typeset_problem() -> str | None:
+    """Why the page cannot be typeset here (WeasyPrint is missing, or cannot load Pango),
+    or None when :func:`typeset_pdf` can."""
+    try:
+        import weasyprint  # noqa: F401
+    except ImportError:
+        return "WeasyPrint (the pdf extra) is not installed"
+    except OSError as exc:  # WeasyPrint found, the system's Pango not
+        return f"WeasyPrint cannot load Pango: {str(exc).splitlines()[0]}"
+    return None
+
+
+def typeset_pdf(page: Path, out: Path) -> Path:
+    """Typeset the HTML ``page`` (its pictures beside it) as the PDF ``out``, with
+    WeasyPrint; ``ImportError`` or ``OSError`` when :func:`typeset_problem` says it cannot."""
+    import weasyprint
+
+    weasyprint.HTML(filename=str(page)).write_pdf(out)
+    return out
+
+
+def draw_pdf(procedure: Procedure, folder: Path, pictures: dict[int, str], bars: str,
               stands: list[int | None], then: str, out: Path) -> Path:
     """Write the PDF of ``procedure``'s page to ``out``; ``folder`` holds the pictures
     (``pictures``: file names by step number; ``bars``: the picture of a leg's bars),
@@ -75,7 +104,8 @@ def _opening(procedure: Procedure, then: str) -> list[str]:
             "stand's place says whether its plunger then comes out or is pushed in, and so "
             "whether to write what a dial that reads plus when pressed shows, or minus that.",
             "Fill in reading_mm in readings.csv row by row, as the steps say: sheet row N is "
-            "line N + 1 of the file. A row whose gauge gives no reading (out of its travel) "
+            "line N + 1 of the file. The stand column names the stand each row is read on: "
+            "read that stand's dial. A row whose gauge gives no reading (out of its travel) "
             "is deleted. Write the lab clock in time_s when it differs from the planned "
             f"time: it starts at 0 when the set-up ends. Then run {then}.",
             "The set-up is not on the lab's clock. Each step's seconds are the lab's time "
@@ -132,7 +162,7 @@ def _sheet_pages(pdf: Any, procedure: Procedure, stands: list[int | None]) -> No
     header = ["row", "step", "stand", "mounting", "posture", "rho (mm)", "rep.", "time (s)",
               "reading (mm)"]
     cells = [[str(k), str(m.step), "" if n is None else str(n), m.mounting, m.posture,
-              ", ".join(f"{v:g}" for v in m.rho), str(m.repetition),
+              rho_words(m.rho), str(m.repetition),
               "" if m.time_s is None else f"{m.time_s:.0f}", ""]
              for k, (m, n) in enumerate(zip(procedure.sheet, stands, strict=True), start=1)]
     for start in range(0, len(cells), SHEET_ROWS):

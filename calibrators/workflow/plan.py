@@ -40,8 +40,9 @@ from orthoglide_env.model.errors import AXIS_NAMES, LEG_NAMES
 from orthoglide_env.world.conditions import DEFAULT_CONDITIONS, Conditions
 from orthoglide_env.world.table import REFERENCE_LENGTH_MM
 
-#: The sheet's columns: the measurement file's, and the step each reading belongs to.
-SHEET_COLUMNS: tuple[str, ...] = (*COLUMNS, "step")
+#: The sheet's columns: the measurement file's, the step each reading belongs to and the
+#: stand it is read on (the technician checks it; ``fit --plan`` checks it against the plan).
+SHEET_COLUMNS: tuple[str, ...] = (*COLUMNS, "step", "stand")
 #: The files :meth:`Procedure.write` writes: the steps, and the readings sheet.
 PLAN_FILE, SHEET_FILE = "plan.json", "readings.csv"
 #: What each lab operation is called in a step.
@@ -321,18 +322,42 @@ def describe_step(number: int, act: Mapping[str, Any], seconds: float, start: fl
 
 def write_sheet(procedure: Procedure, path: str | Path) -> Path:
     """The readings sheet: one row per reading to take, in step order, the measurement
-    file's columns and ``step``, ``reading_mm`` blank (``time_s`` the planned time: write
-    the clock's when it differs)."""
+    file's columns, ``step`` and ``stand``, ``reading_mm`` blank (``time_s`` the planned
+    time: write the clock's when it differs)."""
     path = Path(path)
     with path.open("w", newline="", encoding="utf-8") as handle:
         writer = csv.writer(handle)
         writer.writerow(SHEET_COLUMNS)
         reading = COLUMNS.index("reading_mm")
-        for m in procedure.sheet:
+        for m, stand in zip(procedure.sheet, stand_numbers(procedure), strict=True):
             row = m.csv_row()
             row[reading] = ""
-            writer.writerow([*row, str(m.step)])
+            writer.writerow([*row, str(m.step), "" if stand is None else str(stand)])
     return path
+
+
+def stands_held(procedure: Procedure) -> dict[int, dict[str, int]]:
+    """The stand on each slot during each step, by step number: the set-up's stands, as
+    each re-mount moves one."""
+    held = {s["slot"]: s["stand"] for s in procedure.stands}
+    out = {}
+    for step in procedure.steps:
+        if step.action == "re-mount":
+            held = {slot: k for slot, k in held.items() if k != step.stand}
+            held[step.slot] = step.stand
+        out[step.number] = held
+    return out
+
+
+def stand_numbers(procedure: Procedure) -> list[int | None]:
+    """The number of the stand each row of the sheet is read on (None: on no stand, the
+    tracker's), by the stands the set-up mounts and each re-mount's move."""
+    held = stands_held(procedure)
+    out: list[int | None] = [None] * len(procedure.sheet)
+    for step in procedure.steps:
+        for row in step.rows:
+            out[row - 1] = held[step.number].get(gauge_name(procedure.sheet[row - 1].gauge))
+    return out
 
 
 class SheetError(ValueError):
@@ -341,9 +366,11 @@ class SheetError(ValueError):
 
 def check_sheet(data: Measurements, procedure: Procedure) -> None:
     """:class:`SheetError` naming the line of the first reading of ``data`` that the plan does
-    not hold: a step it does not have, or a gauge, mounting or posture other than that
-    step's."""
+    not hold: a step it does not have, or a gauge, mounting, posture or stand other than
+    that step's (a reading without a stand is not checked for one: sheets before the stand
+    column)."""
     steps = {s.number: s for s in procedure.steps}
+    held = stands_held(procedure)
     for m in data.items:
         where = f"line {m.line}" if m.line is not None else "a reading"
         if m.step is None:
@@ -360,3 +387,9 @@ def check_sheet(data: Measurements, procedure: Procedure) -> None:
         if step.rho is not None and tuple(step.rho) != m.rho:
             raise SheetError(f"{where}: step {m.step} is at rho {tuple(step.rho)}, not "
                              f"{m.rho}")
+        stand = held[m.step].get(gauge_name(m.gauge))
+        if m.stand is not None and m.stand != stand:
+            planned = "on no stand" if stand is None else f"on stand {stand}"
+            raise SheetError(f"{where}: step {m.step} reads {gauge_name(m.gauge)} {planned}, "
+                             f"not on stand {m.stand}: read the stand the sheet names, or "
+                             "plan again for the stands as mounted")
