@@ -144,8 +144,8 @@ def page(procedure: Procedure, pictures: dict[int, str], then: str = FIT_COMMAND
         if step.number in pictures:
             rows.append(f'<tr class="picture"><td colspan="6"><img src="{pictures[step.number]}"'
                         f' alt="{e(step.text[:80])}"></td></tr>')
-    stands = "".join(f"<tr><td>{s['stand']}</td><td>{e(s['slot'])}</td><td>{e(s['place'])}</td>"
-                     "</tr>" for s in procedure.stands)
+    stands = "".join(f"<tr><td>{s['stand']}</td><td class='name'>{e(s['slot'])}</td>"
+                     f"<td>{e(s['place'])}</td></tr>" for s in procedure.stands)
     sheet = "".join(
         f"<tr><td>{k}</td><td>{m.step}</td><td>{'' if n is None else n}</td>"
         f"<td>{e(m.mounting)}</td><td>{e(m.posture)}</td>"
@@ -162,7 +162,7 @@ table {{ border-collapse: collapse; width: 100%; margin-bottom: 1.5em; }}
 td, th {{ border: 1px solid #888; padding: 0.25em 0.5em; vertical-align: top; }}
 th {{ background: #eee; }}
 td.blank {{ min-width: 8em; }}
-table.sheet td {{ white-space: nowrap; }}
+table.sheet td, td.name {{ white-space: nowrap; }}
 tr.picture td {{ text-align: center; border: none; }}
 img {{ max-width: 100%; }}
 @page {{ size: A4; margin: 14mm 12mm;
