@@ -4,8 +4,9 @@
 
 Every step is a call of the workflow's Python API (:mod:`calibrators.workflow`), as on a
 real machine, each writing the files its ``orthoglide`` command writes; only the
-technician is simulated, and only through :func:`pose` (what the virtual machine's gauges
-read at a posture, and where its tool is, as ``orthoglide pose`` says it):
+technician is simulated, and only through ``examples/fill_sheet.py``'s :func:`pose` (what
+the virtual machine's gauges read at a posture, and where its tool is, as ``orthoglide
+pose`` says it):
 
 1. the "real" machine: a realistic random machine of ``examples/designs/small.json`` in
    the lab's world, written to ``truth.json`` (drawn as ``calibrate --seed`` draws it;
@@ -19,18 +20,17 @@ read at a posture, and where its tool is, as ``orthoglide pose`` says it):
    with its target after the best-fit rigid motion;
 6. ``VerificationPlan`` and ``Verify``: the paper's third experiment.
 
-Change ``DESIGN`` to your machine's design file to try it on yours.
+``--design FILE`` tries it on your machine's design.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
-import sys
 from contextlib import closing
 from pathlib import Path
 
 import numpy as np
+from fill_sheet import fill, pose
 
 from calibrators.agents import get_agent
 from calibrators.measurements import Measurements
@@ -43,64 +43,26 @@ from calibrators.workflow.plan import Plan, Procedure
 from calibrators.workflow.verify import VerificationPlan, Verify
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.lab.operations import DEFAULT_BUDGET_S
-from orthoglide_env.model.design import load_design
-from orthoglide_env.model.errors import DEFAULT_PRESET, check_rho
+from orthoglide_env.model.design import MachineDesign, load_design
+from orthoglide_env.model.errors import DEFAULT_PRESET
 from orthoglide_env.scoring import best_rigid_motion
-from orthoglide_env.sim.report import pose_in_world
 from orthoglide_env.world.conditions import Conditions
-from orthoglide_env.world.machine_file import read_machine_file, write_machine_file
+from orthoglide_env.world.machine_file import write_machine_file
 
 DESIGN = str(Path(__file__).resolve().parent / "designs" / "small.json")
 LAB = Conditions("lab")
 
 
-def draw_truth(path: Path, seed: int) -> None:
+def draw_truth(path: Path, design: MachineDesign, seed: int) -> None:
     """The "real" machine, written to ``path``: the machine and world a lab of the design
     draws for ``calibrate --seed seed`` (a realistic machine, noisy gauges)."""
     agent = get_agent("paper-once")
     with closing(make_lab(agent, errors=DEFAULT_PRESET, gauge_sigma=DEFAULT_SIGMA,
                           gauge_resolution=DEFAULT_RESOLUTION, backend="exact",
                           thermometer=False, budget_s=DEFAULT_BUDGET_S,
-                          design=load_design(DESIGN), conditions=LAB)) as env:
+                          design=design, conditions=LAB)) as env:
         episode = run_episode(env, agent, machine_seed(seed, 0))
     write_machine_file(path, episode.truth, episode.world)
-
-
-def pose(truth: Path, rho: list[float], seed: int) -> dict:
-    """The technician at the virtual machine: drive to ``rho``, read every gauge."""
-    machine, world = read_machine_file(truth, load_design(DESIGN))
-    return pose_in_world(machine, check_rho(np.array(rho, dtype=float), design=machine.design),
-                         world.conditions, seed=seed, sigma=DEFAULT_SIGMA,
-                         resolution=DEFAULT_RESOLUTION, world=world)
-
-
-def fill(sheet: Path, truth: Path, seed: int) -> None:
-    """Write the readings into ``sheet`` row by row: one pose per step (each reading of a
-    step is one of that pose's gauges, the paper's six at the middle of the legs)."""
-    rows = list(csv.DictReader(sheet.open()))
-    read: dict[int, dict] = {}
-    kept = []
-    for row in rows:
-        step = int(row["step"])
-        if step not in read:
-            rho = [float(row[f"rho_{a}"]) for a in "xyz"]
-            read[step] = pose(truth, rho, seed * 100_000 + step)
-        gauges = {(g["leg"], g["axis"]): g for g in read[step]["gauges"]}
-        if row["at"] != "0.5" or (row["leg"], row["axis"]) not in gauges:
-            sys.exit(f"step {step}: gauge {row['mounting']} is not one pose reads")
-        gauge = gauges[(row["leg"], row["axis"])]
-        # The real machine is not the nominal one the plan was made on: a plunger can
-        # leave its travel where the plan expected a reading.  The technician strikes
-        # that row out.
-        if gauge["valid"]:
-            row["reading_mm"] = repr(float(gauge["reading"]))
-            kept.append(row)
-    print(f"{sheet}: {len(kept)} of {len(rows)} readings taken ({len(rows) - len(kept)} "
-          "out of their gauge's travel on this machine, struck out)")
-    with sheet.open("w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(kept)
 
 
 def write_plan(procedure: Procedure, folder: Path, then: str) -> None:
@@ -120,17 +82,19 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=5, help="the machine drawn (default 5)")
     parser.add_argument("--budget", type=float, default=1800.0,
                         help="the calibration's lab time, s (default 1800)")
+    parser.add_argument("--design", default=DESIGN, metavar="FILE",
+                        help="the machine's design file (default examples/designs/small.json)")
     args = parser.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     truth = out / "truth.json"
-    draw_truth(truth, args.seed)
-    design = load_design(DESIGN)
+    design = load_design(args.design)
+    draw_truth(truth, design, args.seed)
     # The technician reads the set-up's six gauges (what ``pose`` reads): no re-mount.
     procedure = Plan(design, agent="optimal-stay", conditions=LAB,
                      budget_s=args.budget).run()
     write_plan(procedure, out / "plan", "orthoglide fit readings.csv --plan plan.json")
-    fill(out / "plan" / "readings.csv", truth, args.seed)
+    fill(out / "plan" / "readings.csv", truth, design, args.seed)
     readings = Measurements.read(out / "plan" / "readings.csv", design)
     calibration = Fit(readings, conditions=LAB, plan=procedure).run()
     calibration.write(out)
@@ -146,7 +110,8 @@ def main() -> None:
     controller = Compensate(estimate, read_targets(out / "targets.csv")).run()
     controller.write(out / "controller")
     compensation = controller.compensation
-    reached = np.array([pose(truth, list(rho), 1)["tcp"] for rho in compensation.commands])
+    reached = np.array([pose(truth, design, list(rho), 1)["tcp"]
+                        for rho in compensation.commands])
     predicted = compensation.predicted["rigid"]
     rotation, translation = best_rigid_motion(targets[None], reached[None],
                                               np.ones((1, len(targets)), bool))
@@ -160,7 +125,7 @@ def main() -> None:
     check = VerificationPlan(estimate, agent="paper", conditions=LAB).run()
     write_plan(check, out / "verify",
                f"orthoglide verify {out / 'estimate.json'} readings.csv")
-    fill(out / "verify" / "readings.csv", truth, args.seed + 1)
+    fill(out / "verify" / "readings.csv", truth, design, args.seed + 1)
     result = Verify(estimate, Measurements.read(out / "verify" / "readings.csv",
                                                 estimate.readings.design)).run()
     print(("PASSED: " if result.passed else "FAILED: ") + result.reason)
