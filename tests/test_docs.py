@@ -16,11 +16,14 @@ only.
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib.util
 import json
 import re
 import shlex
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -282,3 +285,53 @@ def test_every_repository_path_a_document_names_exists(document: Path) -> None:
     missing = sorted(p for p in named if not (document.parent / p).exists()
                      and not (ROOT / p).exists())
     assert not missing, f"{document.name} names files that do not exist: {missing}"
+
+
+def _script_lines() -> list[tuple[str, str]]:
+    """``(where, command)`` of every ``python examples/...`` or ``python benchmarks/...``
+    line of a fenced block and inline span of the documents."""
+    out = []
+    for document in DOCUMENTS:
+        text = document.read_text()
+        name = document.relative_to(ROOT).as_posix()
+        for number, raw in enumerate(text.splitlines(), start=1):
+            if re.match(r"python (examples|benchmarks)/", raw):
+                out.append((f"{name}:{number}", raw))
+        for match in re.finditer(r"(?<!`)`(python (?:examples|benchmarks)/[^`]+)`(?!`)",
+                                 _without_code_blocks(text)):
+            out.append((f"{name}:{text.count(chr(10), 0, match.start()) + 1}",
+                        " ".join(match.group(1).split())))
+    return out
+
+
+SCRIPT_LINES = _script_lines()
+
+
+@functools.cache
+def _script_help(script: str) -> str:
+    done = subprocess.run([sys.executable, script, "--help"], capture_output=True, text=True,
+                          timeout=120, cwd=ROOT)
+    assert done.returncode == 0, f"{script} --help: {done.stderr.splitlines()[-1:]}"
+    return done.stdout
+
+
+@pytest.mark.parametrize(("where", "line"), SCRIPT_LINES, ids=[w for w, _ in SCRIPT_LINES])
+def test_a_documented_script_takes_its_options(where: str, line: str) -> None:
+    """A script a document runs exists, and every option the line gives is one its
+    ``--help`` lists (the scripts run for minutes: tests/test_scripts_start.py starts
+    each one)."""
+    words = shlex.split(line, comments=True)
+    script = words[1]
+    assert (ROOT / script).is_file(), f"{where}: no script {script}"
+    help_text = _script_help(script)
+    for word in words[2:]:
+        option = word.split("=")[0]
+        if option.startswith("--"):
+            assert re.search(rf"(?<![\w-]){re.escape(option)}(?![\w-])", help_text), \
+                f"{where}: {script} has no option {option}"
+
+
+def test_the_documents_run_scripts() -> None:
+    # The collection itself works: the documents name scripts of both folders.
+    assert {line.split()[1].split("/")[0] for _, line in SCRIPT_LINES} == {
+        "examples", "benchmarks"}
