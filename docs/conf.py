@@ -2,8 +2,8 @@
 
 The pages are Markdown (MyST).  The command-line reference is generated from the
 argument parsers at build time by the ``orthoglide-help`` directive below, so it cannot
-go stale; there is no autodoc, which would import every module and slow the build the
-test suite runs.
+go stale.  The API page (``api.md``) is autodoc of the public classes only, so the build
+imports the workflow, the study and the envs, not every module.
 """
 
 from __future__ import annotations
@@ -19,7 +19,9 @@ sys.path.insert(0, str(ROOT))
 
 project = "Orthoglide calibration workbench"
 author = "the Orthoglide workbench authors"
-extensions = ["myst_parser"]
+extensions = ["myst_parser", "sphinx.ext.autodoc"]
+autodoc_member_order = "bysource"
+autodoc_typehints = "description"
 source_suffix = {".md": "markdown"}
 exclude_patterns = ["_build"]
 html_theme = "furo"

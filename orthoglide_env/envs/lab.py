@@ -62,7 +62,7 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
     key    space                        meaning                                used by
     =====  ===========================  =====================================  ==========
     op     Discrete(5)                  0 move, 1 lift, 2 engage, 3 re-mount,  every step
-                                        4 stop (:class:`~orthoglide_env.lab.operations.Op`)
+                                        4 stop (``lab.operations.Op``)
     rho    Box([-100, 60] mm, (3,))     joint targets, control coordinates     move
     stand  Discrete(stands)             which stand                            lift, engage,
                                                                                re-mount
@@ -100,7 +100,7 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
     faulted        1 where the gauge was pushed past    -    {0, 1}
                    its travel: out of service until
                    re-mounted (a lifted one is 0)
-    slot           slot index of each stand, or        -    {0 .. len(slots)}
+    slot           slot index of each stand, or        -     {0 .. len(slots)}
                    len(slots) when not mounted
     mounting       how many times the stand was         -    [0, 1e6]
                    mounted (a new zero each time)
