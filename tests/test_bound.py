@@ -3,6 +3,8 @@ design, equal to the analytic optimum on a tiny problem, below every discrete pl
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -126,3 +128,21 @@ def test_bound_round_trips_and_refuses_bad_input():
         lower_bound(PROTOTYPE, LAB, SIGMA, 600.0, ("interferometer",))
     with pytest.raises(ValueError, match="dial_sigma"):
         bound_model(PROTOTYPE, LAB, -1.0, False)
+
+
+def test_compare_rows_carry_the_bound(capsys, quick):
+    from calibrators.cli import main
+
+    argv = ["compare", "--machines", "1", "--agents", "paper,optimal", "--estimators", "full",
+            "--conditions", "ideal", "--budget", "600", "--seed", "1", "--quiet", "--json"]
+    assert main(argv) == 0
+    plain = json.loads(capsys.readouterr().out)
+    assert main([*argv, "--bound"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    # The same value in every row, the row's numbers unchanged, the bound named.
+    assert {r["bound_mm"] for r in out["rows"]} == {out["bound"]["bound_mm"]}
+    assert [{k: v for k, v in r.items() if k != "bound_mm"} for r in out["rows"]] == \
+        plain["rows"]
+    assert "bound" not in plain and "bound" not in plain["config"]
+    assert out["config"]["bound"] is True
+    assert any("x the bound" in line for line in out["table"])

@@ -286,10 +286,10 @@ def solve(model: BoundModel, budgets: Budgets, lasers: np.ndarray,
     gains as much per second.  The second budget (the laser's visits) caps the laser's
     shares after each step.  The duality gap (:func:`gap`, every :data:`GAP_EVERY`
     steps) is over the whole polytope, and ``f(n) - gap`` bounds the least ``f`` there
-    from below for any ``n``.  The best certified value is returned with the final design's value and
-    counts.  Stops once the gap is :data:`GAP_SHARE` of the value, the certified value
-    passes ``stop_above`` (a problem that cannot be the least), or after
-    :data:`MAX_ITERATIONS`."""
+    from below for any ``n``.  The best certified value is returned with the final
+    design's value and counts.  Stops once the gap is :data:`GAP_SHARE` of the value,
+    the certified value passes ``stop_above`` (a problem that cannot be the least), or
+    after :data:`MAX_ITERATIONS`."""
     rows, factor = model.rows, model.factor
     used = np.concatenate([np.flatnonzero(model.laser < 0), lasers])
     price = np.where(model.laser[used] < 0, budgets.dial_s, budgets.laser_s)
