@@ -42,11 +42,12 @@ at all (its soak before the first): the bound is the least over every set of dri
 up of the problem with ``T`` less their set-ups, each solved alone (8 problems, each a
 group either paid or not, as in optimal design with set-up costs).
 
-Each problem is solved by away-step Frank-Wolfe (:func:`frank_wolfe`).  Its duality gap
-certifies: ``f(n) - gap`` is below the optimum for every feasible ``n``, so the bound
-reported is the least certified value (a true lower bound however far the solver got),
-and the gap says how tight it is.  The tracker, step gauge and ballbar are not
-candidates here: a lab that owns them is bounded over its dials and interferometer only.
+Each problem is solved by the multiplicative algorithm (:func:`solve`), and certified by
+its Frank-Wolfe duality gap (:func:`gap`): ``f(n) - gap`` is below the optimum for every
+``n``, so the bound reported is the least certified value (a true lower bound however far
+the solver got), and the gap says how tight it is.  The tracker, step gauge and ballbar
+are not candidates here: a lab that owns them is bounded over its dials and
+interferometer only.
 """
 
 from __future__ import annotations
@@ -61,7 +62,7 @@ from scipy.linalg import cho_factor, cho_solve
 from calibrators.estimators.consider import DEFAULT_NODE_SPACING, lead_terms
 from orthoglide_env.instruments import interferometer
 from orthoglide_env.lab.design_belief import N_MACHINE, ZERO_SCALE
-from orthoglide_env.lab.operations import TIME
+from orthoglide_env.lab.operations import PAPER_SLOTS, TIME, Op
 from orthoglide_env.lab.slot_table import slot_table
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import MachineParams
@@ -189,8 +190,6 @@ def plan_counts(model: BoundModel, design: MachineDesign, slots: tuple[int, ...]
     on a drive, at each posture's target along it (its set-up reads at Zero; a target
     is taken at the nearest candidate).  ``f`` of these counts (:meth:`BoundModel.value`) is
     the plan's error on the bound's model, which the bound is below."""
-    from orthoglide_env.lab.operations import Op  # (the bound needs no op otherwise)
-
     table = slot_table(design)
     slots_, down = list(slots), list(engaged)
     counts = np.zeros(len(model.rows))
@@ -355,7 +354,7 @@ def setup_seconds(drives: tuple[int, ...]) -> float:
 
 def lower_bound(design: MachineDesign, conditions: Conditions, dial_sigma: float,
                 budget_s: float, instruments: tuple[str, ...] = ("dial",),
-                stands: int = 6) -> Bound:
+                stands: int = len(PAPER_SLOTS)) -> Bound:
     """The bound (see the module) of a lab of ``design`` under ``conditions`` with dials of
     weighting sigma ``dial_sigma`` (mm) on ``stands`` stands, owning ``instruments``, over
     a budget of ``budget_s`` seconds."""
