@@ -146,3 +146,25 @@ def test_compare_rows_carry_the_bound(capsys, quick):
     assert "bound" not in plain and "bound" not in plain["config"]
     assert out["config"]["bound"] is True
     assert any("x the bound" in line for line in out["table"])
+
+
+def test_the_drives_weight_is_the_predicted_frames():
+    # trace(W C) is the square of the rigid RMS the predicted frames give for the same C
+    # over the 27 errors and two made-up drive terms (one product against a sum over the
+    # grid's targets: equal to rounding).
+    from orthoglide_env.model.errors import MachineParams
+    from orthoglide_env.scoring.predicted import (
+        predicted_tcp_frames_many,
+        rigid_weight_with_drives,
+    )
+
+    model = MachineParams(design=PROTOTYPE)
+
+    def drive(rho: np.ndarray) -> np.ndarray:
+        return np.stack([rho**2 * 1e-4, np.sin(rho / 7.0) * 1e-3], axis=-1)
+
+    weight = rigid_weight_with_drives(model, drive)
+    spread = np.random.default_rng(0).normal(size=(29, 29)) * 1e-3
+    covariance = spread @ spread.T
+    expected = predicted_tcp_frames_many([model], [covariance], None, [drive])[0].rigid.rms
+    assert np.sum(weight * covariance) == pytest.approx(expected**2, rel=1e-9)
