@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import json
 import sys
 import time
@@ -199,8 +200,9 @@ def run_command(args: argparse.Namespace) -> None:
         print(f"orthoglide compare: interrupted after {len(collected)} trials"
               + (f"; kept in {out / TRIALS_FILE}, continue with --resume" if out else ""),
               file=sys.stderr)
-        _print(collected, config, len({t.machine for t in collected}),
-               time.perf_counter() - start, args.json)
+        # The table so far at once: the bound's minute or two is not what Ctrl-C asks for.
+        _print(collected, dataclasses.replace(config, bound=False),
+               len({t.machine for t in collected}), time.perf_counter() - start, args.json)
         raise SystemExit(130)
     rows = _print(trials, config, args.machines, time.perf_counter() - start, args.json)
     if args.verify_pybullet:
