@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import json
 import sys
 import time
@@ -28,7 +29,8 @@ from calibrators.cli.common import (
     machine_design_of,
 )
 from calibrators.estimators.catalogue import CATALOGUE, exact_estimators, get_estimator
-from calibrators.study.compare import CHUNK, Config, Trial, run
+from calibrators.planning.bound import Bound
+from calibrators.study.compare import CHUNK, Config, Trial, run, study_bound
 from calibrators.study.crosscheck import verify_pybullet
 from calibrators.study.engines import ENGINES, RAY_INSTALL_HINT, ray_available
 from calibrators.study.episodes import DEFAULT_BUDGET_S
@@ -86,7 +88,8 @@ def _check(args: argparse.Namespace) -> Config:
                   thermometer=args.thermometer, instruments=instruments,
                   faults=faults_of(args),
                   fit_conditions=None if args.fit_conditions is None
-                  else fit_conditions_of(args, conditions), world_check=args.check_world)
+                  else fit_conditions_of(args, conditions), world_check=args.check_world,
+                  bound=args.bound)
 
 
 def _curve_estimator(estimators: tuple[str, ...]) -> str:
@@ -163,6 +166,8 @@ def _config_dict(config: Config, machines: int) -> dict:
         data["fit_conditions"] = getattr(told, "label", told)
     if data.pop("world_check"):
         data["world_check"] = True
+    if data.pop("bound"):
+        data["bound"] = True
     return data
 
 
@@ -195,8 +200,9 @@ def run_command(args: argparse.Namespace) -> None:
         print(f"orthoglide compare: interrupted after {len(collected)} trials"
               + (f"; kept in {out / TRIALS_FILE}, continue with --resume" if out else ""),
               file=sys.stderr)
-        _print(collected, config, len({t.machine for t in collected}),
-               time.perf_counter() - start, args.json)
+        # The table so far at once: the bound's minute or two is not what Ctrl-C asks for.
+        _print(collected, dataclasses.replace(config, bound=False),
+               len({t.machine for t in collected}), time.perf_counter() - start, args.json)
         raise SystemExit(130)
     rows = _print(trials, config, args.machines, time.perf_counter() - start, args.json)
     if args.verify_pybullet:
@@ -216,10 +222,16 @@ def _print(trials: list[Trial], config: Config, machines: int, seconds: float,
     or as JSON holding the same text's table and warning lines beside the numbers; return
     its rows."""
     rows, pairs = summary(trials, config.target_mm, config.faults.active), paired(trials)
+    bound = study_bound(config) if config.bound else None
+    for row in rows if bound else ():
+        row["bound_mm"] = bound.bound_mm
     table, warnings, pair_lines = _lines(rows, pairs, config, machines, seconds)
+    if bound:
+        table += _bound_lines(rows, bound)
     if as_json:
         print(json.dumps({"config": _config_dict(config, machines), "world": config.world,
                           "rows": rows, "paired": pairs,
+                          **({"bound": bound.to_dict()} if bound else {}),
                           "table": table, "warnings": warnings, "paired_table": pair_lines},
                          allow_nan=False))
         return rows
@@ -293,6 +305,20 @@ def _lines(rows: list[dict], pairs: list[dict], config: Config, machines: int,
     return table, warnings, pair_lines
 
 
+def _bound_lines(rows: list[dict], bound: Bound) -> list[str]:
+    """The bound (mm) beside the table, and each row's median against it."""
+    drives = ", ".join("xyz"[d] for d in bound.drives) or "none"
+    lines = [f"bound (any plan of these instruments and budget, linearised; docs/compare.md): "
+             f"{bound.bound_mm:.4f} mm (best continuous design {bound.design_mm:.4f} mm; "
+             f"laser set up on: {drives})"]
+    for r in rows:
+        median = r["tcp_after_mm"]["rigid"]["median"]
+        if median is not None and bound.bound_mm > 0:
+            lines.append(f"  {r['agent']} x {r['estimator']}: {median / bound.bound_mm:.2f} x "
+                         "the bound")
+    return lines
+
+
 def _show(value: float | None, width: int, digits: int) -> str:
     return f"{value:{width}.{digits}f}" if value is not None else f"{'-':>{width}}"
 
@@ -303,11 +329,12 @@ def _write(trials: list[Trial], rows: list[dict], out: Path, config: Config) -> 
     faults = ("faults_detected", "silent_failures") if config.faults.active else ()
     with summary_csv.open("w", newline="") as handle:
         writer = csv.writer(handle)
+        bound = ("bound_mm",) if config.bound else ()
         writer.writerow(["world", "agent", "estimator", "machines", "failed", "time_s_median",
                          *(f"tcp_after_{f}_median_mm" for f in FRAMES),
                          "tcp_after_rigid_ci95_low_mm", "tcp_after_rigid_ci95_high_mm",
                          "tcp_after_rigid_p95_mm", "z_rms", "chi2_rejected", "success_rate",
-                         "predicted_success_rate", *faults])
+                         "predicted_success_rate", *faults, *bound])
         for r in rows:
             writer.writerow([config.world, r["agent"], r["estimator"], r["machines"], r["failed"],
                              r["time_s"]["median"],
@@ -315,7 +342,8 @@ def _write(trials: list[Trial], rows: list[dict], out: Path, config: Config) -> 
                              *(r["tcp_after_mm"]["rigid"]["ci95"] or (None, None)),
                              r["tcp_after_mm"]["rigid"]["p95"], r["z_rms"],
                              r["chi2_rejected"], r["success_rate"],
-                             r["predicted_success_rate"], *(r[k] for k in faults)])
+                             r["predicted_success_rate"], *(r[k] for k in faults),
+                             *(r[k] for k in bound)])
     from calibrators.cli.plots import accuracy_vs_time, boxes
 
     return [out / TRIALS_FILE, summary_csv, accuracy_vs_time(trials, config, out),
@@ -377,6 +405,10 @@ def add(p: argparse.ArgumentParser) -> None:
     p.add_argument("--verify-pybullet", type=int, default=0, metavar="K",
                    help="re-run the first K machines on PyBullet in lockstep with the exact "
                         "model and report the largest reading and TCP differences")
+    p.add_argument("--bound", action="store_true",
+                   help="each row gets bound_mm, the least TCP error after rigid motion any "
+                   "plan of the lab's dials and interferometer can reach in the budget "
+                   "(linearised, a convex relaxation; a minute or two; docs/compare.md)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true",
                    help="print one JSON object: the config, its world, one row per agent x "

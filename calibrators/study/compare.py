@@ -28,6 +28,7 @@ from calibrators.agents import Agent, get_agent
 from calibrators.estimators.base import Estimate
 from calibrators.estimators.catalogue import for_study, get_estimator
 from calibrators.estimators.prediction import predicted_rigid_mm
+from calibrators.planning.bound import Bound, lower_bound
 from calibrators.study.engines import results
 from calibrators.study.episodes import (
     DEFAULT_BUDGET_S,
@@ -48,7 +49,13 @@ from calibrators.study.statistics import (  # noqa: F401
     warning_kind,
 )
 from calibrators.study.trials import Trial
-from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
+from orthoglide_env.instruments.dial import (
+    DEFAULT_RESOLUTION,
+    DEFAULT_SIGMA,
+    GaugeNoise,
+    weighting_sigma,
+)
+from orthoglide_env.lab.operations import PAPER_SLOTS
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import DEFAULT_PRESET, ERROR_NAMES, MachineParams
 from orthoglide_env.reading_model import ParameterSpace, default_scales
@@ -96,6 +103,9 @@ class Config:
     #: The fits test whether the readings show a world worse than the one they were told
     #: (a warning of kind ``world``).
     world_check: bool = False
+    #: The rows carry the bound any plan of the lab's instruments and budget must respect
+    #: (``bound_mm``, :func:`study_bound`).
+    bound: bool = False
 
     @property
     def told(self) -> Conditions | str:
@@ -126,6 +136,16 @@ class Config:
                           conditions=self.conditions, thermometer=self.thermometer,
                           instruments=self.instruments,
                           **({"faults": self.faults} if self.faults.active else {}))
+
+
+def study_bound(config: Config) -> Bound:
+    """The bound (:func:`calibrators.planning.bound.lower_bound`) of the comparison's lab:
+    its design, world, dials (their weighting sigma), stands, instruments and budget,
+    the same for every machine."""
+    noise = GaugeNoise(config.sigma, config.resolution)
+    return lower_bound(config.design, config.conditions,
+                       float(weighting_sigma(noise.effective_sigma)), config.budget_s,
+                       config.instruments or ("dial",), len(PAPER_SLOTS))
 
 
 @cache

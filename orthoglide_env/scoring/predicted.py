@@ -158,6 +158,25 @@ def rigid_weights(models: Sequence[MachineParams], grid: np.ndarray | None = Non
     return out / usable.sum(axis=-1)[:, None, None]
 
 
+def rigid_weight_with_drives(model: MachineParams, drive: DriveTerms,
+                             grid: np.ndarray | None = None) -> np.ndarray:
+    """``W`` (27 + K, 27 + K) over ``model``'s 27 errors (mm, as the machine file has them)
+    and the K coefficients of the drives' terms ``drive`` (as in
+    :func:`predicted_tcp_frames_many`): ``trace(W C)`` is the square of the rigid RMS that
+    :func:`predicted_tcp_frames_many` gives for ``C`` over them, as one matrix (an
+    experiment's designer prices readings against it)."""
+    targets = grid_targets(grid, [model])
+    usable, machines, rho, p = _commanded([model], targets)
+    sensitivity = tcp_sensitivity(machines, rho, p)
+    width = sensitivity.shape[-1]
+    jac, _ = _with_drives(sensitivity, rho, [np.zeros((width, width))], [drive])
+    mask = usable[0]
+    flat = jac[0, mask].reshape(-1, jac.shape[-1])
+    q, _ = np.linalg.qr(motion_basis(targets[mask], "rigid"))
+    left = flat - q @ (q.T @ flat)
+    return left.T @ left / np.count_nonzero(mask)
+
+
 def predicted_tcp_frames(model: MachineParams, covariance: np.ndarray,
                          grid: np.ndarray | None = None) -> FrameErrors:
     """Expected TCP error over the grid, in the three frames, of a machine compensated with
