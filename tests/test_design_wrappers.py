@@ -15,6 +15,7 @@ from gymnasium.utils.env_checker import check_env
 import orthoglide_env
 from calibrators.agents.base import action
 from calibrators.agents.names import get_agent
+from calibrators.agents.optimal import fixed_plan
 from calibrators.agents.policy import (
     DesignPolicyAgent,
     numpy_logits,
@@ -22,6 +23,7 @@ from calibrators.agents.policy import (
     save_policy,
     spec_of,
 )
+from calibrators.planning.design_expert import PlanExpert
 from calibrators.planning.search import Planner
 from calibrators.study.episodes import run_episode
 from orthoglide_env.instruments.dial import weighting_sigma
@@ -300,3 +302,36 @@ def test_a_design_policy_is_refused_on_a_lab_of_another_design(masked_policy: Pa
     agent = get_agent(f"policy:{masked_policy}")
     with pytest.raises(ValueError, match=r"another design \(L = 310.25 mm.*retrain"):
         agent.reset(env, observation, np.random.default_rng(0))
+
+
+def test_the_plan_expert_played_alone_is_the_optimal_plan() -> None:
+    """The imitation's expert, following the view's operations from the lab's clock and
+    stands, takes the ``optimal`` plan's moves in their order (the same planner, the same
+    readings expected, in the textbook world the same clock), for as long as the view
+    offers the plan's move (a move where no stand reads more likely than not is no
+    candidate of the view, and the expert then takes the planner's best one that is)."""
+    budget = 120.0
+    env = design(budget_s=budget)
+    env.reset(seed=6)
+    belief = env.belief
+    expert = PlanExpert(env.unwrapped, belief)
+    steps, _ = fixed_plan(tuple(int(s) for s in belief.slots),
+                          tuple(bool(e) for e in belief.engaged), belief.sigma,
+                          budget - belief.time_s, belief.design, env.unwrapped.conditions)
+    planned = [s.rho for s in steps if s.op == Op.MOVE]
+    played = 0
+    for rho in planned:
+        best = expert.planner.best_move()
+        if best is None or not env.action_masks()[best[0]]:
+            break
+        chosen = expert.choose(belief)
+        assert tuple(float(v) for v in belief.table.postures[chosen]) == rho
+        env.step(chosen)
+        expert.follow(chosen, belief)
+        played += 1
+    else:
+        assert expert.choose(belief) == belief.n_actions - 1
+    # Not vacuous: seed 6's plan offers its first eight moves at least.
+    assert played >= 8
+    chosen = expert.choose(belief)
+    assert env.action_masks()[chosen]
