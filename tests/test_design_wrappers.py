@@ -4,7 +4,9 @@ the predicted TCP error as the reward."""
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
+import zipfile
 from pathlib import Path
 
 import gymnasium as gym
@@ -17,6 +19,7 @@ from calibrators.agents.base import action
 from calibrators.agents.names import get_agent
 from calibrators.agents.optimal import fixed_plan
 from calibrators.agents.policy import (
+    SPEC_ENTRY,
     DesignPolicyAgent,
     numpy_logits,
     read_spec,
@@ -302,6 +305,36 @@ def test_a_design_policy_is_refused_on_a_lab_of_another_design(masked_policy: Pa
     agent = get_agent(f"policy:{masked_policy}")
     with pytest.raises(ValueError, match=r"another design \(L = 310.25 mm.*retrain"):
         agent.reset(env, observation, np.random.default_rng(0))
+
+
+def test_an_argmax_policy_plays_its_most_likely_open_operation(masked_policy: Path,
+                                                             tmp_path: Path) -> None:
+    """A file of ``play="argmax"`` (an imitated policy's) plays the open operation of the
+    largest logit, whatever the agent's random stream; a file of another play, or asked
+    for, is refused with the plays there are."""
+    import sb3_contrib
+
+    model = sb3_contrib.MaskablePPO.load(masked_policy, device="cpu")
+    env = design_lab_env(**LAB)
+    path = save_policy(model, tmp_path / "argmax.zip",
+                       spec_of(env, "MaskablePPO", LAB, play="argmax"))
+    agent = get_agent(f"policy:{path}")
+    lab = gym.make(orthoglide_env.LAB_ENV_ID, **LAB)
+    raw, _ = lab.reset(seed=4)
+    chosen = set()
+    for seed in range(5):
+        agent.reset(lab, raw, np.random.default_rng(seed))
+        logits = numpy_logits(agent.model, agent.belief.observation())
+        chosen.add(agent.decide())
+    assert chosen == {int(np.argmax(np.where(agent.belief.action_mask(), logits, -np.inf)))}
+    with pytest.raises(ValueError, match="play must be one of"):
+        spec_of(env, "MaskablePPO", LAB, play="mean")
+    spec = dataclasses.replace(read_spec(path), play="mean")
+    with zipfile.ZipFile(path, "a") as archive, warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the entry written again: a duplicate name
+        archive.writestr(SPEC_ENTRY, spec.to_json())
+    with pytest.raises(ValueError, match=r"plays 'mean'.*\['draw', 'argmax'\]"):
+        read_spec(path)
 
 
 def test_the_plan_expert_played_alone_is_the_optimal_plan() -> None:
