@@ -303,7 +303,7 @@ def test_a_design_policy_is_refused_on_a_lab_of_another_design(masked_policy: Pa
     env = gym.make(orthoglide_env.LAB_ENV_ID, design=MachineDesign.from_file(SMALL), **LAB)
     observation, _ = env.reset(seed=0)
     agent = get_agent(f"policy:{masked_policy}")
-    with pytest.raises(ValueError, match=r"another design \(L = 310.25 mm.*retrain"):
+    with pytest.raises(ValueError, match=r"another design \(L = 310.25 mm.*retrain.*train_masked"):
         agent.reset(env, observation, np.random.default_rng(0))
 
 

@@ -243,13 +243,15 @@ class PolicyAgent(Agent):
 
     def _check_lab(self) -> None:
         """Refuse a lab of another slot catalogue or design than the training lab's."""
+        script = ("examples/train_masked.py" if self.spec.env_id == DESIGN_LAB_ENV_ID
+                  else "examples/train_policy.py")
         slots = tuple(s.slot for s in self.env.slots)
         if self.spec.slots != slots:
             raise ValueError(
                 f"policy file '{self.path}' was trained on a lab with {len(self.spec.slots)} "
                 f"slots; this lab's design has {len(slots)} (bar slots at "
                 f"{list(self.env.design.slot_positions)}): its actions and observations mean "
-                "other things here, retrain it on this design (examples/train_policy.py)")
+                f"other things here, retrain it on this design ({script})")
         trained = PROTOTYPE if self.spec.design is None else MachineDesign.from_dict(
             self.spec.design)
         if trained != self.env.design:
@@ -258,8 +260,8 @@ class PolicyAgent(Agent):
                 f"policy file '{self.path}' was trained on machines of another design (L = "
                 f"{trained.L:g} mm, limits [{trained.rho_min:g}, {trained.rho_max:g}] mm; this "
                 f"lab's: L = {here.L:g} mm, [{here.rho_min:g}, {here.rho_max:g}] mm): its "
-                "actions and observations mean other things here, retrain it on this design "
-                "(examples/train_policy.py)")
+                f"actions and observations mean other things here, retrain it on this design "
+                f"({script})")
 
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
         if observation["time"][0] >= self.spec.budget_s:
