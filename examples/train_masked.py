@@ -5,7 +5,7 @@ compare it with the designed agents on held-out machines.
     pip install -e '.[rl]'
     python examples/train_masked.py [--steps 100000] [--budget 330] [--conditions lab]
         [--sigma 0.02] [--seed 0] [--out results/masked.zip] [--max-minutes 30]
-        [--imitate 8 [--episodes 24] [--updates 2000]]
+        [--imitate 4 [--episodes 16] [--updates 1500]]
     orthoglide compare --agents policy:results/masked.zip,active --estimators full \
         --conditions lab --budget 330 --machines 50 --seed 1
 
@@ -254,9 +254,9 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--imitate", type=int, default=0,
                         help="DAgger rounds of imitation of the greedy expert before PPO "
                              "(0: PPO alone)")
-    parser.add_argument("--episodes", type=int, default=24,
+    parser.add_argument("--episodes", type=int, default=16,
                         help="episodes of each DAgger round")
-    parser.add_argument("--updates", type=int, default=2000,
+    parser.add_argument("--updates", type=int, default=1500,
                         help="minibatch steps of the fit at each DAgger round")
     parser.add_argument("--baselines", default=BASELINES,
                         help="agents of the curve's lines and the final table")
