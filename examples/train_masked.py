@@ -5,6 +5,7 @@ compare it with the designed agents on held-out machines.
     pip install -e '.[rl]'
     python examples/train_masked.py [--steps 100000] [--budget 330] [--conditions lab]
         [--sigma 0.02] [--seed 0] [--out results/masked.zip] [--max-minutes 30]
+        [--imitate 4 [--episodes 16] [--updates 1500]]
     orthoglide compare --agents policy:results/masked.zip,active --estimators full \
         --conditions lab --budget 330 --machines 50 --seed 1
 
@@ -16,6 +17,18 @@ spectrum, the stands, the posture, the clock); and, by default, the fall of the 
 the predicted mean-square TCP error at each step, whose sum over an episode is the log of
 the prior's over the last: the return is the final predicted error, and ``gamma`` is 1.
 ``--envs`` envs in one process (DummyVecEnv), env ``k`` seeded ``--seed + k``.
+
+With ``--imitate N`` the policy first learns by imitation (DAgger, Ross et al. 2011) of
+the greedy expert (:class:`calibrators.planning.design_expert.PlanExpert`: from the state
+reached, never the truth nor the values read, the move ``optimal``'s planner takes next,
+and the ``optimal`` plan's re-mounts): ``N`` rounds, each of
+``--episodes`` episodes over the ``--envs`` envs, the first played by the expert and the
+others by the policy so far (its most likely open operation), every state labelled with
+the expert's choice; after each round the policy's network is fitted again to all the
+labels (masked cross-entropy, ``--updates`` minibatch steps) and a curve point is scored, its
+steps the decisions labelled so far.  Then ``--steps`` of MaskablePPO start from those
+weights (0: none; the imitated policy is kept as ``<out>.imitated.zip``), and the file
+plays its most likely operation (``play="argmax"``).
 
 Every ``--every`` steps the policy so far is saved to ``<out>.last.zip`` and played on the
 first ``--curve-machines`` held-out machines, scored against their truth by
@@ -36,6 +49,7 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -47,10 +61,12 @@ from training_curve import (
     mean_episode_reward,
     median_rigid,
     plot_curve,
+    write_curve,
 )
 
 from calibrators.agents.names import POLICY_PREFIX
 from calibrators.agents.policy import save_policy, spec_of
+from calibrators.planning.design_expert import PlanExpert
 from calibrators.study import compare, statistics
 from orthoglide_env.model.errors import DEFAULT_PRESET
 from orthoglide_env.world.conditions import Conditions
@@ -90,22 +106,139 @@ def make_vec_env(n_envs: int, kwargs: dict[str, Any], seed: int) -> Any:
     return vec
 
 
+def play_mode(args: argparse.Namespace) -> str:
+    """How the trained file plays (:attr:`calibrators.agents.policy.PolicySpec.play`): an
+    imitated policy its most likely operation, a policy of PPO alone a draw."""
+    return "argmax" if args.imitate else "draw"
+
+
+def held_out_rigid(args: argparse.Namespace, kwargs: dict[str, Any], model: Any, path: Path
+                   ) -> float:
+    """``model`` saved to ``path`` and scored on the curve machines: median TCP error
+    after rigid motion (mm)."""
+    save_policy(model, path, spec_of(design_lab_env(**kwargs), "MaskablePPO", kwargs,
+                                     play=play_mode(args)))
+    row = statistics.summary(compare.run(config(args, (POLICY_PREFIX + str(path),)),
+                                         args.curve_machines))[0]
+    return median_rigid(row)
+
+
 def curve_score(args: argparse.Namespace, kwargs: dict[str, Any]
                 ) -> Any:
     """A learning-curve point: the policy saved at the path it is given and scored on the
     curve machines, with its training episodes' reward and final predicted error."""
 
     def score(model: Any, path: Path) -> dict[str, float]:
-        save_policy(model, path, spec_of(design_lab_env(**kwargs), "MaskablePPO", kwargs))
-        row = statistics.summary(compare.run(config(args, (POLICY_PREFIX + str(path),)),
-                                             args.curve_machines))[0]
         predicted = [e["predicted_rigid_mm"] for e in model.ep_info_buffer]
         return {"mean_episode_reward": mean_episode_reward(model),
                 "training_predicted_mm": (float(np.median(predicted)) if predicted
                                           else float("nan")),
-                "tcp_rigid_median_mm": median_rigid(row)}
+                "tcp_rigid_median_mm": held_out_rigid(args, kwargs, model, path)}
 
     return score
+
+
+def masked_logits(model: Any, observations: Any, masks: Any) -> Any:
+    """The policy's logits (torch, B by actions) of a batch of observations, -1e9 where
+    the mask is shut (as MaskablePPO's masked distribution has them)."""
+    import torch
+
+    policy = model.policy
+    latent = policy.mlp_extractor.forward_actor(policy.extract_features(
+        observations, policy.pi_features_extractor))
+    return torch.where(masks, policy.action_net(latent), torch.tensor(-1e9))
+
+
+def rollouts(envs: list[Any], episodes: int, choose: Callable[[Any, np.ndarray], int]
+             ) -> tuple[list[np.ndarray], list[np.ndarray], list[int], list[dict[str, float]]]:
+    """``episodes`` episodes over ``envs`` in turn (each env's own stream), the operation
+    of each state chosen by ``choose(env, observation)``: every state's observation, mask
+    and expert label, and each episode's return and final predicted error (mm)."""
+    observations, masks, labels, ends = [], [], [], []
+    for episode in range(episodes):
+        env = envs[episode % len(envs)]
+        observation, _ = env.reset()
+        expert = PlanExpert(env.unwrapped, env.belief)
+        total, done, info = 0.0, False, {}
+        while not done:
+            observations.append(observation)
+            masks.append(env.action_masks())
+            labels.append(expert.choose(env.belief))
+            action = labels[-1] if choose is None else choose(env, observation)
+            observation, reward, terminated, truncated, info = env.step(action)
+            expert.follow(action, env.belief)
+            total += reward
+            done = terminated or truncated
+        ends.append({"r": total, "predicted_rigid_mm": info["predicted_rigid_mm"]})
+    return observations, masks, labels, ends
+
+
+def fit(model: Any, data: tuple[list, list, list], updates: int, rng: np.random.Generator
+        ) -> float:
+    """Fit the policy's actor to the expert's labels: ``updates`` Adam steps of masked
+    cross-entropy on minibatches of 256, passes over the labels in ``rng``'s order (a
+    round's fit goes on from the last round's weights); returns the share of states whose
+    most likely open operation is the label."""
+    import torch
+
+    x = torch.as_tensor(np.array(data[0]), dtype=torch.float32)
+    mask = torch.as_tensor(np.array(data[1]), dtype=torch.bool)
+    y = torch.as_tensor(np.array(data[2]), dtype=torch.long)
+    policy = model.policy
+    parameters = [*policy.mlp_extractor.policy_net.parameters(),
+                  *policy.action_net.parameters()]
+    optimiser = torch.optim.Adam(parameters, lr=1e-3)
+    batches: list[np.ndarray] = []
+    for _ in range(updates):
+        if not batches:
+            batches = np.array_split(rng.permutation(len(y)), max(1, len(y) // 256))
+        batch = batches.pop()
+        loss = torch.nn.functional.cross_entropy(
+            masked_logits(model, x[batch], mask[batch]), y[batch])
+        optimiser.zero_grad()
+        loss.backward()
+        optimiser.step()
+    with torch.no_grad():
+        return float((masked_logits(model, x, mask).argmax(1) == y).float().mean())
+
+
+def imitate(args: argparse.Namespace, kwargs: dict[str, Any], model: Any) -> list[dict]:
+    """DAgger rounds (see the module) on ``args.envs`` design views, env ``k`` seeded
+    ``args.seed + k`` once; the learning curve's rows, written as they come."""
+    import torch
+
+    envs = [design_lab_env(**kwargs) for _ in range(args.envs)]
+    for k, env in enumerate(envs):
+        env.reset(seed=args.seed + k)
+    rng = np.random.default_rng(args.seed)
+
+    def policy_choice(env: Any, observation: np.ndarray) -> int:
+        with torch.no_grad():
+            logits = masked_logits(model, torch.as_tensor(observation[None]),
+                                   torch.as_tensor(env.action_masks()[None]))
+        return int(logits.argmax())
+
+    data: tuple[list, list, list] = ([], [], [])
+    rows: list[dict] = []
+    start = time.perf_counter()
+    for round_ in range(args.imitate):
+        *states, ends = rollouts(envs, args.episodes, None if round_ == 0 else policy_choice)
+        for store, new in zip(data, states, strict=True):
+            store.extend(new)
+        agreement = fit(model, data, args.updates, rng)
+        minutes = (time.perf_counter() - start) / 60
+        rows.append({"steps": len(data[2]), "minutes": round(minutes, 2),
+                     "mean_episode_reward": float(np.mean([e["r"] for e in ends])),
+                     "training_predicted_mm": float(np.median(
+                         [e["predicted_rigid_mm"] for e in ends])),
+                     "expert_agreement": agreement,
+                     "tcp_rigid_median_mm": held_out_rigid(
+                         args, kwargs, model, args.out.with_suffix(".last.zip"))})
+        write_curve(rows, args.out.with_suffix(".curve.csv"))
+        print(f"round {round_}: {rows[-1]}", flush=True)
+        if 0 < args.max_minutes <= minutes:
+            break
+    return rows
 
 
 def parse(argv: list[str] | None = None) -> argparse.Namespace:
@@ -118,10 +251,22 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
                         help="the fall of the predicted mean-square TCP error, or of its log")
     parser.add_argument("--per", default="step", choices=DESIGN_PER,
                         help="the reward per step or per second")
+    parser.add_argument("--imitate", type=int, default=0,
+                        help="DAgger rounds of imitation of the greedy expert before PPO "
+                             "(0: PPO alone)")
+    parser.add_argument("--episodes", type=int, default=16,
+                        help="episodes of each DAgger round")
+    parser.add_argument("--updates", type=int, default=1500,
+                        help="minibatch steps of the fit at each DAgger round")
     parser.add_argument("--baselines", default=BASELINES,
                         help="agents of the curve's lines and the final table")
     args = parser.parse_args(argv)
-    check_options(parser, args)
+    check_options(parser, args, min_steps=0 if args.imitate else 1)
+    if args.imitate < 0:
+        parser.error("--imitate must be at least 0")
+    for name in ("episodes", "updates"):
+        if getattr(args, name) < 1:
+            parser.error(f"--{name} must be at least 1")
     return args
 
 
@@ -142,18 +287,30 @@ def main(argv: list[str] | None = None) -> None:
         print(f"{row['agent']:>10}: held-out TCP (rigid) median {median_rigid(row):.4f} mm "
               f"on {args.curve_machines} curve machines", flush=True)
     vec = make_vec_env(args.envs, kwargs, args.seed)
+    # An imitated policy is fine-tuned without the entropy bonus, which would spread the
+    # one operation per state it learned.
     model = MaskablePPO("MlpPolicy", vec, n_steps=256, batch_size=256, n_epochs=5,
-                        gamma=1.0, gae_lambda=0.95, ent_coef=0.01, seed=args.seed,
-                        device="cpu", policy_kwargs={"net_arch": [128, 128]}, verbose=0)
-    curve = curve_callback(args.out, args.every, args.max_minutes, curve_score(args, kwargs))
+                        gamma=1.0, gae_lambda=0.95, ent_coef=0.0 if args.imitate else 0.01,
+                        seed=args.seed, device="cpu", policy_kwargs={"net_arch": [128, 128]},
+                        verbose=0)
     start = time.perf_counter()
-    model.learn(total_timesteps=args.steps, callback=curve)
+    rows = imitate(args, kwargs, model) if args.imitate else []
+    if args.imitate and args.steps:
+        # What PPO starts from, kept: its fine-tuning is judged against it.
+        save_policy(model, args.out.with_suffix(".imitated.zip"),
+                    spec_of(design_lab_env(**kwargs), "MaskablePPO", kwargs, play="argmax"))
+    if args.steps:
+        curve = curve_callback(args.out, args.every, args.max_minutes, curve_score(args, kwargs),
+                               earlier=rows)
+        model.learn(total_timesteps=args.steps, callback=curve)
+        rows = curve.rows
     minutes = (time.perf_counter() - start) / 60
-    save_policy(model, args.out, spec_of(design_lab_env(**kwargs), "MaskablePPO", kwargs))
+    save_policy(model, args.out, spec_of(design_lab_env(**kwargs), "MaskablePPO", kwargs,
+                                         play=play_mode(args)))
     vec.close()
-    print(f"wrote {args.out} ({model.num_timesteps} steps in {minutes:.1f} min)")
+    print(f"wrote {args.out} ({rows[-1]['steps']} steps in {minutes:.1f} min)")
     world = config(args, ()).world
-    path = plot_curve(curve.rows, levels, args.out.with_suffix(".curve.png"),
+    path = plot_curve(rows, levels, args.out.with_suffix(".curve.png"),
                       reward_label="mean episode reward\n(log fall of predicted MSE)",
                       footnote=f"{world}; {ESTIMATOR}; curve machines of the held-out seed")
     print(f"wrote {path}")

@@ -47,15 +47,19 @@ def add_options(parser: argparse.ArgumentParser, *, steps: int, envs: int, envs_
     parser.add_argument("--out", type=Path, default=Path(out), help="the trained policy's file")
 
 
-def check_options(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
-    """Refuse, in one line each, what :func:`add_options`' values cannot be."""
+def check_options(parser: argparse.ArgumentParser, args: argparse.Namespace,
+                  min_steps: int = 1) -> None:
+    """Refuse, in one line each, what :func:`add_options`' values cannot be (``min_steps``:
+    the fewest ``--steps``, 0 where a script learns otherwise first)."""
     if args.eval_seed < 1:
         parser.error("--eval-seed must be >= 1: seed 0's machines include training machines")
     if not (np.isfinite(args.sigma) and args.sigma > 0):
         parser.error(f"--sigma must be a positive number of mm, got {args.sigma}")
     if not (np.isfinite(args.budget) and args.budget > 0):
         parser.error(f"--budget must be a positive number of seconds, got {args.budget}")
-    for name in ("steps", "envs", "every", "curve_machines", "machines", "jobs"):
+    if args.steps < min_steps:
+        parser.error(f"--steps must be at least {min_steps}")
+    for name in ("envs", "every", "curve_machines", "machines", "jobs"):
         if getattr(args, name) < 1:
             parser.error(f"--{name.replace('_', '-')} must be at least 1")
 
@@ -66,37 +70,44 @@ def median_rigid(row: dict) -> float:
     return float("nan") if value is None else value
 
 
-def curve_callback(out: Path, every: int, max_minutes: float, score: Score) -> Any:
+def curve_callback(out: Path, every: int, max_minutes: float, score: Score,
+                   earlier: list[dict[str, float]] | None = None) -> Any:
     """A stable-baselines3 callback that, every ``every`` steps and at the end, saves
     nothing itself but asks ``score`` for the model's scores (``score`` saves the policy to
     ``<out>.last.zip``, the path it is given, and evaluates it), appends them to
     ``<out>.curve.csv`` with the steps and minutes, and prints them.  It ends training
-    after ``max_minutes`` (0: no limit); its ``rows`` are the curve."""
+    after ``max_minutes`` (0: no limit); its ``rows`` are the curve, after the ``earlier``
+    rows of a first stage of training, whose last steps and minutes its own continue."""
+    earlier = list(earlier or [])
+    steps0, minutes0 = ((earlier[-1]["steps"], earlier[-1]["minutes"]) if earlier
+                        else (0, 0.0))
     from stable_baselines3.common.callbacks import BaseCallback
 
     class Curve(BaseCallback):
         def _on_training_start(self) -> None:
             self.start = time.perf_counter()
-            self.next = 0
-            self.rows: list[dict[str, float]] = []
+            # A first stage's last row already scores the model it hands over.
+            self.next = every if earlier else 0
+            self.rows: list[dict[str, float]] = list(earlier)
 
         def _on_step(self) -> bool:
             if self.num_timesteps >= self.next:
                 self.next += every
                 self.record()
-            minutes = (time.perf_counter() - self.start) / 60
+            minutes = minutes0 + (time.perf_counter() - self.start) / 60
             return not 0 < max_minutes <= minutes
 
         def _on_training_end(self) -> None:
             self.record()
 
         def record(self) -> None:
-            minutes = (time.perf_counter() - self.start) / 60
+            minutes = minutes0 + (time.perf_counter() - self.start) / 60
             scores = score(self.model, out.with_suffix(".last.zip"))
-            self.rows.append({"steps": self.num_timesteps, "minutes": round(minutes, 2),
+            self.rows.append({"steps": steps0 + self.num_timesteps,
+                              "minutes": round(minutes, 2),
                               **scores})
             write_curve(self.rows, out.with_suffix(".curve.csv"))
-            print(f"{self.num_timesteps:>8d} steps {minutes:6.1f} min  " + "  ".join(
+            print(f"{steps0 + self.num_timesteps:>8d} steps {minutes:6.1f} min  " + "  ".join(
                 f"{name.replace('_', ' ')} {value:.4f}" for name, value in scores.items()),
                 flush=True)
 

@@ -4,7 +4,9 @@ the predicted TCP error as the reward."""
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
+import zipfile
 from pathlib import Path
 
 import gymnasium as gym
@@ -15,13 +17,16 @@ from gymnasium.utils.env_checker import check_env
 import orthoglide_env
 from calibrators.agents.base import action
 from calibrators.agents.names import get_agent
+from calibrators.agents.optimal import fixed_plan
 from calibrators.agents.policy import (
+    SPEC_ENTRY,
     DesignPolicyAgent,
     numpy_logits,
     read_spec,
     save_policy,
     spec_of,
 )
+from calibrators.planning.design_expert import PlanExpert
 from calibrators.planning.search import Planner
 from calibrators.study.episodes import run_episode
 from orthoglide_env.instruments.dial import weighting_sigma
@@ -298,5 +303,68 @@ def test_a_design_policy_is_refused_on_a_lab_of_another_design(masked_policy: Pa
     env = gym.make(orthoglide_env.LAB_ENV_ID, design=MachineDesign.from_file(SMALL), **LAB)
     observation, _ = env.reset(seed=0)
     agent = get_agent(f"policy:{masked_policy}")
-    with pytest.raises(ValueError, match=r"another design \(L = 310.25 mm.*retrain"):
+    with pytest.raises(ValueError, match=r"another design \(L = 310.25 mm.*retrain.*train_masked"):
         agent.reset(env, observation, np.random.default_rng(0))
+
+
+def test_an_argmax_policy_plays_its_most_likely_open_operation(masked_policy: Path,
+                                                             tmp_path: Path) -> None:
+    """A file of ``play="argmax"`` (an imitated policy's) plays the open operation of the
+    largest logit, whatever the agent's random stream; a file of another play, or asked
+    for, is refused with the plays there are."""
+    import sb3_contrib
+
+    model = sb3_contrib.MaskablePPO.load(masked_policy, device="cpu")
+    env = design_lab_env(**LAB)
+    path = save_policy(model, tmp_path / "argmax.zip",
+                       spec_of(env, "MaskablePPO", LAB, play="argmax"))
+    agent = get_agent(f"policy:{path}")
+    lab = gym.make(orthoglide_env.LAB_ENV_ID, **LAB)
+    raw, _ = lab.reset(seed=4)
+    chosen = set()
+    for seed in range(5):
+        agent.reset(lab, raw, np.random.default_rng(seed))
+        logits = numpy_logits(agent.model, agent.belief.observation())
+        chosen.add(agent.decide())
+    assert chosen == {int(np.argmax(np.where(agent.belief.action_mask(), logits, -np.inf)))}
+    with pytest.raises(ValueError, match="play must be one of"):
+        spec_of(env, "MaskablePPO", LAB, play="mean")
+    spec = dataclasses.replace(read_spec(path), play="mean")
+    with zipfile.ZipFile(path, "a") as archive, warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the entry written again: a duplicate name
+        archive.writestr(SPEC_ENTRY, spec.to_json())
+    with pytest.raises(ValueError, match=r"plays 'mean'.*\['draw', 'argmax'\]"):
+        read_spec(path)
+
+
+def test_the_plan_expert_played_alone_is_the_optimal_plan() -> None:
+    """The imitation's expert, following the view's operations from the lab's clock and
+    stands, takes the ``optimal`` plan's moves in their order (the same planner, the same
+    readings expected, in the textbook world the same clock), for as long as the view
+    offers the plan's move (a move where no stand reads more likely than not is no
+    candidate of the view, and the expert then takes the planner's best one that is)."""
+    budget = 120.0
+    env = design(budget_s=budget)
+    env.reset(seed=6)
+    belief = env.belief
+    expert = PlanExpert(env.unwrapped, belief)
+    steps, _ = fixed_plan(tuple(int(s) for s in belief.slots),
+                          tuple(bool(e) for e in belief.engaged), belief.sigma,
+                          budget - belief.time_s, belief.design, env.unwrapped.conditions)
+    planned = [s.rho for s in steps if s.op == Op.MOVE]
+    played = 0
+    for rho in planned:
+        best = expert.planner.best_move()
+        if best is None or not env.action_masks()[best[0]]:
+            break
+        chosen = expert.choose(belief)
+        assert tuple(float(v) for v in belief.table.postures[chosen]) == rho
+        env.step(chosen)
+        expert.follow(chosen, belief)
+        played += 1
+    else:
+        assert expert.choose(belief) == belief.n_actions - 1
+    # Not vacuous: seed 6's plan offers its first eight moves at least.
+    assert played >= 8
+    chosen = expert.choose(belief)
+    assert env.action_masks()[chosen]

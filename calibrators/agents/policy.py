@@ -51,6 +51,8 @@ SPEC_ENTRY: str = "orthoglide_policy.json"
 #: Version of that entry's layout: a file of another version is refused.
 SPEC_VERSION: int = 1
 INSTALL_HINT: str = "install the extra: pip install '.[rl]'"
+#: How a design-view policy may play (:attr:`PolicySpec.play`).
+PLAYS: tuple[str, ...] = ("draw", "argmax")
 
 
 @dataclass(frozen=True)
@@ -77,6 +79,10 @@ class PolicySpec:
     #: The env id (and version) the policy acted in: the flat lab, or the design view
     #: (``OrthoglideLabDesign-v0``, whose discrete operations the policy chooses).
     env_id: str = FLAT_LAB_ENV_ID
+    #: How a design-view policy plays: "draw" from its distribution over the open
+    #: operations, or "argmax", its most likely one (a policy that imitates a greedy
+    #: expert learns one operation per state, and a draw only adds its residual spread).
+    play: str = "draw"
 
     def to_json(self) -> str:
         return json.dumps(asdict(self))
@@ -99,10 +105,12 @@ class PolicySpec:
 
 
 def spec_of(env: gym.Env, algorithm: str, env_kwargs: dict[str, Any],
-            normaliser: Any | None = None) -> PolicySpec:
+            normaliser: Any | None = None, play: str = "draw") -> PolicySpec:
     """The spec of a policy trained on ``env``, the flat lab or the design view
     (:class:`~orthoglide_env.wrappers.DesignLab`) (``normaliser``: the training
-    VecNormalize, or None)."""
+    VecNormalize, or None; ``play``: :attr:`PolicySpec.play`)."""
+    if play not in PLAYS:
+        raise ValueError(f"play must be one of {PLAYS}, got {play!r}")
     lab = env.unwrapped
     rms = getattr(normaliser, "obs_rms", None)
     discrete = isinstance(env.action_space, gym.spaces.Discrete)
@@ -117,7 +125,7 @@ def spec_of(env: gym.Env, algorithm: str, env_kwargs: dict[str, Any],
         obs_var=tuple(float(v) for v in rms.var) if rms is not None else (),
         clip_obs=float(getattr(normaliser, "clip_obs", 10.0)),
         epsilon=float(getattr(normaliser, "epsilon", 1e-8)), design=lab.design.to_dict(),
-        env_id=DESIGN_LAB_ENV_ID if discrete else FLAT_LAB_ENV_ID,
+        env_id=DESIGN_LAB_ENV_ID if discrete else FLAT_LAB_ENV_ID, play=play,
     )
 
 
@@ -152,6 +160,9 @@ def read_spec(path: str | Path) -> PolicySpec:
     if spec.env_id not in (FLAT_LAB_ENV_ID, DESIGN_LAB_ENV_ID):
         raise ValueError(f"policy file '{path}' acted in env '{spec.env_id}'; this workbench "
                          f"plays {FLAT_LAB_ENV_ID} and {DESIGN_LAB_ENV_ID}: retrain it")
+    if spec.play not in PLAYS:
+        raise ValueError(f"policy file '{path}' plays '{spec.play}'; this workbench plays "
+                         f"{list(PLAYS)}: retrain it")
     if not _a_catalogue(spec.slots) or spec.ops != OP_NAMES[:V0_OPS]:
         raise ValueError(
             f"policy file '{path}' was trained on a lab with {len(spec.slots)} slots and "
@@ -232,13 +243,15 @@ class PolicyAgent(Agent):
 
     def _check_lab(self) -> None:
         """Refuse a lab of another slot catalogue or design than the training lab's."""
+        script = ("examples/train_masked.py" if self.spec.env_id == DESIGN_LAB_ENV_ID
+                  else "examples/train_policy.py")
         slots = tuple(s.slot for s in self.env.slots)
         if self.spec.slots != slots:
             raise ValueError(
                 f"policy file '{self.path}' was trained on a lab with {len(self.spec.slots)} "
                 f"slots; this lab's design has {len(slots)} (bar slots at "
                 f"{list(self.env.design.slot_positions)}): its actions and observations mean "
-                "other things here, retrain it on this design (examples/train_policy.py)")
+                f"other things here, retrain it on this design ({script})")
         trained = PROTOTYPE if self.spec.design is None else MachineDesign.from_dict(
             self.spec.design)
         if trained != self.env.design:
@@ -247,8 +260,8 @@ class PolicyAgent(Agent):
                 f"policy file '{self.path}' was trained on machines of another design (L = "
                 f"{trained.L:g} mm, limits [{trained.rho_min:g}, {trained.rho_max:g}] mm; this "
                 f"lab's: L = {here.L:g} mm, [{here.rho_min:g}, {here.rho_max:g}] mm): its "
-                "actions and observations mean other things here, retrain it on this design "
-                "(examples/train_policy.py)")
+                f"actions and observations mean other things here, retrain it on this design "
+                f"({script})")
 
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
         if observation["time"][0] >= self.spec.budget_s:
@@ -301,15 +314,16 @@ class DesignPolicyAgent(PolicyAgent):
         return action(self.last["op"], self.last["rho"], self.last["stand"], self.last["slot"])
 
     def decide(self) -> int:
-        """An operation drawn from the policy's distribution over the open ones (its
-        network's logits, in NumPy: :func:`numpy_logits`), with the agent's random stream:
-        the largest of the logits plus Gumbel noise where the mask is open, a draw of the
-        masked softmax.  Drawn and not the most likely one: a policy trained for a few
-        minutes still spreads its choices, and its most likely operation, played alone,
-        comes back to one posture again and again (the flat agent's finding too)."""
+        """An operation among the open ones (the mask), from the policy's network's logits
+        in NumPy (:func:`numpy_logits`): as the spec's ``play`` says, the most likely one,
+        or a draw of the masked softmax with the agent's random stream (the largest of
+        the logits plus Gumbel noise).  A policy trained for a few minutes by PPO still
+        spreads its choices, and its most likely operation, played alone, comes back to
+        one posture again and again (the flat agent's finding too): such a policy draws."""
         logits = numpy_logits(self.model, self.belief.observation())
-        noisy = logits + self.rng.gumbel(size=logits.shape)
-        return int(np.argmax(np.where(self.belief.action_mask(), noisy, -np.inf)))
+        if self.spec.play == "draw":
+            logits = logits + self.rng.gumbel(size=logits.shape)
+        return int(np.argmax(np.where(self.belief.action_mask(), logits, -np.inf)))
 
 
 @lru_cache(maxsize=4)

@@ -48,9 +48,11 @@ LOG_FLOOR: float = 1e-6
 #: planner prices a move whose every reading is unlikely (down to 1e-144 at the far end
 #: of a gauge's travel) at next to nothing, and a learner would only spend time there.
 READ_PROBABILITY: float = 0.5
-#: Stand configurations whose reach a belief keeps (about 80 kB each on the prototype):
-#: an episode meets a few, a training run thousands.
-REACH_KEPT: int = 256
+#: States (design, stands, plungers, posture) whose candidate moves a process keeps
+#: (:func:`candidate_moves`, about 100 kB each with six stands): a policy that has learnt
+#: its experiment passes the same states on every machine, and its decision then costs no
+#: pass over the postures.
+MOVES_KEPT: int = 256
 
 
 @lru_cache(maxsize=2)
@@ -82,6 +84,36 @@ def drive_seconds(design: MachineDesign) -> np.ndarray:
     seconds = TIME.move(postures[:, None], postures[None])
     seconds.flags.writeable = False
     return seconds
+
+
+@lru_cache(maxsize=MOVES_KEPT)
+def candidate_moves(design: MachineDesign, slots: bytes, faulted: bytes, engaged: bytes,
+                    here: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The candidate moves of a state (see :meth:`DesignBelief.moves`), from the bytes of
+    its stands' slots (int64, -1: none), out-of-service and engaged flags (bool) and its
+    posture's index: their seconds (P,), the plungers down after them and how likely each
+    reads (K, P), and which of them some stand reads at least :data:`READ_PROBABILITY`
+    likely (P,); read-only."""
+    table = slot_table(design)
+    slot = np.frombuffer(slots, dtype=np.int64)
+    down = np.frombuffer(engaged, dtype=bool)
+    safe, contact = (a[np.maximum(slot, 0)] for a in table.prior_reach)
+    safe = safe & ((slot >= 0) & ~np.frombuffer(faulted, dtype=bool))[:, None]
+    after = safe & (down | safe[:, here])[:, None]
+    reads = np.where(after, contact, 0.0)
+    flicks = np.count_nonzero(after != down[:, None], axis=0)
+    seconds = drive_seconds(design)[here] + TIME.lift_s * flicks
+    readable = (reads >= READ_PROBABILITY).any(axis=0)
+    for array in (seconds, after, reads, readable):
+        array.flags.writeable = False
+    return seconds, after, reads, readable
+
+
+@lru_cache(maxsize=2)
+def posture_index(design: MachineDesign) -> dict[bytes, int]:
+    """Each of the design's candidate postures' index in the slot table, by the bytes of
+    its joint targets (float64): a move's posture found without a pass over them."""
+    return {p.tobytes(): k for k, p in enumerate(slot_table(design).postures)}
 
 
 def woodbury_gain(covariance: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -119,9 +151,6 @@ class DesignBelief:
             len(self.table.postures), len(self.table.tip), int(stands))
         self.n_actions = self.n_postures + self.n_stands * self.n_slots + 1
         self.weight, self.factor = rigid_weight(design), rigid_factor(design)
-        # Each stand's a-priori reach at every posture, by slots and service, kept: a
-        # decision then costs tens of microseconds.
-        self._reach: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
         self.start({"slot": np.full(stands, self.n_slots), "engaged": np.zeros(stands),
                     "faulted": np.zeros(stands), "valid": np.zeros(stands),
                     "time": np.zeros(1)})
@@ -148,14 +177,14 @@ class DesignBelief:
             self.here, self.rho = self.table.zero, np.zeros(3)
         if not refused and operation["op"] == Op.MOVE:
             self.rho = np.asarray(operation["rho"], dtype=float)
-            self.here = int(np.flatnonzero(np.all(self.table.postures == self.rho, axis=1))[0])
+            self.here = posture_index(self.design)[self.rho.tobytes()]
         self._sync(observation)
         if not refused and operation["op"] in (Op.MOVE, Op.REMOUNT):
             self._read(observation)
 
     def _sync(self, observation: dict[str, np.ndarray]) -> None:
-        self._moves: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-        slot = np.asarray(observation["slot"], dtype=int)
+        self._moves: tuple[np.ndarray, ...] | None = None
+        slot = np.asarray(observation["slot"], dtype=np.int64)
         # A stand at a slot beyond the design's catalogue (or none) has no rows here.
         self.slots = np.where(slot < self.n_slots, slot, -1)
         self.engaged = np.asarray(observation["engaged"], dtype=bool) & (self.slots >= 0)
@@ -237,21 +266,11 @@ class DesignBelief:
         likely each reads there (K, P), a priori: a plunger is let down only where it is
         safe both here and there (let down here, it reads there) and lifted where it is
         not safe there; a stand out of service stays up.  (Computed once per state.)"""
-        if self._moves is not None:
-            return self._moves
-        key = self.slots.tobytes() + self.faulted.tobytes()
-        if key not in self._reach:
-            if len(self._reach) >= REACH_KEPT:
-                self._reach.clear()
-            safe, contact = (a[np.maximum(self.slots, 0)] for a in self.table.prior_reach)
-            self._reach[key] = (safe & ((self.slots >= 0) & ~self.faulted)[:, None], contact)
-        safe, contact = self._reach[key]
-        after = safe & (self.engaged | safe[:, self.here])[:, None]
-        reads = np.where(after, contact, 0.0)
-        flicks = np.count_nonzero(after != self.engaged[:, None], axis=0)
-        seconds = drive_seconds(self.design)[self.here] + TIME.lift_s * flicks
-        self._moves = (seconds, after, reads)
-        return self._moves
+        if self._moves is None:
+            self._moves = candidate_moves(self.design, self.slots.tobytes(),
+                                          self.faulted.tobytes(), self.engaged.tobytes(),
+                                          self.here)
+        return self._moves[:3]
 
     def action_mask(self) -> np.ndarray:
         """Which operations are candidates now (``n_actions``,): a move where some stand
@@ -259,9 +278,10 @@ class DesignBelief:
         re-mount at a slot no stand holds, ending within the budget (a re-mount onto a held
         slot is what the lab refuses; onto its own, a new installation where it stands,
         buys nothing a planner weighs); stop."""
-        seconds, _, reads = self.moves()
-        moves = (reads >= READ_PROBABILITY).any(axis=0) & (self.time_s + seconds <= self.budget_s)
-        remount_s = float(TIME.move(self.rho, np.zeros(3))) + TIME.remount_s
+        seconds, _, _ = self.moves()
+        moves = self._moves[3] & (self.time_s + seconds <= self.budget_s)
+        # The drive to Zero, as the lab times it, from the table of every move.
+        remount_s = float(drive_seconds(self.design)[self.here, self.table.zero]) + TIME.remount_s
         free = np.full(self.n_slots, self.time_s + remount_s <= self.budget_s)
         free[self.slots[self.slots >= 0]] = False
         remounts = np.tile(free, self.n_stands)
