@@ -5,13 +5,13 @@ machine's contouring in the three coordinate planes.  The procedure, the same on
 machine:
 
 1. lift every stand's plunger (a circle would push bar gauges past their travel);
-2. for each plane XY, YZ, ZX: set the pivot up (``pivot``) at :data:`CENTRE_MM` with the
-   :data:`LENGTH_MM` bar (the largest whole circle the prototype's workspace holds), then
-   run the circle anticlockwise and clockwise, each through :data:`POINTS` points from a
-   start a little before the first (:data:`OVERSHOOT_DEG`: ISO 230-4's overshoot arc,
-   so every point is approached in the run's direction); the points of the clockwise
-   run lie between the anticlockwise run's, so the two also sample the circle twice as
-   finely;
+2. set the pivot up (``pivot``) at :data:`CENTRE_MM` with the :data:`LENGTH_MM` bar (the
+   largest whole circle the prototype's workspace holds); then, for each plane XY, YZ,
+   ZX about the same pivot (the bar stays in), run the circle anticlockwise and
+   clockwise, each through :data:`POINTS` points from a start a little before the
+   first (:data:`OVERSHOOT_DEG`: ISO 230-4's overshoot arc, so every point is approached
+   in the run's direction); the clockwise run's points lie between the anticlockwise
+   run's, so the two also sample the circle twice as finely;
 3. back at Zero, let every plunger down again (their zeros were kept), and hand the
    rest of the budget to :data:`GAUGES`, which plans the gauges' experiment from there.
 
@@ -68,16 +68,16 @@ def circle_postures(design: MachineDesign, plane: tuple[int, int], clockwise: bo
 
 
 def circle_steps(stands: int, design: MachineDesign) -> list[dict[str, Any]]:
-    """The procedure's lab actions on the ballbar: lift the ``stands``, and per plane a
-    set-up and a run each way; then back to Zero and every plunger down."""
+    """The procedure's lab actions on the ballbar: lift the ``stands``, set the pivot up,
+    and per plane a run each way; then back to Zero and every plunger down."""
     steps = [action(Op.LIFT, stand=k) for k in range(stands)]
     nominal = MachineParams(design=design)
     centre = inverse(nominal, np.full(3, CENTRE_MM))
-    bar = BALLBAR_LENGTHS_MM.index(LENGTH_MM)
+    steps.append({**action(Op.PIVOT, centre), "bar": BALLBAR_LENGTHS_MM.index(LENGTH_MM)})
+    # The bar goes in at the first run's overshoot start and stays in through every run:
+    # each point lies on the sphere of its length about the pivot (a 15 degree chord
+    # leaves it 0.4 mm short of its length, inside its travel).
     for plane in PLANES:
-        steps.append({**action(Op.PIVOT, centre), "bar": bar})
-        # The bar goes in at the first run's overshoot start and stays in through both
-        # runs (a 15 degree chord leaves it 0.4 mm short of its length, inside its travel).
         for clockwise in (False, True):
             steps += [action(Op.MOVE, rho) for rho in circle_postures(design, plane,
                                                                        clockwise)]
