@@ -239,3 +239,24 @@ def test_check_env_is_clean_with_the_ballbar():
     # The one warning left, as for v0 and v1: joint targets are in mm, not a normalised box.
     messages = {str(w.message) for w in caught}
     assert all("symmetric and normalized" in m for m in messages), messages
+
+
+def test_the_fit_considers_the_drives_give_only_with_a_ballbar():
+    """The weight's deflection (about 1 um) is a consider term of a fit with ballbar
+    readings, at the world's own size; a fit of gauges alone is as before."""
+    from calibrators.estimators.consider import consider_terms
+    from orthoglide_env.instruments.slots import PAPER_LAYOUT
+    from orthoglide_env.world.truth import deflection
+    lab = Conditions("lab")
+    rho = circle_postures(PROTOTYPE, (0, 1), False)
+    bar = ReadingLayout.of(["ballbar#1"] * len(rho), [BallbarSpec(tuple(CENTRE), 50.0)]
+                           * len(rho), rho, PROTOTYPE)
+    dial = ReadingLayout.of(["g"] * len(rho), [PAPER_LAYOUT[0]] * len(rho), rho, PROTOTYPE)
+    times = np.zeros((1, len(rho)))
+    with_bar = consider_terms(bar, np.zeros((1, len(rho))), times, lab)
+    assert "compliance.weight" not in consider_terms(dial, np.zeros((1, len(rho))), times,
+                                                     lab).names
+    k = with_bar.names.index("compliance.weight")
+    np.testing.assert_array_equal(with_bar.drive[0, :, :, k], deflection(rho, PROTOTYPE, lab))
+    # The weight's share on a drive changes by about a micrometre over the circle.
+    assert 0.2e-3 < np.ptp(with_bar.drive[0, :, :, k]) < 3e-3
