@@ -243,7 +243,8 @@ def test_check_env_is_clean_with_the_ballbar():
 
 def test_the_fit_considers_the_drives_give_only_with_a_ballbar():
     """The weight's deflection (about 1 um) is a consider term of a fit with ballbar
-    readings, at the world's own size; a fit of gauges alone is as before."""
+    readings, at the world's own size, and so is the bar's scale error; a fit of gauges
+    alone is as before."""
     from calibrators.estimators.consider import consider_terms
     from orthoglide_env.instruments.slots import PAPER_LAYOUT
     from orthoglide_env.world.truth import deflection
@@ -256,6 +257,7 @@ def test_the_fit_considers_the_drives_give_only_with_a_ballbar():
     with_bar = consider_terms(bar, np.zeros((1, len(rho))), times, lab)
     assert "compliance.weight" not in consider_terms(dial, np.zeros((1, len(rho))), times,
                                                      lab).names
+    assert "ballbar.scale[ballbar#1]" in with_bar.names  # its transducer's, per set-up
     k = with_bar.names.index("compliance.weight")
     np.testing.assert_array_equal(with_bar.drive[0, :, :, k], deflection(rho, PROTOTYPE, lab))
     # The weight's share on a drive changes by about a micrometre over the circle.

@@ -68,6 +68,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from orthoglide_env.instruments.ballbar import BallbarSpec
+from orthoglide_env.instruments.ballbar import scale_rms as ballbar_scale_rms
 from orthoglide_env.instruments.interferometer import InterferometerAxis, scale_second_moment
 from orthoglide_env.instruments.slots import GaugeSpec, Part
 from orthoglide_env.model.compensation import interpolation_weights, node_count
@@ -371,6 +373,10 @@ def _reading_terms(design: ReadingLayout, values: np.ndarray, t: np.ndarray | No
             out.append((f"interferometer.scale[{name}]",
                         _on_rows(np.broadcast_to(laser * moved, (len(values), len(rows))),
                                  rows, n)))
+        if isinstance(spec, BallbarSpec) and conditions.active:
+            # Its transducer's scale error, on what it reads.
+            out.append((f"ballbar.scale[{name}]",
+                        _on_rows(ballbar_scale_rms() * values[:, rows], rows, n)))
         if not isinstance(spec, GaugeSpec):
             continue
         # The measuring force grows as the plunger goes in, and the stand (and a bar,

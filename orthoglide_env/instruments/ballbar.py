@@ -70,6 +70,13 @@ def sigma(conditions: Conditions) -> float:
     return float(np.hypot(half, step / np.sqrt(12))) * UM
 
 
+def scale_rms() -> float:
+    """The RMS of a lab's scale error (dimensionless; uniform within the table's range,
+    either sign): a fit considers it on every ballbar reading."""
+    low, high = INSTRUMENT_ERRORS["ballbar"]["scale"].lab
+    return float(np.sqrt((low * low + low * high + high * high) / 3.0)) * 1e-2
+
+
 def centring_sigma() -> float:
     """The RMS (mm) of a pivot's centring error per coordinate, the widest the table
     allows (the workshop's): a fit's prior on a set-up's centre, whatever the world."""
