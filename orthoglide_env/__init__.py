@@ -28,6 +28,8 @@ ENV_ID = "OrthoglideCalibration-v0"
 LAB_ENV_ID = "OrthoglideLab-v0"
 #: The lab whose spaces carry the interferometer (its ``align`` operation and reading).
 LAB_V1_ENV_ID = "OrthoglideLab-v1"
+#: The lab whose spaces also carry the ballbar (its ``pivot`` operation and reading).
+LAB_V2_ENV_ID = "OrthoglideLab-v2"
 FLAT_LAB_ENV_ID = "OrthoglideLabFlat-v0"
 DESIGN_LAB_ENV_ID = "OrthoglideLabDesign-v0"
 
@@ -52,6 +54,12 @@ def _register(gymnasium: ModuleType) -> None:
         gymnasium.register(
             id=LAB_V1_ENV_ID, entry_point="orthoglide_env.envs.lab:OrthoglideLabV1Env",
             vector_entry_point="orthoglide_env.envs.lab_vector:OrthoglideLabV1VectorEnv")
+    if LAB_V2_ENV_ID not in gymnasium.registry:
+        # v2 adds the ballbar to v1's spaces; v1 stays the lab of a lab without one.
+        warnings.filterwarnings("ignore", message=f".*{LAB_V1_ENV_ID} is out of date")
+        gymnasium.register(
+            id=LAB_V2_ENV_ID, entry_point="orthoglide_env.envs.lab:OrthoglideLabV2Env",
+            vector_entry_point="orthoglide_env.envs.lab_vector:OrthoglideLabV2VectorEnv")
     if FLAT_LAB_ENV_ID not in gymnasium.registry:
         # The lab with one Box of actions and one of observations, for off-the-shelf
         # learners.
@@ -93,4 +101,4 @@ elif not any(isinstance(f, _RegisterOnImport) for f in sys.meta_path):
     sys.meta_path.insert(0, _RegisterOnImport())
 
 __all__ = ["DESIGN_LAB_ENV_ID", "ENV_ID", "FLAT_LAB_ENV_ID", "LAB_ENV_ID", "LAB_V1_ENV_ID",
-           "MachineDesign"]
+           "LAB_V2_ENV_ID", "MachineDesign"]

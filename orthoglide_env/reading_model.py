@@ -22,6 +22,7 @@ from functools import cached_property
 
 import numpy as np
 
+from orthoglide_env.instruments.ballbar import BallbarSpec, centring_sigma
 from orthoglide_env.instruments.gauges import Gauge, spec_arrays
 from orthoglide_env.instruments.interferometer import InterferometerAxis
 from orthoglide_env.instruments.rays import boxes_at, face_distances, face_normals, plane_distances
@@ -77,11 +78,12 @@ class TrackerAxis:
         return f"tracker/{AXIS_NAMES[self.component]}"
 
 
-#: What a reading reads: a dial gauge's slot, a tracker's coordinate, or an
+#: What a reading reads: a dial gauge's slot, a tracker's coordinate, an
 #: interferometer's drive (whose model reading is the carriage's offset along it: its
 #: derivative by that drive's ``drho`` is 1, by every other error 0, and the zero of its
-#: set-up takes the offset itself).
-Spec = GaugeSpec | TrackerAxis | InterferometerAxis
+#: set-up takes the offset itself), or a ballbar set-up (the TCP's distance from its
+#: pivot, whose position is three unknowns of the set-up, less the bar's length).
+Spec = GaugeSpec | TrackerAxis | InterferometerAxis | BallbarSpec
 
 
 def station_of(mounting: str) -> str:
@@ -93,8 +95,9 @@ def station_of(mounting: str) -> str:
 class ParameterSpace:
     """Every parameter a fit could estimate for a set of mountings: the 27 machine errors in
     :data:`~orthoglide_env.model.errors.ERROR_NAMES` order, four stand parameters per gauge
-    mounting (:data:`~orthoglide_env.instruments.stands.STAND_PARAMS`), then three rotations per
-    tracker station."""
+    mounting (:data:`~orthoglide_env.instruments.stands.STAND_PARAMS`), three rotations per
+    tracker station, then three coordinates per ballbar set-up: its pivot's offset (mm)
+    from where the machine puts the TCP at the set-up's centre command."""
 
     mountings: tuple[str, ...] = ()
     specs: tuple[Spec, ...] = ()
@@ -112,21 +115,33 @@ class ParameterSpace:
                                   if isinstance(s, TrackerAxis)))
 
     @cached_property
+    def ballbars(self) -> list[int]:
+        """Indices of the ballbar set-ups."""
+        return [k for k, s in enumerate(self.specs) if isinstance(s, BallbarSpec)]
+
+    @cached_property
     def names(self) -> tuple[str, ...]:
         stands = [n for k in self.gauges for n in stand_names(self.mountings[k], self.specs[k])]
         rotations = [f"{st}.rot_{a}" for st in self.stations for a in AXIS_NAMES]
-        return ERROR_NAMES + tuple(stands) + tuple(rotations)
+        centres = [f"{self.mountings[k]}.centre_{a}" for k in self.ballbars for a in AXIS_NAMES]
+        return ERROR_NAMES + tuple(stands) + tuple(rotations) + tuple(centres)
 
     @cached_property
     def groups(self) -> tuple[str, ...]:
-        """Group of every parameter: a machine-file key, ``stand_shift``, ``stand_tilt`` or
-        ``tracker_rotation``."""
+        """Group of every parameter: a machine-file key, ``stand_shift``, ``stand_tilt``,
+        ``tracker_rotation`` or ``ballbar_centre``."""
         stands = ("stand_shift",) * 2 + ("stand_tilt",) * 2
         return (tuple(error_group(n) for n in ERROR_NAMES) + stands * len(self.gauges)
-                + ("tracker_rotation",) * (3 * len(self.stations)))
+                + ("tracker_rotation",) * (3 * len(self.stations))
+                + ("ballbar_centre",) * (3 * len(self.ballbars)))
+
+    @property
+    def centre_start(self) -> int:
+        """The column of the first ballbar set-up's first centre coordinate."""
+        return len(ERROR_NAMES) + 4 * len(self.gauges) + 3 * len(self.stations)
 
     def __len__(self) -> int:
-        return len(ERROR_NAMES) + 4 * len(self.gauges) + 3 * len(self.stations)
+        return self.centre_start + 3 * len(self.ballbars)
 
 
 
@@ -134,15 +149,20 @@ class ParameterSpace:
 #: machine's frame by a best fit to the nominal machine: what is left is of the order of
 #: the machine's own errors over its workspace, ~1 mm over ~100 mm.
 TRACKER_ROTATION_SCALE: float = 1e-2
+#: Scale of a ballbar pivot's offset from the TCP it was centred at (mm): the centring's
+#: few micrometres (along the plane's normal a circle sees it to second order only: 5 um
+#: change a 50 mm bar by 0.25 nm).
+BALLBAR_CENTRE_SCALE: float = 0.01
 
 
 def preset_sigmas(preset: ErrorPreset, space: ParameterSpace) -> np.ndarray:
     """A preset's sigma of every parameter of ``space``: the machine errors, each stand's
-    installation tolerance, and 0 for a tracker's frame (no preset says how it was
-    turned)."""
+    installation tolerance, 0 for a tracker's frame (no preset says how it was turned),
+    and a ballbar pivot's centring (the instrument's, whatever the preset)."""
     stands = [preset.gauge_position] * 2 + [preset.gauge_tilt] * 2
     return np.concatenate([preset.sigmas(), np.tile(stands, len(space.gauges)),
-                           np.zeros(3 * len(space.stations))])
+                           np.zeros(3 * len(space.stations)),
+                           np.full(3 * len(space.ballbars), centring_sigma())])
 
 
 def default_scales(space: ParameterSpace) -> np.ndarray:
@@ -151,6 +171,7 @@ def default_scales(space: ParameterSpace) -> np.ndarray:
     (mm and rad) and sets what "identified" means: known better than this."""
     scale = preset_sigmas(PRESETS[DEFAULT_PRESET], space)
     scale[[g == "tracker_rotation" for g in space.groups]] = TRACKER_ROTATION_SCALE
+    scale[[g == "ballbar_centre" for g in space.groups]] = BALLBAR_CENTRE_SCALE
     return np.where(scale > 0, scale, 1.0)
 
 @dataclass(frozen=True)
@@ -274,6 +295,11 @@ def predict(theta: np.ndarray, layout: ReadingLayout) -> np.ndarray:
     for m, spec in enumerate(layout.specs):
         if isinstance(spec, InterferometerAxis):
             values[..., m] = theta[..., None, spec.axis]
+    if space.ballbars:
+        tcp = direct(machine, postures)
+        for m, pivot in zip(space.ballbars, _pivots(theta, layout, machine), strict=True):
+            values[..., m] = (np.linalg.norm(tcp - pivot[..., None, :], axis=-1)
+                              - layout.specs[m].length)
     rows = values[..., layout.posture_index, layout.mounting]
     through = np.flatnonzero(layout.through)
     if len(through):
@@ -284,6 +310,20 @@ def predict(theta: np.ndarray, layout: ReadingLayout) -> np.ndarray:
         rows[..., through] -= (layout.through[through]
                                / cosines[..., gauge[layout.mounting[through]]])
     return layout.signs[layout.mounting] * rows
+
+
+def _pivots(theta: np.ndarray, layout: ReadingLayout, machine: MachineParams
+            ) -> list[np.ndarray]:
+    """Each ballbar set-up's pivot (``(*batch, 3)``, mm) for parameter vectors ``theta``
+    (``(*batch, n)``) and their ``machine``: where the machine puts the TCP at the
+    set-up's centre command (the pivot was centred there), plus its centring offset."""
+    space = layout.space
+    batch = theta.shape[:-1]
+    start = space.centre_start
+    return [direct(machine, np.reshape(layout.specs[m].centre, (*batch, 3)) if batch
+                   else np.asarray(layout.specs[m].centre, dtype=float))
+            + theta[..., start + 3 * k:start + 3 * k + 3]
+            for k, m in enumerate(space.ballbars)]
 
 
 def rotation_matrices(rotvec: np.ndarray) -> np.ndarray:
@@ -362,6 +402,20 @@ def _derivatives(theta: np.ndarray, layout: ReadingLayout, wanted: np.ndarray) -
     for m, spec in enumerate(layout.specs):
         if isinstance(spec, InterferometerAxis):
             out[:, layout.mounting == m, spec.axis] = 1.0
+    pivots = _pivots(theta, layout, machine)
+    for k, (m, pivot) in enumerate(zip(space.ballbars, pivots, strict=True)):
+        # The distance moves with the TCP along the bar, and against the pivot (the TCP
+        # where it was centred).
+        rows = np.flatnonzero(layout.mounting == m)
+        along = p[:, at[rows]] - pivot[:, None, :]
+        along = along / np.linalg.norm(along, axis=-1, keepdims=True)
+        centre = np.broadcast_to(layout.specs[m].centre, (len(theta), 1, 3))
+        at_centre = tcp_sensitivity_factors(machine, centre, direct(machine, centre))
+        out[:, rows, :N_MACHINE] = (
+            sensitivity_along(inv[:, at[rows]], row[:, at[rows]], along)
+            - sensitivity_along(*at_centre, along))
+        columns = space.centre_start + 3 * k + np.arange(3)
+        out[:, rows[:, None], columns] = -along
     start = N_MACHINE + 4 * len(gauges)
     for k, station in enumerate(space.stations):
         rows = np.flatnonzero([isinstance(layout.specs[m], TrackerAxis)
@@ -376,6 +430,30 @@ def _derivatives(theta: np.ndarray, layout: ReadingLayout, wanted: np.ndarray) -
         turned = np.einsum("bij,brjk->brik", rotation, rotated_derivatives(
             theta[:, None, columns], p[:, at[rows]]))
         out[:, rows, columns] = turned[:, np.arange(len(rows)), component]
+    return out
+
+
+def carriage_derivatives(layout: ReadingLayout) -> np.ndarray:
+    """Derivative (N, 3) of every reading of ``layout`` over each drive's carriage, moved
+    where and when that reading was taken, at the nominal machine: the reading's
+    derivative by the encoder offsets, but for a ballbar's only through the TCP it reads
+    (its pivot was centred where the carriages were then, a constant of its set-up that
+    its centre takes)."""
+    space = layout.space
+    theta = np.zeros(len(space))
+    drho = np.isin(np.arange(len(space)), np.arange(3))
+    out = jacobian(theta, layout, drho, np.ones(3))
+    if not space.ballbars:
+        return out
+    machine = MachineParams.from_vector(theta[None, :N_MACHINE], layout.machine_design)
+    for m, pivot in zip(space.ballbars, _pivots(theta[None], layout, machine), strict=True):
+        rows = np.flatnonzero(layout.mounting == m)
+        centre = np.broadcast_to(layout.specs[m].centre, (1, 1, 3))
+        p = direct(machine, centre)
+        along = direct(machine, layout.rho[rows][None]) - pivot[:, None, :]
+        along = along / np.linalg.norm(along, axis=-1, keepdims=True)
+        at_centre = tcp_sensitivity_factors(machine, centre, p)
+        out[rows] += sensitivity_along(*at_centre, along)[0, :, :3]
     return out
 
 

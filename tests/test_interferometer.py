@@ -56,7 +56,7 @@ def test_v0_keeps_its_spaces_and_refuses_the_interferometer():
 
 
 @pytest.mark.parametrize(("names", "words"), [
-    (["dial", "laser"], "unknown instrument"), (["dial", "ballbar"], "not yet available"),
+    (["dial", "laser"], "unknown instrument"),
     (["dial", "step-gauge"], "not yet available"), (["interferometer"], "include 'dial'"),
     ("dial", "a list of instrument names")])
 def test_bad_instruments_are_refused_in_one_line(names, words):
@@ -199,8 +199,9 @@ def test_check_env_is_clean_with_the_interferometer():
         warnings.simplefilter("always")
         check_env(gym.make(V1, backend="exact", conditions="lab",
                            instruments=OWNED).unwrapped, skip_render_check=True)
-    # The one warning left, as for v0: joint targets are in mm, not a normalised box.
-    messages = {str(w.message) for w in caught}
+    # The one warning left, as for v0: joint targets are in mm, not a normalised box
+    # (besides Gymnasium's note that v2, the lab with the ballbar, exists).
+    messages = {str(w.message) for w in caught if "is out of date" not in str(w.message)}
     assert all("symmetric and normalized" in m for m in messages), messages
 
 

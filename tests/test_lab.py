@@ -42,10 +42,10 @@ def test_check_env_is_clean(backend: str) -> None:
         warnings.simplefilter("always")
         check_env(gym.make(LAB, backend=backend).unwrapped, skip_render_check=True)
     # The one warning left: joint targets are in mm, not a normalised [-1, 1] box (the
-    # flat variant is normalised); and Gymnasium's note that a v1 exists, which the
-    # package silences but ``simplefilter("always")`` shows.
+    # flat variant is normalised); and Gymnasium's note that a later version exists,
+    # which the package silences but ``simplefilter("always")`` shows.
     messages = {str(w.message) for w in caught}
-    assert all("symmetric and normalized" in m or "upgrading to version `v1`" in m
+    assert all("symmetric and normalized" in m or "upgrading to version `v2`" in m
                for m in messages), messages
 
 

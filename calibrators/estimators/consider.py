@@ -68,6 +68,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from orthoglide_env.instruments.ballbar import BallbarSpec
+from orthoglide_env.instruments.ballbar import scale_rms as ballbar_scale_rms
 from orthoglide_env.instruments.interferometer import InterferometerAxis, scale_second_moment
 from orthoglide_env.instruments.slots import GaugeSpec, Part
 from orthoglide_env.model.compensation import interpolation_weights, node_count
@@ -76,7 +78,14 @@ from orthoglide_env.model.errors import AXIS_NAMES
 from orthoglide_env.reading_model import ReadingLayout
 from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.world.table import TRACKER_MPE_PER_M
-from orthoglide_env.world.truth import HOUR, MINUTE, REVOLUTION_MM, UM, bar_bending
+from orthoglide_env.world.truth import (
+    HOUR,
+    MINUTE,
+    REVOLUTION_MM,
+    UM,
+    bar_bending,
+    deflection,
+)
 
 #: A fitted term's parameter name is its name after this.
 WORLD_PREFIX: str = "world."
@@ -287,6 +296,11 @@ def _drive_terms(design: ReadingLayout, t: np.ndarray | None, conditions: Condit
         mean, spread = backlash_sizes(conditions)
         out.append(("backlash.mean", mean * lag))
         out += _per_axis("backlash.spread", spread * lag)
+    if on("compliance") and design.space.ballbars:
+        # The drives give under the platform's weight by about 1 um, changing with the
+        # posture: below what a dial gauge at 20 um tells, but a ballbar reads the TCP at
+        # 0.35 um.  Its size is the table's (an assumption): considered at that size.
+        out.append(("compliance.weight", deflection(design.rho, machine, conditions)[None]))
     if on("warmup"):
         # A x (1 - exp(-t / tau)): A's mean times tau's mean curve acts on every axis at
         # once; what tau's spread and A's spread add, on each alone.
@@ -359,6 +373,10 @@ def _reading_terms(design: ReadingLayout, values: np.ndarray, t: np.ndarray | No
             out.append((f"interferometer.scale[{name}]",
                         _on_rows(np.broadcast_to(laser * moved, (len(values), len(rows))),
                                  rows, n)))
+        if isinstance(spec, BallbarSpec) and conditions.active:
+            # Its transducer's scale error, on what it reads.
+            out.append((f"ballbar.scale[{name}]",
+                        _on_rows(ballbar_scale_rms() * values[:, rows], rows, n)))
         if not isinstance(spec, GaugeSpec):
             continue
         # The measuring force grows as the plunger goes in, and the stand (and a bar,

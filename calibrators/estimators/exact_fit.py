@@ -26,8 +26,7 @@ from calibrators.estimators.solvers import MAX_ITERATIONS as MAX_ITERATIONS
 from calibrators.estimators.solvers import RETAIN as RETAIN
 from calibrators.estimators.solvers import SOLVERS as SOLVERS
 from calibrators.estimators.solvers import Problem, centre, damped_step, transposed
-from orthoglide_env.model.errors import ERROR_NAMES
-from orthoglide_env.reading_model import ReadingLayout, jacobian
+from orthoglide_env.reading_model import ReadingLayout, carriage_derivatives
 
 #: Significance of the chi-square test of the model: above the (1 - CHI2_LEVEL) quantile
 #: the readings are not explained by the model and the noise.
@@ -231,9 +230,7 @@ def world_columns(design: ReadingLayout, consider: Consider) -> np.ndarray:
     a carriage's pattern times the reading's derivative by that axis's encoder offset (at
     the nominal machine: the machine's errors change it by parts in 1e3 of a term of a few
     um), or a reading's own."""
-    drho = np.isin(np.arange(len(design.space.names)),
-                   [design.space.names.index(n) for n in ERROR_NAMES[:3]])
-    derivative = jacobian(np.zeros(len(drho)), design, drho, np.ones(3))  # (N, 3), mm/mm
+    derivative = carriage_derivatives(design)  # (N, 3), mm/mm
     return np.concatenate([np.einsum("na,mnak->mnk", derivative, consider.drive),
                            consider.reading], axis=-1)
 

@@ -85,6 +85,8 @@ from calibrators.estimators.world_sizes import (
     told_scales,
     warning,
 )
+from orthoglide_env.instruments.ballbar import BallbarSpec
+from orthoglide_env.instruments.ballbar import sigma as ballbar_sigma
 from orthoglide_env.instruments.dial import DEFAULT_SIGMA, weighting_sigma
 from orthoglide_env.instruments.interferometer import InterferometerAxis
 from orthoglide_env.instruments.interferometer import sigma as interferometer_sigma
@@ -404,9 +406,11 @@ class GaussNewtonCalibrator(Estimator):
             design = prepared[members[0]][0]
             values = np.stack([prepared[k][1] for k in members])
             seen = dict(options)
-            if full and any(isinstance(s, InterferometerAxis) for s in design.specs):
-                # An interferometer reads a carriage to 0.1 um: the screw's periodic error
-                # is plain in its readings, and fitted, not considered.
+            if full and any(isinstance(s, InterferometerAxis | BallbarSpec)
+                            for s in design.specs):
+                # An interferometer reads a carriage to 0.1 um, a ballbar the TCP to
+                # 0.35 um: the screw's periodic error is plain in their readings, and
+                # fitted, not considered.
                 seen["terms"] = check_families((*terms, "periodic"))
             try:
                 results = self._fit_group(design, values, [datas[k] for k in members],
@@ -459,6 +463,9 @@ class GaussNewtonCalibrator(Estimator):
                            for m in design.mounting])
         if lasers.any():
             noise = np.where(lasers, interferometer_sigma(conditions), noise)
+        bars = np.array([isinstance(design.specs[m], BallbarSpec) for m in design.mounting])
+        if bars.any():
+            noise = np.where(bars, ballbar_sigma(conditions), noise)
         held = holdout_mask(design, holdout, seed) if holdout else np.zeros(values.shape[1], bool)
         base_of = _world_terms(design, values, datas, conditions, spacing)
         told_terms = consider
@@ -571,7 +578,8 @@ class GaussNewtonCalibrator(Estimator):
         theta = result.theta[0]
         warnings = [] if judged is None else [judged]
         if result.misfit[0]:
-            beyond = [g not in ("drho", "dL", "tracker_rotation") for g in space.groups]
+            beyond = [g not in ("drho", "dL", "tracker_rotation", "ballbar_centre")
+                      for g in space.groups]
             hint = ("try --params extended" if not result.free[:len(beyond)][beyond].any() else
                     "look for outliers, a gauge that moved, or a slipping stand")
             left_out = np.diagonal(result.error_covariance[0])[~result.free].any()

@@ -65,8 +65,9 @@ def select(selection: str, space: ParameterSpace) -> np.ndarray:
                 f"({', '.join((*ERROR_GROUPS, 'stand_shift', 'stand_tilt'))}) or a name such "
                 f"as drho_x, attach_y.z or {names[-1] if len(names) > 27 else 'x-leg/y.tilt_x'}"
             )
-    # A tracker's frame is an instrument's unknown, like a gauge's zero: always estimated.
-    free |= np.array([g == "tracker_rotation" for g in groups], dtype=bool)
+    # A tracker's frame and a ballbar's pivot are an instrument's unknowns, like a gauge's
+    # zero: always estimated.
+    free |= np.array([g in ("tracker_rotation", "ballbar_centre") for g in groups], dtype=bool)
     return free
 
 
@@ -133,7 +134,8 @@ def prior_sigmas(prior: str, space: ParameterSpace, free: np.ndarray) -> np.ndar
         if token == "none":
             continue
         if token == "auto":
-            beyond = [g not in ("drho", "dL", "tracker_rotation") for g in groups]
+            beyond = [g not in ("drho", "dL", "tracker_rotation", "ballbar_centre")
+                      for g in groups]
             if free[beyond].any():
                 sigma = _preset_sigmas(DEFAULT_PRESET, space)
             continue

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import BinaryIO
 
 from calibrators.measurements.fields import (
+    BALLBAR_FIELDS,
     COLUMNS,
     INSTRUMENT_COLUMN,
     MAX_FIELD_CHARS,
@@ -28,8 +29,10 @@ from calibrators.measurements.record import (
     Measurement,
     _measurement,
     _Readings,
+    ballbar_cells,
     instrument_of,
 )
+from orthoglide_env.instruments.ballbar import BallbarSpec
 from orthoglide_env.instruments.interferometer import InterferometerAxis
 from orthoglide_env.model.design import MachineDesign
 
@@ -148,9 +151,19 @@ def write_csv(items: list[Measurement], path: Path) -> None:
     keep = [k for k, name in enumerate(COLUMNS)
             if name not in ("time_s", "temperature_c")
             or any(getattr(m, name) is not None for m in items)]
-    kinds = any(isinstance(m.gauge, InterferometerAxis) for m in items)
+    bars = any(isinstance(m.gauge, BallbarSpec) for m in items)
+    kinds = bars or any(isinstance(m.gauge, InterferometerAxis) for m in items)
     with path.open("w", newline="", encoding="utf-8") as handle:
         writer = csv.writer(handle)
-        writer.writerow([COLUMNS[k] for k in keep] + ([INSTRUMENT_COLUMN] if kinds else []))
+        writer.writerow([COLUMNS[k] for k in keep] + ([INSTRUMENT_COLUMN] if kinds else [])
+                        + (list(BALLBAR_FIELDS) if bars else []))
         writer.writerows([row[k] for k in keep] + ([instrument_of(m.gauge)] if kinds else [])
+                         + (_setup_cells(m) if bars else [])
                          for m, row in ((m, m.csv_row()) for m in items))
+
+
+def _setup_cells(m: Measurement) -> list[str]:
+    """A reading's ballbar set-up cells (empty for another instrument's)."""
+    if not isinstance(m.gauge, BallbarSpec):
+        return [""] * len(BALLBAR_FIELDS)
+    return [repr(float(v)) for v in ballbar_cells(m.gauge)]

@@ -42,13 +42,22 @@ COLUMNS: tuple[str, ...] = ("mounting", "leg", "axis", "at", "posture", "rho_x",
 #: without one reads and writes as before).
 INSTRUMENT_COLUMN: str = "instrument"
 #: The ``instrument`` column's values: a dial gauge's (the default where it is empty or
-#: absent), a tracker's (also told by ``leg`` ``tracker``) and an interferometer's.
-INSTRUMENT_KINDS: tuple[str, ...] = ("dial", "tracker", "interferometer")
+#: absent), a tracker's (also told by ``leg`` ``tracker``), an interferometer's and a
+#: ballbar's.
+INSTRUMENT_KINDS: tuple[str, ...] = ("dial", "tracker", "interferometer", "ballbar")
 RHO_FIELDS: tuple[str, str, str] = ("rho_x", "rho_y", "rho_z")
+#: A ballbar reading's set-up, written after the ``instrument`` column when a reading is a
+#: ballbar's: the command its pivot was centred at (mm, control coordinates) and the bar's
+#: nominal length (mm).
+BALLBAR_FIELDS: tuple[str, ...] = ("pivot_x", "pivot_y", "pivot_z", "bar_mm")
+#: A ballbar's bar is at most this long (mm): a longer one is a wrong unit or column.
+MAX_BAR_MM: float = 1000.0
 #: Every name a CSV column or a JSON reading's key may have.
-FIELDS: tuple[str, ...] = (*COLUMNS, "gauge", "step", "stand", INSTRUMENT_COLUMN)
+FIELDS: tuple[str, ...] = (*COLUMNS, "gauge", "step", "stand", INSTRUMENT_COLUMN,
+                           *BALLBAR_FIELDS)
 NUMBER_FIELDS: frozenset[str] = frozenset({"at", *RHO_FIELDS, "repetition", "reading_mm",
-                                          "time_s", "temperature_c", "step", "stand"})
+                                          "time_s", "temperature_c", "step", "stand",
+                                          *BALLBAR_FIELDS})
 JSON_KEYS: tuple[str, ...] = ("readings", "experiment_time_s", "design")
 
 ZERO_RHO: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -182,9 +191,11 @@ def _fields_problem(names: Collection[str], kind: str) -> str | None:
     if "gauge" in names and {"leg", "axis", "at"} & set(names):
         return "give the gauge as 'gauge' or as 'leg', 'axis' (and 'at'), not both"
     if "gauge" not in names and not ({"leg", "axis"} <= set(names)
-                                     or {"instrument", "axis"} <= set(names)):
+                                     or {"instrument", "axis"} <= set(names)
+                                     or {"instrument", *BALLBAR_FIELDS} <= set(names)):
         return ("the gauge is missing: give 'gauge', or 'leg' and 'axis' (an "
-                "interferometer's: 'instrument' and 'axis')")
+                "interferometer's: 'instrument' and 'axis'; a ballbar's: 'instrument', "
+                f"{', '.join(BALLBAR_FIELDS)})")
     rho = [name for name in RHO_FIELDS if name in names]
     if 0 < len(rho) < 3:
         return "rho needs all of rho_x, rho_y and rho_z"

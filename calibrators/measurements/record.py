@@ -13,7 +13,9 @@ from calibrators.measurements import fields
 from calibrators.measurements.fields import (
     _READING_RULE,
     _TRACKER_RULE,
+    BALLBAR_FIELDS,
     INSTRUMENT_KINDS,
+    MAX_BAR_MM,
     MAX_EXPERIMENT_TIME_S,
     MAX_READING_MM,
     MAX_ROOM_C,
@@ -32,11 +34,15 @@ from calibrators.measurements.fields import (
     _show,
     rho_label,
 )
+from orthoglide_env.instruments.ballbar import BallbarSpec, travel_mm
 from orthoglide_env.instruments.interferometer import InterferometerAxis
 from orthoglide_env.instruments.slots import NO_LEG, GaugeSpec, Part, layout_from_names, on_platform
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import AXIS_NAMES, LEG_NAMES
 from orthoglide_env.reading_model import TrackerAxis
+
+#: A ballbar reading's limit: its travel about the bar's length.
+_BALLBAR_RULE = "mm (a ballbar reads within its travel about its length)"
 
 
 @functools.lru_cache(maxsize=4096)
@@ -47,7 +53,7 @@ def default_mounting(gauge: GaugeSpec | TrackerAxis) -> str:
         return f"tracker.{AXIS_NAMES[gauge.component]}"
     if isinstance(gauge, InterferometerAxis):
         return f"interferometer.{AXIS_NAMES[gauge.axis]}"
-    return gauge_name(gauge)
+    return gauge_name(gauge)  # (a ballbar's: its set-up, ``ballbar/50@(...)``)
 
 
 def gauge_name(gauge: GaugeSpec | TrackerAxis) -> str:
@@ -70,7 +76,7 @@ class Measurement:
     :class:`FieldError` (a ValueError) naming the field.
     """
 
-    gauge: GaugeSpec | TrackerAxis | InterferometerAxis
+    gauge: GaugeSpec | TrackerAxis | InterferometerAxis | BallbarSpec
     posture: str
     repetition: int
     reading: float
@@ -103,6 +109,7 @@ class Measurement:
         """Check and set what is this reading's own: its value, repetition, time,
         procedure step, room temperature and stand."""
         limit, rule = ((MAX_TRACKER_MM, _TRACKER_RULE) if isinstance(self.gauge, TrackerAxis)
+                       else (travel_mm(), _BALLBAR_RULE) if isinstance(self.gauge, BallbarSpec)
                        else (MAX_READING_MM, _READING_RULE))
         reading = _real(reading, "reading_mm", -limit, limit, rule)
         time_s = None if time_s is None else _real(
@@ -154,6 +161,10 @@ class Measurement:
         out = {"mounting": self.mounting, "gauge": gauge_name(self.gauge),
                "posture": self.posture, "rho": list(self.rho), "repetition": self.repetition,
                "reading_mm": self.reading}
+        if isinstance(self.gauge, BallbarSpec):
+            del out["gauge"]  # its set-up's fields say it
+            out.update(instrument="ballbar", **dict(zip(BALLBAR_FIELDS, ballbar_cells(
+                self.gauge), strict=True)))
         if self.time_s is not None:
             out["time_s"] = self.time_s
         if self.temperature_c is not None:
@@ -194,6 +205,8 @@ class Measurement:
             leg, axis, at = "tracker", AXIS_NAMES[self.gauge.component], ""
         elif isinstance(self.gauge, InterferometerAxis):
             leg, axis, at = "", AXIS_NAMES[self.gauge.axis], ""
+        elif isinstance(self.gauge, BallbarSpec):
+            leg, axis, at = "", "", ""
         else:
             leg, axis = part_label(self.gauge), AXIS_NAMES[self.gauge.axis]
             at = repr(float(self.gauge.at)) if self.gauge.part == Part.BAR else ""
@@ -202,10 +215,12 @@ class Measurement:
                 *("" if v is None else repr(v) for v in (self.time_s, self.temperature_c))]
 
 
-def instrument_of(gauge: GaugeSpec | TrackerAxis | InterferometerAxis) -> str:
+def instrument_of(gauge: GaugeSpec | TrackerAxis | InterferometerAxis | BallbarSpec) -> str:
     """The ``instrument`` column of a reading of ``gauge``."""
     if isinstance(gauge, InterferometerAxis):
         return "interferometer"
+    if isinstance(gauge, BallbarSpec):
+        return "ballbar"
     return "tracker" if isinstance(gauge, TrackerAxis) else "dial"
 
 
@@ -239,12 +254,19 @@ def _named_gauge(name: str) -> GaugeSpec | TrackerAxis | InterferometerAxis:
                                   f"got {_show(name)}") from None
 
 
-def _gauge(fields: Mapping[str, object]) -> GaugeSpec | TrackerAxis | InterferometerAxis:
+def _gauge(fields: Mapping[str, object], design: MachineDesign
+           ) -> GaugeSpec | TrackerAxis | InterferometerAxis | BallbarSpec:
     # Empty or absent: the reading's gauge says which (a file from before the column).
     instrument = _given(fields, "instrument")
     if instrument is not None and instrument not in INSTRUMENT_KINDS:
         raise FieldError("instrument", f"must be one of {', '.join(INSTRUMENT_KINDS)} "
                                        f"(empty: dial), got {_show(instrument)}")
+    if instrument == "ballbar":
+        return _ballbar_gauge(fields, design)
+    stray = [name for name in BALLBAR_FIELDS if _given(fields, name) is not None]
+    if stray:
+        raise FieldError(stray[0], "only a ballbar reading has its set-up: leave it empty "
+                                   f"(instrument {_show(instrument or 'dial')})")
     gauge = _instrument_gauge(fields) if instrument == "interferometer" else _plain_gauge(
         fields)
     if instrument is not None and instrument != instrument_of(gauge):
@@ -252,6 +274,32 @@ def _gauge(fields: Mapping[str, object]) -> GaugeSpec | TrackerAxis | Interferom
                                        f"{gauge_name(gauge)}, which is a "
                                        f"{instrument_of(gauge)}'s")
     return gauge
+
+
+def _ballbar_gauge(fields: Mapping[str, object], design: MachineDesign) -> BallbarSpec:
+    """A ballbar reading's set-up: its pivot's centring command (``pivot_x``, ``_y``,
+    ``_z``, within ``design``'s control limits) and its bar's length (``bar_mm``); no leg,
+    axis, place or gauge name."""
+    for name in ("gauge", "leg", "axis", "at"):
+        if _given(fields, name) is not None:
+            raise FieldError(name, f"a ballbar reading has no {name}: its set-up is "
+                                   f"{', '.join(BALLBAR_FIELDS)}; got {_show(fields[name])}")
+    missing = [name for name in BALLBAR_FIELDS if _given(fields, name) is None]
+    if missing:
+        raise FieldError(missing[0], "empty: a ballbar reading needs its set-up: the command "
+                                     "its pivot was centred at (pivot_x, pivot_y, pivot_z, "
+                                     "mm) and the bar's length (bar_mm)")
+    centre = tuple(_real(fields[name], name, design.rho_min, design.rho_max,
+                         "mm (the control limits)") for name in BALLBAR_FIELDS[:3])
+    length = _real(fields["bar_mm"], "bar_mm", 0.0, MAX_BAR_MM, "mm (a ballbar's length)")
+    if length == 0.0:
+        raise FieldError("bar_mm", "must be a length > 0 mm, got 0")
+    return BallbarSpec(centre, length)  # type: ignore[arg-type]
+
+
+def ballbar_cells(gauge: BallbarSpec) -> tuple[float, ...]:
+    """A ballbar reading's :data:`~calibrators.measurements.fields.BALLBAR_FIELDS`."""
+    return (*gauge.centre, gauge.length)
 
 
 def _instrument_gauge(fields: Mapping[str, object]) -> InterferometerAxis:
@@ -315,7 +363,7 @@ def _measurement(fields: Mapping[str, object], line: int | None, design: Machine
                  ) -> Measurement:
     """One reading from its fields: a CSV row's cells (numbers parsed) or a JSON object."""
     reading = _required(fields, "reading_mm")
-    gauge = _gauge(fields)
+    gauge = _gauge(fields, design)
     rho = [_given(fields, name) for name in RHO_FIELDS]
     if None in rho:
         if any(v is not None for v in rho):

@@ -43,9 +43,12 @@ def lab_kwargs(agent: Agent, instruments: tuple[str, ...] = (), **settings: Any
 
 
 def lab_id(kwargs: dict[str, Any]) -> str:
-    """The lab env that takes ``kwargs``: ``OrthoglideLab-v1`` for a lab with the
-    interferometer, else ``OrthoglideLab-v0``."""
-    return (orthoglide_env.LAB_V1_ENV_ID if "interferometer" in kwargs.get("instruments", ())
+    """The lab env that takes ``kwargs``: ``OrthoglideLab-v2`` for a lab with the ballbar,
+    ``OrthoglideLab-v1`` for one with the interferometer, else ``OrthoglideLab-v0``."""
+    owned = kwargs.get("instruments", ())
+    if "ballbar" in owned:
+        return orthoglide_env.LAB_V2_ENV_ID
+    return (orthoglide_env.LAB_V1_ENV_ID if "interferometer" in owned
             else orthoglide_env.LAB_ENV_ID)
 
 

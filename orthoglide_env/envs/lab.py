@@ -22,7 +22,7 @@ from orthoglide_env.lab.settings import lab_settings, lab_spaces
 from orthoglide_env.lab.spec import LAB, REWARDS, check_arguments, signature
 
 __all__ = ["ACCURACY_UNIT_MM", "REWARDS", "Estimator", "OrthoglideLabEnv",
-           "OrthoglideLabV1Env", "Record"]
+           "OrthoglideLabV1Env", "OrthoglideLabV2Env", "Record"]
 
 
 class LabFace(Face):
@@ -213,8 +213,27 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
     errors (:mod:`orthoglide_env.instruments.interferometer`).  Each set-up is a mounting
     of the notebook (``interferometer.x#1``).  ``align`` in a lab without it is refused.
 
+    In ``OrthoglideLab-v2`` with the ``ballbar`` (ISO 230-4's circular tests), ``pivot``
+    drives to ``rho``, centres the ballbar's pivot where the TCP is and fits the bar of
+    index ``bar`` (:data:`~orthoglide_env.lab.operations.TIME`: the set-up's time).  A
+    move puts the bar in where the nominal machine brings the TCP within its travel of
+    the pivot (the bar's nominal length, +-1 mm) and reads it there: the TCP's distance
+    from the pivot less the nominal length, in mm, with the instrument's own errors
+    (:mod:`orthoglide_env.instruments.ballbar`).  Once it is in, a move that would take it
+    outside its travel raises ``ValueError`` before anything changes; any other
+    operation takes it off.  Each set-up is a mounting of the notebook (``ballbar#1``).
+    ``pivot`` in a lab without it is refused.
+
     Version history
     ---------------
+    * v2 (``OrthoglideLab-v2``, :class:`OrthoglideLabV2Env`): the lab may own a ballbar
+      (``instruments=["dial", "ballbar"]``, see Instruments).  The action's ``op`` gains 6,
+      ``pivot``, and the action a key ``bar`` (Discrete(3): the index of the bar's length
+      in :data:`~orthoglide_env.world.table.BALLBAR_LENGTHS_MM`; other operations may leave
+      it out); the observation gains ``ballbar`` (mm, Box(-2, 2, (1,)): its reading, 0 when
+      it did not read), ``ballbar_valid`` (1 when it read) and ``ballbar_in`` (1 while the
+      bar is in).  ``OrthoglideLab-v1`` keeps its spaces and refuses the ballbar with
+      ``ValueError``.
     * v0 (issue 37): ``conditions`` defaults to ``"lab"`` (was ``"ideal"``).  The spaces,
       and every stream under a named ``conditions``, are unchanged, so the id keeps its
       version (Gymnasium bumps it when an env's dynamics or spaces change); a lab built
@@ -312,3 +331,11 @@ class OrthoglideLabV1Env(OrthoglideLabEnv):
     the observation's ``interferometer`` keys."""
 
     version = 1
+
+
+class OrthoglideLabV2Env(OrthoglideLabEnv):
+    """``OrthoglideLab-v2``: :class:`OrthoglideLabEnv` (whose docstring is the spec) whose
+    spaces carry the interferometer and the ballbar: the ``pivot`` operation, the action's
+    ``bar`` and the observation's ``ballbar`` keys."""
+
+    version = 2

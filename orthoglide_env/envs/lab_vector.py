@@ -105,3 +105,10 @@ class OrthoglideLabV1VectorEnv(OrthoglideLabVectorEnv):
     interferometer in its spaces."""
 
     version = 1
+
+
+class OrthoglideLabV2VectorEnv(OrthoglideLabVectorEnv):
+    """``OrthoglideLab-v2``'s native vector env: :class:`OrthoglideLabVectorEnv` with the
+    interferometer and the ballbar in its spaces."""
+
+    version = 2

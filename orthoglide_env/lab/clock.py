@@ -14,14 +14,16 @@ from orthoglide_env.lab.operations import TIME, Op
 def travel_seconds(op: np.ndarray, before: np.ndarray, goal: np.ndarray, tracker: bool,
                    blocked: np.ndarray | None = None, laser: np.ndarray | None = None,
                    soak: np.ndarray | None = None) -> np.ndarray:
-    """Seconds (R,) each move, re-mount or interferometer set-up takes to drive the
+    """Seconds (R,) each move, re-mount, interferometer or ballbar set-up takes to drive the
     carriages from ``before`` to ``goal`` (R, 3) and settle, and then: a move the tracker's
-    point (where the lab has a tracker), a re-mount its work, and a re-mount at a reference
-    slot (``blocked``, (R,), in a lab with the gauge block) the block's; in a lab with the
-    interferometer, a set-up its work (and the material sensor's soak before the first,
-    ``soak`` (R,)), and a move while it is set up (``laser`` (R,)) its dwell."""
+    point (where the lab has a tracker), a re-mount or a ballbar set-up its work, and a
+    re-mount at a reference slot (``blocked``, (R,), in a lab with the gauge block) the
+    block's; in a lab with the interferometer, a set-up its work (and the material
+    sensor's soak before the first, ``soak`` (R,)), and a move while it is set up
+    (``laser`` (R,)) its dwell."""
     tracker_s = TIME.tracker_point_s if tracker else 0.0
-    work = np.where(op == Op.MOVE, tracker_s, TIME.remount_s)
+    work = np.where(op == Op.MOVE, tracker_s, np.where(op == Op.PIVOT, TIME.ballbar_setup_s,
+                                                       TIME.remount_s))
     if laser is not None and soak is not None:
         setup = TIME.interferometer_setup_s + np.where(soak, TIME.interferometer_soak_s, 0.0)
         work = np.where(op == Op.ALIGN, setup, work) + np.where(

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from orthoglide_env.instruments import interferometer, thermometer
+from orthoglide_env.instruments import ballbar, interferometer, thermometer
 from orthoglide_env.instruments.dial import Status, readings_from_distances, status_of
 from orthoglide_env.instruments.gauges import Gauge, GaugeArray
 from orthoglide_env.instruments.slots import GaugeSpec, Part, on_platform
@@ -46,7 +46,7 @@ from orthoglide_env.world.truth import UM, World, draw_range
 
 #: Whether each operation code puts the machine somewhere and reads it (a table, where
 #: ``np.isin`` cost 4 % of a lone env's step).
-_READS: np.ndarray = np.isin(np.arange(len(Op)), (Op.MOVE, Op.REMOUNT, Op.ALIGN))
+_READS: np.ndarray = np.isin(np.arange(len(Op)), (Op.MOVE, Op.REMOUNT, Op.ALIGN, Op.PIVOT))
 
 
 @dataclass
@@ -119,6 +119,20 @@ class LabBatch:
         self.laser_reading = np.full(n, np.nan)
         self.laser_scale = np.zeros(n)
         self.laser_sensor = np.zeros(n)
+        # The ballbar (a lab that owns one): its set-ups so far, the bar's nominal length
+        # (NaN: not set up), the command its pivot was centred at, whether the bar is in,
+        # its reading now (NaN: none this step); each lab's errors and the pivot (the
+        # truth: where the centre ball is, in the geometry's frame) and its noise streams.
+        self.bar_setups = np.zeros(n, dtype=np.int64)
+        self.bar_length = np.full(n, np.nan)
+        self.bar_centre = np.zeros((n, 3))
+        self.bar_in = np.zeros(n, dtype=bool)
+        self.bar_ready = np.zeros(n, dtype=bool)  # set up, the bar to go in at the next move
+        self.bar_reading = np.full(n, np.nan)
+        self.bar_scale = np.zeros(n)
+        self.bar_centring = np.zeros((n, ballbar.MAX_SETUPS, 3))
+        self.bar_pivot = np.zeros((n, 3))
+        self.bar_streams: list[np.random.Generator | None] = [None] * n
         # The world beyond the geometry (None under ideal conditions): its drawn truth, the
         # carriages' actual positions, each axis's last direction of travel and each
         # plunger's (+1: going in) and its last ray distance.
@@ -171,6 +185,7 @@ class LabBatch:
         own = None if self.faults is None else [fault_stream(s) for s in streams]
         drawn, rotations, positions, errors, worlds, offsets = [], [], [], [], [], []
         lasers: list[tuple[float, float]] = []
+        bars: list[ballbar.BallbarErrors] = []
         for stream in streams:
             drawn.append(settings.preset.sample(stream, settings.design) if machine is None
                          else machine)
@@ -186,6 +201,8 @@ class LabBatch:
                 offsets.append(thermometer.draw_offset(settings.conditions, stream))
             if settings.interferometer:
                 lasers.append(interferometer.draw_errors(settings.conditions, stream))
+            if settings.ballbar:
+                bars.append(ballbar.draw_errors(settings.conditions, stream))
         blocks = np.full(len(rows), REFERENCE_LENGTH_MM)
         if settings.reference and settings.conditions.active:
             # Drawn last: a lab without the block draws what it always drew.
@@ -242,6 +259,14 @@ class LabBatch:
             self.laser_scale[rows], self.laser_sensor[rows] = np.array(lasers).T
         self.laser_axis[rows], self.laser_setups[rows] = -1, 0
         self.laser_reading[rows] = np.nan
+        if settings.ballbar:
+            self.bar_scale[rows] = [b.scale for b in bars]
+            self.bar_centring[rows] = [b.centring for b in bars]
+            for r, i in enumerate(rows.tolist()):
+                self.bar_streams[i] = ballbar.noise_stream(streams[r])
+        self.bar_setups[rows], self.bar_length[rows] = 0, np.nan
+        self.bar_in[rows] = self.bar_ready[rows] = False
+        self.bar_reading[rows] = np.nan
         self._sync(rows)
         if world is not None:
             self.backend.move(rows, self.actual[rows])
@@ -261,6 +286,7 @@ class LabBatch:
         # Where each move or re-mount takes the carriages, and when: the commanded posture
         # in an ideal world.
         aligns = op == Op.ALIGN  # (its axis is in ``slot``)
+        pivots = op == Op.PIVOT  # (its bar is in ``slot``)
         goal = np.where(((op == Op.REMOUNT) | aligns)[:, None], 0.0, rho)
         laser = self.laser_axis[rows] >= 0
         travel_s = travel_seconds(op, self.rho[rows], goal, settings.tracker, (
@@ -273,19 +299,24 @@ class LabBatch:
             for r in np.flatnonzero(aligns):
                 refused[r] = ("the lab has no interferometer (instruments="
                               f"{list(settings.instruments)})")
+        if pivots.any():
+            self._refuse_pivots(rows, pivots, refused)
         if settings.strict_moves:
             raise_unreachable(machines, rows, op, rho, reached, target, self.size)
         ok = np.array([not r for r in refused], dtype=bool)
+        inserted = self._bar_after(rows, ok, op, goal)
         moves, remounts = ok & (op == Op.MOVE), ok & (op == Op.REMOUNT)
-        aligned = ok & aligns
+        aligned, pivoted = ok & aligns, ok & pivots
         flicks = ok & ((op == Op.LIFT) | (op == Op.ENGAGE))
         # New installations first (they draw from the streams before the readings do, and
         # may fail): nothing is stored before they are made.
         mounted = self._installations(rows[remounts], stand[remounts], slot[remounts],
                                       (self.time[rows] + travel_s)[remounts],
                                       approach[remounts])
-        seconds = step_seconds(ok, flicks, moves | remounts | aligned, travel_s)
-        self._drive(rows, moves, remounts | aligned, goal, reached, target, approach)
+        seconds = step_seconds(ok, flicks, moves | remounts | aligned | pivoted, travel_s)
+        self._drive(rows, moves | pivoted, remounts | aligned, goal, reached, target, approach)
+        self.bar_in[rows] = inserted
+        self.bar_ready[rows] &= ~ok  # (a set-up below makes its own ready)
         if aligned.any():
             self._align(rows[aligned], slot[aligned])
         self._flick(rows[flicks], stand[flicks], (op == Op.ENGAGE)[flicks])
@@ -299,8 +330,11 @@ class LabBatch:
         at = np.cumsum(looks) - 1  # row of each looked-at episode in ``sight``
         overtravel, new_overtravel = self._overtravel(rows, presses, sight, at)
         seconds += overtravel_seconds(new_overtravel)
+        if pivoted.any():
+            self._pivot(rows[pivoted], goal[pivoted], slot[pivoted])
         values = np.full((len(rows), settings.stands), np.nan)
         self.laser_reading[rows] = np.nan
+        self.bar_reading[rows] = np.nan
         if reads.any():
             values[reads] = self._read(rows[reads], seconds[reads], Sight(
                 *(part[at[reads]] for part in sight)))
@@ -364,6 +398,61 @@ class LabBatch:
         moved = self.rho[rows, axis] - self.laser_zero_rho[rows]
         return (factor * (raw - self.laser_zero[rows]) - moved
                 + interferometer.sigma(settings.conditions) * draws)
+
+    def _refuse_pivots(self, rows: np.ndarray, pivots: np.ndarray, refused: list[str]) -> None:
+        """Refuse the ballbar set-ups (``pivots``, a mask over ``rows``) of a lab without a
+        ballbar, or one whose drawn set-ups are all used."""
+        for r in np.flatnonzero(pivots):
+            if not self.settings.ballbar:
+                refused[r] = ("the lab has no ballbar (instruments="
+                              f"{list(self.settings.instruments)})")
+            elif self.bar_setups[rows[r]] >= ballbar.MAX_SETUPS:
+                refused[r] = f"the ballbar was set up {ballbar.MAX_SETUPS} times: no more"
+
+    def _bar_after(self, rows: np.ndarray, ok: np.ndarray, op: np.ndarray, goal: np.ndarray
+                   ) -> np.ndarray:
+        """Whether the bar of each of ``rows`` is in after the step: the first move after a
+        set-up puts it in, and every move while it is in keeps it in (each must bring the
+        nominal machine's TCP within the bar's travel of the pivot: ``ValueError`` before
+        anything changes); any other operation takes it off."""
+        before = self.bar_in[rows] | self.bar_ready[rows]
+        after = self.bar_in[rows] & ~ok
+        moving = ok & (op == Op.MOVE) & before
+        travel, design = ballbar.travel_mm(), self.settings.design
+        for r in np.flatnonzero(moving).tolist():
+            i = int(rows[r])
+            spec = ballbar.BallbarSpec(tuple(self.bar_centre[i].tolist()),
+                                       float(self.bar_length[i]))
+            reading = float(ballbar.nominal_readings(design, spec, goal[r]))
+            if abs(reading) > travel:
+                where = f" of env {i}" if self.size > 1 else ""
+                raise ValueError(
+                    f"action{where} rho {goal[r].tolist()} mm: the ballbar ({spec.length:g} mm "
+                    f"bar, pivot centred at rho {list(spec.centre)}) would read "
+                    f"{reading:+.3f} mm, outside its travel +-{travel:g} mm (any operation "
+                    "but a move takes the bar off)")
+            after[r] = True
+        return after
+
+    def _pivot(self, rows: np.ndarray, centre: np.ndarray, bar: np.ndarray) -> None:
+        """Set the ballbar of ``rows`` up: its pivot centred where the TCP now is (the
+        centre command ``centre``, the look of this step solved it), off by the set-up's
+        centring error; the bar of index ``bar`` fitted, not yet in."""
+        count = self.bar_setups[rows]
+        self.bar_pivot[rows] = self.tcp[rows] + self.bar_centring[rows, count]
+        self.bar_centre[rows] = centre
+        self.bar_length[rows] = [ballbar.length_of(int(b)) for b in bar]
+        self.bar_setups[rows] += 1
+        self.bar_ready[rows] = True
+
+    def _read_bar(self, rows: np.ndarray) -> None:
+        """Read the bars of ``rows`` (each in) at the TCP the last look solved: NaN where
+        the true distance leaves the travel (the nominal machine put it inside)."""
+        draws = np.array([self.bar_streams[i].normal() for i in rows.tolist()])  # type: ignore[union-attr]
+        distance = np.linalg.norm(self.tcp[rows] - self.bar_pivot[rows], axis=-1)
+        values = ballbar.readings(distance, self.bar_length[rows], self.bar_scale[rows],
+                                  self.settings.conditions, draws)
+        self.bar_reading[rows] = np.where(np.abs(values) <= ballbar.travel_mm(), values, np.nan)
 
     def _flick(self, rows: np.ndarray, stand: np.ndarray, engages: np.ndarray) -> None:
         """Lift (or, where ``engages``, engage) the plunger of each ``stand`` of ``rows``."""
@@ -634,6 +723,8 @@ class LabBatch:
         if laser.any():
             self.laser_reading[rows[laser]] = self._laser(
                 rows[laser], (self.time[rows] + pending)[laser], laser_draws[laser])
+        if self.bar_in[rows].any():
+            self._read_bar(rows[self.bar_in[rows]])
         if self.world is not None:
             # The same draws, scaled up where a digital indicator scatters more: a batch
             # draws what a lone lab draws.
@@ -675,6 +766,14 @@ class LabBatch:
                 interferometer.InterferometerAxis(axis),
                 interferometer.mounting_name(axis, int(self.laser_setups[i])), rho[r],
                 float(self.laser_reading[i]), steps[r], stamps[r], room[r]))
+
+        for r in np.flatnonzero(np.isfinite(self.bar_reading[rows])).tolist():
+            i = index[r]
+            spec = ballbar.BallbarSpec(tuple(self.bar_centre[i].tolist()),
+                                       float(self.bar_length[i]))
+            self.notebooks[i].records.append(Record(
+                spec, ballbar.mounting_name(int(self.bar_setups[i])), rho[r],
+                float(self.bar_reading[i]), steps[r], stamps[r], room[r]))
 
     def _room(self, rows: np.ndarray, when: np.ndarray) -> list[float | None]:
         """What the thermometer of each of ``rows`` reads (C) at lab time ``when``; None
@@ -730,7 +829,15 @@ class LabBatch:
             "tracker_valid": tracked.astype(np.int8)[:, None],
             "time": self.time[rows][:, None].copy(),
             **(self._laser_observation(rows, fresh) if self.settings.version >= 1 else {}),
+            **(self._bar_observation(rows, fresh) if self.settings.version >= 2 else {}),
         }
+
+    def _bar_observation(self, rows: np.ndarray, fresh: np.ndarray) -> dict[str, np.ndarray]:
+        """``OrthoglideLab-v2``'s ballbar keys of ``rows``' observations."""
+        read = fresh & np.isfinite(self.bar_reading[rows])
+        return {"ballbar": np.where(read, self.bar_reading[rows], 0.0)[:, None],
+                "ballbar_valid": read.astype(np.int8)[:, None],
+                "ballbar_in": self.bar_in[rows].astype(np.int8)[:, None]}
 
     def _laser_observation(self, rows: np.ndarray, fresh: np.ndarray
                            ) -> dict[str, np.ndarray]:

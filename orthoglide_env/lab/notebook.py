@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from orthoglide_env.instruments.ballbar import BallbarSpec
+from orthoglide_env.instruments.ballbar import sigma as ballbar_sigma
 from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.instruments.gauges import Gauge, GaugeArray
 from orthoglide_env.model.design import MachineDesign
@@ -29,6 +31,7 @@ from orthoglide_env.reading_model import (
     station_of,
 )
 from orthoglide_env.scoring.predicted import predicted_tcp_frames
+from orthoglide_env.world.conditions import Conditions
 
 
 @dataclass(frozen=True)
@@ -61,6 +64,8 @@ class Notebook:
         self._first: tuple[list[str], GaugeArray, int] | None = None
         self._gauge_sigma = weighting_sigma(gauge_sigma)
         self._tracker_sigma = tracker_sigma
+        # The ballbar's scatter in a lab room: the information's weight of its readings.
+        self._bar_sigma = ballbar_sigma(Conditions("lab"))
         # Per mounting: count, sum and sum of outer products of its Jacobian rows, names.
         self._sums: dict[str, tuple[int, Any, Any, tuple[str, ...]]] = {}
         self._informed = 0  # records already in the sums
@@ -91,6 +96,7 @@ class Notebook:
                         default_scales(space))
         for record, row, m in zip(records, rows, layout.mounting, strict=True):
             sigma = (self._tracker_sigma if isinstance(record.spec, TrackerAxis)
+                     else self._bar_sigma if isinstance(record.spec, BallbarSpec)
                      else self._gauge_sigma)
             # The mounting's own columns: the machine's errors and its instrument's.
             mine = _mounting_columns(space, m)

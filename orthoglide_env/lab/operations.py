@@ -36,6 +36,11 @@ interferometer soak     600       before the first set-up: the material sensor s
 interferometer target   2         on top of a move's settle and read while it is set up:
                                   the dwell it averages over; assumption: 2-4 s per
                                   ISO 230-2 target
+ballbar set-up          300       (``pivot``, a lab with the ballbar) drive to the centre,
+                                  fix the centre pivot's magnetic mount under the tool cup,
+                                  centre it, fit the bar of the chosen length; assumption:
+                                  a whole ISO 230-4 test with a QC20-W is sold as about
+                                  10-15 minutes, the set-up a part of it
 ======================  ========  ==========================================================
 """
 
@@ -65,6 +70,7 @@ class TimeTable:
     interferometer_setup_s: float = 600.0
     interferometer_soak_s: float = 600.0
     interferometer_target_s: float = 2.0
+    ballbar_setup_s: float = 300.0
 
     def move(self, start: np.ndarray, target: np.ndarray) -> np.ndarray:
         """Seconds to drive from ``start`` to ``target`` (axes together) and settle; shapes
@@ -144,10 +150,13 @@ class Op(IntEnum):
     REMOUNT = 3  # move stand ``stand`` to ``slot`` (at Zero), new installation, new zero
     STOP = 4  # the experiment is over
     ALIGN = 5  # set the interferometer up along drive ``axis`` (``OrthoglideLab-v1``)
+    PIVOT = 6  # set the ballbar's pivot at the TCP of ``rho``, bar ``bar`` (``-v2``)
 
 
 #: The operations of ``OrthoglideLab-v0``'s action (every one before ``ALIGN``).
 V0_OPS: int = int(Op.ALIGN)
+#: Those of ``OrthoglideLab-v1``'s (every one before ``PIVOT``).
+V1_OPS: int = int(Op.PIVOT)
 
 
 OP_NAMES: tuple[str, ...] = tuple(op.name.lower() for op in Op)

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from orthoglide_env.instruments import ballbar
 from orthoglide_env.instruments.catalogue import check_instruments
 from orthoglide_env.instruments.dial import GaugeNoise, check_noise
 from orthoglide_env.instruments.slots import PAPER_LAYOUT, GaugeSpec
@@ -27,6 +28,7 @@ from orthoglide_env.lab.operations import (
     TIME,
     TRACKER_SIGMA,
     V0_OPS,
+    V1_OPS,
     Op,
     slot_catalogue,
     slot_index,
@@ -36,6 +38,7 @@ from orthoglide_env.model.errors import ErrorPreset, get_preset
 from orthoglide_env.sim.display import display_problem, require_display
 from orthoglide_env.world.conditions import IDEAL, Conditions
 from orthoglide_env.world.faults import NO_FAULTS, Faults
+from orthoglide_env.world.table import BALLBAR_LENGTHS_MM
 
 #: Encoders may read a hair outside the control limits after settling (solver residue
 #: ~1e-9 mm); the observation box leaves this margin so an observation is always inside.
@@ -73,13 +76,18 @@ class LabSettings:
     conditions: Conditions = IDEAL  # the world's effects beyond the geometry
     reference: bool = False  # the lab has the gauge block: its catalogue the reference slots
     instruments: tuple[str, ...] = ("dial",)  # what the lab owns (catalogue.INSTRUMENT_NAMES)
-    version: int = 0  # the lab env's version: v1's spaces carry the interferometer
+    version: int = 0  # the lab env's version: v1's spaces carry the interferometer, v2's ballbar
     faults: Faults = NO_FAULTS  # what can go wrong in the session (orthoglide_env.lab.faults)
 
     @property
     def interferometer(self) -> bool:
         """Whether the lab owns a laser interferometer (``align`` sets it up)."""
         return "interferometer" in self.instruments
+
+    @property
+    def ballbar(self) -> bool:
+        """Whether the lab owns a ballbar (``pivot`` sets it up)."""
+        return "ballbar" in self.instruments
 
     @cached_property
     def slots(self) -> tuple[GaugeSpec, ...]:
@@ -95,6 +103,8 @@ class LabSettings:
         block = TIME.reference_s if self.reference else 0.0
         longest = (far + TIME.remount_s + block + TIME.tracker_point_s
                    + TIME.overtravel_s * self.stands)
+        if self.ballbar:
+            longest = max(longest, far + TIME.ballbar_setup_s + TIME.overtravel_s * self.stands)
         if not self.interferometer:
             return longest
         setup = (far + TIME.interferometer_setup_s + TIME.interferometer_soak_s
@@ -156,6 +166,9 @@ def lab_settings(args: dict[str, Any], version: int = 0) -> LabSettings:
         raise ValueError("instruments: the interferometer needs OrthoglideLab-v1 (its action "
                          "has the align operation and an axis, its observation the "
                          "interferometer's reading)")
+    if "ballbar" in instruments and version < 2:
+        raise ValueError("instruments: the ballbar needs OrthoglideLab-v2 (its action has the "
+                         "pivot operation and a bar, its observation the ballbar's reading)")
     faults = args["faults"]
     if "thermal-step" in faults.kinds and "room" not in args["conditions"]:
         raise ValueError("faults: 'thermal-step' steps the room's temperature: it needs "
@@ -184,13 +197,14 @@ def calibration_settings(args: dict[str, Any]) -> LabSettings:
 def lab_spaces(settings: LabSettings) -> tuple[spaces.Dict, spaces.Dict]:
     """``OrthoglideLab-v0``'s action and observation spaces."""
     n, design = settings.stands, settings.design
-    v1 = settings.version >= 1
+    v1, v2 = settings.version >= 1, settings.version >= 2
     action_space = spaces.Dict({
-        "op": spaces.Discrete(len(Op) if v1 else V0_OPS),
+        "op": spaces.Discrete(len(Op) if v2 else V1_OPS if v1 else V0_OPS),
         "rho": spaces.Box(design.rho_min, design.rho_max, shape=(3,), dtype=np.float64),
         "stand": spaces.Discrete(n),
         "slot": spaces.Discrete(len(settings.slots)),
         **({"axis": spaces.Discrete(3)} if v1 else {}),
+        **({"bar": spaces.Discrete(len(BALLBAR_LENGTHS_MM))} if v2 else {}),
     })
     observation_space = spaces.Dict({
         # A valid reading lies within +-travel/2 of its zero; the box leaves another
@@ -211,6 +225,11 @@ def lab_spaces(settings: LabSettings) -> tuple[spaces.Dict, spaces.Dict]:
         **({"interferometer": spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float64),
             "interferometer_valid": spaces.MultiBinary(1),
             "interferometer_axis": spaces.Discrete(4)} if v1 else {}),
+        # The bar's distance less its length: within its travel, and a little noise.
+        **({"ballbar": spaces.Box(-2 * ballbar.travel_mm(), 2 * ballbar.travel_mm(),
+                                  shape=(1,), dtype=np.float64),
+            "ballbar_valid": spaces.MultiBinary(1),
+            "ballbar_in": spaces.MultiBinary(1)} if v2 else {}),
     })
     return action_space, observation_space
 

@@ -184,7 +184,44 @@ INSTRUMENT_ERRORS: dict[str, dict[str, Size]] = {
                       "datasheet, secondary) but 0.1 um in a still room, 0.3 um on a shop "
                       "floor"),
     },
+    "ballbar": {
+        "accuracy": Size((0.7, 0.7), (0.7, 0.7), "um", "the bar's constant accuracy at "
+                         "20 C: a reading's error within it (sigma half of it, as the "
+                         "tracker's MPE is taken), besides the part that grows with the "
+                         "reading", "Renishaw QC20-W ballbar specification: accuracy "
+                         "+-(0.7 + 0.3 % of the reading) um at 20 C (the sheet was not at "
+                         "hand in this round: check it)"),
+        "scale": Size((0, 0.3), (0, 0.3), "%", "the transducer's scale error: the part of "
+                      "the accuracy that grows with the reading, a factor per lab",
+                      "Renishaw QC20-W ballbar specification: 0.3 % of the reading",
+                      signed=True),
+        "resolution": Size((0.1, 0.1), (0.1, 0.1), "um", "a reading is rounded to it",
+                           "Renishaw QC20-W ballbar specification: sensor resolution "
+                           "0.1 um"),
+        "travel": Size((1.0, 1.0), (1.0, 1.0), "mm", "the bar reads within +- this of its "
+                       "nominal length; a move the nominal machine puts outside it while "
+                       "the bar is in is refused", "Renishaw QC20-W ballbar "
+                       "specification: measurement range +-1.0 mm"),
+        "centring": Size((0, 5), (0, 10), "um", "the pivot's centre ball against the TCP "
+                         "where it was centred, per coordinate (a fit takes the centre as "
+                         "unknown: ISO 230-4 removes the centring error)", "assumption: "
+                         "a magnetic centre mount set against the tool cup by hand",
+                         signed=True),
+        "expansion": Size((11.5, 11.5), (11.5, 11.5), "um/(m K)", "the bar's expansion: "
+                          "the same as the machine's, so the room's uniform growth cancels "
+                          "on a reading", "assumption: a steel bar (the machine: "
+                          "steel 11.5-12 um/(m K))"),
+    },
 }
+
+#: The bar lengths (mm) a lab's ballbar can be set up with: the nominal bar, its radius
+#: halved with a small-circle set-up, and one extension.  On the prototype a whole circle
+#: fits at 50 mm only; 100 and 150 mm bars read arcs.
+BALLBAR_LENGTHS_MM: tuple[float, ...] = (50.0, 100.0, 150.0)
+#: Where the lengths come from (``orthoglide conditions`` and docs/instruments.md show it).
+BALLBAR_LENGTHS_SOURCE: str = ("Renishaw QC20-W: nominal length 100 mm, extension bars of "
+                               "50, 150 and 300 mm; the 50 mm radius is an assumption (a "
+                               "small-circle set-up)")
 
 #: Closed-loop drives (conditions with ``drives="scales"``): a linear scale beside each
 #: drive reads the carriage, so the screw's lead error, its periodic error, its growth

@@ -89,6 +89,20 @@ def _all_numbers(value: Any) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
 
 
+def deflection(rho: np.ndarray, design: MachineDesign, conditions: Conditions,
+               load: np.ndarray | float = 0.0) -> np.ndarray:
+    """How far (mm, ``rho``'s shape) the drives give at carriage positions ``rho`` under
+    the platform's weight and the gauges' forces ``load`` (N): the drives' compliance
+    times the generalised load on each, J^T F, from the paper's model of the nominal
+    machine (the true machine's differs by a part in 1e3 of a deflection of a few um)."""
+    compliance = _fixed(conditions, "compliance", "actuator") * UM
+    lengths = np.full(3, design.L)
+    p = direct_paper(rho, 0.0, lengths, design.L)
+    jac = jacobian_paper(p, rho, 0.0, lengths, design.L)[..., :3]
+    force = np.array([0.0, 0.0, -_fixed(conditions, "compliance", "weight")]) + load
+    return compliance * np.einsum("...ji,...j->...i", jac, np.broadcast_to(force, rho.shape))
+
+
 def bar_bending(conditions: Conditions, at: np.ndarray | float, design: MachineDesign
                 ) -> np.ndarray | float:
     """How far (mm per N) a leg's bar gives under a gauge pressing it at ``at`` (a fraction
@@ -282,18 +296,8 @@ class World:
             # the structure's growth (:meth:`scale`) is the steel's.
             glass = SCALES["expansion"].lab[0] - _fixed(self.conditions, "room", "expansion")
             out = out + glass * 1e-6 * self.temperature(time)[:, None] * (rho - design.rho_min)
-        compliance = _fixed(self.conditions, "compliance", "actuator") * UM
-        if compliance:
-            # Generalised load of the weight on each drive, J^T F, from the paper's model
-            # of the nominal machine (the true machine's differs by a part in 1e3 of a
-            # deflection of a few um).
-            lengths = np.full(3, design.L)
-            p = direct_paper(out, 0.0, lengths, design.L)
-            jac = jacobian_paper(p, out, 0.0, lengths, design.L)[..., :3]
-            force = np.array([0.0, 0.0, -_fixed(self.conditions, "compliance", "weight")]
-                             ) + load
-            out = out + compliance * np.einsum("...ji,...j->...i", jac,
-                                               np.broadcast_to(force, out.shape))
+        if _fixed(self.conditions, "compliance", "actuator"):
+            out = out + deflection(out, design, self.conditions, load)
         return out
 
     @staticmethod
