@@ -189,8 +189,8 @@ INSTRUMENT_ERRORS: dict[str, dict[str, Size]] = {
                          "20 C: a reading's error within it (sigma half of it, as the "
                          "tracker's MPE is taken), besides the part that grows with the "
                          "reading", "Renishaw QC20-W ballbar specification: accuracy "
-                         "+-(0.7 + 0.3 % of the reading) um at 20 C (the sheet was not at "
-                         "hand in this round: check it)"),
+                         "+-(0.7 + 0.3 % of the reading) um at 20 C (not yet checked "
+                         "against the sheet's current issue)"),
         "scale": Size((0, 0.3), (0, 0.3), "%", "the transducer's scale error: the part of "
                       "the accuracy that grows with the reading, a factor per lab",
                       "Renishaw QC20-W ballbar specification: 0.3 % of the reading",
