@@ -55,7 +55,7 @@ from calibrators.agents.policy import PolicySpec, save_policy, spec_of
 from calibrators.study import compare, statistics
 from calibrators.study.episodes import DEFAULT_BUDGET_S, make_estimator
 from orthoglide_env.instruments.dial import DEFAULT_SIGMA
-from orthoglide_env.lab.operations import V1_OPS, Op
+from orthoglide_env.lab.operations import V0_OPS, Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import DEFAULT_PRESET
 from orthoglide_env.world.conditions import Conditions
@@ -121,7 +121,7 @@ def start_near_zero(model: Any) -> None:
     with torch.no_grad():
         bias[:3] = (0.0 - middle) / half
         log_std[:3] = float(np.log(RHO_SPREAD_MM / half))
-        bias[3:3 + V1_OPS] = -MOVE_BIAS
+        bias[3:3 + V0_OPS] = -MOVE_BIAS
         bias[3 + Op.MOVE] = MOVE_BIAS
 
 
