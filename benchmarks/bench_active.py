@@ -6,12 +6,15 @@ workers, against the target of 100 machines within 2 minutes on 2 cores.
 Runs ``compare``'s own path (``calibrators.study.compare.run``: the batched lab, the batched
 fits) for ``active`` with the ``extended`` estimator and reports the wall time (each
 worker's one-off planning start-up included, as a sweep pays it), the seconds per
-machine and the ratio to the target.
+machine and the ratio to the target; then the sha256 of every trial's JSON line (its
+readings, hence its plan, its time and its errors), which another revision's run must
+print too for its plans to be the same.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import time
 
 from calibrators.study.compare import Config, run
@@ -40,6 +43,8 @@ def main() -> None:
           f"machine-hours, {failed} failed) on {args.jobs} workers: {wall:.1f} s wall, "
           f"{wall / args.machines:.2f} s per machine; the target's pace would be "
           f"{target:.0f} s ({wall / target:.1f}x that)")
+    digest = hashlib.sha256("\n".join(t.to_json() for t in trials).encode()).hexdigest()
+    print(f"trials (plans, readings, errors): sha256 {digest}")
 
 
 if __name__ == "__main__":
