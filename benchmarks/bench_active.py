@@ -6,12 +6,16 @@ workers, against the target of 100 machines within 2 minutes on 2 cores.
 Runs ``compare``'s own path (``calibrators.study.compare.run``: the batched lab, the batched
 fits) for ``active`` with the ``extended`` estimator and reports the wall time (each
 worker's one-off planning start-up included, as a sweep pays it), the seconds per
-machine and the ratio to the target.
+machine and the ratio to the target; then the sha256 of every trial's JSON line (its
+readings, hence its plan, its time and its errors), which another revision's run must
+print too for its plans to be the same, and the sweep's CPU seconds.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
+import resource
 import time
 
 from calibrators.study.compare import Config, run
@@ -30,9 +34,9 @@ def main() -> None:
     args = parser.parse_args()
     config = Config(("active",), ("extended",), seed=args.seed,
                     conditions=Conditions(args.conditions))
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), _cpu_seconds()
     trials = run(config, args.machines, jobs=args.jobs)
-    wall = time.perf_counter() - start
+    wall, cpu = time.perf_counter() - start, _cpu_seconds() - cpu
     hours = sum(t.time_s for t in trials) / 3600
     failed = sum(bool(t.failed) for t in trials)
     target = TARGET_S * args.machines / TARGET_MACHINES
@@ -40,6 +44,16 @@ def main() -> None:
           f"machine-hours, {failed} failed) on {args.jobs} workers: {wall:.1f} s wall, "
           f"{wall / args.machines:.2f} s per machine; the target's pace would be "
           f"{target:.0f} s ({wall / target:.1f}x that)")
+    digest = hashlib.sha256("\n".join(t.to_json() for t in trials).encode()).hexdigest()
+    print(f"trials (plans, readings, errors): sha256 {digest}; {cpu:.1f} CPU seconds (the "
+          "workers' included): on a loaded machine, what compares")
+
+
+def _cpu_seconds() -> float:
+    """CPU seconds of this process and of its finished workers."""
+    own, workers = (resource.getrusage(who) for who in (resource.RUSAGE_SELF,
+                                                          resource.RUSAGE_CHILDREN))
+    return own.ru_utime + own.ru_stime + workers.ru_utime + workers.ru_stime
 
 
 if __name__ == "__main__":

@@ -3,13 +3,14 @@ identical: the batched comparison, the command line's start-up, the ``active`` s
 the test suite.
 
     python benchmarks/speed_against_revision.py [--rev 02c124b] [--rounds 3]
-        [--items compare,startup,active,suite] [--active-machines 100]
+        [--items compare,startup,active,suite] [--active-machines 100] [--same-as REV]
 
 Each item times whole commands in fresh processes, this tree and ``REV`` taken in turns,
 round after round, so a change of load hits both alike; the table gives each tree's median
-wall time and their ratio.  ``REV`` is checked out into a temporary git worktree; both
-trees run from their own folder with their own code first on ``PYTHONPATH`` (the same
-interpreter and packages), so the comparison is of the code alone.
+wall time and the median of the rounds' ratios with their range.  ``REV`` is checked out
+into a temporary git worktree; both trees run from their own folder with their own code
+first on ``PYTHONPATH`` (the same interpreter and packages), so the comparison is of the
+code alone.
 
 =========  ============================================================================
 item       what is timed, and what must come out the same
@@ -26,8 +27,11 @@ suite      ``CI=true make test`` in a fresh clone of each (HEAD and ``REV``): th
            time, the venv's build included, and the number of tests that passed
 =========  ============================================================================
 
-The suite item clones the committed HEAD, not the working tree, and takes minutes per
-round; it runs one round whatever ``--rounds`` says.
+``REV``'s outputs may differ for reasons of their own (a warning's wording changed since):
+``--same-as`` names a revision whose outputs must be this tree's to the byte (the one a
+speed-up started from), run once per item beside the timed rounds.  The suite item clones
+the committed HEAD, not the working tree, and takes minutes per round; it runs one round
+whatever ``--rounds`` says.
 """
 
 from __future__ import annotations
@@ -109,12 +113,6 @@ RUNNERS: dict[str, Callable[[Path, argparse.Namespace], tuple[float, str]]] = {
     "compare": compare, "startup": startup, "active": active, "suite": suite}
 
 
-def numpy_import(rounds: int) -> float:
-    """Median wall seconds of ``python -c "import numpy"``."""
-    return float(np.median([_timed([sys.executable, "-c", "import numpy"], ROOT)[0]
-                            for _ in range(rounds)]))
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rev", default="02c124b", help="the earlier revision (git)")
@@ -123,6 +121,9 @@ def main() -> None:
                         help=f"comma list of {', '.join(ITEMS)} (default: all)")
     parser.add_argument("--active-machines", type=int, default=100,
                         help="machines of the active sweep (default %(default)s)")
+    parser.add_argument("--same-as", default="",
+                        help="a revision whose compare and active outputs must be this "
+                             "tree's (default: none)")
     args = parser.parse_args()
     items = [i.strip() for i in args.items.split(",") if i.strip()]
     unknown = sorted(set(items) - set(ITEMS))
@@ -132,38 +133,64 @@ def main() -> None:
         parser.error("--rounds and --active-machines must be >= 1")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        old = Path(tmp) / "rev"
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", "--quiet",
-                        str(old), args.rev], check=True)
+        old, same = Path(tmp) / "rev", Path(tmp) / "same"
+        trees = [(old, args.rev)] + ([(same, args.same_as)] if args.same_as else [])
+        for tree, rev in trees:
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", "--quiet",
+                            str(tree), rev], check=True)
         try:
             for item in items:
-                rounds = 1 if item == "suite" else args.rounds
-                times: dict[str, list[float]] = {"new": [], "old": []}
-                outputs: dict[str, set[str]] = {"new": set(), "old": set()}
-                for r in range(rounds):
-                    for name, tree in (("new", ROOT), ("old", old)):
-                        seconds, out = RUNNERS[item](tree, args)
-                        times[name].append(seconds)
-                        outputs[name].add(out)
-                    print(f"{item}: round {r + 1}/{rounds} done", file=sys.stderr, flush=True)
-                new, was = (float(np.median(times[k])) for k in ("new", "old"))
-                if item == "startup":
-                    same = f"numpy {numpy_import(args.rounds):.3f} s"
-                elif item == "suite":
-                    same = f"tests: {outputs['new'].pop()} / {outputs['old'].pop()}"
-                else:
-                    same = ("outputs identical" if outputs["new"] == outputs["old"]
-                            and len(outputs["new"]) == 1 else "OUTPUTS DIFFER")
-                    digest = hashlib.sha256(sorted(outputs["new"])[0].encode()).hexdigest()
-                    same += f" (sha256 {digest[:12]})"
-                rows.append((item, new, was, same))
+                rows.append(_measure(item, old, 1 if item == "suite" else args.rounds, args,
+                                     same if args.same_as else None))
         finally:
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force",
-                            str(old)], check=True)
-    print(f"load average {os.getloadavg()[0]:.1f}, {args.rounds} rounds, median wall seconds")
-    print(f"{'item':<10}{'this tree':>11}{args.rev[:10]:>12}{'ratio':>8}  check")
-    for item, new, was, same in rows:
-        print(f"{item:<10}{new:11.3f}{was:12.3f}{new / was:8.2f}  {same}")
+            for tree, _ in trees:
+                subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force",
+                                str(tree)], check=True)
+    print(f"load average {os.getloadavg()[0]:.1f}, {args.rounds} rounds; median wall seconds "
+          "of each tree and the median of the rounds' ratios [their range]")
+    print(f"{'item':<10}{'this tree':>11}{args.rev[:10]:>12}{'ratio':>8}  {'range':<14}check")
+    for item, new, was, ratios, same in rows:
+        spread = f"[{min(ratios):.2f}, {max(ratios):.2f}]"
+        print(f"{item:<10}{new:11.3f}{was:12.3f}{float(np.median(ratios)):8.2f}  {spread:<14}"
+              f"{same}")
+
+
+def _measure(item: str, old: Path, rounds: int, args: argparse.Namespace,
+             same: Path | None = None) -> tuple[str, float, float, list[float], str]:
+    """``item`` timed in both trees in turns, ``rounds`` rounds: the median seconds of each,
+    each round's ratio (this tree over ``old``) and what was checked.  The start-up's
+    rounds also time ``python -c "import numpy"`` in turn, which its check compares with;
+    ``same``: a tree whose outputs of compare and active must be this tree's."""
+    times: dict[str, list[float]] = {"new": [], "old": [], "numpy": []}
+    outputs: dict[str, set[str]] = {"new": set(), "old": set()}
+    for r in range(rounds):
+        for name, tree in (("new", ROOT), ("old", old)):
+            seconds, out = RUNNERS[item](tree, args)
+            times[name].append(seconds)
+            outputs[name].add(out)
+        if item == "startup":
+            times["numpy"].append(_timed([sys.executable, "-c", "import numpy"], ROOT)[0])
+        print(f"{item}: round {r + 1}/{rounds} done", file=sys.stderr, flush=True)
+    new, was = (float(np.median(times[k])) for k in ("new", "old"))
+    ratios = [a / b for a, b in zip(times["new"], times["old"], strict=True)]
+    if item == "startup":
+        numpy = [a / b for a, b in zip(times["new"], times["numpy"], strict=True)]
+        check = (f"import numpy {float(np.median(times['numpy'])):.3f} s: "
+                 f"{float(np.median(numpy)):.2f}x it [{min(numpy):.2f}, {max(numpy):.2f}]")
+    elif item == "suite":
+        check = f"tests: {outputs['new'].pop()} / {outputs['old'].pop()}"
+    else:
+        mine = outputs["new"].pop() if len(outputs["new"]) == 1 else None
+        digest = hashlib.sha256(str(mine).encode()).hexdigest()[:12]
+        checks = [f"outputs {'the same' if mine is not None else 'DIFFER'} round to round "
+                  f"(sha256 {digest})",
+                  f"{'identical to' if outputs['old'] == {mine} else 'differ from'} "
+                  f"{args.rev}'s"]
+        if same is not None:
+            agree = RUNNERS[item](same, args)[1] == mine
+            checks.append(f"{'identical to' if agree else 'DIFFER FROM'} {args.same_as}'s")
+        check = "; ".join(checks)
+    return item, new, was, ratios, check
 
 
 if __name__ == "__main__":

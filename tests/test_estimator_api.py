@@ -16,6 +16,7 @@ from calibrators.estimators.catalogue import for_study
 from calibrators.estimators.constraints import InvalidParameterError
 from calibrators.estimators.gauss_newton import GaussNewtonCalibrator
 from calibrators.estimators.paper_linear import NeedsExactFit, PaperCalibrator
+from orthoglide_env.scoring import BLOCK
 
 
 @pytest.fixture(scope="module")
@@ -104,6 +105,25 @@ def test_fit_many_is_each_fit(readings, name: str) -> None:
         np.testing.assert_allclose(together.theta, alone.theta, rtol=0, atol=1e-9)
         np.testing.assert_allclose(together.covariance, alone.covariance, rtol=0,
                                    atol=1e-8 * np.abs(alone.covariance).max())
+
+
+def test_a_batch_over_several_blocks_gives_each_machine_its_own_error_covariance(readings
+                                                                                 ) -> None:
+    """The model-error covariance works through blocks of machines (``BLOCK``): a batch
+    that spans several, each experiment many times over, gives every copy the covariance
+    its experiment gets alone (to the solver's convergence, as above)."""
+    datas, sigma = readings
+    estimator = for_study("paper6", sigma)
+    copies = BLOCK // len(datas) + 2
+    batch = estimator.fit_many(datas * copies)
+    assert len(batch) > BLOCK
+    for k, data in enumerate(datas):
+        alone = estimator.fit(data).error_covariance
+        # The left-out errors fill the covariance beyond the six fitted parameters.
+        assert np.count_nonzero(np.diagonal(alone)) > 6
+        for together in batch[k::len(datas)]:
+            np.testing.assert_allclose(together.error_covariance, alone, rtol=0,
+                                       atol=1e-8 * np.abs(alone).max())
 
 
 def test_fit_many_returns_a_failure_in_place_of_its_estimate(readings) -> None:

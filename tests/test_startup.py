@@ -86,3 +86,14 @@ def test_an_env_id_with_its_module_registers_it() -> None:
             "env = gymnasium.make('orthoglide_env:OrthoglideLab-v0')\n"
             "assert type(env.unwrapped).__name__ == 'OrthoglideLabEnv'")
     assert "gymnasium" in _imported_after(code)
+
+
+def test_a_comparison_imports_no_scipy_stats() -> None:
+    """A comparison (its command's module, the study, its statistics) needs SciPy's special
+    functions only: ``scipy.stats`` alone costs it a tenth of a 1000-machine run."""
+    code = ("import calibrators.cli.compare, calibrators.study.compare\n"
+            "print(__import__('json').dumps(sorted(m for m in sys.modules\n"
+            "                                        if m.startswith('scipy.stats'))))")
+    out = subprocess.run([sys.executable, "-c", f"import sys\n{code}"], capture_output=True,
+                         text=True, check=True).stdout
+    assert json.loads(out.strip().splitlines()[-1]) == []

@@ -17,7 +17,6 @@ import argparse
 import importlib
 import os
 import sys
-from importlib import metadata
 from types import ModuleType
 
 try:
@@ -58,10 +57,29 @@ DISTRIBUTION = "orthoglide-workbench"
 
 def version() -> str:
     """The installed package's version (from its metadata, the one place it is set)."""
+    from importlib import metadata
+
     try:
         return metadata.version(DISTRIBUTION)
     except metadata.PackageNotFoundError:
         return "unknown (the package is not installed)"
+
+
+class _Version(argparse.Action):
+    """``--version``: the version read from the package's metadata when it is asked for,
+    not on every start-up (a command, its ``--help``) as argparse's own action has it."""
+
+    def __init__(self, option_strings: list[str], dest: str = argparse.SUPPRESS,
+                 default: str = argparse.SUPPRESS, help: str | None = None) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=default,
+                         help=help or "show program's version number and exit")
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: object, option_string: str | None = None) -> None:
+        formatter = parser._get_formatter()
+        formatter.add_text(f"{parser.prog} {version()}")
+        parser._print_message(formatter.format_help(), sys.stdout)
+        parser.exit()
 
 
 def command_module(name: str) -> ModuleType:
@@ -73,7 +91,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """The whole command line; with ``only``, the options of that command alone (the
     others are listed, their modules not imported: what one run needs)."""
     parser = Parser(prog="orthoglide", description="Virtual Orthoglide calibration workbench.")
-    parser.add_argument("--version", action="version", version=f"%(prog)s {version()}")
+    parser.add_argument("--version", action=_Version)
     sub = parser.add_subparsers(dest="command", required=True)
     for name, summary in COMMANDS.items():
         p = sub.add_parser(name, help=summary)

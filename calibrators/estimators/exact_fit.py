@@ -27,6 +27,7 @@ from calibrators.estimators.solvers import RETAIN as RETAIN
 from calibrators.estimators.solvers import SOLVERS as SOLVERS
 from calibrators.estimators.solvers import Problem, centre, damped_step, transposed
 from orthoglide_env.reading_model import ReadingLayout, carriage_derivatives
+from orthoglide_env.scoring.grid import blocks
 
 #: Significance of the chi-square test of the model: above the (1 - CHI2_LEVEL) quantile
 #: the readings are not explained by the model and the noise.
@@ -266,18 +267,32 @@ def _model_error(fit: BatchFit, problem: Problem, jac: np.ndarray, gain_matrix: 
     the paper's six parameters."""
     idx = np.flatnonzero(fit.free)
     out = np.flatnonzero(unmodelled)
-    s_free = fit.scale[idx]
     cov = fit.error_covariance
     cov[:, idx[:, None], idx] = fit.covariance
     if not len(out):
         return
-    rows = np.arange(len(fit.theta))
-    ju = problem.jacobian(fit.theta, rows, free=unmodelled)  # (M, N, n_out)
+    # The left-out parameters' Jacobian of a whole batch is tens of MB, passed over a
+    # dozen times: machines a cache-sized block at a time (each machine's numbers are its
+    # own, whatever its block).
+    for block in blocks(len(fit.theta)):
+        _model_error_of(fit, problem, jac[block], gain_matrix[block], unmodelled, spread,
+                        np.arange(len(fit.theta))[block])
+
+
+def _model_error_of(fit: BatchFit, problem: Problem, jac: np.ndarray,
+                    gain_matrix: np.ndarray, unmodelled: np.ndarray, spread: np.ndarray,
+                    rows: np.ndarray) -> None:
+    """:func:`_model_error` of machines ``rows`` (``jac`` and ``gain_matrix``: theirs)."""
+    idx = np.flatnonzero(fit.free)
+    out = np.flatnonzero(unmodelled)
+    s_free = fit.scale[idx]
+    cov = fit.error_covariance
+    ju = problem.jacobian(fit.theta[rows], rows, free=unmodelled)  # (M, N, n_out)
     # gain J_u, the gain being ``gain_matrix @ J^T`` (the pseudo-inverse over the retained
     # directions times the Jacobian).
     propagated = gain_matrix @ (transposed(jac) @ ju)
     left = ju - jac @ propagated
-    excess = np.where(fit.misfit, np.maximum(fit.chi2 - fit.dof, 0.0), 0.0)
+    excess = np.where(fit.misfit[rows], np.maximum(fit.chi2[rows] - fit.dof[rows], 0.0), 0.0)
     kappa = excess / np.maximum(np.einsum("mnu,mnu->m", left, left), 1e-300)
     # D in scaled units: per machine and left-out parameter.
     d = np.maximum(kappa[:, None], (spread[out] / fit.scale[out])[None] ** 2)

@@ -119,16 +119,19 @@ class Belief:
         # to candidate postures.
         self.rho, self.here = np.zeros(3), self.table.zero
         k, p = len(self.slots), len(self.table.postures)
-        self.rows = np.zeros((k, p, n))
+        # Each stand's rows (P, n) at its present mounting (:meth:`rows_of`).  A stand's
+        # array is replaced at a re-mount, never written to, so a fork shares the others:
+        # copying every stand's (megabytes) at each re-mount a search tries cost the
+        # planner a tenth of its time.
+        self.stand_rows: list[np.ndarray] = [np.zeros((p, n))] * k
+        self._stacked: np.ndarray | None = None
         # An upper bound of each stand's spread at every posture (see _reach).
         self.spread_bound = np.zeros((k, p))
         # Each stand's columns of the unknowns its rows touch (K, T) and its rows over
-        # them (K, P, T), padded to T = N_MACHINE + N_STAND (the most a mounting touches)
-        # with zero rows at column 0.
+        # them (P, T) each, padded to T = N_MACHINE + N_STAND (the most a mounting
+        # touches) with zero rows at column 0; replaced at a re-mount, as its rows are.
         self.touched_columns = np.zeros((k, N_MACHINE + N_STAND), dtype=int)
-        self.touched_rows = np.zeros((k, p, N_MACHINE + N_STAND))
-        # Whether a fork shares the rows (they are copied before they change).
-        self.rows_shared = False
+        self.touched_rows: list[np.ndarray] = [np.zeros((p, N_MACHINE + N_STAND))] * k
         for k in range(len(self.slots)):
             self._set_rows(k)
         # Where an engaged gauge was seen not to read (its tip beyond the travel): it will
@@ -157,17 +160,25 @@ class Belief:
         over the unknowns they touch (``touched_columns``, ``touched_rows``); its spread
         bound is the prior spread (its unknowns are as wide as a priori, the machine's at
         most)."""
-        if self.rows_shared:
-            self.rows, self.touched_rows = self.rows.copy(), self.touched_rows.copy()
-            self.touched_columns = self.touched_columns.copy()
-            self.rows_shared = False
-        self.rows[stand] = self.rows_of(stand)
+        rows = self.rows_of(stand)
+        self.stand_rows[stand], self._stacked = rows, None
         self.spread_bound[stand] = self.table.prior_spread[max(self.slots[stand], 0)]
-        used = np.flatnonzero(np.any(self.rows[stand] != 0.0, axis=0))
-        self.touched_columns[stand] = 0
-        self.touched_rows[stand] = 0.0
-        self.touched_columns[stand, :len(used)] = used
-        self.touched_rows[stand, :, :len(used)] = self.rows[stand][:, used]
+        used = np.flatnonzero(np.any(rows != 0.0, axis=0))
+        columns = self.touched_columns.copy()
+        columns[stand] = 0
+        columns[stand, :len(used)] = used
+        touched = np.zeros(self.touched_rows[stand].shape)
+        touched[:, :len(used)] = rows[:, used]
+        self.touched_columns, self.touched_rows[stand] = columns, touched
+
+    @property
+    def rows(self) -> np.ndarray:
+        """Rows (K, P, n) of every stand at every posture (:attr:`stand_rows` stacked,
+        read-only)."""
+        if self._stacked is None:
+            self._stacked = np.stack(self.stand_rows)
+            self._stacked.setflags(write=False)
+        return self._stacked
 
     def predicted_tips(self, postures: np.ndarray | slice = slice(None)) -> np.ndarray:
         """Predicted tip distance of every stand's gauge at ``postures`` (K, P'), mm:
@@ -272,7 +283,8 @@ class Belief:
     def _rows_here(self, stands: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Rows (R, n) of readings of ``stands`` here and now, mm per unit, and (with
         world terms) their rows over the considered terms (R, m)."""
-        rows = self.rows[stands, self.here]
+        rows = np.array([self.stand_rows[k][self.here] for k in stands]).reshape(
+            len(stands), len(self.covariance))
         if self.world is None:
             return rows, np.zeros((len(stands), 0))
         fitted, considered = self.world.rows(

@@ -130,7 +130,7 @@ class Pricer(Belief):
         0))`` or ``slogdet(I)``, zeros that differ at most in their sign).  A posture's
         gain is computed alone (stacked products and solves work item by item), so it is
         the same to the bit whichever others are priced with it."""
-        return (np.swapaxes(self.rows[:, postures], 0, 1)
+        return (np.stack([rows[postures] for rows in self.stand_rows], axis=1)
                 * np.sqrt(reads.T[postures])[:, :, None] / self.sigma)
 
     def _gains(self, rows: np.ndarray) -> np.ndarray:
@@ -161,7 +161,8 @@ class Pricer(Belief):
         the form is ``(C F)(C F)'`` (``F``: :func:`rigid_factor`), so a row's is the
         square of its product with ``C F``, r columns instead of every unknown's."""
         c, cols = self.covariance, self.touched_columns  # (K, T)
-        part = self.touched_rows[:, postures]  # (K, L, T)
+        # (K, L, T), laid out as the stands' rows at the postures were before (L, K, T).
+        part = np.swapaxes(np.stack([t[postures] for t in self.touched_rows], axis=1), 0, 1)
         if self.criterion == "D":
             left, right = part @ c[cols[:, :, None], cols[:, None, :]], part
         else:

@@ -33,12 +33,12 @@ class Planner(Pricer):
     chooses and takes its next operations."""
 
     def fork(self) -> Planner:
-        """A copy to try operations on (the table is shared, the state copied; the rows,
-        which change only at a re-mount, are shared until either copy changes them)."""
+        """A copy to try operations on (the table is shared, the state copied; each
+        stand's rows, which a re-mount replaces, are shared)."""
         trial = copy.copy(self)
         trial.slots, trial.engaged, trial.steps = list(self.slots), list(self.engaged), []
         trial.covariance = self.covariance.copy()
-        self.rows_shared = trial.rows_shared = True
+        trial.stand_rows, trial.touched_rows = list(self.stand_rows), list(self.touched_rows)
         trial.silent = self.silent.copy()
         trial.spread_bound = self.spread_bound.copy()
         trial.mean = None if self.mean is None else self.mean.copy()

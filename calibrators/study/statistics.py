@@ -10,7 +10,6 @@ from typing import Any
 
 import numpy as np
 from scipy import special
-from scipy.stats import norm
 
 from calibrators.study.trials import Trial
 from orthoglide_env.scoring import FRAMES
@@ -84,8 +83,10 @@ def silent(trial: Trial) -> bool:
     warning."""
     if trial.failed or not trial.z or trial.warnings:
         return False
-    tail = 2 * norm.sf(SILENT_SIGMAS) / len(trial.z)
-    return bool(np.max(np.abs(trial.z)) > norm.isf(tail / 2))
+    # The normal distribution's tails from scipy.special (what scipy.stats.norm computes,
+    # bit for bit), whose import costs a comparison a tenth of its time.
+    tail = 2 * special.ndtr(-SILENT_SIGMAS) / len(trial.z)
+    return bool(np.max(np.abs(trial.z)) > -special.ndtri(tail / 2))
 
 
 def fault_keys(trials: list[Trial]) -> dict[str, float | None]:
