@@ -170,11 +170,11 @@ class CompensatedAgent(PlannedAgent):
         design = self.estimate.readings.design
         made, found = _inside(self.estimate, MachineParams(design=design),
                               np.array([a["rho"] for a in moves], dtype=float).reshape(-1, 3))
-        command = {id(a): (m, c) for a, m, c in zip(moves, made, found, strict=True)}
+        commands = iter(zip(made, found, strict=True))
         out = []
         for a in plan:
-            if id(a) in command:
-                m, c = command[id(a)]
+            if int(a["op"]) == Op.MOVE:
+                m, c = next(commands)
                 if not np.isfinite(c).all():
                     continue
                 self.made[tuple(float(v) for v in c)] = tuple(float(v) for v in m)
