@@ -186,3 +186,38 @@ def test_an_impossible_reading_is_asked_again_and_a_knock_offers_a_re_zero(tmp_p
     # From the re-zero on the stand's readings are a new mounting, which starts at Zero.
     assert renamed and renamed[0].is_zero and renamed[0].reading == 0.0
     assert 7.5 not in [m.reading for m in data.items]
+
+
+def test_a_clean_lab_session_asks_again_only_at_a_sign_slip(tmp_path) -> None:
+    """Under the real lab's conditions, a realistic machine's readings differ from the
+    nominal machine's by up to ~1.5 mm at the ends of its gauges' travel (machine seed 2,
+    600 s), and some the nominal machine cannot give at all: none of them is asked again.
+    One reading written with the wrong sign, the first whose true value is beyond 2 mm
+    (its slip moves it by > 4 mm, past NOMINAL_MM = 2.5 mm plus the ~1.5 mm a clean
+    reading is off), is asked again, and it alone."""
+    from calibrators.workflow.session import Session
+
+    env = gym.make(orthoglide_env.LAB_ENV_ID, errors="realistic", gauge_sigma=DEFAULT_SIGMA,
+                   gauge_resolution=DEFAULT_RESOLUTION, backend="exact", budget_s=600.0,
+                   conditions=DEFAULT_CONDITIONS)
+    observation, _ = env.reset(seed=machine_seed(SEED, 0))
+    asked_again: list[tuple[int, int]] = []
+    slipped: list[tuple[int, int]] = []
+
+    def slip(question, value):
+        where = (question["step"], question["stand"])
+        if "again" in question:
+            asked_again.append(where)
+            return value
+        if not slipped and value is not None and abs(value) > 2.0:
+            slipped.append(where)
+            return -value
+        return value
+
+    session = Session("active", 600.0, tmp_path / "notebook.jsonl", design=PROTOTYPE,
+                      seed=machine_seed(SEED, 0))
+    say, answer = _answering(env, observation, slip)
+    session.run(answer, say)
+    env.close()
+    assert slipped, "no reading beyond 2 mm to slip"
+    assert asked_again == slipped

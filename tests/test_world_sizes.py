@@ -120,3 +120,27 @@ def test_a_run_kept_without_the_new_options_resumes() -> None:
     told = _config_dict(Config(agents=("paper",), estimators=("full",),
                                fit_conditions="auto", world_check=True), 3)
     assert told["fit_conditions"] == "auto" and told["world_check"] is True
+
+
+def test_an_auto_fit_keeps_the_world_it_found_in_its_estimate_file(tmp_path) -> None:
+    """``fit --conditions auto --save-estimate``: the estimate file holds each effect
+    family's scale that the readings showed, within its bounds (positive: kept at least at
+    the lab's size and at FLOOR; at most CEILING times the workshop's second moment), and
+    they come back from the file; a fit told the world writes no scales."""
+    from calibrators.estimators.base import Estimate
+    from calibrators.workflow.compensate import CALIBRATION_KEY, read_estimate
+
+    sheet = tmp_path / "m.csv"
+    made = _cli("calibrate", "--conditions", "lab", "--backend", "exact", "--agent", "paper",
+                "--save-measurements", str(sheet))
+    assert made.returncode == 0, made.stderr
+    for told in ("auto", "lab"):
+        run = _cli("fit", str(sheet), "--conditions", told, "--save-estimate",
+                   str(tmp_path / f"{told}.json"))
+        assert run.returncode == 0, run.stderr
+    auto = read_estimate(tmp_path / "auto.json")
+    assert set(auto.world_scales) and all(0 < v <= CEILING for v in auto.world_scales.values())
+    assert Estimate.from_dict(json.loads(json.dumps(auto.to_dict()))).world_scales == (
+        auto.world_scales)
+    assert "world_scales" not in json.loads((tmp_path / "lab.json").read_text())[
+        CALIBRATION_KEY]

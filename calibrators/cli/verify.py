@@ -18,7 +18,7 @@ def run(args: argparse.Namespace) -> None:
     data = Measurements.read(args.readings, est.readings.design)
     given = args.conditions is not None or args.effects is not None
     result = Verify(est, data, conditions_of(args, default=READINGS_CONDITIONS) if given
-                    else None).run()
+                    else None, check_world=args.check_world).run()
     if args.json:
         print(json.dumps(result.to_dict()))
         return
@@ -40,6 +40,10 @@ def add(p: argparse.ArgumentParser) -> None:
     p.add_argument("estimate", help="estimate file (calibrate or fit --save-estimate)")
     p.add_argument("readings", help="the verification's readings, .csv or .json")
     add_conditions(p, measured=True)
+    p.add_argument("--check-world", action="store_true",
+                   help="also fit the readings told the conditions and fail when they show a "
+                        "world worse than those (the estimate's error bars are then too "
+                        "narrow; see docs/world.md)")
     p.add_argument("--json", action="store_true",
                    help="print one JSON object: passed, reason, chi2, dof, "
                         "deviations_before, deviations_after, readings")

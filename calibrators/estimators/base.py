@@ -122,6 +122,10 @@ class Estimate:
     #: pitch-error table's node spacing (mm) when the lead error was fitted as one.
     conditions: dict[str, Any] = field(default_factory=dict)
     node_spacing: float | None = None
+    #: Under ``conditions="auto"``: each effect family's second moment over the
+    #: workshop's, as the readings show it (:mod:`calibrators.estimators.world_sizes`), for
+    #: the families with terms in these readings; empty when the world was told.
+    world_scales: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not self.names:
@@ -245,6 +249,9 @@ class Estimate:
                     residual_rms_mm=self.residual_rms_mm, condition_number=self.condition_number,
                     pitch_table=None if table is None else table.to_dict(),
                     backlash_mm=self.backlash)
+        if not self.world_scales:
+            # A told world's estimate is written as before the scales existed.
+            data.pop("world_scales")
         return data
 
     @classmethod

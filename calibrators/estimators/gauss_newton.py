@@ -26,6 +26,7 @@ from calibrators.estimators.consider import (
     Consider,
     check_families,
     consider_terms,
+    term_family,
     thermometer_sigma,
 )
 from calibrators.estimators.consider import tracker_sigma as tracker_sigma_of
@@ -469,10 +470,15 @@ class GaussNewtonCalibrator(Estimator):
         held = holdout_mask(design, holdout, seed) if holdout else np.zeros(values.shape[1], bool)
         base_of = _world_terms(design, values, datas, conditions, spacing)
         told_terms = consider
+        shown: list[dict[str, float]] = [{} for _ in values]
         if auto:
-            consider = scaled(consider, _estimated_world(
+            sizes = _estimated_world(
                 design, values, np.tile(~held, (len(values), 1)), noise, free, fixed, priors,
-                scale, unmodelled, spread, solver, consider, base_of(FLOOR_WORLD)))
+                scale, unmodelled, spread, solver, consider, base_of(FLOOR_WORLD))
+            consider = scaled(consider, sizes)
+            present = {term_family(n) for n in consider.names}
+            shown = [{f: float(v) for f, v in zip(TERM_FAMILIES, row, strict=True)
+                      if f in present} for row in sizes]
         fitted, consider = consider.split(terms)
         if not fitted.empty:
             # The terms' coefficients, in units of their root second moment, join the
@@ -555,7 +561,7 @@ class GaussNewtonCalibrator(Estimator):
                                           causes[m], every[m], repeated[m], misfits[m],
                                           verify, explain, consider, names,
                                           None if world is None else world[m],
-                                          conditions, spacing, judged[m]))
+                                          conditions, spacing, judged[m], shown[m]))
         return out
 
     def _estimate(self, data: Measurements, params: str, prior: str, sigma: float,
@@ -564,8 +570,8 @@ class GaussNewtonCalibrator(Estimator):
                   outliers: list[int], causes: list[str], every_residual: np.ndarray,
                   repeated: np.ndarray, misfits: np.ndarray, verify: bool, explain: bool,
                   considered: Consider, every: list[str], world: np.ndarray | None,
-                  conditions: Conditions, spacing: float | None, judged: str | None
-                  ) -> Estimate:
+                  conditions: Conditions, spacing: float | None, judged: str | None,
+                  world_scales: dict[str, float]) -> Estimate:
         space = design.space
         names = [n for n, f in zip(every, result.free, strict=True) if f]
         idx = np.flatnonzero(result.free)
@@ -639,7 +645,7 @@ class GaussNewtonCalibrator(Estimator):
             misfits=misfits.tolist(),
             information=info, scale=s, error_covariance=error_cov,
             holdout_rms_mm=float(np.sqrt(np.mean(residuals[held] ** 2))) if held.any() else None,
-            considered=considered.effects,
+            considered=considered.effects, world_scales=world_scales,
             **_lead(result, every, considered.names, error_cov, conditions, spacing),
         )
 

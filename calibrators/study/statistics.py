@@ -47,6 +47,19 @@ def median_interval(values: Any, level: float = 0.95) -> tuple[float, float]:
     return float(ordered[k]), float(ordered[n - 1 - k])
 
 
+def fraction_interval(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
+    """The Clopper-Pearson interval of a fraction ``k`` of ``n`` trials: it covers the
+    true fraction at least ``level`` of the time whatever it is (binomial trials);
+    ``ValueError`` unless 0 <= k <= n and n >= 1."""
+    if not (isinstance(k, (int, np.integer)) and isinstance(n, (int, np.integer))
+            and 0 <= k <= n and n >= 1):
+        raise ValueError(f"a fraction needs 0 <= k <= n and n >= 1, got k={k!r}, n={n!r}")
+    tail = (1 - level) / 2
+    low = 0.0 if k == 0 else float(special.betaincinv(k, n - k + 1, tail))
+    high = 1.0 if k == n else float(special.betaincinv(k + 1, n - k, 1 - tail))
+    return low, high
+
+
 def _fraction(flags: list[bool | None]) -> float | None:
     """The fraction of the tests that said yes (None: no test)."""
     tested = [f for f in flags if f is not None]

@@ -11,9 +11,11 @@ replays it (``resume``) and goes on where it stopped.  The session ends when the
 stops (at its target predicted error, or when nothing is worth the time) or at the budget.
 
 An impossible answer is asked again (the question then holds ``again``, the reason): one
-outside the gauge's travel, or one whose change since the stand's last answer differs
-from the nominal machine's by more than a machine's errors explain
-(:data:`~calibrators.estimators.faults.NOMINAL_MM`).  A stand that reads far from 0 back
+outside the gauge's travel, or one whose change since its mounting's first answer differs
+from the nominal machine's by more than a machine's errors move one reading
+(:data:`~calibrators.estimators.faults.NOMINAL_MM`).  Where the nominal machine's gauge
+gives no reading (past its travel, off its bar) there is nothing to compare with, and
+only the travel is checked.  A stand that reads far from 0 back
 at Zero, where its dial was zeroed, may have been knocked: the session says so and asks for
 the reading again after a re-zero; an answer near 0 then starts a new mounting of that
 stand from that reading on (its own zero for the fit), the same answer again keeps the old
@@ -80,7 +82,8 @@ class Session:
             raise ValueError(f"agent '{agent_name}' has no target error to stop at")
         self.design, self.seed = design, seed
         self.tolerance = ZERO_K * sigma + resolution
-        self.last: dict[str, tuple[float, float]] = {}  # mounting: (answer, nominal reading)
+        # mounting: (answer, nominal reading) at its first answer the nominal lab read too.
+        self.first: dict[str, tuple[float, float]] = {}
         self.rezeroed: dict[str, str] = {}  # a lab mounting's name: the name it goes by now
         self.notebook = Path(notebook)
         self.replay = _read_notebook(self.notebook)
@@ -128,6 +131,7 @@ class Session:
         template = records[first] if len(records) > first else None
         kept = records[:first]
         for stand in sorted(asked):
+            predicted = stand in nominal
             record = nominal.get(stand) or Record(
                 slots[held[stand]], lab.mountings[stand],
                 template.rho if template else moved,
@@ -145,7 +149,7 @@ class Session:
                                      "not this session's notebook")
                 value = given["reading_mm"]
             else:
-                value = self._checked(question, record, answer)
+                value = self._checked(question, record, answer, predicted)
                 with self.notebook.open("a", encoding="utf-8") as handle:
                     handle.write(json.dumps({"step": number, "stand": stand + 1,
                                              "gauge": question["gauge"],
@@ -154,18 +158,18 @@ class Session:
             observation["valid"][stand] = value is not None
             observation["gauges"][stand] = 0.0 if value is None else value
             if value is not None:
-                mounting = self._mounting(record, float(value))
+                mounting = self._mounting(record, float(value), predicted)
                 kept.append(replace(record, reading=float(value), mounting=mounting))
         records[:] = kept
 
-    def _checked(self, question: dict[str, Any], record: Record, answer: Answer
-                 ) -> float | None:
-        """The answer to ``question`` (of the nominal lab's ``record``), asked again with
-        the reason when it is impossible or when a stand back at Zero reads far from its
-        zero (a re-zero offered: an answer near 0 then starts a new mounting); the second
-        answer stands."""
+    def _checked(self, question: dict[str, Any], record: Record, answer: Answer,
+                 predicted: bool) -> float | None:
+        """The answer to ``question`` (of the nominal lab's ``record``, whose reading is
+        the nominal machine's where ``predicted``), asked again with the reason when it is
+        impossible or when a stand back at Zero reads far from its zero (a re-zero
+        offered: an answer near 0 then starts a new mounting); the second answer stands."""
         value = answer(question)
-        reason = None if value is None else self._impossible(record, value)
+        reason = None if value is None else self._impossible(record, value, predicted)
         if reason is None:
             return value
         again = answer({**question, "again": reason})
@@ -175,33 +179,38 @@ class Session:
             self.rezeroed[record.mounting] = f"{mounting}+re-zeroed"
         return again
 
-    def _impossible(self, record: Record, value: float) -> str | None:
-        """Why ``value`` cannot be ``record``'s reading, or why it is suspect; None if it
-        is neither."""
+    def _impossible(self, record: Record, value: float, predicted: bool) -> str | None:
+        """Why ``value`` cannot be ``record``'s reading (its nominal one where
+        ``predicted``), or why it is suspect; None if it is neither."""
         # A reading at the end of the travel may pass it by its noise and rounding.
         reach = self.env.unwrapped.travel / 2 + self.tolerance
         if abs(value) > reach:
             return (f"{value:+.3f} mm is outside the gauge's travel (+-{reach:g} mm about "
                     "its zero, with its noise): read it again")
         mounting = self.rezeroed.get(record.mounting, record.mounting)
-        if mounting not in self.last:
+        if mounting not in self.first:
             return None
-        before, nominal = self.last[mounting]
-        jump = (value - before) - (record.reading - nominal)
-        if abs(jump) > NOMINAL_MM:
-            return (f"{value:+.3f} mm is {jump:+.3f} mm from what the move explains since "
-                    f"its last reading {before:+.3f} mm: read it again")
+        # Against the mounting's first answer, not the last: NOMINAL_MM bounds one
+        # reading's offset from the nominal machine's, and a change between two readings
+        # carries two such offsets.
+        before, nominal = self.first[mounting]
+        off = (value - before) - (record.reading - nominal) if predicted else 0.0
+        if abs(off) > NOMINAL_MM:
+            return (f"{value:+.3f} mm is {off:+.3f} mm from what the nominal machine reads "
+                    f"there, its stand's first reading {before:+.3f} mm taken as its zero: "
+                    "read it again")
         if not any(record.rho) and abs(value) > self.tolerance:
             return (f"back at Zero the stand reads {value:+.3f} mm, where its dial was "
                     "zeroed: it may have been knocked; re-zero its dial and give the "
                     "reading again (the same answer keeps the old zero)")
         return None
 
-    def _mounting(self, record: Record, value: float) -> str:
+    def _mounting(self, record: Record, value: float, predicted: bool) -> str:
         """The mounting ``record``'s answer ``value`` belongs to (a re-zeroed stand's new
-        one), which remembers it."""
+        one), which keeps it as its reference when it is its first ``predicted`` one."""
         mounting = self.rezeroed.get(record.mounting, record.mounting)
-        self.last[mounting] = (value, record.reading)
+        if predicted:
+            self.first.setdefault(mounting, (value, record.reading))
         return mounting
 
 

@@ -19,6 +19,13 @@ holds:
 * the gauges' noise.
 
 It passes at the fit's own :data:`~calibrators.estimators.exact_fit.CHI2_LEVEL`.
+
+The same instruments that calibrated a machine verify it through the same blind spots: an
+estimate whose error bars are too narrow because its world was understated reads, through
+the compensated controller, as it predicts.  What the verification's readings can show is
+the world itself: ``check_world`` (``verify --check-world``) fits them with ``full`` told
+the stated world and tests whether they show a worse one
+(:mod:`calibrators.estimators.world_sizes`); the verification then fails when they do.
 """
 
 from __future__ import annotations
@@ -32,14 +39,17 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from calibrators.agents.base import PlannedAgent
 from calibrators.estimators.base import Estimate
+from calibrators.estimators.catalogue import for_study
 from calibrators.estimators.consider import consider_terms
 from calibrators.estimators.exact_fit import CHI2_LEVEL, world_columns
 from calibrators.measurements import Measurement, Measurements, rho_label
+from calibrators.study.episodes import Episode
 from calibrators.workflow.compensate import compensated_commands
 from calibrators.workflow.plan import Plan, Procedure, rho_words
 from orthoglide_env.instruments.dial import weighting_sigma
-from orthoglide_env.lab.operations import DEFAULT_BUDGET_S
+from orthoglide_env.lab.operations import DEFAULT_BUDGET_S, Op
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import DEFAULT_PRESET, ERROR_NAMES, PRESETS, MachineParams
 from orthoglide_env.model.kinematics import PAPER_POSTURES, direct, paper_posture
@@ -135,6 +145,54 @@ def compensated_procedure(procedure: Procedure, est: Estimate) -> Procedure:
     return replace(procedure, steps=steps, sheet=sheet, notes=notes)
 
 
+class CompensatedAgent(PlannedAgent):
+    """The planned agent ``agent``'s experiment through the compensated controller of
+    the estimate ``estimate``, in a virtual lab: what a technician does by the procedure
+    of :func:`compensated_procedure`, each drive command the compensated one (pulled
+    inside at a control limit in the same way), a drive with none left out.
+    :meth:`readings` labels the episode's readings as that procedure's sheet does, for
+    :func:`verify`."""
+
+    def __init__(self, agent: PlannedAgent, estimate: Estimate) -> None:
+        if not isinstance(agent, PlannedAgent):
+            raise ValueError(f"agent '{agent.name}' chooses each move from the last reading: "
+                             "its verification cannot be planned")
+        self.agent, self.estimate = agent, estimate
+        self.name = agent.name
+        self.needs_tracker, self.needs_reference = agent.needs_tracker, agent.needs_reference
+        self.needs_instruments = agent.needs_instruments
+        self.made: dict[tuple[float, ...], tuple[float, ...]] = {}
+
+    def make_plan(self, observation: dict[str, np.ndarray]) -> list[dict[str, Any]]:
+        self.agent.reset(self.env, observation, self.rng)
+        plan = list(self.agent.plan)
+        moves = [a for a in plan if int(a["op"]) == Op.MOVE]
+        design = self.estimate.readings.design
+        made, found = _inside(self.estimate, MachineParams(design=design),
+                              np.array([a["rho"] for a in moves], dtype=float).reshape(-1, 3))
+        commands = iter(zip(made, found, strict=True))
+        out = []
+        for a in plan:
+            if int(a["op"]) == Op.MOVE:
+                m, c = next(commands)
+                if not np.isfinite(c).all():
+                    continue
+                self.made[tuple(float(v) for v in c)] = tuple(float(v) for v in m)
+                a = {**a, "rho": c}
+            out.append(a)
+        return out
+
+    def readings(self, episode: Episode) -> Measurements:
+        """The episode's readings, each at a compensated command labelled with the
+        command it was made from and :data:`COMPENSATED` (the set-up's, read before the
+        first drive, keep theirs)."""
+        data = episode.measurements
+        return Measurements([replace(m, posture=rho_label(self.made[tuple(m.rho)])
+                                     + COMPENSATED, design=data.design)
+                             if tuple(m.rho) in self.made else m for m in data.items],
+                            data.experiment_time_s, data.design)
+
+
 def _inside(est: Estimate, nominal: MachineParams, rho: np.ndarray
             ) -> tuple[np.ndarray, np.ndarray]:
     """The commands (n, 3) the verification makes of the nominal commands ``rho`` (n, 3)
@@ -184,12 +242,17 @@ class Verification:
     rows: list[dict[str, Any]]
     residual_rms_mm: float
     predicted_rms_mm: float
+    #: The world test's words when it was asked for (``check_world``): the readings'
+    #: fit's warning of kind ``world``, or "" when they show no worse world than stated.
+    world: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        """The outcome as JSON (``verify --json``'s object)."""
+        """The outcome as JSON (``verify --json``'s object; ``world`` only when the
+        world was tested)."""
         return {"passed": self.passed, "reason": self.reason, "chi2": self.chi2,
                 "dof": self.dof, "residual_rms_mm": self.residual_rms_mm,
                 "predicted_rms_mm": self.predicted_rms_mm,
+                **({} if self.world is None else {"world": self.world}),
                 "deviations_before": [r["before_mm"] for r in self.rows],
                 "deviations_after": [r["after_mm"] for r in self.rows], "readings": self.rows}
 
@@ -197,9 +260,11 @@ class Verification:
     def from_dict(cls, data: dict[str, Any]) -> Verification:
         """The outcome :meth:`to_dict` wrote (``ValueError`` if it is not one)."""
         try:
+            world = data.get("world")
             return cls(bool(data["passed"]), str(data["reason"]), float(data["chi2"]),
                        int(data["dof"]), [dict(r) for r in data["readings"]],
-                       float(data["residual_rms_mm"]), float(data["predicted_rms_mm"]))
+                       float(data["residual_rms_mm"]), float(data["predicted_rms_mm"]),
+                       None if world is None else str(world))
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"not a verification's outcome: {exc}") from None
 
@@ -225,13 +290,15 @@ class Verify:
     :meth:`run` makes the :class:`Verification`."""
 
     def __init__(self, estimate: Estimate, readings: Measurements,
-                 conditions: Conditions | None = None) -> None:
+                 conditions: Conditions | None = None, *, check_world: bool = False) -> None:
         _check_design(estimate, readings)
         self.estimate, self.readings, self.conditions = estimate, readings, conditions
+        self.check_world = check_world
 
     def run(self) -> Verification:
         """:func:`verify` of the readings."""
-        return verify(self.estimate, self.readings, self.conditions)
+        return verify(self.estimate, self.readings, self.conditions,
+                      check_world=self.check_world)
 
 
 def _check_design(est: Estimate, data: Measurements) -> None:
@@ -239,11 +306,12 @@ def _check_design(est: Estimate, data: Measurements) -> None:
         raise ValueError("the readings are of another design than the estimate's machine")
 
 
-def verify(est: Estimate, data: Measurements, conditions: Conditions | None = None
-           ) -> Verification:
+def verify(est: Estimate, data: Measurements, conditions: Conditions | None = None, *,
+           check_world: bool = False) -> Verification:
     """Hold the verification readings ``data`` (taken under ``conditions``, default the
-    estimate's) against the estimate ``est``'s prediction; ``ValueError`` when they are
-    of another design, or too few to test."""
+    estimate's) against the estimate ``est``'s prediction; ``check_world``: and test
+    whether they show a world worse than ``conditions`` (:func:`world_test`).
+    ``ValueError`` when they are of another design, or too few to test."""
     _check_design(est, data)
     if conditions is None:
         conditions = Conditions.from_dict(est.conditions) if est.conditions else (
@@ -303,6 +371,12 @@ def verify(est: Estimate, data: Measurements, conditions: Conditions | None = No
     reason = (f"the compensated machine reads as the estimate predicts ({verdict})"
               if passed else f"the machine does not read as the estimate predicts "
               f"({verdict}); re-calibrate, or look for a stand that moved")
+    world = world_test(est, data, conditions) if check_world else None
+    if world:
+        reason = (f"{reason}; but the readings show a world worse than the stated one, "
+                  f"so the estimate's error bars are too narrow: {world}"
+                  if passed else f"{reason}; {world}")
+        passed = False
     first = {}
     for k, m in enumerate(design.mounting):
         first.setdefault(int(m), k)
@@ -314,4 +388,15 @@ def verify(est: Estimate, data: Measurements, conditions: Conditions | None = No
                      "after_mm": float(values[k] - values[ref]),
                      "predicted_mm": float(predicted[k] - predicted[ref]),
                      "residual_mm": float(residual[k])})
-    return Verification(passed, reason, chi2, dof, rows, rms, expected)
+    return Verification(passed, reason, chi2, dof, rows, rms, expected, world)
+
+
+def world_test(est: Estimate, data: Measurements, conditions: Conditions) -> str:
+    """The words of the test that the verification readings ``data`` show a world worse
+    than ``conditions`` (the warning of kind ``world`` of their ``full`` fit told them, at
+    the estimate's noise), or "" when they do not.  ``ValueError`` when that fit fails."""
+    [fitted] = for_study("full", est.sigma, conditions, world_check=True).fit_many([data])
+    if isinstance(fitted, Exception):
+        raise ValueError(f"the verification's readings could not be fitted to test the "
+                         f"world: {fitted}")
+    return next((w for w in fitted.warnings if w.startswith("world:")), "")
