@@ -151,9 +151,9 @@ def place_words(spec: GaugeSpec, design: MachineDesign) -> str:
               "when pressed shows it: write what it shows")
     if spec.part == Part.BAR:
         leg = LEG_NAMES[spec.leg]
-        where = (f"on the {leg} leg's parallelogram, on the one of its two bars the picture's "
-                 f"arrow points at (the bar at {'+' if spec.bar > 0 else '-'}d/2, d = "
-                 f"{design.d:g} mm the distance between the bars), "
+        where = (f"on the {leg} leg's parallelogram, on its bar at "
+                 f"{'+' if spec.bar > 0 else '-'}d/2 (the picture of a leg's two bars names "
+                 f"each; d = {design.d:g} mm the distance between the bars), "
                  f"{spec.at * design.L:.0f} mm along the bar from "
                  f"the centre of its platform-end hinge ({spec.at:g} of L = {design.L:g} mm), "
                  "on the bar's flat face")
