@@ -24,7 +24,9 @@ Score = Callable[[Any, Path], dict[str, float]]
 def add_options(parser: argparse.ArgumentParser, *, steps: int, envs: int, envs_help: str,
                 budget: float, budget_help: str, every: int, out: str) -> None:
     """The options every training script takes, with the script's own defaults."""
-    parser.add_argument("--steps", type=int, default=steps, help="training steps")
+    parser.add_argument("--steps", type=int, default=steps,
+                        help="training steps (PPO trains in whole rollouts of its n_steps "
+                             "per env, so the count is rounded up to a whole number of them)")
     parser.add_argument("--max-minutes", type=float, default=0.0,
                         help="end training after this many minutes, evaluations included "
                              "(0: no limit; the curve says how many steps were done)")
