@@ -24,10 +24,11 @@ from __future__ import annotations
 
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
-from calibrators.agents.base import Agent, action, register
+from calibrators.agents.base import action, register
+from calibrators.agents.instrument_first import GAUGES as GAUGES
+from calibrators.agents.instrument_first import InstrumentFirst
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import MachineParams
@@ -47,8 +48,6 @@ OVERSHOOT_DEG: float = 7.5
 #: The planes, as the pairs of world axes they span, each run anticlockwise as seen from
 #: the third axis' positive side (ISO 230-4's XY, YZ, ZX).
 PLANES: tuple[tuple[int, int], ...] = ((0, 1), (1, 2), (2, 0))
-#: The agent whose experiment follows with the time left.
-GAUGES: str = "active"
 
 
 def circle_postures(design: MachineDesign, plane: tuple[int, int], clockwise: bool
@@ -88,29 +87,12 @@ def circle_steps(stands: int, design: MachineDesign) -> list[dict[str, Any]]:
 
 
 @register
-class BallbarAgent(Agent):
+class BallbarAgent(InstrumentFirst):
     """ISO 230-4's circles with the ballbar, then :data:`GAUGES` with the time left (see
     the module docstring)."""
 
     name = "ballbar"
     needs_instruments = ("ballbar",)
 
-    def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
-              rng: np.random.Generator) -> None:
-        super().reset(env, observation, rng)
-        owned = getattr(self.env, "instruments", ())
-        if "ballbar" not in owned:
-            raise ValueError(f"agent '{self.name}' needs a lab with the ballbar "
-                             f"(instruments {list(owned)})")
-        from calibrators.agents.names import get_agent  # (names imports this module)
-        self.queue = circle_steps(len(observation["slot"]), self.env.design)
-        self.inner = get_agent(GAUGES)
-        self.started = False
-
-    def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
-        if self.queue:
-            return self.queue.pop(0)
-        if not self.started:
-            self.inner.reset(self.env, observation, self.rng)
-            self.started = True
-        return self.inner.act(observation, info)
+    def programme(self, observation: dict[str, np.ndarray]) -> list[dict[str, Any]]:
+        return circle_steps(len(observation["slot"]), self.env.design)

@@ -26,10 +26,11 @@ from __future__ import annotations
 
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
-from calibrators.agents.base import Agent, action, register
+from calibrators.agents.base import action, register
+from calibrators.agents.instrument_first import GAUGES as GAUGES
+from calibrators.agents.instrument_first import InstrumentFirst
 from orthoglide_env.lab.operations import TIME, Op
 from orthoglide_env.model.design import MachineDesign
 
@@ -48,8 +49,6 @@ OVERSHOOT_MM: float = 3.0
 #: geometry still needs the gauges, and a quarter of an hour buys most of what active's
 #: first readings buy.
 GAUGE_SHARE: float = 0.25
-#: The agent whose experiment follows with the time left.
-GAUGES: str = "active"
 
 
 def targets_of(design: MachineDesign) -> np.ndarray:
@@ -110,33 +109,14 @@ def drive_steps(stands: int, design: MachineDesign, runs: int) -> list[dict[str,
 
 
 @register
-class Iso230Agent(Agent):
+class Iso230Agent(InstrumentFirst):
     """The drives by ISO 230-2 with the interferometer, then :data:`GAUGES` with the
     time left (see the module docstring)."""
 
     name = "iso230-2"
     needs_instruments = ("interferometer",)
 
-    def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
-              rng: np.random.Generator) -> None:
-        super().reset(env, observation, rng)
-        missing = [n for n in self.needs_instruments
-                   if n not in getattr(self.env, "instruments", ())]
-        if missing:
-            raise ValueError(f"agent '{self.name}' needs a lab with the {missing[0]} "
-                             f"(instruments {list(getattr(self.env, 'instruments', ()))})")
-        from calibrators.agents.names import get_agent  # (names imports this module)
-        design = self.env.design
+    def programme(self, observation: dict[str, np.ndarray]) -> list[dict[str, Any]]:
         self.runs = runs_for(float(self.env.budget_s) - float(observation["time"][0]),
-                             design)
-        self.queue = drive_steps(len(observation["slot"]), design, self.runs)
-        self.inner = get_agent(GAUGES)
-        self.started = False
-
-    def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
-        if self.queue:
-            return self.queue.pop(0)
-        if not self.started:
-            self.inner.reset(self.env, observation, self.rng)
-            self.started = True
-        return self.inner.act(observation, info)
+                             self.env.design)
+        return drive_steps(len(observation["slot"]), self.env.design, self.runs)
