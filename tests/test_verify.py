@@ -134,36 +134,20 @@ def _verified(truth: str, stated: str, agent: str, machines: int, budget_s: floa
     ``truth`` fitted by ``full`` told ``stated``, played again through the compensated
     controller on the same machine in ``truth`` (another noise stream), and verified told
     ``stated``: the chi-square's verdict and the world test's words."""
-    from contextlib import closing
-
-    import gymnasium as gym
-
-    from calibrators.agents import get_agent
-    from calibrators.estimators.catalogue import for_study
     from calibrators.study.compare import Config, agent_episodes
-    from calibrators.study.episodes import machine_seed, run_episode
-    from calibrators.study.labs import lab_id
-    from calibrators.workflow.verify import CompensatedAgent, verify, world_test
+    from calibrators.study.verifications import verifications
     from orthoglide_env.world.conditions import Conditions
-    from orthoglide_env.world.machine_file import machine_dict
 
     config = Config(agents=(agent,), estimators=("full",), conditions=Conditions(truth),
                     seed=1, sigma=0.02, budget_s=budget_s)
     episodes = agent_episodes(config, agent, list(range(machines)))
-    told = Conditions(stated)
-    estimates = for_study("full", episodes[0].run.sigma, told, "realistic").fit_many(
-        [e.run.measurements for e in episodes])
-    kwargs = config.lab_kwargs(get_agent(agent))
     out = []
-    with closing(gym.make(lab_id(kwargs), **kwargs)) as lab:
-        for e, est in zip(episodes, estimates, strict=True):
-            player = CompensatedAgent(get_agent(agent), est)
-            played = run_episode(lab, player, machine_seed(1, e.machine) + 500_000,
-                                 {"machine": machine_dict(e.run.truth, e.run.world)})
-            readings = player.readings(played)
-            assert all(m.posture.endswith("-compensated") or m.is_zero
-                       for m in readings.items)
-            out.append((verify(est, readings, told).passed, world_test(est, readings, told)))
+    for result in verifications(stated, agent, episodes, config):
+        assert not isinstance(result, Exception), result
+        verification, world, readings = result
+        assert all(m.posture.endswith("-compensated") or m.is_zero
+                   for m in readings.items)
+        out.append((verification.passed, world))
     return out
 
 
