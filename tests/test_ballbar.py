@@ -16,6 +16,7 @@ import pytest
 import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.agents.ballbar import LENGTH_MM, circle_postures, circle_steps
+from calibrators.agents.base import action
 from calibrators.measurements import Measurements
 from calibrators.study.episodes import measurements_of
 from calibrators.study.labs import lab_kwargs
@@ -37,23 +38,15 @@ CENTRE = inverse(MachineParams(design=PROTOTYPE), np.full(3, -20.0))
 SIGMA_UM = ballbar.sigma(Conditions("lab")) * 1e3
 
 
-def _act(op: Op, rho: np.ndarray | None = None, stand: int = 0, bar: int | None = None
-         ) -> dict:
-    out = {"op": int(op), "rho": np.zeros(3) if rho is None else rho, "stand": stand,
-           "slot": 0}
-    if bar is not None:
-        out["bar"] = bar
-    return out
-
 
 def _circle(env: gym.Env, seed: int, plane: tuple[int, int] = (0, 1)) -> list[dict]:
     """Lift the stands, set the pivot up at :data:`CENTRE` and run one anticlockwise
     circle: every observation from the set-up on."""
     obs, _ = env.reset(seed=seed)
     for k in range(len(obs["slot"])):
-        env.step(_act(Op.LIFT, stand=k))
-    seen = [env.step(_act(Op.PIVOT, CENTRE, bar=BAR))[0]]
-    seen += [env.step(_act(Op.MOVE, rho))[0]
+        env.step(action(Op.LIFT, stand=k))
+    seen = [env.step(action(Op.PIVOT, CENTRE, bar=BAR))[0]]
+    seen += [env.step(action(Op.MOVE, rho))[0]
              for rho in circle_postures(PROTOTYPE, plane, False)]
     return seen
 
@@ -72,7 +65,7 @@ def test_v1_keeps_its_spaces_and_refuses_the_ballbar():
     v2 = gym.make(V2, backend="exact", conditions="ideal")
     assert v2.action_space["op"].n == len(Op) and "bar" in v2.action_space.spaces
     v2.reset(seed=0)
-    _, _, _, _, info = v2.step(_act(Op.PIVOT, CENTRE, bar=BAR))
+    _, _, _, _, info = v2.step(action(Op.PIVOT, CENTRE, bar=BAR))
     assert "no ballbar" in info["refused"]
 
 
@@ -153,15 +146,15 @@ def test_the_bar_refuses_a_move_outside_its_travel():
     assert seen[-1]["ballbar_in"][0] == 1
     time = env.unwrapped._batch.time.copy()
     with pytest.raises(ValueError, match="outside its travel") as info:
-        env.step(_act(Op.MOVE, np.zeros(3)))
+        env.step(action(Op.MOVE, np.zeros(3)))
     assert "\n" not in str(info.value)
     np.testing.assert_array_equal(env.unwrapped._batch.time, time)
-    obs = env.step(_act(Op.LIFT))[0]
+    obs = env.step(action(Op.LIFT))[0]
     assert obs["ballbar_in"][0] == 0
-    assert env.step(_act(Op.MOVE, np.zeros(3)))[0]["ballbar_valid"][0] == 0
-    env.step(_act(Op.PIVOT, CENTRE, bar=BAR))
+    assert env.step(action(Op.MOVE, np.zeros(3)))[0]["ballbar_valid"][0] == 0
+    env.step(action(Op.PIVOT, CENTRE, bar=BAR))
     with pytest.raises(ValueError, match="outside its travel"):
-        env.step(_act(Op.MOVE, np.zeros(3)))
+        env.step(action(Op.MOVE, np.zeros(3)))
 
 
 def test_a_full_fit_of_circles_sees_the_geometry():

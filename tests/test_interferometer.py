@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import orthoglide_env
+from calibrators.agents.base import action
 from orthoglide_env.instruments import interferometer
 from orthoglide_env.lab.operations import TIME, V0_OPS, Op
 from orthoglide_env.model.design import PROTOTYPE
@@ -19,26 +20,18 @@ OWNED = ["dial", "interferometer"]
 TARGETS = (-90.0, -50.0, -10.0, 30.0, 55.0, 30.0, -10.0, -50.0, -90.0)
 
 
-def _act(op: Op, rho: np.ndarray | None = None, stand: int = 0, axis: int | None = None
-         ) -> dict:
-    out = {"op": int(op), "rho": np.zeros(3) if rho is None else rho, "stand": stand,
-           "slot": 0}
-    if axis is not None:
-        out["axis"] = axis
-    return out
-
 
 def _run(env: gym.Env, axis: int, seed: int = 3) -> tuple[list[dict], list[dict]]:
     """Lift the stands, set the interferometer up along ``axis`` and drive it through
     :data:`TARGETS`: every observation and info from the set-up on."""
     obs, _ = env.reset(seed=seed)
     for k in range(len(obs["slot"])):
-        env.step(_act(Op.LIFT, stand=k))
-    seen = [env.step(_act(Op.ALIGN, axis=axis))]
+        env.step(action(Op.LIFT, stand=k))
+    seen = [env.step(action(Op.ALIGN, axis=axis))]
     for value in TARGETS:
         rho = np.zeros(3)
         rho[axis] = value
-        seen.append(env.step(_act(Op.MOVE, rho)))
+        seen.append(env.step(action(Op.MOVE, rho)))
     return [s[0] for s in seen], [s[4] for s in seen]
 
 
@@ -52,7 +45,7 @@ def test_v0_keeps_its_spaces_and_refuses_the_interferometer():
                  instruments=OWNED)
     env.reset(seed=0)
     with pytest.raises(ValueError, match="op"):
-        env.step(_act(Op.ALIGN, axis=0))
+        env.step(action(Op.ALIGN, axis=0))
 
 
 @pytest.mark.parametrize(("names", "words"), [
@@ -76,7 +69,7 @@ def test_the_tracker_flag_and_the_tracker_instrument_say_the_same():
 def test_align_without_the_interferometer_is_refused():
     env = gym.make(V1, backend="exact", conditions="ideal")
     env.reset(seed=0)
-    *_, info = env.step(_act(Op.ALIGN, axis=0))
+    *_, info = env.step(action(Op.ALIGN, axis=0))
     assert "no interferometer" in info["refused"]
     assert info["step_time_s"] == TIME.lift_s
 
@@ -133,16 +126,16 @@ def test_times_follow_the_time_table():
     env = gym.make(V1, backend="exact", conditions="ideal", instruments=OWNED)
     env.reset(seed=0)
     rho = np.array([20.0, 0.0, 0.0])
-    *_, info = env.step(_act(Op.MOVE, rho))
+    *_, info = env.step(action(Op.MOVE, rho))
     assert info["step_time_s"] == pytest.approx(float(TIME.move(np.zeros(3), rho)))
-    *_, info = env.step(_act(Op.ALIGN, axis=0))
+    *_, info = env.step(action(Op.ALIGN, axis=0))
     assert info["step_time_s"] == pytest.approx(
         float(TIME.move(rho, np.zeros(3))) + TIME.interferometer_setup_s
         + TIME.interferometer_soak_s)
-    *_, info = env.step(_act(Op.MOVE, rho))
+    *_, info = env.step(action(Op.MOVE, rho))
     assert info["step_time_s"] == pytest.approx(
         float(TIME.move(np.zeros(3), rho)) + TIME.interferometer_target_s)
-    *_, info = env.step(_act(Op.ALIGN, axis=2))  # the sensor has settled: no soak
+    *_, info = env.step(action(Op.ALIGN, axis=2))  # the sensor has settled: no soak
     assert info["step_time_s"] == pytest.approx(
         float(TIME.move(rho, np.zeros(3))) + TIME.interferometer_setup_s)
     records = [r for r in env.unwrapped.records if isinstance(
@@ -178,14 +171,14 @@ def test_a_batch_reads_what_lone_labs_read():
         rho = np.diag(np.full(n, value))
         steps.append({"op": np.full(n, Op.MOVE), "rho": rho, "stand": np.zeros(n, int),
                       "slot": np.zeros(n, int)})
-    for action in steps:
-        obs, *_ = envs.step(action)
+    for step in steps:
+        obs, *_ = envs.step(step)
         batched.append(obs["interferometer"][:, 0].copy())
     for i in range(n):
         env = gym.make(V1, backend="exact", conditions="lab", instruments=OWNED)
         env.reset(seed=11 + i)
-        for action, expected in zip(steps, batched, strict=True):
-            one = {k: v[i] for k, v in action.items()}
+        for step, expected in zip(steps, batched, strict=True):
+            one = {k: v[i] for k, v in step.items()}
             obs, *_ = env.step(one)
             assert obs["interferometer"][0] == expected[i]
         assert env.unwrapped.records == envs.unwrapped.records[i]

@@ -72,7 +72,7 @@ def circle_steps(stands: int, design: MachineDesign) -> list[dict[str, Any]]:
     steps = [action(Op.LIFT, stand=k) for k in range(stands)]
     nominal = MachineParams(design=design)
     centre = inverse(nominal, np.full(3, CENTRE_MM))
-    steps.append({**action(Op.PIVOT, centre), "bar": BALLBAR_LENGTHS_MM.index(LENGTH_MM)})
+    steps.append(action(Op.PIVOT, centre, bar=BALLBAR_LENGTHS_MM.index(LENGTH_MM)))
     # The bar goes in at the first run's overshoot start and stays in through every run:
     # each point lies on the sphere of its length about the pivot (a 15 degree chord
     # leaves it 0.4 mm short of its length, inside its travel).

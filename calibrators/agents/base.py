@@ -57,8 +57,9 @@ AGENT_REGISTRY: Registry[Agent] = Registry("agent", "calibrators.agents")
 AGENTS = AGENT_REGISTRY.classes
 register = AGENT_REGISTRY.register
 available = AGENT_REGISTRY.available
-def action(op: Op, rho: np.ndarray | None = None, stand: int = 0, slot: int = 0
-           ) -> dict[str, Any]:
-    """An action of the lab env (unused fields at harmless values)."""
+def action(op: Op, rho: np.ndarray | None = None, stand: int = 0, slot: int = 0,
+           **keys: int) -> dict[str, Any]:
+    """An action of the lab env (unused fields at harmless values); ``keys``: those of a
+    later version's operations (``axis`` of ``-v1``'s align, ``bar`` of ``-v2``'s pivot)."""
     return {"op": int(op), "rho": np.zeros(3) if rho is None else np.asarray(rho, float),
-            "stand": int(stand), "slot": int(slot)}
+            "stand": int(stand), "slot": int(slot), **{k: int(v) for k, v in keys.items()}}

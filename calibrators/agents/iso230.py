@@ -98,7 +98,7 @@ def drive_steps(stands: int, design: MachineDesign, runs: int) -> list[dict[str,
     steps = [action(Op.LIFT, stand=k) for k in range(stands)]
     targets = targets_of(design)
     for axis in range(3):
-        steps.append({**action(Op.ALIGN), "axis": axis})
+        steps.append(action(Op.ALIGN, axis=axis))
         for _ in range(runs):
             for value in run_postures(targets):
                 rho = np.zeros(3)
