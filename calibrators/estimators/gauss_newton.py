@@ -301,10 +301,11 @@ class GaussNewtonCalibrator(Estimator):
         estimate, not raised.  Each fit's faults are named in its warnings
         (:mod:`calibrators.estimators.faults`); a knocked stand or a skipped row is
         refitted with its readings repaired."""
-        out = self._fit_all(datas)
+        layouts: list[tuple[ReadingLayout, np.ndarray] | None] = []
+        out = self._fit_all(datas, layouts=layouts)
         for k, est in enumerate(out):
             if isinstance(est, Estimate):
-                out[k] = self._with_faults(est)
+                out[k] = self._with_faults(est, layouts[k])
             elif isinstance(est, RuntimeError):
                 out[k] = self._without_slips(datas[k], est)
         return out
@@ -326,14 +327,16 @@ class GaussNewtonCalibrator(Estimator):
             est.warnings = [f.text for f in found] + est.warnings
         return est
 
-    def _with_faults(self, est: Estimate) -> Estimate:
+    def _with_faults(self, est: Estimate,
+                     layout: tuple[ReadingLayout, np.ndarray] | None = None) -> Estimate:
         """``est`` with the faults its readings show named first in its warnings, refitted
-        on the readings repaired when one is repairable."""
+        on the readings repaired when one is repairable (``layout``: the layout and values
+        of ``est``'s readings, when the caller has them)."""
         texts: list[str] = []
         named: set[tuple[str, str]] = set()
         # Each pass repairs one fault and fits again; the next finds what is left.
         for _ in range(MAX_REPAIRS + 1):
-            found = [f for f in self._faults(est) if (f.kind, f.where) not in named]
+            found = [f for f in self._faults(est, layout) if (f.kind, f.where) not in named]
             texts += [f.text for f in found]
             named |= {(f.kind, f.where) for f in found}
             repaired = next((f.repaired for f in found if f.repaired is not None), None)
@@ -344,12 +347,14 @@ class GaussNewtonCalibrator(Estimator):
                 texts.append(f"{PREFIX}: the refit on the repaired readings failed ({refit}); "
                              "this estimate is of the readings as written")
                 break
-            est = refit
+            est, layout = refit, None
         est.warnings = texts + est.warnings
         return est
 
-    def _faults(self, est: Estimate) -> list[Finding]:
-        """The faults ``est``'s readings show (:func:`find_faults`)."""
+    def _faults(self, est: Estimate, layout: tuple[ReadingLayout, np.ndarray] | None = None
+                ) -> list[Finding]:
+        """The faults ``est``'s readings show (:func:`find_faults`; ``layout``: see
+        :meth:`_with_faults`)."""
         used = np.ones(len(est.residuals), dtype=bool)
         used[est.outliers] = False
         residuals = est.residuals.copy()
@@ -357,16 +362,19 @@ class GaussNewtonCalibrator(Estimator):
         # A model of the paper's six errors alone cannot fit a machine with more: its
         # residuals step and drift where nothing went wrong.
         structural = any(n in ERROR_NAMES and n not in PARAM_NAMES for n in est.names)
-        design, values = layout_and_values(est.readings, zeros=False)
+        design, values = (layout_and_values(est.readings, zeros=False) if layout is None
+                          else layout)
         return find_faults(est.readings, residuals, used, est.outliers,
                            weighting_sigma(self.sigma), structural=structural,
                            drives=drive_sensitivities(design, values, est.theta, used)
                            if structural else None)
 
-    def _fit_all(self, datas: list[Measurements], zeros: bool = True
+    def _fit_all(self, datas: list[Measurements], zeros: bool = True,
+                 layouts: list[tuple[ReadingLayout, np.ndarray] | None] | None = None
                  ) -> list[Estimate | Exception]:
         """The fits of :meth:`fit_many`, before their faults are looked for (``zeros``:
-        of :func:`layout_and_values`)."""
+        of :func:`layout_and_values`; ``layouts`` is filled with each one's layout and
+        values, None where they were refused)."""
         out: list[Estimate | Exception] = [ValueError("not fitted")] * len(datas)
         auto = self.conditions == AUTO
         conditions = (Conditions(BASE_WORLD if auto else self.conditions)
@@ -381,7 +389,7 @@ class GaussNewtonCalibrator(Estimator):
             machine = (datas[0].design if datas else MachineParams().design)
             node_count(machine.rho_max - machine.rho_min, node_spacing)
         groups: dict[tuple, list[int]] = {}
-        prepared = []
+        prepared = [] if layouts is None else layouts
         for k, data in enumerate(datas):
             try:
                 design, values = layout_and_values(data, zeros)

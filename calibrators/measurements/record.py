@@ -144,12 +144,21 @@ class Measurement:
         from a file needs (a tenth of a millisecond each on a large sweep's notebooks)
         would find nothing."""
         out = object.__new__(cls)
-        for name, value in (("gauge", gauge), ("posture", posture or rho_label(rho)),
-                            ("repetition", repetition), ("reading", reading), ("rho", rho),
-                            ("mounting", mounting), ("line", None), ("time_s", time_s),
-                            ("temperature_c", temperature_c), ("step", None),
-                            ("stand", None)):
-            object.__setattr__(out, name, value)
+        # Each slot's own setter, called directly and not in a loop: half the cost of
+        # ``object.__setattr__`` by name (a sweep records tens of thousands of readings).
+        (set_gauge, set_posture, set_repetition, set_reading, set_rho, set_mounting,
+         set_line, set_time, set_temperature, set_step, set_stand) = _RECORDED_SETTERS
+        set_gauge(out, gauge)
+        set_posture(out, posture or rho_label(rho))
+        set_repetition(out, repetition)
+        set_reading(out, reading)
+        set_rho(out, rho)
+        set_mounting(out, mounting)
+        set_line(out, None)
+        set_time(out, time_s)
+        set_temperature(out, temperature_c)
+        set_step(out, None)
+        set_stand(out, None)
         return out
 
     @property
@@ -406,3 +415,7 @@ class _Readings:
         self.items.append(m)
 
 
+#: The setters of the slots :meth:`Measurement.recorded` fills, in its order.
+_RECORDED_SETTERS = tuple(getattr(Measurement, name).__set__ for name in (
+    "gauge", "posture", "repetition", "reading", "rho", "mounting", "line", "time_s",
+    "temperature_c", "step", "stand"))

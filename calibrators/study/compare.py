@@ -202,8 +202,10 @@ def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
     good = [k for k, est in enumerate(estimates) if not isinstance(est, Exception)]
     fitted = [estimates[k] for k in good]
     z_scores = iter(machine_z_scores(fitted, [episodes[k].run.truth for k in good]))  # type: ignore[arg-type]
-    reports = iter(_score(episodes, estimates))
-    predicted = iter(predicted_rigid_mm(fitted).tolist() if good else [])  # type: ignore[arg-type]
+    machines = _machines(episodes, estimates)
+    reports = iter(_score(episodes, estimates, machines))
+    predicted = iter(predicted_rigid_mm(fitted, [machines[k] for k in good]).tolist()  # type: ignore[arg-type]
+                     if good else [])
     out = []
     for episode, est, curve in zip(episodes, estimates, curves, strict=True):
         run, count = episode.run, len(episode.run.records)
@@ -249,13 +251,20 @@ def _curves(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
     return points
 
 
-def _score(episodes: list[_Episode], estimates: list[Estimate | Exception]
-           ) -> list[ScoreReport]:
-    """Each estimate's machine, with what its controller compensates of the drives' lead
-    error, scored against its episode's truth in one batched solve; a failed estimate is
-    scored as the nominal machine."""
-    machines = [MachineParams(design=e.run.truth.design) if isinstance(est, Exception)
-                else est.machine for e, est in zip(episodes, estimates, strict=True)]
+def _machines(episodes: list[_Episode], estimates: list[Estimate | Exception]
+              ) -> list[MachineParams]:
+    """Each estimate's machine, the nominal machine for a failed estimate."""
+    return [MachineParams(design=e.run.truth.design) if isinstance(est, Exception)
+            else est.machine for e, est in zip(episodes, estimates, strict=True)]
+
+
+def _score(episodes: list[_Episode], estimates: list[Estimate | Exception],
+           machines: list[MachineParams] | None = None) -> list[ScoreReport]:
+    """Each estimate's machine (``machines``: :func:`_machines`, when the caller has them),
+    with what its controller compensates of the drives' lead error, scored against its
+    episode's truth in one batched solve; a failed estimate is scored as the nominal
+    machine."""
+    machines = _machines(episodes, estimates) if machines is None else machines
     corrections = [est.lead_correction if isinstance(est, Estimate) and est.fits_lead else None
                    for est in estimates]
     return score_batch(machines, [e.run.truth for e in episodes], before=_before(episodes),
