@@ -231,6 +231,16 @@ def carriage_gradients(machine: MachineParams, rho: np.ndarray, weights: np.ndar
     ``CARRIAGE_COLUMNS[legs]`` of the 27 (the others are zero).
 
     ``A_i = o_i + (L + r + drho_i + rho_i) u_i``: each column in closed form."""
+    parts = _carriage_parts(machine, rho, weights, legs)
+    lead = np.broadcast_shapes(*(part.shape[:-1] for part in parts))
+    return np.concatenate([np.broadcast_to(part, (*lead, part.shape[-1])) for part in parts],
+                          axis=-1)
+
+
+def _carriage_parts(machine: MachineParams, rho: np.ndarray, weights: np.ndarray,
+                    legs: np.ndarray | None) -> list[np.ndarray]:
+    """:func:`carriage_gradients`' columns by kind, each broadcasting to its shape: the
+    encoder offset's (..., K, 1), the two tilts' (..., K, 2) and the two offsets'."""
     g, rho = geometry(machine, rho)
     weights = np.asarray(weights, dtype=float)
     extra = rho.ndim - 1 - len(machine.batch_shape)
@@ -246,11 +256,8 @@ def carriage_gradients(machine: MachineParams, rho: np.ndarray, weights: np.ndar
         u = np.take_along_axis(u, legs[..., None], axis=-2)
         du = np.take_along_axis(du, legs[..., None, None], axis=-3)
         across = np.swapaxes(R_LEG[legs][..., 1:], -1, -2)  # (..., K, 2, 3)
-    parts = [dot(weights, u)[..., None], s[..., None] * dot(weights[..., None, :], du),
-             dot(weights[..., None, :], across)]
-    lead = np.broadcast_shapes(*(part.shape[:-1] for part in parts))
-    return np.concatenate([np.broadcast_to(part, (*lead, part.shape[-1])) for part in parts],
-                          axis=-1)
+    return [dot(weights, u)[..., None], s[..., None] * dot(weights[..., None, :], du),
+            dot(weights[..., None, :], across)]
 
 
 def tcp_sensitivity(machine: MachineParams, rho: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -278,7 +285,15 @@ def tcp_sensitivity_factors(machine: MachineParams, rho: np.ndarray, p: np.ndarr
     g, _ = geometry(machine, p)
     legs = np.arange(3)
     row = np.empty((*v.shape[:-2], 27))
-    row[..., CARRIAGE_COLUMNS] = 2 * carriage_gradients(machine, rho, v)
+    # CARRIAGE_COLUMNS' entries (:func:`carriage_gradients`) by kind, written as slices:
+    # the encoder offsets', then each leg's two tilts and two offsets in turn (joining
+    # them and a fancy-indexed write cost as much as computing them).
+    offset, tilts, shifts = _carriage_parts(machine, rho, v, None)  # (..., 3 legs, 1|2)
+    shape = row.shape[:-1]
+    row[..., DRHO_COLUMN:DRHO_COLUMN + 3] = 2 * offset[..., 0]
+    row[..., TILT_COLUMN:TILT_COLUMN + 6] = (2 * tilts).reshape(*shape, 6)
+    row[..., OFFSET_COLUMN:OFFSET_COLUMN + 6] = np.broadcast_to(
+        2 * shifts, (*shape, 3, 2)).reshape(*shape, 6)
     row[..., LENGTH_COLUMN + legs] = 2 * g.lengths
     row[..., ATTACH_COLUMN + 3 * legs[:, None] + legs] = -2 * v
     return inverse_3x3(2 * v), row
