@@ -208,8 +208,10 @@ class Pricer(Belief):
             ceiling = bound / seconds[live]
             order = np.argsort(-ceiling, kind="stable")
             if self.world is not None:
-                moves = np.union1d(live[order[:wanted]],
-                                   np.intersect1d(live, [self.table.zero]))
+                zero = self.table.zero
+                # Zero when it is live: a test of its own entries, not a search of ``live``.
+                moves = np.union1d(live[order[:wanted]], np.array(
+                    [zero] if fits[zero] and reads[:, zero].any() else [], dtype=live.dtype))
                 gain[moves] = self._price(reads, seconds, moves)
                 rate[moves] = gain[moves] / seconds[moves]
                 return rate, PricedMoves(gain, seconds, after, reads)
