@@ -18,6 +18,7 @@ scales its covariance by chi2/dof.
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -59,11 +60,15 @@ class BatchFit:
     considered_gain: np.ndarray
 
     def split(self) -> list[BatchFit]:
-        """One fit per machine (each a batch of one)."""
+        """One fit per machine (each a batch of one), with its chi-square test's verdict
+        (:attr:`misfit`, taken for the whole batch at once)."""
         shared = ("free", "scale", "prior", "sigma")
-        return [replace(self, **{f.name: getattr(self, f.name)[m:m + 1] for f in fields(self)
-                                 if f.name not in shared})
-                for m in range(len(self.theta))]
+        out = [replace(self, **{f.name: getattr(self, f.name)[m:m + 1] for f in fields(self)
+                                if f.name not in shared})
+               for m in range(len(self.theta))]
+        for m, part in enumerate(out):
+            part.__dict__["misfit"] = self.misfit[m:m + 1]
+        return out
 
     @property
     def chi2_dof(self) -> np.ndarray:
@@ -71,9 +76,10 @@ class BatchFit:
         return np.divide(self.chi2, self.dof, out=np.full(np.shape(self.chi2), np.nan),
                          where=self.dof > 0)
 
-    @property
+    @cached_property
     def misfit(self) -> np.ndarray:
-        """(M,) bool: the chi-square test rejects the model at :data:`CHI2_LEVEL`."""
+        """(M,) bool: the chi-square test rejects the model at :data:`CHI2_LEVEL` (taken
+        once: a fit is not changed after it is made)."""
         return chi2_rejects(self.dof, self.chi2)
 
     @property
