@@ -37,6 +37,7 @@ The prices of moves: :mod:`calibrators.planning.pricing`; the choice among them:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
@@ -72,6 +73,15 @@ class PlannedOperation(NamedTuple):
     stand: int = 0
     slot: int = 0
     time_s: float = 0.0
+
+
+@lru_cache(maxsize=64)
+def _stand_columns(stand: int) -> np.ndarray:
+    """:meth:`Belief._columns` of ``stand``, made once."""
+    start = N_MACHINE + N_STAND * stand
+    out = np.concatenate((np.arange(N_MACHINE), np.arange(start, start + N_STAND)))
+    out.setflags(write=False)
+    return out
 
 
 @dataclass
@@ -144,8 +154,9 @@ class Belief:
 
     # -- the model of a reading -----------------------------------------------------------
     def _columns(self, stand: int) -> np.ndarray:
-        start = N_MACHINE + N_STAND * stand
-        return np.concatenate((np.arange(N_MACHINE), np.arange(start, start + N_STAND)))
+        """The state's columns (read-only) of a reading of ``stand``: the machine's errors,
+        then its mounting's stand unknowns and zero (asked for at every decision)."""
+        return _stand_columns(stand)
 
     def rows_of(self, stand: int) -> np.ndarray:
         """Rows (P, n) in mm per unit scale of a reading of ``stand`` at every posture."""
@@ -235,7 +246,9 @@ class Belief:
                 at = np.flatnonzero(open_[k])
                 spread[k, at] = self.spread_bound[k, index[at]] = self._spread(k, index[at])
             if stands.size:
-                safe, contact = reach(self.table, np.maximum(slots, 0), tip, spread, postures)
+                # Again only for the stands whose spreads were computed: the rest stand.
+                safe[stands], contact[stands] = reach(self.table, np.maximum(slots[stands], 0),
+                                                      tip[stands], spread[stands], postures)
         return safe & mounted, np.where(self.silent[:, postures], 0.0, contact) * mounted
 
     def predicted_rigid_mm(self) -> float:
