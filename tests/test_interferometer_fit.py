@@ -156,8 +156,10 @@ def test_iso230_2_plans_the_standard_and_shortens_runs_to_the_budget():
      "needs the tracker"),
     (["calibrate", "--instruments", "dial,laser"], "unknown instrument"),
     (["compare", "--instruments", "dial,step-gauge", "--machines", "1"], "not yet available"),
-    (["plan", "--instruments", "dial,interferometer", "--out", "unused"],
-     "does not yet take the interferometer")])
+    (["plan", "--agent", "iso230-2", "--instruments", "dial", "--out", "unused"],
+     "needs the interferometer"),
+    (["plan", "--verify", "unused.json", "--instruments", "dial,interferometer", "--out",
+      "unused"], "--verify plans the verification with the dial gauges")])
 def test_the_commands_refuse_a_lab_without_what_they_need(argv, words, capsys):
     from calibrators.cli import main
     assert main(argv) == 2
