@@ -30,10 +30,12 @@ CASES = {"iso230-2": (("dial", "interferometer"), 3000.0),
 SEED = 3
 
 
-def _true_lab(agent: Any, instruments: tuple[str, ...], budget: float) -> Any:
-    """A lab of a realistic machine under ``lab`` conditions, as calibrate builds it."""
-    return make_lab(agent, backend="exact", errors="realistic", gauge_sigma=0.02,
-                    gauge_resolution=0.01, budget_s=budget, conditions=LAB,
+def _true_lab(agent: Any, instruments: tuple[str, ...], budget: float,
+              sigma: float = 0.02, resolution: float = 0.01) -> Any:
+    """A lab of a realistic machine under ``lab`` conditions, as calibrate builds it, its
+    gauges of repeatability ``sigma`` and ``resolution`` (mm)."""
+    return make_lab(agent, backend="exact", errors="realistic", gauge_sigma=sigma,
+                    gauge_resolution=resolution, budget_s=budget, conditions=LAB,
                     instruments=instruments)
 
 
@@ -81,9 +83,9 @@ def test_a_sheet_filled_in_a_lab_fits_as_the_labs_own_readings(planned, tmp_path
     name, out = planned
     instruments, budget = CASES[name]
     agent = planned_agent(name)
-    # Reset with the plan's seed (0): the machine it draws is a realistic one, and the
-    # planned gauges' part makes the plan's choices from that seed's stream.
-    with closing(_true_lab(agent, instruments, budget)) as env:
+    # As the plan was made: its seed (0; the machine it draws is a realistic one) and
+    # its gauges' noise (none), from which the planned gauges' part makes its choices.
+    with closing(_true_lab(agent, instruments, budget, 0.0, 0.0)) as env:
         episode = run_episode(env, agent, 0)
     lab = measurements_of(episode.records, episode.time_s, design=PROTOTYPE)
     rows = list(csv.DictReader((out / SHEET_FILE).open()))
