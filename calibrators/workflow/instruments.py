@@ -207,8 +207,7 @@ class BallbarWork(InstrumentWork):
         return text, {"instrument": self.name, "pivot": centre, "bar_mm": length}
 
     def reading(self, spec: Any) -> str:
-        return (f"the ballbar's reading: the bar's length less {spec.length:g} mm, mm "
-                "(positive when longer)")
+        return f"the ballbar (its length less {spec.length:g} mm)"
 
     def before(self, design: MachineDesign) -> list[str]:
         rows = INSTRUMENT_ERRORS["ballbar"]

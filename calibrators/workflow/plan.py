@@ -246,8 +246,7 @@ def make_procedure(agent_name: str, budget_s: float, design: MachineDesign,
     conditions = Conditions(DEFAULT_CONDITIONS) if conditions is None else conditions
     agent = planned_agent(agent_name)
     notes = ([f"after its {'/'.join(agent.needs_instruments)} programme, the gauges' part "
-              f"is {PLANNED_GAUGES}'s plan for the time left (the agent's own "
-              f"{GAUGES} "
+              f"is {PLANNED_GAUGES}'s plan for the time left (the agent's own {GAUGES} "
               "decides as it reads: orthoglide session runs it)"]
              if isinstance(agent, InstrumentFirst) else [])
     with closing(nominal_lab(agent, design, conditions, budget_s,
