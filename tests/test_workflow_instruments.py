@@ -13,6 +13,7 @@ import pytest
 
 from calibrators.cli import main
 from calibrators.measurements import Measurements
+from calibrators.measurements.record import instrument_of
 from calibrators.study.episodes import machine_seed, measurements_of, run_episode
 from calibrators.study.labs import make_lab
 from calibrators.workflow.instruments import LASER_DEVIATION_MM, WORK
@@ -77,9 +78,10 @@ def test_the_page_shows_each_set_up_and_the_sheet_its_rows(planned) -> None:
 def test_a_sheet_filled_in_a_lab_fits_as_the_labs_own_readings(planned, tmp_path,
                                                                  capsys) -> None:
     """The plan's sheet, filled row by row with what a lab of a realistic machine read
-    playing the same procedure, is what that lab wrote down: `fit --plan` reads it back
-    to the same estimate as the lab's readings (bit for bit: nothing is lost in the
-    sheet's columns)."""
+    playing the same procedure (a row its gauge did not read there deleted, as the page
+    says), is what that lab wrote down: `fit --plan` reads it back to the same estimate
+    as the lab's own readings of those rows (bit for bit: nothing is lost in the sheet's
+    columns)."""
     name, out = planned
     instruments, budget = CASES[name]
     agent = planned_agent(name)
@@ -88,13 +90,21 @@ def test_a_sheet_filled_in_a_lab_fits_as_the_labs_own_readings(planned, tmp_path
     with closing(_true_lab(agent, instruments, budget, 0.0, 0.0)) as env:
         episode = run_episode(env, agent, 0)
     lab = measurements_of(episode.records, episode.time_s, design=PROTOTYPE)
-    rows = list(csv.DictReader((out / SHEET_FILE).open()))
-    assert len(rows) == len(lab.items)
-    for row, m in zip(rows, lab.items, strict=True):
-        assert (row["mounting"], float(row["rho_x"]), float(row["rho_y"]),
-                float(row["rho_z"])) == (m.mounting, *m.rho)
-        row["reading_mm"] = repr(m.reading)
-        row["time_s"] = repr(m.time_s)
+    read = {(m.mounting, m.rho, m.time_s): m for m in lab.items}
+    rows = []
+    for row in csv.DictReader((out / SHEET_FILE).open()):
+        key = (row["mounting"], tuple(float(row[f"rho_{a}"]) for a in "xyz"),
+               float(row["time_s"]))
+        if key in read:
+            rows.append({**row, "reading_mm": repr(read.pop(key).reading)})
+    # The true machine's plungers leave their travel at a few postures the nominal one
+    # reads, and read at a few it does not; the instrument reads every one.
+    assert sum(r["instrument"] == instruments[1] for r in rows) == sum(
+        instrument_of(m.gauge) == instruments[1] for m in lab.items)
+    assert len(rows) > 0.9 * len(lab.items)
+    unplanned = set(map(id, read.values()))
+    lab = Measurements([m for m in lab.items if id(m) not in unplanned],
+                       experiment_time_s=lab.experiment_time_s)
     sheet = tmp_path / "filled.csv"
     with sheet.open("w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
