@@ -40,7 +40,7 @@ from calibrators.measurements import COLUMNS, Measurement, Measurements, gauge_n
 from calibrators.measurements.csv_file import instrument_cells, instrument_columns
 from calibrators.study.episodes import measurements_of, run_episode
 from calibrators.study.labs import nominal_lab, nominal_options
-from calibrators.workflow.instruments import work_of_op, work_of_spec
+from calibrators.workflow.instruments import work_of_action, work_of_op, work_of_spec
 from orthoglide_env.instruments.slots import PLATFORM_AIM, GaugeSpec, Part
 from orthoglide_env.lab.operations import DEFAULT_BUDGET_S, Op
 from orthoglide_env.model.design import MachineDesign
@@ -447,7 +447,8 @@ def check_sheet(data: Measurements, procedure: Procedure) -> None:
         if step is None:
             raise SheetError(f"{where}: step {m.step} is not in the plan (steps 1 .. "
                              f"{len(procedure.steps)})")
-        if step.action not in ("set up", "drive and read", "re-mount"):
+        if (step.action not in ("set up", "drive and read", "re-mount")
+                and work_of_action(step.action) is None):
             raise SheetError(f"{where}: step {m.step} ({step.action}) takes no reading")
         if step.slot is not None and m.gauge.slot != step.slot:
             raise SheetError(f"{where}: step {m.step} reads stand {step.stand} at "
