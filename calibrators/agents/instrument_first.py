@@ -20,7 +20,11 @@ GAUGES: str = "active"
 
 
 class InstrumentFirst(Agent):
-    """Play :meth:`programme`'s actions, then :data:`GAUGES`'s."""
+    """Play :meth:`programme`'s actions, then :attr:`gauges`'s."""
+
+    #: The agent that plays the gauges' part (a written plan takes one that decides it
+    #: at the start: :mod:`calibrators.workflow.plan`).
+    gauges: str = GAUGES
 
     def programme(self, observation: dict[str, np.ndarray]) -> list[dict[str, Any]]:
         """The fixed programme's actions, from the lab as reset (``self.env`` is set)."""
@@ -36,7 +40,7 @@ class InstrumentFirst(Agent):
                              f"(instruments {owned})")
         from calibrators.agents.names import get_agent  # (names imports the subclasses)
         self.queue = self.programme(observation)
-        self.inner = get_agent(GAUGES)
+        self.inner = get_agent(self.gauges)
         self.started = False
 
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:

@@ -197,19 +197,14 @@ def instruments_of(args: argparse.Namespace, agents: tuple[Agent, ...] = ()
     return owned
 
 
-def workflow_instruments(args: argparse.Namespace, agent: str, command: str) -> None:
-    """``--instruments`` of a workflow ``command`` (``plan``, ``session``), checked with
-    ``agent``: the sheets and prompts are the dial gauges' and the tracker's, so a lab
-    with the interferometer or the ballbar is refused in one line (:class:`UsageError`)."""
+def workflow_instruments(args: argparse.Namespace, agent: str) -> tuple[str, ...]:
+    """``--instruments`` of a workflow command (``plan``, ``session``), checked with
+    ``agent`` (:func:`instruments_of`; :class:`UsageError` in one line if bad)."""
     from calibrators.agents import get_agent
     try:
-        owned = instruments_of(args, (get_agent(agent),))
+        return instruments_of(args, (get_agent(agent),))
     except ValueError as exc:  # an unknown agent
         raise UsageError(str(exc)) from None
-    for name in ("interferometer", "ballbar"):
-        if name in owned:
-            raise UsageError(f"--instruments: {command} does not yet take the {name} (its "
-                             "sheets and prompts are to come); compare and calibrate run it")
 
 
 def conditions_of(args: argparse.Namespace, world: World | None = None,

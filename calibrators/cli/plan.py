@@ -44,8 +44,11 @@ def run(args: argparse.Namespace) -> None:
     if not args.budget > 0:
         raise UsageError(f"--budget must be a positive number of seconds, got {args.budget:g}")
     conditions = conditions_of(args, None)
-    workflow_instruments(args, args.agent, "plan")
+    instruments = workflow_instruments(args, args.agent)
     try:
+        if args.verify and set(instruments) - {"dial", "tracker"}:
+            raise UsageError("--verify plans the verification with the dial gauges: leave "
+                             "the other instruments out of --instruments")
         if args.verify:
             est = read_estimate(args.verify)
             held_design(args, est.readings.design, "estimate", args.verify)
@@ -53,7 +56,8 @@ def run(args: argparse.Namespace) -> None:
                                        budget_s=args.budget, seed=args.seed)
         else:
             planner = Plan(load_design(args.design), agent=args.agent,
-                           conditions=conditions, budget_s=args.budget, seed=args.seed)
+                           conditions=conditions, budget_s=args.budget, seed=args.seed,
+                           instruments=instruments)
         procedure = planner.run()
     except ValueError as exc:
         raise UsageError(str(exc)) from None

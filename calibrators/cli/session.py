@@ -27,7 +27,7 @@ def run(args: argparse.Namespace) -> None:
     from calibrators.study.episodes import machine_seed
     from calibrators.workflow.session import Session, parse_answer
 
-    workflow_instruments(args, args.agent, "session")
+    instruments = workflow_instruments(args, args.agent)
     out = Path(args.out)
     notebook = out / "notebook.jsonl"
     if notebook.exists() and not args.resume:
@@ -38,7 +38,8 @@ def run(args: argparse.Namespace) -> None:
     out.mkdir(parents=True, exist_ok=True)
     session = Session(args.agent, args.budget, notebook, design=load_design(args.design),
                       conditions=conditions_of(args, None),
-                      seed=machine_seed(args.seed, 0), target_mm=args.target_mm)
+                      seed=machine_seed(args.seed, 0), target_mm=args.target_mm,
+                      instruments=instruments)
 
     def say(text: str, action: dict[str, Any] | None = None) -> None:
         if args.json:
@@ -52,8 +53,10 @@ def run(args: argparse.Namespace) -> None:
     def answer(question: dict[str, Any]) -> float | None:
         prompt = (json.dumps({"ask": question}) if args.json else
                   (f"  {question['again']}\n" if "again" in question else "")
-                  + f"  stand {question['stand']} ({question['gauge']}): reading in mm "
-                  "(- for none)? ")
+                  + (f"  stand {question['stand']} ({question['gauge']}): reading"
+                     if "stand" in question else
+                     f"  {question['what']} ({question['gauge']})")
+                  + " in mm (- for none)? ")
         while True:
             print(prompt, end="\n" if args.json else "", flush=True)
             line = sys.stdin.readline()
@@ -95,7 +98,8 @@ def add(p: argparse.ArgumentParser) -> None:
                    help="go on with the session whose notebook --out holds")
     p.add_argument("--json", action="store_true",
                    help="JSON lines on stdout: {\"say\": text, \"action\": ...} per step and "
-                        "{\"ask\": {step, text, stand, gauge, rho, time_s}} per reading")
+                        "{\"ask\": {step, text, stand, gauge, rho, time_s}} per reading (an "
+                        "instrument's: instrument and what in place of stand)")
     add_design(p)
     add_conditions(p)
     add_instruments(p)

@@ -42,6 +42,11 @@ considered):
   ``sin``/``cos(2 pi y / revolution)`` (the phase is random, so the zero's offset is in
   it); each mounting is taken as its own indicator.
 
+* ``stands.dead_path``: an interferometer's dead path (:func:`dead_path_terms`): the
+  room grows the 100 mm from the drive's back end to where its count was zeroed, about
+  0.3 um per hour under ``lab``, and a set-up stays on while the gauges' experiment
+  after it reads it for hours.  The room's drift and walk are shared by every set-up.
+
 A term's *family* (:func:`term_family`, :data:`TERM_FAMILIES`) is what an estimator
 fits or considers: ``full`` fits :data:`FULL_TERMS` and considers the rest.
 
@@ -50,9 +55,7 @@ structure's growth with the room (a similarity the legs' parallelism does not se
 indicator's retrace, the drives' compliance under the platform's weight and the gauges'
 force, and the gauge block's deviation from its nominal length (a reference gauge's
 zeroing reading; its grade allows 0.2 um under ``lab``, 0.8 um in the workshop:
-:data:`~orthoglide_env.world.table.REFERENCE_DEVIATION`), and an interferometer's
-dead path: the room's drift grows the 100 mm from the drive's back end to where its count
-was zeroed, about 0.3 um per hour of a set-up under ``lab``; and with linear scales
+:data:`~orthoglide_env.world.table.REFERENCE_DEVIATION`); and with linear scales
 (``drives="scales"``), the scale's expansion against the steel's (3.5 ppm/K over the
 stroke: 0.2 um per hour of the lab's drift; its part at the room's offset is the
 grade's linear term).  A tracker's noise under
@@ -83,8 +86,11 @@ from orthoglide_env.world.truth import (
     MINUTE,
     REVOLUTION_MM,
     UM,
+    WALK_MODE_SCALE,
+    WALK_MODES,
     bar_bending,
     deflection,
+    walk_modes,
 )
 
 #: A fitted term's parameter name is its name after this.
@@ -398,6 +404,39 @@ def _reading_terms(design: ReadingLayout, values: np.ndarray, t: np.ndarray | No
                 dial_terms(values[:, rows], design.machine_design.gauge_travel, conditions)]
     if gives:
         out.append(("stands.give", give_all))
+    return out + dead_path_terms(design, t, conditions)
+
+
+def dead_path_terms(design: ReadingLayout, t: np.ndarray | None, conditions: Conditions
+                    ) -> list[tuple[str, np.ndarray]]:
+    """An interferometer's dead path under ``room``: the machine between the drive's back
+    end (``rho_min``, where the instrument counts from) and the carriage where the count
+    was zeroed grows with the room, and the material compensation, which scales what the
+    count moved, does not take it.  A set-up zeroed ``d`` mm from that end reads
+    ``d alpha (T(t) - T(t0))`` beyond the carriage's move; its zero takes ``T(t0)``.  The
+    room is one for every set-up: its drift and its walk's modes
+    (:func:`~orthoglide_env.world.truth.walk_modes`) are terms shared by them, each
+    sized by its prior (name, (M, N) pattern per unit coefficient).  In the ``stands``
+    family: the set-up's own growth, as a stand's arm's is."""
+    lasers = [(k, spec) for k, spec in enumerate(design.specs)
+              if isinstance(spec, InterferometerAxis)]
+    if not lasers or "room" not in conditions:
+        return []
+    if t is None:
+        raise ValueError(f"under the {conditions.name} conditions every reading needs its "
+                         "time (time_s) to size an interferometer's dead path")
+    machine = design.machine_design
+    alpha = _fixed("room", "expansion", conditions) * 1e-6
+    dead = np.zeros(len(design))
+    for k, spec in lasers:
+        rows = np.flatnonzero(design.mounting == k)
+        dead[rows] = alpha * (design.rho[rows[0], spec.axis] - machine.rho_min)
+    rate = np.sqrt(second_moment("room", "drift", conditions)) / HOUR
+    walk = np.sqrt(second_moment("room", "walk", conditions)) * WALK_MODE_SCALE
+    out = [("stands.dead_path.drift", dead * rate * t)]
+    modes = walk_modes(t)
+    out += [(f"stands.dead_path.walk{j}", dead * walk * modes[..., j])
+            for j in range(WALK_MODES)]
     return out
 
 

@@ -151,15 +151,28 @@ def write_csv(items: list[Measurement], path: Path) -> None:
     keep = [k for k, name in enumerate(COLUMNS)
             if name not in ("time_s", "temperature_c")
             or any(getattr(m, name) is not None for m in items)]
-    bars = any(isinstance(m.gauge, BallbarSpec) for m in items)
-    kinds = bars or any(isinstance(m.gauge, InterferometerAxis) for m in items)
+    extra = instrument_columns(items)
     with path.open("w", newline="", encoding="utf-8") as handle:
         writer = csv.writer(handle)
-        writer.writerow([COLUMNS[k] for k in keep] + ([INSTRUMENT_COLUMN] if kinds else [])
-                        + (list(BALLBAR_FIELDS) if bars else []))
-        writer.writerows([row[k] for k in keep] + ([instrument_of(m.gauge)] if kinds else [])
-                         + (_setup_cells(m) if bars else [])
+        writer.writerow([COLUMNS[k] for k in keep] + extra)
+        writer.writerows([row[k] for k in keep] + instrument_cells(m, extra)
                          for m, row in ((m, m.csv_row()) for m in items))
+
+
+def instrument_columns(items: list[Measurement]) -> list[str]:
+    """The columns a file of ``items`` carries after :data:`COLUMNS`: the ``instrument``
+    column when a reading is an interferometer's or a ballbar's, and the ballbar's set-up
+    when one is a ballbar's (none for dial gauges and the tracker: files as before)."""
+    bars = any(isinstance(m.gauge, BallbarSpec) for m in items)
+    kinds = bars or any(isinstance(m.gauge, InterferometerAxis) for m in items)
+    return ([INSTRUMENT_COLUMN] if kinds else []) + (list(BALLBAR_FIELDS) if bars else [])
+
+
+def instrument_cells(m: Measurement, columns: list[str]) -> list[str]:
+    """Reading ``m``'s cells of :func:`instrument_columns`'s ``columns``."""
+    if not columns:
+        return []
+    return [instrument_of(m.gauge)] + (_setup_cells(m) if len(columns) > 1 else [])
 
 
 def _setup_cells(m: Measurement) -> list[str]:

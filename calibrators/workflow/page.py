@@ -2,12 +2,13 @@
 
 :func:`write_page` writes into a plan's folder ``setup.png`` and ``step-N.png`` (the
 machine at Zero with the stands mounted at set-up and after each re-mount, each stand
-marked and labelled, the moved one in red), ``bars.png`` (a leg's two bars, the distance
-d between them that a stand's place "+d/2" or "-d/2" refers to, and where along a bar a
-stand's "at" is measured from), ``procedure.html``, a printable page with the stands, the
-steps, their pictures and the sheet to fill in, and ``procedure.pdf``, the same to print:
-that page typeset with the ``pdf`` extra, else drawn with matplotlib
-(:mod:`calibrators.workflow.page_pdf`).
+marked and labelled, the moved one in red; at an instrument's set-up, the machine with
+that instrument in place: :mod:`calibrators.workflow.instruments`), ``bars.png`` (a
+leg's two bars, the distance d between them that a stand's place "+d/2" or "-d/2"
+refers to, and where along a bar a stand's "at" is measured from), ``procedure.html``, a
+printable page with the stands, the steps, their pictures and the sheet to fill in, and
+``procedure.pdf``, the same to print: that page typeset with the ``pdf`` extra, else
+drawn with matplotlib (:mod:`calibrators.workflow.page_pdf`).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from __future__ import annotations
 import html
 from pathlib import Path
 
+from calibrators.workflow.instruments import used_in, work_of_action
 from calibrators.workflow.plan import Procedure, rho_words, stand_numbers
 from orthoglide_env.lab.operations import slot_catalogue
 from orthoglide_env.model.design import MachineDesign
@@ -113,6 +115,13 @@ def pictures(procedure: Procedure, design: MachineDesign, out: Path) -> dict[int
     held = {s["stand"]: s["slot"] for s in procedure.stands}
     pictures = {}
     for step in procedure.steps:
+        work = work_of_action(step.action)
+        if work is not None and step.setup is not None:
+            name = f"step-{step.number}.png"
+            work.draw(design, step.setup, out / name,
+                      f"Step {step.number}: {work.action}")
+            pictures[step.number] = name
+            continue
         if step.action not in ("set up", "re-mount"):
             continue
         if step.action == "re-mount":
@@ -144,6 +153,10 @@ def page(procedure: Procedure, pictures: dict[int, str], then: str = FIT_COMMAND
         if step.number in pictures:
             rows.append(f'<tr class="picture"><td colspan="6"><img src="{pictures[step.number]}"'
                         f' alt="{e(step.text[:80])}"></td></tr>')
+    instruments = "".join(
+        f"<h2>The {e(w.name)}</h2>" + "".join(f"<p>{e(t)}</p>" for t in w.before(
+            MachineDesign.from_dict(procedure.design)))
+        for w in used_in([s.action for s in procedure.steps]))
     stands = "".join(f"<tr><td>{s['stand']}</td><td class='name'>{e(s['slot'])}</td>"
                      f"<td>{e(s['place'])}</td></tr>" for s in procedure.stands)
     sheet = "".join(
@@ -202,6 +215,7 @@ driving at 20 mm/s, 5 s to settle and read, 3 s per plunger lever, 120 s per re-
 Read the dials to their resolution (0.01 mm for the usual dial).</li>
 </ul>
 {''.join(f"<p><b>Note:</b> {e(n)}.</p>" for n in procedure.notes)}
+{instruments}
 <h2>Where a stand goes on a bar</h2>
 <p>Each leg has two parallel bars, d apart. A stand's place names its bar by its side,
 +d/2 or -d/2, and the distance along the bar from the centre of the platform-end

@@ -17,7 +17,9 @@ import textwrap
 from pathlib import Path
 from typing import Any
 
+from calibrators.workflow.instruments import used_in
 from calibrators.workflow.plan import Procedure, rho_words
+from orthoglide_env.model.design import MachineDesign
 
 #: A4 portrait, inches.
 A4 = (8.27, 11.69)
@@ -68,7 +70,12 @@ def draw_pdf(procedure: Procedure, folder: Path, pictures: dict[int, str], bars:
                       "two parallel bars, d apart; a stand's place names its bar by its side, "
                       "+d/2 or -d/2, and the distance along it from the centre of the "
                       "platform-end hinge.")
-        lines = ["The stands at set-up", ""]
+        lines = []
+        for work in used_in([s.action for s in procedure.steps]):
+            lines += [f"The {work.name}", ""]
+            for text in work.before(MachineDesign.from_dict(procedure.design)):
+                lines += [*_wrapped(text, "  "), ""]
+        lines += ["The stands at set-up", ""]
         for s in procedure.stands:
             lines += _wrapped(f"stand {s['stand']} at {s['slot']}: {s['place']}", "  ")
         lines += ["", "Steps", ""]

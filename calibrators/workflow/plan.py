@@ -13,7 +13,12 @@ are checked against the steps (:func:`check_sheet`).  The printable page and its
 are :mod:`calibrators.workflow.page`'s.
 
 An agent that chooses each move from the last reading (``active``) has no procedure to
-write ahead: it is refused by name.
+write ahead: it is refused by name.  A reference procedure with an instrument
+(``iso230-2``, ``ballbar``: :class:`~calibrators.agents.instrument_first.InstrumentFirst`)
+plays its fixed programme, and the gauges' part is :data:`PLANNED_GAUGES`'s, decided at the
+start of that part (its own ``active`` decides as it reads: ``orthoglide session`` runs
+it).  An instrument's set-up and readings are written as
+:mod:`calibrators.workflow.instruments` says.
 """
 
 from __future__ import annotations
@@ -29,10 +34,13 @@ from typing import Any
 import numpy as np
 
 from calibrators.agents import available, get_agent
-from calibrators.agents.base import PlannedAgent
+from calibrators.agents.base import Agent, PlannedAgent
+from calibrators.agents.instrument_first import GAUGES, InstrumentFirst
 from calibrators.measurements import COLUMNS, Measurement, Measurements, gauge_name
+from calibrators.measurements.csv_file import instrument_cells, instrument_columns
 from calibrators.study.episodes import measurements_of, run_episode
 from calibrators.study.labs import nominal_lab, nominal_options
+from calibrators.workflow.instruments import work_of_action, work_of_op, work_of_spec
 from orthoglide_env.instruments.slots import PLATFORM_AIM, GaugeSpec, Part
 from orthoglide_env.lab.operations import DEFAULT_BUDGET_S, Op
 from orthoglide_env.model.design import MachineDesign
@@ -45,9 +53,12 @@ from orthoglide_env.world.table import REFERENCE_LENGTH_MM
 SHEET_COLUMNS: tuple[str, ...] = (*COLUMNS, "step", "stand")
 #: The files :meth:`Procedure.write` writes: the steps, and the readings sheet.
 PLAN_FILE, SHEET_FILE = "plan.json", "readings.csv"
-#: What each lab operation is called in a step.
+#: What each lab operation is called in a step (an instrument's set-up: its own words,
+#: :mod:`calibrators.workflow.instruments`).
 ACTIONS: dict[Op, str] = {Op.MOVE: "drive and read", Op.LIFT: "lift", Op.ENGAGE: "engage",
                           Op.REMOUNT: "re-mount", Op.STOP: "stop"}
+#: The agent that plays a reference procedure's gauges' part in a written plan.
+PLANNED_GAUGES: str = "optimal"
 
 
 @dataclass(frozen=True)
@@ -64,6 +75,9 @@ class Step:
     slot: str | None = None
     rho: list[float] | None = None
     rows: list[int] = field(default_factory=list)
+    #: An instrument's set-up (:meth:`~calibrators.workflow.instruments.InstrumentWork.
+    #: setup`'s), at a step that sets one up.
+    setup: dict[str, Any] | None = None
 
 
 @dataclass(frozen=True)
@@ -134,8 +148,10 @@ def rho_words(rho: list[float] | tuple[float, ...]) -> str:
 
 
 def planned_agents() -> list[str]:
-    """The registered agents that decide their whole experiment at the start."""
-    return [name for name in available() if isinstance(get_agent(name), PlannedAgent)]
+    """The registered agents whose experiment can be written down at the start: those that
+    decide it then, and the reference procedures with an instrument."""
+    return [name for name in available()
+            if isinstance(get_agent(name), PlannedAgent | InstrumentFirst)]
 
 
 def place_words(spec: GaugeSpec, design: MachineDesign) -> str:
@@ -186,27 +202,32 @@ class Plan:
 
     def __init__(self, design: MachineDesign, *, agent: str = "paper",
                  conditions: Conditions | None = None, budget_s: float = DEFAULT_BUDGET_S,
-                 seed: int = 0) -> None:
+                 seed: int = 0, instruments: tuple[str, ...] = ()) -> None:
         if not isinstance(design, MachineDesign):
             raise TypeError(f"design must be a MachineDesign, got {type(design).__name__}")
         if not budget_s > 0:
             raise ValueError(f"budget_s must be a positive number of seconds, got "
                              f"{budget_s:g}")
-        _planned(agent)
+        planned_agent(agent)
         self.design, self.agent, self.budget_s, self.seed = design, agent, float(budget_s), seed
         self.conditions = Conditions(DEFAULT_CONDITIONS) if conditions is None else conditions
+        self.instruments = tuple(instruments)
 
     def run(self) -> Procedure:
         """The procedure: the experiment played on the design's nominal machine in the
         exact-model lab; a planned agent's steps do not depend on the machine, so they
         are the real machine's."""
         return make_procedure(self.agent, self.budget_s, self.design, self.conditions,
-                              self.seed)
+                              self.seed, self.instruments)
 
 
-def _planned(agent_name: str) -> PlannedAgent:
-    """The agent ``agent_name``; ``ValueError`` for one that decides as it reads."""
+def planned_agent(agent_name: str) -> Agent:
+    """The agent ``agent_name``, a reference procedure's with :data:`PLANNED_GAUGES` for
+    its gauges' part; ``ValueError`` for one that decides as it reads."""
     agent = get_agent(agent_name)
+    if isinstance(agent, InstrumentFirst):
+        agent.gauges = PLANNED_GAUGES
+        return agent
     if not isinstance(agent, PlannedAgent):
         raise ValueError(f"agent '{agent_name}' chooses each move from the last readings: its "
                          "experiment cannot be written down ahead; plan one that decides it "
@@ -215,21 +236,28 @@ def _planned(agent_name: str) -> PlannedAgent:
 
 
 def make_procedure(agent_name: str, budget_s: float, design: MachineDesign,
-                   conditions: Conditions | None = None, seed: int = 0) -> Procedure:
+                   conditions: Conditions | None = None, seed: int = 0,
+                   instruments: tuple[str, ...] = ()) -> Procedure:
     """The procedure of agent ``agent_name``'s experiment within ``budget_s`` seconds on a
     machine of ``design`` under ``conditions`` (default
-    :data:`~orthoglide_env.world.conditions.DEFAULT_CONDITIONS`, the real lab): :meth:`Plan.run`.
-    ``ValueError`` for an agent that decides as it reads."""
+    :data:`~orthoglide_env.world.conditions.DEFAULT_CONDITIONS`, the real lab), in a lab
+    owning ``instruments`` (empty: the dial gauges): :meth:`Plan.run`.  ``ValueError`` for
+    an agent that decides as it reads, or that needs an instrument the lab does not own."""
     conditions = Conditions(DEFAULT_CONDITIONS) if conditions is None else conditions
-    agent = _planned(agent_name)
-    with closing(nominal_lab(agent, design, conditions, budget_s)) as env:
+    agent = planned_agent(agent_name)
+    notes = ([f"after its {'/'.join(agent.needs_instruments)} programme, the gauges' part "
+              f"is {PLANNED_GAUGES}'s plan for the time left (the agent's own {GAUGES} "
+              "decides as it reads: orthoglide session runs it)"]
+             if isinstance(agent, InstrumentFirst) else [])
+    with closing(nominal_lab(agent, design, conditions, budget_s,
+                             instruments=tuple(instruments))) as env:
         writer = _StepWriter(env.unwrapped, agent_name, design)
         episode = run_episode(env, agent, seed, nominal_options(design), watch=writer)
     data = measurements_of(episode.records, episode.time_s, design=design)
     sheet = [m.again(m.reading, m.repetition, m.time_s, None, step, m.temperature_c)
              for m, step in zip(data.items, writer.taken, strict=True)]
     return Procedure(agent_name, float(budget_s), conditions.to_dict(), design.to_dict(),
-                     writer.stands, writer.steps, sheet)
+                     writer.stands, writer.steps, sheet, notes)
 
 
 class _StepWriter:
@@ -238,13 +266,15 @@ class _StepWriter:
 
     def __init__(self, lab: Any, agent_name: str, design: MachineDesign) -> None:
         self.lab, self.agent_name, self.design = lab, agent_name, design
+        self.state = LabState()
         self.steps: list[Step] = []
         self.stands: list[dict[str, Any]] = []
         self.taken: list[int] = []
 
     def reset(self, i: int, observation: dict[str, np.ndarray]) -> None:
         slots = self.lab.slots
-        self.held = [int(s) for s in observation["slot"]]
+        self.state.reset(observation)
+        self.held = self.state.held
         self.stands = [{"stand": k + 1, "slot": slots[s].slot,
                         "place": place_words(slots[s], self.design)}
                        for k, s in enumerate(self.held) if s < len(slots)]
@@ -265,10 +295,29 @@ class _StepWriter:
         before = len(self.taken)
         read = self.lab.records[before:]
         self.steps.append(describe_step(number, action, now - self.clock, self.clock, read,
-                                        before, self.lab.slots, self.design, self.held))
+                                        before, self.lab.slots, self.design, self.held,
+                                        self.state))
         self.taken += [number] * len(read)
-        self.held = [int(s) for s in observation["slot"]]
+        self.state.step(action, observation)
+        self.held = self.state.held
         self.clock = now
+
+
+class LabState:
+    """What a step's words depend on beyond its action, followed step by step: the stands'
+    slots (``held``, indices into the lab's slots), whether the ballbar is in, and which
+    instruments were set up before."""
+
+    def reset(self, observation: Mapping[str, np.ndarray]) -> None:
+        self.held = [int(s) for s in observation["slot"]]
+        self.bar_in = False
+        self.set_up: set[Op] = set()
+
+    def step(self, action: Mapping[str, Any], observation: Mapping[str, np.ndarray]) -> None:
+        """Follow lab action ``action``, which led to ``observation``."""
+        self.held = [int(s) for s in observation["slot"]]
+        self.bar_in = bool(np.asarray(observation.get("ballbar_in", [0]))[0])
+        self.set_up.add(Op(int(action["op"])))
 
 
 def _setup_text(stands: list[dict[str, Any]], engaged: list[bool]) -> str:
@@ -284,11 +333,23 @@ def _setup_text(stands: list[dict[str, Any]], engaged: list[bool]) -> str:
 
 def describe_step(number: int, act: Mapping[str, Any], seconds: float, start: float,
                   read: list, first_row: int, slots: tuple[GaugeSpec, ...],
-                  design: MachineDesign, held: list[int]) -> Step:
+                  design: MachineDesign, held: list[int], state: LabState | None = None
+                  ) -> Step:
     """Step ``number``: lab action ``act``, its ``seconds`` from the clock at ``start``, the
     records it ``read`` (rows from ``first_row + 1`` on the sheet), in words for the
-    technician, with the stands at the slots ``held`` (indices into ``slots``)."""
+    technician, with the stands at the slots ``held`` (indices into ``slots``) and the
+    instruments as ``state`` found them before the step (None: none set up)."""
     op = Op(int(act["op"]))
+    work = work_of_op(op)
+    if work is not None:
+        text, setup = work.setup(act, design, state is None or op not in state.set_up)
+        return Step(number, work.action, text, seconds, start,
+                    rho=[0.0, 0.0, 0.0] if op == Op.ALIGN else
+                    [float(v) for v in np.asarray(act["rho"], dtype=float)],
+                    rows=list(range(first_row + 1, first_row + len(read) + 1)), setup=setup)
+    # Any operation but a move takes the ballbar off: the technician does it first.
+    off = ("Take the ballbar off (the tool cup and the pivot stay). "
+           if state is not None and state.bar_in and op != Op.MOVE else "")
     stand = int(act["stand"]) + 1
     rows = list(range(first_row + 1, first_row + len(read) + 1))
     # Stands by the number the technician gave them, with where they are.
@@ -296,7 +357,10 @@ def describe_step(number: int, act: Mapping[str, Any], seconds: float, start: fl
     if op == Op.REMOUNT:
         number_of[slots[int(act["slot"])].slot] = stand
     names = [f"stand {number_of[n]} ({n})" if n in number_of else n
-             for n in dict.fromkeys(gauge_name(r.spec) for r in read)]
+             for n in dict.fromkeys(gauge_name(r.spec) for r in read
+                                    if work_of_spec(r.spec) is None)]
+    names += list(dict.fromkeys(w.reading(r.spec) for r in read
+                                if (w := work_of_spec(r.spec)) is not None))
     if op == Op.MOVE:
         rho = [float(v) for v in np.asarray(act["rho"], dtype=float)]
         reading = (f"read {', '.join(names)} onto the sheet" if names
@@ -305,34 +369,38 @@ def describe_step(number: int, act: Mapping[str, Any], seconds: float, start: fl
                     f"mm, wait until it settles, {reading}.", seconds, start, rho=rho,
                     rows=rows)
     if op == Op.LIFT:
-        return Step(number, ACTIONS[op], f"Lift the plunger of stand {stand} with its lever.",
+        return Step(number, ACTIONS[op], f"{off}Lift the plunger of stand {stand} with its "
+                    "lever.",
                     seconds, start, stand, rows=rows)
     if op == Op.ENGAGE:
-        return Step(number, ACTIONS[op], f"Let the plunger of stand {stand} down on its face "
+        return Step(number, ACTIONS[op], f"{off}Let the plunger of stand {stand} down on its face "
                     "again (its zero is kept).", seconds, start, stand, rows=rows)
     if op == Op.REMOUNT:
         slot = slots[int(act["slot"])]
-        return Step(number, ACTIONS[op], f"Drive to Zero. Move stand {stand} to {slot.slot}: "
+        return Step(number, ACTIONS[op], f"{off}Drive to Zero. Move stand {stand} to {slot.slot}: "
                     f"{place_words(slot, design)}. Set the gauge at mid-travel and zero its "
                     f"dial. Then, at Zero, read {', '.join(names)} onto the sheet.", seconds,
                     start, stand, slot.slot, rows=rows)
-    return Step(number, ACTIONS[op], "The experiment is over: lift every plunger and switch "
+    return Step(number, ACTIONS[op], f"{off}The experiment is over: lift every plunger and switch "
                 "the drives off.", seconds, start, rows=rows)
 
 
 def write_sheet(procedure: Procedure, path: str | Path) -> Path:
     """The readings sheet: one row per reading to take, in step order, the measurement
-    file's columns, ``step`` and ``stand``, ``reading_mm`` blank (``time_s`` the planned
-    time: write the clock's when it differs)."""
+    file's columns, ``step`` and ``stand`` (then an instrument's columns, for a lab with
+    one: :func:`~calibrators.measurements.csv_file.instrument_columns`), ``reading_mm``
+    blank (``time_s`` the planned time: write the clock's when it differs)."""
     path = Path(path)
+    extra = instrument_columns(procedure.sheet)
     with path.open("w", newline="", encoding="utf-8") as handle:
         writer = csv.writer(handle)
-        writer.writerow(SHEET_COLUMNS)
+        writer.writerow([*SHEET_COLUMNS, *extra])
         reading = COLUMNS.index("reading_mm")
         for m, stand in zip(procedure.sheet, stand_numbers(procedure), strict=True):
             row = m.csv_row()
             row[reading] = ""
-            writer.writerow([*row, str(m.step), "" if stand is None else str(stand)])
+            writer.writerow([*row, str(m.step), "" if stand is None else str(stand),
+                             *instrument_cells(m, extra)])
     return path
 
 
@@ -379,7 +447,8 @@ def check_sheet(data: Measurements, procedure: Procedure) -> None:
         if step is None:
             raise SheetError(f"{where}: step {m.step} is not in the plan (steps 1 .. "
                              f"{len(procedure.steps)})")
-        if step.action not in ("set up", "drive and read", "re-mount"):
+        if (step.action not in ("set up", "drive and read", "re-mount")
+                and work_of_action(step.action) is None):
             raise SheetError(f"{where}: step {m.step} ({step.action}) takes no reading")
         if step.slot is not None and m.gauge.slot != step.slot:
             raise SheetError(f"{where}: step {m.step} reads stand {step.stand} at "

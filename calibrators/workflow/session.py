@@ -21,6 +21,12 @@ the reading again after a re-zero; an answer near 0 then starts a new mounting o
 stand from that reading on (its own zero for the fit), the same answer again keeps the old
 one.
 
+A lab with an instrument beyond the gauges (``--instruments``: the interferometer, the
+ballbar) asks for its readings too, after the stands', each question naming the
+instrument and what its reading is (:mod:`calibrators.workflow.instruments`); an answer
+that cannot be its reading (a ballbar's outside its travel, a laser's far from the
+carriage's command) is asked again.
+
 The episode is :func:`~calibrators.study.episodes.run_episode`'s, the session watching each
 step (:class:`~calibrators.study.episodes.Watcher`) to say it and ask its readings.
 """
@@ -42,7 +48,8 @@ from calibrators.estimators.faults import NOMINAL_MM
 from calibrators.measurements import Measurements, gauge_name
 from calibrators.study.episodes import run_episode
 from calibrators.study.labs import nominal_lab, nominal_options
-from calibrators.workflow.plan import SHEET_FILE, describe_step
+from calibrators.workflow.instruments import work_of_spec
+from calibrators.workflow.plan import SHEET_FILE, LabState, describe_step
 from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.lab.notebook import Record
 from orthoglide_env.lab.operations import Op, slot_catalogue
@@ -54,7 +61,8 @@ from orthoglide_env.world.conditions import DEFAULT_CONDITIONS, Conditions
 ZERO_K: float = 5.0
 
 #: What an answer is asked for: (step number, what to do, stand (1, 2, ...), gauge name,
-#: rho, lab clock (s)); it returns the reading (mm) or None (the gauge gave none).
+#: rho, lab clock (s); an instrument's reading: ``instrument`` and ``what`` in place of
+#: the stand); it returns the reading (mm) or None (the gauge gave none).
 Answer = Callable[[dict[str, Any]], float | None]
 
 
@@ -66,7 +74,8 @@ class Session:
     def __init__(self, agent_name: str, budget_s: float, notebook: str | Path, *,
                  design: MachineDesign, conditions: Conditions | None = None,
                  seed: int = 0, target_mm: float = 0.0, sigma: float = DEFAULT_SIGMA,
-                 resolution: float = DEFAULT_RESOLUTION) -> None:
+                 resolution: float = DEFAULT_RESOLUTION,
+                 instruments: tuple[str, ...] = ()) -> None:
         if not budget_s > 0:
             raise ValueError(f"the budget must be a positive number of seconds, got "
                              f"{budget_s:g}")
@@ -89,7 +98,8 @@ class Session:
         self.replay = _read_notebook(self.notebook)
         self.env = nominal_lab(self.agent, design,
                                Conditions(DEFAULT_CONDITIONS) if conditions is None else conditions,
-                               budget_s, sigma=sigma, resolution=resolution)
+                               budget_s, sigma=sigma, resolution=resolution,
+                               instruments=tuple(instruments))
         self.answered = 0
 
     def run(self, answer: Answer, say: Callable[..., None] = print) -> Measurements:
@@ -123,7 +133,8 @@ class Session:
         slots = slot_catalogue(self.design)
         stand_of = {slots[s]: k for k, s in enumerate(held) if s < len(slots)}
         records = lab.records
-        nominal = {stand_of[r.spec]: r for r in records[first:]}
+        nominal = {stand_of[r.spec]: r for r in records[first:] if work_of_spec(r.spec) is None}
+        own = [r for r in records[first:] if work_of_spec(r.spec) is not None]
         asked = set(nominal)
         if moved is not None:
             asked |= {k for k, s in enumerate(held)
@@ -140,27 +151,47 @@ class Session:
             question = {"step": number, "text": text, "stand": stand + 1,
                         "gauge": gauge_name(record.spec), "rho": list(record.rho),
                         "time_s": record.time_s}
-            if self.answered < len(self.replay):
-                given = self.replay[self.answered]
-                if (given["step"], given["stand"]) != (number, stand + 1):
-                    raise ValueError(f"{self.notebook}: answer {self.answered + 1} is for "
-                                     f"step {given['step']}, stand {given['stand']}, but "
-                                     f"the session asks step {number}, stand {stand + 1}: "
-                                     "not this session's notebook")
-                value = given["reading_mm"]
-            else:
-                value = self._checked(question, record, answer, predicted)
-                with self.notebook.open("a", encoding="utf-8") as handle:
-                    handle.write(json.dumps({"step": number, "stand": stand + 1,
-                                             "gauge": question["gauge"],
-                                             "reading_mm": value}) + "\n")
-            self.answered += 1
+            value = self._given(question, {"stand": stand + 1},
+                                lambda q, r=record, p=predicted: self._checked(q, r, answer, p))
             observation["valid"][stand] = value is not None
             observation["gauges"][stand] = 0.0 if value is None else value
             if value is not None:
                 mounting = self._mounting(record, float(value), predicted)
                 kept.append(replace(record, reading=float(value), mounting=mounting))
+        for record in own:
+            work = work_of_spec(record.spec)
+            question = {"step": number, "text": text, "instrument": work.name,
+                        "what": work.reading(record.spec), "gauge": record.mounting,
+                        "rho": list(record.rho), "time_s": record.time_s}
+            value = self._given(question, {"instrument": work.name}, lambda q, r=record, w=work:
+                                _asked_again(q, answer, lambda v: w.impossible(v, r)))
+            observation[f"{work.name}_valid"][0] = value is not None
+            observation[work.name][0] = 0.0 if value is None else value
+            if value is not None:
+                kept.append(replace(record, reading=float(value)))
         records[:] = kept
+
+    def _given(self, question: dict[str, Any], who: dict[str, Any],
+               ask: Callable[[dict[str, Any]], float | None]) -> float | None:
+        """The answer to ``question`` of the reader ``who`` (its stand, or its
+        instrument): the notebook's next one when it replays, else ``ask``'s, written to
+        the notebook at once."""
+        if self.answered < len(self.replay):
+            given = self.replay[self.answered]
+            if given["who"] != who or given["step"] != question["step"]:
+                raise ValueError(f"{self.notebook}: answer {self.answered + 1} is for "
+                                 f"step {given['step']}, {_who(given['who'])}, but the "
+                                 f"session asks step {question['step']}, {_who(who)}: "
+                                 "not this session's notebook")
+            value = given["reading_mm"]
+        else:
+            value = ask(question)
+            with self.notebook.open("a", encoding="utf-8") as handle:
+                handle.write(json.dumps({"step": question["step"], **who,
+                                         "gauge": question["gauge"],
+                                         "reading_mm": value}) + "\n")
+        self.answered += 1
+        return value
 
     def _checked(self, question: dict[str, Any], record: Record, answer: Answer,
                  predicted: bool) -> float | None:
@@ -222,9 +253,11 @@ class _Asker:
         self.session, self.answer, self.say = session, answer, say
         self.lab = session.env.unwrapped
         self.slots = slot_catalogue(session.design)
+        self.state = LabState()
 
     def reset(self, i: int, observation: dict[str, np.ndarray]) -> None:
-        self.held = [int(s) for s in observation["slot"]]
+        self.state.reset(observation)
+        self.held = self.state.held
         self.say("Step 1: drive to Zero, mount the stands ("
                  + ", ".join(f"stand {k + 1} at {self.slots[s].slot}"
                              for k, s in enumerate(self.held) if s < len(self.slots))
@@ -238,10 +271,11 @@ class _Asker:
         now = float(observation["time"][0])
         step = describe_step(self.number, action, now - self.clock, self.clock,
                              self.lab.records[self.before:], self.before, self.slots,
-                             self.session.design, self.held)
+                             self.session.design, self.held, self.state)
         self.say(f"Step {self.number} ({step.seconds:.0f} s, clock {self.clock / 60:.1f} min): "
                  f"{step.text}", action)
-        self.held = [int(s) for s in observation["slot"]]
+        self.state.step(action, observation)
+        self.held = self.state.held
         self.session._answer(self.number, step.text, observation, self.before, self.held,
                              self.answer,
                              moved=tuple(float(v) for v in np.asarray(action["rho"]))
@@ -264,12 +298,27 @@ def _read_notebook(path: Path) -> list[dict[str, Any]]:
                                           and not isinstance(value, bool)
                                           and np.isfinite(value)):
                 raise ValueError
-            out.append({"step": int(item["step"]), "stand": int(item["stand"]),
-                        "reading_mm": value})
+            who = ({"instrument": str(item["instrument"])} if "instrument" in item
+                   else {"stand": int(item["stand"])})
+            out.append({"step": int(item["step"]), "who": who, "reading_mm": value})
         except (ValueError, KeyError, TypeError):
             raise ValueError(f"{path}:{line_number}: not an answer of a session's "
                              "notebook") from None
     return out
+
+
+def _who(who: dict[str, Any]) -> str:
+    """A reader in words: ``stand 3``, or ``the interferometer``."""
+    return f"stand {who['stand']}" if "stand" in who else f"the {who['instrument']}"
+
+
+def _asked_again(question: dict[str, Any], answer: Answer,
+                 impossible: Callable[[float], str | None]) -> float | None:
+    """The answer to ``question``, asked once more with the reason when ``impossible``
+    gives one; the second answer stands."""
+    value = answer(question)
+    reason = None if value is None else impossible(value)
+    return value if reason is None else answer({**question, "again": reason})
 
 
 def parse_answer(text: str) -> float | None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -149,6 +150,21 @@ def project(points: np.ndarray, eye: np.ndarray, target: np.ndarray, fov: float,
     return np.stack([(x + 1) / 2 * width, (1 - y) / 2 * height], axis=-1)
 
 
+def draw_world_axes(axes: Any, eye: np.ndarray, target: np.ndarray, fov: float,
+                    width: int, height: int) -> None:
+    """The world axes as a triad in the lower left corner of ``axes``, an image of the
+    camera at ``eye`` aimed at ``target`` (:func:`project`'s): a sheet's signs are along
+    them."""
+    ends = project(np.vstack([np.zeros(3), 100 * np.eye(3)]), eye, target, fov, width,
+                   height)
+    corner = np.array([70.0, height - 70.0])
+    for k, name in enumerate(AXIS_NAMES):
+        tip = corner + (ends[k + 1] - ends[0]) / np.linalg.norm(ends[k + 1] - ends[0]) * 50
+        axes.annotate("", tip, xytext=corner, arrowprops={"arrowstyle": "->", "lw": 2})
+        axes.text(*(corner + (tip - corner) * 1.3), f"+{name}", fontsize=12, ha="center",
+                  va="center")
+
+
 def render_stands_png(machine: MachineParams, specs: list, labels: list[str],
                       out_path: str | Path, *, highlight: int | None = None,
                       title: str = "", width: int = 960, height: int = 720) -> Path:
@@ -189,15 +205,7 @@ def render_stands_png(machine: MachineParams, specs: list, labels: list[str],
                           bbox={"boxstyle": "round", "fc": "white", "alpha": 0.85},
                           arrowprops={"arrowstyle": "->", "lw": 2.5 if mine else 1.2,
                                       "color": "red" if mine else "navy"})
-        # The world axes, as a triad in a corner: the sheet's signs are along them.
-        ends = project(np.vstack([np.zeros(3), 100 * np.eye(3)]), eye, target, fov, width,
-                       height)
-        corner = np.array([70.0, height - 70.0])
-        for k, name in enumerate(AXIS_NAMES):
-            tip = corner + (ends[k + 1] - ends[0]) / np.linalg.norm(ends[k + 1] - ends[0]) * 50
-            axes.annotate("", tip, xytext=corner, arrowprops={"arrowstyle": "->", "lw": 2})
-            axes.text(*(corner + (tip - corner) * 1.3), f"+{name}", fontsize=12, ha="center",
-                      va="center")
+        draw_world_axes(axes, eye, target, fov, width, height)
         if title:
             axes.text(10, 24, title, fontsize=13, color="black",
                       bbox={"fc": "white", "alpha": 0.85})

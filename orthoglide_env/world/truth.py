@@ -41,6 +41,9 @@ HOUR: float = 3600.0
 #: fixed number of draws, whatever the budget.
 WALK_MODES: int = 8
 WALK_HORIZON_S: float = 8 * HOUR
+#: A walk mode's coefficient is a standard normal times the walk's size (K/sqrt(h)) times
+#: this (sqrt(h)): the modes then add up to a random walk of that size over the horizon.
+WALK_MODE_SCALE: float = float(np.sqrt(WALK_HORIZON_S / HOUR))
 #: A plunger's revolution (mm): the dial's periodic error repeats with it.
 REVOLUTION_MM: float = 1.0
 #: Where each effect's per-machine numbers live (its fields below), in draw order.
@@ -114,6 +117,15 @@ def bar_bending(conditions: Conditions, at: np.ndarray | float, design: MachineD
     return a**2 * b**2 / (3 * modulus * inertia * design.L)
 
 
+
+def walk_modes(time: np.ndarray) -> np.ndarray:
+    """The room's random walk's modes (..., :data:`WALK_MODES`) at lab ``time`` (s, any
+    shape): the Karhunen-Loeve basis of a random walk over :data:`WALK_HORIZON_S`, each
+    weighted by its standard deviation."""
+    k = np.arange(WALK_MODES) + 0.5
+    return np.sqrt(2) * np.sin(np.pi * k * np.asarray(time)[..., None] / WALK_HORIZON_S) / (
+        np.pi * k)
+
 @dataclass(frozen=True)
 class World:
     """The drawn non-geometric truth of a batch of machines (``(M, ...)`` arrays; zeros
@@ -181,7 +193,7 @@ class World:
                 offset=draw_range(stream, c.size("room", "offset"), (1,), True),
                 rate=draw_range(stream, c.size("room", "drift"), (1,), True, 1 / HOUR),
                 walk=stream.normal(0, 1, (1, WALK_MODES)) * _fixed(c, "room", "walk")
-                * np.sqrt(WALK_HORIZON_S / HOUR))
+                * WALK_MODE_SCALE)
         dial = dict.fromkeys(_DIAL_FIELDS, zeros)
         if on("dial"):
             digital = c.indicator == "digital"
@@ -256,10 +268,7 @@ class World:
     # -- what the world does ------------------------------------------------------------
     def temperature(self, time: np.ndarray) -> np.ndarray:
         """Room temperature minus 20 C (K) of each machine at its lab ``time`` (M,)."""
-        k = np.arange(WALK_MODES) + 0.5
-        modes = np.sqrt(2) * np.sin(np.pi * k * np.asarray(time)[:, None] / WALK_HORIZON_S) / (
-            np.pi * k)
-        return self.offset + self.rate * time + (self.walk * modes).sum(axis=-1)
+        return self.offset + self.rate * time + (self.walk * walk_modes(time)).sum(axis=-1)
 
     def scale(self, time: np.ndarray) -> np.ndarray:
         """The structure's growth factor about the world origin (M,) at ``time``."""
