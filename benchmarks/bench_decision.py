@@ -16,10 +16,10 @@ The table gives each agent's seconds per decision (all its ``act`` time, taking 
 readings included; and the choice alone, :data:`CHOICE`) and per episode (the agent's,
 and the lab's steps beside them), and their ratios, then where the policy's decision
 goes (:data:`PARTS`: the belief's updates, its observation, the mask, the network); the
-issue's targets are a decision at least 100x cheaper than ``active``'s, and a whole episode at least 10x.  Without ``--policy`` the
-policy is an untrained MaskablePPO network of ``examples/train_masked.py``'s shape: a
-decision costs the same whatever the weights.  Needs sb3-contrib (``pip install -e
-'.[rl]'``).
+issue's targets are a decision at least 100x cheaper than ``active``'s, and a whole
+episode at least 10x.  Without ``--policy`` the policy is an untrained MaskablePPO
+network of ``examples/train_masked.py``'s shape: a decision costs the same whatever the
+weights.  Needs sb3-contrib (``pip install -e '.[rl]'``).
 """
 
 from __future__ import annotations

@@ -101,5 +101,5 @@ def test_an_actor_other_than_the_default_mlp_is_refused() -> None:
     with pytest.raises(ValueError, match=r"do not chain: \(4, 3\) then \(2, 5\)"):
         actor_of(weights, {"net_arch": [4]})
     del weights["action_net.bias"]
-    with pytest.raises(ValueError, match="no 'action_net.bias'"):
+    with pytest.raises(ValueError, match=r"no 'action_net\.bias'"):
         actor_of(weights, {})
