@@ -14,11 +14,12 @@ re-mount, stop); the calls that play a chosen operation's further lab actions ar
 in the agent's time but are not decisions.
 The table gives each agent's seconds per decision (all its ``act`` time, taking in the
 readings included; and the choice alone, :data:`CHOICE`) and per episode (the agent's,
-and the lab's steps beside them), and their ratios; the issue's targets are a decision at least
-100x cheaper than ``active``'s, and a whole episode at least 10x.  Without ``--policy`` the
-policy is an untrained MaskablePPO network of ``examples/train_masked.py``'s shape: a
-decision costs the same whatever the weights.  Needs sb3-contrib (``pip install -e
-'.[rl]'``).
+and the lab's steps beside them), and their ratios, then where the policy's decision
+goes (:data:`PARTS`: the belief's updates, its observation, the mask, the network); the
+issue's targets are a decision at least 100x cheaper than ``active``'s, and a whole
+episode at least 10x.  Without ``--policy`` the policy is an untrained MaskablePPO
+network of ``examples/train_masked.py``'s shape: a decision costs the same whatever the
+weights.  Needs sb3-contrib (``pip install -e '.[rl]'``).
 """
 
 from __future__ import annotations
@@ -55,24 +56,51 @@ def untrained_policy(kwargs: dict, folder: Path) -> Path:
 CHOICE = {"policy": "decide", "active": "_next"}
 
 
+#: The parts of a policy's decision (:data:`PARTS`' order): taking in a lab step's
+#: readings (the belief's rank-one updates), the observation (the predicted error's
+#: spectrum), the mask, the network.
+PARTS: tuple[str, ...] = ("update", "observation", "mask", "network")
+
+
+def timed(owner: object, method: str, seconds: list[float], k: int) -> None:
+    """Replace ``owner.method`` by itself adding its CPU seconds to ``seconds[k]``."""
+    inner = getattr(owner, method)
+
+    def wrapper(*args: object) -> object:
+        start = time.process_time()
+        try:
+            return inner(*args)
+        finally:
+            seconds[k] += time.process_time() - start
+
+    setattr(owner, method, wrapper)
+
+
+class TimedActor:
+    """A policy's actor whose logits are timed (the actor itself is shared and frozen)."""
+
+    def __init__(self, actor: object, seconds: list[float]) -> None:
+        self.actor, self.weights = actor, actor.weights
+        timed(self, "logits", seconds, 1 + PARTS.index("network"))
+
+    def logits(self, observation: np.ndarray) -> np.ndarray:
+        return self.actor.logits(observation)
+
+
 def play(label: str, name: str, kwargs: dict, seed: int, machine: int) -> list[float]:
     """One episode of agent ``name``: its seconds in ``act``, the lab's seconds in ``step``,
-    its decisions, its lab steps and its seconds in its choice (:data:`CHOICE`)."""
+    its decisions, its lab steps, its seconds in its choice (:data:`CHOICE`) and, for the
+    policy, in each of :data:`PARTS` (0 for ``active``)."""
     env = gym.make(orthoglide_env.LAB_ENV_ID, **kwargs)
     observation, info = env.reset(seed=machine_seed(seed, machine))
     agent = get_agent(name)
     agent.reset(env, observation, agent_rng(machine_seed(seed, machine)))
-    choosing = [0.0]
-    choose = getattr(agent, CHOICE[label])
-
-    def timed(*args: object) -> object:
-        start = time.process_time()
-        try:
-            return choose(*args)
-        finally:
-            choosing[0] += time.process_time() - start
-
-    setattr(agent, CHOICE[label], timed)
+    choosing = [0.0] * (1 + len(PARTS))
+    timed(agent, CHOICE[label], choosing, 0)
+    if label == "policy":
+        for k, method in enumerate(("observe", "observation", "action_mask")):
+            timed(agent.belief, method, choosing, 1 + k)
+        agent.actor = TimedActor(agent.actor, choosing)
     acting = stepping = 0.0
     decisions = steps = 0
     while True:
@@ -85,7 +113,7 @@ def play(label: str, name: str, kwargs: dict, seed: int, machine: int) -> list[f
         acting += middle - start
         steps += 1
         if terminated or truncated:
-            return [acting, stepping, decisions, steps, choosing[0]]
+            return [acting, stepping, decisions, steps, *choosing]
 
 
 def main() -> None:
@@ -119,11 +147,14 @@ def main() -> None:
           f"{args.sigma} mm, budget {args.budget:g} s")
     print(f"{'agent':8}{'ms/decision':>13}{'ms/choice':>11}{'decisions':>11}"
           f"{'agent s/episode':>17}{'lab s/episode':>15}{'lab steps':>11}")
-    for label, (acting, stepping, decisions, steps, choosing) in totals.items():
+    for label, (acting, stepping, decisions, steps, choosing, *_) in totals.items():
         print(f"{label:8}{1e3 * acting / decisions:13.3f}{1e3 * choosing / decisions:11.3f}"
               f"{decisions / args.machines:11.1f}{acting / args.machines:17.3f}"
               f"{stepping / args.machines:15.3f}{steps / args.machines:11.1f}")
     p, a = totals["policy"], totals["active"]
+    print("the policy's decision, ms: " + ", ".join(
+        f"{part} {1e3 * seconds / p[2]:.3f}" for part, seconds in zip(PARTS, p[5:], strict=True))
+        + f", the rest of act {1e3 * (p[0] - sum(p[5:])) / p[2]:.3f}")
     print(f"active / policy: {(a[0] / a[2]) / (p[0] / p[2]):.0f}x per decision (all of act), "
           f"{(a[4] / a[2]) / (p[4] / p[2]):.0f}x per choice, "
           f"{(a[0] + a[1]) / (p[0] + p[1]):.1f}x per episode (agent and lab)")

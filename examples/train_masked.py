@@ -150,16 +150,19 @@ def masked_logits(model: Any, observations: Any, masks: Any) -> Any:
 
 
 def rollouts(envs: list[Any], episodes: int, choose: Callable[[Any, np.ndarray], int]
-             ) -> tuple[list[np.ndarray], list[np.ndarray], list[int], list[dict[str, float]]]:
+             ) -> tuple[list[np.ndarray], list[np.ndarray], list[int], list[float],
+                        list[dict[str, float]]]:
     """``episodes`` episodes over ``envs`` in turn (each env's own stream), the operation
-    of each state chosen by ``choose(env, observation)``: every state's observation, mask
-    and expert label, and each episode's return and final predicted error (mm)."""
-    observations, masks, labels, ends = [], [], [], []
+    of each state chosen by ``choose(env, observation)``: every state's observation, mask,
+    expert label and return from there to the episode's end (``gamma`` 1, as PPO learns),
+    and each episode's return and final predicted error (mm)."""
+    observations, masks, labels, returns, ends = [], [], [], [], []
     for episode in range(episodes):
         env = envs[episode % len(envs)]
         observation, _ = env.reset()
         expert = PlanExpert(env.unwrapped, env.belief)
-        total, done, info = 0.0, False, {}
+        rewards: list[float] = []
+        done, info = False, {}
         while not done:
             observations.append(observation)
             masks.append(env.action_masks())
@@ -167,10 +170,12 @@ def rollouts(envs: list[Any], episodes: int, choose: Callable[[Any, np.ndarray],
             action = labels[-1] if choose is None else choose(env, observation)
             observation, reward, terminated, truncated, info = env.step(action)
             expert.follow(action, env.belief)
-            total += reward
+            rewards.append(float(reward))
             done = terminated or truncated
-        ends.append({"r": total, "predicted_rigid_mm": info["predicted_rigid_mm"]})
-    return observations, masks, labels, ends
+        returns.extend(np.cumsum(rewards[::-1])[::-1].tolist())
+        ends.append({"r": float(np.sum(rewards)),
+                     "predicted_rigid_mm": info["predicted_rigid_mm"]})
+    return observations, masks, labels, returns, ends
 
 
 def fit(model: Any, data: tuple[list, list, list], updates: int, rng: np.random.Generator
@@ -202,6 +207,40 @@ def fit(model: Any, data: tuple[list, list, list], updates: int, rng: np.random.
         return float((masked_logits(model, x, mask).argmax(1) == y).float().mean())
 
 
+def fit_critic(model: Any, observations: list[np.ndarray], returns: list[float],
+               updates: int, rng: np.random.Generator) -> float:
+    """Fit the policy's value network to the imitation rollouts' returns (``updates`` Adam
+    steps of squared error on minibatches of 256): PPO's first advantages then come from
+    values of the imitated policy, not from an untrained critic whose noise would move
+    the imitated actor before the critic learns.  Returns the fit's R^2 on all states."""
+    import torch
+
+    x = torch.as_tensor(np.array(observations), dtype=torch.float32)
+    y = torch.as_tensor(np.array(returns), dtype=torch.float32)
+    policy = model.policy
+    parameters = [*policy.mlp_extractor.value_net.parameters(),
+                  *policy.value_net.parameters()]
+    optimiser = torch.optim.Adam(parameters, lr=1e-3)
+
+    def values(batch: Any) -> Any:
+        latent = policy.mlp_extractor.forward_critic(policy.extract_features(
+            x[batch], policy.vf_features_extractor))
+        return policy.value_net(latent).squeeze(-1)
+
+    batches: list[np.ndarray] = []
+    for _ in range(updates):
+        if not batches:
+            batches = np.array_split(rng.permutation(len(y)), max(1, len(y) // 256))
+        batch = batches.pop()
+        loss = torch.nn.functional.mse_loss(values(batch), y[batch])
+        optimiser.zero_grad()
+        loss.backward()
+        optimiser.step()
+    with torch.no_grad():
+        residual = values(slice(None)) - y
+        return float(1 - residual.var() / y.var())
+
+
 def imitate(args: argparse.Namespace, kwargs: dict[str, Any], model: Any) -> list[dict]:
     """DAgger rounds (see the module) on ``args.envs`` design views, env ``k`` seeded
     ``args.seed + k`` once; the learning curve's rows, written as they come."""
@@ -218,14 +257,14 @@ def imitate(args: argparse.Namespace, kwargs: dict[str, Any], model: Any) -> lis
                                    torch.as_tensor(env.action_masks()[None]))
         return int(logits.argmax())
 
-    data: tuple[list, list, list] = ([], [], [])
+    data: tuple[list, list, list, list] = ([], [], [], [])
     rows: list[dict] = []
     start = time.perf_counter()
     for round_ in range(args.imitate):
         *states, ends = rollouts(envs, args.episodes, None if round_ == 0 else policy_choice)
         for store, new in zip(data, states, strict=True):
             store.extend(new)
-        agreement = fit(model, data, args.updates, rng)
+        agreement = fit(model, data[:3], args.updates, rng)
         minutes = (time.perf_counter() - start) / 60
         rows.append({"steps": len(data[2]), "minutes": round(minutes, 2),
                      "mean_episode_reward": float(np.mean([e["r"] for e in ends])),
@@ -238,6 +277,10 @@ def imitate(args: argparse.Namespace, kwargs: dict[str, Any], model: Any) -> lis
         print(f"round {round_}: {rows[-1]}", flush=True)
         if 0 < args.max_minutes <= minutes:
             break
+    if args.steps:
+        explained = fit_critic(model, data[0], data[3], args.updates, rng)
+        print(f"critic fitted to {len(data[3])} imitation returns: R^2 {explained:.3f}",
+              flush=True)
     return rows
 
 
@@ -258,6 +301,12 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
                         help="episodes of each DAgger round")
     parser.add_argument("--updates", type=int, default=1500,
                         help="minibatch steps of the fit at each DAgger round")
+    parser.add_argument("--learning-rate", type=float, default=3e-4,
+                        help="PPO's Adam step size (fine-tuning an imitated policy: small, "
+                             "so that it does not forget what it imitated)")
+    parser.add_argument("--target-kl", type=float, default=0.0,
+                        help="PPO stops an update's epochs once the policy has moved this "
+                             "far from the rollout's (approximate KL; 0: no limit)")
     parser.add_argument("--baselines", default=BASELINES,
                         help="agents of the curve's lines and the final table")
     args = parser.parse_args(argv)
@@ -267,6 +316,10 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     for name in ("episodes", "updates"):
         if getattr(args, name) < 1:
             parser.error(f"--{name} must be at least 1")
+    if not (np.isfinite(args.learning_rate) and args.learning_rate > 0):
+        parser.error(f"--learning-rate must be a positive number, got {args.learning_rate}")
+    if not (np.isfinite(args.target_kl) and args.target_kl >= 0):
+        parser.error(f"--target-kl must be a number >= 0, got {args.target_kl}")
     return args
 
 
@@ -291,6 +344,7 @@ def main(argv: list[str] | None = None) -> None:
     # one operation per state it learned.
     model = MaskablePPO("MlpPolicy", vec, n_steps=256, batch_size=256, n_epochs=5,
                         gamma=1.0, gae_lambda=0.95, ent_coef=0.0 if args.imitate else 0.01,
+                        learning_rate=args.learning_rate, target_kl=args.target_kl or None,
                         seed=args.seed, device="cpu", policy_kwargs={"net_arch": [128, 128]},
                         verbose=0)
     start = time.perf_counter()

@@ -21,7 +21,6 @@ from calibrators.agents.optimal import fixed_plan
 from calibrators.agents.policy import (
     SPEC_ENTRY,
     DesignPolicyAgent,
-    numpy_logits,
     read_spec,
     save_policy,
     spec_of,
@@ -267,8 +266,10 @@ def test_a_design_policy_file_records_its_view_and_plays_in_the_lab(masked_polic
     """``policy:FILE`` of a design-view policy keeps the view's belief from the lab's own
     observations (the wrapper's, step for step) and draws open operations from the
     network's distribution, whose logits it computes as torch does."""
+    import sb3_contrib
     import torch
 
+    model = sb3_contrib.MaskablePPO.load(masked_policy, device="cpu")
     assert read_spec(masked_policy).env_id == ID
     agent = get_agent(f"policy:{masked_policy}")
     assert isinstance(agent, DesignPolicyAgent)
@@ -282,9 +283,9 @@ def test_a_design_policy_file_records_its_view_and_plays_in_the_lab(masked_polic
     for _ in range(5):
         np.testing.assert_array_equal(agent.belief.observation(), observation)
         with torch.no_grad():
-            tensor, _ = agent.model.policy.obs_to_tensor(observation)
-            expected = agent.model.policy.get_distribution(tensor).distribution.logits[0]
-        logits = numpy_logits(agent.model, observation)
+            tensor, _ = model.policy.obs_to_tensor(observation)
+            expected = model.policy.get_distribution(tensor).distribution.logits[0]
+        logits = agent.actor.logits(observation)
         # The same float32 network: log-softmax equal to torch's to its rounding (~1e-6).
         np.testing.assert_allclose(logits - np.logaddexp.reduce(logits), expected.numpy(),
                                    atol=1e-5)
@@ -324,7 +325,7 @@ def test_an_argmax_policy_plays_its_most_likely_open_operation(masked_policy: Pa
     chosen = set()
     for seed in range(5):
         agent.reset(lab, raw, np.random.default_rng(seed))
-        logits = numpy_logits(agent.model, agent.belief.observation())
+        logits = agent.actor.logits(agent.belief.observation())
         chosen.add(agent.decide())
     assert chosen == {int(np.argmax(np.where(agent.belief.action_mask(), logits, -np.inf)))}
     with pytest.raises(ValueError, match="play must be one of"):

@@ -38,6 +38,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.spaces import flatten, flatten_space
 
+from calibrators.agents.actor_weights import read_actor
 from calibrators.agents.base import Agent, action
 from orthoglide_env import DESIGN_LAB_ENV_ID, FLAT_LAB_ENV_ID
 from orthoglide_env.instruments.dial import weighting_sigma
@@ -288,7 +289,18 @@ class DesignPolicyAgent(PolicyAgent):
     agent's random stream, and plays it as the lab actions it is (a move's lever flicks,
     then the move), until the lab time of a training episode is used.  The belief runs on
     the training episode's budget, so that the observed clock and the mask mean what they
-    meant in training."""
+    meant in training.  Its network is read from the file in NumPy
+    (:func:`~calibrators.agents.actor_weights.read_actor`): it plays without torch or
+    stable-baselines3."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self.spec = read_spec(self.path)
+        self.actor = read_actor(self.path)
+        sizes = (self.actor.weights[0].shape[1], self.actor.weights[-1].shape[0])
+        if sizes != (self.spec.observation_size, self.spec.action_size):
+            raise ValueError(f"policy file '{self.path}': the network's sizes {sizes} differ "
+                             "from its spec: the file is damaged")
 
     def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
               rng: np.random.Generator) -> None:
@@ -315,62 +327,15 @@ class DesignPolicyAgent(PolicyAgent):
 
     def decide(self) -> int:
         """An operation among the open ones (the mask), from the policy's network's logits
-        in NumPy (:func:`numpy_logits`): as the spec's ``play`` says, the most likely one,
-        or a draw of the masked softmax with the agent's random stream (the largest of
-        the logits plus Gumbel noise).  A policy trained for a few minutes by PPO still
-        spreads its choices, and its most likely operation, played alone, comes back to
-        one posture again and again (the flat agent's finding too): such a policy draws."""
-        logits = numpy_logits(self.model, self.belief.observation())
+        in NumPy: as the spec's ``play`` says, the most likely one, or a draw of the masked
+        softmax with the agent's random stream (the largest of the logits plus Gumbel
+        noise).  A policy trained for a few minutes by PPO still spreads its choices, and
+        its most likely operation, played alone, comes back to one posture again and again
+        (the flat agent's finding too): such a policy draws."""
+        logits = self.actor.logits(self.belief.observation())
         if self.spec.play == "draw":
             logits = logits + self.rng.gumbel(size=logits.shape)
         return int(np.argmax(np.where(self.belief.action_mask(), logits, -np.inf)))
-
-
-@lru_cache(maxsize=4)
-def _layers(model: Any) -> tuple[tuple[np.ndarray, np.ndarray, str], ...]:
-    """The actor of an on-policy stable-baselines3 model with a flat observation as
-    (weight, bias, activation after it) layers in NumPy (float32): a decision then costs
-    tens of microseconds, where torch's dispatch and sb3's checks cost a millisecond."""
-    import torch
-
-    policy = model.policy
-    if not isinstance(policy.features_extractor, _flatten_extractor()):
-        raise ValueError("a design-view policy reads its flat observation as it is "
-                         f"(FlattenExtractor), not through {type(policy.features_extractor)}")
-    modules = [*policy.mlp_extractor.policy_net, policy.action_net]
-    activations = {torch.nn.Tanh: "tanh", torch.nn.ReLU: "relu"}
-    layers: list[tuple[np.ndarray, np.ndarray, str]] = []
-    for module in modules:
-        if isinstance(module, torch.nn.Linear):
-            layers.append((module.weight.detach().numpy().copy(),
-                           module.bias.detach().numpy().copy(), ""))
-        elif type(module) in activations and layers:
-            weight, bias, _ = layers[-1]
-            layers[-1] = (weight, bias, activations[type(module)])
-        else:
-            raise ValueError(f"a design-view policy's network has a layer {module} that "
-                             "this agent cannot play: Linear, Tanh and ReLU only")
-    return tuple(layers)
-
-
-def _flatten_extractor() -> type:
-    from stable_baselines3.common.torch_layers import FlattenExtractor
-
-    return FlattenExtractor
-
-
-def numpy_logits(model: Any, observation: np.ndarray) -> np.ndarray:
-    """The action logits of ``model``'s actor (a MaskablePPO ``MlpPolicy``) for one flat
-    ``observation``, in NumPy and in float32 as torch computes them (equal to its
-    rounding)."""
-    x = np.asarray(observation, dtype=np.float32)
-    for weight, bias, activation in _layers(model):
-        x = weight @ x + bias
-        if activation == "tanh":
-            x = np.tanh(x)
-        elif activation == "relu":
-            x = np.maximum(x, 0.0)
-    return x
 
 
 def policy_agent(path: str | Path) -> PolicyAgent:

@@ -151,6 +151,10 @@ class DesignBelief:
             len(self.table.postures), len(self.table.tip), int(stands))
         self.n_actions = self.n_postures + self.n_stands * self.n_slots + 1
         self.weight, self.factor = rigid_weight(design), rigid_factor(design)
+        # Found once: their caches are keyed by the design, whose hash every step would pay.
+        self.drive_s, self.index = drive_seconds(design), posture_index(design)
+        #: Each stand's columns (K, 32): the machine's errors, then its mounting's.
+        self.stand_columns = np.array([self._columns(k) for k in range(self.n_stands)])
         self.start({"slot": np.full(stands, self.n_slots), "engaged": np.zeros(stands),
                     "faulted": np.zeros(stands), "valid": np.zeros(stands),
                     "time": np.zeros(1)})
@@ -177,7 +181,7 @@ class DesignBelief:
             self.here, self.rho = self.table.zero, np.zeros(3)
         if not refused and operation["op"] == Op.MOVE:
             self.rho = np.asarray(operation["rho"], dtype=float)
-            self.here = posture_index(self.design)[self.rho.tobytes()]
+            self.here = self.index[self.rho.tobytes()]
         self._sync(observation)
         if not refused and operation["op"] in (Op.MOVE, Op.REMOUNT):
             self._read(observation)
@@ -200,11 +204,10 @@ class DesignBelief:
         stands = np.flatnonzero(np.asarray(observation["valid"], dtype=bool) & (self.slots >= 0))
         if not stands.size:
             return
+        values = np.full((len(stands), self.stand_columns.shape[1]), ZERO_SCALE)
+        values[:, :-1] = self.table.change[self.slots[stands], self.here]
         rows = np.zeros((len(stands), len(self.covariance)))
-        for r, k in enumerate(stands):
-            cols = self._columns(k)
-            rows[r, cols[:-1]] = self.table.change[self.slots[k], self.here]
-            rows[r, cols[-1]] = ZERO_SCALE
+        np.put_along_axis(rows, self.stand_columns[stands], values, axis=1)
         gain, b = woodbury_gain(self.covariance, rows / self.sigma)
         self.covariance = shrunk(self.covariance, gain, b)
 
@@ -281,7 +284,7 @@ class DesignBelief:
         seconds, _, _ = self.moves()
         moves = self._moves[3] & (self.time_s + seconds <= self.budget_s)
         # The drive to Zero, as the lab times it, from the table of every move.
-        remount_s = float(drive_seconds(self.design)[self.here, self.table.zero]) + TIME.remount_s
+        remount_s = float(self.drive_s[self.here, self.table.zero]) + TIME.remount_s
         free = np.full(self.n_slots, self.time_s + remount_s <= self.budget_s)
         free[self.slots[self.slots >= 0]] = False
         remounts = np.tile(free, self.n_stands)

@@ -1,0 +1,146 @@
+"""A design-view policy's actor read from its file in NumPy, without torch.
+
+A stable-baselines3 zip keeps the network's weights in ``policy.pth``, torch's own zip of
+a pickled state dict whose tensors point at raw little-endian storages (``data/0``, ...).
+:func:`read_actor` unpickles that dict with an unpickler that builds only the dict and
+its tensors (as NumPy arrays: the same bytes, so the same float32 weights torch holds)
+and refuses every other object, so a policy file cannot run code when it is read.  The
+actor is the ``MlpPolicy`` of MaskablePPO on a flat Box: its ``policy_net`` Linear layers,
+each followed by sb3's default activation, ``tanh``, then ``action_net``.
+"""
+
+from __future__ import annotations
+
+import io
+import itertools
+import json
+import pickle
+import zipfile
+from collections import OrderedDict
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: The policy classes whose actor :func:`read_actor` reads (``data``'s ``policy_class``).
+ACTOR_CRITIC_MODULES: tuple[str, ...] = ("sb3_contrib.common.maskable.policies",)
+#: Torch's storage types in a state dict and their NumPy dtypes.
+STORAGE_DTYPES: dict[str, str] = {"FloatStorage": "<f4", "DoubleStorage": "<f8",
+                                  "HalfStorage": "<f2", "LongStorage": "<i8",
+                                  "IntStorage": "<i4", "BoolStorage": "?"}
+
+
+@dataclass(frozen=True)
+class ActorWeights:
+    """The actor's layers, input to output: ``weights[i]`` (out, in) and ``biases[i]``
+    (out,), float32; every layer but the last is followed by ``tanh``."""
+
+    weights: tuple[np.ndarray, ...]
+    biases: tuple[np.ndarray, ...]
+
+    def logits(self, observation: np.ndarray) -> np.ndarray:
+        """The action logits (float32) of one flat ``observation``: torch's float32
+        arithmetic to its rounding (a matrix product may sum in another order)."""
+        x = np.asarray(observation, dtype=np.float32)
+        last = len(self.weights) - 1
+        for k, (weight, bias) in enumerate(zip(self.weights, self.biases, strict=True)):
+            x = weight @ x + bias
+            if k < last:
+                x = np.tanh(x)
+        return x
+
+
+class _StateDictUnpickler(pickle.Unpickler):
+    """Unpickles torch's ``data.pkl`` of a state dict into NumPy arrays: the dict, the
+    tensor rebuilder and the storage types, nothing else."""
+
+    def __init__(self, data: bytes, archive: zipfile.ZipFile, prefix: str) -> None:
+        super().__init__(io.BytesIO(data))
+        self.archive, self.prefix = archive, prefix
+
+    def find_class(self, module: str, name: str) -> Any:
+        if (module, name) == ("collections", "OrderedDict"):
+            return OrderedDict
+        if (module, name) == ("torch._utils", "_rebuild_tensor_v2"):
+            return _rebuild_tensor
+        if module == "torch" and name in STORAGE_DTYPES:
+            return STORAGE_DTYPES[name]
+        raise pickle.UnpicklingError(f"a state dict holds no {module}.{name}")
+
+    def persistent_load(self, pid: Any) -> np.ndarray:
+        kind, dtype, key, _location, _count = pid
+        if kind != "storage" or dtype not in STORAGE_DTYPES.values():
+            raise pickle.UnpicklingError(f"a state dict holds no storage {pid!r}")
+        return np.frombuffer(self.archive.read(f"{self.prefix}data/{key}"), dtype=dtype)
+
+
+def _rebuild_tensor(storage: np.ndarray, offset: int, size: tuple[int, ...],
+                    stride: tuple[int, ...], *_: Any) -> np.ndarray:
+    """A tensor of ``storage`` as torch rebuilds it (its offset, shape and strides, in
+    elements), copied out as a native-order array."""
+    view = np.lib.stride_tricks.as_strided(storage[offset:], shape=size,
+                                           strides=[s * storage.itemsize for s in stride])
+    return np.array(view, dtype=storage.dtype.newbyteorder("="))
+
+
+def state_dict(pth: bytes) -> dict[str, np.ndarray]:
+    """The state dict in torch's zip ``pth`` (the bytes of a ``torch.save``) as NumPy
+    arrays; ``ValueError`` for a file of another layout."""
+    try:
+        with zipfile.ZipFile(io.BytesIO(pth)) as archive:
+            pickled = next(n for n in archive.namelist() if n.endswith("/data.pkl"))
+            prefix = pickled[:-len("data.pkl")]
+            order = archive.read(prefix + "byteorder").decode() if (
+                prefix + "byteorder" in archive.namelist()) else "little"
+            if order != "little":
+                raise ValueError(f"weights stored {order}-endian")
+            return dict(_StateDictUnpickler(archive.read(pickled), archive, prefix).load())
+    except (zipfile.BadZipFile, StopIteration, pickle.UnpicklingError, ValueError, KeyError,
+            TypeError) as error:
+        raise ValueError(f"not torch's state dict of a policy ({error})") from None
+
+
+def actor_of(weights: dict[str, np.ndarray], policy_kwargs: dict[str, Any]) -> ActorWeights:
+    """The actor of an ``MlpPolicy`` state dict ``weights`` trained with
+    ``policy_kwargs`` (sb3's; only ``net_arch`` may be set: the activation is then tanh and
+    the observation read flat); ``ValueError`` otherwise."""
+    others = sorted(set(policy_kwargs) - {"net_arch"})
+    if others:
+        raise ValueError(f"an actor of policy_kwargs {others} is not sb3's default MLP of "
+                         "tanh layers on the flat observation")
+    hidden = sorted(int(k.split(".")[2]) for k in weights
+                    if k.startswith("mlp_extractor.policy_net.") and k.endswith(".weight"))
+    names = [f"mlp_extractor.policy_net.{i}" for i in hidden] + ["action_net"]
+    try:
+        layers = [(weights[n + ".weight"], weights[n + ".bias"]) for n in names]
+    except KeyError as missing:
+        raise ValueError(f"the state dict has no {missing}: not an actor-critic MLP") from None
+    for (w, _), (w_next, _) in itertools.pairwise(layers):
+        if w.shape[0] != w_next.shape[1]:
+            raise ValueError(f"the actor's layers do not chain: {w.shape} then {w_next.shape}")
+    return ActorWeights(tuple(np.ascontiguousarray(w, dtype=np.float32) for w, _ in layers),
+                        tuple(np.ascontiguousarray(b, dtype=np.float32) for _, b in layers))
+
+
+@lru_cache(maxsize=4)
+def _read(path: str, modified_ns: int) -> ActorWeights:
+    with zipfile.ZipFile(path) as archive:
+        data = json.loads(archive.read("data"))
+        pth = archive.read("policy.pth")
+    module = data.get("policy_class", {}).get("__module__")
+    if module not in ACTOR_CRITIC_MODULES:
+        raise ValueError(f"its policy class is of {module}, not MaskablePPO's actor-critic")
+    return actor_of(state_dict(pth), data.get("policy_kwargs") or {})
+
+
+def read_actor(path: str | Path) -> ActorWeights:
+    """The actor of the stable-baselines3 MaskablePPO file ``path`` (read once per file
+    version); ``ValueError`` saying why a file cannot be read so."""
+    path = Path(path)
+    try:
+        return _read(str(path.resolve()), path.stat().st_mtime_ns)
+    except (zipfile.BadZipFile, KeyError, json.JSONDecodeError, ValueError) as error:
+        raise ValueError(f"policy file '{path}': its network cannot be read in NumPy: "
+                         f"{error}") from None
