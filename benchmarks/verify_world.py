@@ -13,14 +13,14 @@ controller of the estimate (:class:`~calibrators.workflow.verify.CompensatedAgen
 verification a technician runs from ``orthoglide plan --verify``), in the true world,
 with a noise stream of its own: ``--instrument same``, the same agent's experiment
 again; ``ballbar``, ISO 230-4's circles with a ballbar
-(:class:`~calibrators.workflow.verify.BallbarCircles`).  :func:`~calibrators.workflow.
+(:class:`~calibrators.workflow.verify.BallbarCircles`). :func:`~calibrators.workflow.
 verify.verify` holds it against the estimate under the stated world, without and with
-the world test (``verify --check-world``; not on a ballbar's circles, which hold no
-gauge reading to fit).  A row: the share of machines whose verification PASSED, each
-with its 95 % Clopper-Pearson interval, the median chi2/dof, the share whose readings
-showed a worse world than stated, and whether the row keeps the issue's promise with the
-world test: on the stated (true) world PASSED on >= 95 % of machines; on a world worse
-than stated, FAILED on >= 90 %.
+the world test (``verify --check-world``; not on a ballbar's circles: the fit's world
+test does not take a ballbar's terms yet). A row: the share of machines whose
+verification PASSED, each with its 95 % Clopper-Pearson interval, the median chi2/dof,
+the share whose readings showed a worse world than stated, and whether the row keeps the
+issue's promise with the world test: on the stated (true) world PASSED on >= 95 % of
+machines; on a world worse than stated, FAILED on >= 90 %.
 """
 
 from __future__ import annotations

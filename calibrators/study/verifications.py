@@ -11,6 +11,7 @@ from dataclasses import replace
 import gymnasium as gym
 
 from calibrators.agents import get_agent
+from calibrators.agents.base import PlannedAgent
 from calibrators.estimators.catalogue import for_study
 from calibrators.measurements import Measurements
 from calibrators.study.compare import Config
@@ -45,33 +46,36 @@ def verifications(stated: str, agent: str, episodes: list, config: Config,
     compensated controller (:class:`~calibrators.workflow.verify.CompensatedAgent`) in
     ``config``'s world by ``instrument`` (:data:`VERIFIERS`), and verified told
     ``stated``: the verification, the world test's words ("" when the readings show no
-    worse world; None for a ballbar's, which ``full`` alone cannot fit: its circles hold
-    no gauge) and the readings; an exception where the fit or the verification failed
-    (kept, never dropped).  ``ValueError`` for an unknown ``instrument``."""
+    worse world; None for a ballbar's: the fit's world test does not take the families of
+    a ballbar's terms, its scale error and the drives' give, yet) and the readings; an
+    exception where the fit or the verification failed (kept, never dropped).
+    ``ValueError`` for an unknown ``instrument``."""
     if instrument not in VERIFIERS:
         raise ValueError(f"unknown verification instrument '{instrument}'; one of "
                          f"{', '.join(VERIFIERS)}")
     told = Conditions(stated)
     estimates = for_study("full", episodes[0].run.sigma, told, "realistic").fit_many(
         [e.run.measurements for e in episodes])
-    played = BallbarCircles() if instrument == "ballbar" else get_agent(agent)
-    lab_config = (replace(config, instruments=("dial", "ballbar")) if instrument == "ballbar"
-                  else config)
-    kwargs = lab_config.lab_kwargs(played)
+    ballbar = instrument == "ballbar"
+
+    def verifier() -> PlannedAgent:
+        return BallbarCircles() if ballbar else get_agent(agent)
+
+    kwargs = (replace(config, instruments=("dial", "ballbar")) if ballbar
+              else config).lab_kwargs(verifier())
     out: list[Verified | Exception] = []
     with closing(gym.make(lab_id(kwargs), **kwargs)) as lab:
         for e, est in zip(episodes, estimates, strict=True):
             if isinstance(est, Exception):
                 out.append(est)
                 continue
-            player = CompensatedAgent(
-                BallbarCircles() if instrument == "ballbar" else get_agent(agent), est)
+            player = CompensatedAgent(verifier(), est)
             run = run_episode(lab, player, machine_seed(config.seed, e.machine)
                               + VERIFICATION_STREAM,
                               {"machine": machine_dict(e.run.truth, e.run.world)})
             readings = player.readings(run)
             try:
-                world = None if instrument == "ballbar" else world_test(est, readings, told)
+                world = None if ballbar else world_test(est, readings, told)
                 out.append((verify(est, readings, told), world, readings))
             except ValueError as exc:
                 out.append(exc)

@@ -20,6 +20,14 @@ holds:
 
 It passes at the fit's own :data:`~calibrators.estimators.exact_fit.CHI2_LEVEL`.
 
+The readings may be any instrument's (each row's ``instrument``): a tracker's frame and a
+ballbar set-up's pivot are unknowns, projected out with the zeros, as the fit takes them
+(:data:`NUISANCE_GROUPS`), and each reading is weighted by its instrument's noise.  An
+instrument finer than a dial gauge sees the world's effects above its noise: its
+readings are also tested along the directions where the estimate's error and those
+effects dominate (:data:`FOCUS_RATIO`), the level shared between the two tests.
+:class:`BallbarCircles` is such a verification: ISO 230-4's circles with a ballbar.
+
 The same instruments that calibrated a machine verify it through the same blind spots: an
 estimate whose error bars are too narrow because its world was understated reads, through
 the compensated controller, as it predicts.  What the verification's readings can show is
