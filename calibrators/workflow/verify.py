@@ -327,7 +327,8 @@ VERIFICATION_FILE = "verification.json"
 
 class Verify:
     """The verification, configured: the readings ``readings`` taken through the
-    compensated controller (the filled sheet of a :class:`VerificationPlan`), under
+    compensated controller (the filled sheet of a :class:`VerificationPlan`, or any
+    instrument's readings, such as a ballbar's circles: :class:`BallbarCircles`), under
     ``conditions`` (default the estimate's), against the estimate ``estimate``.
     ``ValueError`` at construction for readings of another design than the estimate's;
     :meth:`run` makes the :class:`Verification`."""
@@ -352,9 +353,10 @@ def _check_design(est: Estimate, data: Measurements) -> None:
 def verify(est: Estimate, data: Measurements, conditions: Conditions | None = None, *,
            check_world: bool = False) -> Verification:
     """Hold the verification readings ``data`` (taken under ``conditions``, default the
-    estimate's) against the estimate ``est``'s prediction; ``check_world``: and test
-    whether they show a world worse than ``conditions`` (:func:`world_test`).
-    ``ValueError`` when they are of another design, or too few to test."""
+    estimate's; any instrument's, see the module docstring) against the estimate
+    ``est``'s prediction; ``check_world``: and test whether they show a world worse than
+    ``conditions`` (:func:`world_test`).  ``ValueError`` when they are of another design,
+    or too few to test."""
     _check_design(est, data)
     if conditions is None:
         conditions = Conditions.from_dict(est.conditions) if est.conditions else (
