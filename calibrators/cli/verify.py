@@ -36,7 +36,9 @@ def add(p: argparse.ArgumentParser) -> None:
         "at the uncompensated commands), after it (the readings), the predicted one and the "
         "residual, then pass or fail: a chi-square test of the readings against the "
         "estimate's prediction, with its error bars, the new stands' installation errors, "
-        "the conditions' effects and the gauges' noise.")
+        "the conditions' effects and the instruments' noise.  The readings may be any "
+        "instrument's (the file's instrument column): a tracker's frame and a ballbar's "
+        "pivot are unknowns, as in the fit.")
     p.add_argument("estimate", help="estimate file (calibrate or fit --save-estimate)")
     p.add_argument("readings", help="the verification's readings, .csv or .json")
     add_conditions(p, measured=True)
