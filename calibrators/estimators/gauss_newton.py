@@ -81,6 +81,7 @@ from calibrators.estimators.parameters import (
 from calibrators.estimators.world_sizes import (
     family_index,
     judge,
+    noiseless_readings,
     restricted_statistics,
     scaled,
     told_scales,
@@ -476,13 +477,13 @@ class GaussNewtonCalibrator(Estimator):
         if bars.any():
             noise = np.where(bars, ballbar_sigma(conditions), noise)
         held = holdout_mask(design, holdout, seed) if holdout else np.zeros(values.shape[1], bool)
-        base_of = _world_terms(design, values, datas, conditions, spacing)
+        base_of = _world_terms(design, datas, conditions, spacing)
         told_terms = consider
         shown: list[dict[str, float]] = [{} for _ in values]
         if auto:
             sizes = _estimated_world(
                 design, values, np.tile(~held, (len(values), 1)), noise, free, fixed, priors,
-                scale, unmodelled, spread, solver, consider, base_of(FLOOR_WORLD))
+                scale, unmodelled, spread, solver, base_of)
             consider = scaled(consider, sizes)
             present = {term_family(n) for n in consider.names}
             shown = [{f: float(v) for f, v in zip(TERM_FAMILIES, row, strict=True)
@@ -555,7 +556,7 @@ class GaussNewtonCalibrator(Estimator):
             fitting[m, rows] = False
         judged = ([None] * m_count if auto or not world_check else _world_warnings(
             design, values, fitting, noise, np.stack([r.theta[0] for r in results]), free,
-            scale, told_terms, base_of(BASE_WORLD), conditions.label))
+            scale, told_terms, base_of, conditions.label))
         for m, result in enumerate(results):
             if not result.converged[0]:
                 out.append(RuntimeError("the exact-model fit did not converge"))
@@ -657,16 +658,17 @@ class GaussNewtonCalibrator(Estimator):
             **_lead(result, every, considered.names, error_cov, conditions, spacing),
         )
 
-def _world_terms(design: ReadingLayout, values: np.ndarray, datas: list[Measurements],
-                 conditions: Conditions, spacing: float | None
-                 ) -> Callable[[str], Consider]:
-    """The consider terms of these readings under the named conditions, every effect
-    acting and the told conditions' indicator: what the told world is measured against."""
+def _world_terms(design: ReadingLayout, datas: list[Measurements], conditions: Conditions,
+                 spacing: float | None) -> Callable[[str, np.ndarray], Consider]:
+    """The consider terms of these experiments' readings (given as (M, N) values: those
+    the geometry predicts, :func:`~calibrators.estimators.world_sizes.noiseless_readings`)
+    under the named conditions, every effect acting and the told conditions' indicator:
+    what the told world is measured against."""
     times, temperatures = (_every_reading(datas, name) for name in ("time_s", "temperature_c"))
     indicator = conditions.indicator
 
-    def of(name: str) -> Consider:
-        return consider_terms(design, values, times, Conditions(name, indicator=indicator),
+    def of(name: str, readings: np.ndarray) -> Consider:
+        return consider_terms(design, readings, times, Conditions(name, indicator=indicator),
                               spacing, temperatures)
 
     return of
@@ -675,14 +677,17 @@ def _world_terms(design: ReadingLayout, values: np.ndarray, datas: list[Measurem
 def _estimated_world(design: ReadingLayout, values: np.ndarray, mask: np.ndarray,
                      noise: np.ndarray, free: np.ndarray, fixed: np.ndarray,
                      priors: np.ndarray, scale: np.ndarray, unmodelled: np.ndarray,
-                     spread: np.ndarray, solver: str, base: Consider, floor: Consider
-                     ) -> np.ndarray:
-    """(M, F) the families' scales of ``base``'s terms that the readings show
-    (:mod:`calibrators.estimators.world_sizes`), at least ``floor``'s: the geometry is
-    fitted first with every base term considered, then the scales are the restricted
-    likelihood's maximum over what it leaves."""
+                     spread: np.ndarray, solver: str,
+                     terms: Callable[[str, np.ndarray], Consider]) -> np.ndarray:
+    """(M, F) the families' scales of the base world's terms (``terms`` of
+    :data:`BASE_WORLD`) that the readings show (:mod:`calibrators.estimators.world_sizes`),
+    at least :data:`FLOOR_WORLD`'s: the geometry is fitted first with every base term
+    considered, then the scales are the restricted likelihood's maximum over what it
+    leaves."""
     geometry = fit_batch(design, values, mask, noise, free, fixed, priors, scale,
                          unmodelled=unmodelled, solver=solver, left_out=spread)
+    clean = noiseless_readings(design, values, mask, geometry.theta)
+    base, floor = terms(BASE_WORLD, clean), terms(FLOOR_WORLD, clean)
     columns = world_columns(design, base)
     gram, b = restricted_statistics(design, values, mask, 1.0 / weighting_sigma(noise),
                                     geometry.theta, free, scale, columns)
@@ -693,10 +698,12 @@ def _estimated_world(design: ReadingLayout, values: np.ndarray, mask: np.ndarray
 
 def _world_warnings(design: ReadingLayout, values: np.ndarray, mask: np.ndarray,
                     noise: np.ndarray, theta: np.ndarray, free: np.ndarray,
-                    scale: np.ndarray, told: Consider, base: Consider, label: str
+                    scale: np.ndarray, told: Consider,
+                    terms: Callable[[str, np.ndarray], Consider], label: str
                     ) -> list[str | None]:
     """Per machine, the words of the test that its readings show a world worse than the
     ``told`` terms' (:func:`~calibrators.estimators.world_sizes.warning`), or None."""
+    base = terms(BASE_WORLD, noiseless_readings(design, values, mask, theta))
     columns = world_columns(design, base)
     n = len(design.space.names)
     gram, b = restricted_statistics(design, values, mask, 1.0 / weighting_sigma(noise),

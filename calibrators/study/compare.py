@@ -232,6 +232,14 @@ def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
     return out
 
 
+def scored_trials(episodes: list[_Episode], name: str,
+                  estimates: list[Estimate | Exception]) -> list[Trial]:
+    """The trials of ``estimates`` (estimator ``name``'s fits of the whole ``episodes``),
+    scored as a comparison scores them, without accuracy curves: for studies that fit one
+    agent's readings several ways."""
+    return _trials(episodes, name, estimates, [[] for _ in episodes])
+
+
 def _curves(episodes: list[_Episode], name: str, estimates: list[Estimate | Exception],
             config: Config) -> list[list[list[float]]]:
     """Accuracy against time for each episode: re-estimates from the readings taken by
