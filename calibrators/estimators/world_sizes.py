@@ -196,7 +196,13 @@ def threshold(families: int, level: float = WORLD_LEVEL) -> float:
 
 
 def family_index(names: tuple[str, ...]) -> np.ndarray:
-    """(K,) each term's family's index in :data:`TERM_FAMILIES`."""
+    """(K,) each term's family's index in :data:`TERM_FAMILIES`; ``ValueError`` naming a
+    term of another family (an instrument's own terms, such as the ballbar's scale or the
+    platform's deflection under it, whose sizes the readings are not asked to judge)."""
+    other = sorted({term_family(n) for n in names} - set(TERM_FAMILIES))
+    if other:
+        raise ValueError(f"the world's sizes are estimated for {', '.join(TERM_FAMILIES)} "
+                         f"only, not yet for readings with {', '.join(other)} terms")
     return np.array([TERM_FAMILIES.index(term_family(n)) for n in names], dtype=int)
 
 
