@@ -155,7 +155,8 @@ def test_iso230_2_plans_the_standard_and_shortens_runs_to_the_budget():
     (["compare", "--agents", "tracker", "--instruments", "dial", "--machines", "1"],
      "needs the tracker"),
     (["calibrate", "--instruments", "dial,laser"], "unknown instrument"),
-    (["compare", "--instruments", "dial,step-gauge", "--machines", "1"], "not yet available"),
+    (["compare", "--agents", "step-gauge", "--conditions", "lab", "--machines", "1"],
+     "needs the step-gauge"),
     (["plan", "--instruments", "dial,interferometer", "--out", "unused"],
      "does not yet take the interferometer")])
 def test_the_commands_refuse_a_lab_without_what_they_need(argv, words, capsys):

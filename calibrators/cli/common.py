@@ -168,8 +168,8 @@ READINGS_CONDITIONS = "ideal"
 def add_instruments(p: argparse.ArgumentParser) -> None:
     """``--instruments``: what the lab owns."""
     p.add_argument("--instruments", metavar="LIST", default=None,
-                   help="what the lab owns, comma-separated: dial, interferometer, ballbar, "
-                   "tracker (step-gauge is not yet available); an agent that needs "
+                   help="what the lab owns, comma-separated: dial, interferometer, "
+                   "step-gauge, ballbar, tracker; an agent that needs "
                    "one the lab does not own is refused (default: the dial gauges, and the "
                    "tracker for an agent that reads one; docs/instruments.md)")
 
@@ -200,13 +200,14 @@ def instruments_of(args: argparse.Namespace, agents: tuple[Agent, ...] = ()
 def workflow_instruments(args: argparse.Namespace, agent: str, command: str) -> None:
     """``--instruments`` of a workflow ``command`` (``plan``, ``session``), checked with
     ``agent``: the sheets and prompts are the dial gauges' and the tracker's, so a lab
-    with the interferometer or the ballbar is refused in one line (:class:`UsageError`)."""
+    with the interferometer, the step gauge or the ballbar is refused in one line
+    (:class:`UsageError`)."""
     from calibrators.agents import get_agent
     try:
         owned = instruments_of(args, (get_agent(agent),))
     except ValueError as exc:  # an unknown agent
         raise UsageError(str(exc)) from None
-    for name in ("interferometer", "ballbar"):
+    for name in ("interferometer", "step-gauge", "ballbar"):
         if name in owned:
             raise UsageError(f"--instruments: {command} does not yet take the {name} (its "
                              "sheets and prompts are to come); compare and calibrate run it")

@@ -18,6 +18,7 @@ from calibrators.measurements.fields import (
     MAX_FIELD_CHARS,
     MAX_LINE_BYTES,
     NUMBER_FIELDS,
+    STEP_GAUGE_FIELDS,
     FieldError,
     MeasurementFileError,
     _fields_problem,
@@ -34,6 +35,7 @@ from calibrators.measurements.record import (
 )
 from orthoglide_env.instruments.ballbar import BallbarSpec
 from orthoglide_env.instruments.interferometer import InterferometerAxis
+from orthoglide_env.instruments.step_gauge import StepGaugeSpec
 from orthoglide_env.model.design import MachineDesign
 
 _INTEGER = re.compile(r"[+-]?[0-9]+")
@@ -152,14 +154,24 @@ def write_csv(items: list[Measurement], path: Path) -> None:
             if name not in ("time_s", "temperature_c")
             or any(getattr(m, name) is not None for m in items)]
     bars = any(isinstance(m.gauge, BallbarSpec) for m in items)
-    kinds = bars or any(isinstance(m.gauge, InterferometerAxis) for m in items)
+    probes = any(isinstance(m.gauge, StepGaugeSpec) for m in items)
+    kinds = bars or probes or any(isinstance(m.gauge, InterferometerAxis) for m in items)
     with path.open("w", newline="", encoding="utf-8") as handle:
         writer = csv.writer(handle)
         writer.writerow([COLUMNS[k] for k in keep] + ([INSTRUMENT_COLUMN] if kinds else [])
-                        + (list(BALLBAR_FIELDS) if bars else []))
+                        + (list(BALLBAR_FIELDS) if bars else [])
+                        + (list(STEP_GAUGE_FIELDS) if probes else []))
         writer.writerows([row[k] for k in keep] + ([instrument_of(m.gauge)] if kinds else [])
                          + (_setup_cells(m) if bars else [])
+                         + (_start_cells(m) if probes else [])
                          for m, row in ((m, m.csv_row()) for m in items))
+
+
+def _start_cells(m: Measurement) -> list[str]:
+    """A reading's step-gauge set-up cells (empty for another instrument's)."""
+    if not isinstance(m.gauge, StepGaugeSpec):
+        return [""] * len(STEP_GAUGE_FIELDS)
+    return [repr(float(v)) for v in m.gauge.start]
 
 
 def _setup_cells(m: Measurement) -> list[str]:
