@@ -203,7 +203,11 @@ class GaugeOnly(PlannedAgent):
 
 
 def _episode(conditions: Conditions, seed: int = 0):
-    env = gym.make(V3, backend="exact", conditions=conditions, errors="realistic",
+    """The gauge alone on a machine of nominal geometry: along a line a realistic
+    machine's geometry (errors of a millimetre) moves the TCP by tens of micrometres as
+    smoothly as the lead error does, which the gauges' experiment tells apart (the
+    agent's second half), not the gauge."""
+    env = gym.make(V3, backend="exact", conditions=conditions, errors="nominal",
                    instruments=OWNED)
     return run_episode(env, GaugeOnly(), machine_seed(1, seed))
 
@@ -244,7 +248,8 @@ def test_the_full_fit_recovers_the_pitch_table_within_its_error_bars(noisy: bool
     0.05 um for the table's linear interpolation between nodes of a smooth curve) of the
     true smooth lead error there (the table is 0 at its reference node, the stroke's back
     end, where face 0 lies).  Noise-free: the model's readings at the truth; noisy: the
-    lab's, with the probe's scatter and the gauge's own errors."""
+    lab's, with the probe's scatter and the gauge's own errors (see :func:`_episode` for
+    the machine)."""
     conditions = Conditions("lab", ("lead",))
     episode = _episode(conditions)
     data = episode.measurements if noisy else _exact_readings(episode)
