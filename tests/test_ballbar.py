@@ -229,8 +229,9 @@ def test_check_env_is_clean_with_the_ballbar():
         warnings.simplefilter("always")
         check_env(gym.make(V2, backend="exact", conditions="lab",
                            instruments=OWNED).unwrapped, skip_render_check=True)
-    # The one warning left, as for v0 and v1: joint targets are in mm, not a normalised box.
-    messages = {str(w.message) for w in caught}
+    # The one warning left, as for v0 and v1: joint targets are in mm, not a normalised box
+    # (besides Gymnasium's note that v3, the lab with the step gauge, exists).
+    messages = {str(w.message) for w in caught if "is out of date" not in str(w.message)}
     assert all("symmetric and normalized" in m for m in messages), messages
 
 
