@@ -30,6 +30,8 @@ LAB_ENV_ID = "OrthoglideLab-v0"
 LAB_V1_ENV_ID = "OrthoglideLab-v1"
 #: The lab whose spaces also carry the ballbar (its ``pivot`` operation and reading).
 LAB_V2_ENV_ID = "OrthoglideLab-v2"
+#: The lab whose spaces also carry the step gauge (its ``place`` operation and reading).
+LAB_V3_ENV_ID = "OrthoglideLab-v3"
 FLAT_LAB_ENV_ID = "OrthoglideLabFlat-v0"
 DESIGN_LAB_ENV_ID = "OrthoglideLabDesign-v0"
 
@@ -60,6 +62,12 @@ def _register(gymnasium: ModuleType) -> None:
         gymnasium.register(
             id=LAB_V2_ENV_ID, entry_point="orthoglide_env.envs.lab:OrthoglideLabV2Env",
             vector_entry_point="orthoglide_env.envs.lab_vector:OrthoglideLabV2VectorEnv")
+    if LAB_V3_ENV_ID not in gymnasium.registry:
+        # v3 adds the step gauge to v2's spaces; v2 stays the lab of a lab without one.
+        warnings.filterwarnings("ignore", message=f".*{LAB_V2_ENV_ID} is out of date")
+        gymnasium.register(
+            id=LAB_V3_ENV_ID, entry_point="orthoglide_env.envs.lab:OrthoglideLabV3Env",
+            vector_entry_point="orthoglide_env.envs.lab_vector:OrthoglideLabV3VectorEnv")
     if FLAT_LAB_ENV_ID not in gymnasium.registry:
         # The lab with one Box of actions and one of observations, for off-the-shelf
         # learners.
@@ -101,4 +109,4 @@ elif not any(isinstance(f, _RegisterOnImport) for f in sys.meta_path):
     sys.meta_path.insert(0, _RegisterOnImport())
 
 __all__ = ["DESIGN_LAB_ENV_ID", "ENV_ID", "FLAT_LAB_ENV_ID", "LAB_ENV_ID", "LAB_V1_ENV_ID",
-           "LAB_V2_ENV_ID", "MachineDesign"]
+           "LAB_V2_ENV_ID", "LAB_V3_ENV_ID", "MachineDesign"]

@@ -34,6 +34,7 @@ from orthoglide_env.instruments.stands import (
     stand_names,
     stand_rays,
 )
+from orthoglide_env.instruments.step_gauge import StepGaugeSpec, face_lengths, faces_of
 from orthoglide_env.model.boxes import bar_normal_pullback
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import (
@@ -81,9 +82,11 @@ class TrackerAxis:
 #: What a reading reads: a dial gauge's slot, a tracker's coordinate, an
 #: interferometer's drive (whose model reading is the carriage's offset along it: its
 #: derivative by that drive's ``drho`` is 1, by every other error 0, and the zero of its
-#: set-up takes the offset itself), or a ballbar set-up (the TCP's distance from its
-#: pivot, whose position is three unknowns of the set-up, less the bar's length).
-Spec = GaugeSpec | TrackerAxis | InterferometerAxis | BallbarSpec
+#: set-up takes the offset itself), a ballbar set-up (the TCP's distance from its
+#: pivot, whose position is three unknowns of the set-up, less the bar's length), or a
+#: step-gauge set-up (the TCP's coordinate along its axis less the nominal distance of the
+#: face read from face 0; the set-up's zero takes where face 0 lies).
+Spec = GaugeSpec | TrackerAxis | InterferometerAxis | BallbarSpec | StepGaugeSpec
 
 
 def station_of(mounting: str) -> str:
@@ -240,6 +243,24 @@ class ReadingLayout:
                 directions[np.arange(len(gauges)), [s.axis for s in gauges]])
         return signs
 
+    @cached_property
+    def probed(self) -> np.ndarray:
+        """Which readings are a step gauge's (N,)."""
+        gauge = np.array([isinstance(s, StepGaugeSpec) for s in self.specs], dtype=bool)
+        return gauge[self.mounting] if len(gauge) else np.zeros(len(self), dtype=bool)
+
+    @cached_property
+    def face_distances(self) -> np.ndarray:
+        """Per reading, the nominal distance (mm) from face 0 of the step-gauge face it
+        read (the face the nominal machine puts the TCP at); 0 for other readings."""
+        out = np.zeros(len(self))
+        for m, spec in enumerate(self.specs):
+            if isinstance(spec, StepGaugeSpec):
+                rows = np.flatnonzero(self.mounting == m)
+                face = faces_of(self.machine_design, spec, self.rho[rows])[0]
+                out[rows] = face_lengths()[np.clip(face, 0, len(face_lengths()) - 1)]
+        return out
+
     @classmethod
     def of(cls, mountings: list[str], specs: list[Spec], rho: np.ndarray,
            machine_design: MachineDesign) -> ReadingLayout:
@@ -300,7 +321,15 @@ def predict(theta: np.ndarray, layout: ReadingLayout) -> np.ndarray:
         for m, pivot in zip(space.ballbars, _pivots(theta, layout, machine), strict=True):
             values[..., m] = (np.linalg.norm(tcp - pivot[..., None, :], axis=-1)
                               - layout.specs[m].length)
+    probed = layout.probed
+    if probed.any():
+        tcp = direct(machine, postures)
+        for m, spec in enumerate(layout.specs):
+            if isinstance(spec, StepGaugeSpec):
+                values[..., m] = tcp[..., spec.axis]
     rows = values[..., layout.posture_index, layout.mounting]
+    if probed.any():
+        rows[..., probed] -= layout.face_distances[probed]
     through = np.flatnonzero(layout.through)
     if len(through):
         gauge = np.full(len(layout.specs), -1)
@@ -402,6 +431,13 @@ def _derivatives(theta: np.ndarray, layout: ReadingLayout, wanted: np.ndarray) -
     for m, spec in enumerate(layout.specs):
         if isinstance(spec, InterferometerAxis):
             out[:, layout.mounting == m, spec.axis] = 1.0
+        if isinstance(spec, StepGaugeSpec):
+            # The TCP's coordinate along the gauge's axis.
+            rows = np.flatnonzero(layout.mounting == m)
+            along = np.zeros((len(theta), len(rows), 3))
+            along[..., spec.axis] = 1.0
+            out[:, rows, :N_MACHINE] = sensitivity_along(inv[:, at[rows]], row[:, at[rows]],
+                                                         along)
     pivots = _pivots(theta, layout, machine)
     for k, (m, pivot) in enumerate(zip(space.ballbars, pivots, strict=True)):
         # The distance moves with the TCP along the bar, and against the pivot (the TCP

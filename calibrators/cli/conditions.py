@@ -6,7 +6,16 @@ from __future__ import annotations
 
 import argparse
 
-from orthoglide_env.world.table import EFFECTS, INSTRUMENT_ERRORS, Size
+from orthoglide_env.world.table import (
+    BALLBAR_LENGTHS_MM,
+    BALLBAR_LENGTHS_SOURCE,
+    EFFECTS,
+    INSTRUMENT_ERRORS,
+    STEP_GAUGE_FACES,
+    STEP_GAUGE_PITCH_MM,
+    STEP_GAUGE_SOURCE,
+    Size,
+)
 
 
 def _range(low: float, high: float, signed: bool) -> str:
@@ -35,10 +44,21 @@ def instruments_table() -> str:
     return _rows(INSTRUMENT_ERRORS, "instrument")
 
 
+def instruments_shapes() -> str:
+    """The instruments' shapes, with their sources: the ballbar's lengths, the step
+    gauge's faces."""
+    lengths = ", ".join(f"{v:g}" for v in BALLBAR_LENGTHS_MM)
+    return (f"ballbar lengths: {lengths} mm ({BALLBAR_LENGTHS_SOURCE})\n"
+            f"step-gauge faces: {STEP_GAUGE_FACES}, {STEP_GAUGE_PITCH_MM:g} mm apart "
+            f"({STEP_GAUGE_SOURCE})\n")
+
+
 def run(args: argparse.Namespace) -> None:
     print(table(), end="")
     print()
     print(instruments_table(), end="")
+    print()
+    print(instruments_shapes(), end="")
 
 
 def add(p: argparse.ArgumentParser) -> None:

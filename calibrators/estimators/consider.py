@@ -62,7 +62,11 @@ grade's linear term).  A tracker's noise under
 conditions with its MPE is not a term but its readings' sigma (:func:`tracker_sigma`);
 an interferometer's scatter likewise (:func:`~orthoglide_env.instruments.interferometer.
 sigma`), and its scale error (laser, air, material sensor) is a term per set-up,
-``interferometer.scale``, on the displacement from its zero.
+``interferometer.scale``, on the displacement from its zero.  A step gauge's errors are
+terms too: each face's calibration error, one term per face over every set-up (the same
+gauge is laid along each axis), and its scale error, one term on every face's distance;
+per set-up, its cosine error and what the room leaves once the gauge and the machine are
+taken to 20 C, ``step-gauge.scale``, on the face's distance.
 """
 
 from __future__ import annotations
@@ -75,6 +79,14 @@ from orthoglide_env.instruments.ballbar import BallbarSpec
 from orthoglide_env.instruments.ballbar import scale_rms as ballbar_scale_rms
 from orthoglide_env.instruments.interferometer import InterferometerAxis, scale_second_moment
 from orthoglide_env.instruments.slots import GaugeSpec, Part
+from orthoglide_env.instruments.step_gauge import (
+    StepGaugeSpec,
+    cosine_rms,
+    expansion_rms,
+    face_lengths,
+    face_sigmas,
+    length_sigma,
+)
 from orthoglide_env.model.compensation import interpolation_weights, node_count
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import AXIS_NAMES
@@ -404,6 +416,8 @@ def _reading_terms(design: ReadingLayout, values: np.ndarray, t: np.ndarray | No
                 dial_terms(values[:, rows], design.machine_design.gauge_travel, conditions)]
     if gives:
         out.append(("stands.give", give_all))
+    if design.probed.any() and conditions.active:
+        out += _step_gauge_terms(design, len(values), conditions)
     return out + dead_path_terms(design, t, conditions)
 
 
@@ -437,6 +451,28 @@ def dead_path_terms(design: ReadingLayout, t: np.ndarray | None, conditions: Con
     modes = walk_modes(t)
     out += [(f"stands.dead_path.walk{j}", dead * walk * modes[..., j])
             for j in range(WALK_MODES)]
+    return out
+
+
+def _step_gauge_terms(design: ReadingLayout, machines: int, conditions: Conditions
+                      ) -> list[tuple[str, np.ndarray]]:
+    """A step gauge's own terms on ``design``'s readings: (name, (M, N))."""
+    distance = design.face_distances
+    face = np.rint(distance / face_lengths()[1]).astype(int)
+    probed = design.probed
+
+    def term(pattern: np.ndarray) -> np.ndarray:
+        return np.broadcast_to(np.where(probed, pattern, 0.0), (machines, len(design)))
+
+    out = [(f"step-gauge.face{k}", term(np.where(face == k, sigma, 0.0)))
+           for k, sigma in enumerate(face_sigmas()) if sigma and (probed & (face == k)).any()]
+    out.append(("step-gauge.length", term(length_sigma() * distance)))
+    per_setup = float(np.hypot(cosine_rms(conditions), expansion_rms(conditions)))
+    for k, name in enumerate(design.mountings):
+        if isinstance(design.specs[k], StepGaugeSpec):
+            mine = design.mounting == k
+            out.append((f"step-gauge.scale[{name}]", term(np.where(mine, per_setup * distance,
+                                                                    0.0))))
     return out
 
 

@@ -92,6 +92,7 @@ from orthoglide_env.instruments.ballbar import sigma as ballbar_sigma
 from orthoglide_env.instruments.dial import DEFAULT_SIGMA, weighting_sigma
 from orthoglide_env.instruments.interferometer import InterferometerAxis
 from orthoglide_env.instruments.interferometer import sigma as interferometer_sigma
+from orthoglide_env.instruments.step_gauge import sigma as step_gauge_sigma
 from orthoglide_env.lab.operations import TRACKER_SIGMA
 from orthoglide_env.model.compensation import node_count
 from orthoglide_env.model.errors import (
@@ -476,6 +477,8 @@ class GaussNewtonCalibrator(Estimator):
         bars = np.array([isinstance(design.specs[m], BallbarSpec) for m in design.mounting])
         if bars.any():
             noise = np.where(bars, ballbar_sigma(conditions), noise)
+        if design.probed.any():
+            noise = np.where(design.probed, step_gauge_sigma(conditions), noise)
         held = holdout_mask(design, holdout, seed) if holdout else np.zeros(values.shape[1], bool)
         base_of = _world_terms(design, datas, conditions, spacing)
         told_terms = consider

@@ -18,6 +18,7 @@ from calibrators.measurements.fields import (
     MAX_FIELD_CHARS,
     MAX_LINE_BYTES,
     NUMBER_FIELDS,
+    STEP_GAUGE_FIELDS,
     FieldError,
     MeasurementFileError,
     _fields_problem,
@@ -34,6 +35,7 @@ from calibrators.measurements.record import (
 )
 from orthoglide_env.instruments.ballbar import BallbarSpec
 from orthoglide_env.instruments.interferometer import InterferometerAxis
+from orthoglide_env.instruments.step_gauge import StepGaugeSpec
 from orthoglide_env.model.design import MachineDesign
 
 _INTEGER = re.compile(r"[+-]?[0-9]+")
@@ -161,18 +163,30 @@ def write_csv(items: list[Measurement], path: Path) -> None:
 
 def instrument_columns(items: list[Measurement]) -> list[str]:
     """The columns a file of ``items`` carries after :data:`COLUMNS`: the ``instrument``
-    column when a reading is an interferometer's or a ballbar's, and the ballbar's set-up
-    when one is a ballbar's (none for dial gauges and the tracker: files as before)."""
+    column when a reading is an interferometer's, a ballbar's or a step gauge's, then the
+    ballbar's set-up when one is a ballbar's and the step gauge's when one is a step
+    gauge's (none for dial gauges and the tracker: files as before)."""
     bars = any(isinstance(m.gauge, BallbarSpec) for m in items)
-    kinds = bars or any(isinstance(m.gauge, InterferometerAxis) for m in items)
-    return ([INSTRUMENT_COLUMN] if kinds else []) + (list(BALLBAR_FIELDS) if bars else [])
+    probes = any(isinstance(m.gauge, StepGaugeSpec) for m in items)
+    kinds = bars or probes or any(isinstance(m.gauge, InterferometerAxis) for m in items)
+    return (([INSTRUMENT_COLUMN] if kinds else []) + (list(BALLBAR_FIELDS) if bars else [])
+            + (list(STEP_GAUGE_FIELDS) if probes else []))
 
 
 def instrument_cells(m: Measurement, columns: list[str]) -> list[str]:
     """Reading ``m``'s cells of :func:`instrument_columns`'s ``columns``."""
     if not columns:
         return []
-    return [instrument_of(m.gauge)] + (_setup_cells(m) if len(columns) > 1 else [])
+    return ([instrument_of(m.gauge)]
+            + (_setup_cells(m) if BALLBAR_FIELDS[0] in columns else [])
+            + (_start_cells(m) if STEP_GAUGE_FIELDS[0] in columns else []))
+
+
+def _start_cells(m: Measurement) -> list[str]:
+    """A reading's step-gauge set-up cells (empty for another instrument's)."""
+    if not isinstance(m.gauge, StepGaugeSpec):
+        return [""] * len(STEP_GAUGE_FIELDS)
+    return [repr(float(v)) for v in m.gauge.start]
 
 
 def _setup_cells(m: Measurement) -> list[str]:

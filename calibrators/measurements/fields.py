@@ -42,9 +42,10 @@ COLUMNS: tuple[str, ...] = ("mounting", "leg", "axis", "at", "posture", "rho_x",
 #: without one reads and writes as before).
 INSTRUMENT_COLUMN: str = "instrument"
 #: The ``instrument`` column's values: a dial gauge's (the default where it is empty or
-#: absent), a tracker's (also told by ``leg`` ``tracker``), an interferometer's and a
-#: ballbar's.
-INSTRUMENT_KINDS: tuple[str, ...] = ("dial", "tracker", "interferometer", "ballbar")
+#: absent), a tracker's (also told by ``leg`` ``tracker``), an interferometer's, a
+#: ballbar's and a step gauge's.
+INSTRUMENT_KINDS: tuple[str, ...] = ("dial", "tracker", "interferometer", "ballbar",
+                                     "step-gauge")
 RHO_FIELDS: tuple[str, str, str] = ("rho_x", "rho_y", "rho_z")
 #: A ballbar reading's set-up, written after the ``instrument`` column when a reading is a
 #: ballbar's: the command its pivot was centred at (mm, control coordinates) and the bar's
@@ -52,12 +53,19 @@ RHO_FIELDS: tuple[str, str, str] = ("rho_x", "rho_y", "rho_z")
 BALLBAR_FIELDS: tuple[str, ...] = ("pivot_x", "pivot_y", "pivot_z", "bar_mm")
 #: A ballbar's bar is at most this long (mm): a longer one is a wrong unit or column.
 MAX_BAR_MM: float = 1000.0
+#: A step-gauge reading's set-up, written after the ``instrument`` column (and the
+#: ballbar's) when a reading is a step gauge's: the command at which its probe touched
+#: face 0 (mm, control coordinates); the gauge's axis is the ``axis`` column.
+STEP_GAUGE_FIELDS: tuple[str, ...] = ("start_x", "start_y", "start_z")
+#: A step-gauge reading's face (0 to the gauge's last), written after its set-up: a check
+#: that the reading's rho puts the TCP at it.
+FACE_FIELD: str = "face"
 #: Every name a CSV column or a JSON reading's key may have.
 FIELDS: tuple[str, ...] = (*COLUMNS, "gauge", "step", "stand", INSTRUMENT_COLUMN,
-                           *BALLBAR_FIELDS)
+                           *BALLBAR_FIELDS, *STEP_GAUGE_FIELDS, FACE_FIELD)
 NUMBER_FIELDS: frozenset[str] = frozenset({"at", *RHO_FIELDS, "repetition", "reading_mm",
                                           "time_s", "temperature_c", "step", "stand",
-                                          *BALLBAR_FIELDS})
+                                          *BALLBAR_FIELDS, *STEP_GAUGE_FIELDS, FACE_FIELD})
 JSON_KEYS: tuple[str, ...] = ("readings", "experiment_time_s", "design")
 
 ZERO_RHO: tuple[float, float, float] = (0.0, 0.0, 0.0)

@@ -4,16 +4,20 @@ in which repetition; built from a file's fields and written back to them."""
 from __future__ import annotations
 
 import functools
+import numbers
 import sys
 from collections.abc import Mapping
 from dataclasses import KW_ONLY, InitVar, dataclass, field
 from typing import Any
+
+import numpy as np
 
 from calibrators.measurements import fields
 from calibrators.measurements.fields import (
     _READING_RULE,
     _TRACKER_RULE,
     BALLBAR_FIELDS,
+    FACE_FIELD,
     INSTRUMENT_KINDS,
     MAX_BAR_MM,
     MAX_EXPERIMENT_TIME_S,
@@ -22,6 +26,7 @@ from calibrators.measurements.fields import (
     MAX_TRACKER_MM,
     MIN_ROOM_C,
     RHO_FIELDS,
+    STEP_GAUGE_FIELDS,
     ZERO_RHO,
     FieldError,
     _fields_problem,
@@ -37,12 +42,23 @@ from calibrators.measurements.fields import (
 from orthoglide_env.instruments.ballbar import BallbarSpec, travel_mm
 from orthoglide_env.instruments.interferometer import InterferometerAxis
 from orthoglide_env.instruments.slots import NO_LEG, GaugeSpec, Part, layout_from_names, on_platform
+from orthoglide_env.instruments.step_gauge import (
+    StepGaugeSpec,
+    face_lengths,
+    faces_of,
+    off_face,
+    probe_range_mm,
+)
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import AXIS_NAMES, LEG_NAMES
 from orthoglide_env.reading_model import TrackerAxis
 
 #: A ballbar reading's limit: its travel about the bar's length.
 _BALLBAR_RULE = "mm (a ballbar reads within its travel about its length)"
+#: A step-gauge reading's limit: its probe's range about face 0's.
+_PROBE_RULE = "mm (a step gauge's probe reads within its range)"
+#: What a reading reads, as the files name it.
+Gauge = GaugeSpec | TrackerAxis | InterferometerAxis | BallbarSpec | StepGaugeSpec
 
 
 @functools.lru_cache(maxsize=4096)
@@ -76,7 +92,7 @@ class Measurement:
     :class:`FieldError` (a ValueError) naming the field.
     """
 
-    gauge: GaugeSpec | TrackerAxis | InterferometerAxis | BallbarSpec
+    gauge: Gauge
     posture: str
     repetition: int
     reading: float
@@ -110,6 +126,8 @@ class Measurement:
         procedure step, room temperature and stand."""
         limit, rule = ((MAX_TRACKER_MM, _TRACKER_RULE) if isinstance(self.gauge, TrackerAxis)
                        else (travel_mm(), _BALLBAR_RULE) if isinstance(self.gauge, BallbarSpec)
+                       else (probe_range_mm(), _PROBE_RULE)
+                       if isinstance(self.gauge, StepGaugeSpec)
                        else (MAX_READING_MM, _READING_RULE))
         reading = _real(reading, "reading_mm", -limit, limit, rule)
         time_s = None if time_s is None else _real(
@@ -174,6 +192,10 @@ class Measurement:
             del out["gauge"]  # its set-up's fields say it
             out.update(instrument="ballbar", **dict(zip(BALLBAR_FIELDS, ballbar_cells(
                 self.gauge), strict=True)))
+        if isinstance(self.gauge, StepGaugeSpec):
+            del out["gauge"]  # its set-up's fields say it
+            out.update(instrument="step-gauge", axis=AXIS_NAMES[self.gauge.axis],
+                       **dict(zip(STEP_GAUGE_FIELDS, self.gauge.start, strict=True)))
         if self.time_s is not None:
             out["time_s"] = self.time_s
         if self.temperature_c is not None:
@@ -212,7 +234,7 @@ class Measurement:
         ``repr``, so reading the file back gives the identical floats."""
         if isinstance(self.gauge, TrackerAxis):
             leg, axis, at = "tracker", AXIS_NAMES[self.gauge.component], ""
-        elif isinstance(self.gauge, InterferometerAxis):
+        elif isinstance(self.gauge, InterferometerAxis | StepGaugeSpec):
             leg, axis, at = "", AXIS_NAMES[self.gauge.axis], ""
         elif isinstance(self.gauge, BallbarSpec):
             leg, axis, at = "", "", ""
@@ -224,12 +246,14 @@ class Measurement:
                 *("" if v is None else repr(v) for v in (self.time_s, self.temperature_c))]
 
 
-def instrument_of(gauge: GaugeSpec | TrackerAxis | InterferometerAxis | BallbarSpec) -> str:
+def instrument_of(gauge: Gauge) -> str:
     """The ``instrument`` column of a reading of ``gauge``."""
     if isinstance(gauge, InterferometerAxis):
         return "interferometer"
     if isinstance(gauge, BallbarSpec):
         return "ballbar"
+    if isinstance(gauge, StepGaugeSpec):
+        return "step-gauge"
     return "tracker" if isinstance(gauge, TrackerAxis) else "dial"
 
 
@@ -263,8 +287,7 @@ def _named_gauge(name: str) -> GaugeSpec | TrackerAxis | InterferometerAxis:
                                   f"got {_show(name)}") from None
 
 
-def _gauge(fields: Mapping[str, object], design: MachineDesign
-           ) -> GaugeSpec | TrackerAxis | InterferometerAxis | BallbarSpec:
+def _gauge(fields: Mapping[str, object], design: MachineDesign) -> Gauge:
     # Empty or absent: the reading's gauge says which (a file from before the column).
     instrument = _given(fields, "instrument")
     if instrument is not None and instrument not in INSTRUMENT_KINDS:
@@ -272,6 +295,12 @@ def _gauge(fields: Mapping[str, object], design: MachineDesign
                                        f"(empty: dial), got {_show(instrument)}")
     if instrument == "ballbar":
         return _ballbar_gauge(fields, design)
+    if instrument == "step-gauge":
+        return _step_gauge(fields, design)
+    stray = [name for name in (*STEP_GAUGE_FIELDS, FACE_FIELD) if _given(fields, name) is not None]
+    if stray:
+        raise FieldError(stray[0], "only a step-gauge reading has its set-up and face: leave "
+                                   f"it empty (instrument {_show(instrument or 'dial')})")
     stray = [name for name in BALLBAR_FIELDS if _given(fields, name) is not None]
     if stray:
         raise FieldError(stray[0], "only a ballbar reading has its set-up: leave it empty "
@@ -304,6 +333,47 @@ def _ballbar_gauge(fields: Mapping[str, object], design: MachineDesign) -> Ballb
     if length == 0.0:
         raise FieldError("bar_mm", "must be a length > 0 mm, got 0")
     return BallbarSpec(centre, length)  # type: ignore[arg-type]
+
+
+def _step_gauge(fields: Mapping[str, object], design: MachineDesign) -> StepGaugeSpec:
+    """A step-gauge reading's set-up: the world axis it lies along (``axis``) and the
+    command at which its probe touched face 0 (``start_x``, ``_y``, ``_z``, within
+    ``design``'s control limits); no leg, place or gauge name."""
+    for name in ("gauge", "leg", "at", *BALLBAR_FIELDS):
+        if _given(fields, name) is not None:
+            raise FieldError(name, f"a step-gauge reading has no {name}: its set-up is axis, "
+                                   f"{', '.join(STEP_GAUGE_FIELDS)}; got {_show(fields[name])}")
+    missing = [name for name in ("axis", *STEP_GAUGE_FIELDS) if _given(fields, name) is None]
+    if missing:
+        raise FieldError(missing[0], "empty: a step-gauge reading needs its set-up: the world "
+                                     "axis it lies along (axis) and the command at which the "
+                                     "probe touched face 0 (start_x, start_y, start_z, mm)")
+    axis = fields["axis"]
+    if axis not in AXIS_NAMES:
+        raise FieldError("axis", f"a step gauge lies along a world axis: one of "
+                                 f"{', '.join(AXIS_NAMES)}, got {_show(axis)}")
+    start = tuple(_real(fields[name], name, design.rho_min, design.rho_max,
+                        "mm (the control limits)") for name in STEP_GAUGE_FIELDS)
+    return StepGaugeSpec(AXIS_NAMES.index(axis), start)  # type: ignore[arg-type, arg-type]
+
+
+def _check_face(m: Measurement, given: object, design: MachineDesign) -> None:
+    """A step-gauge reading's rho must put the nominal machine's TCP at one of its gauge's
+    faces, and at the ``face`` field's when one is given (:class:`FieldError`)."""
+    problem = off_face(design, m.gauge, np.asarray(m.rho))  # type: ignore[arg-type]
+    if problem:
+        raise FieldError("rho", f"a step-gauge reading is read at a face: {problem}")
+    if given is None:
+        return
+    count = len(face_lengths())
+    if isinstance(given, bool) or not isinstance(given, numbers.Integral) or not (
+            0 <= given < count):
+        raise FieldError(FACE_FIELD, f"must be a face of the gauge, an integer 0..{count - 1}, "
+                                     f"got {_show(given)}")
+    face = int(faces_of(design, m.gauge, np.asarray(m.rho))[0])  # type: ignore[arg-type]
+    if face != given:
+        raise FieldError(FACE_FIELD, f"the reading's rho puts the TCP at face {face}, not "
+                                     f"{given}")
 
 
 def ballbar_cells(gauge: BallbarSpec) -> tuple[float, ...]:
@@ -382,12 +452,15 @@ def _measurement(fields: Mapping[str, object], line: int | None, design: Machine
     posture = _given(fields, "posture")
     if posture is None and rho is None:
         raise FieldError("posture", "empty: give a paper posture, or the rho")
-    return Measurement(gauge, "" if posture is None else posture,
-                       _given(fields, "repetition", 1), reading, rho,
-                       _given(fields, "mounting", ""), line, design=design,
-                       time_s=_given(fields, "time_s"), step=_given(fields, "step"),
-                       temperature_c=_given(fields, "temperature_c"),
-                       stand=_given(fields, "stand"))
+    out = Measurement(gauge, "" if posture is None else posture,
+                      _given(fields, "repetition", 1), reading, rho,
+                      _given(fields, "mounting", ""), line, design=design,
+                      time_s=_given(fields, "time_s"), step=_given(fields, "step"),
+                      temperature_c=_given(fields, "temperature_c"),
+                      stand=_given(fields, "stand"))
+    if isinstance(gauge, StepGaugeSpec):
+        _check_face(out, _given(fields, FACE_FIELD), design)
+    return out
 
 
 class _Readings:

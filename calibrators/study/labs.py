@@ -43,9 +43,12 @@ def lab_kwargs(agent: Agent, instruments: tuple[str, ...] = (), **settings: Any
 
 
 def lab_id(kwargs: dict[str, Any]) -> str:
-    """The lab env that takes ``kwargs``: ``OrthoglideLab-v2`` for a lab with the ballbar,
-    ``OrthoglideLab-v1`` for one with the interferometer, else ``OrthoglideLab-v0``."""
+    """The lab env that takes ``kwargs``: ``OrthoglideLab-v3`` for a lab with the step
+    gauge, ``OrthoglideLab-v2`` for one with the ballbar, ``OrthoglideLab-v1`` for one with
+    the interferometer, else ``OrthoglideLab-v0``."""
     owned = kwargs.get("instruments", ())
+    if "step-gauge" in owned:
+        return orthoglide_env.LAB_V3_ENV_ID
     if "ballbar" in owned:
         return orthoglide_env.LAB_V2_ENV_ID
     return (orthoglide_env.LAB_V1_ENV_ID if "interferometer" in owned

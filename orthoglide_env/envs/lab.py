@@ -22,7 +22,7 @@ from orthoglide_env.lab.settings import lab_settings, lab_spaces
 from orthoglide_env.lab.spec import LAB, REWARDS, check_arguments, signature
 
 __all__ = ["ACCURACY_UNIT_MM", "REWARDS", "Estimator", "OrthoglideLabEnv",
-           "OrthoglideLabV1Env", "OrthoglideLabV2Env", "Record"]
+           "OrthoglideLabV1Env", "OrthoglideLabV2Env", "OrthoglideLabV3Env", "Record"]
 
 
 class LabFace(Face):
@@ -203,8 +203,8 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
     Instruments
     -----------
     ``instruments`` lists what the lab owns (names in
-    :data:`~orthoglide_env.instruments.catalogue.INSTRUMENT_NAMES`; an unknown one, or
-    one not yet available, raises ``ValueError``).  In ``OrthoglideLab-v1`` with the
+    :data:`~orthoglide_env.instruments.catalogue.INSTRUMENT_NAMES`; an unknown one
+    raises ``ValueError``).  In ``OrthoglideLab-v1`` with the
     ``interferometer``, ``align`` drives to Zero, sets the interferometer up along drive
     ``axis`` (the retroreflector on its carriage) and zeroes it there (the first set-up
     also waits for its material sensor to settle; :data:`~orthoglide_env.lab.operations.
@@ -224,8 +224,26 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
     operation takes it off.  Each set-up is a mounting of the notebook (``ballbar#1``).
     ``pivot`` in a lab without it is refused.
 
+    In ``OrthoglideLab-v3`` with the ``step-gauge`` (a KOBA-type gauge, faces every
+    20 mm), ``place`` drives to ``rho``, lays the gauge along world axis ``axis`` with its
+    face 0 at the TCP there and zeroes the probe on the platform on it (:data:`~orthoglide_env.
+    lab.operations.TIME`: the set-up's time).  While it is set up every move must bring the
+    nominal machine's TCP onto the gauge's line at one of its faces (else ``ValueError``
+    before anything changes) and reads it, with the probe's dwell: how far the TCP lies
+    past the face along the gauge, from where it lay at face 0, in mm, with the
+    instrument's own errors (:mod:`orthoglide_env.instruments.step_gauge`).  Any other
+    operation takes the probe off.  Each set-up is a mounting of the notebook
+    (``step-gauge#1``).  ``place`` in a lab without it is refused.
+
     Version history
     ---------------
+    * v3 (``OrthoglideLab-v3``, :class:`OrthoglideLabV3Env`): the lab may own a step gauge
+      (``instruments=["dial", "step-gauge"]``, see Instruments).  The action's ``op`` gains
+      7, ``place``, which takes the action's ``axis`` (the world axis to lay the gauge
+      along); the observation gains ``step_gauge`` (mm, Box(-1, 1, (1,)): its reading, 0
+      when it did not read), ``step_gauge_valid`` (1 when it read) and ``step_gauge_in``
+      (1 while the probe is on the gauge).  ``OrthoglideLab-v2`` keeps its spaces and
+      refuses the step gauge with ``ValueError``.
     * v2 (``OrthoglideLab-v2``, :class:`OrthoglideLabV2Env`): the lab may own a ballbar
       (``instruments=["dial", "ballbar"]``, see Instruments).  The action's ``op`` gains 6,
       ``pivot``, and the action a key ``bar`` (Discrete(3): the index of the bar's length
@@ -339,3 +357,11 @@ class OrthoglideLabV2Env(OrthoglideLabEnv):
     ``bar`` and the observation's ``ballbar`` keys."""
 
     version = 2
+
+
+class OrthoglideLabV3Env(OrthoglideLabEnv):
+    """``OrthoglideLab-v3``: :class:`OrthoglideLabEnv` (whose docstring is the spec) whose
+    spaces carry the interferometer, the ballbar and the step gauge: the ``place``
+    operation and the observation's ``step_gauge`` keys."""
+
+    version = 3

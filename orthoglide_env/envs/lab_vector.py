@@ -112,3 +112,10 @@ class OrthoglideLabV2VectorEnv(OrthoglideLabVectorEnv):
     interferometer and the ballbar in its spaces."""
 
     version = 2
+
+
+class OrthoglideLabV3VectorEnv(OrthoglideLabVectorEnv):
+    """``OrthoglideLab-v3``'s native vector env: :class:`OrthoglideLabVectorEnv` with the
+    interferometer, the ballbar and the step gauge in its spaces."""
+
+    version = 3

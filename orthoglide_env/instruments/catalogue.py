@@ -8,13 +8,11 @@ from collections.abc import Iterable
 #: Every instrument a lab may own, by the name commands and envs use.
 INSTRUMENT_NAMES: tuple[str, ...] = ("dial", "interferometer", "step-gauge", "ballbar",
                                      "tracker")
-#: Those the lab can use today; the others are refused in one line.
-AVAILABLE: tuple[str, ...] = ("dial", "interferometer", "ballbar", "tracker")
 
 
 def check_instruments(names: Iterable[str]) -> tuple[str, ...]:
     """``names`` in :data:`INSTRUMENT_NAMES` order, or ``ValueError`` naming an unknown
-    one, one not yet available, or a lab without its dial gauges (its stands carry them)."""
+    one, or a lab without its dial gauges (its stands carry them)."""
     names = list(names)
     if not names or not all(isinstance(n, str) for n in names):
         raise ValueError(f"instruments must be a list of names from "
@@ -23,10 +21,6 @@ def check_instruments(names: Iterable[str]) -> tuple[str, ...]:
     if unknown:
         raise ValueError(f"unknown instrument(s) {unknown}; instruments are "
                          f"{', '.join(INSTRUMENT_NAMES)}")
-    later = [n for n in names if n not in AVAILABLE]
-    if later:
-        raise ValueError(f"instrument(s) {later} not yet available; available: "
-                         f"{', '.join(AVAILABLE)}")
     if "dial" not in names:
         raise ValueError("instruments must include 'dial': the lab's stands carry dial "
                          "gauges")

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from orthoglide_env.lab.operations import V0_OPS, V1_OPS, Op
+from orthoglide_env.lab.operations import V0_OPS, V1_OPS, V2_OPS, Op
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import check_rho
 from orthoglide_env.world.table import BALLBAR_LENGTHS_MM
@@ -70,10 +70,11 @@ def check_lab_actions(action: Any, shape: tuple[int, ...], stands: int, slots: i
     them (``shape (N,)``, each field with the batch axis first), as arrays, or
     ``ValueError`` naming the field (and the env).  ``slots``: the size of the lab's slot
     catalogue; ``rows``: the envs whose action is used (the others are not checked);
-    ``rho`` is checked where the operation is a move or a pivot.  ``version`` 1
+    ``rho`` is checked where the operation is a move, a pivot or a place.  ``version`` 1
     (``OrthoglideLab-v1``) adds the ``align`` operation and its ``axis`` field, version 2
-    the ``pivot`` operation and its ``bar`` field (other operations may leave either out);
-    an align's axis and a pivot's bar are returned in its ``slot``."""
+    the ``pivot`` operation and its ``bar`` field, version 3 the ``place`` operation, which
+    takes ``axis`` too (other operations may leave either out); an align's or a place's
+    axis and a pivot's bar are returned in its ``slot``."""
     keys = {"op", "rho", "stand", "slot"}
     optional = {"axis"} if version == 1 else {"axis", "bar"} if version >= 2 else set()
     if not isinstance(action, dict) or not (keys <= set(action) <= keys | optional):
@@ -81,7 +82,8 @@ def check_lab_actions(action: Any, shape: tuple[int, ...], stands: int, slots: i
                          + (" and, for align, axis" if version >= 1 else "")
                          + (" and, for pivot, bar" if version >= 2 else ""))
     used = np.ones(shape, dtype=bool) if rows is None else np.asarray(rows, dtype=bool)
-    ops = len(Op) if version >= 2 else V1_OPS if version == 1 else V0_OPS
+    ops = (len(Op) if version >= 3 else V2_OPS if version == 2 else V1_OPS if version == 1
+           else V0_OPS)
     op = _integers(action["op"], "op", ops, shape, used)
     stand = _integers(action["stand"], "stand", stands, shape, used)
     slot = _integers(action["slot"], "slot", slots, shape, used)
@@ -89,13 +91,15 @@ def check_lab_actions(action: Any, shape: tuple[int, ...], stands: int, slots: i
                                    "z) to set the interferometer up along"),
                                   (Op.PIVOT, "bar", len(BALLBAR_LENGTHS_MM), "pivot: the "
                                    f"index of the bar's length in {list(BALLBAR_LENGTHS_MM)} "
-                                   "mm")):
+                                   "mm"),
+                                  (Op.PLACE, "axis", 3, "place: the world axis (0, 1, 2 for "
+                                   "x, y, z) to lay the step gauge along")):
         doing = used & (op == kind)
         if doing.any():
             if key not in action:
                 raise ValueError(f"action {key} is needed by {what}")
             slot = np.where(doing, _integers(action[key], key, size, shape, doing), slot)
-    moving = used & ((op == Op.MOVE) | (op == Op.PIVOT))
+    moving = used & ((op == Op.MOVE) | (op == Op.PIVOT) | (op == Op.PLACE))
     rho = np.zeros((*shape, 3))
     if moving.any():
         given = check_targets(action["rho"], (*shape, 3), rows=moving if shape else None,

@@ -13,14 +13,16 @@ from orthoglide_env.lab.operations import TIME, Op
 
 def travel_seconds(op: np.ndarray, before: np.ndarray, goal: np.ndarray, tracker: bool,
                    blocked: np.ndarray | None = None, laser: np.ndarray | None = None,
-                   soak: np.ndarray | None = None) -> np.ndarray:
+                   soak: np.ndarray | None = None, probe: np.ndarray | None = None
+                   ) -> np.ndarray:
     """Seconds (R,) each move, re-mount, interferometer or ballbar set-up takes to drive the
     carriages from ``before`` to ``goal`` (R, 3) and settle, and then: a move the tracker's
     point (where the lab has a tracker), a re-mount or a ballbar set-up its work, and a
     re-mount at a reference slot (``blocked``, (R,), in a lab with the gauge block) the
     block's; in a lab with the interferometer, a set-up its work (and the material
     sensor's soak before the first, ``soak`` (R,)), and a move while it is set up
-    (``laser`` (R,)) its dwell."""
+    (``laser`` (R,)) its dwell; in a lab with the step gauge, a set-up its work, and a
+    move while it is set up (``probe`` (R,)) the probe's dwell on the face."""
     tracker_s = TIME.tracker_point_s if tracker else 0.0
     work = np.where(op == Op.MOVE, tracker_s, np.where(op == Op.PIVOT, TIME.ballbar_setup_s,
                                                        TIME.remount_s))
@@ -28,6 +30,9 @@ def travel_seconds(op: np.ndarray, before: np.ndarray, goal: np.ndarray, tracker
         setup = TIME.interferometer_setup_s + np.where(soak, TIME.interferometer_soak_s, 0.0)
         work = np.where(op == Op.ALIGN, setup, work) + np.where(
             (op == Op.MOVE) & laser, TIME.interferometer_target_s, 0.0)
+    if probe is not None:
+        work = np.where(op == Op.PLACE, TIME.step_gauge_setup_s, work) + np.where(
+            (op == Op.MOVE) & probe, TIME.step_gauge_face_s, 0.0)
     seconds = TIME.move(before, goal) + work
     if blocked is not None:
         seconds = seconds + np.where(blocked, TIME.reference_s, 0.0)

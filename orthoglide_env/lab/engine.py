@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from orthoglide_env.instruments import ballbar, interferometer, thermometer
+from orthoglide_env.instruments import ballbar, interferometer, step_gauge, thermometer
 from orthoglide_env.instruments.dial import Status, readings_from_distances, status_of
 from orthoglide_env.instruments.gauges import Gauge, GaugeArray
 from orthoglide_env.instruments.slots import GaugeSpec, Part, on_platform
@@ -41,12 +41,17 @@ from orthoglide_env.model.errors import AXIS_NAMES, MachineParams
 from orthoglide_env.reading_model import TrackerAxis
 from orthoglide_env.scoring.truth import score
 from orthoglide_env.world.faults import fault_stream
-from orthoglide_env.world.table import REFERENCE_DEVIATION, REFERENCE_LENGTH_MM
-from orthoglide_env.world.truth import UM, World, draw_range
+from orthoglide_env.world.table import (
+    REFERENCE_DEVIATION,
+    REFERENCE_LENGTH_MM,
+    STEP_GAUGE_FACES,
+)
+from orthoglide_env.world.truth import REFERENCE_C, UM, World, draw_range
 
 #: Whether each operation code puts the machine somewhere and reads it (a table, where
 #: ``np.isin`` cost 4 % of a lone env's step).
-_READS: np.ndarray = np.isin(np.arange(len(Op)), (Op.MOVE, Op.REMOUNT, Op.ALIGN, Op.PIVOT))
+_READS: np.ndarray = np.isin(np.arange(len(Op)), (Op.MOVE, Op.REMOUNT, Op.ALIGN, Op.PIVOT,
+                                                   Op.PLACE))
 
 
 @dataclass
@@ -133,6 +138,20 @@ class LabBatch:
         self.bar_centring = np.zeros((n, ballbar.MAX_SETUPS, 3))
         self.bar_pivot = np.zeros((n, 3))
         self.bar_streams: list[np.random.Generator | None] = [None] * n
+        # The step gauge (a lab that owns one): its set-ups so far, the axis it lies along
+        # and the command of its face 0, whether the probe is on it, where the TCP touched
+        # face 0 (the truth, grown with the room; NaN: at the next reading), its reading
+        # now (NaN: none this step); each lab's errors (the truth) and its noise streams.
+        self.gauge_setups = np.zeros(n, dtype=np.int64)
+        self.gauge_axis = np.zeros(n, dtype=np.int64)
+        self.gauge_start = np.zeros((n, 3))
+        self.gauge_in = np.zeros(n, dtype=bool)
+        self.gauge_origin = np.full((n, 3), np.nan)
+        self.gauge_reading = np.full(n, np.nan)
+        self.gauge_faces = np.zeros((n, STEP_GAUGE_FACES))
+        self.gauge_scale = np.zeros(n)
+        self.gauge_normals = np.zeros((n, step_gauge.MAX_SETUPS, 3))
+        self.gauge_streams: list[np.random.Generator | None] = [None] * n
         # The world beyond the geometry (None under ideal conditions): its drawn truth, the
         # carriages' actual positions, each axis's last direction of travel and each
         # plunger's (+1: going in) and its last ray distance.
@@ -186,6 +205,7 @@ class LabBatch:
         drawn, rotations, positions, errors, worlds, offsets = [], [], [], [], [], []
         lasers: list[tuple[float, float]] = []
         bars: list[ballbar.BallbarErrors] = []
+        probes: list[step_gauge.StepGaugeErrors] = []
         for stream in streams:
             drawn.append(settings.preset.sample(stream, settings.design) if machine is None
                          else machine)
@@ -203,6 +223,8 @@ class LabBatch:
                 lasers.append(interferometer.draw_errors(settings.conditions, stream))
             if settings.ballbar:
                 bars.append(ballbar.draw_errors(settings.conditions, stream))
+            if settings.step_gauge:
+                probes.append(step_gauge.draw_errors(settings.conditions, stream))
         blocks = np.full(len(rows), REFERENCE_LENGTH_MM)
         if settings.reference and settings.conditions.active:
             # Drawn last: a lab without the block draws what it always drew.
@@ -267,6 +289,15 @@ class LabBatch:
         self.bar_setups[rows], self.bar_length[rows] = 0, np.nan
         self.bar_in[rows] = self.bar_ready[rows] = False
         self.bar_reading[rows] = np.nan
+        if settings.step_gauge:
+            self.gauge_faces[rows] = [g.faces for g in probes]
+            self.gauge_scale[rows] = [g.scale for g in probes]
+            self.gauge_normals[rows] = [g.normals for g in probes]
+            for r, i in enumerate(rows.tolist()):
+                self.gauge_streams[i] = step_gauge.noise_stream(streams[r])
+        self.gauge_setups[rows] = 0
+        self.gauge_in[rows] = False
+        self.gauge_reading[rows] = np.nan
         self._sync(rows)
         if world is not None:
             self.backend.move(rows, self.actual[rows])
@@ -287,11 +318,13 @@ class LabBatch:
         # in an ideal world.
         aligns = op == Op.ALIGN  # (its axis is in ``slot``)
         pivots = op == Op.PIVOT  # (its bar is in ``slot``)
+        places = op == Op.PLACE  # (its axis is in ``slot``)
         goal = np.where(((op == Op.REMOUNT) | aligns)[:, None], 0.0, rho)
         laser = self.laser_axis[rows] >= 0
         travel_s = travel_seconds(op, self.rho[rows], goal, settings.tracker, (
             (op == Op.REMOUNT) & self._references(slot) if settings.reference else None),
-            *((laser, self.laser_setups[rows] == 0) if settings.interferometer else ()))
+            *((laser, self.laser_setups[rows] == 0) if settings.interferometer else
+              (None, None)), probe=self.gauge_in[rows] if settings.step_gauge else None)
         approach, target = self._carriages(rows, goal, self.time[rows] + travel_s)
         refused, reached = refusals(machines, rows, op, rho, stand, slot, target,
                                     self.slot[rows], self.places)
@@ -301,21 +334,27 @@ class LabBatch:
                               f"{list(settings.instruments)})")
         if pivots.any():
             self._refuse_pivots(rows, pivots, refused)
+        if places.any():
+            self._refuse_places(rows, places, refused)
         if settings.strict_moves:
             raise_unreachable(machines, rows, op, rho, reached, target, self.size)
         ok = np.array([not r for r in refused], dtype=bool)
         inserted = self._bar_after(rows, ok, op, goal)
+        probing = self._gauge_after(rows, ok, op, goal)
         moves, remounts = ok & (op == Op.MOVE), ok & (op == Op.REMOUNT)
-        aligned, pivoted = ok & aligns, ok & pivots
+        aligned, pivoted, placed = ok & aligns, ok & pivots, ok & places
         flicks = ok & ((op == Op.LIFT) | (op == Op.ENGAGE))
         # New installations first (they draw from the streams before the readings do, and
         # may fail): nothing is stored before they are made.
         mounted = self._installations(rows[remounts], stand[remounts], slot[remounts],
                                       (self.time[rows] + travel_s)[remounts],
                                       approach[remounts])
-        seconds = step_seconds(ok, flicks, moves | remounts | aligned | pivoted, travel_s)
-        self._drive(rows, moves | pivoted, remounts | aligned, goal, reached, target, approach)
+        seconds = step_seconds(ok, flicks, moves | remounts | aligned | pivoted | placed,
+                               travel_s)
+        self._drive(rows, moves | pivoted | placed, remounts | aligned, goal, reached, target,
+                    approach)
         self.bar_in[rows] = inserted
+        self.gauge_in[rows] = probing
         self.bar_ready[rows] &= ~ok  # (a set-up below makes its own ready)
         if aligned.any():
             self._align(rows[aligned], slot[aligned])
@@ -332,9 +371,12 @@ class LabBatch:
         seconds += overtravel_seconds(new_overtravel)
         if pivoted.any():
             self._pivot(rows[pivoted], goal[pivoted], slot[pivoted])
+        if placed.any():
+            self._place(rows[placed], goal[placed], slot[placed])
         values = np.full((len(rows), settings.stands), np.nan)
         self.laser_reading[rows] = np.nan
         self.bar_reading[rows] = np.nan
+        self.gauge_reading[rows] = np.nan
         if reads.any():
             values[reads] = self._read(rows[reads], seconds[reads], Sight(
                 *(part[at[reads]] for part in sight)))
@@ -453,6 +495,76 @@ class LabBatch:
         values = ballbar.readings(distance, self.bar_length[rows], self.bar_scale[rows],
                                   self.settings.conditions, draws)
         self.bar_reading[rows] = np.where(np.abs(values) <= ballbar.travel_mm(), values, np.nan)
+
+    def _refuse_places(self, rows: np.ndarray, places: np.ndarray, refused: list[str]) -> None:
+        """Refuse the step-gauge set-ups (``places``, a mask over ``rows``) of a lab without
+        a step gauge, or one whose drawn set-ups are all used."""
+        for r in np.flatnonzero(places):
+            if not self.settings.step_gauge:
+                refused[r] = ("the lab has no step gauge (instruments="
+                              f"{list(self.settings.instruments)})")
+            elif self.gauge_setups[rows[r]] >= step_gauge.MAX_SETUPS:
+                refused[r] = f"the step gauge was set up {step_gauge.MAX_SETUPS} times: no more"
+
+    def _gauge_after(self, rows: np.ndarray, ok: np.ndarray, op: np.ndarray, goal: np.ndarray
+                     ) -> np.ndarray:
+        """Whether the probe of each of ``rows`` is on the step gauge after the step: a
+        set-up puts it on, and every move while it is on keeps it there (each must bring
+        the nominal machine's TCP to a face: ``ValueError`` before anything changes); any
+        other operation takes it off."""
+        after = (self.gauge_in[rows] & ~ok) | (ok & (op == Op.PLACE))
+        design = self.settings.design
+        for r in np.flatnonzero(ok & (op == Op.MOVE) & self.gauge_in[rows]).tolist():
+            i = int(rows[r])
+            spec = step_gauge.StepGaugeSpec(int(self.gauge_axis[i]),
+                                            tuple(self.gauge_start[i].tolist()))
+            problem = step_gauge.off_face(design, spec, goal[r])
+            if problem:
+                where = f" of env {i}" if self.size > 1 else ""
+                raise ValueError(f"action{where} rho {goal[r].tolist()} mm: no step of the "
+                                 f"gauge ({spec.slot}) is read there: {problem} (any "
+                                 "operation but a move takes the probe off)")
+            after[r] = True
+        return after
+
+    def _place(self, rows: np.ndarray, start: np.ndarray, axis: np.ndarray) -> None:
+        """Set the step gauge of ``rows`` up along world ``axis`` with face 0 at the TCP of
+        command ``start`` (where the step drove): its probe is zeroed on face 0 at this
+        step's reading."""
+        self.gauge_axis[rows] = axis
+        self.gauge_start[rows] = start
+        self.gauge_setups[rows] += 1
+        self.gauge_origin[rows] = np.nan
+
+    def _read_gauge(self, rows: np.ndarray, when: np.ndarray) -> None:
+        """Read the step gauges of ``rows`` (each on) at the TCP the last look solved, at
+        lab time ``when``: the face the nominal machine puts the TCP at, the TCP grown
+        with the room, and the room's temperature and the thermometer's reading of it; NaN
+        where the true TCP leaves the probe's range (the nominal machine put it inside)."""
+        settings = self.settings
+        draws = np.array([self.gauge_streams[i].normal() for i in rows.tolist()])  # type: ignore[union-attr]
+        tcp = self.tcp[rows]
+        temperature = read = np.zeros(len(rows))
+        if self.world is not None:
+            world = self._of(self.world, rows)
+            tcp = tcp * world.scale(when)[:, None]
+            temperature = world.temperature(when)
+        if settings.thermometer:
+            read = np.asarray(self._room(rows, when), dtype=float) - REFERENCE_C
+        fresh = np.isnan(self.gauge_origin[rows, 0])
+        self.gauge_origin[rows[fresh]] = tcp[fresh]
+        axis = self.gauge_axis[rows]
+        face = np.array([int(step_gauge.faces_of(settings.design, step_gauge.StepGaugeSpec(
+            int(a), tuple(start)), rho)[0]) for a, start, rho in zip(
+                axis.tolist(), self.gauge_start[rows].tolist(), self.rho[rows], strict=True)])
+        normal = step_gauge.world_normal(
+            axis, self.gauge_normals[rows, self.gauge_setups[rows] - 1])
+        values = step_gauge.readings(
+            tcp - self.gauge_origin[rows], normal, axis, face,
+            (self.gauge_faces[rows], self.gauge_scale[rows]), (temperature, read),
+            settings.conditions, draws)
+        reach = step_gauge.probe_range_mm()
+        self.gauge_reading[rows] = np.where(np.abs(values) <= reach, values, np.nan)
 
     def _flick(self, rows: np.ndarray, stand: np.ndarray, engages: np.ndarray) -> None:
         """Lift (or, where ``engages``, engage) the plunger of each ``stand`` of ``rows``."""
@@ -725,6 +837,9 @@ class LabBatch:
                 rows[laser], (self.time[rows] + pending)[laser], laser_draws[laser])
         if self.bar_in[rows].any():
             self._read_bar(rows[self.bar_in[rows]])
+        if self.gauge_in[rows].any():
+            probing = self.gauge_in[rows]
+            self._read_gauge(rows[probing], (self.time[rows] + pending)[probing])
         if self.world is not None:
             # The same draws, scaled up where a digital indicator scatters more: a batch
             # draws what a lone lab draws.
@@ -774,6 +889,14 @@ class LabBatch:
             self.notebooks[i].records.append(Record(
                 spec, ballbar.mounting_name(int(self.bar_setups[i])), rho[r],
                 float(self.bar_reading[i]), steps[r], stamps[r], room[r]))
+
+        for r in np.flatnonzero(np.isfinite(self.gauge_reading[rows])).tolist():
+            i = index[r]
+            spec = step_gauge.StepGaugeSpec(int(self.gauge_axis[i]),
+                                            tuple(self.gauge_start[i].tolist()))
+            self.notebooks[i].records.append(Record(
+                spec, step_gauge.mounting_name(int(self.gauge_setups[i])), rho[r],
+                float(self.gauge_reading[i]), steps[r], stamps[r], room[r]))
 
     def _room(self, rows: np.ndarray, when: np.ndarray) -> list[float | None]:
         """What the thermometer of each of ``rows`` reads (C) at lab time ``when``; None
@@ -830,7 +953,15 @@ class LabBatch:
             "time": self.time[rows][:, None].copy(),
             **(self._laser_observation(rows, fresh) if self.settings.version >= 1 else {}),
             **(self._bar_observation(rows, fresh) if self.settings.version >= 2 else {}),
+            **(self._gauge_observation(rows, fresh) if self.settings.version >= 3 else {}),
         }
+
+    def _gauge_observation(self, rows: np.ndarray, fresh: np.ndarray) -> dict[str, np.ndarray]:
+        """``OrthoglideLab-v3``'s step-gauge keys of ``rows``' observations."""
+        read = fresh & np.isfinite(self.gauge_reading[rows])
+        return {"step_gauge": np.where(read, self.gauge_reading[rows], 0.0)[:, None],
+                "step_gauge_valid": read.astype(np.int8)[:, None],
+                "step_gauge_in": self.gauge_in[rows].astype(np.int8)[:, None]}
 
     def _bar_observation(self, rows: np.ndarray, fresh: np.ndarray) -> dict[str, np.ndarray]:
         """``OrthoglideLab-v2``'s ballbar keys of ``rows``' observations."""

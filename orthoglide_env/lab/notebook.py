@@ -19,6 +19,8 @@ from orthoglide_env.instruments.ballbar import BallbarSpec
 from orthoglide_env.instruments.ballbar import sigma as ballbar_sigma
 from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.instruments.gauges import Gauge, GaugeArray
+from orthoglide_env.instruments.step_gauge import StepGaugeSpec
+from orthoglide_env.instruments.step_gauge import sigma as step_gauge_sigma
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import ERROR_NAMES, MachineParams
 from orthoglide_env.reading_model import (
@@ -66,6 +68,7 @@ class Notebook:
         self._tracker_sigma = tracker_sigma
         # The ballbar's scatter in a lab room: the information's weight of its readings.
         self._bar_sigma = ballbar_sigma(Conditions("lab"))
+        self._probe_sigma = step_gauge_sigma(Conditions("lab"))
         # Per mounting: count, sum and sum of outer products of its Jacobian rows, names.
         self._sums: dict[str, tuple[int, Any, Any, tuple[str, ...]]] = {}
         self._informed = 0  # records already in the sums
@@ -97,6 +100,7 @@ class Notebook:
         for record, row, m in zip(records, rows, layout.mounting, strict=True):
             sigma = (self._tracker_sigma if isinstance(record.spec, TrackerAxis)
                      else self._bar_sigma if isinstance(record.spec, BallbarSpec)
+                     else self._probe_sigma if isinstance(record.spec, StepGaugeSpec)
                      else self._gauge_sigma)
             # The mounting's own columns: the machine's errors and its instrument's.
             mine = _mounting_columns(space, m)

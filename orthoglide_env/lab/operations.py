@@ -41,6 +41,14 @@ ballbar set-up          300       (``pivot``, a lab with the ballbar) drive to t
                                   centre it, fit the bar of the chosen length; assumption:
                                   a whole ISO 230-4 test with a QC20-W is sold as about
                                   10-15 minutes, the set-up a part of it
+step-gauge set-up       300       (``place``, a lab with the step gauge) drive to face 0,
+                                  lay the gauge along the axis on its stand, square it,
+                                  fix the probe under the platform and zero it on face 0;
+                                  assumption: as a ballbar's set-up, the gauge's stand
+                                  positioning it (KOBA-step: "positioning guaranteed by
+                                  multipurpose accessories"); kept in the room: no soak
+step-gauge face         2         on top of a move's settle and read while it is set up:
+                                  the probe's dwell on the face; assumption
 ======================  ========  ==========================================================
 """
 
@@ -71,6 +79,8 @@ class TimeTable:
     interferometer_soak_s: float = 600.0
     interferometer_target_s: float = 2.0
     ballbar_setup_s: float = 300.0
+    step_gauge_setup_s: float = 300.0
+    step_gauge_face_s: float = 2.0
 
     def move(self, start: np.ndarray, target: np.ndarray) -> np.ndarray:
         """Seconds to drive from ``start`` to ``target`` (axes together) and settle; shapes
@@ -151,12 +161,15 @@ class Op(IntEnum):
     STOP = 4  # the experiment is over
     ALIGN = 5  # set the interferometer up along drive ``axis`` (``OrthoglideLab-v1``)
     PIVOT = 6  # set the ballbar's pivot at the TCP of ``rho``, bar ``bar`` (``-v2``)
+    PLACE = 7  # lay the step gauge along ``axis``, face 0 at the TCP of ``rho`` (``-v3``)
 
 
 #: The operations of ``OrthoglideLab-v0``'s action (every one before ``ALIGN``).
 V0_OPS: int = int(Op.ALIGN)
 #: Those of ``OrthoglideLab-v1``'s (every one before ``PIVOT``).
 V1_OPS: int = int(Op.PIVOT)
+#: Those of ``OrthoglideLab-v2``'s (every one before ``PLACE``).
+V2_OPS: int = int(Op.PLACE)
 
 
 OP_NAMES: tuple[str, ...] = tuple(op.name.lower() for op in Op)

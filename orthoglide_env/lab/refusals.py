@@ -33,10 +33,10 @@ def refusals(machines: MachineParams, rows: np.ndarray, op: np.ndarray, rho: np.
     """Why each well-formed operation of episodes ``rows`` of ``machines`` cannot be done
     ("" when it can): a stand that is not mounted cannot be lifted or engaged, a slot holds
     one stand, and the machine cannot be driven where it cannot assemble; and the TCP
-    (R, 3) where each move (or ballbar set-up) takes it (NaN where none), solved to know
-    that.  ``target``:
-    where each move puts the carriages; ``held``: the slot index of each stand of the rows
-    (R, stands; -1: not mounted), indices into ``places``."""
+    (R, 3) where each move (or ballbar or step-gauge set-up) takes it (NaN where none),
+    solved to know that.  ``target``: where each move puts the carriages; ``held``: the
+    slot index of each stand of the rows (R, stands; -1: not mounted), indices into
+    ``places``."""
     out = [""] * len(rows)
     reached = np.full((len(rows), 3), np.nan)
     flick = (op == Op.LIFT) | (op == Op.ENGAGE)
@@ -45,7 +45,7 @@ def refusals(machines: MachineParams, rows: np.ndarray, op: np.ndarray, rho: np.
     others = (held == slot[:, None]) & (np.arange(held.shape[1]) != stand[:, None])
     for r in np.flatnonzero((op == Op.REMOUNT) & others.any(axis=-1)):
         out[r] = f"slot {places[slot[r]].slot} already holds a stand"
-    moves = np.flatnonzero((op == Op.MOVE) | (op == Op.PIVOT))
+    moves = np.flatnonzero((op == Op.MOVE) | (op == Op.PIVOT) | (op == Op.PLACE))
     if len(moves):
         reached[moves] = assembled(machines[rows[moves]], target[moves])
         for r in moves[np.isnan(reached[moves, 0])]:

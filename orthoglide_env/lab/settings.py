@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from orthoglide_env.instruments import ballbar
+from orthoglide_env.instruments import ballbar, step_gauge
 from orthoglide_env.instruments.catalogue import check_instruments
 from orthoglide_env.instruments.dial import GaugeNoise, check_noise
 from orthoglide_env.instruments.slots import PAPER_LAYOUT, GaugeSpec
@@ -29,6 +29,7 @@ from orthoglide_env.lab.operations import (
     TRACKER_SIGMA,
     V0_OPS,
     V1_OPS,
+    V2_OPS,
     Op,
     slot_catalogue,
     slot_index,
@@ -76,7 +77,8 @@ class LabSettings:
     conditions: Conditions = IDEAL  # the world's effects beyond the geometry
     reference: bool = False  # the lab has the gauge block: its catalogue the reference slots
     instruments: tuple[str, ...] = ("dial",)  # what the lab owns (catalogue.INSTRUMENT_NAMES)
-    version: int = 0  # the lab env's version: v1's spaces carry the interferometer, v2's ballbar
+    version: int = 0  # the env's version: v1's spaces carry the interferometer, v2's ballbar,
+    # v3's step gauge
     faults: Faults = NO_FAULTS  # what can go wrong in the session (orthoglide_env.lab.faults)
 
     @property
@@ -88,6 +90,11 @@ class LabSettings:
     def ballbar(self) -> bool:
         """Whether the lab owns a ballbar (``pivot`` sets it up)."""
         return "ballbar" in self.instruments
+
+    @property
+    def step_gauge(self) -> bool:
+        """Whether the lab owns a step gauge (``place`` sets it up)."""
+        return "step-gauge" in self.instruments
 
     @cached_property
     def slots(self) -> tuple[GaugeSpec, ...]:
@@ -105,6 +112,9 @@ class LabSettings:
                    + TIME.overtravel_s * self.stands)
         if self.ballbar:
             longest = max(longest, far + TIME.ballbar_setup_s + TIME.overtravel_s * self.stands)
+        if self.step_gauge:
+            longest = max(longest, far + TIME.step_gauge_setup_s + TIME.step_gauge_face_s
+                          + TIME.tracker_point_s + TIME.overtravel_s * self.stands)
         if not self.interferometer:
             return longest
         setup = (far + TIME.interferometer_setup_s + TIME.interferometer_soak_s
@@ -169,6 +179,9 @@ def lab_settings(args: dict[str, Any], version: int = 0) -> LabSettings:
     if "ballbar" in instruments and version < 2:
         raise ValueError("instruments: the ballbar needs OrthoglideLab-v2 (its action has the "
                          "pivot operation and a bar, its observation the ballbar's reading)")
+    if "step-gauge" in instruments and version < 3:
+        raise ValueError("instruments: the step gauge needs OrthoglideLab-v3 (its action has "
+                         "the place operation, its observation the step gauge's reading)")
     faults = args["faults"]
     if "thermal-step" in faults.kinds and "room" not in args["conditions"]:
         raise ValueError("faults: 'thermal-step' steps the room's temperature: it needs "
@@ -197,9 +210,9 @@ def calibration_settings(args: dict[str, Any]) -> LabSettings:
 def lab_spaces(settings: LabSettings) -> tuple[spaces.Dict, spaces.Dict]:
     """``OrthoglideLab-v0``'s action and observation spaces."""
     n, design = settings.stands, settings.design
-    v1, v2 = settings.version >= 1, settings.version >= 2
+    v1, v2, v3 = settings.version >= 1, settings.version >= 2, settings.version >= 3
     action_space = spaces.Dict({
-        "op": spaces.Discrete(len(Op) if v2 else V1_OPS if v1 else V0_OPS),
+        "op": spaces.Discrete(len(Op) if v3 else V2_OPS if v2 else V1_OPS if v1 else V0_OPS),
         "rho": spaces.Box(design.rho_min, design.rho_max, shape=(3,), dtype=np.float64),
         "stand": spaces.Discrete(n),
         "slot": spaces.Discrete(len(settings.slots)),
@@ -230,6 +243,12 @@ def lab_spaces(settings: LabSettings) -> tuple[spaces.Dict, spaces.Dict]:
                                   shape=(1,), dtype=np.float64),
             "ballbar_valid": spaces.MultiBinary(1),
             "ballbar_in": spaces.MultiBinary(1)} if v2 else {}),
+        # The TCP's positioning error along the gauge: tens of um, within the probe's range.
+        **({"step_gauge": spaces.Box(-2 * step_gauge.probe_range_mm(),
+                                     2 * step_gauge.probe_range_mm(), shape=(1,),
+                                     dtype=np.float64),
+            "step_gauge_valid": spaces.MultiBinary(1),
+            "step_gauge_in": spaces.MultiBinary(1)} if v3 else {}),
     })
     return action_space, observation_space
 

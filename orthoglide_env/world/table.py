@@ -212,7 +212,55 @@ INSTRUMENT_ERRORS: dict[str, dict[str, Size]] = {
                           "on a reading", "assumption: a steel bar (the machine: "
                           "steel 11.5-12 um/(m K))"),
     },
+    "step-gauge": {
+        "calibration": Size((0.2, 0.2), (0.2, 0.2), "um", "the constant part of the "
+                            "calibration's expanded uncertainty U of each face's position from "
+                            "face 0: what each face truly lies off its certificate's value is "
+                            "drawn once per gauge, normal with sigma U / 2 (k = 2 assumed)",
+                            "KOBA-step (Kolb & Baumann): U = 0.2 um + 0.5e-6 L ('KOBA-step "
+                            "and ISO 10360 requirements', item 6; catalogue 6100/E/01/2009)"),
+        "calibration_length": Size((0.5, 0.5), (0.5, 0.5), "um/m", "the part of U that grows "
+                                   "with a face's distance L from face 0: a scale error of the "
+                                   "gauge's faces, drawn once per gauge, normal with sigma "
+                                   "half of it", "KOBA-step: U = 0.2 um + 0.5e-6 L"),
+        "expansion": Size((11.3, 11.3), (11.3, 11.3), "um/(m K)", "the gauge's expansion: its "
+                          "faces grow from face 0 with the room; the lab takes them, and the "
+                          "machine's growth with the steel's coefficient, to 20 C at the "
+                          "thermometer's reading (at 20 C without one)",
+                          "KOBA-step: coefficient of thermal expansion 11.3e-6/K ('KOBA-step "
+                          "and ISO 10360 requirements', item 11)"),
+        "misalignment": Size((0, 1.0), (0, 2.0), "mrad", "angle between the gauge's line and "
+                             "the world axis it is laid along, per set-up: the faces' normal "
+                             "is tilted by it, so a step reads long by 1/cos - 1 of it "
+                             "(cosine error) and a move across the line by its sine",
+                             "assumption: laid against a square and checked with an "
+                             "indicator over its length, 0.1-0.3 mm over 140 mm"),
+        "probe": Size((0.2, 0.2), (0.3, 0.3), "um", "a reading's scatter (standard "
+                      "deviation): the probe's repeatability on a face",
+                      "assumption: an electronic length probe of 0.1 um resolution; 0.2 um in "
+                      "a still room, 0.3 um on a shop floor"),
+        "resolution": Size((0.1, 0.1), (0.1, 0.1), "um", "a reading is rounded to it",
+                           "assumption: an electronic length probe's 0.1 um display"),
+        "range": Size((0.5, 0.5), (0.5, 0.5), "mm", "the probe reads a face within +- this "
+                      "of where it touches face 0: a move while the gauge is set up must "
+                      "bring the nominal TCP within it of a face along the gauge",
+                      "assumption: an electronic length probe's +-0.5 mm"),
+        "across": Size((2.0, 2.0), (2.0, 2.0), "mm", "how far across the gauge's line the "
+                       "probe may touch a face", "assumption: a face's half-height less the "
+                       "probe tip's radius"),
+    },
 }
+
+#: The step gauge's faces: their spacing (mm) and how many a gauge has (face 0 to face
+#: ``STEP_GAUGE_FACES - 1``, the last ``(STEP_GAUGE_FACES - 1) * STEP_GAUGE_PITCH_MM`` from
+#: the first).
+STEP_GAUGE_PITCH_MM: float = 20.0
+STEP_GAUGE_FACES: int = 9
+#: Where they come from (``orthoglide conditions`` and docs/instruments.md show it).
+STEP_GAUGE_SOURCE: str = ("KOBA-step: standard distance 20 mm ('KOBA-step and ISO 10360 "
+                          "requirements', item 4); 9 faces (160 mm) is an assumption: a "
+                          "gauge as long as the prototype's travel along a world axis "
+                          "through Zero")
 
 #: The bar lengths (mm) a lab's ballbar can be set up with: the nominal bar, its radius
 #: halved with a small-circle set-up, and one extension.  On the prototype a whole circle
