@@ -75,13 +75,16 @@ class OptimalAgent(PlannedAgent):
     criterion = "I"
     #: Whether the plan may move stands to other slots.
     remounts = True
+    #: Whether the instruments the lab owns beyond its dials are among the options.
+    plans_instruments = True
 
     def make_plan(self, observation: dict[str, np.ndarray]) -> list[dict[str, Any]]:
         steps, self.predicted_rigid_mm = fixed_plan(*lab_setup(self.env, observation,
                                                                self.reserved_s),
                                                     criterion=self.criterion,
                                                     remounts=self.remounts,
-                                                    instruments=owned_instruments(self.env))
+                                                    instruments=owned_instruments(self.env)
+                                                    if self.plans_instruments else ())
         return [action(s.op, s.rho, s.stand, s.slot, **operation_keys(s)) for s in steps]
 
 
