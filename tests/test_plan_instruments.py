@@ -1,23 +1,28 @@
 """The planner over the lab's instruments (calibrators.planning.instruments): a set-up's
-own unknowns integrated out exactly, bundles priced and taken, and the bound over the
-ballbar below a plan that reads it."""
+own unknowns integrated out exactly, a bundle priced and timed as the lab runs it, and
+the bound over the ballbar below a plan that reads it."""
 
 from __future__ import annotations
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
-from calibrators.agents.optimal import fixed_plan
+import orthoglide_env
+from calibrators.agents.base import action
 from calibrators.planning import bound
 from calibrators.planning.bound import bound_model, lower_bound, plan_counts
 from calibrators.planning.instruments import (
-    InstrumentOperation,
+    best_bundle,
+    expect,
     marginal,
     operation_keys,
     planned_bundles,
+    take,
 )
 from calibrators.planning.search import Planner
-from orthoglide_env.lab.operations import PAPER_SLOTS, Op
+from orthoglide_env.instruments.ballbar import BallbarSpec
+from orthoglide_env.lab.operations import PAPER_SLOTS
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
 
@@ -66,45 +71,52 @@ def test_instrument_columns_and_the_lead_share():
 
 
 @pytest.fixture(scope="module")
-def ballbar_plan():
-    """The ``optimal`` plan of half an hour in a lab owning the ballbar (ideal world: the
-    geometry alone, quick to plan)."""
-    owned = ("dial", "ballbar")
-    steps, predicted = fixed_plan(PAPER_SLOTS, (True,) * 6, SIGMA, 1800.0, PROTOTYPE,
-                                  instruments=("ballbar",))
-    _, plain_predicted = fixed_plan(PAPER_SLOTS, (True,) * 6, SIGMA, 1800.0, PROTOTYPE)
-    return owned, steps, predicted, plain_predicted
+def bundle_taken():
+    """The best bundle of a lab owning the ballbar (ideal world: the geometry alone), after
+    the readings of the episode's opening, taken and its readings expected."""
+    planner = Planner(list(PAPER_SLOTS), [True] * 6, SIGMA, 1800.0, design=PROTOTYPE,
+                      instruments=("dial", "ballbar"))
+    planner.expect_readings()
+    before = planner.predicted_rigid_mm()
+    bundle = best_bundle(planner, 0.0)
+    ops = take(planner, bundle)
+    expect(planner, bundle)
+    return bundle, ops, planner.time_s, before, planner.predicted_rigid_mm()
 
 
-def test_plan_takes_the_ballbar_and_predicts_less(ballbar_plan):
-    _, steps, predicted, plain = ballbar_plan
-    taken = planned_bundles(steps, PROTOTYPE, ("ballbar",))
-    assert taken and all(b.instrument == "ballbar" for _, b in taken)
-    # A pivot's action carries its bar, and the plan's clock stays within the budget.
-    pivots = [s for s in steps if s.op == Op.PIVOT]
-    assert all(isinstance(s, InstrumentOperation) and "bar" in operation_keys(s)
-               for s in pivots)
-    assert steps[-1].time_s <= 1800.0
-    # Taken only where it buys more per second than the dials: the prediction falls.
-    assert predicted < plain
+def test_a_bundle_is_timed_as_the_lab_runs_it(bundle_taken):
+    bundle, ops, planned_s, before, after = bundle_taken
+    # Any bar reading informs the geometry, so the best bundle gains.
+    assert bundle.instrument == "ballbar" and after < before
+    env = gym.make(orthoglide_env.LAB_V2_ENV_ID, errors="nominal", backend="exact",
+                   conditions="ideal", instruments=["dial", "ballbar"])
+    obs, _ = env.reset(seed=0)
+    start = float(obs["time"][0])
+    for step in ops:
+        obs, _, _, _, info = env.step(action(step.op, step.rho, step.stand, step.slot,
+                                             **operation_keys(step)))
+        assert not info.get("refused"), step
+    # The plan's clock is the lab's (one time table), to rounding.
+    assert float(obs["time"][0]) - start == pytest.approx(planned_s, abs=1e-6)
+    read = [r for r in env.unwrapped.records if isinstance(r.spec, BallbarSpec)]
+    assert len(read) == len(bundle.path)
+    assert planned_bundles(ops, PROTOTYPE, ("ballbar",))[0][1] == bundle
 
 
-def test_bound_with_the_ballbar_is_below_its_plan(ballbar_plan, monkeypatch):
+def test_bound_with_the_ballbar_is_below_a_plan_that_reads_it(bundle_taken, monkeypatch):
     # Fewer solver steps: the bound stays certified (f - gap), only less tight.
     monkeypatch.setattr(bound, "MAX_ITERATIONS", 40)
-    _, steps, _, _ = ballbar_plan
+    bundle, ops, _, _, _ = bundle_taken
     ideal = Conditions("ideal")
     with_bar = lower_bound(PROTOTYPE, ideal, SIGMA, 1800.0, ("dial", "ballbar"))
     dial = lower_bound(PROTOTYPE, ideal, SIGMA, 1800.0)
     model = bound_model(PROTOTYPE, ideal, SIGMA, False, True)
     actions = [{"op": s.op, "rho": s.rho, "stand": s.stand, "slot": s.slot,
-                **operation_keys(s)} for s in steps]
+                **operation_keys(s)} for s in ops]
     counts = plan_counts(model, PROTOTYPE, PAPER_SLOTS, (True,) * 6, actions)
     # Every bar reading of the plan is a candidate of the bound's.
-    driven = sum(len(b.path) for _, b in planned_bundles(steps, PROTOTYPE, ("ballbar",)))
-    assert counts[model.laser == bound.BAR].sum() == driven
+    assert counts[model.laser == bound.BAR].sum() == len(bundle.path)
     assert with_bar.bound_mm <= np.sqrt(model.value(counts))
     # Owning more can only help, and the bar is read where it pays.
     assert with_bar.bound_mm <= dial.bound_mm
     assert with_bar.ballbar_readings > 0
-
