@@ -60,9 +60,12 @@ def cell(trials: list[Trial], bound: Bound | None = None, mark: str = "") -> str
 
 def agent_instruments(agent: str, owned: tuple[str, ...]) -> tuple[str, ...]:
     """The instruments of the bound an agent's row is held against: the dials, and those
-    of :data:`BOUND_INSTRUMENTS` it needs and the lab owns."""
-    needs = get_agent(agent).needs_instruments
-    return ("dial", *(n for n in BOUND_INSTRUMENTS[1:] if n in needs and n in owned))
+    of :data:`BOUND_INSTRUMENTS` the lab owns that it needs or plans over (``optimal``,
+    ``active``: every one the lab owns)."""
+    found = get_agent(agent)
+    reads = (*found.needs_instruments, *(owned if getattr(found, "plans_instruments", False)
+                                         else ()))
+    return ("dial", *(n for n in BOUND_INSTRUMENTS[1:] if n in reads and n in owned))
 
 
 def folder_bound(folder: Path, config: dict, instruments: tuple[str, ...]) -> Bound:

@@ -33,10 +33,14 @@ import gymnasium as gym
 import numpy as np
 
 from calibrators.agents.base import Agent, action, register
-from calibrators.agents.optimal import fixed_plan, lab_setup
+from calibrators.agents.optimal import fixed_plan, lab_setup, owned_instruments
 from calibrators.estimators.catalogue import for_study
 from calibrators.planning.belief import N_MACHINE, N_STAND, ZERO_SCALE, PlannedOperation
+from calibrators.planning.instruments import Bundle, operation_keys, planned_bundles, take
+from calibrators.planning.instruments import observe as observe_bundle
 from calibrators.planning.search import Planner
+from orthoglide_env.instruments.ballbar import BallbarSpec
+from orthoglide_env.instruments.interferometer import InterferometerAxis
 from orthoglide_env.instruments.stands import stand_names
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.model.errors import ERROR_NAMES
@@ -53,17 +57,26 @@ class ActiveAgent(Agent):
     #: Stop once the predicted TCP error after rigid motion is at most this (mm); 0: use
     #: the whole budget.
     target_mm: float = 0.0
+    #: Whether the instruments the lab owns beyond its dials are among the options (a
+    #: reference procedure that plays its instrument first leaves the rest to the dials).
+    plans_instruments: bool = True
 
     def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
               rng: np.random.Generator) -> None:
         super().reset(env, observation, rng)
         setup = lab_setup(self.env, observation, self.reserved_s)
         slots, engaged, sigma, budget, design, conditions = setup
+        owned = owned_instruments(self.env) if self.plans_instruments else ()
         self.planner = Planner(list(slots), list(engaged), sigma,
                                budget + float(observation["time"][0]), criterion=self.criterion,
-                               design=design, conditions=conditions)
-        steps, _ = fixed_plan(*setup, criterion=self.criterion)
+                               design=design, conditions=conditions, instruments=owned)
+        steps, _ = fixed_plan(*setup, criterion=self.criterion, instruments=owned)
         self.remounts = [s for s in steps if s.op == Op.REMOUNT]
+        # The instruments' bundles, taken when and as the fixed plan takes them (as its
+        # re-mounts are); the operations of the one under way left, and its first record.
+        self.bundles = planned_bundles(steps, design, owned) if owned else []
+        self.bundle: Bundle | None = None
+        self.bundle_left, self.bundle_first = 0, 0
         self.readings: dict[int, list[tuple[int, float]]] = {k: [] for k in range(len(slots))}
         self.queue: list[PlannedOperation] = []
         self.last: PlannedOperation | None = None
@@ -71,11 +84,15 @@ class ActiveAgent(Agent):
         self._observe(observation, {})
 
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
-        if self.last is not None and not info.get("refused"):
+        if self.bundle_left:
+            self.bundle_left -= 1
+            if not self.bundle_left:
+                self._observe_bundle(observation)
+        elif self.last is not None and not info.get("refused"):
             self._observe(observation, info)
         step = self._next(float(observation["time"][0]))
         self.last = step
-        return action(step.op, step.rho, step.stand, step.slot)
+        return action(step.op, step.rho, step.stand, step.slot, **operation_keys(step))
 
     # -- what was seen -------------------------------------------------------------------
     def _observe(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> None:
@@ -96,6 +113,19 @@ class ActiveAgent(Agent):
         for k, value in zip(stands, values, strict=True):
             self.readings[k].append((planner.here, value))
 
+    def _observe_bundle(self, observation: dict[str, np.ndarray]) -> None:
+        """Take in the readings of the instrument's bundle just played (the notebook's
+        records of its set-up)."""
+        planner, bundle = self.planner, self.bundle
+        planner.time_s = float(observation["time"][0])
+        kind = InterferometerAxis if bundle.instrument == "interferometer" else BallbarSpec
+        records = [r for r in self.env.records[self.bundle_first:] if isinstance(r.spec, kind)]
+        if records:
+            last = records[-1].mounting
+            records = [r for r in records if r.mounting == last]
+        observe_bundle(planner, bundle, np.array([r.rho for r in records]).reshape(-1, 3),
+                       np.array([r.reading for r in records]))
+
     # -- what to do next -------------------------------------------------------------------
     def _next(self, now: float) -> PlannedOperation:
         planner = self.planner
@@ -107,16 +137,36 @@ class ActiveAgent(Agent):
         if self.target_mm > 0 and planner.predicted_rigid_mm() <= self.target_mm:
             return PlannedOperation(Op.STOP)
         start = len(planner.steps)
-        if self.remounts and self.remounts[0].time_s <= now:
+        if self.bundles and self.bundles[0][0] <= now:
+            self._take_bundle()
+        elif self.remounts and self.remounts[0].time_s <= now:
             remount = self.remounts.pop(0)
             planner.remount(remount.stand, remount.slot)
         else:
             choice = planner.best_move()
-            if choice is None:
+            if choice is None and not self._bundle_fits():
                 return PlannedOperation(Op.STOP)
-            planner.move(*choice)
+            if choice is None:
+                # The dials pay no more: the plan's next bundle comes early.
+                self._take_bundle()
+            else:
+                planner.move(*choice)
         self.queue = list(planner.steps[start:])
         return self.queue.pop(0)
+
+    def _take_bundle(self) -> None:
+        """Start the fixed plan's next instrument bundle (its operations in the steps)."""
+        _, self.bundle = self.bundles.pop(0)
+        self.bundle_first = len(self.env.records)
+        self.bundle_left = len(take(self.planner, self.bundle))
+
+    def _bundle_fits(self) -> bool:
+        """Whether the fixed plan's next bundle fits in the budget left."""
+        if not self.bundles:
+            return False
+        trial = self.planner.fork()
+        take(trial, self.bundles[0][1])
+        return trial.time_s <= trial.budget_s
 
     def _refit(self) -> None:
         """Replace the filter's mean by the extended estimator's fit of the notebook."""

@@ -41,6 +41,8 @@ class InstrumentFirst(Agent):
         from calibrators.agents.names import get_agent  # (names imports the subclasses)
         self.queue = self.programme(observation)
         self.inner = get_agent(self.gauges)
+        # The programme is the procedure's instrument work: the gauges do the rest.
+        self.inner.plans_instruments = False
         self.started = False
 
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:

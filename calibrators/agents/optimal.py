@@ -23,6 +23,7 @@ import numpy as np
 
 from calibrators.agents.base import PlannedAgent, action, register
 from calibrators.planning.belief import PlannedOperation
+from calibrators.planning.instruments import PLANNED_INSTRUMENTS, operation_keys
 from calibrators.planning.search import Planner, greedy_plan
 from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.model.design import MachineDesign
@@ -33,12 +34,15 @@ from orthoglide_env.world.conditions import Conditions
 def fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
                budget_s: float, design: MachineDesign,
                conditions: Conditions | None = None, criterion: str = "I",
-               remounts: bool = True) -> tuple[tuple[PlannedOperation, ...], float]:
+               remounts: bool = True, instruments: tuple[str, ...] = ()
+               ) -> tuple[tuple[PlannedOperation, ...], float]:
     """The greedy plan from stands at ``slots`` (-1: none) with plungers ``engaged`` on a
-    machine of ``design`` in a lab of ``conditions`` (None: ideal), re-mounting stands
-    or not, and the TCP error after rigid motion it predicts (mm)."""
+    machine of ``design`` in a lab of ``conditions`` (None: ideal) that owns
+    ``instruments`` (the interferometer's and the ballbar's bundles are among the plan's
+    options: :mod:`calibrators.planning.instruments`), re-mounting stands or not, and the
+    TCP error after rigid motion it predicts (mm)."""
     planner = Planner(list(slots), list(engaged), sigma, budget_s, criterion=criterion,
-                      design=design, conditions=conditions)
+                      design=design, conditions=conditions, instruments=instruments)
     planner.expect_readings()  # the lab reads every stand as the episode opens
     steps = greedy_plan(planner, remounts=remounts)
     return tuple(steps), planner.predicted_rigid_mm()
@@ -58,19 +62,30 @@ def lab_setup(env: gym.Env, observation: dict[str, np.ndarray], reserved_s: floa
             env.conditions)
 
 
+def owned_instruments(env: gym.Env) -> tuple[str, ...]:
+    """The instruments the lab owns that a planner prices besides its dials (the lab
+    tells what it owns; none in a lab of dials only, whose plans are today's)."""
+    owned = tuple(getattr(env.unwrapped, "instruments", ()) or ())
+    return tuple(n for n in PLANNED_INSTRUMENTS if n in owned)
+
+
 @register
 class OptimalAgent(PlannedAgent):
     name = "optimal"
     criterion = "I"
     #: Whether the plan may move stands to other slots.
     remounts = True
+    #: Whether the instruments the lab owns beyond its dials are among the options.
+    plans_instruments = True
 
     def make_plan(self, observation: dict[str, np.ndarray]) -> list[dict[str, Any]]:
         steps, self.predicted_rigid_mm = fixed_plan(*lab_setup(self.env, observation,
                                                                self.reserved_s),
                                                     criterion=self.criterion,
-                                                    remounts=self.remounts)
-        return [action(s.op, s.rho, s.stand, s.slot) for s in steps]
+                                                    remounts=self.remounts,
+                                                    instruments=owned_instruments(self.env)
+                                                    if self.plans_instruments else ())
+        return [action(s.op, s.rho, s.stand, s.slot, **operation_keys(s)) for s in steps]
 
 
 @register

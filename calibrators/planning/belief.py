@@ -42,6 +42,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from calibrators.planning.instruments import instrument_kit
 from calibrators.planning.world_terms import world_terms
 from orthoglide_env.lab.design_belief import (
     N_MACHINE,
@@ -110,6 +111,7 @@ class Belief:
     design: MachineDesign = field(kw_only=True)
     steps: list[PlannedOperation] = field(default_factory=list)
     conditions: Conditions | None = None
+    instruments: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         self.table = slot_table(self.design)
@@ -123,6 +125,12 @@ class Belief:
         n = N_MACHINE + N_STAND * len(self.slots)
         self.world = world_terms(self.conditions, self.design, self.table, len(self.slots), n)
         n += self.world.count if self.world is not None else 0
+        self.kit = instrument_kit(tuple(self.instruments), self.design, self.conditions, n)
+        if self.kit is not None:
+            n += len(self.kit.lead)
+            if self.world is not None:
+                self.world.consider = np.vstack([self.world.consider, np.zeros(
+                    (len(self.kit.lead), self.world.consider.shape[1]))])
         self.covariance = np.eye(n)
         self.mean: np.ndarray | None = None  # set by observe()
         # The posture, and its index in the table: a plan starts at Zero, and moves only
@@ -258,6 +266,8 @@ class Belief:
         square = np.trace(self.weight @ self.covariance[:n, :n])
         if self.world is not None:
             square += self.world.bias(self.weight)
+        if self.kit is not None:
+            square += self.kit.share(self.covariance)
         return float(np.sqrt(max(square, 0.0)))
 
     def _criterion_value(self) -> float:
@@ -304,7 +314,7 @@ class Belief:
             np.array(self.slots), np.array([self.here]), np.array([self.time_s]),
             self.world.approach[None], stands)
         rows = rows.copy()
-        rows[:, self.world.start:] += fitted[:, 0]
+        rows[:, self.world.start:self.world.start + self.world.count] += fitted[:, 0]
         return rows, considered[:, 0]
 
     def observe(self, stands: list[int], values: list[float]) -> None:

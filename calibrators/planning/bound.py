@@ -2,8 +2,11 @@
 budget can reach with a lab's instruments, on the planner's linearised model.
 
 Every plan is a multiset of readings: a dial at a slot of the catalogue at a candidate
-posture of the slot table (:mod:`orthoglide_env.lab.slot_table`), and, in a lab with the
-interferometer, the laser along one drive with its carriage at a target.  On the linearised
+posture of the slot table (:mod:`orthoglide_env.lab.slot_table`), in a lab with the
+interferometer, the laser along one drive with its carriage at a target, and in a lab
+with the ballbar, the 50 mm bar about ISO 230-4's centre at a point of its circle in a
+coordinate plane (every :data:`BAR_STEP_DEG`; the ``ballbar`` agent's and the planner's
+points are among them).  On the linearised
 model at the nominal machine with the estimators' priors, a reading adds the rank-one
 information ``a a^T`` (its whitened row), so a plan that takes ``n_i`` readings of candidate
 ``i`` leaves the covariance ``M(n)^-1``, ``M(n) = I + sum_i n_i a_i a_i^T``, and the
@@ -17,7 +20,9 @@ The unknowns: the machine's 27 errors (the realistic preset's sigmas), the lead 
 terms as the ``full`` estimator fits them (the pitch table's coefficients, whitened, and
 the screw's periodic error: :func:`~calibrators.estimators.consider.lead_terms`), and a
 zero per dial slot and per drive's interferometer set-up (diffuse, :data:`~orthoglide_env.
-lab.design_belief.ZERO_SCALE`).  ``W`` is the TCP error's weight over the first two
+lab.design_belief.ZERO_SCALE`), and the ballbar set-up's pivot centre (its centring's
+prior) and zero (the fit's rows: :func:`~calibrators.planning.instruments.reading_rows`).
+``W`` is the TCP error's weight over the first two
 groups (:func:`~orthoglide_env.scoring.predicted.rigid_weight_with_drives`).
 
 What is relaxed, each a superset of what a plan can do, so the bound stays below every
@@ -27,7 +32,8 @@ plan (a Gaussian posterior only narrows when more is known or read):
   indicators' curves, the interferometer's scale error), and so is every stand's
   installation: their unknowns only widen a plan's error;
 * a slot's readings share one zero, however often a plan mounts a stand there, and so
-  do a drive's set-ups (a shared zero is separate zeros known to be equal);
+  do a drive's set-ups and the ballbar's (a shared zero is separate zeros known to be
+  equal; the pivots' centres likewise);
 * a stand reads wherever the nominal machine's tip touches its bar (a priori contact
   above 0), mounting costs nothing, and a visit to a posture reads up to ``stands`` dial
   slots, any of them, at one settle and read each (:data:`~orthoglide_env.lab.
@@ -35,19 +41,22 @@ plan (a Gaussian posterior only narrows when more is known or read):
 * with the interferometer set up, a reading costs its dwell on top of the visit and the
   visit reads the dials too: readings of counts ``n_d`` (dials) and ``n_l`` (laser) then
   need ``settle n_d / stands + dwell n_l <= T`` and ``(settle + dwell) n_l <= T``, two
-  linear budgets (each visit reads at most one laser target and ``stands`` dials).
+  linear budgets (each visit reads at most one laser target and ``stands`` dials);
+* a visit may read the bar as well as the dials and the laser (the lab lifts the plungers
+  for a circle), so the bar's readings need a third, ``settle n_b + dwell n_l <= T``.
 
 Not relaxed: the set-ups.  The laser's set-up on a drive is a fixed cost paid once or not
-at all (its soak before the first): the bound is the least over every set of drives set
-up of the problem with ``T`` less their set-ups, each solved alone (8 problems, each a
-group either paid or not, as in optimal design with set-up costs).
+at all (its soak before the first), and so is the ballbar's pivot: the bound is the least
+over every set of drives set up, with or without the pivot, of the problem with ``T`` less
+their set-ups, each solved alone (8 or 16 problems, each a group either paid or not, as in
+optimal design with set-up costs).
 
 Each problem is solved by the multiplicative algorithm (:func:`solve`), and certified by
 its Frank-Wolfe duality gap (:func:`gap`): ``f(n) - gap`` is below the optimum for every
 ``n``, so the bound reported is the least certified value (a true lower bound however far
-the solver got), and the gap says how tight it is.  The tracker, step gauge and ballbar
-are not candidates here: a lab that owns them is bounded over its dials and
-interferometer only.
+the solver got), and the gap says how tight it is.  The tracker and the step gauge are
+not candidates here: a lab that owns them is bounded over its dials, interferometer and
+ballbar only.
 """
 
 from __future__ import annotations
@@ -60,18 +69,27 @@ import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 
 from calibrators.estimators.consider import DEFAULT_NODE_SPACING, lead_terms
+from calibrators.planning.instruments import Bundle, reading_rows
 from orthoglide_env.instruments import interferometer
 from orthoglide_env.lab.design_belief import N_MACHINE, ZERO_SCALE
 from orthoglide_env.lab.operations import PAPER_SLOTS, TIME, Op
 from orthoglide_env.lab.slot_table import slot_table
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import MachineParams
+from orthoglide_env.model.kinematics import inverse
 from orthoglide_env.reading_model import ParameterSpace, default_scales
 from orthoglide_env.scoring.predicted import rigid_weight_with_drives
 from orthoglide_env.world.conditions import Conditions
+from orthoglide_env.world.table import BALLBAR_LENGTHS_MM
 
 #: The instruments whose readings are candidates of the bound.
-BOUND_INSTRUMENTS: tuple[str, ...] = ("dial", "interferometer")
+BOUND_INSTRUMENTS: tuple[str, ...] = ("dial", "interferometer", "ballbar")
+#: ``BoundModel.laser``'s mark of a ballbar candidate (a dial's is -1, a laser's its drive).
+BAR: int = -2
+#: The ballbar's candidate readings lie on the 50 mm bar's circles about ISO 230-4's centre
+#: (:mod:`calibrators.agents.ballbar`) in the three coordinate planes, this far apart
+#: (degrees): the circles' points and their overshoot starts, both ways, fall on them.
+BAR_STEP_DEG: float = 7.5
 #: The laser's candidate targets along each drive are this far apart (mm): ten per period
 #: of the screw's periodic error (its lead, 5 mm on the prototype), and a twentieth of the
 #: pitch table's node spacing.
@@ -95,8 +113,10 @@ class BoundModel:
     """The candidate readings of a lab and the criterion over them.
 
     ``rows`` (N, n): each candidate's whitened row over the unknowns (machine, lead terms,
-    zeros); ``laser`` (N,): the drive a laser candidate reads (-1: a dial reading);
-    ``label`` (N, 3): a dial's (slot, posture, -1) or a laser's (-1, axis, target index);
+    zeros, and a ballbar set-up's pivot centre and zero); ``laser`` (N,): the drive a
+    laser candidate reads (-1: a dial reading, :data:`BAR`: a ballbar reading);
+    ``label`` (N, 3): a dial's (slot, posture, -1), a laser's (-1, axis, target index) or
+    a ballbar's (:data:`BAR`, -1, point index);
     ``factor`` (n, r): ``F`` with ``F F^T`` the TCP error's weight padded with zeros
     (the zeros do not move the tool)."""
 
@@ -105,6 +125,10 @@ class BoundModel:
     label: np.ndarray
     factor: np.ndarray
     targets: np.ndarray  # (T,) the laser's targets along a drive, mm
+    #: (B, 3) the ballbar's candidate points (commands, mm) and its set-up's pivot command
+    #: and bar index (None: no ballbar).
+    bar_points: np.ndarray | None = None
+    pivot: tuple[tuple[float, float, float], int] | None = None
 
     def value(self, counts: np.ndarray) -> float:
         """``f(n)``: the predicted mean-square TCP error after rigid motion (mm^2) of
@@ -124,12 +148,39 @@ class BoundModel:
         k = int(np.argmin(np.abs(self.targets - target_mm)))
         return int(np.flatnonzero((self.laser == axis) & (self.label[:, 2] == k))[0])
 
+    def bar_index(self, rho: np.ndarray) -> int | None:
+        """The ballbar candidate read at command ``rho`` (None: no candidate there)."""
+        if self.bar_points is None:
+            return None
+        hit = np.flatnonzero(np.all(np.abs(self.bar_points - rho) < 1e-9, axis=-1))
+        return int(np.flatnonzero(self.laser == BAR)[hit[0]]) if hit.size else None
+
+
+def bar_bundle(design: MachineDesign) -> Bundle:
+    """The ballbar's candidate readings as one bundle: the 50 mm bar at ISO 230-4's centre,
+    read every :data:`BAR_STEP_DEG` round its circle in each coordinate plane."""
+    from calibrators.agents import ballbar as circles  # (the agents import the planner)
+
+    nominal = MachineParams(design=design)
+    centre = inverse(nominal, np.full(3, circles.CENTRE_MM))
+    angles = np.radians(np.arange(0.0, 360.0, BAR_STEP_DEG))
+    points = []
+    for plane in circles.PLANES:
+        tcp = np.full((len(angles), 3), circles.CENTRE_MM)
+        tcp[:, plane[0]] += circles.LENGTH_MM * np.cos(angles)
+        tcp[:, plane[1]] += circles.LENGTH_MM * np.sin(angles)
+        points.append(inverse(nominal, tcp))
+    return Bundle("ballbar", "ballbar candidates", Op.PIVOT, np.concatenate(points),
+                  centre=tuple(float(v) for v in centre),
+                  bar=BALLBAR_LENGTHS_MM.index(circles.LENGTH_MM))
+
 
 @lru_cache(maxsize=4)
 def bound_model(design: MachineDesign, conditions: Conditions, dial_sigma: float,
-                interferometer_owned: bool) -> BoundModel:
+                interferometer_owned: bool, ballbar_owned: bool = False) -> BoundModel:
     """The candidates of a lab of ``design`` under ``conditions`` whose dials read with
-    ``dial_sigma`` (mm, the weighting sigma), with or without the interferometer."""
+    ``dial_sigma`` (mm, the weighting sigma), with or without the interferometer and the
+    ballbar."""
     if not (np.isfinite(dial_sigma) and dial_sigma > 0):
         raise ValueError(f"dial_sigma must be a positive number, got {dial_sigma}")
     table = slot_table(design)
@@ -143,7 +194,7 @@ def bound_model(design: MachineDesign, conditions: Conditions, dial_sigma: float
                 else np.zeros((*np.shape(rho), 0)))
 
     n_lead = lead(np.zeros((1, 3))).shape[-1]
-    n = N_MACHINE + n_lead + n_slots + 3
+    n = N_MACHINE + n_lead + n_slots + 3 + (4 if ballbar_owned else 0)
     zero = N_MACHINE + n_lead  # the first zero's column
     dial = np.zeros((len(slots), n))
     dial[:, :N_MACHINE] = table.change[slots, postures, :N_MACHINE]
@@ -169,6 +220,18 @@ def bound_model(design: MachineDesign, conditions: Conditions, dial_sigma: float
             laser.append(np.full(len(targets), axis))
             label.append(np.stack([np.full(len(targets), -1), np.full(len(targets), axis),
                                    np.arange(len(targets))], axis=-1))
+    bar: Bundle | None = bar_bundle(design) if ballbar_owned else None
+    if bar is not None:
+        # The fit's rows of the bar's readings; its set-up's centre and zero are the last
+        # four unknowns (one set-up: a plan's set-ups there share them, a relaxation).
+        over, setup, _ = reading_rows(bar, design, conditions, bar.path)
+        on_bar = np.zeros((len(bar.path), n))
+        on_bar[:, :zero] = over
+        on_bar[:, n - 4:] = setup
+        rows.append(on_bar)
+        laser.append(np.full(len(bar.path), BAR))
+        label.append(np.stack([np.full(len(bar.path), BAR), np.full(len(bar.path), -1),
+                               np.arange(len(bar.path))], axis=-1))
     nominal = MachineParams(design=design)
     weight = rigid_weight_with_drives(nominal, lead)
     units = np.concatenate([scale, np.ones(n_lead)])
@@ -178,7 +241,8 @@ def bound_model(design: MachineDesign, conditions: Conditions, dial_sigma: float
     factor = np.zeros((n, int(keep.sum())))
     factor[:zero] = vector[:, keep] * np.sqrt(value[keep])
     return BoundModel(np.vstack(rows), np.concatenate(laser), np.vstack(label), factor,
-                      targets)
+                      targets, None if bar is None else bar.path,
+                      None if bar is None else (bar.centre, bar.bar))
 
 
 def plan_counts(model: BoundModel, design: MachineDesign, slots: tuple[int, ...],
@@ -188,16 +252,30 @@ def plan_counts(model: BoundModel, design: MachineDesign, slots: tuple[int, ...]
     counted per candidate of ``model``: every engaged stand at every posture it moves to or
     is re-mounted or set up at (where its nominal tip touches), and the laser, once set up
     on a drive, at each posture's target along it (its set-up reads at Zero; a target
-    is taken at the nearest candidate).  ``f`` of these counts (:meth:`BoundModel.value`) is
+    is taken at the nearest candidate), and the ballbar, once its pivot is set up at the
+    model's, at every move until any other operation takes the bar off (a point off the
+    candidates counts nothing).  ``f`` of these counts (:meth:`BoundModel.value`) is
     the plan's error on the bound's model, which the bound is below."""
     table = slot_table(design)
     slots_, down = list(slots), list(engaged)
     counts = np.zeros(len(model.rows))
     axis = -1
+    bar_in = False
     where = {tuple(p): k for k, p in enumerate(table.postures)}
     dial = {(int(a), int(b)): k for k, (a, b, _) in enumerate(model.label) if a >= 0}
     for step in actions:
         op = Op(int(step["op"]))  # type: ignore[call-overload]
+        if op == Op.PIVOT:
+            bar_in = model.pivot is not None and np.allclose(
+                step["rho"], model.pivot[0], rtol=0, atol=1e-9) and int(
+                step["bar"]) == model.pivot[1]  # type: ignore[call-overload]
+            continue
+        if op != Op.MOVE:
+            bar_in = False
+        elif bar_in:
+            k = model.bar_index(np.asarray(step["rho"], dtype=float))
+            if k is not None:
+                counts[k] += 1
         if op in (Op.LIFT, Op.ENGAGE):
             down[int(step["stand"])] = op == Op.ENGAGE  # type: ignore[call-overload]
             continue
@@ -256,24 +334,34 @@ class Budgets:
 
 
 def gap(model: BoundModel, budgets: Budgets, lasers: np.ndarray, counts: np.ndarray,
-        gradient: np.ndarray) -> float:
+        gradient: np.ndarray, bars: np.ndarray | None = None) -> float:
     """The Frank-Wolfe duality gap at ``counts`` with the ``gradient`` of ``f`` there:
     ``g . n - min over the polytope of g . s``.  ``f`` is convex, so ``f(n) - gap`` is
     below its least value over the polytope.  The least of a linear function over it is
     at a vertex: one dial candidate's readings, one laser candidate's, or both read on
-    every visit (:meth:`Budgets.atom`), each at its least gradient."""
-    dials = np.flatnonzero(model.laser < 0)
+    every visit (:meth:`Budgets.atom`), each at its least gradient; with the ballbar's
+    candidates ``bars``, each vertex also reads the bar on every visit its laser leaves
+    (a third budget: a visit's settle per bar reading and the laser's dwells)."""
+    dials = np.flatnonzero(model.laser == -1)
     i = int(dials[np.argmin(gradient[dials])])
     options = [budgets.atom(i, None)]
     if lasers.size:
         j = int(lasers[np.argmin(gradient[lasers])])
         options += [budgets.atom(None, j), budgets.atom(i, j)]
+    if bars is not None and bars.size:
+        # Each visit may also read the bar (a superset of what the lab allows): its
+        # readings fill the visits the laser leaves, at the least gradient.
+        b = int(bars[np.argmin(gradient[bars])])
+        settle = budgets.visit_s - budgets.laser_s
+        options = [(*atom, (b, (budgets.seconds - budgets.laser_s * sum(
+            c for k, c in atom if model.laser[k] >= 0)) / settle)) for atom in options]
     least = min(sum(gradient[k] * c for k, c in atom) for atom in options)
     return float(gradient @ counts - least)
 
 
 def solve(model: BoundModel, budgets: Budgets, lasers: np.ndarray,
-          stop_above: float = np.inf) -> tuple[float, float, np.ndarray]:
+          stop_above: float = np.inf, bars: np.ndarray | None = None
+          ) -> tuple[float, float, np.ndarray]:
     """The continuous design of least ``f`` over ``budgets`` with every dial candidate and
     the laser candidates ``lasers`` (indices), by the multiplicative algorithm (Silvey,
     Titterington and Torsney 1978; Yu 2010 for A-optimality's monotone convergence).
@@ -288,25 +376,39 @@ def solve(model: BoundModel, budgets: Budgets, lasers: np.ndarray,
     from below for any ``n``.  The best certified value is returned with the final
     design's value and counts.  Stops once the gap is :data:`GAP_SHARE` of the value,
     the certified value passes ``stop_above`` (a problem that cannot be the least), or
-    after :data:`MAX_ITERATIONS`."""
+    after :data:`MAX_ITERATIONS`.
+
+    With the ballbar's candidates ``bars``, their readings fill the visits the laser's
+    dwells leave, in shares of their own updated alike (a feasible design, not always the
+    best mix of laser and bar: the gap, over the whole polytope, says how far it is)."""
     rows, factor = model.rows, model.factor
-    used = np.concatenate([np.flatnonzero(model.laser < 0), lasers])
-    price = np.where(model.laser[used] < 0, budgets.dial_s, budgets.laser_s)
+    used = np.concatenate([np.flatnonzero(model.laser == -1), lasers])
+    price = np.where(model.laser[used] == -1, budgets.dial_s, budgets.laser_s)
     w = np.full(len(used), 1.0 / len(used))
+    bars = np.zeros(0, dtype=int) if bars is None else bars
+    u = np.full(len(bars), 1.0 / max(len(bars), 1))
+    settle = budgets.visit_s - budgets.laser_s
     lower = -np.inf
     for iteration in range(MAX_ITERATIONS + 1):
         counts = np.zeros(len(rows))
         counts[used] = w * budgets.seconds / price
+        if bars.size:
+            spent = budgets.laser_s * counts[lasers].sum()
+            counts[bars] = u * (budgets.seconds - spent) / settle
         value, x = _value(_information(rows, counts), factor)
         fall = np.sum((rows @ x) ** 2, axis=1)  # -gradient
         if iteration % GAP_EVERY == 0 or iteration == MAX_ITERATIONS:
-            lower = max(lower, value - gap(model, budgets, lasers, counts, -fall))
+            lower = max(lower, value - gap(model, budgets, lasers, counts, -fall,
+                                           bars if bars.size else None))
             if (value - lower <= GAP_SHARE * value or lower > stop_above
                     or iteration == MAX_ITERATIONS):
                 break
         per_second = fall[used] / price
         w = w * (per_second / float(w @ per_second)) ** POWER
         w /= w.sum()
+        if bars.size:
+            u = u * (fall[bars] / float(u @ fall[bars])) ** POWER
+            u /= u.sum()
         # The laser's visits within the second budget: its shares of the first at most
         # dwell / (settle + dwell), the dials' the rest.
         laser, cap = model.laser[used] >= 0, budgets.laser_s / budgets.visit_s
@@ -323,16 +425,21 @@ class Bound:
     most :data:`GAP_SHARE` of the mean square above, unless the solver stopped early),
     ``gap_mm2`` their squares' difference, ``drives`` the drives the best design sets the
     laser up on and ``laser_readings`` how many laser readings it takes (real, a time
-    share)."""
+    share); ``ballbar_readings`` how many ballbar readings (0: no pivot set up; a bound
+    without them writes no such key, as before the ballbar)."""
 
     bound_mm: float
     design_mm: float
     gap_mm2: float
     drives: tuple[int, ...]
     laser_readings: float
+    ballbar_readings: float = 0.0
 
     def to_dict(self) -> dict[str, object]:
-        return {**asdict(self), "drives": list(self.drives)}
+        out = {**asdict(self), "drives": list(self.drives)}
+        if not self.ballbar_readings:
+            del out["ballbar_readings"]
+        return out
 
     @classmethod
     def from_dict(cls, data: dict[str, object]) -> Bound:
@@ -341,7 +448,8 @@ class Bound:
             raise ValueError(f"unknown bound key(s) {unknown}")
         return cls(float(data["bound_mm"]), float(data["design_mm"]),  # type: ignore[arg-type]
                    float(data["gap_mm2"]), tuple(int(d) for d in data["drives"]),  # type: ignore[attr-defined]
-                   float(data["laser_readings"]))  # type: ignore[arg-type]
+                   float(data["laser_readings"]),  # type: ignore[arg-type]
+                   float(data.get("ballbar_readings", 0.0)))  # type: ignore[arg-type]
 
 
 def setup_seconds(drives: tuple[int, ...]) -> float:
@@ -365,25 +473,33 @@ def lower_bound(design: MachineDesign, conditions: Conditions, dial_sigma: float
     if "dial" not in instruments:
         raise ValueError(f"instruments must include 'dial', got {list(instruments)}")
     owned = "interferometer" in instruments
-    model = bound_model(design, conditions, float(dial_sigma), owned)
+    bar = "ballbar" in instruments
+    model = (bound_model(design, conditions, float(dial_sigma), owned, True) if bar
+             else bound_model(design, conditions, float(dial_sigma), owned))
     dial_s = TIME.settle_and_read_s / stands
     laser_s = TIME.interferometer_target_s
     choices = [()] + ([c for k in (1, 2, 3) for c in itertools.combinations(range(3), k)]
                       if owned else [])
+    # The pivot's set-up is paid once or not at all, as the laser's are.
+    pivots = [False, True] if bar else [False]
     best: tuple[float, tuple[int, ...], np.ndarray] | None = None
     lowest = np.inf
-    for drives in choices:
-        seconds = budget_s - setup_seconds(drives)
-        if seconds <= 0:
-            continue
-        budgets = Budgets(seconds, dial_s, laser_s, TIME.settle_and_read_s + laser_s)
-        lasers = np.flatnonzero(np.isin(model.laser, drives))
-        lower, value, counts = solve(model, budgets, lasers, best[0] if best else np.inf)
-        lowest = min(lowest, lower)
-        if best is None or value < best[0]:
-            best = (value, drives, counts)
+    for pivot in pivots:
+        for drives in choices:
+            seconds = budget_s - setup_seconds(drives) - (TIME.ballbar_setup_s if pivot else 0)
+            if seconds <= 0:
+                continue
+            budgets = Budgets(seconds, dial_s, laser_s, TIME.settle_and_read_s + laser_s)
+            lasers = np.flatnonzero(np.isin(model.laser, drives))
+            bars = np.flatnonzero(model.laser == BAR) if pivot else None
+            lower, value, counts = solve(model, budgets, lasers, best[0] if best else np.inf,
+                                         bars)
+            lowest = min(lowest, lower)
+            if best is None or value < best[0]:
+                best = (value, drives, counts)
     assert best is not None  # the dial-only problem always has a budget
     value, drives, counts = best
     lowest = max(lowest, 0.0)
     return Bound(float(np.sqrt(lowest)), float(np.sqrt(value)), float(value - lowest),
-                 tuple(drives), float(counts[model.laser >= 0].sum()))
+                 tuple(drives), float(counts[model.laser >= 0].sum()),
+                 float(counts[model.laser == BAR].sum()))

@@ -100,7 +100,8 @@ class Pricer(Belief):
         fitted, considered = self.world.rows(
             np.array(self.slots), postures, self.time_s + seconds[postures],
             directions(self.rho, self.table.postures[postures], self.world.approach))
-        rows[..., self.world.start:] += np.swapaxes(fitted, 0, 1) * weight
+        rows[..., self.world.start:self.world.start + self.world.count] += (
+            np.swapaxes(fitted, 0, 1) * weight)
         if self.criterion == "D":
             return self._gains(rows)
         return self.world.gains(rows, np.swapaxes(considered, 0, 1) * weight,
@@ -119,6 +120,8 @@ class Pricer(Belief):
         flicks = np.sum(after != engaged[:, None], axis=0)
         drive = drive_seconds(self.design, tuple(float(v) for v in self.rho))
         seconds = drive + TIME.lift_s * flicks
+        if self.kit is not None and self.kit.dwell_s:
+            seconds = seconds + self.kit.dwell_s  # a laser left set up reads at every move
         return seconds, after, reads
 
     def _rows(self, reads: np.ndarray, postures: np.ndarray) -> np.ndarray:

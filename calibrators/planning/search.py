@@ -17,6 +17,7 @@ import copy
 import numpy as np
 
 from calibrators.planning.belief import PlannedOperation
+from calibrators.planning.instruments import best_bundle, expect, take
 from calibrators.planning.pricing import PricedMoves, Pricer
 from orthoglide_env.lab.operations import TIME, Op, slot_catalogue
 
@@ -43,6 +44,7 @@ class Planner(Pricer):
         trial.spread_bound = self.spread_bound.copy()
         trial.mean = None if self.mean is None else self.mean.copy()
         trial.world = None if self.world is None else self.world.copy()
+        trial.kit = None if self.kit is None else self.kit.copy()
         return trial
 
 
@@ -171,6 +173,16 @@ def greedy_plan(planner: Planner, remounts: bool = True, screened: int | None = 
     promising played out: see :meth:`Planner.best_remount`), and end with a stop."""
     checked = -np.inf
     while True:
+        if planner.kit is not None and planner.time_s - checked >= REMOUNT_CHECK_S:
+            # An instrument's bundle against the dials' next moves, then the re-mounts.
+            bundle = best_bundle(planner, planner.lookahead_rate())
+            if bundle is not None:
+                take(planner, bundle)
+                expect(planner, bundle)
+                checked = planner.time_s
+                continue
+            if not remounts:
+                checked = planner.time_s
         if remounts and planner.time_s - checked >= REMOUNT_CHECK_S:
             checked = planner.time_s
             choice = planner.best_remount(screened)

@@ -1,0 +1,122 @@
+"""The planner over the lab's instruments (calibrators.planning.instruments): a set-up's
+own unknowns integrated out exactly, a bundle priced and timed as the lab runs it, and
+the bound over the ballbar below a plan that reads it."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import orthoglide_env
+from calibrators.agents.base import action
+from calibrators.planning import bound
+from calibrators.planning.bound import bound_model, lower_bound, plan_counts
+from calibrators.planning.instruments import (
+    best_bundle,
+    expect,
+    marginal,
+    operation_keys,
+    planned_bundles,
+    take,
+)
+from calibrators.planning.search import Planner
+from orthoglide_env.instruments.ballbar import BallbarSpec
+from orthoglide_env.lab.operations import PAPER_SLOTS
+from orthoglide_env.model.design import PROTOTYPE
+from orthoglide_env.world.conditions import Conditions
+
+SIGMA = float(np.hypot(0.02, 0.01 / np.sqrt(12)))
+LAB = Conditions("lab")
+
+
+def test_marginal_rows_update_as_the_joint_readings_do():
+    # Readings over 5 unknowns of interest and 2 of a set-up (unit priors): the equivalent
+    # rows and residual give the joint posterior's marginal, mean and covariance, to
+    # rounding (both are the same Gaussian algebra, ~1e-12 relative).
+    rng = np.random.default_rng(3)
+    rows, setup = rng.normal(size=(9, 5)), rng.normal(size=(9, 2)) * 4.0
+    residual = rng.normal(size=9)
+    joint = np.hstack([rows, setup])
+    covariance = np.linalg.inv(np.eye(7) + joint.T @ joint)
+    mean = covariance @ joint.T @ residual
+    equivalent, innovation = marginal(rows, setup, residual)
+    small = np.linalg.inv(np.eye(5) + equivalent.T @ equivalent)
+    assert np.allclose(small, covariance[:5, :5], rtol=0, atol=1e-12)
+    assert np.allclose(small @ equivalent.T @ innovation, mean[:5], rtol=0, atol=1e-12)
+
+
+def test_a_lab_of_dials_plans_without_instruments():
+    # Owning only dials (or a tracker) gives the planner no kit: today's plans.
+    for owned in ((), ("dial",), ("dial", "tracker")):
+        planner = Planner(list(PAPER_SLOTS), [True] * 6, SIGMA, 600.0, design=PROTOTYPE,
+                          conditions=LAB, instruments=owned)
+        assert planner.kit is None
+
+
+def test_instrument_columns_and_the_lead_share():
+    # Under lab the planner carries the lead terms the fit fits; their prior share of the
+    # TCP error is positive, and the ideal world has none (no lead error to see).
+    lab = Planner(list(PAPER_SLOTS), [True] * 6, SIGMA, 600.0, design=PROTOTYPE,
+                  conditions=LAB, instruments=("dial", "ballbar"))
+    plain = Planner(list(PAPER_SLOTS), [True] * 6, SIGMA, 600.0, design=PROTOTYPE,
+                    conditions=LAB)
+    assert len(lab.kit.lead) > 0
+    assert lab.predicted_rigid_mm() > plain.predicted_rigid_mm()
+    ideal = Planner(list(PAPER_SLOTS), [True] * 6, SIGMA, 600.0, design=PROTOTYPE,
+                    instruments=("dial", "ballbar", "interferometer"))
+    assert len(ideal.kit.lead) == 0
+    assert ideal.predicted_rigid_mm() == Planner(list(PAPER_SLOTS), [True] * 6, SIGMA, 600.0,
+                                                 design=PROTOTYPE).predicted_rigid_mm()
+
+
+@pytest.fixture(scope="module")
+def bundle_taken():
+    """The best bundle of a lab owning the ballbar (ideal world: the geometry alone), after
+    the readings of the episode's opening, taken and its readings expected."""
+    planner = Planner(list(PAPER_SLOTS), [True] * 6, SIGMA, 1800.0, design=PROTOTYPE,
+                      instruments=("dial", "ballbar"))
+    planner.expect_readings()
+    before = planner.predicted_rigid_mm()
+    bundle = best_bundle(planner, 0.0)
+    ops = take(planner, bundle)
+    expect(planner, bundle)
+    return bundle, ops, planner.time_s, before, planner.predicted_rigid_mm()
+
+
+def test_a_bundle_is_timed_as_the_lab_runs_it(bundle_taken):
+    bundle, ops, planned_s, before, after = bundle_taken
+    # Any bar reading informs the geometry, so the best bundle gains.
+    assert bundle.instrument == "ballbar" and after < before
+    env = gym.make(orthoglide_env.LAB_V2_ENV_ID, errors="nominal", backend="exact",
+                   conditions="ideal", instruments=["dial", "ballbar"])
+    obs, _ = env.reset(seed=0)
+    start = float(obs["time"][0])
+    for step in ops:
+        obs, _, _, _, info = env.step(action(step.op, step.rho, step.stand, step.slot,
+                                             **operation_keys(step)))
+        assert not info.get("refused"), step
+    # The plan's clock is the lab's (one time table), to rounding.
+    assert float(obs["time"][0]) - start == pytest.approx(planned_s, abs=1e-6)
+    read = [r for r in env.unwrapped.records if isinstance(r.spec, BallbarSpec)]
+    assert len(read) == len(bundle.path)
+    assert planned_bundles(ops, PROTOTYPE, ("ballbar",))[0][1] == bundle
+
+
+def test_bound_with_the_ballbar_is_below_a_plan_that_reads_it(bundle_taken, monkeypatch):
+    # Fewer solver steps: the bound stays certified (f - gap), only less tight.
+    monkeypatch.setattr(bound, "MAX_ITERATIONS", 40)
+    bundle, ops, _, _, _ = bundle_taken
+    ideal = Conditions("ideal")
+    with_bar = lower_bound(PROTOTYPE, ideal, SIGMA, 1800.0, ("dial", "ballbar"))
+    dial = lower_bound(PROTOTYPE, ideal, SIGMA, 1800.0)
+    model = bound_model(PROTOTYPE, ideal, SIGMA, False, True)
+    actions = [{"op": s.op, "rho": s.rho, "stand": s.stand, "slot": s.slot,
+                **operation_keys(s)} for s in ops]
+    counts = plan_counts(model, PROTOTYPE, PAPER_SLOTS, (True,) * 6, actions)
+    # Every bar reading of the plan is a candidate of the bound's.
+    assert counts[model.laser == bound.BAR].sum() == len(bundle.path)
+    assert with_bar.bound_mm <= np.sqrt(model.value(counts))
+    # Owning more can only help, and the bar is read where it pays.
+    assert with_bar.bound_mm <= dial.bound_mm
+    assert with_bar.ballbar_readings > 0
