@@ -12,15 +12,8 @@ import orthoglide_env
 from calibrators.agents.base import action
 from calibrators.planning import bound
 from calibrators.planning.bound import bound_model, lower_bound, plan_counts
-from calibrators.planning.instruments import (
-    best_bundle,
-    expect,
-    marginal,
-    operation_keys,
-    planned_bundles,
-    take,
-)
-from calibrators.planning.search import Planner
+from calibrators.planning.instruments import marginal, operation_keys, planned_bundles
+from calibrators.planning.search import Planner, best_bundle, expect, take
 from orthoglide_env.instruments.ballbar import BallbarSpec
 from orthoglide_env.lab.operations import PAPER_SLOTS
 from orthoglide_env.model.design import PROTOTYPE

@@ -36,9 +36,9 @@ from calibrators.agents.base import Agent, action, register
 from calibrators.agents.optimal import fixed_plan, lab_setup, owned_instruments
 from calibrators.estimators.catalogue import for_study
 from calibrators.planning.belief import N_MACHINE, N_STAND, ZERO_SCALE, PlannedOperation
-from calibrators.planning.instruments import Bundle, operation_keys, planned_bundles, take
-from calibrators.planning.instruments import observe as observe_bundle
-from calibrators.planning.search import Planner
+from calibrators.planning.instruments import Bundle, operation_keys, planned_bundles
+from calibrators.planning.search import Planner, take
+from calibrators.planning.search import observe as observe_bundle
 from orthoglide_env.instruments.ballbar import BallbarSpec
 from orthoglide_env.instruments.interferometer import InterferometerAxis
 from orthoglide_env.instruments.stands import stand_names

@@ -44,7 +44,7 @@ from __future__ import annotations
 import copy
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import TYPE_CHECKING, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
@@ -52,7 +52,7 @@ from calibrators.estimators.consider import DEFAULT_NODE_SPACING, lead_terms
 from orthoglide_env.instruments import ballbar, interferometer
 from orthoglide_env.instruments.ballbar import BallbarSpec
 from orthoglide_env.lab.design_belief import N_MACHINE, ZERO_SCALE
-from orthoglide_env.lab.operations import TIME, Op
+from orthoglide_env.lab.operations import Op
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import inverse
@@ -67,9 +67,6 @@ from orthoglide_env.reading_model import (
 from orthoglide_env.scoring.predicted import rigid_weight_with_drives
 from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.world.table import BALLBAR_LENGTHS_MM
-
-if TYPE_CHECKING:
-    from calibrators.planning.search import Planner
 
 #: The instruments a planner prices besides the dial gauges.
 PLANNED_INSTRUMENTS: tuple[str, ...] = ("interferometer", "ballbar")
@@ -101,7 +98,7 @@ def operation_keys(step: NamedTuple) -> dict[str, int]:
     return {}
 
 
-def _conditions(conditions: Conditions | None) -> Conditions:
+def conditions_or_default(conditions: Conditions | None) -> Conditions:
     return conditions if conditions is not None else Conditions("ideal")
 
 
@@ -230,7 +227,7 @@ def reading_rows(bundle: Bundle, design: MachineDesign, conditions: Conditions |
     """The readings of ``bundle`` at commands ``path`` (R, 3): their rows (R, 27 + L) over
     the machine's errors (per unit scale) and the lead terms, their rows (R, U) over the
     set-up's own unknowns (per unit prior), both whitened, and their nominal values (mm)."""
-    world = _conditions(conditions)
+    world = conditions_or_default(conditions)
     lead = lead_patterns(design, conditions, path)  # (R, 3, L)
     rows = np.zeros((len(path), N_MACHINE + lead.shape[-1]))
     if bundle.instrument == "interferometer":
@@ -274,122 +271,6 @@ def marginal(rows: np.ndarray, setup: np.ndarray, residual: np.ndarray | None = 
         return equivalent, None
     vector_b = rows.T @ residual - cross @ np.linalg.solve(inner, setup.T @ residual)
     return equivalent, (vector[:, keep].T @ vector_b) / np.sqrt(value[keep])
-
-
-# -- a bundle in a plan -----------------------------------------------------------------
-def operations(planner: Planner, bundle: Bundle) -> tuple[list[InstrumentOperation], float]:
-    """The lab operations of taking ``bundle`` from the planner's state, each at its lab
-    time, and the seconds they take: lift every plunger down, set up, drive the path, take
-    the bar off (any operation but a move does), back to Zero and every lifted plunger
-    down again (their zeros were kept)."""
-    clock = planner.time_s
-    kit = planner.kit
-    ops: list[InstrumentOperation] = []
-    down = [k for k, on in enumerate(planner.engaged) if on]
-
-    def add(op: Op, seconds: float, rho: np.ndarray | None = None, **keys: int) -> None:
-        nonlocal clock
-        rho_ = (0.0, 0.0, 0.0) if rho is None else tuple(float(v) for v in rho)
-        ops.append(InstrumentOperation(op, rho_, time_s=clock, **keys))
-        clock += seconds
-
-    for k in down:
-        add(Op.LIFT, TIME.lift_s, stand=k)
-    here = np.asarray(planner.rho, dtype=float)
-    dwell = kit.dwell_s
-    if bundle.setup == Op.ALIGN:
-        soak = 0.0 if kit.soaked else TIME.interferometer_soak_s
-        add(Op.ALIGN, float(TIME.move(here, np.zeros(3))) + TIME.interferometer_setup_s + soak,
-            axis=bundle.axis)
-        here, dwell = np.zeros(3), TIME.interferometer_target_s
-    else:
-        centre = np.asarray(bundle.centre)
-        add(Op.PIVOT, float(TIME.move(here, centre)) + TIME.ballbar_setup_s, centre,
-            bar=bundle.bar)
-        here = centre
-    for rho in bundle.path:
-        add(Op.MOVE, float(TIME.move(here, rho)) + dwell, rho)
-        here = rho
-    if bundle.setup == Op.PIVOT:
-        add(Op.LIFT, TIME.lift_s, stand=0)
-    if here.any():
-        add(Op.MOVE, float(TIME.move(here, np.zeros(3))) + dwell, np.zeros(3))
-    for k in down:
-        add(Op.ENGAGE, TIME.lift_s, stand=k)
-    return ops, clock - planner.time_s
-
-
-def take(planner: Planner, bundle: Bundle) -> list[InstrumentOperation]:
-    """Take ``bundle`` in the plan (its operations appended to the steps, the clock, the
-    posture, the laser's state); its readings are added by the caller (expected:
-    :func:`expect`, or observed: :func:`observe`)."""
-    ops, seconds = operations(planner, bundle)
-    kit = planner.kit
-    if bundle.setup == Op.ALIGN:
-        kit.soaked, kit.dwell_s = True, TIME.interferometer_target_s
-    if planner.world is not None:
-        planner.world.moved(np.asarray(planner.rho, dtype=float), np.zeros(3))
-    planner.steps.extend(ops)
-    planner.time_s += seconds
-    planner.rho, planner.here = np.zeros(3), planner.table.zero
-    return ops
-
-
-def _update(planner: Planner, equivalent: np.ndarray, innovation: np.ndarray | None) -> None:
-    full = np.zeros((len(equivalent), len(planner.covariance)))
-    full[:, planner.kit.columns] = equivalent
-    considered = np.zeros((len(full), planner.world.consider.shape[1])
-                          if planner.world is not None else (len(full), 0))
-    planner._add(full, innovation, considered)
-
-
-def expect(planner: Planner, bundle: Bundle) -> None:
-    """Count ``bundle``'s readings in the planner's belief (a plan's)."""
-    rows, setup, _ = reading_rows(bundle, planner.design, planner.conditions,
-                                  _read_path(bundle))
-    _update(planner, *marginal(rows, setup)[:1], None)
-
-
-def observe(planner: Planner, bundle: Bundle, path: np.ndarray, values: np.ndarray) -> None:
-    """Readings ``values`` (mm) of ``bundle``'s instrument taken at commands ``path`` (R, 3)
-    (the set-up's, in the lab's notebook): update the filter's mean and covariance."""
-    if not len(values):
-        return
-    if planner.mean is None:
-        planner.mean = np.zeros(len(planner.covariance))
-    rows, setup, nominal = reading_rows(bundle, planner.design, planner.conditions, path)
-    sigma = (interferometer.sigma(_conditions(planner.conditions))
-             if bundle.instrument == "interferometer"
-             else ballbar.sigma(_conditions(planner.conditions)))
-    residual = (np.asarray(values, dtype=float) - nominal) / sigma - rows @ planner.mean[
-        planner.kit.columns]
-    equivalent, innovation = marginal(rows, setup, residual)
-    _update(planner, equivalent, innovation)
-
-
-def _read_path(bundle: Bundle) -> np.ndarray:
-    """Where a bundle's instrument reads: a laser at its set-up (Zero) and every move, a
-    bar at every move of its path."""
-    if bundle.setup == Op.ALIGN:
-        return np.vstack([np.zeros((1, 3)), bundle.path])
-    return bundle.path
-
-
-def best_bundle(planner: Planner, rate_to_beat: float) -> Bundle | None:
-    """The bundle that fits in the budget with the most fall of the criterion per second,
-    set-up included, if that beats ``rate_to_beat`` (per s); else None."""
-    start = planner._criterion_value()
-    best, best_rate = None, rate_to_beat
-    for bundle in bundles(planner.design, planner.kit.owned):
-        trial = planner.fork()
-        take(trial, bundle)
-        if trial.time_s > trial.budget_s:
-            continue
-        expect(trial, bundle)
-        rate = (start - trial._criterion_value()) / (trial.time_s - planner.time_s)
-        if rate > best_rate:
-            best, best_rate = bundle, rate
-    return best
 
 
 def planned_bundles(steps: tuple[NamedTuple, ...] | list[NamedTuple], design: MachineDesign,

@@ -7,7 +7,10 @@ until the budget is spent or nothing pays.
 per second (:meth:`Planner.best_move`), and every :data:`REMOUNT_CHECK_S` of the plan
 weighs re-mounting a stand elsewhere against staying (:meth:`Planner.best_remount`).
 :func:`greedy_plan` spends a budget so; the ``active`` agent takes one move at a time
-between readings.
+between readings.  In a lab that owns an instrument the planner prices
+(:mod:`calibrators.planning.instruments`), an instrument's bundle is one more option
+(:func:`best_bundle`), taken (:func:`take`) and counted (:func:`expect`, or with its
+values :func:`observe`) here, where the planner's state lives.
 """
 
 from __future__ import annotations
@@ -17,8 +20,16 @@ import copy
 import numpy as np
 
 from calibrators.planning.belief import PlannedOperation
-from calibrators.planning.instruments import best_bundle, expect, take
+from calibrators.planning.instruments import (
+    Bundle,
+    InstrumentOperation,
+    bundles,
+    conditions_or_default,
+    marginal,
+    reading_rows,
+)
 from calibrators.planning.pricing import PricedMoves, Pricer
+from orthoglide_env.instruments import ballbar, interferometer
 from orthoglide_env.lab.operations import TIME, Op, slot_catalogue
 
 #: Re-mounts are weighed against staying every this many seconds of the plan, each option
@@ -194,3 +205,119 @@ def greedy_plan(planner: Planner, remounts: bool = True, screened: int | None = 
             break
     planner.steps.append(PlannedOperation(Op.STOP, time_s=planner.time_s))
     return planner.steps
+
+
+# -- a bundle in a plan -----------------------------------------------------------------
+def operations(planner: Planner, bundle: Bundle) -> tuple[list[InstrumentOperation], float]:
+    """The lab operations of taking ``bundle`` from the planner's state, each at its lab
+    time, and the seconds they take: lift every plunger down, set up, drive the path, take
+    the bar off (any operation but a move does), back to Zero and every lifted plunger
+    down again (their zeros were kept)."""
+    clock = planner.time_s
+    kit = planner.kit
+    ops: list[InstrumentOperation] = []
+    down = [k for k, on in enumerate(planner.engaged) if on]
+
+    def add(op: Op, seconds: float, rho: np.ndarray | None = None, **keys: int) -> None:
+        nonlocal clock
+        rho_ = (0.0, 0.0, 0.0) if rho is None else tuple(float(v) for v in rho)
+        ops.append(InstrumentOperation(op, rho_, time_s=clock, **keys))
+        clock += seconds
+
+    for k in down:
+        add(Op.LIFT, TIME.lift_s, stand=k)
+    here = np.asarray(planner.rho, dtype=float)
+    dwell = kit.dwell_s
+    if bundle.setup == Op.ALIGN:
+        soak = 0.0 if kit.soaked else TIME.interferometer_soak_s
+        add(Op.ALIGN, float(TIME.move(here, np.zeros(3))) + TIME.interferometer_setup_s + soak,
+            axis=bundle.axis)
+        here, dwell = np.zeros(3), TIME.interferometer_target_s
+    else:
+        centre = np.asarray(bundle.centre)
+        add(Op.PIVOT, float(TIME.move(here, centre)) + TIME.ballbar_setup_s, centre,
+            bar=bundle.bar)
+        here = centre
+    for rho in bundle.path:
+        add(Op.MOVE, float(TIME.move(here, rho)) + dwell, rho)
+        here = rho
+    if bundle.setup == Op.PIVOT:
+        add(Op.LIFT, TIME.lift_s, stand=0)
+    if here.any():
+        add(Op.MOVE, float(TIME.move(here, np.zeros(3))) + dwell, np.zeros(3))
+    for k in down:
+        add(Op.ENGAGE, TIME.lift_s, stand=k)
+    return ops, clock - planner.time_s
+
+
+def take(planner: Planner, bundle: Bundle) -> list[InstrumentOperation]:
+    """Take ``bundle`` in the plan (its operations appended to the steps, the clock, the
+    posture, the laser's state); its readings are added by the caller (expected:
+    :func:`expect`, or observed: :func:`observe`)."""
+    ops, seconds = operations(planner, bundle)
+    kit = planner.kit
+    if bundle.setup == Op.ALIGN:
+        kit.soaked, kit.dwell_s = True, TIME.interferometer_target_s
+    if planner.world is not None:
+        planner.world.moved(np.asarray(planner.rho, dtype=float), np.zeros(3))
+    planner.steps.extend(ops)
+    planner.time_s += seconds
+    planner.rho, planner.here = np.zeros(3), planner.table.zero
+    return ops
+
+
+def _update(planner: Planner, equivalent: np.ndarray, innovation: np.ndarray | None) -> None:
+    full = np.zeros((len(equivalent), len(planner.covariance)))
+    full[:, planner.kit.columns] = equivalent
+    considered = np.zeros((len(full), planner.world.consider.shape[1])
+                          if planner.world is not None else (len(full), 0))
+    planner._add(full, innovation, considered)
+
+
+def expect(planner: Planner, bundle: Bundle) -> None:
+    """Count ``bundle``'s readings in the planner's belief (a plan's)."""
+    rows, setup, _ = reading_rows(bundle, planner.design, planner.conditions,
+                                  _read_path(bundle))
+    _update(planner, *marginal(rows, setup)[:1], None)
+
+
+def observe(planner: Planner, bundle: Bundle, path: np.ndarray, values: np.ndarray) -> None:
+    """Readings ``values`` (mm) of ``bundle``'s instrument taken at commands ``path`` (R, 3)
+    (the set-up's, in the lab's notebook): update the filter's mean and covariance."""
+    if not len(values):
+        return
+    if planner.mean is None:
+        planner.mean = np.zeros(len(planner.covariance))
+    rows, setup, nominal = reading_rows(bundle, planner.design, planner.conditions, path)
+    sigma = (interferometer.sigma(conditions_or_default(planner.conditions))
+             if bundle.instrument == "interferometer"
+             else ballbar.sigma(conditions_or_default(planner.conditions)))
+    residual = (np.asarray(values, dtype=float) - nominal) / sigma - rows @ planner.mean[
+        planner.kit.columns]
+    equivalent, innovation = marginal(rows, setup, residual)
+    _update(planner, equivalent, innovation)
+
+
+def _read_path(bundle: Bundle) -> np.ndarray:
+    """Where a bundle's instrument reads: a laser at its set-up (Zero) and every move, a
+    bar at every move of its path."""
+    if bundle.setup == Op.ALIGN:
+        return np.vstack([np.zeros((1, 3)), bundle.path])
+    return bundle.path
+
+
+def best_bundle(planner: Planner, rate_to_beat: float) -> Bundle | None:
+    """The bundle that fits in the budget with the most fall of the criterion per second,
+    set-up included, if that beats ``rate_to_beat`` (per s); else None."""
+    start = planner._criterion_value()
+    best, best_rate = None, rate_to_beat
+    for bundle in bundles(planner.design, planner.kit.owned):
+        trial = planner.fork()
+        take(trial, bundle)
+        if trial.time_s > trial.budget_s:
+            continue
+        expect(trial, bundle)
+        rate = (start - trial._criterion_value()) / (trial.time_s - planner.time_s)
+        if rate > best_rate:
+            best, best_rate = bundle, rate
+    return best
