@@ -3,6 +3,10 @@ experiment in the lab."""
 
 from __future__ import annotations
 
+import re
+import subprocess
+import sys
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -11,6 +15,7 @@ import pytest
 
 import orthoglide_env
 from calibrators.agents import get_agent
+from calibrators.measurements import Measurements
 from calibrators.study.episodes import Episode, run_episode
 from orthoglide_env.model.design import PROTOTYPE
 
@@ -71,3 +76,15 @@ def paper_experiment(machine: dict | None = None, seed: int = 0, **lab: Any
     finally:
         env.close()
     return episode, env.unwrapped
+
+
+def assert_refused_in_one_line(path: Path, words: str) -> None:
+    """A bad reading file: reading it raises ``ValueError`` with ``words`` in one line, and
+    ``fit`` ends with that one line on stderr and exit 2."""
+    with pytest.raises(ValueError, match=re.escape(words)) as info:
+        Measurements.read(path)
+    assert "\n" not in str(info.value)
+    done = subprocess.run([sys.executable, "-m", "calibrators.cli", "fit", str(path)],
+                          capture_output=True, text=True, check=False)
+    assert done.returncode == 2
+    assert words in done.stderr and len(done.stderr.strip().splitlines()) == 1

@@ -4,7 +4,6 @@ model in the fit, its rows in a reading file, and the ``ballbar`` agent's needs.
 
 from __future__ import annotations
 
-import re
 import subprocess
 import sys
 from pathlib import Path
@@ -12,6 +11,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import assert_refused_in_one_line
 
 import orthoglide_env
 from calibrators.agents import get_agent
@@ -198,14 +198,7 @@ def test_a_reading_file_keeps_the_set_up(tmp_path: Path):
     ("ballbar#1,x,y,,10,-20,-5,1,0.01,ballbar,-21.5,-21.5,-21.5,50", "has no leg"),
     ("s,x,y,,0,0,0,1,0.01,dial,-21.5,,,", "only a ballbar")])
 def test_a_bad_ballbar_row_is_refused_in_one_line(tmp_path: Path, row: str, words: str):
-    path = _file(tmp_path, row)
-    with pytest.raises(ValueError, match=re.escape(words)) as info:
-        Measurements.read(path)
-    assert "\n" not in str(info.value)
-    done = subprocess.run([sys.executable, "-m", "calibrators.cli", "fit", str(path)],
-                          capture_output=True, text=True, check=False)
-    assert done.returncode == 2
-    assert words in done.stderr and len(done.stderr.strip().splitlines()) == 1
+    assert_refused_in_one_line(_file(tmp_path, row), words)
 
 
 def test_the_agent_needs_the_ballbar():

@@ -14,6 +14,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import assert_refused_in_one_line
 
 import orthoglide_env
 from calibrators.agents import get_agent
@@ -306,14 +307,7 @@ def test_a_reading_file_keeps_the_set_up(tmp_path: Path):
     (f"g#1,,x,,{AT_2},1,0.9,step-gauge,{START},", "probe reads within its range"),
     (f"g#1,x,y,,{AT_2},1,0.01,dial,{START},", "only a step-gauge reading")])
 def test_a_bad_step_gauge_row_is_refused_in_one_line(tmp_path: Path, row: str, words: str):
-    path = _file(tmp_path, row)
-    with pytest.raises(ValueError, match=re.escape(words)) as info:
-        Measurements.read(path)
-    assert "\n" not in str(info.value)
-    done = subprocess.run([sys.executable, "-m", "calibrators.cli", "fit", str(path)],
-                          capture_output=True, text=True, check=False)
-    assert done.returncode == 2
-    assert words in done.stderr and len(done.stderr.strip().splitlines()) == 1
+    assert_refused_in_one_line(_file(tmp_path, row), words)
 
 
 def test_the_commands_refuse_an_unknown_instrument_in_one_line():

@@ -28,7 +28,7 @@ import numpy as np
 
 from calibrators.agents.base import action, register
 from calibrators.agents.instrument_first import GAUGES as GAUGES
-from calibrators.agents.instrument_first import InstrumentFirst
+from calibrators.agents.instrument_first import InstrumentFirst, back_to_the_gauges
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import MachineParams
@@ -80,10 +80,7 @@ def circle_steps(stands: int, design: MachineDesign) -> list[dict[str, Any]]:
         for clockwise in (False, True):
             steps += [action(Op.MOVE, rho) for rho in circle_postures(design, plane,
                                                                        clockwise)]
-    # Any operation but a move takes the bar off: the way back to Zero would pull it out.
-    steps.append(action(Op.LIFT, stand=0))
-    steps.append(action(Op.MOVE, np.zeros(3)))
-    return steps + [action(Op.ENGAGE, stand=k) for k in range(stands)]
+    return steps + back_to_the_gauges(stands)
 
 
 @register

@@ -13,10 +13,20 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from calibrators.agents.base import Agent
+from calibrators.agents.base import Agent, action
+from orthoglide_env.lab.operations import Op
 
 #: The agent whose experiment follows the programme, with the time left.
 GAUGES: str = "active"
+
+
+def back_to_the_gauges(stands: int) -> list[dict[str, Any]]:
+    """The programme's last actions: the instrument off, at Zero, every plunger down.
+    Any operation but a move takes a bar or a probe off, and the way back to Zero would
+    pull a bar out or leave a step gauge's faces, so a lift of the first stand comes
+    first."""
+    return ([action(Op.LIFT, stand=0), action(Op.MOVE, np.zeros(3))]
+            + [action(Op.ENGAGE, stand=k) for k in range(stands)])
 
 
 class InstrumentFirst(Agent):

@@ -27,7 +27,7 @@ import numpy as np
 
 from calibrators.agents.base import action, register
 from calibrators.agents.instrument_first import GAUGES as GAUGES
-from calibrators.agents.instrument_first import InstrumentFirst
+from calibrators.agents.instrument_first import InstrumentFirst, back_to_the_gauges
 from orthoglide_env.instruments.step_gauge import face_lengths
 from orthoglide_env.lab.operations import TIME, Op
 from orthoglide_env.model.design import MachineDesign
@@ -93,10 +93,7 @@ def gauge_steps(stands: int, design: MachineDesign, runs: int) -> list[dict[str,
         for _ in range(runs):
             steps += [action(Op.MOVE, face_command(design, axis, face))
                       for face in run_faces()]
-    # Any operation but a move takes the probe off: Zero is no face of the gauge.
-    steps.append(action(Op.LIFT, stand=0))
-    steps.append(action(Op.MOVE, np.zeros(3)))
-    return steps + [action(Op.ENGAGE, stand=k) for k in range(stands)]
+    return steps + back_to_the_gauges(stands)
 
 
 @register
