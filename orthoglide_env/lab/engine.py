@@ -333,9 +333,11 @@ class LabBatch:
                 refused[r] = ("the lab has no interferometer (instruments="
                               f"{list(settings.instruments)})")
         if pivots.any():
-            self._refuse_pivots(rows, pivots, refused)
+            self._refuse_setups(rows, pivots, refused, "ballbar", self.settings.ballbar,
+                                self.bar_setups, ballbar.MAX_SETUPS)
         if places.any():
-            self._refuse_places(rows, places, refused)
+            self._refuse_setups(rows, places, refused, "step gauge", self.settings.step_gauge,
+                                self.gauge_setups, step_gauge.MAX_SETUPS)
         if settings.strict_moves:
             raise_unreachable(machines, rows, op, rho, reached, target, self.size)
         ok = np.array([not r for r in refused], dtype=bool)
@@ -441,15 +443,17 @@ class LabBatch:
         return (factor * (raw - self.laser_zero[rows]) - moved
                 + interferometer.sigma(settings.conditions) * draws)
 
-    def _refuse_pivots(self, rows: np.ndarray, pivots: np.ndarray, refused: list[str]) -> None:
-        """Refuse the ballbar set-ups (``pivots``, a mask over ``rows``) of a lab without a
-        ballbar, or one whose drawn set-ups are all used."""
-        for r in np.flatnonzero(pivots):
-            if not self.settings.ballbar:
-                refused[r] = ("the lab has no ballbar (instruments="
+    def _refuse_setups(self, rows: np.ndarray, chosen: np.ndarray, refused: list[str],
+                       name: str, owned: bool, setups: np.ndarray, most: int) -> None:
+        """Refuse the set-ups of instrument ``name`` (``chosen``, a mask over ``rows``) of
+        a lab without it (``owned`` False), or one whose ``most`` drawn set-ups are all used
+        (``setups`` so far, per env)."""
+        for r in np.flatnonzero(chosen):
+            if not owned:
+                refused[r] = (f"the lab has no {name} (instruments="
                               f"{list(self.settings.instruments)})")
-            elif self.bar_setups[rows[r]] >= ballbar.MAX_SETUPS:
-                refused[r] = f"the ballbar was set up {ballbar.MAX_SETUPS} times: no more"
+            elif setups[rows[r]] >= most:
+                refused[r] = f"the {name} was set up {most} times: no more"
 
     def _bar_after(self, rows: np.ndarray, ok: np.ndarray, op: np.ndarray, goal: np.ndarray
                    ) -> np.ndarray:
@@ -495,16 +499,6 @@ class LabBatch:
         values = ballbar.readings(distance, self.bar_length[rows], self.bar_scale[rows],
                                   self.settings.conditions, draws)
         self.bar_reading[rows] = np.where(np.abs(values) <= ballbar.travel_mm(), values, np.nan)
-
-    def _refuse_places(self, rows: np.ndarray, places: np.ndarray, refused: list[str]) -> None:
-        """Refuse the step-gauge set-ups (``places``, a mask over ``rows``) of a lab without
-        a step gauge, or one whose drawn set-ups are all used."""
-        for r in np.flatnonzero(places):
-            if not self.settings.step_gauge:
-                refused[r] = ("the lab has no step gauge (instruments="
-                              f"{list(self.settings.instruments)})")
-            elif self.gauge_setups[rows[r]] >= step_gauge.MAX_SETUPS:
-                refused[r] = f"the step gauge was set up {step_gauge.MAX_SETUPS} times: no more"
 
     def _gauge_after(self, rows: np.ndarray, ok: np.ndarray, op: np.ndarray, goal: np.ndarray
                      ) -> np.ndarray:
