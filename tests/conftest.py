@@ -4,6 +4,7 @@ experiment in the lab."""
 from __future__ import annotations
 
 import re
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -88,3 +89,10 @@ def assert_refused_in_one_line(path: Path, words: str) -> None:
                           capture_output=True, text=True, check=False)
     assert done.returncode == 2
     assert words in done.stderr and len(done.stderr.strip().splitlines()) == 1
+
+
+def as_a_terminal_job() -> None:
+    """A child's SIGINT at its default, as a terminal's foreground job has it: a shell
+    starts background jobs with SIGINT ignored, and children inherit that (pass as
+    ``preexec_fn``), so a Ctrl-C test holds wherever the suite was started."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

@@ -19,6 +19,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from conftest import as_a_terminal_job
 
 from calibrators.study.trials import Trial
 
@@ -59,7 +60,7 @@ def test_ctrl_c_while_the_command_loads_is_one_line_and_130(module: str) -> None
     vector env, the last module a comparison loads: its first machines are being built."""
     run = subprocess.run([sys.executable, "-c", _HOOKED, module, *COMPARE,
                           "--machines", "5"], capture_output=True, text=True,
-                         timeout=GUARD_S, env=_environment())
+                         timeout=GUARD_S, env=_environment(), preexec_fn=as_a_terminal_job)
     assert run.returncode == 130, run.stderr
     assert "Traceback" not in run.stderr
     lines = run.stderr.strip().splitlines()
@@ -80,7 +81,7 @@ def test_ctrl_c_with_busy_workers_keeps_the_finished_trials(tmp_path) -> None:
         [sys.executable, "-m", "calibrators.cli", *COMPARE, "--machines", "400",
          "--jobs", "2", "--chunk", "1", "--out", str(out)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_environment(),
-        start_new_session=True)
+        start_new_session=True, preexec_fn=as_a_terminal_job)
     try:
         # The readiness marker: a finished trial on disk (the workers are then on the
         # next machines, of 400).

@@ -12,6 +12,7 @@ import warnings
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import as_a_terminal_job
 from gymnasium.utils.env_checker import check_env
 
 import orthoglide_env
@@ -362,11 +363,9 @@ def test_ctrl_c_keeps_the_finished_trials_and_resume_completes_the_table(tmp_pat
             "--estimators", "paper6", "--machines", str(machines), "--seed", "2", "--jobs",
             "2", "--quiet"]
     chunked = [*argv, "--chunk", str(chunk)]
-    # A shell starts background jobs with SIGINT ignored, and children inherit that: give
-    # the run the default disposition a terminal's foreground job has.
     proc = subprocess.Popen([*chunked, "--out", str(out)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, start_new_session=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+                            preexec_fn=as_a_terminal_job)
     trials = out / "trials.jsonl"
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and not (trials.exists() and trials.read_text()):
