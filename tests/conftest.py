@@ -96,3 +96,24 @@ def as_a_terminal_job() -> None:
     starts background jobs with SIGINT ignored, and children inherit that (pass as
     ``preexec_fn``), so a Ctrl-C test holds wherever the suite was started."""
     signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def assert_batch_reads_as_alone(env_id: str, steps: list[dict[str, Any]], defaults: dict[str,
+                                int], keys: tuple[str, ...], **kwargs: Any) -> dict:
+    """The native vector env of ``env_id`` over machine seeds 3 and 7, stepped through
+    ``steps`` (each with ``defaults`` for the keys it leaves out), observes at every step
+    what two separate exact labs observe, key by key of ``keys``: its last observation."""
+    seeds = [3, 7]
+    envs = gym.make_vec(env_id, num_envs=2, vectorization_mode="vector_entry_point", **kwargs)
+    envs.reset(seed=seeds)
+    lone = [gym.make(env_id, backend="exact", **kwargs) for _ in seeds]
+    for env, seed in zip(lone, seeds, strict=True):
+        env.reset(seed=seed)
+    batched: dict = {}
+    for step in steps:
+        step = {**defaults, **step}
+        batched = envs.step({k: np.array([v, v]) for k, v in step.items()})[0]
+        alone = [env.step(step)[0] for env in lone]
+        for key in keys:
+            np.testing.assert_array_equal(batched[key], np.stack([a[key] for a in alone]))
+    return batched

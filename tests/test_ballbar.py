@@ -11,7 +11,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import assert_refused_in_one_line
+from conftest import assert_batch_reads_as_alone, assert_refused_in_one_line
 
 import orthoglide_env
 from calibrators.agents import get_agent
@@ -121,18 +121,10 @@ def test_the_model_predicts_the_engine_at_the_truth():
 
 
 def test_a_batch_reads_what_separate_labs_read():
-    seeds, steps = [3, 7], circle_steps(6, PROTOTYPE)[:40]
-    kwargs = dict(errors="realistic", conditions="lab", instruments=OWNED)
-    envs = gym.make_vec(V2, num_envs=2, vectorization_mode="vector_entry_point", **kwargs)
-    batched, _ = envs.reset(seed=seeds)
-    lone = [gym.make(V2, backend="exact", **kwargs) for _ in seeds]
-    alone = [env.reset(seed=s)[0] for env, s in zip(lone, seeds, strict=True)]
-    for step in steps:
-        step = {"bar": BAR, **step}
-        batched = envs.step({k: np.array([v, v]) for k, v in step.items()})[0]
-        alone = [env.step(step)[0] for env in lone]
-        for key in ("ballbar", "ballbar_valid", "ballbar_in", "gauges", "time"):
-            np.testing.assert_array_equal(batched[key], np.stack([a[key] for a in alone]))
+    batched = assert_batch_reads_as_alone(
+        V2, circle_steps(6, PROTOTYPE)[:40], {"bar": BAR},
+        ("ballbar", "ballbar_valid", "ballbar_in", "gauges", "time"),
+        errors="realistic", conditions="lab", instruments=OWNED)
     assert batched["ballbar_valid"].all()
 
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import assert_refused_in_one_line
+from conftest import assert_batch_reads_as_alone, assert_refused_in_one_line
 
 import orthoglide_env
 from calibrators.agents import get_agent
@@ -117,19 +117,10 @@ def test_both_backends_read_the_same():
 
 
 def test_a_batch_reads_what_separate_labs_read():
-    seeds, steps = [3, 7], gauge_steps(6, PROTOTYPE, 1)[:30]
-    kwargs = dict(errors="realistic", conditions="lab", instruments=OWNED, thermometer=True)
-    envs = gym.make_vec(V3, num_envs=2, vectorization_mode="vector_entry_point", **kwargs)
-    batched, _ = envs.reset(seed=seeds)
-    lone = [gym.make(V3, backend="exact", **kwargs) for _ in seeds]
-    for env, seed in zip(lone, seeds, strict=True):
-        env.reset(seed=seed)
-    for step in steps:
-        step = {"axis": 0, **step}
-        batched = envs.step({k: np.array([v, v]) for k, v in step.items()})[0]
-        alone = [env.step(step)[0] for env in lone]
-        for key in ("step_gauge", "step_gauge_valid", "step_gauge_in", "gauges", "time"):
-            np.testing.assert_array_equal(batched[key], np.stack([a[key] for a in alone]))
+    batched = assert_batch_reads_as_alone(
+        V3, gauge_steps(6, PROTOTYPE, 1)[:30], {"axis": 0},
+        ("step_gauge", "step_gauge_valid", "step_gauge_in", "gauges", "time"),
+        errors="realistic", conditions="lab", instruments=OWNED, thermometer=True)
     assert batched["step_gauge_valid"].all()
 
 
