@@ -427,7 +427,8 @@ def _derivatives(theta: np.ndarray, layout: ReadingLayout, wanted: np.ndarray) -
         rows = np.flatnonzero(where[layout.mounting] >= 0)
         _gauge_derivatives(theta, layout, machine, p, (inv, row), rows,
                            where[layout.mounting[rows]], at[rows], out,
-                           stands=bool(wanted[N_MACHINE:N_MACHINE + 4 * len(gauges)].any()))
+                           stands=bool(wanted[N_MACHINE:N_MACHINE + 4 * len(gauges)].any()),
+                           columns=np.flatnonzero(wanted[:N_MACHINE]))
     for m, spec in enumerate(layout.specs):
         if isinstance(spec, InterferometerAxis):
             out[:, layout.mounting == m, spec.axis] = 1.0
@@ -495,11 +496,12 @@ def carriage_derivatives(layout: ReadingLayout) -> np.ndarray:
 
 def _gauge_derivatives(theta: np.ndarray, layout: ReadingLayout, machine: MachineParams,
                        p: np.ndarray, dp: tuple[np.ndarray, np.ndarray], rows: np.ndarray,
-                       gauge: np.ndarray, at: np.ndarray, out: np.ndarray, stands: bool
-                       ) -> None:
+                       gauge: np.ndarray, at: np.ndarray, out: np.ndarray, stands: bool,
+                       columns: np.ndarray) -> None:
     """Fill ``out[:, rows]``: the derivatives of the gauge readings ``rows`` (their gauge
-    among the layout's gauges, their posture index ``at``) over the machine's errors, and
-    over the stand parameters when ``stands``."""
+    among the layout's gauges, their posture index ``at``) over the machine's errors
+    ``columns`` (the others are left as they are), and over the stand parameters when
+    ``stands``."""
     space = layout.space
     specs = [layout.specs[k] for k in space.gauges]
     count = len(specs)
@@ -533,13 +535,14 @@ def _gauge_derivatives(theta: np.ndarray, layout: ReadingLayout, machine: Machin
     aimed = [np.where(bar, g.at[:, None], np.where((g.part == Part.CARRIAGE)[:, None], 1.0, 0.0)),
              np.where(bar, 1 - g.at[:, None], 0.0),
              np.where(on_platform(g.part)[:, None], 1.0, 0.0)]
+    inv_zero, row_zero = tcp_sensitivity_factors(machine, zero, p_zero)
     machine_part = (
-        _through_leg(machine, postures[None], (dp[0][:, at], dp[1][:, at]), legs, d_a, d_c,
-                     d_p)
-        - _through_leg(machine, zero, tcp_sensitivity_factors(machine, zero, p_zero), legs,
-                       *(w * towards_centre for w in aimed)))
+        _through_leg(machine, postures[None], (dp[0][:, at], dp[1][:, at[:, None], columns]),
+                     legs, d_a, d_c, d_p, columns)
+        - _through_leg(machine, zero, (inv_zero, row_zero[..., columns]), legs,
+                       *(w * towards_centre for w in aimed), columns))
     sign = layout.signs[layout.mounting[rows]]
-    out[:, rows, :N_MACHINE] = sign[:, None] * machine_part
+    out[:, rows[:, None], columns] = sign[:, None] * machine_part
     if not stands:
         return
     # Stand parameters move the ray only: shifts its origin across the measuring axis,
@@ -556,18 +559,31 @@ def _gauge_derivatives(theta: np.ndarray, layout: ReadingLayout, machine: Machin
 
 
 def _through_leg(machine: MachineParams, rho: np.ndarray, dp: tuple[np.ndarray, np.ndarray],
-                 legs: np.ndarray, d_a: np.ndarray, d_c: np.ndarray, d_p: np.ndarray
-                 ) -> np.ndarray:
-    """``d_a . dA/dtheta + d_c . dC/dtheta + d_p . dp/dtheta`` over the 27 errors, for the
-    R1 centre A and R2 centre C of leg ``legs`` (``(R,)``) and the TCP p at commands
-    ``rho`` (``(..., R, 3)``, or one posture for all), the TCP's derivative ``dp`` as its
-    :func:`~orthoglide_env.model.kinematics.tcp_sensitivity_factors` (``(B, R, 3, 3)``, ``(B, R,
-    27)``, or one posture for all): ``(B, R, 27)``."""
-    each = np.arange(len(legs))[:, None]
-    out = sensitivity_along(*dp, d_c + d_p)
-    out[:, each, CARRIAGE_COLUMNS[legs]] += carriage_gradients(
-        machine, rho, d_a[..., None, :], legs[:, None])[..., 0, :]
-    out[:, each, ATTACH_COLUMN + 3 * legs[:, None] + np.arange(3)] += d_c
+                 legs: np.ndarray, d_a: np.ndarray, d_c: np.ndarray, d_p: np.ndarray,
+                 columns: np.ndarray) -> np.ndarray:
+    """``d_a . dA/dtheta + d_c . dC/dtheta + d_p . dp/dtheta`` over the errors ``columns``
+    (sorted, of the 27), for the R1 centre A and R2 centre C of leg ``legs`` (``(R,)``) and
+    the TCP p at commands ``rho`` (``(..., R, 3)``, or one posture for all), the TCP's
+    derivative ``dp`` as its :func:`~orthoglide_env.model.kinematics.
+    tcp_sensitivity_factors` (``(B, R, 3, 3)``, and the entries of ``columns`` ``(B, R,
+    K)``, or one posture for all): ``(B, R, K)``.
+
+    Each entry is the same sum, in the same order, as in the derivative over all 27: a fit
+    of a few errors (the paper's six) forms only their columns, with the same bits."""
+    out = sensitivity_along(*dp, d_c + d_p, columns)
+    # Where each leg's carriage and attachment columns sit among ``columns`` (-1: not
+    # wanted); a leg's are apart from the other legs' and from each other.
+    position = np.full(N_MACHINE, -1)
+    position[columns] = np.arange(len(columns))
+    carriage = position[CARRIAGE_COLUMNS[legs]]  # (R, 5)
+    r, k = np.nonzero(carriage >= 0)
+    if len(r):
+        out[:, r, carriage[r, k]] += carriage_gradients(
+            machine, rho, d_a[..., None, :], legs[:, None])[..., 0, :][:, r, k]
+    attach = position[ATTACH_COLUMN + 3 * legs[:, None] + np.arange(3)]  # (R, 3)
+    r, k = np.nonzero(attach >= 0)
+    if len(r):
+        out[:, r, attach[r, k]] += d_c[..., r, k]
     return out
 
 

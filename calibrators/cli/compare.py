@@ -9,6 +9,7 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from tqdm import tqdm
@@ -29,9 +30,7 @@ from calibrators.cli.common import (
     machine_design_of,
 )
 from calibrators.estimators.catalogue import CATALOGUE, exact_estimators, get_estimator
-from calibrators.planning.bound import Bound
 from calibrators.study.compare import CHUNK, Config, Trial, run, study_bound
-from calibrators.study.crosscheck import verify_pybullet
 from calibrators.study.engines import ENGINES, RAY_INSTALL_HINT, ray_available
 from calibrators.study.episodes import DEFAULT_BUDGET_S
 from calibrators.study.statistics import paired, summary, warning_title
@@ -40,6 +39,9 @@ from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import DEFAULT_PRESET, PRESETS
 from orthoglide_env.scoring import FRAMES
 from orthoglide_env.world.conditions import EFFECT_NAMES
+
+if TYPE_CHECKING:
+    from calibrators.planning.bound import Bound
 
 TRIALS_FILE = "trials.jsonl"
 #: Most processes a run may ask for: beyond the cores they only compete.
@@ -206,6 +208,8 @@ def run_command(args: argparse.Namespace) -> None:
         raise SystemExit(130)
     rows = _print(trials, config, args.machines, time.perf_counter() - start, args.json)
     if args.verify_pybullet:
+        from calibrators.study.crosscheck import verify_pybullet
+
         gaps = verify_pybullet(config, min(args.verify_pybullet, args.machines))
         print(f"PyBullet check of {min(args.verify_pybullet, args.machines)} machine(s), "
               f"every agent, {gaps['steps']} steps with ideal gauges: largest reading "

@@ -182,8 +182,12 @@ def align_tracker(design: ReadingLayout, values: np.ndarray) -> np.ndarray:
 def _every_reading(datas: list[Measurements], name: str) -> np.ndarray | None:
     """Field ``name`` of every reading of every experiment (M, N), or None when one
     reading lacks it."""
-    rows = [[getattr(m, name) for m in data.items] for data in datas]
-    return None if any(None in row for row in rows) else np.array(rows, dtype=float)
+    rows = []
+    for data in datas:
+        rows.append([getattr(m, name) for m in data.items])
+        if None in rows[-1]:  # e.g. no thermometer: known from the first experiment
+            return None
+    return np.array(rows, dtype=float)
 
 
 def _check_fix(fix: Any) -> None:

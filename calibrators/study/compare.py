@@ -19,7 +19,7 @@ from collections.abc import Callable
 from contextlib import closing
 from dataclasses import dataclass, field
 from functools import cache, partial
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
@@ -28,7 +28,6 @@ from calibrators.agents import Agent, get_agent
 from calibrators.estimators.base import Estimate
 from calibrators.estimators.catalogue import for_study, get_estimator
 from calibrators.estimators.prediction import predicted_rigid_mm
-from calibrators.planning.bound import Bound, lower_bound
 from calibrators.study.engines import results
 from calibrators.study.episodes import (
     DEFAULT_BUDGET_S,
@@ -63,6 +62,9 @@ from orthoglide_env.scoring import FRAMES, ScoreReport, score_batch, uncalibrate
 from orthoglide_env.world.conditions import DEFAULT_CONDITIONS, Conditions
 from orthoglide_env.world.faults import NO_FAULTS, Faults, happened
 from orthoglide_env.world.truth import World
+
+if TYPE_CHECKING:
+    from calibrators.planning.bound import Bound
 
 #: Fractions of an episode's time at which the accuracy-versus-time curve re-estimates.
 CURVE_FRACTIONS: tuple[float, ...] = (0.25, 0.5, 0.75)
@@ -142,6 +144,9 @@ def study_bound(config: Config) -> Bound:
     """The bound (:func:`calibrators.planning.bound.lower_bound`) of the comparison's lab:
     its design, world, dials (their weighting sigma), stands, instruments and budget,
     the same for every machine."""
+    # Imported here: the bound (and scipy.linalg) is for runs that ask for it.
+    from calibrators.planning.bound import lower_bound
+
     noise = GaugeNoise(config.sigma, config.resolution)
     return lower_bound(config.design, config.conditions,
                        float(weighting_sigma(noise.effective_sigma)), config.budget_s,

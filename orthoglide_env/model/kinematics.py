@@ -299,15 +299,17 @@ def tcp_sensitivity_factors(machine: MachineParams, rho: np.ndarray, p: np.ndarr
     return inverse_3x3(2 * v), row
 
 
-def sensitivity_along(inverse: np.ndarray, row: np.ndarray, weights: np.ndarray
-                      ) -> np.ndarray:
+def sensitivity_along(inverse: np.ndarray, row: np.ndarray, weights: np.ndarray,
+                      columns: np.ndarray | None = None) -> np.ndarray:
     """``weights . dp/dtheta`` (``(..., 27)``) from the :func:`tcp_sensitivity_factors`
     ``inverse`` and ``row`` and the ``weights`` (``(..., 3)``) of the TCP's coordinates:
     the weights go through the 3 x 3 inverse first, so the 27 columns are formed once,
-    not three times."""
+    not three times.  ``columns``: only these of the 27 (``row`` holding their entries
+    alone), each with the bits it has among all 27."""
     through = (weights[..., 0, None] * inverse[..., 0, :] + weights[..., 1, None]
                * inverse[..., 1, :] + weights[..., 2, None] * inverse[..., 2, :])
-    return np.take(through, ERROR_LEGS, axis=-1) * row
+    legs = ERROR_LEGS if columns is None else ERROR_LEGS[columns]
+    return np.take(through, legs, axis=-1) * row
 
 
 def inverse_3x3(m: np.ndarray) -> np.ndarray:

@@ -112,7 +112,13 @@ def best_rigid_motion(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray
     ``H = U S V^T``, ``R = V diag(1, 1, d) U^T`` where ``d = det(V U^T)`` keeps ``R`` a
     rotation when the best orthogonal fit would be a reflection."""
     targets, reached = np.broadcast_arrays(targets, reached)
-    q, p, cq, cp = _masked_centroids(targets, reached, np.asarray(mask, dtype=bool))
+    return _rigid_motion(*_masked_centroids(targets, reached, np.asarray(mask, dtype=bool)))
+
+
+def _rigid_motion(q: np.ndarray, p: np.ndarray, cq: np.ndarray, cp: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`best_rigid_motion` from the targets and reached points about their centroids
+    and the centroids (:func:`_masked_centroids`)."""
     u, _, vt = np.linalg.svd(np.einsum("...ni,...nj->...ij", p, q))
     ut, v = np.swapaxes(u, -1, -2), np.swapaxes(vt, -1, -2).copy()
     v[..., 2] *= np.sign(np.linalg.det(v @ ut))[..., None]
@@ -120,19 +126,24 @@ def best_rigid_motion(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray
     return rotation, cq - np.einsum("...ij,...j->...i", rotation, cp)
 
 
-def remove_translation(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray) -> np.ndarray:
+def remove_translation(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray,
+                       centred: tuple[np.ndarray, ...] | None = None) -> np.ndarray:
     """Error vectors (..., n, 3) left after the best-fit translation over ``mask``: the
     errors minus their mean, i.e. the centred reached points minus the centred targets;
-    NaN outside ``mask``."""
+    NaN outside ``mask``.  ``centred``: :func:`_masked_centroids` of the three, when the
+    caller has them."""
     mask = np.asarray(mask, dtype=bool)
-    q, p, _, _ = _masked_centroids(targets, reached, mask)
+    q, p, _, _ = _masked_centroids(targets, reached, mask) if centred is None else centred
     return np.where(mask[..., None], p - q, np.nan)
 
 
-def remove_rigid(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray) -> np.ndarray:
+def remove_rigid(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray,
+                 centred: tuple[np.ndarray, ...] | None = None) -> np.ndarray:
     """Error vectors ``R reached + t - target`` (..., n, 3) left after the best-fit rigid
-    motion over ``mask`` (:func:`best_rigid_motion`); NaN outside ``mask``."""
-    rotation, shift = best_rigid_motion(targets, reached, mask)
+    motion over ``mask`` (:func:`best_rigid_motion`); NaN outside ``mask``.  ``centred``:
+    see :func:`remove_translation`."""
+    rotation, shift = (best_rigid_motion(targets, reached, mask) if centred is None
+                       else _rigid_motion(*centred))
     moved = np.einsum("...ij,...nj->...ni", rotation, reached) + shift[..., None, :]
     return np.where(np.asarray(mask, dtype=bool)[..., None], moved - targets, np.nan)
 
@@ -143,7 +154,7 @@ def _stats(errors: np.ndarray, mask: np.ndarray) -> list[ErrorStats]:
     length2 = dot(kept, kept)
     rms = np.sqrt(length2.sum(axis=-1) / mask.sum(axis=-1))
     worst = np.sqrt(np.max(length2, axis=-1))
-    return [ErrorStats(float(r), float(m)) for r, m in zip(rms, worst, strict=True)]
+    return [ErrorStats(r, m) for r, m in zip(rms.tolist(), worst.tolist(), strict=True)]
 
 
 def frame_errors(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray) -> list[FrameErrors]:
@@ -161,8 +172,10 @@ def frame_errors(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray) -> 
         return [frames for b in blocks(len(reached))
                 for frames in frame_errors(targets[b], reached[b], mask[b])]
     raw = _stats(reached - targets, mask)
-    translation = _stats(remove_translation(targets, reached, mask), mask)
-    rigid = _stats(remove_rigid(targets, reached, mask), mask)
+    # Both fits start from the same centred points, computed once.
+    centred = _masked_centroids(targets, reached, mask)
+    translation = _stats(remove_translation(targets, reached, mask, centred), mask)
+    rigid = _stats(remove_rigid(targets, reached, mask, centred), mask)
     return [FrameErrors(*frames) for frames in zip(raw, translation, rigid, strict=True)]
 
 
