@@ -49,7 +49,7 @@ from orthoglide_env.model.errors import (
 from orthoglide_env.model.kinematics import (
     ATTACH_COLUMN,
     CARRIAGE_COLUMNS,
-    carriage_gradients,
+    carriage_parts,
     carriage_points,
     direct,
     dot,
@@ -576,10 +576,14 @@ def _through_leg(machine: MachineParams, rho: np.ndarray, dp: tuple[np.ndarray, 
     position = np.full(N_MACHINE, -1)
     position[columns] = np.arange(len(columns))
     carriage = position[CARRIAGE_COLUMNS[legs]]  # (R, 5)
-    r, k = np.nonzero(carriage >= 0)
-    if len(r):
-        out[:, r, carriage[r, k]] += carriage_gradients(
-            machine, rho, d_a[..., None, :], legs[:, None])[..., 0, :][:, r, k]
+    kinds = [carriage[:, :1], carriage[:, 1:3], carriage[:, 3:]]  # encoder, tilts, offsets
+    parts = carriage_parts(machine, rho, d_a[..., None, :], legs[:, None],
+                           tuple(bool((kind >= 0).any()) for kind in kinds))
+    for kind, part in zip(kinds, parts, strict=True):
+        r, k = np.nonzero(kind >= 0)
+        if len(r):
+            out[:, r, kind[r, k]] += np.broadcast_to(
+                part[..., 0, :], (*out.shape[:2], kind.shape[1]))[:, r, k]
     attach = position[ATTACH_COLUMN + 3 * legs[:, None] + np.arange(3)]  # (R, 3)
     r, k = np.nonzero(attach >= 0)
     if len(r):

@@ -103,6 +103,7 @@ from orthoglide_env.model.errors import (
     MachineFileError,
     MachineParams,
     check_validity,
+    valid_vectors,
 )
 from orthoglide_env.model.kinematics import direct
 from orthoglide_env.reading_model import (
@@ -561,6 +562,10 @@ class GaussNewtonCalibrator(Estimator):
         fitting = mask.copy()
         for m, rows in enumerate(misfits):
             fitting[m, rows] = False
+        # Most estimates are inside the validity range: only the others are made into a
+        # machine each, for their warning's words.
+        valid = valid_vectors(np.stack([r.theta[0, :len(ERROR_NAMES)] for r in results]),
+                              design.machine_design)
         judged = ([None] * m_count if auto or not world_check else _world_warnings(
             design, values, fitting, noise, np.stack([r.theta[0] for r in results]), free,
             scale, told_terms, base_of, conditions.label))
@@ -577,7 +582,8 @@ class GaussNewtonCalibrator(Estimator):
                                           causes[m], every[m], repeated[m], misfits[m],
                                           verify, explain, consider, names,
                                           None if world is None else world[m],
-                                          conditions, spacing, judged[m], shown[m]))
+                                          conditions, spacing, judged[m], shown[m],
+                                          bool(valid[m])))
         return out
 
     def _estimate(self, data: Measurements, params: str, prior: str, sigma: float,
@@ -587,7 +593,10 @@ class GaussNewtonCalibrator(Estimator):
                   repeated: np.ndarray, misfits: np.ndarray, verify: bool, explain: bool,
                   considered: Consider, every: list[str], world: np.ndarray | None,
                   conditions: Conditions, spacing: float | None, judged: str | None,
-                  world_scales: dict[str, float]) -> Estimate:
+                  world_scales: dict[str, float], valid: bool) -> Estimate:
+        """The estimate of machine ``data`` from its fit ``result``; ``valid``: whether
+        its machine is inside the validity range (:func:`~orthoglide_env.model.errors.
+        valid_vectors`)."""
         space = design.space
         names = [n for n, f in zip(every, result.free, strict=True) if f]
         idx = np.flatnonzero(result.free)
@@ -613,8 +622,9 @@ class GaussNewtonCalibrator(Estimator):
                 f"{result.chi2_dof[0]:.1f} (chi-square test at {CHI2_LEVEL:g}); {widened}; "
                 f"{hint}")
         try:
-            check_validity(MachineParams.from_vector(theta[:len(ERROR_NAMES)],
-                                                     design.machine_design))
+            if not valid:
+                check_validity(MachineParams.from_vector(theta[:len(ERROR_NAMES)],
+                                                         design.machine_design))
         except MachineFileError as exc:
             warnings.append(f"the estimate is outside the validity range, where the model "
                             f"holds: {str(exc).replace('machine key', 'estimate key')}; do "

@@ -378,6 +378,22 @@ def check_validity(machine: MachineParams) -> MachineParams:
     return machine
 
 
+def valid_vectors(vectors: np.ndarray, design: MachineDesign) -> np.ndarray:
+    """(M,) for machine vectors ``vectors`` (M, 27) of ``design``: True where
+    :meth:`MachineParams.from_vector` and :func:`check_validity` take the machine (finite
+    errors, legs longer than half the parallelogram's width, each error inside its
+    validity range), False where either would raise: for many estimates at once, the
+    same comparisons without a machine each."""
+    vectors = np.asarray(vectors, dtype=float)
+    valid = np.isfinite(vectors).all(axis=-1)
+    parts = dict(zip(_SHAPES, np.split(vectors, _SPLITS, axis=-1), strict=True))
+    with np.errstate(invalid="ignore"):
+        valid &= ~np.any(design.L + parts["dL"] <= design.d / 2, axis=-1)
+        for key, (limit, _) in design.validity_range.items():
+            valid &= ~np.any(np.abs(parts[key]) > limit, axis=-1)
+    return valid
+
+
 def _design_of(value: Any, folder: Path | None) -> MachineDesign:
     """The design under a machine's ``design`` key: a design object, or a design file's path
     (relative to ``folder``)."""

@@ -231,33 +231,38 @@ def carriage_gradients(machine: MachineParams, rho: np.ndarray, weights: np.ndar
     ``CARRIAGE_COLUMNS[legs]`` of the 27 (the others are zero).
 
     ``A_i = o_i + (L + r + drho_i + rho_i) u_i``: each column in closed form."""
-    parts = _carriage_parts(machine, rho, weights, legs)
+    parts = carriage_parts(machine, rho, weights, legs)
     lead = np.broadcast_shapes(*(part.shape[:-1] for part in parts))
     return np.concatenate([np.broadcast_to(part, (*lead, part.shape[-1])) for part in parts],
                           axis=-1)
 
 
-def _carriage_parts(machine: MachineParams, rho: np.ndarray, weights: np.ndarray,
-                    legs: np.ndarray | None) -> list[np.ndarray]:
+def carriage_parts(machine: MachineParams, rho: np.ndarray, weights: np.ndarray,
+                   legs: np.ndarray | None, kinds: tuple[bool, bool, bool] = (True, True, True)
+                   ) -> list[np.ndarray | None]:
     """:func:`carriage_gradients`' columns by kind, each broadcasting to its shape: the
-    encoder offset's (..., K, 1), the two tilts' (..., K, 2) and the two offsets'."""
+    encoder offset's (..., K, 1), the two tilts' (..., K, 2) and the two offsets'; None for
+    a kind not in ``kinds`` (a fit that leaves the axes' tilts and offsets fixed needs only
+    the encoder offsets', and the tilts' cost the most)."""
     g, rho = geometry(machine, rho)
     weights = np.asarray(weights, dtype=float)
     extra = rho.ndim - 1 - len(machine.batch_shape)
     s = _slide(machine) + g.drho + rho
     u = g.u
-    du = axis_direction_derivatives(machine).reshape(*machine.batch_shape, *(1,) * extra,
-                                                     3, 2, 3)
+    du = axis_direction_derivatives(machine).reshape(
+        *machine.batch_shape, *(1,) * extra, 3, 2, 3) if kinds[1] else None
     if legs is None:
         across = np.swapaxes(R_LEG[..., 1:], -1, -2)
     else:
         legs = np.broadcast_to(legs, np.broadcast_shapes(weights.shape[:-1], np.shape(legs)))
         s = np.take_along_axis(s, legs, axis=-1)
         u = np.take_along_axis(u, legs[..., None], axis=-2)
-        du = np.take_along_axis(du, legs[..., None, None], axis=-3)
+        if du is not None:
+            du = np.take_along_axis(du, legs[..., None, None], axis=-3)
         across = np.swapaxes(R_LEG[legs][..., 1:], -1, -2)  # (..., K, 2, 3)
-    return [dot(weights, u)[..., None], s[..., None] * dot(weights[..., None, :], du),
-            dot(weights[..., None, :], across)]
+    return [dot(weights, u)[..., None] if kinds[0] else None,
+            s[..., None] * dot(weights[..., None, :], du) if du is not None else None,
+            dot(weights[..., None, :], across) if kinds[2] else None]
 
 
 def tcp_sensitivity(machine: MachineParams, rho: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -288,7 +293,7 @@ def tcp_sensitivity_factors(machine: MachineParams, rho: np.ndarray, p: np.ndarr
     # CARRIAGE_COLUMNS' entries (:func:`carriage_gradients`) by kind, written as slices:
     # the encoder offsets', then each leg's two tilts and two offsets in turn (joining
     # them and a fancy-indexed write cost as much as computing them).
-    offset, tilts, shifts = _carriage_parts(machine, rho, v, None)  # (..., 3 legs, 1|2)
+    offset, tilts, shifts = carriage_parts(machine, rho, v, None)  # (..., 3 legs, 1|2)
     shape = row.shape[:-1]
     row[..., DRHO_COLUMN:DRHO_COLUMN + 3] = 2 * offset[..., 0]
     row[..., TILT_COLUMN:TILT_COLUMN + 6] = (2 * tilts).reshape(*shape, 6)
