@@ -29,8 +29,11 @@ from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import (
     ERROR_NAMES,
     PRESETS,
+    MachineFileError,
     MachineParams,
+    check_validity,
     random_machine,
+    valid_vectors,
 )
 from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture
 from orthoglide_env.reading_model import parameters_of, predict
@@ -256,3 +259,55 @@ def test_extended_estimator_is_honest_and_beats_the_paper_model() -> None:
     assert 0.8 <= np.sqrt(np.mean(np.square(z_ext))) <= 1.25
     assert np.mean(warned) >= 0.9
     assert np.sqrt(np.mean(np.square(z_paper))) <= 1.5
+
+
+def test_jacobian_of_a_few_parameters_is_their_columns_of_the_whole_bit_for_bit() -> None:
+    """A fit of a few errors (the paper's six, an encoder offset with one tilt, the
+    attachments) forms only their columns; each must carry the very bits it has among all
+    of them, on bars, carriages and the platform at random postures and random parameter
+    vectors, so that what a fit frees never moves another parameter's result."""
+    from orthoglide_env.instruments.slots import layout_from_names
+    from orthoglide_env.reading_model import ReadingLayout, default_scales, jacobian
+
+    rng = np.random.default_rng(3)
+    names = ["x-leg/y", "y/z@0.3", "z-leg/x", "x-carriage/y", "y-carriage/z", "platform/x"]
+    specs = layout_from_names(names)
+    mountings, chosen, rho = [], [], []
+    for posture in rng.uniform(-20.0, 20.0, (5, 3)):
+        for name, spec in zip(names, specs, strict=True):
+            mountings.append(name)
+            chosen.append(spec)
+            rho.append(posture)
+    layout = ReadingLayout.of(mountings, chosen, np.array(rho), PROTOTYPE)
+    count = len(layout.space)
+    scale = default_scales(layout.space)
+    theta = rng.normal(0.0, 1.0, (4, count)) * scale
+    whole = jacobian(theta, layout, np.ones(count, bool), scale)
+    for picked in (select("paper6", layout.space), np.isin(np.arange(count), [0, 7, 20]),
+                   np.isin(np.arange(count), np.arange(18, 27)), np.arange(count) >= 27):
+        part = jacobian(theta, layout, picked, scale)
+        np.testing.assert_array_equal(part, whole[..., picked])
+
+
+def test_valid_vectors_agree_with_check_validity_machine_by_machine() -> None:
+    """The batched validity test takes exactly the machines that ``from_vector`` and
+    ``check_validity`` take: drawn machines, some pushed past one group's limit (just
+    past, and just at it), a leg too short and a non-finite error."""
+    rng = np.random.default_rng(5)
+    vectors = np.stack([random_machine(rng, "realistic", design=PROTOTYPE).to_vector()
+                        for _ in range(40)])
+    starts = {"drho": 0, "dL": 3, "axis_tilt": 6, "axis_offset": 12, "attach": 18}
+    for k, (key, (limit, _)) in enumerate(PROTOTYPE.validity_range.items()):
+        vectors[2 * k, starts[key] + k % 3] = limit * (1 + 1e-12)
+        vectors[2 * k + 1, starts[key] + k % 3] = -limit
+    vectors[30, 4] = -PROTOTYPE.L
+    vectors[31, 9] = np.nan
+    expected = []
+    for vector in vectors:
+        try:
+            check_validity(MachineParams.from_vector(vector, PROTOTYPE))
+            expected.append(True)
+        except MachineFileError:
+            expected.append(False)
+    assert 0 < sum(expected) < len(expected)
+    np.testing.assert_array_equal(valid_vectors(vectors, PROTOTYPE), expected)
