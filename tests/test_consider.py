@@ -217,7 +217,7 @@ def test_fitting_the_world_keeps_batches_and_ideal_fits_as_they_are() -> None:
     from conftest import paper_experiment
 
     datas, sigma = [], 0.0
-    for seed in (3, 4, 5):
+    for seed in (3, 4):
         episode, _ = paper_experiment(None, seed, errors="realistic", conditions="lab")
         datas.append(measurements_of(episode.records, episode.time_s, design=PROTOTYPE))
         sigma = episode.sigma
