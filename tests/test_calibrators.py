@@ -122,7 +122,7 @@ def test_statistics_against_the_cramer_rao_bound(strategy: str) -> None:
     order: on machines with 2 mm errors its mean error is systematically off (measured
     -0.14 to -0.21 mm, 4-6 standard errors), so its RMS exceeds its bound; it must never
     beat the bound by more than the sampling band.  The machines are played as one batch
-    of exact labs, which reads what 200 lone labs read (tests/test_vector_env.py)."""
+    of exact labs, which reads what 200 lone labs read (tests/test_lab_vector.py)."""
     seeds = list(range(200))
     envs = gym.make_vec(orthoglide_env.LAB_ENV_ID, num_envs=len(seeds),
                         vectorization_mode="vector_entry_point", errors="paper",

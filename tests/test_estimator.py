@@ -57,7 +57,7 @@ def experiment(machine: MachineParams | None, seed: int, errors: str = "realisti
 def experiments(seeds: list[int], errors: str = "realistic", sigma: float = 0.01,
                 resolution: float = 0.01) -> list[tuple]:
     """:func:`experiment` on machines drawn from ``seeds``, played as one batch of exact
-    labs (a batch reads what its lone labs read: tests/test_vector_env.py)."""
+    labs (a batch reads what its lone labs read: tests/test_lab_vector.py)."""
     envs = gym.make_vec(orthoglide_env.LAB_ENV_ID, num_envs=len(seeds),
                         vectorization_mode="vector_entry_point", errors=errors,
                         gauge_sigma=sigma, gauge_resolution=resolution, conditions="ideal")
