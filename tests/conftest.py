@@ -117,3 +117,12 @@ def assert_batch_reads_as_alone(env_id: str, steps: list[dict[str, Any]], defaul
         for key in keys:
             np.testing.assert_array_equal(batched[key], np.stack([a[key] for a in alone]))
     return batched
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The tests marked ``slow`` run first, each in collection order.  Spread over workers
+    (``make test``: ``-n auto``), the suite lasts as long as its busiest worker: a long
+    test handed out last would keep one worker busy while the others idle, whereas
+    started first it overlaps the many short ones.  The order is only a schedule: no test
+    depends on another having run."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)

@@ -92,6 +92,7 @@ def _plan_mm(model: BoundModel, actions: list[dict]) -> float:
     return float(np.sqrt(model.value(counts)))
 
 
+@pytest.mark.slow
 def test_bound_is_below_every_discrete_plan(quick):
     # Half an hour: the laser's set-up on one drive fits, and the plans are quick to make.
     budget = 1800.0

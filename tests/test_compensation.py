@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -102,6 +103,16 @@ def test_the_estimate_file_is_a_machine_file_and_compensate_writes_the_controlle
     assert (tmp_path / "again.json").read_text() == est_path.read_text()
 
 
+@pytest.fixture(scope="module")
+def paper_estimate(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The ``paper`` agent's estimate file of machine seed 1 (exact backend), made once for
+    the bad-target tests: each only reads it."""
+    path = tmp_path_factory.mktemp("paper_estimate") / "est.json"
+    assert main(["calibrate", "--agent", "paper", "--backend", "exact", "--seed", "1",
+                 "--save-estimate", str(path)]) == 0
+    return path
+
+
 @pytest.mark.parametrize(("text", "fragment"), [
     ("x,y\n0,0\n", "missing z)"),
     ("x,y,z\n0,0,abc\n", ":2: z must be a finite number"),
@@ -109,13 +120,11 @@ def test_the_estimate_file_is_a_machine_file_and_compensate_writes_the_controlle
     ("x,y,z\n", "no target"),
     ("x,y,z\n0,0,400\n", "outside the estimated machine's control limits"),
 ])
-def test_bad_targets_are_refused_in_one_line(tmp_path, capsys, text, fragment) -> None:
-    est_path = tmp_path / "est.json"
-    assert main(["calibrate", "--agent", "paper", "--backend", "exact", "--seed", "1",
-                 "--save-estimate", str(est_path)]) == 0
+def test_bad_targets_are_refused_in_one_line(tmp_path, capsys, paper_estimate, text,
+                                            fragment) -> None:
     (tmp_path / "t.csv").write_text(text)
     capsys.readouterr()
-    assert main(["compensate", str(est_path), "--targets", str(tmp_path / "t.csv"),
+    assert main(["compensate", str(paper_estimate), "--targets", str(tmp_path / "t.csv"),
                  "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and fragment in err[0], err

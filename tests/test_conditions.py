@@ -39,6 +39,7 @@ def table_range(effect: str, parameter: str, condition: str) -> tuple[float, flo
     return EFFECTS[effect][parameter].at(condition)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("condition", ["lab", "workshop"])
 def test_zero_readings_drift_over_an_hour_by_the_stands_and_the_room(condition: str) -> None:
     """A gauge's Zero reading after an hour of work minus the one at its mounting: its

@@ -130,6 +130,7 @@ def lead_machines(conditions: Conditions, machines: int = 40) -> tuple:
     return design, theta, values, free, prior, scale
 
 
+@pytest.mark.slow
 def test_a_fit_that_ignores_the_lead_error_lies_and_one_that_considers_it_does_not() -> None:
     """Workshop lead error alone, 200 postures read at 3 um: without the consider terms the
     extended fit's z-RMS is 2.8 (the screws' error goes into the parameters, unseen by the
@@ -207,6 +208,7 @@ def test_the_trackers_sigma_bounds_its_noise_under_its_mpe() -> None:
     assert spread[0] < 0.5 * sigma  # along the line of sight: 10 um + 0.3 um/m
 
 
+@pytest.mark.slow
 def test_fitting_the_world_keeps_batches_and_ideal_fits_as_they_are() -> None:
     """``fit_world``: each term's coefficient is a parameter with a unit prior.  Under
     ``ideal`` there is none, and the fit is the extended one bit for bit; under ``lab`` a
@@ -215,7 +217,7 @@ def test_fitting_the_world_keeps_batches_and_ideal_fits_as_they_are() -> None:
     from conftest import paper_experiment
 
     datas, sigma = [], 0.0
-    for seed in (3, 4, 5):
+    for seed in (3, 4):
         episode, _ = paper_experiment(None, seed, errors="realistic", conditions="lab")
         datas.append(measurements_of(episode.records, episode.time_s, design=PROTOTYPE))
         sigma = episode.sigma

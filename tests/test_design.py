@@ -232,6 +232,7 @@ def play_without_faults(env, agent, observation, info):
     return lab, for_study("extended", lab.noise.effective_sigma).fit(data)
 
 
+@pytest.mark.slow
 def test_a_wrong_start_does_not_lock_the_active_agent() -> None:
     """Start the active agent's filter from the estimate of another machine (a draw of
     the prior: every error off by about its a-priori size).  Its margins are the
