@@ -149,16 +149,17 @@ def masked_logits(model: Any, observations: Any, masks: Any) -> Any:
     return torch.where(masks, policy.action_net(latent), torch.tensor(-1e9))
 
 
-#: How a rollout's episode chooses: ``choose(env, observation, episode)``, the episode's
-#: index in its round.
-Choice = Callable[[Any, np.ndarray, int], int]
+#: How a rollout's episode chooses: ``choose(env, observation, episode, label)``, the
+#: episode's index in its round and the expert's choice.
+Choice = Callable[[Any, np.ndarray, int, int], int]
 
 
 def rollouts(envs: list[Any], episodes: int, choose: Choice | None
              ) -> tuple[list[np.ndarray], list[np.ndarray], list[int], list[float],
                         list[dict[str, float]]]:
     """``episodes`` episodes over ``envs`` in turn (each env's own stream), the operation
-    of each state chosen by ``choose(env, observation, episode)`` (``None``: the expert's):
+    of each state chosen by ``choose(env, observation, episode, label)`` (``None``: the
+    expert's, ``label``):
     every state's observation, mask, expert label and return from there to the episode's
     end (``gamma`` 1, as PPO learns), and each episode's return and final predicted error
     (mm)."""
@@ -173,7 +174,8 @@ def rollouts(envs: list[Any], episodes: int, choose: Choice | None
             observations.append(observation)
             masks.append(env.action_masks())
             labels.append(expert.choose(env.belief))
-            action = labels[-1] if choose is None else choose(env, observation, episode)
+            action = (labels[-1] if choose is None
+                      else choose(env, observation, episode, labels[-1]))
             observation, reward, terminated, truncated, info = env.step(action)
             expert.follow(action, env.belief)
             rewards.append(float(reward))
@@ -292,7 +294,9 @@ def imitate(args: argparse.Namespace, kwargs: dict[str, Any], model: Any) -> lis
 
     draws = np.random.default_rng(args.seed + 1)
 
-    def policy_choice(env: Any, observation: np.ndarray, episode: int) -> int:
+    def policy_choice(env: Any, observation: np.ndarray, episode: int, label: int) -> int:
+        if episode > 0 and args.mix and draws.random() < args.mix:
+            return label
         with torch.no_grad():
             logits = masked_logits(model, torch.as_tensor(observation[None]),
                                    torch.as_tensor(env.action_masks()[None]))[0].numpy()
@@ -362,6 +366,12 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
                         help="in each DAgger round after the first, every episode but the "
                              "first draws its operations from the policy's masked softmax, "
                              "so that the expert labels states near the policy's path too")
+    parser.add_argument("--mix", type=float, default=0.0,
+                        help="in each DAgger round after the first, every episode but the "
+                             "first takes the expert's operation at each decision with this "
+                             "probability, the policy's otherwise (Ross et al.'s mixture): "
+                             "the expert labels the policy's mistakes all along its path, "
+                             "not only up to the policy's first loop")
     parser.add_argument("--learning-rate", type=float, default=3e-4,
                         help="PPO's Adam step size (fine-tuning an imitated policy: small, "
                              "so that it does not forget what it imitated)")
@@ -387,6 +397,8 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
         parser.error(f"--net is widths separated by commas, got {args.net!r}")
     if not args.net or min(args.net) < 1:
         parser.error(f"--net widths must be at least 1, got {args.net}")
+    if not 0 <= args.mix <= 1:
+        parser.error(f"--mix is a probability, got {args.mix}")
     if not (np.isfinite(args.target_kl) and args.target_kl >= 0):
         parser.error(f"--target-kl must be a number >= 0, got {args.target_kl}")
     return args
