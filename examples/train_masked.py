@@ -149,13 +149,20 @@ def masked_logits(model: Any, observations: Any, masks: Any) -> Any:
     return torch.where(masks, policy.action_net(latent), torch.tensor(-1e9))
 
 
-def rollouts(envs: list[Any], episodes: int, choose: Callable[[Any, np.ndarray], int]
+#: How a rollout's episode chooses: ``choose(env, observation, episode, label)``, the
+#: episode's index in its round and the expert's choice.
+Choice = Callable[[Any, np.ndarray, int, int], int]
+
+
+def rollouts(envs: list[Any], episodes: int, choose: Choice | None
              ) -> tuple[list[np.ndarray], list[np.ndarray], list[int], list[float],
                         list[dict[str, float]]]:
     """``episodes`` episodes over ``envs`` in turn (each env's own stream), the operation
-    of each state chosen by ``choose(env, observation)``: every state's observation, mask,
-    expert label and return from there to the episode's end (``gamma`` 1, as PPO learns),
-    and each episode's return and final predicted error (mm)."""
+    of each state chosen by ``choose(env, observation, episode, label)`` (``None``: the
+    expert's, ``label``):
+    every state's observation, mask, expert label and return from there to the episode's
+    end (``gamma`` 1, as PPO learns), and each episode's return and final predicted error
+    (mm)."""
     observations, masks, labels, returns, ends = [], [], [], [], []
     for episode in range(episodes):
         env = envs[episode % len(envs)]
@@ -167,7 +174,8 @@ def rollouts(envs: list[Any], episodes: int, choose: Callable[[Any, np.ndarray],
             observations.append(observation)
             masks.append(env.action_masks())
             labels.append(expert.choose(env.belief))
-            action = labels[-1] if choose is None else choose(env, observation)
+            action = (labels[-1] if choose is None
+                      else choose(env, observation, episode, labels[-1]))
             observation, reward, terminated, truncated, info = env.step(action)
             expert.follow(action, env.belief)
             rewards.append(float(reward))
@@ -178,33 +186,66 @@ def rollouts(envs: list[Any], episodes: int, choose: Callable[[Any, np.ndarray],
     return observations, masks, labels, returns, ends
 
 
-def fit(model: Any, data: tuple[list, list, list], updates: int, rng: np.random.Generator
-        ) -> float:
+def agreement(model: Any, data: tuple[list, list, list]) -> float:
+    """The share of the states of ``data`` (observations, masks, expert labels) whose most
+    likely open operation under ``model`` is the label (NaN without states)."""
+    import torch
+
+    if not data[2]:
+        return float("nan")
+    with torch.no_grad():
+        logits = masked_logits(model, torch.as_tensor(np.array(data[0]), dtype=torch.float32),
+                               torch.as_tensor(np.array(data[1]), dtype=torch.bool))
+        return float((logits.argmax(1) == torch.as_tensor(np.array(data[2]))).float().mean())
+
+
+def fit(model: Any, data: tuple[list, list, list], updates: int, rng: np.random.Generator,
+        learning_rate: float = 1e-3, standardise: bool = False) -> float:
     """Fit the policy's actor to the expert's labels: ``updates`` Adam steps of masked
     cross-entropy on minibatches of 256, passes over the labels in ``rng``'s order (a
     round's fit goes on from the last round's weights); returns the share of states whose
-    most likely open operation is the label."""
+    most likely open operation is the label.
+
+    With ``standardise`` the fit sees each observation component centred and scaled by the
+    labels' mean and spread, and the first layer is folded back onto the raw observation
+    afterwards (``W x + b`` with ``W / s`` and ``b - W m / s``): the file keeps a plain MLP
+    of the view's observation, while the fit's steps are not dwarfed by components of a
+    large offset or tiny spread (the clock, whose one decision moves it by 0.002 of an
+    hour's episode)."""
     import torch
 
     x = torch.as_tensor(np.array(data[0]), dtype=torch.float32)
     mask = torch.as_tensor(np.array(data[1]), dtype=torch.bool)
     y = torch.as_tensor(np.array(data[2]), dtype=torch.long)
     policy = model.policy
+    first = policy.mlp_extractor.policy_net[0]
+    centre, spread = torch.zeros(x.shape[1]), torch.ones(x.shape[1])
+    if standardise:
+        centre, spread = x.mean(0), x.std(0)
+        # A component constant over the labels (a slot no stand held) keeps its scale.
+        spread = torch.where(spread > 1e-6, spread, torch.ones(()))
+        with torch.no_grad():
+            first.bias += first.weight @ centre
+            first.weight *= spread
+    z = (x - centre) / spread
     parameters = [*policy.mlp_extractor.policy_net.parameters(),
                   *policy.action_net.parameters()]
-    optimiser = torch.optim.Adam(parameters, lr=1e-3)
+    optimiser = torch.optim.Adam(parameters, lr=learning_rate)
     batches: list[np.ndarray] = []
     for _ in range(updates):
         if not batches:
             batches = np.array_split(rng.permutation(len(y)), max(1, len(y) // 256))
         batch = batches.pop()
         loss = torch.nn.functional.cross_entropy(
-            masked_logits(model, x[batch], mask[batch]), y[batch])
+            masked_logits(model, z[batch], mask[batch]), y[batch])
         optimiser.zero_grad()
         loss.backward()
         optimiser.step()
-    with torch.no_grad():
-        return float((masked_logits(model, x, mask).argmax(1) == y).float().mean())
+    if standardise:
+        with torch.no_grad():
+            first.weight /= spread
+            first.bias -= first.weight @ centre
+    return agreement(model, data)
 
 
 def fit_critic(model: Any, observations: list[np.ndarray], returns: list[float],
@@ -251,26 +292,37 @@ def imitate(args: argparse.Namespace, kwargs: dict[str, Any], model: Any) -> lis
         env.reset(seed=args.seed + k)
     rng = np.random.default_rng(args.seed)
 
-    def policy_choice(env: Any, observation: np.ndarray) -> int:
+    draws = np.random.default_rng(args.seed + 1)
+
+    def policy_choice(env: Any, observation: np.ndarray, episode: int, label: int) -> int:
+        if episode > 0 and args.mix and draws.random() < args.mix:
+            return label
         with torch.no_grad():
             logits = masked_logits(model, torch.as_tensor(observation[None]),
-                                   torch.as_tensor(env.action_masks()[None]))
-        return int(logits.argmax())
+                                   torch.as_tensor(env.action_masks()[None]))[0].numpy()
+        if args.draw and episode > 0:
+            # The masked softmax's draw (the largest logit plus Gumbel noise).
+            logits = logits + draws.gumbel(size=logits.shape)
+        return int(np.argmax(logits))
 
     data: tuple[list, list, list, list] = ([], [], [], [])
     rows: list[dict] = []
     start = time.perf_counter()
     for round_ in range(args.imitate):
         *states, ends = rollouts(envs, args.episodes, None if round_ == 0 else policy_choice)
+        # The round's states before the policy fits them: its match on states it has not
+        # been fitted to, those it reached itself after round 0.
+        held_out = agreement(model, states[:3]) if round_ else float("nan")
         for store, new in zip(data, states, strict=True):
             store.extend(new)
-        agreement = fit(model, data[:3], args.updates, rng)
+        fitted = fit(model, data[:3], args.updates, rng, args.fit_learning_rate,
+                     args.standardise)
         minutes = (time.perf_counter() - start) / 60
         rows.append({"steps": len(data[2]), "minutes": round(minutes, 2),
                      "mean_episode_reward": float(np.mean([e["r"] for e in ends])),
                      "training_predicted_mm": float(np.median(
                          [e["predicted_rigid_mm"] for e in ends])),
-                     "expert_agreement": agreement,
+                     "expert_agreement": fitted, "held_out_agreement": held_out,
                      "tcp_rigid_median_mm": held_out_rigid(
                          args, kwargs, model, args.out.with_suffix(".last.zip"))})
         write_curve(rows, args.out.with_suffix(".curve.csv"))
@@ -301,6 +353,25 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
                         help="episodes of each DAgger round")
     parser.add_argument("--updates", type=int, default=1500,
                         help="minibatch steps of the fit at each DAgger round")
+    parser.add_argument("--net", default="128,128",
+                        help="the actor's and the critic's hidden layers (widths, comma "
+                             "separated)")
+    parser.add_argument("--fit-learning-rate", type=float, default=1e-3,
+                        help="Adam's step size of the imitation's fit")
+    parser.add_argument("--standardise", action="store_true",
+                        help="the imitation's fit sees the observations centred and scaled "
+                             "(folded back into the first layer: the file's network reads "
+                             "the view's observation)")
+    parser.add_argument("--draw", action="store_true",
+                        help="in each DAgger round after the first, every episode but the "
+                             "first draws its operations from the policy's masked softmax, "
+                             "so that the expert labels states near the policy's path too")
+    parser.add_argument("--mix", type=float, default=0.0,
+                        help="in each DAgger round after the first, every episode but the "
+                             "first takes the expert's operation at each decision with this "
+                             "probability, the policy's otherwise (Ross et al.'s mixture): "
+                             "the expert labels the policy's mistakes all along its path, "
+                             "not only up to the policy's first loop")
     parser.add_argument("--learning-rate", type=float, default=3e-4,
                         help="PPO's Adam step size (fine-tuning an imitated policy: small, "
                              "so that it does not forget what it imitated)")
@@ -316,8 +387,18 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     for name in ("episodes", "updates"):
         if getattr(args, name) < 1:
             parser.error(f"--{name} must be at least 1")
-    if not (np.isfinite(args.learning_rate) and args.learning_rate > 0):
-        parser.error(f"--learning-rate must be a positive number, got {args.learning_rate}")
+    for name in ("learning_rate", "fit_learning_rate"):
+        value = getattr(args, name)
+        if not (np.isfinite(value) and value > 0):
+            parser.error(f"--{name.replace('_', '-')} must be a positive number, got {value}")
+    try:
+        args.net = [int(w) for w in args.net.split(",")]
+    except ValueError:
+        parser.error(f"--net is widths separated by commas, got {args.net!r}")
+    if not args.net or min(args.net) < 1:
+        parser.error(f"--net widths must be at least 1, got {args.net}")
+    if not 0 <= args.mix <= 1:
+        parser.error(f"--mix is a probability, got {args.mix}")
     if not (np.isfinite(args.target_kl) and args.target_kl >= 0):
         parser.error(f"--target-kl must be a number >= 0, got {args.target_kl}")
     return args
@@ -345,7 +426,7 @@ def main(argv: list[str] | None = None) -> None:
     model = MaskablePPO("MlpPolicy", vec, n_steps=256, batch_size=256, n_epochs=5,
                         gamma=1.0, gae_lambda=0.95, ent_coef=0.0 if args.imitate else 0.01,
                         learning_rate=args.learning_rate, target_kl=args.target_kl or None,
-                        seed=args.seed, device="cpu", policy_kwargs={"net_arch": [128, 128]},
+                        seed=args.seed, device="cpu", policy_kwargs={"net_arch": args.net},
                         verbose=0)
     start = time.perf_counter()
     rows = imitate(args, kwargs, model) if args.imitate else []

@@ -234,6 +234,43 @@ def test_masked_ppo_trains_and_acts_within_the_mask() -> None:
     assert env.action_masks()[int(action)]
 
 
+def test_a_standardised_fit_is_folded_back_onto_the_view_s_observation(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """``train_masked.py --standardise``: the imitation's fit moves the first layer to the
+    observations' centred and scaled coordinates and folds it back after its steps, so the
+    file's network reads the view's raw observation.  With no step, the move and the fold
+    give back the network's logits: float32 rounding of products of size |W| |x| (about
+    1 here), so 1e-4."""
+    sb3_contrib = pytest.importorskip("sb3_contrib")
+    torch = pytest.importorskip("torch")
+    monkeypatch.syspath_prepend(str(Path(__file__).parents[1] / "examples"))
+    from train_masked import fit, masked_logits
+
+    env = design(budget_s=300.0)
+    observation, _ = env.reset(seed=3)
+    data: tuple[list, list, list] = ([], [], [])
+    rng = np.random.default_rng(0)
+    for _ in range(6):
+        mask = env.action_masks()
+        move = int(rng.choice(np.flatnonzero(mask[:env.belief.n_postures])))
+        for store, value in zip(data, (observation, mask, move), strict=True):
+            store.append(value)
+        observation, *_ = env.step(move)
+    model = sb3_contrib.MaskablePPO("MlpPolicy", env, seed=0, device="cpu")
+    x = torch.as_tensor(np.array(data[0]))
+    masks = torch.as_tensor(np.array(data[1]))
+    with torch.no_grad():
+        before = masked_logits(model, x, masks).numpy()
+    fit(model, data, 0, rng, standardise=True)
+    with torch.no_grad():
+        after = masked_logits(model, x, masks).numpy()
+    np.testing.assert_allclose(after, before, atol=1e-4)
+    # A fit's steps move the network: the fold is not a copy of the weights before it.
+    fit(model, data, 20, rng, standardise=True)
+    with torch.no_grad():
+        assert not np.allclose(masked_logits(model, x, masks).numpy(), before, atol=1e-2)
+
+
 def test_op_codes_of_a_move_are_flicks_then_the_move() -> None:
     env = design()
     env.reset(seed=0)
