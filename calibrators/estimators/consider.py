@@ -67,7 +67,10 @@ sigma`), and its scale error (laser, air, material sensor) is a term per set-up,
 terms too: each face's calibration error, one term per face over every set-up (the same
 gauge is laid along each axis), and its scale error, one term on every face's distance;
 per set-up, its cosine error and what the room leaves once the gauge and the machine are
-taken to 20 C, ``step-gauge.scale``, on the face's distance.
+taken to 20 C, ``step-gauge.scale``, on the face's distance.  A ballbar's transducer
+scale error is one term, ``ballbar.scale``, on every set-up's readings (the lab has one
+bar); a pivot's offset is a fitted unknown whose prior holds the drives' errors where it
+was centred (:func:`pivot_sigmas`).
 """
 
 from __future__ import annotations
