@@ -24,8 +24,9 @@ considered):
   controller's pitch-error table (:func:`lead_terms`, :func:`table_prior`), and the
   periodic terms are their own family, ``periodic``.
 * ``backlash``: per axis, half the lost motion times the direction of the last move of
-  that axis before the reading (from the readings' order: the lab starts each axis as if
-  last moved forward).
+  that axis before the reading (from the readings' order, with a ballbar set-up's drive
+  to its centre before its first reading: the lab starts each axis as if last moved
+  forward).
 * ``warmup``: per axis, ``x (1 - exp(-t / tau))``, the time constant's spread by
   Simpson's rule over its range; the amplitude's mean acts on every axis at once.
 * ``stands``: per gauge mounting, its creep ``1 - exp(-(t - t0) / tau)`` from its first
@@ -66,7 +67,10 @@ sigma`), and its scale error (laser, air, material sensor) is a term per set-up,
 terms too: each face's calibration error, one term per face over every set-up (the same
 gauge is laid along each axis), and its scale error, one term on every face's distance;
 per set-up, its cosine error and what the room leaves once the gauge and the machine are
-taken to 20 C, ``step-gauge.scale``, on the face's distance.
+taken to 20 C, ``step-gauge.scale``, on the face's distance.  A ballbar's transducer
+scale error is one term, ``ballbar.scale``, on every set-up's readings (the lab has one
+bar); a pivot's offset is a fitted unknown whose prior holds the drives' errors where it
+was centred (:func:`pivot_sigmas`).
 """
 
 from __future__ import annotations
@@ -75,7 +79,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from orthoglide_env.instruments.ballbar import BallbarSpec
+from orthoglide_env.instruments.ballbar import BallbarSpec, centring_sigma
 from orthoglide_env.instruments.ballbar import scale_rms as ballbar_scale_rms
 from orthoglide_env.instruments.interferometer import InterferometerAxis, scale_second_moment
 from orthoglide_env.instruments.slots import GaugeSpec, Part
@@ -89,7 +93,8 @@ from orthoglide_env.instruments.step_gauge import (
 )
 from orthoglide_env.model.compensation import interpolation_weights, node_count
 from orthoglide_env.model.design import MachineDesign
-from orthoglide_env.model.errors import AXIS_NAMES
+from orthoglide_env.model.errors import AXIS_NAMES, MachineParams
+from orthoglide_env.model.kinematics import direct, sensitivity_along, tcp_sensitivity_factors
 from orthoglide_env.reading_model import ReadingLayout
 from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.world.table import TRACKER_MPE_PER_M
@@ -214,13 +219,21 @@ def _taus(effect: str, parameter: str, conditions: Conditions) -> list[float]:
     return [(low + (high - low) * node) * MINUTE for node in _NODES]
 
 
-def _approach(rho: np.ndarray) -> np.ndarray:
-    """(N, 3) the direction (+-1) of each axis's last move before each reading, from the
-    readings' order; +1 before an axis first moves."""
-    out = np.ones(rho.shape)
-    for k in range(1, len(rho)):
-        step = rho[k] - rho[k - 1]
-        out[k] = np.where(step > 0, 1.0, np.where(step < 0, -1.0, out[k - 1]))
+def _approach(design: ReadingLayout) -> np.ndarray:
+    """(N, 3) the direction (+-1) of each axis's last move before each reading of
+    ``design``, from the readings' order; +1 before an axis first moves.  A ballbar
+    set-up drove to its centre command unread, so its first reading was approached from
+    there."""
+    hidden = {int(np.flatnonzero(design.mounting == k)[0]): np.asarray(design.specs[k].centre)
+              for k in design.space.ballbars}
+    out = np.ones(design.rho.shape)
+    state, last = out[0], design.rho[0]
+    for k, posture in enumerate(design.rho):
+        for point in ((hidden[k], posture) if k in hidden else (posture,)):
+            step = point - last
+            state = np.where(step > 0, 1.0, np.where(step < 0, -1.0, state))
+            last = point
+        out[k] = state
     return out
 
 
@@ -310,7 +323,7 @@ def _drive_terms(design: ReadingLayout, t: np.ndarray | None, conditions: Condit
     if on("backlash"):
         # Half the lost motion, b / 2, against the approach: b's mean acts on every axis
         # at once (the axes' b are all positive), its spread on each alone.
-        lag = -_approach(design.rho)[None] / 2 * UM
+        lag = -_approach(design)[None] / 2 * UM
         mean, spread = backlash_sizes(conditions)
         out.append(("backlash.mean", mean * lag))
         out += _per_axis("backlash.spread", spread * lag)
@@ -357,6 +370,45 @@ def backlash_sizes(conditions: Conditions) -> tuple[float, float]:
     return mean, float(np.sqrt(second_moment("backlash", "lost_motion", conditions) - mean**2))
 
 
+def pivot_sigmas(design: ReadingLayout, conditions: Conditions) -> np.ndarray:
+    """The prior sigma (mm, ``(3 B,)``) of each of ``design``'s B ballbar set-ups' pivot
+    offsets from where the nominal-model machine puts the TCP at its centre command.  The
+    pivot is centred where the TCP truly was, so beside the centring
+    (:func:`~orthoglide_env.instruments.ballbar.centring_sigma`) the offset holds what
+    the drives' carriages were off at the centre then, through the TCP's sensitivity:
+    the lead error, half the lost motion and the warm-up once warm (its amplitude's mean
+    on every axis at once, its spread on each alone), at the table's second moments
+    under ``conditions``; and the structure's growth at the room's offset.  A fit's
+    centre takes them, as ISO 230-4's analysis removes the centring."""
+    bars = design.space.ballbars
+    if not bars:
+        return np.zeros(0)
+    machine = design.machine_design
+    centres = np.array([design.specs[k].centre for k in bars], dtype=float)  # (B, 3)
+    # The carriages' errors' covariance at the centres (B, 3, 3), mm^2.
+    variance = sum((pattern**2 for _, pattern in lead_terms(centres, machine, conditions)),
+                   np.zeros(centres.shape))
+    if "backlash" in conditions:
+        variance = variance + second_moment("backlash", "lost_motion", conditions) / 4 * UM**2
+    carriage = variance[..., None] * np.eye(3)
+    if "warmup" in conditions:
+        x = (centres - machine.rho_min) / (machine.rho_max - machine.rho_min)
+        mean, spread = warmup_sizes(conditions)
+        carriage = carriage + mean**2 * x[..., :, None] * x[..., None, :] + (
+            spread**2 * x**2)[..., None] * np.eye(3)
+    nominal = MachineParams(design=machine)
+    tcp = direct(nominal, centres)
+    inverse, row = tcp_sensitivity_factors(nominal, centres, tcp)
+    # Row i of the TCP's derivative over the carriages (the encoder offsets' columns).
+    sensitivity = np.stack([sensitivity_along(inverse, row, np.broadcast_to(e, tcp.shape))
+                            [..., :3] for e in np.eye(3)], axis=-2)  # (B, 3, 3)
+    spread2 = np.einsum("bij,bjk,bik->bi", sensitivity, carriage, sensitivity)
+    if "room" in conditions:
+        alpha = _fixed("room", "expansion", conditions) * 1e-6
+        spread2 = spread2 + second_moment("room", "offset", conditions) * (alpha * tcp) ** 2
+    return np.sqrt(centring_sigma() ** 2 + spread2).ravel()
+
+
 def thermometer_sigma(conditions: Conditions) -> float:
     """What a thermometer's error adds (mm, a standard deviation) to a gauge reading when
     the stands' growth is sized by its readings: the arm's coefficient times its rounding,
@@ -382,6 +434,8 @@ def _reading_terms(design: ReadingLayout, values: np.ndarray, t: np.ndarray | No
     give_all = np.zeros((len(values), n))
     gives = False
     laser = np.sqrt(scale_second_moment(conditions))
+    # The lab has one bar: its transducer's scale error is one term over every set-up.
+    bar_scale = np.zeros((len(values), n))
     for k, name in enumerate(design.mountings):
         rows = np.flatnonzero(design.mounting == k)
         spec = design.specs[k]
@@ -392,9 +446,7 @@ def _reading_terms(design: ReadingLayout, values: np.ndarray, t: np.ndarray | No
                         _on_rows(np.broadcast_to(laser * moved, (len(values), len(rows))),
                                  rows, n)))
         if isinstance(spec, BallbarSpec) and conditions.active:
-            # Its transducer's scale error, on what it reads.
-            out.append((f"ballbar.scale[{name}]",
-                        _on_rows(ballbar_scale_rms() * values[:, rows], rows, n)))
+            bar_scale[:, rows] = ballbar_scale_rms() * values[:, rows]
         if not isinstance(spec, GaugeSpec):
             continue
         # The measuring force grows as the plunger goes in, and the stand (and a bar,
@@ -416,6 +468,8 @@ def _reading_terms(design: ReadingLayout, values: np.ndarray, t: np.ndarray | No
                 dial_terms(values[:, rows], design.machine_design.gauge_travel, conditions)]
     if gives:
         out.append(("stands.give", give_all))
+    if design.space.ballbars and conditions.active:
+        out.append(("ballbar.scale", bar_scale))
     if design.probed.any() and conditions.active:
         out += _step_gauge_terms(design, len(values), conditions)
     return out + dead_path_terms(design, t, conditions)

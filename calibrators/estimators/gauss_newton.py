@@ -26,6 +26,7 @@ from calibrators.estimators.consider import (
     Consider,
     check_families,
     consider_terms,
+    pivot_sigmas,
     term_family,
     thermometer_sigma,
 )
@@ -87,7 +88,7 @@ from calibrators.estimators.world_sizes import (
     told_scales,
     warning,
 )
-from orthoglide_env.instruments.ballbar import BallbarSpec
+from orthoglide_env.instruments.ballbar import BallbarSpec, centring_sigma
 from orthoglide_env.instruments.ballbar import sigma as ballbar_sigma
 from orthoglide_env.instruments.dial import DEFAULT_SIGMA, weighting_sigma
 from orthoglide_env.instruments.interferometer import InterferometerAxis
@@ -457,6 +458,12 @@ class GaussNewtonCalibrator(Estimator):
         unmodelled = ~free & ~np.isin(np.arange(len(space)),
                                       [space.names.index(n) for n in fix])
         priors = prior_sigmas(prior, space, free)
+        if space.ballbars:
+            # A pivot sits where the drives truly put the TCP: its default prior (the
+            # centring's) widens by their errors there.
+            centres = np.array([g == "ballbar_centre" for g in space.groups])
+            priors[centres] = np.where(priors[centres] == centring_sigma(),
+                                       pivot_sigmas(design, conditions), priors[centres])
         scale = scales(space, priors)
         needed = len(design.mountings) + int(np.sum(~np.isfinite(priors[free]))) + 1
         if values.shape[1] < needed:
