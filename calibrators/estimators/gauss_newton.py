@@ -675,17 +675,17 @@ class GaussNewtonCalibrator(Estimator):
         )
 
 def _world_terms(design: ReadingLayout, datas: list[Measurements], conditions: Conditions,
-                 spacing: float | None) -> Callable[[str, np.ndarray], Consider]:
+                 spacing: float | None) -> Callable[[str | Conditions, np.ndarray], Consider]:
     """The consider terms of these experiments' readings (given as (M, N) values: those
     the geometry predicts, :func:`~calibrators.estimators.world_sizes.noiseless_readings`)
-    under the named conditions, every effect acting and the told conditions' indicator:
-    what the told world is measured against."""
+    under the named conditions, every effect acting and the told conditions' indicator
+    (or under given conditions): what the told world is measured against."""
     times, temperatures = (_every_reading(datas, name) for name in ("time_s", "temperature_c"))
     indicator = conditions.indicator
 
-    def of(name: str, readings: np.ndarray) -> Consider:
-        return consider_terms(design, readings, times, Conditions(name, indicator=indicator),
-                              spacing, temperatures)
+    def of(name: str | Conditions, readings: np.ndarray) -> Consider:
+        world = name if isinstance(name, Conditions) else Conditions(name, indicator=indicator)
+        return consider_terms(design, readings, times, world, spacing, temperatures)
 
     return of
 
@@ -715,7 +715,8 @@ def _estimated_world(design: ReadingLayout, values: np.ndarray, mask: np.ndarray
 def _world_warnings(design: ReadingLayout, values: np.ndarray, mask: np.ndarray,
                     noise: np.ndarray, theta: np.ndarray, free: np.ndarray,
                     scale: np.ndarray, told: Consider,
-                    terms: Callable[[str, np.ndarray], Consider], conditions: Conditions,
+                    terms: Callable[[str | Conditions, np.ndarray], Consider],
+                    conditions: Conditions,
                     covariance: np.ndarray, moved_by: Callable[[Consider], np.ndarray]
                     ) -> list[str | None]:
     """Per machine, the words of the test that its readings show a world worse than the
@@ -737,11 +738,15 @@ def _world_warnings(design: ReadingLayout, values: np.ndarray, mask: np.ndarray,
     sizes = judge(gram, b, member, told_sizes)
     words = [warning(sizes, m, conditions.label) for m in range(len(values))]
     default = terms(DEFAULT_CONDITIONS, clean)
-    default_sizes = told_scales(base, default, columns, world_columns(design, default))
-    # The told world's share of the default's, per family: below 1 is a blind spot's
-    # candidate, and the default's terms at the rest of their size are what it leaves out.
-    share = np.divide(told_sizes, default_sizes, out=np.ones_like(told_sizes),
-                      where=default_sizes > 0)
+    default_columns = world_columns(design, default)
+    default_sizes = told_scales(base, default, columns, default_columns)
+    # The told world's share of the default's, per family, both at the same readings:
+    # below 1 is a blind spot's candidate, and the default's terms at the rest of their
+    # size are what it leaves out.
+    mine = terms(conditions, clean)
+    share = np.minimum(told_scales(default, mine, default_columns, world_columns(
+        design, mine) if not mine.empty else np.zeros((*values.shape, 0))), 1.0)
+    share = np.where(default_sizes > 0, share, 1.0)
     quiet = ~sizes.worse & (share < 1.0).any(axis=1)
     if not quiet.any():
         return words
