@@ -12,7 +12,8 @@ backend) is played once and its readings fitted by ``full`` told each world of `
 a worse world than told (:mod:`calibrators.estimators.world_sizes`).  A row: the pooled
 z-RMS of the machine errors' determined combinations with its 95 % interval (chi-square
 on the pooled count, as if the z were independent), the fraction of trials whose
-chi-square test rejects, the fraction warned of kind ``world``, the TCP error after the
+chi-square test rejects, the fraction warned of kind ``world`` (by the test, or of a blind
+spot: ``blind``, the fraction of those), the TCP error after the
 best rigid motion (median and its distribution-free 95 % interval, a failed fit scored as
 the uncalibrated machine), the failed fits, and whether the row keeps the issue's promise:
 where the fit is told less than the truth, >= 90 % warned or z-RMS within [0.8, 1.25];
@@ -35,6 +36,7 @@ import numpy as np
 from scipy import stats
 
 from calibrators.estimators.catalogue import for_study
+from calibrators.estimators.world_sizes import BLIND_SPOT
 from calibrators.study.compare import Config, agent_episodes, scored_trials
 from calibrators.study.statistics import median_interval
 from orthoglide_env.world.conditions import AUTO, CONDITION_NAMES, Conditions
@@ -62,6 +64,7 @@ def row(truth: str, agent: str, told: str, episodes: list, sigma: float) -> dict
     z = np.concatenate([t.z for t in ok])
     z_rms = float(np.sqrt(np.mean(z**2)))
     warned = float(np.mean([any(w.startswith("world:") for w in t.warnings) for t in ok]))
+    blind = float(np.mean([any(w.startswith(BLIND_SPOT) for w in t.warnings) for t in ok]))
     rejected = float(np.mean([t.chi2_rejected for t in ok]))
     rigid = [t.tcp_after["rigid"] for t in trials]
     inside = Z_BAND[0] <= z_rms <= Z_BAND[1]
@@ -69,7 +72,7 @@ def row(truth: str, agent: str, told: str, episodes: list, sigma: float) -> dict
     kept = inside if told == AUTO else (warned >= FLAGGED or inside) if less else None
     return {"truth": truth, "agent": agent, "told": told, "machines": len(episodes),
             "failed": len(trials) - len(ok), "z_rms": z_rms, "z_ci95": z_interval(z),
-            "chi2_rejected": rejected, "warned": warned,
+            "chi2_rejected": rejected, "warned": warned, "blind": blind,
             "tcp_rigid_mm": float(np.median(rigid)), "tcp_rigid_ci95": median_interval(rigid),
             "kept": kept}
 
@@ -104,7 +107,8 @@ def main() -> None:
     print(f"{args.machines} machines, realistic errors, seed {args.seed}, gauge sigma "
           f"{args.sigma} mm, budget {args.budget:g} s, exact backend, the full fit")
     print(f"{'truth':10}{'agent':10}{'told':10}{'z-RMS':>7}{'95 % interval':>16}"
-          f"{'chi2 rej':>9}{'warned':>8}{'rigid um [95 %]':>22}{'failed':>7}  promise")
+          f"{'chi2 rej':>9}{'warned':>8}{'blind':>7}{'rigid um [95 %]':>22}{'failed':>7}"
+          "  promise")
     for truth in args.truths.split(","):
         for agent in args.agents.split(","):
             config = Config(agents=(agent,), estimators=("full",), conditions=Conditions(truth),
@@ -117,7 +121,8 @@ def main() -> None:
                 tcp = 1e3 * np.array([r["tcp_rigid_mm"], *r["tcp_rigid_ci95"]])
                 print(f"{truth:10}{agent:10}{told:10}{r['z_rms']:7.2f}"
                       f"{f'[{low:.2f}, {high:.2f}]':>16}{r['chi2_rejected']:9.2f}"
-                      f"{r['warned']:8.2f}{f'{tcp[0]:.1f} [{tcp[1]:.1f}, {tcp[2]:.1f}]':>22}"
+                      f"{r['warned']:8.2f}{r['blind']:7.2f}"
+                      f"{f'{tcp[0]:.1f} [{tcp[1]:.1f}, {tcp[2]:.1f}]':>22}"
                       f"{r['failed']:7d}  {promise}", flush=True)
             print(f"  {truth} {agent} done", file=sys.stderr)
 

@@ -13,11 +13,19 @@ import numpy as np
 import pytest
 
 from calibrators.estimators.world_sizes import (
+    BLIND_SPOT,
     CEILING,
+    DETERMINED,
+    HONEST_RATIO,
+    SEEN_POWER,
     WORLD_LEVEL,
+    blind_spot,
     estimate_scales,
     judge,
+    power_against,
+    seen_families,
     threshold,
+    widening,
 )
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -102,6 +110,71 @@ def test_an_ideal_told_world_against_a_real_one_is_flagged() -> None:
     gram, b, member = _draw((1.0, 1.0), seed=3)
     sizes = judge(gram, b, member, np.zeros((M, 2)))
     assert sizes.worse.mean() >= 0.9
+
+
+def test_the_widening_is_the_z_rms_the_terms_give() -> None:
+    """Least squares of readings ``J d + C x + e`` (unit noise, terms of unit second
+    moment) with the error bars of the noise alone: over 4000 machines the z-RMS along
+    the eigenvectors of its covariance is the widening's (about 1.4 here).  Each z^2 is
+    Gaussian's square, mean w^2 and variance 2 w^4: the pooled mean of 4000 x 6 has a
+    relative spread of sqrt(2 / 24000) ~ 0.009, 0.005 on the z-RMS; 2.5 % is five of
+    those.  Terms that move nothing widen nothing."""
+    rng = np.random.default_rng(4)
+    machines, n, p, k = 4000, 60, 6, 8
+    jac = rng.normal(size=(n, p))
+    terms = rng.normal(size=(n, k)) * 0.4
+    cov = np.linalg.inv(jac.T @ jac)
+    moved = cov @ jac.T @ terms
+    # A prior wide enough that every direction is determined (variance <= DETERMINED).
+    scale = np.full(p, 10 * np.sqrt(np.linalg.eigvalsh(cov).max() / DETERMINED))
+    truth = rng.normal(size=(machines, p))
+    readings = truth @ jac.T + rng.normal(size=(machines, k)) @ terms.T + rng.normal(
+        size=(machines, n))
+    error = readings @ (cov @ jac.T).T - truth
+    values, vectors = np.linalg.eigh(cov)
+    z = (error @ vectors) / np.sqrt(values)
+    predicted = widening(cov[None], moved[None], scale)[0]
+    assert predicted > HONEST_RATIO
+    assert np.sqrt(np.mean(z**2)) == pytest.approx(predicted, rel=0.025)
+    assert widening(cov[None], moved[None] * 0.0, scale)[0] == pytest.approx(1.0)
+
+
+def test_the_power_bounds_the_share_flagged_from_below() -> None:
+    """Family 1 drawn at a scale above the told one, 300 machines a case: the share the
+    world test flags is at least the bound's mean less three binomial standard deviations
+    (at most sqrt(0.25 / 300) ~ 0.029 each: a false failure about 1e-3 per case), and the
+    bound is not empty: it passes SEEN_POWER only where the test flags at least that
+    share, and the family held at its told size gets none."""
+    machines = 300
+    for told_scale, drawn, seed in ((1.0, 3.0, 5), (0.0, 0.2, 7), (0.0, 0.4, 8)):
+        gram, b, member = _draw((told_scale, drawn), seed=seed, machines=machines)
+        told = np.full((machines, 2), told_scale)
+        alternative = np.tile([told_scale, drawn], (machines, 1))
+        flagged = judge(gram, b, member, told).worse.mean()
+        power = power_against(gram, member, told, alternative,
+                              seen_families(gram, member, 2))
+        assert (power[:, 0] == 0).all()
+        bound = power[:, 1].mean()
+        assert flagged >= bound - 3 * np.sqrt(0.25 / machines)
+        if bound >= SEEN_POWER:
+            assert flagged >= SEEN_POWER - 3 * np.sqrt(0.25 / machines)
+
+
+def test_a_blind_spot_names_the_fewest_families_that_pass_the_band() -> None:
+    """Blind families whose excesses of z^2 add beyond HONEST_RATIO^2 - 1 are named,
+    largest first, as few as pass the band; a family the test sees, one not understated
+    (factor 1) or a sum inside the band says nothing."""
+    families = ("lead", "periodic", "backlash", "warmup", "stands", "dial")
+    factors = np.array([1.10, 1.0, 1.01, 1.20, 1.0, 1.03])
+    blind = np.zeros(6)
+    words = blind_spot("ideal", "lab", families, factors, blind)
+    assert words is not None and words.startswith(BLIND_SPOT)
+    assert "warmup (1.20x" in words and "lead (1.10x" in words and "dial" not in words
+    assert f"{np.sqrt(1 + np.sum(factors**2 - 1)):.2f}x too narrow" in words
+    seen = blind.copy()
+    seen[3] = 0.95
+    assert blind_spot("ideal", "lab", families, factors, seen) is None
+    assert blind_spot("lab", "lab", families, np.ones(6), blind) is None
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess:

@@ -379,7 +379,8 @@ def add(p: argparse.ArgumentParser) -> None:
     p.add_argument("--check-world", action="store_true",
                    help="the exact-model fits test whether the readings show a world worse "
                    "than the one they are told, and warn (warning 'world') with the effects "
-                   "that show it (docs/world.md)")
+                   "that show it, or with those of the default lab it leaves out and cannot "
+                   "see (docs/world.md)")
     add_thermometer(p)
     add_instruments(p)
     add_faults(p)

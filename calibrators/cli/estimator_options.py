@@ -100,7 +100,8 @@ OPTIONS: tuple[Option, ...] = (
     Option("--check-world", "world_check", {
         "action": "store_const", "const": True,
         "help": "test whether the readings show a world worse than the conditions the fit "
-                "is told, and warn (warning 'world') with the effects that show it (see "
+                "is told, and warn (warning 'world') with the effects that show it, or "
+                "with those of the default lab it leaves out and cannot see (see "
                 "docs/world.md)"}),
     Option("--left-out", "left_out", {
         "choices": sorted(PRESETS),

@@ -80,13 +80,17 @@ from calibrators.estimators.parameters import (
     sparse_basis,
 )
 from calibrators.estimators.world_sizes import (
+    blind_spot,
     family_index,
     judge,
     noiseless_readings,
+    power_against,
     restricted_statistics,
     scaled,
+    seen_families,
     told_scales,
     warning,
+    widening,
 )
 from orthoglide_env.instruments.ballbar import BallbarSpec, centring_sigma
 from orthoglide_env.instruments.ballbar import sigma as ballbar_sigma
@@ -110,11 +114,17 @@ from orthoglide_env.model.kinematics import direct
 from orthoglide_env.reading_model import (
     ReadingLayout,
     TrackerAxis,
+    default_scales,
     preset_sigmas,
     station_of,
 )
 from orthoglide_env.scoring import best_rigid_motion
-from orthoglide_env.world.conditions import AUTO, CONDITION_NAMES, Conditions
+from orthoglide_env.world.conditions import (
+    AUTO,
+    CONDITION_NAMES,
+    DEFAULT_CONDITIONS,
+    Conditions,
+)
 
 #: What to do about an estimate outside the validity range.
 VALIDITY_HINT: str = ("free more parameters, e.g. --params extended, or take readings at "
@@ -515,11 +525,12 @@ class GaussNewtonCalibrator(Estimator):
                 for a, v in ((free, True), (fixed, 0.0), (priors, 1.0), (scale, 1.0),
                              (unmodelled, False), (spread, 0.0)))
 
-        def fit(rows: np.ndarray, mask: np.ndarray) -> BatchFit:
+        def fit(rows: np.ndarray, mask: np.ndarray, terms: Consider = consider,
+                start: np.ndarray | None = None) -> BatchFit:
             return fit_batch(design, values[rows], mask[rows], noise, free, fixed, priors,
                              scale, unmodelled=unmodelled, solver=solver,
-                             consider=consider.rows(rows), left_out=spread,
-                             world=None if world is None else world[rows])
+                             consider=terms.rows(rows), left_out=spread,
+                             world=None if world is None else world[rows], start=start)
 
         m_count = len(values)
         mask = np.tile(~held, (m_count, 1))
@@ -573,9 +584,11 @@ class GaussNewtonCalibrator(Estimator):
         # machine each, for their warning's words.
         valid = valid_vectors(np.stack([r.theta[0, :len(ERROR_NAMES)] for r in results]),
                               design.machine_design)
+        thetas = np.stack([r.theta[0] for r in results])
         judged = ([None] * m_count if auto or not world_check else _world_warnings(
-            design, values, fitting, noise, np.stack([r.theta[0] for r in results]), free,
-            scale, told_terms, base_of, conditions.label))
+            design, values, fitting, noise, thetas, free, scale, told_terms, base_of,
+            conditions, np.stack([r.scaled_covariance[0] for r in results]),
+            lambda terms: fit(np.arange(m_count), mask, terms, thetas).considered_gain))
         for m, result in enumerate(results):
             if not result.converged[0]:
                 out.append(RuntimeError("the exact-model fit did not converge"))
@@ -683,17 +696,17 @@ class GaussNewtonCalibrator(Estimator):
         )
 
 def _world_terms(design: ReadingLayout, datas: list[Measurements], conditions: Conditions,
-                 spacing: float | None) -> Callable[[str, np.ndarray], Consider]:
+                 spacing: float | None) -> Callable[[str | Conditions, np.ndarray], Consider]:
     """The consider terms of these experiments' readings (given as (M, N) values: those
     the geometry predicts, :func:`~calibrators.estimators.world_sizes.noiseless_readings`)
-    under the named conditions, every effect acting and the told conditions' indicator:
-    what the told world is measured against."""
+    under the named conditions, every effect acting and the told conditions' indicator
+    (or under given conditions): what the told world is measured against."""
     times, temperatures = (_every_reading(datas, name) for name in ("time_s", "temperature_c"))
     indicator = conditions.indicator
 
-    def of(name: str, readings: np.ndarray) -> Consider:
-        return consider_terms(design, readings, times, Conditions(name, indicator=indicator),
-                              spacing, temperatures)
+    def of(name: str | Conditions, readings: np.ndarray) -> Consider:
+        world = name if isinstance(name, Conditions) else Conditions(name, indicator=indicator)
+        return consider_terms(design, readings, times, world, spacing, temperatures)
 
     return of
 
@@ -723,20 +736,58 @@ def _estimated_world(design: ReadingLayout, values: np.ndarray, mask: np.ndarray
 def _world_warnings(design: ReadingLayout, values: np.ndarray, mask: np.ndarray,
                     noise: np.ndarray, theta: np.ndarray, free: np.ndarray,
                     scale: np.ndarray, told: Consider,
-                    terms: Callable[[str, np.ndarray], Consider], label: str
+                    terms: Callable[[str | Conditions, np.ndarray], Consider],
+                    conditions: Conditions,
+                    covariance: np.ndarray, moved_by: Callable[[Consider], np.ndarray]
                     ) -> list[str | None]:
     """Per machine, the words of the test that its readings show a world worse than the
-    ``told`` terms' (:func:`~calibrators.estimators.world_sizes.warning`), or None."""
-    base = terms(BASE_WORLD, noiseless_readings(design, values, mask, theta))
+    ``told`` terms' (:func:`~calibrators.estimators.world_sizes.warning`), or, where it
+    does not, of the told world's blind spots against the default one
+    (:func:`~calibrators.estimators.world_sizes.blind_spot`), or None.  ``covariance``
+    (M, P, P): the estimates' over the free parameters; ``moved_by``: how far a
+    :class:`Consider`'s terms move them (M, P, K), as the fit's gain takes them."""
+    clean = noiseless_readings(design, values, mask, theta)
+    base = terms(BASE_WORLD, clean)
     columns = world_columns(design, base)
     n = len(design.space.names)
     gram, b = restricted_statistics(design, values, mask, 1.0 / weighting_sigma(noise),
                                     theta[:, :n], free[:n], scale[:n], columns)
     told_columns = (world_columns(design, told) if not told.empty
                     else np.zeros((*values.shape, 0)))
-    sizes = judge(gram, b, family_index(base.names),
-                  told_scales(base, told, columns, told_columns))
-    return [warning(sizes, m, label) for m in range(len(values))]
+    member = family_index(base.names)
+    told_sizes = told_scales(base, told, columns, told_columns)
+    sizes = judge(gram, b, member, told_sizes)
+    words = [warning(sizes, m, conditions.label) for m in range(len(values))]
+    default = terms(DEFAULT_CONDITIONS, clean)
+    default_columns = world_columns(design, default)
+    default_sizes = told_scales(base, default, columns, default_columns)
+    # The told world's share of the default's, per family, both at the same readings:
+    # below 1 is a blind spot's candidate, and the default's terms at the rest of their
+    # size are what it leaves out.
+    mine = terms(conditions, clean)
+    share = np.minimum(told_scales(default, mine, default_columns, world_columns(
+        design, mine) if not mine.empty else np.zeros((*values.shape, 0))), 1.0)
+    share = np.where(default_sizes > 0, share, 1.0)
+    quiet = ~sizes.worse & (share < 1.0).any(axis=1)
+    if not quiet.any():
+        return words
+    count = len(TERM_FAMILIES)
+    power = power_against(gram, member, told_sizes, np.maximum(default_sizes, told_sizes),
+                       seen_families(gram, member, count))
+    moved = moved_by(scaled(default, np.clip(1.0 - share, 0.0, None)))
+    idx = np.flatnonzero(free)
+    machine = idx[idx < len(ERROR_NAMES)]
+    rows = np.flatnonzero(idx < len(ERROR_NAMES))
+    prior = default_scales(ParameterSpace())[machine]
+    cov = covariance[:, rows][:, :, rows]
+    own = family_index(default.names)
+    factors = np.ones_like(share)
+    for f in np.flatnonzero(np.isin(np.arange(count), own)):
+        factors[:, f] = widening(cov, moved[:, rows][:, :, own == f], prior)
+    for m in np.flatnonzero(quiet):
+        words[m] = blind_spot(conditions.label, DEFAULT_CONDITIONS, TERM_FAMILIES,
+                              np.where(share[m] < 1.0, factors[m], 1.0), power[m])
+    return words
 
 
 def _lead(result: BatchFit, every: list[str], considered: tuple[str, ...],

@@ -71,6 +71,20 @@ CEILING: float = 4.0
 #: Directions of the geometry's Jacobian below this fraction of its largest singular value
 #: squared are not projected out: they are round-off, not parameters.
 RANK_TOL: float = 1e-12
+#: The top of the honesty band of issue 38: error bars whose z-RMS the default world's
+#: effects would raise above this are too narrow to hand out unsaid.
+HONEST_RATIO: float = 1.25
+#: The world test's power against a family at the default world's size below which its
+#: silence does not say that the family is smaller: the issue's share of understated
+#: experiments the check must flag (90 %).
+SEEN_POWER: float = 0.9
+#: How a blind-spot warning (:func:`blind_spot`) starts: a warning of kind ``world`` that
+#: says what the readings cannot show, not what they show.
+BLIND_SPOT: str = "world: blind spot:"
+#: A combination of the machine errors is determined where its reported variance is at
+#: most this share of its a-priori one (the data know it better than the prior): the
+#: combinations whose z-scores a study pools.
+DETERMINED: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -221,6 +235,13 @@ def told_scales(base: Consider, told: Consider, base_columns: np.ndarray,
     return out
 
 
+def seen_families(gram: np.ndarray, member: np.ndarray, count: int) -> np.ndarray:
+    """(M, ``count``) whether the readings see a term of each family: one weighed by
+    :func:`restricted_statistics` (``gram`` (M, K, K), ``member`` (K,) each term's family)."""
+    diagonal = np.diagonal(gram, axis1=1, axis2=2) > 0
+    return np.stack([diagonal[:, member == f].any(axis=1) for f in range(count)], axis=1)
+
+
 def judge(gram: np.ndarray, b: np.ndarray, member: np.ndarray, told: np.ndarray
           ) -> WorldSizes:
     """The restricted likelihood's scales (:func:`estimate_scales`, started at the told
@@ -240,10 +261,7 @@ def judge(gram: np.ndarray, b: np.ndarray, member: np.ndarray, told: np.ndarray
     best = log_likelihood(gram, b, above[:, member])
     statistic = np.maximum(2 * (best - at_told), 0.0)
     # A family the readings do not see has no say in the ratio, nor a degree in its law.
-    seen = np.zeros(told.shape, dtype=bool)
-    diagonal = np.diagonal(gram, axis1=1, axis2=2) > 0
-    for f in np.flatnonzero(present):
-        seen[:, f] = diagonal[:, member == f].any(axis=1)
+    seen = seen_families(gram, member, count)
     flagged = statistic > np.array([threshold(int(n)) for n in seen.sum(axis=1)])
     cost = np.zeros(told.shape)
     for f in np.flatnonzero(present):
@@ -254,6 +272,83 @@ def judge(gram: np.ndarray, b: np.ndarray, member: np.ndarray, told: np.ndarray
     strongest = np.eye(count, dtype=bool)[np.argmax(np.where(seen, cost, -np.inf), axis=1)]
     named = np.where(named.any(axis=1, keepdims=True), named, strongest) & flagged[:, None]
     return WorldSizes(TERM_FAMILIES, estimated, told, statistic, named, flagged)
+
+
+def power_against(gram: np.ndarray, member: np.ndarray, told: np.ndarray,
+                  alternative: np.ndarray, seen: np.ndarray) -> np.ndarray:
+    """(M, F) a lower bound of the world test's power (:func:`judge`) against each family
+    alone at its ``alternative`` scale (M, F), the others at the ``told`` ones (M, F);
+    ``seen`` (M, F) the families the readings see (the test's degrees).
+
+    The test's ratio is at least the ratio of that one alternative against the told world,
+    whose law there is ``sum(mu_i chi2_1) - sum(log(1 + mu_i))`` (``mu`` the family's
+    excess terms' eigenvalues over the told covariance of the projected readings), so the
+    chance that this one passes the test's threshold (:func:`threshold`) bounds its power
+    from below.  The weighted sum of chi-squares is taken as Satterthwaite's scaled
+    chi-square of the same mean and variance.  A family the readings do not see, or not
+    larger than told, gets 0."""
+    from scipy import stats
+
+    machines, families = told.shape
+    root = np.sqrt(told[:, member])
+    inner = root[:, :, None] * gram * root[:, None, :] + np.eye(gram.shape[-1])
+    # C^T (I + C L C^T)^-1 C over the projected readings, by Woodbury.
+    spread = gram - gram @ (root[:, :, None] * np.linalg.solve(
+        inner, root[:, :, None] * gram))
+    limit = np.array([threshold(int(n)) for n in seen.sum(axis=1)])
+    out = np.zeros((machines, families))
+    for f in np.flatnonzero(np.isin(np.arange(families), member)):
+        terms = member == f
+        excess = np.clip(alternative[:, f] - told[:, f], 0.0, None)
+        mu = np.clip(np.linalg.eigvalsh(spread[:, terms][:, :, terms]
+                                        * excess[:, None, None]), 0.0, None)
+        first, second = mu.sum(axis=1), (mu**2).sum(axis=1)
+        on = seen[:, f] & (first > 0) & np.isfinite(limit)
+        gain = np.where(on, second, 1.0) / np.where(on, first, 1.0)
+        degrees = np.where(on, first**2, 1.0) / np.where(on, second, 1.0)
+        beyond = limit + np.sum(np.log1p(mu), axis=1)
+        out[:, f] = np.where(on, stats.chi2.sf(np.where(on, beyond, 0.0) / gain, degrees),
+                             0.0)
+    return out
+
+
+def widening(covariance: np.ndarray, moved: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """(M,) the z-RMS the estimates' error bars would show along their determined
+    combinations (:data:`DETERMINED`) were terms that move them by ``moved`` (M, P, K, per
+    unit coefficient) acting: ``sqrt(mean(1 + |d^T moved|^2 / lambda))`` over the
+    eigenvectors ``d`` of ``covariance`` (M, P, P) in units of the a-priori ``scale``
+    (P,), ``lambda`` their eigenvalues."""
+    values, vectors = np.linalg.eigh(covariance / np.outer(scale, scale))
+    along = transposed(vectors) @ (moved / scale[:, None])
+    extra = np.sum(along**2, axis=-1) / np.where(values > 0, values, np.inf)
+    known = values <= DETERMINED
+    ratio = np.sum((1.0 + extra) * known, axis=1) / np.maximum(known.sum(axis=1), 1)
+    return np.sqrt(ratio)
+
+
+def blind_spot(told_name: str, default_name: str, families: tuple[str, ...],
+               factors: np.ndarray, power: np.ndarray) -> str | None:
+    """The words of one machine's blind-spot warning, or None: the families (F) the told
+    world ``told_name`` carries smaller than ``default_name``'s, each with its ``factors``
+    (F,: the z-RMS that family at the default's size would give the error bars, 1 where it
+    is not smaller) and the world test's ``power`` against it (F,).  Those the test sees
+    in fewer than :data:`SEEN_POWER` of experiments are blind spots; when together they
+    would widen the error bars beyond :data:`HONEST_RATIO` (the excesses of ``z^2`` add),
+    the words name the fewest of them, largest first, that do, with the factor."""
+    excess = np.where(power < SEEN_POWER, factors**2 - 1.0, 0.0)
+    if np.sqrt(1.0 + excess.sum()) <= HONEST_RATIO:
+        return None
+    order = np.argsort(-excess)
+    needed = int(np.searchsorted(np.cumsum(excess[order]), HONEST_RATIO**2 - 1.0)) + 1
+    named = ", ".join(f"{families[f]} ({factors[f]:.2f}x, seen in {power[f]:.0%})"
+                      for f in order[:needed])
+    return (f"{BLIND_SPOT} the fit was told the {told_name} conditions, smaller than the "
+            f"default {default_name}'s in effects these readings cannot show (the world "
+            f"test sees them in fewer than {SEEN_POWER:.0%} of experiments that have "
+            f"them): {named}; if the {default_name}'s effects act, its error bars are "
+            f"{np.sqrt(1.0 + excess.sum()):.2f}x too narrow along the combinations it "
+            f"determines; fit with --conditions {default_name} or auto, or add readings of "
+            "an instrument that sees them")
 
 
 def scaled(consider: Consider, scales: np.ndarray) -> Consider:

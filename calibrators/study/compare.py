@@ -28,6 +28,7 @@ from calibrators.agents import Agent, get_agent
 from calibrators.estimators.base import Estimate
 from calibrators.estimators.catalogue import for_study, get_estimator
 from calibrators.estimators.prediction import predicted_rigid_mm
+from calibrators.estimators.world_sizes import DETERMINED
 from calibrators.study.engines import results
 from calibrators.study.episodes import (
     DEFAULT_BUDGET_S,
@@ -182,7 +183,7 @@ def machine_z_scores(ests: list[Estimate], truths: list[MachineParams]) -> list[
         # Along an eigenvector the reported variance is its eigenvalue.
         along = (np.swapaxes(vectors, -1, -2) @ err[..., None])[..., 0]
         for m, value, z in zip(members, values, along, strict=True):
-            known = value <= 0.5
+            known = value <= DETERMINED
             out[m] = z[known] / np.sqrt(value[known])
     return out
 

@@ -54,6 +54,7 @@ from calibrators.estimators.catalogue import for_study
 from calibrators.estimators.consider import consider_terms, tracker_sigma
 from calibrators.estimators.exact_fit import CHI2_LEVEL, world_columns
 from calibrators.estimators.gauss_newton import align_tracker, tracker_reach
+from calibrators.estimators.world_sizes import BLIND_SPOT
 from calibrators.measurements import Measurement, Measurements, rho_label
 from calibrators.study.episodes import Episode
 from calibrators.workflow.compensate import compensated_commands
@@ -507,4 +508,6 @@ def world_test(est: Estimate, data: Measurements, conditions: Conditions) -> str
     if isinstance(fitted, Exception):
         raise ValueError(f"the verification's readings could not be fitted to test the "
                          f"world: {fitted}")
-    return next((w for w in fitted.warnings if w.startswith("world:")), "")
+    # A blind spot says what the readings cannot show: no verdict on the world.
+    return next((w for w in fitted.warnings
+                 if w.startswith("world:") and not w.startswith(BLIND_SPOT)), "")
