@@ -580,11 +580,10 @@ class GaussNewtonCalibrator(Estimator):
         fitting = mask.copy()
         for m, rows in enumerate(misfits):
             fitting[m, rows] = False
+        thetas = np.stack([r.theta[0] for r in results])
         # Most estimates are inside the validity range: only the others are made into a
         # machine each, for their warning's words.
-        valid = valid_vectors(np.stack([r.theta[0, :len(ERROR_NAMES)] for r in results]),
-                              design.machine_design)
-        thetas = np.stack([r.theta[0] for r in results])
+        valid = valid_vectors(thetas[:, :len(ERROR_NAMES)], design.machine_design)
         judged = ([None] * m_count if auto or not world_check else _world_warnings(
             design, values, fitting, noise, thetas, free, scale, told_terms, base_of,
             conditions, np.stack([r.scaled_covariance[0] for r in results]),
