@@ -9,11 +9,11 @@ around them:
 
 1. :func:`sequential_design`: the continuous design of the bound's model for a choice of
    set-ups, with one clock: a reading of a dial costs a settle over the stands, of the
-   laser a settle and its dwell, of the bar a settle (the plan lifts the plungers while an
-   instrument reads, so unlike the bound's relaxation the instruments and the dials do not
-   share visits).  Solved by the multiplicative algorithm (every reading used gains as much
-   per second at its optimum), for every choice of drives and pivot; the choice of least
-   value is kept.
+   laser a settle and its dwell, of the bar a settle, and each set-up its lifts and
+   engages (the plan lifts the plungers while an instrument reads, so unlike the bound's
+   relaxation the instruments and the dials do not share visits).  Solved by the
+   multiplicative algorithm (every reading used gains as much per second at its
+   optimum); the :data:`CHOICES_TRIED` choices of least value are rounded.
 2. :func:`apportion`: each instrument's readings (the design's count, rounded) are shared
    over its candidates by efficient apportionment (Pukelsheim and Rieder 1992, "Efficient
    rounding of approximate designs", Biometrika 79: ``ceil((n - p/2) w_i)``, then one
@@ -22,9 +22,9 @@ around them:
 3. :func:`relaxed_bundles`: the readings as bundles a plan takes, the laser along each
    drive at its targets (ascending, back to Zero), the bar at its points round its circles.
 
-``optimal`` takes these bundles first and lets the greedy search fill the rest of the
-budget, then keeps that plan or the greedy one alone, whichever its criterion predicts
-better (:func:`calibrators.agents.optimal.fixed_plan`).
+``optimal`` takes each choice's bundles first and lets the greedy search fill the rest of
+the budget (:func:`relaxed_plan`), then keeps the plan, of these and the greedy one alone,
+whose criterion predicts least (:func:`calibrators.agents.optimal.fixed_plan`).
 """
 
 from __future__ import annotations
@@ -50,11 +50,11 @@ from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.world.conditions import Conditions
 
 #: Steps of :func:`sequential_design`'s multiplicative algorithm: a design to round, not a
-#: certified value (the value moved less than 1 % of the mean square between 100 and 400
-#: steps on the prototype's one-hour problems, below what rounding to whole readings moves).
+#: certified value (on the prototype's one-hour problems the RMS moved 0.1-0.4 % between
+#: 30 and 100 steps, less than rounding to whole readings moves it).
 DESIGN_STEPS: int = 100
-#: Steps that screen the dial candidates and the set-ups (the values of the set-ups'
-#: designs ranked alike after 30 and after 100 steps on the prototype's one-hour problems).
+#: Steps that screen the dial candidates and the set-ups (the set-ups' designs ranked
+#: alike after 30 and after 100 steps on the prototype's one-hour problems).
 SCREEN_STEPS: int = 30
 #: The dial candidates kept after the screening, of about 9,000: a visit reads 6 of them,
 #: and an hour's dials take about 700 visits.
