@@ -8,10 +8,12 @@ bar.  Here the design chooses the instruments' readings and the greedy search th
 around them:
 
 1. :func:`sequential_design`: the continuous design of the bound's model for a choice of
-   set-ups, with one clock: a reading of a dial costs a settle over the stands, of the
-   laser a settle and its dwell, of the bar a settle, and each set-up its lifts and
-   engages (the plan lifts the plungers while an instrument reads, so unlike the bound's
-   relaxation the instruments and the dials do not share visits).  Solved by the
+   set-ups, with one clock: a reading of a dial costs a visit over the stands, of the
+   bar a visit, of the laser a settle and its dwell, and each set-up its lifts and
+   engages (a visit is a settle, and the laser's dwell once it is set up: a plan sets
+   it up first and leaves it).  The plan lifts the plungers while an instrument reads,
+   so unlike the bound's relaxation the instruments and the dials do not share visits.
+   Solved by the
    multiplicative algorithm (every reading used gains as much per second at its
    optimum); the :data:`CHOICES_TRIED` choices of least value are rounded.
 2. :func:`apportion`: each instrument's readings (the design's count, rounded) are shared
@@ -100,8 +102,10 @@ def sequential_design(model: BoundModel, seconds: float, drives: tuple[int, ...]
     dials = np.flatnonzero(model.laser == -1) if dials is None else dials
     used = np.concatenate([dials, np.flatnonzero(np.isin(model.laser, drives)
                                                  | ((model.laser == BAR) & pivot))])
-    price = np.where(model.laser[used] == -1, TIME.settle_and_read_s / stands,
-                     np.where(model.laser[used] == BAR, TIME.settle_and_read_s,
+    # A plan sets the laser up first and leaves it set up: every later visit dwells.
+    visit = TIME.settle_and_read_s + (TIME.interferometer_target_s if drives else 0.0)
+    price = np.where(model.laser[used] == -1, visit / stands,
+                     np.where(model.laser[used] == BAR, visit,
                               TIME.settle_and_read_s + TIME.interferometer_target_s))
     w = np.full(len(used), 1.0 / len(used))
     counts = np.zeros(len(model.rows))
