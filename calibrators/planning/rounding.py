@@ -13,9 +13,8 @@ around them:
    engages (a visit is a settle, and the laser's dwell once it is set up: a plan sets
    it up first and leaves it).  The plan lifts the plungers while an instrument reads,
    so unlike the bound's relaxation the instruments and the dials do not share visits.
-   Solved by the
-   multiplicative algorithm (every reading used gains as much per second at its
-   optimum); the :data:`CHOICES_TRIED` choices of least value are rounded.
+   Solved by the multiplicative algorithm (every reading used gains as much per second
+   at its optimum); the :data:`CHOICES_TRIED` choices of least value are rounded.
 2. :func:`apportion`: each instrument's readings (the design's count, rounded) are shared
    over its candidates by efficient apportionment (Pukelsheim and Rieder 1992, "Efficient
    rounding of approximate designs", Biometrika 79: ``ceil((n - p/2) w_i)``, then one
