@@ -37,6 +37,7 @@ from calibrators.agents.optimal import fixed_plan, lab_setup, owned_instruments
 from calibrators.estimators.catalogue import for_study
 from calibrators.planning.belief import N_MACHINE, N_STAND, ZERO_SCALE, PlannedOperation
 from calibrators.planning.instruments import Bundle, operation_keys, planned_bundles
+from calibrators.planning.rounding import plan_bundles
 from calibrators.planning.search import Planner, take
 from calibrators.planning.search import observe as observe_bundle
 from orthoglide_env.instruments.ballbar import BallbarSpec
@@ -74,7 +75,9 @@ class ActiveAgent(Agent):
         self.remounts = [s for s in steps if s.op == Op.REMOUNT]
         # The instruments' bundles, taken when and as the fixed plan takes them (as its
         # re-mounts are); the operations of the one under way left, and its first record.
-        self.bundles = planned_bundles(steps, design, owned) if owned else []
+        relaxed = plan_bundles(slots, sigma, budget, design, conditions, owned)
+        self.bundles = planned_bundles(steps, design, owned, tuple(
+            b for group in relaxed for b in group)) if owned else []
         self.bundle: Bundle | None = None
         self.bundle_left, self.bundle_first = 0, 0
         self.readings: dict[int, list[tuple[int, float]]] = {k: [] for k in range(len(slots))}

@@ -24,6 +24,7 @@ import numpy as np
 from calibrators.agents.base import PlannedAgent, action, register
 from calibrators.planning.belief import PlannedOperation
 from calibrators.planning.instruments import PLANNED_INSTRUMENTS, operation_keys
+from calibrators.planning.rounding import plan_bundles, relaxed_plan
 from calibrators.planning.search import Planner, greedy_plan
 from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.model.design import MachineDesign
@@ -40,12 +41,28 @@ def fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
     machine of ``design`` in a lab of ``conditions`` (None: ideal) that owns
     ``instruments`` (the interferometer's and the ballbar's bundles are among the plan's
     options: :mod:`calibrators.planning.instruments`), re-mounting stands or not, and the
-    TCP error after rigid motion it predicts (mm)."""
-    planner = Planner(list(slots), list(engaged), sigma, budget_s, criterion=criterion,
-                      design=design, conditions=conditions, instruments=instruments)
-    planner.expect_readings()  # the lab reads every stand as the episode opens
+    TCP error after rigid motion it predicts (mm).  In a lab that owns the interferometer
+    or the ballbar, the plans that first take a continuous design of the bound's model
+    rounded to bundles (:mod:`calibrators.planning.rounding`) are made too, and the one
+    predicting the least error kept (criterion ``I``)."""
+    def opened() -> Planner:
+        planner = Planner(list(slots), list(engaged), sigma, budget_s, criterion=criterion,
+                          design=design, conditions=conditions, instruments=instruments)
+        planner.expect_readings()  # the lab reads every stand as the episode opens
+        return planner
+
+    planner = opened()
     steps = greedy_plan(planner, remounts=remounts)
-    return tuple(steps), planner.predicted_rigid_mm()
+    best = tuple(steps), planner.predicted_rigid_mm()
+    for relaxed in plan_bundles(slots, sigma, budget_s, design, conditions, instruments
+                                ) if criterion == "I" else ():
+        # A design of the bound's model rounded, the dials greedy around it: kept where
+        # it predicts better than the greedy plan alone.
+        planner = opened()
+        steps = relaxed_plan(planner, relaxed, remounts)
+        if planner.predicted_rigid_mm() < best[1]:
+            best = tuple(steps), planner.predicted_rigid_mm()
+    return best
 
 
 def lab_setup(env: gym.Env, observation: dict[str, np.ndarray], reserved_s: float = 0.0

@@ -274,10 +274,12 @@ def marginal(rows: np.ndarray, setup: np.ndarray, residual: np.ndarray | None = 
 
 
 def planned_bundles(steps: tuple[NamedTuple, ...] | list[NamedTuple], design: MachineDesign,
-                    owned: tuple[str, ...]) -> list[tuple[float, Bundle]]:
+                    owned: tuple[str, ...], extra: tuple[Bundle, ...] = ()
+                    ) -> list[tuple[float, Bundle]]:
     """The bundles a plan's ``steps`` take (a lab owning ``owned``), each with the lab
-    time of its set-up: the candidate whose set-up it is and whose path the moves after
-    it drive (the longest, where one path begins another)."""
+    time of its set-up: the candidate (of :func:`bundles` and ``extra``) whose set-up it
+    is and whose path the moves after it drive (the longest, where one path begins
+    another)."""
     out: list[tuple[float, Bundle]] = []
     for i, step in enumerate(steps):
         if step.op not in (Op.ALIGN, Op.PIVOT):
@@ -288,7 +290,7 @@ def planned_bundles(steps: tuple[NamedTuple, ...] | list[NamedTuple], design: Ma
                 break
             moves.append(later.rho)
         driven = np.asarray(moves, dtype=float).reshape(-1, 3)
-        matches = [b for b in bundles(design, owned)
+        matches = [b for b in (*bundles(design, owned), *extra)
                    if b.setup == step.op and operation_keys(step) == operation_keys(
                        InstrumentOperation(b.setup, axis=b.axis, bar=b.bar))
                    and len(b.path) <= len(driven)

@@ -1,0 +1,214 @@
+"""A plan from the relaxation: the bound's continuous design rounded to instrument bundles.
+
+The greedy search (:mod:`calibrators.planning.search`) prices a set-up by what its bundle
+buys per second against the dials' next moves, so a set-up that pays only over the whole
+hour (the laser's soak and set-ups take 40 minutes) is never bought, where the bound's
+design (:mod:`calibrators.planning.bound`) sets the laser up on every drive and reads the
+bar.  Here the design chooses the instruments' readings and the greedy search the dials'
+around them:
+
+1. :func:`sequential_design`: the continuous design of the bound's model for a choice of
+   set-ups, with one clock: a reading of a dial costs a visit over the stands, of the
+   bar a visit, of the laser a settle and its dwell, and each set-up its lifts and
+   engages (a visit is a settle, and the laser's dwell once it is set up: a plan sets
+   it up first and leaves it).  The plan lifts the plungers while an instrument reads,
+   so unlike the bound's relaxation the instruments and the dials do not share visits.
+   Solved by the multiplicative algorithm (every reading used gains as much per second
+   at its optimum); the :data:`CHOICES_TRIED` choices of least value are rounded.
+2. :func:`apportion`: each instrument's readings (the design's count, rounded) are shared
+   over its candidates by efficient apportionment (Pukelsheim and Rieder 1992, "Efficient
+   rounding of approximate designs", Biometrika 79: ``ceil((n - p/2) w_i)``, then one
+   reading at a time added where ``n_i / w_i`` is least or taken where ``(n_i - 1) / w_i``
+   is most).
+3. :func:`relaxed_bundles`: the readings as bundles a plan takes, the laser along each
+   drive at its targets (ascending, back to Zero), the bar at its points round its circles.
+
+``optimal`` takes each choice's bundles first and lets the greedy search fill the rest of
+the budget (:func:`relaxed_plan`), then keeps the plan, of these and the greedy one alone,
+whose criterion predicts least (:func:`calibrators.agents.optimal.fixed_plan`).
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from calibrators.planning.belief import PlannedOperation
+from calibrators.planning.bound import (
+    BAR,
+    BoundModel,
+    _information,
+    _value,
+    bar_bundle,
+    bound_model,
+    setup_seconds,
+)
+from calibrators.planning.instruments import Bundle, conditions_or_default
+from calibrators.planning.search import Planner, expect, greedy_plan, take
+from orthoglide_env.lab.operations import TIME, Op
+from orthoglide_env.model.design import MachineDesign
+from orthoglide_env.world.conditions import Conditions
+
+#: Steps of :func:`sequential_design`'s multiplicative algorithm: a design to round, not a
+#: certified value (on the prototype's one-hour problems the RMS moved 0.1-0.4 % between
+#: 30 and 100 steps, less than rounding to whole readings moves it).
+DESIGN_STEPS: int = 100
+#: Steps that screen the dial candidates and the set-ups (the set-ups' designs ranked
+#: alike after 30 and after 100 steps on the prototype's one-hour problems).
+SCREEN_STEPS: int = 30
+#: The dial candidates kept after the screening, of about 9,000: a visit reads 6 of them,
+#: and an hour's dials take about 700 visits.
+DIALS_KEPT: int = 1000
+#: The set-up choices whose rounded designs are planned (each a greedy fill, a minute or
+#: two): the sequential design's ranking misses what the plan adds (the stands' unknown
+#: installations, the world's terms, the drives' travel), so the planner's criterion
+#: decides among the best few.
+CHOICES_TRIED: int = 3
+#: A candidate whose share of its instrument's readings is below this is dropped before
+#: apportioning (the multiplicative algorithm leaves every share positive, most tiny).
+SHARE_FLOOR: float = 1e-3
+
+
+def apportion(weights: np.ndarray, n: int) -> np.ndarray:
+    """``n`` whole readings shared over the candidates of design ``weights`` (non-negative,
+    not all zero) by efficient apportionment; where ``n`` is below the support's size, one
+    reading each at the ``n`` largest weights."""
+    w = np.asarray(weights, dtype=float)
+    if not (n >= 0 and np.all(w >= 0) and w.sum() > 0):
+        raise ValueError(f"apportion needs n >= 0 and non-negative weights, got n={n}")
+    w = w / w.sum()
+    support = np.flatnonzero(w > 0)
+    counts = np.zeros(len(w), dtype=int)
+    if n < len(support):
+        counts[support[np.argsort(w[support])[::-1][:n]]] = 1
+        return counts
+    counts[support] = np.ceil((n - len(support) / 2) * w[support]).astype(int)
+    while counts.sum() < n:
+        counts[support[np.argmin(counts[support] / w[support])]] += 1
+    while counts.sum() > n:
+        counts[support[np.argmax((counts[support] - 1) / w[support])]] -= 1
+    return counts
+
+
+def sequential_design(model: BoundModel, seconds: float, drives: tuple[int, ...],
+                      pivot: bool, stands: int, dials: np.ndarray | None = None,
+                      steps: int = DESIGN_STEPS) -> tuple[float, np.ndarray]:
+    """The continuous design on ``model`` over ``seconds`` of one clock with the laser set
+    up on ``drives`` and the bar's pivot or not (see the module), over the dial candidates
+    ``dials`` (None: all), after ``steps`` multiplicative steps: its value ``f`` (mm^2) and
+    counts (N,)."""
+    dials = np.flatnonzero(model.laser == -1) if dials is None else dials
+    used = np.concatenate([dials, np.flatnonzero(np.isin(model.laser, drives)
+                                                 | ((model.laser == BAR) & pivot))])
+    # A plan sets the laser up first and leaves it set up: every later visit dwells.
+    visit = TIME.settle_and_read_s + (TIME.interferometer_target_s if drives else 0.0)
+    price = np.where(model.laser[used] == -1, visit / stands,
+                     np.where(model.laser[used] == BAR, visit,
+                              TIME.settle_and_read_s + TIME.interferometer_target_s))
+    w = np.full(len(used), 1.0 / len(used))
+    counts = np.zeros(len(model.rows))
+    value = np.inf
+    for step in range(steps + 1):
+        counts[used] = w * seconds / price
+        value, x = _value(_information(model.rows, counts), model.factor)
+        if step == steps:
+            break
+        per_second = np.sum((model.rows[used] @ x) ** 2, axis=1) / price
+        w = w * per_second / float(w @ per_second)
+        w /= w.sum()
+    return value, counts
+
+
+@lru_cache(maxsize=8)
+def relaxed_bundles(design: MachineDesign, conditions: Conditions, dial_sigma: float,
+                    budget_s: float, instruments: tuple[str, ...], stands: int
+                    ) -> tuple[tuple[Bundle, ...], ...]:
+    """The bundles of the best sequential designs (:func:`sequential_design`) of a lab of
+    ``design`` under ``conditions`` with dials of weighting sigma ``dial_sigma`` (mm) on
+    ``stands`` stands, owning ``instruments``, over ``budget_s`` seconds: one tuple per
+    choice of set-ups, the :data:`CHOICES_TRIED` of least value first (a choice that sets
+    nothing up is the greedy plan's, left out).
+
+    To keep it to seconds: the dial candidates are the :data:`DIALS_KEPT` most read after
+    :data:`SCREEN_STEPS` steps over all of them with every instrument set up, and the
+    set-ups are the laser on the first ``k`` drives (the prototype's drives are alike)
+    with or without the pivot, each ranked after :data:`SCREEN_STEPS` steps and the
+    kept ones solved to :data:`DESIGN_STEPS`.  Each set-up's seconds are less the lifts
+    and engages of the plungers around it."""
+    owned = "interferometer" in instruments
+    bar = "ballbar" in instruments
+    model = (bound_model(design, conditions, float(dial_sigma), owned, True) if bar
+             else bound_model(design, conditions, float(dial_sigma), owned))
+    every = (0, 1, 2) if owned else ()
+
+    def seconds(drives: tuple[int, ...], pivot: bool) -> float:
+        flicks = (len(drives) + pivot) * 2 * stands * TIME.lift_s
+        return (budget_s - setup_seconds(drives) - (TIME.ballbar_setup_s if pivot else 0.0)
+                - flicks)
+
+    dials = np.flatnonzero(model.laser == -1)
+    if seconds(every, bar) > 0:
+        _, counts = sequential_design(model, seconds(every, bar), every, bar, stands,
+                                      steps=SCREEN_STEPS)
+        dials = dials[np.argsort(counts[dials])[-DIALS_KEPT:]]
+    ranked = sorted((sequential_design(model, seconds(every[:k], pivot), every[:k], pivot,
+                                       stands, dials, SCREEN_STEPS)[0], every[:k], pivot)
+                    for pivot in ([False, True] if bar else [False])
+                    for k in range(len(every) + 1)
+                    if (k or pivot) and seconds(every[:k], pivot) > 0)
+    return tuple(_bundles(model, design, drives, pivot, sequential_design(
+        model, seconds(drives, pivot), drives, pivot, stands, dials)[1])
+        for _, drives, pivot in ranked[:CHOICES_TRIED])
+
+
+def _bundles(model: BoundModel, design: MachineDesign, drives: tuple[int, ...], pivot: bool,
+             counts: np.ndarray) -> tuple[Bundle, ...]:
+    """A design's ``counts`` of the laser's and the bar's candidates as bundles."""
+    out: list[Bundle] = []
+    for axis in drives:
+        on = np.flatnonzero(model.laser == axis)
+        targets = np.repeat(model.targets[model.label[on, 2]], _rounded(counts[on]))
+        path = np.zeros((len(targets) + 1, 3))
+        path[:-1, axis] = np.sort(targets)  # then back to Zero, read too
+        out.append(Bundle("interferometer", f"interferometer {'xyz'[axis]} (design)",
+                          Op.ALIGN, path, axis=axis))
+    if pivot:
+        circle = bar_bundle(design)
+        out.append(Bundle("ballbar", "ballbar 50 mm (design)", Op.PIVOT,
+                          np.repeat(circle.path, _rounded(counts[model.laser == BAR]), axis=0),
+                          centre=circle.centre, bar=circle.bar))
+    return tuple(out)
+
+
+def _rounded(counts: np.ndarray) -> np.ndarray:
+    """An instrument's design ``counts`` as whole readings: their sum rounded (at least
+    one), apportioned over the candidates above :data:`SHARE_FLOOR` of it."""
+    kept = np.where(counts >= SHARE_FLOOR * counts.sum(), counts, 0.0)
+    return apportion(kept, max(round(float(counts.sum())), 1))
+
+
+def plan_bundles(slots: tuple[int, ...], sigma: float, budget_s: float, design: MachineDesign,
+                 conditions: Conditions | None, instruments: tuple[str, ...]
+                 ) -> tuple[tuple[Bundle, ...], ...]:
+    """:func:`relaxed_bundles` of a plan's lab: stands at ``slots`` (-1: none), dials of
+    weighting sigma ``sigma`` (mm), ``budget_s`` seconds, ``conditions`` (None: ideal),
+    owning ``instruments``; none where it owns no instrument the bound holds."""
+    if not {"interferometer", "ballbar"} & set(instruments):
+        return ()
+    return relaxed_bundles(design, conditions_or_default(conditions), float(sigma),
+                           float(budget_s), ("dial", *instruments),
+                           max(sum(s >= 0 for s in slots), 1))
+
+
+def relaxed_plan(planner: Planner, bundles: tuple[Bundle, ...], remounts: bool = True
+                 ) -> list[PlannedOperation]:
+    """``bundles`` taken first, each that fits in the planner's budget, their readings
+    expected, then the budget spent by :func:`~calibrators.planning.search.greedy_plan`."""
+    for bundle in bundles:
+        trial = planner.fork()
+        take(trial, bundle)
+        if trial.time_s <= trial.budget_s:
+            take(planner, bundle)
+            expect(planner, bundle)
+    return greedy_plan(planner, remounts=remounts)
