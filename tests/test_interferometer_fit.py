@@ -159,8 +159,8 @@ def test_iso230_2_plans_the_standard_and_shortens_runs_to_the_budget():
      "needs the step-gauge"),
     (["plan", "--agent", "iso230-2", "--instruments", "dial", "--out", "unused"],
      "needs the interferometer"),
-    (["plan", "--instruments", "dial,step-gauge", "--out", "unused"],
-     "does not yet take the step-gauge"),
+    (["plan", "--agent", "step-gauge", "--instruments", "dial", "--out", "unused"],
+     "needs the step-gauge"),
     (["plan", "--verify", "unused.json", "--instruments", "dial,interferometer", "--out",
       "unused"], "--verify plans the verification with the dial gauges")])
 def test_the_commands_refuse_a_lab_without_what_they_need(argv, words, capsys):

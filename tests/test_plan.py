@@ -223,7 +223,7 @@ def test_the_page_draws_d_and_its_drawn_pdf_holds_it(paper_plan, tmp_path) -> No
     steps and sheet, with a page for each picture."""
     import pypdf
 
-    from calibrators.workflow.page import BARS_FILE, stand_numbers
+    from calibrators.workflow.page import BARS_FILE, sheet_readers
     from calibrators.workflow.page_pdf import draw_pdf
 
     html = (paper_plan / "procedure.html").read_text()
@@ -231,7 +231,7 @@ def test_the_page_draws_d_and_its_drawn_pdf_holds_it(paper_plan, tmp_path) -> No
     assert (paper_plan / BARS_FILE).read_bytes()[:4] == b"\x89PNG"
     procedure = _sheet_procedure(paper_plan)
     out = draw_pdf(procedure, paper_plan, {1: "setup.png"}, BARS_FILE,
-                   stand_numbers(procedure), "orthoglide fit", tmp_path / "drawn.pdf")
+                   sheet_readers(procedure), "orthoglide fit", tmp_path / "drawn.pdf")
     _assert_holds_the_procedure(out, procedure)
     # The pages share one table of resources: the pictures are its distinct images.
     images = {i.name for p in pypdf.PdfReader(out).pages for i in p.images}

@@ -8,9 +8,9 @@ the same on every machine:
 1. lift every stand's plunger (the gauge's 160 mm would push bar gauges past their
    travel);
 2. for each world axis x, y, z: lay the gauge along it through Zero (``place``) with
-   face 0 :data:`START_MM` along the axis, zeroing the probe there, then :func:`runs_for`
-   runs, each up through every face and down through every face again (both directions:
-   backlash shows as the reversal);
+   face 0 at the back end of the stroke (:func:`start_mm`), zeroing the probe there, then
+   :func:`runs_for` runs, each up through every face in reach (:func:`faces_in_reach`)
+   and down through them again (both directions: backlash shows as the reversal);
 3. back at Zero, let every plunger down again (their zeros were kept), and hand the rest
    of the budget to :data:`GAUGES`, which plans the gauges' experiment from there.
 
@@ -31,14 +31,9 @@ from calibrators.agents.instrument_first import InstrumentFirst, back_to_the_gau
 from orthoglide_env.instruments.step_gauge import face_lengths
 from orthoglide_env.lab.operations import TIME, Op
 from orthoglide_env.model.design import MachineDesign
-from orthoglide_env.model.errors import MachineParams
+from orthoglide_env.model.errors import MachineParams, within_limits
 from orthoglide_env.model.kinematics import inverse
 
-#: Where face 0 lies on each world axis (mm from Zero): at the back end of the drive that
-#: carries the axis (its pitch table's reference, where the lead error is the encoder
-#: offset's), so the gauge's 160 mm span the whole stroke and its set-up's zero takes no
-#: part of the lead error.
-START_MM: float = -100.0
 #: Runs in each direction at most (ISO 230-2's five, as ``iso230-2`` takes).
 MAX_RUNS: int = 5
 #: The share of the budget left to the gauges after the step gauge.  Half: the gauge reads
@@ -49,23 +44,48 @@ MAX_RUNS: int = 5
 GAUGE_SHARE: float = 0.5
 
 
-def run_faces() -> list[int]:
-    """One run after face 0: up through every face, then down through every face."""
-    count = len(face_lengths())
-    return [*range(1, count), *range(count - 2, -1, -1)]
+def start_mm(design: MachineDesign) -> float:
+    """Where face 0 lies on each world axis (mm from Zero): at the back end of the drive
+    that carries the axis, ``rho_min`` (its pitch table's reference, where the lead error
+    is the encoder offset's), so the gauge spans the stroke from there and its set-up's
+    zero takes no part of the lead error.  (On the axis through Zero a drive carries its
+    own axis one to one.)"""
+    return design.rho_min
 
 
 def face_command(design: MachineDesign, axis: int, face: int) -> np.ndarray:
     """The command (mm) that puts the nominal machine's TCP at ``face`` of the gauge laid
-    along world ``axis`` through Zero from :data:`START_MM`."""
+    along world ``axis`` through Zero from :func:`start_mm`."""
     point = np.zeros(3)
-    point[axis] = START_MM + face_lengths()[face]
+    point[axis] = start_mm(design) + face_lengths()[face]
     return inverse(MachineParams(design=design), point)
+
+
+def faces_in_reach(design: MachineDesign) -> int:
+    """How many faces, from face 0 on, the machine reaches on every axis within its
+    control limits: the whole gauge on the prototype (its 160 mm are the stroke), fewer
+    on a machine of a shorter stroke."""
+    count = 0
+    while count < len(face_lengths()) and all(
+            np.all(within_limits(face_command(design, axis, count), design))
+            for axis in range(3)):
+        count += 1
+    if count < 2:
+        raise ValueError(f"a step gauge along an axis through Zero reaches {count} face(s) "
+                         f"within the control limits {design.rho_min:g} .. "
+                         f"{design.rho_max:g} mm: it needs two")
+    return count
+
+
+def run_faces(design: MachineDesign) -> list[int]:
+    """One run after face 0: up through every face in reach, then down through them."""
+    count = faces_in_reach(design)
+    return [*range(1, count), *range(count - 2, -1, -1)]
 
 
 def run_seconds(design: MachineDesign) -> float:
     """What one run on one axis costs by the time table."""
-    faces = [0, *run_faces()]
+    faces = [0, *run_faces(design)]
     moves = np.abs(np.diff([face_lengths()[f] for f in faces]))
     return float(np.sum(moves / TIME.drive_speed_mm_s + TIME.settle_and_read_s
                         + TIME.step_gauge_face_s))
@@ -92,7 +112,7 @@ def gauge_steps(stands: int, design: MachineDesign, runs: int) -> list[dict[str,
         steps.append(action(Op.PLACE, face_command(design, axis, 0), axis=axis))
         for _ in range(runs):
             steps += [action(Op.MOVE, face_command(design, axis, face))
-                      for face in run_faces()]
+                      for face in run_faces(design)]
     return steps + back_to_the_gauges(stands)
 
 

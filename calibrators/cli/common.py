@@ -199,16 +199,12 @@ def instruments_of(args: argparse.Namespace, agents: tuple[Agent, ...] = ()
 
 def workflow_instruments(args: argparse.Namespace, agent: str) -> tuple[str, ...]:
     """``--instruments`` of a workflow command (``plan``, ``session``), checked with
-    ``agent`` (:func:`instruments_of`; :class:`UsageError` in one line if bad, or for the
-    step gauge, whose sheets and prompts are to come)."""
+    ``agent`` (:func:`instruments_of`; :class:`UsageError` in one line if bad)."""
     from calibrators.agents import get_agent
     try:
         owned = instruments_of(args, (get_agent(agent),))
     except ValueError as exc:  # an unknown agent
         raise UsageError(str(exc)) from None
-    if "step-gauge" in owned:
-        raise UsageError(f"--instruments: {args.command} does not yet take the step-gauge "
-                         "(its sheets and prompts are to come); compare and calibrate run it")
     return owned
 
 

@@ -17,7 +17,7 @@ import html
 from pathlib import Path
 
 from calibrators.workflow.instruments import used_in, work_of_action
-from calibrators.workflow.plan import Procedure, rho_words, stand_numbers
+from calibrators.workflow.plan import Procedure, rho_words, sheet_readers
 from orthoglide_env.lab.operations import slot_catalogue
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import MachineParams
@@ -49,7 +49,7 @@ def write_page(procedure: Procedure, folder: str | Path, then: str = FIT_COMMAND
     if pdf and typeset_problem() is None:
         typeset_pdf(path, folder / PDF_FILE)
     elif pdf:
-        draw_pdf(procedure, folder, drawn, BARS_FILE, stand_numbers(procedure), then,
+        draw_pdf(procedure, folder, drawn, BARS_FILE, sheet_readers(procedure), then,
                  folder / PDF_FILE)
     return path, drawn
 
@@ -160,11 +160,11 @@ def page(procedure: Procedure, pictures: dict[int, str], then: str = FIT_COMMAND
     stands = "".join(f"<tr><td>{s['stand']}</td><td class='name'>{e(s['slot'])}</td>"
                      f"<td>{e(s['place'])}</td></tr>" for s in procedure.stands)
     sheet = "".join(
-        f"<tr><td>{k}</td><td>{m.step}</td><td>{'' if n is None else n}</td>"
+        f"<tr><td>{k}</td><td>{m.step}</td><td>{e(n)}</td>"
         f"<td>{e(m.mounting)}</td><td>{e(m.posture)}</td>"
         f"<td>{rho_words(m.rho)}</td><td>{m.repetition}</td>"
         f"<td>{'' if m.time_s is None else f'{m.time_s:.0f}'}</td><td class='blank'></td></tr>"
-        for k, (m, n) in enumerate(zip(procedure.sheet, stand_numbers(procedure),
+        for k, (m, n) in enumerate(zip(procedure.sheet, sheet_readers(procedure),
                                        strict=True), start=1))
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8">

@@ -54,10 +54,11 @@ def typeset_pdf(page: Path, out: Path) -> Path:
 
 
 def draw_pdf(procedure: Procedure, folder: Path, pictures: dict[int, str], bars: str,
-              stands: list[int | None], then: str, out: Path) -> Path:
+              stands: list[str], then: str, out: Path) -> Path:
     """Write the PDF of ``procedure``'s page to ``out``; ``folder`` holds the pictures
     (``pictures``: file names by step number; ``bars``: the picture of a leg's bars),
-    ``stands`` the stand of each row of the sheet, ``then`` the command that reads the
+    ``stands`` where each row of the sheet is read (its stand, or a step gauge's face:
+    :func:`~calibrators.workflow.plan.sheet_readers`), ``then`` the command that reads the
     filled sheet."""
     import matplotlib
 
@@ -162,13 +163,13 @@ def _picture_page(pdf: Any, path: Path, caption: str) -> None:
         plt.close(figure)
 
 
-def _sheet_pages(pdf: Any, procedure: Procedure, stands: list[int | None]) -> None:
+def _sheet_pages(pdf: Any, procedure: Procedure, stands: list[str]) -> None:
     """The readings sheet, :data:`SHEET_ROWS` rows a page, its last column blank."""
     from matplotlib import pyplot as plt
 
     header = ["row", "step", "stand", "mounting", "posture", "rho (mm)", "rep.", "time (s)",
               "reading (mm)"]
-    cells = [[str(k), str(m.step), "" if n is None else str(n), m.mounting, m.posture,
+    cells = [[str(k), str(m.step), n, m.mounting, m.posture,
               rho_words(m.rho), str(m.repetition),
               "" if m.time_s is None else f"{m.time_s:.0f}", ""]
              for k, (m, n) in enumerate(zip(procedure.sheet, stands, strict=True), start=1)]

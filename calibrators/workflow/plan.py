@@ -40,7 +40,7 @@ from calibrators.measurements import COLUMNS, Measurement, Measurements, gauge_n
 from calibrators.measurements.csv_file import instrument_cells, instrument_columns
 from calibrators.study.episodes import measurements_of, run_episode
 from calibrators.study.labs import nominal_lab, nominal_options
-from calibrators.workflow.instruments import work_of_action, work_of_op, work_of_spec
+from calibrators.workflow.instruments import WORK, work_of_action, work_of_op, work_of_spec
 from orthoglide_env.instruments.slots import PLATFORM_AIM, GaugeSpec, Part
 from orthoglide_env.lab.operations import DEFAULT_BUDGET_S, Op
 from orthoglide_env.model.design import MachineDesign
@@ -305,18 +305,21 @@ class _StepWriter:
 
 class LabState:
     """What a step's words depend on beyond its action, followed step by step: the stands'
-    slots (``held``, indices into the lab's slots), whether the ballbar is in, and which
-    instruments were set up before."""
+    slots (``held``, indices into the lab's slots), the instruments on the machine (``on``,
+    names of :data:`~calibrators.workflow.instruments.WORK` that are taken off before a
+    step that is not a move: the ballbar, the step gauge's probe), and the operations
+    that set an instrument up before."""
 
     def reset(self, observation: Mapping[str, np.ndarray]) -> None:
         self.held = [int(s) for s in observation["slot"]]
-        self.bar_in = False
+        self.on: list[str] = []
         self.set_up: set[Op] = set()
 
     def step(self, action: Mapping[str, Any], observation: Mapping[str, np.ndarray]) -> None:
         """Follow lab action ``action``, which led to ``observation``."""
         self.held = [int(s) for s in observation["slot"]]
-        self.bar_in = bool(np.asarray(observation.get("ballbar_in", [0]))[0])
+        self.on = [w.name for w in WORK.values() if w.off is not None
+                   and np.asarray(observation.get(f"{w.key}_in", [0]))[0]]
         self.set_up.add(Op(int(action["op"])))
 
 
@@ -340,16 +343,17 @@ def describe_step(number: int, act: Mapping[str, Any], seconds: float, start: fl
     technician, with the stands at the slots ``held`` (indices into ``slots``) and the
     instruments as ``state`` found them before the step (None: none set up)."""
     op = Op(int(act["op"]))
+    # Any operation but a move takes the ballbar or the probe off: the technician does it
+    # first.
+    off = ("".join(WORK[name].off or "" for name in state.on)
+           if state is not None and op != Op.MOVE else "")
     work = work_of_op(op)
     if work is not None:
         text, setup = work.setup(act, design, state is None or op not in state.set_up)
-        return Step(number, work.action, text, seconds, start,
+        return Step(number, work.action, off + text, seconds, start,
                     rho=[0.0, 0.0, 0.0] if op == Op.ALIGN else
                     [float(v) for v in np.asarray(act["rho"], dtype=float)],
                     rows=list(range(first_row + 1, first_row + len(read) + 1)), setup=setup)
-    # Any operation but a move takes the ballbar off: the technician does it first.
-    off = ("Take the ballbar off (the tool cup and the pivot stay). "
-           if state is not None and state.bar_in and op != Op.MOVE else "")
     stand = int(act["stand"]) + 1
     rows = list(range(first_row + 1, first_row + len(read) + 1))
     # Stands by the number the technician gave them, with where they are.
@@ -359,7 +363,7 @@ def describe_step(number: int, act: Mapping[str, Any], seconds: float, start: fl
     names = [f"stand {number_of[n]} ({n})" if n in number_of else n
              for n in dict.fromkeys(gauge_name(r.spec) for r in read
                                     if work_of_spec(r.spec) is None)]
-    names += list(dict.fromkeys(w.reading(r.spec) for r in read
+    names += list(dict.fromkeys(w.reading(r, design) for r in read
                                 if (w := work_of_spec(r.spec)) is not None))
     if op == Op.MOVE:
         rho = [float(v) for v in np.asarray(act["rho"], dtype=float)]
@@ -388,20 +392,37 @@ def describe_step(number: int, act: Mapping[str, Any], seconds: float, start: fl
 def write_sheet(procedure: Procedure, path: str | Path) -> Path:
     """The readings sheet: one row per reading to take, in step order, the measurement
     file's columns, ``step`` and ``stand`` (then an instrument's columns, for a lab with
-    one: :func:`~calibrators.measurements.csv_file.instrument_columns`), ``reading_mm``
-    blank (``time_s`` the planned time: write the clock's when it differs)."""
+    one: :func:`~calibrators.measurements.csv_file.instrument_columns`, and those that
+    guide its reader, :attr:`~calibrators.workflow.instruments.InstrumentWork.columns`:
+    a step gauge's ``face``, which ``fit`` checks), ``reading_mm`` blank (``time_s`` the
+    planned time: write the clock's when it differs)."""
     path = Path(path)
     extra = instrument_columns(procedure.sheet)
+    design = MachineDesign.from_dict(procedure.design)
+    guides = [w for w in WORK.values()
+              if w.columns and any(isinstance(m.gauge, w.spec) for m in procedure.sheet)]
     with path.open("w", newline="", encoding="utf-8") as handle:
         writer = csv.writer(handle)
-        writer.writerow([*SHEET_COLUMNS, *extra])
+        writer.writerow([*SHEET_COLUMNS, *extra, *(c for w in guides for c in w.columns)])
         reading = COLUMNS.index("reading_mm")
         for m, stand in zip(procedure.sheet, stand_numbers(procedure), strict=True):
             row = m.csv_row()
             row[reading] = ""
             writer.writerow([*row, str(m.step), "" if stand is None else str(stand),
-                             *instrument_cells(m, extra)])
+                             *instrument_cells(m, extra),
+                             *(c for w in guides for c in (
+                                 w.cells(m, design) if isinstance(m.gauge, w.spec)
+                                 else [""] * len(w.columns)))])
     return path
+
+
+def sheet_readers(procedure: Procedure) -> list[str]:
+    """Where the printed sheet says each row is read: its stand's number (a dial's), or
+    its instrument's word for it (a step gauge's face), else blank."""
+    design = MachineDesign.from_dict(procedure.design)
+    return [str(stand) if stand is not None
+            else w.label(m, design) if (w := work_of_spec(m.gauge)) is not None else ""
+            for m, stand in zip(procedure.sheet, stand_numbers(procedure), strict=True)]
 
 
 def stands_held(procedure: Procedure) -> dict[int, dict[str, int]]:

@@ -22,10 +22,11 @@ stand from that reading on (its own zero for the fit), the same answer again kee
 one.
 
 A lab with an instrument beyond the gauges (``--instruments``: the interferometer, the
-ballbar) asks for its readings too, after the stands', each question naming the
-instrument and what its reading is (:mod:`calibrators.workflow.instruments`); an answer
-that cannot be its reading (a ballbar's outside its travel, a laser's far from the
-carriage's command) is asked again.
+ballbar, the step gauge) asks for its readings too, after the stands', each question
+naming the instrument and what its reading is (:mod:`calibrators.workflow.instruments`);
+an answer that cannot be its reading (a ballbar's outside its travel, a laser's far from
+the carriage's command, a probe's outside its range or far from where the nominal machine
+puts the TCP at its face) is asked again.
 
 The episode is :func:`~calibrators.study.episodes.run_episode`'s, the session watching each
 step (:class:`~calibrators.study.episodes.Watcher`) to say it and ask its readings.
@@ -161,12 +162,13 @@ class Session:
         for record in own:
             work = work_of_spec(record.spec)
             question = {"step": number, "text": text, "instrument": work.name,
-                        "what": work.reading(record.spec), "gauge": record.mounting,
+                        "what": work.reading(record, self.design), "gauge": record.mounting,
                         "rho": list(record.rho), "time_s": record.time_s}
             value = self._given(question, {"instrument": work.name}, lambda q, r=record, w=work:
-                                _asked_again(q, answer, lambda v: w.impossible(v, r)))
-            observation[f"{work.name}_valid"][0] = value is not None
-            observation[work.name][0] = 0.0 if value is None else value
+                                _asked_again(q, answer,
+                                             lambda v: w.impossible(v, r, self.design)))
+            observation[f"{work.key}_valid"][0] = value is not None
+            observation[work.key][0] = 0.0 if value is None else value
             if value is not None:
                 kept.append(replace(record, reading=float(value)))
         records[:] = kept
