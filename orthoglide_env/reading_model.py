@@ -349,8 +349,8 @@ def _pivots(theta: np.ndarray, layout: ReadingLayout, machine: MachineParams
     space = layout.space
     batch = theta.shape[:-1]
     start = space.centre_start
-    return [direct(machine, np.reshape(layout.specs[m].centre, (*batch, 3)) if batch
-                   else np.asarray(layout.specs[m].centre, dtype=float))
+    return [direct(machine, np.broadcast_to(np.asarray(layout.specs[m].centre, dtype=float),
+                                            (*batch, 3)))
             + theta[..., start + 3 * k:start + 3 * k + 3]
             for k, m in enumerate(space.ballbars)]
 

@@ -120,6 +120,24 @@ def test_the_model_predicts_the_engine_at_the_truth():
     assert np.max(np.abs(analytic - numeric)) <= 1e-6 * np.max(np.abs(numeric))
 
 
+def test_the_model_predicts_many_machines_at_once_as_each_alone():
+    """A batch fit predicts the readings of several machines that share one layout (every
+    machine of a planned experiment does) in one call: each row is that machine's own
+    prediction, pivots included (a batch of two used to fail on the pivots' shape)."""
+    env = gym.make(V2, errors="realistic", backend="exact", conditions="ideal",
+                   instruments=OWNED)
+    _circle(env, seed=5)
+    records = [r for r in env.unwrapped.records if isinstance(r.spec, BallbarSpec)]
+    layout = ReadingLayout.of([r.mounting for r in records], [r.spec for r in records],
+                              np.array([r.rho for r in records]), PROTOTYPE)
+    truth = np.concatenate([env.unwrapped._batch.machines[0].to_vector(), np.zeros(3)])
+    thetas = truth + np.random.default_rng(0).normal(0.0, 1e-3, (3, len(truth)))
+    together = predict(thetas, layout)
+    # The same arithmetic per machine, batched or not: equal to rounding (1e-12 mm).
+    np.testing.assert_allclose(together, [predict(t, layout) for t in thetas],
+                               rtol=0, atol=1e-12)
+
+
 def test_a_batch_reads_what_separate_labs_read():
     batched = assert_batch_reads_as_alone(
         V2, circle_steps(6, PROTOTYPE)[:40], {"bar": BAR},
