@@ -40,7 +40,7 @@ from orthoglide_env.model.errors import (
     valid_vectors,
 )
 from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture
-from orthoglide_env.reading_model import parameters_of, predict
+from orthoglide_env.reading_model import ReadingLayout, parameters_of, predict
 
 TABLE1 = MachineParams(**TABLE1_ERRORS)
 
@@ -144,6 +144,20 @@ def test_a_gauge_zero_is_eliminated() -> None:
     np.testing.assert_allclose(moved.theta, est.theta, atol=1e-8)
 
 
+def _random_layout(rng: np.random.Generator, names: list[str], specs: list, postures: int,
+                   keep: float = 1.0) -> ReadingLayout:
+    """Each of ``names``' readings at ``postures`` random postures, each kept with
+    probability ``keep`` (1: all, drawing nothing more from ``rng``)."""
+    mountings, chosen, rho = [], [], []
+    for posture in rng.uniform(-20.0, 20.0, (postures, 3)):
+        for name, spec in zip(names, specs, strict=True):
+            if keep >= 1.0 or rng.random() < keep:
+                mountings.append(name)
+                chosen.append(spec)
+                rho.append(posture)
+    return ReadingLayout.of(mountings, chosen, np.array(rho), PROTOTYPE)
+
+
 def test_jacobian_equals_central_differences_on_every_target_and_the_tracker() -> None:
     """The chain-rule Jacobian of the reading model (closed-form geometry and rotations,
     the TCP's derivative by the implicit function theorem) equals central differences of
@@ -154,20 +168,13 @@ def test_jacobian_equals_central_differences_on_every_target_and_the_tracker() -
     scale unit on readings of the order of L = 310 mm, times the few operations a
     reading takes: the bar is 1e-9 mm per scale unit."""
     from orthoglide_env.instruments.slots import layout_from_names
-    from orthoglide_env.reading_model import ReadingLayout, TrackerAxis, default_scales, jacobian
+    from orthoglide_env.reading_model import TrackerAxis, default_scales, jacobian
 
     rng = np.random.default_rng(0)
     names = ["x-leg/y", "y/z@0.3", "z-leg/x", "x-carriage/y", "y-carriage/z", "platform/x"]
     specs = [*layout_from_names(names), TrackerAxis(0), TrackerAxis(1), TrackerAxis(2)]
     names += ["tracker.x", "tracker.y", "tracker.z"]
-    mountings, chosen, rho = [], [], []
-    for posture in rng.uniform(-20.0, 20.0, (6, 3)):
-        for name, spec in zip(names, specs, strict=True):
-            if rng.random() < 0.8:
-                mountings.append(name)
-                chosen.append(spec)
-                rho.append(posture)
-    design = ReadingLayout.of(mountings, chosen, np.array(rho), PROTOTYPE)
+    design = _random_layout(rng, names, specs, 6, keep=0.8)
     count = len(design.space)
     scale = default_scales(design.space)
     theta = rng.normal(0.0, 1.0, (3, count)) * scale
@@ -290,18 +297,12 @@ def test_jacobian_of_a_few_parameters_is_their_columns_of_the_whole_bit_for_bit(
     of them, on bars, carriages and the platform at random postures and random parameter
     vectors, so that what a fit frees never moves another parameter's result."""
     from orthoglide_env.instruments.slots import layout_from_names
-    from orthoglide_env.reading_model import ReadingLayout, default_scales, jacobian
+    from orthoglide_env.reading_model import default_scales, jacobian
 
     rng = np.random.default_rng(3)
     names = ["x-leg/y", "y/z@0.3", "z-leg/x", "x-carriage/y", "y-carriage/z", "platform/x"]
     specs = layout_from_names(names)
-    mountings, chosen, rho = [], [], []
-    for posture in rng.uniform(-20.0, 20.0, (5, 3)):
-        for name, spec in zip(names, specs, strict=True):
-            mountings.append(name)
-            chosen.append(spec)
-            rho.append(posture)
-    layout = ReadingLayout.of(mountings, chosen, np.array(rho), PROTOTYPE)
+    layout = _random_layout(rng, names, specs, 5)
     count = len(layout.space)
     scale = default_scales(layout.space)
     theta = rng.normal(0.0, 1.0, (4, count)) * scale
