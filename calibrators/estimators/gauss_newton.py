@@ -122,7 +122,6 @@ from orthoglide_env.scoring import best_rigid_motion
 from orthoglide_env.world.conditions import (
     AUTO,
     CONDITION_NAMES,
-    DEFAULT_CONDITIONS,
     Conditions,
 )
 
@@ -741,7 +740,8 @@ def _world_warnings(design: ReadingLayout, values: np.ndarray, mask: np.ndarray,
                     ) -> list[str | None]:
     """Per machine, the words of the test that its readings show a world worse than the
     ``told`` terms' (:func:`~calibrators.estimators.world_sizes.warning`), or, where it
-    does not, of the told world's blind spots against the default one
+    does not, of the told world's blind spot against the mildest named world harsher than
+    it whose unseen effects would widen the error bars beyond the band
     (:func:`~calibrators.estimators.world_sizes.blind_spot`), or None.  ``covariance``
     (M, P, P): the estimates' over the free parameters; ``moved_by``: how far a
     :class:`Consider`'s terms move them (M, P, K), as the fit's gain takes them."""
@@ -757,35 +757,45 @@ def _world_warnings(design: ReadingLayout, values: np.ndarray, mask: np.ndarray,
     told_sizes = told_scales(base, told, columns, told_columns)
     sizes = judge(gram, b, member, told_sizes)
     words = [warning(sizes, m, conditions.label) for m in range(len(values))]
-    default = terms(DEFAULT_CONDITIONS, clean)
-    default_columns = world_columns(design, default)
-    default_sizes = told_scales(base, default, columns, default_columns)
-    # The told world's share of the default's, per family, both at the same readings:
-    # below 1 is a blind spot's candidate, and the default's terms at the rest of their
-    # size are what it leaves out.
-    mine = terms(conditions, clean)
-    share = np.minimum(told_scales(default, mine, default_columns, world_columns(
-        design, mine) if not mine.empty else np.zeros((*values.shape, 0))), 1.0)
-    share = np.where(default_sizes > 0, share, 1.0)
-    quiet = ~sizes.worse & (share < 1.0).any(axis=1)
-    if not quiet.any():
-        return words
     count = len(TERM_FAMILIES)
-    power = power_against(gram, member, told_sizes, np.maximum(default_sizes, told_sizes),
-                       seen_families(gram, member, count))
-    moved = moved_by(scaled(default, np.clip(1.0 - share, 0.0, None)))
+    seen = seen_families(gram, member, count)
     idx = np.flatnonzero(free)
     machine = idx[idx < len(ERROR_NAMES)]
     rows = np.flatnonzero(idx < len(ERROR_NAMES))
     prior = default_scales(ParameterSpace())[machine]
     cov = covariance[:, rows][:, :, rows]
-    own = family_index(default.names)
-    factors = np.ones_like(share)
-    for f in np.flatnonzero(np.isin(np.arange(count), own)):
-        factors[:, f] = widening(cov, moved[:, rows][:, :, own == f], prior)
-    for m in np.flatnonzero(quiet):
-        words[m] = blind_spot(conditions.label, DEFAULT_CONDITIONS, TERM_FAMILIES,
-                              np.where(share[m] < 1.0, factors[m], 1.0), power[m])
+    mine = terms(conditions, clean)
+    mine_columns = (world_columns(design, mine) if not mine.empty
+                    else np.zeros((*values.shape, 0)))
+    pending = ~sizes.worse
+    # A world the readings cannot tell from the told one, and in which its error bars
+    # would be too narrow, is a blind spot whichever world the readings came from: each
+    # named world at least as harsh as the told one's name is asked, mildest first.
+    for harsher in CONDITION_NAMES[CONDITION_NAMES.index(conditions.name):]:
+        wider = terms(harsher, clean)
+        if wider.empty:
+            continue
+        wider_columns = world_columns(design, wider)
+        wider_sizes = told_scales(base, wider, columns, wider_columns)
+        # The told world's share of the harsher one's, per family, both at the same
+        # readings: below 1 is a blind spot's candidate, and the harsher world's terms at
+        # the rest of their size are what it leaves out.
+        share = np.minimum(told_scales(wider, mine, wider_columns, mine_columns), 1.0)
+        share = np.where(wider_sizes > 0, share, 1.0)
+        quiet = pending & (share < 1.0).any(axis=1)
+        if not quiet.any():
+            continue
+        power = power_against(gram, member, told_sizes, np.maximum(wider_sizes, told_sizes),
+                              seen)
+        moved = moved_by(scaled(wider, np.clip(1.0 - share, 0.0, None)))
+        own = family_index(wider.names)
+        factors = np.ones_like(share)
+        for f in np.flatnonzero(np.isin(np.arange(count), own)):
+            factors[:, f] = widening(cov, moved[:, rows][:, :, own == f], prior)
+        for m in np.flatnonzero(quiet):
+            words[m] = blind_spot(conditions.label, harsher, TERM_FAMILIES,
+                                  np.where(share[m] < 1.0, factors[m], 1.0), power[m])
+        pending &= np.array([w is None for w in words])
     return words
 
 

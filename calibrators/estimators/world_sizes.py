@@ -326,15 +326,16 @@ def widening(covariance: np.ndarray, moved: np.ndarray, scale: np.ndarray) -> np
     return np.sqrt(ratio)
 
 
-def blind_spot(told_name: str, default_name: str, families: tuple[str, ...],
+def blind_spot(told_name: str, harsher_name: str, families: tuple[str, ...],
                factors: np.ndarray, power: np.ndarray) -> str | None:
     """The words of one machine's blind-spot warning, or None: the families (F) the told
-    world ``told_name`` carries smaller than ``default_name``'s, each with its ``factors``
-    (F,: the z-RMS that family at the default's size would give the error bars, 1 where it
-    is not smaller) and the world test's ``power`` against it (F,).  Those the test sees
-    in fewer than :data:`SEEN_POWER` of experiments are blind spots; when together they
-    would widen the error bars beyond :data:`HONEST_RATIO` (the excesses of ``z^2`` add),
-    the words name the fewest of them, largest first, that do, with the factor."""
+    world ``told_name`` carries smaller than the harsher named world ``harsher_name``,
+    each with its ``factors`` (F,: the z-RMS that family at the harsher world's size would
+    give the error bars, 1 where it is not smaller) and the world test's ``power`` against
+    it (F,).  Those the test sees in fewer than :data:`SEEN_POWER` of experiments are
+    blind spots; when together they would widen the error bars beyond
+    :data:`HONEST_RATIO` (the excesses of ``z^2`` add), the words name the fewest of
+    them, largest first, that do, with the factor."""
     excess = np.where(power < SEEN_POWER, factors**2 - 1.0, 0.0)
     if np.sqrt(1.0 + excess.sum()) <= HONEST_RATIO:
         return None
@@ -343,12 +344,13 @@ def blind_spot(told_name: str, default_name: str, families: tuple[str, ...],
     named = ", ".join(f"{families[f]} ({factors[f]:.2f}x, seen in {power[f]:.0%})"
                       for f in order[:needed])
     return (f"{BLIND_SPOT} the fit was told the {told_name} conditions, smaller than the "
-            f"default {default_name}'s in effects these readings cannot show (the world "
-            f"test sees them in fewer than {SEEN_POWER:.0%} of experiments that have "
-            f"them): {named}; if the {default_name}'s effects act, its error bars are "
+            f"{harsher_name}'s in effects these readings cannot show (the world test "
+            f"sees them in fewer than {SEEN_POWER:.0%} of experiments that have them): "
+            f"{named}; if the {harsher_name}'s effects act, its error bars are "
             f"{np.sqrt(1.0 + excess.sum()):.2f}x too narrow along the combinations it "
-            f"determines; fit with --conditions {default_name} or auto, or add readings of "
-            "an instrument that sees them")
+            f"determines; the readings do not say the world is worse, only that they "
+            f"cannot rule it out; fit with --conditions {harsher_name}, or add readings "
+            "of an instrument that sees them")
 
 
 def scaled(consider: Consider, scales: np.ndarray) -> Consider:
