@@ -71,10 +71,10 @@ CEILING: float = 4.0
 #: Directions of the geometry's Jacobian below this fraction of its largest singular value
 #: squared are not projected out: they are round-off, not parameters.
 RANK_TOL: float = 1e-12
-#: The top of the honesty band of issue 38: error bars whose z-RMS the default world's
+#: The top of the honesty band of issue 38: error bars whose z-RMS a harsher named world's
 #: effects would raise above this are too narrow to hand out unsaid.
 HONEST_RATIO: float = 1.25
-#: The world test's power against a family at the default world's size below which its
+#: The world test's power against a family at a harsher world's size below which its
 #: silence does not say that the family is smaller: the issue's share of understated
 #: experiments the check must flag (90 %).
 SEEN_POWER: float = 0.9

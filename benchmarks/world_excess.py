@@ -1,0 +1,101 @@
+"""Which effect families carry a misjudged world's excess of z^2, and can the readings see them.
+
+    python benchmarks/world_excess.py --truth workshop --agent optimal --told lab
+                                      [--machines 50] [--seed 1] [--sigma 0.02]
+                                      [--budget 3600] [--episodes DIR] [--scale EFFECT=K]
+
+The experiments of ``misjudged_world.py`` (the same episodes, kept in ``--episodes``) are
+fitted by ``full`` told ``--told`` with the world check on.  Beside the measured row it
+prints, for each named world harsher than the told one, what the fit's blind-spot
+analysis (:func:`calibrators.estimators.world_sizes.blind_spot`) weighed on the machines
+where the world test was silent: the z-RMS it predicts there (the median over machines of
+``sqrt(1 + sum of the families' excesses of z^2)``), and per family the mean excess of
+``z^2``, the median factor and the world test's power against the family at that world's
+size (median and largest).  The analysis predicts the excess over error bars that are
+honest in the told world; what the fit shows told the truth is the other row to read
+beside it.
+
+``--scale EFFECT=K`` multiplies the second moments of one effect's table rows in the
+fit's terms by K (an experiment on the fit's model of that effect, not an option of the
+tool): it asks how far the fit's own model of the effect falls short of what acts.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+from misjudged_world import played, row
+
+import calibrators.estimators.consider as consider
+import calibrators.estimators.gauss_newton as gauss_newton
+from calibrators.estimators.consider import TERM_FAMILIES
+from calibrators.study.compare import Config
+from orthoglide_env.world.conditions import CONDITION_NAMES, EFFECT_NAMES, Conditions
+
+
+def scaled_effect(spec: str) -> tuple[str, float]:
+    """``EFFECT=K`` as (effect, K); ``argparse.ArgumentTypeError`` on anything else."""
+    effect, _, factor = spec.partition("=")
+    try:
+        k = float(factor)
+    except ValueError:
+        k = float("nan")
+    if effect not in EFFECT_NAMES or not k > 0:
+        raise argparse.ArgumentTypeError(f"--scale wants EFFECT=K with EFFECT one of "
+                                         f"{list(EFFECT_NAMES)} and K > 0, got {spec!r}")
+    return effect, k
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--truth", choices=CONDITION_NAMES, default="workshop")
+    parser.add_argument("--agent", default="optimal")
+    parser.add_argument("--told", choices=CONDITION_NAMES, default="lab")
+    parser.add_argument("--machines", type=int, default=50)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--sigma", type=float, default=0.02)
+    parser.add_argument("--budget", type=float, default=3600.0)
+    parser.add_argument("--episodes", type=Path, default=None,
+                        help="the folder where misjudged_world.py keeps its episodes")
+    parser.add_argument("--scale", type=scaled_effect, default=None,
+                        help="EFFECT=K: that effect's second moments times K in the fit")
+    args = parser.parse_args()
+    config = Config(agents=(args.agent,), estimators=("full",),
+                    conditions=Conditions(args.truth), seed=args.seed, sigma=args.sigma,
+                    budget_s=args.budget)
+    episodes = played(config, args.agent, args.machines, args.episodes)
+    if args.scale is not None:
+        effect, k = args.scale
+        moment = consider.second_moment
+        consider.second_moment = (lambda e, p, c: moment(e, p, c) * (k if e == effect else 1.0))
+    weighed: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+    words = gauss_newton.blind_spot
+
+    def recorded(told: str, harsher: str, families: tuple[str, ...], factors: np.ndarray,
+                 power: np.ndarray) -> str | None:
+        weighed.setdefault(harsher, []).append((factors.copy(), power.copy()))
+        return words(told, harsher, families, factors, power)
+
+    gauss_newton.blind_spot = recorded
+    r = row(args.truth, args.agent, args.told, episodes, episodes[0].run.sigma)
+    low, high = r["z_ci95"]
+    scale = "" if args.scale is None else f", {args.scale[0]} second moments x{args.scale[1]:g}"
+    print(f"truth {args.truth}, {args.agent}, told {args.told}{scale}, {r['machines']} "
+          f"machines: z-RMS {r['z_rms']:.2f} [{low:.2f}, {high:.2f}], world test flags "
+          f"{r['warned'] - r['blind']:.2f}, blind spot {r['blind']:.2f}")
+    for harsher, rows in weighed.items():
+        factors = np.array([f for f, _ in rows])
+        power = np.array([p for _, p in rows])
+        predicted = np.sqrt(1.0 + np.sum(factors**2 - 1.0, axis=1))
+        print(f"  against {harsher}, {len(rows)} machines the test left silent: predicted "
+              f"z-RMS {np.median(predicted):.2f}")
+        for f, family in enumerate(TERM_FAMILIES):
+            print(f"    {family:9} excess of z^2 {np.mean(factors[:, f]**2 - 1):6.3f}  factor "
+                  f"{np.median(factors[:, f]):.3f}  power {np.median(power[:, f]):.3f} "
+                  f"(largest {power[:, f].max():.3f})")
+
+
+if __name__ == "__main__":
+    main()
