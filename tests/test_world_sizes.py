@@ -206,6 +206,38 @@ def test_a_blind_spot_names_the_fewest_families_that_pass_the_band() -> None:
     assert blind_spot("lab", "lab", families, np.ones(6), blind) is None
 
 
+def test_a_blind_spot_is_asked_of_every_harsher_world_and_gone_when_told_the_harshest(
+        ) -> None:
+    """The tracker's experiment on 4 machines of an ideal world, fitted told ``ideal``: its
+    readings see the lab's lead error at least in part, and the lab's unseen effects
+    widen its error bars about 1.24x, inside the band, but the workshop's do beyond it.
+    Where the world test is silent (it flags a told world's experiment at 0.01: all four
+    flagged, which would leave nothing to check, has a chance of 1e-8), the fit names a
+    blind spot whose factor passes the band; told the ``workshop``, no world is harsher
+    and none is named."""
+    from calibrators.estimators.catalogue import for_study
+    from calibrators.study.compare import Config, agent_episodes
+    from orthoglide_env.world.conditions import Conditions
+
+    config = Config(agents=("tracker",), estimators=("full",), conditions=Conditions("ideal"),
+                    seed=1, sigma=0.02)
+    readings = [e.run.measurements for e in agent_episodes(config, "tracker", [0, 1, 2, 3])]
+    fits = {told: for_study("full", 0.02, Conditions(told), "realistic",
+                            world_check=True).fit_many(readings)
+            for told in ("ideal", "workshop")}
+    checked = 0
+    for ideal, workshop in zip(fits["ideal"], fits["workshop"], strict=True):
+        assert not any(w.startswith(BLIND_SPOT) for w in workshop.warnings)
+        words = [w for w in ideal.warnings if w.startswith("world:")]
+        if words and not words[0].startswith(BLIND_SPOT):
+            continue
+        checked += 1
+        assert len(words) == 1
+        factor = float(words[0].split("its error bars are ")[1].split("x too narrow")[0])
+        assert factor > HONEST_RATIO
+    assert checked > 0
+
+
 def _cli(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "calibrators.cli", *args],
                           capture_output=True, text=True, cwd=ROOT, timeout=600)
