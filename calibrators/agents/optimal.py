@@ -31,7 +31,6 @@ from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.world.conditions import Conditions
 
 
-@lru_cache(maxsize=8)
 def fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
                budget_s: float, design: MachineDesign,
                conditions: Conditions | None = None, criterion: str = "I",
@@ -44,7 +43,23 @@ def fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
     TCP error after rigid motion it predicts (mm).  In a lab that owns the interferometer
     or the ballbar, the plans that first take a continuous design of the bound's model
     rounded to bundles (:mod:`calibrators.planning.rounding`) are made too, and the one
-    predicting the least error kept (criterion ``I``)."""
+    predicting the least error kept (criterion ``I``).
+
+    Made once per process for each set-up, however the arguments are passed: ``optimal``
+    and ``active`` in one comparison (``active`` replays its re-mounts and bundles) share
+    the plan, whose rounded designs' greedy fills cost about half a CPU-minute each."""
+    # Every argument by position: a cache keyed on the call's form made a second plan
+    # for the same set-up when a caller left out a default another passed.
+    return _fixed_plan(tuple(slots), tuple(engaged), sigma, budget_s, design, conditions,
+                       criterion, remounts, tuple(instruments))
+
+
+@lru_cache(maxsize=8)
+def _fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
+                budget_s: float, design: MachineDesign, conditions: Conditions | None,
+                criterion: str, remounts: bool, instruments: tuple[str, ...]
+                ) -> tuple[tuple[PlannedOperation, ...], float]:
+    """:func:`fixed_plan`, its arguments all given, cached per process."""
     def opened() -> Planner:
         planner = Planner(list(slots), list(engaged), sigma, budget_s, criterion=criterion,
                           design=design, conditions=conditions, instruments=instruments)

@@ -150,6 +150,7 @@ class Belief:
         # touches) with zero rows at column 0; replaced at a re-mount, as its rows are.
         self.touched_columns = np.zeros((k, N_MACHINE + N_STAND), dtype=int)
         self.touched_rows: list[np.ndarray] = [np.zeros((p, N_MACHINE + N_STAND))] * k
+        self._touched: np.ndarray | None = None
         for k in range(len(self.slots)):
             self._set_rows(k)
         # Where an engaged gauge was seen not to read (its tip beyond the travel): it will
@@ -189,6 +190,7 @@ class Belief:
         touched = np.zeros(self.touched_rows[stand].shape)
         touched[:, :len(used)] = rows[:, used]
         self.touched_columns, self.touched_rows[stand] = columns, touched
+        self._touched = None
 
     @property
     def rows(self) -> np.ndarray:
@@ -198,6 +200,16 @@ class Belief:
             self._stacked = np.stack(self.stand_rows)
             self._stacked.setflags(write=False)
         return self._stacked
+
+    @property
+    def touched(self) -> np.ndarray:
+        """:attr:`touched_rows` stacked by posture (P, K, T), read-only: made once per
+        mounting of the stands, where gathering each stand's at every decision cost the
+        ``active`` agent a twentieth of its choice."""
+        if self._touched is None:
+            self._touched = np.stack(self.touched_rows, axis=1)
+            self._touched.setflags(write=False)
+        return self._touched
 
     def predicted_tips(self, postures: np.ndarray | slice = slice(None)) -> np.ndarray:
         """Predicted tip distance of every stand's gauge at ``postures`` (K, P'), mm:

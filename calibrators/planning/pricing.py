@@ -165,7 +165,7 @@ class Pricer(Belief):
         square of its product with ``C F``, r columns instead of every unknown's."""
         c, cols = self.covariance, self.touched_columns  # (K, T)
         # (K, L, T), laid out as the stands' rows at the postures were before (L, K, T).
-        part = np.swapaxes(np.stack([t[postures] for t in self.touched_rows], axis=1), 0, 1)
+        part = np.swapaxes(self.touched[postures], 0, 1)
         if self.criterion == "D":
             left, right = part @ c[cols[:, :, None], cols[:, None, :]], part
         else:

@@ -75,6 +75,14 @@ def directions(start: np.ndarray, targets: np.ndarray, last: np.ndarray) -> np.n
     return np.where(targets > start, 1.0, np.where(targets < start, -1.0, last))
 
 
+def _at(table: np.ndarray, slots: np.ndarray, postures: np.ndarray | slice) -> np.ndarray:
+    """``table[slots][:, postures]`` of a table (S, P, ...) by slot and posture, gathering
+    only the postures asked for (a plan prices a few of some 1,500 at a time)."""
+    if isinstance(postures, slice):
+        return table[slots][:, postures]
+    return table[slots[:, None], np.asarray(postures)[None, :]]
+
+
 @dataclass
 class WorldTerms:
     """The world's unknowns of one experiment being designed on ``table`` (its design's
@@ -133,7 +141,7 @@ class WorldTerms:
         stands = np.arange(self.stands) if stands is None else np.asarray(stands)
         mounted = slots[stands] >= 0
         slot = np.maximum(slots[stands], 0)
-        drho = self.drive[slot][:, postures] * mounted[:, None, None]  # (K, P', 3)
+        drho = _at(self.drive, slot, postures) * mounted[:, None, None]  # (K, P', 3)
         k, p = drho.shape[:2]
         fitted = np.zeros((k, p, self.count))
         column = 0
@@ -158,7 +166,7 @@ class WorldTerms:
                     pattern * mounted[:, None])
         considered = np.zeros((k, p, self.consider.shape[1]))
         if self.per_dial:
-            y = self.table.reading[slot][:, postures]
+            y = _at(self.table.reading, slot, postures)
             for j, (_, pattern) in enumerate(dial_terms(y, self.table.travel,
                                                         self.conditions)):
                 considered[np.arange(k), :, self.dial_columns[stands, j]] = (
