@@ -113,3 +113,38 @@ def test_bound_with_the_ballbar_is_below_a_plan_that_reads_it(bundle_taken, monk
     # Owning more can only help, and the bar is read where it pays.
     assert with_bar.bound_mm <= dial.bound_mm
     assert with_bar.ballbar_readings > 0
+
+
+@pytest.mark.parametrize("world", ["ideal", "lab", "workshop"])
+def test_the_planner_prices_a_pivot_with_the_fits_prior(world):
+    # The planner's rows of a bar's readings over its pivot's centre are the fit's
+    # Jacobian in units of the fit's prior (pivot_sigmas: one source of truth), so what a
+    # plan expects of the bar is what the fit will draw from it.  The prior is the
+    # centring's alone under ideal and wider where the drives err at the centre (10.8 and
+    # 17.5 um against 6 um), so the check is not of equal numbers by accident.
+    from calibrators.estimators.consider import pivot_sigmas
+    from calibrators.planning.instruments import bundles, reading_rows
+    from orthoglide_env.instruments import ballbar
+    from orthoglide_env.reading_model import (
+        BALLBAR_CENTRE_SCALE,
+        ReadingLayout,
+        default_scales,
+        jacobian,
+    )
+
+    conditions = Conditions(world)
+    bar = next(b for b in bundles(PROTOTYPE, ("ballbar",)) if b.instrument == "ballbar")
+    _, setup, _ = reading_rows(bar, PROTOTYPE, conditions, bar.path)
+    layout = ReadingLayout.of(["bar"] * len(bar.path), [bar.spec] * len(bar.path), bar.path,
+                              PROTOTYPE)
+    space = layout.space
+    derivative = jacobian(np.zeros(len(space)), layout, np.ones(len(space), dtype=bool),
+                          default_scales(space))[:, -3:]  # per BALLBAR_CENTRE_SCALE
+    prior = pivot_sigmas(layout, conditions)
+    # Whitened by the bar's sigma, per unit of the prior: rounding only (~1e-15 relative).
+    expected = derivative * prior / BALLBAR_CENTRE_SCALE / ballbar.sigma(conditions)
+    assert np.allclose(setup[:, :3], expected, rtol=1e-12, atol=0)
+    if world == "ideal":
+        assert np.allclose(prior, ballbar.centring_sigma(), rtol=1e-12)
+    else:
+        assert np.all(prior > 1.5 * ballbar.centring_sigma())

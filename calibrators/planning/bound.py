@@ -20,10 +20,10 @@ The unknowns: the machine's 27 errors (the realistic preset's sigmas), the lead 
 terms as the ``full`` estimator fits them (the pitch table's coefficients, whitened, and
 the screw's periodic error: :func:`~calibrators.estimators.consider.lead_terms`), and a
 zero per dial slot and per drive's interferometer set-up (diffuse, :data:`~orthoglide_env.
-lab.design_belief.ZERO_SCALE`), and the ballbar set-up's pivot centre (its centring's
-prior) and zero (the fit's rows: :func:`~calibrators.planning.instruments.reading_rows`).
-``W`` is the TCP error's weight over the first two
-groups (:func:`~orthoglide_env.scoring.predicted.rigid_weight_with_drives`).
+lab.design_belief.ZERO_SCALE`), and the ballbar set-up's pivot centre (the fit's prior,
+:func:`~calibrators.estimators.consider.pivot_sigmas`) and zero (the fit's rows:
+:func:`~calibrators.planning.instruments.reading_rows`).  ``W`` is the TCP error's weight
+over the first two groups (:func:`~orthoglide_env.scoring.predicted.rigid_weight_with_drives`).
 
 What is relaxed, each a superset of what a plan can do, so the bound stays below every
 plan (a Gaussian posterior only narrows when more is known or read):

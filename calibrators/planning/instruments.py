@@ -48,7 +48,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from calibrators.estimators.consider import DEFAULT_NODE_SPACING, lead_terms
+from calibrators.estimators.consider import DEFAULT_NODE_SPACING, lead_terms, pivot_sigmas
 from orthoglide_env.instruments import ballbar, interferometer
 from orthoglide_env.instruments.ballbar import BallbarSpec
 from orthoglide_env.lab.design_belief import N_MACHINE, ZERO_SCALE
@@ -244,8 +244,9 @@ def reading_rows(bundle: Bundle, design: MachineDesign, conditions: Conditions |
                           default_scales(space))
     rows[:, :N_MACHINE] = derivative[:, :N_MACHINE]
     rows[:, N_MACHINE:] = np.einsum("ra,ral->rl", carriage_derivatives(layout), lead)
-    # The pivot's centre, in units of its centring's prior, and the bar's length.
-    centre = derivative[:, N_MACHINE:] * ballbar.centring_sigma() / BALLBAR_CENTRE_SCALE
+    # The pivot's centre, in units of the fit's prior (the centring and the drives' errors
+    # where it was centred), and the bar's length.
+    centre = derivative[:, N_MACHINE:] * pivot_sigmas(layout, world) / BALLBAR_CENTRE_SCALE
     setup = np.column_stack([centre, np.full(len(path), ZERO_SCALE)])
     sigma = ballbar.sigma(world)
     return rows / sigma, setup / sigma, ballbar.nominal_readings(design, spec, path)
