@@ -40,7 +40,7 @@ from gymnasium.spaces import flatten, flatten_space
 
 from calibrators.agents.actor_weights import read_actor
 from calibrators.agents.base import Agent, action
-from orthoglide_env import DESIGN_LAB_ENV_ID, FLAT_LAB_ENV_ID
+from orthoglide_env import DESIGN_LAB_ENV_ID, DESIGN_LAB_V1_ENV_ID, FLAT_LAB_ENV_ID
 from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.lab.design_belief import DesignBelief
 from orthoglide_env.lab.operations import OP_NAMES, SLOT_NAMES, V0_OPS, Op, slot_catalogue
@@ -52,6 +52,8 @@ SPEC_ENTRY: str = "orthoglide_policy.json"
 #: Version of that entry's layout: a file of another version is refused.
 SPEC_VERSION: int = 1
 INSTALL_HINT: str = "install the extra: pip install '.[rl]'"
+#: The design views' env ids, by the view's version (its observation).
+DESIGN_VIEW_IDS: dict[str, int] = {DESIGN_LAB_ENV_ID: 0, DESIGN_LAB_V1_ENV_ID: 1}
 #: How a design-view policy may play (:attr:`PolicySpec.play`).
 PLAYS: tuple[str, ...] = ("draw", "argmax")
 
@@ -77,8 +79,9 @@ class PolicySpec:
     #: The training lab's machine design (``MachineDesign.to_dict``); None: the prototype
     #: (files saved before designs were recorded).
     design: dict[str, Any] | None = None
-    #: The env id (and version) the policy acted in: the flat lab, or the design view
-    #: (``OrthoglideLabDesign-v0``, whose discrete operations the policy chooses).
+    #: The env id (and version) the policy acted in: the flat lab, or a design view
+    #: (``OrthoglideLabDesign-v0`` or ``-v1``, whose discrete operations the policy
+    #: chooses).
     env_id: str = FLAT_LAB_ENV_ID
     #: How a design-view policy plays: "draw" from its distribution over the open
     #: operations, or "argmax", its most likely one (a policy that imitates a greedy
@@ -126,7 +129,8 @@ def spec_of(env: gym.Env, algorithm: str, env_kwargs: dict[str, Any],
         obs_var=tuple(float(v) for v in rms.var) if rms is not None else (),
         clip_obs=float(getattr(normaliser, "clip_obs", 10.0)),
         epsilon=float(getattr(normaliser, "epsilon", 1e-8)), design=lab.design.to_dict(),
-        env_id=DESIGN_LAB_ENV_ID if discrete else FLAT_LAB_ENV_ID, play=play,
+        env_id=((DESIGN_LAB_V1_ENV_ID if env.get_wrapper_attr("version") else DESIGN_LAB_ENV_ID)
+                if discrete else FLAT_LAB_ENV_ID), play=play,
     )
 
 
@@ -158,9 +162,9 @@ def read_spec(path: str | Path) -> PolicySpec:
     if spec.version != SPEC_VERSION:
         raise ValueError(f"policy file '{path}' has layout version {spec.version}, this "
                          f"workbench reads {SPEC_VERSION}: retrain it")
-    if spec.env_id not in (FLAT_LAB_ENV_ID, DESIGN_LAB_ENV_ID):
+    if spec.env_id != FLAT_LAB_ENV_ID and spec.env_id not in DESIGN_VIEW_IDS:
         raise ValueError(f"policy file '{path}' acted in env '{spec.env_id}'; this workbench "
-                         f"plays {FLAT_LAB_ENV_ID} and {DESIGN_LAB_ENV_ID}: retrain it")
+                         f"plays {[FLAT_LAB_ENV_ID, *DESIGN_VIEW_IDS]}: retrain it")
     if spec.play not in PLAYS:
         raise ValueError(f"policy file '{path}' plays '{spec.play}'; this workbench plays "
                          f"{list(PLAYS)}: retrain it")
@@ -244,7 +248,7 @@ class PolicyAgent(Agent):
 
     def _check_lab(self) -> None:
         """Refuse a lab of another slot catalogue or design than the training lab's."""
-        script = ("examples/train_masked.py" if self.spec.env_id == DESIGN_LAB_ENV_ID
+        script = ("examples/train_masked.py" if self.spec.env_id in DESIGN_VIEW_IDS
                   else "examples/train_policy.py")
         slots = tuple(s.slot for s in self.env.slots)
         if self.spec.slots != slots:
@@ -283,7 +287,7 @@ class PolicyAgent(Agent):
 
 
 class DesignPolicyAgent(PolicyAgent):
-    """Plays a policy trained on the design view (``OrthoglideLabDesign-v0``,
+    """Plays a policy trained on a design view (``OrthoglideLabDesign-v0`` or ``-v1``,
     :class:`~orthoglide_env.wrappers.DesignLab`): it keeps the view's belief from the lab's
     observations, draws the policy's operation among the open ones (its mask) with the
     agent's random stream, and plays it as the lab actions it is (a move's lever flicks,
@@ -309,7 +313,7 @@ class DesignPolicyAgent(PolicyAgent):
         lab = self.env
         self.belief = DesignBelief(lab.design, lab.n_stands,
                                    weighting_sigma(float(lab.noise.effective_sigma)),
-                                   self.spec.budget_s)
+                                   self.spec.budget_s, DESIGN_VIEW_IDS[self.spec.env_id])
         self._check_sizes((len(self.belief.observation()), self.belief.n_actions))
         self.belief.start(observation)
         self.queue: list[dict[str, Any]] = []
@@ -342,4 +346,4 @@ def policy_agent(path: str | Path) -> PolicyAgent:
     """The agent that plays the policy file ``path``: of the flat lab or of the design
     view, as its spec says."""
     spec = read_spec(path)
-    return DesignPolicyAgent(path) if spec.env_id == DESIGN_LAB_ENV_ID else PolicyAgent(path)
+    return DesignPolicyAgent(path) if spec.env_id in DESIGN_VIEW_IDS else PolicyAgent(path)
