@@ -38,7 +38,7 @@ agent.reset(lab, observation, np.random.default_rng(0))
 decisions = 0
 while True:
     if not agent.queue:
-        logits = agent.actor.logits(agent.belief.observation())
+        logits = agent.actor.logits_many(agent.belief.observation()[None])[0]
         best = int(np.argmax(np.where(agent.belief.action_mask(), logits, -np.inf)))
         assert agent.decide() == best
         decisions += 1
@@ -55,6 +55,44 @@ print(decisions, float(observation["time"][0]))
     # A 330 s episode of single moves of a few seconds each: tens of decisions, all
     # within the training episode's budget.
     assert 10 <= int(decisions) and float(seconds) <= 330.0
+
+
+def test_a_chunk_of_machines_decides_as_each_machine_alone() -> None:
+    """``compare`` plays a chunk of machines' episodes together, and the policy's agents
+    then decide together (one network pass): each machine's episode is the one it plays
+    alone, reading for reading."""
+    import gymnasium as gym
+
+    import orthoglide_env
+    from calibrators.agents.names import get_agent
+    from calibrators.study.episodes import run_episode, run_episodes
+
+    lab = {"conditions": "lab", "gauge_sigma": 0.02, "budget_s": 330.0}
+    seeds = [11, 12, 13]
+    envs = gym.vector.SyncVectorEnv([lambda: gym.make(orthoglide_env.LAB_ENV_ID, **lab)] * 3)
+    together = run_episodes(envs, [get_agent(f"policy:{SHIPPED}") for _ in seeds], seeds)
+    for seed, episode in zip(seeds, together, strict=True):
+        alone = run_episode(gym.make(orthoglide_env.LAB_ENV_ID, **lab),
+                            get_agent(f"policy:{SHIPPED}"), seed)
+        assert [(r.mounting, r.rho, r.reading) for r in episode.records] == [
+            (r.mounting, r.rho, r.reading) for r in alone.records]
+        assert len(episode.records) > 30
+
+
+def test_the_fused_network_is_the_layers_of_the_file() -> None:
+    """``logits_many`` (float64, a matrix product per layer for a chunk) is the float32
+    layers' network to float32's rounding (logits of order 10, so 1e-5), and a row's logits
+    do not depend on the rows beside it beyond float64's rounding."""
+    actor = read_actor(SHIPPED)
+    rng = np.random.default_rng(0)
+    rows = rng.standard_normal((7, actor.weights[0].shape[1])).astype(np.float32)
+    many = actor.logits_many(rows)
+    for k, row in enumerate(rows):
+        np.testing.assert_allclose(many[k], actor.logits(row), rtol=0, atol=1e-5)
+        np.testing.assert_allclose(many[k], actor.logits_many(row[None])[0], rtol=0,
+                                   atol=1e-12)
+    with pytest.raises(ValueError, match=r"observations are \(N, 269\)"):
+        actor.logits_many(rows[:, :5])
 
 
 def test_the_weights_are_torchs_bit_for_bit() -> None:

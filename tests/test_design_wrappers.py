@@ -29,7 +29,12 @@ from calibrators.planning.design_expert import PlanExpert
 from calibrators.planning.search import Planner
 from calibrators.study.episodes import run_episode
 from orthoglide_env.instruments.dial import weighting_sigma
-from orthoglide_env.lab.design_belief import COUNT_SCALE, FALL_FLOOR, READ_PROBABILITY
+from orthoglide_env.lab.design_belief import (
+    COUNT_SCALE,
+    FALL_FLOOR,
+    READ_PROBABILITY,
+    observations,
+)
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.lab.rewards import ACCURACY_UNIT_MM
 from orthoglide_env.model.design import MachineDesign
@@ -125,6 +130,21 @@ def test_view_1_counts_the_readings_here_and_their_fall() -> None:
         before = after
     # Zero: read at the reset, then once more.
     assert counts == [[2, 2], [3, 3], [4, 4], [1, 2], [1, 5]]
+
+
+def test_the_observations_of_a_chunk_are_each_belief_s_own() -> None:
+    """A policy deciding for a chunk of machines observes them in one batched pass: the
+    same floats as each belief's own observation, in every state of either view."""
+    rng = np.random.default_rng(4)
+    for version in (0, 1):
+        envs = [design(conditions="lab", version=version) for _ in range(4)]
+        for k, env in enumerate(envs):
+            env.reset(seed=k)
+            candidate_moves(env, rng, 3 * k)
+        beliefs = [env.belief for env in envs]
+        for count in (1, 2, 4):
+            np.testing.assert_array_equal(observations(beliefs[:count]),
+                                          [b.observation() for b in beliefs[:count]])
 
 
 def test_bad_arguments_are_refused() -> None:

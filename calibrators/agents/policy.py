@@ -29,6 +29,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import zipfile
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -42,7 +43,7 @@ from calibrators.agents.actor_weights import read_actor
 from calibrators.agents.base import Agent, action
 from orthoglide_env import DESIGN_LAB_ENV_ID, DESIGN_LAB_V1_ENV_ID, FLAT_LAB_ENV_ID
 from orthoglide_env.instruments.dial import weighting_sigma
-from orthoglide_env.lab.design_belief import DesignBelief
+from orthoglide_env.lab.design_belief import DesignBelief, observations
 from orthoglide_env.lab.operations import OP_NAMES, SLOT_NAMES, V0_OPS, Op, slot_catalogue
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.wrappers import flat_action_space, lab_action
@@ -320,14 +321,33 @@ class DesignPolicyAgent(PolicyAgent):
         self.last: dict[str, Any] | None = None
 
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
-        if self.last is not None:
-            self.belief.observe(self.last, observation, bool(info.get("refused")))
-        if not self.queue:
-            if observation["time"][0] >= self.spec.budget_s:
-                return action(Op.STOP)
-            self.queue = self.belief.operations(self.decide())
-        self.last = self.queue.pop(0)
-        return action(self.last["op"], self.last["rho"], self.last["stand"], self.last["slot"])
+        return self.act_all([self], [observation], [info])[0]
+
+    @classmethod
+    def act_all(cls, agents: list[Agent], observations: list[dict[str, np.ndarray]],
+                infos: list[Mapping[str, Any]]) -> list[dict[str, Any]]:
+        """Each agent takes in its lab's observation; those that choose an operation now
+        choose together (:func:`decide_all`, one network pass per policy file); each plays
+        its operation's next lab action, or stops once the training episode's time is
+        used."""
+        deciding: list[DesignPolicyAgent] = []
+        for agent, observation, info in zip(agents, observations, infos, strict=True):
+            if agent.last is not None:
+                agent.belief.observe(agent.last, observation, bool(info.get("refused")))
+            if not agent.queue and observation["time"][0] < agent.spec.budget_s:
+                deciding.append(agent)
+        for group in _by_actor(deciding):
+            for agent, chosen in zip(group, decide_all(group), strict=True):
+                agent.queue = agent.belief.operations(chosen)
+        actions = []
+        for agent in agents:
+            if not agent.queue:
+                actions.append(action(Op.STOP))
+                continue
+            agent.last = agent.queue.pop(0)
+            actions.append(action(agent.last["op"], agent.last["rho"], agent.last["stand"],
+                                  agent.last["slot"]))
+        return actions
 
     def decide(self) -> int:
         """An operation among the open ones (the mask), from the policy's network's logits
@@ -335,11 +355,36 @@ class DesignPolicyAgent(PolicyAgent):
         softmax with the agent's random stream (the largest of the logits plus Gumbel
         noise).  A policy trained for a few minutes by PPO still spreads its choices, and
         its most likely operation, played alone, comes back to one posture again and again
-        (the flat agent's finding too): such a policy draws."""
-        logits = self.actor.logits(self.belief.observation())
-        if self.spec.play == "draw":
-            logits = logits + self.rng.gumbel(size=logits.shape)
-        return int(np.argmax(np.where(self.belief.action_mask(), logits, -np.inf)))
+        (the flat agent's finding too): such a policy draws.  :func:`decide_all` of this
+        agent alone."""
+        return decide_all([self])[0]
+
+
+def _by_actor(agents: list[DesignPolicyAgent]) -> list[list[DesignPolicyAgent]]:
+    """``agents`` grouped by the network they play (one per policy file), in order."""
+    groups: dict[int, list[DesignPolicyAgent]] = {}
+    for agent in agents:
+        groups.setdefault(id(agent.actor), []).append(agent)
+    return list(groups.values())
+
+
+def decide_all(agents: list[DesignPolicyAgent]) -> list[int]:
+    """Each agent's operation (:meth:`DesignPolicyAgent.decide`), for agents of one
+    network (one policy file, one view) on labs of one design: their observations in one
+    batched pass (:func:`~orthoglide_env.lab.design_belief.observations`) and their logits
+    in one matrix product per layer (:meth:`ActorWeights.logits_many
+    <calibrators.agents.actor_weights.ActorWeights.logits_many>`), so that a chunk of
+    machines pays about one machine's call overhead; the mask and a draw are each
+    agent's."""
+    if not agents:
+        return []
+    logits = agents[0].actor.logits_many(observations([a.belief for a in agents]))
+    chosen = []
+    for agent, row in zip(agents, logits, strict=True):
+        if agent.spec.play == "draw":
+            row = row + agent.rng.gumbel(size=row.shape)
+        chosen.append(int(np.argmax(np.where(agent.belief.action_mask(), row, -np.inf))))
+    return chosen
 
 
 def policy_agent(path: str | Path) -> PolicyAgent:

@@ -283,15 +283,21 @@ class DesignBelief:
         stand's slot one-hot (then "not mounted"), engaged and out of service, the posture
         scaled to [-1, 1] over the design's control limits, the time used over the
         budget, and in view 1 :meth:`reading_history`."""
+        return np.concatenate((self.log_mean_squares(),
+                               self.observation_tail())).astype(np.float32)
+
+    def observation_tail(self) -> np.ndarray:
+        """The observation after :meth:`log_mean_squares` (float64): the stands, the
+        posture, the clock and, in view 1, :meth:`reading_history`."""
         stands = np.zeros((self.n_stands, self.n_slots + 3))
         stands[np.arange(self.n_stands), np.where(self.slots >= 0, self.slots, self.n_slots)] = 1
         stands[:, -2], stands[:, -1] = self.engaged, self.faulted
         low, high = self.design.rho_min, self.design.rho_max
         rho = (2 * self.rho - (high + low)) / (high - low)
-        parts = [self.log_mean_squares(), stands.ravel(), rho, [self.time_s / self.budget_s]]
+        parts = [stands.ravel(), rho, [self.time_s / self.budget_s]]
         if self.version >= 1:
             parts.append(self.reading_history())
-        return np.concatenate(parts).astype(np.float32)
+        return np.concatenate(parts)
 
     def observation_bounds(self, longest_s: float) -> tuple[np.ndarray, np.ndarray]:
         """Bounds (float32) of every :meth:`observation` of a lab whose longest step takes
@@ -355,3 +361,19 @@ class DesignBelief:
         flicks = [{**idle, "op": Op.ENGAGE if down else Op.LIFT, "stand": k}
                   for k, down in enumerate(after[:, action]) if down != self.engaged[k]]
         return [*flicks, {**idle, "op": Op.MOVE, "rho": self.table.postures[action].copy()}]
+
+
+def observations(beliefs: list[DesignBelief]) -> np.ndarray:
+    """:meth:`DesignBelief.observation` of each of ``beliefs`` (of one design, stands and
+    view), stacked (N, n), the same floats: the predicted error's spectra of all of them in
+    one batched product and eigen-solve, whose call costs a chunk of machines about what
+    one machine's costs."""
+    first = beliefs[0]
+    n = N_MACHINE
+    blocks = first.factor.T @ np.stack([b.covariance[:n, :n] for b in beliefs]) @ first.factor
+    spectra = np.clip(np.linalg.eigvalsh((blocks + blocks.transpose(0, 2, 1)) / 2), 0.0,
+                      None)[:, ::-1]
+    values = np.concatenate((spectra, np.sum(spectra, axis=1, keepdims=True)), axis=1)
+    logs = np.log10(values / ACCURACY_UNIT_MM**2 + LOG_FLOOR)
+    tails = np.stack([b.observation_tail() for b in beliefs])
+    return np.concatenate((logs, tails), axis=1).astype(np.float32)
