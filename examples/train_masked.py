@@ -28,7 +28,11 @@ the expert's choice; after each round the policy's network is fitted again to al
 labels (masked cross-entropy, ``--updates`` minibatch steps) and a curve point is scored, its
 steps the decisions labelled so far.  Then ``--steps`` of MaskablePPO start from those
 weights (0: none; the imitated policy is kept as ``<out>.imitated.zip``), and the file
-plays its most likely operation (``play="argmax"``).
+plays its most likely operation (``play="argmax"``).  ``--view 1`` trains on
+``OrthoglideLabDesign-v1``, whose observation also counts the readings taken at the present
+posture (an expert's stays of up to 20 re-readings are then a function of what the policy
+sees); ``--select-round`` keeps each round's policy and writes the one that scored best on
+the curve machines (choose their ``--eval-seed`` apart from the test's).
 
 Every ``--every`` steps the policy so far is saved to ``<out>.last.zip`` and played on the
 first ``--curve-machines`` held-out machines, scored against their truth by

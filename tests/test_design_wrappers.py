@@ -309,6 +309,24 @@ def test_masked_ppo_trains_and_acts_within_the_mask() -> None:
     assert env.action_masks()[int(action)]
 
 
+def test_the_training_selects_a_round_by_its_held_out_score(
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture) -> None:
+    """``train_masked.py --select-round`` writes the DAgger round of the lowest error on
+    the curve machines, and is refused where there are no rounds to choose from."""
+    monkeypatch.syspath_prepend(str(Path(__file__).parents[1] / "examples"))
+    from train_masked import parse, round_file, selected_round
+
+    rows = [{"tcp_rigid_median_mm": v} for v in (0.02, 0.011, 0.013, 0.011)]
+    assert selected_round(rows) == 1
+    assert round_file(Path("r/m.zip"), 3) == Path("r/m.round3.zip")
+    assert parse(["--imitate", "2", "--steps", "0", "--select-round", "--view", "1"]).view == 1
+    for argv in (["--select-round"], ["--imitate", "2", "--select-round"],
+                 ["--view", "2"]):
+        with pytest.raises(SystemExit):
+            parse(argv)
+    assert "--select-round" in capsys.readouterr().err
+
+
 def test_a_standardised_fit_is_folded_back_onto_the_view_s_observation(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """``train_masked.py --standardise``: the imitation's fit moves the first layer to the
