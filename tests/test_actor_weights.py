@@ -19,6 +19,7 @@ from calibrators.agents.actor_weights import actor_of, read_actor
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "examples" / "policies" / "masked_lab330.zip"
+SHIPPED_HOUR = ROOT / "examples" / "policies" / "masked_lab3600.zip"
 
 
 def test_the_shipped_policy_plays_without_torch() -> None:
@@ -55,6 +56,32 @@ print(decisions, float(observation["time"][0]))
     # A 330 s episode of single moves of a few seconds each: tens of decisions, all
     # within the training episode's budget.
     assert 10 <= int(decisions) and float(seconds) <= 330.0
+
+
+def test_the_one_hour_policy_plays_view_1_within_its_mask() -> None:
+    """The shipped one-hour policy acted in the design view's version 1: its agent keeps
+    that view's belief (the readings here in its observation) on an hour's budget, and
+    its first decisions are open operations."""
+    import gymnasium as gym
+
+    import orthoglide_env
+    from calibrators.agents.names import get_agent
+    from calibrators.agents.policy import read_spec
+
+    spec = read_spec(SHIPPED_HOUR)
+    assert (spec.env_id, spec.budget_s, spec.play) == (orthoglide_env.DESIGN_LAB_V1_ENV_ID,
+                                                       3600.0, "argmax")
+    agent = get_agent(f"policy:{SHIPPED_HOUR}")
+    lab = gym.make(orthoglide_env.LAB_ENV_ID, conditions="lab", gauge_sigma=0.02,
+                   budget_s=3600.0)
+    observation, info = lab.reset(seed=5)
+    agent.reset(lab, observation, np.random.default_rng(0))
+    assert agent.belief.version == 1 and len(agent.belief.observation()) == 272
+    for _ in range(20):
+        if not agent.queue:
+            assert agent.belief.action_mask()[agent.decide()]
+        observation, _, terminated, truncated, info = lab.step(agent.act(observation, info))
+        assert not (terminated or truncated)
 
 
 def test_a_chunk_of_machines_decides_as_each_machine_alone() -> None:
