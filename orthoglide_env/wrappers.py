@@ -124,11 +124,11 @@ class DesignLab(gym.Wrapper):
                                 "not mounted"), engaged, out of service
     posture                     the joint targets scaled to [-1, 1]               3
     time                        seconds used / ``budget_s``                       1
-    readings here (v1)          readings taken at the present posture in a row,   3
+    readings here (v1)          readings taken at the present posture in a row    3
                                 and in all, over :data:`~orthoglide_env.lab.
-                                design_belief.COUNT_SCALE`; ``log10`` of the last
-                                reading's relative fall of the predicted mean
-                                square plus :data:`~orthoglide_env.lab.
+                                design_belief.COUNT_SCALE`; ``log10`` of the
+                                last reading's relative fall of the predicted
+                                mean square plus :data:`~orthoglide_env.lab.
                                 design_belief.FALL_FLOOR`
     ==========================  ===============================================  ========
 
