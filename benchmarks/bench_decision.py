@@ -2,10 +2,12 @@
 run on the same machines of the same lab.
 
     python benchmarks/bench_decision.py [--policy results/masked.zip] [--machines 5]
-        [--budget 330] [--conditions lab] [--sigma 0.02] [--seed 1]
+        [--budget 330] [--conditions lab] [--sigma 0.02] [--seed 1] [--chunk 1]
 
 Each agent plays its episodes through the lab env (``OrthoglideLab-v0``), as ``compare``
-plays them; every ``act`` call is timed in CPU seconds of the process
+plays them, ``--chunk`` machines together (each agent class's ``act_all``: the policy's
+agents decide together, one batched observation and one network pass for the chunk;
+``active``'s act one by one); every ``act_all`` call is timed in CPU seconds of the process
 (``time.process_time``), which a machine shared with other work inflates far less than
 its wall clock (on a 2-core machine at load 35, the policy's choice took 0.4 ms of CPU
 and 5.6 ms of wall time).
@@ -35,6 +37,7 @@ import numpy as np
 
 import orthoglide_env
 from calibrators.agents import get_agent
+from calibrators.agents import policy as policy_module
 from calibrators.agents.names import POLICY_PREFIX
 from calibrators.agents.policy import save_policy, spec_of
 from calibrators.study.episodes import agent_rng, machine_seed
@@ -51,9 +54,9 @@ def untrained_policy(kwargs: dict, folder: Path) -> Path:
     return save_policy(model, folder / "untrained.zip", spec_of(env, "MaskablePPO", kwargs))
 
 
-#: Each agent's method that chooses its next operation (the choice alone, without taking
-#: in the readings): the policy's network over its mask, the planner's pricing.
-CHOICE = {"policy": "decide", "active": "_next"}
+#: Each agent's choice alone, without taking in the readings: the policy's (its agents'
+#: observations, network and masks, for a chunk at once), the planner's pricing.
+CHOICE = {"policy": (policy_module, "decide_all"), "active": (None, "_next")}
 
 
 #: The parts of a policy's decision (:data:`PARTS`' order): taking in a lab step's
@@ -81,39 +84,64 @@ class TimedActor:
 
     def __init__(self, actor: object, seconds: list[float]) -> None:
         self.actor, self.weights = actor, actor.weights
-        timed(self, "logits", seconds, 1 + PARTS.index("network"))
+        timed(self, "logits_many", seconds, 1 + PARTS.index("network"))
 
-    def logits(self, observation: np.ndarray) -> np.ndarray:
-        return self.actor.logits(observation)
+    def logits_many(self, observations: np.ndarray) -> np.ndarray:
+        return self.actor.logits_many(observations)
 
 
-def play(label: str, name: str, kwargs: dict, seed: int, machine: int) -> list[float]:
-    """One episode of agent ``name``: its seconds in ``act``, the lab's seconds in ``step``,
-    its decisions, its lab steps, its seconds in its choice (:data:`CHOICE`) and, for the
-    policy, in each of :data:`PARTS` (0 for ``active``)."""
-    env = gym.make(orthoglide_env.LAB_ENV_ID, **kwargs)
-    observation, info = env.reset(seed=machine_seed(seed, machine))
-    agent = get_agent(name)
-    agent.reset(env, observation, agent_rng(machine_seed(seed, machine)))
+def play(label: str, name: str, kwargs: dict, seed: int, machines: list[int]
+         ) -> list[float]:
+    """One episode of agent ``name`` on each of ``machines``, played together as
+    ``compare`` plays a chunk (each agent's ``act_all``): its seconds in ``act_all``, the
+    labs' seconds in ``step``, its decisions, its lab steps, its seconds in its choice
+    (:data:`CHOICE`) and, for the policy, in each of :data:`PARTS` (0 for ``active``)."""
+    labs = [gym.make(orthoglide_env.LAB_ENV_ID, **kwargs) for _ in machines]
+    firsts = [lab.reset(seed=machine_seed(seed, m)) for lab, m in zip(labs, machines,
+                                                                       strict=True)]
+    agents = [get_agent(name) for _ in machines]
+    for agent, lab, (observation, _), m in zip(agents, labs, firsts, machines, strict=True):
+        agent.reset(lab, observation, agent_rng(machine_seed(seed, m)))
     choosing = [0.0] * (1 + len(PARTS))
-    timed(agent, CHOICE[label], choosing, 0)
-    if label == "policy":
-        for k, method in enumerate(("observe", "observation", "action_mask")):
-            timed(agent.belief, method, choosing, 1 + k)
-        agent.actor = TimedActor(agent.actor, choosing)
+    owner, method = CHOICE[label]
+    restore = []
+    if owner is None:
+        for agent in agents:
+            timed(agent, method, choosing, 0)
+    else:
+        restore = [(owner, method, getattr(owner, method)),
+                   (policy_module, "observations", policy_module.observations)]
+        timed(owner, method, choosing, 0)
+        timed(policy_module, "observations", choosing, 1 + PARTS.index("observation"))
+        actor = TimedActor(agents[0].actor, choosing)
+        for agent in agents:
+            timed(agent.belief, "observe", choosing, 1 + PARTS.index("update"))
+            timed(agent.belief, "action_mask", choosing, 1 + PARTS.index("mask"))
+            agent.actor = actor
     acting = stepping = 0.0
     decisions = steps = 0
-    while True:
-        decisions += not agent.queue
+    running = list(range(len(machines)))
+    state = [list(first) for first in firsts]
+    while running:
+        decisions += sum(not agents[i].queue for i in running)
         start = time.process_time()
-        action = agent.act(observation, info)
+        actions = type(agents[0]).act_all([agents[i] for i in running],
+                                          [state[i][0] for i in running],
+                                          [state[i][1] for i in running])
         middle = time.process_time()
-        observation, _, terminated, truncated, info = env.step(action)
+        done = []
+        for i, chosen in zip(running, actions, strict=True):
+            observation, _, terminated, truncated, info = labs[i].step(chosen)
+            state[i] = [observation, info]
+            if terminated or truncated:
+                done.append(i)
         stepping += time.process_time() - middle
         acting += middle - start
-        steps += 1
-        if terminated or truncated:
-            return [acting, stepping, decisions, steps, *choosing]
+        steps += len(running)
+        running = [i for i in running if i not in done]
+    for owner_, method_, inner in restore:
+        setattr(owner_, method_, inner)
+    return [acting, stepping, decisions, steps, *choosing]
 
 
 def main() -> None:
@@ -125,7 +153,12 @@ def main() -> None:
     parser.add_argument("--conditions", default="lab")
     parser.add_argument("--sigma", type=float, default=0.02)
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--chunk", type=int, default=1,
+                        help="machines played together, as a comparison's chunk: the "
+                             "policy decides for them at once")
     args = parser.parse_args()
+    if args.machines < 1 or args.chunk < 1:
+        parser.error("--machines and --chunk must be at least 1")
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import torch
 
@@ -138,13 +171,15 @@ def main() -> None:
         # One episode each first: the slot table, the fixed plan and torch start once per
         # process, a cost no decision of a sweep pays again.
         for label, name in agents.items():
-            play(label, name, kwargs, args.seed, 0)
+            play(label, name, kwargs, args.seed, [0])
         totals = {}
+        chunks = [list(range(args.machines))[k:k + args.chunk]
+                  for k in range(0, args.machines, args.chunk)]
         for label, name in agents.items():
-            runs = [play(label, name, kwargs, args.seed, m) for m in range(args.machines)]
+            runs = [play(label, name, kwargs, args.seed, chunk) for chunk in chunks]
             totals[label] = np.sum(runs, axis=0)
-    print(f"{args.machines} machines, seed {args.seed}, {args.conditions} conditions, sigma "
-          f"{args.sigma} mm, budget {args.budget:g} s")
+    print(f"{args.machines} machines in chunks of {args.chunk}, seed {args.seed}, "
+          f"{args.conditions} conditions, sigma {args.sigma} mm, budget {args.budget:g} s")
     print(f"{'agent':8}{'ms/decision':>13}{'ms/choice':>11}{'decisions':>11}"
           f"{'agent s/episode':>17}{'lab s/episode':>15}{'lab steps':>11}")
     for label, (acting, stepping, decisions, steps, choosing, *_) in totals.items():

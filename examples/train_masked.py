@@ -28,7 +28,11 @@ the expert's choice; after each round the policy's network is fitted again to al
 labels (masked cross-entropy, ``--updates`` minibatch steps) and a curve point is scored, its
 steps the decisions labelled so far.  Then ``--steps`` of MaskablePPO start from those
 weights (0: none; the imitated policy is kept as ``<out>.imitated.zip``), and the file
-plays its most likely operation (``play="argmax"``).
+plays its most likely operation (``play="argmax"``).  ``--view 1`` trains on
+``OrthoglideLabDesign-v1``, whose observation also counts the readings taken at the present
+posture (an expert's stays of up to 20 re-readings are then a function of what the policy
+sees); ``--select-round`` keeps each round's policy and writes the one that scored best on
+the curve machines (choose their ``--eval-seed`` apart from the test's).
 
 Every ``--every`` steps the policy so far is saved to ``<out>.last.zip`` and played on the
 first ``--curve-machines`` held-out machines, scored against their truth by
@@ -48,6 +52,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -68,6 +73,7 @@ from calibrators.agents.names import POLICY_PREFIX
 from calibrators.agents.policy import save_policy, spec_of
 from calibrators.planning.design_expert import PlanExpert
 from calibrators.study import compare, statistics
+from orthoglide_env.lab.design_belief import VIEW_VERSIONS
 from orthoglide_env.model.errors import DEFAULT_PRESET
 from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.wrappers import DESIGN_PER, DESIGN_REWARDS, design_lab_env
@@ -83,7 +89,7 @@ def env_kwargs(args: argparse.Namespace) -> dict[str, Any]:
     them)."""
     return {"errors": DEFAULT_PRESET, "gauge_sigma": args.sigma, "budget_s": args.budget,
             "conditions": Conditions(args.conditions).to_dict(), "reward": args.reward,
-            "per": args.per}
+            "per": args.per, "version": args.view}
 
 
 def config(args: argparse.Namespace, agents: tuple[str, ...]) -> compare.Config:
@@ -326,6 +332,8 @@ def imitate(args: argparse.Namespace, kwargs: dict[str, Any], model: Any) -> lis
                      "tcp_rigid_median_mm": held_out_rigid(
                          args, kwargs, model, args.out.with_suffix(".last.zip"))})
         write_curve(rows, args.out.with_suffix(".curve.csv"))
+        if args.select_round:
+            shutil.copyfile(args.out.with_suffix(".last.zip"), round_file(args.out, round_))
         print(f"round {round_}: {rows[-1]}", flush=True)
         if 0 < args.max_minutes <= minutes:
             break
@@ -334,6 +342,17 @@ def imitate(args: argparse.Namespace, kwargs: dict[str, Any], model: Any) -> lis
         print(f"critic fitted to {len(data[3])} imitation returns: R^2 {explained:.3f}",
               flush=True)
     return rows
+
+
+def round_file(out: Path, round_: int) -> Path:
+    """Where ``--select-round`` keeps DAgger round ``round_``'s policy."""
+    return out.with_suffix(f".round{round_}.zip")
+
+
+def selected_round(rows: list[dict]) -> int:
+    """The DAgger round whose policy scored the lowest median error on the curve machines
+    (the first of equals)."""
+    return int(np.argmin([row["tcp_rigid_median_mm"] for row in rows]))
 
 
 def parse(argv: list[str] | None = None) -> argparse.Namespace:
@@ -378,6 +397,14 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--target-kl", type=float, default=0.0,
                         help="PPO stops an update's epochs once the policy has moved this "
                              "far from the rollout's (approximate KL; 0: no limit)")
+    parser.add_argument("--view", type=int, default=0, choices=VIEW_VERSIONS,
+                        help="the design view's version: 0 (OrthoglideLabDesign-v0), or 1 "
+                             "(-v1: also the readings taken at the present posture)")
+    parser.add_argument("--select-round", action="store_true",
+                        help="keep every DAgger round's policy (<out>.round<k>.zip) and write "
+                             "to <out> the round of the lowest error on the curve machines, "
+                             "not the last (those of --eval-seed: choose a seed other than "
+                             "the one the policy is tested on)")
     parser.add_argument("--baselines", default=BASELINES,
                         help="agents of the curve's lines and the final table")
     args = parser.parse_args(argv)
@@ -401,6 +428,9 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
         parser.error(f"--mix is a probability, got {args.mix}")
     if not (np.isfinite(args.target_kl) and args.target_kl >= 0):
         parser.error(f"--target-kl must be a number >= 0, got {args.target_kl}")
+    if args.select_round and (args.steps or not args.imitate):
+        parser.error("--select-round chooses among DAgger rounds: it needs --imitate and "
+                     "--steps 0")
     return args
 
 
@@ -440,8 +470,13 @@ def main(argv: list[str] | None = None) -> None:
         model.learn(total_timesteps=args.steps, callback=curve)
         rows = curve.rows
     minutes = (time.perf_counter() - start) / 60
-    save_policy(model, args.out, spec_of(design_lab_env(**kwargs), "MaskablePPO", kwargs,
-                                         play=play_mode(args)))
+    if args.select_round:
+        best = selected_round(rows)
+        shutil.copyfile(round_file(args.out, best), args.out)
+        print(f"round {best} scored best on the curve machines")
+    else:
+        save_policy(model, args.out, spec_of(design_lab_env(**kwargs), "MaskablePPO", kwargs,
+                                             play=play_mode(args)))
     vec.close()
     print(f"wrote {args.out} ({rows[-1]['steps']} steps in {minutes:.1f} min)")
     world = config(args, ()).world

@@ -34,6 +34,8 @@ LAB_V2_ENV_ID = "OrthoglideLab-v2"
 LAB_V3_ENV_ID = "OrthoglideLab-v3"
 FLAT_LAB_ENV_ID = "OrthoglideLabFlat-v0"
 DESIGN_LAB_ENV_ID = "OrthoglideLabDesign-v0"
+#: The design view whose observation also tells how the present posture has been read.
+DESIGN_LAB_V1_ENV_ID = "OrthoglideLabDesign-v1"
 
 
 def _register(gymnasium: ModuleType) -> None:
@@ -78,6 +80,14 @@ def _register(gymnasium: ModuleType) -> None:
         gymnasium.register(id=DESIGN_LAB_ENV_ID,
                            entry_point="orthoglide_env.wrappers:design_lab_env",
                            vector_entry_point="orthoglide_env.wrappers:DesignLabVector")
+    if DESIGN_LAB_V1_ENV_ID not in gymnasium.registry:
+        # v1 adds the readings at the present posture to v0's observation; v0 stays what
+        # the shipped 330 s policy plays, so Gymnasium's note that a v1 exists is not said.
+        warnings.filterwarnings("ignore", message=f".*{DESIGN_LAB_ENV_ID} is out of date")
+        gymnasium.register(id=DESIGN_LAB_V1_ENV_ID,
+                           entry_point="orthoglide_env.wrappers:design_lab_env",
+                           vector_entry_point="orthoglide_env.wrappers:DesignLabVector",
+                           kwargs={"version": 1})
 
 
 class _RegisterOnImport(importlib.abc.MetaPathFinder):
@@ -108,5 +118,5 @@ if "gymnasium" in sys.modules:
 elif not any(isinstance(f, _RegisterOnImport) for f in sys.meta_path):
     sys.meta_path.insert(0, _RegisterOnImport())
 
-__all__ = ["DESIGN_LAB_ENV_ID", "ENV_ID", "FLAT_LAB_ENV_ID", "LAB_ENV_ID", "LAB_V1_ENV_ID",
-           "LAB_V2_ENV_ID", "LAB_V3_ENV_ID", "MachineDesign"]
+__all__ = ["DESIGN_LAB_ENV_ID", "DESIGN_LAB_V1_ENV_ID", "ENV_ID", "FLAT_LAB_ENV_ID", "LAB_ENV_ID",
+           "LAB_V1_ENV_ID", "LAB_V2_ENV_ID", "LAB_V3_ENV_ID", "MachineDesign"]

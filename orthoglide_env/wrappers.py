@@ -8,7 +8,7 @@ following block picks the operation, the stand and the slot.  With Gymnasium's
 the lab env with both, so a stable-baselines3 ``PPO("MlpPolicy", "OrthoglideLabFlat-v0")``
 trains on it as it is.
 
-Design view.  :class:`DesignLab` (``OrthoglideLabDesign-v0``) offers the experiment
+Design view.  :class:`DesignLab` (``OrthoglideLabDesign-v0`` and ``-v1``) offers the experiment
 planner's candidate operations as one ``Discrete`` action with a mask, observes what the
 readings so far determine and rewards the fall of the predicted TCP error: the set-up of
 amortised experiment design (a state that summarises what is known, a dense information
@@ -28,7 +28,7 @@ from gymnasium.wrappers import FlattenObservation
 
 from orthoglide_env.envs.lab import OrthoglideLabEnv
 from orthoglide_env.instruments.dial import weighting_sigma
-from orthoglide_env.lab.design_belief import DesignBelief
+from orthoglide_env.lab.design_belief import VIEW_VERSIONS, DesignBelief
 from orthoglide_env.lab.rewards import ACCURACY_UNIT_MM
 
 
@@ -124,6 +124,12 @@ class DesignLab(gym.Wrapper):
                                 "not mounted"), engaged, out of service
     posture                     the joint targets scaled to [-1, 1]               3
     time                        seconds used / ``budget_s``                       1
+    readings here (v1)          readings taken at the present posture in a row    3
+                                and in all, over :data:`~orthoglide_env.lab.
+                                design_belief.COUNT_SCALE`; ``log10`` of the
+                                last reading's relative fall of the predicted
+                                mean square plus :data:`~orthoglide_env.lab.
+                                design_belief.FALL_FLOOR`
     ==========================  ===============================================  ========
 
     Reward
@@ -139,16 +145,23 @@ class DesignLab(gym.Wrapper):
     belief's predicted TCP error after rigid motion).  Reset options are the lab's.
 
     Arguments: ``env``, an ``OrthoglideLab-v0`` (without ``reference``: the gauge block's
-    slots are not among the candidates), ``reward``, ``per``.  ``design_lab_env(reward=,
-    per=, **lab_kwargs)`` builds both; it is ``gymnasium.make("OrthoglideLabDesign-v0",
-    ...)``.
+    slots are not among the candidates), ``reward``, ``per``, ``version`` (of the view, 0 or
+    1).  ``design_lab_env(reward=, per=, version=, **lab_kwargs)`` builds both;
+    ``gymnasium.make("OrthoglideLabDesign-v0", ...)`` is version 0, ``-v1`` version 1.
 
     Version history
     ---------------
     * v0 (first release): the design view of ``OrthoglideLab-v0``.
+    * v1: the observation ends with the readings taken at the present posture (in a row
+      and in all) and the last reading's relative fall of the predicted error.  On an
+      hour's budget an expert reads one posture up to 20 times in a row, and v0's
+      observation moves by about a thousandth between two of those readings (the clock's
+      5 s of 3600): a policy could not tell a re-reading from the next.  Actions, mask and
+      reward are v0's.
     """
 
-    def __init__(self, env: gym.Env, reward: str = "mse", per: str = "step") -> None:
+    def __init__(self, env: gym.Env, reward: str = "mse", per: str = "step",
+                 version: int = 0) -> None:
         super().__init__(env)
         lab = env.unwrapped
         if not isinstance(lab, OrthoglideLabEnv):
@@ -157,13 +170,16 @@ class DesignLab(gym.Wrapper):
             raise ValueError(f"reward must be one of {DESIGN_REWARDS}, got {reward!r}")
         if per not in DESIGN_PER:
             raise ValueError(f"per must be one of {DESIGN_PER}, got {per!r}")
+        if version not in VIEW_VERSIONS:
+            raise ValueError(f"version must be one of {VIEW_VERSIONS}, got {version!r}")
         if lab.reference:
             raise ValueError("reference: the design view offers no gauge block's slots; "
                              "use reference=False")
         self.reward_mode, self.per = reward, per
         sigma = float(lab.noise.effective_sigma)
+        self.version = version
         self.belief = DesignBelief(lab.design, lab.n_stands, weighting_sigma(sigma),
-                                   lab.budget_s)
+                                   lab.budget_s, version)
         self.action_space = spaces.Discrete(self.belief.n_actions)
         low, high = self.belief.observation_bounds(lab.settings.longest_step())
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
@@ -211,9 +227,11 @@ class DesignLab(gym.Wrapper):
         return self.belief.observation()
 
 
-def design_lab_env(reward: str = "mse", per: str = "step", **kwargs: Any) -> DesignLab:
-    """``OrthoglideLab-v0`` (``kwargs``: the lab env's) in its design view (:class:`DesignLab`)."""
-    return DesignLab(OrthoglideLabEnv(**kwargs), reward=reward, per=per)
+def design_lab_env(reward: str = "mse", per: str = "step", version: int = 0, **kwargs: Any
+                   ) -> DesignLab:
+    """``OrthoglideLab-v0`` (``kwargs``: the lab env's) in its design view of ``version``
+    (:class:`DesignLab`)."""
+    return DesignLab(OrthoglideLabEnv(**kwargs), reward=reward, per=per, version=version)
 
 
 class DesignLabVector(SyncVectorEnv):

@@ -19,6 +19,7 @@ from calibrators.agents.actor_weights import actor_of, read_actor
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "examples" / "policies" / "masked_lab330.zip"
+SHIPPED_HOUR = ROOT / "examples" / "policies" / "masked_lab3600.zip"
 
 
 def test_the_shipped_policy_plays_without_torch() -> None:
@@ -38,7 +39,7 @@ agent.reset(lab, observation, np.random.default_rng(0))
 decisions = 0
 while True:
     if not agent.queue:
-        logits = agent.actor.logits(agent.belief.observation())
+        logits = agent.actor.logits_many(agent.belief.observation()[None])[0]
         best = int(np.argmax(np.where(agent.belief.action_mask(), logits, -np.inf)))
         assert agent.decide() == best
         decisions += 1
@@ -55,6 +56,70 @@ print(decisions, float(observation["time"][0]))
     # A 330 s episode of single moves of a few seconds each: tens of decisions, all
     # within the training episode's budget.
     assert 10 <= int(decisions) and float(seconds) <= 330.0
+
+
+def test_the_one_hour_policy_plays_view_1_within_its_mask() -> None:
+    """The shipped one-hour policy acted in the design view's version 1: its agent keeps
+    that view's belief (the readings here in its observation) on an hour's budget, and
+    its first decisions are open operations."""
+    import gymnasium as gym
+
+    import orthoglide_env
+    from calibrators.agents.names import get_agent
+    from calibrators.agents.policy import read_spec
+
+    spec = read_spec(SHIPPED_HOUR)
+    assert (spec.env_id, spec.budget_s, spec.play) == (orthoglide_env.DESIGN_LAB_V1_ENV_ID,
+                                                       3600.0, "argmax")
+    agent = get_agent(f"policy:{SHIPPED_HOUR}")
+    lab = gym.make(orthoglide_env.LAB_ENV_ID, conditions="lab", gauge_sigma=0.02,
+                   budget_s=3600.0)
+    observation, info = lab.reset(seed=5)
+    agent.reset(lab, observation, np.random.default_rng(0))
+    assert agent.belief.version == 1 and len(agent.belief.observation()) == 272
+    for _ in range(20):
+        if not agent.queue:
+            assert agent.belief.action_mask()[agent.decide()]
+        observation, _, terminated, truncated, info = lab.step(agent.act(observation, info))
+        assert not (terminated or truncated)
+
+
+def test_a_chunk_of_machines_decides_as_each_machine_alone() -> None:
+    """``compare`` plays a chunk of machines' episodes together, and the policy's agents
+    then decide together (one network pass): each machine's episode is the one it plays
+    alone, reading for reading."""
+    import gymnasium as gym
+
+    import orthoglide_env
+    from calibrators.agents.names import get_agent
+    from calibrators.study.episodes import run_episode, run_episodes
+
+    lab = {"conditions": "lab", "gauge_sigma": 0.02, "budget_s": 330.0}
+    seeds = [11, 12, 13]
+    envs = gym.vector.SyncVectorEnv([lambda: gym.make(orthoglide_env.LAB_ENV_ID, **lab)] * 3)
+    together = run_episodes(envs, [get_agent(f"policy:{SHIPPED}") for _ in seeds], seeds)
+    for seed, episode in zip(seeds, together, strict=True):
+        alone = run_episode(gym.make(orthoglide_env.LAB_ENV_ID, **lab),
+                            get_agent(f"policy:{SHIPPED}"), seed)
+        assert [(r.mounting, r.rho, r.reading) for r in episode.records] == [
+            (r.mounting, r.rho, r.reading) for r in alone.records]
+        assert len(episode.records) > 30
+
+
+def test_the_fused_network_is_the_layers_of_the_file() -> None:
+    """``logits_many`` (float64, a matrix product per layer for a chunk) is the float32
+    layers' network to float32's rounding (logits of order 10, so 1e-5), and a row's logits
+    do not depend on the rows beside it beyond float64's rounding."""
+    actor = read_actor(SHIPPED)
+    rng = np.random.default_rng(0)
+    rows = rng.standard_normal((7, actor.weights[0].shape[1])).astype(np.float32)
+    many = actor.logits_many(rows)
+    for k, row in enumerate(rows):
+        np.testing.assert_allclose(many[k], actor.logits(row), rtol=0, atol=1e-5)
+        np.testing.assert_allclose(many[k], actor.logits_many(row[None])[0], rtol=0,
+                                   atol=1e-12)
+    with pytest.raises(ValueError, match=r"observations are \(N, 269\)"):
+        actor.logits_many(rows[:, :5])
 
 
 def test_the_weights_are_torchs_bit_for_bit() -> None:

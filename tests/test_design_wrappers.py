@@ -29,13 +29,19 @@ from calibrators.planning.design_expert import PlanExpert
 from calibrators.planning.search import Planner
 from calibrators.study.episodes import run_episode
 from orthoglide_env.instruments.dial import weighting_sigma
-from orthoglide_env.lab.design_belief import READ_PROBABILITY
+from orthoglide_env.lab.design_belief import (
+    COUNT_SCALE,
+    FALL_FLOOR,
+    READ_PROBABILITY,
+    observations,
+)
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.lab.rewards import ACCURACY_UNIT_MM
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.wrappers import DesignLab, DesignLabVector, design_lab_env
 
 ID = orthoglide_env.DESIGN_LAB_ENV_ID
+ID_V1 = orthoglide_env.DESIGN_LAB_V1_ENV_ID
 BUDGET_S = 900.0
 
 
@@ -73,8 +79,77 @@ def test_the_spaces_and_check_env() -> None:
     assert all("different from the unwrapped version" in m for m in messages), messages
 
 
+def test_view_1_is_view_0_then_the_readings_here_and_check_env() -> None:
+    v0, v1 = gym.make(ID, conditions="lab", budget_s=BUDGET_S), gym.make(ID_V1, conditions="lab",
+                                                                          budget_s=BUDGET_S)
+    assert v1.observation_space.shape == (v0.observation_space.shape[0] + 3,)
+    assert v1.action_space == v0.action_space
+    for env in (v0, v1):
+        env.reset(seed=5)
+    rng = np.random.default_rng(3)
+    for _ in range(6):
+        mask = v0.get_wrapper_attr("action_masks")()
+        np.testing.assert_array_equal(mask, v1.get_wrapper_attr("action_masks")())
+        chosen = int(rng.choice(np.flatnonzero(mask[:1500])))
+        a, r0, *_ = v0.step(chosen)
+        b, r1, *_ = v1.step(chosen)
+        np.testing.assert_array_equal(a, b[:-3])
+        assert r0 == r1 and v1.observation_space.contains(b)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(design(version=1), skip_render_check=True)
+    messages = [str(w.message) for w in caught]
+    assert all("different from the unwrapped version" in m for m in messages), messages
+
+
+def test_view_1_counts_the_readings_here_and_their_fall() -> None:
+    """Re-readings of one posture count up one by one, a move elsewhere starts a new run
+    and a return adds to the posture's total; the fall is the reading's relative fall of
+    the predicted mean square, as the step's info gives it."""
+    env = design(version=1)
+    _, info = env.reset(seed=2)
+    before = info["predicted_rigid_mm"] ** 2
+    # The first candidate move that reads (re-reading Zero alone only pins the dials'
+    # zeros), then three re-readings there, a move to Zero and back.
+    for here in np.flatnonzero(env.action_masks()[:1500]):
+        _, _, _, _, info = env.step(int(here))
+        if info["predicted_rigid_mm"] ** 2 < before:
+            break
+    before = info["predicted_rigid_mm"] ** 2
+    counts = []
+    zero = env.belief.table.zero
+    for chosen in (here, here, here, zero, here):
+        observation, _, _, _, info = env.step(int(chosen))
+        after = info["predicted_rigid_mm"] ** 2
+        counts.append(np.round(observation[-3:-1] * COUNT_SCALE).tolist())
+        # float32 observation of a log10: 1e-6 of a decade.
+        assert observation[-1] == pytest.approx(np.log10(1 - after / before + FALL_FLOOR),
+                                                abs=1e-5)
+        # A re-reading where the stands read adds information, if little.
+        assert chosen == zero or after < before
+        before = after
+    # Zero: read at the reset, then once more.
+    assert counts == [[2, 2], [3, 3], [4, 4], [1, 2], [1, 5]]
+
+
+def test_the_observations_of_a_chunk_are_each_belief_s_own() -> None:
+    """A policy deciding for a chunk of machines observes them in one batched pass: the
+    same floats as each belief's own observation, in every state of either view."""
+    rng = np.random.default_rng(4)
+    for version in (0, 1):
+        envs = [design(conditions="lab", version=version) for _ in range(4)]
+        for k, env in enumerate(envs):
+            env.reset(seed=k)
+            candidate_moves(env, rng, 3 * k)
+        beliefs = [env.belief for env in envs]
+        for count in (1, 2, 4):
+            np.testing.assert_array_equal(observations(beliefs[:count]),
+                                          [b.observation() for b in beliefs[:count]])
+
+
 def test_bad_arguments_are_refused() -> None:
-    for kwargs in ({"reward": "accuracy"}, {"per": "hour"}, {"reference": True}):
+    for kwargs in ({"reward": "accuracy"}, {"per": "hour"}, {"reference": True},
+                   {"version": 2}):
         with pytest.raises(ValueError):
             design(**kwargs)
     env = design()
@@ -234,6 +309,24 @@ def test_masked_ppo_trains_and_acts_within_the_mask() -> None:
     assert env.action_masks()[int(action)]
 
 
+def test_the_training_selects_a_round_by_its_held_out_score(
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture) -> None:
+    """``train_masked.py --select-round`` writes the DAgger round of the lowest error on
+    the curve machines, and is refused where there are no rounds to choose from."""
+    monkeypatch.syspath_prepend(str(Path(__file__).parents[1] / "examples"))
+    from train_masked import parse, round_file, selected_round
+
+    rows = [{"tcp_rigid_median_mm": v} for v in (0.02, 0.011, 0.013, 0.011)]
+    assert selected_round(rows) == 1
+    assert round_file(Path("r/m.zip"), 3) == Path("r/m.round3.zip")
+    assert parse(["--imitate", "2", "--steps", "0", "--select-round", "--view", "1"]).view == 1
+    for argv in (["--select-round"], ["--imitate", "2", "--select-round"],
+                 ["--view", "2"]):
+        with pytest.raises(SystemExit):
+            parse(argv)
+    assert "--select-round" in capsys.readouterr().err
+
+
 def test_a_standardised_fit_is_folded_back_onto_the_view_s_observation(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """``train_masked.py --standardise``: the imitation's fit moves the first layer to the
@@ -286,11 +379,17 @@ SMALL = Path(__file__).resolve().parents[1] / "examples" / "designs" / "small.js
 LAB = {"conditions": "lab", "gauge_sigma": 0.02, "budget_s": 300.0}
 
 
-@pytest.fixture(scope="module")
-def masked_policy(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A tiny MaskablePPO policy of the design view saved to a file."""
+def view_of(model: object) -> int:
+    """The design view's version a model of the prototype's lab acts in (its input size)."""
+    return int(model.observation_space.shape[0] == 269 + 3)
+
+
+@pytest.fixture(scope="module", params=[0, 1], ids=["v0", "v1"])
+def masked_policy(tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest
+                  ) -> Path:
+    """A tiny MaskablePPO policy of the design view (of each version) saved to a file."""
     sb3_contrib = pytest.importorskip("sb3_contrib")
-    env = design_lab_env(**LAB)
+    env = design_lab_env(version=request.param, **LAB)
     model = sb3_contrib.MaskablePPO("MlpPolicy", env, n_steps=64, batch_size=32, n_epochs=1,
                                     seed=0, device="cpu")
     model.learn(total_timesteps=64)
@@ -307,12 +406,13 @@ def test_a_design_policy_file_records_its_view_and_plays_in_the_lab(masked_polic
     import torch
 
     model = sb3_contrib.MaskablePPO.load(masked_policy, device="cpu")
-    assert read_spec(masked_policy).env_id == ID
+    version = view_of(model)
+    assert read_spec(masked_policy).env_id == (ID_V1 if version else ID)
     agent = get_agent(f"policy:{masked_policy}")
     assert isinstance(agent, DesignPolicyAgent)
     episode = run_episode(gym.make(orthoglide_env.LAB_ENV_ID, **LAB), agent, seed=4)
     assert episode.measurements.experiment_time_s <= LAB["budget_s"]
-    wrapped = design_lab_env(**LAB)
+    wrapped = design_lab_env(version=version, **LAB)
     observation, _ = wrapped.reset(seed=4)
     lab = gym.make(orthoglide_env.LAB_ENV_ID, **LAB)
     raw, info = lab.reset(seed=4)
@@ -353,7 +453,7 @@ def test_an_argmax_policy_plays_its_most_likely_open_operation(masked_policy: Pa
     import sb3_contrib
 
     model = sb3_contrib.MaskablePPO.load(masked_policy, device="cpu")
-    env = design_lab_env(**LAB)
+    env = design_lab_env(version=view_of(model), **LAB)
     path = save_policy(model, tmp_path / "argmax.zip",
                        spec_of(env, "MaskablePPO", LAB, play="argmax"))
     agent = get_agent(f"policy:{path}")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -33,6 +34,14 @@ class Agent:
 
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
         raise NotImplementedError
+
+    @classmethod
+    def act_all(cls, agents: list[Agent], observations: list[dict[str, np.ndarray]],
+                infos: list[Mapping[str, Any]]) -> list[dict[str, Any]]:
+        """``act`` of each of ``agents`` (all of this class, one per lab of a chunk) on its
+        own observation and info, in turn.  A class whose agents decide cheaper together
+        (one network pass for the chunk) overrides it, with the same actions."""
+        return [a.act(o, i) for a, o, i in zip(agents, observations, infos, strict=True)]
 
 
 class PlannedAgent(Agent):

@@ -29,6 +29,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import zipfile
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -40,9 +41,9 @@ from gymnasium.spaces import flatten, flatten_space
 
 from calibrators.agents.actor_weights import read_actor
 from calibrators.agents.base import Agent, action
-from orthoglide_env import DESIGN_LAB_ENV_ID, FLAT_LAB_ENV_ID
+from orthoglide_env import DESIGN_LAB_ENV_ID, DESIGN_LAB_V1_ENV_ID, FLAT_LAB_ENV_ID
 from orthoglide_env.instruments.dial import weighting_sigma
-from orthoglide_env.lab.design_belief import DesignBelief
+from orthoglide_env.lab.design_belief import DesignBelief, observations
 from orthoglide_env.lab.operations import OP_NAMES, SLOT_NAMES, V0_OPS, Op, slot_catalogue
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.wrappers import flat_action_space, lab_action
@@ -52,6 +53,8 @@ SPEC_ENTRY: str = "orthoglide_policy.json"
 #: Version of that entry's layout: a file of another version is refused.
 SPEC_VERSION: int = 1
 INSTALL_HINT: str = "install the extra: pip install '.[rl]'"
+#: The design views' env ids, by the view's version (its observation).
+DESIGN_VIEW_IDS: dict[str, int] = {DESIGN_LAB_ENV_ID: 0, DESIGN_LAB_V1_ENV_ID: 1}
 #: How a design-view policy may play (:attr:`PolicySpec.play`).
 PLAYS: tuple[str, ...] = ("draw", "argmax")
 
@@ -77,8 +80,9 @@ class PolicySpec:
     #: The training lab's machine design (``MachineDesign.to_dict``); None: the prototype
     #: (files saved before designs were recorded).
     design: dict[str, Any] | None = None
-    #: The env id (and version) the policy acted in: the flat lab, or the design view
-    #: (``OrthoglideLabDesign-v0``, whose discrete operations the policy chooses).
+    #: The env id (and version) the policy acted in: the flat lab, or a design view
+    #: (``OrthoglideLabDesign-v0`` or ``-v1``, whose discrete operations the policy
+    #: chooses).
     env_id: str = FLAT_LAB_ENV_ID
     #: How a design-view policy plays: "draw" from its distribution over the open
     #: operations, or "argmax", its most likely one (a policy that imitates a greedy
@@ -126,7 +130,8 @@ def spec_of(env: gym.Env, algorithm: str, env_kwargs: dict[str, Any],
         obs_var=tuple(float(v) for v in rms.var) if rms is not None else (),
         clip_obs=float(getattr(normaliser, "clip_obs", 10.0)),
         epsilon=float(getattr(normaliser, "epsilon", 1e-8)), design=lab.design.to_dict(),
-        env_id=DESIGN_LAB_ENV_ID if discrete else FLAT_LAB_ENV_ID, play=play,
+        env_id=((DESIGN_LAB_V1_ENV_ID if env.get_wrapper_attr("version") else DESIGN_LAB_ENV_ID)
+                if discrete else FLAT_LAB_ENV_ID), play=play,
     )
 
 
@@ -158,9 +163,9 @@ def read_spec(path: str | Path) -> PolicySpec:
     if spec.version != SPEC_VERSION:
         raise ValueError(f"policy file '{path}' has layout version {spec.version}, this "
                          f"workbench reads {SPEC_VERSION}: retrain it")
-    if spec.env_id not in (FLAT_LAB_ENV_ID, DESIGN_LAB_ENV_ID):
+    if spec.env_id != FLAT_LAB_ENV_ID and spec.env_id not in DESIGN_VIEW_IDS:
         raise ValueError(f"policy file '{path}' acted in env '{spec.env_id}'; this workbench "
-                         f"plays {FLAT_LAB_ENV_ID} and {DESIGN_LAB_ENV_ID}: retrain it")
+                         f"plays {[FLAT_LAB_ENV_ID, *DESIGN_VIEW_IDS]}: retrain it")
     if spec.play not in PLAYS:
         raise ValueError(f"policy file '{path}' plays '{spec.play}'; this workbench plays "
                          f"{list(PLAYS)}: retrain it")
@@ -244,7 +249,7 @@ class PolicyAgent(Agent):
 
     def _check_lab(self) -> None:
         """Refuse a lab of another slot catalogue or design than the training lab's."""
-        script = ("examples/train_masked.py" if self.spec.env_id == DESIGN_LAB_ENV_ID
+        script = ("examples/train_masked.py" if self.spec.env_id in DESIGN_VIEW_IDS
                   else "examples/train_policy.py")
         slots = tuple(s.slot for s in self.env.slots)
         if self.spec.slots != slots:
@@ -283,7 +288,7 @@ class PolicyAgent(Agent):
 
 
 class DesignPolicyAgent(PolicyAgent):
-    """Plays a policy trained on the design view (``OrthoglideLabDesign-v0``,
+    """Plays a policy trained on a design view (``OrthoglideLabDesign-v0`` or ``-v1``,
     :class:`~orthoglide_env.wrappers.DesignLab`): it keeps the view's belief from the lab's
     observations, draws the policy's operation among the open ones (its mask) with the
     agent's random stream, and plays it as the lab actions it is (a move's lever flicks,
@@ -309,21 +314,40 @@ class DesignPolicyAgent(PolicyAgent):
         lab = self.env
         self.belief = DesignBelief(lab.design, lab.n_stands,
                                    weighting_sigma(float(lab.noise.effective_sigma)),
-                                   self.spec.budget_s)
+                                   self.spec.budget_s, DESIGN_VIEW_IDS[self.spec.env_id])
         self._check_sizes((len(self.belief.observation()), self.belief.n_actions))
         self.belief.start(observation)
         self.queue: list[dict[str, Any]] = []
         self.last: dict[str, Any] | None = None
 
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
-        if self.last is not None:
-            self.belief.observe(self.last, observation, bool(info.get("refused")))
-        if not self.queue:
-            if observation["time"][0] >= self.spec.budget_s:
-                return action(Op.STOP)
-            self.queue = self.belief.operations(self.decide())
-        self.last = self.queue.pop(0)
-        return action(self.last["op"], self.last["rho"], self.last["stand"], self.last["slot"])
+        return self.act_all([self], [observation], [info])[0]
+
+    @classmethod
+    def act_all(cls, agents: list[Agent], observations: list[dict[str, np.ndarray]],
+                infos: list[Mapping[str, Any]]) -> list[dict[str, Any]]:
+        """Each agent takes in its lab's observation; those that choose an operation now
+        choose together (:func:`decide_all`, one network pass per policy file); each plays
+        its operation's next lab action, or stops once the training episode's time is
+        used."""
+        deciding: list[DesignPolicyAgent] = []
+        for agent, observation, info in zip(agents, observations, infos, strict=True):
+            if agent.last is not None:
+                agent.belief.observe(agent.last, observation, bool(info.get("refused")))
+            if not agent.queue and observation["time"][0] < agent.spec.budget_s:
+                deciding.append(agent)
+        for group in _by_actor(deciding):
+            for agent, chosen in zip(group, decide_all(group), strict=True):
+                agent.queue = agent.belief.operations(chosen)
+        actions = []
+        for agent in agents:
+            if not agent.queue:
+                actions.append(action(Op.STOP))
+                continue
+            agent.last = agent.queue.pop(0)
+            actions.append(action(agent.last["op"], agent.last["rho"], agent.last["stand"],
+                                  agent.last["slot"]))
+        return actions
 
     def decide(self) -> int:
         """An operation among the open ones (the mask), from the policy's network's logits
@@ -331,15 +355,40 @@ class DesignPolicyAgent(PolicyAgent):
         softmax with the agent's random stream (the largest of the logits plus Gumbel
         noise).  A policy trained for a few minutes by PPO still spreads its choices, and
         its most likely operation, played alone, comes back to one posture again and again
-        (the flat agent's finding too): such a policy draws."""
-        logits = self.actor.logits(self.belief.observation())
-        if self.spec.play == "draw":
-            logits = logits + self.rng.gumbel(size=logits.shape)
-        return int(np.argmax(np.where(self.belief.action_mask(), logits, -np.inf)))
+        (the flat agent's finding too): such a policy draws.  :func:`decide_all` of this
+        agent alone."""
+        return decide_all([self])[0]
+
+
+def _by_actor(agents: list[DesignPolicyAgent]) -> list[list[DesignPolicyAgent]]:
+    """``agents`` grouped by the network they play (one per policy file), in order."""
+    groups: dict[int, list[DesignPolicyAgent]] = {}
+    for agent in agents:
+        groups.setdefault(id(agent.actor), []).append(agent)
+    return list(groups.values())
+
+
+def decide_all(agents: list[DesignPolicyAgent]) -> list[int]:
+    """Each agent's operation (:meth:`DesignPolicyAgent.decide`), for agents of one
+    network (one policy file, one view) on labs of one design: their observations in one
+    batched pass (:func:`~orthoglide_env.lab.design_belief.observations`) and their logits
+    in one matrix product per layer (:meth:`ActorWeights.logits_many
+    <calibrators.agents.actor_weights.ActorWeights.logits_many>`), so that a chunk of
+    machines pays about one machine's call overhead; the mask and a draw are each
+    agent's."""
+    if not agents:
+        return []
+    logits = agents[0].actor.logits_many(observations([a.belief for a in agents]))
+    chosen = []
+    for agent, row in zip(agents, logits, strict=True):
+        if agent.spec.play == "draw":
+            row = row + agent.rng.gumbel(size=row.shape)
+        chosen.append(int(np.argmax(np.where(agent.belief.action_mask(), row, -np.inf))))
+    return chosen
 
 
 def policy_agent(path: str | Path) -> PolicyAgent:
     """The agent that plays the policy file ``path``: of the flat lab or of the design
     view, as its spec says."""
     spec = read_spec(path)
-    return DesignPolicyAgent(path) if spec.env_id == DESIGN_LAB_ENV_ID else PolicyAgent(path)
+    return DesignPolicyAgent(path) if spec.env_id in DESIGN_VIEW_IDS else PolicyAgent(path)

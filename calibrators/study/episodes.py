@@ -158,9 +158,11 @@ def run_episodes(envs: gym.vector.VectorEnv, agents: list[Agent], seeds: list[in
                                    "episode ended")
             actions = {key: value[:, step] for key, value in plans.items()}
         else:
-            moves = [idle if out[i] is not None else agent.act(_row(observation, i),
-                                                               _InfoRow(info, i))
-                     for i, agent in enumerate(agents)]
+            running = [i for i in range(len(agents)) if out[i] is None]
+            acted = iter(_act_all([agents[i] for i in running],
+                                  [_row(observation, i) for i in running],
+                                  [_InfoRow(info, i) for i in running]))
+            moves = [idle if out[i] is not None else next(acted) for i in range(len(agents))]
             actions = {key: np.array([m.get(key, idle[key]) for m in moves])
                        for key in idle}
         if lockstep:
@@ -193,6 +195,16 @@ def run_episode(env: gym.Env, agent: Agent, seed: int, options: dict | None = No
     (and ``options``), worked by ``agent`` until the episode ends, seen by ``watch``."""
     return run_episodes(gym.vector.SyncVectorEnv([lambda: env]), [agent], [seed], options,
                         watch=watch)[0]
+
+
+def _act_all(agents: list[Agent], observations: list[dict[str, np.ndarray]],
+             infos: list[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """Each agent's action, by its class's :meth:`~calibrators.agents.base.Agent.act_all`
+    where all are of one class (a chunk of one strategy's machines), else one by one."""
+    kind = type(agents[0]) if agents else Agent
+    if not all(type(a) is kind for a in agents):
+        kind = Agent
+    return kind.act_all(agents, observations, infos)
 
 
 def _faults(envs: gym.vector.VectorEnv, i: int) -> list[dict[str, Any]]:

@@ -53,6 +53,17 @@ READ_PROBABILITY: float = 0.5
 #: its experiment passes the same states on every machine, and its decision then costs no
 #: pass over the postures.
 MOVES_KEPT: int = 256
+#: Views of the design (:attr:`DesignBelief.version`): 0, the predicted error's spectrum,
+#: the stands, the posture and the clock; 1 adds how the present posture has been read
+#: (:meth:`DesignBelief.reading_history`).
+VIEW_VERSIONS: tuple[int, ...] = (0, 1)
+#: Readings are counted in units of this many in view 1's observation: a scale of the
+#: learner's input (an expert's stays are up to about 20 readings), no physical size.
+COUNT_SCALE: float = 10.0
+#: Added to a reading's relative fall of the predicted mean square before its log is
+#: observed (view 1): a fall of a millionth is below what a learner needs to tell apart,
+#: and a reading that adds nothing (no stand read) keeps a finite log.
+FALL_FLOOR: float = 1e-6
 
 
 @lru_cache(maxsize=2)
@@ -137,15 +148,19 @@ class DesignBelief:
     a re-mount of each of ``K`` stands at each of the ``S`` slots of the design's
     catalogue, and stop: ``P + K S + 1`` operations, in that order.
 
-    ``sigma``: a reading's standard deviation (mm), ``budget_s``: the lab's time budget.
-    It follows the lab from its observations (:meth:`start`, :meth:`observe`), never from
-    its truth."""
+    ``sigma``: a reading's standard deviation (mm), ``budget_s``: the lab's time budget,
+    ``version``: the view its :meth:`observation` is (:data:`VIEW_VERSIONS`).  It follows
+    the lab from its observations (:meth:`start`, :meth:`observe`), never from its
+    truth."""
 
-    def __init__(self, design: MachineDesign, stands: int, sigma: float, budget_s: float
-                 ) -> None:
+    def __init__(self, design: MachineDesign, stands: int, sigma: float, budget_s: float,
+                 version: int = 0) -> None:
         if not (np.isfinite(sigma) and sigma > 0):
             raise ValueError(f"sigma must be a positive number, got {sigma}")
+        if version not in VIEW_VERSIONS:
+            raise ValueError(f"version must be one of {VIEW_VERSIONS}, got {version!r}")
         self.design, self.sigma, self.budget_s = design, float(sigma), float(budget_s)
+        self.version = version
         self.table: SlotTable = slot_table(design)
         self.n_postures, self.n_slots, self.n_stands = (
             len(self.table.postures), len(self.table.tip), int(stands))
@@ -164,6 +179,11 @@ class DesignBelief:
         """A fresh belief at Zero from the lab's first observation (its readings at Zero)."""
         self.covariance = np.eye(N_MACHINE + N_STAND * self.n_stands)
         self.here, self.rho = self.table.zero, np.zeros(3)
+        #: Readings taken at each posture (a move's or a re-mount's, of any stand or none),
+        #: in a row at the present one, and the relative fall of the predicted mean square
+        #: by the last.
+        self.readings_at = np.zeros(self.n_postures, dtype=np.int64)
+        self.run, self.fall = 0, 0.0
         self._sync(observation)
         self._read(observation)
 
@@ -173,6 +193,8 @@ class DesignBelief:
         :meth:`operations` gives them): a move's readings, a re-mount's fresh unknowns and
         its readings at Zero.  A refused operation changes nothing but the clock."""
         if not refused and operation["op"] == Op.REMOUNT:
+            # Another set of mountings reads at Zero from here on: a new stay.
+            self.run = 0
             cols = self._columns(int(operation["stand"]))[N_MACHINE:]
             # A mounting left behind is marginalised out: nothing reads it again.
             self.covariance[cols, :] = 0.0
@@ -181,7 +203,10 @@ class DesignBelief:
             self.here, self.rho = self.table.zero, np.zeros(3)
         if not refused and operation["op"] == Op.MOVE:
             self.rho = np.asarray(operation["rho"], dtype=float)
-            self.here = self.index[self.rho.tobytes()]
+            here = self.index[self.rho.tobytes()]
+            if here != self.here:
+                self.run = 0
+            self.here = here
         self._sync(observation)
         if not refused and operation["op"] in (Op.MOVE, Op.REMOUNT):
             self._read(observation)
@@ -200,16 +225,22 @@ class DesignBelief:
         return np.concatenate((np.arange(N_MACHINE), np.arange(start, start + N_STAND)))
 
     def _read(self, observation: dict[str, np.ndarray]) -> None:
-        """Add the valid readings of the observation, taken here."""
+        """Add the valid readings of the observation, taken here, and count them."""
+        self.readings_at[self.here] += 1
+        self.run += 1
+        self.fall = 0.0
         stands = np.flatnonzero(np.asarray(observation["valid"], dtype=bool) & (self.slots >= 0))
         if not stands.size:
             return
+        before = self.predicted_mse()
         values = np.full((len(stands), self.stand_columns.shape[1]), ZERO_SCALE)
         values[:, :-1] = self.table.change[self.slots[stands], self.here]
         rows = np.zeros((len(stands), len(self.covariance)))
         np.put_along_axis(rows, self.stand_columns[stands], values, axis=1)
         gain, b = woodbury_gain(self.covariance, rows / self.sigma)
         self.covariance = shrunk(self.covariance, gain, b)
+        if before > 0:
+            self.fall = max(1.0 - self.predicted_mse() / before, 0.0)
 
     # -- what it predicts -------------------------------------------------------------------
     def predicted_mse(self) -> float:
@@ -236,31 +267,56 @@ class DesignBelief:
         return np.log10(values / ACCURACY_UNIT_MM**2 + LOG_FLOOR)
 
     # -- what a learner observes ------------------------------------------------------------
+    def reading_history(self) -> np.ndarray:
+        """How the present posture has been read (3,): the readings taken here in a row
+        (since the last move elsewhere or re-mount) and in all, over :data:`COUNT_SCALE`,
+        and ``log10`` of the last reading's relative fall of the predicted mean square
+        plus :data:`FALL_FLOOR`.  View 1 observes them: between two re-readings of one
+        posture the rest of the observation hardly moves, and a stay's length is what an
+        expert's choice to stay or leave turns on."""
+        return np.array([self.run / COUNT_SCALE, self.readings_at[self.here] / COUNT_SCALE,
+                         np.log10(self.fall + FALL_FLOOR)])
+
     def observation(self) -> np.ndarray:
         """The observation of the design view (float32; its parts:
         :class:`~orthoglide_env.wrappers.DesignLab`): :meth:`log_mean_squares`, each
         stand's slot one-hot (then "not mounted"), engaged and out of service, the posture
-        scaled to [-1, 1] over the design's control limits, and the time used over the
-        budget."""
+        scaled to [-1, 1] over the design's control limits, the time used over the
+        budget, and in view 1 :meth:`reading_history`."""
+        return np.concatenate((self.log_mean_squares(),
+                               self.observation_tail())).astype(np.float32)
+
+    def observation_tail(self) -> np.ndarray:
+        """The observation after :meth:`log_mean_squares` (float64): the stands, the
+        posture, the clock and, in view 1, :meth:`reading_history`."""
         stands = np.zeros((self.n_stands, self.n_slots + 3))
         stands[np.arange(self.n_stands), np.where(self.slots >= 0, self.slots, self.n_slots)] = 1
         stands[:, -2], stands[:, -1] = self.engaged, self.faulted
         low, high = self.design.rho_min, self.design.rho_max
         rho = (2 * self.rho - (high + low)) / (high - low)
-        return np.concatenate((self.log_mean_squares(), stands.ravel(), rho,
-                               [self.time_s / self.budget_s])).astype(np.float32)
+        parts = [stands.ravel(), rho, [self.time_s / self.budget_s]]
+        if self.version >= 1:
+            parts.append(self.reading_history())
+        return np.concatenate(parts)
 
     def observation_bounds(self, longest_s: float) -> tuple[np.ndarray, np.ndarray]:
         """Bounds (float32) of every :meth:`observation` of a lab whose longest step takes
         ``longest_s``: the logs lie between that of :data:`LOG_FLOOR` and a decade above the
         prior's mean square (readings only shrink the covariance), the clock stops within a
-        step of the budget."""
+        step of the budget; in view 1 no more readings than the shortest re-reading fits
+        into that time, and a fall between nothing and all."""
         top = float(np.log10(np.trace(self.weight) / ACCURACY_UNIT_MM**2 + LOG_FLOOR)) + 1.0
         logs, stands = self.factor.shape[1] + 1, self.n_stands * (self.n_slots + 3)
         low = np.concatenate((np.full(logs, np.log10(LOG_FLOOR)), np.zeros(stands),
                               -np.ones(3), [0.0]))
         high = np.concatenate((np.full(logs, top), np.ones(stands), np.ones(3),
                                [(self.budget_s + longest_s) / self.budget_s]))
+        if self.version >= 1:
+            # The first reading is at Zero at no cost; every later one takes a move.
+            readings = 1 + np.floor((self.budget_s + longest_s) / np.min(np.diag(self.drive_s)))
+            low = np.concatenate((low, [0.0, 0.0, np.log10(FALL_FLOOR)]))
+            high = np.concatenate((high, [readings / COUNT_SCALE] * 2,
+                                   [np.log10(1 + FALL_FLOOR)]))
         return low.astype(np.float32), high.astype(np.float32)
 
     # -- the candidate operations -----------------------------------------------------------
@@ -305,3 +361,19 @@ class DesignBelief:
         flicks = [{**idle, "op": Op.ENGAGE if down else Op.LIFT, "stand": k}
                   for k, down in enumerate(after[:, action]) if down != self.engaged[k]]
         return [*flicks, {**idle, "op": Op.MOVE, "rho": self.table.postures[action].copy()}]
+
+
+def observations(beliefs: list[DesignBelief]) -> np.ndarray:
+    """:meth:`DesignBelief.observation` of each of ``beliefs`` (of one design, stands and
+    view), stacked (N, n), the same floats: the predicted error's spectra of all of them in
+    one batched product and eigen-solve, whose call costs a chunk of machines about what
+    one machine's costs."""
+    first = beliefs[0]
+    n = N_MACHINE
+    blocks = first.factor.T @ np.stack([b.covariance[:n, :n] for b in beliefs]) @ first.factor
+    spectra = np.clip(np.linalg.eigvalsh((blocks + blocks.transpose(0, 2, 1)) / 2), 0.0,
+                      None)[:, ::-1]
+    values = np.concatenate((spectra, np.sum(spectra, axis=1, keepdims=True)), axis=1)
+    logs = np.log10(values / ACCURACY_UNIT_MM**2 + LOG_FLOOR)
+    tails = np.stack([b.observation_tail() for b in beliefs])
+    return np.concatenate((logs, tails), axis=1).astype(np.float32)
