@@ -112,48 +112,20 @@ def test_an_ideal_told_world_against_a_real_one_is_flagged() -> None:
     assert sizes.worse.mean() >= 0.9
 
 
-def test_the_widening_is_the_z_rms_the_terms_give() -> None:
-    """Least squares of readings ``J d + C x + e`` (unit noise, terms of unit second
-    moment) with the error bars of the noise alone: over 4000 machines the z-RMS along
-    the eigenvectors of its covariance is the widening's (about 1.4 here).  Each z^2 is
-    Gaussian's square, mean w^2 and variance 2 w^4: the pooled mean of 4000 x 6 has a
-    relative spread of sqrt(2 / 24000) ~ 0.009, 0.005 on the z-RMS; 2.5 % is five of
-    those.  Terms that move nothing widen nothing."""
-    rng = np.random.default_rng(4)
+def _widening_drawn(seed: int, size: float, share: float) -> tuple[float, float, float]:
+    """Least squares of readings ``J d + C x + e`` (unit noise, terms ``C`` of ``size``,
+    coefficients of unit second moment) over 4000 machines, with error bars that hold the
+    terms at ``share`` of their second moment (``cov + share moved moved^T``): the pooled
+    z-RMS along the eigenvectors of that covariance, the widening the terms at the rest of
+    their size predict, and the widening of terms that move nothing."""
+    rng = np.random.default_rng(seed)
     machines, n, p, k = 4000, 60, 6, 8
     jac = rng.normal(size=(n, p))
-    terms = rng.normal(size=(n, k)) * 0.4
-    cov = np.linalg.inv(jac.T @ jac)
-    moved = cov @ jac.T @ terms
-    # A prior wide enough that every direction is determined (variance <= DETERMINED).
-    scale = np.full(p, 10 * np.sqrt(np.linalg.eigvalsh(cov).max() / DETERMINED))
-    truth = rng.normal(size=(machines, p))
-    readings = truth @ jac.T + rng.normal(size=(machines, k)) @ terms.T + rng.normal(
-        size=(machines, n))
-    error = readings @ (cov @ jac.T).T - truth
-    values, vectors = np.linalg.eigh(cov)
-    z = (error @ vectors) / np.sqrt(values)
-    predicted = widening(cov[None], moved[None], scale)[0]
-    assert predicted > HONEST_RATIO
-    assert np.sqrt(np.mean(z**2)) == pytest.approx(predicted, rel=0.025)
-    assert widening(cov[None], moved[None] * 0.0, scale)[0] == pytest.approx(1.0)
-
-
-def test_the_widening_against_a_harsher_world_counts_only_what_the_told_one_leaves_out(
-        ) -> None:
-    """A fit told a world that carries the terms at a share s of a harsher world's second
-    moment (its error bars hold them: covariance ``cov + s moved moved^T``), the readings
-    drawn in the harsher world: over 4000 machines the z-RMS along the eigenvectors of the
-    told covariance is the widening of the terms at the rest of their size, ``sqrt(1 - s)``
-    (about 1.3 here).  As above, a relative spread of the pooled z-RMS of about 0.005:
-    2.5 % is five of those, a false failure below 1e-6.  At s = 1 nothing is left out."""
-    rng = np.random.default_rng(9)
-    machines, n, p, k, share = 4000, 60, 6, 8, 0.3
-    jac = rng.normal(size=(n, p))
-    terms = rng.normal(size=(n, k)) * 0.6
+    terms = rng.normal(size=(n, k)) * size
     noise_cov = np.linalg.inv(jac.T @ jac)
     moved = noise_cov @ jac.T @ terms
     told_cov = noise_cov + share * moved @ moved.T
+    # A prior wide enough that every direction is determined (variance <= DETERMINED).
     scale = np.full(p, 10 * np.sqrt(np.linalg.eigvalsh(told_cov).max() / DETERMINED))
     truth = rng.normal(size=(machines, p))
     readings = truth @ jac.T + rng.normal(size=(machines, k)) @ terms.T + rng.normal(
@@ -162,10 +134,31 @@ def test_the_widening_against_a_harsher_world_counts_only_what_the_told_one_leav
     values, vectors = np.linalg.eigh(told_cov)
     z = (error @ vectors) / np.sqrt(values)
     predicted = widening(told_cov[None], moved[None] * np.sqrt(1 - share), scale)[0]
+    return (float(np.sqrt(np.mean(z**2))), float(predicted),
+            float(widening(told_cov[None], moved[None] * 0.0, scale)[0]))
+
+
+def test_the_widening_is_the_z_rms_the_terms_give() -> None:
+    """Error bars of the noise alone (share 0): the z-RMS is the widening's (about 1.4
+    here).  Each z^2 is Gaussian's square, mean w^2 and variance 2 w^4: the pooled mean of
+    4000 x 6 has a relative spread of sqrt(2 / 24000) ~ 0.009, 0.005 on the z-RMS; 2.5 %
+    is five of those.  Terms that move nothing widen nothing."""
+    measured, predicted, nothing = _widening_drawn(4, 0.4, 0.0)
     assert predicted > HONEST_RATIO
-    assert np.sqrt(np.mean(z**2)) == pytest.approx(predicted, rel=0.025)
-    full = noise_cov + moved @ moved.T
-    assert widening(full[None], moved[None] * 0.0, scale)[0] == pytest.approx(1.0)
+    assert measured == pytest.approx(predicted, rel=0.025)
+    assert nothing == pytest.approx(1.0)
+
+
+def test_the_widening_against_a_harsher_world_counts_only_what_the_told_one_leaves_out(
+        ) -> None:
+    """A fit told a world that carries the terms at a share 0.3 of a harsher world's
+    second moment, the readings drawn in the harsher world: the z-RMS is the widening of
+    the terms at the rest of their size, ``sqrt(1 - s)`` of them (about 1.3 here).  As
+    above, 2.5 % is five standard deviations, a false failure below 1e-6."""
+    measured, predicted, nothing = _widening_drawn(9, 0.6, 0.3)
+    assert predicted > HONEST_RATIO
+    assert measured == pytest.approx(predicted, rel=0.025)
+    assert nothing == pytest.approx(1.0)
 
 
 def test_the_power_bounds_the_share_flagged_from_below() -> None:
