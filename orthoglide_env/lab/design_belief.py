@@ -253,18 +253,13 @@ class DesignBelief:
         """Eigenvalues (r,), largest first, of the predicted TCP error's covariance in the
         ``r`` directions the rigid-motion score sees (``F' C F``, mm^2): their sum is
         :meth:`predicted_mse`."""
-        n = N_MACHINE
-        block = self.factor.T @ self.covariance[:n, :n] @ self.factor
-        # A covariance's eigenvalues are >= 0; the rounding of a resolved one may not be.
-        return np.clip(np.linalg.eigvalsh((block + block.T) / 2), 0.0, None)[::-1]
+        return _spectra(self.factor, self.covariance[:N_MACHINE, :N_MACHINE])
 
     def log_mean_squares(self) -> np.ndarray:
         """``log10`` of :meth:`error_spectrum` and of its sum (:meth:`predicted_mse`, to
         rounding), each in units of ``ACCURACY_UNIT_MM`` squared plus :data:`LOG_FLOOR`
         (r + 1,)."""
-        spectrum = self.error_spectrum()
-        values = np.append(spectrum, np.sum(spectrum))
-        return np.log10(values / ACCURACY_UNIT_MM**2 + LOG_FLOOR)
+        return _log_mean_squares(self.error_spectrum())
 
     # -- what a learner observes ------------------------------------------------------------
     def reading_history(self) -> np.ndarray:
@@ -368,12 +363,24 @@ def observations(beliefs: list[DesignBelief]) -> np.ndarray:
     view), stacked (N, n), the same floats: the predicted error's spectra of all of them in
     one batched product and eigen-solve, whose call costs a chunk of machines about what
     one machine's costs."""
-    first = beliefs[0]
     n = N_MACHINE
-    blocks = first.factor.T @ np.stack([b.covariance[:n, :n] for b in beliefs]) @ first.factor
-    spectra = np.clip(np.linalg.eigvalsh((blocks + blocks.transpose(0, 2, 1)) / 2), 0.0,
-                      None)[:, ::-1]
-    values = np.concatenate((spectra, np.sum(spectra, axis=1, keepdims=True)), axis=1)
-    logs = np.log10(values / ACCURACY_UNIT_MM**2 + LOG_FLOOR)
+    logs = _log_mean_squares(_spectra(beliefs[0].factor, np.stack(
+        [b.covariance[:n, :n] for b in beliefs])))
     tails = np.stack([b.observation_tail() for b in beliefs])
     return np.concatenate((logs, tails), axis=1).astype(np.float32)
+
+
+def _spectra(factor: np.ndarray, covariances: np.ndarray) -> np.ndarray:
+    """Eigenvalues (..., r), largest first, of ``F' C F`` for the machine block ``C``
+    (..., n, n) of one covariance or a stack of them."""
+    block = factor.T @ covariances @ factor
+    # A covariance's eigenvalues are >= 0; the rounding of a resolved one may not be.
+    symmetric = (block + np.swapaxes(block, -1, -2)) / 2
+    return np.clip(np.linalg.eigvalsh(symmetric), 0.0, None)[..., ::-1]
+
+
+def _log_mean_squares(spectra: np.ndarray) -> np.ndarray:
+    """``log10`` of spectra (..., r) and of their sums, in units of ``ACCURACY_UNIT_MM``
+    squared plus :data:`LOG_FLOOR` (..., r + 1)."""
+    values = np.concatenate((spectra, np.sum(spectra, axis=-1, keepdims=True)), axis=-1)
+    return np.log10(values / ACCURACY_UNIT_MM**2 + LOG_FLOOR)
