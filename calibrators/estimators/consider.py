@@ -124,8 +124,6 @@ TERM_FAMILIES: tuple[str, ...] = ("lead", "periodic", "backlash", "warmup", "sta
 #: screw's lead cannot compensate the periodic error, and an indicator's error curve is
 #: told apart from the geometry only against a reference.
 FULL_TERMS: tuple[str, ...] = ("lead", "backlash", "warmup", "stands")
-#: The pitch-error table's prior: the curve's correlation length, a fraction of the stroke.
-CURVE_LENGTH: float = 0.25
 #: The ``full`` estimator's pitch-error table's default node spacing (mm).  Assumption:
 #: 10 mm, a usual spacing of a controller's pitch-error table on a short axis.
 DEFAULT_NODE_SPACING: float = 10.0
@@ -253,12 +251,11 @@ def lead_terms(rho: np.ndarray, machine: MachineDesign, conditions: Conditions,
     """The lead error's terms at the carriages' positions ``rho`` (..., 3): (name,
     pattern (..., 3), mm per unit coefficient), none where the lead effect is off.
 
-    ``spacing`` None: the curve as the conditions' table describes it (scale, two sines,
-    the screw's periodic sin/cos).  A spacing (mm): the curve as a controller's
-    pitch-error table with nodes that far apart (:func:`table_prior`), in the
-    coefficients that whiten its prior (``lead.table<i>``), and the periodic terms, which a
-    table coarser than the screw's lead cannot hold.  The curve's prior is the table's
-    sizes, not the sines the lab draws: a real screw's curve has no such form."""
+    ``spacing`` None: the curve as the conditions' table describes it (:func:`curve_terms`)
+    and the screw's periodic sin/cos.  A spacing (mm): the curve as a controller's
+    pitch-error table with nodes that far apart (:func:`table_prior`), in the coefficients
+    that whiten its prior (``lead.table<i>``), and the periodic terms, which a table
+    coarser than the screw's lead cannot hold."""
     if "lead" not in conditions:
         return []
     stroke = machine.rho_max - machine.rho_min
@@ -268,13 +265,7 @@ def lead_terms(rho: np.ndarray, machine: MachineDesign, conditions: Conditions,
     waves = [("lead.periodic_sin", periodic * np.sin(angle)),
              ("lead.periodic_cos", periodic * np.cos(angle))]
     if spacing is None:
-        scale = np.sqrt(second_moment("lead", "scale", conditions)) * UM
-        curve = np.sqrt(second_moment("lead", "curve", conditions)) * UM
-        # The table's curve is split between the two sines as the lab draws it: a share
-        # s ~ U(0, 1) to the first, (1 - s) / 2 to the second (E[s^2] = 1/3).
-        curves = [("lead.scale", scale * x),
-                  ("lead.curve1", curve / np.sqrt(3) * np.sin(np.pi * x)),
-                  ("lead.curve2", curve / np.sqrt(12) * np.sin(2 * np.pi * x))]
+        curves = curve_terms(x, conditions)
     else:
         count, root = table_prior(machine, conditions, spacing)
         weights = interpolation_weights(rho, machine.rho_min, spacing, count) @ root
@@ -285,31 +276,35 @@ def lead_terms(rho: np.ndarray, machine: MachineDesign, conditions: Conditions,
     return out
 
 
+def curve_terms(x: np.ndarray, conditions: Conditions) -> list[tuple[str, np.ndarray]]:
+    """The lead error's smooth part at ``x`` (...), a fraction of the stroke from
+    ``rho_min``, as the lab draws it (:meth:`~orthoglide_env.world.truth.World.draw`):
+    (name, pattern (...), mm per unit coefficient) of three uncorrelated coefficients, so
+    that the patterns' outer products add up to the drawn curve's second moments.  The
+    scale ``x`` at the table's ``scale``; the table's ``curve`` C split between two sines,
+    a share s ~ U(0, 1) to ``sin(pi x)`` and (1 - s) / 2 to ``sin(2 pi x)``, with random
+    signs: E[C^2 s^2] = E[C^2] / 3 and E[C^2 (1 - s)^2 / 4] = E[C^2] / 12."""
+    scale = np.sqrt(second_moment("lead", "scale", conditions)) * UM
+    curve = np.sqrt(second_moment("lead", "curve", conditions)) * UM
+    return [("lead.scale", scale * x),
+            ("lead.curve1", curve / np.sqrt(3) * np.sin(np.pi * x)),
+            ("lead.curve2", curve / np.sqrt(12) * np.sin(2 * np.pi * x))]
+
+
 def table_prior(machine: MachineDesign, conditions: Conditions, spacing: float
                 ) -> tuple[int, np.ndarray]:
     """The pitch-error table's node count after the reference node and ``R`` (count, K),
-    mm: node values ``R z`` with ``z ~ N(0, I)`` have the table's prior, a Gaussian
-    process that is 0 at the reference (its error is an encoder offset) and smooth: a
-    linear part whose slope is the screw's travel deviation (the table's ``scale`` at the
-    stroke's end), and a curve of the table's ``curve`` size with a squared-exponential
-    correlation over a quarter of the stroke (ISO 3408's v_300p bounds the deviation in
-    any 300 mm; two bends over the stroke, an assumption), conditioned on 0 at the
-    reference.  Directions of the prior below 1e-3 of its largest spread are dropped:
-    they move no node by a measurable amount."""
+    mm: node values ``R z`` with ``z ~ N(0, I)`` have the second moments of the lead
+    error's smooth part that the lab draws at the nodes (:func:`curve_terms`), 0 at the
+    reference (an error there is an encoder offset).  One source for the fit and the
+    lab: the table's prior is the truth's own distribution, so the fit's error bars hold
+    the curve as large and as shaped as it acts, no narrower and no wider.  Its K = 3
+    columns are the curve's terms at the nodes; a table finer than the curve holds no
+    more."""
     stroke = machine.rho_max - machine.rho_min
     count = node_count(stroke, spacing)
     x = spacing * np.arange(1, count + 1) / stroke
-
-    def correlation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        return np.exp(-0.5 * ((a[:, None] - b[None]) / CURVE_LENGTH) ** 2)
-
-    zero = np.zeros(1)
-    curve = correlation(x, x) - correlation(x, zero) @ correlation(zero, x)
-    cov = (second_moment("lead", "scale", conditions) * np.outer(x, x)
-           + second_moment("lead", "curve", conditions) / 2 * curve) * UM**2
-    values, vectors = np.linalg.eigh(cov)
-    keep = values > 1e-6 * values.max()
-    return count, vectors[:, keep] * np.sqrt(values[keep])
+    return count, np.stack([pattern for _, pattern in curve_terms(x, conditions)], axis=-1)
 
 
 def _drive_terms(design: ReadingLayout, t: np.ndarray | None, conditions: Conditions,
