@@ -16,8 +16,9 @@ honest in the told world; what the fit shows told the truth is the other row to 
 beside it.
 
 ``--scale EFFECT=K`` multiplies the second moments of one effect's table rows in the
-fit's terms by K (an experiment on the fit's model of that effect, not an option of the
-tool): it asks how far the fit's own model of the effect falls short of what acts.
+fit's terms by K, ``--scale EFFECT.PARAMETER=K`` of one row (an experiment on the fit's
+model of that effect, not an option of the tool): it asks how far the fit's own model of
+the effect falls short of what acts.
 """
 
 from __future__ import annotations
@@ -33,19 +34,24 @@ import calibrators.estimators.gauss_newton as gauss_newton
 from calibrators.estimators.consider import TERM_FAMILIES
 from calibrators.study.compare import Config
 from orthoglide_env.world.conditions import CONDITION_NAMES, EFFECT_NAMES, Conditions
+from orthoglide_env.world.table import EFFECTS
 
 
-def scaled_effect(spec: str) -> tuple[str, float]:
-    """``EFFECT=K`` as (effect, K); ``argparse.ArgumentTypeError`` on anything else."""
-    effect, _, factor = spec.partition("=")
+def scaled_effect(spec: str) -> tuple[str, str | None, float]:
+    """``EFFECT=K`` or ``EFFECT.PARAMETER=K`` as (effect, parameter or None, K);
+    ``argparse.ArgumentTypeError`` on anything else."""
+    name, _, factor = spec.partition("=")
+    effect, _, parameter = name.partition(".")
     try:
         k = float(factor)
     except ValueError:
         k = float("nan")
-    if effect not in EFFECT_NAMES or not k > 0:
-        raise argparse.ArgumentTypeError(f"--scale wants EFFECT=K with EFFECT one of "
-                                         f"{list(EFFECT_NAMES)} and K > 0, got {spec!r}")
-    return effect, k
+    if (effect not in EFFECT_NAMES or not k > 0
+            or (parameter and parameter not in EFFECTS[effect])):
+        raise argparse.ArgumentTypeError(f"--scale wants EFFECT=K or EFFECT.PARAMETER=K with "
+                                         f"EFFECT one of {list(EFFECT_NAMES)}, a row of its "
+                                         f"table and K > 0, got {spec!r}")
+    return effect, parameter or None, k
 
 
 def main() -> None:
@@ -60,16 +66,18 @@ def main() -> None:
     parser.add_argument("--episodes", type=Path, default=None,
                         help="the folder where misjudged_world.py keeps its episodes")
     parser.add_argument("--scale", type=scaled_effect, default=None,
-                        help="EFFECT=K: that effect's second moments times K in the fit")
+                        help="EFFECT=K or EFFECT.PARAMETER=K: those second moments "
+                        "times K in the fit")
     args = parser.parse_args()
     config = Config(agents=(args.agent,), estimators=("full",),
                     conditions=Conditions(args.truth), seed=args.seed, sigma=args.sigma,
                     budget_s=args.budget)
     episodes = played(config, args.agent, args.machines, args.episodes)
     if args.scale is not None:
-        effect, k = args.scale
+        effect, parameter, k = args.scale
         moment = consider.second_moment
-        consider.second_moment = (lambda e, p, c: moment(e, p, c) * (k if e == effect else 1.0))
+        consider.second_moment = (lambda e, p, c: moment(e, p, c) * (
+            k if e == effect and parameter in (None, p) else 1.0))
     weighed: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
     words = gauss_newton.blind_spot
 
@@ -81,7 +89,8 @@ def main() -> None:
     gauss_newton.blind_spot = recorded
     r = row(args.truth, args.agent, args.told, episodes, episodes[0].run.sigma)
     low, high = r["z_ci95"]
-    scale = "" if args.scale is None else f", {args.scale[0]} second moments x{args.scale[1]:g}"
+    scale = "" if args.scale is None else (
+        f", {'.'.join(n for n in args.scale[:2] if n)} second moments x{args.scale[2]:g}")
     print(f"truth {args.truth}, {args.agent}, told {args.told}{scale}, {r['machines']} "
           f"machines: z-RMS {r['z_rms']:.2f} [{low:.2f}, {high:.2f}], world test flags "
           f"{r['warned'] - r['blind']:.2f}, blind spot {r['blind']:.2f}")
