@@ -35,7 +35,7 @@ from orthoglide_env.lab.operations import TIME, Op
 from orthoglide_env.model.design import MachineDesign
 
 #: Targets per drive: ISO 230-2's at least 5 per metre and 5 in all, and more: about two
-#: of the pitch table's 10 mm node spacings apart, which its smoothness prior bridges.
+#: of the pitch table's 10 mm node spacings apart, which its prior (the lab's lead curve) bridges.
 #: (17, one per node, removed no more of the lead error's variance on three machines,
 #: 0.91 against 0.90, and left the gauges 6 minutes less of the hour.)
 TARGETS: int = 9

@@ -95,7 +95,7 @@ OPTIONS: tuple[Option, ...] = (
     Option("--node-spacing", "node_spacing", {
         "type": float, "metavar": "MM",
         "help": f"fit the lead error as a controller's pitch-error table with nodes this far "
-                f"apart, with a smoothness prior (default with --params full: "
+                f"apart, its prior the lead curve the lab draws (default with --params full: "
                 f"{DEFAULT_NODE_SPACING:g})"}),
     Option("--check-world", "world_check", {
         "action": "store_const", "const": True,

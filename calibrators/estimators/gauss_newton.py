@@ -257,10 +257,11 @@ class GaussNewtonCalibrator(Estimator):
     families (:data:`~calibrators.estimators.consider.TERM_FAMILIES`; True: all) are fitted
     (each coefficient a parameter ``world.<term>`` with its second moment as a normal
     prior) instead of considered; ``node_spacing``: the lead error's curve as a
-    controller's pitch-error table with nodes this far apart (mm), with its smoothness
-    prior (:func:`~calibrators.estimators.consider.table_prior`); ``conditions="auto"``:
-    the fit estimates the world from the readings, each effect family's size between the
-    ``lab``'s and twice the ``workshop``'s (:mod:`calibrators.estimators.world_sizes`);
+    controller's pitch-error table with nodes this far apart (mm), with the lead curve
+    the lab draws as its prior (:func:`~calibrators.estimators.consider.table_prior`);
+    ``conditions="auto"``: the fit estimates the world from the readings, each effect
+    family's size between the ``lab``'s and twice the ``workshop``'s
+    (:mod:`calibrators.estimators.world_sizes`);
     ``world_check``: a warning of kind ``world`` when the readings show a world worse than
     the named ``conditions``, with the effects that show it.
     """
