@@ -4,6 +4,7 @@
                                          [--truths lab,workshop]
                                          [--told ideal,lab,workshop,auto] [--seed 1]
                                          [--sigma 0.02] [--budget 3600]
+                                         [--instruments dial,interferometer,ballbar]
                                          [--episodes DIR]
 
 Per true world and agent, each machine's one-hour experiment (``realistic`` errors, exact
@@ -22,7 +23,8 @@ with ``auto``, z-RMS within [0.8, 1.25].
 ``--episodes DIR`` keeps each true world's and agent's played episodes in DIR (a pickle
 per sweep, named by its world, agent, machines, seed, sigma and budget) and fits those
 found there instead of playing them again: the fits can be repeated at the cost of the
-fits alone.  Load only files this script wrote.
+fits alone.  Load only files this script wrote.  ``--instruments`` names what the lab owns
+(as ``compare --instruments``; the dial gauges alone when not given).
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ from calibrators.estimators.catalogue import for_study
 from calibrators.estimators.world_sizes import BLIND_SPOT
 from calibrators.study.compare import Config, agent_episodes, scored_trials
 from calibrators.study.statistics import median_interval
+from orthoglide_env.instruments.catalogue import check_instruments
 from orthoglide_env.world.conditions import AUTO, CONDITION_NAMES, Conditions
 
 #: The issue's promise (issue 38, must-show 1).
@@ -54,10 +57,13 @@ def z_interval(z: np.ndarray) -> tuple[float, float]:
             float(np.sqrt(total / stats.chi2.isf(0.975, n))))
 
 
-def row(truth: str, agent: str, told: str, episodes: list, sigma: float) -> dict:
-    """One cell of the table: the fits of ``episodes`` told ``told``, scored."""
+def row(truth: str, agent: str, told: str, episodes: list, sigma: float,
+        world_check: bool = True) -> dict:
+    """One cell of the table: the fits of ``episodes`` told ``told``, scored, with the
+    world test unless ``world_check`` is False (it sizes the world from the gauges' terms
+    only: readings of the interferometer or the ballbar are fitted without it)."""
     world = told if told == AUTO else Conditions(told)
-    estimates = for_study("full", sigma, world, "realistic", world_check=True).fit_many(
+    estimates = for_study("full", sigma, world, "realistic", world_check=world_check).fit_many(
         [e.run.measurements for e in episodes])
     trials = scored_trials(episodes, "full", estimates)
     ok = [t for t in trials if not t.failed]
@@ -82,14 +88,24 @@ def played(config: Config, agent: str, machines: int, keep: Path | None) -> list
     were kept there, else played (and kept there when it is given)."""
     if keep is None:
         return agent_episodes(config, agent, list(range(machines)))
-    path = keep / (f"{config.conditions.name}-{agent}-{machines}-seed{config.seed}-"
-                   f"sigma{config.sigma:g}-{config.budget_s:g}s.pickle")
+    owned = "".join(f"-{name}" for name in config.instruments)
+    path = keep / (f"{config.conditions.label}-{agent}-{machines}-seed{config.seed}-"
+                   f"sigma{config.sigma:g}-{config.budget_s:g}s{owned}.pickle")
     if path.exists():
         return pickle.loads(path.read_bytes())
     episodes = agent_episodes(config, agent, list(range(machines)))
     keep.mkdir(parents=True, exist_ok=True)
     path.write_bytes(pickle.dumps(episodes))
     return episodes
+
+
+def owned(text: str) -> tuple[str, ...]:
+    """``--instruments``: the lab's instruments named in ``text``, comma-separated;
+    ``argparse.ArgumentTypeError`` naming an unknown one."""
+    try:
+        return check_instruments([n.strip() for n in text.split(",") if n.strip()])
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def main() -> None:
@@ -101,6 +117,8 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--sigma", type=float, default=0.02)
     parser.add_argument("--budget", type=float, default=3600.0)
+    parser.add_argument("--instruments", type=owned, default=(),
+                        help="what the lab owns, comma-separated (default: the dial gauges)")
     parser.add_argument("--episodes", type=Path, default=None,
                         help="keep the played episodes in this folder and reuse them")
     args = parser.parse_args()
@@ -112,7 +130,8 @@ def main() -> None:
     for truth in args.truths.split(","):
         for agent in args.agents.split(","):
             config = Config(agents=(agent,), estimators=("full",), conditions=Conditions(truth),
-                            seed=args.seed, sigma=args.sigma, budget_s=args.budget)
+                            seed=args.seed, sigma=args.sigma, budget_s=args.budget,
+                            instruments=args.instruments)
             episodes = played(config, agent, args.machines, args.episodes)
             for told in args.told.split(","):
                 r = row(truth, agent, told, episodes, episodes[0].run.sigma)

@@ -3,6 +3,7 @@
     python benchmarks/world_excess.py --truth workshop --agent optimal --told lab
                                       [--machines 50] [--seed 1] [--sigma 0.02]
                                       [--budget 3600] [--episodes DIR] [--scale EFFECT=K]
+                                      [--instruments LIST] [--effects LIST]
 
 The experiments of ``misjudged_world.py`` (the same episodes, kept in ``--episodes``) are
 fitted by ``full`` told ``--told`` with the world check on.  Beside the measured row it
@@ -19,6 +20,14 @@ beside it.
 fit's terms by K, ``--scale EFFECT.PARAMETER=K`` of one row (an experiment on the fit's
 model of that effect, not an option of the tool): it asks how far the fit's own model of
 the effect falls short of what acts.
+
+``--effects LIST`` has only those effects of ``--truth`` act in the played world (as
+``compare --effects``), the fit still told all of ``--told``'s: switched off one at a
+time, they split the measured excess of z^2 by effect.  The agent still plans for all of
+``--truth``'s effects (an experiment, not a lab: a planner told the world it plays in
+would plan other operations), so every row reads the same operations and the rows are
+paired.  ``--instruments`` names what the
+lab owns (``misjudged_world.py --instruments``).
 """
 
 from __future__ import annotations
@@ -27,8 +36,10 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-from misjudged_world import played, row
+from misjudged_world import owned, played, row
 
+import calibrators.agents.active as active
+import calibrators.agents.optimal as optimal
 import calibrators.estimators.consider as consider
 import calibrators.estimators.gauss_newton as gauss_newton
 from calibrators.estimators.consider import TERM_FAMILIES
@@ -54,6 +65,17 @@ def scaled_effect(spec: str) -> tuple[str, str | None, float]:
     return effect, parameter or None, k
 
 
+def effect_list(text: str) -> tuple[str, ...]:
+    """``--effects``: effect names, comma-separated; ``argparse.ArgumentTypeError`` naming
+    an unknown one."""
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    unknown = [n for n in names if n not in EFFECT_NAMES]
+    if unknown:
+        raise argparse.ArgumentTypeError(f"unknown effect(s) {unknown}; effects are "
+                                         f"{', '.join(EFFECT_NAMES)}")
+    return names
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--truth", choices=CONDITION_NAMES, default="workshop")
@@ -68,10 +90,22 @@ def main() -> None:
     parser.add_argument("--scale", type=scaled_effect, default=None,
                         help="EFFECT=K or EFFECT.PARAMETER=K: those second moments "
                         "times K in the fit")
+    parser.add_argument("--instruments", type=owned, default=(),
+                        help="what the lab owns, comma-separated (default: the dial gauges)")
+    parser.add_argument("--effects", type=effect_list, default=None,
+                        help="only these effects of --truth act in the played world")
     args = parser.parse_args()
-    config = Config(agents=(args.agent,), estimators=("full",),
-                    conditions=Conditions(args.truth), seed=args.seed, sigma=args.sigma,
-                    budget_s=args.budget)
+    truth = Conditions(args.truth, effects=args.effects)
+    if args.effects is not None:
+        setup = optimal.lab_setup
+
+        def planned_for_all(*given):  # type: ignore[no-untyped-def]
+            return (*setup(*given)[:-1], Conditions(args.truth))
+
+        optimal.lab_setup = active.lab_setup = planned_for_all
+    config = Config(agents=(args.agent,), estimators=("full",), conditions=truth,
+                    seed=args.seed, sigma=args.sigma, budget_s=args.budget,
+                    instruments=args.instruments)
     episodes = played(config, args.agent, args.machines, args.episodes)
     if args.scale is not None:
         effect, parameter, k = args.scale
@@ -87,11 +121,14 @@ def main() -> None:
         return words(told, harsher, families, factors, power)
 
     gauss_newton.blind_spot = recorded
-    r = row(args.truth, args.agent, args.told, episodes, episodes[0].run.sigma)
+    # The world test sizes the gauges' terms only: with other instruments it is left out,
+    # and the measured row is all there is to read.
+    r = row(args.truth, args.agent, args.told, episodes, episodes[0].run.sigma,
+            world_check=set(args.instruments) <= {"dial"})
     low, high = r["z_ci95"]
     scale = "" if args.scale is None else (
         f", {'.'.join(n for n in args.scale[:2] if n)} second moments x{args.scale[2]:g}")
-    print(f"truth {args.truth}, {args.agent}, told {args.told}{scale}, {r['machines']} "
+    print(f"truth {truth.label}, {args.agent}, told {args.told}{scale}, {r['machines']} "
           f"machines: z-RMS {r['z_rms']:.2f} [{low:.2f}, {high:.2f}], world test flags "
           f"{r['warned'] - r['blind']:.2f}, blind spot {r['blind']:.2f}")
     for harsher, rows in weighed.items():

@@ -525,12 +525,17 @@ class GaussNewtonCalibrator(Estimator):
                 for a, v in ((free, True), (fixed, 0.0), (priors, 1.0), (scale, 1.0),
                              (unmodelled, False), (spread, 0.0)))
 
+        # An interferometer or a ballbar determines the best-seen combinations finely
+        # enough that the model's curvature over what it does not see outgrows them.
+        curved = any(isinstance(s, InterferometerAxis | BallbarSpec) for s in design.specs)
+
         def fit(rows: np.ndarray, mask: np.ndarray, terms: Consider = consider,
                 start: np.ndarray | None = None) -> BatchFit:
             return fit_batch(design, values[rows], mask[rows], noise, free, fixed, priors,
                              scale, unmodelled=unmodelled, solver=solver,
                              consider=terms.rows(rows), left_out=spread,
-                             world=None if world is None else world[rows], start=start)
+                             world=None if world is None else world[rows], start=start,
+                             curvature=curved)
 
         m_count = len(values)
         mask = np.tile(~held, (m_count, 1))
