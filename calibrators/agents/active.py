@@ -27,6 +27,7 @@ more time does not pay (:mod:`calibrators.planning.world_terms`).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
@@ -37,8 +38,9 @@ from calibrators.agents.optimal import fixed_plan, lab_setup, owned_instruments
 from calibrators.estimators.catalogue import for_study
 from calibrators.planning.belief import N_MACHINE, N_STAND, ZERO_SCALE, PlannedOperation
 from calibrators.planning.instruments import Bundle, operation_keys, planned_bundles
+from calibrators.planning.pricing import PricedMoves
 from calibrators.planning.rounding import plan_bundles
-from calibrators.planning.search import Planner, take
+from calibrators.planning.search import Planner, best_moves, take
 from calibrators.planning.search import observe as observe_bundle
 from orthoglide_env.instruments.ballbar import BallbarSpec
 from orthoglide_env.instruments.interferometer import InterferometerAxis
@@ -87,15 +89,33 @@ class ActiveAgent(Agent):
         self._observe(observation, {})
 
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
-        if self.bundle_left:
-            self.bundle_left -= 1
-            if not self.bundle_left:
-                self._observe_bundle(observation)
-        elif self.last is not None and not info.get("refused"):
-            self._observe(observation, info)
-        step = self._next(float(observation["time"][0]))
-        self.last = step
-        return action(step.op, step.rho, step.stand, step.slot, **operation_keys(step))
+        return self.act_all([self], [observation], [info])[0]
+
+    @classmethod
+    def act_all(cls, agents: list[Agent], observations: list[dict[str, np.ndarray]],
+                infos: list[Mapping[str, Any]]) -> list[dict[str, Any]]:
+        """Each agent takes in its lab's observation and readies its next operation; those
+        that choose a move now choose together (:func:`~calibrators.planning.search.
+        best_moves`, their beliefs' prices stacked over the chunk's machines), each the
+        move it would choose alone."""
+        steps: list[PlannedOperation | None] = []
+        for agent, observation, info in zip(agents, observations, infos, strict=True):
+            if agent.bundle_left:
+                agent.bundle_left -= 1
+                if not agent.bundle_left:
+                    agent._observe_bundle(observation)
+            elif agent.last is not None and not info.get("refused"):
+                agent._observe(observation, info)
+            steps.append(agent._ready(float(observation["time"][0])))
+        choosing = [i for i, step in enumerate(steps) if step is None]
+        choices = best_moves([agents[i].planner for i in choosing])
+        for i, choice in zip(choosing, choices, strict=True):
+            steps[i] = agents[i]._moved(choice)
+        out = []
+        for agent, step in zip(agents, steps, strict=True):
+            agent.last = step
+            out.append(action(step.op, step.rho, step.stand, step.slot, **operation_keys(step)))
+        return out
 
     # -- what was seen -------------------------------------------------------------------
     def _observe(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> None:
@@ -130,7 +150,9 @@ class ActiveAgent(Agent):
                        np.array([r.reading for r in records]))
 
     # -- what to do next -------------------------------------------------------------------
-    def _next(self, now: float) -> PlannedOperation:
+    def _ready(self, now: float) -> PlannedOperation | None:
+        """The next operation, or None when it is a move the planner is to choose
+        (:meth:`_moved` then takes it)."""
         planner = self.planner
         if self.queue:
             return self.queue.pop(0)
@@ -146,15 +168,25 @@ class ActiveAgent(Agent):
             remount = self.remounts.pop(0)
             planner.remount(remount.stand, remount.slot)
         else:
-            choice = planner.best_move()
-            if choice is None and not self._bundle_fits():
-                return PlannedOperation(Op.STOP)
-            if choice is None:
-                # The dials pay no more: the plan's next bundle comes early.
-                self._take_bundle()
-            else:
-                planner.move(*choice)
-        self.queue = list(planner.steps[start:])
+            return None
+        return self._queued(start)
+
+    def _moved(self, choice: tuple[int, PricedMoves] | None) -> PlannedOperation:
+        """The next operation after the planner's choice of move (:meth:`~calibrators.
+        planning.search.Planner.best_move`'s): that move, else the plan's next bundle
+        early (the dials pay no more), else stop."""
+        start = len(self.planner.steps)
+        if choice is None and not self._bundle_fits():
+            return PlannedOperation(Op.STOP)
+        if choice is None:
+            self._take_bundle()
+        else:
+            self.planner.move(*choice)
+        return self._queued(start)
+
+    def _queued(self, start: int) -> PlannedOperation:
+        """The first of the planner's operations from ``start`` on, the rest queued."""
+        self.queue = list(self.planner.steps[start:])
         return self.queue.pop(0)
 
     def _take_bundle(self) -> None:

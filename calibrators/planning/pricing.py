@@ -23,7 +23,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from calibrators.planning.belief import N_MACHINE, Belief, rigid_factor
+from calibrators.planning.belief import N_MACHINE, Belief, reaches, rigid_factor
 from calibrators.planning.world_terms import directions
 from orthoglide_env.lab.operations import TIME
 from orthoglide_env.lab.slot_table import slot_table
@@ -112,7 +112,11 @@ class Pricer(Belief):
         how likely each reads there (K, P).  A plunger is let down only where it is safe
         both here and there (let down here, it reads there), and lifted where it is not
         safe there."""
-        safe, contact = self._reach()
+        return self._moves_from(*self._reach())
+
+    def _moves_from(self, safe: np.ndarray, contact: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`_moves` from the stands' reach at every posture (:meth:`_reach`)."""
         here = safe[:, self.here]
         engaged = np.array(self.engaged, dtype=bool)
         after = safe & (engaged | here)[:, None]
@@ -193,8 +197,12 @@ class Pricer(Belief):
         With the world's terms only the :data:`WORLD_SHORTLIST` moves of the highest
         bounds per second and Zero are priced, with the world's terms
         (:meth:`_price`): their rates are returned, -inf for the others."""
+        return self._top_rates_of(count, *self._moves())
+
+    def _top_rates_of(self, count: int, seconds: np.ndarray, after: np.ndarray,
+                      reads: np.ndarray) -> tuple[np.ndarray, PricedMoves]:
+        """:meth:`top_rates` from the moves' seconds, plungers and readings (:meth:`_moves`)."""
         wanted = count if self.world is None else max(count, WORLD_SHORTLIST)
-        seconds, after, reads = self._moves()
         fits = self.time_s + seconds <= self.budget_s
         live = np.flatnonzero(fits & reads.any(axis=0))
         gain = np.full(len(seconds), np.nan)
@@ -223,3 +231,17 @@ class Pricer(Belief):
             if rest.size:
                 price(rest[ceiling[rest] >= np.sort(rate[live[first]])[-wanted]])
         return rate, PricedMoves(gain, seconds, after, reads)
+
+
+def top_rates_many(pricers: list[Pricer], count: int
+                   ) -> list[tuple[np.ndarray, PricedMoves]]:
+    """:meth:`Pricer.top_rates` of each of ``pricers`` (one per machine of a chunk), the
+    same arrays to the bit: the stands' reach of filters of one design and stand count
+    stacked over them (:func:`~calibrators.planning.belief.reaches`)."""
+    if not pricers:
+        return []
+    if not all(p.mean is not None and p.table is pricers[0].table
+               and len(p.slots) == len(pricers[0].slots) for p in pricers):
+        return [pricer.top_rates(count) for pricer in pricers]
+    return [pricer._top_rates_of(count, *pricer._moves_from(*reached))
+            for pricer, reached in zip(pricers, reaches(pricers), strict=True)]
