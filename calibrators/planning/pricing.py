@@ -24,7 +24,7 @@ from typing import NamedTuple
 import numpy as np
 
 from calibrators.planning.belief import N_MACHINE, Belief, reaches, rigid_factor
-from calibrators.planning.world_terms import directions
+from calibrators.planning.world_terms import directions, gains_many
 from orthoglide_env.lab.operations import TIME
 from orthoglide_env.lab.slot_table import slot_table
 from orthoglide_env.model.design import MachineDesign
@@ -93,19 +93,26 @@ class Pricer(Belief):
         ``seconds`` of every move): the geometry's alone, or with the world's terms their
         rows too, at the time and from the direction each move arrives, and for I the
         considered terms' bias (:meth:`~calibrators.planning.world_terms.WorldTerms.gains`)."""
-        rows = self._rows(reads, postures)
         if self.world is None:
+            return self._gains(self._rows(reads, postures))
+        rows, considered = self._world_rows(reads, seconds, postures)
+        if self.criterion == "D":
             return self._gains(rows)
+        return self.world.gains(rows, considered, self.covariance, rigid_factor(self.design))
+
+    def _world_rows(self, reads: np.ndarray, seconds: np.ndarray, postures: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+        """Whitened rows (L, K, n) of the readings of the moves to ``postures`` (L,) with
+        the world's terms (at the time and from the direction each move arrives), and over
+        the considered terms (L, K, m) (:meth:`_price`'s)."""
+        rows = self._rows(reads, postures)
         weight = np.sqrt(reads.T[postures])[:, :, None] / self.sigma
         fitted, considered = self.world.rows(
             np.array(self.slots), postures, self.time_s + seconds[postures],
             directions(self.rho, self.table.postures[postures], self.world.approach))
         rows[..., self.world.start:self.world.start + self.world.count] += (
             np.swapaxes(fitted, 0, 1) * weight)
-        if self.criterion == "D":
-            return self._gains(rows)
-        return self.world.gains(rows, np.swapaxes(considered, 0, 1) * weight,
-                                self.covariance, rigid_factor(self.design))
+        return rows, np.swapaxes(considered, 0, 1) * weight
 
     def _moves(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The seconds (P,) of every candidate move, the plungers down after it (K, P) and
@@ -202,6 +209,24 @@ class Pricer(Belief):
     def _top_rates_of(self, count: int, seconds: np.ndarray, after: np.ndarray,
                       reads: np.ndarray) -> tuple[np.ndarray, PricedMoves]:
         """:meth:`top_rates` from the moves' seconds, plungers and readings (:meth:`_moves`)."""
+        rate, priced, moves = self._top_rates_open(count, seconds, after, reads)
+        if moves is not None:
+            self._take_prices(rate, priced, moves, self._price(reads, seconds, moves))
+        return rate, priced
+
+    @staticmethod
+    def _take_prices(rate: np.ndarray, priced: PricedMoves, moves: np.ndarray,
+                     gain: np.ndarray) -> None:
+        """Enter the world's prices ``gain`` of ``moves`` in :meth:`_top_rates_open`'s."""
+        priced.gain[moves] = gain
+        rate[moves] = gain / priced.seconds[moves]
+
+    def _top_rates_open(self, count: int, seconds: np.ndarray, after: np.ndarray,
+                        reads: np.ndarray
+                        ) -> tuple[np.ndarray, PricedMoves, np.ndarray | None]:
+        """:meth:`_top_rates_of`, but with the world's terms the moves of the shortlist
+        are left for the caller to price (:meth:`_price`, then :meth:`_take_prices`):
+        the rates, the priced moves, and those moves (None: nothing left to price)."""
         wanted = count if self.world is None else max(count, WORLD_SHORTLIST)
         fits = self.time_s + seconds <= self.budget_s
         live = np.flatnonzero(fits & reads.any(axis=0))
@@ -223,14 +248,12 @@ class Pricer(Belief):
                 # Zero when it is live: a test of its own entries, not a search of ``live``.
                 moves = np.union1d(live[order[:wanted]], np.array(
                     [zero] if fits[zero] and reads[:, zero].any() else [], dtype=live.dtype))
-                gain[moves] = self._price(reads, seconds, moves)
-                rate[moves] = gain[moves] / seconds[moves]
-                return rate, PricedMoves(gain, seconds, after, reads)
+                return rate, PricedMoves(gain, seconds, after, reads), moves
             first, rest = np.split(order, [max(FIRST_PRICED, wanted)])
             price(first)
             if rest.size:
                 price(rest[ceiling[rest] >= np.sort(rate[live[first]])[-wanted]])
-        return rate, PricedMoves(gain, seconds, after, reads)
+        return rate, PricedMoves(gain, seconds, after, reads), None
 
 
 def top_rates_many(pricers: list[Pricer], count: int
@@ -243,5 +266,41 @@ def top_rates_many(pricers: list[Pricer], count: int
     if not all(p.mean is not None and p.table is pricers[0].table
                and len(p.slots) == len(pricers[0].slots) for p in pricers):
         return [pricer.top_rates(count) for pricer in pricers]
-    return [pricer._top_rates_of(count, *pricer._moves_from(*reached))
-            for pricer, reached in zip(pricers, reaches(pricers), strict=True)]
+    opened = []
+    for pricer, reached in zip(pricers, reaches(pricers), strict=True):
+        moves = pricer._moves_from(*reached)
+        opened.append((*pricer._top_rates_open(count, *moves), moves))
+    asked = [i for i, (_, _, shortlist, _) in enumerate(opened) if shortlist is not None]
+    gains = price_many([pricers[i] for i in asked],
+                       [(opened[i][3][2], opened[i][3][0], opened[i][2]) for i in asked])
+    for i, gain in zip(asked, gains, strict=True):
+        Pricer._take_prices(opened[i][0], opened[i][1], opened[i][2], gain)
+    return [(rate, priced) for rate, priced, _, _ in opened]
+
+
+def price_many(pricers: list[Pricer], asked: list[tuple[np.ndarray, np.ndarray, np.ndarray]]
+               ) -> list[np.ndarray]:
+    """:meth:`Pricer._price` of each of ``pricers`` with its ``(reads, seconds, postures)``
+    of ``asked``.  The gains of beliefs with the world's terms under criterion I, as many
+    postures, stands, unknowns and considered terms each, in one stacked computation
+    (:func:`~calibrators.planning.world_terms.gains_many`): each its own to the bit."""
+    out: list[np.ndarray | None] = [None] * len(pricers)
+    groups: dict[tuple, list[int]] = {}
+    for i, (pricer, (_, _, postures)) in enumerate(zip(pricers, asked, strict=True)):
+        if pricer.world is None or pricer.criterion != "I":
+            out[i] = pricer._price(*asked[i])
+            continue
+        key = (len(postures), len(pricer.slots), pricer.world.consider.shape,
+               pricer.design)
+        groups.setdefault(key, []).append(i)
+    for members in groups.values():
+        rows, considered = zip(*(pricers[i]._world_rows(*asked[i]) for i in members),
+                               strict=True)
+        first = pricers[members[0]]
+        gains = gains_many(np.stack(rows), np.stack(considered),
+                           np.stack([pricers[i].covariance for i in members]),
+                           np.stack([pricers[i].world.consider for i in members]),
+                           rigid_factor(first.design))
+        for i, gain in zip(members, gains, strict=True):
+            out[i] = gain
+    return out  # type: ignore[return-value]

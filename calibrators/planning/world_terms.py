@@ -207,27 +207,39 @@ class WorldTerms:
         included, for each batch of whitened readings (B, K, n) over the fitted unknowns
         and ``considered`` (B, K, m) over the considered ones; ``factor``: ``F`` (27, r)
         of the rigid weight ``W = F F'``, so every quadratic form in ``W`` is a sum of
-        squares over r columns instead of 27."""
-        n = len(factor)
-
-        def times(a: np.ndarray, matrix: np.ndarray) -> np.ndarray:
-            # One BLAS product for every batch at once.
-            return (a.reshape(-1, a.shape[-1]) @ matrix).reshape(*a.shape[:-1], -1)
-
-        b = times(rows, covariance)
-        m = np.eye(rows.shape[1]) + rows @ np.swapaxes(b, 1, 2)
-        bf = times(b[..., :n], factor)
-        hf = np.linalg.solve(m, bf)  # (B, K, r): the gain, times F
-        known = np.sum(hf * bf, axis=(1, 2))
-        # How the readings move D's machine rows, times F: (B, m, r).
-        qf = np.swapaxes(considered - times(rows, self.consider), 1, 2) @ hf
-        df = self.consider[:n].T @ factor  # (m, r)
-        return known - 2 * np.sum(df[None] * qf, axis=(1, 2)) - np.sum(qf * qf, axis=(1, 2))
+        squares over r columns instead of 27: :func:`gains_many` of this belief alone."""
+        return gains_many(rows[None], considered[None], covariance[None],
+                          self.consider[None], factor)[0]
 
     def stops(self, rate: float, remaining_s: float, criterion: float) -> bool:
         """Whether the plan stops: :data:`STOP_SHARE`'s rule for the best ``rate`` (per
         s) with ``remaining_s`` of the budget left and the ``criterion`` (mm^2) now."""
         return rate * remaining_s < STOP_SHARE * criterion
+
+
+def gains_many(rows: np.ndarray, considered: np.ndarray, covariances: np.ndarray,
+               considers: np.ndarray, factor: np.ndarray) -> np.ndarray:
+    """:meth:`WorldTerms.gains` (M, B) of M beliefs at once: their whitened readings'
+    rows (M, B, K, n) and ``considered`` (M, B, K, m), covariances (M, n, n) and ``D``s
+    (M, n, m), with one ``factor``.  Every product and solve is stacked over the beliefs
+    (BLAS and LAPACK item by item), so each belief's gains are its own alone, to the bit."""
+    n = len(factor)
+
+    def times(a: np.ndarray, matrix: np.ndarray) -> np.ndarray:
+        # One BLAS product for every batch of a belief at once.
+        flat = a.reshape(len(a), -1, a.shape[-1])
+        return (flat @ matrix).reshape(*a.shape[:-1], -1)
+
+    b = times(rows, covariances)
+    m = np.eye(rows.shape[2]) + rows @ np.swapaxes(b, 2, 3)
+    bf = times(b[..., :n], factor)
+    hf = np.linalg.solve(m, bf)  # (M, B, K, r): the gain, times F
+    known = np.sum(hf * bf, axis=(2, 3))
+    # How the readings move D's machine rows, times F: (M, B, m, r).
+    qf = np.swapaxes(considered - times(rows, considers), 2, 3) @ hf
+    df = np.swapaxes(considers[:, :n], 1, 2) @ factor  # (M, m, r)
+    return (known - 2 * np.sum(df[:, None] * qf, axis=(2, 3))
+            - np.sum(qf * qf, axis=(2, 3)))
 
 
 def world_terms(conditions: Conditions | None, design: MachineDesign, table: SlotTable,
