@@ -24,7 +24,7 @@ from typing import NamedTuple
 import numpy as np
 
 from calibrators.planning.belief import N_MACHINE, Belief, reaches, rigid_factor
-from calibrators.planning.world_terms import directions, gains_many
+from calibrators.planning.world_terms import directions, gains_many, rows_many
 from orthoglide_env.lab.operations import TIME
 from orthoglide_env.lab.slot_table import slot_table
 from orthoglide_env.model.design import MachineDesign
@@ -95,21 +95,27 @@ class Pricer(Belief):
         considered terms' bias (:meth:`~calibrators.planning.world_terms.WorldTerms.gains`)."""
         if self.world is None:
             return self._gains(self._rows(reads, postures))
-        rows, considered = self._world_rows(reads, seconds, postures)
+        fitted, considered = self.world.rows(np.array(self.slots), postures,
+                                             *self._arrival(seconds, postures))
+        rows, considered = self._world_rows(reads, postures, fitted, considered)
         if self.criterion == "D":
             return self._gains(rows)
         return self.world.gains(rows, considered, self.covariance, rigid_factor(self.design))
 
-    def _world_rows(self, reads: np.ndarray, seconds: np.ndarray, postures: np.ndarray
-                    ) -> tuple[np.ndarray, np.ndarray]:
-        """Whitened rows (L, K, n) of the readings of the moves to ``postures`` (L,) with
-        the world's terms (at the time and from the direction each move arrives), and over
-        the considered terms (L, K, m) (:meth:`_price`'s)."""
+    def _arrival(self, seconds: np.ndarray, postures: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        """The lab time (L,) at which each move to ``postures`` (L,) arrives (``seconds``
+        of every move) and each axis's direction of travel there (L, 3)."""
+        return self.time_s + seconds[postures], directions(
+            self.rho, self.table.postures[postures], self.world.approach)
+
+    def _world_rows(self, reads: np.ndarray, postures: np.ndarray, fitted: np.ndarray,
+                    considered: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Whitened rows (L, K, n) of the readings of the moves to ``postures`` (L,), the
+        world's rows ``fitted`` (K, L, count) of them added, and over the considered terms
+        (L, K, m) from their rows ``considered`` (K, L, m) (:meth:`_price`'s)."""
         rows = self._rows(reads, postures)
         weight = np.sqrt(reads.T[postures])[:, :, None] / self.sigma
-        fitted, considered = self.world.rows(
-            np.array(self.slots), postures, self.time_s + seconds[postures],
-            directions(self.rho, self.table.postures[postures], self.world.approach))
         rows[..., self.world.start:self.world.start + self.world.count] += (
             np.swapaxes(fitted, 0, 1) * weight)
         return rows, np.swapaxes(considered, 0, 1) * weight
@@ -291,12 +297,22 @@ def price_many(pricers: list[Pricer], asked: list[tuple[np.ndarray, np.ndarray, 
             out[i] = pricer._price(*asked[i])
             continue
         key = (len(postures), len(pricer.slots), pricer.world.consider.shape,
-               pricer.design)
+               pricer.design, pricer.conditions)
         groups.setdefault(key, []).append(i)
     for members in groups.values():
-        rows, considered = zip(*(pricers[i]._world_rows(*asked[i]) for i in members),
-                               strict=True)
-        first = pricers[members[0]]
+        group = [pricers[i] for i in members]
+        postures = np.stack([asked[i][2] for i in members])
+        times, approach = (np.stack(a) for a in zip(
+            *(p._arrival(asked[i][1], asked[i][2]) for p, i in zip(group, members,
+                                                                  strict=True)),
+            strict=True))
+        fitted, considered = rows_many(
+            [p.world for p in group], np.array([p.slots for p in group]), postures, times,
+            approach, np.tile(np.arange(len(group[0].slots)), (len(group), 1)))
+        rows, considered = zip(*(p._world_rows(asked[i][0], asked[i][2], f, c)
+                                 for p, i, f, c in zip(group, members, fitted, considered,
+                                                       strict=True)), strict=True)
+        first = group[0]
         gains = gains_many(np.stack(rows), np.stack(considered),
                            np.stack([pricers[i].covariance for i in members]),
                            np.stack([pricers[i].world.consider for i in members]),
