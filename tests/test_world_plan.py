@@ -8,7 +8,7 @@ import pytest
 
 from calibrators.agents import get_agent
 from calibrators.agents.optimal import fixed_plan
-from calibrators.planning.belief import N_MACHINE, N_STAND, predicted_tips_many
+from calibrators.planning.belief import N_MACHINE, N_STAND, observe_many, predicted_tips_many
 from calibrators.planning.pricing import WORLD_SHORTLIST, top_rates_many
 from calibrators.planning.search import Planner, best_moves, greedy_plan
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op
@@ -213,3 +213,18 @@ def test_filters_priced_together_price_as_each_alone() -> None:
     chosen = best_moves([p.fork() for p in filters])
     for p, choice in zip(filters, chosen, strict=True):
         assert choice is not None and choice[0] == p.fork().best_move()[0]
+    # Their readings taken in together: each filter's update is its own alone.
+    reads = []
+    for p in filters:
+        stands, _ = p.reading_here()
+        nominal = p.table.reading[[p.slots[k] for k in stands], p.here]
+        reads.append((list(stands), list(nominal + rng.normal(0.0, SIGMA, len(stands)))))
+    alone, together = [p.fork() for p in filters], [p.fork() for p in filters]
+    assert len({len(s) for s, _ in reads}) < len(reads)  # some stacked together
+    for p, (stands, values) in zip(alone, reads, strict=True):
+        p.observe(stands, values)
+    observe_many(together, [s for s, _ in reads], [v for _, v in reads])
+    for p, q in zip(alone, together, strict=True):
+        for name in ("mean", "covariance"):
+            np.testing.assert_array_equal(getattr(q, name), getattr(p, name))
+        np.testing.assert_array_equal(q.world.consider, p.world.consider)

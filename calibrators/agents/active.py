@@ -36,7 +36,13 @@ import numpy as np
 from calibrators.agents.base import Agent, action, register
 from calibrators.agents.optimal import fixed_plan, lab_setup, owned_instruments
 from calibrators.estimators.catalogue import for_study
-from calibrators.planning.belief import N_MACHINE, N_STAND, ZERO_SCALE, PlannedOperation
+from calibrators.planning.belief import (
+    N_MACHINE,
+    N_STAND,
+    ZERO_SCALE,
+    PlannedOperation,
+    observe_many,
+)
 from calibrators.planning.instruments import Bundle, operation_keys, planned_bundles
 from calibrators.planning.pricing import PricedMoves
 from calibrators.planning.rounding import plan_bundles
@@ -97,16 +103,25 @@ class ActiveAgent(Agent):
         """Each agent takes in its lab's observation and readies its next operation; those
         that choose a move now choose together (:func:`~calibrators.planning.search.
         best_moves`, their beliefs' prices stacked over the chunk's machines), each the
-        move it would choose alone."""
-        steps: list[PlannedOperation | None] = []
+        move it would choose alone; their filters take in their dials' readings together
+        too (:func:`~calibrators.planning.belief.observe_many`)."""
+        seen = []
         for agent, observation, info in zip(agents, observations, infos, strict=True):
             if agent.bundle_left:
                 agent.bundle_left -= 1
                 if not agent.bundle_left:
                     agent._observe_bundle(observation)
             elif agent.last is not None and not info.get("refused"):
-                agent._observe(observation, info)
-            steps.append(agent._ready(float(observation["time"][0])))
+                read = agent._seen(observation, info)
+                if read is not None:
+                    seen.append((agent, *read))
+        observe_many([a.planner for a, _, _ in seen], [s for _, s, _ in seen],
+                     [v for _, _, v in seen])
+        for agent, stands, values in seen:
+            agent._note(stands, values)
+        steps: list[PlannedOperation | None] = [
+            agent._ready(float(observation["time"][0]))
+            for agent, observation in zip(agents, observations, strict=True)]
         choosing = [i for i, step in enumerate(steps) if step is None]
         choices = best_moves([agents[i].planner for i in choosing])
         for i, choice in zip(choosing, choices, strict=True):
@@ -120,21 +135,33 @@ class ActiveAgent(Agent):
     # -- what was seen -------------------------------------------------------------------
     def _observe(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> None:
         """Take in the readings of the last move or re-mount (or of the reset)."""
+        read = self._seen(observation, info)
+        if read is not None:
+            self.planner.observe(*read)
+            self._note(*read)
+
+    def _seen(self, observation: dict[str, np.ndarray], info: Mapping[str, Any]
+              ) -> tuple[list[int], list[float]] | None:
+        """The stands and readings of the last move or re-mount (or of the reset) for the
+        filter to take in (None: nothing to take in), its clock and stands brought up to
+        date."""
         planner = self.planner
         planner.time_s = float(observation["time"][0])
         for text in info.get("overtravel", []):
             # A stand pushed past its travel reads nothing until it is re-mounted.
             planner.retire(int(text.split()[1]))
         if self.last is not None and self.last.op not in (Op.MOVE, Op.REMOUNT):
-            return
+            return None
         if self.last is not None and self.last.op == Op.REMOUNT:
             self.readings[self.last.stand] = []
         stands = [k for k in range(len(planner.slots))
                   if observation["valid"][k] and planner.slots[k] >= 0]
-        values = [float(observation["gauges"][k]) for k in stands]
-        planner.observe(stands, values)
+        return stands, [float(observation["gauges"][k]) for k in stands]
+
+    def _note(self, stands: list[int], values: list[float]) -> None:
+        """Keep the readings the filter took in, for the refits' zeros."""
         for k, value in zip(stands, values, strict=True):
-            self.readings[k].append((planner.here, value))
+            self.readings[k].append((self.planner.here, value))
 
     def _observe_bundle(self, observation: dict[str, np.ndarray]) -> None:
         """Take in the readings of the instrument's bundle just played (the notebook's

@@ -43,7 +43,7 @@ from typing import NamedTuple
 import numpy as np
 
 from calibrators.planning.instruments import instrument_kit
-from calibrators.planning.world_terms import world_terms
+from calibrators.planning.world_terms import rows_many, world_terms
 from orthoglide_env.lab.design_belief import (
     N_MACHINE,
     N_STAND,
@@ -286,32 +286,32 @@ class Belief:
         weight = np.sqrt(weights)[:, None]
         self._add(rows * weight / self.sigma, considered=considered * weight / self.sigma)
 
-    def _rows_here(self, stands: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _rows_here(self, stands: np.ndarray,
+                   world: tuple[np.ndarray, np.ndarray] | None = None
+                   ) -> tuple[np.ndarray, np.ndarray]:
         """Rows (R, n) of readings of ``stands`` here and now, mm per unit, and (with
-        world terms) their rows over the considered terms (R, m)."""
+        world terms) their rows over the considered terms (R, m); ``world``: the world's
+        rows of them (:func:`world_rows_here`), if already computed."""
         rows = np.array([self.stand_rows[k][self.here] for k in stands]).reshape(
             len(stands), len(self.covariance))
         if self.world is None:
             return rows, np.zeros((len(stands), 0))
-        fitted, considered = self.world.rows(
-            np.array(self.slots), np.array([self.here]), np.array([self.time_s]),
-            self.world.approach[None], stands)
+        fitted, considered = world or world_rows_here([self], [stands])[0]
         rows = rows.copy()
-        rows[:, self.world.start:self.world.start + self.world.count] += fitted[:, 0]
-        return rows, considered[:, 0]
+        rows[:, self.world.start:self.world.start + self.world.count] += fitted
+        return rows, considered
 
     def observe(self, stands: list[int], values: list[float]) -> None:
         """Readings (mm) of ``stands`` taken here (every other engaged stand read nothing):
-        update the mean and the covariance."""
-        if self.mean is None:
-            self.mean = np.zeros(len(self.covariance))
-        quiet = [k for k, down in enumerate(self.engaged) if down and k not in stands]
-        self.silent[quiet, self.here] = True
-        stands_ = np.asarray(stands, dtype=int)
-        if not stands_.size:
-            return
-        rows, considered = self._rows_here(stands_)
-        nominal = self.table.reading[[self.slots[k] for k in stands_], self.here]
+        update the mean and the covariance (:func:`observe_many` of this belief alone)."""
+        observe_many([self], [stands], [values])
+
+    def _observed(self, stands: np.ndarray, values: list[float],
+                  world: tuple[np.ndarray, np.ndarray] | None) -> None:
+        """:meth:`observe`'s update by the readings of ``stands`` (some), the world's rows
+        of them ``world`` (:func:`world_rows_here`)."""
+        rows, considered = self._rows_here(stands, world)
+        nominal = self.table.reading[[self.slots[k] for k in stands], self.here]
         predicted = nominal + rows @ self.mean
         self._add(rows / self.sigma, (np.asarray(values, dtype=float) - predicted) / self.sigma,
                   considered / self.sigma)
@@ -409,3 +409,48 @@ def reaches(beliefs: list[Belief], postures: np.ndarray | slice = slice(None)
     silent = np.stack([b.silent[:, postures] for b in beliefs])
     safe, contact = safe & mounted, np.where(silent, 0.0, contact) * mounted
     return list(zip(safe, contact, strict=True))
+
+
+def world_rows_here(beliefs: list[Belief], stands: list[np.ndarray]
+                    ) -> list[tuple[np.ndarray, np.ndarray] | None]:
+    """What the world adds to readings of each belief's ``stands`` (R,) here and now: the
+    fitted unknowns' rows (R, count) and the considered ones' (R, m), None without world
+    terms.  Beliefs of one design, conditions and stand count reading as many stands,
+    with as many considered terms, in one stacked pass
+    (:func:`~calibrators.planning.world_terms.rows_many`): each its own alone."""
+    out: list[tuple[np.ndarray, np.ndarray] | None] = [None] * len(beliefs)
+    groups: dict[tuple, list[int]] = {}
+    for i, (belief, read) in enumerate(zip(beliefs, stands, strict=True)):
+        if belief.world is not None:
+            key = (len(read), len(belief.slots), belief.world.consider.shape, belief.design,
+                   belief.conditions)
+            groups.setdefault(key, []).append(i)
+    for members in groups.values():
+        group = [beliefs[i] for i in members]
+        fitted, considered = rows_many(
+            [b.world for b in group], np.array([b.slots for b in group]),
+            np.array([[b.here] for b in group]), np.array([[b.time_s] for b in group]),
+            np.stack([b.world.approach for b in group])[:, None],
+            np.array([np.asarray(stands[i], dtype=int) for i in members]).reshape(
+                len(members), -1))
+        for i, f, c in zip(members, fitted, considered, strict=True):
+            out[i] = f[:, 0], c[:, 0]
+    return out
+
+
+def observe_many(beliefs: list[Belief], stands: list[list[int]], values: list[list[float]]
+                 ) -> None:
+    """:meth:`Belief.observe` of each of ``beliefs`` (one per machine of a chunk) with its
+    ``stands`` and ``values``, the world's rows of their readings stacked
+    (:func:`world_rows_here`): each belief's update its own alone, to the bit."""
+    reading = []
+    for belief, read in zip(beliefs, stands, strict=True):
+        if belief.mean is None:
+            belief.mean = np.zeros(len(belief.covariance))
+        quiet = [k for k, down in enumerate(belief.engaged) if down and k not in read]
+        belief.silent[quiet, belief.here] = True
+        reading.append(np.asarray(read, dtype=int))
+    live = [i for i, read in enumerate(reading) if read.size]
+    worlds = world_rows_here([beliefs[i] for i in live], [reading[i] for i in live])
+    for i, world in zip(live, worlds, strict=True):
+        beliefs[i]._observed(reading[i], values[i], world)
