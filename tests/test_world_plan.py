@@ -183,7 +183,9 @@ def test_filters_priced_together_price_as_each_alone() -> None:
     (:func:`~calibrators.planning.pricing.top_rates_many`, the stands' reach stacked over
     the filters): each filter's rates, gains, seconds, plungers and readings are its own
     alone to the bit, and :func:`~calibrators.planning.search.best_moves` its own choice,
-    through filters of different readings, clocks and stands (one re-mounted)."""
+    through filters of different readings, clocks and stands (two re-mounted); their
+    readings taken in together (:func:`~calibrators.planning.belief.observe_many`) leave
+    each filter's mean, covariance and considered terms as alone, to the bit."""
     rng = np.random.default_rng(11)
     filters = []
     for steps in (3, 8, 14):
