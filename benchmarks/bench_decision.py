@@ -7,10 +7,10 @@ run on the same machines of the same lab.
 Each agent plays its episodes through the lab env (``OrthoglideLab-v0``), as ``compare``
 plays them, ``--chunk`` machines together (each agent class's ``act_all``: the policy's
 agents decide together, one batched observation and one network pass for the chunk;
-``active``'s act one by one); every ``act_all`` call is timed in CPU seconds of the process
-(``time.process_time``), which a machine shared with other work inflates far less than
-its wall clock (on a 2-core machine at load 35, the policy's choice took 0.4 ms of CPU
-and 5.6 ms of wall time).
+``active``'s price their moves together); every ``act_all`` call is timed in CPU seconds
+of the process (``time.process_time``), which a machine shared with other work inflates
+far less than its wall clock (on a 2-core machine at load 35, the policy's choice took
+0.4 ms of CPU and 5.6 ms of wall time).
 A decision is a call that chose a new operation (a move with its lever flicks, a
 re-mount, stop); the calls that play a chosen operation's further lab actions are counted
 in the agent's time but are not decisions.
@@ -36,6 +36,7 @@ import gymnasium as gym
 import numpy as np
 
 import orthoglide_env
+from calibrators.agents import active as active_module
 from calibrators.agents import get_agent
 from calibrators.agents import policy as policy_module
 from calibrators.agents.names import POLICY_PREFIX
@@ -55,8 +56,11 @@ def untrained_policy(kwargs: dict, folder: Path) -> Path:
 
 
 #: Each agent's choice alone, without taking in the readings: the policy's (its agents'
-#: observations, network and masks, for a chunk at once), the planner's pricing.
-CHOICE = {"policy": (policy_module, "decide_all"), "active": (None, "_next")}
+#: observations, network and masks, for a chunk at once), the planner's (each agent's
+#: next operation readied, refits included, the chunk's moves priced at once, the chosen
+#: one taken): the module's functions, then each agent's methods.
+CHOICE = {"policy": (policy_module, "decide_all", ()),
+          "active": (active_module, "best_moves", ("_ready", "_moved"))}
 
 
 #: The parts of a policy's decision (:data:`PARTS`' order): taking in a lab step's
@@ -103,15 +107,14 @@ def play(label: str, name: str, kwargs: dict, seed: int, machines: list[int]
     for agent, lab, (observation, _), m in zip(agents, labs, firsts, machines, strict=True):
         agent.reset(lab, observation, agent_rng(machine_seed(seed, m)))
     choosing = [0.0] * (1 + len(PARTS))
-    owner, method = CHOICE[label]
-    restore = []
-    if owner is None:
-        for agent in agents:
-            timed(agent, method, choosing, 0)
-    else:
-        restore = [(owner, method, getattr(owner, method)),
-                   (policy_module, "observations", policy_module.observations)]
-        timed(owner, method, choosing, 0)
+    owner, method, methods = CHOICE[label]
+    restore = [(owner, method, getattr(owner, method))]
+    timed(owner, method, choosing, 0)
+    for agent in agents:
+        for own in methods:
+            timed(agent, own, choosing, 0)
+    if label == "policy":
+        restore.append((policy_module, "observations", policy_module.observations))
         timed(policy_module, "observations", choosing, 1 + PARTS.index("observation"))
         actor = TimedActor(agents[0].actor, choosing)
         for agent in agents:

@@ -8,9 +8,9 @@ import pytest
 
 from calibrators.agents import get_agent
 from calibrators.agents.optimal import fixed_plan
-from calibrators.planning.belief import N_MACHINE
-from calibrators.planning.pricing import WORLD_SHORTLIST
-from calibrators.planning.search import Planner, greedy_plan
+from calibrators.planning.belief import N_MACHINE, N_STAND, observe_many, predicted_tips_many
+from calibrators.planning.pricing import WORLD_SHORTLIST, top_rates_many
+from calibrators.planning.search import Planner, best_moves, greedy_plan
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
@@ -176,3 +176,57 @@ def test_optimal_stay_never_remounts() -> None:
     assert not any(s.op == Op.REMOUNT for s in staying)
     assert staying[-1].op == Op.STOP and staying[-1].time_s <= 900.0
     assert get_agent("optimal-stay").remounts is False
+
+
+def test_filters_priced_together_price_as_each_alone() -> None:
+    """The ``active`` agent's chunk prices its machines' moves together
+    (:func:`~calibrators.planning.pricing.top_rates_many`, the stands' reach stacked over
+    the filters): each filter's rates, gains, seconds, plungers and readings are its own
+    alone to the bit, and :func:`~calibrators.planning.search.best_moves` its own choice,
+    through filters of different readings, clocks and stands (two re-mounted); their
+    readings taken in together (:func:`~calibrators.planning.belief.observe_many`) leave
+    each filter's mean, covariance and considered terms as alone, to the bit."""
+    rng = np.random.default_rng(11)
+    filters = []
+    for steps in (3, 8, 14):
+        p = planner(LAB, budget_s=1200.0)
+        for step in range(steps):
+            if step == 6:
+                p.remount(1, next(s for s in range(len(p.table.tip)) if s not in p.slots))
+            stands, _ = p.reading_here()
+            nominal = p.table.reading[[p.slots[k] for k in stands], p.here]
+            p.observe(list(stands), list(nominal + rng.normal(0.0, SIGMA, len(stands))))
+            p.move(*p.best_move())
+        filters.append(p)
+    assert len({tuple(p.slots) for p in filters}) == 2
+    # The stacked tips are each stand's own product with its mean, as one belief made it
+    # before it was a batch of one (a stacked product's items are BLAS's lone products).
+    for p, tips in zip(filters, predicted_tips_many(filters), strict=True):
+        for k, slot in enumerate(p.slots):
+            columns = np.r_[:N_MACHINE, N_MACHINE + N_STAND * k + np.arange(N_STAND - 1)]
+            own = p.table.change[slot] @ p.mean[columns]
+            np.testing.assert_array_equal(tips[k], p.table.tip[slot] + p.table.sign[slot] * own)
+    alone = [p.fork().top_rates(1) for p in filters]
+    together = top_rates_many([p.fork() for p in filters], 1)
+    for (rate, priced), (rate_, priced_) in zip(alone, together, strict=True):
+        np.testing.assert_array_equal(rate_, rate)
+        for field, field_ in zip(priced, priced_, strict=True):
+            np.testing.assert_array_equal(field_, field)
+    chosen = best_moves([p.fork() for p in filters])
+    for p, choice in zip(filters, chosen, strict=True):
+        assert choice is not None and choice[0] == p.fork().best_move()[0]
+    # Their readings taken in together: each filter's update is its own alone.
+    reads = []
+    for p in filters:
+        stands, _ = p.reading_here()
+        nominal = p.table.reading[[p.slots[k] for k in stands], p.here]
+        reads.append((list(stands), list(nominal + rng.normal(0.0, SIGMA, len(stands)))))
+    alone, together = [p.fork() for p in filters], [p.fork() for p in filters]
+    assert len({len(s) for s, _ in reads}) < len(reads)  # some stacked together
+    for p, (stands, values) in zip(alone, reads, strict=True):
+        p.observe(stands, values)
+    observe_many(together, [s for s, _ in reads], [v for _, v in reads])
+    for p, q in zip(alone, together, strict=True):
+        for name in ("mean", "covariance"):
+            np.testing.assert_array_equal(getattr(q, name), getattr(p, name))
+        np.testing.assert_array_equal(q.world.consider, p.world.consider)

@@ -27,6 +27,7 @@ more time does not pay (:mod:`calibrators.planning.world_terms`).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
@@ -35,10 +36,17 @@ import numpy as np
 from calibrators.agents.base import Agent, action, register
 from calibrators.agents.optimal import fixed_plan, lab_setup, owned_instruments
 from calibrators.estimators.catalogue import for_study
-from calibrators.planning.belief import N_MACHINE, N_STAND, ZERO_SCALE, PlannedOperation
+from calibrators.planning.belief import (
+    N_MACHINE,
+    N_STAND,
+    ZERO_SCALE,
+    PlannedOperation,
+    observe_many,
+)
 from calibrators.planning.instruments import Bundle, operation_keys, planned_bundles
+from calibrators.planning.pricing import PricedMoves
 from calibrators.planning.rounding import plan_bundles
-from calibrators.planning.search import Planner, take
+from calibrators.planning.search import Planner, best_moves, take
 from calibrators.planning.search import observe as observe_bundle
 from orthoglide_env.instruments.ballbar import BallbarSpec
 from orthoglide_env.instruments.interferometer import InterferometerAxis
@@ -87,34 +95,73 @@ class ActiveAgent(Agent):
         self._observe(observation, {})
 
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
-        if self.bundle_left:
-            self.bundle_left -= 1
-            if not self.bundle_left:
-                self._observe_bundle(observation)
-        elif self.last is not None and not info.get("refused"):
-            self._observe(observation, info)
-        step = self._next(float(observation["time"][0]))
-        self.last = step
-        return action(step.op, step.rho, step.stand, step.slot, **operation_keys(step))
+        return self.act_all([self], [observation], [info])[0]
+
+    @classmethod
+    def act_all(cls, agents: list[Agent], observations: list[dict[str, np.ndarray]],
+                infos: list[Mapping[str, Any]]) -> list[dict[str, Any]]:
+        """Each agent takes in its lab's observation and readies its next operation; those
+        that choose a move now choose together (:func:`~calibrators.planning.search.
+        best_moves`, their beliefs' prices stacked over the chunk's machines), each the
+        move it would choose alone; their filters take in their dials' readings together
+        too (:func:`~calibrators.planning.belief.observe_many`)."""
+        seen = []
+        for agent, observation, info in zip(agents, observations, infos, strict=True):
+            if agent.bundle_left:
+                agent.bundle_left -= 1
+                if not agent.bundle_left:
+                    agent._observe_bundle(observation)
+            elif agent.last is not None and not info.get("refused"):
+                read = agent._seen(observation, info)
+                if read is not None:
+                    seen.append((agent, *read))
+        observe_many([a.planner for a, _, _ in seen], [s for _, s, _ in seen],
+                     [v for _, _, v in seen])
+        for agent, stands, values in seen:
+            agent._note(stands, values)
+        steps: list[PlannedOperation | None] = [
+            agent._ready(float(observation["time"][0]))
+            for agent, observation in zip(agents, observations, strict=True)]
+        choosing = [i for i, step in enumerate(steps) if step is None]
+        choices = best_moves([agents[i].planner for i in choosing])
+        for i, choice in zip(choosing, choices, strict=True):
+            steps[i] = agents[i]._moved(choice)
+        out = []
+        for agent, step in zip(agents, steps, strict=True):
+            agent.last = step
+            out.append(action(step.op, step.rho, step.stand, step.slot, **operation_keys(step)))
+        return out
 
     # -- what was seen -------------------------------------------------------------------
     def _observe(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> None:
         """Take in the readings of the last move or re-mount (or of the reset)."""
+        read = self._seen(observation, info)
+        if read is not None:
+            self.planner.observe(*read)
+            self._note(*read)
+
+    def _seen(self, observation: dict[str, np.ndarray], info: Mapping[str, Any]
+              ) -> tuple[list[int], list[float]] | None:
+        """The stands and readings of the last move or re-mount (or of the reset) for the
+        filter to take in (None: nothing to take in), its clock and stands brought up to
+        date."""
         planner = self.planner
         planner.time_s = float(observation["time"][0])
         for text in info.get("overtravel", []):
             # A stand pushed past its travel reads nothing until it is re-mounted.
             planner.retire(int(text.split()[1]))
         if self.last is not None and self.last.op not in (Op.MOVE, Op.REMOUNT):
-            return
+            return None
         if self.last is not None and self.last.op == Op.REMOUNT:
             self.readings[self.last.stand] = []
         stands = [k for k in range(len(planner.slots))
                   if observation["valid"][k] and planner.slots[k] >= 0]
-        values = [float(observation["gauges"][k]) for k in stands]
-        planner.observe(stands, values)
+        return stands, [float(observation["gauges"][k]) for k in stands]
+
+    def _note(self, stands: list[int], values: list[float]) -> None:
+        """Keep the readings the filter took in, for the refits' zeros."""
         for k, value in zip(stands, values, strict=True):
-            self.readings[k].append((planner.here, value))
+            self.readings[k].append((self.planner.here, value))
 
     def _observe_bundle(self, observation: dict[str, np.ndarray]) -> None:
         """Take in the readings of the instrument's bundle just played (the notebook's
@@ -130,7 +177,9 @@ class ActiveAgent(Agent):
                        np.array([r.reading for r in records]))
 
     # -- what to do next -------------------------------------------------------------------
-    def _next(self, now: float) -> PlannedOperation:
+    def _ready(self, now: float) -> PlannedOperation | None:
+        """The next operation, or None when it is a move the planner is to choose
+        (:meth:`_moved` then takes it)."""
         planner = self.planner
         if self.queue:
             return self.queue.pop(0)
@@ -146,15 +195,25 @@ class ActiveAgent(Agent):
             remount = self.remounts.pop(0)
             planner.remount(remount.stand, remount.slot)
         else:
-            choice = planner.best_move()
-            if choice is None and not self._bundle_fits():
-                return PlannedOperation(Op.STOP)
-            if choice is None:
-                # The dials pay no more: the plan's next bundle comes early.
-                self._take_bundle()
-            else:
-                planner.move(*choice)
-        self.queue = list(planner.steps[start:])
+            return None
+        return self._queued(start)
+
+    def _moved(self, choice: tuple[int, PricedMoves] | None) -> PlannedOperation:
+        """The next operation after the planner's choice of move (:meth:`~calibrators.
+        planning.search.Planner.best_move`'s): that move, else the plan's next bundle
+        early (the dials pay no more), else stop."""
+        start = len(self.planner.steps)
+        if choice is None and not self._bundle_fits():
+            return PlannedOperation(Op.STOP)
+        if choice is None:
+            self._take_bundle()
+        else:
+            self.planner.move(*choice)
+        return self._queued(start)
+
+    def _queued(self, start: int) -> PlannedOperation:
+        """The first of the planner's operations from ``start`` on, the rest queued."""
+        self.queue = list(self.planner.steps[start:])
         return self.queue.pop(0)
 
     def _take_bundle(self) -> None:

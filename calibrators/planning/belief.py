@@ -43,7 +43,7 @@ from typing import NamedTuple
 import numpy as np
 
 from calibrators.planning.instruments import instrument_kit
-from calibrators.planning.world_terms import world_terms
+from calibrators.planning.world_terms import rows_many, world_terms
 from orthoglide_env.lab.design_belief import (
     N_MACHINE,
     N_STAND,
@@ -215,14 +215,9 @@ class Belief:
         """Predicted tip distance of every stand's gauge at ``postures`` (K, P'), mm:
         nominal for a plan, from the mean once readings were observed.  (An empty stand
         gets slot 0's: it is masked later.)"""
-        slots = np.maximum(np.array(self.slots), 0)
-        tip = self.table.tip[slots][:, postures]
         if self.mean is None:
-            return tip
-        for k, slot in enumerate(slots):
-            change = self.table.change[slot][postures] @ self.mean[self._columns(k)[:-1]]
-            tip[k] += self.table.sign[slot] * change
-        return tip
+            return self.table.tip[np.maximum(np.array(self.slots), 0)][:, postures]
+        return predicted_tips_many([self], postures)[0]
 
     def _spread(self, stand: int, postures: np.ndarray) -> np.ndarray:
         """Standard deviation (L,) of ``stand``'s predicted tip at ``postures`` (L,), mm,
@@ -238,37 +233,13 @@ class Belief:
     def _reach(self, postures: np.ndarray | slice = slice(None)
                ) -> tuple[np.ndarray, np.ndarray]:
         """:func:`reach` of every stand at ``postures`` (nothing for an empty stand, no
-        contact where it was seen not to read).
-
-        Once readings were observed, a spread is computed only where the answer depends
-        on it.  Not where the tip misses its bar or a bar presses the gauge, nor where
-        the tip is less than :data:`END_GAP` off the end, and not where the stand's
-        spread bound (``spread_bound``) already leaves the tip safe and touching
-        (contact exactly 1): the spread, at most the bound, would leave it so too.  The
-        bound is the prior spread at a mounting, then each spread as last computed,
-        plus :data:`SPREAD_SLACK`: readings only shrink the covariance, so a spread
-        never grows until its stand is re-mounted."""
+        contact where it was seen not to read): :func:`reaches` of this belief alone once
+        readings were observed, else the table's prior reach."""
+        if self.mean is not None:
+            return reaches([self], postures)[0]
         slots = np.array(self.slots)
         mounted = (slots >= 0)[:, None]
-        if self.mean is None:
-            safe, contact = (a[np.maximum(slots, 0)][:, postures]
-                             for a in self.table.prior_reach)
-        else:
-            tip = self.predicted_tips(postures)
-            spread = self.spread_bound[:, postures] + SPREAD_SLACK
-            safe, contact = reach(self.table, np.maximum(slots, 0), tip, spread, postures)
-            index = np.arange(len(self.table.postures))[postures]
-            with np.errstate(invalid="ignore"):
-                open_ = ((tip >= END_GAP) & (contact < 1.0)
-                         & ~self.table.pressed[np.maximum(slots, 0)][:, postures] & mounted)
-            stands = np.flatnonzero(open_.any(axis=1))
-            for k in stands:
-                at = np.flatnonzero(open_[k])
-                spread[k, at] = self.spread_bound[k, index[at]] = self._spread(k, index[at])
-            if stands.size:
-                # Again only for the stands whose spreads were computed: the rest stand.
-                safe[stands], contact[stands] = reach(self.table, np.maximum(slots[stands], 0),
-                                                      tip[stands], spread[stands], postures)
+        safe, contact = (a[np.maximum(slots, 0)][:, postures] for a in self.table.prior_reach)
         return safe & mounted, np.where(self.silent[:, postures], 0.0, contact) * mounted
 
     def predicted_rigid_mm(self) -> float:
@@ -315,32 +286,32 @@ class Belief:
         weight = np.sqrt(weights)[:, None]
         self._add(rows * weight / self.sigma, considered=considered * weight / self.sigma)
 
-    def _rows_here(self, stands: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _rows_here(self, stands: np.ndarray,
+                   world: tuple[np.ndarray, np.ndarray] | None = None
+                   ) -> tuple[np.ndarray, np.ndarray]:
         """Rows (R, n) of readings of ``stands`` here and now, mm per unit, and (with
-        world terms) their rows over the considered terms (R, m)."""
+        world terms) their rows over the considered terms (R, m); ``world``: the world's
+        rows of them (:func:`world_rows_here`), if already computed."""
         rows = np.array([self.stand_rows[k][self.here] for k in stands]).reshape(
             len(stands), len(self.covariance))
         if self.world is None:
             return rows, np.zeros((len(stands), 0))
-        fitted, considered = self.world.rows(
-            np.array(self.slots), np.array([self.here]), np.array([self.time_s]),
-            self.world.approach[None], stands)
+        fitted, considered = world or world_rows_here([self], [stands])[0]
         rows = rows.copy()
-        rows[:, self.world.start:self.world.start + self.world.count] += fitted[:, 0]
-        return rows, considered[:, 0]
+        rows[:, self.world.start:self.world.start + self.world.count] += fitted
+        return rows, considered
 
     def observe(self, stands: list[int], values: list[float]) -> None:
         """Readings (mm) of ``stands`` taken here (every other engaged stand read nothing):
-        update the mean and the covariance."""
-        if self.mean is None:
-            self.mean = np.zeros(len(self.covariance))
-        quiet = [k for k, down in enumerate(self.engaged) if down and k not in stands]
-        self.silent[quiet, self.here] = True
-        stands_ = np.asarray(stands, dtype=int)
-        if not stands_.size:
-            return
-        rows, considered = self._rows_here(stands_)
-        nominal = self.table.reading[[self.slots[k] for k in stands_], self.here]
+        update the mean and the covariance (:func:`observe_many` of this belief alone)."""
+        observe_many([self], [stands], [values])
+
+    def _observed(self, stands: np.ndarray, values: list[float],
+                  world: tuple[np.ndarray, np.ndarray] | None) -> None:
+        """:meth:`observe`'s update by the readings of ``stands`` (some), the world's rows
+        of them ``world`` (:func:`world_rows_here`)."""
+        rows, considered = self._rows_here(stands, world)
+        nominal = self.table.reading[[self.slots[k] for k in stands], self.here]
         predicted = nominal + rows @ self.mean
         self._add(rows / self.sigma, (np.asarray(values, dtype=float) - predicted) / self.sigma,
                   considered / self.sigma)
@@ -379,3 +350,107 @@ class Belief:
         _, contact = self._reach(np.array([self.here]))
         down = np.flatnonzero(self.engaged)
         return down, contact[down, 0]
+
+
+def predicted_tips_many(beliefs: list[Belief], postures: np.ndarray | slice = slice(None)
+                        ) -> np.ndarray:
+    """:meth:`Belief.predicted_tips` of filters ``beliefs`` (readings observed, one design,
+    as many stands each) stacked (M, K, P'), each to the bit as alone: the stands at one
+    slot share its table of changes, their means' products with it in one stacked
+    product (item by item, as one belief's)."""
+    table = beliefs[0].table
+    slots = np.maximum(np.array([b.slots for b in beliefs]), 0)  # (M, K)
+    tip = table.tip[slots][..., postures]
+    columns = np.stack([_stand_columns(k)[:-1] for k in range(slots.shape[1])])
+    means = np.stack([b.mean for b in beliefs])[:, columns]  # (M, K, C)
+    for slot in np.unique(slots):
+        at = slots == slot
+        change = np.matmul(table.change[slot][postures], means[at][..., None])[..., 0]
+        tip[at] += table.sign[slot] * change
+    return tip
+
+
+def reaches(beliefs: list[Belief], postures: np.ndarray | slice = slice(None)
+            ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """:func:`reach` of every stand at ``postures`` (nothing for an empty stand, no contact
+    where it was seen not to read) of each of filters ``beliefs`` (readings observed, one
+    design, as many stands each), stacked over them: each to the bit as alone.
+
+    A spread is computed only where the answer depends on it.  Not where the tip misses
+    its bar or a bar presses the gauge, nor where the tip is less than :data:`END_GAP` off
+    the end, and not where the stand's spread bound (``spread_bound``) already leaves the
+    tip safe and touching (contact exactly 1): the spread, at most the bound, would leave
+    it so too.  The bound is the prior spread at a mounting, then each spread as last
+    computed, plus :data:`SPREAD_SLACK`: readings only shrink the covariance, so a spread
+    never grows until its stand is re-mounted."""
+    table = beliefs[0].table
+    slots = np.array([b.slots for b in beliefs])  # (M, K)
+    used, mounted = np.maximum(slots, 0), (slots >= 0)[..., None]
+    tip = predicted_tips_many(beliefs, postures)
+    shape = tip.shape
+    spread = np.stack([b.spread_bound[:, postures] for b in beliefs]) + SPREAD_SLACK
+    flat = (-1, shape[-1])
+    safe, contact = (a.reshape(shape) for a in reach(
+        table, used.reshape(-1), tip.reshape(flat), spread.reshape(flat), postures))
+    index = np.arange(len(table.postures))[postures]
+    with np.errstate(invalid="ignore"):
+        open_ = ((tip >= END_GAP) & (contact < 1.0)
+                 & ~table.pressed[used][..., postures] & mounted)
+    rows = np.argwhere(open_.any(axis=-1))  # (machine, stand) pairs
+    for m, k in rows:
+        at = np.flatnonzero(open_[m, k])
+        spread[m, k, at] = beliefs[m].spread_bound[k, index[at]] = beliefs[m]._spread(
+            k, index[at])
+    if len(rows):
+        # Again only for the stands whose spreads were computed: the rest stand.
+        m, k = rows.T
+        safe[m, k], contact[m, k] = reach(table, used[m, k], tip[m, k], spread[m, k],
+                                          postures)
+    silent = np.stack([b.silent[:, postures] for b in beliefs])
+    safe, contact = safe & mounted, np.where(silent, 0.0, contact) * mounted
+    return list(zip(safe, contact, strict=True))
+
+
+def world_rows_here(beliefs: list[Belief], stands: list[np.ndarray]
+                    ) -> list[tuple[np.ndarray, np.ndarray] | None]:
+    """What the world adds to readings of each belief's ``stands`` (R,) here and now: the
+    fitted unknowns' rows (R, count) and the considered ones' (R, m), None without world
+    terms.  Beliefs of one design, conditions and stand count reading as many stands,
+    with as many considered terms, in one stacked pass
+    (:func:`~calibrators.planning.world_terms.rows_many`): each its own alone."""
+    out: list[tuple[np.ndarray, np.ndarray] | None] = [None] * len(beliefs)
+    groups: dict[tuple, list[int]] = {}
+    for i, (belief, read) in enumerate(zip(beliefs, stands, strict=True)):
+        if belief.world is not None:
+            key = (len(read), len(belief.slots), belief.world.consider.shape, belief.design,
+                   belief.conditions)
+            groups.setdefault(key, []).append(i)
+    for members in groups.values():
+        group = [beliefs[i] for i in members]
+        fitted, considered = rows_many(
+            [b.world for b in group], np.array([b.slots for b in group]),
+            np.array([[b.here] for b in group]), np.array([[b.time_s] for b in group]),
+            np.stack([b.world.approach for b in group])[:, None],
+            np.array([np.asarray(stands[i], dtype=int) for i in members]).reshape(
+                len(members), -1))
+        for i, f, c in zip(members, fitted, considered, strict=True):
+            out[i] = f[:, 0], c[:, 0]
+    return out
+
+
+def observe_many(beliefs: list[Belief], stands: list[list[int]], values: list[list[float]]
+                 ) -> None:
+    """:meth:`Belief.observe` of each of ``beliefs`` (one per machine of a chunk) with its
+    ``stands`` and ``values``, the world's rows of their readings stacked
+    (:func:`world_rows_here`): each belief's update its own alone, to the bit."""
+    reading = []
+    for belief, read in zip(beliefs, stands, strict=True):
+        if belief.mean is None:
+            belief.mean = np.zeros(len(belief.covariance))
+        quiet = [k for k, down in enumerate(belief.engaged) if down and k not in read]
+        belief.silent[quiet, belief.here] = True
+        reading.append(np.asarray(read, dtype=int))
+    live = [i for i, read in enumerate(reading) if read.size]
+    worlds = world_rows_here([beliefs[i] for i in live], [reading[i] for i in live])
+    for i, world in zip(live, worlds, strict=True):
+        beliefs[i]._observed(reading[i], values[i], world)

@@ -23,8 +23,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from calibrators.planning.belief import N_MACHINE, Belief, rigid_factor
-from calibrators.planning.world_terms import directions
+from calibrators.planning.belief import N_MACHINE, Belief, reaches, rigid_factor
+from calibrators.planning.world_terms import directions, gains_many, rows_many
 from orthoglide_env.lab.operations import TIME
 from orthoglide_env.lab.slot_table import slot_table
 from orthoglide_env.model.design import MachineDesign
@@ -93,26 +93,43 @@ class Pricer(Belief):
         ``seconds`` of every move): the geometry's alone, or with the world's terms their
         rows too, at the time and from the direction each move arrives, and for I the
         considered terms' bias (:meth:`~calibrators.planning.world_terms.WorldTerms.gains`)."""
-        rows = self._rows(reads, postures)
         if self.world is None:
-            return self._gains(rows)
-        weight = np.sqrt(reads.T[postures])[:, :, None] / self.sigma
-        fitted, considered = self.world.rows(
-            np.array(self.slots), postures, self.time_s + seconds[postures],
-            directions(self.rho, self.table.postures[postures], self.world.approach))
-        rows[..., self.world.start:self.world.start + self.world.count] += (
-            np.swapaxes(fitted, 0, 1) * weight)
+            return self._gains(self._rows(reads, postures))
+        fitted, considered = self.world.rows(np.array(self.slots), postures,
+                                             *self._arrival(seconds, postures))
+        rows, considered = self._world_rows(reads, postures, fitted, considered)
         if self.criterion == "D":
             return self._gains(rows)
-        return self.world.gains(rows, np.swapaxes(considered, 0, 1) * weight,
-                                self.covariance, rigid_factor(self.design))
+        return self.world.gains(rows, considered, self.covariance, rigid_factor(self.design))
+
+    def _arrival(self, seconds: np.ndarray, postures: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        """The lab time (L,) at which each move to ``postures`` (L,) arrives (``seconds``
+        of every move) and each axis's direction of travel there (L, 3)."""
+        return self.time_s + seconds[postures], directions(
+            self.rho, self.table.postures[postures], self.world.approach)
+
+    def _world_rows(self, reads: np.ndarray, postures: np.ndarray, fitted: np.ndarray,
+                    considered: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Whitened rows (L, K, n) of the readings of the moves to ``postures`` (L,), the
+        world's rows ``fitted`` (K, L, count) of them added, and over the considered terms
+        (L, K, m) from their rows ``considered`` (K, L, m) (:meth:`_price`'s)."""
+        rows = self._rows(reads, postures)
+        weight = np.sqrt(reads.T[postures])[:, :, None] / self.sigma
+        rows[..., self.world.start:self.world.start + self.world.count] += (
+            np.swapaxes(fitted, 0, 1) * weight)
+        return rows, np.swapaxes(considered, 0, 1) * weight
 
     def _moves(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The seconds (P,) of every candidate move, the plungers down after it (K, P) and
         how likely each reads there (K, P).  A plunger is let down only where it is safe
         both here and there (let down here, it reads there), and lifted where it is not
         safe there."""
-        safe, contact = self._reach()
+        return self._moves_from(*self._reach())
+
+    def _moves_from(self, safe: np.ndarray, contact: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`_moves` from the stands' reach at every posture (:meth:`_reach`)."""
         here = safe[:, self.here]
         engaged = np.array(self.engaged, dtype=bool)
         after = safe & (engaged | here)[:, None]
@@ -193,8 +210,30 @@ class Pricer(Belief):
         With the world's terms only the :data:`WORLD_SHORTLIST` moves of the highest
         bounds per second and Zero are priced, with the world's terms
         (:meth:`_price`): their rates are returned, -inf for the others."""
+        return self._top_rates_of(count, *self._moves())
+
+    def _top_rates_of(self, count: int, seconds: np.ndarray, after: np.ndarray,
+                      reads: np.ndarray) -> tuple[np.ndarray, PricedMoves]:
+        """:meth:`top_rates` from the moves' seconds, plungers and readings (:meth:`_moves`)."""
+        rate, priced, moves = self._top_rates_open(count, seconds, after, reads)
+        if moves is not None:
+            self._take_prices(rate, priced, moves, self._price(reads, seconds, moves))
+        return rate, priced
+
+    @staticmethod
+    def _take_prices(rate: np.ndarray, priced: PricedMoves, moves: np.ndarray,
+                     gain: np.ndarray) -> None:
+        """Enter the world's prices ``gain`` of ``moves`` in :meth:`_top_rates_open`'s."""
+        priced.gain[moves] = gain
+        rate[moves] = gain / priced.seconds[moves]
+
+    def _top_rates_open(self, count: int, seconds: np.ndarray, after: np.ndarray,
+                        reads: np.ndarray
+                        ) -> tuple[np.ndarray, PricedMoves, np.ndarray | None]:
+        """:meth:`_top_rates_of`, but with the world's terms the moves of the shortlist
+        are left for the caller to price (:meth:`_price`, then :meth:`_take_prices`):
+        the rates, the priced moves, and those moves (None: nothing left to price)."""
         wanted = count if self.world is None else max(count, WORLD_SHORTLIST)
-        seconds, after, reads = self._moves()
         fits = self.time_s + seconds <= self.budget_s
         live = np.flatnonzero(fits & reads.any(axis=0))
         gain = np.full(len(seconds), np.nan)
@@ -215,11 +254,69 @@ class Pricer(Belief):
                 # Zero when it is live: a test of its own entries, not a search of ``live``.
                 moves = np.union1d(live[order[:wanted]], np.array(
                     [zero] if fits[zero] and reads[:, zero].any() else [], dtype=live.dtype))
-                gain[moves] = self._price(reads, seconds, moves)
-                rate[moves] = gain[moves] / seconds[moves]
-                return rate, PricedMoves(gain, seconds, after, reads)
+                return rate, PricedMoves(gain, seconds, after, reads), moves
             first, rest = np.split(order, [max(FIRST_PRICED, wanted)])
             price(first)
             if rest.size:
                 price(rest[ceiling[rest] >= np.sort(rate[live[first]])[-wanted]])
-        return rate, PricedMoves(gain, seconds, after, reads)
+        return rate, PricedMoves(gain, seconds, after, reads), None
+
+
+def top_rates_many(pricers: list[Pricer], count: int
+                   ) -> list[tuple[np.ndarray, PricedMoves]]:
+    """:meth:`Pricer.top_rates` of each of ``pricers`` (one per machine of a chunk), the
+    same arrays to the bit: the stands' reach of filters of one design and stand count
+    stacked over them (:func:`~calibrators.planning.belief.reaches`)."""
+    if not pricers:
+        return []
+    if not all(p.mean is not None and p.table is pricers[0].table
+               and len(p.slots) == len(pricers[0].slots) for p in pricers):
+        return [pricer.top_rates(count) for pricer in pricers]
+    opened = []
+    for pricer, reached in zip(pricers, reaches(pricers), strict=True):
+        moves = pricer._moves_from(*reached)
+        opened.append((*pricer._top_rates_open(count, *moves), moves))
+    asked = [i for i, (_, _, shortlist, _) in enumerate(opened) if shortlist is not None]
+    gains = price_many([pricers[i] for i in asked],
+                       [(opened[i][3][2], opened[i][3][0], opened[i][2]) for i in asked])
+    for i, gain in zip(asked, gains, strict=True):
+        Pricer._take_prices(opened[i][0], opened[i][1], opened[i][2], gain)
+    return [(rate, priced) for rate, priced, _, _ in opened]
+
+
+def price_many(pricers: list[Pricer], asked: list[tuple[np.ndarray, np.ndarray, np.ndarray]]
+               ) -> list[np.ndarray]:
+    """:meth:`Pricer._price` of each of ``pricers`` with its ``(reads, seconds, postures)``
+    of ``asked``.  The gains of beliefs with the world's terms under criterion I, as many
+    postures, stands, unknowns and considered terms each, in one stacked computation
+    (:func:`~calibrators.planning.world_terms.gains_many`): each its own to the bit."""
+    out: list[np.ndarray | None] = [None] * len(pricers)
+    groups: dict[tuple, list[int]] = {}
+    for i, (pricer, (_, _, postures)) in enumerate(zip(pricers, asked, strict=True)):
+        if pricer.world is None or pricer.criterion != "I":
+            out[i] = pricer._price(*asked[i])
+            continue
+        key = (len(postures), len(pricer.slots), pricer.world.consider.shape,
+               pricer.design, pricer.conditions)
+        groups.setdefault(key, []).append(i)
+    for members in groups.values():
+        group = [pricers[i] for i in members]
+        postures = np.stack([asked[i][2] for i in members])
+        times, approach = (np.stack(a) for a in zip(
+            *(p._arrival(asked[i][1], asked[i][2]) for p, i in zip(group, members,
+                                                                  strict=True)),
+            strict=True))
+        fitted, considered = rows_many(
+            [p.world for p in group], np.array([p.slots for p in group]), postures, times,
+            approach, np.tile(np.arange(len(group[0].slots)), (len(group), 1)))
+        rows, considered = zip(*(p._world_rows(asked[i][0], asked[i][2], f, c)
+                                 for p, i, f, c in zip(group, members, fitted, considered,
+                                                       strict=True)), strict=True)
+        first = group[0]
+        gains = gains_many(np.stack(rows), np.stack(considered),
+                           np.stack([pricers[i].covariance for i in members]),
+                           np.stack([pricers[i].world.consider for i in members]),
+                           rigid_factor(first.design))
+        for i, gain in zip(members, gains, strict=True):
+            out[i] = gain
+    return out  # type: ignore[return-value]

@@ -28,7 +28,7 @@ from calibrators.planning.instruments import (
     marginal,
     reading_rows,
 )
-from calibrators.planning.pricing import PricedMoves, Pricer
+from calibrators.planning.pricing import PricedMoves, Pricer, top_rates_many
 from orthoglide_env.instruments import ballbar, interferometer
 from orthoglide_env.lab.operations import TIME, Op, slot_catalogue
 
@@ -104,7 +104,11 @@ class Planner(Pricer):
         move is priced, so a plan ends only when no move pays, not when the shortlist's
         do not (a fresh mounting's loose bounds may shortlist moves that add more to the
         indicators' bias than they take off the geometry)."""
-        rate, priced = self.top_rates(1)
+        return self._chosen(*self.top_rates(1))
+
+    def _chosen(self, rate: np.ndarray, priced: PricedMoves
+                ) -> tuple[int, PricedMoves] | None:
+        """:meth:`best_move`'s answer from :meth:`top_rates`' ``rate`` and ``priced``."""
         best = int(np.argmax(rate))
         if self.world is not None and self._ends(rate[best]):
             priced = self.priced_moves()
@@ -175,6 +179,15 @@ class Planner(Pricer):
                 best, best_rate = (stand, slot), rate
         return best
 
+
+
+def best_moves(planners: list[Planner]) -> list[tuple[int, PricedMoves] | None]:
+    """:meth:`Planner.best_move` of each of ``planners`` (one per machine of a chunk), their
+    moves priced together (:func:`~calibrators.planning.pricing.top_rates_many`): each the
+    same choice as alone."""
+    return [planner._chosen(rate, priced)
+            for planner, (rate, priced) in zip(planners, top_rates_many(planners, 1),
+                                               strict=True)]
 
 
 def greedy_plan(planner: Planner, remounts: bool = True, screened: int | None = SCREENED

@@ -137,41 +137,14 @@ class WorldTerms:
         stand) at ``slots`` (every stand's, -1: none) taken at candidate ``postures`` (P')
         at lab ``times`` (P') with the axes last moved in ``approach`` (P', 3): the fitted
         unknowns' rows (K, P', count) and the considered ones' (K, P', consider columns),
-        mm per unit coefficient."""
+        mm per unit coefficient: :func:`rows_many` of this belief alone."""
+        postures = np.arange(len(self.table.postures))[postures]
         stands = np.arange(self.stands) if stands is None else np.asarray(stands)
-        mounted = slots[stands] >= 0
-        slot = np.maximum(slots[stands], 0)
-        drho = _at(self.drive, slot, postures) * mounted[:, None, None]  # (K, P', 3)
-        k, p = drho.shape[:2]
-        fitted = np.zeros((k, p, self.count))
-        column = 0
-        on = self.conditions.__contains__
-        carriage = []  # (mean size, spread size, per-axis pattern (P', 3))
-        if on("warmup"):
-            carriage.append((*warmup_sizes(self.conditions),
-                             warmup_curves(self.x[postures], times, self.conditions)[1]))
-        if on("backlash"):
-            mean, spread = backlash_sizes(self.conditions)
-            carriage.append((mean * UM, spread * UM, -approach / 2))
-        for mean, spread, pattern in carriage:
-            moved = drho * pattern[None]  # (K, P', 3)
-            fitted[..., column] = mean * moved.sum(axis=-1)
-            fitted[..., column + 1:column + 4] = spread * moved
-            column += 4
-        if self.per_stand:
-            since = times[None] - self.first_read[stands, None]
-            for j, (_, pattern) in enumerate(drift_terms(
-                    since, np.broadcast_to(times, since.shape), self.conditions)):
-                fitted[np.arange(k), :, column + self.per_stand * stands + j] = (
-                    pattern * mounted[:, None])
-        considered = np.zeros((k, p, self.consider.shape[1]))
-        if self.per_dial:
-            y = _at(self.table.reading, slot, postures)
-            for j, (_, pattern) in enumerate(dial_terms(y, self.table.travel,
-                                                        self.conditions)):
-                considered[np.arange(k), :, self.dial_columns[stands, j]] = (
-                    pattern * mounted[:, None])
-        return fitted, considered
+        fitted, considered = rows_many([self], np.asarray(slots)[None], postures[None],
+                                       np.asarray(times)[None],
+                                       np.broadcast_to(approach, (len(postures), 3))[None],
+                                       stands[None])
+        return fitted[0], considered[0]
 
     # -- the state ------------------------------------------------------------------------
     def moved(self, start: np.ndarray, target: np.ndarray) -> None:
@@ -207,27 +180,88 @@ class WorldTerms:
         included, for each batch of whitened readings (B, K, n) over the fitted unknowns
         and ``considered`` (B, K, m) over the considered ones; ``factor``: ``F`` (27, r)
         of the rigid weight ``W = F F'``, so every quadratic form in ``W`` is a sum of
-        squares over r columns instead of 27."""
-        n = len(factor)
-
-        def times(a: np.ndarray, matrix: np.ndarray) -> np.ndarray:
-            # One BLAS product for every batch at once.
-            return (a.reshape(-1, a.shape[-1]) @ matrix).reshape(*a.shape[:-1], -1)
-
-        b = times(rows, covariance)
-        m = np.eye(rows.shape[1]) + rows @ np.swapaxes(b, 1, 2)
-        bf = times(b[..., :n], factor)
-        hf = np.linalg.solve(m, bf)  # (B, K, r): the gain, times F
-        known = np.sum(hf * bf, axis=(1, 2))
-        # How the readings move D's machine rows, times F: (B, m, r).
-        qf = np.swapaxes(considered - times(rows, self.consider), 1, 2) @ hf
-        df = self.consider[:n].T @ factor  # (m, r)
-        return known - 2 * np.sum(df[None] * qf, axis=(1, 2)) - np.sum(qf * qf, axis=(1, 2))
+        squares over r columns instead of 27: :func:`gains_many` of this belief alone."""
+        return gains_many(rows[None], considered[None], covariance[None],
+                          self.consider[None], factor)[0]
 
     def stops(self, rate: float, remaining_s: float, criterion: float) -> bool:
         """Whether the plan stops: :data:`STOP_SHARE`'s rule for the best ``rate`` (per
         s) with ``remaining_s`` of the budget left and the ``criterion`` (mm^2) now."""
         return rate * remaining_s < STOP_SHARE * criterion
+
+
+def rows_many(terms: list[WorldTerms], slots: np.ndarray, postures: np.ndarray,
+              times: np.ndarray, approach: np.ndarray, stands: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """:meth:`WorldTerms.rows` of M beliefs' world terms ``terms`` (one conditions, design
+    and stand count, as many considered columns each) at once: each one's ``slots`` (M,
+    K), ``postures`` (M, P'), ``times`` (M, P'), ``approach`` (M, P', 3) and ``stands``
+    (M, K'); the fitted rows (M, K', P', count) and the considered ones (M, K', P', m).
+    Every value is an element-wise function of its own belief's, so each is its own alone."""
+    first = terms[0]
+    m_count, k = stands.shape
+    machines = np.arange(m_count)[:, None]
+    mounted = slots[machines, stands] >= 0  # (M, K')
+    slot = np.maximum(slots[machines, stands], 0)
+    drho = (first.drive[slot[..., None], postures[:, None, :]]
+            * mounted[..., None, None])  # (M, K', P', 3)
+    p = drho.shape[2]
+    fitted = np.zeros((m_count, k, p, first.count))
+    column = 0
+    on = first.conditions.__contains__
+    carriage = []  # (mean size, spread size, per-axis pattern (M, P', 3))
+    if on("warmup"):
+        carriage.append((*warmup_sizes(first.conditions),
+                         warmup_curves(first.x[postures], times, first.conditions)[1]))
+    if on("backlash"):
+        mean, spread = backlash_sizes(first.conditions)
+        carriage.append((mean * UM, spread * UM, -approach / 2))
+    for mean, spread, pattern in carriage:
+        moved = drho * pattern[:, None]  # (M, K', P', 3)
+        fitted[..., column] = mean * moved.sum(axis=-1)
+        fitted[..., column + 1:column + 4] = spread * moved
+        column += 4
+    rows = np.arange(k)[None, :]
+    if first.per_stand:
+        reads_from = np.stack([t.first_read for t in terms])[machines, stands]
+        since = times[:, None] - reads_from[..., None]  # (M, K', P')
+        for j, (_, pattern) in enumerate(drift_terms(
+                since, np.broadcast_to(times[:, None], since.shape), first.conditions)):
+            fitted[machines, rows, :, column + first.per_stand * stands + j] = (
+                pattern * mounted[..., None])
+    considered = np.zeros((m_count, k, p, first.consider.shape[1]))
+    if first.per_dial:
+        y = first.table.reading[slot[..., None], postures[:, None, :]]
+        dials = np.stack([t.dial_columns for t in terms])[machines, stands]  # (M, K', d)
+        for j, (_, pattern) in enumerate(dial_terms(y, first.table.travel,
+                                                    first.conditions)):
+            considered[machines, rows, :, dials[..., j]] = pattern * mounted[..., None]
+    return fitted, considered
+
+
+def gains_many(rows: np.ndarray, considered: np.ndarray, covariances: np.ndarray,
+               considers: np.ndarray, factor: np.ndarray) -> np.ndarray:
+    """:meth:`WorldTerms.gains` (M, B) of M beliefs at once: their whitened readings'
+    rows (M, B, K, n) and ``considered`` (M, B, K, m), covariances (M, n, n) and ``D``s
+    (M, n, m), with one ``factor``.  Every product and solve is stacked over the beliefs
+    (BLAS and LAPACK item by item), so each belief's gains are its own alone, to the bit."""
+    n = len(factor)
+
+    def times(a: np.ndarray, matrix: np.ndarray) -> np.ndarray:
+        # One BLAS product for every batch of a belief at once.
+        flat = a.reshape(len(a), -1, a.shape[-1])
+        return (flat @ matrix).reshape(*a.shape[:-1], -1)
+
+    b = times(rows, covariances)
+    m = np.eye(rows.shape[2]) + rows @ np.swapaxes(b, 2, 3)
+    bf = times(b[..., :n], factor)
+    hf = np.linalg.solve(m, bf)  # (M, B, K, r): the gain, times F
+    known = np.sum(hf * bf, axis=(2, 3))
+    # How the readings move D's machine rows, times F: (M, B, m, r).
+    qf = np.swapaxes(considered - times(rows, considers), 2, 3) @ hf
+    df = np.swapaxes(considers[:, :n], 1, 2) @ factor  # (M, m, r)
+    return (known - 2 * np.sum(df[:, None] * qf, axis=(2, 3))
+            - np.sum(qf * qf, axis=(2, 3)))
 
 
 def world_terms(conditions: Conditions | None, design: MachineDesign, table: SlotTable,
