@@ -125,3 +125,14 @@ def test_a_design_visit_reads_its_stands_at_one_posture():
             visits[p] > 0], rtol=1e-9)
     spent = (taken.sum() + counts[model.laser == bound.BAR].sum()) * TIME.settle_and_read_s
     assert spent == pytest.approx(seconds, rel=1e-9)
+
+
+def test_an_instrument_the_design_leaves_unread_gets_no_bundle():
+    # In the ideal world the relaxation may give the bar (or a laser axis) no weight at all:
+    # that set-up is not taken, where apportioning its zero readings used to fail.
+    model = bound_model(PROTOTYPE, IDEAL, SIGMA, True, True)
+    counts = np.zeros(len(model.rows))
+    counts[np.flatnonzero(model.laser == 0)[:3]] = 2.0
+    bundles = rounding._bundles(model, PROTOTYPE, (0, 1), True, counts)
+    assert [(b.instrument, b.axis) for b in bundles] == [("interferometer", 0)]
+    assert len(bundles[0].path) == 6 + 1  # the six readings, then back to Zero

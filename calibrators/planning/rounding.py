@@ -184,16 +184,20 @@ def relaxed_bundles(design: MachineDesign, conditions: Conditions, dial_sigma: f
 
 def _bundles(model: BoundModel, design: MachineDesign, drives: tuple[int, ...], pivot: bool,
              counts: np.ndarray) -> tuple[Bundle, ...]:
-    """A design's ``counts`` of the laser's and the bar's candidates as bundles."""
+    """A design's ``counts`` of the laser's and the bar's candidates as bundles; an
+    instrument the design gives no reading (a world where it sees nothing, ``ideal``'s bar)
+    gets no bundle."""
     out: list[Bundle] = []
     for axis in drives:
         on = np.flatnonzero(model.laser == axis)
+        if not counts[on].sum() > 0:
+            continue
         targets = np.repeat(model.targets[model.label[on, 2]], _rounded(counts[on]))
         path = np.zeros((len(targets) + 1, 3))
         path[:-1, axis] = np.sort(targets)  # then back to Zero, read too
         out.append(Bundle("interferometer", f"interferometer {'xyz'[axis]} (design)",
                           Op.ALIGN, path, axis=axis))
-    if pivot:
+    if pivot and counts[model.laser == BAR].sum() > 0:
         circle = bar_bundle(design)
         out.append(Bundle("ballbar", "ballbar 50 mm (design)", Op.PIVOT,
                           np.repeat(circle.path, _rounded(counts[model.laser == BAR]), axis=0),
