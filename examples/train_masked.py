@@ -74,6 +74,7 @@ from calibrators.agents.policy import save_policy, spec_of
 from calibrators.planning.design_expert import PlanExpert
 from calibrators.study import compare, statistics
 from orthoglide_env.lab.design_belief import VIEW_VERSIONS
+from orthoglide_env.model.design import load_design
 from orthoglide_env.model.errors import DEFAULT_PRESET
 from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.wrappers import DESIGN_PER, DESIGN_REWARDS, design_lab_env
@@ -85,17 +86,24 @@ BASELINES: str = "paper,optimal,active,random"
 
 
 def env_kwargs(args: argparse.Namespace) -> dict[str, Any]:
-    """The design view's keyword arguments in training (all JSON: the policy file records
-    them)."""
+    """The design view's keyword arguments in training: the machines' design (a
+    :class:`~orthoglide_env.model.design.MachineDesign`) and JSON (:func:`recorded`)."""
     return {"errors": DEFAULT_PRESET, "gauge_sigma": args.sigma, "budget_s": args.budget,
             "conditions": Conditions(args.conditions).to_dict(), "reward": args.reward,
-            "per": args.per, "version": args.view}
+            "per": args.per, "version": args.view, "design": load_design(args.design)}
+
+
+def recorded(kwargs: dict[str, Any]) -> dict[str, Any]:
+    """The view's keyword arguments the policy file records as JSON: all but the design,
+    which the file records on its own (:attr:`calibrators.agents.policy.PolicySpec.design`)."""
+    return {k: v for k, v in kwargs.items() if k != "design"}
 
 
 def config(args: argparse.Namespace, agents: tuple[str, ...]) -> compare.Config:
     return compare.Config(agents, (ESTIMATOR,), budget_s=args.budget, errors=DEFAULT_PRESET,
                           sigma=args.sigma, seed=args.eval_seed,
-                          conditions=Conditions(args.conditions))
+                          conditions=Conditions(args.conditions),
+                          design=load_design(args.design))
 
 
 def make_vec_env(n_envs: int, kwargs: dict[str, Any], seed: int) -> Any:
@@ -122,8 +130,8 @@ def held_out_rigid(args: argparse.Namespace, kwargs: dict[str, Any], model: Any,
                    ) -> float:
     """``model`` saved to ``path`` and scored on the curve machines: median TCP error
     after rigid motion (mm)."""
-    save_policy(model, path, spec_of(design_lab_env(**kwargs), "MaskablePPO", kwargs,
-                                     play=play_mode(args)))
+    save_policy(model, path, spec_of(design_lab_env(**kwargs), "MaskablePPO",
+                                     recorded(kwargs), play=play_mode(args)))
     row = statistics.summary(compare.run(config(args, (POLICY_PREFIX + str(path),)),
                                          args.curve_machines))[0]
     return median_rigid(row)
@@ -405,6 +413,9 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
                              "to <out> the round of the lowest error on the curve machines, "
                              "not the last (those of --eval-seed: choose a seed other than "
                              "the one the policy is tested on)")
+    parser.add_argument("--design", metavar="FILE",
+                        help="the machines' design (a JSON file, as orthoglide's --design; "
+                             "default: the prototype)")
     parser.add_argument("--baselines", default=BASELINES,
                         help="agents of the curve's lines and the final table")
     args = parser.parse_args(argv)
@@ -463,7 +474,8 @@ def main(argv: list[str] | None = None) -> None:
     if args.imitate and args.steps:
         # What PPO starts from, kept: its fine-tuning is judged against it.
         save_policy(model, args.out.with_suffix(".imitated.zip"),
-                    spec_of(design_lab_env(**kwargs), "MaskablePPO", kwargs, play="argmax"))
+                    spec_of(design_lab_env(**kwargs), "MaskablePPO", recorded(kwargs),
+                            play="argmax"))
     if args.steps:
         curve = curve_callback(args.out, args.every, args.max_minutes, curve_score(args, kwargs),
                                earlier=rows)
@@ -475,8 +487,8 @@ def main(argv: list[str] | None = None) -> None:
         shutil.copyfile(round_file(args.out, best), args.out)
         print(f"round {best} scored best on the curve machines")
     else:
-        save_policy(model, args.out, spec_of(design_lab_env(**kwargs), "MaskablePPO", kwargs,
-                                             play=play_mode(args)))
+        save_policy(model, args.out, spec_of(design_lab_env(**kwargs), "MaskablePPO",
+                                             recorded(kwargs), play=play_mode(args)))
     vec.close()
     print(f"wrote {args.out} ({rows[-1]['steps']} steps in {minutes:.1f} min)")
     world = config(args, ()).world
@@ -489,7 +501,8 @@ def main(argv: list[str] | None = None) -> None:
     orthoglide(["compare", "--agents", ",".join((POLICY_PREFIX + str(args.out), *baselines)),
                 "--estimators", ESTIMATOR, "--budget", str(args.budget), "--machines",
                 str(args.machines), "--seed", str(args.eval_seed), "--conditions",
-                args.conditions, "--sigma", str(args.sigma), "--jobs", str(args.jobs)])
+                args.conditions, "--sigma", str(args.sigma), "--jobs", str(args.jobs),
+                *(("--design", str(args.design)) if args.design else ())])
 
 
 if __name__ == "__main__":
