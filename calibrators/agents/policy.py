@@ -57,6 +57,8 @@ INSTALL_HINT: str = "install the extra: pip install '.[rl]'"
 DESIGN_VIEW_IDS: dict[str, int] = {DESIGN_LAB_ENV_ID: 0, DESIGN_LAB_V1_ENV_ID: 1}
 #: How a design-view policy may play (:attr:`PolicySpec.play`).
 PLAYS: tuple[str, ...] = ("draw", "argmax")
+#: How a design-view policy's moves may let plungers down (:attr:`PolicySpec.flicks`).
+FLICKS: tuple[str, ...] = ("prior", "filter")
 
 
 @dataclass(frozen=True)
@@ -88,6 +90,10 @@ class PolicySpec:
     #: operations, or "argmax", its most likely one (a policy that imitates a greedy
     #: expert learns one operation per state, and a draw only adds its residual spread).
     play: str = "draw"
+    #: How a design-view policy's moves let plungers down: "prior", as the view's fixed
+    #: plan does, or "filter", as ``active``'s filter of the values read does
+    #: (:class:`~calibrators.planning.active_expert.FilteredDesignLab`).
+    flicks: str = "prior"
 
     def to_json(self) -> str:
         return json.dumps(asdict(self))
@@ -132,6 +138,7 @@ def spec_of(env: gym.Env, algorithm: str, env_kwargs: dict[str, Any],
         epsilon=float(getattr(normaliser, "epsilon", 1e-8)), design=lab.design.to_dict(),
         env_id=((DESIGN_LAB_V1_ENV_ID if env.get_wrapper_attr("version") else DESIGN_LAB_ENV_ID)
                 if discrete else FLAT_LAB_ENV_ID), play=play,
+        flicks=env.get_wrapper_attr("flicks") if discrete else "prior",
     )
 
 
@@ -169,6 +176,9 @@ def read_spec(path: str | Path) -> PolicySpec:
     if spec.play not in PLAYS:
         raise ValueError(f"policy file '{path}' plays '{spec.play}'; this workbench plays "
                          f"{list(PLAYS)}: retrain it")
+    if spec.flicks not in FLICKS:
+        raise ValueError(f"policy file '{path}' lets plungers down by '{spec.flicks}'; this "
+                         f"workbench knows {list(FLICKS)}: retrain it")
     if not _a_catalogue(spec.slots) or spec.ops != OP_NAMES[:V0_OPS]:
         raise ValueError(
             f"policy file '{path}' was trained on a lab with {len(spec.slots)} slots and "
@@ -317,6 +327,12 @@ class DesignPolicyAgent(PolicyAgent):
                                    self.spec.budget_s, DESIGN_VIEW_IDS[self.spec.env_id])
         self._check_sizes((len(self.belief.observation()), self.belief.n_actions))
         self.belief.start(observation)
+        self.filter = None
+        if self.spec.flicks == "filter":
+            # Imported here: the planner's modules import the agents package.
+            from calibrators.planning.active_expert import ActiveExpert
+
+            self.filter = ActiveExpert(lab, self.belief, observation)
         self.queue: list[dict[str, Any]] = []
         self.last: dict[str, Any] | None = None
 
@@ -334,11 +350,14 @@ class DesignPolicyAgent(PolicyAgent):
         for agent, observation, info in zip(agents, observations, infos, strict=True):
             if agent.last is not None:
                 agent.belief.observe(agent.last, observation, bool(info.get("refused")))
+                if agent.filter is not None:
+                    agent.filter.observe(agent.last, observation, info)
             if not agent.queue and observation["time"][0] < agent.spec.budget_s:
                 deciding.append(agent)
         for group in _by_actor(deciding):
             for agent, chosen in zip(group, decide_all(group), strict=True):
-                agent.queue = agent.belief.operations(chosen)
+                agent.queue = (agent.belief.operations(chosen) if agent.filter is None
+                               else agent.filter.operations(chosen, agent.belief))
         actions = []
         for agent in agents:
             if not agent.queue:
@@ -383,7 +402,9 @@ def decide_all(agents: list[DesignPolicyAgent]) -> list[int]:
     for agent, row in zip(agents, logits, strict=True):
         if agent.spec.play == "draw":
             row = row + agent.rng.gumbel(size=row.shape)
-        chosen.append(int(np.argmax(np.where(agent.belief.action_mask(), row, -np.inf))))
+        mask = (agent.belief.action_mask() if agent.filter is None
+                else agent.filter.action_mask(agent.belief))
+        chosen.append(int(np.argmax(np.where(mask, row, -np.inf))))
     return chosen
 
 

@@ -50,6 +50,16 @@ def remount_schedule(lab: Any, belief: DesignBelief) -> tuple[Remount, ...]:
                  if s.op == Op.REMOUNT)
 
 
+def planner_at(lab: Any, belief: DesignBelief) -> Planner:
+    """A planner (world terms included) in the state of ``belief`` as the episode opens, in
+    the lab ``lab``'s conditions, no reading yet taken in."""
+    planner = Planner([int(s) for s in belief.slots], [bool(e) for e in belief.engaged],
+                      belief.sigma, belief.budget_s, design=belief.design,
+                      conditions=lab.conditions)
+    planner.time_s = belief.time_s
+    return planner
+
+
 class PlanExpert:
     """The ``optimal`` planner's greedy choice from any state of the design view: a
     :class:`~calibrators.planning.search.Planner` (world terms included) that follows the
@@ -57,11 +67,7 @@ class PlanExpert:
     (never its value), and chooses the next move as ``optimal`` would from there."""
 
     def __init__(self, lab: Any, belief: DesignBelief) -> None:
-        self.planner = Planner([int(s) for s in belief.slots],
-                               [bool(e) for e in belief.engaged], belief.sigma,
-                               belief.budget_s, design=belief.design,
-                               conditions=lab.conditions)
-        self.planner.time_s = belief.time_s
+        self.planner = planner_at(lab, belief)
         self.planner.expect_readings()  # the lab reads every stand as the episode opens
         self.remounts = remount_schedule(lab, belief)
 
@@ -83,10 +89,15 @@ class PlanExpert:
                 planner.retire(int(stand))
         planner.time_s = belief.time_s
 
+    def action_mask(self, belief: DesignBelief) -> np.ndarray:
+        """The operations open to the expert: the view's (:meth:`DesignBelief.action_mask
+        <orthoglide_env.lab.design_belief.DesignBelief.action_mask>`)."""
+        return belief.action_mask()
+
     def choose(self, belief: DesignBelief) -> int:
         """The expert's operation: a due re-mount of the ``optimal`` plan first, else the
         planner's best move among the open ones, else stop."""
-        mask = belief.action_mask()
+        mask = self.action_mask(belief)
         due: dict[int, int] = {}
         for remount in self.remounts:
             if remount.time_s <= belief.time_s:
