@@ -110,8 +110,11 @@ def config(args: argparse.Namespace, agents: tuple[str, ...]) -> compare.Config:
 def view(kwargs: dict[str, Any], expert: str) -> Any:
     """The design view the policy learns in: its moves' flicks as the fixed plan's
     (``--expert optimal``) or as ``active``'s filter's (``--expert active``,
-    :class:`~calibrators.planning.active_expert.FilteredDesignLab`)."""
-    return filtered_design_lab_env(**kwargs) if expert == "active" else design_lab_env(**kwargs)
+    :class:`~calibrators.planning.active_expert.FilteredDesignLab`; ``active-reach``: its
+    observation also holds the dials the filter lets read at each posture)."""
+    if expert == "optimal":
+        return design_lab_env(**kwargs)
+    return filtered_design_lab_env(reach=expert == "active-reach", **kwargs)
 
 
 def expert_of(env: Any) -> Any:
@@ -429,10 +432,13 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
                              "to <out> the round of the lowest error on the curve machines, "
                              "not the last (those of --eval-seed: choose a seed other than "
                              "the one the policy is tested on)")
-    parser.add_argument("--expert", default="optimal", choices=("optimal", "active"),
+    parser.add_argument("--expert", default="optimal",
+                        choices=("optimal", "active", "active-reach"),
                         help="the imitation's expert: optimal's planner from the view's "
                              "state, or active's filter of the values read, whose flicks the "
-                             "view's moves then take (the file records it)")
+                             "view's moves then take (active-reach: the view's observation "
+                             "also holds the dials the filter lets read at each posture; the "
+                             "file records it)")
     parser.add_argument("--design", metavar="FILE",
                         help="the machines' design (a JSON file, as orthoglide's --design; "
                              "default: the prototype)")

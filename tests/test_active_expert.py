@@ -69,11 +69,13 @@ def test_the_active_expert_played_alone_reads_what_active_reads() -> None:
     assert filtered_readings > 1.05 * prior_readings
 
 
-@pytest.fixture(scope="module")
-def filtered_policy(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A tiny MaskablePPO policy of the filtered view (v1), played by its argmax."""
+@pytest.fixture(scope="module", params=[False, True], ids=["flicks", "reach"])
+def filtered_policy(tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest
+                    ) -> Path:
+    """A tiny MaskablePPO policy of the filtered view (v1; its observation with the
+    filter's reach or not), played by its argmax."""
     sb3_contrib = pytest.importorskip("sb3_contrib")
-    env = filtered_design_lab_env(version=1, **LAB)
+    env = filtered_design_lab_env(version=1, reach=request.param, **LAB)
     model = sb3_contrib.MaskablePPO("MlpPolicy", env, n_steps=64, batch_size=32, n_epochs=1,
                                     seed=0, device="cpu")
     model.learn(total_timesteps=64)
@@ -85,13 +87,16 @@ def test_a_filtered_policy_plays_in_the_lab_as_in_its_view(filtered_policy: Path
     """``policy:FILE`` of a policy trained in the filtered view keeps ``active``'s filter
     beside its belief: its episode in the lab is the one the view plays with the same
     network's most likely open operation, reading for reading; the file says how its
-    plungers go down."""
-    assert read_spec(filtered_policy).flicks == "filter"
+    plungers go down and what its network sees."""
+    spec = read_spec(filtered_policy)
+    assert spec.flicks == "filter"
     agent = get_agent(f"policy:{filtered_policy}")
     assert isinstance(agent, DesignPolicyAgent)
     episode = run_episode(gym.make(orthoglide_env.LAB_ENV_ID, **LAB), agent, seed=4)
-    view = filtered_design_lab_env(version=1, **LAB)
+    view = filtered_design_lab_env(version=1, reach=spec.reach, **LAB)
+    assert view.observation_space.shape[0] == 272 + spec.reach * view.belief.n_postures
     observation, _ = view.reset(seed=4)
+    assert view.observation_space.contains(observation)
     done = False
     while not done:
         logits = agent.actor.logits(observation)

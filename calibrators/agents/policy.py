@@ -94,6 +94,9 @@ class PolicySpec:
     #: plan does, or "filter", as ``active``'s filter of the values read does
     #: (:class:`~calibrators.planning.active_expert.FilteredDesignLab`).
     flicks: str = "prior"
+    #: Whether a policy of ``flicks="filter"`` also sees each posture's dials the filter
+    #: lets read (:meth:`~calibrators.planning.active_expert.ActiveExpert.reach`).
+    reach: bool = False
 
     def to_json(self) -> str:
         return json.dumps(asdict(self))
@@ -139,6 +142,7 @@ def spec_of(env: gym.Env, algorithm: str, env_kwargs: dict[str, Any],
         env_id=((DESIGN_LAB_V1_ENV_ID if env.get_wrapper_attr("version") else DESIGN_LAB_ENV_ID)
                 if discrete else FLAT_LAB_ENV_ID), play=play,
         flicks=env.get_wrapper_attr("flicks") if discrete else "prior",
+        reach=bool(getattr(env, "reach", False)),
     )
 
 
@@ -325,7 +329,8 @@ class DesignPolicyAgent(PolicyAgent):
         self.belief = DesignBelief(lab.design, lab.n_stands,
                                    weighting_sigma(float(lab.noise.effective_sigma)),
                                    self.spec.budget_s, DESIGN_VIEW_IDS[self.spec.env_id])
-        self._check_sizes((len(self.belief.observation()), self.belief.n_actions))
+        extra = self.belief.n_postures if self.spec.reach else 0
+        self._check_sizes((len(self.belief.observation()) + extra, self.belief.n_actions))
         self.belief.start(observation)
         self.filter = None
         if self.spec.flicks == "filter":
@@ -397,7 +402,12 @@ def decide_all(agents: list[DesignPolicyAgent]) -> list[int]:
     agent's."""
     if not agents:
         return []
-    logits = agents[0].actor.logits_many(observations([a.belief for a in agents]))
+    seen = observations([a.belief for a in agents])
+    if agents[0].spec.reach:
+        # float32, as the view in training gave it.
+        seen = np.concatenate((seen, [a.filter.reach() for a in agents]),
+                              axis=1).astype(np.float32)
+    logits = agents[0].actor.logits_many(seen)
     chosen = []
     for agent, row in zip(agents, logits, strict=True):
         if agent.spec.play == "draw":

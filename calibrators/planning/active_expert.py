@@ -24,6 +24,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium import spaces
 
 from calibrators.planning.design_expert import PlanExpert, planner_at, remount_schedule
 from calibrators.planning.pricing import PricedMoves
@@ -59,6 +60,12 @@ class ActiveExpert(PlanExpert):
         mask[:belief.n_postures] = ((reads.max(axis=0) >= READ_PROBABILITY)
                                     & (belief.time_s + seconds <= belief.budget_s))
         return mask
+
+    def reach(self) -> np.ndarray:
+        """Each candidate posture's expected number of dials reading there, as the filter
+        lets plungers down from here, over the stands (P,): in [0, 1]."""
+        reads = self.planner._moves()[2]
+        return reads.sum(axis=0) / len(reads)
 
     def operations(self, action: int, belief: DesignBelief) -> list[dict[str, object]]:
         """The lab actions of view operation ``action``: a move's flicks as the filter lets
@@ -125,24 +132,36 @@ class _Feed(gym.Wrapper):
 
 
 class FilteredDesignLab(DesignLab):
-    """The design view (its spaces, mask and reward) whose moves let plungers down as
+    """The design view (its actions and reward) whose moves let plungers down as
     ``active``'s filter does (:class:`ActiveExpert`, the episode's :attr:`expert`, which
-    labels its states with ``active``'s choice).  Its ``flicks`` is ``"filter"``."""
+    labels its states with ``active``'s choice), its mask opening the moves the filter lets
+    a dial read (:meth:`ActiveExpert.action_mask`).  Its ``flicks`` is ``"filter"``.  With
+    ``reach`` its observation also holds, after the view's, each candidate posture's dials
+    that would read there, as the filter lets them down, over the stands
+    (:meth:`ActiveExpert.reach`): what the values read open, which the view's observation
+    does not carry."""
 
     flicks = "filter"
 
     def __init__(self, env: gym.Env, reward: str = "mse", per: str = "step",
-                 version: int = 0) -> None:
+                 version: int = 0, reach: bool = False) -> None:
         feed = _Feed(env)
         super().__init__(feed, reward=reward, per=per, version=version)
         feed.view = self
+        self.reach = reach
         self.expert: ActiveExpert | None = None
+        if reach:
+            n = self.belief.n_postures
+            space = self.observation_space
+            self.observation_space = spaces.Box(np.r_[space.low, np.zeros(n)],
+                                                np.r_[space.high, np.ones(n)],
+                                                dtype=np.float32)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
               ) -> tuple[np.ndarray, dict[str, Any]]:
-        result = super().reset(seed=seed, options=options)
+        _, info = super().reset(seed=seed, options=options)
         self.expert = ActiveExpert(self.env.unwrapped, self.belief, self.env.first)
-        return result
+        return self._observation(), info
 
     def operations(self, action: int) -> list[dict[str, object]]:
         return self.expert.operations(action, self.belief)
@@ -151,10 +170,17 @@ class FilteredDesignLab(DesignLab):
         """Which actions are candidates now: :meth:`ActiveExpert.action_mask`."""
         return self.expert.action_mask(self.belief)
 
+    def _observation(self) -> np.ndarray:
+        seen = super()._observation()
+        if not self.reach or self.expert is None:
+            return seen
+        return np.concatenate((seen, self.expert.reach())).astype(np.float32)
+
 
 def filtered_design_lab_env(reward: str = "mse", per: str = "step", version: int = 0,
-                            **kwargs: Any) -> FilteredDesignLab:
+                            reach: bool = False, **kwargs: Any) -> FilteredDesignLab:
     """``OrthoglideLab-v0`` (``kwargs``: the lab env's) in the design view of ``version``
-    whose moves take ``active``'s flicks (:class:`FilteredDesignLab`)."""
+    whose moves take ``active``'s flicks, its observation with the filter's ``reach``
+    or not (:class:`FilteredDesignLab`)."""
     return FilteredDesignLab(OrthoglideLabEnv(**kwargs), reward=reward, per=per,
-                             version=version)
+                             version=version, reach=reach)
