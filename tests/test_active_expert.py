@@ -3,11 +3,13 @@ its expert is ``active``, and a policy of its view plays in the lab as it did in
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 import pytest
+from gymnasium.utils.env_checker import check_env
 
 import orthoglide_env
 from calibrators.agents.names import get_agent
@@ -67,6 +69,22 @@ def test_the_active_expert_played_alone_reads_what_active_reads() -> None:
     # medians 111 and 95 readings); summed over three machines the margin is far above
     # one machine's spread.
     assert filtered_readings > 1.05 * prior_readings
+
+
+@pytest.mark.parametrize("reach", [False, True], ids=["flicks", "reach"])
+def test_check_env_of_the_filtered_view(reach: bool) -> None:
+    """The filtered view passes Gymnasium's check (random actions, re-mounts onto held
+    slots and onto a stand's own among them); with ``reach`` its observation has one more
+    entry per candidate posture, each in [0, 1]."""
+    env = filtered_design_lab_env(version=1, reach=reach, conditions="lab", gauge_sigma=0.02,
+                                  budget_s=120.0)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env, skip_render_check=True)
+    # The one warning left says the env is a wrapper, which it is by design.
+    messages = [str(w.message) for w in caught]
+    assert all("different from the unwrapped version" in m for m in messages), messages
+    assert env.observation_space.shape == (272 + reach * env.belief.n_postures,)
 
 
 @pytest.fixture(scope="module", params=[False, True], ids=["flicks", "reach"])

@@ -95,7 +95,11 @@ class ActiveExpert(PlanExpert):
                 self._pending = None
                 self._read(observation)
             elif operation["op"] == Op.REMOUNT:
-                planner.remount(int(operation["stand"]), int(operation["slot"]))
+                stand, slot = int(operation["stand"]), int(operation["slot"])
+                if planner.slots[stand] == slot:
+                    # Re-mounted where it stood: a new mounting all the same.
+                    planner.retire(stand)
+                planner.remount(stand, slot)
                 self._read(observation)
         for stand in np.flatnonzero(observation["faulted"]):
             if planner.slots[stand] >= 0:
@@ -153,9 +157,9 @@ class FilteredDesignLab(DesignLab):
         if reach:
             n = self.belief.n_postures
             space = self.observation_space
-            self.observation_space = spaces.Box(np.r_[space.low, np.zeros(n)],
-                                                np.r_[space.high, np.ones(n)],
-                                                dtype=np.float32)
+            self.observation_space = spaces.Box(
+                np.r_[space.low, np.zeros(n)].astype(np.float32),
+                np.r_[space.high, np.ones(n)].astype(np.float32), dtype=np.float32)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
               ) -> tuple[np.ndarray, dict[str, Any]]:
