@@ -10,7 +10,8 @@ weighs them (:mod:`calibrators.planning.world_terms`), else stop.  Played alone 
 policy reaches, so a policy learns from it by DAgger (``examples/train_masked.py
 --imitate``).  It cannot label ``active``'s choices: those rest on the values read (its
 filter lets a plunger down where its estimate, not the prior, keeps it safe), which the
-view does not observe.
+view does not observe; :mod:`calibrators.planning.active_expert` keeps that filter beside
+the view and labels them.
 """
 
 from __future__ import annotations
