@@ -59,6 +59,11 @@ DESIGN_VIEW_IDS: dict[str, int] = {DESIGN_LAB_ENV_ID: 0, DESIGN_LAB_V1_ENV_ID: 1
 PLAYS: tuple[str, ...] = ("draw", "argmax")
 #: How a design-view policy's moves may let plungers down (:attr:`PolicySpec.flicks`).
 FLICKS: tuple[str, ...] = ("prior", "filter")
+#: The filters beside the belief that a policy of ``flicks`` other than "prior" plays its
+#: moves with, by name: a class made from (lab, belief, the lab's first observation),
+#: registered by the module that defines it (:mod:`calibrators.planning.active_filter`
+#: registers "filter"; the planner's modules import the agents package, not the reverse).
+FLICK_FILTERS: dict[str, Any] = {}
 
 
 @dataclass(frozen=True)
@@ -95,7 +100,7 @@ class PolicySpec:
     #: (:class:`~calibrators.planning.active_expert.FilteredDesignLab`).
     flicks: str = "prior"
     #: Whether a policy of ``flicks="filter"`` also sees each posture's dials the filter
-    #: lets read (:meth:`~calibrators.planning.active_expert.ActiveExpert.reach`).
+    #: lets read (:meth:`~calibrators.planning.active_filter.ActiveFilter.reach`).
     reach: bool = False
 
     def to_json(self) -> str:
@@ -333,11 +338,12 @@ class DesignPolicyAgent(PolicyAgent):
         self._check_sizes((len(self.belief.observation()) + extra, self.belief.n_actions))
         self.belief.start(observation)
         self.filter = None
-        if self.spec.flicks == "filter":
-            # Imported here: the planner's modules import the agents package.
-            from calibrators.planning.active_expert import ActiveExpert
-
-            self.filter = ActiveExpert(lab, self.belief, observation)
+        if self.spec.flicks != "prior":
+            if self.spec.flicks not in FLICK_FILTERS:
+                raise ValueError(f"policy file '{self.path}' plays its moves with the "
+                                 f"'{self.spec.flicks}' filter: import "
+                                 "calibrators.planning.active_filter first")
+            self.filter = FLICK_FILTERS[self.spec.flicks](lab, self.belief, observation)
         self.queue: list[dict[str, Any]] = []
         self.last: dict[str, Any] | None = None
 

@@ -26,94 +26,32 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from calibrators.planning.design_expert import PlanExpert, planner_at, remount_schedule
-from calibrators.planning.pricing import PricedMoves
+from calibrators.planning.active_filter import ActiveFilter
+from calibrators.planning.design_expert import PlanExpert, remount_schedule
 from orthoglide_env.envs.lab import OrthoglideLabEnv
-from orthoglide_env.lab.design_belief import READ_PROBABILITY, DesignBelief
-from orthoglide_env.lab.operations import Op
+from orthoglide_env.lab.design_belief import DesignBelief
 from orthoglide_env.wrappers import DesignLab
 
 
 class ActiveExpert(PlanExpert):
-    """``active``'s filter following a design view's episode, its flicks and its choice
-    (see the module).  Made at the episode's start from the lab's first observation and the
-    view's belief after it; told every lab action and what the lab observed after it
-    (:meth:`observe`)."""
+    """``active``'s choice from any state of the filtered view: its filter
+    (:class:`~calibrators.planning.active_filter.ActiveFilter`, :attr:`filter`), the
+    ``optimal`` plan's re-mounts once due, else the filter's best open move, else stop.
+    Made at the episode's start from the lab's first observation and the view's belief
+    after it."""
 
     def __init__(self, lab: Any, belief: DesignBelief, observation: dict[str, np.ndarray]
                  ) -> None:
-        self.planner = planner_at(lab, belief)
+        self.filter = ActiveFilter(lab, belief, observation)
+        self.planner = self.filter.planner
         self.remounts = remount_schedule(lab, belief)
-        self.index = belief.index
-        self._pending: PricedMoves | None = None
-        self._read(observation)
 
     def action_mask(self, belief: DesignBelief) -> np.ndarray:
-        """The view's mask (:meth:`DesignBelief.action_mask
-        <orthoglide_env.lab.design_belief.DesignBelief.action_mask>`) with its moves open
-        where some stand reads at least :data:`~orthoglide_env.lab.design_belief.
-        READ_PROBABILITY` likely as the filter lets plungers down, not as the prior does
-        (``active`` goes where its estimate lets a dial read)."""
-        mask = belief.action_mask()
-        seconds = belief.moves()[0]
-        reads = self.planner._moves()[2]
-        mask[:belief.n_postures] = ((reads.max(axis=0) >= READ_PROBABILITY)
-                                    & (belief.time_s + seconds <= belief.budget_s))
-        return mask
-
-    def reach(self) -> np.ndarray:
-        """Each candidate posture's expected number of dials reading there, as the filter
-        lets plungers down from here, over the stands (P,): in [0, 1]."""
-        reads = self.planner._moves()[2]
-        return reads.sum(axis=0) / len(reads)
-
-    def operations(self, action: int, belief: DesignBelief) -> list[dict[str, object]]:
-        """The lab actions of view operation ``action``: a move's flicks as the filter lets
-        plungers down (its estimate keeps the tip inside the travel), then the move; a
-        re-mount or stop as the view plays them."""
-        if action >= belief.n_postures:
-            return belief.operations(action)
-        seconds, after, reads = self.planner._moves()
-        self._pending = PricedMoves(np.zeros(len(seconds)), seconds, after, reads)
-        idle = {"rho": np.zeros(3), "stand": 0, "slot": 0}
-        flicks = [{**idle, "op": Op.ENGAGE if down else Op.LIFT, "stand": k}
-                  for k, down in enumerate(after[:, action])
-                  if bool(down) != bool(belief.engaged[k])]
-        return [*flicks, {**idle, "op": Op.MOVE, "rho": belief.table.postures[action].copy()}]
-
-    def observe(self, operation: dict[str, object], observation: dict[str, np.ndarray],
-                info: dict[str, Any]) -> None:
-        """Take in the lab's ``observation`` after lab action ``operation`` (``info``: the
-        lab's): a move's or a re-mount's readings, by value."""
-        planner = self.planner
-        for text in info.get("overtravel", []):
-            planner.retire(int(text.split()[1]))
-        if not info.get("refused"):
-            if operation["op"] == Op.MOVE and self._pending is not None:
-                posture = self.index[np.asarray(operation["rho"], dtype=float).tobytes()]
-                planner.move(posture, self._pending)
-                self._pending = None
-                self._read(observation)
-            elif operation["op"] == Op.REMOUNT:
-                stand, slot = int(operation["stand"]), int(operation["slot"])
-                if planner.slots[stand] == slot:
-                    # Re-mounted where it stood: a new mounting all the same.
-                    planner.retire(stand)
-                planner.remount(stand, slot)
-                self._read(observation)
-        for stand in np.flatnonzero(observation["faulted"]):
-            if planner.slots[stand] >= 0:
-                planner.retire(int(stand))
-        planner.time_s = float(observation["time"][0])
+        """The filter's (:meth:`ActiveFilter.action_mask`)."""
+        return self.filter.action_mask(belief)
 
     def follow(self, action: int, belief: DesignBelief) -> None:
-        """Nothing: the filter has seen every lab action (:meth:`observe`)."""
-
-    def _read(self, observation: dict[str, np.ndarray]) -> None:
-        planner = self.planner
-        stands = [k for k in range(len(planner.slots))
-                  if observation["valid"][k] and planner.slots[k] >= 0]
-        planner.observe(stands, [float(observation["gauges"][k]) for k in stands])
+        """Nothing: the filter has seen every lab action (:meth:`ActiveFilter.observe`)."""
 
 
 class _Feed(gym.Wrapper):
@@ -131,7 +69,7 @@ class _Feed(gym.Wrapper):
 
     def step(self, action: dict[str, Any]) -> tuple[Any, ...]:
         observation, reward, terminated, truncated, info = self.env.step(action)
-        self.view.expert.observe(action, observation, info)
+        self.view.expert.filter.observe(action, observation, info)
         return observation, reward, terminated, truncated, info
 
 
@@ -139,10 +77,10 @@ class FilteredDesignLab(DesignLab):
     """The design view (its actions and reward) whose moves let plungers down as
     ``active``'s filter does (:class:`ActiveExpert`, the episode's :attr:`expert`, which
     labels its states with ``active``'s choice), its mask opening the moves the filter lets
-    a dial read (:meth:`ActiveExpert.action_mask`).  Its ``flicks`` is ``"filter"``.  With
+    a dial read (:meth:`ActiveFilter.action_mask`).  Its ``flicks`` is ``"filter"``.  With
     ``reach`` its observation also holds, after the view's, each candidate posture's dials
     that would read there, as the filter lets them down, over the stands
-    (:meth:`ActiveExpert.reach`): what the values read open, which the view's observation
+    (:meth:`ActiveFilter.reach`): what the values read open, which the view's observation
     does not carry."""
 
     flicks = "filter"
@@ -168,7 +106,7 @@ class FilteredDesignLab(DesignLab):
         return self._observation(), info
 
     def operations(self, action: int) -> list[dict[str, object]]:
-        return self.expert.operations(action, self.belief)
+        return self.expert.filter.operations(action, self.belief)
 
     def action_masks(self) -> np.ndarray:
         """Which actions are candidates now: :meth:`ActiveExpert.action_mask`."""
@@ -178,7 +116,7 @@ class FilteredDesignLab(DesignLab):
         seen = super()._observation()
         if not self.reach or self.expert is None:
             return seen
-        return np.concatenate((seen, self.expert.reach())).astype(np.float32)
+        return np.concatenate((seen, self.expert.filter.reach())).astype(np.float32)
 
 
 def filtered_design_lab_env(reward: str = "mse", per: str = "step", version: int = 0,

@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 
 from calibrators.agents.optimal import fixed_plan
+from calibrators.planning.active_filter import planner_at
 from calibrators.planning.pricing import PricedMoves
-from calibrators.planning.search import Planner
 from orthoglide_env.lab.design_belief import DesignBelief
 from orthoglide_env.lab.operations import Op
 
@@ -49,16 +49,6 @@ def remount_schedule(lab: Any, belief: DesignBelief) -> tuple[Remount, ...]:
                           criterion="I")
     return tuple(Remount(belief.time_s + s.time_s, s.stand, s.slot) for s in steps
                  if s.op == Op.REMOUNT)
-
-
-def planner_at(lab: Any, belief: DesignBelief) -> Planner:
-    """A planner (world terms included) in the state of ``belief`` as the episode opens, in
-    the lab ``lab``'s conditions, no reading yet taken in."""
-    planner = Planner([int(s) for s in belief.slots], [bool(e) for e in belief.engaged],
-                      belief.sigma, belief.budget_s, design=belief.design,
-                      conditions=lab.conditions)
-    planner.time_s = belief.time_s
-    return planner
 
 
 class PlanExpert:
