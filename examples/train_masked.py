@@ -71,9 +71,11 @@ from training_curve import (
 
 from calibrators.agents.names import POLICY_PREFIX
 from calibrators.agents.policy import save_policy, spec_of
+from calibrators.planning.active_expert import FilteredDesignLab, filtered_design_lab_env
 from calibrators.planning.design_expert import PlanExpert
 from calibrators.study import compare, statistics
 from orthoglide_env.lab.design_belief import VIEW_VERSIONS
+from orthoglide_env.model.design import load_design
 from orthoglide_env.model.errors import DEFAULT_PRESET
 from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.wrappers import DESIGN_PER, DESIGN_REWARDS, design_lab_env
@@ -85,27 +87,52 @@ BASELINES: str = "paper,optimal,active,random"
 
 
 def env_kwargs(args: argparse.Namespace) -> dict[str, Any]:
-    """The design view's keyword arguments in training (all JSON: the policy file records
-    them)."""
+    """The design view's keyword arguments in training: the machines' design (a
+    :class:`~orthoglide_env.model.design.MachineDesign`) and JSON (:func:`recorded`)."""
     return {"errors": DEFAULT_PRESET, "gauge_sigma": args.sigma, "budget_s": args.budget,
             "conditions": Conditions(args.conditions).to_dict(), "reward": args.reward,
-            "per": args.per, "version": args.view}
+            "per": args.per, "version": args.view, "design": load_design(args.design)}
+
+
+def recorded(kwargs: dict[str, Any]) -> dict[str, Any]:
+    """The view's keyword arguments the policy file records as JSON: all but the design,
+    which the file records on its own (:attr:`calibrators.agents.policy.PolicySpec.design`)."""
+    return {k: v for k, v in kwargs.items() if k != "design"}
 
 
 def config(args: argparse.Namespace, agents: tuple[str, ...]) -> compare.Config:
     return compare.Config(agents, (ESTIMATOR,), budget_s=args.budget, errors=DEFAULT_PRESET,
                           sigma=args.sigma, seed=args.eval_seed,
-                          conditions=Conditions(args.conditions))
+                          conditions=Conditions(args.conditions),
+                          design=load_design(args.design))
 
 
-def make_vec_env(n_envs: int, kwargs: dict[str, Any], seed: int) -> Any:
+def view(kwargs: dict[str, Any], expert: str) -> Any:
+    """The design view the policy learns in: its moves' flicks as the fixed plan's
+    (``--expert optimal``) or as ``active``'s filter's (``--expert active``,
+    :class:`~calibrators.planning.active_expert.FilteredDesignLab`; ``active-reach``: its
+    observation also holds the dials the filter lets read at each posture)."""
+    if expert == "optimal":
+        return design_lab_env(**kwargs)
+    return filtered_design_lab_env(reach=expert == "active-reach", **kwargs)
+
+
+def expert_of(env: Any) -> Any:
+    """The expert that labels the states of ``env``'s episode, just reset: the filter's
+    ``active`` of a :class:`FilteredDesignLab`, else ``optimal``'s :class:`PlanExpert`."""
+    if isinstance(env, FilteredDesignLab):
+        return env.expert
+    return PlanExpert(env.unwrapped, env.belief)
+
+
+def make_vec_env(n_envs: int, kwargs: dict[str, Any], seed: int, expert: str) -> Any:
     """``n_envs`` design views as a stable-baselines3 ``DummyVecEnv``, env ``k`` seeded
     ``seed + k``, each in a ``Monitor`` that keeps its episodes' final predicted error."""
     from stable_baselines3.common.monitor import Monitor
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     def factory() -> Any:
-        return Monitor(design_lab_env(**kwargs), info_keywords=("predicted_rigid_mm",))
+        return Monitor(view(kwargs, expert), info_keywords=("predicted_rigid_mm",))
 
     vec = DummyVecEnv([factory] * n_envs)
     vec.seed(seed)
@@ -122,8 +149,8 @@ def held_out_rigid(args: argparse.Namespace, kwargs: dict[str, Any], model: Any,
                    ) -> float:
     """``model`` saved to ``path`` and scored on the curve machines: median TCP error
     after rigid motion (mm)."""
-    save_policy(model, path, spec_of(design_lab_env(**kwargs), "MaskablePPO", kwargs,
-                                     play=play_mode(args)))
+    save_policy(model, path, spec_of(view(kwargs, args.expert), "MaskablePPO",
+                                     recorded(kwargs), play=play_mode(args)))
     row = statistics.summary(compare.run(config(args, (POLICY_PREFIX + str(path),)),
                                          args.curve_machines))[0]
     return median_rigid(row)
@@ -173,7 +200,7 @@ def rollouts(envs: list[Any], episodes: int, choose: Choice | None
     for episode in range(episodes):
         env = envs[episode % len(envs)]
         observation, _ = env.reset()
-        expert = PlanExpert(env.unwrapped, env.belief)
+        expert = expert_of(env)
         rewards: list[float] = []
         done, info = False, {}
         while not done:
@@ -293,7 +320,7 @@ def imitate(args: argparse.Namespace, kwargs: dict[str, Any], model: Any) -> lis
     ``args.seed + k`` once; the learning curve's rows, written as they come."""
     import torch
 
-    envs = [design_lab_env(**kwargs) for _ in range(args.envs)]
+    envs = [view(kwargs, args.expert) for _ in range(args.envs)]
     for k, env in enumerate(envs):
         env.reset(seed=args.seed + k)
     rng = np.random.default_rng(args.seed)
@@ -405,6 +432,16 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
                              "to <out> the round of the lowest error on the curve machines, "
                              "not the last (those of --eval-seed: choose a seed other than "
                              "the one the policy is tested on)")
+    parser.add_argument("--expert", default="optimal",
+                        choices=("optimal", "active", "active-reach"),
+                        help="the imitation's expert: optimal's planner from the view's "
+                             "state, or active's filter of the values read, whose flicks the "
+                             "view's moves then take (active-reach: the view's observation "
+                             "also holds the dials the filter lets read at each posture; the "
+                             "file records it)")
+    parser.add_argument("--design", metavar="FILE",
+                        help="the machines' design (a JSON file, as orthoglide's --design; "
+                             "default: the prototype)")
     parser.add_argument("--baselines", default=BASELINES,
                         help="agents of the curve's lines and the final table")
     args = parser.parse_args(argv)
@@ -450,7 +487,7 @@ def main(argv: list[str] | None = None) -> None:
     for row in levels:
         print(f"{row['agent']:>10}: held-out TCP (rigid) median {median_rigid(row):.4f} mm "
               f"on {args.curve_machines} curve machines", flush=True)
-    vec = make_vec_env(args.envs, kwargs, args.seed)
+    vec = make_vec_env(args.envs, kwargs, args.seed, args.expert)
     # An imitated policy is fine-tuned without the entropy bonus, which would spread the
     # one operation per state it learned.
     model = MaskablePPO("MlpPolicy", vec, n_steps=256, batch_size=256, n_epochs=5,
@@ -463,7 +500,8 @@ def main(argv: list[str] | None = None) -> None:
     if args.imitate and args.steps:
         # What PPO starts from, kept: its fine-tuning is judged against it.
         save_policy(model, args.out.with_suffix(".imitated.zip"),
-                    spec_of(design_lab_env(**kwargs), "MaskablePPO", kwargs, play="argmax"))
+                    spec_of(view(kwargs, args.expert), "MaskablePPO", recorded(kwargs),
+                            play="argmax"))
     if args.steps:
         curve = curve_callback(args.out, args.every, args.max_minutes, curve_score(args, kwargs),
                                earlier=rows)
@@ -475,8 +513,8 @@ def main(argv: list[str] | None = None) -> None:
         shutil.copyfile(round_file(args.out, best), args.out)
         print(f"round {best} scored best on the curve machines")
     else:
-        save_policy(model, args.out, spec_of(design_lab_env(**kwargs), "MaskablePPO", kwargs,
-                                             play=play_mode(args)))
+        save_policy(model, args.out, spec_of(view(kwargs, args.expert), "MaskablePPO",
+                                             recorded(kwargs), play=play_mode(args)))
     vec.close()
     print(f"wrote {args.out} ({rows[-1]['steps']} steps in {minutes:.1f} min)")
     world = config(args, ()).world
@@ -489,7 +527,8 @@ def main(argv: list[str] | None = None) -> None:
     orthoglide(["compare", "--agents", ",".join((POLICY_PREFIX + str(args.out), *baselines)),
                 "--estimators", ESTIMATOR, "--budget", str(args.budget), "--machines",
                 str(args.machines), "--seed", str(args.eval_seed), "--conditions",
-                args.conditions, "--sigma", str(args.sigma), "--jobs", str(args.jobs)])
+                args.conditions, "--sigma", str(args.sigma), "--jobs", str(args.jobs),
+                *(("--design", str(args.design)) if args.design else ())])
 
 
 if __name__ == "__main__":

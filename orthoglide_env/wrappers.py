@@ -160,6 +160,10 @@ class DesignLab(gym.Wrapper):
       reward are v0's.
     """
 
+    #: How its moves let plungers down: as the fixed plan does, where the a-priori spread
+    #: keeps the tip safe (:meth:`operations`).
+    flicks: str = "prior"
+
     def __init__(self, env: gym.Env, reward: str = "mse", per: str = "step",
                  version: int = 0) -> None:
         super().__init__(env)
@@ -200,7 +204,7 @@ class DesignLab(gym.Wrapper):
         terminated = truncated = False
         info: dict[str, Any] = {}
         count = 0
-        for operation in belief.operations(int(action)):
+        for operation in self.operations(int(action)):
             observation, _, terminated, truncated, info = self.env.step(operation)
             count += 1
             belief.observe(operation, observation, bool(info.get("refused")))
@@ -215,6 +219,11 @@ class DesignLab(gym.Wrapper):
             reward /= belief.time_s - start_s
         info = {**info, "lab_steps": count, "predicted_rigid_mm": self._predicted_mm()}
         return self._observation(), float(reward), terminated, truncated, info
+
+    def operations(self, action: int) -> list[dict[str, Any]]:
+        """The lab actions that operation ``action`` is (the belief's: a move's flicks as
+        the fixed plan lets plungers down; a subclass may let them down otherwise)."""
+        return self.belief.operations(action)
 
     def action_masks(self) -> np.ndarray:
         """Which actions are candidates now (bool, ``action_space.n``): see the class."""

@@ -57,6 +57,13 @@ INSTALL_HINT: str = "install the extra: pip install '.[rl]'"
 DESIGN_VIEW_IDS: dict[str, int] = {DESIGN_LAB_ENV_ID: 0, DESIGN_LAB_V1_ENV_ID: 1}
 #: How a design-view policy may play (:attr:`PolicySpec.play`).
 PLAYS: tuple[str, ...] = ("draw", "argmax")
+#: How a design-view policy's moves may let plungers down (:attr:`PolicySpec.flicks`).
+FLICKS: tuple[str, ...] = ("prior", "filter")
+#: The filters beside the belief that a policy of ``flicks`` other than "prior" plays its
+#: moves with, by name: a class made from (lab, belief, the lab's first observation),
+#: registered by the module that defines it (:mod:`calibrators.planning.active_filter`
+#: registers "filter"; the planner's modules import the agents package, not the reverse).
+FLICK_FILTERS: dict[str, Any] = {}
 
 
 @dataclass(frozen=True)
@@ -88,6 +95,13 @@ class PolicySpec:
     #: operations, or "argmax", its most likely one (a policy that imitates a greedy
     #: expert learns one operation per state, and a draw only adds its residual spread).
     play: str = "draw"
+    #: How a design-view policy's moves let plungers down: "prior", as the view's fixed
+    #: plan does, or "filter", as ``active``'s filter of the values read does
+    #: (:class:`~calibrators.planning.active_expert.FilteredDesignLab`).
+    flicks: str = "prior"
+    #: Whether a policy of ``flicks="filter"`` also sees each posture's dials the filter
+    #: lets read (:meth:`~calibrators.planning.active_filter.ActiveFilter.reach`).
+    reach: bool = False
 
     def to_json(self) -> str:
         return json.dumps(asdict(self))
@@ -132,6 +146,8 @@ def spec_of(env: gym.Env, algorithm: str, env_kwargs: dict[str, Any],
         epsilon=float(getattr(normaliser, "epsilon", 1e-8)), design=lab.design.to_dict(),
         env_id=((DESIGN_LAB_V1_ENV_ID if env.get_wrapper_attr("version") else DESIGN_LAB_ENV_ID)
                 if discrete else FLAT_LAB_ENV_ID), play=play,
+        flicks=env.get_wrapper_attr("flicks") if discrete else "prior",
+        reach=bool(getattr(env, "reach", False)),
     )
 
 
@@ -169,6 +185,9 @@ def read_spec(path: str | Path) -> PolicySpec:
     if spec.play not in PLAYS:
         raise ValueError(f"policy file '{path}' plays '{spec.play}'; this workbench plays "
                          f"{list(PLAYS)}: retrain it")
+    if spec.flicks not in FLICKS:
+        raise ValueError(f"policy file '{path}' lets plungers down by '{spec.flicks}'; this "
+                         f"workbench knows {list(FLICKS)}: retrain it")
     if not _a_catalogue(spec.slots) or spec.ops != OP_NAMES[:V0_OPS]:
         raise ValueError(
             f"policy file '{path}' was trained on a lab with {len(spec.slots)} slots and "
@@ -315,8 +334,16 @@ class DesignPolicyAgent(PolicyAgent):
         self.belief = DesignBelief(lab.design, lab.n_stands,
                                    weighting_sigma(float(lab.noise.effective_sigma)),
                                    self.spec.budget_s, DESIGN_VIEW_IDS[self.spec.env_id])
-        self._check_sizes((len(self.belief.observation()), self.belief.n_actions))
+        extra = self.belief.n_postures if self.spec.reach else 0
+        self._check_sizes((len(self.belief.observation()) + extra, self.belief.n_actions))
         self.belief.start(observation)
+        self.filter = None
+        if self.spec.flicks != "prior":
+            if self.spec.flicks not in FLICK_FILTERS:
+                raise ValueError(f"policy file '{self.path}' plays its moves with the "
+                                 f"'{self.spec.flicks}' filter: import "
+                                 "calibrators.planning.active_filter first")
+            self.filter = FLICK_FILTERS[self.spec.flicks](lab, self.belief, observation)
         self.queue: list[dict[str, Any]] = []
         self.last: dict[str, Any] | None = None
 
@@ -334,11 +361,14 @@ class DesignPolicyAgent(PolicyAgent):
         for agent, observation, info in zip(agents, observations, infos, strict=True):
             if agent.last is not None:
                 agent.belief.observe(agent.last, observation, bool(info.get("refused")))
+                if agent.filter is not None:
+                    agent.filter.observe(agent.last, observation, info)
             if not agent.queue and observation["time"][0] < agent.spec.budget_s:
                 deciding.append(agent)
         for group in _by_actor(deciding):
             for agent, chosen in zip(group, decide_all(group), strict=True):
-                agent.queue = agent.belief.operations(chosen)
+                agent.queue = (agent.belief.operations(chosen) if agent.filter is None
+                               else agent.filter.operations(chosen, agent.belief))
         actions = []
         for agent in agents:
             if not agent.queue:
@@ -378,12 +408,19 @@ def decide_all(agents: list[DesignPolicyAgent]) -> list[int]:
     agent's."""
     if not agents:
         return []
-    logits = agents[0].actor.logits_many(observations([a.belief for a in agents]))
+    seen = observations([a.belief for a in agents])
+    if agents[0].spec.reach:
+        # float32, as the view in training gave it.
+        seen = np.concatenate((seen, [a.filter.reach() for a in agents]),
+                              axis=1).astype(np.float32)
+    logits = agents[0].actor.logits_many(seen)
     chosen = []
     for agent, row in zip(agents, logits, strict=True):
         if agent.spec.play == "draw":
             row = row + agent.rng.gumbel(size=row.shape)
-        chosen.append(int(np.argmax(np.where(agent.belief.action_mask(), row, -np.inf))))
+        mask = (agent.belief.action_mask() if agent.filter is None
+                else agent.filter.action_mask(agent.belief))
+        chosen.append(int(np.argmax(np.where(mask, row, -np.inf))))
     return chosen
 
 

@@ -10,7 +10,8 @@ weighs them (:mod:`calibrators.planning.world_terms`), else stop.  Played alone 
 policy reaches, so a policy learns from it by DAgger (``examples/train_masked.py
 --imitate``).  It cannot label ``active``'s choices: those rest on the values read (its
 filter lets a plunger down where its estimate, not the prior, keeps it safe), which the
-view does not observe.
+view does not observe; :mod:`calibrators.planning.active_expert` keeps that filter beside
+the view and labels them.
 """
 
 from __future__ import annotations
@@ -21,8 +22,8 @@ from typing import Any
 import numpy as np
 
 from calibrators.agents.optimal import fixed_plan
+from calibrators.planning.active_filter import planner_at
 from calibrators.planning.pricing import PricedMoves
-from calibrators.planning.search import Planner
 from orthoglide_env.lab.design_belief import DesignBelief
 from orthoglide_env.lab.operations import Op
 
@@ -57,11 +58,7 @@ class PlanExpert:
     (never its value), and chooses the next move as ``optimal`` would from there."""
 
     def __init__(self, lab: Any, belief: DesignBelief) -> None:
-        self.planner = Planner([int(s) for s in belief.slots],
-                               [bool(e) for e in belief.engaged], belief.sigma,
-                               belief.budget_s, design=belief.design,
-                               conditions=lab.conditions)
-        self.planner.time_s = belief.time_s
+        self.planner = planner_at(lab, belief)
         self.planner.expect_readings()  # the lab reads every stand as the episode opens
         self.remounts = remount_schedule(lab, belief)
 
@@ -83,10 +80,15 @@ class PlanExpert:
                 planner.retire(int(stand))
         planner.time_s = belief.time_s
 
+    def action_mask(self, belief: DesignBelief) -> np.ndarray:
+        """The operations open to the expert: the view's (:meth:`DesignBelief.action_mask
+        <orthoglide_env.lab.design_belief.DesignBelief.action_mask>`)."""
+        return belief.action_mask()
+
     def choose(self, belief: DesignBelief) -> int:
         """The expert's operation: a due re-mount of the ``optimal`` plan first, else the
         planner's best move among the open ones, else stop."""
-        mask = belief.action_mask()
+        mask = self.action_mask(belief)
         due: dict[int, int] = {}
         for remount in self.remounts:
             if remount.time_s <= belief.time_s:

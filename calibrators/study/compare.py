@@ -24,6 +24,8 @@ from typing import TYPE_CHECKING, Any
 import gymnasium as gym
 import numpy as np
 
+# Registers the filter that a policy file of flicks "filter" plays its moves with.
+import calibrators.planning.active_filter  # noqa: F401
 from calibrators.agents import Agent, get_agent
 from calibrators.estimators.base import Estimate
 from calibrators.estimators.catalogue import for_study, get_estimator
