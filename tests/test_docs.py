@@ -25,6 +25,7 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 from conftest import TABLE1 as TABLE1_ERRORS
@@ -246,8 +247,21 @@ def documents_folder(tmp_path_factory) -> Path:
     return folder
 
 
-@pytest.mark.parametrize(("where", "line", "argv", "runnable"), CASES,
-                         ids=[c[0] for c in CASES])
+def _runs(line: str, runnable: bool) -> bool:
+    """Whether the test runs the line's variants: a line of a code block with no
+    placeholder anywhere (one with a placeholder is a synopsis, only parsed)."""
+    return runnable and not any(PLACEHOLDER.search(w) for w in shlex.split(line, comments=True))
+
+
+def _scheduled(case: tuple[str, str, list[str], bool]) -> Any:
+    """``case`` as a parameter; a ``compare`` it runs is marked ``slow`` (scheduled first:
+    its agents' plans take up to half a CPU-minute)."""
+    where, line, argv, runnable = case
+    slow = argv[0] == "compare" and _runs(line, runnable) and not _cannot_run_here(argv)
+    return pytest.param(*case, id=where, marks=[pytest.mark.slow] if slow else [])
+
+
+@pytest.mark.parametrize(("where", "line", "argv", "runnable"), map(_scheduled, CASES))
 def test_a_documented_command_works(where: str, line: str, argv: list[str], runnable: bool,
                                     documents_folder: Path, tmp_path: Path,
                                     monkeypatch, capsys) -> None:
@@ -256,9 +270,7 @@ def test_a_documented_command_works(where: str, line: str, argv: list[str], runn
     if argv[0] in commands:
         _check_offered_values(commands[argv[0]], line, argv)
     _parse_only(argv)
-    # A line with a placeholder anywhere is a synopsis: none of its variants is run.
-    concrete = not any(PLACEHOLDER.search(w) for w in shlex.split(line, comments=True))
-    if not (runnable and concrete) or _cannot_run_here(argv):
+    if not _runs(line, runnable) or _cannot_run_here(argv):
         return
     for name in ("m.json", "r.csv"):
         shutil.copy(documents_folder / name, tmp_path / name)
