@@ -16,19 +16,17 @@ only.
 from __future__ import annotations
 
 import argparse
-import functools
 import importlib.util
 import json
 import re
 import shlex
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
 import pytest
 from conftest import TABLE1 as TABLE1_ERRORS
+from conftest import script_help
 
 from calibrators.agents.names import POLICY_PREFIX
 from calibrators.cli import build_parser, main
@@ -319,14 +317,6 @@ def _script_lines() -> list[tuple[str, str]]:
 SCRIPT_LINES = _script_lines()
 
 
-@functools.cache
-def _script_help(script: str) -> str:
-    done = subprocess.run([sys.executable, script, "--help"], capture_output=True, text=True,
-                          timeout=120, cwd=ROOT)
-    assert done.returncode == 0, f"{script} --help: {done.stderr.splitlines()[-1:]}"
-    return done.stdout
-
-
 @pytest.mark.parametrize(("where", "line"), SCRIPT_LINES, ids=[w for w, _ in SCRIPT_LINES])
 def test_a_documented_script_takes_its_options(where: str, line: str) -> None:
     """A script a document runs exists, and every option the line gives is one its
@@ -335,7 +325,9 @@ def test_a_documented_script_takes_its_options(where: str, line: str) -> None:
     words = shlex.split(line, comments=True)
     script = words[1]
     assert (ROOT / script).is_file(), f"{where}: no script {script}"
-    help_text = _script_help(script)
+    done = script_help(script)
+    assert done.returncode == 0, f"{script} --help: {done.stderr.splitlines()[-1:]}"
+    help_text = done.stdout
     for word in words[2:]:
         option = word.split("=")[0]
         if option.startswith("--"):
