@@ -24,9 +24,14 @@ run: $(STAMP)
 	docs/compare.md and docs/benchmarks.md, a machine builder docs/workflow.md (make docs builds \
 	the site into docs/_build/html)."
 
+# The package compiled first: where PYTHONDONTWRITEBYTECODE is set (container images) every
+# worker and every command a test starts would compile it again (0.1 CPU-s a start).
+# NUMPY_MADVISE_HUGEPAGE=0: each 2 MB page numpy asks of the kernel for a large array costs
+# milliseconds to zero on a virtual machine, and the suite's arrays are short-lived.
 test: $(STAMP)
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest -q -n auto
+	$(BIN)/python -m compileall -q orthoglide_env calibrators
+	NUMPY_MADVISE_HUGEPAGE=0 $(BIN)/python -m pytest -q -n auto
 
 docs: $(STAMP)
 	$(BIN)/python -m sphinx -W --keep-going -b html docs docs/_build/html

@@ -3,6 +3,7 @@ experiment in the lab."""
 
 from __future__ import annotations
 
+import functools
 import re
 import signal
 import subprocess
@@ -89,6 +90,18 @@ def assert_refused_in_one_line(path: Path, words: str) -> None:
                           capture_output=True, text=True, check=False)
     assert done.returncode == 2
     assert words in done.stderr and len(done.stderr.strip().splitlines()) == 1
+
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@functools.cache
+def script_help(script: str) -> subprocess.CompletedProcess:
+    """``python SCRIPT --help`` (``script``: its path from the repository's top), run as a
+    user runs it: from the top, the script's folder first on ``sys.path``.  Once per
+    process: the scripts' own test and the documents' options ask the same."""
+    return subprocess.run([sys.executable, script, "--help"], capture_output=True, text=True,
+                          timeout=120, cwd=ROOT)
 
 
 def as_a_terminal_job() -> None:

@@ -16,18 +16,17 @@ only.
 from __future__ import annotations
 
 import argparse
-import functools
 import importlib.util
 import json
 import re
 import shlex
 import shutil
-import subprocess
-import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 from conftest import TABLE1 as TABLE1_ERRORS
+from conftest import script_help
 
 from calibrators.agents.names import POLICY_PREFIX
 from calibrators.cli import build_parser, main
@@ -246,8 +245,21 @@ def documents_folder(tmp_path_factory) -> Path:
     return folder
 
 
-@pytest.mark.parametrize(("where", "line", "argv", "runnable"), CASES,
-                         ids=[c[0] for c in CASES])
+def _runs(line: str, runnable: bool) -> bool:
+    """Whether the test runs the line's variants: a line of a code block with no
+    placeholder anywhere (one with a placeholder is a synopsis, only parsed)."""
+    return runnable and not any(PLACEHOLDER.search(w) for w in shlex.split(line, comments=True))
+
+
+def _scheduled(case: tuple[str, str, list[str], bool]) -> Any:
+    """``case`` as a parameter; a ``compare`` it runs is marked ``slow`` (scheduled first:
+    its agents' plans take up to half a CPU-minute)."""
+    where, line, argv, runnable = case
+    slow = argv[0] == "compare" and _runs(line, runnable) and not _cannot_run_here(argv)
+    return pytest.param(*case, id=where, marks=[pytest.mark.slow] if slow else [])
+
+
+@pytest.mark.parametrize(("where", "line", "argv", "runnable"), map(_scheduled, CASES))
 def test_a_documented_command_works(where: str, line: str, argv: list[str], runnable: bool,
                                     documents_folder: Path, tmp_path: Path,
                                     monkeypatch, capsys) -> None:
@@ -256,9 +268,7 @@ def test_a_documented_command_works(where: str, line: str, argv: list[str], runn
     if argv[0] in commands:
         _check_offered_values(commands[argv[0]], line, argv)
     _parse_only(argv)
-    # A line with a placeholder anywhere is a synopsis: none of its variants is run.
-    concrete = not any(PLACEHOLDER.search(w) for w in shlex.split(line, comments=True))
-    if not (runnable and concrete) or _cannot_run_here(argv):
+    if not _runs(line, runnable) or _cannot_run_here(argv):
         return
     for name in ("m.json", "r.csv"):
         shutil.copy(documents_folder / name, tmp_path / name)
@@ -307,14 +317,6 @@ def _script_lines() -> list[tuple[str, str]]:
 SCRIPT_LINES = _script_lines()
 
 
-@functools.cache
-def _script_help(script: str) -> str:
-    done = subprocess.run([sys.executable, script, "--help"], capture_output=True, text=True,
-                          timeout=120, cwd=ROOT)
-    assert done.returncode == 0, f"{script} --help: {done.stderr.splitlines()[-1:]}"
-    return done.stdout
-
-
 @pytest.mark.parametrize(("where", "line"), SCRIPT_LINES, ids=[w for w, _ in SCRIPT_LINES])
 def test_a_documented_script_takes_its_options(where: str, line: str) -> None:
     """A script a document runs exists, and every option the line gives is one its
@@ -323,7 +325,9 @@ def test_a_documented_script_takes_its_options(where: str, line: str) -> None:
     words = shlex.split(line, comments=True)
     script = words[1]
     assert (ROOT / script).is_file(), f"{where}: no script {script}"
-    help_text = _script_help(script)
+    done = script_help(script)
+    assert done.returncode == 0, f"{script} --help: {done.stderr.splitlines()[-1:]}"
+    help_text = done.stdout
     for word in words[2:]:
         option = word.split("=")[0]
         if option.startswith("--"):

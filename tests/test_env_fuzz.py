@@ -114,6 +114,7 @@ def _connected_clients() -> int:
     return sum(pb.getConnectionInfo(c)["isConnected"] for c in range(64))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("backend", "resets"),
     [("exact", 1000), pytest.param("pybullet", 300, marks=needs_pybullet)],

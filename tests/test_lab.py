@@ -204,6 +204,7 @@ def test_a_new_agent_is_one_registered_class() -> None:
     assert times["paper-5"] > times["paper"]
 
 
+@pytest.mark.slow
 def test_compare_json_contract_and_resume(tmp_path) -> None:
     """The rows scripts rely on; an interrupted run resumed from its trials file ends with
     the table of an uninterrupted one."""
@@ -345,6 +346,7 @@ def test_pybullet_lab_reads_what_the_exact_lab_reads() -> None:
     assert gap < 1e-3
 
 
+@pytest.mark.slow
 def test_ctrl_c_keeps_the_finished_trials_and_resume_completes_the_table(tmp_path) -> None:
     """Ctrl-C (SIGINT to the whole process group, as a terminal sends it) stops a two-job
     run with one line and the partial table; --resume then ends with the table of an

@@ -384,6 +384,7 @@ def test_the_vector_lab_of_a_design_with_other_slots_is_its_lone_labs(tmp_path) 
         lone.close()
 
 
+@pytest.mark.slow
 def test_compare_on_a_design_with_other_slots(tmp_path, capsys) -> None:
     path, _ = _three(tmp_path)
     out = tmp_path / "run"

@@ -124,6 +124,7 @@ def test_a_controller_that_compensates_the_true_lead_error_meets_the_machine_wit
     assert np.nanmax(np.abs(compensated - plain)) < 2.5e-4
 
 
+@pytest.mark.slow
 def test_the_tables_error_bars_hold_against_the_true_lead_error() -> None:
     """Workshop lead error alone, the axial experiment of ``test_consider`` (200 postures
     at 3 um), the extended fit with the table's terms (10 mm nodes) fitted and the

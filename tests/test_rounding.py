@@ -83,6 +83,7 @@ def test_a_rounded_plan_lies_above_the_bound_and_near_it(half_hour_plan, monkeyp
     assert error <= 2.6 * found.bound_mm
 
 
+@pytest.mark.slow
 def test_fixed_plan_keeps_the_better_plan_and_active_finds_its_bundles(half_hour_plan):
     budget, bundles, _, predicted = half_hour_plan
     plan = fixed_plan(PAPER_SLOTS, STANDS, SIGMA, budget, PROTOTYPE, IDEAL,

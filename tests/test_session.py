@@ -82,6 +82,7 @@ def calibrated(tmp_path_factory) -> tuple[Path, dict]:
     return readings, json.loads(out.stdout)
 
 
+@pytest.mark.slow
 def test_a_piped_session_is_calibrate_and_resumes(calibrated, tmp_path, capsys) -> None:
     """Fed the machine's readings as they come, with a slip of the finger typed now and
     then (asked again, never fatal), and its input ended after 40 answers (the notebook

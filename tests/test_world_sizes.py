@@ -93,6 +93,7 @@ def test_the_threshold_is_the_law_of_a_ratio_at_a_bound() -> None:
     assert threshold(0) == np.inf
 
 
+@pytest.mark.slow
 def test_the_told_world_is_flagged_at_the_tests_level() -> None:
     """Readings of the told world, 4000 machines: the share flagged is the test's level
     (0.01) to within the binomial spread: 40 expected, standard deviation 6.3, and
