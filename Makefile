@@ -28,10 +28,12 @@ run: $(STAMP)
 # worker and every command a test starts would compile it again (0.1 CPU-s a start).
 # NUMPY_MADVISE_HUGEPAGE=0: each 2 MB page numpy asks of the kernel for a large array costs
 # milliseconds to zero on a virtual machine, and the suite's arrays are short-lived.
+# OPENBLAS_NUM_THREADS=1: the workers already fill the cores; BLAS threads of their own
+# would only contend for them.
 test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/python -m compileall -q orthoglide_env calibrators
-	NUMPY_MADVISE_HUGEPAGE=0 $(BIN)/python -m pytest -q -n auto
+	NUMPY_MADVISE_HUGEPAGE=0 OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -q -n auto
 
 docs: $(STAMP)
 	$(BIN)/python -m sphinx -W --keep-going -b html docs docs/_build/html
