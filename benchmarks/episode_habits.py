@@ -21,6 +21,7 @@ from itertools import pairwise
 
 import numpy as np
 
+from calibrators.agents.names import get_agent
 from calibrators.study import compare
 from orthoglide_env.model.design import load_design
 from orthoglide_env.model.errors import DEFAULT_PRESET
@@ -82,10 +83,15 @@ def main(argv: list[str] | None = None) -> None:
     if args.machines < 1:
         parser.error(f"--machines must be at least 1, got {args.machines}")
     agents = tuple(a for a in args.agents.split(",") if a)
-    config = compare.Config(agents, ("full",), budget_s=args.budget, errors=DEFAULT_PRESET,
-                            sigma=args.sigma, seed=args.seed,
-                            conditions=Conditions(args.conditions),
-                            design=load_design(args.design))
+    try:
+        config = compare.Config(agents, ("full",), budget_s=args.budget,
+                                errors=DEFAULT_PRESET, sigma=args.sigma, seed=args.seed,
+                                conditions=Conditions(args.conditions),
+                                design=load_design(args.design))
+        for agent in agents:
+            get_agent(agent)  # an unknown name or policy file: one line before any play
+    except ValueError as error:
+        parser.error(str(error))
     print(f"{args.machines} machines ({config.world}); medians over the machines")
     fields = ("readings", "events", "dials_per_event", "postures", "visits", "revisits",
               "longest_stay", "remounts", "time_s")
