@@ -409,9 +409,12 @@ def jacobian(theta: np.ndarray, layout: ReadingLayout, free: np.ndarray, scale: 
     return full.reshape(*batch, len(layout), len(idx))
 
 
-def _derivatives(theta: np.ndarray, layout: ReadingLayout, wanted: np.ndarray) -> np.ndarray:
+def _derivatives(theta: np.ndarray, layout: ReadingLayout, wanted: np.ndarray,
+                 aimed: bool = True) -> np.ndarray:
     """Derivative of every reading over every parameter, ``(B, N, n)`` for ``theta``
-    ``(B, n)``; the stands' columns are left at zero unless one of them is ``wanted``."""
+    ``(B, n)``; the stands' columns are left at zero unless one of them is ``wanted``;
+    ``aimed`` False: a gauge's ray stays where its stand was aimed (see
+    :func:`_gauge_derivatives`)."""
     space = layout.space
     machine = MachineParams.from_vector(theta[:, :N_MACHINE], layout.machine_design)
     postures = layout.postures[None]
@@ -428,7 +431,7 @@ def _derivatives(theta: np.ndarray, layout: ReadingLayout, wanted: np.ndarray) -
         _gauge_derivatives(theta, layout, machine, p, (inv, row), rows,
                            where[layout.mounting[rows]], at[rows], out,
                            stands=bool(wanted[N_MACHINE:N_MACHINE + 4 * len(gauges)].any()),
-                           columns=np.flatnonzero(wanted[:N_MACHINE]))
+                           columns=np.flatnonzero(wanted[:N_MACHINE]), aimed=aimed)
     for m, spec in enumerate(layout.specs):
         if isinstance(spec, InterferometerAxis):
             out[:, layout.mounting == m, spec.axis] = 1.0
@@ -475,11 +478,15 @@ def carriage_derivatives(layout: ReadingLayout) -> np.ndarray:
     where and when that reading was taken, at the nominal machine: the reading's
     derivative by the encoder offsets, but for a ballbar's only through the TCP it reads
     (its pivot was centred where the carriages were then, a constant of its set-up that
-    its centre takes)."""
+    its centre takes), and for a dial gauge's only through the target it touches: its
+    stand was aimed at the machine's geometry at Zero, not at where the carriages stood
+    then, and what they were off when its plunger was zeroed is a constant of the
+    mounting that its zero takes."""
     space = layout.space
     theta = np.zeros(len(space))
     drho = np.isin(np.arange(len(space)), np.arange(3))
-    out = jacobian(theta, layout, drho, np.ones(3))
+    distinct, rows = layout.distinct
+    out = _derivatives(theta[None], distinct, drho, aimed=False)[0, rows][:, :3]
     if not space.ballbars:
         return out
     machine = MachineParams.from_vector(theta[None, :N_MACHINE], layout.machine_design)
@@ -497,11 +504,13 @@ def carriage_derivatives(layout: ReadingLayout) -> np.ndarray:
 def _gauge_derivatives(theta: np.ndarray, layout: ReadingLayout, machine: MachineParams,
                        p: np.ndarray, dp: tuple[np.ndarray, np.ndarray], rows: np.ndarray,
                        gauge: np.ndarray, at: np.ndarray, out: np.ndarray, stands: bool,
-                       columns: np.ndarray) -> None:
+                       columns: np.ndarray, aimed: bool = True) -> None:
     """Fill ``out[:, rows]``: the derivatives of the gauge readings ``rows`` (their gauge
     among the layout's gauges, their posture index ``at``) over the machine's errors
     ``columns`` (the others are left as they are), and over the stand parameters when
-    ``stands``."""
+    ``stands``.  ``aimed``: the ray moves with the machine at Zero, where its stand was
+    aimed (a geometric error); else it stays (an error of the carriages at the reading
+    only, which the stand's aim did not see)."""
     space = layout.space
     specs = [layout.specs[k] for k in space.gauges]
     count = len(specs)
@@ -532,15 +541,17 @@ def _gauge_derivatives(theta: np.ndarray, layout: ReadingLayout, machine: Machin
     # at) * C``, on a carriage with A, on the platform with p.
     zero = np.zeros((1, 1, 3))
     p_zero = direct(machine, zero)
-    aimed = [np.where(bar, g.at[:, None], np.where((g.part == Part.CARRIAGE)[:, None], 1.0, 0.0)),
+    origin = [np.where(bar, g.at[:, None], np.where((g.part == Part.CARRIAGE)[:, None], 1.0, 0.0)),
              np.where(bar, 1 - g.at[:, None], 0.0),
              np.where(on_platform(g.part)[:, None], 1.0, 0.0)]
     inv_zero, row_zero = tcp_sensitivity_factors(machine, zero, p_zero)
-    machine_part = (
-        _through_leg(machine, postures[None], (dp[0][:, at], dp[1][:, at[:, None], columns]),
-                     legs, d_a, d_c, d_p, columns)
-        - _through_leg(machine, zero, (inv_zero, row_zero[..., columns]), legs,
-                       *(w * towards_centre for w in aimed), columns))
+    machine_part = _through_leg(machine, postures[None], (dp[0][:, at],
+                                                          dp[1][:, at[:, None], columns]),
+                                legs, d_a, d_c, d_p, columns)
+    if aimed:
+        machine_part = machine_part - _through_leg(
+            machine, zero, (inv_zero, row_zero[..., columns]), legs,
+            *(w * towards_centre for w in origin), columns)
     sign = layout.signs[layout.mounting[rows]]
     out[:, rows[:, None], columns] = sign[:, None] * machine_part
     if not stands:
