@@ -209,7 +209,13 @@ class Belief:
         columns[stand] = 0
         columns[stand, :len(used)] = used
         self.touched_columns, self.touched_rows[stand] = columns, touched
-        self._touched = None
+        if self._touched is not None:
+            # A copy of the stack with this stand's rows replaced: a re-mount the search
+            # tries changes one stand, and copying is cheaper than stacking anew.
+            stacked = self._touched.copy()
+            stacked[:, stand] = touched
+            stacked.setflags(write=False)
+            self._touched = stacked
 
     @property
     def rows(self) -> np.ndarray:
