@@ -10,7 +10,13 @@ from calibrators.agents import get_agent
 from calibrators.agents.optimal import fixed_plan
 from calibrators.planning.belief import N_MACHINE, N_STAND, observe_many, predicted_tips_many
 from calibrators.planning.pricing import WORLD_SHORTLIST, top_rates_many
-from calibrators.planning.search import Planner, best_moves, greedy_plan
+from calibrators.planning.search import (
+    LOOKAHEAD_MOVES,
+    Planner,
+    best_moves,
+    greedy_plan,
+    lookahead_rates,
+)
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
@@ -230,3 +236,48 @@ def test_filters_priced_together_price_as_each_alone() -> None:
         for name in ("mean", "covariance"):
             np.testing.assert_array_equal(getattr(q, name), getattr(p, name))
         np.testing.assert_array_equal(q.world.consider, p.world.consider)
+
+
+@pytest.mark.slow
+def test_a_remount_checks_options_priced_together_as_each_alone() -> None:
+    """A re-mount check (:meth:`~calibrators.planning.search.Planner.best_remount`) screens
+    its options and plays the best out together: copies re-mounted together, their
+    opening readings expected together (:func:`~calibrators.planning.belief.expect_many`),
+    hold each its own covariance and considered terms alone; their moves priced together
+    (:func:`~calibrators.planning.pricing.top_rates_many` of plans, whose reach is their
+    table's) are each one's own alone; and their look-aheads played together
+    (:func:`~calibrators.planning.search.lookahead_rates`) are each one's greedy moves
+    taken alone, to the bit, through options that run out of budget before the
+    look-ahead's last move and one that does not."""
+    p = planner(LAB, budget_s=420.0)
+    for _ in range(5):
+        assert p.greedy_move()
+    free = [s for s in range(len(p.table.tip)) if s not in p.slots]
+    options = [(0, free[0]), (0, free[9]), (3, free[4]), (5, free[-1])]
+    together = p._remounted(options)
+    for (stand, slot), trial in zip(options, together, strict=True):
+        alone = p.fork()
+        alone.remount(stand, slot)
+        alone.expect_readings()
+        np.testing.assert_array_equal(trial.covariance, alone.covariance)
+        np.testing.assert_array_equal(trial.world.consider, alone.world.consider)
+    alone_rates = [t.fork().top_rates(LOOKAHEAD_MOVES) for t in together]
+    for (rate, priced), (rate_, priced_) in zip(
+            alone_rates, top_rates_many([t.fork() for t in together], LOOKAHEAD_MOVES),
+            strict=True):
+        np.testing.assert_array_equal(rate_, rate)
+        for field, field_ in zip(priced, priced_, strict=True):
+            np.testing.assert_array_equal(field_, field)
+
+    def played_alone(option: Planner) -> tuple[float, int]:
+        trial = option.fork()
+        moves = 0
+        while moves < LOOKAHEAD_MOVES and trial.greedy_move():
+            moves += 1
+        return (start - trial._criterion_value()) / (trial.time_s - p.time_s), moves
+
+    start = p._criterion_value()
+    played = [p, *together]
+    alone = [played_alone(option) for option in played]
+    assert {moves for _, moves in alone} > {LOOKAHEAD_MOVES}  # some run out, one does not
+    assert lookahead_rates(played, start, p.time_s) == [rate for rate, _ in alone]

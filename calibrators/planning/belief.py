@@ -85,6 +85,26 @@ def _stand_columns(stand: int) -> np.ndarray:
     return out
 
 
+@lru_cache(maxsize=512)
+def _touched_block(design: MachineDesign, slot: int) -> tuple[np.ndarray, np.ndarray]:
+    """Which of a stand's columns (:meth:`Belief._columns`) its rows at ``slot`` (-1:
+    none) touch, and those rows (P, N_MACHINE + N_STAND), padded with zero columns
+    (read-only): what :meth:`Belief.rows_of` puts in them, made once per slot, not at
+    each re-mount a search tries."""
+    table = slot_table(design)
+    touched = np.zeros((len(table.postures), N_MACHINE + N_STAND))
+    if slot < 0:
+        picked = np.zeros(N_MACHINE + N_STAND, dtype=bool)
+    else:
+        values = np.concatenate((table.change[slot], np.full((len(touched), 1), ZERO_SCALE)),
+                                axis=1)
+        picked = np.any(values != 0.0, axis=0)
+        touched[:, :np.count_nonzero(picked)] = values[:, picked]
+    picked.setflags(write=False)
+    touched.setflags(write=False)
+    return picked, touched
+
+
 @dataclass
 class Belief:
     """An experiment being designed: stands, plungers, posture, clock, and the covariance
@@ -183,14 +203,19 @@ class Belief:
         rows = self.rows_of(stand)
         self.stand_rows[stand], self._stacked = rows, None
         self.spread_bound[stand] = self.table.prior_spread[max(self.slots[stand], 0)]
-        used = np.flatnonzero(np.any(rows != 0.0, axis=0))
+        picked, touched = _touched_block(self.design, self.slots[stand])
+        used = self._columns(stand)[picked]
         columns = self.touched_columns.copy()
         columns[stand] = 0
         columns[stand, :len(used)] = used
-        touched = np.zeros(self.touched_rows[stand].shape)
-        touched[:, :len(used)] = rows[:, used]
         self.touched_columns, self.touched_rows[stand] = columns, touched
-        self._touched = None
+        if self._touched is not None:
+            # A copy of the stack with this stand's rows replaced: a re-mount the search
+            # tries changes one stand, and copying is cheaper than stacking anew.
+            stacked = self._touched.copy()
+            stacked[:, stand] = touched
+            stacked.setflags(write=False)
+            self._touched = stacked
 
     @property
     def rows(self) -> np.ndarray:
@@ -282,7 +307,13 @@ class Belief:
         :meth:`reading_here`)."""
         if stands is None:
             stands, weights = self.reading_here()
-        rows, considered = self._rows_here(stands)
+        self._expected(stands, weights, None)
+
+    def _expected(self, stands: np.ndarray, weights: np.ndarray,
+                  world: tuple[np.ndarray, np.ndarray] | None) -> None:
+        """:meth:`expect_readings` of ``stands`` with ``weights``, the world's rows of them
+        ``world`` (:func:`world_rows_here`), if already computed."""
+        rows, considered = self._rows_here(stands, world)
         weight = np.sqrt(weights)[:, None]
         self._add(rows * weight / self.sigma, considered=considered * weight / self.sigma)
 
@@ -436,6 +467,16 @@ def world_rows_here(beliefs: list[Belief], stands: list[np.ndarray]
         for i, f, c in zip(members, fitted, considered, strict=True):
             out[i] = f[:, 0], c[:, 0]
     return out
+
+
+def expect_many(beliefs: list[Belief]) -> None:
+    """:meth:`Belief.expect_readings` of each of ``beliefs`` (every stand down here, each
+    with its probability of reading), the world's rows of their readings stacked
+    (:func:`world_rows_here`): each belief's update its own alone, to the bit."""
+    here = [belief.reading_here() for belief in beliefs]
+    worlds = world_rows_here(beliefs, [stands for stands, _ in here])
+    for belief, (stands, weights), world in zip(beliefs, here, worlds, strict=True):
+        belief._expected(stands, weights, world)
 
 
 def observe_many(beliefs: list[Belief], stands: list[list[int]], values: list[list[float]]

@@ -264,17 +264,21 @@ class Pricer(Belief):
 
 def top_rates_many(pricers: list[Pricer], count: int
                    ) -> list[tuple[np.ndarray, PricedMoves]]:
-    """:meth:`Pricer.top_rates` of each of ``pricers`` (one per machine of a chunk), the
-    same arrays to the bit: the stands' reach of filters of one design and stand count
-    stacked over them (:func:`~calibrators.planning.belief.reaches`)."""
+    """:meth:`Pricer.top_rates` of each of ``pricers`` (one per machine of a chunk, or the
+    re-mounts a plan screens), the same arrays to the bit: the stands' reach of filters of
+    one design and stand count stacked over them (:func:`~calibrators.planning.belief.
+    reaches`; a plan's is its table's), the world's prices of the shortlists too
+    (:func:`price_many`)."""
     if not pricers:
         return []
-    if not all(p.mean is not None and p.table is pricers[0].table
-               and len(p.slots) == len(pricers[0].slots) for p in pricers):
-        return [pricer.top_rates(count) for pricer in pricers]
+    if all(p.mean is not None and p.table is pricers[0].table
+           and len(p.slots) == len(pricers[0].slots) for p in pricers):
+        reached = reaches(pricers)
+    else:
+        reached = [pricer._reach() for pricer in pricers]
     opened = []
-    for pricer, reached in zip(pricers, reaches(pricers), strict=True):
-        moves = pricer._moves_from(*reached)
+    for pricer, (safe, contact) in zip(pricers, reached, strict=True):
+        moves = pricer._moves_from(safe, contact)
         opened.append((*pricer._top_rates_open(count, *moves), moves))
     asked = [i for i, (_, _, shortlist, _) in enumerate(opened) if shortlist is not None]
     gains = price_many([pricers[i] for i in asked],

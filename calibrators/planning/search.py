@@ -19,7 +19,7 @@ import copy
 
 import numpy as np
 
-from calibrators.planning.belief import PlannedOperation
+from calibrators.planning.belief import PlannedOperation, expect_many
 from calibrators.planning.instruments import (
     Bundle,
     InstrumentOperation,
@@ -37,6 +37,17 @@ from orthoglide_env.lab.operations import TIME, Op, slot_catalogue
 REMOUNT_CHECK_S: float = 300.0
 LOOKAHEAD_MOVES: int = 24
 SCREENED: int = 6
+#: The options a re-mount's check plays out (:meth:`Planner.best_remount`) are played this
+#: many at a time, their moves chosen together (:func:`best_moves`): staying and the
+#: :data:`SCREENED` re-mounts at once; all of them at once would hold every re-mount's
+#: rows (a megabyte or more each) together.
+PLAYED_TOGETHER: int = SCREENED + 1
+#: Under the world's terms, a re-mount check screens this many re-mounts at a time, the
+#: world's prices of their shortlists stacked (:func:`~calibrators.planning.pricing.
+#: price_many`): 8 and a stand's 33 at once cost the one-hour ``lab`` plan alike, and 8
+#: hold a quarter of the rows.  Without the world nothing is stacked, and holding the
+#: trials only costs memory traffic: they are screened one by one.
+SCREENED_TOGETHER: int = 8
 
 
 class Planner(Pricer):
@@ -83,14 +94,8 @@ class Planner(Pricer):
                        ) -> float:
         """Gain per second, since criterion value ``start`` at ``start_s`` (default now),
         of the next :data:`LOOKAHEAD_MOVES` greedy moves (readings expected), on a copy."""
-        trial = self.fork()
-        start = trial._criterion_value() if start is None else start
-        start_s = trial.time_s if start_s is None else start_s
-        for _ in range(LOOKAHEAD_MOVES):
-            if not trial.greedy_move():
-                break
-        spent = trial.time_s - start_s
-        return (start - trial._criterion_value()) / spent if spent > 0 else 0.0
+        return lookahead_rates([self], self._criterion_value() if start is None else start,
+                               self.time_s if start_s is None else start_s)[0]
 
 
     def best_move(self) -> tuple[int, PricedMoves] | None:
@@ -134,11 +139,16 @@ class Planner(Pricer):
         self.expect_readings()
         return True
 
-    def _remounted(self, stand: int, slot: int) -> Planner:
-        trial = self.fork()
-        trial.remount(stand, slot)
-        trial.expect_readings()
-        return trial
+    def _remounted(self, options: list[tuple[int, int]]) -> list[Planner]:
+        """Copies re-mounted, one per (stand, slot) of ``options``, each with the readings
+        of its opening expected (the world's rows of them stacked: :func:`expect_many`)."""
+        trials = []
+        for stand, slot in options:
+            trial = self.fork()
+            trial.remount(stand, slot)
+            trials.append(trial)
+        expect_many(trials)
+        return trials
 
     def _screening_moves(self) -> tuple[np.ndarray, PricedMoves]:
         """The :data:`LOOKAHEAD_MOVES` affordable moves of the highest rates, the lowest
@@ -146,7 +156,12 @@ class Planner(Pricer):
         them, and the priced moves with their gains.  From :meth:`top_rates` when those rates
         are positive and distinct, and above every other (so the ranking is the only
         one); else from every move priced, whose ties ``np.argsort`` breaks its way."""
-        rate, priced = self.top_rates(LOOKAHEAD_MOVES)
+        return self._screened(*self.top_rates(LOOKAHEAD_MOVES))
+
+    def _screened(self, rate: np.ndarray, priced: PricedMoves
+                  ) -> tuple[np.ndarray, PricedMoves]:
+        """:meth:`_screening_moves` from :meth:`top_rates`' ``rate`` and ``priced`` (of
+        :data:`LOOKAHEAD_MOVES`)."""
         top = np.argsort(rate)[-LOOKAHEAD_MOVES:]
         kept = rate[top]
         if (kept[0] > 0 and np.unique(kept).size == LOOKAHEAD_MOVES
@@ -159,24 +174,41 @@ class Planner(Pricer):
         """The re-mount (stand, slot) whose next moves gain more per second, re-mount
         included, than the next moves of the present configuration, or None.  Every
         re-mount is screened by the best :data:`LOOKAHEAD_MOVES` moves it opens, each
-        priced alone; the ``screened`` best (None: all) are then played out greedily."""
+        priced alone; the ``screened`` best (None: all) are then played out greedily.
+
+        The re-mounts are screened :data:`SCREENED_TOGETHER` at a time and the options
+        played out :data:`PLAYED_TOGETHER` at a time, their prices stacked
+        (:func:`~calibrators.planning.pricing.top_rates_many`): each option's numbers are
+        its own alone, to the bit."""
         start = self._criterion_value()
         candidates = []
-        for stand in range(len(self.slots)):
-            for slot in range(len(slot_catalogue(self.design))):
-                if slot in self.slots:
-                    continue
-                trial = self._remounted(stand, slot)
-                top, priced = trial._screening_moves()
+        options = [(stand, slot) for stand in range(len(self.slots))
+                   for slot in range(len(slot_catalogue(self.design)))
+                   if slot not in self.slots]
+        together = SCREENED_TOGETHER if self.world is not None else 1
+        for first in range(0, len(options), together):
+            chunk = options[first:first + together]
+            trials = self._remounted(chunk)
+            for (stand, slot), trial, opened in zip(chunk, trials, top_rates_many(
+                    trials, LOOKAHEAD_MOVES), strict=True):
+                top, priced = trial._screened(*opened)
                 gain = start - trial._criterion_value() + priced.gain[top].sum()
                 spent = trial.time_s - self.time_s + priced.seconds[top].sum()
                 candidates.append((gain / spent, stand, slot))
-        best, best_rate = None, self.lookahead_rate()
         ranked = sorted(candidates)
-        for _, stand, slot in ranked[-screened:] if screened else ranked:
-            rate = self._remounted(stand, slot).lookahead_rate(start, self.time_s)
+        # Staying first, then the screened re-mounts from the least promising up.
+        played = [None] + [(stand, slot) for _, stand, slot in (
+            ranked[-screened:] if screened else ranked)]
+        rates = []
+        for first in range(0, len(played), PLAYED_TOGETHER):
+            chunk = played[first:first + PLAYED_TOGETHER]
+            moved = iter(self._remounted([o for o in chunk if o is not None]))
+            rates += lookahead_rates([self if o is None else next(moved) for o in chunk],
+                                     start, self.time_s)
+        best, best_rate = None, rates[0]
+        for option, rate in zip(played[1:], rates[1:], strict=True):
             if rate > best_rate:
-                best, best_rate = (stand, slot), rate
+                best, best_rate = option, rate
         return best
 
 
@@ -188,6 +220,27 @@ def best_moves(planners: list[Planner]) -> list[tuple[int, PricedMoves] | None]:
     return [planner._chosen(rate, priced)
             for planner, (rate, priced) in zip(planners, top_rates_many(planners, 1),
                                                strict=True)]
+
+
+def lookahead_rates(planners: list[Planner], start: float, start_s: float) -> list[float]:
+    """:meth:`Planner.lookahead_rate` of each of ``planners`` since criterion value
+    ``start`` at ``start_s``, their moves chosen together (:func:`best_moves`) and their
+    readings expected together (:func:`~calibrators.planning.belief.expect_many`): each
+    its own alone, to the bit."""
+    trials = [planner.fork() for planner in planners]
+    going = trials
+    for _ in range(LOOKAHEAD_MOVES):
+        chosen = [(trial, choice) for trial, choice in zip(going, best_moves(going),
+                                                           strict=True) if choice is not None]
+        for trial, choice in chosen:
+            trial.move(*choice)
+        going = [trial for trial, _ in chosen]
+        expect_many(going)
+    out = []
+    for trial in trials:
+        spent = trial.time_s - start_s
+        out.append((start - trial._criterion_value()) / spent if spent > 0 else 0.0)
+    return out
 
 
 def greedy_plan(planner: Planner, remounts: bool = True, screened: int | None = SCREENED
