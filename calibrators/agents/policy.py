@@ -43,7 +43,12 @@ from calibrators.agents.actor_weights import read_actor
 from calibrators.agents.base import Agent, action
 from orthoglide_env import DESIGN_LAB_ENV_ID, DESIGN_LAB_V1_ENV_ID, FLAT_LAB_ENV_ID
 from orthoglide_env.instruments.dial import weighting_sigma
-from orthoglide_env.lab.design_belief import DesignBelief, observations
+from orthoglide_env.lab.design_belief import (
+    DesignBelief,
+    action_masks,
+    observations,
+    observe_many,
+)
 from orthoglide_env.lab.operations import OP_NAMES, SLOT_NAMES, V0_OPS, Op, slot_catalogue
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.wrappers import flat_action_space, lab_action
@@ -357,14 +362,16 @@ class DesignPolicyAgent(PolicyAgent):
         choose together (:func:`decide_all`, one network pass per policy file); each plays
         its operation's next lab action, or stops once the training episode's time is
         used."""
-        deciding: list[DesignPolicyAgent] = []
-        for agent, observation, info in zip(agents, observations, infos, strict=True):
-            if agent.last is not None:
-                agent.belief.observe(agent.last, observation, bool(info.get("refused")))
-                if agent.filter is not None:
-                    agent.filter.observe(agent.last, observation, info)
-            if not agent.queue and observation["time"][0] < agent.spec.budget_s:
-                deciding.append(agent)
+        following = [(agent, observation, info) for agent, observation, info
+                     in zip(agents, observations, infos, strict=True) if agent.last is not None]
+        observe_many([a.belief for a, _, _ in following], [a.last for a, _, _ in following],
+                     [o for _, o, _ in following],
+                     [bool(i.get("refused")) for _, _, i in following])
+        for agent, observation, info in following:
+            if agent.filter is not None:
+                agent.filter.observe(agent.last, observation, info)
+        deciding = [agent for agent, observation in zip(agents, observations, strict=True)
+                    if not agent.queue and observation["time"][0] < agent.spec.budget_s]
         for group in _by_actor(deciding):
             for agent, chosen in zip(group, decide_all(group), strict=True):
                 agent.queue = (agent.belief.operations(chosen) if agent.filter is None
@@ -413,15 +420,11 @@ def decide_all(agents: list[DesignPolicyAgent]) -> list[int]:
         # float32, as the view in training gave it.
         seen = np.concatenate((seen, [a.filter.reach() for a in agents]),
                               axis=1).astype(np.float32)
-    logits = agents[0].actor.logits_many(seen)
-    chosen = []
-    for agent, row in zip(agents, logits, strict=True):
-        if agent.spec.play == "draw":
-            row = row + agent.rng.gumbel(size=row.shape)
-        mask = (agent.belief.action_mask() if agent.filter is None
-                else agent.filter.action_mask(agent.belief))
-        chosen.append(int(np.argmax(np.where(mask, row, -np.inf))))
-    return chosen
+    noise = (np.array([a.rng.gumbel(size=a.belief.n_actions) for a in agents])
+             if agents[0].spec.play == "draw" else None)
+    masks = (action_masks([a.belief for a in agents]) if agents[0].filter is None
+             else np.array([a.filter.action_mask(a.belief) for a in agents]))
+    return agents[0].actor.choose_many(seen, masks, noise).tolist()
 
 
 def policy_agent(path: str | Path) -> PolicyAgent:
