@@ -358,10 +358,11 @@ class DesignPolicyAgent(PolicyAgent):
     @classmethod
     def act_all(cls, agents: list[Agent], observations: list[dict[str, np.ndarray]],
                 infos: list[Mapping[str, Any]]) -> list[dict[str, Any]]:
-        """Each agent takes in its lab's observation; those that choose an operation now
-        choose together (:func:`decide_all`, one network pass per policy file); each plays
-        its operation's next lab action, or stops once the training episode's time is
-        used."""
+        """Each agent takes in its lab's observation (their beliefs together,
+        :func:`~orthoglide_env.lab.design_belief.observe_many`); those that choose an
+        operation now choose together (:func:`decide_all`, one network pass per policy
+        file); each plays its operation's next lab action, or stops once the training
+        episode's time is used."""
         following = [(agent, observation, info) for agent, observation, info
                      in zip(agents, observations, infos, strict=True) if agent.last is not None]
         observe_many([a.belief for a, _, _ in following], [a.last for a, _, _ in following],
@@ -408,11 +409,12 @@ def _by_actor(agents: list[DesignPolicyAgent]) -> list[list[DesignPolicyAgent]]:
 def decide_all(agents: list[DesignPolicyAgent]) -> list[int]:
     """Each agent's operation (:meth:`DesignPolicyAgent.decide`), for agents of one
     network (one policy file, one view) on labs of one design: their observations in one
-    batched pass (:func:`~orthoglide_env.lab.design_belief.observations`) and their logits
-    in one matrix product per layer (:meth:`ActorWeights.logits_many
-    <calibrators.agents.actor_weights.ActorWeights.logits_many>`), so that a chunk of
-    machines pays about one machine's call overhead; the mask and a draw are each
-    agent's."""
+    batched pass (:func:`~orthoglide_env.lab.design_belief.observations`), their masks in
+    another (:func:`~orthoglide_env.lab.design_belief.action_masks`, or each filter's),
+    and the choices in one pass of the network (:meth:`ActorWeights.choose_many
+    <calibrators.agents.actor_weights.ActorWeights.choose_many>`: the arg-max of the
+    float64 logits over the open operations), so that a chunk of machines pays about one
+    machine's call overhead; a draw's noise is each agent's, from its own stream."""
     if not agents:
         return []
     seen = observations([a.belief for a in agents])

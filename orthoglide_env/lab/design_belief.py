@@ -353,7 +353,9 @@ class DesignBelief:
             return [{**idle, "op": Op.REMOUNT, "stand": stand, "slot": slot}]
         _, after, _ = self.moves()
         flicks = [{**idle, "op": Op.ENGAGE if down else Op.LIFT, "stand": k}
-                  for k, down in enumerate(after[:, action]) if down != self.engaged[k]]
+                  for k, (down, now) in enumerate(zip(after[:, action].tolist(),
+                                                      self.engaged.tolist(), strict=True))
+                  if down != now]
         return [*flicks, {**idle, "op": Op.MOVE, "rho": self.table.postures[action].copy()}]
 
 
