@@ -14,13 +14,20 @@ far less than its wall clock (on a 2-core machine at load 35, the policy's choic
 A decision is a call that chose a new operation (a move with its lever flicks, a
 re-mount, stop); the calls that play a chosen operation's further lab actions are counted
 in the agent's time but are not decisions.
-The table gives each agent's seconds per decision (all its ``act`` time, taking in the
-readings included; and the choice alone, :data:`CHOICE`) and per episode (the agent's,
-and the lab's steps beside them), and their ratios, then where the policy's decision
-goes (:data:`PARTS`: the belief's updates, its observation, the mask, the network); the
-issue's targets are a decision at least 100x cheaper than ``active``'s, and a whole
-episode at least 10x.  Without ``--policy`` the policy is an untrained MaskablePPO
-network of ``examples/train_masked.py``'s shape: a decision costs the same whatever the
+
+What is counted, for both agents alike: an agent's time is its ``act_all`` calls and
+nothing else (taking in the readings of the lab's last step, choosing, handing back the
+lab action); the lab env's ``step`` (the machine moving, the dials read, the notebook
+written) is the same work whichever agent asks for it, and is timed apart, as the lab's
+seconds per episode.  The time per decision is an agent's whole time over its decisions
+(``ms/decision``), and its choice alone over them (``ms/choice``).  The table gives each
+agent's seconds per decision and per episode (the agent's, and the lab's steps beside
+them), and their ratios, then where the policy's decision goes (:data:`PARTS`: the
+beliefs' updates, their observations, the masks, the network's choice); the issue's
+targets are a decision at least 100x cheaper than ``active``'s, and a whole episode at
+least 10x (agent time; with the lab's steps, which both pay, the ratio is also printed).
+Without ``--policy`` the policy is an untrained MaskablePPO network of
+``examples/train_masked.py``'s shape: a decision costs about the same whatever the
 weights.  Needs sb3-contrib (``pip install -e '.[rl]'``).
 """
 
@@ -63,10 +70,14 @@ CHOICE = {"policy": (policy_module, "decide_all", ()),
           "active": (active_module, "best_moves", ("_ready", "_moved"))}
 
 
-#: The parts of a policy's decision (:data:`PARTS`' order): taking in a lab step's
-#: readings (the belief's rank-one updates), the observation (the predicted error's
-#: spectrum), the mask, the network.
+#: The parts of a policy's decision, each one call for a chunk's agents: taking in a lab
+#: step's readings (the beliefs' stacked Woodbury steps,
+#: :func:`~orthoglide_env.lab.design_belief.observe_many`), the observations (the predicted
+#: error's spectra, ``observations``), the masks (``action_masks``), the network's choice
+#: (:meth:`~calibrators.agents.actor_weights.ActorWeights.choose_many`).
 PARTS: tuple[str, ...] = ("update", "observation", "mask", "network")
+#: The policy module's functions timed as :data:`PARTS`' first three.
+PART_FUNCTIONS: tuple[str, ...] = ("observe_many", "observations", "action_masks")
 
 
 def timed(owner: object, method: str, seconds: list[float], k: int) -> None:
@@ -84,14 +95,14 @@ def timed(owner: object, method: str, seconds: list[float], k: int) -> None:
 
 
 class TimedActor:
-    """A policy's actor whose logits are timed (the actor itself is shared and frozen)."""
+    """A policy's actor whose choices are timed (the actor itself is shared and frozen)."""
 
     def __init__(self, actor: object, seconds: list[float]) -> None:
         self.actor, self.weights = actor, actor.weights
-        timed(self, "logits_many", seconds, 1 + PARTS.index("network"))
+        timed(self, "choose_many", seconds, 1 + PARTS.index("network"))
 
-    def logits_many(self, observations: np.ndarray) -> np.ndarray:
-        return self.actor.logits_many(observations)
+    def choose_many(self, *args: np.ndarray | None) -> np.ndarray:
+        return self.actor.choose_many(*args)
 
 
 def play(label: str, name: str, kwargs: dict, seed: int, machines: list[int]
@@ -114,12 +125,11 @@ def play(label: str, name: str, kwargs: dict, seed: int, machines: list[int]
         for own in methods:
             timed(agent, own, choosing, 0)
     if label == "policy":
-        restore.append((policy_module, "observations", policy_module.observations))
-        timed(policy_module, "observations", choosing, 1 + PARTS.index("observation"))
+        for k, function in enumerate(PART_FUNCTIONS):
+            restore.append((policy_module, function, getattr(policy_module, function)))
+            timed(policy_module, function, choosing, 1 + k)
         actor = TimedActor(agents[0].actor, choosing)
         for agent in agents:
-            timed(agent.belief, "observe", choosing, 1 + PARTS.index("update"))
-            timed(agent.belief, "action_mask", choosing, 1 + PARTS.index("mask"))
             agent.actor = actor
     acting = stepping = 0.0
     decisions = steps = 0

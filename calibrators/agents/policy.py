@@ -43,7 +43,12 @@ from calibrators.agents.actor_weights import read_actor
 from calibrators.agents.base import Agent, action
 from orthoglide_env import DESIGN_LAB_ENV_ID, DESIGN_LAB_V1_ENV_ID, FLAT_LAB_ENV_ID
 from orthoglide_env.instruments.dial import weighting_sigma
-from orthoglide_env.lab.design_belief import DesignBelief, observations
+from orthoglide_env.lab.design_belief import (
+    DesignBelief,
+    action_masks,
+    observations,
+    observe_many,
+)
 from orthoglide_env.lab.operations import OP_NAMES, SLOT_NAMES, V0_OPS, Op, slot_catalogue
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.wrappers import flat_action_space, lab_action
@@ -353,18 +358,21 @@ class DesignPolicyAgent(PolicyAgent):
     @classmethod
     def act_all(cls, agents: list[Agent], observations: list[dict[str, np.ndarray]],
                 infos: list[Mapping[str, Any]]) -> list[dict[str, Any]]:
-        """Each agent takes in its lab's observation; those that choose an operation now
-        choose together (:func:`decide_all`, one network pass per policy file); each plays
-        its operation's next lab action, or stops once the training episode's time is
-        used."""
-        deciding: list[DesignPolicyAgent] = []
-        for agent, observation, info in zip(agents, observations, infos, strict=True):
-            if agent.last is not None:
-                agent.belief.observe(agent.last, observation, bool(info.get("refused")))
-                if agent.filter is not None:
-                    agent.filter.observe(agent.last, observation, info)
-            if not agent.queue and observation["time"][0] < agent.spec.budget_s:
-                deciding.append(agent)
+        """Each agent takes in its lab's observation (their beliefs together,
+        :func:`~orthoglide_env.lab.design_belief.observe_many`); those that choose an
+        operation now choose together (:func:`decide_all`, one network pass per policy
+        file); each plays its operation's next lab action, or stops once the training
+        episode's time is used."""
+        following = [(agent, observation, info) for agent, observation, info
+                     in zip(agents, observations, infos, strict=True) if agent.last is not None]
+        observe_many([a.belief for a, _, _ in following], [a.last for a, _, _ in following],
+                     [o for _, o, _ in following],
+                     [bool(i.get("refused")) for _, _, i in following])
+        for agent, observation, info in following:
+            if agent.filter is not None:
+                agent.filter.observe(agent.last, observation, info)
+        deciding = [agent for agent, observation in zip(agents, observations, strict=True)
+                    if not agent.queue and observation["time"][0] < agent.spec.budget_s]
         for group in _by_actor(deciding):
             for agent, chosen in zip(group, decide_all(group), strict=True):
                 agent.queue = (agent.belief.operations(chosen) if agent.filter is None
@@ -401,11 +409,12 @@ def _by_actor(agents: list[DesignPolicyAgent]) -> list[list[DesignPolicyAgent]]:
 def decide_all(agents: list[DesignPolicyAgent]) -> list[int]:
     """Each agent's operation (:meth:`DesignPolicyAgent.decide`), for agents of one
     network (one policy file, one view) on labs of one design: their observations in one
-    batched pass (:func:`~orthoglide_env.lab.design_belief.observations`) and their logits
-    in one matrix product per layer (:meth:`ActorWeights.logits_many
-    <calibrators.agents.actor_weights.ActorWeights.logits_many>`), so that a chunk of
-    machines pays about one machine's call overhead; the mask and a draw are each
-    agent's."""
+    batched pass (:func:`~orthoglide_env.lab.design_belief.observations`), their masks in
+    another (:func:`~orthoglide_env.lab.design_belief.action_masks`, or each filter's),
+    and the choices in one pass of the network (:meth:`ActorWeights.choose_many
+    <calibrators.agents.actor_weights.ActorWeights.choose_many>`: the arg-max of the
+    float64 logits over the open operations), so that a chunk of machines pays about one
+    machine's call overhead; a draw's noise is each agent's, from its own stream."""
     if not agents:
         return []
     seen = observations([a.belief for a in agents])
@@ -413,15 +422,11 @@ def decide_all(agents: list[DesignPolicyAgent]) -> list[int]:
         # float32, as the view in training gave it.
         seen = np.concatenate((seen, [a.filter.reach() for a in agents]),
                               axis=1).astype(np.float32)
-    logits = agents[0].actor.logits_many(seen)
-    chosen = []
-    for agent, row in zip(agents, logits, strict=True):
-        if agent.spec.play == "draw":
-            row = row + agent.rng.gumbel(size=row.shape)
-        mask = (agent.belief.action_mask() if agent.filter is None
-                else agent.filter.action_mask(agent.belief))
-        chosen.append(int(np.argmax(np.where(mask, row, -np.inf))))
-    return chosen
+    noise = (np.array([a.rng.gumbel(size=a.belief.n_actions) for a in agents])
+             if agents[0].spec.play == "draw" else None)
+    masks = (action_masks([a.belief for a in agents]) if agents[0].filter is None
+             else np.array([a.filter.action_mask(a.belief) for a in agents]))
+    return agents[0].actor.choose_many(seen, masks, noise).tolist()
 
 
 def policy_agent(path: str | Path) -> PolicyAgent:

@@ -142,6 +142,11 @@ def shrunk(covariance: np.ndarray, gain: np.ndarray, b: np.ndarray) -> np.ndarra
     return (covariance + covariance.T) / 2
 
 
+def _transposed(matrices: np.ndarray) -> np.ndarray:
+    """Each matrix of a stack (..., a, b) transposed."""
+    return np.swapaxes(matrices, -1, -2)
+
+
 class DesignBelief:
     """A lab experiment's belief as it runs (see the module), and its candidate operations:
     a move to each of the slot table's ``P`` postures (with the lever flicks it needs),
@@ -184,6 +189,10 @@ class DesignBelief:
         #: by the last.
         self.readings_at = np.zeros(self.n_postures, dtype=np.int64)
         self.run, self.fall = 0, 0.0
+        #: The array whose row ``_index`` (``_row``) the covariance is, when
+        #: :func:`observe_many` keeps it so.
+        self._stack: np.ndarray | None = None
+        self._index, self._row = -1, self.covariance
         self._sync(observation)
         self._read(observation)
 
@@ -192,6 +201,14 @@ class DesignBelief:
         """Take in the lab's observation after ``operation`` (a lab action, as
         :meth:`operations` gives them): a move's readings, a re-mount's fresh unknowns and
         its readings at Zero.  A refused operation changes nothing but the clock."""
+        reads = self._step(operation, refused)
+        self._sync(observation)
+        if reads:
+            self._read(observation)
+
+    def _step(self, operation: dict[str, object], refused: bool) -> bool:
+        """:meth:`observe`'s bookkeeping of the operation itself (a re-mount's fresh
+        unknowns, a move's posture): whether the observation after it holds readings."""
         if not refused and operation["op"] == Op.REMOUNT:
             # Another set of mountings reads at Zero from here on: a new stay.
             self.run = 0
@@ -207,18 +224,10 @@ class DesignBelief:
             if here != self.here:
                 self.run = 0
             self.here = here
-        self._sync(observation)
-        if not refused and operation["op"] in (Op.MOVE, Op.REMOUNT):
-            self._read(observation)
+        return not refused and operation["op"] in (Op.MOVE, Op.REMOUNT)
 
     def _sync(self, observation: dict[str, np.ndarray]) -> None:
-        self._moves: tuple[np.ndarray, ...] | None = None
-        slot = np.asarray(observation["slot"], dtype=np.int64)
-        # A stand at a slot beyond the design's catalogue (or none) has no rows here.
-        self.slots = np.where(slot < self.n_slots, slot, -1)
-        self.engaged = np.asarray(observation["engaged"], dtype=bool) & (self.slots >= 0)
-        self.faulted = np.asarray(observation["faulted"], dtype=bool)
-        self.time_s = float(observation["time"][0])
+        _sync_many([self], [observation])
 
     def _columns(self, stand: int) -> np.ndarray:
         start = N_MACHINE + N_STAND * stand
@@ -226,21 +235,21 @@ class DesignBelief:
 
     def _read(self, observation: dict[str, np.ndarray]) -> None:
         """Add the valid readings of the observation, taken here, and count them."""
-        self.readings_at[self.here] += 1
-        self.run += 1
-        self.fall = 0.0
-        stands = np.flatnonzero(np.asarray(observation["valid"], dtype=bool) & (self.slots >= 0))
-        if not stands.size:
+        self._tally()
+        rows = readings_rows([self], np.asarray(observation["valid"], dtype=bool)[None])[0]
+        if not rows.size:
             return
         before = self.predicted_mse()
-        values = np.full((len(stands), self.stand_columns.shape[1]), ZERO_SCALE)
-        values[:, :-1] = self.table.change[self.slots[stands], self.here]
-        rows = np.zeros((len(stands), len(self.covariance)))
-        np.put_along_axis(rows, self.stand_columns[stands], values, axis=1)
-        gain, b = woodbury_gain(self.covariance, rows / self.sigma)
+        gain, b = woodbury_gain(self.covariance, rows)
         self.covariance = shrunk(self.covariance, gain, b)
         if before > 0:
             self.fall = max(1.0 - self.predicted_mse() / before, 0.0)
+
+    def _tally(self) -> None:
+        """Count a reading here (its fall is the update's to set)."""
+        self.readings_at[self.here] += 1
+        self.run += 1
+        self.fall = 0.0
 
     # -- what it predicts -------------------------------------------------------------------
     def predicted_mse(self) -> float:
@@ -269,8 +278,8 @@ class DesignBelief:
         plus :data:`FALL_FLOOR`.  View 1 observes them: between two re-readings of one
         posture the rest of the observation hardly moves, and a stay's length is what an
         expert's choice to stay or leave turns on."""
-        return np.array([self.run / COUNT_SCALE, self.readings_at[self.here] / COUNT_SCALE,
-                         np.log10(self.fall + FALL_FLOOR)])
+        return _history(np.array([self.run]), np.array([self.readings_at[self.here]]),
+                        np.array([self.fall]))[0]
 
     def observation(self) -> np.ndarray:
         """The observation of the design view (float32; its parts:
@@ -283,16 +292,9 @@ class DesignBelief:
 
     def observation_tail(self) -> np.ndarray:
         """The observation after :meth:`log_mean_squares` (float64): the stands, the
-        posture, the clock and, in view 1, :meth:`reading_history`."""
-        stands = np.zeros((self.n_stands, self.n_slots + 3))
-        stands[np.arange(self.n_stands), np.where(self.slots >= 0, self.slots, self.n_slots)] = 1
-        stands[:, -2], stands[:, -1] = self.engaged, self.faulted
-        low, high = self.design.rho_min, self.design.rho_max
-        rho = (2 * self.rho - (high + low)) / (high - low)
-        parts = [stands.ravel(), rho, [self.time_s / self.budget_s]]
-        if self.version >= 1:
-            parts.append(self.reading_history())
-        return np.concatenate(parts)
+        posture, the clock and, in view 1, :meth:`reading_history`
+        (:func:`observation_tails` of this belief alone)."""
+        return observation_tails([self])[0]
 
     def observation_bounds(self, longest_s: float) -> tuple[np.ndarray, np.ndarray]:
         """Bounds (float32) of every :meth:`observation` of a lab whose longest step takes
@@ -320,26 +322,23 @@ class DesignBelief:
         likely each reads there (K, P), a priori: a plunger is let down only where it is
         safe both here and there (let down here, it reads there) and lifted where it is
         not safe there; a stand out of service stays up.  (Computed once per state.)"""
+        return self._candidates()[:3]
+
+    def _candidates(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:func:`candidate_moves` of the present state (found once per state)."""
         if self._moves is None:
             self._moves = candidate_moves(self.design, self.slots.tobytes(),
                                           self.faulted.tobytes(), self.engaged.tobytes(),
                                           self.here)
-        return self._moves[:3]
+        return self._moves
 
     def action_mask(self) -> np.ndarray:
         """Which operations are candidates now (``n_actions``,): a move where some stand
         reads at least :data:`READ_PROBABILITY` likely and which ends within the budget; a
         re-mount at a slot no stand holds, ending within the budget (a re-mount onto a held
         slot is what the lab refuses; onto its own, a new installation where it stands,
-        buys nothing a planner weighs); stop."""
-        seconds, _, _ = self.moves()
-        moves = self._moves[3] & (self.time_s + seconds <= self.budget_s)
-        # The drive to Zero, as the lab times it, from the table of every move.
-        remount_s = float(self.drive_s[self.here, self.table.zero]) + TIME.remount_s
-        free = np.full(self.n_slots, self.time_s + remount_s <= self.budget_s)
-        free[self.slots[self.slots >= 0]] = False
-        remounts = np.tile(free, self.n_stands)
-        return np.concatenate((moves, remounts, [True]))
+        buys nothing a planner weighs); stop (:func:`action_masks` of this belief alone)."""
+        return action_masks([self])[0]
 
     def operations(self, action: int) -> list[dict[str, object]]:
         """The lab actions that operation ``action`` is: a move's lever flicks (by stand)
@@ -354,8 +353,150 @@ class DesignBelief:
             return [{**idle, "op": Op.REMOUNT, "stand": stand, "slot": slot}]
         _, after, _ = self.moves()
         flicks = [{**idle, "op": Op.ENGAGE if down else Op.LIFT, "stand": k}
-                  for k, down in enumerate(after[:, action]) if down != self.engaged[k]]
+                  for k, (down, now) in enumerate(zip(after[:, action].tolist(),
+                                                      self.engaged.tolist(), strict=True))
+                  if down != now]
         return [*flicks, {**idle, "op": Op.MOVE, "rho": self.table.postures[action].copy()}]
+
+
+def _sync_many(beliefs: list[DesignBelief], seen: list[dict[str, np.ndarray]]) -> None:
+    """Each belief's stands and clock from its lab's observation (beliefs of one design and
+    stands): their arrays are rows of one array each."""
+    slot = np.array([o["slot"] for o in seen], dtype=np.int64)
+    # A stand at a slot beyond the design's catalogue (or none) has no rows here.
+    slots = np.where(slot < beliefs[0].n_slots, slot, -1)
+    engaged = np.array([o["engaged"] for o in seen], dtype=bool) & (slots >= 0)
+    faulted = np.array([o["faulted"] for o in seen], dtype=bool)
+    for k, (belief, observation) in enumerate(zip(beliefs, seen, strict=True)):
+        belief._moves = None
+        belief.slots, belief.engaged, belief.faulted = slots[k], engaged[k], faulted[k]
+        belief.time_s = float(observation["time"][0])
+
+
+def _stacked(beliefs: list[DesignBelief]) -> np.ndarray:
+    """The covariances of ``beliefs`` as one array (N, n, n) whose rows the beliefs'
+    covariances are: the array of the last call for these beliefs in this order, kept
+    while none of them has replaced its covariance (:meth:`DesignBelief.start`, a lone
+    :meth:`DesignBelief.observe`); else made anew, their covariances then its rows."""
+    stack = beliefs[0]._stack
+    if stack is None or len(stack) != len(beliefs) or not all(
+            b._stack is stack and b._index == k and b.covariance is b._row
+            for k, b in enumerate(beliefs)):
+        stack = np.stack([b.covariance for b in beliefs])
+        for k, belief in enumerate(beliefs):
+            belief._stack, belief._index, belief._row = stack, k, stack[k]
+            belief.covariance = belief._row
+    return stack
+
+
+def readings_rows(beliefs: list[DesignBelief], valid: np.ndarray) -> np.ndarray:
+    """The whitened rows (N, R, n) of the readings of each of ``beliefs`` (of one design and
+    stands) at its posture by its stands ``valid`` (N, K) and mounted, in the stands' order,
+    padded with rows of zeros (R: the most readings of one; 0 when none read)."""
+    first = beliefs[0]
+    slots = np.array([b.slots for b in beliefs])
+    reads = valid & (slots >= 0)
+    which, stand = np.nonzero(reads)
+    rank = np.cumsum(reads, axis=1)[which, stand] - 1
+    rows = np.zeros((len(beliefs), int(rank.max(initial=-1)) + 1, len(first.covariance)))
+    values = np.full((len(which), first.stand_columns.shape[1]), ZERO_SCALE)
+    values[:, :-1] = first.table.change[slots[which, stand],
+                                        np.array([b.here for b in beliefs])[which]]
+    rows[which[:, None], rank[:, None], first.stand_columns[stand]] = values
+    return rows / np.array([b.sigma for b in beliefs])[:, None, None]
+
+
+def observe_many(beliefs: list[DesignBelief], operations: list[dict[str, object]],
+                 seen: list[dict[str, np.ndarray]], refused: list[bool]) -> None:
+    """:meth:`DesignBelief.observe` of each of ``beliefs`` (of one design and stands) after
+    its operation: each its own bookkeeping, and the readings' Woodbury steps of all of
+    them at once, on their covariances kept as one array (:func:`_stacked`; a belief that
+    read less, or nothing, has rows of zeros, which change nothing), so that a chunk of
+    machines pays about one machine's calls.  A covariance is its lone belief's to
+    rounding (a stacked product may sum in another order), and symmetric to rounding: the
+    spectra symmetrise the block they see."""
+    if not beliefs:
+        return
+    steps = [belief._step(operation, no)
+             for belief, operation, no in zip(beliefs, operations, refused, strict=True)]
+    _sync_many(beliefs, seen)
+    for belief, reads in zip(beliefs, steps, strict=True):
+        if reads:
+            belief._tally()
+    valid = np.array([o["valid"] for o in seen], dtype=bool) & np.array(steps)[:, None]
+    rows = readings_rows(beliefs, valid)
+    if not rows.shape[1]:
+        return
+    covariances = _stacked(beliefs)
+    # predicted_mse of each, before and after: trace(W C) as one product of the stack.
+    size = covariances.shape[-1]
+    weight = np.zeros((size, size))
+    weight[:N_MACHINE, :N_MACHINE] = beliefs[0].weight
+    flat = covariances.reshape(len(beliefs), -1)
+    before = flat @ weight.ravel()
+    # woodbury_gain and shrunk, in the orders of operands a stack multiplies fastest in
+    # (``R C`` is ``B'``: the covariances are symmetric).
+    b_t = rows @ covariances
+    m = b_t @ _transposed(rows)
+    m += np.eye(rows.shape[1])
+    covariances -= _transposed(np.linalg.solve(m, b_t)) @ b_t
+    after = np.maximum(flat @ weight.ravel(), 0.0)
+    for k in np.flatnonzero(rows.any(axis=(1, 2))).tolist():
+        if before[k] > 0:
+            beliefs[k].fall = max(1.0 - float(after[k]) / float(before[k]), 0.0)
+
+
+def observation_tails(beliefs: list[DesignBelief]) -> np.ndarray:
+    """:meth:`DesignBelief.observation_tail` of each of ``beliefs`` (of one design, stands
+    and view), stacked (N, m): each stand's slot one-hot (then "not mounted"), engaged and
+    out of service, the posture scaled to [-1, 1] over the design's control limits, the
+    time used over the budget, and in view 1 the reading history."""
+    first = beliefs[0]
+    count, stands, slots = len(beliefs), first.n_stands, first.n_slots
+    held = np.array([b.slots for b in beliefs])
+    tails = np.zeros((count, stands, slots + 3))
+    tails[np.arange(count)[:, None], np.arange(stands), np.where(held >= 0, held, slots)] = 1
+    tails[:, :, -2] = [b.engaged for b in beliefs]
+    tails[:, :, -1] = [b.faulted for b in beliefs]
+    low, high = first.design.rho_min, first.design.rho_max
+    rho = (2 * np.array([b.rho for b in beliefs]) - (high + low)) / (high - low)
+    parts = [tails.reshape(count, -1), rho, [[b.time_s / b.budget_s] for b in beliefs]]
+    if first.version >= 1:
+        parts.append(_history(np.array([b.run for b in beliefs]),
+                              np.array([b.readings_at[b.here] for b in beliefs]),
+                              np.array([b.fall for b in beliefs])))
+    return np.concatenate(parts, axis=1)
+
+
+def _history(run: np.ndarray, total: np.ndarray, fall: np.ndarray) -> np.ndarray:
+    """:meth:`DesignBelief.reading_history` (N, 3) of readings in a row ``run``, in all
+    ``total`` and the last one's relative fall ``fall`` (N,) each."""
+    return np.stack((run / COUNT_SCALE, total / COUNT_SCALE, np.log10(fall + FALL_FLOOR)),
+                    axis=-1)
+
+
+def action_masks(beliefs: list[DesignBelief]) -> np.ndarray:
+    """:meth:`DesignBelief.action_mask` of each of ``beliefs`` (of one design and stands),
+    stacked (N, ``n_actions``): each state's candidate moves from the cache
+    (:func:`candidate_moves`), the clock and the held slots of all of them at once."""
+    first = beliefs[0]
+    count, postures, slots = len(beliefs), first.n_postures, first.n_slots
+    moves = [b._candidates() for b in beliefs]
+    clock = np.array([b.time_s for b in beliefs])
+    budget = np.array([b.budget_s for b in beliefs])
+    masks = np.empty((count, first.n_actions), dtype=bool)
+    np.logical_and(np.array([m[3] for m in moves]),
+                   clock[:, None] + np.array([m[0] for m in moves]) <= budget[:, None],
+                   out=masks[:, :postures])
+    # The drive to Zero, as the lab times it, from the table of every move.
+    remount_s = first.drive_s[[b.here for b in beliefs], first.table.zero] + TIME.remount_s
+    free = np.repeat(clock + remount_s <= budget, slots).reshape(count, slots)
+    held = np.array([b.slots for b in beliefs])
+    rows, stands = np.nonzero(held >= 0)
+    free[rows, held[rows, stands]] = False
+    masks[:, postures:-1] = np.tile(free, first.n_stands)
+    masks[:, -1] = True
+    return masks
 
 
 def observations(beliefs: list[DesignBelief]) -> np.ndarray:
@@ -366,7 +507,7 @@ def observations(beliefs: list[DesignBelief]) -> np.ndarray:
     n = N_MACHINE
     logs = _log_mean_squares(_spectra(beliefs[0].factor, np.stack(
         [b.covariance[:n, :n] for b in beliefs])))
-    tails = np.stack([b.observation_tail() for b in beliefs])
+    tails = observation_tails(beliefs)
     return np.concatenate((logs, tails), axis=1).astype(np.float32)
 
 

@@ -1,0 +1,178 @@
+"""The design-view policy's fast decision path: beliefs updated together
+(:func:`~orthoglide_env.lab.design_belief.observe_many`), masks together
+(:func:`~orthoglide_env.lab.design_belief.action_masks`) and the network's last layer in
+float32 over the open actions only (:meth:`ActorWeights.choose_many
+<calibrators.agents.actor_weights.ActorWeights.choose_many>`) take the operations that each
+belief's own update, observation, mask and float64 logits take."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import orthoglide_env
+from calibrators.agents.actor_weights import last_layer_bounds, read_actor
+from calibrators.agents.base import action
+from calibrators.agents.names import get_agent
+from calibrators.agents.policy import DesignPolicyAgent
+from calibrators.study.episodes import machine_seed
+from orthoglide_env.lab.design_belief import action_masks, observations
+from orthoglide_env.lab.operations import Op
+
+ROOT = Path(__file__).resolve().parents[1]
+SHIPPED_HOUR = ROOT / "examples" / "policies" / "masked_lab3600.zip"
+LAB = {"conditions": "lab", "gauge_sigma": 0.02, "budget_s": 3600.0}
+
+
+def one_by_one(agent: DesignPolicyAgent, observation: dict[str, np.ndarray],
+               info: dict[str, Any]) -> dict[str, Any]:
+    """The agent's lab action as each agent decided alone before the fast path: its own
+    belief's update, observation and mask, and the float64 logits' arg-max."""
+    if agent.last is not None:
+        agent.belief.observe(agent.last, observation, bool(info.get("refused")))
+    if not agent.queue and observation["time"][0] < agent.spec.budget_s:
+        logits = agent.actor.logits_many(agent.belief.observation()[None])[0]
+        chosen = int(np.argmax(np.where(agent.belief.action_mask(), logits, -np.inf)))
+        agent.queue = agent.belief.operations(chosen)
+    if not agent.queue:
+        return action(Op.STOP)
+    agent.last = agent.queue.pop(0)
+    return action(agent.last["op"], agent.last["rho"], agent.last["stand"],
+                  agent.last["slot"])
+
+
+def play(machines: list[int], together: bool, stop_s: float
+         ) -> tuple[list[list[tuple[Any, ...]]], list[DesignPolicyAgent]]:
+    """Each machine's lab actions (until ``stop_s`` of lab time) and its agent, the chunk
+    deciding together (``act_all``) or each agent alone (:func:`one_by_one`)."""
+    labs = [gym.make(orthoglide_env.LAB_ENV_ID, **LAB) for _ in machines]
+    agents = [get_agent(f"policy:{SHIPPED_HOUR}") for _ in machines]
+    state = []
+    for lab, agent, m in zip(labs, agents, machines, strict=True):
+        observation, info = lab.reset(seed=machine_seed(1, m))
+        agent.reset(lab, observation, np.random.default_rng(m))
+        state.append((observation, info))
+    taken: list[list[tuple[Any, ...]]] = [[] for _ in machines]
+    running = list(range(len(machines)))
+    while running:
+        if together:
+            actions = DesignPolicyAgent.act_all([agents[i] for i in running],
+                                                [state[i][0] for i in running],
+                                                [state[i][1] for i in running])
+        else:
+            actions = [one_by_one(agents[i], *state[i]) for i in running]
+        done = []
+        for i, chosen in zip(running, actions, strict=True):
+            taken[i].append((chosen["op"], tuple(chosen["rho"]), chosen["stand"],
+                             chosen["slot"]))
+            observation, _, terminated, truncated, info = labs[i].step(chosen)
+            state[i] = (observation, info)
+            if terminated or truncated or observation["time"][0] >= stop_s:
+                done.append(i)
+        running = [i for i in running if i not in done]
+    return taken, agents
+
+
+def test_a_chunk_decides_as_each_agent_alone_did() -> None:
+    """Three machines of the one-hour policy, half an hour each: the chunk's fast path
+    takes today's operations, action for action, and its beliefs are each agent's own
+    to rounding (their stacked products may sum in another order: 1e-9 of the
+    covariance's largest entry, the prior's 10^2, is far above that rounding and far
+    below anything a reading resolves)."""
+    machines = [0, 1, 2]
+    fast, fast_agents = play(machines, together=True, stop_s=1800.0)
+    slow, slow_agents = play(machines, together=False, stop_s=1800.0)
+    assert fast == slow
+    # Half an hour of the policy is about 150 operations a machine.
+    assert min(len(taken) for taken in fast) > 100
+    for a, b in zip(fast_agents, slow_agents, strict=True):
+        np.testing.assert_allclose(a.belief.covariance, b.belief.covariance, rtol=0,
+                                   atol=1e-9 * np.abs(b.belief.covariance).max())
+        np.testing.assert_array_equal(observations([a.belief]), observations([b.belief]))
+        np.testing.assert_array_equal(action_masks([a.belief])[0], b.belief.action_mask())
+
+
+def observed_states() -> tuple[np.ndarray, np.ndarray]:
+    """The one-hour policy's observations and masks over the first 300 s of two machines,
+    decided one by one."""
+    seen, masks = [], []
+    for m in (3, 4):
+        lab = gym.make(orthoglide_env.LAB_ENV_ID, **LAB)
+        agent = get_agent(f"policy:{SHIPPED_HOUR}")
+        observation, info = lab.reset(seed=machine_seed(1, m))
+        agent.reset(lab, observation, np.random.default_rng(m))
+        while observation["time"][0] < 300.0:
+            if agent.last is not None:
+                agent.belief.observe(agent.last, observation, bool(info.get("refused")))
+            seen.append(agent.belief.observation())
+            masks.append(agent.belief.action_mask())
+            agent.last = None
+            observation, _, _, _, info = lab.step(one_by_one(agent, observation, info))
+    return np.array(seen), np.array(masks)
+
+
+@pytest.fixture(scope="module")
+def states() -> tuple[np.ndarray, np.ndarray]:
+    return observed_states()
+
+
+def test_the_float32_choice_is_the_float64_choice(states: tuple[np.ndarray, np.ndarray]
+                                                  ) -> None:
+    """``choose_many`` picks float64's arg-max over the open actions in every state an
+    episode reached, in chunks of one and of all, with a draw's noise too."""
+    actor = read_actor(SHIPPED_HOUR)
+    seen, masks = states
+    assert len(seen) > 40
+    exact = actor.logits_many(seen)
+    best = np.argmax(np.where(masks, exact, -np.inf), axis=1)
+    np.testing.assert_array_equal(actor.choose_many(seen, masks), best)
+    np.testing.assert_array_equal([actor.choose_many(s[None], m[None])[0]
+                                   for s, m in zip(seen, masks, strict=True)], best)
+    noise = np.random.default_rng(0).gumbel(size=exact.shape)
+    np.testing.assert_array_equal(actor.choose_many(seen, masks, noise),
+                                  np.argmax(np.where(masks, exact + noise, -np.inf), axis=1))
+
+
+def test_a_near_tie_is_decided_in_float64(states: tuple[np.ndarray, np.ndarray]) -> None:
+    """Where two open actions' logits are closer than the float32 bound, float64 decides:
+    a noise that brings the runner-up to 1e-12 below or above the best (far inside the
+    float32 logits' rounding, about 1e-6) flips the choice as float64 says it must."""
+    actor = read_actor(SHIPPED_HOUR)
+    seen, masks = states
+    exact = actor.logits_many(seen)
+    for gap in (1e-12, -1e-12):
+        noise = np.zeros_like(exact)
+        for k, (row, mask) in enumerate(zip(exact, masks, strict=True)):
+            order = np.flatnonzero(mask)[np.argsort(row[mask])]
+            if len(order) > 1:
+                noise[k, order[-2]] = row[order[-1]] - row[order[-2]] - gap
+        expected = np.argmax(np.where(masks, exact + noise, -np.inf), axis=1)
+        np.testing.assert_array_equal(actor.choose_many(seen, masks, noise), expected)
+
+
+def test_the_bound_holds_on_the_float32_logits(states: tuple[np.ndarray, np.ndarray]
+                                               ) -> None:
+    """Each action's bound is above the distance between its float32 logit (from float64
+    hidden values) and its float64 one, in every state reached, yet small beside the
+    logits' gaps (below 1e-3: the network's largest row of weights sums to about 100)."""
+    actor = read_actor(SHIPPED_HOUR)
+    seen, _ = states
+    hidden = actor._hidden(seen)
+    weight, bias = actor.weights[-1], actor.biases[-1]
+    fast = (hidden.astype(np.float32) @ weight.T).astype(np.float64) + bias
+    bounds = last_layer_bounds(weight, bias)
+    assert np.all(np.abs(fast - actor.logits_many(seen)) <= bounds)
+    assert bounds.max() < 1e-3
+
+
+def test_bad_masks_are_refused(states: tuple[np.ndarray, np.ndarray]) -> None:
+    actor = read_actor(SHIPPED_HOUR)
+    seen, masks = states
+    with pytest.raises(ValueError, match="an open action in every row"):
+        actor.choose_many(seen[:2], np.zeros_like(masks[:2]))
+    with pytest.raises(ValueError, match=r"masks are \(N, 1735\)"):
+        actor.choose_many(seen[:2], masks[:3])
