@@ -73,6 +73,7 @@ from calibrators.agents.names import POLICY_PREFIX
 from calibrators.agents.policy import save_policy, spec_of
 from calibrators.planning.active_expert import FilteredDesignLab, filtered_design_lab_env
 from calibrators.planning.design_expert import PlanExpert
+from calibrators.planning.shortlist import SHORTLIST_MOVES, shortlist_design_lab_env
 from calibrators.study import compare, statistics
 from orthoglide_env.lab.design_belief import VIEW_VERSIONS
 from orthoglide_env.model.design import load_design
@@ -111,9 +112,13 @@ def view(kwargs: dict[str, Any], expert: str) -> Any:
     """The design view the policy learns in: its moves' flicks as the fixed plan's
     (``--expert optimal``) or as ``active``'s filter's (``--expert active``,
     :class:`~calibrators.planning.active_expert.FilteredDesignLab`; ``active-reach``: its
-    observation also holds the dials the filter lets read at each posture)."""
+    observation also holds the dials the filter lets read at each posture;
+    ``active-shortlist``: its mask opens ``active``'s short list only,
+    :class:`~calibrators.planning.shortlist.ShortlistDesignLab`)."""
     if expert == "optimal":
         return design_lab_env(**kwargs)
+    if expert == "active-shortlist":
+        return shortlist_design_lab_env(**kwargs)
     return filtered_design_lab_env(reach=expert == "active-reach", **kwargs)
 
 
@@ -433,12 +438,14 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
                              "not the last (those of --eval-seed: choose a seed other than "
                              "the one the policy is tested on)")
     parser.add_argument("--expert", default="optimal",
-                        choices=("optimal", "active", "active-reach"),
+                        choices=("optimal", "active", "active-reach", "active-shortlist"),
                         help="the imitation's expert: optimal's planner from the view's "
                              "state, or active's filter of the values read, whose flicks the "
                              "view's moves then take (active-reach: the view's observation "
-                             "also holds the dials the filter lets read at each posture; the "
-                             "file records it)")
+                             "also holds the dials the filter lets read at each posture; "
+                             "active-shortlist: the view opens active's choice and its next "
+                             f"best moves, {SHORTLIST_MOVES} in all, and stop; the file "
+                             "records it)")
     parser.add_argument("--design", metavar="FILE",
                         help="the machines' design (a JSON file, as orthoglide's --design; "
                              "default: the prototype)")
