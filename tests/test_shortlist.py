@@ -18,6 +18,8 @@ from calibrators.agents.policy import DesignPolicyAgent, read_spec, save_policy,
 from calibrators.planning.active_expert import filtered_design_lab_env
 from calibrators.planning.shortlist import (
     SHORTLIST_MOVES,
+    LookaheadExpert,
+    played_out,
     shortlist_design_lab_env,
     shortlist_mask,
 )
@@ -85,6 +87,31 @@ def test_check_env_of_the_shortlist_view() -> None:
         check_env(env, skip_render_check=True)
     messages = [str(w.message) for w in caught]
     assert all("different from the unwrapped version" in m for m in messages), messages
+
+
+def test_the_lookahead_takes_the_move_whose_greedy_play_out_ends_lowest() -> None:
+    """Along an episode it plays itself: its choice is open in the short list, and the
+    greedy play-out after it ends no higher than after ``active``'s choice and below the
+    criterion now; a play-out leaves the filter as it was (it plays on a copy).  And it
+    departs from ``active`` somewhere."""
+    env = shortlist_design_lab_env(version=1, **LAB)
+    env.reset(seed=3)
+    expert = LookaheadExpert(env.expert)
+    n = env.belief.n_postures
+    departed, done = 0, False
+    while not done:
+        chosen, theirs = expert.choose(env.belief), env.expert.choose(env.belief)
+        assert env.action_masks()[chosen]
+        if theirs < n:
+            planner = env.expert.planner
+            now = planner._criterion_value(), planner.time_s, list(planner.engaged)
+            ends = played_out(planner, chosen), played_out(planner, theirs)
+            assert ends[0] <= ends[1] < now[0]
+            assert (planner._criterion_value(), planner.time_s, list(planner.engaged)) == now
+        departed += chosen != theirs
+        _, _, terminated, truncated, _ = env.step(chosen)
+        done = terminated or truncated
+    assert departed >= 1
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,10 @@ only :data:`SHORTLIST_MOVES` of them, and stop: ``active``'s choice
 (:meth:`~calibrators.planning.design_expert.PlanExpert.choose`: a due re-mount, else the
 filter's best move, else stop) and the moves of the next highest rates among those the
 filter offers.  A policy in it cannot take a move that ``active``'s pricing ranks low, and
-what it learns is where to depart from the greedy order.  Its file records
+what it learns is where to depart from the greedy order.  :class:`LookaheadExpert` labels
+where: the move of the short list after which ``active``'s greedy plan, played out to the
+budget's end with its readings expected (never their values), leaves the lowest predicted
+error.  Its file records
 ``flicks="shortlist"`` and ``policy:FILE`` narrows its mask the same way
 (:class:`ShortlistFilter`, registered in
 :data:`~calibrators.agents.policy.FLICK_FILTERS`).  A decision then costs ``active``'s
@@ -25,6 +28,8 @@ import numpy as np
 
 from calibrators.agents.policy import FLICK_FILTERS
 from calibrators.planning.active_expert import ActiveExpert, FilteredDesignLab
+from calibrators.planning.pricing import PricedMoves
+from calibrators.planning.search import Planner
 from orthoglide_env.envs.lab import OrthoglideLabEnv
 from orthoglide_env.lab.design_belief import DesignBelief
 
@@ -56,6 +61,44 @@ def shortlist_mask(expert: ActiveExpert, belief: DesignBelief,
     mask = np.zeros(belief.n_actions, dtype=bool)
     mask[[chosen, *others, belief.n_actions - 1]] = True
     return mask
+
+
+def played_out(planner: Planner, posture: int) -> float:
+    """The criterion (predicted mean-square TCP error after rigid motion) that ``planner``'s
+    greedy plan leaves at the budget's end after move ``posture``, on a copy, every reading
+    expected with its probability."""
+    trial = planner.fork()
+    seconds, after, reads = trial._moves()
+    trial.move(posture, PricedMoves(np.zeros(len(seconds)), seconds, after, reads))
+    trial.expect_readings()
+    while trial.greedy_move():
+        pass
+    return trial._criterion_value()
+
+
+class LookaheadExpert:
+    """The short list's move that plans past the next reading: of the moves
+    :func:`shortlist_mask` opens, the one whose greedy play-out (:func:`played_out`)
+    leaves the lowest predicted error; ``active``'s choice when it is a re-mount or stop.
+    It labels the states of a :class:`ShortlistDesignLab` for imitation, from the view's
+    ``active`` expert (its filter: the values read, never the truth)."""
+
+    def __init__(self, expert: ActiveExpert) -> None:
+        self.expert = expert
+
+    def choose(self, belief: DesignBelief) -> int:
+        chosen = self.expert.choose(belief)
+        n = belief.n_postures
+        if chosen >= n:
+            return chosen
+        moves = [int(p) for p in np.flatnonzero(shortlist_mask(self.expert, belief)[:n])]
+        if len(moves) == 1:
+            return chosen
+        # The stable argmin: a tie goes to the move of the lower index.
+        return moves[int(np.argmin([played_out(self.expert.planner, p) for p in moves]))]
+
+    def follow(self, action: int, belief: DesignBelief) -> None:
+        """Nothing: the view's filter has seen every lab action."""
 
 
 class ShortlistDesignLab(FilteredDesignLab):
