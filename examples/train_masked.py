@@ -73,6 +73,11 @@ from calibrators.agents.names import POLICY_PREFIX
 from calibrators.agents.policy import save_policy, spec_of
 from calibrators.planning.active_expert import FilteredDesignLab, filtered_design_lab_env
 from calibrators.planning.design_expert import PlanExpert
+from calibrators.planning.shortlist import (
+    SHORTLIST_MOVES,
+    LookaheadExpert,
+    shortlist_design_lab_env,
+)
 from calibrators.study import compare, statistics
 from orthoglide_env.lab.design_belief import VIEW_VERSIONS
 from orthoglide_env.model.design import load_design
@@ -82,6 +87,9 @@ from orthoglide_env.wrappers import DESIGN_PER, DESIGN_REWARDS, design_lab_env
 
 #: The estimator that scores every evaluation (the comparison's headline).
 ESTIMATOR: str = "full"
+#: The experts whose pupils act among ``active``'s short list
+#: (:class:`~calibrators.planning.shortlist.ShortlistDesignLab`).
+SHORTLIST_EXPERTS: tuple[str, ...] = ("active-shortlist", "lookahead")
 #: The designed agents whose levels the curve draws and the final table compares.
 BASELINES: str = "paper,optimal,active,random"
 
@@ -111,15 +119,22 @@ def view(kwargs: dict[str, Any], expert: str) -> Any:
     """The design view the policy learns in: its moves' flicks as the fixed plan's
     (``--expert optimal``) or as ``active``'s filter's (``--expert active``,
     :class:`~calibrators.planning.active_expert.FilteredDesignLab`; ``active-reach``: its
-    observation also holds the dials the filter lets read at each posture)."""
+    observation also holds the dials the filter lets read at each posture;
+    ``active-shortlist``: its mask opens ``active``'s short list only,
+    :class:`~calibrators.planning.shortlist.ShortlistDesignLab`)."""
     if expert == "optimal":
         return design_lab_env(**kwargs)
+    if expert in SHORTLIST_EXPERTS:
+        return shortlist_design_lab_env(**kwargs)
     return filtered_design_lab_env(reach=expert == "active-reach", **kwargs)
 
 
-def expert_of(env: Any) -> Any:
-    """The expert that labels the states of ``env``'s episode, just reset: the filter's
+def expert_of(env: Any, expert: str) -> Any:
+    """The expert that labels the states of ``env``'s episode, just reset: with ``expert``
+    "lookahead" the short list's play-out (:class:`LookaheadExpert`), else the filter's
     ``active`` of a :class:`FilteredDesignLab`, else ``optimal``'s :class:`PlanExpert`."""
+    if expert == "lookahead":
+        return LookaheadExpert(env.expert)
     if isinstance(env, FilteredDesignLab):
         return env.expert
     return PlanExpert(env.unwrapped, env.belief)
@@ -187,12 +202,12 @@ def masked_logits(model: Any, observations: Any, masks: Any) -> Any:
 Choice = Callable[[Any, np.ndarray, int, int], int]
 
 
-def rollouts(envs: list[Any], episodes: int, choose: Choice | None
+def rollouts(envs: list[Any], episodes: int, choose: Choice | None, expert_name: str
              ) -> tuple[list[np.ndarray], list[np.ndarray], list[int], list[float],
                         list[dict[str, float]]]:
     """``episodes`` episodes over ``envs`` in turn (each env's own stream), the operation
     of each state chosen by ``choose(env, observation, episode, label)`` (``None``: the
-    expert's, ``label``):
+    expert's, ``label``; the expert named by ``--expert``, ``expert_name``):
     every state's observation, mask, expert label and return from there to the episode's
     end (``gamma`` 1, as PPO learns), and each episode's return and final predicted error
     (mm)."""
@@ -200,7 +215,7 @@ def rollouts(envs: list[Any], episodes: int, choose: Choice | None
     for episode in range(episodes):
         env = envs[episode % len(envs)]
         observation, _ = env.reset()
-        expert = expert_of(env)
+        expert = expert_of(env, expert_name)
         rewards: list[float] = []
         done, info = False, {}
         while not done:
@@ -342,7 +357,8 @@ def imitate(args: argparse.Namespace, kwargs: dict[str, Any], model: Any) -> lis
     rows: list[dict] = []
     start = time.perf_counter()
     for round_ in range(args.imitate):
-        *states, ends = rollouts(envs, args.episodes, None if round_ == 0 else policy_choice)
+        *states, ends = rollouts(envs, args.episodes, None if round_ == 0 else policy_choice,
+                                args.expert)
         # The round's states before the policy fits them: its match on states it has not
         # been fitted to, those it reached itself after round 0.
         held_out = agreement(model, states[:3]) if round_ else float("nan")
@@ -433,11 +449,15 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
                              "not the last (those of --eval-seed: choose a seed other than "
                              "the one the policy is tested on)")
     parser.add_argument("--expert", default="optimal",
-                        choices=("optimal", "active", "active-reach"),
+                        choices=("optimal", "active", "active-reach", *SHORTLIST_EXPERTS),
                         help="the imitation's expert: optimal's planner from the view's "
                              "state, or active's filter of the values read, whose flicks the "
                              "view's moves then take (active-reach: the view's observation "
-                             "also holds the dials the filter lets read at each posture; the "
+                             "also holds the dials the filter lets read at each posture; "
+                             "active-shortlist: the view opens active's choice and its next "
+                             f"best moves, {SHORTLIST_MOVES} in all, and stop; lookahead: "
+                             "the same view, labelled with the short list's move after which "
+                             "active's greedy play-out leaves the lowest predicted error; the "
                              "file records it)")
     parser.add_argument("--design", metavar="FILE",
                         help="the machines' design (a JSON file, as orthoglide's --design; "

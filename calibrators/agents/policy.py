@@ -63,7 +63,7 @@ DESIGN_VIEW_IDS: dict[str, int] = {DESIGN_LAB_ENV_ID: 0, DESIGN_LAB_V1_ENV_ID: 1
 #: How a design-view policy may play (:attr:`PolicySpec.play`).
 PLAYS: tuple[str, ...] = ("draw", "argmax")
 #: How a design-view policy's moves may let plungers down (:attr:`PolicySpec.flicks`).
-FLICKS: tuple[str, ...] = ("prior", "filter")
+FLICKS: tuple[str, ...] = ("prior", "filter", "shortlist")
 #: The filters beside the belief that a policy of ``flicks`` other than "prior" plays its
 #: moves with, by name: a class made from (lab, belief, the lab's first observation),
 #: registered by the module that defines it (:mod:`calibrators.planning.active_filter`
@@ -102,7 +102,9 @@ class PolicySpec:
     play: str = "draw"
     #: How a design-view policy's moves let plungers down: "prior", as the view's fixed
     #: plan does, or "filter", as ``active``'s filter of the values read does
-    #: (:class:`~calibrators.planning.active_expert.FilteredDesignLab`).
+    #: (:class:`~calibrators.planning.active_expert.FilteredDesignLab`), or "shortlist", as
+    #: that filter does, choosing among ``active``'s short list only
+    #: (:class:`~calibrators.planning.shortlist.ShortlistDesignLab`).
     flicks: str = "prior"
     #: Whether a policy of ``flicks="filter"`` also sees each posture's dials the filter
     #: lets read (:meth:`~calibrators.planning.active_filter.ActiveFilter.reach`).

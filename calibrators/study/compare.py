@@ -24,8 +24,9 @@ from typing import TYPE_CHECKING, Any
 import gymnasium as gym
 import numpy as np
 
-# Registers the filter that a policy file of flicks "filter" plays its moves with.
-import calibrators.planning.active_filter  # noqa: F401
+# Registers the filters that policy files of flicks "filter" and "shortlist" play their
+# moves with (the short list's module imports the filter's).
+import calibrators.planning.shortlist  # noqa: F401
 from calibrators.agents import Agent, get_agent
 from calibrators.estimators.base import Estimate
 from calibrators.estimators.catalogue import for_study, get_estimator

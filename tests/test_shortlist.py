@@ -1,0 +1,146 @@
+"""``active``'s short list as a policy's actions (:mod:`calibrators.planning.shortlist`): the
+mask opens ``active``'s choice and its next best moves only, the view plays ``active``'s
+episode when the policy takes the choice, and ``policy:FILE`` plays as its view did."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import orthoglide_env
+from calibrators.agents.names import get_agent
+from calibrators.agents.policy import DesignPolicyAgent, read_spec, save_policy, spec_of
+from calibrators.planning.active_expert import filtered_design_lab_env
+from calibrators.planning.shortlist import (
+    SHORTLIST_MOVES,
+    LookaheadExpert,
+    played_out,
+    shortlist_design_lab_env,
+    shortlist_mask,
+)
+from calibrators.study.episodes import run_episode
+
+#: A short episode: some twenty decisions, enough to leave Zero's neighbourhood.
+LAB = {"conditions": "lab", "gauge_sigma": 0.02, "budget_s": 120.0}
+
+
+def test_the_mask_opens_actives_choice_and_its_next_best_moves() -> None:
+    """At every state of an episode played at random among the open operations: stop and
+    ``active``'s choice are open, at most :data:`SHORTLIST_MOVES` moves are, each one the
+    filter opens, and no move the filter opens but the mask shuts has a higher gain per
+    second than an open one other than the choice."""
+    env = shortlist_design_lab_env(version=1, **LAB)
+    env.reset(seed=3)
+    rng = np.random.default_rng(0)
+    n = env.belief.n_postures
+    widest, done = 0, False
+    while not done:
+        mask = env.action_masks()
+        chosen = env.expert.choose(env.belief)
+        opened = env.expert.action_mask(env.belief)
+        assert mask[chosen] and mask[-1]
+        assert not np.any(mask & ~opened)
+        moves = np.flatnonzero(mask[:n])
+        assert len(moves) <= SHORTLIST_MOVES
+        widest = max(widest, len(moves))
+        rate, _ = env.expert.planner.top_rates(SHORTLIST_MOVES)
+        others = [p for p in moves if p != chosen]
+        shut = opened[:n] & ~mask[:n]
+        if chosen < n:
+            shut[chosen] = False
+        if others:
+            assert np.all(rate[others].min() >= rate[shut])
+        _, _, terminated, truncated, _ = env.step(int(rng.choice(np.flatnonzero(mask))))
+        done = terminated or truncated
+    # Not vacuous: the list was full at some state.
+    assert widest == SHORTLIST_MOVES
+    with pytest.raises(ValueError, match="at least 1 move"):
+        shortlist_mask(env.expert, env.belief, moves=0)
+
+
+def test_taking_the_choice_plays_the_filtered_views_episode() -> None:
+    """The short list's view changes only the mask: taking ``active``'s choice at every
+    state reads what the filtered view's expert reads, value for value."""
+    played = []
+    for make in (shortlist_design_lab_env, filtered_design_lab_env):
+        env = make(version=1, **LAB)
+        env.reset(seed=5)
+        done = False
+        while not done:
+            _, _, terminated, truncated, _ = env.step(env.expert.choose(env.belief))
+            done = terminated or truncated
+        played.append([(r.spec, r.rho, r.reading) for r in env.unwrapped.records])
+    assert played[0] == played[1]
+    assert len(played[0]) > 12
+
+
+def test_check_env_of_the_shortlist_view() -> None:
+    """Gymnasium's check passes (its one warning: the env is a wrapper)."""
+    env = shortlist_design_lab_env(version=1, **LAB)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env, skip_render_check=True)
+    messages = [str(w.message) for w in caught]
+    assert all("different from the unwrapped version" in m for m in messages), messages
+
+
+def test_the_lookahead_takes_the_move_whose_greedy_play_out_ends_lowest() -> None:
+    """Along an episode it plays itself: its choice is open in the short list, and the
+    greedy play-out after it ends no higher than after ``active``'s choice and below the
+    criterion now; a play-out leaves the filter as it was (it plays on a copy).  And it
+    departs from ``active`` somewhere."""
+    env = shortlist_design_lab_env(version=1, **LAB)
+    env.reset(seed=3)
+    expert = LookaheadExpert(env.expert)
+    n = env.belief.n_postures
+    departed, done = 0, False
+    while not done:
+        chosen, theirs = expert.choose(env.belief), env.expert.choose(env.belief)
+        assert env.action_masks()[chosen]
+        if theirs < n:
+            planner = env.expert.planner
+            now = planner._criterion_value(), planner.time_s, list(planner.engaged)
+            ends = played_out(planner, chosen), played_out(planner, theirs)
+            assert ends[0] <= ends[1] < now[0]
+            assert (planner._criterion_value(), planner.time_s, list(planner.engaged)) == now
+        departed += chosen != theirs
+        _, _, terminated, truncated, _ = env.step(chosen)
+        done = terminated or truncated
+    assert departed >= 1
+
+
+@pytest.fixture(scope="module")
+def shortlist_policy(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A tiny MaskablePPO policy of the short list's view, played by its argmax."""
+    sb3_contrib = pytest.importorskip("sb3_contrib")
+    env = shortlist_design_lab_env(version=1, **LAB)
+    model = sb3_contrib.MaskablePPO("MlpPolicy", env, n_steps=64, batch_size=32, n_epochs=1,
+                                    seed=0, device="cpu")
+    model.learn(total_timesteps=64)
+    path = tmp_path_factory.mktemp("policy") / "shortlist.zip"
+    return save_policy(model, path, spec_of(env, "MaskablePPO", LAB, play="argmax"))
+
+
+def test_a_shortlist_policy_plays_in_the_lab_as_in_its_view(shortlist_policy: Path) -> None:
+    """``policy:FILE`` of the short list's view narrows its mask as the view did: its
+    episode in the lab is the view's with the same network's most likely open operation."""
+    assert read_spec(shortlist_policy).flicks == "shortlist"
+    agent = get_agent(f"policy:{shortlist_policy}")
+    assert isinstance(agent, DesignPolicyAgent)
+    episode = run_episode(gym.make(orthoglide_env.LAB_ENV_ID, **LAB), agent, seed=4)
+    view = shortlist_design_lab_env(version=1, **LAB)
+    observation, _ = view.reset(seed=4)
+    done = False
+    while not done:
+        logits = agent.actor.logits(observation)
+        chosen = int(np.argmax(np.where(view.action_masks(), logits, -np.inf)))
+        observation, _, terminated, truncated, _ = view.step(chosen)
+        done = terminated or truncated
+    played = [(r.spec, r.rho, r.reading) for r in view.unwrapped.records]
+    assert played == [(r.spec, r.rho, r.reading) for r in episode.records]
+    assert len(played) > 12
