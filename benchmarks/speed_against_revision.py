@@ -24,7 +24,8 @@ active     ``benchmarks/bench_active.py``'s sweep (``active`` x ``extended``, la
            hour, ``--jobs 2``); every trial (its readings, time and errors) must be the
            same bytes: the plans are identical
 suite      ``CI=true make test`` in a fresh clone of each (HEAD and ``REV``): the wall
-           time, the venv's build included, and the number of tests that passed
+           time, the venv's build included, and the number of tests that passed; beside
+           them the venv's wall time and the tests' CPU seconds
 =========  ============================================================================
 
 ``REV``'s outputs may differ for reasons of their own (a warning's wording changed since):
@@ -40,6 +41,7 @@ import argparse
 import hashlib
 import os
 import re
+import resource
 import subprocess
 import sys
 import tempfile
@@ -96,17 +98,31 @@ def active(tree: Path, args: argparse.Namespace) -> tuple[float, str]:
     return _timed([sys.executable, "-c", ACTIVE, str(args.active_machines)], tree)
 
 
+def _children_cpu() -> float:
+    """CPU seconds (user + system) of this process's ended children so far."""
+    used = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return used.ru_utime + used.ru_stime
+
+
 def suite(tree: Path, _: argparse.Namespace) -> tuple[float, str]:
-    """``CI=true make test`` in a fresh clone of ``tree``'s checked-out commit; prints the
-    number of tests that passed."""
+    """``CI=true make test`` in a fresh clone of ``tree``'s checked-out commit, its venv
+    built first by make (the build's wall seconds apart: its share of the total); prints
+    the number of tests that passed and the CPU seconds of the tests' part (lint, compile,
+    pytest and its workers and the commands they start), which a loaded machine's wall
+    time hides."""
     with tempfile.TemporaryDirectory() as tmp:
         clone = Path(tmp) / "clone"
         subprocess.run(["git", "-c", "advice.detachedHead=false", "clone", "--quiet", str(tree),
                         str(clone)], check=True)
-        env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
-        seconds, out = _timed(["make", "test"], clone, dict(env, CI="true"))
+        env = dict({k: v for k, v in os.environ.items()
+                    if k not in ("PYTHONPATH", "VIRTUAL_ENV")}, CI="true")
+        venv, _ = _timed(["make", ".venv/.installed"], clone, env)
+        cpu = _children_cpu()
+        tests, out = _timed(["make", "test"], clone, env)
+        cpu = _children_cpu() - cpu
     passed = re.findall(r"(\d+) passed", out)
-    return seconds, f"{passed[-1] if passed else '?'} passed"
+    return venv + tests, (f"{passed[-1] if passed else '?'} passed (venv {venv:.0f} s, "
+                          f"tests {tests:.0f} s and {cpu:.0f} CPU-s)")
 
 
 RUNNERS: dict[str, Callable[[Path, argparse.Namespace], tuple[float, str]]] = {

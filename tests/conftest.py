@@ -136,6 +136,8 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """The tests marked ``slow`` run first, each in collection order.  Spread over workers
     (``make test``: ``-n auto``), the suite lasts as long as its busiest worker: a long
     test handed out last would keep one worker busy while the others idle, whereas
-    started first it overlaps the many short ones.  The order is only a schedule: no test
+    started first it overlaps the many short ones.  ``make test`` lets a worker that runs
+    out take half of another's queue (``--dist worksteal``): the default's opening blocks
+    gave every slow test to the first worker.  The order is only a schedule: no test
     depends on another having run."""
     items.sort(key=lambda item: item.get_closest_marker("slow") is None)

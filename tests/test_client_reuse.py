@@ -126,6 +126,7 @@ def test_stands_are_drawn_for_pictures_only_and_once() -> None:
         sim.close()
 
 
+@pytest.mark.slow
 def test_an_env_keeps_one_client_over_200_resets() -> None:
     base = _connected_clients()
     env = gym.make(orthoglide_env.ENV_ID, backend="pybullet", render_mode="rgb_array")

@@ -251,11 +251,25 @@ def _runs(line: str, runnable: bool) -> bool:
     return runnable and not any(PLACEHOLDER.search(w) for w in shlex.split(line, comments=True))
 
 
+#: Agents that design their experiment before the first reading: a line that plays one
+#: costs a plan of up to half a CPU-minute, whatever its command.
+PLANNING = ("optimal", "active")
+
+
+def _plans(argv: list[str]) -> bool:
+    """Whether ``argv`` runs a comparison or an agent of :data:`PLANNING`."""
+    agents = [a for option in ("--agents", "--agent") if option in argv
+              for a in argv[argv.index(option) + 1].split(",")]
+    return argv[0] == "compare" or any(a.startswith(PLANNING) for a in agents)
+
+
 def _scheduled(case: tuple[str, str, list[str], bool]) -> Any:
-    """``case`` as a parameter; a ``compare`` it runs is marked ``slow`` (scheduled first:
-    its agents' plans take up to half a CPU-minute)."""
+    """``case`` as a parameter; a comparison or a planning agent it runs is marked
+    ``slow`` (scheduled first: a calibration with ``optimal`` alone took 55 s of a loaded
+    suite's wall time, and handed out among the last short tests such a line would keep one
+    worker busy while the other idles)."""
     where, line, argv, runnable = case
-    slow = argv[0] == "compare" and _runs(line, runnable) and not _cannot_run_here(argv)
+    slow = _plans(argv) and _runs(line, runnable) and not _cannot_run_here(argv)
     return pytest.param(*case, id=where, marks=[pytest.mark.slow] if slow else [])
 
 

@@ -15,6 +15,7 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 
 
+@pytest.mark.slow
 def test_the_site_builds_without_a_warning(tmp_path: Path) -> None:
     pytest.importorskip("myst_parser", reason="the extra 'docs' is not installed")
     pytest.importorskip("furo", reason="the extra 'docs' is not installed")

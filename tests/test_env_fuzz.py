@@ -95,6 +95,7 @@ def fuzz(env: gym.Env, steps: int, seed: int) -> tuple[int, int]:
     return accepted, refused
 
 
+@pytest.mark.slow
 def test_fuzz_exact_backend_thousands_of_steps() -> None:
     env = gym.make(orthoglide_env.ENV_ID, backend="exact")
     accepted, refused = fuzz(env, 4000, seed=1)

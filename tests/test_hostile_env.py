@@ -169,6 +169,7 @@ ELEMENTS = st.one_of(
 )
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(ELEMENTS, min_size=3, max_size=3))
 def test_an_action_is_accepted_exactly_when_it_is_three_real_numbers_in_limits(

@@ -259,6 +259,7 @@ def test_the_typeset_pdf_is_the_page_with_its_pictures(paper_plan, tmp_path) -> 
                abs(float(p.mediabox.height) - 841.89) < 0.1 for p in pages)
 
 
+@pytest.mark.slow
 def test_plan_pdf_without_the_extra_says_so_in_one_line(tmp_path, monkeypatch,
                                                         capsys) -> None:
     """Without WeasyPrint `plan --pdf` still writes the PDF, drawn with matplotlib, and one

@@ -124,6 +124,7 @@ def test_the_block_deviation_is_drawn_within_its_grade() -> None:
                           block.unwrapped._batch.machines.to_vector())
 
 
+@pytest.mark.slow
 def test_an_agent_with_the_reference_keeps_its_time_back() -> None:
     """``paper+reference`` plays the paper's procedure, then the reference's, within the
     budget; an agent that plans to the budget ends its own part that much earlier."""

@@ -150,6 +150,7 @@ def _answering(env: gym.Env, observation: dict, slip):
     return say, answer
 
 
+@pytest.mark.slow
 def test_an_impossible_reading_is_asked_again_and_a_knock_offers_a_re_zero(tmp_path) -> None:
     from calibrators.workflow.session import Session
 

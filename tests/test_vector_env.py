@@ -103,6 +103,7 @@ def copied(kwargs: dict) -> dict:
     return {**kwargs, "options": options}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", list(AutoresetMode))
 @pytest.mark.parametrize("noise", [{}, {"gauge_sigma": 0.0, "gauge_resolution": 0.0}],
                          ids=["noisy", "ideal"])

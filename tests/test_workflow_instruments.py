@@ -200,6 +200,7 @@ class _Technician:
         return float(self.observation["gauges"][k]) if self.observation["valid"][k] else None
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_a_session_asks_each_instrument_reading_and_re_asks_an_impossible_one(
         name: str, tmp_path: Path) -> None:

@@ -162,6 +162,7 @@ def test_the_widening_against_a_harsher_world_counts_only_what_the_told_one_leav
     assert nothing == pytest.approx(1.0)
 
 
+@pytest.mark.slow
 def test_the_power_bounds_the_share_flagged_from_below() -> None:
     """Family 1 drawn at a scale above the told one, 300 machines a case: the share the
     world test flags is at least the bound's mean less three binomial standard deviations
