@@ -132,6 +132,37 @@ def assert_batch_reads_as_alone(env_id: str, steps: list[dict[str, Any]], defaul
     return batched
 
 
+def tiny_maskable_policy(env: gym.Env, lab: dict[str, Any], path: Path) -> Path:
+    """A MaskablePPO policy of ``env`` after one update of 64 steps, saved at ``path`` with
+    the spec of ``lab`` to be played by its argmax: enough to check how a file plays, not
+    how well (the caller skips first where sb3-contrib is absent)."""
+    import sb3_contrib
+
+    from calibrators.agents.policy import save_policy, spec_of
+    model = sb3_contrib.MaskablePPO("MlpPolicy", env, n_steps=64, batch_size=32, n_epochs=1,
+                                    seed=0, device="cpu")
+    model.learn(total_timesteps=64)
+    return save_policy(model, path, spec_of(env, "MaskablePPO", lab, play="argmax"))
+
+
+def assert_view_plays_as_lab(view: gym.Env, agent: Any, episode: Episode, seed: int) -> None:
+    """``view``, stepped with ``agent``'s network's most likely open operation from a reset
+    at ``seed``, reads what the lab episode ``episode`` of the ``policy:FILE`` agent read,
+    reading for reading; more than a dozen of them, so it moved beyond Zero's first
+    readings and the check is not vacuous."""
+    observation, _ = view.reset(seed=seed)
+    assert view.observation_space.contains(observation)
+    done = False
+    while not done:
+        logits = agent.actor.logits(observation)
+        chosen = int(np.argmax(np.where(view.action_masks(), logits, -np.inf)))
+        observation, _, terminated, truncated, _ = view.step(chosen)
+        done = terminated or truncated
+    played = [(r.spec, r.rho, r.reading) for r in view.unwrapped.records]
+    assert played == [(r.spec, r.rho, r.reading) for r in episode.records]
+    assert len(played) > 12
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """The tests marked ``slow`` run first, each in collection order.  Spread over workers
     (``make test``: ``-n auto``), the suite lasts as long as its busiest worker: a long

@@ -7,13 +7,13 @@ import warnings
 from pathlib import Path
 
 import gymnasium as gym
-import numpy as np
 import pytest
+from conftest import assert_view_plays_as_lab, tiny_maskable_policy
 from gymnasium.utils.env_checker import check_env
 
 import orthoglide_env
 from calibrators.agents.names import get_agent
-from calibrators.agents.policy import DesignPolicyAgent, read_spec, save_policy, spec_of
+from calibrators.agents.policy import DesignPolicyAgent, read_spec
 from calibrators.planning.active_expert import FilteredDesignLab, filtered_design_lab_env
 from calibrators.planning.design_expert import PlanExpert
 from calibrators.study import compare
@@ -92,13 +92,9 @@ def filtered_policy(tmp_path_factory: pytest.TempPathFactory, request: pytest.Fi
                     ) -> Path:
     """A tiny MaskablePPO policy of the filtered view (v1; its observation with the
     filter's reach or not), played by its argmax."""
-    sb3_contrib = pytest.importorskip("sb3_contrib")
+    pytest.importorskip("sb3_contrib")
     env = filtered_design_lab_env(version=1, reach=request.param, **LAB)
-    model = sb3_contrib.MaskablePPO("MlpPolicy", env, n_steps=64, batch_size=32, n_epochs=1,
-                                    seed=0, device="cpu")
-    model.learn(total_timesteps=64)
-    path = tmp_path_factory.mktemp("policy") / "filtered.zip"
-    return save_policy(model, path, spec_of(env, "MaskablePPO", LAB, play="argmax"))
+    return tiny_maskable_policy(env, LAB, tmp_path_factory.mktemp("policy") / "filtered.zip")
 
 
 def test_a_filtered_policy_plays_in_the_lab_as_in_its_view(filtered_policy: Path) -> None:
@@ -113,15 +109,4 @@ def test_a_filtered_policy_plays_in_the_lab_as_in_its_view(filtered_policy: Path
     episode = run_episode(gym.make(orthoglide_env.LAB_ENV_ID, **LAB), agent, seed=4)
     view = filtered_design_lab_env(version=1, reach=spec.reach, **LAB)
     assert view.observation_space.shape[0] == 272 + spec.reach * view.belief.n_postures
-    observation, _ = view.reset(seed=4)
-    assert view.observation_space.contains(observation)
-    done = False
-    while not done:
-        logits = agent.actor.logits(observation)
-        chosen = int(np.argmax(np.where(view.action_masks(), logits, -np.inf)))
-        observation, _, terminated, truncated, _ = view.step(chosen)
-        done = terminated or truncated
-    played = [(r.spec, r.rho, r.reading) for r in view.unwrapped.records]
-    assert played == [(r.spec, r.rho, r.reading) for r in episode.records]
-    # Not vacuous: the untrained network moves and reads beyond the first readings at Zero.
-    assert len(played) > 12
+    assert_view_plays_as_lab(view, agent, episode, 4)

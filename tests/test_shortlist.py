@@ -10,11 +10,12 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import assert_view_plays_as_lab, tiny_maskable_policy
 from gymnasium.utils.env_checker import check_env
 
 import orthoglide_env
 from calibrators.agents.names import get_agent
-from calibrators.agents.policy import DesignPolicyAgent, read_spec, save_policy, spec_of
+from calibrators.agents.policy import DesignPolicyAgent, read_spec
 from calibrators.planning.active_expert import filtered_design_lab_env
 from calibrators.planning.shortlist import (
     SHORTLIST_MOVES,
@@ -117,13 +118,9 @@ def test_the_lookahead_takes_the_move_whose_greedy_play_out_ends_lowest() -> Non
 @pytest.fixture(scope="module")
 def shortlist_policy(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A tiny MaskablePPO policy of the short list's view, played by its argmax."""
-    sb3_contrib = pytest.importorskip("sb3_contrib")
+    pytest.importorskip("sb3_contrib")
     env = shortlist_design_lab_env(version=1, **LAB)
-    model = sb3_contrib.MaskablePPO("MlpPolicy", env, n_steps=64, batch_size=32, n_epochs=1,
-                                    seed=0, device="cpu")
-    model.learn(total_timesteps=64)
-    path = tmp_path_factory.mktemp("policy") / "shortlist.zip"
-    return save_policy(model, path, spec_of(env, "MaskablePPO", LAB, play="argmax"))
+    return tiny_maskable_policy(env, LAB, tmp_path_factory.mktemp("policy") / "shortlist.zip")
 
 
 def test_a_shortlist_policy_plays_in_the_lab_as_in_its_view(shortlist_policy: Path) -> None:
@@ -133,14 +130,4 @@ def test_a_shortlist_policy_plays_in_the_lab_as_in_its_view(shortlist_policy: Pa
     agent = get_agent(f"policy:{shortlist_policy}")
     assert isinstance(agent, DesignPolicyAgent)
     episode = run_episode(gym.make(orthoglide_env.LAB_ENV_ID, **LAB), agent, seed=4)
-    view = shortlist_design_lab_env(version=1, **LAB)
-    observation, _ = view.reset(seed=4)
-    done = False
-    while not done:
-        logits = agent.actor.logits(observation)
-        chosen = int(np.argmax(np.where(view.action_masks(), logits, -np.inf)))
-        observation, _, terminated, truncated, _ = view.step(chosen)
-        done = terminated or truncated
-    played = [(r.spec, r.rho, r.reading) for r in view.unwrapped.records]
-    assert played == [(r.spec, r.rho, r.reading) for r in episode.records]
-    assert len(played) > 12
+    assert_view_plays_as_lab(shortlist_design_lab_env(version=1, **LAB), agent, episode, 4)
