@@ -75,6 +75,22 @@ def test_a_visit_reads_each_slot_once_and_at_most_its_stands():
     assert one[0] > both and one[1] == pytest.approx(apart[1], rel=bound.GAP_SHARE)
 
 
+def test_a_slot_the_stands_do_not_start_at_pays_for_its_re_mount():
+    # Slot 1 is not where a stand starts: each of its readings costs its share of a
+    # re-mount, remount * settle / seconds, on top of its visit; the least f over that one
+    # budget by brute force.
+    a, b, seconds, settle, remount = 2.0, 1.5, 60.0, 1.0, 20.0
+    visits = Visits(seconds, settle, 2.0, 6, (0,), remount)
+    moved = remount * settle / seconds
+    first = np.linspace(0.0, seconds / settle, 200001)
+    second = (seconds - settle * first) / (settle + moved)
+    best = np.min(1 / (1 + first * a**2) + 1 / (1 + second * b**2))
+    lower, value, _ = solve(tiny(a, b), visits, np.zeros(0, dtype=int))
+    assert lower <= best + 1e-9 <= value + 2e-9
+    free = solve(tiny(a, b), Visits(seconds, settle, 2.0, 6), np.zeros(0, dtype=int))
+    assert free[1] < best
+
+
 def test_the_laser_pays_its_dwell_on_a_visit():
     # One dial candidate on the first unknown, one laser candidate on the second: the
     # least of f over the polytope, found by brute force over the laser's readings L
@@ -192,11 +208,13 @@ def test_the_drives_weight_is_the_predicted_frames():
     assert np.sum(weight * covariance) == pytest.approx(expected**2, rel=1e-9)
 
 
-def _seconds_needed(model: BoundModel, counts: np.ndarray, stands: int) -> float:
-    """The least seconds of settles and dwells that readings ``counts`` need in the bound's
-    polytope: at each posture as many visits as its most read slot and its readings over
-    ``stands``, a visit per bar reading, and the laser's dwells on as many visits (a visit
-    of their own where they outnumber the rest)."""
+def _seconds_needed(model: BoundModel, counts: np.ndarray, stands: int, seconds: float
+                    ) -> float:
+    """The least seconds that readings ``counts`` need in the bound's polytope of
+    ``seconds``: at each posture as many visits as its most read slot and its readings over
+    ``stands``, a visit per bar reading, the laser's dwells on as many visits (a visit of
+    their own where they outnumber the rest), and each reading of a slot the stands do not
+    start at its share of a re-mount."""
     dial = np.flatnonzero(model.laser == -1)
     posture = model.label[dial, 1]
     most = np.zeros(posture.max() + 1)
@@ -204,7 +222,9 @@ def _seconds_needed(model: BoundModel, counts: np.ndarray, stands: int) -> float
     spread = np.bincount(posture, counts[dial], minlength=len(most)) / stands
     visits = np.maximum(most, spread).sum() + counts[model.laser == bound.BAR].sum()
     laser = counts[model.laser >= 0].sum()
-    return (TIME.settle_and_read_s * max(visits, laser) + TIME.interferometer_target_s * laser)
+    moved = counts[dial][~np.isin(model.label[dial, 0], PAPER_SLOTS[:stands])].sum()
+    return (TIME.settle_and_read_s * max(visits, laser) + TIME.interferometer_target_s * laser
+            + moved * TIME.remount_s * TIME.settle_and_read_s / seconds)
 
 
 def _random_plan(env: gym.Env, model: BoundModel, seed: int) -> tuple[list[dict], float, set]:
@@ -265,10 +285,10 @@ def _random_plan(env: gym.Env, model: BoundModel, seed: int) -> tuple[list[dict]
 @pytest.mark.slow
 def test_plans_of_the_labs_operations_lie_in_the_polytope_and_above_the_bound(quick):
     # Random plans played in the lab itself, its clock the judge: the readings each takes
-    # (on the bound's candidates) need no more seconds in the bound's polytope than the
-    # lab took, less the set-ups the bound takes off (the laser's soak and one set-up per
-    # drive, each giving back its dwell; the pivot's), so each plan's f is above the
-    # certified bound of its own time.
+    # (on the bound's candidates) need no more seconds in the bound's polytope (re-mounts
+    # priced per reading) than the lab took, less the set-ups the bound takes off (the
+    # laser's soak and one set-up per drive, each giving back its dwell; the pivot's), so
+    # each plan's f is above the certified bound of its own time.
     model = bound_model(PROTOTYPE, LAB, SIGMA, True, True)
     stands = len(PAPER_SLOTS)
     env = gym.make(orthoglide_env.LAB_V3_ENV_ID, backend="exact", conditions="lab",
@@ -282,7 +302,7 @@ def test_plans_of_the_labs_operations_lie_in_the_polytope_and_above_the_bound(qu
                     - (TIME.ballbar_setup_s if pivot else 0.0)
                     + TIME.interferometer_target_s * len(drives))
             assert counts.sum() > 0
-            assert _seconds_needed(model, counts, stands) <= left + 1e-9, seed
+            assert _seconds_needed(model, counts, stands, left) <= left + 1e-9, seed
         found = lower_bound(PROTOTYPE, LAB, SIGMA, seconds, ("dial", "interferometer",
                                                               "ballbar"))
         assert found.bound_mm <= np.sqrt(model.value(counts))

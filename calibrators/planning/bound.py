@@ -35,8 +35,11 @@ plan (a Gaussian posterior only narrows when more is known or read):
   do a drive's set-ups and the ballbar's (a shared zero is separate zeros known to be
   equal; the pivots' centres likewise);
 * a stand reads wherever the nominal machine's tip touches its bar (a priori contact
-  above 0), and mounting costs nothing: the stands may be at any slots on any visit;
-  driving between postures, the levers and overtravels cost nothing;
+  above 0), and the stands may be at any slots on any visit, at a fraction of the
+  re-mounts' price: a slot the stands do not start at (the paper's) is read only after a
+  re-mount there, and on no more than ``T / settle`` visits, so each of its readings
+  carries ``remount settle / T`` seconds (:attr:`Visits.moved_s`), and nothing else of
+  mounting is priced; driving between postures, the levers and overtravels cost nothing;
 * the laser's and the pivot's set-ups cost their time table's work and no more (their
   drive to Zero and back is free), and the visit a laser's set-up makes at Zero reads
   the laser without a dwell: each drive set up gives one dwell back.
@@ -54,7 +57,8 @@ needs ``settle V + dwell L <= T`` and ``L <= V``, and a posture's readings are a
 visits each reading a set of at most ``stands`` of its slots (the polytope of
 :class:`Visits`).  Before, a dial reading was priced at a sixth of a visit wherever it
 was, so one visit could read six slots at six postures, and the bar on top: a looser
-bound (0.48 um against 0.81 um under ``lab``, one hour, the three instruments).
+bound (0.48 um against 0.87 um under ``lab``, one hour, the three instruments; 0.81 um
+with the visits priced and mounting free).
 
 Not relaxed: the set-ups.  The laser's set-up on a drive is a fixed cost paid once or not
 at all (its soak before the first), and so is the ballbar's pivot: the bound is the least
@@ -85,8 +89,9 @@ from scipy.sparse import csr_matrix, vstack
 from calibrators.estimators.consider import DEFAULT_NODE_SPACING, lead_terms
 from calibrators.planning.instruments import Bundle, reading_rows
 from orthoglide_env.instruments import interferometer
+from orthoglide_env.instruments.slots import PAPER_LAYOUT
 from orthoglide_env.lab.design_belief import N_MACHINE, ZERO_SCALE
-from orthoglide_env.lab.operations import PAPER_SLOTS, TIME, Op
+from orthoglide_env.lab.operations import PAPER_SLOTS, TIME, Op, slot_index
 from orthoglide_env.lab.slot_table import slot_table
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import MachineParams
@@ -333,21 +338,36 @@ class Visits:
     place (a candidate posture, or a ballbar point), reading there each dial slot whose
     candidate it is at most once and at most ``stands`` of them (or the bar's point), and
     the laser at one target for ``dwell_s`` more (a visit of its own where no dial or bar
-    is read)."""
+    is read).  A slot the stands do not ``start`` at is read only after a re-mount there
+    (``remount_s``), so each of its readings adds :attr:`moved_s` to its visit."""
 
     seconds: float
     settle_s: float
     dwell_s: float
     stands: int
+    start: tuple[int, ...] = ()
+    remount_s: float = 0.0
 
-    def most(self, visit_gain: float, laser_gain: float) -> float:
-        """The most that gains (>= 0) of ``visit_gain`` per visit and ``laser_gain`` per
-        laser reading sum to over the polytope: the budget spent on visits to the place of
-        the best visit, with the laser read on none of them or on all (the vertices of
-        ``settle V + dwell L <= seconds``, ``L <= V``)."""
-        plain = visit_gain * self.seconds / self.settle_s
-        both = (visit_gain + laser_gain) * self.seconds / (self.settle_s + self.dwell_s)
-        return max(plain, both)
+    @property
+    def moved_s(self) -> float:
+        """The seconds a reading of a slot the stands do not start at adds: a slot read at
+        all took a re-mount, and no slot is read on more than ``seconds / settle_s``
+        visits, so its readings ``n`` took at least ``n settle_s / seconds`` re-mounts."""
+        return self.remount_s * self.settle_s / self.seconds
+
+    def prices(self, members: list[np.ndarray], grid: np.ndarray) -> np.ndarray:
+        """The seconds of a visit that reads each of ``members`` (dial or bar candidates)."""
+        moved = _moved(grid, self.start)
+        return np.array([self.settle_s + self.moved_s * np.count_nonzero(np.isin(m, moved))
+                         for m in members])
+
+
+def _moved(grid: np.ndarray, start: tuple[int, ...]) -> np.ndarray:
+    """The dial candidates (of ``grid``, see :func:`dial_grid`) of the slots not in
+    ``start``."""
+    columns = np.setdiff1d(np.arange(grid.shape[1]), start)
+    cells = grid[:, columns]
+    return cells[cells >= 0]
 
 
 def dial_grid(model: BoundModel) -> np.ndarray:
@@ -359,16 +379,35 @@ def dial_grid(model: BoundModel) -> np.ndarray:
     return grid
 
 
-def best_visits(grid: np.ndarray, fall: np.ndarray, stands: int
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """Each posture's best visit against the readings' gains ``fall`` (N,, >= 0): its gain
-    (P,), the sum of its ``stands`` best dial candidates', and those candidates (P, k; -1
-    where fewer touch)."""
-    k = min(stands, grid.shape[1])
-    gains = np.where(grid >= 0, fall[grid], -1.0)
-    top = np.argpartition(-gains, k - 1, axis=1)[:, :k]
-    picked = np.take_along_axis(grid, top, axis=1)
-    return np.take_along_axis(np.maximum(gains, 0.0), top, axis=1).sum(axis=1), picked
+def best_visits(grid: np.ndarray, fall: np.ndarray, visits: Visits, base_s: float,
+                base_gain: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Each posture's best visit per second against the readings' gains ``fall`` (N,,
+    >= 0), a visit of ``base_s`` and ``base_gain`` (the laser's, when it reads) before its
+    dials: its gain per second (P,), and the dial candidates it reads (P, m; -1: none).
+    The best of each count of the starting slots' candidates and the others' is the top
+    of each (the others' each cost :attr:`Visits.moved_s` alike), so the counts are
+    enumerated."""
+    k = min(visits.stands, grid.shape[1])
+    gains = np.where(grid >= 0, fall[grid], -np.inf)
+    start = np.isin(np.arange(grid.shape[1]), visits.start)
+    ranked, sums = [], []
+    for columns in (np.flatnonzero(start), np.flatnonzero(~start)):
+        order = np.argsort(-gains[:, columns], axis=1, kind="stable")[:, :k]
+        ranked.append(np.take_along_axis(grid[:, columns], order, axis=1))
+        top = np.take_along_axis(gains[:, columns], order, axis=1)
+        sums.append(np.concatenate([np.zeros((len(grid), 1)), np.cumsum(top, axis=1)], axis=1))
+    own, other = np.arange(sums[0].shape[1]), np.arange(sums[1].shape[1])
+    with np.errstate(invalid="ignore"):
+        rate = ((base_gain + sums[0][:, :, None] + sums[1][:, None, :])
+                / (base_s + visits.moved_s * other[None, None, :]))
+    rate[:, own[:, None] + other[None, :] > k] = -np.inf
+    rate = np.nan_to_num(rate, nan=-np.inf).reshape(len(grid), -1)
+    best = np.argmax(rate, axis=1)
+    a, b = np.divmod(best, len(other))
+    picked = np.concatenate([
+        np.where(np.arange(ranked[0].shape[1]) < a[:, None], ranked[0], -1),
+        np.where(np.arange(ranked[1].shape[1]) < b[:, None], ranked[1], -1)], axis=1)
+    return rate[np.arange(len(grid)), best], picked
 
 
 def gap(visits: Visits, grid: np.ndarray, lasers: np.ndarray, bars: np.ndarray,
@@ -376,14 +415,17 @@ def gap(visits: Visits, grid: np.ndarray, lasers: np.ndarray, bars: np.ndarray,
     """The Frank-Wolfe duality gap at ``counts`` where the readings' gains (minus ``f``'s
     gradient) are ``fall``: ``max over the polytope of fall . s - fall . n``.  ``f`` is
     convex, so ``f(n) - gap`` is below its least value over the polytope.  The linear
-    oracle: the best visit is a posture's ``stands`` best dial candidates or a bar point
-    (the laser candidates ``lasers`` and bar points ``bars`` of the problem's set-ups),
-    the best laser reading the best target's (:meth:`Visits.most`)."""
-    visit = float(best_visits(grid, fall, visits.stands)[0].max())
-    if bars.size:
-        visit = max(visit, float(fall[bars].max()))
-    laser = float(fall[lasers].max()) if lasers.size else 0.0
-    return visits.most(visit, laser) - float(fall @ counts)
+    oracle: the polytope's vertices spend the budget on one kind of visit, so the most is
+    the budget times the best gain per second of a visit (:func:`best_visits`, or a bar
+    point of ``bars``), reading the laser's best candidate of ``lasers`` or not."""
+    settle, both = visits.settle_s, visits.settle_s + visits.dwell_s
+    bar = float(fall[bars].max()) if bars.size else -np.inf
+    rate = max(float(best_visits(grid, fall, visits, settle)[0].max()), bar / settle)
+    if lasers.size:
+        laser = float(fall[lasers].max())
+        rate = max(rate, float(best_visits(grid, fall, visits, both, laser)[0].max()),
+                   (bar + laser) / both)
+    return visits.seconds * rate - float(fall @ counts)
 
 
 def _atoms(members: list[np.ndarray], n: int) -> csr_matrix:
@@ -408,30 +450,30 @@ def solve(model: BoundModel, visits: Visits, lasers: np.ndarray,
     A-optimality's monotone convergence) over visits, with their columns generated.
 
     A design is a share of the budget per kind of visit (a posture with a set of at most
-    ``stands`` of its dial candidates, or a bar point), ``visit_s`` each, and per laser
-    candidate, ``dwell_s`` each.  Each share is multiplied by its fall of ``f`` per second
-    against the shares' mean: the fixed point is the optimum's condition, every kind used
-    gains as much per second.  The laser's shares are capped so that it reads on at most
-    every visit.  Every :data:`GAP_EVERY` steps the duality gap (:func:`gap`) is taken
-    over the whole polytope (``f(n) - gap`` is below the least ``f`` there for any ``n``),
-    and each posture whose best visit (:func:`best_visits`) gains more than its kinds
-    there is given that visit as a new kind, with half of the posture's share.  The best
-    certified value is returned with the final design's value and counts.  Stops once
-    the gap is :data:`GAP_SHARE` of the value, the certified value passes ``stop_above``
-    (a problem that cannot be the least), or after :data:`MAX_ITERATIONS`."""
+    ``stands`` of its dial candidates, or a bar point), each at its price
+    (:meth:`Visits.prices`), and per laser candidate, ``dwell_s`` each.  Each share is
+    multiplied by its fall of ``f`` per second against the shares' mean: the fixed point
+    is the optimum's condition, every kind used gains as much per second.  The laser's
+    shares are capped so that it reads on at most every visit.  Every :data:`GAP_EVERY`
+    steps the duality gap (:func:`gap`) is taken over the whole polytope (``f(n) - gap``
+    is below the least ``f`` there for any ``n``), and each posture whose best visit
+    (:func:`best_visits`) gains more per second than its kinds there is given that visit
+    as a new kind, with half of the posture's share.  The best certified value is
+    returned with the final design's value and counts.  Stops once the gap is
+    :data:`GAP_SHARE` of the value, the certified value passes ``stop_above`` (a problem
+    that cannot be the least), or after :data:`MAX_ITERATIONS`."""
     rows, factor = model.rows, model.factor
     grid = dial_grid(model)
     bars = np.zeros(0, dtype=int) if bars is None else bars
-    _, picked = best_visits(grid, _fall(rows, factor), visits.stands)
+    _, picked = best_visits(grid, _fall(rows, factor), visits, visits.settle_s)
     members = [p[p >= 0] for p in picked] + [np.array([b]) for b in bars]
     place = np.concatenate([np.arange(len(picked)), len(picked) + np.arange(len(bars))])
     touched = np.array([len(m) > 0 for m in members])
     members, place = [m for m, t in zip(members, touched, strict=True) if t], place[touched]
     atoms = _atoms(members, len(rows))
-    price = np.concatenate([np.full(len(members), visits.settle_s),
+    price = np.concatenate([visits.prices(members, grid),
                             np.full(len(lasers), visits.dwell_s)])
     share = np.full(len(price), 1.0 / len(price))
-    cap = visits.dwell_s / (visits.settle_s + visits.dwell_s)
     lower = -np.inf
     for iteration in range(MAX_ITERATIONS + 1):
         taken = share * visits.seconds / price
@@ -446,52 +488,62 @@ def solve(model: BoundModel, visits: Visits, lasers: np.ndarray,
             if (value - lower <= GAP_SHARE * value or lower > stop_above
                     or iteration == MAX_ITERATIONS):
                 break
-            atoms, place, share, gains = _generate(atoms, place, share, gains, grid, fall,
-                                                   visits.stands)
-            price = np.concatenate([np.full(atoms.shape[0], visits.settle_s),
-                                    np.full(len(lasers), visits.dwell_s)])
+            atoms, place, share, gains, price = _generate(
+                atoms, place, share, gains, price, grid, fall, visits)
         per_second = gains / price
         share = share * (per_second / float(share @ per_second)) ** POWER
         share /= share.sum()
-        laser = np.arange(len(share)) >= atoms.shape[0]
-        if share[laser].sum() > cap:
-            share[laser] *= cap / share[laser].sum()
-            share[~laser] *= (1 - cap) / share[~laser].sum()
+        share = _cap_laser(share, price, atoms.shape[0], visits.dwell_s)
     return lower, value, counts
 
 
+def _cap_laser(share: np.ndarray, price: np.ndarray, n_atoms: int, dwell_s: float
+               ) -> np.ndarray:
+    """``share`` with the laser's (after the ``n_atoms`` visits') scaled down, the visits'
+    up, where it would read on more than every visit (``L <= V``)."""
+    laser = share[n_atoms:].sum() / dwell_s
+    visits = float(share[:n_atoms] @ (1.0 / price[:n_atoms]))
+    if laser <= visits:
+        return share
+    # beta (visits' scale) and alpha (the laser's): alpha L = beta V, alpha sL + beta sV = 1.
+    beta = 1.0 / (share[:n_atoms].sum() + dwell_s * visits)
+    alpha = beta * visits / laser
+    return np.concatenate([share[:n_atoms] * beta, share[n_atoms:] * alpha])
+
+
 def _generate(atoms: csr_matrix, place: np.ndarray, share: np.ndarray, gains: np.ndarray,
-              grid: np.ndarray, fall: np.ndarray, stands: int
-              ) -> tuple[csr_matrix, np.ndarray, np.ndarray, np.ndarray]:
+              price: np.ndarray, grid: np.ndarray, fall: np.ndarray, visits: Visits
+              ) -> tuple[csr_matrix, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`solve`'s column generation: the kinds of visit ``atoms`` at ``place`` with
-    shares ``share`` (the laser's after them) and gains ``gains``, without the kinds whose
-    share has vanished (the multiplicative step never revives one), and with the best
-    visit of each posture that gains more than every kind there, given half of the
-    posture's share."""
+    shares ``share``, gains ``gains`` and prices ``price`` (the laser's after them),
+    without the kinds whose share has vanished (the multiplicative step never revives
+    one), and with the best visit of each posture that gains more per second than every
+    kind there, given half of the posture's share."""
     n_atoms = atoms.shape[0]
     keep = np.concatenate([share[:n_atoms] > VANISHED * share.max(),
                            np.ones(len(share) - n_atoms, dtype=bool)])
     atoms, place = atoms[keep[:n_atoms]], place[keep[:n_atoms]]
-    share, gains = share[keep], gains[keep]
+    share, gains, price = share[keep], gains[keep], price[keep]
     n_atoms = atoms.shape[0]
-    best, picked = best_visits(grid, fall, stands)
+    best, picked = best_visits(grid, fall, visits, visits.settle_s)
     held = np.zeros(len(best))
     dial = place < len(best)
-    np.maximum.at(held, place[dial], gains[:n_atoms][dial])
+    np.maximum.at(held, place[dial], (gains[:n_atoms] / price[:n_atoms])[dial])
     new = np.flatnonzero(best > held * (1 + 1e-9))
     if not new.size:
-        return atoms, place, share, gains
+        return atoms, place, share, gains, price
     owned = np.bincount(place[dial], share[:n_atoms][dial], minlength=len(best))
-    halved = np.isin(place, new)
     share = share.copy()
-    share[:n_atoms][halved] *= 0.5
+    share[:n_atoms][np.isin(place, new)] *= 0.5
     added = 0.5 * owned[new] + VANISHED * share.max()
     members = [picked[p][picked[p] >= 0] for p in new]
+    cost = visits.prices(members, grid)
     atoms = vstack([atoms, _atoms(members, atoms.shape[1])], format="csr")
     share = np.concatenate([share[:n_atoms], added, share[n_atoms:]])
     share /= share.sum()
-    gains = np.concatenate([gains[:n_atoms], best[new], gains[n_atoms:]])
-    return atoms, np.concatenate([place, new]), share, gains
+    gains = np.concatenate([gains[:n_atoms], best[new] * cost, gains[n_atoms:]])
+    price = np.concatenate([price[:n_atoms], cost, price[n_atoms:]])
+    return atoms, np.concatenate([place, new]), share, gains, price
 
 
 @dataclass(frozen=True)
@@ -552,6 +604,8 @@ def lower_bound(design: MachineDesign, conditions: Conditions, dial_sigma: float
     bar = "ballbar" in instruments
     model = (bound_model(design, conditions, float(dial_sigma), owned, True) if bar
              else bound_model(design, conditions, float(dial_sigma), owned))
+    # The lab mounts its stands at the paper's slots at every reset.
+    start = tuple(slot_index(spec, design=design) for spec in PAPER_LAYOUT[:stands])
     choices = [()] + ([c for k in (1, 2, 3) for c in itertools.combinations(range(3), k)]
                       if owned else [])
     # The pivot's set-up is paid once or not at all, as the laser's are.
@@ -567,7 +621,7 @@ def lower_bound(design: MachineDesign, conditions: Conditions, dial_sigma: float
             if seconds <= 0:
                 continue
             visits = Visits(seconds, TIME.settle_and_read_s, TIME.interferometer_target_s,
-                            stands)
+                            stands, start, TIME.remount_s)
             lasers = np.flatnonzero(np.isin(model.laser, drives))
             bars = np.flatnonzero(model.laser == BAR) if pivot else None
             lower, value, counts = solve(model, visits, lasers, best[0] if best else np.inf,
