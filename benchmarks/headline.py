@@ -15,7 +15,7 @@ its budget and instruments too where the folders differ in them.
 (:func:`calibrators.planning.bound.lower_bound`: its dials, and the interferometer when
 the agent needs one; a tracker's readings are not in the bound, so the tracker's ratio,
 marked ``*``, is over the dials' bound and may fall below 1), and the bounds themselves;
-each is kept in the folder (``bound-<instruments>.json``) once computed.  ``--against
+each is kept in the folder (``bound-visits-<instruments>.json``) once computed.  ``--against
 AGENT`` adds every other agent's ratio to AGENT paired on the same machines (median
 with its 95 % interval).  The instruments' headline (docs/instruments.md):
 
@@ -70,8 +70,9 @@ def agent_instruments(agent: str, owned: tuple[str, ...]) -> tuple[str, ...]:
 
 def folder_bound(folder: Path, config: dict, instruments: tuple[str, ...]) -> Bound:
     """The bound of a compare folder's lab with ``instruments``, from the folder when kept
-    there, else computed and kept."""
-    path = folder / f"bound-{'+'.join(instruments)}.json"
+    there, else computed and kept (named for the visit's pricing: a bound a folder kept
+    before it, dial readings priced at a sixth of a visit, is not read)."""
+    path = folder / f"bound-visits-{'+'.join(instruments)}.json"
     if path.exists():
         return Bound.from_dict(json.loads(path.read_text()))
     conditions = Conditions.from_dict({"name": config.get("conditions", "ideal"),

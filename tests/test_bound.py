@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import json
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
+import orthoglide_env
 from calibrators.agents.iso230 import drive_steps, runs_for
 from calibrators.agents.optimal import fixed_plan
 from calibrators.agents.paper import REPETITIONS, paper_plan
@@ -15,7 +17,7 @@ from calibrators.planning import bound
 from calibrators.planning.bound import (
     Bound,
     BoundModel,
-    Budgets,
+    Visits,
     bound_model,
     lower_bound,
     plan_counts,
@@ -23,7 +25,8 @@ from calibrators.planning.bound import (
 )
 from orthoglide_env.instruments.slots import PAPER_LAYOUT
 from orthoglide_env.lab.design_belief import rigid_weight
-from orthoglide_env.lab.operations import PAPER_SLOTS
+from orthoglide_env.lab.operations import PAPER_SLOTS, TIME, Op
+from orthoglide_env.lab.slot_table import slot_table
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
 
@@ -32,22 +35,23 @@ SIGMA = float(np.hypot(0.02, 0.01 / np.sqrt(12)))
 LAB = Conditions("lab")
 
 
-def tiny(a: float, b: float) -> BoundModel:
+def tiny(a: float, b: float, posture_b: int = 1) -> BoundModel:
     """Two unknowns of unit prior, each read by one dial candidate (``a``, ``b`` its
-    whitened sensitivity), the TCP error their plain sum of squares."""
+    whitened sensitivity; slots 0 and 1, at postures 0 and ``posture_b``), the TCP error
+    their plain sum of squares."""
     rows = np.array([[a, 0.0], [0.0, b]])
-    return BoundModel(rows, np.array([-1, -1]), np.array([[0, 0, -1], [1, 0, -1]]),
+    return BoundModel(rows, np.array([-1, -1]), np.array([[0, 0, -1], [1, posture_b, -1]]),
                       np.eye(2), np.zeros(1))
 
 
 def test_tiny_problem_meets_its_analytic_optimum():
-    # f = 1/(1 + n1 a^2) + 1/(1 + n2 b^2) with n1 + n2 = N: equal marginal gains give
-    # n1 = (a - b + N a b^2) / (a b (a + b)).
-    a, b, seconds, price = 2.0, 0.5, 30.0, 1.0
-    n = seconds / price
+    # f = 1/(1 + n1 a^2) + 1/(1 + n2 b^2) with n1 + n2 = N visits (one posture each): equal
+    # marginal gains give n1 = (a - b + N a b^2) / (a b (a + b)).
+    a, b, seconds, settle = 2.0, 0.5, 30.0, 1.0
+    n = seconds / settle
     n1 = (a - b + n * a * b**2) / (a * b * (a + b))
     best = 1 / (1 + n1 * a**2) + 1 / (1 + (n - n1) * b**2)
-    lower, value, counts = solve(tiny(a, b), Budgets(seconds, price, 2.0, 7.0),
+    lower, value, counts = solve(tiny(a, b), Visits(seconds, settle, 2.0, 6),
                                  np.zeros(0, dtype=int))
     # The certificate is below the optimum, and the design above it (both by the
     # theory); the solver's stopping rule puts them within GAP_SHARE of each other.
@@ -56,16 +60,49 @@ def test_tiny_problem_meets_its_analytic_optimum():
     assert counts[0] == pytest.approx(n1, rel=0.02)
 
 
-def test_the_laser_pays_its_visit_and_its_dwell():
+def test_a_visit_reads_each_slot_once_and_at_most_its_stands():
+    # Both slots touch at one posture: with two stands every visit reads both, once each
+    # (no visit reads a slot twice, so no more than N readings of either); with one stand
+    # the visits share them as at two postures.
+    a, b, seconds = 2.0, 0.5, 30.0
+    both = 1 / (1 + seconds * a**2) + 1 / (1 + seconds * b**2)
+    lower, value, counts = solve(tiny(a, b, posture_b=0), Visits(seconds, 1.0, 2.0, 2),
+                                 np.zeros(0, dtype=int))
+    assert lower <= both + 1e-12 <= value + 2e-12
+    assert counts == pytest.approx([seconds, seconds], rel=1e-9)
+    one = solve(tiny(a, b, posture_b=0), Visits(seconds, 1.0, 2.0, 1), np.zeros(0, dtype=int))
+    apart = solve(tiny(a, b), Visits(seconds, 1.0, 2.0, 1), np.zeros(0, dtype=int))
+    assert one[0] > both and one[1] == pytest.approx(apart[1], rel=bound.GAP_SHARE)
+
+
+def test_a_slot_the_stands_do_not_start_at_pays_for_its_re_mount():
+    # Slot 1 is not where a stand starts: each of its readings costs its share of a
+    # re-mount, remount * settle / seconds, on top of its visit; the least f over that one
+    # budget by brute force.
+    a, b, seconds, settle, remount = 2.0, 1.5, 60.0, 1.0, 20.0
+    visits = Visits(seconds, settle, 2.0, 6, (0,), remount)
+    moved = remount * settle / seconds
+    first = np.linspace(0.0, seconds / settle, 200001)
+    second = (seconds - settle * first) / (settle + moved)
+    best = np.min(1 / (1 + first * a**2) + 1 / (1 + second * b**2))
+    lower, value, _ = solve(tiny(a, b), visits, np.zeros(0, dtype=int))
+    assert lower <= best + 1e-9 <= value + 2e-9
+    free = solve(tiny(a, b), Visits(seconds, settle, 2.0, 6), np.zeros(0, dtype=int))
+    assert free[1] < best
+
+
+def test_the_laser_pays_its_dwell_on_a_visit():
     # One dial candidate on the first unknown, one laser candidate on the second: the
-    # least of f over both budgets, found by brute force over the laser's visits.
+    # least of f over the polytope, found by brute force over the laser's readings L
+    # (each on a visit that reads the dial too, the visits' settles and the dwells within
+    # the budget, L at most the visits).
     model = BoundModel(np.array([[1.0, 0.0], [0.0, 3.0]]), np.array([-1, 0]),
                        np.array([[0, 0, -1], [-1, 0, 0]]), np.eye(2), np.zeros(1))
-    budgets = Budgets(40.0, 5.0 / 6, 2.0, 7.0)
-    visits = np.linspace(0.0, budgets.seconds / budgets.visit_s, 200001)
-    dials = (budgets.seconds - budgets.laser_s * visits) / budgets.dial_s
-    best = np.min(1 / (1 + dials) + 1 / (1 + 9 * visits))
-    lower, value, _ = solve(model, budgets, np.array([1]))
+    visits = Visits(40.0, 5.0, 2.0, 6)
+    laser = np.linspace(0.0, visits.seconds / (visits.settle_s + visits.dwell_s), 200001)
+    dials = (visits.seconds - visits.dwell_s * laser) / visits.settle_s
+    best = np.min(1 / (1 + dials) + 1 / (1 + 9 * laser))
+    lower, value, _ = solve(model, visits, np.array([1]))
     # The grid's step moves f by under 1e-9 here.
     assert lower <= best + 1e-9
     assert value >= best - 1e-9
@@ -169,3 +206,105 @@ def test_the_drives_weight_is_the_predicted_frames():
     covariance = spread @ spread.T
     expected = predicted_tcp_frames_many([model], [covariance], None, [drive])[0].rigid.rms
     assert np.sum(weight * covariance) == pytest.approx(expected**2, rel=1e-9)
+
+
+def _seconds_needed(model: BoundModel, counts: np.ndarray, stands: int, seconds: float
+                    ) -> float:
+    """The least seconds that readings ``counts`` need in the bound's polytope of
+    ``seconds``: at each posture as many visits as its most read slot and its readings over
+    ``stands``, a visit per bar reading, the laser's dwells on as many visits (a visit of
+    their own where they outnumber the rest), and each reading of a slot the stands do not
+    start at its share of a re-mount."""
+    dial = np.flatnonzero(model.laser == -1)
+    posture = model.label[dial, 1]
+    most = np.zeros(posture.max() + 1)
+    np.maximum.at(most, posture, counts[dial])
+    spread = np.bincount(posture, counts[dial], minlength=len(most)) / stands
+    visits = np.maximum(most, spread).sum() + counts[model.laser == bound.BAR].sum()
+    laser = counts[model.laser >= 0].sum()
+    moved = counts[dial][~np.isin(model.label[dial, 0], PAPER_SLOTS[:stands])].sum()
+    return (TIME.settle_and_read_s * max(visits, laser) + TIME.interferometer_target_s * laser
+            + moved * TIME.remount_s * TIME.settle_and_read_s / seconds)
+
+
+def _random_plan(env: gym.Env, model: BoundModel, seed: int) -> tuple[list[dict], float, set]:
+    """A random plan of the lab's own operations played on ``env`` (moves to candidate
+    postures, lever flicks, re-mounts, laser set-ups, the ballbar's pivot and moves round
+    its circle): its accepted actions, the seconds the lab's clock took, and the drives
+    the laser was set up on."""
+    rng = np.random.default_rng(seed)
+    env.reset(seed=seed)
+    table = slot_table(PROTOTYPE)
+    # The postures where most of the starting stands touch safely, close together: the
+    # moves' travel and overtravels, which the polytope does not price, stay small, so
+    # the plans come close to its budget.
+    safe, contact = table.prior_reach
+    touching = ((contact > 0) & safe)[list(PAPER_SLOTS)].sum(axis=0)
+    touched = np.argsort(-touching, kind="stable")[:12]
+    held = list(PAPER_SLOTS)
+    stand = {"stand": 0, "slot": 0, "rho": np.zeros(3)}
+    actions, drives = [], set()
+    while len(actions) < 80:
+        kind = rng.choice(["move", "flick", "remount", "align", "pivot"],
+                          p=[0.8, 0.06, 0.03, 0.06, 0.05])
+        plan: list[dict] = []
+        if kind == "move":
+            plan = [{**stand, "op": Op.MOVE, "rho": table.postures[rng.choice(touched)]}]
+        elif kind == "flick":
+            plan = [{**stand, "op": int(rng.choice([Op.LIFT, Op.ENGAGE])),
+                     "stand": int(rng.integers(len(held)))}]
+        elif kind == "remount":
+            free = sorted(set(range(len(table.tip))) - set(held))
+            plan = [{**stand, "op": Op.REMOUNT, "stand": int(rng.integers(len(held))),
+                     "slot": int(rng.choice(free))}]
+        elif kind == "align":
+            # Each drive's set-up once, the pivot's once: the bound takes off no more.
+            axes = sorted({0, 1, 2} - drives)
+            plan = [{**stand, "op": Op.ALIGN, "axis": int(rng.choice(axes))}] if axes else []
+        elif not any(a["op"] == Op.PIVOT for a in actions):
+            # The bar is in from the first move after the pivot and out at the next
+            # other operation (a flick).
+            points = model.bar_points[rng.choice(len(model.bar_points), 12, replace=False)]
+            plan = ([{**stand, "op": Op.PIVOT, "rho": np.array(model.pivot[0]),
+                      "bar": model.pivot[1]}]
+                    + [{**stand, "op": Op.MOVE, "rho": p} for p in points]
+                    + [{**stand, "op": Op.ENGAGE, "stand": 0}])
+        for action in plan:
+            *_, info = env.step({k: (np.asarray(v, dtype=float) if k == "rho" else int(v))
+                                 for k, v in action.items()})
+            if info["refused"]:
+                continue
+            actions.append(action)
+            if action["op"] == Op.REMOUNT:
+                held[action["stand"]] = action["slot"]
+            if action["op"] == Op.ALIGN:
+                drives.add(int(action["axis"]))
+    return actions, float(env.unwrapped._time), drives
+
+
+@pytest.mark.slow
+def test_plans_of_the_labs_operations_lie_in_the_polytope_and_above_the_bound(quick):
+    # Random plans played in the lab itself, its clock the judge: the readings each takes
+    # (on the bound's candidates) need no more seconds in the bound's polytope (re-mounts
+    # priced per reading) than the lab took, less the set-ups the bound takes off (the
+    # laser's soak and one set-up per drive, each giving back its dwell; the pivot's), so
+    # each plan's f is above the certified bound of its own time.
+    model = bound_model(PROTOTYPE, LAB, SIGMA, True, True)
+    stands = len(PAPER_SLOTS)
+    env = gym.make(orthoglide_env.LAB_V3_ENV_ID, backend="exact", conditions="lab",
+                   instruments=["dial", "interferometer", "ballbar"], budget_s=1e6)
+    try:
+        for seed in (1, 2, 3):
+            actions, seconds, drives = _random_plan(env, model, seed)
+            counts = plan_counts(model, PROTOTYPE, PAPER_SLOTS, (True,) * stands, actions)
+            pivot = any(a["op"] == Op.PIVOT for a in actions)
+            left = (seconds - bound.setup_seconds(tuple(drives))
+                    - (TIME.ballbar_setup_s if pivot else 0.0)
+                    + TIME.interferometer_target_s * len(drives))
+            assert counts.sum() > 0
+            assert _seconds_needed(model, counts, stands, left) <= left + 1e-9, seed
+        found = lower_bound(PROTOTYPE, LAB, SIGMA, seconds, ("dial", "interferometer",
+                                                              "ballbar"))
+        assert found.bound_mm <= np.sqrt(model.value(counts))
+    finally:
+        env.close()

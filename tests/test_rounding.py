@@ -75,12 +75,11 @@ def test_a_rounded_plan_lies_above_the_bound_and_near_it(half_hour_plan, monkeyp
     assert counts[model.laser == bound.BAR].sum() == len(bundles[0].path)
     error = float(np.sqrt(model.value(counts)))
     assert found.bound_mm <= error
-    # Within a measured factor: 2.27x here (0.80 um against a bound of 0.35 um after 40
-    # solver steps; the bound reads the bar and the dials on the same visits, a visit's
-    # dials at as many postures as it reads stands, and knows the stands' installations,
-    # the plan does none of it); 2.6x leaves 15 % for changes of the solver's or the
-    # planner's rounding.
-    assert error <= 2.6 * found.bound_mm
+    # Within a measured factor: 1.33x here (0.80 um against a bound of 0.60 um after 40
+    # solver steps; the bound mounts its stands anywhere at a re-mount's share per
+    # reading and knows their installations, and the plan lifts its plungers for the
+    # circles); 1.6x leaves 20 % for changes of the solver's or the planner's rounding.
+    assert error <= 1.6 * found.bound_mm
 
 
 @pytest.mark.slow

@@ -35,15 +35,30 @@ plan (a Gaussian posterior only narrows when more is known or read):
   do a drive's set-ups and the ballbar's (a shared zero is separate zeros known to be
   equal; the pivots' centres likewise);
 * a stand reads wherever the nominal machine's tip touches its bar (a priori contact
-  above 0), mounting costs nothing, and a visit to a posture reads up to ``stands`` dial
-  slots, any of them, at one settle and read each (:data:`~orthoglide_env.lab.
-  operations.TIME`); driving between postures and the levers cost nothing;
-* with the interferometer set up, a reading costs its dwell on top of the visit and the
-  visit reads the dials too: readings of counts ``n_d`` (dials) and ``n_l`` (laser) then
-  need ``settle n_d / stands + dwell n_l <= T`` and ``(settle + dwell) n_l <= T``, two
-  linear budgets (each visit reads at most one laser target and ``stands`` dials);
-* a visit may read the bar as well as the dials and the laser (the lab lifts the plungers
-  for a circle), so the bar's readings need a third, ``settle n_b + dwell n_l <= T``.
+  above 0), and the stands may be at any slots on any visit, at a fraction of the
+  re-mounts' price: a slot the stands do not start at (the paper's) is read only after a
+  re-mount there, and on no more than ``T / settle`` visits, so each of its readings
+  carries ``remount settle / T`` seconds (:attr:`Visits.moved_s`), and nothing else of
+  mounting is priced; driving between postures, the levers and overtravels cost nothing;
+* the laser's and the pivot's set-ups cost their time table's work and no more (their
+  drive to Zero and back is free), and the visit a laser's set-up makes at Zero reads
+  the laser without a dwell: each drive set up gives one dwell back.
+
+What is priced as the lab prices it: the visit.  Every reading is taken on a visit, a
+move that settles at one place and is read (:data:`~orthoglide_env.lab.operations.TIME`'s
+settle and read); a visit to a candidate posture reads each slot that touches there at
+most once (a slot holds one stand) and at most ``stands`` slots; a visit to a ballbar
+point reads the bar and no dial candidate (no candidate posture is a point of the bar's
+circles, and with the bar in a move must stay within its travel of them); with the
+interferometer set up, a visit reads the laser at one target for its dwell more (a visit
+of its own where nothing else is read).  A re-mount's or a set-up's reading at Zero is a
+visit that costs more than one.  So with ``V`` visits and ``L`` laser readings a plan
+needs ``settle V + dwell L <= T`` and ``L <= V``, and a posture's readings are a mix of
+visits each reading a set of at most ``stands`` of its slots (the polytope of
+:class:`Visits`).  Before, a dial reading was priced at a sixth of a visit wherever it
+was, so one visit could read six slots at six postures, and the bar on top: a looser
+bound (0.48 um against 0.87 um under ``lab``, one hour, the three instruments; 0.81 um
+with the visits priced and mounting free).
 
 Not relaxed: the set-ups.  The laser's set-up on a drive is a fixed cost paid once or not
 at all (its soak before the first), and so is the ballbar's pivot: the bound is the least
@@ -51,10 +66,12 @@ over every set of drives set up, with or without the pivot, of the problem with 
 their set-ups, each solved alone (8 or 16 problems, each a group either paid or not, as in
 optimal design with set-up costs).
 
-Each problem is solved by the multiplicative algorithm (:func:`solve`), and certified by
-its Frank-Wolfe duality gap (:func:`gap`): ``f(n) - gap`` is below the optimum for every
-``n``, so the bound reported is the least certified value (a true lower bound however far
-the solver got), and the gap says how tight it is.  The tracker and the step gauge are
+Each problem is solved by the multiplicative algorithm over kinds of visit, generating
+the kinds as it goes (:func:`solve`), and certified by its Frank-Wolfe duality gap
+(:func:`gap`, whose linear oracle is each posture's ``stands`` best slots,
+:func:`best_visits`): ``f(n) - gap`` is below the optimum for every feasible ``n``, so the
+bound reported is the least certified value (a true lower bound however far the solver
+got), and the gap says how tight it is.  The tracker and the step gauge are
 not candidates here: a lab that owns them is bounded over its dials, interferometer and
 ballbar only.
 """
@@ -67,12 +84,14 @@ from functools import lru_cache
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
+from scipy.sparse import csr_matrix, vstack
 
 from calibrators.estimators.consider import DEFAULT_NODE_SPACING, lead_terms
 from calibrators.planning.instruments import Bundle, reading_rows
 from orthoglide_env.instruments import interferometer
+from orthoglide_env.instruments.slots import PAPER_LAYOUT
 from orthoglide_env.lab.design_belief import N_MACHINE, ZERO_SCALE
-from orthoglide_env.lab.operations import PAPER_SLOTS, TIME, Op
+from orthoglide_env.lab.operations import PAPER_SLOTS, TIME, Op, slot_index
 from orthoglide_env.lab.slot_table import slot_table
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import MachineParams
@@ -106,6 +125,8 @@ GAP_EVERY: int = 10
 #: one-hour problems as 1/2 in 400 (certified 4.953 and 4.273 um against the designs'
 #: 4.955 and 4.283).
 POWER: float = 1.0
+#: A kind of visit whose share falls below this share of the largest is dropped.
+VANISHED: float = 1e-12
 
 
 @dataclass(frozen=True)
@@ -312,110 +333,217 @@ def _value(information: np.ndarray, factor: np.ndarray) -> tuple[float, np.ndarr
 
 
 @dataclass(frozen=True)
-class Budgets:
-    """The two linear budgets of a problem: ``dial_s`` per dial reading and ``laser_s``
-    per laser reading against the first, ``visit_s`` per laser reading against the second
-    (both of ``seconds``)."""
+class Visits:
+    """The polytope of one problem: ``seconds`` of visits, each ``settle_s`` long and at one
+    place (a candidate posture, or a ballbar point), reading there each dial slot whose
+    candidate it is at most once and at most ``stands`` of them (or the bar's point), and
+    the laser at one target for ``dwell_s`` more (a visit of its own where no dial or bar
+    is read).  A slot the stands do not ``start`` at is read only after a re-mount there
+    (``remount_s``), so each of its readings adds :attr:`moved_s` to its visit."""
 
     seconds: float
-    dial_s: float
-    laser_s: float
-    visit_s: float
+    settle_s: float
+    dwell_s: float
+    stands: int
+    start: tuple[int, ...] = ()
+    remount_s: float = 0.0
 
-    def atom(self, dial: int | None, laser: int | None) -> tuple[tuple[int, float], ...]:
-        """A vertex of the polytope: the readings of one dial candidate, one laser
-        candidate, or both together, each budget spent."""
-        if laser is None:
-            return ((dial, self.seconds / self.dial_s),)  # type: ignore[return-value]
-        visits = self.seconds / self.visit_s
-        if dial is None:
-            return ((laser, visits),)
-        return ((dial, (self.seconds - self.laser_s * visits) / self.dial_s), (laser, visits))
+    @property
+    def moved_s(self) -> float:
+        """The seconds a reading of a slot the stands do not start at adds: a slot read at
+        all took a re-mount, and no slot is read on more than ``seconds / settle_s``
+        visits, so its readings ``n`` took at least ``n settle_s / seconds`` re-mounts."""
+        return self.remount_s * self.settle_s / self.seconds
+
+    def prices(self, members: list[np.ndarray], grid: np.ndarray) -> np.ndarray:
+        """The seconds of a visit that reads each of ``members`` (dial or bar candidates)."""
+        moved = _moved(grid, self.start)
+        return np.array([self.settle_s + self.moved_s * np.count_nonzero(np.isin(m, moved))
+                         for m in members])
 
 
-def gap(model: BoundModel, budgets: Budgets, lasers: np.ndarray, counts: np.ndarray,
-        gradient: np.ndarray, bars: np.ndarray | None = None) -> float:
-    """The Frank-Wolfe duality gap at ``counts`` with the ``gradient`` of ``f`` there:
-    ``g . n - min over the polytope of g . s``.  ``f`` is convex, so ``f(n) - gap`` is
-    below its least value over the polytope.  The least of a linear function over it is
-    at a vertex: one dial candidate's readings, one laser candidate's, or both read on
-    every visit (:meth:`Budgets.atom`), each at its least gradient; with the ballbar's
-    candidates ``bars``, each vertex also reads the bar on every visit its laser leaves
-    (a third budget: a visit's settle per bar reading and the laser's dwells)."""
+def _moved(grid: np.ndarray, start: tuple[int, ...]) -> np.ndarray:
+    """The dial candidates (of ``grid``, see :func:`dial_grid`) of the slots not in
+    ``start``."""
+    columns = np.setdiff1d(np.arange(grid.shape[1]), start)
+    cells = grid[:, columns]
+    return cells[cells >= 0]
+
+
+def dial_grid(model: BoundModel) -> np.ndarray:
+    """(P, S) the dial candidate of each posture and slot of ``model`` (-1: none there)."""
     dials = np.flatnonzero(model.laser == -1)
-    i = int(dials[np.argmin(gradient[dials])])
-    options = [budgets.atom(i, None)]
+    slot, posture = model.label[dials, 0], model.label[dials, 1]
+    grid = np.full((int(posture.max()) + 1, int(slot.max()) + 1), -1)
+    grid[posture, slot] = dials
+    return grid
+
+
+def best_visits(grid: np.ndarray, fall: np.ndarray, visits: Visits, base_s: float,
+                base_gain: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Each posture's best visit per second against the readings' gains ``fall`` (N,,
+    >= 0), a visit of ``base_s`` and ``base_gain`` (the laser's, when it reads) before its
+    dials: its gain per second (P,), and the dial candidates it reads (P, m; -1: none).
+    The best of each count of the starting slots' candidates and the others' is the top
+    of each (the others' each cost :attr:`Visits.moved_s` alike), so the counts are
+    enumerated."""
+    k = min(visits.stands, grid.shape[1])
+    gains = np.where(grid >= 0, fall[grid], -np.inf)
+    start = np.isin(np.arange(grid.shape[1]), visits.start)
+    ranked, sums = [], []
+    for columns in (np.flatnonzero(start), np.flatnonzero(~start)):
+        order = np.argsort(-gains[:, columns], axis=1, kind="stable")[:, :k]
+        ranked.append(np.take_along_axis(grid[:, columns], order, axis=1))
+        top = np.take_along_axis(gains[:, columns], order, axis=1)
+        sums.append(np.concatenate([np.zeros((len(grid), 1)), np.cumsum(top, axis=1)], axis=1))
+    own, other = np.arange(sums[0].shape[1]), np.arange(sums[1].shape[1])
+    with np.errstate(invalid="ignore"):
+        rate = ((base_gain + sums[0][:, :, None] + sums[1][:, None, :])
+                / (base_s + visits.moved_s * other[None, None, :]))
+    rate[:, own[:, None] + other[None, :] > k] = -np.inf
+    rate = np.nan_to_num(rate, nan=-np.inf).reshape(len(grid), -1)
+    best = np.argmax(rate, axis=1)
+    a, b = np.divmod(best, len(other))
+    picked = np.concatenate([
+        np.where(np.arange(ranked[0].shape[1]) < a[:, None], ranked[0], -1),
+        np.where(np.arange(ranked[1].shape[1]) < b[:, None], ranked[1], -1)], axis=1)
+    return rate[np.arange(len(grid)), best], picked
+
+
+def gap(visits: Visits, grid: np.ndarray, lasers: np.ndarray, bars: np.ndarray,
+        counts: np.ndarray, fall: np.ndarray) -> float:
+    """The Frank-Wolfe duality gap at ``counts`` where the readings' gains (minus ``f``'s
+    gradient) are ``fall``: ``max over the polytope of fall . s - fall . n``.  ``f`` is
+    convex, so ``f(n) - gap`` is below its least value over the polytope.  The linear
+    oracle: the polytope's vertices spend the budget on one kind of visit, so the most is
+    the budget times the best gain per second of a visit (:func:`best_visits`, or a bar
+    point of ``bars``), reading the laser's best candidate of ``lasers`` or not."""
+    settle, both = visits.settle_s, visits.settle_s + visits.dwell_s
+    bar = float(fall[bars].max()) if bars.size else -np.inf
+    rate = max(float(best_visits(grid, fall, visits, settle)[0].max()), bar / settle)
     if lasers.size:
-        j = int(lasers[np.argmin(gradient[lasers])])
-        options += [budgets.atom(None, j), budgets.atom(i, j)]
-    if bars is not None and bars.size:
-        # Each visit may also read the bar (a superset of what the lab allows): its
-        # readings fill the visits the laser leaves, at the least gradient.
-        b = int(bars[np.argmin(gradient[bars])])
-        settle = budgets.visit_s - budgets.laser_s
-        options = [(*atom, (b, (budgets.seconds - budgets.laser_s * sum(
-            c for k, c in atom if model.laser[k] >= 0)) / settle)) for atom in options]
-    least = min(sum(gradient[k] * c for k, c in atom) for atom in options)
-    return float(gradient @ counts - least)
+        laser = float(fall[lasers].max())
+        rate = max(rate, float(best_visits(grid, fall, visits, both, laser)[0].max()),
+                   (bar + laser) / both)
+    return visits.seconds * rate - float(fall @ counts)
 
 
-def solve(model: BoundModel, budgets: Budgets, lasers: np.ndarray,
+def _atoms(members: list[np.ndarray], n: int) -> csr_matrix:
+    """(A, n) 0/1: the readings each visit in ``members`` (candidate indices) takes."""
+    lengths = [len(m) for m in members]
+    indptr = np.concatenate([[0], np.cumsum(lengths)])
+    indices = np.concatenate(members) if members else np.zeros(0, dtype=int)
+    return csr_matrix((np.ones(len(indices)), indices, indptr), shape=(len(members), n))
+
+
+def _fall(rows: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Each reading's fall of ``f`` (minus its gradient) where ``X = M^-1 F``."""
+    return np.sum((rows @ x) ** 2, axis=1)
+
+
+def solve(model: BoundModel, visits: Visits, lasers: np.ndarray,
           stop_above: float = np.inf, bars: np.ndarray | None = None
           ) -> tuple[float, float, np.ndarray]:
-    """The continuous design of least ``f`` over ``budgets`` with every dial candidate and
-    the laser candidates ``lasers`` (indices), by the multiplicative algorithm (Silvey,
-    Titterington and Torsney 1978; Yu 2010 for A-optimality's monotone convergence).
+    """The continuous design of least ``f`` over the polytope of ``visits`` with every dial
+    candidate, the laser candidates ``lasers`` and the bar points ``bars`` (indices), by
+    the multiplicative algorithm (Silvey, Titterington and Torsney 1978; Yu 2010 for
+    A-optimality's monotone convergence) over visits, with their columns generated.
 
-    The design is a share ``w_i`` of the first budget per candidate (summing to 1), ``n_i
-    = w_i T / c_i`` with ``c_i`` its price there (``dial_s`` or ``laser_s``).  Each share
-    is multiplied by the square root of its reading's fall of ``f`` per second against
-    the shares' mean: the fixed point is the optimum's condition, every reading used
-    gains as much per second.  The second budget (the laser's visits) caps the laser's
-    shares after each step.  The duality gap (:func:`gap`, every :data:`GAP_EVERY`
-    steps) is over the whole polytope, and ``f(n) - gap`` bounds the least ``f`` there
-    from below for any ``n``.  The best certified value is returned with the final
-    design's value and counts.  Stops once the gap is :data:`GAP_SHARE` of the value,
-    the certified value passes ``stop_above`` (a problem that cannot be the least), or
-    after :data:`MAX_ITERATIONS`.
-
-    With the ballbar's candidates ``bars``, their readings fill the visits the laser's
-    dwells leave, in shares of their own updated alike (a feasible design, not always the
-    best mix of laser and bar: the gap, over the whole polytope, says how far it is)."""
+    A design is a share of the budget per kind of visit (a posture with a set of at most
+    ``stands`` of its dial candidates, or a bar point), each at its price
+    (:meth:`Visits.prices`), and per laser candidate, ``dwell_s`` each.  Each share is
+    multiplied by its fall of ``f`` per second against the shares' mean: the fixed point
+    is the optimum's condition, every kind used gains as much per second.  The laser's
+    shares are capped so that it reads on at most every visit.  Every :data:`GAP_EVERY`
+    steps the duality gap (:func:`gap`) is taken over the whole polytope (``f(n) - gap``
+    is below the least ``f`` there for any ``n``), and each posture whose best visit
+    (:func:`best_visits`) gains more per second than its kinds there is given that visit
+    as a new kind, with half of the posture's share.  The best certified value is
+    returned with the final design's value and counts.  Stops once the gap is
+    :data:`GAP_SHARE` of the value, the certified value passes ``stop_above`` (a problem
+    that cannot be the least), or after :data:`MAX_ITERATIONS`."""
     rows, factor = model.rows, model.factor
-    used = np.concatenate([np.flatnonzero(model.laser == -1), lasers])
-    price = np.where(model.laser[used] == -1, budgets.dial_s, budgets.laser_s)
-    w = np.full(len(used), 1.0 / len(used))
+    grid = dial_grid(model)
     bars = np.zeros(0, dtype=int) if bars is None else bars
-    u = np.full(len(bars), 1.0 / max(len(bars), 1))
-    settle = budgets.visit_s - budgets.laser_s
+    _, picked = best_visits(grid, _fall(rows, factor), visits, visits.settle_s)
+    members = [p[p >= 0] for p in picked] + [np.array([b]) for b in bars]
+    place = np.concatenate([np.arange(len(picked)), len(picked) + np.arange(len(bars))])
+    touched = np.array([len(m) > 0 for m in members])
+    members, place = [m for m, t in zip(members, touched, strict=True) if t], place[touched]
+    atoms = _atoms(members, len(rows))
+    price = np.concatenate([visits.prices(members, grid),
+                            np.full(len(lasers), visits.dwell_s)])
+    share = np.full(len(price), 1.0 / len(price))
     lower = -np.inf
     for iteration in range(MAX_ITERATIONS + 1):
-        counts = np.zeros(len(rows))
-        counts[used] = w * budgets.seconds / price
-        if bars.size:
-            spent = budgets.laser_s * counts[lasers].sum()
-            counts[bars] = u * (budgets.seconds - spent) / settle
+        taken = share * visits.seconds / price
+        n_atoms = atoms.shape[0]
+        counts = atoms.T @ taken[:n_atoms]
+        counts[lasers] += taken[n_atoms:]
         value, x = _value(_information(rows, counts), factor)
-        fall = np.sum((rows @ x) ** 2, axis=1)  # -gradient
+        fall = _fall(rows, x)
+        gains = np.concatenate([atoms @ fall, fall[lasers]])
         if iteration % GAP_EVERY == 0 or iteration == MAX_ITERATIONS:
-            lower = max(lower, value - gap(model, budgets, lasers, counts, -fall,
-                                           bars if bars.size else None))
+            lower = max(lower, value - gap(visits, grid, lasers, bars, counts, fall))
             if (value - lower <= GAP_SHARE * value or lower > stop_above
                     or iteration == MAX_ITERATIONS):
                 break
-        per_second = fall[used] / price
-        w = w * (per_second / float(w @ per_second)) ** POWER
-        w /= w.sum()
-        if bars.size:
-            u = u * (fall[bars] / float(u @ fall[bars])) ** POWER
-            u /= u.sum()
-        # The laser's visits within the second budget: its shares of the first at most
-        # dwell / (settle + dwell), the dials' the rest.
-        laser, cap = model.laser[used] >= 0, budgets.laser_s / budgets.visit_s
-        if w[laser].sum() > cap:
-            w[laser] *= cap / w[laser].sum()
-            w[~laser] *= (1 - cap) / w[~laser].sum()
+            atoms, place, share, gains, price = _generate(
+                atoms, place, share, gains, price, grid, fall, visits)
+        per_second = gains / price
+        share = share * (per_second / float(share @ per_second)) ** POWER
+        share /= share.sum()
+        share = _cap_laser(share, price, atoms.shape[0], visits.dwell_s)
     return lower, value, counts
+
+
+def _cap_laser(share: np.ndarray, price: np.ndarray, n_atoms: int, dwell_s: float
+               ) -> np.ndarray:
+    """``share`` with the laser's (after the ``n_atoms`` visits') scaled down, the visits'
+    up, where it would read on more than every visit (``L <= V``)."""
+    laser = share[n_atoms:].sum() / dwell_s
+    visits = float(share[:n_atoms] @ (1.0 / price[:n_atoms]))
+    if laser <= visits:
+        return share
+    # beta (visits' scale) and alpha (the laser's): alpha L = beta V, alpha sL + beta sV = 1.
+    beta = 1.0 / (share[:n_atoms].sum() + dwell_s * visits)
+    alpha = beta * visits / laser
+    return np.concatenate([share[:n_atoms] * beta, share[n_atoms:] * alpha])
+
+
+def _generate(atoms: csr_matrix, place: np.ndarray, share: np.ndarray, gains: np.ndarray,
+              price: np.ndarray, grid: np.ndarray, fall: np.ndarray, visits: Visits
+              ) -> tuple[csr_matrix, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`solve`'s column generation: the kinds of visit ``atoms`` at ``place`` with
+    shares ``share``, gains ``gains`` and prices ``price`` (the laser's after them),
+    without the kinds whose share has vanished (the multiplicative step never revives
+    one), and with the best visit of each posture that gains more per second than every
+    kind there, given half of the posture's share."""
+    n_atoms = atoms.shape[0]
+    keep = np.concatenate([share[:n_atoms] > VANISHED * share.max(),
+                           np.ones(len(share) - n_atoms, dtype=bool)])
+    atoms, place = atoms[keep[:n_atoms]], place[keep[:n_atoms]]
+    share, gains, price = share[keep], gains[keep], price[keep]
+    n_atoms = atoms.shape[0]
+    best, picked = best_visits(grid, fall, visits, visits.settle_s)
+    held = np.zeros(len(best))
+    dial = place < len(best)
+    np.maximum.at(held, place[dial], (gains[:n_atoms] / price[:n_atoms])[dial])
+    new = np.flatnonzero(best > held * (1 + 1e-9))
+    if not new.size:
+        return atoms, place, share, gains, price
+    owned = np.bincount(place[dial], share[:n_atoms][dial], minlength=len(best))
+    share = share.copy()
+    share[:n_atoms][np.isin(place, new)] *= 0.5
+    added = 0.5 * owned[new] + VANISHED * share.max()
+    members = [picked[p][picked[p] >= 0] for p in new]
+    cost = visits.prices(members, grid)
+    atoms = vstack([atoms, _atoms(members, atoms.shape[1])], format="csr")
+    share = np.concatenate([share[:n_atoms], added, share[n_atoms:]])
+    share /= share.sum()
+    gains = np.concatenate([gains[:n_atoms], best[new] * cost, gains[n_atoms:]])
+    price = np.concatenate([price[:n_atoms], cost, price[n_atoms:]])
+    return atoms, np.concatenate([place, new]), share, gains, price
 
 
 @dataclass(frozen=True)
@@ -476,8 +604,8 @@ def lower_bound(design: MachineDesign, conditions: Conditions, dial_sigma: float
     bar = "ballbar" in instruments
     model = (bound_model(design, conditions, float(dial_sigma), owned, True) if bar
              else bound_model(design, conditions, float(dial_sigma), owned))
-    dial_s = TIME.settle_and_read_s / stands
-    laser_s = TIME.interferometer_target_s
+    # The lab mounts its stands at the paper's slots at every reset.
+    start = tuple(slot_index(spec, design=design) for spec in PAPER_LAYOUT[:stands])
     choices = [()] + ([c for k in (1, 2, 3) for c in itertools.combinations(range(3), k)]
                       if owned else [])
     # The pivot's set-up is paid once or not at all, as the laser's are.
@@ -486,13 +614,17 @@ def lower_bound(design: MachineDesign, conditions: Conditions, dial_sigma: float
     lowest = np.inf
     for pivot in pivots:
         for drives in choices:
-            seconds = budget_s - setup_seconds(drives) - (TIME.ballbar_setup_s if pivot else 0)
+            # A set-up's own visit (at Zero, its settle on the clock) reads the laser
+            # without a dwell: each is given one.
+            seconds = (budget_s - setup_seconds(drives) - (TIME.ballbar_setup_s if pivot else 0)
+                       + TIME.interferometer_target_s * len(drives))
             if seconds <= 0:
                 continue
-            budgets = Budgets(seconds, dial_s, laser_s, TIME.settle_and_read_s + laser_s)
+            visits = Visits(seconds, TIME.settle_and_read_s, TIME.interferometer_target_s,
+                            stands, start, TIME.remount_s)
             lasers = np.flatnonzero(np.isin(model.laser, drives))
             bars = np.flatnonzero(model.laser == BAR) if pivot else None
-            lower, value, counts = solve(model, budgets, lasers, best[0] if best else np.inf,
+            lower, value, counts = solve(model, visits, lasers, best[0] if best else np.inf,
                                          bars)
             lowest = min(lowest, lower)
             if best is None or value < best[0]:
