@@ -73,8 +73,8 @@ def _single_threaded() -> Iterator[None]:
 def imports_kept() -> Iterator[None]:
     """While it lasts, what the process holds at its start (the modules, their tables and
     caches) is out of the cyclic garbage collector's passes: it outlives the work, and each
-    full pass of a long run would walk it again (~40 % of the collector's CPU in a
-    1000-machine comparison, 3 % of the run).  Collects nothing and changes no result;
+    full pass of a long run would walk it again (a third of the collector's CPU in a
+    1000-machine comparison, 2 % of the run).  Collects nothing and changes no result;
     after it, the collector sees everything again (a caller's own objects included)."""
     gc.freeze()
     try:
