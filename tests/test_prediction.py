@@ -109,3 +109,35 @@ def test_predicted_rms_matches_sampled_true_machines() -> None:
         assert abs(square.mean() - getattr(predicted, frame).rms ** 2) < tolerance, frame
     assert predicted.rigid.rms < predicted.translation.rms < predicted.raw.rms
 
+
+
+def test_rigid_weights_are_each_models_alone_whatever_its_block_and_commands() -> None:
+    """A batch of more than one block of models, some reaching fewer targets (a rigid basis
+    of their own, found again in the next block), gives each model the bits it gets alone,
+    and the same bits again from the commands a scoring of the same models solved: the
+    batch shares the bases and the commands, never a number of another model."""
+    from orthoglide_env.model.errors import get_preset
+    from orthoglide_env.scoring import commands_many, rigid_weights
+    from orthoglide_env.scoring.grid import BLOCK
+
+    rng = np.random.default_rng(5)
+    models = [get_preset("realistic").sample(rng, PROTOTYPE) for _ in range(BLOCK + 4)]
+    for k in (3, BLOCK + 1):  # one in each block loses the far targets along x
+        models[k] = MachineParams(drho=[40.0, 0.0, 0.0])
+    weights = rigid_weights(models)
+    commands = commands_many(models, workspace_grid(design=PROTOTYPE))
+    assert np.array_equal(rigid_weights(models, commands=commands), weights)
+    for k in (0, 3, BLOCK - 1, BLOCK, BLOCK + 1, BLOCK + 3):
+        assert np.array_equal(rigid_weights([models[k]])[0], weights[k]), k
+
+
+def test_a_scoring_from_the_estimates_commands_is_the_same() -> None:
+    """:func:`score_batch` given the estimates' commands over the grid (which compare
+    solves once for the scoring and the predicted error) scores as it does solving them."""
+    from orthoglide_env.model.errors import random_machine
+    from orthoglide_env.scoring import commands_many
+
+    estimates = [random_machine(k, "paper", design=PROTOTYPE) for k in range(3)]
+    truths = [random_machine(10 + k, "realistic", design=PROTOTYPE) for k in range(3)]
+    commands = commands_many(estimates, workspace_grid(design=PROTOTYPE))
+    assert score_batch(estimates, truths, commands=commands) == score_batch(estimates, truths)

@@ -113,6 +113,7 @@ def run(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         # Imported once the command line is parsed: --help and --version need none of it.
+        from calibrators.study.engines import imports_kept
         from orthoglide_env.instruments.dial import (
             DEFAULT_RESOLUTION,
             DEFAULT_SIGMA,
@@ -123,7 +124,8 @@ def run(argv: list[str] | None = None) -> int:
         check_noise(DEFAULT_SIGMA if sigma is None else sigma,
                     DEFAULT_RESOLUTION if resolution is None else resolution,
                     names=("--sigma", "--resolution"))
-        args.func(args)
+        with imports_kept():
+            args.func(args)
     except BrokenPipeError:
         raise  # an OSError, but no mistake of the user's: main ends quietly
     except (UsageError, ValueError, OSError, RuntimeError) as exc:

@@ -246,11 +246,12 @@ def find_faults(data: Measurements, residuals: np.ndarray, used: np.ndarray,
     spread = max(sigma, 1.4826 * float(np.median(np.abs(residuals[finite]))))
     found: list[Finding] = []
     names = {k: data.items[k].mounting or data.items[k].gauge.slot for k in range(len(values))}
-    groups = _mountings(data, finite)
+    # Steps and rows written late are looked for only where the model can fit the machine.
+    groups = _mountings(data, finite) if structural else {}
     # Rows written late are far from the model, and mostly left out: all of a mounting's
     # readings are followed, in order.
-    followed = gauge & np.isfinite(residuals) if structural else np.zeros(len(values), bool)
-    for name, ks in _mountings(data, followed).items():
+    followed = _mountings(data, gauge & np.isfinite(residuals)) if structural else {}
+    for name, ks in followed.items():
         first = _late(values, residuals, ks, spread, level)
         if first is not None:
             found.append(Finding("skip", f"{PREFIX} skip: {name}, from {_place(data, first)} "

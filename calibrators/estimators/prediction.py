@@ -40,15 +40,17 @@ def predicted_tcp_error(est: Estimate, grid: np.ndarray | None = None) -> FrameE
     return predicted_tcp_errors([est], grid)[0]
 
 
-def predicted_rigid_mm(ests: list[Estimate], machines: list[MachineParams] | None = None
-                       ) -> np.ndarray:
+def predicted_rigid_mm(ests: list[Estimate], machines: list[MachineParams] | None = None,
+                       commands: np.ndarray | None = None) -> np.ndarray:
     """The rigid-frame RMS of :func:`predicted_tcp_errors` of each estimate (mm), alone:
     ``sqrt(trace(W C))`` (:func:`~orthoglide_env.scoring.rigid_weights`) for the
     geometry's part, through the frames where the drives' lead error adds its own.
-    ``machines``: the estimates' machines, when the caller has them already."""
+    ``machines``: the estimates' machines, and ``commands`` their commands over the
+    scoring grid (:func:`~orthoglide_env.scoring.grid.commands_many`), when the caller has
+    them already."""
     n = len(ERROR_NAMES)
     machines = [e.machine for e in ests] if machines is None else machines
-    weights = rigid_weights(machines)
+    weights = rigid_weights(machines, commands=commands)
     covariances = np.array([e.error_covariance[:n, :n] for e in ests]).reshape(-1, n, n)
     out = np.sqrt(np.clip(np.einsum("mij,mji->m", weights, covariances), 0.0, None))
     leads = [k for k, e in enumerate(ests) if e.lead_terms]

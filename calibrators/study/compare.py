@@ -62,7 +62,15 @@ from orthoglide_env.lab.operations import PAPER_SLOTS
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import DEFAULT_PRESET, ERROR_NAMES, MachineParams
 from orthoglide_env.reading_model import ParameterSpace, default_scales
-from orthoglide_env.scoring import FRAMES, ScoreReport, score_batch, uncalibrated_errors
+from orthoglide_env.scoring import (
+    FRAMES,
+    ScoreReport,
+    commands_many,
+    score_batch,
+    uncalibrated_errors,
+    workspace_grid,
+)
+from orthoglide_env.scoring.grid import blocks
 from orthoglide_env.world.conditions import DEFAULT_CONDITIONS, Conditions
 from orthoglide_env.world.faults import NO_FAULTS, Faults, happened
 from orthoglide_env.world.truth import World
@@ -212,9 +220,14 @@ def _trials(episodes: list[_Episode], name: str, estimates: list[Estimate | Exce
     fitted = [estimates[k] for k in good]
     z_scores = iter(machine_z_scores(fitted, [episodes[k].run.truth for k in good]))  # type: ignore[arg-type]
     machines = _machines(episodes, estimates)
-    reports = iter(_score(episodes, estimates, machines))
-    predicted = iter(predicted_rigid_mm(fitted, [machines[k] for k in good]).tolist()  # type: ignore[arg-type]
-                     if good else [])
+    # The estimated machines' commands over the grid, which the scoring and the predicted
+    # error both start from, solved once.
+    grid = workspace_grid(design=episodes[0].run.truth.design)
+    commands = np.concatenate([commands_many(machines[b], grid)
+                               for b in blocks(len(machines))])
+    reports = iter(_score(episodes, estimates, machines, commands))
+    predicted = iter(predicted_rigid_mm(fitted, [machines[k] for k in good],  # type: ignore[arg-type]
+                                        commands[good]).tolist() if good else [])
     out = []
     for episode, est, curve in zip(episodes, estimates, curves, strict=True):
         run, count = episode.run, len(episode.run.records)
@@ -276,16 +289,17 @@ def _machines(episodes: list[_Episode], estimates: list[Estimate | Exception]
 
 
 def _score(episodes: list[_Episode], estimates: list[Estimate | Exception],
-           machines: list[MachineParams] | None = None) -> list[ScoreReport]:
-    """Each estimate's machine (``machines``: :func:`_machines`, when the caller has them),
-    with what its controller compensates of the drives' lead error, scored against its
-    episode's truth in one batched solve; a failed estimate is scored as the nominal
-    machine."""
+           machines: list[MachineParams] | None = None, commands: np.ndarray | None = None
+           ) -> list[ScoreReport]:
+    """Each estimate's machine (``machines``: :func:`_machines`, and ``commands`` their
+    commands over the scoring grid, when the caller has them), with what its controller
+    compensates of the drives' lead error, scored against its episode's truth in one
+    batched solve; a failed estimate is scored as the nominal machine."""
     machines = _machines(episodes, estimates) if machines is None else machines
     corrections = [est.lead_correction if isinstance(est, Estimate) and est.fits_lead else None
                    for est in estimates]
     return score_batch(machines, [e.run.truth for e in episodes], before=_before(episodes),
-                       worlds=_worlds(episodes), corrections=corrections)
+                       worlds=_worlds(episodes), corrections=corrections, commands=commands)
 
 
 def _before(episodes: list[_Episode]) -> np.ndarray:

@@ -8,6 +8,7 @@ An interrupt (Ctrl-C) or an error stops the work still outstanding before it is 
 
 from __future__ import annotations
 
+import gc
 import os
 import signal
 import traceback
@@ -66,6 +67,20 @@ def _single_threaded() -> Iterator[None]:
                 os.environ.pop(key, None)
             else:
                 os.environ[key] = value
+
+
+@contextmanager
+def imports_kept() -> Iterator[None]:
+    """While it lasts, what the process holds at its start (the modules, their tables and
+    caches) is out of the cyclic garbage collector's passes: it outlives the work, and each
+    full pass of a long run would walk it again (a third of the collector's CPU in a
+    1000-machine comparison, 2 % of the run).  Collects nothing and changes no result;
+    after it, the collector sees everything again (a caller's own objects included)."""
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
 
 
 def _ignore_interrupts() -> None:
@@ -163,17 +178,18 @@ def _serve(function: Callable[[Item], Result], connection: Connection) -> None:
     """A worker's loop: answer each item with ``(True, result)`` or ``(False, (error,
     its traceback))`` until the parent closes the pipe."""
     _ignore_interrupts()
-    while True:
-        try:
-            item = connection.recv()
-        except EOFError:
-            return
-        try:
-            answer = (True, function(item))
-        except Exception as error:
-            # A traceback does not pickle: its text goes along.
-            answer = (False, (error, traceback.format_exc()))
-        connection.send(answer)
+    with imports_kept():  # ``function`` came with its modules
+        while True:
+            try:
+                item = connection.recv()
+            except EOFError:
+                return
+            try:
+                answer = (True, function(item))
+            except Exception as error:
+                # A traceback does not pickle: its text goes along.
+                answer = (False, (error, traceback.format_exc()))
+            connection.send(answer)
 
 
 class RemoteTraceback(Exception):

@@ -19,14 +19,15 @@ from orthoglide_env.model.kinematics import (
     tcp_sensitivity,
     tcp_sensitivity_factors,
 )
-from orthoglide_env.scoring.grid import BLOCK, blocks, commands_many, grid_targets
+from orthoglide_env.scoring.grid import blocks, commands_many, grid_targets
 from orthoglide_env.scoring.reports import FRAMES, ErrorStats, FrameErrors
 
 #: Error terms of the drives at the commands, mm per unit coefficient: (n, 3) -> (n, 3, K).
 DriveTerms = Callable[[np.ndarray], np.ndarray]
 
 
-def _commanded(models: Sequence[MachineParams], targets: np.ndarray
+def _commanded(models: Sequence[MachineParams], targets: np.ndarray,
+               commands: np.ndarray | None = None
                ) -> tuple[np.ndarray, MachineParams, np.ndarray, np.ndarray]:
     """Which targets (n, 3) each model commands within the control limits (M, n), the
     models stacked, and the commands and TCPs (M, n, 3) to take derivatives at.
@@ -37,9 +38,11 @@ def _commanded(models: Sequence[MachineParams], targets: np.ndarray
     the TCP reached at every command over the machine's 27 errors is
     :func:`~orthoglide_env.model.kinematics.tcp_sensitivity` there (the implicit function
     theorem): to first order a machine compensated with a model is off by
-    ``jac @ (theta - theta_model)``."""
+    ``jac @ (theta - theta_model)``.  ``commands``: the models' :func:`~orthoglide_env.
+    scoring.grid.commands_many` for the targets, when the caller has them."""
     machines = MachineParams.stack(list(models))
-    rho = commands_many(models, targets, machines)  # (M, n, 3)
+    rho = (commands_many(models, targets, machines) if commands is None
+           else commands)  # (M, n, 3)
     usable = np.isfinite(rho).all(axis=-1)
     rho = np.where(usable[..., None], rho, 0.0)
     p = np.where(usable[..., None], targets, 0.0)
@@ -103,13 +106,16 @@ def _per_target(targets: np.ndarray, jac: np.ndarray, covariance: np.ndarray
 
 def _same_targets(usable: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
     """The models (rows of ``usable``, (M, n)) grouped by the targets they reach: each
-    distinct mask with the indices of its models."""
+    distinct mask with the indices of its models.  Mostly every model reaches the same
+    targets: then one group, without sorting the masks."""
+    if (usable == usable[:1]).all():
+        return [(usable[0], np.arange(len(usable)))]
     masks, group = np.unique(usable, axis=0, return_inverse=True)
     return [(mask, np.flatnonzero(np.ravel(group) == k)) for k, mask in enumerate(masks)]
 
 
-def rigid_weights(models: Sequence[MachineParams], grid: np.ndarray | None = None
-                  ) -> np.ndarray:
+def rigid_weights(models: Sequence[MachineParams], grid: np.ndarray | None = None,
+                  commands: np.ndarray | None = None) -> np.ndarray:
     """``W`` (M, 27, 27) of each model: ``trace(W C)`` is the mean square over the grid of
     the expected TCP error after the best-fit rigid motion (mm^2) for a machine compensated
     with the model whose errors are off by ``N(0, C)``, i.e. the square of
@@ -120,23 +126,46 @@ def rigid_weights(models: Sequence[MachineParams], grid: np.ndarray | None = Non
     inverse ``A`` times a scalar ``r_e`` (:func:`~orthoglide_env.model.kinematics.
     tcp_sensitivity_factors`), so ``J^T J`` has the blocks ``sum_t r_a (A^T A)_ab r_b^T``
     of each pair of legs, and the rigid fit's part ``Q^T J`` has the blocks
-    ``sum_t (Q_t^T A)_a r_a^T``: a third of the memory and of the products."""
+    ``sum_t (Q_t^T A)_a r_a^T``: a third of the memory and of the products.
+    ``commands``: the models' :func:`~orthoglide_env.scoring.grid.commands_many` for the
+    grid, when the caller has them (a scoring of the same models does)."""
     if not models:
         return np.zeros((0, 27, 27))
     targets = grid_targets(grid, models)
-    if len(models) > BLOCK:
-        return np.concatenate([rigid_weights(models[b], targets) for b in blocks(len(models))])
-    usable, machines, rho, p = _commanded(models, targets)
+    bases: dict[bytes, np.ndarray] = {}
+    return np.concatenate([_rigid_weights(models[b], targets, bases,
+                                          None if commands is None else commands[b])
+                           for b in blocks(len(models))])
+
+
+def _rigid_basis(targets: np.ndarray, mask: np.ndarray, bases: dict[bytes, np.ndarray]
+                 ) -> np.ndarray:
+    """The rigid fit's orthonormal basis (m, 3, 6) over the ``targets`` of ``mask``, from
+    ``bases`` when a block before found it (every block of a sweep mostly reaches the
+    same targets)."""
+    key = mask.tobytes()
+    if key not in bases:
+        bases[key] = np.linalg.qr(motion_basis(targets[mask], "rigid"))[0].reshape(-1, 3, 6)
+    return bases[key]
+
+
+def _rigid_weights(models: Sequence[MachineParams], targets: np.ndarray,
+                   bases: dict[bytes, np.ndarray], commands: np.ndarray | None
+                   ) -> np.ndarray:
+    """:func:`rigid_weights` of one block of models (``bases``: see :func:`_rigid_basis`;
+    ``commands``: the block's, or None)."""
+    usable, machines, rho, p = _commanded(models, targets, commands)
     inv, row = tcp_sensitivity_factors(machines, rho, p)
-    row = np.where(usable[..., None], row, 0.0)  # unreachable targets count for nothing
+    if not usable.all():  # mostly every target is reached: no copy to make
+        row = np.where(usable[..., None], row, 0.0)  # unreached ones count for nothing
     # The rigid fit's orthonormal basis over each model's reachable targets, zero on the
     # others: in the common case one set of targets, one basis shared by every model.
     groups = _same_targets(usable)
     shared = len(groups) == 1
     basis = np.zeros((1 if shared else len(models), len(targets), 3, 6))
     for mask, members in groups:
-        q = np.linalg.qr(motion_basis(targets[mask], "rigid"))[0].reshape(-1, 3, 6)
-        basis[np.ix_([0] if shared else members, np.flatnonzero(mask))] = q
+        basis[np.ix_([0] if shared else members, np.flatnonzero(mask))] = _rigid_basis(
+            targets, mask, bases)
     columns = [np.flatnonzero(ERROR_LEGS == leg) for leg in range(3)]
     rows = [row[..., c] for c in columns]  # (M, n, 9) each
     # Products of 3 x 3 matrices written out: a stack of tens of thousands of small

@@ -45,8 +45,8 @@ def tcp_error_vectors(model: MachineParams, truth: MachineParams,
 
 def tcp_error_vectors_many(models: Sequence[MachineParams], truths: Sequence[MachineParams],
                            targets: np.ndarray, worlds: Sequence[World] | None = None,
-                           corrections: Sequence[Correction | None] | None = None
-                           ) -> np.ndarray:
+                           corrections: Sequence[Correction | None] | None = None,
+                           commands: np.ndarray | None = None) -> np.ndarray:
     """:func:`tcp_error_vectors` of many pairs over the targets (n, 3): (M, n, 3).  The
     true machines reach their commands in one batched solve; each machine's numbers are
     those it gets alone.  ``worlds``: the machines' worlds, whose drives' lead error
@@ -54,12 +54,15 @@ def tcp_error_vectors_many(models: Sequence[MachineParams], truths: Sequence[Mac
     reference, warm, each axis at the centre of its backlash).  ``corrections``: per
     model, the drives' error (mm, a function of ``rho`` (n, 3)) that its controller
     compensates (a pitch-error table's, :mod:`orthoglide_env.model.compensation`): it
-    commands ``rho - correction(rho)``."""
+    commands ``rho - correction(rho)``.  ``commands``: the models' :func:`~orthoglide_env.
+    scoring.grid.commands_many` for the targets, when the caller has them."""
     if len(models) > BLOCK:
         return np.concatenate([tcp_error_vectors_many(
             models[b], truths[b], targets, None if worlds is None else worlds[b],
-            None if corrections is None else corrections[b]) for b in blocks(len(models))])
-    rho = commands_many(models, targets)  # (M, n, 3)
+            None if corrections is None else corrections[b],
+            None if commands is None else commands[b]) for b in blocks(len(models))])
+    # (M, n, 3); a copy of the caller's, which the corrections below change in place.
+    rho = commands_many(models, targets) if commands is None else commands.copy()
     inside = np.isfinite(rho).all(axis=-1)
     for m, correct in enumerate(corrections or ()):
         if correct is not None:
@@ -192,9 +195,11 @@ def uncalibrated_errors(truths: Sequence[MachineParams], grid: np.ndarray | None
 def score_batch(estimates: Sequence[MachineParams], truths: Sequence[MachineParams],
                 grid: np.ndarray | None = None, before: np.ndarray | None = None,
                 worlds: Sequence[World] | None = None,
-                corrections: Sequence[Correction | None] | None = None) -> list[ScoreReport]:
-    """Score each estimate against its true machine (see :func:`score`; ``worlds`` and
-    ``corrections``: see :func:`tcp_error_vectors_many`); ``before``: the
+                corrections: Sequence[Correction | None] | None = None,
+                commands: np.ndarray | None = None) -> list[ScoreReport]:
+    """Score each estimate against its true machine (see :func:`score`; ``worlds``,
+    ``corrections`` and the estimates' ``commands``: see :func:`tcp_error_vectors_many`);
+    ``before``: the
     :func:`uncalibrated_errors` of ``truths``, when already known (they depend on the
     machines only, not on the estimates).
 
@@ -204,7 +209,7 @@ def score_batch(estimates: Sequence[MachineParams], truths: Sequence[MachinePara
     targets = grid_targets(grid, truths)
     if before is None:
         before = uncalibrated_errors(truths, targets, worlds)
-    after = tcp_error_vectors_many(estimates, truths, targets, worlds, corrections)
+    after = tcp_error_vectors_many(estimates, truths, targets, worlds, corrections, commands)
     usable = np.isfinite(before).all(axis=-1) & np.isfinite(after).all(axis=-1)
     empty = np.flatnonzero(~usable.any(axis=-1))
     if empty.size:
