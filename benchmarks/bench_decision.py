@@ -42,6 +42,8 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
+# Registers the filters that policy files of flicks other than "prior" play with.
+import calibrators.planning.shortlist  # noqa: F401
 import orthoglide_env
 from calibrators.agents import active as active_module
 from calibrators.agents import get_agent

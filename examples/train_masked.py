@@ -76,6 +76,8 @@ from calibrators.planning.design_expert import PlanExpert
 from calibrators.planning.shortlist import (
     SHORTLIST_MOVES,
     LookaheadExpert,
+    RankLabels,
+    ranked_shortlist_lab_env,
     shortlist_design_lab_env,
 )
 from calibrators.study import compare, statistics
@@ -90,6 +92,10 @@ ESTIMATOR: str = "full"
 #: The experts whose pupils act among ``active``'s short list
 #: (:class:`~calibrators.planning.shortlist.ShortlistDesignLab`).
 SHORTLIST_EXPERTS: tuple[str, ...] = ("active-shortlist", "lookahead")
+#: The experts whose pupils choose a rank of ``active``'s short list, seeing its moves
+#: (:class:`~calibrators.planning.shortlist.RankedShortlistLab`): ``active``'s choice or
+#: the lookahead's, as ranks.
+RANKED_EXPERTS: tuple[str, ...] = ("active-ranked", "lookahead-ranked")
 #: The designed agents whose levels the curve draws and the final table compares.
 BASELINES: str = "paper,optimal,active,random"
 
@@ -121,20 +127,30 @@ def view(kwargs: dict[str, Any], expert: str) -> Any:
     :class:`~calibrators.planning.active_expert.FilteredDesignLab`; ``active-reach``: its
     observation also holds the dials the filter lets read at each posture;
     ``active-shortlist``: its mask opens ``active``'s short list only,
-    :class:`~calibrators.planning.shortlist.ShortlistDesignLab`)."""
+    :class:`~calibrators.planning.shortlist.ShortlistDesignLab`; ``active-ranked`` and
+    ``lookahead-ranked``: its actions are the short list's ranks and its observation
+    holds the listed moves' features,
+    :class:`~calibrators.planning.shortlist.RankedShortlistLab`)."""
     if expert == "optimal":
         return design_lab_env(**kwargs)
     if expert in SHORTLIST_EXPERTS:
         return shortlist_design_lab_env(**kwargs)
+    if expert in RANKED_EXPERTS:
+        return ranked_shortlist_lab_env(**kwargs)
     return filtered_design_lab_env(reach=expert == "active-reach", **kwargs)
 
 
 def expert_of(env: Any, expert: str) -> Any:
     """The expert that labels the states of ``env``'s episode, just reset: with ``expert``
-    "lookahead" the short list's play-out (:class:`LookaheadExpert`), else the filter's
+    "lookahead" the short list's play-out (:class:`LookaheadExpert`; "-ranked": its
+    choice or ``active``'s as a rank, :class:`RankLabels`), else the filter's
     ``active`` of a :class:`FilteredDesignLab`, else ``optimal``'s :class:`PlanExpert`."""
     if expert == "lookahead":
         return LookaheadExpert(env.expert)
+    if expert == "lookahead-ranked":
+        return RankLabels(LookaheadExpert(env.expert), env)
+    if expert == "active-ranked":
+        return RankLabels(env.expert, env)
     if isinstance(env, FilteredDesignLab):
         return env.expert
     return PlanExpert(env.unwrapped, env.belief)
@@ -449,7 +465,8 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
                              "not the last (those of --eval-seed: choose a seed other than "
                              "the one the policy is tested on)")
     parser.add_argument("--expert", default="optimal",
-                        choices=("optimal", "active", "active-reach", *SHORTLIST_EXPERTS),
+                        choices=("optimal", "active", "active-reach", *SHORTLIST_EXPERTS,
+                                 *RANKED_EXPERTS),
                         help="the imitation's expert: optimal's planner from the view's "
                              "state, or active's filter of the values read, whose flicks the "
                              "view's moves then take (active-reach: the view's observation "
@@ -457,8 +474,10 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
                              "active-shortlist: the view opens active's choice and its next "
                              f"best moves, {SHORTLIST_MOVES} in all, and stop; lookahead: "
                              "the same view, labelled with the short list's move after which "
-                             "active's greedy play-out leaves the lowest predicted error; the "
-                             "file records it)")
+                             "active's greedy play-out leaves the lowest predicted error; "
+                             "active-ranked, lookahead-ranked: their labels as ranks of the "
+                             "short list, whose moves' gains, seconds and dials the view "
+                             "observes; the file records it)")
     parser.add_argument("--design", metavar="FILE",
                         help="the machines' design (a JSON file, as orthoglide's --design; "
                              "default: the prototype)")

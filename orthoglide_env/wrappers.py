@@ -199,12 +199,18 @@ class DesignLab(gym.Wrapper):
         if not self.action_space.contains(action):
             raise ValueError(f"an action is an integer in [0, {self.action_space.n}), "
                              f"got {action!r}")
+        return self._play(int(action))
+
+    def _play(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """:meth:`step` of view operation ``action`` (checked): its lab actions, the
+        belief's update, the reward.  A subclass whose actions name the view's operations
+        otherwise (a rank in a short list) plays the operation its action names here."""
         belief = self.belief
         before, start_s = belief.predicted_mse(), belief.time_s
         terminated = truncated = False
         info: dict[str, Any] = {}
         count = 0
-        for operation in self.operations(int(action)):
+        for operation in self.operations(action):
             observation, _, terminated, truncated, info = self.env.step(operation)
             count += 1
             belief.observe(operation, observation, bool(info.get("refused")))

@@ -18,9 +18,13 @@ from calibrators.agents.names import get_agent
 from calibrators.agents.policy import DesignPolicyAgent, read_spec
 from calibrators.planning.active_expert import filtered_design_lab_env
 from calibrators.planning.shortlist import (
+    RANK_FEATURES,
     SHORTLIST_MOVES,
     LookaheadExpert,
+    RankLabels,
+    listed_moves,
     played_out,
+    ranked_shortlist_lab_env,
     shortlist_design_lab_env,
     shortlist_mask,
 )
@@ -80,9 +84,10 @@ def test_taking_the_choice_plays_the_filtered_views_episode() -> None:
     assert len(played[0]) > 12
 
 
-def test_check_env_of_the_shortlist_view() -> None:
+@pytest.mark.parametrize("make", [shortlist_design_lab_env, ranked_shortlist_lab_env])
+def test_check_env_of_the_shortlist_views(make: object) -> None:
     """Gymnasium's check passes (its one warning: the env is a wrapper)."""
-    env = shortlist_design_lab_env(version=1, **LAB)
+    env = make(version=1, **LAB)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         check_env(env, skip_render_check=True)
@@ -131,3 +136,86 @@ def test_a_shortlist_policy_plays_in_the_lab_as_in_its_view(shortlist_policy: Pa
     assert isinstance(agent, DesignPolicyAgent)
     episode = run_episode(gym.make(orthoglide_env.LAB_ENV_ID, **LAB), agent, seed=4)
     assert_view_plays_as_lab(shortlist_design_lab_env(version=1, **LAB), agent, episode, 4)
+
+
+def test_the_ranked_view_names_the_short_list_and_sees_its_moves() -> None:
+    """Along an episode played at random among the listed ranks: rank ``r`` plays the short
+    list's ``r``-th operation (the list the short-list view's mask opens), the mask opens
+    the ranks the list fills and stop, and each listed move's features are its own: the
+    best rate of the list is 1, a stay is flagged where the belief stands, the readings so
+    far are the belief's tally there; ranks past the list's end are zeros; a listed move
+    leaves the belief at its posture."""
+    env = ranked_shortlist_lab_env(version=1, **LAB)
+    observation, _ = env.reset(seed=3)
+    rng = np.random.default_rng(1)
+    n, revisits, done = env.belief.n_postures, 0, False
+    while not done:
+        listed, _, _ = listed_moves(env.expert, env.belief)
+        assert listed == env.listed
+        opened = np.flatnonzero(shortlist_mask(env.expert, env.belief))
+        assert sorted({*listed, env.belief.n_actions - 1}) == opened.tolist()
+        assert env.action_masks().tolist() == [r < len(listed) for r in
+                                               range(SHORTLIST_MOVES)] + [True]
+        features = observation[-SHORTLIST_MOVES * RANK_FEATURES:].reshape(SHORTLIST_MOVES, -1)
+        moves = [r for r, p in enumerate(listed) if p < n]
+        if moves:
+            assert features[moves, 2].max() == pytest.approx(1.0)
+        for r, p in enumerate(listed):
+            if p < n:
+                assert features[r, 7] == (p == env.belief.here)
+                assert features[r, 6] == pytest.approx(env.belief.readings_at[p] / 10.0)
+                revisits += env.belief.readings_at[p] > 0
+        assert not features[len(listed):].any()
+        # A random listed operation (the list holds at least ``active``'s choice; stop only
+        # where that is it).
+        rank = int(rng.choice(np.flatnonzero(env.action_masks()[:-1])))
+        here = listed[rank]
+        readings = len(env.unwrapped.records)
+        observation, _, terminated, truncated, _ = env.step(rank)
+        done = terminated or truncated
+        if here < n and not done:
+            assert env.belief.here == here and len(env.unwrapped.records) > readings
+    # Not vacuous: a posture read before was listed somewhere.
+    assert revisits >= 1
+    with pytest.raises(ValueError, match="an action is an integer"):
+        env.step(SHORTLIST_MOVES + 1)
+
+
+def test_ranked_labels_name_the_experts_operation() -> None:
+    """A view expert's label as a rank (:class:`RankLabels`) names the operation the
+    expert chose, along the lookahead's own episode; an operation off the list is refused."""
+    env = ranked_shortlist_lab_env(version=1, **LAB)
+    env.reset(seed=5)
+    lookahead = LookaheadExpert(env.expert)
+    labels = RankLabels(lookahead, env)
+    ranks, done = [], False
+    while not done:
+        rank = labels.choose(env.belief)
+        chosen = lookahead.choose(env.belief)
+        assert [*env.listed, env.belief.n_actions - 1][rank] == chosen
+        ranks.append(rank)
+        _, _, terminated, truncated, _ = env.step(rank)
+        done = terminated or truncated
+    # The lookahead departs from ``active``'s choice (rank 0) somewhere.
+    assert max(ranks[:-1]) >= 1
+    off = next(p for p in range(env.belief.n_postures) if p not in env.listed)
+    with pytest.raises(ValueError, match="not on the short list"):
+        env.rank_of(off)
+
+
+@pytest.fixture(scope="module")
+def ranked_policy(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A tiny MaskablePPO policy of the ranked short list's view, played by its argmax."""
+    pytest.importorskip("sb3_contrib")
+    env = ranked_shortlist_lab_env(version=1, **LAB)
+    return tiny_maskable_policy(env, LAB, tmp_path_factory.mktemp("policy") / "ranked.zip")
+
+
+def test_a_ranked_policy_plays_in_the_lab_as_in_its_view(ranked_policy: Path) -> None:
+    """``policy:FILE`` of the ranked view sees the list's features after the view's
+    observation and plays the rank it chooses: its episode in the lab is the view's."""
+    assert read_spec(ranked_policy).flicks == "ranked"
+    agent = get_agent(f"policy:{ranked_policy}")
+    assert isinstance(agent, DesignPolicyAgent)
+    episode = run_episode(gym.make(orthoglide_env.LAB_ENV_ID, **LAB), agent, seed=4)
+    assert_view_plays_as_lab(ranked_shortlist_lab_env(version=1, **LAB), agent, episode, 4)

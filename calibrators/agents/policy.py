@@ -63,7 +63,7 @@ DESIGN_VIEW_IDS: dict[str, int] = {DESIGN_LAB_ENV_ID: 0, DESIGN_LAB_V1_ENV_ID: 1
 #: How a design-view policy may play (:attr:`PolicySpec.play`).
 PLAYS: tuple[str, ...] = ("draw", "argmax")
 #: How a design-view policy's moves may let plungers down (:attr:`PolicySpec.flicks`).
-FLICKS: tuple[str, ...] = ("prior", "filter", "shortlist")
+FLICKS: tuple[str, ...] = ("prior", "filter", "shortlist", "ranked")
 #: The filters beside the belief that a policy of ``flicks`` other than "prior" plays its
 #: moves with, by name: a class made from (lab, belief, the lab's first observation),
 #: registered by the module that defines it (:mod:`calibrators.planning.active_filter`
@@ -104,7 +104,9 @@ class PolicySpec:
     #: plan does, or "filter", as ``active``'s filter of the values read does
     #: (:class:`~calibrators.planning.active_expert.FilteredDesignLab`), or "shortlist", as
     #: that filter does, choosing among ``active``'s short list only
-    #: (:class:`~calibrators.planning.shortlist.ShortlistDesignLab`).
+    #: (:class:`~calibrators.planning.shortlist.ShortlistDesignLab`), or "ranked", the
+    #: short list's ranks as actions and its moves' features seen after the view's
+    #: observation (:class:`~calibrators.planning.shortlist.RankedShortlistLab`).
     flicks: str = "prior"
     #: Whether a policy of ``flicks="filter"`` also sees each posture's dials the filter
     #: lets read (:meth:`~calibrators.planning.active_filter.ActiveFilter.reach`).
@@ -341,8 +343,7 @@ class DesignPolicyAgent(PolicyAgent):
         self.belief = DesignBelief(lab.design, lab.n_stands,
                                    weighting_sigma(float(lab.noise.effective_sigma)),
                                    self.spec.budget_s, DESIGN_VIEW_IDS[self.spec.env_id])
-        extra = self.belief.n_postures if self.spec.reach else 0
-        self._check_sizes((len(self.belief.observation()) + extra, self.belief.n_actions))
+        size = len(self.belief.observation())
         self.belief.start(observation)
         self.filter = None
         if self.spec.flicks != "prior":
@@ -351,6 +352,12 @@ class DesignPolicyAgent(PolicyAgent):
                                  f"'{self.spec.flicks}' filter: import "
                                  "calibrators.planning.active_filter first")
             self.filter = FLICK_FILTERS[self.spec.flicks](lab, self.belief, observation)
+        # A filter whose view adds inputs or names its own actions (a ranked short list)
+        # says how many.
+        extra = (self.belief.n_postures if self.spec.reach
+                 else getattr(self.filter, "inputs", 0))
+        self._check_sizes((size + extra,
+                           getattr(self.filter, "actions", self.belief.n_actions)))
         self.queue: list[dict[str, Any]] = []
         self.last: dict[str, Any] | None = None
 
@@ -424,11 +431,22 @@ def decide_all(agents: list[DesignPolicyAgent]) -> list[int]:
         # float32, as the view in training gave it.
         seen = np.concatenate((seen, [a.filter.reach() for a in agents]),
                               axis=1).astype(np.float32)
-    noise = (np.array([a.rng.gumbel(size=a.belief.n_actions) for a in agents])
+    ranked = agents[0].spec.flicks == "ranked"
+    if ranked:
+        # The short list's features after the view's (float32, as in training); its
+        # ranks are the actions.
+        inputs, masks = zip(*[a.filter.ranked(a.belief) for a in agents], strict=True)
+        seen = np.concatenate((seen, inputs), axis=1).astype(np.float32)
+        masks = np.array(masks)
+    else:
+        masks = (action_masks([a.belief for a in agents]) if agents[0].filter is None
+                 else np.array([a.filter.action_mask(a.belief) for a in agents]))
+    noise = (np.array([a.rng.gumbel(size=masks.shape[1]) for a in agents])
              if agents[0].spec.play == "draw" else None)
-    masks = (action_masks([a.belief for a in agents]) if agents[0].filter is None
-             else np.array([a.filter.action_mask(a.belief) for a in agents]))
-    return agents[0].actor.choose_many(seen, masks, noise).tolist()
+    chosen = agents[0].actor.choose_many(seen, masks, noise).tolist()
+    if ranked:
+        return [a.filter.view_action(c, a.belief) for a, c in zip(agents, chosen, strict=True)]
+    return chosen
 
 
 def policy_agent(path: str | Path) -> PolicyAgent:

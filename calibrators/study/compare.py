@@ -24,8 +24,8 @@ from typing import TYPE_CHECKING, Any
 import gymnasium as gym
 import numpy as np
 
-# Registers the filters that policy files of flicks "filter" and "shortlist" play their
-# moves with (the short list's module imports the filter's).
+# Registers the filters that policy files of flicks "filter", "shortlist" and "ranked"
+# play their moves with (the short list's module imports the filter's).
 import calibrators.planning.shortlist  # noqa: F401
 from calibrators.agents import Agent, get_agent
 from calibrators.estimators.base import Estimate

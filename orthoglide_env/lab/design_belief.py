@@ -309,12 +309,17 @@ class DesignBelief:
         high = np.concatenate((np.full(logs, top), np.ones(stands), np.ones(3),
                                [(self.budget_s + longest_s) / self.budget_s]))
         if self.version >= 1:
-            # The first reading is at Zero at no cost; every later one takes a move.
-            readings = 1 + np.floor((self.budget_s + longest_s) / np.min(np.diag(self.drive_s)))
             low = np.concatenate((low, [0.0, 0.0, np.log10(FALL_FLOOR)]))
-            high = np.concatenate((high, [readings / COUNT_SCALE] * 2,
+            high = np.concatenate((high, [self.most_readings(longest_s) / COUNT_SCALE] * 2,
                                    [np.log10(1 + FALL_FLOOR)]))
         return low.astype(np.float32), high.astype(np.float32)
+
+    def most_readings(self, longest_s: float) -> float:
+        """The most readings an episode can take at one posture, in a lab whose longest
+        step takes ``longest_s``: the shortest re-reading fits no more often into the
+        budget and a step past it."""
+        # The first reading is at Zero at no cost; every later one takes a move.
+        return float(1 + np.floor((self.budget_s + longest_s) / np.min(np.diag(self.drive_s))))
 
     # -- the candidate operations -----------------------------------------------------------
     def moves(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
