@@ -9,8 +9,8 @@ Each variant must parse, and every value a synopsis offers for an option must be
 option's ``--help`` names. A line with a placeholder (``FILE``, ``MM``, ``...``) is a
 synopsis, only parsed; each variant of a concrete line of a code block is run, with at
 most one machine and one job, in a fresh folder holding the ``m.json`` and ``r.csv`` the
-documents use. Inline spans are the measured runs behind the tables (minutes): parsed
-only.
+documents use (a command that several lines give alike, for the first of them). Inline
+spans are the measured runs behind the tables (minutes): parsed only.
 """
 
 from __future__ import annotations
@@ -251,6 +251,28 @@ def _runs(line: str, runnable: bool) -> bool:
     return runnable and not any(PLACEHOLDER.search(w) for w in shlex.split(line, comments=True))
 
 
+def _first_runs(cases: list[tuple[str, str, list[str], bool]]) -> dict[tuple[str, ...], str]:
+    """Each distinct command the documents run here, as :func:`_tiny` cuts it, with the
+    case that gives it first.  A later line of the same words, run in a fresh folder of the
+    same files, would repeat that run (``plan --agent paper --out plan --pdf`` is on two
+    pages, 3 to 4 CPU-s a run), so it is parsed and checked only."""
+    first: dict[tuple[str, ...], str] = {}
+    for where, line, argv, runnable in cases:
+        if _runs(line, runnable) and not _cannot_run_here(argv):
+            first.setdefault(tuple(_tiny(argv)), where)
+    return first
+
+
+FIRST_RUN = _first_runs(CASES)
+
+
+def _executes(where: str, line: str, argv: list[str], runnable: bool) -> bool:
+    """Whether the test runs the case's command: a line it runs (:func:`_runs`) that can
+    run here, the first to give its command (:data:`FIRST_RUN`)."""
+    return (_runs(line, runnable) and not _cannot_run_here(argv)
+            and FIRST_RUN[tuple(_tiny(argv))] == where)
+
+
 #: Agents that design their experiment before the first reading: a line that plays one
 #: costs a plan of up to half a CPU-minute, whatever its command.
 PLANNING = ("optimal", "active")
@@ -268,9 +290,8 @@ def _scheduled(case: tuple[str, str, list[str], bool]) -> Any:
     ``slow`` (scheduled first: a calibration with ``optimal`` alone took 55 s of a loaded
     suite's wall time, and handed out among the last short tests such a line would keep one
     worker busy while the other idles)."""
-    where, line, argv, runnable = case
-    slow = _plans(argv) and _runs(line, runnable) and not _cannot_run_here(argv)
-    return pytest.param(*case, id=where, marks=[pytest.mark.slow] if slow else [])
+    slow = _plans(case[2]) and _executes(*case)
+    return pytest.param(*case, id=case[0], marks=[pytest.mark.slow] if slow else [])
 
 
 @pytest.mark.parametrize(("where", "line", "argv", "runnable"), map(_scheduled, CASES))
@@ -282,7 +303,7 @@ def test_a_documented_command_works(where: str, line: str, argv: list[str], runn
     if argv[0] in commands:
         _check_offered_values(commands[argv[0]], line, argv)
     _parse_only(argv)
-    if not _runs(line, runnable) or _cannot_run_here(argv):
+    if not _executes(where, line, argv, runnable):
         return
     for name in ("m.json", "r.csv"):
         shutil.copy(documents_folder / name, tmp_path / name)
