@@ -8,7 +8,6 @@ import numpy as np
 from scipy import stats
 
 from calibrators.agents.ballbar import CENTRE_MM, LENGTH_MM, PLANES, circle_postures
-from calibrators.estimators import gauss_newton
 from calibrators.estimators.catalogue import for_study
 from calibrators.measurements import Measurements
 from calibrators.measurements.record import Measurement
@@ -53,13 +52,14 @@ def _circles(seed: int) -> tuple[list[Measurements], list]:
     raise AssertionError("too few machines keep the bar within its travel")
 
 
-def _z_rms(datas: list[Measurements], truths: list) -> tuple[float, int]:
-    estimates = for_study("full", 0.02, IDEAL).fit_many(datas)
+def _z_rms(datas: list[Measurements], truths: list, curvature: bool = True
+           ) -> tuple[float, int]:
+    estimates = for_study("full", 0.02, IDEAL).clone(curvature=curvature).fit_many(datas)
     z = np.concatenate(machine_z_scores(estimates, truths))
     return float(np.sqrt(np.mean(z**2))), len(z)
 
 
-def test_the_covariance_holds_the_curvature_over_the_unseen_rigid_motion(monkeypatch):
+def test_the_covariance_holds_the_curvature_over_the_unseen_rigid_motion():
     """The readings are the exact model's plus the bar's scatter, so a linear model's
     covariance would be honest but for the curvature.  Without it, the z-RMS of the
     determined combinations is above the 95 % interval of an honest one (chi-square on
@@ -69,12 +69,23 @@ def test_the_covariance_holds_the_curvature_over_the_unseen_rigid_motion(monkeyp
     with_curvature, count = _z_rms(datas, truths)
     honest = (np.sqrt(stats.chi2.ppf(0.025, count) / count),
               np.sqrt(stats.chi2.ppf(0.975, count) / count))
-    original = gauss_newton.fit_batch
-
-    def linear(*args, **kwargs):  # type: ignore[no-untyped-def]
-        return original(*args, **{**kwargs, "curvature": False})
-
-    monkeypatch.setattr(gauss_newton, "fit_batch", linear)
-    without, _ = _z_rms(datas, truths)
+    without, _ = _z_rms(datas, truths, curvature=False)
     assert without > honest[1], (without, honest)
     assert honest[0] <= with_curvature <= honest[1], (with_curvature, honest)
+
+
+def test_leaving_the_curvature_out_keeps_the_estimate_and_narrows_only_its_error_bars():
+    """A caller that reads only the estimate (``active``'s refits) leaves the curvature
+    out: the fit's solution does not depend on its covariance, so the estimate is the
+    same to the bit; the curvature only adds a second moment, so the covariance left out
+    of it is smaller by a positive semi-definite matrix that is not zero (its eigenvalues
+    down to the rounding of the covariance, 1e-12 of its largest)."""
+    datas, _ = _circles(7)
+    curved, linear = (for_study("full", 0.02, IDEAL).clone(curvature=c).fit_many(datas[:3])
+                      for c in (True, False))
+    for a, b in zip(curved, linear, strict=True):
+        assert np.array_equal(a.theta, b.theta)
+        assert a.warnings == b.warnings
+        added = np.linalg.eigvalsh(a.covariance - b.covariance)
+        rounding = 1e-12 * np.linalg.eigvalsh(a.covariance).max()
+        assert added.min() >= -rounding and added.max() > rounding

@@ -238,7 +238,8 @@ class ActiveAgent(Agent):
         records = self.env.records
         planner = self.planner
         try:
-            est = for_study("extended", planner.sigma).fit(
+            # Only the estimate is read: its error bars' curvature is left out.
+            est = for_study("extended", planner.sigma).clone(curvature=False).fit(
                 measurements_of(records, design=planner.design))
         except (ValueError, RuntimeError, np.linalg.LinAlgError):
             return  # the filter goes on alone; the next refit has more data

@@ -263,7 +263,11 @@ class GaussNewtonCalibrator(Estimator):
     family's size between the ``lab``'s and twice the ``workshop``'s
     (:mod:`calibrators.estimators.world_sizes`);
     ``world_check``: a warning of kind ``world`` when the readings show a world worse than
-    the named ``conditions``, with the effects that show it.
+    the named ``conditions``, with the effects that show it; ``curvature``: a fit of
+    interferometer or ballbar readings puts the model's curvature into its covariance
+    (:func:`~calibrators.estimators.exact_fit.fit_batch`); a caller that reads only the
+    estimate, not its error bars, leaves it out (the same estimate, at about half a
+    three-hour notebook's cost).
     """
 
     name = "gauss-newton"
@@ -289,6 +293,7 @@ class GaussNewtonCalibrator(Estimator):
         "fit_world": [BOOLEAN, Satisfies(_check_terms, f"a tuple of term families "
                                                        f"{list(TERM_FAMILIES)}")],
         "node_spacing": [NONE, Interval(0, None, "neither")],
+        "curvature": [BOOLEAN],
     }
 
     def __init__(self, *, params: str = "paper6", sigma: float = DEFAULT_SIGMA,
@@ -297,12 +302,14 @@ class GaussNewtonCalibrator(Estimator):
                  solver: str = "gauss-newton", tracker_sigma: float = TRACKER_SIGMA,
                  explain: bool = True, conditions: Conditions | str = "ideal",
                  left_out: str = DEFAULT_PRESET, fit_world: bool | tuple[str, ...] = False,
-                 node_spacing: float | None = None, world_check: bool = False) -> None:
+                 node_spacing: float | None = None, world_check: bool = False,
+                 curvature: bool = True) -> None:
         self.params, self.sigma, self.verify, self.prior = params, sigma, verify, prior
         self.fix, self.keep_outliers, self.holdout, self.seed = fix, keep_outliers, holdout, seed
         self.solver, self.tracker_sigma, self.explain = solver, tracker_sigma, explain
         self.conditions, self.left_out, self.fit_world = conditions, left_out, fit_world
         self.node_spacing, self.world_check = node_spacing, world_check
+        self.curvature = curvature
         self._validate_params()
 
     def fit(self, data: Measurements) -> Estimate:
@@ -527,7 +534,8 @@ class GaussNewtonCalibrator(Estimator):
 
         # An interferometer or a ballbar determines the best-seen combinations finely
         # enough that the model's curvature over what it does not see outgrows them.
-        curved = any(isinstance(s, InterferometerAxis | BallbarSpec) for s in design.specs)
+        curved = self.curvature and any(isinstance(s, InterferometerAxis | BallbarSpec)
+                                        for s in design.specs)
 
         def fit(rows: np.ndarray, mask: np.ndarray, terms: Consider = consider,
                 start: np.ndarray | None = None) -> BatchFit:
