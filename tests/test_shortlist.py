@@ -120,22 +120,20 @@ def test_the_lookahead_takes_the_move_whose_greedy_play_out_ends_lowest() -> Non
     assert departed >= 1
 
 
-@pytest.fixture(scope="module")
-def shortlist_policy(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A tiny MaskablePPO policy of the short list's view, played by its argmax."""
-    pytest.importorskip("sb3_contrib")
-    env = shortlist_design_lab_env(version=1, **LAB)
-    return tiny_maskable_policy(env, LAB, tmp_path_factory.mktemp("policy") / "shortlist.zip")
-
-
-def test_a_shortlist_policy_plays_in_the_lab_as_in_its_view(shortlist_policy: Path) -> None:
-    """``policy:FILE`` of the short list's view narrows its mask as the view did: its
+@pytest.mark.parametrize(("make_view", "flicks"), [(shortlist_design_lab_env, "shortlist"),
+                                                    (ranked_shortlist_lab_env, "ranked")])
+def test_a_shortlist_policy_plays_in_the_lab_as_in_its_view(
+        make_view, flicks: str, tmp_path: Path) -> None:
+    """``policy:FILE`` of a short list's view (the list's mask, or its ranks with the listed
+    moves' features after the view's observation) narrows its choice as the view did: its
     episode in the lab is the view's with the same network's most likely open operation."""
-    assert read_spec(shortlist_policy).flicks == "shortlist"
-    agent = get_agent(f"policy:{shortlist_policy}")
+    pytest.importorskip("sb3_contrib")
+    policy = tiny_maskable_policy(make_view(version=1, **LAB), LAB, tmp_path / f"{flicks}.zip")
+    assert read_spec(policy).flicks == flicks
+    agent = get_agent(f"policy:{policy}")
     assert isinstance(agent, DesignPolicyAgent)
     episode = run_episode(gym.make(orthoglide_env.LAB_ENV_ID, **LAB), agent, seed=4)
-    assert_view_plays_as_lab(shortlist_design_lab_env(version=1, **LAB), agent, episode, 4)
+    assert_view_plays_as_lab(make_view(version=1, **LAB), agent, episode, 4)
 
 
 def test_the_ranked_view_names_the_short_list_and_sees_its_moves() -> None:
@@ -201,21 +199,3 @@ def test_ranked_labels_name_the_experts_operation() -> None:
     off = next(p for p in range(env.belief.n_postures) if p not in env.listed)
     with pytest.raises(ValueError, match="not on the short list"):
         env.rank_of(off)
-
-
-@pytest.fixture(scope="module")
-def ranked_policy(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A tiny MaskablePPO policy of the ranked short list's view, played by its argmax."""
-    pytest.importorskip("sb3_contrib")
-    env = ranked_shortlist_lab_env(version=1, **LAB)
-    return tiny_maskable_policy(env, LAB, tmp_path_factory.mktemp("policy") / "ranked.zip")
-
-
-def test_a_ranked_policy_plays_in_the_lab_as_in_its_view(ranked_policy: Path) -> None:
-    """``policy:FILE`` of the ranked view sees the list's features after the view's
-    observation and plays the rank it chooses: its episode in the lab is the view's."""
-    assert read_spec(ranked_policy).flicks == "ranked"
-    agent = get_agent(f"policy:{ranked_policy}")
-    assert isinstance(agent, DesignPolicyAgent)
-    episode = run_episode(gym.make(orthoglide_env.LAB_ENV_ID, **LAB), agent, seed=4)
-    assert_view_plays_as_lab(ranked_shortlist_lab_env(version=1, **LAB), agent, episode, 4)
