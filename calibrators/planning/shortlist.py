@@ -91,7 +91,10 @@ def ranked_shortlist(expert: ActiveExpert, belief: DesignBelief,
     listed, rate, priced = listed_moves(expert, belief, moves)
     n = belief.n_postures
     features = np.zeros((moves, RANK_FEATURES))
-    rates = np.array([rate[p] if np.isfinite(rate[p]) else 0.0 for p in listed if p < n])
+    # An unpriced move (an infinite or undefined rate or gain) offers nothing.
+    rate = np.where(np.isfinite(rate), rate, 0.0)
+    gains = np.where(np.isfinite(priced.gain), priced.gain, 0.0)
+    rates = rate[[p for p in listed if p < n]]
     best = float(rates.max()) if rates.size and rates.max() > 0 else 1.0
     criterion = max(float(expert.planner._criterion_value()), np.finfo(float).tiny)
     left = max(belief.budget_s - belief.time_s, np.finfo(float).tiny)
@@ -99,9 +102,8 @@ def ranked_shortlist(expert: ActiveExpert, belief: DesignBelief,
         if p >= n:
             features[r, 0] = 1.0
             continue
-        gain = priced.gain[p] if np.isfinite(priced.gain[p]) else 0.0
-        features[r] = (1.0, 1.0, max(rate[p], 0.0) / best if np.isfinite(rate[p]) else 0.0,
-                       np.log10(min(max(gain, 0.0) / criterion, 1.0) + FALL_FLOOR),
+        features[r] = (1.0, 1.0, max(rate[p], 0.0) / best,
+                       np.log10(min(max(gains[p], 0.0) / criterion, 1.0) + FALL_FLOOR),
                        min(priced.seconds[p] / left, 1.0), float(priced.reads[:, p].mean()),
                        belief.readings_at[p] / COUNT_SCALE, float(p == belief.here))
     return listed, features
