@@ -7,6 +7,7 @@ belief's own update, observation, mask and float64 logits take."""
 
 from __future__ import annotations
 
+import copy
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +23,7 @@ from calibrators.agents.policy import DesignPolicyAgent
 from calibrators.study.episodes import machine_seed
 from orthoglide_env.lab.design_belief import action_masks, observations
 from orthoglide_env.lab.operations import Op
+from orthoglide_env.wrappers import design_lab_env
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED_HOUR = ROOT / "examples" / "policies" / "masked_lab3600.zip"
@@ -167,6 +169,32 @@ def test_the_bound_holds_on_the_float32_logits(states: tuple[np.ndarray, np.ndar
     bounds = last_layer_bounds(weight, bias)
     assert np.all(np.abs(fast - actor.logits_many(seen)) <= bounds)
     assert bounds.max() < 1e-3
+
+
+def test_a_mask_near_the_budget_s_end_is_each_move_s_own() -> None:
+    """``action_masks`` opens a move some stand reads likely that ends within the budget:
+    the state's readable moves as they are while its longest one ends in time, each move's
+    end against the budget once it does not.  Beliefs of one state at clocks from the
+    start to past the budget, in one chunk."""
+    env = design_lab_env(version=1, **LAB)
+    env.reset(seed=0)
+    belief = env.belief
+    seconds, _, _, readable, latest = belief._candidates()
+    assert readable.any() and 0.0 < latest == seconds[readable].max()
+    budget = belief.budget_s
+    clocks = [0.0, budget - latest, budget - latest + 1.0, budget - seconds[readable].min(),
+              budget - 5.0, budget + 1.0]
+    beliefs = []
+    for clock in clocks:
+        twin = copy.copy(belief)
+        twin.time_s = clock
+        beliefs.append(twin)
+    masks = action_masks(beliefs)[:, :belief.n_postures]
+    expected = readable & (np.array(clocks)[:, None] + seconds <= budget)
+    np.testing.assert_array_equal(masks, expected)
+    # Both ways are taken: all readable moves open, some closed, none open.
+    assert masks[0].sum() == masks[1].sum() == readable.sum() > masks[2].sum() > 0
+    assert not masks[-1].any()
 
 
 def test_bad_masks_are_refused(states: tuple[np.ndarray, np.ndarray]) -> None:

@@ -73,9 +73,13 @@ class ActorWeights:
         if x.ndim != 2 or x.shape[1] != self.weights[0].shape[1]:
             raise ValueError(f"observations are (N, {self.weights[0].shape[1]}), got "
                              f"{x.shape}")
-        x = x.astype(np.float64)
-        for weight, bias in self.fused[:-1]:
-            x = x @ weight
+        # The design view's observation is mostly its stands' one-hots (about 33 of 272
+        # inputs are non-zero over a chunk): the first layer multiplies only the columns
+        # some row reads, the same sums but for their zero terms.
+        used = np.flatnonzero(x.any(axis=0))
+        x = x[:, used].astype(np.float64)
+        for k, (weight, bias) in enumerate(self.fused[:-1]):
+            x = x @ (weight[used] if k == 0 else weight)
             x += bias
             np.tanh(x, out=x)
         return x

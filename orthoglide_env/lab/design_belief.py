@@ -22,7 +22,8 @@ a-priori spread of its reading keeps it safe, as a fixed plan does.
 
 from __future__ import annotations
 
-from functools import lru_cache
+from collections.abc import Callable
+from functools import lru_cache, partial
 
 import numpy as np
 
@@ -48,8 +49,8 @@ LOG_FLOOR: float = 1e-6
 #: planner prices a move whose every reading is unlikely (down to 1e-144 at the far end
 #: of a gauge's travel) at next to nothing, and a learner would only spend time there.
 READ_PROBABILITY: float = 0.5
-#: States (design, stands, plungers, posture) whose candidate moves a process keeps
-#: (:func:`candidate_moves`, about 100 kB each with six stands): a policy that has learnt
+#: States (stands, plungers, posture) whose candidate moves a process keeps per design
+#: (:func:`state_moves`, about 100 kB each with six stands): a policy that has learnt
 #: its experiment passes the same states on every machine, and its decision then costs no
 #: pass over the postures.
 MOVES_KEPT: int = 256
@@ -97,14 +98,17 @@ def drive_seconds(design: MachineDesign) -> np.ndarray:
     return seconds
 
 
-@lru_cache(maxsize=MOVES_KEPT)
+#: A state's candidate moves (:func:`candidate_moves`): their seconds (P,), the plungers
+#: down after them and how likely each reads (K, P), which of them some stand reads at
+#: least :data:`READ_PROBABILITY` likely (P,), and the longest of those in seconds.
+Moves = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]
+
+
 def candidate_moves(design: MachineDesign, slots: bytes, faulted: bytes, engaged: bytes,
-                    here: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                    here: int) -> Moves:
     """The candidate moves of a state (see :meth:`DesignBelief.moves`), from the bytes of
     its stands' slots (int64, -1: none), out-of-service and engaged flags (bool) and its
-    posture's index: their seconds (P,), the plungers down after them and how likely each
-    reads (K, P), and which of them some stand reads at least :data:`READ_PROBABILITY`
-    likely (P,); read-only."""
+    posture's index (:data:`Moves`; the arrays read-only)."""
     table = slot_table(design)
     slot = np.frombuffer(slots, dtype=np.int64)
     down = np.frombuffer(engaged, dtype=bool)
@@ -117,7 +121,16 @@ def candidate_moves(design: MachineDesign, slots: bytes, faulted: bytes, engaged
     readable = (reads >= READ_PROBABILITY).any(axis=0)
     for array in (seconds, after, reads, readable):
         array.flags.writeable = False
-    return seconds, after, reads, readable
+    return seconds, after, reads, readable, float(np.max(seconds, initial=-np.inf,
+                                                         where=readable))
+
+
+@lru_cache(maxsize=2)
+def state_moves(design: MachineDesign) -> Callable[[bytes, bytes, bytes, int], Moves]:
+    """:func:`candidate_moves` of ``design``'s states, the last :data:`MOVES_KEPT` of them
+    kept: a belief holds this function, so that finding a state's moves hashes the state's
+    bytes and not the design (a microsecond and a half a decision)."""
+    return lru_cache(maxsize=MOVES_KEPT)(partial(candidate_moves, design))
 
 
 @lru_cache(maxsize=2)
@@ -173,6 +186,7 @@ class DesignBelief:
         self.weight, self.factor = rigid_weight(design), rigid_factor(design)
         # Found once: their caches are keyed by the design, whose hash every step would pay.
         self.drive_s, self.index = drive_seconds(design), posture_index(design)
+        self._moves_of = state_moves(design)
         #: Each stand's columns (K, 32): the machine's errors, then its mounting's.
         self.stand_columns = np.array([self._columns(k) for k in range(self.n_stands)])
         self.start({"slot": np.full(stands, self.n_slots), "engaged": np.zeros(stands),
@@ -329,12 +343,11 @@ class DesignBelief:
         not safe there; a stand out of service stays up.  (Computed once per state.)"""
         return self._candidates()[:3]
 
-    def _candidates(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def _candidates(self) -> Moves:
         """:func:`candidate_moves` of the present state (found once per state)."""
         if self._moves is None:
-            self._moves = candidate_moves(self.design, self.slots.tobytes(),
-                                          self.faulted.tobytes(), self.engaged.tobytes(),
-                                          self.here)
+            self._moves = self._moves_of(self.slots.tobytes(), self.faulted.tobytes(),
+                                         self.engaged.tobytes(), self.here)
         return self._moves
 
     def action_mask(self) -> np.ndarray:
@@ -407,8 +420,10 @@ def readings_rows(beliefs: list[DesignBelief], valid: np.ndarray) -> np.ndarray:
     values = np.full((len(which), first.stand_columns.shape[1]), ZERO_SCALE)
     values[:, :-1] = first.table.change[slots[which, stand],
                                         np.array([b.here for b in beliefs])[which]]
+    # Whitened before they are placed: the rows' zeros need no division.
+    values /= np.array([b.sigma for b in beliefs])[which, None]
     rows[which[:, None], rank[:, None], first.stand_columns[stand]] = values
-    return rows / np.array([b.sigma for b in beliefs])[:, None, None]
+    return rows
 
 
 def observe_many(beliefs: list[DesignBelief], operations: list[dict[str, object]],
@@ -444,7 +459,9 @@ def observe_many(beliefs: list[DesignBelief], operations: list[dict[str, object]
     b_t = rows @ covariances
     m = b_t @ _transposed(rows)
     m += np.eye(rows.shape[1])
-    covariances -= _transposed(np.linalg.solve(m, b_t)) @ b_t
+    # m's inverse times B', not a solve: NumPy's stacked solve of 57 right-hand sides costs
+    # five times the stacked inverse of m (R x R, R at most the stands) and its product.
+    covariances -= _transposed(np.linalg.inv(m) @ b_t) @ b_t
     after = np.maximum(flat @ weight.ravel(), 0.0)
     for k in np.flatnonzero(rows.any(axis=(1, 2))).tolist():
         if before[k] > 0:
@@ -490,9 +507,12 @@ def action_masks(beliefs: list[DesignBelief]) -> np.ndarray:
     clock = np.array([b.time_s for b in beliefs])
     budget = np.array([b.budget_s for b in beliefs])
     masks = np.empty((count, first.n_actions), dtype=bool)
-    np.logical_and(np.array([m[3] for m in moves]),
-                   clock[:, None] + np.array([m[0] for m in moves]) <= budget[:, None],
-                   out=masks[:, :postures])
+    np.stack([m[3] for m in moves], out=masks[:, :postures])
+    # A state's readable moves all end within the budget while its longest one does: only
+    # a row near the budget's end compares each move's end with it.
+    late = clock + np.array([m[4] for m in moves]) > budget
+    for k in np.flatnonzero(late).tolist():
+        masks[k, :postures] &= clock[k] + moves[k][0] <= budget[k]
     # The drive to Zero, as the lab times it, from the table of every move.
     remount_s = first.drive_s[[b.here for b in beliefs], first.table.zero] + TIME.remount_s
     free = np.repeat(clock + remount_s <= budget, slots).reshape(count, slots)
