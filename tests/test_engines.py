@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import signal
 import subprocess
 import sys
@@ -10,6 +11,7 @@ import pytest
 
 from calibrators.cli import main
 from calibrators.study.compare import Config, run
+from calibrators.study.engines import YOUNG_THRESHOLD, imports_kept
 
 
 def test_ray_engine_gives_the_local_engines_trials(monkeypatch) -> None:
@@ -48,6 +50,17 @@ def _thread_settings(_: int) -> tuple[str | None, ...]:
     from calibrators.study.engines import _THREAD_VARIABLES
 
     return tuple(os.environ.get(key) for key in _THREAD_VARIABLES)
+
+
+def test_the_collector_is_as_it_was_after_a_command() -> None:
+    # While a command runs, what was imported is frozen and the young passes are rarer;
+    # after it, the caller's collector is as it was (its own thresholds, nothing frozen).
+    before, frozen = gc.get_threshold(), gc.get_freeze_count()
+    with imports_kept():
+        assert gc.get_threshold()[0] == max(YOUNG_THRESHOLD, before[0])
+        assert gc.get_threshold()[1:] == before[1:]
+        assert gc.get_freeze_count() > frozen
+    assert gc.get_threshold() == before and gc.get_freeze_count() == frozen
 
 
 def test_local_workers_start_single_threaded(monkeypatch) -> None:

@@ -8,6 +8,7 @@ import re
 import subprocess
 import sys
 import warnings
+from dataclasses import FrozenInstanceError, fields
 
 import gymnasium as gym
 import numpy as np
@@ -23,6 +24,7 @@ from calibrators.estimators.catalogue import for_study
 from calibrators.study.compare import Config, agent_episodes, run, run_chunk
 from calibrators.study.episodes import make_estimator, measurements_of, run_episode
 from calibrators.study.statistics import summary
+from orthoglide_env.lab.notebook import Record
 from orthoglide_env.lab.operations import SLOTS, TIME, Op, slot_index
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.scoring import score
@@ -89,6 +91,23 @@ def test_a_remount_is_a_new_installation_with_its_own_zero() -> None:
     mine = [r for r in last if r.mounting.startswith("x-leg/y@0.2")]
     # The new mounting's first reading is its zero: at Zero it reads 0 (ideal gauge).
     assert len(mine) == 1 and mine[0].reading == pytest.approx(0.0, abs=1e-12)
+
+
+def test_the_labs_records_are_those_the_record_class_makes() -> None:
+    # The lab writes its records through a shortcut past the frozen class's setters: each
+    # must be the record its fields make, to the field order, hash and repr.
+    env = lab(tracker=True, thermometer=True, conditions="lab")
+    env.reset(seed=3)
+    env.step(action(Op.MOVE, [20.0, -10.0, 5.0]))
+    records = env.unwrapped.records
+    assert {type(r.spec).__name__ for r in records} >= {"TrackerAxis"} and len(records) > 3
+    for record in records:
+        made = Record(**{f.name: getattr(record, f.name) for f in fields(Record)})
+        assert vars(record) == vars(made) and list(vars(record)) == list(vars(made))
+        assert record == made and hash(record) == hash(made) and repr(record) == repr(made)
+        assert record.temperature_c is not None
+        with pytest.raises(FrozenInstanceError):
+            record.reading = 0.0  # type: ignore[misc]
 
 
 def test_refused_operations_cost_a_moment_and_change_nothing() -> None:

@@ -124,6 +124,13 @@ class Face:
         """The single env's info of row ``r`` of ``result``, env ``i``'s step."""
         raise NotImplementedError
 
+    def _step_columns(self, result: StepResult, rows: np.ndarray
+                      ) -> dict[str, list[Any]] | None:
+        """The infos of ``result``'s ``rows`` (:meth:`_step_info` of each) key by key, one
+        list of values per key in the order of ``rows``, when they are flat and have the
+        same keys; None where they are not, or to build each env's dict."""
+        return None
+
     def _reset_info(self, i: int) -> dict[str, Any]:
         """The single env's info of env ``i``'s reset."""
         raise NotImplementedError

@@ -44,6 +44,10 @@ class LabFace(Face):
     def _step_info(self, result: StepResult, r: int, i: int) -> dict[str, Any]:
         return result.info(r)
 
+    def _step_columns(self, result: StepResult, rows: np.ndarray
+                      ) -> dict[str, list[Any]] | None:
+        return result.columns(rows)
+
     def _reset_info(self, i: int) -> dict[str, Any]:
         return {"op": "reset", "step_time_s": 0.0, "collision": "", "overtravel": []}
 

@@ -15,7 +15,7 @@ from gymnasium.vector.utils import batch_space
 
 from orthoglide_env.envs.base import Face, check_seed
 from orthoglide_env.instruments.slots import GaugeSpec
-from orthoglide_env.lab.engine import LabBatch
+from orthoglide_env.lab.engine import LabBatch, StepResult
 from orthoglide_env.lab.machines import ExactMachines
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.lab.settings import LabSettings
@@ -126,10 +126,8 @@ class EngineVectorEnv(Face, VectorEnv):
             else np.zeros(n, dtype=bool)
         # An env that resets on this step shows its reset's info (SyncVectorEnv's way).
         last = ending[rows]
-        info = self._add_infos({}, [self._step_info(result, r, rows[r])
-                                    for r in np.flatnonzero(~last)], rows[~last])
-        final = self._add_infos({}, [self._step_info(result, r, rows[r])
-                                     for r in np.flatnonzero(last)], rows[last])
+        info = self._step_infos(result, np.flatnonzero(~last), rows)
+        final = self._step_infos(result, np.flatnonzero(last), rows)
         if ending.any():
             info["final_obs"] = np.full(n, None, dtype=object)
             for i in np.flatnonzero(ending):
@@ -142,6 +140,17 @@ class EngineVectorEnv(Face, VectorEnv):
         self._obs = obs
         self._ended = (terminated | truncated) & ~ending
         return self._copy_obs(), reward, terminated, truncated, info
+
+    def _step_infos(self, result: StepResult, picked: np.ndarray, rows: np.ndarray
+                    ) -> dict[str, Any]:
+        """The vector infos of rows ``picked`` of ``result`` (a step of envs ``rows``): key
+        by key from the face's columns where it gives them, else from each env's info."""
+        envs = rows[picked]
+        columns = self._step_columns(result, picked) if len(picked) else None
+        if columns is None:
+            return self._add_infos({}, [self._step_info(result, r, i)
+                                        for r, i in zip(picked, envs, strict=True)], envs)
+        return self._add_columns({}, columns, envs)
 
     def _add_infos(self, vector_infos: dict[str, Any], infos: Sequence[dict[str, Any]],
                    envs: np.ndarray) -> dict[str, Any]:
@@ -156,8 +165,14 @@ class EngineVectorEnv(Face, VectorEnv):
             for d, i in zip(infos, envs, strict=True):
                 self._add_info(vector_infos, d, int(i))
             return vector_infos
-        for key in keys:
-            values = [d[key] for d in infos]
+        return self._add_columns(vector_infos, {key: [d[key] for d in infos] for key in keys},
+                                 envs)
+
+    def _add_columns(self, vector_infos: dict[str, Any], columns: dict[str, list[Any]],
+                     envs: np.ndarray) -> dict[str, Any]:
+        """:meth:`_add_infos` of flat infos with the same keys given key by key: each key's
+        values for ``envs`` in turn."""
+        for key, values in columns.items():
             if key not in vector_infos:  # Gymnasium's rule picks the array's type
                 self._add_info(vector_infos, {key: values[0]}, int(envs[0]))
             array = vector_infos[key]

@@ -81,6 +81,20 @@ class StepResult:
                         predicted_tcp_rigid_mm=float(self.predicted[i]))
         return info
 
+    def columns(self, rows: np.ndarray) -> dict[str, list[Any]] | None:
+        """:meth:`info` of ``rows`` key by key (each key's values in the order of
+        ``rows``), or None when one of them ends its episode (its info has more keys): a
+        step of a lab vector env makes no dict per env (a fifth of its own cost)."""
+        ended = self.terminated[rows] | self.truncated[rows]
+        if ended.any():
+            return None
+        picked = rows.tolist()
+        return {"op": [OP_NAMES[o] for o in self.op[rows].tolist()],
+                "step_time_s": self.seconds[rows].tolist(),
+                "overtravel": [self.overtravel[r] for r in picked],
+                "collision": [self.collision[r] for r in picked],
+                "refused": [self.refused[r] for r in picked]}
+
 
 class LabBatch:
     """The state of ``size`` lab episodes and the lab's rules applied to any of them.
@@ -860,15 +874,16 @@ class LabBatch:
         room = self._room(rows, self.time[rows] + pending)
         for r, k in zip(*(part.tolist() for part in np.nonzero(valid)), strict=True):
             i = index[r]
-            self.notebooks[i].records.append(Record(self.places[slots[r][k]], self.mounting[i][k],
-                                                    rho[r], read[r][k], steps[r], stamps[r],
-                                                    room[r]))
+            self.notebooks[i].records.append(Record.written(
+                self.places[slots[r][k]], self.mounting[i][k], rho[r], read[r][k], steps[r],
+                stamps[r], room[r]))
         if settings.tracker:
             tracker = self.tracker_reading[rows].tolist()
             for r, i in enumerate(index):
                 self.notebooks[i].records.extend(
-                    Record(TrackerAxis(c), f"tracker.{AXIS_NAMES[c]}", rho[r], tracker[r][c],
-                           steps[r], stamps[r], room[r]) for c in range(3))
+                    Record.written(TrackerAxis(c), f"tracker.{AXIS_NAMES[c]}", rho[r],
+                                   tracker[r][c], steps[r], stamps[r], room[r])
+                    for c in range(3))
         for r in np.flatnonzero(self.laser_axis[rows] >= 0).tolist():
             i, axis = index[r], int(self.laser_axis[index[r]])
             self.notebooks[i].records.append(Record(
