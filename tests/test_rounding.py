@@ -102,6 +102,23 @@ def test_fixed_plan_keeps_the_better_plan_and_active_finds_its_bundles(half_hour
     assert len(taken) == sum(s.op == Op.PIVOT for s in steps)
 
 
+def test_the_bounds_own_design_rounds_to_its_readings(monkeypatch):
+    # best_design is the bound's with the design that reaches it: its counts give the
+    # design's value, and its bar readings, rounded, are its bundle's path.
+    monkeypatch.setattr(bound, "MAX_ITERATIONS", 40)
+    budget, owned = 1800.0, ("dial", "ballbar")
+    found = bound.best_design(PROTOTYPE, IDEAL, SIGMA, budget, owned)
+    assert found.bound == lower_bound(PROTOTYPE, IDEAL, SIGMA, budget, owned)
+    model = bound_model(PROTOTYPE, IDEAL, SIGMA, False, True)
+    assert np.sqrt(model.value(found.counts)) == pytest.approx(found.bound.design_mm,
+                                                               rel=1e-9)
+    bar = found.counts[model.laser == bound.BAR].sum()
+    # The bar pays for its pivot in half an hour (about 180 readings).
+    assert found.pivot and bar == pytest.approx(found.bound.ballbar_readings) and bar > 100
+    (bundle,) = rounding.bound_bundles(PROTOTYPE, IDEAL, SIGMA, budget, owned)
+    assert bundle.instrument == "ballbar" and len(bundle.path) == round(bar)
+
+
 def test_a_design_visit_reads_its_stands_at_one_posture():
     # The design behind a plan keeps one clock: its visits (each one posture, reading the
     # mounted stands that touch there safely, each once at most) and the bar's readings

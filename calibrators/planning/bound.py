@@ -594,6 +594,26 @@ def lower_bound(design: MachineDesign, conditions: Conditions, dial_sigma: float
     """The bound (see the module) of a lab of ``design`` under ``conditions`` with dials of
     weighting sigma ``dial_sigma`` (mm) on ``stands`` stands, owning ``instruments``, over
     a budget of ``budget_s`` seconds."""
+    return best_design(design, conditions, dial_sigma, budget_s, instruments, stands).bound
+
+
+@dataclass(frozen=True)
+class Design:
+    """The bound's best continuous design: its :class:`Bound`, its set-ups (the laser's
+    ``drives``, the ballbar's ``pivot`` or not) and its ``counts`` (N,) of the candidates
+    of :func:`bound_model`'s model of the lab (real: time shares)."""
+
+    bound: Bound
+    drives: tuple[int, ...]
+    pivot: bool
+    counts: np.ndarray
+
+
+def best_design(design: MachineDesign, conditions: Conditions, dial_sigma: float,
+                budget_s: float, instruments: tuple[str, ...] = ("dial",),
+                stands: int = len(PAPER_SLOTS)) -> Design:
+    """:func:`lower_bound` with the design that reaches it (a plan rounds it:
+    :mod:`calibrators.planning.rounding`)."""
     if not (np.isfinite(budget_s) and budget_s > 0):
         raise ValueError(f"budget_s must be a positive number of seconds, got {budget_s}")
     if not (isinstance(stands, int) and stands >= 1):
@@ -610,7 +630,7 @@ def lower_bound(design: MachineDesign, conditions: Conditions, dial_sigma: float
                       if owned else [])
     # The pivot's set-up is paid once or not at all, as the laser's are.
     pivots = [False, True] if bar else [False]
-    best: tuple[float, tuple[int, ...], np.ndarray] | None = None
+    best: tuple[float, tuple[int, ...], bool, np.ndarray] | None = None
     lowest = np.inf
     for pivot in pivots:
         for drives in choices:
@@ -628,10 +648,11 @@ def lower_bound(design: MachineDesign, conditions: Conditions, dial_sigma: float
                                          bars)
             lowest = min(lowest, lower)
             if best is None or value < best[0]:
-                best = (value, drives, counts)
+                best = (value, drives, pivot, counts)
     assert best is not None  # the dial-only problem always has a budget
-    value, drives, counts = best
+    value, drives, pivot, counts = best
     lowest = max(lowest, 0.0)
-    return Bound(float(np.sqrt(lowest)), float(np.sqrt(value)), float(value - lowest),
-                 tuple(drives), float(counts[model.laser >= 0].sum()),
-                 float(counts[model.laser == BAR].sum()))
+    found = Bound(float(np.sqrt(lowest)), float(np.sqrt(value)), float(value - lowest),
+                  tuple(drives), float(counts[model.laser >= 0].sum()),
+                  float(counts[model.laser == BAR].sum()))
+    return Design(found, tuple(drives), pivot, counts)

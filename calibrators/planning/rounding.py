@@ -45,6 +45,7 @@ from calibrators.planning.bound import (
     _information,
     _value,
     bar_bundle,
+    best_design,
     bound_model,
     setup_seconds,
 )
@@ -210,6 +211,22 @@ def _rounded(counts: np.ndarray) -> np.ndarray:
     one), apportioned over the candidates above :data:`SHARE_FLOOR` of it."""
     kept = np.where(counts >= SHARE_FLOOR * counts.sum(), counts, 0.0)
     return apportion(kept, max(round(float(counts.sum())), 1))
+
+
+def bound_bundles(design: MachineDesign, conditions: Conditions, dial_sigma: float,
+                  budget_s: float, instruments: tuple[str, ...]) -> tuple[Bundle, ...]:
+    """The bound's own design (:func:`~calibrators.planning.bound.best_design`, whose
+    instruments share its visits with the dials) rounded to bundles as
+    :func:`relaxed_bundles` rounds the sequential designs: its set-ups, its laser targets
+    and its bar points.  Not among ``optimal``'s choices: where its plan was kept its
+    prediction was within 1 % of the plan kept before and its error in the lab no
+    measurably lower (``benchmarks/plan_gap.py``, docs/instruments.md)."""
+    found = best_design(design, conditions, dial_sigma, budget_s, instruments)
+    model = (bound_model(design, conditions, float(dial_sigma), "interferometer" in instruments,
+                         True) if "ballbar" in instruments
+             else bound_model(design, conditions, float(dial_sigma),
+                              "interferometer" in instruments))
+    return _bundles(model, design, found.drives, found.pivot, found.counts)
 
 
 def plan_bundles(slots: tuple[int, ...], sigma: float, budget_s: float, design: MachineDesign,
