@@ -4,16 +4,16 @@
     python benchmarks/buyer.py --machines 10 --out results/buyer --dry-run
     python benchmarks/buyer.py --machines 20 --agents optimal --sets dial --out results/buyer
 
-A machine builder's table under ``lab`` (seed 1, realistic machines, dial sigma 0.02 mm,
-``full``): per instrument set (:data:`SETS`: the dial gauges alone, with the
-interferometer, with the ballbar, all of them), per indicator (``--indicator dial`` or
-``digital``) and per budget (1 h, 3 h), the best of the set's agents by its median, with
-its 95 % distribution-free interval, p95, lab minutes, z-RMS, chi-square rejections,
-failed trials and its median over the bound of the instruments it reads (as
-``headline.py --bound``, kept in the run's folder); and closed-loop drives (``--drives
-scales``) with the gauges alone.  Each cell is one ``orthoglide compare`` run kept in
-``--out`` (a run already there is read, not run again: ``compare --resume`` finishes one
-cut short); ``--dry-run`` prints the commands.
+A machine builder's table under ``lab`` (seed 1, realistic machines, ``full``): per
+instrument set (:data:`SETS`: the dial gauges alone, with the interferometer, with the
+ballbar, all of them), per indicator (``--indicator dial`` or ``digital``, each read with
+its own sigma and resolution, :data:`NOISE`) and per budget (1 h, 3 h), the best of the
+set's agents by its median, with its 95 % distribution-free interval, p95, lab minutes,
+z-RMS, chi-square rejections, failed trials and its median over the bound of the
+instruments it reads (as ``headline.py --bound``, kept in the run's folder); and
+closed-loop drives (``--drives scales``) with the gauges alone.  Each cell is one
+``orthoglide compare`` run kept in ``--out`` (a run already there is read, not run again:
+``compare --resume`` finishes one cut short); ``--dry-run`` prints the commands.
 
 The whole table is 20 runs of every set's agents, and ``active`` costs most (a minute or
 more of CPU per machine at 3 h).  ``--agents``, ``--sets`` and ``--budgets`` run a part of
@@ -44,6 +44,10 @@ SETS: dict[str, tuple[str, tuple[str, ...]]] = {
     "all": ("dial,interferometer,ballbar,tracker",
             ("optimal", "active", "iso230-2", "ballbar", "tracker")),
 }
+#: Each indicator's gauge sigma and resolution (mm): the dial gauges' defaults, and a
+#: digital indicator read to its datasheets' 1 um (docs/conditions.md, ``digital_range``)
+#: with a 2 um repeatability (an assumption, as docs/benchmarks.md reads one).
+NOISE: dict[str, tuple[float, float]] = {"dial": (0.02, 0.01), "digital": (0.002, 0.001)}
 #: The budgets of the table (h).
 BUDGETS_H: tuple[float, ...] = (1.0, 3.0)
 #: The rows: (instrument set, indicator, drives).
@@ -63,8 +67,10 @@ def command(row: tuple[str, str, str], budget: float, agents: tuple[str, ...],
     """The ``orthoglide compare`` arguments of one cell, run with ``agents``."""
     name, indicator, drives = row
     instruments = SETS[name][0]
+    sigma, resolution = NOISE[indicator]
     return ["compare", "--agents", ",".join(agents), "--instruments", instruments, "--indicator",
-            indicator, "--drives", drives, "--conditions", "lab", "--budget", f"{budget:g}",
+            indicator, "--sigma", f"{sigma:g}", "--resolution", f"{resolution:g}", "--drives",
+            drives, "--conditions", "lab", "--budget", f"{budget:g}",
             "--machines", str(machines), "--seed", "1", "--estimators", "full", "--jobs",
             str(jobs), "--quiet", "--out", str(folder)]
 
@@ -80,16 +86,19 @@ def best(folder: Path) -> str:
     return f"{cell([t for t in trials if t.agent == agent], bound, outside_bound(agent))} `{agent}`"
 
 
-def kept_differs(folder: Path, agents: tuple[str, ...], machines: int) -> str:
-    """Why the run kept in ``folder`` is not the cell asked for (other agents or machines),
-    or '' when it is or none is kept."""
+def kept_differs(folder: Path, agents: tuple[str, ...], machines: int,
+                 noise: tuple[float, float]) -> str:
+    """Why the run kept in ``folder`` is not the cell asked for (other agents, machines or
+    gauge sigma and resolution), or '' when it is or none is kept."""
     if not (folder / "config.json").exists():
         return ""
     config = json.loads((folder / "config.json").read_text())
-    if (tuple(config["agents"]), config["machines"]) == (agents, machines):
+    kept = (tuple(config["agents"]), config["machines"], (config["sigma"], config["resolution"]))
+    if kept == (agents, machines, noise):
         return ""
-    return (f"{folder} holds a run of {','.join(config['agents'])} on {config['machines']} "
-            f"machines, not {','.join(agents)} on {machines}: give another --out")
+    return (f"{folder} holds a run of {','.join(kept[0])} on {kept[1]} machines read with "
+            f"sigma, resolution {kept[2][0]:g}, {kept[2][1]:g} mm, not {','.join(agents)} on "
+            f"{machines} with {noise[0]:g}, {noise[1]:g}: give another --out")
 
 
 def hours(text: str) -> tuple[float, ...]:
@@ -158,20 +167,22 @@ def main() -> None:
     except ValueError as error:
         parser.error(str(error))
     rows = [row for row in ROWS if row[0] in sets]
-    for row, budget in ((row, budget) for row in rows for budget in budgets):
-        folder = folder_of(args.out, row, budget)
-        argv = command(row, budget, agents[row[0]], args.machines, args.jobs, folder)
-        if args.dry_run:
+    cells = [(folder_of(args.out, row, budget), row, budget) for row in rows for budget in budgets]
+    if args.dry_run:
+        for folder, row, budget in cells:
+            argv = command(row, budget, agents[row[0]], args.machines, args.jobs, folder)
             print("orthoglide " + " ".join(argv))
-            continue
-        if differs := kept_differs(folder, agents[row[0]], args.machines):
+        return
+    # Every kept run is checked before the first run starts, not an hour into the table.
+    for folder, row, _ in cells:
+        if differs := kept_differs(folder, agents[row[0]], args.machines, NOISE[row[1]]):
             parser.error(differs)
+    for folder, row, budget in cells:
         if (folder / "summary.csv").exists():
             continue
+        argv = command(row, budget, agents[row[0]], args.machines, args.jobs, folder)
         resume = ["--resume"] if (folder / "config.json").exists() else []
         subprocess.run([sys.executable, "-m", "calibrators.cli", *argv, *resume], check=True)
-    if args.dry_run:
-        return
     print("| instruments | indicator | drives | " + " | ".join(
         f"{b / 3600:g} h: rigid µm median [95 %] (p95), min, z-RMS, chi2 rejected, failed, "
         "x bound, best agent" for b in budgets) + " |")
@@ -179,8 +190,9 @@ def main() -> None:
     for row in rows:
         print(f"| {row[0]} | {row[1]} | {row[2]} | " + " | ".join(
             best(folder_of(args.out, row, b)) for b in budgets) + " |")
-    print(f"\n{args.machines} realistic machines per cell, lab, seed 1, dial sigma 0.02 mm, "
-          "full; agents: " + "; ".join(f"{n}: {', '.join(a)}" for n, a in agents.items())
+    print(f"\n{args.machines} realistic machines per cell, lab, seed 1, gauge sigma and "
+          "resolution " + ", ".join(f"{k} {s:g} and {r:g} mm" for k, (s, r) in NOISE.items())
+          + ", full; agents: " + "; ".join(f"{n}: {', '.join(a)}" for n, a in agents.items())
           + ".")
     left = [n for n in SETS if n not in sets]
     if left:

@@ -33,6 +33,10 @@ def test_a_reduced_table_runs_only_its_cells(tmp_path: Path) -> None:
     for run in runs:
         assert " --agents optimal " in run and " --instruments dial " in run
         assert " --budget 3600 " in run and " --machines 20 " in run
+        # A digital indicator is read as one, not at the dial gauge's scatter and 10 um.
+        noise = ("--sigma 0.002 --resolution 0.001" if "--indicator digital" in run
+                 else "--sigma 0.02 --resolution 0.01")
+        assert noise in run
 
 
 def test_the_whole_table_runs_every_set_agent(tmp_path: Path) -> None:
@@ -53,8 +57,17 @@ def test_a_kept_run_of_other_agents_is_not_read_as_the_cell(tmp_path: Path) -> N
     folder = tmp_path / "dial-dial-screw-1h"
     folder.mkdir()
     (folder / "config.json").write_text(json.dumps({"agents": ["optimal", "active"],
-                                                    "machines": 20}))
+                                                    "machines": 20, "sigma": 0.02,
+                                                    "resolution": 0.01}))
     done = buyer("--out", str(tmp_path), "--agents", "optimal", "--sets", "dial",
                  "--budgets", "1", "--machines", "20")
     assert done.returncode == 2
     assert "holds a run of optimal,active on 20 machines" in done.stderr
+    # A digital indicator's cell kept from a run at the dial gauge's noise is not read either.
+    folder.rename(tmp_path / "dial-digital-screw-1h")
+    (tmp_path / "dial-digital-screw-1h" / "config.json").write_text(json.dumps(
+        {"agents": ["optimal"], "machines": 20, "sigma": 0.02, "resolution": 0.01}))
+    done = buyer("--out", str(tmp_path), "--agents", "optimal", "--sets", "dial",
+                 "--budgets", "1", "--machines", "20")
+    assert done.returncode == 2
+    assert "sigma, resolution 0.02, 0.01 mm" in done.stderr
