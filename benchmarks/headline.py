@@ -12,12 +12,14 @@ machine, as compare's summary counts them).  A folder is named by its conditions
 its budget and instruments too where the folders differ in them.
 
 ``--bound`` adds each agent's median over the bound of the instruments it reads
-(:func:`calibrators.planning.bound.lower_bound`: its dials, and the interferometer when
-the agent needs one; a tracker's readings are not in the bound, so the tracker's ratio,
-marked ``*``, is over the dials' bound and may fall below 1), and the bounds themselves;
-each is kept in the folder (``bound-visits-<instruments>.json``) once computed.  ``--against
-AGENT`` adds every other agent's ratio to AGENT paired on the same machines (median
-with its 95 % interval).  The instruments' headline (docs/instruments.md):
+(:func:`calibrators.planning.bound.lower_bound`: its dials, and the interferometer and the
+ballbar when the agent needs or plans over them; a tracker's or a step gauge's readings
+are not in the bound, so their agents' ratio, marked ``*``, is over the dials' bound and
+may fall below 1), and the bounds themselves; each is kept in the folder
+(``bound-visits-<instruments>.json``) once computed.  ``--against AGENT`` adds every other
+agent's ratio to AGENT paired on the same machines (median with its 95 % interval), the
+share of machines where it is the better (a tie counts a half), and on how many of them
+either fit failed.  The instruments' headline (docs/instruments.md):
 
     for c in lab workshop; do for b in 3600 10800; do
       nice orthoglide compare --machines 50 --seed 1 --estimators full --conditions $c \
@@ -68,6 +70,14 @@ def agent_instruments(agent: str, owned: tuple[str, ...]) -> tuple[str, ...]:
     return ("dial", *(n for n in BOUND_INSTRUMENTS[1:] if n in reads and n in owned))
 
 
+def outside_bound(agent: str) -> str:
+    """``*`` when the agent reads an instrument the bound does not hold (the tracker, the
+    step gauge: its ratio is over a bound without those readings), else ''."""
+    found = get_agent(agent)
+    reads = (*found.needs_instruments, *(("tracker",) if found.needs_tracker else ()))
+    return "*" if any(n not in BOUND_INSTRUMENTS for n in reads) else ""
+
+
 def folder_bound(folder: Path, config: dict, instruments: tuple[str, ...]) -> Bound:
     """The bound of a compare folder's lab with ``instruments``, from the folder when kept
     there, else computed and kept (named for the visit's pricing: a bound a folder kept
@@ -112,7 +122,8 @@ def paired_lines(name: str, trials: list[Trial], against: str) -> list[str]:
             interval = ("[{:.2f}, {:.2f}]".format(*pair["ratio_ci95"]) if pair["ratio_ci95"]
                         else "-")
             out.append(f"| {name} | `{agent}` / `{against}` | `{pair['estimator']}` | "
-                       f"{pair['ratio_median']:.2f} {interval} | {pair['machines']} |")
+                       f"{pair['ratio_median']:.2f} {interval} | {pair['win_rate']:.0%} | "
+                       f"{pair['machines']} | {pair['failed']} |")
     return out
 
 
@@ -148,9 +159,8 @@ def main() -> None:
         cells = []
         for (name, trials), config in zip(runs.items(), configs, strict=True):
             kind = agent_instruments(agent, tuple(config.get("instruments", ("dial",))))
-            mark = "*" if get_agent(agent).needs_tracker else ""
             cells.append(cell([t for t in trials if (t.agent, t.estimator) == (agent, estimator)],
-                              bounds.get((name, kind)), mark))
+                              bounds.get((name, kind)), outside_bound(agent)))
         print(f"| `{agent}` | `{estimator}` | " + " | ".join(cells) + " |")
     if bounds:
         print("\n| world | instruments | bound µm | best continuous design µm | laser set up on "
@@ -161,8 +171,9 @@ def main() -> None:
             print(f"| {name} | {'+'.join(kind)} | {UM * b.bound_mm:.2f} | "
                   f"{UM * b.design_mm:.2f} | {drives} | {b.laser_readings:.0f} |")
     if args.against:
-        print("\n| world | paired ratio | estimator | median [95 % interval] | machines |")
-        print("|---|---|---|---|---|")
+        print("\n| world | paired ratio | estimator | median [95 % interval] | better on | "
+              "machines | failed on either side |")
+        print("|---|---|---|---|---|---|---|")
         for name, trials in runs.items():
             for line in paired_lines(name, trials, args.against):
                 print(line)
