@@ -73,9 +73,7 @@ class StepResult:
 
     def info(self, i: int) -> dict[str, Any]:
         """Row ``i``'s info, as the lab env gives it."""
-        info = {"op": OP_NAMES[self.op[i]], "step_time_s": float(self.seconds[i]),
-                "overtravel": self.overtravel[i], "collision": self.collision[i],
-                "refused": self.refused[i]}
+        info = {key: values[0] for key, values in self._ongoing(np.array([i])).items()}
         if self.terminated[i] or self.truncated[i]:
             info.update(is_success=bool(self.success[i]),
                         predicted_tcp_rigid_mm=float(self.predicted[i]))
@@ -86,8 +84,10 @@ class StepResult:
         ``rows``), or None when one of them ends its episode (its info has more keys): a
         step of a lab vector env makes no dict per env (a fifth of its own cost)."""
         ended = self.terminated[rows] | self.truncated[rows]
-        if ended.any():
-            return None
+        return None if ended.any() else self._ongoing(rows)
+
+    def _ongoing(self, rows: np.ndarray) -> dict[str, list[Any]]:
+        """The info keys every step of ``rows`` has, key by key in the order of ``rows``."""
         picked = rows.tolist()
         return {"op": [OP_NAMES[o] for o in self.op[rows].tolist()],
                 "step_time_s": self.seconds[rows].tolist(),
