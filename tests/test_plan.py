@@ -7,20 +7,40 @@ import csv
 import json
 import subprocess
 import sys
+from contextlib import closing
+from dataclasses import replace
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import pytest
 from conftest import TABLE1
 
+from calibrators.agents import get_agent
 from calibrators.cli import main
+from calibrators.measurements import Measurement, Measurements
+from calibrators.study.compare import Config
+from calibrators.study.episodes import machine_seed, run_episode
+from calibrators.study.labs import lab_id
 from calibrators.workflow.page import pictures as draw_pictures
-from calibrators.workflow.plan import Procedure, Step, make_procedure, place_words
-from orthoglide_env.instruments.slots import GaugeSpec
+from calibrators.workflow.plan import (
+    ACTIONS,
+    Plan,
+    Procedure,
+    SheetError,
+    Step,
+    check_sheet,
+    place_words,
+    stand_numbers,
+    stands_held,
+)
+from orthoglide_env.instruments.dial import GaugeNoise
+from orthoglide_env.instruments.slots import GaugeSpec, layout_from_names
 from orthoglide_env.instruments.stands import install
-from orthoglide_env.lab.operations import SLOTS
+from orthoglide_env.lab.operations import SLOTS, Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import AXIS_NAMES, MachineParams
+from orthoglide_env.world.conditions import Conditions
 
 
 def run_json(capsys, argv: list[str]) -> dict:
@@ -157,11 +177,10 @@ def test_the_words_say_where_the_plunger_points(spec: GaugeSpec) -> None:
 def test_each_re_mount_has_its_picture(tmp_path) -> None:
     """A re-mount step gets a picture of the stands after it, the moved one highlighted;
     the set-up gets one of all."""
-    paper = make_procedure("paper", 3600, PROTOTYPE)
+    paper = Plan(PROTOTYPE, agent="paper", budget_s=3600).run()
     moved = Step(len(paper.steps) + 1, "re-mount", "Move stand 1.", 120.0, paper.total_s,
                  stand=1, slot="x-leg/y@0.8")
-    procedure = Procedure(paper.agent, paper.budget_s, paper.conditions, paper.design,
-                          paper.stands, [*paper.steps, moved])
+    procedure = replace(paper, steps=[*paper.steps, moved], sheet=[])
     pictures = draw_pictures(procedure, PROTOTYPE, tmp_path)
     assert pictures == {1: "setup.png", moved.number: f"step-{moved.number}.png"}
     assert all((tmp_path / name).read_bytes()[:4] == b"\x89PNG" for name in pictures.values())
@@ -171,18 +190,13 @@ def test_the_sheet_names_each_readings_stand_across_a_re_mount(tmp_path) -> None
     """Each row of the sheet names the stand it is read on: the stand the set-up put at its
     gauge's place, and after a re-mount the moved stand at its new place (stand 1 leaves
     x-leg/y@0.5 for x-leg/y@0.8: a reading there is stand 1's, none is left at 0.5)."""
-    from calibrators.measurements import Measurement
-    from calibrators.workflow.plan import stand_numbers
-    from orthoglide_env.instruments.slots import layout_from_names
-
-    paper = make_procedure("paper", 3600, PROTOTYPE)
+    paper = Plan(PROTOTYPE, agent="paper", budget_s=3600).run()
     moved_to = layout_from_names(["x-leg/y@0.8"])[0]
     moved = Step(len(paper.steps) + 1, "re-mount", "Move stand 1.", 120.0, paper.total_s,
                  stand=1, slot="x-leg/y@0.8", rows=[len(paper.sheet) + 1])
     extra = Measurement(moved_to, "Zero", 1, 0.0, (0.0, 0.0, 0.0), "x-leg/y@0.8#2",
                         step=moved.number)
-    procedure = Procedure(paper.agent, paper.budget_s, paper.conditions, paper.design,
-                          paper.stands, [*paper.steps, moved], [*paper.sheet, extra])
+    procedure = replace(paper, steps=[*paper.steps, moved], sheet=[*paper.sheet, extra])
     numbers = stand_numbers(procedure)
     held = {s["stand"]: s["slot"] for s in paper.stands}
     for m, n in zip(paper.sheet, numbers, strict=False):
@@ -192,10 +206,8 @@ def test_the_sheet_names_each_readings_stand_across_a_re_mount(tmp_path) -> None
 
 def _sheet_procedure(paper_plan: Path) -> Procedure:
     """The paper plan as read back, with its sheet (plan.json holds the steps only)."""
-    procedure = Procedure.read(paper_plan / "plan.json")
-    return Procedure(procedure.agent, procedure.budget_s, procedure.conditions,
-                     procedure.design, procedure.stands, procedure.steps,
-                     make_procedure("paper", 3600, PROTOTYPE).sheet)
+    return replace(Procedure.read(paper_plan / "plan.json"),
+                   sheet=Plan(PROTOTYPE, agent="paper", budget_s=3600).run().sheet)
 
 
 def _assert_holds_the_procedure(pdf: Path, procedure: Procedure) -> None:
@@ -276,7 +288,6 @@ def test_the_sheet_names_the_stands_and_fit_reads_them_back(paper_plan, tmp_path
                                                             capsys) -> None:
     """The sheet's stand column is each row's stand (the page's); a filled sheet without
     the column (an older sheet) fits to the very same estimate, bit for bit."""
-    from calibrators.workflow.plan import stand_numbers
 
     rows = list(csv.DictReader((paper_plan / "readings.csv").open()))
     numbers = stand_numbers(_sheet_procedure(paper_plan))
@@ -330,3 +341,65 @@ def test_a_mounting_on_two_stands_is_refused(paper_plan, tmp_path, capsys) -> No
     assert proc.returncode == 2, proc.stderr
     assert "readings.csv:11: column 14 (stand): mounting 'x-leg/z@0.5' is on stand 2 (line 3)" in \
         proc.stderr, proc.stderr
+
+
+@pytest.fixture(scope="module")
+def optimal_plan() -> Procedure:
+    """`plan --agent optimal --conditions lab` for the hour, with the dial gauges."""
+    return Plan(PROTOTYPE, agent="optimal", conditions=Conditions("lab"), budget_s=3600).run()
+
+
+class _Actions:
+    """The lab actions of an episode, as a plan's steps name them: (action, rho of a move,
+    stand of a lift, engage or re-mount as the technician numbers it)."""
+
+    def __init__(self) -> None:
+        self.seen: list[tuple[str, tuple[float, ...] | None, int | None]] = []
+
+    def reset(self, i, observation) -> None:
+        self.seen.clear()
+
+    def step(self, i, action, observation, info) -> None:
+        op = Op(int(action["op"]))
+        self.seen.append((ACTIONS[op],
+                          tuple(float(v) for v in action["rho"]) if op == Op.MOVE else None,
+                          int(action["stand"]) + 1 if op in (Op.LIFT, Op.ENGAGE, Op.REMOUNT)
+                          else None))
+
+
+def test_the_optimal_plan_is_the_one_compare_plays(optimal_plan) -> None:
+    """The procedure `plan` writes for `optimal` is, step for step, the experiment
+    `compare`'s `optimal` plays on the nominal machine with compare's defaults (its lab's
+    arguments, the first machine's seed: the dial gauges' sigma and resolution), to the
+    same clock.  `optimal` designs its experiment for the noise the lab shows it, so a
+    plan made for other gauges than the lab's is another plan (noise-free: 386 steps and
+    3583.3 s, against compare's 529 and 3568.3 s)."""
+    config = Config(agents=("optimal",), estimators=("full",), budget_s=3600.0,
+                    errors="nominal", conditions=Conditions("lab"))
+    assert optimal_plan.gauges == GaugeNoise(config.sigma, config.resolution)
+    agent = get_agent("optimal")
+    kwargs = config.lab_kwargs(agent)
+    played = _Actions()
+    with closing(gym.make(lab_id(kwargs), **kwargs)) as env:
+        episode = run_episode(env, agent, machine_seed(config.seed, 0), watch=played)
+    assert optimal_plan.total_s == episode.time_s
+    assert [(s.action, None if s.action != "drive and read" else tuple(s.rho), s.stand)
+            for s in optimal_plan.steps[1:]] == played.seen
+    assert any(s.action == "re-mount" for s in optimal_plan.steps)
+
+
+def test_a_plans_own_sheet_passes_its_check(optimal_plan) -> None:
+    """Every reading the plan lists is one its steps hold, a re-mount's included: the
+    re-mount reads every stand at Zero, the moved one at its new place."""
+    remounts = [s for s in optimal_plan.steps if s.action == "re-mount"]
+    assert any(len(s.rows) > 1 for s in remounts)
+    check_sheet(Measurements(optimal_plan.sheet), optimal_plan)
+    # The moved stand's reading written at the place it left is refused.
+    moved = remounts[0]
+    left = next(slot for slot, stand in stands_held(optimal_plan)[moved.number - 1].items()
+                if stand == moved.stand)
+    stale = Measurement(layout_from_names([left])[0], "Zero", 1, 0.0, (0.0, 0.0, 0.0), left,
+                        step=moved.number)
+    with pytest.raises(SheetError, match=f"step {moved.number} has no stand at {left} "
+                       f"\\(stand {moved.stand} is moved to {moved.slot} there\\)"):
+        check_sheet(Measurements([stale]), optimal_plan)

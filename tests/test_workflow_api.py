@@ -23,7 +23,12 @@ from calibrators.workflow.compensate import Compensate, Controller, read_estimat
 from calibrators.workflow.fit import Calibration, Fit
 from calibrators.workflow.plan import Plan, Procedure, SheetError
 from calibrators.workflow.verify import Verification, VerificationPlan, Verify
-from orthoglide_env.instruments.dial import exact_readings
+from orthoglide_env.instruments.dial import (
+    DEFAULT_RESOLUTION,
+    DEFAULT_SIGMA,
+    GaugeNoise,
+    exact_readings,
+)
 from orthoglide_env.instruments.slots import PAPER_LAYOUT
 from orthoglide_env.instruments.stands import install, installed_on
 from orthoglide_env.lab.operations import Op
@@ -99,6 +104,28 @@ def test_a_plan_is_checked_at_construction() -> None:
         Plan(PROTOTYPE, agent="nobody")
     with pytest.raises(TypeError, match="MachineDesign"):
         Plan("prototype")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="sigma -1 mm is out of range"):
+        Plan(PROTOTYPE, sigma=-1.0)
+
+
+def test_a_plan_names_its_gauges_and_its_fit_reads_with_them(tmp_path) -> None:
+    """The gauges a plan is made for (a digital indicator's here) go into plan.json and
+    back; a fit of its sheet weighs the readings with them unless told other ones, and
+    with the dial gauges' for a plan written before plans named their gauges."""
+    digital = GaugeNoise(0.002, 0.001)
+    made = Plan(PROTOTYPE, agent="paper", sigma=0.002, resolution=0.001).run()
+    procedure = Procedure.read(made.write(tmp_path)[0])
+    assert procedure.gauges == digital
+    assert procedure.gauges_words() == "gauges of repeatability 0.002 mm read to 0.001 mm"
+    readings = _technician(4)(made.sheet)
+    assert Fit(readings, plan=procedure).sigma == digital.effective_sigma
+    assert Fit(readings, plan=procedure, sigma=0.02).sigma == GaugeNoise(
+        0.02, 0.001).effective_sigma
+    older = Procedure.from_dict({k: v for k, v in procedure.to_dict().items()
+                                 if k != "gauges"})
+    assert older.gauges is None
+    assert Fit(readings, plan=older).sigma == GaugeNoise(DEFAULT_SIGMA,
+                                                         DEFAULT_RESOLUTION).effective_sigma
 
 
 def test_the_procedure_writes_its_files_and_reads_back(staged, tmp_path) -> None:
@@ -184,7 +211,8 @@ def test_the_episode_loop_shows_a_watcher_every_step() -> None:
     """One reset and every step of the episode, the last being the agent's stop."""
     agent = get_agent("paper")
     seen = _Seen()
-    with closing(nominal_lab(agent, PROTOTYPE, Conditions("ideal"), 3600)) as env:
+    with closing(nominal_lab(agent, PROTOTYPE, Conditions("ideal"), 3600, sigma=0.0,
+                             resolution=0.0)) as env:
         run_episode(env, agent, 0, nominal_options(PROTOTYPE), watch=seen)
     assert seen.resets == 1 and len(seen.steps) > 10
     assert seen.steps[-1] == Op.STOP and Op.STOP not in seen.steps[:-1]

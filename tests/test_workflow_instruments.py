@@ -120,8 +120,8 @@ def test_a_sheet_filled_in_a_lab_fits_as_the_labs_own_readings(planned, tmp_path
     instruments, budget = CASES[name]
     agent = planned_agent(name)
     # As the plan was made: its seed (0; the machine it draws is a realistic one) and
-    # its gauges' noise (none), from which the planned gauges' part makes its choices.
-    with closing(_true_lab(agent, instruments, budget, 0.0, 0.0, design)) as env:
+    # its gauges (the dial gauges'), for whose noise the planned gauges' part chooses.
+    with closing(_true_lab(agent, instruments, budget, design=design)) as env:
         episode = run_episode(env, agent, 0)
     lab = measurements_of(episode.records, episode.time_s, design=design)
     read = {(m.mounting, m.rho, m.time_s): m for m in lab.items}

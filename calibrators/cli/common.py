@@ -12,6 +12,7 @@ import numpy as np
 
 from calibrators.cli.parser import Parser as Parser
 from calibrators.cli.parser import UsageError as UsageError
+from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.model.design import PROTOTYPE, MachineDesign, load_design
 from orthoglide_env.model.errors import MachineParams, check_rho, random_machine
 from orthoglide_env.world.conditions import (
@@ -132,6 +133,18 @@ def add_conditions(p: argparse.ArgumentParser, replays: bool = False,
                    "(semi-closed loop, the encoders on the motors) or scales (closed loop "
                    "on linear scales: no lead, periodic error, warm-up or lost motion, but "
                    "the scale's grade and expansion; docs/instruments.md) (default: screw)")
+
+
+def add_gauges(p: argparse.ArgumentParser, *, planned: bool = False) -> None:
+    """``--sigma`` and ``--resolution``: the gauges the lab reads, the dial gauges' by
+    default (``planned``: the plan's when the command is given one, which was designed
+    for its gauges)."""
+    plan = "the plan's with --plan, else " if planned else ""
+    p.add_argument("--sigma", type=float, default=None if planned else DEFAULT_SIGMA,
+                   help=f"gauge repeatability (mm, default {plan}{DEFAULT_SIGMA})")
+    p.add_argument("--resolution", type=float,
+                   default=None if planned else DEFAULT_RESOLUTION,
+                   help=f"gauge display resolution (mm, default {plan}{DEFAULT_RESOLUTION})")
 
 
 def add_faults(p: argparse.ArgumentParser) -> None:

@@ -10,13 +10,13 @@ from calibrators.cli.common import (
     READINGS_CONDITIONS,
     UsageError,
     add_conditions,
+    add_gauges,
     conditions_of,
     fit_conditions_of,
     given_design,
     held_design,
 )
 from calibrators.measurements import Measurements
-from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.world.conditions import Conditions
 
@@ -30,7 +30,8 @@ def run(args: argparse.Namespace) -> None:
     from calibrators.workflow.fit import Fit
     from calibrators.workflow.plan import SheetError
 
-    # --sigma and --resolution were checked with every command's (calibrators.cli.run).
+    # --sigma and --resolution were checked with every command's (calibrators.cli.run);
+    # left out, they are the plan's gauges, else the dial gauges' (Fit's).
     plan = _read_plan(args.plan) if args.plan else None
     try:
         data = Measurements.read(args.file, _design(args, plan))
@@ -87,10 +88,7 @@ def _design(args: argparse.Namespace, plan: Procedure | None) -> MachineDesign |
 
 def add(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", help="readings, .csv or .json (docs/measurements.md)")
-    p.add_argument("--sigma", type=float, default=DEFAULT_SIGMA,
-                   help="gauge repeatability (mm, default %(default)s)")
-    p.add_argument("--resolution", type=float, default=DEFAULT_RESOLUTION,
-                   help="gauge display resolution (mm, default %(default)s)")
+    add_gauges(p, planned=True)
     p.add_argument("--seed", type=int, default=0,
                    help="seed of the --holdout draw (default: %(default)s)")
     p.add_argument("--design", metavar="FILE", help="design of the machine the readings come "

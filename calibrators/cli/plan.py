@@ -25,6 +25,7 @@ from calibrators.cli.common import (
     UsageError,
     add_conditions,
     add_design,
+    add_gauges,
     add_instruments,
     conditions_of,
     held_design,
@@ -53,11 +54,13 @@ def run(args: argparse.Namespace) -> None:
             est = read_estimate(args.verify)
             held_design(args, est.readings.design, "estimate", args.verify)
             planner = VerificationPlan(est, agent=args.agent, conditions=conditions,
-                                       budget_s=args.budget, seed=args.seed)
+                                       budget_s=args.budget, seed=args.seed,
+                                       sigma=args.sigma, resolution=args.resolution)
         else:
             planner = Plan(load_design(args.design), agent=args.agent,
                            conditions=conditions, budget_s=args.budget, seed=args.seed,
-                           instruments=instruments)
+                           instruments=instruments, sigma=args.sigma,
+                           resolution=args.resolution)
         procedure = planner.run()
     except ValueError as exc:
         raise UsageError(str(exc)) from None
@@ -97,5 +100,6 @@ def add(p: argparse.ArgumentParser) -> None:
                         "pdf extra (pip install -e '.[pdf]'), else drawn with matplotlib")
     add_design(p)
     add_conditions(p)
+    add_gauges(p)
     add_instruments(p)
     p.set_defaults(func=run)

@@ -15,6 +15,7 @@ from calibrators.cli.common import (
     UsageError,
     add_conditions,
     add_design,
+    add_gauges,
     add_instruments,
     conditions_of,
     workflow_instruments,
@@ -39,7 +40,7 @@ def run(args: argparse.Namespace) -> None:
     session = Session(args.agent, args.budget, notebook, design=load_design(args.design),
                       conditions=conditions_of(args, None),
                       seed=machine_seed(args.seed, 0), target_mm=args.target_mm,
-                      instruments=instruments)
+                      sigma=args.sigma, resolution=args.resolution, instruments=instruments)
 
     def say(text: str, action: dict[str, Any] | None = None) -> None:
         if args.json:
@@ -102,5 +103,6 @@ def add(p: argparse.ArgumentParser) -> None:
                         "instrument's: instrument and what in place of stand)")
     add_design(p)
     add_conditions(p)
+    add_gauges(p)
     add_instruments(p)
     p.set_defaults(func=run)

@@ -62,11 +62,13 @@ def make_lab(agent: Agent, **settings: Any) -> gym.Env:
 
 
 def nominal_lab(agent: Agent, design: MachineDesign, conditions: Conditions,
-                budget_s: float, *, sigma: float = 0.0, resolution: float = 0.0,
+                budget_s: float, *, sigma: float, resolution: float,
                 instruments: tuple[str, ...] = ()) -> gym.Env:
     """The exact-model lab of the nominal machine of ``design`` for ``agent`` (reset it
-    with :func:`nominal_options`), gauges of noise ``sigma`` and dial ``resolution``,
-    owning ``instruments`` (:func:`lab_kwargs`)."""
+    with :func:`nominal_options`), gauges of noise ``sigma`` and dial ``resolution`` (mm),
+    owning ``instruments`` (:func:`lab_kwargs`).  The gauges are the ones the real lab
+    reads, never a default: a planned agent designs its experiment for the noise the lab
+    shows it, so a lab of other gauges plays another plan."""
     return make_lab(agent, backend="exact", errors="nominal", gauge_sigma=sigma,
                     gauge_resolution=resolution, budget_s=budget_s, design=design,
                     conditions=conditions, instruments=instruments)

@@ -33,7 +33,8 @@ ESTIMATE_FILE = "estimate.json"
 class Fit:
     """The fit, configured: the measured ``readings`` (a filled sheet of ``plan``, when
     given, is checked against its steps), read with gauges of repeatability ``sigma`` and
-    display ``resolution`` (mm), taken under ``conditions`` (``"auto"``: the fit
+    display ``resolution`` (mm; left out: the plan's gauges, which it was designed for,
+    else the dial gauges'), taken under ``conditions`` (``"auto"``: the fit
     estimates them), fitted by ``estimator``: a
     name of :data:`~calibrators.estimators.catalogue.CATALOGUE` or an estimator configured
     with :func:`~calibrators.estimators.get_estimator` (its noise and conditions are set
@@ -44,9 +45,14 @@ class Fit:
 
     def __init__(self, readings: Measurements, *,
                  estimator: str | Estimator = DEFAULT_ESTIMATOR,
-                 sigma: float = DEFAULT_SIGMA, resolution: float = DEFAULT_RESOLUTION,
+                 sigma: float | None = None, resolution: float | None = None,
                  conditions: Conditions | str | None = None, plan: Procedure | None = None
                  ) -> None:
+        # Gauges not given: the ones the plan was designed for, else the dial gauges.
+        gauges = (plan.gauges if plan is not None and plan.gauges is not None
+                  else GaugeNoise(DEFAULT_SIGMA, DEFAULT_RESOLUTION))
+        sigma = gauges.sigma if sigma is None else sigma
+        resolution = gauges.resolution if resolution is None else resolution
         check_noise(sigma, resolution, names=("sigma", "resolution"))
         chosen = get_estimator(estimator) if isinstance(estimator, str) else estimator
         if plan is not None:

@@ -191,9 +191,9 @@ img {{ max-width: 100%; }}
 <h1>Calibration procedure</h1>
 <p>Agent <b>{e(procedure.agent)}</b>, {len(procedure.steps)} steps,
 {len(procedure.sheet)} readings, <b>{procedure.total_s / 60:.1f} min</b> on the lab's clock
-(budget {procedure.budget_s / 60:.0f} min), planned for <b>{e(conditions)}</b> conditions on
-a machine of L = {procedure.design['L']:g} mm, control limits {procedure.design['rho_min']:g}
-.. {procedure.design['rho_max']:g} mm.</p>
+(budget {procedure.budget_s / 60:.0f} min), planned for <b>{e(conditions)}</b> conditions and
+{e(procedure.gauges_words())} on a machine of L = {procedure.design['L']:g} mm, control
+limits {procedure.design['rho_min']:g} .. {procedure.design['rho_max']:g} mm.</p>
 <h2>Before you start</h2>
 <ul>
 <li>Postures are control coordinates rho (mm): 0, 0, 0 is the Zero posture, and each value

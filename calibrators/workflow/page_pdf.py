@@ -100,7 +100,8 @@ def _opening(procedure: Procedure, then: str) -> list[str]:
         f"Agent {procedure.agent}, {len(procedure.steps)} steps, {len(procedure.sheet)} "
         f"readings, {procedure.total_s / 60:.1f} min on the lab's clock (budget "
         f"{procedure.budget_s / 60:.0f} min), planned for "
-        f"{procedure.conditions.get('name', 'ideal')} conditions on a machine of L = "
+        f"{procedure.conditions.get('name', 'ideal')} conditions and "
+        f"{procedure.gauges_words()} on a machine of L = "
         f"{design['L']:g} mm, control limits {design['rho_min']:g} .. {design['rho_max']:g} "
         "mm.")
     lines += ["", "Before you start", ""]

@@ -41,6 +41,12 @@ from calibrators.measurements.csv_file import instrument_cells, instrument_colum
 from calibrators.study.episodes import measurements_of, run_episode
 from calibrators.study.labs import nominal_lab, nominal_options
 from calibrators.workflow.instruments import WORK, work_of_action, work_of_op, work_of_spec
+from orthoglide_env.instruments.dial import (
+    DEFAULT_RESOLUTION,
+    DEFAULT_SIGMA,
+    GaugeNoise,
+    check_noise,
+)
 from orthoglide_env.instruments.slots import PLATFORM_AIM, GaugeSpec, Part
 from orthoglide_env.lab.operations import DEFAULT_BUDGET_S, Op
 from orthoglide_env.model.design import MachineDesign
@@ -82,7 +88,9 @@ class Step:
 
 @dataclass(frozen=True)
 class Procedure:
-    """A planned agent's experiment as steps, with the stands' places and its sheet."""
+    """A planned agent's experiment as steps, with the stands' places and its sheet, for
+    ``gauges`` of the noise it was designed for (None: a plan written before plans named
+    their gauges)."""
 
     agent: str
     budget_s: float
@@ -90,6 +98,7 @@ class Procedure:
     design: dict[str, Any]
     stands: list[dict[str, Any]]  # {"stand", "slot", "place"} as mounted at set-up
     steps: list[Step]
+    gauges: GaugeNoise | None
     sheet: list[Measurement] = field(default_factory=list, compare=False)
     #: What the technician should know beyond the steps (e.g. steps left out).
     notes: list[str] = field(default_factory=list)
@@ -104,6 +113,13 @@ class Procedure:
                 f"{self.total_s / 60:.1f} min on the lab's clock (budget "
                 f"{self.budget_s / 60:.0f} min)")
 
+    def gauges_words(self) -> str:
+        """The gauges the procedure was designed for, as its page names them."""
+        if self.gauges is None:
+            return "gauges it does not name"
+        return (f"gauges of repeatability {self.gauges.sigma:g} mm read to "
+                f"{self.gauges.resolution:g} mm")
+
     def to_dict(self) -> dict[str, Any]:
         """The procedure as JSON (the sheet is its own file, :func:`write_sheet`)."""
         out = asdict(self)
@@ -115,9 +131,13 @@ class Procedure:
     def from_dict(cls, data: dict[str, Any]) -> Procedure:
         """The procedure :meth:`to_dict` wrote (``ValueError`` if it is not one)."""
         try:
+            gauges = data.get("gauges")
             return cls(data["agent"], float(data["budget_s"]), dict(data["conditions"]),
                        dict(data["design"]), list(data["stands"]),
                        [Step(**s) for s in data["steps"]],
+                       None if gauges is None else check_noise(
+                           gauges["sigma"], gauges["resolution"],
+                           names=("gauges sigma", "gauges resolution")),
                        notes=[str(n) for n in data.get("notes", [])])
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"not a procedure written by orthoglide plan: {exc}") from None
@@ -195,19 +215,24 @@ def place_words(spec: GaugeSpec, design: MachineDesign) -> str:
 class Plan:
     """The plan of an experiment, configured: agent ``agent``'s experiment within
     ``budget_s`` seconds on a machine of ``design`` under ``conditions`` (default
-    :data:`~orthoglide_env.world.conditions.DEFAULT_CONDITIONS`, the real lab),
-    a random agent's choices drawn from ``seed``.  ``ValueError`` at construction for a
-    budget that is not positive, or an agent that decides as it reads; :meth:`run` makes
-    the :class:`Procedure`."""
+    :data:`~orthoglide_env.world.conditions.DEFAULT_CONDITIONS`, the real lab), read
+    with gauges of repeatability ``sigma`` and display ``resolution`` (mm; the dial
+    gauges' by default, as ``compare`` and :class:`~calibrators.workflow.session.Session`
+    read them), a random agent's choices drawn from ``seed``.  ``ValueError`` at
+    construction for a budget that is not positive, bad noise, or an agent that decides
+    as it reads; :meth:`run` makes the :class:`Procedure`."""
 
     def __init__(self, design: MachineDesign, *, agent: str = "paper",
                  conditions: Conditions | None = None, budget_s: float = DEFAULT_BUDGET_S,
-                 seed: int = 0, instruments: tuple[str, ...] = ()) -> None:
+                 seed: int = 0, instruments: tuple[str, ...] = (),
+                 sigma: float = DEFAULT_SIGMA, resolution: float = DEFAULT_RESOLUTION
+                 ) -> None:
         if not isinstance(design, MachineDesign):
             raise TypeError(f"design must be a MachineDesign, got {type(design).__name__}")
         if not budget_s > 0:
             raise ValueError(f"budget_s must be a positive number of seconds, got "
                              f"{budget_s:g}")
+        self.gauges = check_noise(sigma, resolution, names=("sigma", "resolution"))
         planned_agent(agent)
         self.design, self.agent, self.budget_s, self.seed = design, agent, float(budget_s), seed
         self.conditions = Conditions(DEFAULT_CONDITIONS) if conditions is None else conditions
@@ -218,7 +243,8 @@ class Plan:
         exact-model lab; a planned agent's steps do not depend on the machine, so they
         are the real machine's."""
         return make_procedure(self.agent, self.budget_s, self.design, self.conditions,
-                              self.seed, self.instruments)
+                              self.seed, self.instruments, sigma=self.gauges.sigma,
+                              resolution=self.gauges.resolution)
 
 
 def planned_agent(agent_name: str) -> Agent:
@@ -237,27 +263,31 @@ def planned_agent(agent_name: str) -> Agent:
 
 def make_procedure(agent_name: str, budget_s: float, design: MachineDesign,
                    conditions: Conditions | None = None, seed: int = 0,
-                   instruments: tuple[str, ...] = ()) -> Procedure:
+                   instruments: tuple[str, ...] = (), *, sigma: float, resolution: float
+                   ) -> Procedure:
     """The procedure of agent ``agent_name``'s experiment within ``budget_s`` seconds on a
     machine of ``design`` under ``conditions`` (default
     :data:`~orthoglide_env.world.conditions.DEFAULT_CONDITIONS`, the real lab), in a lab
-    owning ``instruments`` (empty: the dial gauges): :meth:`Plan.run`.  ``ValueError`` for
-    an agent that decides as it reads, or that needs an instrument the lab does not own."""
+    owning ``instruments`` (empty: the dial gauges) whose gauges read with repeatability
+    ``sigma`` and display ``resolution`` (mm): :meth:`Plan.run`.  ``ValueError`` for an
+    agent that decides as it reads, or that needs an instrument the lab does not own."""
     conditions = Conditions(DEFAULT_CONDITIONS) if conditions is None else conditions
     agent = planned_agent(agent_name)
     notes = ([f"after its {'/'.join(agent.needs_instruments)} programme, the gauges' part "
               f"is {PLANNED_GAUGES}'s plan for the time left (the agent's own {GAUGES} "
               "decides as it reads: orthoglide session runs it)"]
              if isinstance(agent, InstrumentFirst) else [])
-    with closing(nominal_lab(agent, design, conditions, budget_s,
-                             instruments=tuple(instruments))) as env:
+    # The agent designs its experiment for the gauges' noise the lab shows it: the
+    # gauges the real lab reads, or the plan is not the one played there.
+    with closing(nominal_lab(agent, design, conditions, budget_s, sigma=sigma,
+                             resolution=resolution, instruments=tuple(instruments))) as env:
         writer = _StepWriter(env.unwrapped, agent_name, design)
         episode = run_episode(env, agent, seed, nominal_options(design), watch=writer)
     data = measurements_of(episode.records, episode.time_s, design=design)
     sheet = [m.again(m.reading, m.repetition, m.time_s, None, step, m.temperature_c)
              for m, step in zip(data.items, writer.taken, strict=True)]
     return Procedure(agent_name, float(budget_s), conditions.to_dict(), design.to_dict(),
-                     writer.stands, writer.steps, sheet, notes)
+                     writer.stands, writer.steps, GaugeNoise(sigma, resolution), sheet, notes)
 
 
 class _StepWriter:
@@ -455,9 +485,9 @@ class SheetError(ValueError):
 
 def check_sheet(data: Measurements, procedure: Procedure) -> None:
     """:class:`SheetError` naming the line of the first reading of ``data`` that the plan does
-    not hold: a step it does not have, or a gauge, mounting, posture or stand other than
-    that step's (a reading without a stand is not checked for one: sheets before the stand
-    column)."""
+    not hold: a step it does not have, or a dial at a place no stand holds at that step, a
+    posture or a stand other than that step's (a reading without a stand is not checked
+    for one: sheets before the stand column)."""
     steps = {s.number: s for s in procedure.steps}
     held = stands_held(procedure)
     for m in data.items:
@@ -471,9 +501,13 @@ def check_sheet(data: Measurements, procedure: Procedure) -> None:
         if (step.action not in ("set up", "drive and read", "re-mount")
                 and work_of_action(step.action) is None):
             raise SheetError(f"{where}: step {m.step} ({step.action}) takes no reading")
-        if step.slot is not None and m.gauge.slot != step.slot:
-            raise SheetError(f"{where}: step {m.step} reads stand {step.stand} at "
-                             f"{step.slot}, not {m.gauge.slot}")
+        # A re-mount reads every stand at Zero, the moved one at its new place: a dial
+        # reads where a stand is held at its step.
+        if isinstance(m.gauge, GaugeSpec) and gauge_name(m.gauge) not in held[m.step]:
+            moved = (f" (stand {step.stand} is moved to {step.slot} there)"
+                     if step.slot is not None else "")
+            raise SheetError(f"{where}: step {m.step} has no stand at {m.gauge.slot}{moved}; "
+                             f"its stands are at {', '.join(held[m.step])}")
         if step.rho is not None and tuple(step.rho) != m.rho:
             raise SheetError(f"{where}: step {m.step} is at rho {tuple(step.rho)}, not "
                              f"{m.rho}")

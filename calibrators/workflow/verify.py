@@ -60,7 +60,7 @@ from calibrators.study.episodes import Episode
 from calibrators.workflow.compensate import compensated_commands
 from calibrators.workflow.plan import Plan, Procedure, rho_words
 from orthoglide_env.instruments import ballbar, interferometer
-from orthoglide_env.instruments.dial import weighting_sigma
+from orthoglide_env.instruments.dial import DEFAULT_RESOLUTION, DEFAULT_SIGMA, weighting_sigma
 from orthoglide_env.instruments.interferometer import InterferometerAxis
 from orthoglide_env.instruments.slots import GaugeSpec
 from orthoglide_env.lab.operations import DEFAULT_BUDGET_S, TRACKER_SIGMA, Op
@@ -89,18 +89,20 @@ INWARD_STEP_MM: float = 0.5
 
 class VerificationPlan:
     """The plan of the verification of the estimate ``estimate``, configured: agent
-    ``agent``'s experiment (within ``budget_s`` s, under ``conditions``, a random agent's
-    choices from ``seed``) on a machine of the estimate's design, every command
-    compensated as the compensated controller drives it.  ``ValueError`` at construction
-    as :class:`~calibrators.workflow.plan.Plan`'s; :meth:`run` makes the procedure."""
+    ``agent``'s experiment (within ``budget_s`` s, under ``conditions``, read with gauges
+    of repeatability ``sigma`` and display ``resolution`` mm, a random agent's choices
+    from ``seed``) on a machine of the estimate's design, every command compensated as
+    the compensated controller drives it.  ``ValueError`` at construction as
+    :class:`~calibrators.workflow.plan.Plan`'s; :meth:`run` makes the procedure."""
 
     def __init__(self, estimate: Estimate, *, agent: str = "paper",
                  conditions: Conditions | None = None, budget_s: float = DEFAULT_BUDGET_S,
-                 seed: int = 0) -> None:
+                 seed: int = 0, sigma: float = DEFAULT_SIGMA,
+                 resolution: float = DEFAULT_RESOLUTION) -> None:
         self.estimate = estimate
         # The estimate holds the design it calibrated: its verification is planned for it.
         self.plan = Plan(estimate.readings.design, agent=agent, conditions=conditions,
-                         budget_s=budget_s, seed=seed)
+                         budget_s=budget_s, seed=seed, sigma=sigma, resolution=resolution)
 
     def run(self) -> Procedure:
         """:func:`compensated_procedure` of the plan's procedure."""
