@@ -171,13 +171,12 @@ def test_batched_compare_gives_the_per_machine_trials(conditions: str) -> None:
     assert len(batched) == 3 * 2 * 3 and any(not t.failed for t in batched)
 
 
-
 @pytest.mark.parametrize("conditions", ["ideal", "lab"])
 def test_kept_looks_are_the_traced_ones(conditions: str, monkeypatch: pytest.MonkeyPatch
                                         ) -> None:
     """A look the exact machines keep (asked again at the same postures, machines and
     gauges) is the one tracing it again gives: the paper's procedure (every posture
-    revisited) and the random agent (re-mounts, lever flicks, refusals) write the same
+    revisited) and the random agent (its moves, lever flicks and re-mounts) write the same
     notebooks at the same times, to the last bit, either way."""
     config = Config(("paper", "random"), ("paper6",), budget_s=600.0, seed=3,
                     conditions=Conditions(conditions))
