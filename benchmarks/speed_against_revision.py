@@ -7,7 +7,9 @@ the test suite.
 
 Each item times whole commands in fresh processes, this tree and ``REV`` taken in turns,
 round after round, so a change of load hits both alike; the table gives each tree's median
-wall time and the median of the rounds' ratios with their range.  ``REV`` is checked out
+wall time and the median of the rounds' ratios with their range, then the same of their CPU
+seconds (user and system, of the command and every process it starts), which other work on
+a loaded machine stretches far less than the wall time.  ``REV`` is checked out
 into a temporary git worktree; both trees run from their own folder with their own code
 first on ``PYTHONPATH`` (the same interpreter and packages), each compiled to bytecode
 first as an installed package is, so the comparison is of the code alone.
@@ -48,6 +50,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -72,29 +75,37 @@ print(digest)
 """
 
 
+class Seconds(NamedTuple):
+    """What a command took: wall seconds and CPU seconds (user and system, its own and its
+    children's)."""
+
+    wall: float
+    cpu: float
+
+
 def _env(tree: Path) -> dict[str, str]:
     return dict(os.environ, PYTHONPATH=str(tree))
 
 
 def _timed(command: list[str], tree: Path, env: dict[str, str] | None = None
-           ) -> tuple[float, str]:
-    """Wall seconds of ``command`` run in ``tree`` and what it printed."""
-    start = time.perf_counter()
+           ) -> tuple[Seconds, str]:
+    """The seconds of ``command`` run in ``tree`` and what it printed."""
+    start, cpu = time.perf_counter(), _children_cpu()
     out = subprocess.run(command, cwd=tree, env=env or _env(tree), check=True,
                          capture_output=True, text=True)
-    return time.perf_counter() - start, out.stdout
+    return Seconds(time.perf_counter() - start, _children_cpu() - cpu), out.stdout
 
 
-def compare(tree: Path, _: argparse.Namespace) -> tuple[float, str]:
+def compare(tree: Path, _: argparse.Namespace) -> tuple[Seconds, str]:
     seconds, out = _timed([sys.executable, "-m", "calibrators.cli", *COMPARE], tree)
     return seconds, RUN_SECONDS.sub(", (seconds) s. ", out)
 
 
-def startup(tree: Path, _: argparse.Namespace) -> tuple[float, str]:
+def startup(tree: Path, _: argparse.Namespace) -> tuple[Seconds, str]:
     return _timed([sys.executable, "-m", "calibrators.cli", "--version"], tree)
 
 
-def active(tree: Path, args: argparse.Namespace) -> tuple[float, str]:
+def active(tree: Path, args: argparse.Namespace) -> tuple[Seconds, str]:
     return _timed([sys.executable, "-c", ACTIVE, str(args.active_machines)], tree)
 
 
@@ -104,7 +115,7 @@ def _children_cpu() -> float:
     return used.ru_utime + used.ru_stime
 
 
-def suite(tree: Path, _: argparse.Namespace) -> tuple[float, str]:
+def suite(tree: Path, _: argparse.Namespace) -> tuple[Seconds, str]:
     """``CI=true make test`` in a fresh clone of ``tree``'s checked-out commit, its venv
     built first by make (the build's wall seconds apart: its share of the total); prints
     the number of tests that passed and the CPU seconds of the tests' part (lint, compile,
@@ -117,15 +128,14 @@ def suite(tree: Path, _: argparse.Namespace) -> tuple[float, str]:
         env = dict({k: v for k, v in os.environ.items()
                     if k not in ("PYTHONPATH", "VIRTUAL_ENV")}, CI="true")
         venv, _ = _timed(["make", ".venv/.installed"], clone, env)
-        cpu = _children_cpu()
         tests, out = _timed(["make", "test"], clone, env)
-        cpu = _children_cpu() - cpu
     passed = re.findall(r"(\d+) passed", out)
-    return venv + tests, (f"{passed[-1] if passed else '?'} passed (venv {venv:.0f} s, "
-                          f"tests {tests:.0f} s and {cpu:.0f} CPU-s)")
+    return Seconds(venv.wall + tests.wall, venv.cpu + tests.cpu), (
+        f"{passed[-1] if passed else '?'} passed (venv {venv.wall:.0f} s, tests "
+        f"{tests.wall:.0f} s and {tests.cpu:.0f} CPU-s)")
 
 
-RUNNERS: dict[str, Callable[[Path, argparse.Namespace], tuple[float, str]]] = {
+RUNNERS: dict[str, Callable[[Path, argparse.Namespace], tuple[Seconds, str]]] = {
     "compare": compare, "startup": startup, "active": active, "suite": suite}
 
 
@@ -164,13 +174,22 @@ def main() -> None:
             for tree, _ in trees:
                 subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force",
                                 str(tree)], check=True)
-    print(f"load average {os.getloadavg()[0]:.1f}, {args.rounds} rounds; median wall seconds "
-          "of each tree and the median of the rounds' ratios [their range]")
-    print(f"{'item':<10}{'this tree':>11}{args.rev[:10]:>12}{'ratio':>8}  {'range':<14}check")
-    for item, new, was, ratios, same in rows:
-        spread = f"[{min(ratios):.2f}, {max(ratios):.2f}]"
-        print(f"{item:<10}{new:11.3f}{was:12.3f}{float(np.median(ratios)):8.2f}  {spread:<14}"
-              f"{same}")
+    print(f"load average {os.getloadavg()[0]:.1f}, {args.rounds} rounds; median wall and CPU "
+          "seconds of each tree and the median of the rounds' ratios [their range]")
+    print(f"{'item':<10}{'this tree':>11}{args.rev[:10]:>12}{'ratio':>8}  {'range':<14}"
+          f"{'CPU this':>10}{'CPU ' + args.rev[:8]:>13}{'ratio':>8}  {'range':<14}check")
+    for item, times, same in rows:
+        cells = []
+        for kind in Seconds._fields:
+            new, was = (float(np.median([getattr(t, kind) for t in times[k]]))
+                        for k in ("new", "old"))
+            ratios = [getattr(a, kind) / getattr(b, kind)
+                      for a, b in zip(times["new"], times["old"], strict=True)]
+            spread = f"[{min(ratios):.2f}, {max(ratios):.2f}]"
+            width = (11, 12) if kind == "wall" else (10, 13)
+            cells.append(f"{new:{width[0]}.3f}{was:{width[1]}.3f}"
+                         f"{float(np.median(ratios)):8.2f}  {spread:<14}")
+        print(f"{item:<10}{''.join(cells)}{same}")
 
 
 def _compiled(tree: Path) -> None:
@@ -182,12 +201,12 @@ def _compiled(tree: Path) -> None:
 
 
 def _measure(item: str, old: Path, rounds: int, args: argparse.Namespace,
-             same: Path | None = None) -> tuple[str, float, float, list[float], str]:
-    """``item`` timed in both trees in turns, ``rounds`` rounds: the median seconds of each,
-    each round's ratio (this tree over ``old``) and what was checked.  The start-up's
+             same: Path | None = None) -> tuple[str, dict[str, list[Seconds]], str]:
+    """``item`` timed in both trees in turns, ``rounds`` rounds: the seconds of each round
+    in each tree (``new``: this one, ``old``) and what was checked.  The start-up's
     rounds also time ``python -c "import numpy"`` in turn, which its check compares with;
     ``same``: a tree whose outputs of compare and active must be this tree's."""
-    times: dict[str, list[float]] = {"new": [], "old": [], "numpy": []}
+    times: dict[str, list[Seconds]] = {"new": [], "old": [], "numpy": []}
     outputs: dict[str, set[str]] = {"new": set(), "old": set()}
     for r in range(rounds):
         for name, tree in (("new", ROOT), ("old", old)):
@@ -197,11 +216,9 @@ def _measure(item: str, old: Path, rounds: int, args: argparse.Namespace,
         if item == "startup":
             times["numpy"].append(_timed([sys.executable, "-c", "import numpy"], ROOT)[0])
         print(f"{item}: round {r + 1}/{rounds} done", file=sys.stderr, flush=True)
-    new, was = (float(np.median(times[k])) for k in ("new", "old"))
-    ratios = [a / b for a, b in zip(times["new"], times["old"], strict=True)]
     if item == "startup":
-        numpy = [a / b for a, b in zip(times["new"], times["numpy"], strict=True)]
-        check = (f"import numpy {float(np.median(times['numpy'])):.3f} s: "
+        numpy = [a.wall / b.wall for a, b in zip(times["new"], times["numpy"], strict=True)]
+        check = (f"import numpy {float(np.median([t.wall for t in times['numpy']])):.3f} s: "
                  f"{float(np.median(numpy)):.2f}x it [{min(numpy):.2f}, {max(numpy):.2f}]")
     elif item == "suite":
         check = f"tests: {outputs['new'].pop()} / {outputs['old'].pop()}"
@@ -216,7 +233,7 @@ def _measure(item: str, old: Path, rounds: int, args: argparse.Namespace,
             agree = RUNNERS[item](same, args)[1] == mine
             checks.append(f"{'identical to' if agree else 'DIFFER FROM'} {args.same_as}'s")
         check = "; ".join(checks)
-    return item, new, was, ratios, check
+    return item, times, check
 
 
 if __name__ == "__main__":

@@ -23,9 +23,9 @@ from functools import cached_property
 import numpy as np
 
 from orthoglide_env.instruments.ballbar import BallbarSpec, centring_sigma
-from orthoglide_env.instruments.gauges import Gauge, spec_arrays
+from orthoglide_env.instruments.gauges import Gauge, GaugeArray, spec_arrays
 from orthoglide_env.instruments.interferometer import InterferometerAxis
-from orthoglide_env.instruments.rays import boxes_at, face_distances, face_normals, plane_distances
+from orthoglide_env.instruments.rays import boxes_at, face_normals, plane_distances
 from orthoglide_env.instruments.slots import GaugeSpec, Part, on_platform
 from orthoglide_env.instruments.stands import (
     across_axes,
@@ -211,6 +211,15 @@ class ReadingLayout:
         return (ReadingLayout(self.mountings, self.specs, self.mounting[first],
                               self.rho[first], self.machine_design), np.ravel(inverse))
 
+    @cached_property
+    def gauge_reads(self) -> tuple[np.ndarray, np.ndarray]:
+        """The dial gauges' readings, each mounting once at each of its postures: their
+        rows of :attr:`postures` and their mountings (the model reads a gauge only where
+        it was read, not at every posture)."""
+        gauges = np.isin(self.mounting, self.space.gauges)
+        key = np.unique(self.posture_index[gauges] * len(self.specs) + self.mounting[gauges])
+        return key // len(self.specs), key % len(self.specs)
+
     @property
     def postures(self) -> np.ndarray:
         """The distinct postures (P, 3)."""
@@ -302,7 +311,12 @@ def predict(theta: np.ndarray, layout: ReadingLayout) -> np.ndarray:
         stand = theta[..., N_MACHINE:N_MACHINE + 4 * len(gauges)].reshape(*batch, -1, 4)
         origins, directions = ideal_rays(specs, machine)
         origins, directions = stand_rays(specs, origins, directions, stand)
-        values[..., gauges] = face_distances(machine, specs, origins, directions, postures)
+        at, read = layout.gauge_reads
+        gauge = np.searchsorted(gauges, read)  # (``space.gauges`` is in mounting order)
+        values[..., at, read] = _gauge_targets(
+            machine, spec_arrays([layout.specs[k] for k in read]), postures[..., at, :],
+            direct(machine, postures)[..., at, :], origins[..., gauge, :],
+            directions[..., gauge, :])[-1]
     stations = space.stations
     if stations:
         tcp = direct(machine, postures)  # (*b, P, 3)
@@ -412,7 +426,9 @@ def jacobian(theta: np.ndarray, layout: ReadingLayout, free: np.ndarray, scale: 
 def _derivatives(theta: np.ndarray, layout: ReadingLayout, wanted: np.ndarray,
                  aimed: bool = True) -> np.ndarray:
     """Derivative of every reading over every parameter, ``(B, N, n)`` for ``theta``
-    ``(B, n)``; the stands' columns are left at zero unless one of them is ``wanted``;
+    ``(B, n)``; the stands' columns are left at zero unless one of them is ``wanted``, and
+    so are the machine's errors' kinds (:func:`~orthoglide_env.model.kinematics.
+    tcp_sensitivity_factors`) of which none is;
     ``aimed`` False: a gauge's ray stays where its stand was aimed (see
     :func:`_gauge_derivatives`)."""
     space = layout.space
@@ -420,7 +436,8 @@ def _derivatives(theta: np.ndarray, layout: ReadingLayout, wanted: np.ndarray,
     postures = layout.postures[None]
     p = direct(machine, postures)  # (B, P, 3)
     # The TCP's derivative (B, P, 3, 27) as its factors (B, P, 3, 3) and (B, P, 27).
-    inv, row = tcp_sensitivity_factors(machine, postures, p)
+    columns = np.flatnonzero(wanted[:N_MACHINE])
+    inv, row = tcp_sensitivity_factors(machine, postures, p, columns)
     out = np.zeros((len(theta), len(layout), theta.shape[-1]))
     at = layout.posture_index
     gauges = space.gauges
@@ -431,7 +448,7 @@ def _derivatives(theta: np.ndarray, layout: ReadingLayout, wanted: np.ndarray,
         _gauge_derivatives(theta, layout, machine, p, (inv, row), rows,
                            where[layout.mounting[rows]], at[rows], out,
                            stands=bool(wanted[N_MACHINE:N_MACHINE + 4 * len(gauges)].any()),
-                           columns=np.flatnonzero(wanted[:N_MACHINE]), aimed=aimed)
+                           columns=columns, aimed=aimed)
     for m, spec in enumerate(layout.specs):
         if isinstance(spec, InterferometerAxis):
             out[:, layout.mounting == m, spec.axis] = 1.0
@@ -501,6 +518,23 @@ def carriage_derivatives(layout: ReadingLayout) -> np.ndarray:
     return out
 
 
+def _gauge_targets(machine: MachineParams, g: GaugeArray, rho: np.ndarray, p: np.ndarray,
+                   origins: np.ndarray, directions: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...], np.ndarray]:
+    """What gauge readings ``g`` (``(R,)``) of ``machine`` (batch ``(*b,)``) touch at
+    commands ``rho`` and TCPs ``p`` (``(*b | 1, R, 3)``), along rays ``origins`` and
+    ``directions`` (``(*b, R, 3)``): their legs' R1 and R2 centres, their target boxes
+    (:func:`~orthoglide_env.instruments.rays.boxes_at`) and the distance along each ray
+    to its face's plane (:func:`~orthoglide_env.instruments.rays.face_distances`, each
+    reading alone)."""
+    legs = np.maximum(g.leg, 0)
+    each = np.arange(len(legs))
+    a = carriage_points(machine, rho)[..., each, legs, :]
+    c = platform_points(machine, p)[..., each, legs, :]
+    boxes = boxes_at(g, a, c, p, machine.design)
+    return a, c, boxes, plane_distances(*boxes, g.face, origins, directions)
+
+
 def _gauge_derivatives(theta: np.ndarray, layout: ReadingLayout, machine: MachineParams,
                        p: np.ndarray, dp: tuple[np.ndarray, np.ndarray], rows: np.ndarray,
                        gauge: np.ndarray, at: np.ndarray, out: np.ndarray, stands: bool,
@@ -520,12 +554,8 @@ def _gauge_derivatives(theta: np.ndarray, layout: ReadingLayout, machine: Machin
     g = spec_arrays([specs[j] for j in gauge])
     legs = np.maximum(g.leg, 0)
     postures = layout.postures[at]
-    each = np.arange(len(rows))
-    a = carriage_points(machine, postures[None])[:, each, legs]
-    c = platform_points(machine, p[:, at])[:, each, legs]
-    centre, rot, half = boxes_at(g, a, c, p[:, at], machine.design)
     o, d = origins[:, gauge], directions[:, gauge]
-    t = plane_distances(centre, rot, half, g.face, o, d)
+    a, c, (centre, rot, _), t = _gauge_targets(machine, g, postures[None], p[:, at], o, d)
     normal = face_normals(rot, g.face)
     nd = dot(normal, d)[..., None]
     towards_centre = normal / nd  # dt/dc, and -dt/do
@@ -544,7 +574,7 @@ def _gauge_derivatives(theta: np.ndarray, layout: ReadingLayout, machine: Machin
     origin = [np.where(bar, g.at[:, None], np.where((g.part == Part.CARRIAGE)[:, None], 1.0, 0.0)),
              np.where(bar, 1 - g.at[:, None], 0.0),
              np.where(on_platform(g.part)[:, None], 1.0, 0.0)]
-    inv_zero, row_zero = tcp_sensitivity_factors(machine, zero, p_zero)
+    inv_zero, row_zero = tcp_sensitivity_factors(machine, zero, p_zero, columns)
     machine_part = _through_leg(machine, postures[None], (dp[0][:, at],
                                                           dp[1][:, at[:, None], columns]),
                                 legs, d_a, d_c, d_p, columns)

@@ -11,9 +11,10 @@ from gymnasium.vector import AutoresetMode
 from test_vector_env import CRASHING, assert_same
 
 import orthoglide_env
-from calibrators.study.compare import Config, run_chunk
+from calibrators.study.compare import Config, agent_episodes, run_chunk
 from calibrators.study.episodes import make_estimator
 from orthoglide_env.envs.lab_vector import OrthoglideLabVectorEnv
+from orthoglide_env.lab.machines import ExactMachines, Sight
 from orthoglide_env.lab.operations import PAPER_SLOTS, SLOTS, V0_OPS, Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
@@ -168,3 +169,35 @@ def test_batched_compare_gives_the_per_machine_trials(conditions: str) -> None:
     alone = run_chunk(config, [0, 1, 2], set(), batched=False)
     assert [t.to_json() for t in batched] == [t.to_json() for t in alone]
     assert len(batched) == 3 * 2 * 3 and any(not t.failed for t in batched)
+
+
+@pytest.mark.parametrize("conditions", ["ideal", "lab"])
+def test_kept_looks_are_the_traced_ones(conditions: str, monkeypatch: pytest.MonkeyPatch
+                                        ) -> None:
+    """A look the exact machines keep (asked again at the same postures, machines and
+    gauges) is the one tracing it again gives: the paper's procedure (every posture
+    revisited) and the random agent (its moves, lever flicks and re-mounts) write the same
+    notebooks at the same times, to the last bit, either way."""
+    config = Config(("paper", "random"), ("paper6",), budget_s=600.0, seed=3,
+                    conditions=Conditions(conditions))
+    traced = ExactMachines._traced
+    calls: list[int] = []
+
+    def counted(*args: np.ndarray) -> Sight:
+        calls.append(1)
+        return traced(*args)
+
+    def notebooks() -> list[tuple[float, list]]:
+        return [(e.run.time_s, e.run.records) for agent in config.agents
+                for e in agent_episodes(config, agent, [0, 1, 2])]
+
+    monkeypatch.setattr(ExactMachines, "_traced", staticmethod(counted))
+    kept = notebooks()
+    misses = len(calls)
+    calls.clear()
+    monkeypatch.setattr(ExactMachines, "look",
+                        lambda self, rows, *args: ExactMachines._traced(*args))
+    assert notebooks() == kept
+    if conditions == "ideal":
+        # The paper's revisits were kept (the lab's carriages drift between visits).
+        assert misses < len(calls)

@@ -926,7 +926,7 @@ class LabBatch:
             self.require(), self.gauges, at, self.tcp, self.engaged))).tcp
         if self.world is not None:
             tcp = tcp * self.world[rows].scale(self.time[rows])[:, None]
-        return tcp[0]
+        return tcp[0].copy()  # (a look may be shared: it is read-only)
 
     def final_tcp_rigid_mm(self, row: int) -> float:
         """TCP error RMS after the best-fit rigid motion of the machine the estimator makes

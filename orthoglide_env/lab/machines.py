@@ -126,10 +126,46 @@ class LabMachines:
 
 class ExactMachines(LabMachines):
     """The exact model: a machine is its errors and posture, so there is nothing to keep
-    in step; one :class:`ExactMachine` computes any batch."""
+    in step; one :class:`ExactMachine` computes any batch.
+
+    A look is a function of its arguments alone, so the last :data:`KEPT` are kept and a
+    look asked again is not traced again: a procedure that goes back to its postures
+    (the paper's Zero -> Max -> Min three times, every machine of a batch at once) traces
+    each once.  Where the world moves the carriages between visits the arguments differ,
+    and every look is traced."""
+
+    #: Looks kept: a leg's three paper postures with room for the levers' looks between.
+    KEPT: int = 8
+
+    def __init__(self) -> None:
+        # The arguments' bytes -> the machines and gauges looked at (held, so that the
+        # objects compared by identity live on) and what they showed.
+        self._looks: dict[tuple[bytes, ...], tuple[MachineParams, GaugeArray, Sight]] = {}
 
     def look(self, rows: np.ndarray, machines: MachineParams, gauges: GaugeArray,
              rho: np.ndarray, tcp: np.ndarray, engaged: np.ndarray) -> Sight:
+        key = tuple(np.ascontiguousarray(x).tobytes() for x in (rows, rho, tcp, engaged))
+        kept = self._looks.get(key)
+        if kept is not None and kept[0] is machines and kept[1] is gauges:
+            return kept[2]
+        sight = self._traced(machines, gauges, rho, tcp, engaged)
+        for part in sight:
+            part.flags.writeable = False  # shared by every look that asks again
+        if len(self._looks) >= self.KEPT:
+            del self._looks[next(iter(self._looks))]  # the oldest
+        self._looks[key] = (machines, gauges, sight)
+        return sight
+
+    def start(self, rows: np.ndarray, machines: MachineParams) -> None:
+        self._looks.clear()
+
+    def set_gauges(self, rows: np.ndarray, gauges: GaugeArray, mounted: np.ndarray) -> None:
+        self._looks.clear()
+
+    @staticmethod
+    def _traced(machines: MachineParams, gauges: GaugeArray, rho: np.ndarray,
+                tcp: np.ndarray, engaged: np.ndarray) -> Sight:
+        """:meth:`look` computed: the gauges' rays traced to their targets."""
         # Only the stands engaged on some machine are traced (the paper's procedure keeps
         # two of six down): their rays against every box are most of a look's arithmetic.
         down = np.flatnonzero(engaged.any(axis=0))

@@ -278,27 +278,38 @@ def tcp_sensitivity(machine: MachineParams, rho: np.ndarray, p: np.ndarray) -> n
     return np.take(inverse, ERROR_LEGS, axis=-1) * row[..., None, :]
 
 
-def tcp_sensitivity_factors(machine: MachineParams, rho: np.ndarray, p: np.ndarray
+def tcp_sensitivity_factors(machine: MachineParams, rho: np.ndarray, p: np.ndarray,
+                            columns: np.ndarray | None = None
                             ) -> tuple[np.ndarray, np.ndarray]:
     """The factors of :func:`tcp_sensitivity`: ``(df/dp)^-1`` (``(..., 3, 3)``) and the
     entry of ``-df/dtheta`` of each error in its leg's row (``(..., 27)``); column ``e`` of
     the sensitivity is column ``ERROR_LEGS[e]`` of the first times entry ``e`` of the
-    second.  Products with the sensitivity can use them without its 27 columns of 3."""
+    second.  Products with the sensitivity can use them without its 27 columns of 3.
+    ``columns``: the errors wanted (default all): the axes' tilts and offsets are computed
+    only where one of theirs is (a fit of the encoder offsets and lengths needs neither,
+    and the tilts cost the most), and left at zero where not; every entry computed has
+    the bits it has among all 27."""
     rho = np.asarray(rho, dtype=float)
     p = np.asarray(p, dtype=float)
     v = leg_vectors(machine, rho, p)  # (..., 3 legs, 3)
     g, _ = geometry(machine, p)
     legs = np.arange(3)
-    row = np.empty((*v.shape[:-2], 27))
+    kinds = (True, True, True) if columns is None else tuple(
+        bool(np.isin(CARRIAGE_COLUMNS[:, part], columns).any())
+        for part in (slice(0, 1), slice(1, 3), slice(3, 5)))
+    row = (np.empty if all(kinds) else np.zeros)((*v.shape[:-2], 27))
     # CARRIAGE_COLUMNS' entries (:func:`carriage_gradients`) by kind, written as slices:
     # the encoder offsets', then each leg's two tilts and two offsets in turn (joining
     # them and a fancy-indexed write cost as much as computing them).
-    offset, tilts, shifts = carriage_parts(machine, rho, v, None)  # (..., 3 legs, 1|2)
+    offset, tilts, shifts = carriage_parts(machine, rho, v, None, kinds)  # (..., 3 legs, 1|2)
     shape = row.shape[:-1]
-    row[..., DRHO_COLUMN:DRHO_COLUMN + 3] = 2 * offset[..., 0]
-    row[..., TILT_COLUMN:TILT_COLUMN + 6] = (2 * tilts).reshape(*shape, 6)
-    row[..., OFFSET_COLUMN:OFFSET_COLUMN + 6] = np.broadcast_to(
-        2 * shifts, (*shape, 3, 2)).reshape(*shape, 6)
+    if offset is not None:
+        row[..., DRHO_COLUMN:DRHO_COLUMN + 3] = 2 * offset[..., 0]
+    if tilts is not None:
+        row[..., TILT_COLUMN:TILT_COLUMN + 6] = (2 * tilts).reshape(*shape, 6)
+    if shifts is not None:
+        row[..., OFFSET_COLUMN:OFFSET_COLUMN + 6] = np.broadcast_to(
+            2 * shifts, (*shape, 3, 2)).reshape(*shape, 6)
     row[..., LENGTH_COLUMN + legs] = 2 * g.lengths
     row[..., ATTACH_COLUMN + 3 * legs[:, None] + legs] = -2 * v
     return inverse_3x3(2 * v), row
