@@ -54,6 +54,7 @@ import argparse
 import dataclasses
 import os
 import shutil
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -422,13 +423,9 @@ def imitate(args: argparse.Namespace, kwargs: dict[str, Any], model: Any) -> lis
     return rows
 
 
-def start_from(args: argparse.Namespace, kwargs: dict[str, Any], model: Any) -> None:
-    """PPO's start from the policy file ``args.start``: its actor's weights, checked to be
-    this run's view and world (``ValueError`` naming what differs), then the critic fitted
-    to the returns of ``args.episodes`` episodes that actor plays on the training machines
-    (its most likely open operation, the file's play), as after imitation
-    (:func:`fit_critic`).  The view's reward comes from the readings and the nominal model
-    only, so those returns never see the truth."""
+def check_start(args: argparse.Namespace, kwargs: dict[str, Any]) -> None:
+    """``ValueError`` naming what differs unless the policy file ``args.start`` was trained
+    in this run's view and world (its spec is the one this run would write)."""
     spec = read_spec(args.start)
     wanted = PolicySpec.from_json(spec_of(view(kwargs, args.expert), "MaskablePPO",
                                           recorded(kwargs), play="argmax").to_json())
@@ -439,7 +436,15 @@ def start_from(args: argparse.Namespace, kwargs: dict[str, Any], model: Any) -> 
     if differ:
         raise ValueError(f"'{args.start}' was trained in another view or world than this "
                          f"run's (--expert, --view, --conditions, --sigma, --budget, "
-                         f"--reward, --per, --design): its {', '.join(differ)} differ")
+                         f"--reward, --per, --design); what differs: {', '.join(differ)}")
+
+
+def start_from(args: argparse.Namespace, kwargs: dict[str, Any], model: Any) -> None:
+    """PPO's start from the policy file ``args.start`` (:func:`check_start`): its actor's
+    weights, then the critic fitted to the returns of ``args.episodes`` episodes that
+    actor plays on the training machines (its most likely open operation, the file's
+    play), as after imitation (:func:`fit_critic`).  The view's reward comes from the
+    readings' places and the nominal model only, so those returns never see the truth."""
     model.set_parameters(str(args.start), device="cpu")
     envs = training_envs(args, kwargs)
     observations, _, _, returns, _ = rollouts(
@@ -464,8 +469,8 @@ def point_file(out: Path, steps: int) -> Path:
 
 
 def selected_round(rows: list[dict]) -> int:
-    """The DAgger round whose policy scored the lowest median error on the curve machines
-    (the first of equals)."""
+    """The curve row (a DAgger round, or a PPO point from ``--start``) whose policy scored
+    the lowest median error on the curve machines (the first of equals)."""
     return int(np.argmin([row["tcp_rigid_median_mm"] for row in rows]))
 
 
@@ -587,6 +592,12 @@ def main(argv: list[str] | None = None) -> None:
     torch.set_num_threads(1)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     kwargs = env_kwargs(args)
+    if args.start is not None:
+        try:
+            check_start(args, kwargs)
+        except ValueError as error:
+            print(f"train_masked.py: error: {error}", file=sys.stderr)
+            raise SystemExit(2) from None
     baselines = tuple(a for a in args.baselines.split(",") if a)
     levels = (statistics.summary(compare.run(config(args, baselines), args.curve_machines))
               if baselines else [])
@@ -605,10 +616,7 @@ def main(argv: list[str] | None = None) -> None:
     start = time.perf_counter()
     rows = imitate(args, kwargs, model) if args.imitate else []
     if args.start is not None:
-        try:
-            start_from(args, kwargs, model)
-        except ValueError as error:
-            raise SystemExit(f"train_masked.py: error: {error}") from None
+        start_from(args, kwargs, model)
     if args.imitate and args.steps:
         # What PPO starts from, kept: its fine-tuning is judged against it.
         save_policy(model, args.out.with_suffix(".imitated.zip"),

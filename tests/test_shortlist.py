@@ -211,7 +211,15 @@ def test_ppo_starts_from_the_file_s_actor_and_refuses_another_world(
     sb3_contrib = pytest.importorskip("sb3_contrib")
     torch = pytest.importorskip("torch")
     monkeypatch.syspath_prepend(str(Path(__file__).parents[1] / "examples"))
-    from train_masked import env_kwargs, parse, recorded, start_from, view
+    from train_masked import (
+        check_start,
+        env_kwargs,
+        parse,
+        point_file,
+        recorded,
+        start_from,
+        view,
+    )
 
     argv = ["--expert", "active-ranked", "--view", "1", "--conditions", "lab", "--sigma",
             "0.02", "--budget", "120", "--steps", "64", "--episodes", "2", "--updates", "50",
@@ -243,6 +251,12 @@ def test_ppo_starts_from_the_file_s_actor_and_refuses_another_world(
         rank = int(np.argmax(np.where(mask, logits, -np.inf)))
         observation, _, terminated, truncated, _ = env.step(rank)
         done = terminated or truncated
+    check_start(args, kwargs)
+    # PPO's curve points are kept and chosen among; a start is not also imitated.
+    assert parse([*argv, "--start", str(path), "--select-round"]).select_round
+    assert point_file(Path("r/m.zip"), 4096) == Path("r/m.ppo4096.zip")
+    with pytest.raises(SystemExit):
+        parse([*argv, "--start", str(path), "--imitate", "2"])
     with pytest.raises(ValueError, match="env gauge_sigma"):
-        start_from(parse([*argv, "--sigma", "0.03", "--start", str(path)]),
-                   env_kwargs(parse([*argv, "--sigma", "0.03"])), model)
+        check_start(parse([*argv, "--sigma", "0.03", "--start", str(path)]),
+                    env_kwargs(parse([*argv, "--sigma", "0.03"])))
