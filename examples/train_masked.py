@@ -51,8 +51,10 @@ machine.  The same command and seed give the same policy (one torch thread, CPU)
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import shutil
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -70,7 +72,7 @@ from training_curve import (
 )
 
 from calibrators.agents.names import POLICY_PREFIX
-from calibrators.agents.policy import save_policy, spec_of
+from calibrators.agents.policy import PolicySpec, read_spec, save_policy, spec_of
 from calibrators.planning.active_expert import FilteredDesignLab, filtered_design_lab_env
 from calibrators.planning.design_expert import PlanExpert
 from calibrators.planning.shortlist import (
@@ -172,8 +174,9 @@ def make_vec_env(n_envs: int, kwargs: dict[str, Any], seed: int, expert: str) ->
 
 def play_mode(args: argparse.Namespace) -> str:
     """How the trained file plays (:attr:`calibrators.agents.policy.PolicySpec.play`): an
-    imitated policy its most likely operation, a policy of PPO alone a draw."""
-    return "argmax" if args.imitate else "draw"
+    imitated policy (or one fine-tuned from an imitated ``--start``) its most likely
+    operation, a policy of PPO alone a draw."""
+    return "argmax" if args.imitate or args.start else "draw"
 
 
 def held_out_rigid(args: argparse.Namespace, kwargs: dict[str, Any], model: Any, path: Path
@@ -194,10 +197,13 @@ def curve_score(args: argparse.Namespace, kwargs: dict[str, Any]
 
     def score(model: Any, path: Path) -> dict[str, float]:
         predicted = [e["predicted_rigid_mm"] for e in model.ep_info_buffer]
-        return {"mean_episode_reward": mean_episode_reward(model),
-                "training_predicted_mm": (float(np.median(predicted)) if predicted
-                                          else float("nan")),
-                "tcp_rigid_median_mm": held_out_rigid(args, kwargs, model, path)}
+        scores = {"mean_episode_reward": mean_episode_reward(model),
+                  "training_predicted_mm": (float(np.median(predicted)) if predicted
+                                            else float("nan")),
+                  "tcp_rigid_median_mm": held_out_rigid(args, kwargs, model, path)}
+        if args.select_round:
+            shutil.copyfile(path, point_file(args.out, model.num_timesteps))
+        return scores
 
     return score
 
@@ -218,12 +224,13 @@ def masked_logits(model: Any, observations: Any, masks: Any) -> Any:
 Choice = Callable[[Any, np.ndarray, int, int], int]
 
 
-def rollouts(envs: list[Any], episodes: int, choose: Choice | None, expert_name: str
+def rollouts(envs: list[Any], episodes: int, choose: Choice | None, expert_name: str | None
              ) -> tuple[list[np.ndarray], list[np.ndarray], list[int], list[float],
                         list[dict[str, float]]]:
     """``episodes`` episodes over ``envs`` in turn (each env's own stream), the operation
     of each state chosen by ``choose(env, observation, episode, label)`` (``None``: the
-    expert's, ``label``; the expert named by ``--expert``, ``expert_name``):
+    expert's, ``label``; the expert named by ``--expert``, ``expert_name``; ``None``: no
+    expert, whose labels are then -1 and cost nothing):
     every state's observation, mask, expert label and return from there to the episode's
     end (``gamma`` 1, as PPO learns), and each episode's return and final predicted error
     (mm)."""
@@ -231,17 +238,18 @@ def rollouts(envs: list[Any], episodes: int, choose: Choice | None, expert_name:
     for episode in range(episodes):
         env = envs[episode % len(envs)]
         observation, _ = env.reset()
-        expert = expert_of(env, expert_name)
+        expert = expert_of(env, expert_name) if expert_name else None
         rewards: list[float] = []
         done, info = False, {}
         while not done:
             observations.append(observation)
             masks.append(env.action_masks())
-            labels.append(expert.choose(env.belief))
+            labels.append(expert.choose(env.belief) if expert else -1)
             action = (labels[-1] if choose is None
                       else choose(env, observation, episode, labels[-1]))
             observation, reward, terminated, truncated, info = env.step(action)
-            expert.follow(action, env.belief)
+            if expert:
+                expert.follow(action, env.belief)
             rewards.append(float(reward))
             done = terminated or truncated
         returns.extend(np.cumsum(rewards[::-1])[::-1].tolist())
@@ -346,14 +354,28 @@ def fit_critic(model: Any, observations: list[np.ndarray], returns: list[float],
         return float(1 - residual.var() / y.var())
 
 
-def imitate(args: argparse.Namespace, kwargs: dict[str, Any], model: Any) -> list[dict]:
-    """DAgger rounds (see the module) on ``args.envs`` design views, env ``k`` seeded
-    ``args.seed + k`` once; the learning curve's rows, written as they come."""
-    import torch
-
+def training_envs(args: argparse.Namespace, kwargs: dict[str, Any]) -> list[Any]:
+    """``args.envs`` design views of the training machines, env ``k`` seeded
+    ``args.seed + k`` once (its later machines from its own stream)."""
     envs = [view(kwargs, args.expert) for _ in range(args.envs)]
     for k, env in enumerate(envs):
         env.reset(seed=args.seed + k)
+    return envs
+
+
+def most_likely(model: Any, env: Any, observation: np.ndarray) -> np.ndarray:
+    """The policy's masked logits (NumPy) of ``env``'s state ``observation``."""
+    import torch
+
+    with torch.no_grad():
+        return masked_logits(model, torch.as_tensor(observation[None]),
+                             torch.as_tensor(env.action_masks()[None]))[0].numpy()
+
+
+def imitate(args: argparse.Namespace, kwargs: dict[str, Any], model: Any) -> list[dict]:
+    """DAgger rounds (see the module) on ``args.envs`` design views, env ``k`` seeded
+    ``args.seed + k`` once; the learning curve's rows, written as they come."""
+    envs = training_envs(args, kwargs)
     rng = np.random.default_rng(args.seed)
 
     draws = np.random.default_rng(args.seed + 1)
@@ -361,9 +383,7 @@ def imitate(args: argparse.Namespace, kwargs: dict[str, Any], model: Any) -> lis
     def policy_choice(env: Any, observation: np.ndarray, episode: int, label: int) -> int:
         if episode > 0 and args.mix and draws.random() < args.mix:
             return label
-        with torch.no_grad():
-            logits = masked_logits(model, torch.as_tensor(observation[None]),
-                                   torch.as_tensor(env.action_masks()[None]))[0].numpy()
+        logits = most_likely(model, env, observation)
         if args.draw and episode > 0:
             # The masked softmax's draw (the largest logit plus Gumbel noise).
             logits = logits + draws.gumbel(size=logits.shape)
@@ -403,14 +423,54 @@ def imitate(args: argparse.Namespace, kwargs: dict[str, Any], model: Any) -> lis
     return rows
 
 
+def check_start(args: argparse.Namespace, kwargs: dict[str, Any]) -> None:
+    """``ValueError`` naming what differs unless the policy file ``args.start`` was trained
+    in this run's view and world (its spec is the one this run would write)."""
+    spec = read_spec(args.start)
+    wanted = PolicySpec.from_json(spec_of(view(kwargs, args.expert), "MaskablePPO",
+                                          recorded(kwargs), play="argmax").to_json())
+    differ = [f.name for f in dataclasses.fields(spec) if f.name != "env"
+              and getattr(spec, f.name) != getattr(wanted, f.name)]
+    differ += [f"env {key}" for key in sorted({*spec.env, *wanted.env})
+               if spec.env.get(key) != wanted.env.get(key)]
+    if differ:
+        raise ValueError(f"'{args.start}' was trained in another view or world than this "
+                         f"run's (--expert, --view, --conditions, --sigma, --budget, "
+                         f"--reward, --per, --design); what differs: {', '.join(differ)}")
+
+
+def start_from(args: argparse.Namespace, kwargs: dict[str, Any], model: Any) -> None:
+    """PPO's start from the policy file ``args.start`` (:func:`check_start`): its actor's
+    weights, then the critic fitted to the returns of ``args.episodes`` episodes that
+    actor plays on the training machines (its most likely open operation, the file's
+    play), as after imitation (:func:`fit_critic`).  The view's reward comes from the
+    readings' places and the nominal model only, so those returns never see the truth."""
+    model.set_parameters(str(args.start), device="cpu")
+    envs = training_envs(args, kwargs)
+    observations, _, _, returns, _ = rollouts(
+        envs, args.episodes,
+        lambda env, observation, episode, label: int(np.argmax(
+            most_likely(model, env, observation))), None)
+    explained = fit_critic(model, observations, returns, args.updates,
+                           np.random.default_rng(args.seed))
+    print(f"critic fitted to {len(returns)} returns of {args.start}'s episodes: "
+          f"R^2 {explained:.3f}", flush=True)
+
+
 def round_file(out: Path, round_: int) -> Path:
     """Where ``--select-round`` keeps DAgger round ``round_``'s policy."""
     return out.with_suffix(f".round{round_}.zip")
 
 
+def point_file(out: Path, steps: int) -> Path:
+    """Where ``--select-round`` with ``--start`` keeps the policy of the PPO curve point
+    at ``steps``."""
+    return out.with_suffix(f".ppo{steps}.zip")
+
+
 def selected_round(rows: list[dict]) -> int:
-    """The DAgger round whose policy scored the lowest median error on the curve machines
-    (the first of equals)."""
+    """The curve row (a DAgger round, or a PPO point from ``--start``) whose policy scored
+    the lowest median error on the curve machines (the first of equals)."""
     return int(np.argmin([row["tcp_rigid_median_mm"] for row in rows]))
 
 
@@ -478,6 +538,13 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
                              "active-ranked, lookahead-ranked: their labels as ranks of the "
                              "short list, whose moves' gains, seconds and dials the view "
                              "observes; the file records it)")
+    parser.add_argument("--start", type=Path, metavar="FILE",
+                        help="instead of --imitate, PPO's --steps fine-tune this policy file "
+                             "of the same view and world (a DAgger round's, "
+                             "<out>.round<k>.zip), its critic first fitted to the returns of "
+                             "--episodes episodes it plays on the training machines; with "
+                             "--select-round every curve point's policy is kept "
+                             "(<out>.ppo<steps>.zip) and the best written to <out>")
     parser.add_argument("--design", metavar="FILE",
                         help="the machines' design (a JSON file, as orthoglide's --design; "
                              "default: the prototype)")
@@ -504,9 +571,14 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
         parser.error(f"--mix is a probability, got {args.mix}")
     if not (np.isfinite(args.target_kl) and args.target_kl >= 0):
         parser.error(f"--target-kl must be a number >= 0, got {args.target_kl}")
-    if args.select_round and (args.steps or not args.imitate):
-        parser.error("--select-round chooses among DAgger rounds: it needs --imitate and "
-                     "--steps 0")
+    if args.start is not None and args.imitate:
+        parser.error("--start fine-tunes a trained policy: it takes no --imitate")
+    if args.start is not None and not args.start.is_file():
+        parser.error(f"--start: no policy file '{args.start}'")
+    if args.select_round and not ((args.imitate and not args.steps)
+                                  or (args.start is not None and args.steps)):
+        parser.error("--select-round chooses among DAgger rounds (it needs --imitate and "
+                     "--steps 0) or among the curve points of PPO from --start")
     return args
 
 
@@ -520,6 +592,12 @@ def main(argv: list[str] | None = None) -> None:
     torch.set_num_threads(1)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     kwargs = env_kwargs(args)
+    if args.start is not None:
+        try:
+            check_start(args, kwargs)
+        except ValueError as error:
+            print(f"train_masked.py: error: {error}", file=sys.stderr)
+            raise SystemExit(2) from None
     baselines = tuple(a for a in args.baselines.split(",") if a)
     levels = (statistics.summary(compare.run(config(args, baselines), args.curve_machines))
               if baselines else [])
@@ -530,12 +608,15 @@ def main(argv: list[str] | None = None) -> None:
     # An imitated policy is fine-tuned without the entropy bonus, which would spread the
     # one operation per state it learned.
     model = MaskablePPO("MlpPolicy", vec, n_steps=256, batch_size=256, n_epochs=5,
-                        gamma=1.0, gae_lambda=0.95, ent_coef=0.0 if args.imitate else 0.01,
+                        gamma=1.0, gae_lambda=0.95,
+                        ent_coef=0.0 if args.imitate or args.start else 0.01,
                         learning_rate=args.learning_rate, target_kl=args.target_kl or None,
                         seed=args.seed, device="cpu", policy_kwargs={"net_arch": args.net},
                         verbose=0)
     start = time.perf_counter()
     rows = imitate(args, kwargs, model) if args.imitate else []
+    if args.start is not None:
+        start_from(args, kwargs, model)
     if args.imitate and args.steps:
         # What PPO starts from, kept: its fine-tuning is judged against it.
         save_policy(model, args.out.with_suffix(".imitated.zip"),
@@ -549,8 +630,10 @@ def main(argv: list[str] | None = None) -> None:
     minutes = (time.perf_counter() - start) / 60
     if args.select_round:
         best = selected_round(rows)
-        shutil.copyfile(round_file(args.out, best), args.out)
-        print(f"round {best} scored best on the curve machines")
+        chosen = (point_file(args.out, rows[best]["steps"]) if args.start
+                  else round_file(args.out, best))
+        shutil.copyfile(chosen, args.out)
+        print(f"{chosen} scored best on the curve machines")
     else:
         save_policy(model, args.out, spec_of(view(kwargs, args.expert), "MaskablePPO",
                                              recorded(kwargs), play=play_mode(args)))

@@ -199,3 +199,64 @@ def test_ranked_labels_name_the_experts_operation() -> None:
     off = next(p for p in range(env.belief.n_postures) if p not in env.listed)
     with pytest.raises(ValueError, match="not on the short list"):
         env.rank_of(off)
+
+
+def test_ppo_starts_from_the_file_s_actor_and_refuses_another_world(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """``train_masked.py --start FILE``: before any PPO update the model's actor is the
+    file's, weight for weight, so it takes the file's operations (its logits, as
+    ``policy:FILE`` reads them in NumPy, agree to float32 rounding, 1e-5 at logits of
+    order 1); its critic alone is fitted, to that actor's returns, so it moves off the
+    file's.  A file of another world is refused, naming what differs."""
+    sb3_contrib = pytest.importorskip("sb3_contrib")
+    torch = pytest.importorskip("torch")
+    monkeypatch.syspath_prepend(str(Path(__file__).parents[1] / "examples"))
+    from train_masked import (
+        check_start,
+        env_kwargs,
+        parse,
+        point_file,
+        recorded,
+        start_from,
+        view,
+    )
+
+    argv = ["--expert", "active-ranked", "--view", "1", "--conditions", "lab", "--sigma",
+            "0.02", "--budget", "120", "--steps", "64", "--episodes", "2", "--updates", "50",
+            "--envs", "1", "--seed", "7"]
+    kwargs = env_kwargs(parse(argv))
+    path = tiny_maskable_policy(view(kwargs, "active-ranked"), recorded(kwargs),
+                                tmp_path / "start.zip")
+    args = parse([*argv, "--start", str(path)])
+    model = sb3_contrib.MaskablePPO("MlpPolicy", view(kwargs, "active-ranked"), seed=1,
+                                    device="cpu")
+    start_from(args, kwargs, model)
+    saved = sb3_contrib.MaskablePPO.load(path, device="cpu").policy.state_dict()
+    now = model.policy.state_dict()
+    actor = [k for k in saved if k.startswith(("mlp_extractor.policy_net", "action_net"))]
+    critic = [k for k in saved if k.startswith(("mlp_extractor.value_net", "value_net"))]
+    assert actor and critic
+    assert all(torch.equal(now[k], saved[k]) for k in actor)
+    assert not all(torch.equal(now[k], saved[k]) for k in critic)
+    agent = get_agent(f"policy:{path}")
+    env = view(kwargs, "active-ranked")
+    observation, _ = env.reset(seed=11)
+    done = False
+    while not done:
+        with torch.no_grad():
+            logits = model.policy.action_net(model.policy.mlp_extractor.forward_actor(
+                torch.as_tensor(observation[None])))[0].numpy()
+        np.testing.assert_allclose(logits, agent.actor.logits(observation), atol=1e-5)
+        mask = env.action_masks()
+        rank = int(np.argmax(np.where(mask, logits, -np.inf)))
+        observation, _, terminated, truncated, _ = env.step(rank)
+        done = terminated or truncated
+    check_start(args, kwargs)
+    # PPO's curve points are kept and chosen among; a start is not also imitated.
+    assert parse([*argv, "--start", str(path), "--select-round"]).select_round
+    assert point_file(Path("r/m.zip"), 4096) == Path("r/m.ppo4096.zip")
+    with pytest.raises(SystemExit):
+        parse([*argv, "--start", str(path), "--imitate", "2"])
+    with pytest.raises(ValueError, match="env gauge_sigma"):
+        check_start(parse([*argv, "--sigma", "0.03", "--start", str(path)]),
+                    env_kwargs(parse([*argv, "--sigma", "0.03"])))
