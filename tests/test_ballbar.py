@@ -367,6 +367,14 @@ def test_the_pivot_moves_with_the_drives_where_and_when_it_was_centred():
     np.testing.assert_allclose(both[bars], encoder[bars], rtol=0, atol=1e-12)
     # The pivot's part is not small: a circle's readings move by the bar's direction.
     assert np.abs(pivot_derivatives(layout)[bars]).max() > 0.5
+    # Machines that share the layout (a fixed design's batch) read at their own times:
+    # each one's terms are its own alone.
+    later = np.concatenate([times, times + 600.0])
+    both = consider_terms(layout, np.zeros(later.shape), later, Conditions("workshop"))
+    for m in range(2):
+        alone = consider_terms(layout, np.zeros((1, later.shape[1])), later[m:m + 1],
+                               Conditions("workshop"))
+        np.testing.assert_array_equal(both.pivot[m], alone.pivot[0])
 
 
 def test_a_ballbar_leaves_the_drives_common_scale_to_its_prior():

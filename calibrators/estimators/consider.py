@@ -345,7 +345,9 @@ def _drive_terms(design: ReadingLayout, t: np.ndarray | None, conditions: Condit
     setup = np.full(len(design), len(bars))
     for b, k in enumerate(bars):
         setup[design.mounting == k] = b
-    patterns = np.stack([pattern for _, pattern in at_centres], axis=-1)  # (M|1, B, 3, K)
+    machines = max(len(pattern) for _, pattern in at_centres)
+    patterns = np.stack([np.broadcast_to(pattern, (machines, *centres.shape))
+                         for _, pattern in at_centres], axis=-1)  # (M|1, B, 3, K)
     padded = np.concatenate([patterns, np.zeros((*patterns.shape[:1], 1,
                                                  *patterns.shape[2:]))], axis=1)
     return out, padded[:, setup]
