@@ -494,8 +494,8 @@ def carriage_derivatives(layout: ReadingLayout) -> np.ndarray:
     """Derivative (N, 3) of every reading of ``layout`` over each drive's carriage, moved
     where and when that reading was taken, at the nominal machine: the reading's
     derivative by the encoder offsets, but for a ballbar's only through the TCP it reads
-    (its pivot was centred where the carriages were then, a constant of its set-up that
-    its centre takes), and for a dial gauge's only through the target it touches: its
+    (its pivot was centred where the carriages were then: :func:`pivot_derivatives`
+    takes that part), and for a dial gauge's only through the target it touches: its
     stand was aimed at the machine's geometry at Zero, not at where the carriages stood
     then, and what they were off when its plunger was zeroed is a constant of the
     mounting that its zero takes."""
@@ -504,8 +504,20 @@ def carriage_derivatives(layout: ReadingLayout) -> np.ndarray:
     drho = np.isin(np.arange(len(space)), np.arange(3))
     distinct, rows = layout.distinct
     out = _derivatives(theta[None], distinct, drho, aimed=False)[0, rows][:, :3]
+    return out - pivot_derivatives(layout) if space.ballbars else out
+
+
+def pivot_derivatives(layout: ReadingLayout) -> np.ndarray:
+    """Derivative (N, 3) of every reading of ``layout`` over each drive's carriage where
+    and when its ballbar set-up's pivot was centred, at the nominal machine: the pivot
+    sits where the carriages then put the TCP at the centre command, so a carriage's
+    error there moves the pivot and, against it, the reading along the bar.  Zero for
+    every other instrument's readings."""
+    out = np.zeros((len(layout), 3))
+    space = layout.space
     if not space.ballbars:
         return out
+    theta = np.zeros(len(space))
     machine = MachineParams.from_vector(theta[None, :N_MACHINE], layout.machine_design)
     for m, pivot in zip(space.ballbars, _pivots(theta[None], layout, machine), strict=True):
         rows = np.flatnonzero(layout.mounting == m)
@@ -514,7 +526,7 @@ def carriage_derivatives(layout: ReadingLayout) -> np.ndarray:
         along = direct(machine, layout.rho[rows][None]) - pivot[:, None, :]
         along = along / np.linalg.norm(along, axis=-1, keepdims=True)
         at_centre = tcp_sensitivity_factors(machine, centre, p)
-        out[rows] += sensitivity_along(*at_centre, along)[0, :, :3]
+        out[rows] = -sensitivity_along(*at_centre, along)[0, :, :3]
     return out
 
 

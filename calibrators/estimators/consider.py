@@ -69,8 +69,12 @@ gauge is laid along each axis), and its scale error, one term on every face's di
 per set-up, its cosine error and what the room leaves once the gauge and the machine are
 taken to 20 C, ``step-gauge.scale``, on the face's distance.  A ballbar's transducer
 scale error is one term, ``ballbar.scale``, on every set-up's readings (the lab has one
-bar); a pivot's offset is a fitted unknown whose prior holds the drives' errors where it
-was centred (:func:`pivot_sigmas`).
+bar); a pivot's offset is a fitted unknown, and every drive term moves the pivot as
+well as the TCP the bar reads: a ballbar reading's term has its pattern at the reading
+and, through the pivot, at its set-up's centre command when the set-up ended
+(:attr:`Consider.pivot`; the lab reads the bar first a move after that, and a sheet's
+first reading is taken as so too), so the offset's prior holds only the centring and the
+room's growth (:func:`pivot_sigmas` without ``drives``).
 """
 
 from __future__ import annotations
@@ -91,6 +95,7 @@ from orthoglide_env.instruments.step_gauge import (
     face_sigmas,
     length_sigma,
 )
+from orthoglide_env.lab.operations import TIME
 from orthoglide_env.model.compensation import interpolation_weights, node_count
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import AXIS_NAMES, MachineParams
@@ -140,6 +145,11 @@ class Consider:
     names: tuple[str, ...]
     drive: np.ndarray
     reading: np.ndarray
+    #: (M, N, 3, K) or None (no ballbar readings): for a ballbar reading, the K drive
+    #: terms' carriage errors where and when its set-up's pivot was centred (the centre
+    #: command, at the set-up's time), which moved the pivot
+    #: (:func:`~orthoglide_env.reading_model.pivot_derivatives`); zero for other readings.
+    pivot: np.ndarray | None = None
 
     @property
     def empty(self) -> bool:
@@ -152,7 +162,8 @@ class Consider:
 
     def rows(self, rows: np.ndarray) -> Consider:
         """The terms of machines ``rows``."""
-        return Consider(self.names, self.drive[rows], self.reading[rows])
+        return Consider(self.names, self.drive[rows], self.reading[rows],
+                        None if self.pivot is None else self.pivot[rows])
 
     def split(self, families: tuple[str, ...]) -> tuple[Consider, Consider]:
         """The terms of ``families`` (:func:`term_family`), and the others."""
@@ -161,7 +172,8 @@ class Consider:
 
         def part(keep: np.ndarray) -> Consider:
             return Consider(tuple(n for n, c in zip(self.names, keep, strict=True) if c),
-                            self.drive[..., keep[:k]], self.reading[..., keep[k:]])
+                            self.drive[..., keep[:k]], self.reading[..., keep[k:]],
+                            None if self.pivot is None else self.pivot[..., keep[:k]])
 
         return part(chosen), part(~chosen)
 
@@ -217,22 +229,27 @@ def _taus(effect: str, parameter: str, conditions: Conditions) -> list[float]:
     return [(low + (high - low) * node) * MINUTE for node in _NODES]
 
 
-def _approach(design: ReadingLayout) -> np.ndarray:
+def _approach(design: ReadingLayout) -> tuple[np.ndarray, np.ndarray]:
     """(N, 3) the direction (+-1) of each axis's last move before each reading of
     ``design``, from the readings' order; +1 before an axis first moves.  A ballbar
     set-up drove to its centre command unread, so its first reading was approached from
-    there."""
+    there.  And (B, 3) the same at each of the B ballbar set-ups' centres, where its pivot
+    was centred."""
+    bars = design.space.ballbars
     hidden = {int(np.flatnonzero(design.mounting == k)[0]): np.asarray(design.specs[k].centre)
-              for k in design.space.ballbars}
+              for k in bars}
     out = np.ones(design.rho.shape)
+    centres: dict[int, np.ndarray] = {}
     state, last = out[0], design.rho[0]
     for k, posture in enumerate(design.rho):
         for point in ((hidden[k], posture) if k in hidden else (posture,)):
             step = point - last
             state = np.where(step > 0, 1.0, np.where(step < 0, -1.0, state))
             last = point
+            if point is not posture:
+                centres[k] = state
         out[k] = state
-    return out
+    return out, np.array([centres[first] for first in hidden]).reshape(len(bars), 3)
 
 
 def _per_axis(name: str, pattern: np.ndarray) -> list[tuple[str, np.ndarray]]:
@@ -308,17 +325,48 @@ def table_prior(machine: MachineDesign, conditions: Conditions, spacing: float
 
 
 def _drive_terms(design: ReadingLayout, t: np.ndarray | None, conditions: Conditions,
-                 spacing: float | None) -> list[tuple[str, np.ndarray]]:
-    """The carriages' terms: (name, pattern (M or 1, N, 3))."""
+                 spacing: float | None) -> tuple[list[tuple[str, np.ndarray]],
+                                                 np.ndarray | None]:
+    """The carriages' terms: (name, pattern (M or 1, N, 3)) at the readings, and, with
+    ballbar readings, every term's pattern (M or 1, N, 3, K) where and when each one's
+    set-up centred its pivot (:attr:`Consider.pivot`), else None."""
+    approach, centre_approach = _approach(design)
+    out = _carriage_terms(design.rho, approach, t, design, conditions, spacing)
+    bars = design.space.ballbars
+    if not bars or not out:
+        return out, None
+    first = np.array([np.flatnonzero(design.mounting == k)[0] for k in bars])
+    centres = np.array([design.specs[k].centre for k in bars], dtype=float)  # (B, 3)
+    # The pivot was centred when the set-up's work ended: its first reading came a move
+    # (drive and settle) later.
+    when = None if t is None else t[:, first] - TIME.move(centres, design.rho[first])
+    at_centres = _carriage_terms(centres, centre_approach, when, design, conditions, spacing)
+    # Each ballbar reading gets its set-up's centre's patterns; other readings none.
+    setup = np.full(len(design), len(bars))
+    for b, k in enumerate(bars):
+        setup[design.mounting == k] = b
+    machines = max(len(pattern) for _, pattern in at_centres)
+    patterns = np.stack([np.broadcast_to(pattern, (machines, *centres.shape))
+                         for _, pattern in at_centres], axis=-1)  # (M|1, B, 3, K)
+    padded = np.concatenate([patterns, np.zeros((*patterns.shape[:1], 1,
+                                                 *patterns.shape[2:]))], axis=1)
+    return out, padded[:, setup]
+
+
+def _carriage_terms(rho: np.ndarray, approach: np.ndarray, t: np.ndarray | None,
+                    design: ReadingLayout, conditions: Conditions, spacing: float | None
+                    ) -> list[tuple[str, np.ndarray]]:
+    """The carriages' terms at commands ``rho`` (P, 3) approached from ``approach`` (P, 3)
+    at lab times ``t`` (M, P) or None: (name, pattern (M or 1, P, 3))."""
     on = conditions.__contains__
-    out = [(name, pattern[None]) for name, pattern in lead_terms(
-        design.rho, design.machine_design, conditions, spacing)]
     machine = design.machine_design
-    x = (design.rho - machine.rho_min) / (machine.rho_max - machine.rho_min)  # (N, 3)
+    out = [(name, pattern[None]) for name, pattern in lead_terms(
+        rho, machine, conditions, spacing)]
+    x = (rho - machine.rho_min) / (machine.rho_max - machine.rho_min)  # (P, 3)
     if on("backlash"):
         # Half the lost motion, b / 2, against the approach: b's mean acts on every axis
         # at once (the axes' b are all positive), its spread on each alone.
-        lag = -_approach(design)[None] / 2 * UM
+        lag = -approach[None] / 2 * UM
         mean, spread = backlash_sizes(conditions)
         out.append(("backlash.mean", mean * lag))
         out += _per_axis("backlash.spread", spread * lag)
@@ -326,7 +374,7 @@ def _drive_terms(design: ReadingLayout, t: np.ndarray | None, conditions: Condit
         # The drives give under the platform's weight by about 1 um, changing with the
         # posture: below what a dial gauge at 20 um tells, but a ballbar reads the TCP at
         # 0.35 um.  Its size is the table's (an assumption): considered at that size.
-        out.append(("compliance.weight", deflection(design.rho, machine, conditions)[None]))
+        out.append(("compliance.weight", deflection(rho, machine, conditions)[None]))
     if on("warmup"):
         # A x (1 - exp(-t / tau)): A's mean times tau's mean curve acts on every axis at
         # once; what tau's spread and A's spread add, on each alone.
@@ -365,43 +413,59 @@ def backlash_sizes(conditions: Conditions) -> tuple[float, float]:
     return mean, float(np.sqrt(second_moment("backlash", "lost_motion", conditions) - mean**2))
 
 
-def pivot_sigmas(design: ReadingLayout, conditions: Conditions) -> np.ndarray:
+def pivot_sigmas(design: ReadingLayout, conditions: Conditions, drives: bool = True
+                 ) -> np.ndarray:
     """The prior sigma (mm, ``(3 B,)``) of each of ``design``'s B ballbar set-ups' pivot
     offsets from where the nominal-model machine puts the TCP at its centre command.  The
     pivot is centred where the TCP truly was, so beside the centring
-    (:func:`~orthoglide_env.instruments.ballbar.centring_sigma`) the offset holds what
-    the drives' carriages were off at the centre then, through the TCP's sensitivity:
-    the lead error, half the lost motion and the warm-up once warm (its amplitude's mean
-    on every axis at once, its spread on each alone), at the table's second moments
-    under ``conditions``; and the structure's growth at the room's offset.  A fit's
-    centre takes them, as ISO 230-4's analysis removes the centring."""
+    (:func:`~orthoglide_env.instruments.ballbar.centring_sigma`) the offset holds the
+    structure's growth at the room's offset and, with ``drives``, what the drives'
+    carriages were off at the centre then, through the TCP's sensitivity: the lead error,
+    half the lost motion and the warm-up once warm (its amplitude's mean on every axis at
+    once, its spread on each alone), at the table's second moments under ``conditions``.
+    A fit's centre takes them, as ISO 230-4's analysis removes the centring.  A fit whose
+    terms move the pivot with the drives (:attr:`Consider.pivot`) leaves ``drives`` out:
+    an offset's zero-mean prior per set-up would pull every set-up's weakly seen
+    coordinate (along its plane's normal) the same way, where the drives' errors at a
+    centre are one machine's, shared by its set-ups and positive for the warm-up."""
     bars = design.space.ballbars
     if not bars:
         return np.zeros(0)
     machine = design.machine_design
     centres = np.array([design.specs[k].centre for k in bars], dtype=float)  # (B, 3)
-    # The carriages' errors' covariance at the centres (B, 3, 3), mm^2.
-    variance = sum((pattern**2 for _, pattern in lead_terms(centres, machine, conditions)),
-                   np.zeros(centres.shape))
-    if "backlash" in conditions:
-        variance = variance + second_moment("backlash", "lost_motion", conditions) / 4 * UM**2
-    carriage = variance[..., None] * np.eye(3)
-    if "warmup" in conditions:
-        x = (centres - machine.rho_min) / (machine.rho_max - machine.rho_min)
-        mean, spread = warmup_sizes(conditions)
-        carriage = carriage + mean**2 * x[..., :, None] * x[..., None, :] + (
-            spread**2 * x**2)[..., None] * np.eye(3)
     nominal = MachineParams(design=machine)
     tcp = direct(nominal, centres)
-    inverse, row = tcp_sensitivity_factors(nominal, centres, tcp)
-    # Row i of the TCP's derivative over the carriages (the encoder offsets' columns).
-    sensitivity = np.stack([sensitivity_along(inverse, row, np.broadcast_to(e, tcp.shape))
-                            [..., :3] for e in np.eye(3)], axis=-2)  # (B, 3, 3)
-    spread2 = np.einsum("bij,bjk,bik->bi", sensitivity, carriage, sensitivity)
+    spread2 = np.zeros(centres.shape)
+    if drives:
+        inverse, row = tcp_sensitivity_factors(nominal, centres, tcp)
+        # Row i of the TCP's derivative over the carriages (the encoder offsets' columns).
+        sensitivity = np.stack([sensitivity_along(inverse, row, np.broadcast_to(e, tcp.shape))
+                                [..., :3] for e in np.eye(3)], axis=-2)  # (B, 3, 3)
+        spread2 = np.einsum("bij,bjk,bik->bi", sensitivity,
+                            _carriage_covariance(centres, machine, conditions), sensitivity)
     if "room" in conditions:
         alpha = _fixed("room", "expansion", conditions) * 1e-6
         spread2 = spread2 + second_moment("room", "offset", conditions) * (alpha * tcp) ** 2
     return np.sqrt(centring_sigma() ** 2 + spread2).ravel()
+
+
+def _carriage_covariance(rho: np.ndarray, machine: MachineDesign, conditions: Conditions
+                         ) -> np.ndarray:
+    """(P, 3, 3) the second moments (mm^2) of the drives' carriage errors at commands
+    ``rho`` (P, 3) under ``conditions``: the lead error, half the lost motion and the
+    warm-up once warm (its amplitude's mean on every axis at once, its spread on each
+    alone)."""
+    variance = sum((pattern**2 for _, pattern in lead_terms(rho, machine, conditions)),
+                   np.zeros(rho.shape))
+    if "backlash" in conditions:
+        variance = variance + second_moment("backlash", "lost_motion", conditions) / 4 * UM**2
+    carriage = variance[..., None] * np.eye(3)
+    if "warmup" in conditions:
+        x = (rho - machine.rho_min) / (machine.rho_max - machine.rho_min)
+        mean, spread = warmup_sizes(conditions)
+        carriage = carriage + mean**2 * x[..., :, None] * x[..., None, :] + (
+            spread**2 * x**2)[..., None] * np.eye(3)
+    return carriage
 
 
 def thermometer_sigma(conditions: Conditions) -> float:
@@ -583,7 +647,7 @@ def consider_terms(design: ReadingLayout, values: np.ndarray, times: np.ndarray 
                          f"time (time_s) to size {', '.join(needs)}")
     t = None if times is None else np.asarray(times, dtype=float)
     m_count, n = len(values), len(design)
-    drive = _drive_terms(design, t, conditions, spacing)
+    drive, pivot = _drive_terms(design, t, conditions, spacing)
     reading = _reading_terms(design, values, t, conditions,
                              None if temperatures is None else np.asarray(temperatures, float))
     drive_array = (np.stack([np.broadcast_to(p, (m_count, n, 3)) for _, p in drive], axis=-1)
@@ -591,7 +655,8 @@ def consider_terms(design: ReadingLayout, values: np.ndarray, times: np.ndarray 
     reading_array = (np.stack([np.broadcast_to(p, (m_count, n)) for _, p in reading],
                               axis=-1) if reading else np.zeros((m_count, n, 0)))
     return Consider(tuple(name for name, _ in drive) + tuple(name for name, _ in reading),
-                    drive_array, reading_array)
+                    drive_array, reading_array,
+                    None if pivot is None else np.broadcast_to(pivot, drive_array.shape))
 
 
 def _on_rows(pattern: np.ndarray, rows: np.ndarray, n: int) -> np.ndarray:

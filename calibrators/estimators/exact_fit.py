@@ -27,7 +27,11 @@ from calibrators.estimators.solvers import MAX_ITERATIONS as MAX_ITERATIONS
 from calibrators.estimators.solvers import RETAIN as RETAIN
 from calibrators.estimators.solvers import SOLVERS as SOLVERS
 from calibrators.estimators.solvers import Problem, centre, damped_step, transposed
-from orthoglide_env.reading_model import ReadingLayout, carriage_derivatives
+from orthoglide_env.reading_model import (
+    ReadingLayout,
+    carriage_derivatives,
+    pivot_derivatives,
+)
 from orthoglide_env.scoring.grid import blocks
 
 #: Significance of the chi-square test of the model: above the (1 - CHI2_LEVEL) quantile
@@ -279,10 +283,13 @@ def world_columns(design: ReadingLayout, consider: Consider) -> np.ndarray:
     """(M, N, K) each consider term's pattern over the readings (mm per unit coefficient):
     a carriage's pattern times the reading's derivative by that axis's encoder offset (at
     the nominal machine: the machine's errors change it by parts in 1e3 of a term of a few
-    um), or a reading's own."""
+    um), and for a ballbar's, its pattern where its pivot was centred times the reading's
+    derivative by the carriages there; or a reading's own."""
     derivative = carriage_derivatives(design)  # (N, 3), mm/mm
-    return np.concatenate([np.einsum("na,mnak->mnk", derivative, consider.drive),
-                           consider.reading], axis=-1)
+    drive = np.einsum("na,mnak->mnk", derivative, consider.drive)
+    if consider.pivot is not None:
+        drive = drive + np.einsum("na,mnak->mnk", pivot_derivatives(design), consider.pivot)
+    return np.concatenate([drive, consider.reading], axis=-1)
 
 
 def _considered(problem: Problem, jac: np.ndarray, gain_matrix: np.ndarray,

@@ -476,11 +476,13 @@ class GaussNewtonCalibrator(Estimator):
                                       [space.names.index(n) for n in fix])
         priors = prior_sigmas(prior, space, free)
         if space.ballbars:
-            # A pivot sits where the drives truly put the TCP: its default prior (the
-            # centring's) widens by their errors there.
+            # A pivot sits where the drives truly put the TCP: the drives' terms move it
+            # (their patterns at its centre, when it was centred), and its default prior
+            # (the centring's) widens by what no term holds, the room's growth.
             centres = np.array([g == "ballbar_centre" for g in space.groups])
             priors[centres] = np.where(priors[centres] == centring_sigma(),
-                                       pivot_sigmas(design, conditions), priors[centres])
+                                       pivot_sigmas(design, conditions, drives=False),
+                                       priors[centres])
         scale = scales(space, priors)
         needed = len(design.mountings) + int(np.sum(~np.isfinite(priors[free]))) + 1
         if values.shape[1] < needed:

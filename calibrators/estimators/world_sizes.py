@@ -359,7 +359,8 @@ def scaled(consider: Consider, scales: np.ndarray) -> Consider:
     root = np.sqrt(scales[:, family_index(consider.names)])  # (M, K + J)
     k = consider.drive.shape[-1]
     return Consider(consider.names, consider.drive * root[:, None, None, :k],
-                    consider.reading * root[:, None, k:])
+                    consider.reading * root[:, None, k:],
+                    None if consider.pivot is None else consider.pivot * root[:, None, None, :k])
 
 
 def warning(sizes: WorldSizes, m: int, told_name: str) -> str | None:
