@@ -224,9 +224,12 @@ def test_a_new_agent_is_one_registered_class() -> None:
 
 
 @pytest.mark.slow
-def test_compare_json_contract_and_resume(tmp_path) -> None:
+def test_compare_json_contract_and_resume(tmp_path, capsys) -> None:
     """The rows scripts rely on; an interrupted run resumed from its trials file ends with
-    the table of an uninterrupted one."""
+    the table of an uninterrupted one.  The JSON run is made in this process (one command
+    fewer to start), the others as a script runs them."""
+    from calibrators.cli import main
+
     argv = ["compare", "--agents", "paper,tracker", "--estimators", "paper6,extended",
             "--machines", "3", "--seed", "4", "--budget", "1800", "--quiet"]
 
@@ -234,9 +237,9 @@ def test_compare_json_contract_and_resume(tmp_path) -> None:
         return subprocess.run([sys.executable, "-m", "calibrators.cli", *argv, *extra],
                               capture_output=True, text=True, timeout=600)
 
-    whole = orthoglide("--json")
-    assert whole.returncode == 0, whole.stderr
-    rows = json.loads(whole.stdout)["rows"]
+    assert main([*argv, "--json"]) == 0
+    shown = json.loads(capsys.readouterr().out)
+    rows = shown["rows"]
     for r in rows:
         assert set(r) >= {"agent", "estimator", "machines", "time_s", "tcp_after_mm", "z_rms",
                           "success_rate", "predicted_success_rate", "failed", "chi2_rejected"}
@@ -245,15 +248,13 @@ def test_compare_json_contract_and_resume(tmp_path) -> None:
         # Three machines are too few for a 95 % interval of a median.
         assert all(set(v) == {"median", "ci95", "p95"} and v["ci95"] is None
                    for v in r["tcp_after_mm"].values())
-    assert {(p["estimator"], p["agent"], p["against"])
-            for p in json.loads(whole.stdout)["paired"]} == {("paper6", "paper", "tracker"),
-                                                             ("extended", "paper", "tracker")}
+    assert {(p["estimator"], p["agent"], p["against"]) for p in shown["paired"]} == {
+        ("paper6", "paper", "tracker"), ("extended", "paper", "tracker")}
     out = tmp_path / "run"
     first = orthoglide("--out", str(out))
     assert first.returncode == 0
     # The JSON holds the text's table, warning and paired lines: the same lines as the
     # text run prints (but the heading's seconds), and the world they hold in.
-    shown = json.loads(whole.stdout)
     text = shown["table"] + shown["warnings"] + shown["paired_table"]
     assert len(shown["table"]) == 2 + len(rows) and shown["world"] in shown["table"][0]
     assert first.stdout.splitlines()[1:len(text)] == text[1:]
@@ -366,24 +367,28 @@ def test_pybullet_lab_reads_what_the_exact_lab_reads() -> None:
 
 
 @pytest.mark.slow
-def test_ctrl_c_keeps_the_finished_trials_and_resume_completes_the_table(tmp_path) -> None:
+def test_ctrl_c_keeps_the_finished_trials_and_resume_completes_the_table(tmp_path, capsys
+                                                                         ) -> None:
     """Ctrl-C (SIGINT to the whole process group, as a terminal sends it) stops a two-job
     run with one line and the partial table; --resume then ends with the table of an
     uninterrupted run.  Four chunks' worth of machines, so the interrupt, sent when the
     first chunk's trials are written, lands while the third and fourth are pending (the
     two workers can finish two chunks at once).  The uninterrupted run takes its chunks
-    at the default size: the table does not depend on them either."""
+    at the default size in one job, in this process (a command and a pool of workers
+    fewer to start): the table depends on neither."""
     import os
     import signal
     import time
 
+    from calibrators.cli import main
+
     chunk = 100  # a second or so of work each: the interrupt lands between chunks
     machines = 4 * chunk
     out = tmp_path / "run"
-    argv = [sys.executable, "-m", "calibrators.cli", "compare", "--agents", "paper",
-            "--estimators", "paper6", "--machines", str(machines), "--seed", "2", "--jobs",
-            "2", "--quiet"]
-    chunked = [*argv, "--chunk", str(chunk)]
+    command = ["compare", "--agents", "paper", "--estimators", "paper6", "--machines",
+               str(machines), "--seed", "2", "--quiet"]
+    chunked = [sys.executable, "-m", "calibrators.cli", *command, "--jobs", "2", "--chunk",
+               str(chunk)]
     proc = subprocess.Popen([*chunked, "--out", str(out)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, start_new_session=True,
                             preexec_fn=as_a_terminal_job)
@@ -401,9 +406,10 @@ def test_ctrl_c_keeps_the_finished_trials_and_resume_completes_the_table(tmp_pat
     assert 0 < kept < machines
     resumed = subprocess.run([*chunked, "--out", str(out), "--resume", "--json"],
                              capture_output=True, text=True, timeout=600)
-    whole = subprocess.run([*argv, "--json"], capture_output=True, text=True, timeout=600)
-    assert resumed.returncode == 0 and whole.returncode == 0, resumed.stderr
-    assert_close(json.loads(resumed.stdout)["rows"], json.loads(whole.stdout)["rows"])
+    assert resumed.returncode == 0, resumed.stderr
+    assert main([*command, "--jobs", "1", "--json"]) == 0
+    whole = json.loads(capsys.readouterr().out)
+    assert_close(json.loads(resumed.stdout)["rows"], whole["rows"])
 
 
 def test_stable_baselines3_trains_on_the_flat_variant_as_it_is() -> None:

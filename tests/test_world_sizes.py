@@ -25,6 +25,7 @@ from calibrators.estimators.world_sizes import (
     power_against,
     seen_families,
     threshold,
+    thresholds,
     widening,
 )
 
@@ -91,6 +92,16 @@ def test_the_threshold_is_the_law_of_a_ratio_at_a_bound() -> None:
         tail = np.sum(special.comb(f, k) / 2.0**f * stats.chi2.sf(threshold(f), k))
         assert tail == pytest.approx(WORLD_LEVEL, rel=1e-6)
     assert threshold(0) == np.inf
+
+
+def test_a_batchs_thresholds_are_each_machines_own() -> None:
+    """Solved once per count of families seen, each machine's threshold is the one of its
+    own count, to the bit, in the machines' order (none seen: no ratio passes)."""
+    seen = np.random.default_rng(0).random((50, 3)) < 0.5
+    assert {int(n) for n in seen.sum(axis=1)} == {0, 1, 2, 3}
+    expected = [threshold(int(n)) for n in seen.sum(axis=1)]
+    assert thresholds(seen).tolist() == expected
+    assert thresholds(seen[:0]).shape == (0,)
 
 
 @pytest.mark.slow

@@ -209,6 +209,14 @@ def threshold(families: int, level: float = WORLD_LEVEL) -> float:
     return float(optimize.brentq(excess, 0.0, stats.chi2.isf(level, families)))
 
 
+def thresholds(seen: np.ndarray) -> np.ndarray:
+    """(M,) :func:`threshold` of each machine's count of families seen (``seen`` (M, F)),
+    solved once per distinct count: the root-finding over the chi-square mixture costs
+    milliseconds a call, and a batch of machines has a handful of counts."""
+    counts, index = np.unique(seen.sum(axis=1), return_inverse=True)
+    return np.array([threshold(int(n)) for n in counts])[index.reshape(-1)]
+
+
 def family_index(names: tuple[str, ...]) -> np.ndarray:
     """(K,) each term's family's index in :data:`TERM_FAMILIES`; ``ValueError`` naming a
     term of another family (an instrument's own terms, such as the ballbar's scale or the
@@ -262,7 +270,7 @@ def judge(gram: np.ndarray, b: np.ndarray, member: np.ndarray, told: np.ndarray
     statistic = np.maximum(2 * (best - at_told), 0.0)
     # A family the readings do not see has no say in the ratio, nor a degree in its law.
     seen = seen_families(gram, member, count)
-    flagged = statistic > np.array([threshold(int(n)) for n in seen.sum(axis=1)])
+    flagged = statistic > thresholds(seen)
     cost = np.zeros(told.shape)
     for f in np.flatnonzero(present):
         back = above.copy()
@@ -295,7 +303,7 @@ def power_against(gram: np.ndarray, member: np.ndarray, told: np.ndarray,
     # C^T (I + C L C^T)^-1 C over the projected readings, by Woodbury.
     spread = gram - gram @ (root[:, :, None] * np.linalg.solve(
         inner, root[:, :, None] * gram))
-    limit = np.array([threshold(int(n)) for n in seen.sum(axis=1)])
+    limit = thresholds(seen)
     out = np.zeros((machines, families))
     for f in np.flatnonzero(np.isin(np.arange(families), member)):
         terms = member == f
