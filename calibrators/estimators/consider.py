@@ -41,7 +41,11 @@ considered):
 * ``dial``: per gauge mounting, the indicator's error over the plunger's position, which
   is the reading up to the mounting's zero: ``sin``/``cos(pi y / travel)`` and
   ``sin``/``cos(2 pi y / revolution)`` (the phase is random, so the zero's offset is in
-  it); each mounting is taken as its own indicator.
+  it); each mounting is taken as its own indicator.  And its retrace
+  (:func:`retrace_terms`): half of it, one way with the plunger going in and the other
+  coming out, the way read from the mounting's readings in their order.  A digital
+  indicator's readings within the last part of its stroke, where they scatter more, are
+  not fitted (:func:`indicator_end`).
 
 * ``stands.dead_path``: an interferometer's dead path (:func:`dead_path_terms`): the
   room grows the 100 mm from the drive's back end to where its count was zeroed, about
@@ -49,11 +53,14 @@ considered):
   after it reads it for hours.  The room's drift and walk are shared by every set-up.
 
 A term's *family* (:func:`term_family`, :data:`TERM_FAMILIES`) is what an estimator
-fits or considers: ``full`` fits :data:`FULL_TERMS` and considers the rest.
+fits or considers: ``full`` fits :data:`FULL_TERMS` and considers the rest, but for
+what an instrument's readings show plainly: the screw's periodic error with an
+interferometer's or a ballbar's, and with a digital indicator's (2 um) the periodic error
+and the indicator's own curve and retrace.
 
 Left out, each at most about 1 um over a one-hour experiment under ``lab``: the
 structure's growth with the room (a similarity the legs' parallelism does not see), the
-indicator's retrace, the drives' compliance under the platform's weight and the gauges'
+drives' compliance under the platform's weight and the gauges'
 force, and the gauge block's deviation from its nominal length (a reference gauge's
 zeroing reading; its grade allows 0.2 um under ``lab``, 0.8 um in the workshop:
 :data:`~orthoglide_env.world.table.REFERENCE_DEVIATION`); and with linear scales
@@ -481,6 +488,57 @@ def thermometer_sigma(conditions: Conditions) -> float:
                  / np.sqrt(12.0))
 
 
+def plunger_directions(values: np.ndarray, sign: float, rho: np.ndarray) -> np.ndarray:
+    """(M, R) whether one mounting's plunger last moved in (+1) or out (-1) at each of its
+    readings ``values`` (M, R, in the order taken) at commanded postures ``rho`` (R, 3),
+    from the readings themselves: the tip's distance out is the reading along the gauge's
+    ``sign``, so it went in where that fell since the mounting's reading before.  A reading
+    at the same posture as the one before keeps the direction (the plunger did not move);
+    a mounting's first reading went in (its stand was slid in to mid-travel)."""
+    out = np.ones(np.shape(values))
+    if not out.shape[-1]:
+        return out
+    tip = sign * np.asarray(values, dtype=float)
+    moved = np.any(rho[1:] != rho[:-1], axis=-1)
+    step = np.where(moved, np.sign(tip[:, :-1] - tip[:, 1:]), 0.0)
+    for j in range(1, out.shape[-1]):
+        out[:, j] = np.where(step[:, j - 1] != 0, step[:, j - 1], out[:, j - 1])
+    return out
+
+
+def retrace_terms(values: np.ndarray, sign: float, rho: np.ndarray, conditions: Conditions
+                  ) -> list[tuple[str, np.ndarray]]:
+    """An indicator's retrace on one mounting's readings ``values`` (M, R) at postures
+    ``rho`` (R, 3): the reading moves by half of it, one way with the plunger going in
+    and the other coming out (:func:`plunger_directions`); (name, pattern in mm per unit
+    coefficient), its coefficient's second moment the table's; none without the ``dial``
+    effect.  A 2 um digital reading shows it (up to 1 um each way): left out, it made a
+    digital indicator's error bars 1.5x too small with the indicator's errors alone."""
+    if "dial" not in conditions:
+        return []
+    size = np.sqrt(second_moment("dial", "retrace", conditions)) / 2 * UM
+    return [("dial.retrace", size * plunger_directions(values, sign, rho))]
+
+
+def indicator_end(design: ReadingLayout, values: np.ndarray, conditions: Conditions
+                  ) -> np.ndarray:
+    """(M, N) which of ``design``'s readings ``values`` (M, N) a digital indicator took
+    within the last part of its stroke at either end (the table's ``digital_end``), where
+    its datasheets give no repeatability: a mounting's zero is set at mid-travel, so the
+    plunger's position is half the travel plus the reading along its sign.  None for a
+    dial indicator or without the ``dial`` effect."""
+    out = np.zeros(np.shape(values), dtype=bool)
+    if conditions.indicator != "digital" or "dial" not in conditions:
+        return out
+    gauge = np.zeros(len(design.specs), dtype=bool)
+    gauge[design.space.gauges] = True
+    travel = design.machine_design.gauge_travel
+    band = _fixed("dial", "digital_end", conditions)
+    tip = travel / 2 + design.signs[design.mounting] * values
+    with np.errstate(invalid="ignore"):
+        return gauge[design.mounting] & ((tip < band) | (tip > travel - band))
+
+
 def _reading_terms(design: ReadingLayout, values: np.ndarray, t: np.ndarray | None,
                    conditions: Conditions, temperatures: np.ndarray | None = None
                    ) -> list[tuple[str, np.ndarray]]:
@@ -524,7 +582,9 @@ def _reading_terms(design: ReadingLayout, values: np.ndarray, t: np.ndarray | No
             out += [(f"{label}[{name}]", _on_rows(pattern, rows, n))
                     for label, pattern in drift_terms(since, t[:, rows], conditions, heat)]
         out += [(f"{label}[{name}]", _on_rows(pattern, rows, n)) for label, pattern in
-                dial_terms(values[:, rows], design.machine_design.gauge_travel, conditions)]
+                (*dial_terms(values[:, rows], design.machine_design.gauge_travel, conditions),
+                 *retrace_terms(values[:, rows], design.signs[k], design.rho[rows],
+                                conditions))]
     if gives:
         out.append(("stands.give", give_all))
     if design.space.ballbars and conditions.active:

@@ -26,6 +26,7 @@ from calibrators.estimators.consider import (
     Consider,
     check_families,
     consider_terms,
+    indicator_end,
     pivot_sigmas,
     term_family,
     thermometer_sigma,
@@ -440,12 +441,20 @@ class GaussNewtonCalibrator(Estimator):
             design = prepared[members[0]][0]
             values = np.stack([prepared[k][1] for k in members])
             seen = dict(options)
+            plain = []
             if full and any(isinstance(s, InterferometerAxis | BallbarSpec)
                             for s in design.specs):
                 # An interferometer reads a carriage to 0.1 um, a ballbar the TCP to
                 # 0.35 um: the screw's periodic error is plain in their readings, and
                 # fitted, not considered.
-                seen["terms"] = check_families((*terms, "periodic"))
+                plain.append("periodic")
+            if full and conditions.indicator == "digital":
+                # A digital indicator reads to 2 um: its own error curve and retrace (up
+                # to 3 and 2 um) and the screw's periodic error (up to 6 um) are plain in
+                # its readings, and fitted (with their priors), not considered.
+                plain += ["periodic", "dial"]
+            if plain:
+                seen["terms"] = check_families((*terms, *plain))
             try:
                 results = self._fit_group(design, values, [datas[k] for k in members],
                                           **seen)
@@ -511,12 +520,14 @@ class GaussNewtonCalibrator(Estimator):
         if design.probed.any():
             noise = np.where(design.probed, step_gauge_sigma(conditions), noise)
         held = holdout_mask(design, holdout, seed) if holdout else np.zeros(values.shape[1], bool)
+        # A digital indicator's readings near its stroke's ends scatter beyond its sigma.
+        used = ~held & ~indicator_end(design, values, conditions)
         base_of = _world_terms(design, datas, conditions, spacing)
         told_terms = consider
         shown: list[dict[str, float]] = [{} for _ in values]
         if auto:
             sizes = _estimated_world(
-                design, values, np.tile(~held, (len(values), 1)), noise, free, fixed, priors,
+                design, values, used, noise, free, fixed, priors,
                 scale, unmodelled, spread, solver, base_of)
             consider = scaled(consider, sizes)
             present = {term_family(n) for n in consider.names}
@@ -548,7 +559,7 @@ class GaussNewtonCalibrator(Estimator):
                              curvature=curved)
 
         m_count = len(values)
-        mask = np.tile(~held, (m_count, 1))
+        mask = used
         results = fit(np.arange(m_count), mask).split()
         outliers: list[list[int]] = [[] for _ in range(m_count)]
         causes: list[list[str]] = [[] for _ in range(m_count)]
