@@ -674,6 +674,13 @@ class GaussNewtonCalibrator(Estimator):
             warnings.append(f"the estimate is outside the validity range, where the model "
                             f"holds: {str(exc).replace('machine key', 'estimate key')}; do "
                             f"not compensate with it ({VALIDITY_HINT})")
+        ends = int(indicator_end(design, values[None], conditions).sum())
+        if ends:
+            # Said, not silent: a technician reading the fit sees why readings are missing.
+            warnings.append(f"{ends} reading(s) left out: a digital indicator read them "
+                            "within its stroke's last "
+                            f"{conditions.size('dial', 'digital_end')[0]:g} mm, where its "
+                            "datasheets give no repeatability")
         for cause in ("reading", "unrepeated"):
             mine = [k for k, c in zip(outliers, causes, strict=True) if c == cause]
             if mine:
