@@ -167,6 +167,18 @@ def test_a_plan_spends_at_most_its_budget_and_the_lab_charges_what_it_planned() 
     assert 0 < predicted < 0.7
 
 
+def test_no_operation_of_a_plan_ends_past_its_budget() -> None:
+    """A re-mount is weighed every ``REMOUNT_CHECK_S`` (300 s) of the plan: at 305 s the
+    check falls with 5 s left, less than a re-mount's 125 s, and the plan must not take
+    one (it did, ending at 432 s: the ``ballbar`` procedure's gauges overran so).  The
+    plan's clock is the lab's, so its stop's time is when the lab's episode ends."""
+    budget = 305.0
+    p = planner(budget_s=budget)
+    steps = greedy_plan(p)
+    assert steps[-1].op == Op.STOP and steps[-1].time_s <= budget
+    assert p.time_s + p.remount_seconds() > budget  # (the re-mount was on offer, and late)
+
+
 def test_the_designed_plan_beats_the_papers_experiment_at_equal_time() -> None:
     """At the paper procedure's own lab time (about 5 minutes), the optimal plan predicts a
     smaller TCP error after rigid motion than the paper's experiment (both on the nominal

@@ -175,10 +175,11 @@ def test_the_lab_tells_a_faulted_stand_from_a_lifted_one() -> None:
     env.close()
 
 
-def test_the_clock_stays_inside_its_documented_bound() -> None:
-    """The clock stops at the first step that reaches the budget; the longest step (a
-    re-mount from the far corner, every stand pushed past its travel) keeps it inside the
-    time box, budget_s + longest_step."""
+def test_the_clock_never_passes_the_budget() -> None:
+    """Equal lab time is enforced: a re-mount that would end past the budget (8 s used of
+    10, a re-mount takes 128 s from the far corner) is refused, saying so, and the clock
+    runs to the budget exactly (it ended at 136 s when the step was played whole).  The
+    time box keeps its documented bound."""
     env = gym.make(orthoglide_env.LAB_ENV_ID, budget_s=10.0)
     lab = env.unwrapped
     high = float(env.observation_space["time"].high[0])
@@ -186,8 +187,11 @@ def test_the_clock_stays_inside_its_documented_bound() -> None:
     assert "budget_s + longest" in type(lab).__doc__
     env.reset(seed=0)
     obs, _, _, truncated, _ = env.step(action(Op.MOVE, np.full(3, 60.0)))
-    obs, _, _, truncated, _ = env.step(action(Op.REMOUNT, stand=0,
-                                              slot=slot_index("x-leg/y@0.5", design=PROTOTYPE)))
-    assert truncated and 10.0 <= obs["time"][0] <= high
+    assert not truncated and obs["time"][0] == 8.0
+    mountings = lab.mountings
+    obs, _, _, truncated, info = env.step(action(
+        Op.REMOUNT, stand=0, slot=slot_index("x-carriage/y", design=PROTOTYPE)))
+    assert truncated and obs["time"][0] == 10.0 and info["step_time_s"] == 2.0
+    assert "past the budget of 10 s" in info["refused"] and lab.mountings == mountings
     assert env.observation_space.contains(obs)
     env.close()

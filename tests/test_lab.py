@@ -297,8 +297,9 @@ def test_flat_variant_steps_with_a_box() -> None:
 
 def test_every_slot_can_be_mounted_and_reads_its_zero() -> None:
     """Every slot of the catalogue can be mounted at Zero on a realistic machine: its tip
-    lands on the bar's face and the new mounting reads there."""
-    env = lab()
+    lands on the bar's face and the new mounting reads there (a re-mount onto every slot
+    takes more than the default hour's budget, past which the lab refuses any operation)."""
+    env = lab(budget_s=len(SLOTS) * (TIME.remount_s + TIME.settle_and_read_s))
     obs, _ = env.reset(seed=9)
     held = set(obs["slot"][1:].tolist())
     for slot in range(len(SLOTS)):

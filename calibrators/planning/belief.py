@@ -353,13 +353,18 @@ class Belief:
         self.engaged[stand] = False
         self._set_rows(stand)
 
+    def remount_seconds(self) -> float:
+        """Seconds a re-mount takes from here, as the lab's clock charges it: the drive to
+        Zero, then the stand's work."""
+        return float(TIME.move(self.rho, np.zeros(3))) + TIME.remount_s
+
     def remount(self, stand: int, slot: int) -> None:
         """Move ``stand`` to ``slot`` (the machine drives to Zero first): a new mounting
         with fresh unknowns, its plunger down."""
         if slot in self.slots:
             raise ValueError(f"slot {slot} already holds a stand")
         self.steps.append(PlannedOperation(Op.REMOUNT, stand=stand, slot=slot, time_s=self.time_s))
-        self.time_s += float(TIME.move(self.rho, np.zeros(3))) + TIME.remount_s
+        self.time_s += self.remount_seconds()
         cols = self._columns(stand)[N_MACHINE:]
         if self.world is not None:
             self.world.moved(self.rho, np.zeros(3))

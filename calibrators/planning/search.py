@@ -179,7 +179,10 @@ class Planner(Pricer):
         The re-mounts are screened :data:`SCREENED_TOGETHER` at a time and the options
         played out :data:`PLAYED_TOGETHER` at a time, their prices stacked
         (:func:`~calibrators.planning.pricing.top_rates_many`): each option's numbers are
-        its own alone, to the bit."""
+        its own alone, to the bit.  None when a re-mount would end past the budget: a
+        plan's every operation ends within it, as its moves do (:meth:`affordable_rates`)."""
+        if self.time_s + self.remount_seconds() > self.budget_s:
+            return None
         start = self._criterion_value()
         candidates = []
         options = [(stand, slot) for stand in range(len(self.slots))

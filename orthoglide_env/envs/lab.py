@@ -116,10 +116,13 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
     =============  ==================================  ====  ============================
 
     A reading that is not valid is 0.0: use ``valid``.  A stand that is not engaged is
-    lifted (``faulted`` 0) or out of service (``faulted`` 1).  The clock stops at the first
-    step that reaches ``budget_s``, so it never passes ``budget_s`` plus the longest step
-    (a re-mount from the far corner with the tracker and every stand pushed past its
-    travel: :meth:`~orthoglide_env.lab.settings.LabSettings.longest_step`).  Every reading
+    lifted (``faulted`` 0) or out of service (``faulted`` 1).  The clock never passes
+    ``budget_s``: an operation that would end past it is refused (``info["refused"]`` says
+    when it would end) and the clock runs to ``budget_s``; the re-installs of stands a
+    step pushed past their travel, or a refusal's lever flick, stop there too.  (The
+    space's bound, ``budget_s`` plus the longest step, is kept from when the last step
+    could end past it: :meth:`~orthoglide_env.lab.settings.LabSettings.longest_step`.)
+    Every reading
     is also written to ``records`` (the lab notebook: instrument, mounting, posture,
     value), which agents and estimators read; the machine's truth stays on
     ``true_machine`` for scoring only.
@@ -144,7 +147,10 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
     Termination and truncation
     --------------------------
     ``terminated`` on ``stop``, or when moving parts that must never meet touch
-    (``info["collision"]``).  ``truncated`` once the time used reaches ``budget_s``.
+    (``info["collision"]``).  ``truncated`` once the time used reaches ``budget_s`` (an
+    operation that cannot end within it ends the episode there, refused): every episode
+    that is not stopped takes exactly ``budget_s``, so agents compared at one budget use
+    equal lab time.
 
     Info
     ----
@@ -241,6 +247,13 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
 
     Version history
     ---------------
+    * every version: an operation that would end past ``budget_s`` is refused and the
+      clock runs to ``budget_s`` (truncated); the re-installs after an overtravel and a
+      refusal's flick stop at ``budget_s``.  Before, the step that reached the budget was
+      played whole, so an episode could end past it by up to the longest step (a
+      re-mount planned at 1496 s of a 1500 s budget ended at 1621 s).  The spaces are
+      unchanged and every episode whose steps all end within the budget is unchanged,
+      bit for bit, so the ids keep their versions.
     * v3 (``OrthoglideLab-v3``, :class:`OrthoglideLabV3Env`): the lab may own a step gauge
       (``instruments=["dial", "step-gauge"]``, see Instruments).  The action's ``op`` gains
       7, ``place``, which takes the action's ``axis`` (the world axis to lay the gauge

@@ -29,7 +29,7 @@ from orthoglide_env.lab.clock import overtravel_seconds, step_seconds, travel_se
 from orthoglide_env.lab.faults import LabFaults
 from orthoglide_env.lab.machines import ExactMachine, LabMachines, Sight
 from orthoglide_env.lab.notebook import Notebook, Record, predicted_many
-from orthoglide_env.lab.operations import OP_NAMES, TRACKER_DISTANCE, Op
+from orthoglide_env.lab.operations import OP_NAMES, TIME, TRACKER_DISTANCE, Op
 from orthoglide_env.lab.refusals import assembled as assembled  # re-exported: its old home
 from orthoglide_env.lab.refusals import raise_unreachable, refusals
 from orthoglide_env.lab.rewards import ACCURACY_UNIT_MM as ACCURACY_UNIT_MM  # (its old home)
@@ -354,6 +354,7 @@ class LabBatch:
                                 self.gauge_setups, step_gauge.MAX_SETUPS)
         if settings.strict_moves:
             raise_unreachable(machines, rows, op, rho, reached, target, self.size)
+        late = self._refuse_late(rows, op, travel_s, refused)
         ok = np.array([not r for r in refused], dtype=bool)
         inserted = self._bar_after(rows, ok, op, goal)
         probing = self._gauge_after(rows, ok, op, goal)
@@ -367,6 +368,8 @@ class LabBatch:
                                       approach[remounts])
         seconds = step_seconds(ok, flicks, moves | remounts | aligned | pivoted | placed,
                                travel_s)
+        # An operation that cannot end within the budget is not begun: the time is up.
+        seconds[late] = settings.budget_s - self.time[rows][late]
         self._drive(rows, moves | pivoted | placed, remounts | aligned, goal, reached, target,
                     approach)
         self.bar_in[rows] = inserted
@@ -397,6 +400,10 @@ class LabBatch:
             values[reads] = self._read(rows[reads], seconds[reads], Sight(
                 *(part[at[reads]] for part in sight)))
         self._take_blocks_away(rows[remounts], stand[remounts])
+        # The budget ends the lab's time, whatever a step's stands pushed past their travel
+        # (or a refusal's lever flick) would have taken after it: equal lab time for every
+        # agent, enforced.
+        seconds = np.minimum(seconds, np.maximum(settings.budget_s - self.time[rows], 0.0))
         self.time[rows] += seconds
         self.steps[rows] += 1
         collision = self._collisions(op, looks, sight, at)
@@ -624,6 +631,21 @@ class LabBatch:
         for r in np.flatnonzero(crashed & _READS[op]):
             collision[r] = ", ".join(collision_names(sight.crashed[at[r]]))
         return collision
+
+    def _refuse_late(self, rows: np.ndarray, op: np.ndarray, travel_s: np.ndarray,
+                     refused: list[str]) -> np.ndarray:
+        """Refuse (in ``refused``) each operation of ``rows`` not refused yet that would end
+        past the budget (its drive and work, ``travel_s``; a lever's flick); the mask of
+        them."""
+        budget = self.settings.budget_s
+        flick = (op == Op.LIFT) | (op == Op.ENGAGE)
+        ends = self.time[rows] + np.where(flick, TIME.lift_s, np.where(_READS[op], travel_s,
+                                                                       0.0))
+        late = (ends > budget) & np.array([not r for r in refused], dtype=bool)
+        for r in np.flatnonzero(late):
+            refused[r] = (f"it would end at {ends[r]:.1f} s, past the budget of {budget:g} s: "
+                          "the time is up")
+        return late
 
     def _ends(self, rows: np.ndarray, op: np.ndarray, collision: list[str]
               ) -> tuple[np.ndarray, np.ndarray]:
