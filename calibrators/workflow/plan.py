@@ -48,6 +48,7 @@ from orthoglide_env.instruments.dial import (
     check_noise,
 )
 from orthoglide_env.instruments.slots import PLATFORM_AIM, GaugeSpec, Part
+from orthoglide_env.lab.engine import TIME_UP
 from orthoglide_env.lab.operations import DEFAULT_BUDGET_S, Op
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import AXIS_NAMES, LEG_NAMES
@@ -287,7 +288,8 @@ def make_procedure(agent_name: str, budget_s: float, design: MachineDesign,
     sheet = [m.again(m.reading, m.repetition, m.time_s, None, step, m.temperature_c)
              for m, step in zip(data.items, writer.taken, strict=True)]
     return Procedure(agent_name, float(budget_s), conditions.to_dict(), design.to_dict(),
-                     writer.stands, writer.steps, GaugeNoise(sigma, resolution), sheet, notes)
+                     writer.stands, writer.steps, GaugeNoise(sigma, resolution), sheet,
+                     notes + ([writer.cut] if writer.cut else []))
 
 
 class _StepWriter:
@@ -300,6 +302,8 @@ class _StepWriter:
         self.steps: list[Step] = []
         self.stands: list[dict[str, Any]] = []
         self.taken: list[int] = []
+        #: Why the procedure stops before its plan's end ("": it does not).
+        self.cut = ""
 
     def reset(self, i: int, observation: dict[str, np.ndarray]) -> None:
         slots = self.lab.slots
@@ -318,6 +322,10 @@ class _StepWriter:
     def step(self, i: int, action: Mapping[str, Any], observation: dict[str, np.ndarray],
              info: Mapping[str, Any]) -> None:
         number = len(self.steps) + 1
+        if str(info.get("refused", "")).endswith(TIME_UP):
+            # The planner's clock ran behind the lab's: the procedure ends at the budget.
+            self.cut = f"step {number} would end past the budget: the procedure stops before it"
+            return
         if info.get("refused"):
             raise RuntimeError(f"the lab refused step {number} of agent '{self.agent_name}' "
                                f"on the nominal machine: {info['refused']}")

@@ -54,6 +54,11 @@ _READS: np.ndarray = np.isin(np.arange(len(Op)), (Op.MOVE, Op.REMOUNT, Op.ALIGN,
                                                    Op.PLACE))
 
 
+#: The end of a refusal of an operation that would end past the budget (the episode
+#: is then truncated): a written procedure ends there.
+TIME_UP = "the time is up"
+
+
 @dataclass
 class StepResult:
     """One step of episodes ``rows`` (one entry per row)."""
@@ -644,7 +649,7 @@ class LabBatch:
         late = (ends > budget) & np.array([not r for r in refused], dtype=bool)
         for r in np.flatnonzero(late):
             refused[r] = (f"it would end at {ends[r]:.1f} s, past the budget of {budget:g} s: "
-                          "the time is up")
+                          f"{TIME_UP}")
         return late
 
     def _ends(self, rows: np.ndarray, op: np.ndarray, collision: list[str]
