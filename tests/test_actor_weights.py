@@ -20,6 +20,7 @@ from calibrators.agents.actor_weights import actor_of, read_actor
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "examples" / "policies" / "masked_lab330.zip"
 SHIPPED_HOUR = ROOT / "examples" / "policies" / "masked_lab3600.zip"
+SHIPPED_RANKED = ROOT / "examples" / "policies" / "ranked_lab330.zip"
 
 
 def test_the_shipped_policy_plays_without_torch() -> None:
@@ -126,11 +127,13 @@ def test_the_fused_network_is_the_layers_of_the_file() -> None:
         actor.logits_many(rows[:, :5])
 
 
-def test_the_weights_are_torchs_bit_for_bit() -> None:
-    """The arrays read are the bytes torch holds: the same float32 actor."""
+@pytest.mark.parametrize("path", [SHIPPED, SHIPPED_RANKED], ids=["imitated", "ranked"])
+def test_the_weights_are_torchs_bit_for_bit(path: Path) -> None:
+    """The arrays read are the bytes torch holds: the same float32 actor, also in the
+    file PPO fine-tuned (its critic and optimiser state beside the actor are not read)."""
     sb3_contrib = pytest.importorskip("sb3_contrib")
-    policy = sb3_contrib.MaskablePPO.load(SHIPPED, device="cpu").policy
-    actor = read_actor(SHIPPED)
+    policy = sb3_contrib.MaskablePPO.load(path, device="cpu").policy
+    actor = read_actor(path)
     linears = [m for m in policy.mlp_extractor.policy_net if hasattr(m, "weight")]
     for module, weight, bias in zip([*linears, policy.action_net], actor.weights,
                                     actor.biases, strict=True):
