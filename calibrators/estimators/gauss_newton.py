@@ -521,7 +521,8 @@ class GaussNewtonCalibrator(Estimator):
             noise = np.where(design.probed, step_gauge_sigma(conditions), noise)
         held = holdout_mask(design, holdout, seed) if holdout else np.zeros(values.shape[1], bool)
         # A digital indicator's readings near its stroke's ends scatter beyond its sigma.
-        used = ~held & ~indicator_end(design, values, conditions)
+        ends = indicator_end(design, values, conditions)
+        used = ~held & ~ends
         base_of = _world_terms(design, datas, conditions, spacing)
         told_terms = consider
         shown: list[dict[str, float]] = [{} for _ in values]
@@ -628,7 +629,7 @@ class GaussNewtonCalibrator(Estimator):
                                           verify, explain, consider, names,
                                           None if world is None else world[m],
                                           conditions, spacing, judged[m], shown[m],
-                                          bool(valid[m])))
+                                          bool(valid[m]), int(ends[m].sum())))
         return out
 
     def _estimate(self, data: Measurements, params: str, prior: str, sigma: float,
@@ -638,10 +639,11 @@ class GaussNewtonCalibrator(Estimator):
                   repeated: np.ndarray, misfits: np.ndarray, verify: bool, explain: bool,
                   considered: Consider, every: list[str], world: np.ndarray | None,
                   conditions: Conditions, spacing: float | None, judged: str | None,
-                  world_scales: dict[str, float], valid: bool) -> Estimate:
+                  world_scales: dict[str, float], valid: bool, ends: int) -> Estimate:
         """The estimate of machine ``data`` from its fit ``result``; ``valid``: whether
         its machine is inside the validity range (:func:`~orthoglide_env.model.errors.
-        valid_vectors`)."""
+        valid_vectors`); ``ends``: how many of its readings a digital indicator took at its
+        stroke's ends, left out (:func:`~calibrators.estimators.consider.indicator_end`)."""
         space = design.space
         names = [n for n, f in zip(every, result.free, strict=True) if f]
         idx = np.flatnonzero(result.free)
@@ -674,7 +676,6 @@ class GaussNewtonCalibrator(Estimator):
             warnings.append(f"the estimate is outside the validity range, where the model "
                             f"holds: {str(exc).replace('machine key', 'estimate key')}; do "
                             f"not compensate with it ({VALIDITY_HINT})")
-        ends = int(indicator_end(design, values[None], conditions).sum())
         if ends:
             # Said, not silent: a technician reading the fit sees why readings are missing.
             warnings.append(f"{ends} reading(s) left out: a digital indicator read them "
