@@ -106,11 +106,14 @@ def _per_target(targets: np.ndarray, jac: np.ndarray, covariance: np.ndarray
 def _same_targets(usable: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
     """The models (rows of ``usable``, (M, n)) grouped by the targets they reach: each
     distinct mask with the indices of its models.  Mostly every model reaches the same
-    targets: then one group, without sorting the masks."""
+    targets: then one group; else the groups in the order of their first models, found by
+    the masks' bytes (sorting the masks, as ``np.unique`` does, costs ~30x more)."""
     if (usable == usable[:1]).all():
         return [(usable[0], np.arange(len(usable)))]
-    masks, group = np.unique(usable, axis=0, return_inverse=True)
-    return [(mask, np.flatnonzero(np.ravel(group) == k)) for k, mask in enumerate(masks)]
+    groups: dict[bytes, list[int]] = {}
+    for m, mask in enumerate(usable):
+        groups.setdefault(mask.tobytes(), []).append(m)
+    return [(usable[members[0]], np.array(members)) for members in groups.values()]
 
 
 def rigid_weights(models: Sequence[MachineParams], grid: np.ndarray | None = None,
