@@ -443,15 +443,6 @@ def sensitivity_along(inverse: np.ndarray, row: np.ndarray, weights: np.ndarray,
     return np.take(through, legs, axis=-1) * row
 
 
-def inverse_3x3(m: np.ndarray) -> np.ndarray:
-    """Inverses of 3 x 3 matrices ``(..., 3, 3)`` by their adjugates: the columns are the
-    cross products of the rows over the determinant (a batched LAPACK solve costs ~3x more
-    on tens of thousands of small systems)."""
-    r0, r1, r2 = m[..., 0, :], m[..., 1, :], m[..., 2, :]
-    adjugate = np.stack([cross(r1, r2), cross(r2, r0), cross(r0, r1)], axis=-1)
-    return adjugate / dot(r0, adjugate[..., :, 0])[..., None, None]
-
-
 def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Dot product over the last axis (of length 3), written out: numpy's reduction over a
     short last axis costs ~5x more, and this sums in the same order (the same bits)."""
