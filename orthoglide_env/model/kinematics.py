@@ -87,18 +87,36 @@ def direct_paper(rho: np.ndarray, drho: np.ndarray, lengths: np.ndarray,
     paper, with ``+sqrt``, is the other mode), computed in the cancellation-free form
     ``t = 2c / (-b + sqrt(b^2 - 4ac))``.
     """
-    q = nominal + np.asarray(rho, dtype=float) + np.asarray(drho)
-    lengths = np.asarray(lengths, dtype=float)
-    _require(np.abs(q) > 1e-9, "an actuator carriage sits at the axis intersection")
-    a_vec = (q**2 - lengths**2) / (2 * q)
-    b_vec = 1.0 / q
-    qa = dot(b_vec, b_vec)
-    qb = 2 * dot(a_vec, b_vec) - 2.0
-    qc = dot(a_vec, a_vec)
+    return np.stack(_paper_tcp(_coordinates(rho), _coordinates(drho), _coordinates(lengths),
+                               nominal), axis=-1)
+
+
+def _coordinates(x: np.ndarray | float) -> list[np.ndarray]:
+    """The three coordinates of ``x`` (``(..., 3)``, or a scalar for all three)."""
+    x = np.asarray(x, dtype=float)
+    return [x] * 3 if x.ndim == 0 else [x[..., i] for i in range(3)]
+
+
+def _paper_tcp(rho: list[np.ndarray], drho: list[np.ndarray], lengths: list[np.ndarray],
+               nominal: float) -> list[np.ndarray]:
+    """:func:`direct_paper` coordinate by coordinate (the arithmetic of its vector form, in
+    the same order: the same bits), each coordinate of the TCP an array over the
+    broadcast shape of the inputs' coordinates."""
+    q = [nominal + rho[i] + drho[i] for i in range(3)]
+    for x in q:
+        _require(np.abs(x) > 1e-9, "an actuator carriage sits at the axis intersection")
+    # The vector form squares arrays of coordinates (``x**2`` of an array is ``x * x``)
+    # even for one machine at one posture, whose coordinates here are lone numbers (whose
+    # ``x**2`` calls pow): products keep its bits.  ``qb`` is a lone number there too.
+    a = [(q[i] * q[i] - lengths[i] * lengths[i]) / (2 * q[i]) for i in range(3)]
+    b = [1.0 / q[i] for i in range(3)]
+    qa = b[0] * b[0] + b[1] * b[1] + b[2] * b[2]
+    qb = 2 * (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) - 2.0
+    qc = a[0] * a[0] + a[1] * a[1] + a[2] * a[2]
     disc = qb**2 - 4 * qa * qc
     _require(disc >= 0, "the legs cannot be assembled at these joint coordinates")
     t = 2 * qc / (-qb + np.sqrt(disc))
-    return a_vec + t[..., None] * b_vec
+    return [a[i] + t * b[i] for i in range(3)]
 
 
 def jacobian_paper(p: np.ndarray, rho: np.ndarray, drho: np.ndarray, lengths: np.ndarray,
@@ -149,44 +167,93 @@ def direct(machine: MachineParams, rho: np.ndarray, *, tol: float = 1e-11, max_i
            ) -> np.ndarray:
     """TCP position (mm) for control coordinates ``rho``, exactly (Newton to ``tol`` mm)."""
     g, rho = geometry(machine, rho)
-    p = direct_paper(rho, g.drho, g.lengths, machine.design.L)
+    drho = _coordinates(g.drho)
+    p = _paper_tcp(_coordinates(rho), drho, _coordinates(g.lengths), machine.design.L)
     if machine.is_paper_model:
-        return p
-    a = g.o + (_slide(machine) + g.drho + rho)[..., :, None] * g.u
-    shape = p.shape[:-1]
-    # Every coordinate of every leg as one contiguous array over the whole batch: numpy then
-    # runs each operation below as one long loop (a third faster on a sweep's scoring
-    # grid), with the same arithmetic in the same order as the vector form.
-    attach, carriage = (_components(np.broadcast_to(x, (*shape, 3, 3))) for x in (g.attach, a))
-    lengths2 = [np.array(x) for x in np.moveaxis(np.broadcast_to(g.lengths**2, (*shape, 3)),
-                                                   -1, 0)]
-    q = [np.array(p[..., j]) for j in range(3)]
-    moving = np.ones(shape, dtype=bool)
+        return np.stack(p, axis=-1)
+    shape = np.broadcast_shapes(*(x.shape for x in p))
+    # Every coordinate of every leg as one contiguous array over the whole batch, flat:
+    # numpy then runs each operation below as one long loop, with the same arithmetic in
+    # the same order as the vector form.
+    slide = [_slide(machine) + drho[i] + rho[..., i] for i in range(3)]
+
+    def flat(x: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(np.broadcast_to(x, shape)).reshape(-1)
+
+    carriage = [[flat(g.o[..., i, j] + slide[i] * g.u[..., i, j]) for j in range(3)]
+                for i in range(3)]
+    attach = [[flat(g.attach[..., i, j]) for j in range(3)] for i in range(3)]
+    lengths2 = [flat(x) for x in _coordinates(g.lengths**2)]
+    q = [np.array(flat(x)) for x in p]  # iterated in place
+    # Newton in cache-sized runs of postures: each posture's iterates are its own, so the
+    # runs give the bits of one pass over all.
+    for start in range(0, len(q[0]), NEWTON_RUN):
+        run = slice(start, start + NEWTON_RUN)
+        _newton([x[run] for x in q], [[x[run] for x in line] for line in attach],
+                [[x[run] for x in line] for line in carriage], [x[run] for x in lengths2],
+                tol, max_iter)
+    return np.stack([x.reshape(shape) for x in q], axis=-1)
+
+
+#: Postures per run of :func:`direct`'s Newton iterations: their two dozen working arrays
+#: stay in a core's cache (2 MB on the reference machine) while the run iterates.
+NEWTON_RUN: int = 4096
+
+
+def _newton(q: list[np.ndarray], attach: list[list[np.ndarray]],
+            carriage: list[list[np.ndarray]], lengths2: list[np.ndarray], tol: float,
+            max_iter: int) -> None:
+    """Newton's iterations on the loop closures ``|q + attach_i - carriage_i|^2 =
+    lengths2_i`` from the TCPs ``q`` (three flat coordinate arrays, updated in place)."""
+    moving = np.ones(q[0].shape, dtype=bool)
+    v = [[np.empty_like(x) for x in q] for _ in range(3)]
+    f = [np.empty_like(x) for x in q]
+    cross_rows = [[np.empty_like(x) for x in q] for _ in range(3)]
+    step = [np.empty_like(x) for x in q]
+    det, part, other = (np.empty_like(q[0]) for _ in range(3))
+    big = np.empty_like(moving)
     for _ in range(max_iter):
-        v = [[(q[j] + attach[i][j]) - carriage[i][j] for j in range(3)] for i in range(3)]
-        f = [v[i][0] * v[i][0] + v[i][1] * v[i][1] + v[i][2] * v[i][2] - lengths2[i]
-             for i in range(3)]
+        for i in range(3):
+            for j in range(3):
+                np.add(q[j], attach[i][j], out=v[i][j])
+                v[i][j] -= carriage[i][j]
+            _dot_into(v[i], v[i], f[i], part)
+            f[i] -= lengths2[i]
         # Newton's step solves (2 v) step = f by Cramer's rule, the cross products of the
         # rows over the determinant: ~5x faster than batched LAPACK solves of tens of
         # thousands of 3 x 3 systems, and these are well conditioned (legs far from
-        # parallel).
-        r = [[2 * x for x in row] for row in v]
-        c0, c1, c2 = _cross_rows(r[1], r[2]), _cross_rows(r[2], r[0]), _cross_rows(r[0], r[1])
-        det = r[0][0] * c0[0] + r[0][1] * c0[1] + r[0][2] * c0[2]
-        step = [(f[0] * c0[j] + f[1] * c1[j] + f[2] * c2[j]) / det for j in range(3)]
+        # parallel).  The rows' factor 2 is a power of two, exact in every product: the
+        # step is (f . cross products) / (2 det) of the rows v, the bits of the rows 2 v.
+        for k, (a, b) in enumerate(((1, 2), (2, 0), (0, 1))):
+            for j, (x, y) in enumerate(((1, 2), (2, 0), (0, 1))):
+                np.multiply(v[a][x], v[b][y], out=cross_rows[k][j])
+                np.multiply(v[a][y], v[b][x], out=part)
+                cross_rows[k][j] -= part
+        _dot_into(v[0], cross_rows[0], det, part)
+        det *= 2
+        for j in range(3):
+            _dot_into(f, [cross_rows[k][j] for k in range(3)], step[j], part)
+            step[j] /= det
         # A converged posture stops moving, so its result does not depend on the batch
         # it was solved in (one machine or many give the same bits).
-        q = [q[j] - np.where(moving, step[j], 0.0) for j in range(3)]
-        size = np.maximum(np.maximum(np.abs(step[0]), np.abs(step[1])), np.abs(step[2]))
-        moving &= size >= tol
+        for j in range(3):
+            np.subtract(q[j], step[j], out=q[j], where=moving)
+        np.abs(step[0], out=part)
+        np.maximum(part, np.abs(step[1], out=other), out=part)
+        np.maximum(part, np.abs(step[2], out=other), out=part)
+        moving &= np.greater_equal(part, tol, out=big)
         if not moving.any():
-            return np.stack(q, axis=-1)
+            return
     raise UnreachableError("direct kinematics did not converge: posture near a singularity")
 
 
-def _components(x: np.ndarray) -> list[list[np.ndarray]]:
-    """``x[..., i, j]`` (``(..., 3, 3)``) as contiguous copies, ``[i][j]``."""
-    return [[np.array(x[..., i, j]) for j in range(3)] for i in range(3)]
+def _dot_into(a: list[np.ndarray], b: list[np.ndarray], out: np.ndarray, part: np.ndarray
+              ) -> None:
+    """``a . b`` of vectors given as their three coordinate arrays into ``out`` (``part``:
+    scratch of its shape), summed in :func:`dot`'s order."""
+    np.multiply(a[0], b[0], out=out)
+    out += np.multiply(a[1], b[1], out=part)
+    out += np.multiply(a[2], b[2], out=part)
 
 
 def _cross_rows(a: list[np.ndarray], b: list[np.ndarray]) -> list[np.ndarray]:
@@ -288,31 +355,79 @@ def tcp_sensitivity_factors(machine: MachineParams, rho: np.ndarray, p: np.ndarr
     ``columns``: the errors wanted (default all): the axes' tilts and offsets are computed
     only where one of theirs is (a fit of the encoder offsets and lengths needs neither,
     and the tilts cost the most), and left at zero where not; every entry computed has
-    the bits it has among all 27."""
-    rho = np.asarray(rho, dtype=float)
-    p = np.asarray(p, dtype=float)
-    v = leg_vectors(machine, rho, p)  # (..., 3 legs, 3)
-    g, _ = geometry(machine, p)
-    legs = np.arange(3)
+    the bits it has among all 27.  :func:`sensitivity_parts` gives them coordinate by
+    coordinate."""
     kinds = (True, True, True) if columns is None else tuple(
         bool(np.isin(CARRIAGE_COLUMNS[:, part], columns).any())
         for part in (slice(0, 1), slice(1, 3), slice(3, 5)))
-    row = (np.empty if all(kinds) else np.zeros)((*v.shape[:-2], 27))
-    # CARRIAGE_COLUMNS' entries (:func:`carriage_gradients`) by kind, written as slices:
-    # the encoder offsets', then each leg's two tilts and two offsets in turn (joining
-    # them and a fancy-indexed write cost as much as computing them).
-    offset, tilts, shifts = carriage_parts(machine, rho, v, None, kinds)  # (..., 3 legs, 1|2)
-    shape = row.shape[:-1]
-    if offset is not None:
-        row[..., DRHO_COLUMN:DRHO_COLUMN + 3] = 2 * offset[..., 0]
-    if tilts is not None:
-        row[..., TILT_COLUMN:TILT_COLUMN + 6] = (2 * tilts).reshape(*shape, 6)
-    if shifts is not None:
-        row[..., OFFSET_COLUMN:OFFSET_COLUMN + 6] = np.broadcast_to(
-            2 * shifts, (*shape, 3, 2)).reshape(*shape, 6)
-    row[..., LENGTH_COLUMN + legs] = 2 * g.lengths
-    row[..., ATTACH_COLUMN + 3 * legs[:, None] + legs] = -2 * v
-    return inverse_3x3(2 * v), row
+    parts = sensitivity_parts(machine, rho, p, kinds)  # type: ignore[arg-type]
+    inverse = np.stack([np.stack(line, axis=-1) for line in parts.inverse], axis=-2)
+    row = (np.empty if all(kinds) else np.zeros)((*inverse.shape[:-2], 27))
+    for e, entry in enumerate(parts.entries):
+        if entry is not None:
+            row[..., e] = entry
+    return inverse, row
+
+
+class SensitivityParts(NamedTuple):
+    """:func:`tcp_sensitivity_factors`' factors coordinate by coordinate, each a contiguous
+    array over the batch and the postures (or broadcasting to it)."""
+
+    #: ``[j][k]``: entry ``(j, k)`` of ``(df/dp)^-1``.
+    inverse: list[list[np.ndarray]]
+    #: Entry ``e`` of ``-df/dtheta`` for each of the 27 errors; None where not computed
+    #: (zero in the factors).
+    entries: list[np.ndarray | None]
+
+
+def sensitivity_parts(machine: MachineParams, rho: np.ndarray, p: np.ndarray,
+                      kinds: tuple[bool, bool, bool] = (True, True, True)
+                      ) -> SensitivityParts:
+    """:func:`tcp_sensitivity_factors` at commands ``rho`` and TCPs ``p``
+    (``(*batch, *postures, 3)``) as one array per coordinate: the arithmetic of the
+    vector form, each entry the same operations in the same order (the same bits),
+    without its strided ``(..., 3, 3)`` temporaries (a scoring grid's tens of thousands
+    of postures run at about twice the speed).  ``kinds``: the carriages' encoder offsets',
+    axis tilts' and axis offsets' entries, each computed only when wanted."""
+    g, rho = geometry(machine, rho)
+    at_p, p = geometry(machine, p)
+    s = _slide(machine) + g.drho + rho
+    slide = [s[..., i] for i in range(3)]
+    u = [[g.u[..., i, j] for j in range(3)] for i in range(3)]
+    # The leg vectors A_i -> C_i: ``(p + attach) - (o + s u)``.
+    v = [[(p[..., j] + at_p.attach[..., i, j]) - (g.o[..., i, j] + slide[i] * u[i][j])
+          for j in range(3)] for i in range(3)]
+    # (df/dp)^-1 of the rows 2 v by its adjugate, whose columns are the rows' cross products.
+    r = [[2 * x for x in line] for line in v]
+    adjugate = [_cross_rows(r[1], r[2]), _cross_rows(r[2], r[0]), _cross_rows(r[0], r[1])]
+    det = r[0][0] * adjugate[0][0] + r[0][1] * adjugate[0][1] + r[0][2] * adjugate[0][2]
+    inverse = [[adjugate[k][j] / det for k in range(3)] for j in range(3)]
+    entries: list[np.ndarray | None] = [None] * 27
+    for i in range(3):
+        entries[LENGTH_COLUMN + i] = 2 * at_p.lengths[..., i]
+        for j in range(3):
+            entries[ATTACH_COLUMN + 3 * i + j] = -2 * v[i][j]
+        if kinds[0]:
+            entries[DRHO_COLUMN + i] = 2 * _dot_rows(v[i], u[i])
+    if kinds[1]:
+        extra = rho.ndim - 1 - len(machine.batch_shape)
+        du = axis_direction_derivatives(machine).reshape(
+            *machine.batch_shape, *(1,) * extra, 3, 2, 3)
+        for i in range(3):
+            for k in range(2):
+                entries[TILT_COLUMN + 2 * i + k] = 2 * (slide[i] * _dot_rows(
+                    v[i], [du[..., i, k, j] for j in range(3)]))
+    if kinds[2]:
+        for i in range(3):
+            for k in range(2):
+                entries[OFFSET_COLUMN + 2 * i + k] = 2 * _dot_rows(
+                    v[i], [R_LEG[i, j, k + 1] for j in range(3)])
+    return SensitivityParts(inverse, entries)
+
+
+def _dot_rows(a: list[np.ndarray], b: list[np.ndarray]) -> np.ndarray:
+    """:func:`dot` of vectors given as their three coordinate arrays."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
 def sensitivity_along(inverse: np.ndarray, row: np.ndarray, weights: np.ndarray,
@@ -326,15 +441,6 @@ def sensitivity_along(inverse: np.ndarray, row: np.ndarray, weights: np.ndarray,
                * inverse[..., 1, :] + weights[..., 2, None] * inverse[..., 2, :])
     legs = ERROR_LEGS if columns is None else ERROR_LEGS[columns]
     return np.take(through, legs, axis=-1) * row
-
-
-def inverse_3x3(m: np.ndarray) -> np.ndarray:
-    """Inverses of 3 x 3 matrices ``(..., 3, 3)`` by their adjugates: the columns are the
-    cross products of the rows over the determinant (a batched LAPACK solve costs ~3x more
-    on tens of thousands of small systems)."""
-    r0, r1, r2 = m[..., 0, :], m[..., 1, :], m[..., 2, :]
-    adjugate = np.stack([cross(r1, r2), cross(r2, r0), cross(r0, r1)], axis=-1)
-    return adjugate / dot(r0, adjugate[..., :, 0])[..., None, None]
 
 
 def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
