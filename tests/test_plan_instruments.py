@@ -10,12 +10,13 @@ import pytest
 
 import orthoglide_env
 from calibrators.agents.base import action
+from calibrators.agents.optimal import lab_setup, move_dwell_s
 from calibrators.planning import bound
 from calibrators.planning.bound import bound_model, lower_bound, plan_counts
 from calibrators.planning.instruments import marginal, operation_keys, planned_bundles
 from calibrators.planning.search import Planner, best_bundle, expect, take
 from orthoglide_env.instruments.ballbar import BallbarSpec
-from orthoglide_env.lab.operations import PAPER_SLOTS
+from orthoglide_env.lab.operations import PAPER_SLOTS, TIME, Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
 
@@ -148,3 +149,36 @@ def test_the_planner_prices_a_pivot_with_the_fits_prior(world):
         assert np.allclose(prior, ballbar.centring_sigma(), rtol=1e-12)
     else:
         assert np.all(prior > 1.5 * ballbar.centring_sigma())
+
+
+def test_a_plan_started_with_the_laser_set_up_moves_on_the_lab_s_clock():
+    """A reference procedure leaves the interferometer set up, and the lab then charges
+    every move its dwell: a planner started there (the gauges' part) prices each move as
+    the lab charges it, and one told nothing of the laser would run behind the lab's
+    clock by the dwell per move."""
+    env = gym.make(orthoglide_env.LAB_V1_ENV_ID, errors="nominal", backend="exact",
+                   conditions="ideal", instruments=["dial", "interferometer"])
+    obs, _ = env.reset(seed=0)
+    assert move_dwell_s(obs) == 0.0
+    obs, *_ = env.step(action(Op.ALIGN, axis=2))
+    dwell = move_dwell_s(obs)
+    assert dwell == TIME.interferometer_target_s > 0
+    slots, engaged, sigma, budget, design, conditions = lab_setup(env.unwrapped, obs)
+    planner = Planner(list(slots), list(engaged), sigma, budget, design=design,
+                      conditions=conditions, dwell_s=dwell)
+    unaware = planner.fork()
+    unaware.dwell_s = 0.0
+    moved = 0
+    for posture in np.flatnonzero(planner.table.postures[:, 2] != 0)[::40]:
+        priced = planner.priced_moves()
+        if not np.array_equal(priced.engaged[:, posture], planner.engaged):
+            continue  # a plunger's lever would be a step of its own
+        obs, _, _, _, info = env.step(action(Op.MOVE, planner.table.postures[posture]))
+        assert not info.get("refused")
+        assert info["step_time_s"] == priced.seconds[posture]
+        assert (info["step_time_s"] - unaware.priced_moves().seconds[posture]
+                == pytest.approx(dwell, abs=1e-12))
+        planner.move(int(posture), priced)
+        unaware.move(int(posture), unaware.priced_moves())
+        moved += 1
+    assert moved >= 3

@@ -109,6 +109,20 @@ def test_the_page_shows_each_set_up_and_the_sheet_its_rows(planned) -> None:
         assert PROBE_READING in setups[0]["text"]
 
 
+def test_a_written_procedure_ends_within_its_budget_as_planned(planned) -> None:
+    """The gauges' part after the instrument's programme is planned on the lab's clock
+    (the laser the ISO 230-2 programme leaves set up charges each move its dwell): no
+    step would end past the budget, so the procedure is not cut short, and its steps
+    follow one another on the sheet's clock."""
+    name, out, _ = planned
+    plan = json.loads((out / "plan.json").read_text())
+    assert not [n for n in plan["notes"] if "past the budget" in n]
+    ends = [s["start_s"] + s["seconds"] for s in plan["steps"]]
+    assert ends[-1] <= CASES[name][1]
+    assert all(s["start_s"] == pytest.approx(end, abs=1e-9)
+               for s, end in zip(plan["steps"][1:], ends, strict=False))
+
+
 def test_a_sheet_filled_in_a_lab_fits_as_the_labs_own_readings(planned, tmp_path,
                                                                  capsys) -> None:
     """The plan's sheet, filled row by row with what a lab of a realistic machine read

@@ -34,7 +34,7 @@ import gymnasium as gym
 import numpy as np
 
 from calibrators.agents.base import Agent, action, register
-from calibrators.agents.optimal import fixed_plan, lab_setup, owned_instruments
+from calibrators.agents.optimal import fixed_plan, lab_setup, move_dwell_s, owned_instruments
 from calibrators.estimators.catalogue import for_study
 from calibrators.planning.belief import (
     N_MACHINE,
@@ -76,22 +76,27 @@ class ActiveAgent(Agent):
         setup = lab_setup(self.env, observation, self.reserved_s)
         slots, engaged, sigma, budget, design, conditions = setup
         owned = owned_instruments(self.env) if self.plans_instruments else ()
-        self.planner = Planner(list(slots), list(engaged), sigma,
-                               budget + float(observation["time"][0]), criterion=self.criterion,
-                               design=design, conditions=conditions, instruments=owned)
-        steps, _ = fixed_plan(*setup, criterion=self.criterion, instruments=owned)
-        self.remounts = [s for s in steps if s.op == Op.REMOUNT]
+        dwell_s, start = move_dwell_s(observation), float(observation["time"][0])
+        self.planner = Planner(list(slots), list(engaged), sigma, budget + start,
+                               criterion=self.criterion, design=design, conditions=conditions,
+                               instruments=owned, dwell_s=dwell_s)
+        steps, _ = fixed_plan(*setup, criterion=self.criterion, instruments=owned,
+                              dwell_s=dwell_s)
+        # The fixed plan's clock starts at 0 where the lab's reads ``start``: after a
+        # reference procedure's programme, its re-mounts and bundles are due that much later.
+        self.remounts = [s._replace(time_s=start + s.time_s) for s in steps
+                         if s.op == Op.REMOUNT]
         # The instruments' bundles, taken when and as the fixed plan takes them (as its
         # re-mounts are); the operations of the one under way left, and its first record.
         relaxed = plan_bundles(slots, sigma, budget, design, conditions, owned)
-        self.bundles = planned_bundles(steps, design, owned, tuple(
-            b for group in relaxed for b in group)) if owned else []
+        self.bundles = [(start + t, b) for t, b in planned_bundles(steps, design, owned, tuple(
+            b for group in relaxed for b in group))] if owned else []
         self.bundle: Bundle | None = None
         self.bundle_left, self.bundle_first = 0, 0
         self.readings: dict[int, list[tuple[int, float]]] = {k: [] for k in range(len(slots))}
         self.queue: list[PlannedOperation] = []
         self.last: PlannedOperation | None = None
-        self.fitted = float(observation["time"][0])
+        self.fitted = start
         self._observe(observation, {})
 
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
@@ -188,11 +193,20 @@ class ActiveAgent(Agent):
             self.fitted = now
         if self.target_mm > 0 and planner.predicted_rigid_mm() <= self.target_mm:
             return PlannedOperation(Op.STOP)
+        # The fixed plan's bundles and re-mounts are replayed when the lab's clock reaches
+        # the plan's time for them, after a move of this agent's own that may pass that
+        # time (and an overtravel's re-install may add minutes): one that would then end
+        # past the budget is dropped, and the planner chooses moves for the time left.
         start = len(planner.steps)
         if self.bundles and self.bundles[0][0] <= now:
+            if not self._bundle_fits():
+                self.bundles.pop(0)
+                return None
             self._take_bundle()
         elif self.remounts and self.remounts[0].time_s <= now:
             remount = self.remounts.pop(0)
+            if now + planner.remount_seconds() > planner.budget_s:
+                return None
             planner.remount(remount.stand, remount.slot)
         else:
             return None

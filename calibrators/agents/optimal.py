@@ -27,6 +27,7 @@ from calibrators.planning.instruments import PLANNED_INSTRUMENTS, operation_keys
 from calibrators.planning.rounding import plan_bundles, relaxed_plan
 from calibrators.planning.search import Planner, greedy_plan
 from orthoglide_env.instruments.dial import weighting_sigma
+from orthoglide_env.lab.clock import move_dwell_seconds
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.world.conditions import Conditions
 
@@ -34,13 +35,14 @@ from orthoglide_env.world.conditions import Conditions
 def fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
                budget_s: float, design: MachineDesign,
                conditions: Conditions | None = None, criterion: str = "I",
-               remounts: bool = True, instruments: tuple[str, ...] = ()
+               remounts: bool = True, instruments: tuple[str, ...] = (), dwell_s: float = 0.0
                ) -> tuple[tuple[PlannedOperation, ...], float]:
     """The greedy plan from stands at ``slots`` (-1: none) with plungers ``engaged`` on a
     machine of ``design`` in a lab of ``conditions`` (None: ideal) that owns
     ``instruments`` (the interferometer's and the ballbar's bundles are among the plan's
-    options: :mod:`calibrators.planning.instruments`), re-mounting stands or not, and the
-    TCP error after rigid motion it predicts (mm).  In a lab that owns the interferometer
+    options: :mod:`calibrators.planning.instruments`), re-mounting stands or not, every
+    move ``dwell_s`` longer than its drive and settle from the start (:func:`move_dwell_s`),
+    and the TCP error after rigid motion it predicts (mm).  In a lab that owns the interferometer
     or the ballbar, the plans that first take a continuous design of the bound's model
     rounded to bundles (:mod:`calibrators.planning.rounding`) are made too, and the one
     predicting the least error kept (criterion ``I``).
@@ -51,18 +53,19 @@ def fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
     # Every argument by position: a cache keyed on the call's form made a second plan
     # for the same set-up when a caller left out a default another passed.
     return _fixed_plan(tuple(slots), tuple(engaged), sigma, budget_s, design, conditions,
-                       criterion, remounts, tuple(instruments))
+                       criterion, remounts, tuple(instruments), float(dwell_s))
 
 
 @lru_cache(maxsize=8)
 def _fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
                 budget_s: float, design: MachineDesign, conditions: Conditions | None,
-                criterion: str, remounts: bool, instruments: tuple[str, ...]
+                criterion: str, remounts: bool, instruments: tuple[str, ...], dwell_s: float
                 ) -> tuple[tuple[PlannedOperation, ...], float]:
     """:func:`fixed_plan`, its arguments all given, cached per process."""
     def opened() -> Planner:
         planner = Planner(list(slots), list(engaged), sigma, budget_s, criterion=criterion,
-                          design=design, conditions=conditions, instruments=instruments)
+                          design=design, conditions=conditions, instruments=instruments,
+                          dwell_s=dwell_s)
         planner.expect_readings()  # the lab reads every stand as the episode opens
         return planner
 
@@ -94,6 +97,18 @@ def lab_setup(env: gym.Env, observation: dict[str, np.ndarray], reserved_s: floa
             env.conditions)
 
 
+def move_dwell_s(observation: dict[str, np.ndarray]) -> float:
+    """Seconds every move takes on top of its drive and settle in the lab as
+    ``observation`` shows it, the lab's charge (:func:`~orthoglide_env.lab.clock.
+    move_dwell_seconds`): the laser's dwell while the interferometer is set up (a
+    reference procedure leaves it set up, :mod:`calibrators.agents.iso230`).  The ballbar
+    and the step gauge's probe come off at any operation but a move, and the procedures
+    that read them end with one (:func:`~calibrators.agents.instrument_first.
+    back_to_the_gauges`); no planner plays in a lab with the tracker."""
+    axis = observation.get("interferometer_axis")
+    return float(move_dwell_seconds(laser=axis is not None and int(np.ravel(axis)[0]) < 3))
+
+
 def owned_instruments(env: gym.Env) -> tuple[str, ...]:
     """The instruments the lab owns that a planner prices besides its dials (the lab
     tells what it owns; none in a lab of dials only, whose plans are today's)."""
@@ -116,7 +131,8 @@ class OptimalAgent(PlannedAgent):
                                                     criterion=self.criterion,
                                                     remounts=self.remounts,
                                                     instruments=owned_instruments(self.env)
-                                                    if self.plans_instruments else ())
+                                                    if self.plans_instruments else (),
+                                                    dwell_s=move_dwell_s(observation))
         return [action(s.op, s.rho, s.stand, s.slot, **operation_keys(s)) for s in steps]
 
 

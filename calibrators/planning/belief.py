@@ -120,7 +120,12 @@ class Belief:
     slot table and scoring grid).  ``conditions``: the lab's world; under ``lab`` or
     ``workshop`` the state also holds the world's unknowns (:mod:`~calibrators.planning.
     world_terms`: drift, backlash, the indicators' curves) and the plan may stop early;
-    None or ``ideal``: the geometry alone."""
+    None or ``ideal``: the geometry alone.  ``dwell_s``: the seconds every move takes on
+    top of its drive and settle while an instrument stays set up (the lab's
+    :func:`~orthoglide_env.lab.clock.move_dwell_seconds`): 0 from a lab with nothing set
+    up, the laser's dwell from one whose interferometer a reference procedure left set
+    up (:func:`~calibrators.agents.optimal.move_dwell_s`), and the laser's once a plan
+    sets it up (:func:`~calibrators.planning.search.take`)."""
 
     slots: list[int]
     engaged: list[bool]
@@ -132,6 +137,7 @@ class Belief:
     steps: list[PlannedOperation] = field(default_factory=list)
     conditions: Conditions | None = None
     instruments: tuple[str, ...] = ()
+    dwell_s: float = 0.0
 
     def __post_init__(self) -> None:
         self.table = slot_table(self.design)

@@ -131,16 +131,15 @@ def lead_weight(design: MachineDesign, conditions: Conditions | None
 @dataclass
 class InstrumentKit:
     """What a belief holds for the instruments its lab owns: which (``owned``), the state's
-    columns of the lead terms (``lead``), the TCP error's weight over them, whether the
-    laser's material sensor has soaked, and the dwell every move costs while the laser
-    stays set up (s)."""
+    columns of the lead terms (``lead``), the TCP error's weight over them, and whether
+    the laser's material sensor has soaked (the dwell every move costs while the laser
+    stays set up is the belief's, :attr:`~calibrators.planning.belief.Belief.dwell_s`)."""
 
     owned: tuple[str, ...]
     design: MachineDesign
     conditions: Conditions | None
     lead: np.ndarray
     soaked: bool = False
-    dwell_s: float = 0.0
 
     def __post_init__(self) -> None:
         self.machine_lead, self.lead_lead = lead_weight(self.design, self.conditions)

@@ -137,8 +137,8 @@ class Pricer(Belief):
         flicks = np.sum(after != engaged[:, None], axis=0)
         drive = drive_seconds(self.design, tuple(float(v) for v in self.rho))
         seconds = drive + TIME.lift_s * flicks
-        if self.kit is not None and self.kit.dwell_s:
-            seconds = seconds + self.kit.dwell_s  # a laser left set up reads at every move
+        if self.dwell_s:
+            seconds = seconds + self.dwell_s  # a laser left set up reads at every move
         return seconds, after, reads
 
     def _rows(self, reads: np.ndarray, postures: np.ndarray) -> np.ndarray:

@@ -30,6 +30,7 @@ from calibrators.planning.instruments import (
 )
 from calibrators.planning.pricing import PricedMoves, Pricer, top_rates_many
 from orthoglide_env.instruments import ballbar, interferometer
+from orthoglide_env.lab.clock import move_dwell_seconds
 from orthoglide_env.lab.operations import TIME, Op, slot_catalogue
 
 #: Re-mounts are weighed against staying every this many seconds of the plan, each option
@@ -48,6 +49,9 @@ PLAYED_TOGETHER: int = SCREENED + 1
 #: hold a quarter of the rows.  Without the world nothing is stacked, and holding the
 #: trials only costs memory traffic: they are screened one by one.
 SCREENED_TOGETHER: int = 8
+#: What every move costs on top of its drive and settle once a plan has set the laser up
+#: (s): the lab's charge.
+LASER_DWELL_S: float = float(move_dwell_seconds(laser=True))
 
 
 class Planner(Pricer):
@@ -296,12 +300,12 @@ def operations(planner: Planner, bundle: Bundle) -> tuple[list[InstrumentOperati
     for k in down:
         add(Op.LIFT, TIME.lift_s, stand=k)
     here = np.asarray(planner.rho, dtype=float)
-    dwell = kit.dwell_s
+    dwell = planner.dwell_s
     if bundle.setup == Op.ALIGN:
         soak = 0.0 if kit.soaked else TIME.interferometer_soak_s
         add(Op.ALIGN, float(TIME.move(here, np.zeros(3))) + TIME.interferometer_setup_s + soak,
             axis=bundle.axis)
-        here, dwell = np.zeros(3), TIME.interferometer_target_s
+        here, dwell = np.zeros(3), LASER_DWELL_S
     else:
         centre = np.asarray(bundle.centre)
         add(Op.PIVOT, float(TIME.move(here, centre)) + TIME.ballbar_setup_s, centre,
@@ -326,7 +330,7 @@ def take(planner: Planner, bundle: Bundle) -> list[InstrumentOperation]:
     ops, seconds = operations(planner, bundle)
     kit = planner.kit
     if bundle.setup == Op.ALIGN:
-        kit.soaked, kit.dwell_s = True, TIME.interferometer_target_s
+        kit.soaked, planner.dwell_s = True, LASER_DWELL_S
     if planner.world is not None:
         planner.world.moved(np.asarray(planner.rho, dtype=float), np.zeros(3))
     planner.steps.extend(ops)
