@@ -379,9 +379,9 @@ def test_the_training_selects_a_round_by_its_held_out_score(
     rows = [{"tcp_rigid_median_mm": v} for v in (0.02, 0.011, 0.013, 0.011)]
     assert selected_round(rows) == 1
     assert round_file(Path("r/m.zip"), 3) == Path("r/m.round3.zip")
-    assert parse(["--imitate", "2", "--steps", "0", "--select-round", "--view", "1"]).view == 1
+    assert parse(["--imitate", "2", "--steps", "0", "--select-round", "--view", "2"]).view == 2
     for argv in (["--select-round"], ["--imitate", "2", "--select-round"],
-                 ["--view", "2"]):
+                 ["--view", "3"]):
         with pytest.raises(SystemExit):
             parse(argv)
     assert "--select-round" in capsys.readouterr().err
