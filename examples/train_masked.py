@@ -517,8 +517,9 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
                         help="PPO stops an update's epochs once the policy has moved this "
                              "far from the rollout's (approximate KL; 0: no limit)")
     parser.add_argument("--view", type=int, default=0, choices=VIEW_VERSIONS,
-                        help="the design view's version: 0 (OrthoglideLabDesign-v0), or 1 "
-                             "(-v1: also the readings taken at the present posture)")
+                        help="the design view's version: 0 (OrthoglideLabDesign-v0), 1 "
+                             "(-v1: also the readings taken at the present posture) or 2 "
+                             "(-v2: the readings taken at every posture, no spectrum)")
     parser.add_argument("--select-round", action="store_true",
                         help="keep every DAgger round's policy (<out>.round<k>.zip) and write "
                              "to <out> the round of the lowest error on the curve machines, "

@@ -36,6 +36,9 @@ FLAT_LAB_ENV_ID = "OrthoglideLabFlat-v0"
 DESIGN_LAB_ENV_ID = "OrthoglideLabDesign-v0"
 #: The design view whose observation also tells how the present posture has been read.
 DESIGN_LAB_V1_ENV_ID = "OrthoglideLabDesign-v1"
+#: The design view that observes the readings taken at every posture instead of the
+#: predicted error's spectrum.
+DESIGN_LAB_V2_ENV_ID = "OrthoglideLabDesign-v2"
 
 
 def _register(gymnasium: ModuleType) -> None:
@@ -88,6 +91,14 @@ def _register(gymnasium: ModuleType) -> None:
                            entry_point="orthoglide_env.wrappers:design_lab_env",
                            vector_entry_point="orthoglide_env.wrappers:DesignLabVector",
                            kwargs={"version": 1})
+    if DESIGN_LAB_V2_ENV_ID not in gymnasium.registry:
+        # v2 observes the readings' counts in place of v1's spectrum; v1 stays what the
+        # shipped one-hour policy plays.
+        warnings.filterwarnings("ignore", message=f".*{DESIGN_LAB_V1_ENV_ID} is out of date")
+        gymnasium.register(id=DESIGN_LAB_V2_ENV_ID,
+                           entry_point="orthoglide_env.wrappers:design_lab_env",
+                           vector_entry_point="orthoglide_env.wrappers:DesignLabVector",
+                           kwargs={"version": 2})
 
 
 class _RegisterOnImport(importlib.abc.MetaPathFinder):
@@ -118,5 +129,6 @@ if "gymnasium" in sys.modules:
 elif not any(isinstance(f, _RegisterOnImport) for f in sys.meta_path):
     sys.meta_path.insert(0, _RegisterOnImport())
 
-__all__ = ["DESIGN_LAB_ENV_ID", "DESIGN_LAB_V1_ENV_ID", "ENV_ID", "FLAT_LAB_ENV_ID", "LAB_ENV_ID",
-           "LAB_V1_ENV_ID", "LAB_V2_ENV_ID", "LAB_V3_ENV_ID", "MachineDesign"]
+__all__ = ["DESIGN_LAB_ENV_ID", "DESIGN_LAB_V1_ENV_ID", "DESIGN_LAB_V2_ENV_ID", "ENV_ID",
+           "FLAT_LAB_ENV_ID", "LAB_ENV_ID", "LAB_V1_ENV_ID", "LAB_V2_ENV_ID", "LAB_V3_ENV_ID",
+           "MachineDesign"]

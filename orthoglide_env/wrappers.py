@@ -114,12 +114,12 @@ class DesignLab(gym.Wrapper):
     ==========================  ===============================================  ========
     part                        meaning                                          length
     ==========================  ===============================================  ========
-    error spectrum              ``log10`` of the eigenvalues, largest first, of   r (12)
+    error spectrum (v0, v1)     ``log10`` of the eigenvalues, largest first, of   r (12)
                                 the predicted TCP error's covariance after the
                                 best-fit rigid motion, in (0.01 mm)^2, plus
                                 :data:`~orthoglide_env.lab.design_belief.
                                 LOG_FLOOR`
-    predicted error             ``log10`` of their sum (the mean square)          1
+    predicted error (v0, v1)    ``log10`` of their sum (the mean square)          1
     stands                      per stand: its slot one-hot (``S`` slots, then    K (S + 3)
                                 "not mounted"), engaged, out of service
     posture                     the joint targets scaled to [-1, 1]               3
@@ -130,6 +130,9 @@ class DesignLab(gym.Wrapper):
                                 last reading's relative fall of the predicted
                                 mean square plus :data:`~orthoglide_env.lab.
                                 design_belief.FALL_FLOOR`
+    readings here (v2)          v1's first two (no fall)                         2
+    readings everywhere (v2)    the readings taken at each candidate posture,    P
+                                over ``COUNT_SCALE``
     ==========================  ===============================================  ========
 
     Reward
@@ -145,9 +148,10 @@ class DesignLab(gym.Wrapper):
     belief's predicted TCP error after rigid motion).  Reset options are the lab's.
 
     Arguments: ``env``, an ``OrthoglideLab-v0`` (without ``reference``: the gauge block's
-    slots are not among the candidates), ``reward``, ``per``, ``version`` (of the view, 0 or
-    1).  ``design_lab_env(reward=, per=, version=, **lab_kwargs)`` builds both;
-    ``gymnasium.make("OrthoglideLabDesign-v0", ...)`` is version 0, ``-v1`` version 1.
+    slots are not among the candidates), ``reward``, ``per``, ``version`` (of the view, 0,
+    1 or 2).  ``design_lab_env(reward=, per=, version=, **lab_kwargs)`` builds both;
+    ``gymnasium.make("OrthoglideLabDesign-v0", ...)`` is version 0, ``-v1`` version 1,
+    ``-v2`` version 2.
 
     Version history
     ---------------
@@ -158,6 +162,13 @@ class DesignLab(gym.Wrapper):
       observation moves by about a thousandth between two of those readings (the clock's
       5 s of 3600): a policy could not tell a re-reading from the next.  Actions, mask and
       reward are v0's.
+    * v2: the observation holds the readings taken at every candidate posture in place
+      of v1's spectrum and fall.  At the nominal machine the predicted covariance is a
+      function of where and by which mountings readings were taken, never of their
+      values, so the counts with the stands' states carry what the spectrum carried; a
+      policy then decides without the belief's Woodbury steps and eigen-solve (the
+      wrapper still follows the covariance, for its reward and ``predicted_rigid_mm``).
+      Actions, mask and reward are v0's.
     """
 
     #: How its moves let plungers down: as the fixed plan does, where the a-priori spread

@@ -21,6 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "examples" / "policies" / "masked_lab330.zip"
 SHIPPED_HOUR = ROOT / "examples" / "policies" / "masked_lab3600.zip"
 SHIPPED_RANKED = ROOT / "examples" / "policies" / "ranked_lab330.zip"
+SHIPPED_COUNTS = ROOT / "examples" / "policies" / "counts_lab3600.zip"
 
 
 def test_the_shipped_policy_plays_without_torch() -> None:
@@ -83,6 +84,37 @@ def test_the_one_hour_policy_plays_view_1_within_its_mask() -> None:
             assert agent.belief.action_mask()[agent.decide()]
         observation, _, terminated, truncated, info = lab.step(agent.act(observation, info))
         assert not (terminated or truncated)
+
+
+def test_the_counting_policy_plays_view_2_without_the_covariance() -> None:
+    """The shipped one-hour policy of view 2 keeps a belief that counts the readings and
+    never forms the covariance (it stays the prior's identity), and its first decisions
+    are open operations that read: the counts of the postures it chose grow."""
+    import gymnasium as gym
+
+    import orthoglide_env
+    from calibrators.agents.names import get_agent
+    from calibrators.agents.policy import read_spec
+
+    spec = read_spec(SHIPPED_COUNTS)
+    assert (spec.env_id, spec.budget_s, spec.play) == (orthoglide_env.DESIGN_LAB_V2_ENV_ID,
+                                                       3600.0, "argmax")
+    agent = get_agent(f"policy:{SHIPPED_COUNTS}")
+    lab = gym.make(orthoglide_env.LAB_ENV_ID, conditions="lab", gauge_sigma=0.02,
+                   budget_s=3600.0)
+    observation, info = lab.reset(seed=5)
+    agent.reset(lab, observation, np.random.default_rng(0))
+    belief = agent.belief
+    assert belief.version == 2 and not belief.follows
+    assert len(belief.observation()) == 6 * (39 + 3) + 3 + 1 + 2 + 1500
+    for _ in range(20):
+        if not agent.queue:
+            assert belief.action_mask()[agent.decide()]
+        observation, _, terminated, truncated, info = lab.step(agent.act(observation, info))
+        assert not (terminated or truncated)
+    # Zero read at the reset, then a reading after each move.
+    assert belief.readings_at.sum() > 1
+    np.testing.assert_array_equal(belief.covariance, np.eye(len(belief.covariance)))
 
 
 def test_a_chunk_of_machines_decides_as_each_machine_alone() -> None:

@@ -8,6 +8,9 @@ belief's own update, observation, mask and float64 logits take."""
 from __future__ import annotations
 
 import copy
+import dataclasses
+import itertools
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -16,12 +19,12 @@ import numpy as np
 import pytest
 
 import orthoglide_env
-from calibrators.agents.actor_weights import last_layer_bounds, read_actor
+from calibrators.agents.actor_weights import ActorWeights, last_layer_bounds, read_actor
 from calibrators.agents.base import action
 from calibrators.agents.names import get_agent
 from calibrators.agents.policy import DesignPolicyAgent
 from calibrators.study.episodes import machine_seed
-from orthoglide_env.lab.design_belief import action_masks, observations
+from orthoglide_env.lab.design_belief import DesignBelief, action_masks, observations
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.wrappers import design_lab_env
 
@@ -47,16 +50,28 @@ def one_by_one(agent: DesignPolicyAgent, observation: dict[str, np.ndarray],
                   agent.last["slot"])
 
 
-def play(machines: list[int], together: bool, stop_s: float
+def shipped_agent() -> DesignPolicyAgent:
+    return get_agent(f"policy:{SHIPPED_HOUR}")
+
+
+def play(machines: list[int], together: bool, stop_s: float,
+         make: Callable[[], DesignPolicyAgent] = shipped_agent
          ) -> tuple[list[list[tuple[Any, ...]]], list[DesignPolicyAgent]]:
-    """Each machine's lab actions (until ``stop_s`` of lab time) and its agent, the chunk
-    deciding together (``act_all``) or each agent alone (:func:`one_by_one`)."""
+    """Each machine's lab actions (until ``stop_s`` of lab time) and its agent (of
+    ``make``), the chunk deciding together (``act_all``) or each agent alone
+    (:func:`one_by_one`), its belief then one that follows the covariance, as the view's
+    own does."""
     labs = [gym.make(orthoglide_env.LAB_ENV_ID, **LAB) for _ in machines]
-    agents = [get_agent(f"policy:{SHIPPED_HOUR}") for _ in machines]
+    agents = [make() for _ in machines]
     state = []
     for lab, agent, m in zip(labs, agents, machines, strict=True):
         observation, info = lab.reset(seed=machine_seed(1, m))
         agent.reset(lab, observation, np.random.default_rng(m))
+        if not together and not agent.belief.follows:
+            lean = agent.belief
+            agent.belief = DesignBelief(lean.design, lean.n_stands, lean.sigma, lean.budget_s,
+                                        lean.version)
+            agent.belief.start(observation)
         state.append((observation, info))
     taken: list[list[tuple[Any, ...]]] = [[] for _ in machines]
     running = list(range(len(machines)))
@@ -95,6 +110,45 @@ def test_a_chunk_decides_as_each_agent_alone_did() -> None:
         np.testing.assert_allclose(a.belief.covariance, b.belief.covariance, rtol=0,
                                    atol=1e-9 * np.abs(b.belief.covariance).max())
         np.testing.assert_array_equal(observations([a.belief]), observations([b.belief]))
+        np.testing.assert_array_equal(action_masks([a.belief])[0], b.belief.action_mask())
+
+
+def counting_agent() -> DesignPolicyAgent:
+    """An agent of view 2 (``OrthoglideLabDesign-v2``): the shipped file's spec in that
+    view, with a network of random weights of its sizes (seeded; its stop's bias far
+    below, so that it plays the half hour).  What is tested is the path to a choice, which
+    is the same whatever the weights."""
+    agent = shipped_agent()
+    env = design_lab_env(version=2, **LAB)
+    size = env.observation_space.shape[0]
+    agent.spec = dataclasses.replace(agent.spec, env_id=orthoglide_env.DESIGN_LAB_V2_ENV_ID,
+                                     observation_size=size)
+    rng = np.random.default_rng(7)
+    sizes = (size, 128, 128, env.action_space.n)
+    weights = tuple((rng.standard_normal((out, inputs)) / np.sqrt(inputs)).astype(np.float32)
+                    for inputs, out in itertools.pairwise(sizes))
+    biases = [np.zeros(out, dtype=np.float32) for out in sizes[1:]]
+    biases[-1][-1] = -100.0
+    agent.actor = ActorWeights(weights, tuple(biases))
+    return agent
+
+
+def test_view_2_decides_from_counts_as_the_view_s_belief_does() -> None:
+    """A policy of view 2 decides without the covariance: its chunk's beliefs only count
+    the readings, and take, action for action, the operations that the view's own
+    beliefs (which follow the covariance) with float64 logits take, on three machines for
+    half an hour.  Their observations and masks are the same floats."""
+    machines = [0, 1, 2]
+    fast, fast_agents = play(machines, together=True, stop_s=1800.0, make=counting_agent)
+    slow, slow_agents = play(machines, together=False, stop_s=1800.0, make=counting_agent)
+    assert fast == slow
+    assert min(len(taken) for taken in fast) > 100
+    for a, b in zip(fast_agents, slow_agents, strict=True):
+        assert not a.belief.follows and b.belief.follows
+        # The view's belief learnt from its readings; the lean one kept its prior.
+        assert b.belief.predicted_mse() < 0.1 * np.trace(b.belief.weight)
+        np.testing.assert_array_equal(a.belief.covariance, np.eye(len(a.belief.covariance)))
+        np.testing.assert_array_equal(observations([a.belief]), [b.belief.observation()])
         np.testing.assert_array_equal(action_masks([a.belief])[0], b.belief.action_mask())
 
 

@@ -33,6 +33,7 @@ from orthoglide_env.lab.design_belief import (
     COUNT_SCALE,
     FALL_FLOOR,
     READ_PROBABILITY,
+    DesignBelief,
     observations,
 )
 from orthoglide_env.lab.operations import Op
@@ -42,6 +43,7 @@ from orthoglide_env.wrappers import DesignLab, DesignLabVector, design_lab_env
 
 ID = orthoglide_env.DESIGN_LAB_ENV_ID
 ID_V1 = orthoglide_env.DESIGN_LAB_V1_ENV_ID
+ID_V2 = orthoglide_env.DESIGN_LAB_V2_ENV_ID
 BUDGET_S = 900.0
 
 
@@ -132,11 +134,69 @@ def test_view_1_counts_the_readings_here_and_their_fall() -> None:
     assert counts == [[2, 2], [3, 3], [4, 4], [1, 2], [1, 5]]
 
 
+def test_view_2_is_view_1_s_stands_then_the_readings_at_every_posture() -> None:
+    """View 2 observes v1's stands, posture, clock and readings here, then the readings
+    taken at each posture (its spectrum and fall left out); its actions, masks and rewards
+    are v1's, step for step, and ``check_env`` is clean."""
+    v1, v2 = (gym.make(i, conditions="lab", budget_s=BUDGET_S) for i in (ID_V1, ID_V2))
+    spectrum = v1.get_wrapper_attr("belief").factor.shape[1] + 1
+    assert v2.observation_space.shape == (v1.observation_space.shape[0] - spectrum - 1 + 1500,)
+    assert v2.action_space == v1.action_space
+    for env in (v1, v2):
+        env.reset(seed=5)
+    rng = np.random.default_rng(3)
+    chosen = []
+    for _ in range(6):
+        mask = v1.get_wrapper_attr("action_masks")()
+        np.testing.assert_array_equal(mask, v2.get_wrapper_attr("action_masks")())
+        chosen.append(int(rng.choice(np.flatnonzero(mask[:1500]))))
+        a, r1, *_ = v1.step(chosen[-1])
+        b, r2, *_ = v2.step(chosen[-1])
+        np.testing.assert_array_equal(a[spectrum:-1], b[:-1500])
+        assert r1 == r2 and v2.observation_space.contains(b)
+    # Zero read at the reset, then each chosen posture once per choice.
+    expected = np.bincount([v2.get_wrapper_attr("belief").table.zero, *chosen], minlength=1500)
+    np.testing.assert_array_equal(np.round(b[-1500:] * COUNT_SCALE), expected)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(design(version=2), skip_render_check=True)
+    messages = [str(w.message) for w in caught]
+    assert all("different from the unwrapped version" in m for m in messages), messages
+
+
+def test_a_belief_of_view_2_may_count_without_the_covariance() -> None:
+    """A belief that does not follow the covariance observes view 2 as one that does, and
+    refuses to predict an error; the views that observe the spectrum refuse it."""
+    env = design(conditions="lab", version=2)
+    # The lab's own observations, which an agent's belief follows.
+    observation, _ = env.unwrapped.reset(seed=1)
+    lean = DesignBelief(env.belief.design, env.belief.n_stands, env.belief.sigma, BUDGET_S, 2,
+                        covariance=False)
+    for belief in (env.belief, lean):
+        belief.start(observation)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        operations = env.operations(int(rng.choice(np.flatnonzero(env.action_masks()[:1500]))))
+        for operation in operations:
+            observation, _, _, _, info = env.unwrapped.step(operation)
+            for belief in (env.belief, lean):
+                belief.observe(operation, observation, bool(info.get("refused")))
+        np.testing.assert_array_equal(lean.observation(), env.belief.observation())
+        np.testing.assert_array_equal(lean.action_mask(), env.belief.action_mask())
+    assert env.belief.predicted_mse() < np.trace(env.belief.weight)
+    np.testing.assert_array_equal(lean.covariance, np.eye(len(lean.covariance)))
+    with pytest.raises(ValueError, match="predicts no error"):
+        lean.predicted_mse()
+    for version in (0, 1):
+        with pytest.raises(ValueError, match="observes the covariance"):
+            DesignBelief(env.belief.design, 6, 0.02, BUDGET_S, version, covariance=False)
+
+
 def test_the_observations_of_a_chunk_are_each_belief_s_own() -> None:
     """A policy deciding for a chunk of machines observes them in one batched pass: the
     same floats as each belief's own observation, in every state of either view."""
     rng = np.random.default_rng(4)
-    for version in (0, 1):
+    for version in (0, 1, 2):
         envs = [design(conditions="lab", version=version) for _ in range(4)]
         for k, env in enumerate(envs):
             env.reset(seed=k)
@@ -149,7 +209,7 @@ def test_the_observations_of_a_chunk_are_each_belief_s_own() -> None:
 
 def test_bad_arguments_are_refused() -> None:
     for kwargs in ({"reward": "accuracy"}, {"per": "hour"}, {"reference": True},
-                   {"version": 2}):
+                   {"version": 3}):
         with pytest.raises(ValueError):
             design(**kwargs)
     env = design()
@@ -319,9 +379,9 @@ def test_the_training_selects_a_round_by_its_held_out_score(
     rows = [{"tcp_rigid_median_mm": v} for v in (0.02, 0.011, 0.013, 0.011)]
     assert selected_round(rows) == 1
     assert round_file(Path("r/m.zip"), 3) == Path("r/m.round3.zip")
-    assert parse(["--imitate", "2", "--steps", "0", "--select-round", "--view", "1"]).view == 1
+    assert parse(["--imitate", "2", "--steps", "0", "--select-round", "--view", "2"]).view == 2
     for argv in (["--select-round"], ["--imitate", "2", "--select-round"],
-                 ["--view", "2"]):
+                 ["--view", "3"]):
         with pytest.raises(SystemExit):
             parse(argv)
     assert "--select-round" in capsys.readouterr().err

@@ -41,9 +41,15 @@ from gymnasium.spaces import flatten, flatten_space
 
 from calibrators.agents.actor_weights import read_actor
 from calibrators.agents.base import Agent, action
-from orthoglide_env import DESIGN_LAB_ENV_ID, DESIGN_LAB_V1_ENV_ID, FLAT_LAB_ENV_ID
+from orthoglide_env import (
+    DESIGN_LAB_ENV_ID,
+    DESIGN_LAB_V1_ENV_ID,
+    DESIGN_LAB_V2_ENV_ID,
+    FLAT_LAB_ENV_ID,
+)
 from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.lab.design_belief import (
+    SPECTRUM_VIEWS,
     DesignBelief,
     action_masks,
     observations,
@@ -59,7 +65,8 @@ SPEC_ENTRY: str = "orthoglide_policy.json"
 SPEC_VERSION: int = 1
 INSTALL_HINT: str = "install the extra: pip install '.[rl]'"
 #: The design views' env ids, by the view's version (its observation).
-DESIGN_VIEW_IDS: dict[str, int] = {DESIGN_LAB_ENV_ID: 0, DESIGN_LAB_V1_ENV_ID: 1}
+DESIGN_VIEW_IDS: dict[str, int] = {DESIGN_LAB_ENV_ID: 0, DESIGN_LAB_V1_ENV_ID: 1,
+                                   DESIGN_LAB_V2_ENV_ID: 2}
 #: How a design-view policy may play (:attr:`PolicySpec.play`).
 PLAYS: tuple[str, ...] = ("draw", "argmax")
 #: How a design-view policy's moves may let plungers down (:attr:`PolicySpec.flicks`).
@@ -93,8 +100,8 @@ class PolicySpec:
     #: (files saved before designs were recorded).
     design: dict[str, Any] | None = None
     #: The env id (and version) the policy acted in: the flat lab, or a design view
-    #: (``OrthoglideLabDesign-v0`` or ``-v1``, whose discrete operations the policy
-    #: chooses).
+    #: (``OrthoglideLabDesign-v0``, ``-v1`` or ``-v2``, whose discrete operations the
+    #: policy chooses).
     env_id: str = FLAT_LAB_ENV_ID
     #: How a design-view policy plays: "draw" from its distribution over the open
     #: operations, or "argmax", its most likely one (a policy that imitates a greedy
@@ -153,11 +160,16 @@ def spec_of(env: gym.Env, algorithm: str, env_kwargs: dict[str, Any],
         obs_var=tuple(float(v) for v in rms.var) if rms is not None else (),
         clip_obs=float(getattr(normaliser, "clip_obs", 10.0)),
         epsilon=float(getattr(normaliser, "epsilon", 1e-8)), design=lab.design.to_dict(),
-        env_id=((DESIGN_LAB_V1_ENV_ID if env.get_wrapper_attr("version") else DESIGN_LAB_ENV_ID)
-                if discrete else FLAT_LAB_ENV_ID), play=play,
+        env_id=(_view_id(env.get_wrapper_attr("version")) if discrete else FLAT_LAB_ENV_ID),
+        play=play,
         flicks=env.get_wrapper_attr("flicks") if discrete else "prior",
         reach=bool(getattr(env, "reach", False)),
     )
+
+
+def _view_id(version: int) -> str:
+    """The env id of the design view of ``version``."""
+    return next(key for key, value in DESIGN_VIEW_IDS.items() if value == version)
 
 
 def save_policy(model: Any, path: str | Path, spec: PolicySpec) -> Path:
@@ -316,12 +328,13 @@ class PolicyAgent(Agent):
 
 
 class DesignPolicyAgent(PolicyAgent):
-    """Plays a policy trained on a design view (``OrthoglideLabDesign-v0`` or ``-v1``,
-    :class:`~orthoglide_env.wrappers.DesignLab`): it keeps the view's belief from the lab's
-    observations, draws the policy's operation among the open ones (its mask) with the
-    agent's random stream, and plays it as the lab actions it is (a move's lever flicks,
-    then the move), until the lab time of a training episode is used.  The belief runs on
-    the training episode's budget, so that the observed clock and the mask mean what they
+    """Plays a policy trained on a design view (``OrthoglideLabDesign-v0``, ``-v1`` or
+    ``-v2``, :class:`~orthoglide_env.wrappers.DesignLab`): it keeps the view's belief from
+    the lab's observations (in view 2 its counts alone, not its covariance), draws the
+    policy's operation among the open ones (its mask) with the agent's random stream, and
+    plays it as the lab actions it is (a move's lever flicks, then the move), until the
+    lab time of a training episode is used.  The belief runs on the training episode's
+    budget, so that the observed clock and the mask mean what they
     meant in training.  Its network is read from the file in NumPy
     (:func:`~calibrators.agents.actor_weights.read_actor`): it plays without torch or
     stable-baselines3."""
@@ -340,9 +353,14 @@ class DesignPolicyAgent(PolicyAgent):
         Agent.reset(self, env, observation, rng)
         self._check_lab()
         lab = self.env
+        version = DESIGN_VIEW_IDS[self.spec.env_id]
+        # A view that observes no spectrum decides without the covariance, unless a filter
+        # beside the belief reads it.
         self.belief = DesignBelief(lab.design, lab.n_stands,
                                    weighting_sigma(float(lab.noise.effective_sigma)),
-                                   self.spec.budget_s, DESIGN_VIEW_IDS[self.spec.env_id])
+                                   self.spec.budget_s, version,
+                                   covariance=(version in SPECTRUM_VIEWS
+                                               or self.spec.flicks != "prior"))
         size = len(self.belief.observation())
         self.belief.start(observation)
         self.filter = None

@@ -56,8 +56,12 @@ READ_PROBABILITY: float = 0.5
 MOVES_KEPT: int = 256
 #: Views of the design (:attr:`DesignBelief.version`): 0, the predicted error's spectrum,
 #: the stands, the posture and the clock; 1 adds how the present posture has been read
-#: (:meth:`DesignBelief.reading_history`).
-VIEW_VERSIONS: tuple[int, ...] = (0, 1)
+#: (:meth:`DesignBelief.reading_history`); 2 replaces the spectrum by the readings taken at
+#: every posture (:meth:`DesignBelief.posture_counts`), which determine it.
+VIEW_VERSIONS: tuple[int, ...] = (0, 1, 2)
+#: The views whose observation is a function of the covariance (its spectrum, a reading's
+#: fall): a belief of another view observes without following it.
+SPECTRUM_VIEWS: tuple[int, ...] = (0, 1)
 #: Readings are counted in units of this many in view 1's observation: a scale of the
 #: learner's input (an expert's stays are up to about 20 readings), no physical size.
 COUNT_SCALE: float = 10.0
@@ -167,18 +171,24 @@ class DesignBelief:
     catalogue, and stop: ``P + K S + 1`` operations, in that order.
 
     ``sigma``: a reading's standard deviation (mm), ``budget_s``: the lab's time budget,
-    ``version``: the view its :meth:`observation` is (:data:`VIEW_VERSIONS`).  It follows
-    the lab from its observations (:meth:`start`, :meth:`observe`), never from its
-    truth."""
+    ``version``: the view its :meth:`observation` is (:data:`VIEW_VERSIONS`),
+    ``covariance``: whether it follows the covariance (the Woodbury steps; needed for the
+    predicted error, the reward, and the observation of the :data:`SPECTRUM_VIEWS`).  A
+    policy of view 2 decides from the readings' counts alone, so its agent's belief skips
+    the covariance, the larger part of a decision's cost.  It follows the lab from its
+    observations (:meth:`start`, :meth:`observe`), never from its truth."""
 
     def __init__(self, design: MachineDesign, stands: int, sigma: float, budget_s: float,
-                 version: int = 0) -> None:
+                 version: int = 0, covariance: bool = True) -> None:
         if not (np.isfinite(sigma) and sigma > 0):
             raise ValueError(f"sigma must be a positive number, got {sigma}")
         if version not in VIEW_VERSIONS:
             raise ValueError(f"version must be one of {VIEW_VERSIONS}, got {version!r}")
+        if not covariance and version in SPECTRUM_VIEWS:
+            raise ValueError(f"view {version} observes the covariance: a belief of it follows "
+                             "the covariance")
         self.design, self.sigma, self.budget_s = design, float(sigma), float(budget_s)
-        self.version = version
+        self.version, self.follows = version, bool(covariance)
         self.table: SlotTable = slot_table(design)
         self.n_postures, self.n_slots, self.n_stands = (
             len(self.table.postures), len(self.table.tip), int(stands))
@@ -250,6 +260,8 @@ class DesignBelief:
     def _read(self, observation: dict[str, np.ndarray]) -> None:
         """Add the valid readings of the observation, taken here, and count them."""
         self._tally()
+        if not self.follows:
+            return
         rows = readings_rows([self], np.asarray(observation["valid"], dtype=bool)[None])[0]
         if not rows.size:
             return
@@ -268,6 +280,7 @@ class DesignBelief:
     # -- what it predicts -------------------------------------------------------------------
     def predicted_mse(self) -> float:
         """Predicted mean-square TCP error after the best-fit rigid motion (mm^2)."""
+        self._following()
         n = N_MACHINE
         # trace(W C) of two symmetric matrices, without their product.
         return float(max(np.sum(self.weight * self.covariance[:n, :n]), 0.0))
@@ -276,7 +289,14 @@ class DesignBelief:
         """Eigenvalues (r,), largest first, of the predicted TCP error's covariance in the
         ``r`` directions the rigid-motion score sees (``F' C F``, mm^2): their sum is
         :meth:`predicted_mse`."""
+        self._following()
         return _spectra(self.factor, self.covariance[:N_MACHINE, :N_MACHINE])
+
+    def _following(self) -> None:
+        """Refuse to predict from a covariance this belief does not follow."""
+        if not self.follows:
+            raise ValueError("this belief counts the readings without following the "
+                             "covariance (covariance=False): it predicts no error")
 
     def log_mean_squares(self) -> np.ndarray:
         """``log10`` of :meth:`error_spectrum` and of its sum (:meth:`predicted_mse`, to
@@ -295,38 +315,49 @@ class DesignBelief:
         return _history(np.array([self.run]), np.array([self.readings_at[self.here]]),
                         np.array([self.fall]))[0]
 
+    def posture_counts(self) -> np.ndarray:
+        """The readings taken at each candidate posture (P,), over :data:`COUNT_SCALE`
+        (view 2).  At the nominal machine the covariance is a function of where and by
+        which mountings the readings were taken, and those are the counts with the
+        stands' states, so view 2 observes them in place of the spectrum: a decision then
+        needs no Woodbury step and no eigen-solve."""
+        return self.readings_at / COUNT_SCALE
+
     def observation(self) -> np.ndarray:
         """The observation of the design view (float32; its parts:
-        :class:`~orthoglide_env.wrappers.DesignLab`): :meth:`log_mean_squares`, each
-        stand's slot one-hot (then "not mounted"), engaged and out of service, the posture
-        scaled to [-1, 1] over the design's control limits, the time used over the
-        budget, and in view 1 :meth:`reading_history`."""
-        return np.concatenate((self.log_mean_squares(),
-                               self.observation_tail())).astype(np.float32)
-
-    def observation_tail(self) -> np.ndarray:
-        """The observation after :meth:`log_mean_squares` (float64): the stands, the
-        posture, the clock and, in view 1, :meth:`reading_history`
-        (:func:`observation_tails` of this belief alone)."""
-        return observation_tails([self])[0]
+        :class:`~orthoglide_env.wrappers.DesignLab`): in views 0 and 1
+        :meth:`log_mean_squares`, then each stand's slot one-hot (then "not mounted"),
+        engaged and out of service, the posture scaled to [-1, 1] over the design's
+        control limits, the time used over the budget; in view 1 :meth:`reading_history`;
+        in view 2 its first two numbers (no fall) and :meth:`posture_counts`."""
+        tail = observation_tails([self])[0]
+        if self.version not in SPECTRUM_VIEWS:
+            return tail.astype(np.float32)
+        return np.concatenate((self.log_mean_squares(), tail)).astype(np.float32)
 
     def observation_bounds(self, longest_s: float) -> tuple[np.ndarray, np.ndarray]:
         """Bounds (float32) of every :meth:`observation` of a lab whose longest step takes
         ``longest_s``: the logs lie between that of :data:`LOG_FLOOR` and a decade above the
         prior's mean square (readings only shrink the covariance), the clock stops within a
-        step of the budget; in view 1 no more readings than the shortest re-reading fits
-        into that time, and a fall between nothing and all."""
+        step of the budget; in views 1 and 2 no more readings at a posture than the
+        shortest re-reading fits into that time, and in view 1 a fall between nothing and
+        all."""
         top = float(np.log10(np.trace(self.weight) / ACCURACY_UNIT_MM**2 + LOG_FLOOR)) + 1.0
         logs, stands = self.factor.shape[1] + 1, self.n_stands * (self.n_slots + 3)
-        low = np.concatenate((np.full(logs, np.log10(LOG_FLOOR)), np.zeros(stands),
-                              -np.ones(3), [0.0]))
-        high = np.concatenate((np.full(logs, top), np.ones(stands), np.ones(3),
-                               [(self.budget_s + longest_s) / self.budget_s]))
-        if self.version >= 1:
-            low = np.concatenate((low, [0.0, 0.0, np.log10(FALL_FLOOR)]))
-            high = np.concatenate((high, [self.most_readings(longest_s) / COUNT_SCALE] * 2,
-                                   [np.log10(1 + FALL_FLOOR)]))
-        return low.astype(np.float32), high.astype(np.float32)
+        most = self.most_readings(longest_s) / COUNT_SCALE
+        low = [np.zeros(stands), -np.ones(3), [0.0]]
+        high = [np.ones(stands), np.ones(3), [(self.budget_s + longest_s) / self.budget_s]]
+        if self.version in SPECTRUM_VIEWS:
+            low.insert(0, np.full(logs, np.log10(LOG_FLOOR)))
+            high.insert(0, np.full(logs, top))
+        if self.version == 1:
+            low.append([0.0, 0.0, np.log10(FALL_FLOOR)])
+            high.append([most, most, np.log10(1 + FALL_FLOOR)])
+        if self.version == 2:
+            low.append(np.zeros(2 + self.n_postures))
+            high.append(np.full(2 + self.n_postures, most))
+        return (np.concatenate(low).astype(np.float32),
+                np.concatenate(high).astype(np.float32))
 
     def most_readings(self, longest_s: float) -> float:
         """The most readings an episode can take at one posture, in a lab whose longest
@@ -443,6 +474,8 @@ def observe_many(beliefs: list[DesignBelief], operations: list[dict[str, object]
     for belief, reads in zip(beliefs, steps, strict=True):
         if reads:
             belief._tally()
+    if not beliefs[0].follows:
+        return
     valid = np.array([o["valid"] for o in seen], dtype=bool) & np.array(steps)[:, None]
     rows = readings_rows(beliefs, valid)
     if not rows.shape[1]:
@@ -469,10 +502,11 @@ def observe_many(beliefs: list[DesignBelief], operations: list[dict[str, object]
 
 
 def observation_tails(beliefs: list[DesignBelief]) -> np.ndarray:
-    """:meth:`DesignBelief.observation_tail` of each of ``beliefs`` (of one design, stands
-    and view), stacked (N, m): each stand's slot one-hot (then "not mounted"), engaged and
-    out of service, the posture scaled to [-1, 1] over the design's control limits, the
-    time used over the budget, and in view 1 the reading history."""
+    """The observation after the spectrum's logs of each of ``beliefs`` (of one design,
+    stands and view), stacked (N, m), float64: each stand's slot one-hot (then "not
+    mounted"), engaged and out of service, the posture scaled to [-1, 1] over the design's
+    control limits, the time used over the budget, in view 1 the reading history, in
+    view 2 its counts and every posture's (:meth:`DesignBelief.posture_counts`)."""
     first = beliefs[0]
     count, stands, slots = len(beliefs), first.n_stands, first.n_slots
     held = np.array([b.slots for b in beliefs])
@@ -484,9 +518,12 @@ def observation_tails(beliefs: list[DesignBelief]) -> np.ndarray:
     rho = (2 * np.array([b.rho for b in beliefs]) - (high + low)) / (high - low)
     parts = [tails.reshape(count, -1), rho, [[b.time_s / b.budget_s] for b in beliefs]]
     if first.version >= 1:
-        parts.append(_history(np.array([b.run for b in beliefs]),
-                              np.array([b.readings_at[b.here] for b in beliefs]),
-                              np.array([b.fall for b in beliefs])))
+        history = _history(np.array([b.run for b in beliefs]),
+                           np.array([b.readings_at[b.here] for b in beliefs]),
+                           np.array([b.fall for b in beliefs]))
+        parts.append(history if first.version == 1 else history[:, :2])
+    if first.version == 2:
+        parts.append(np.stack([b.readings_at for b in beliefs]) / COUNT_SCALE)
     return np.concatenate(parts, axis=1)
 
 
@@ -528,11 +565,13 @@ def observations(beliefs: list[DesignBelief]) -> np.ndarray:
     """:meth:`DesignBelief.observation` of each of ``beliefs`` (of one design, stands and
     view), stacked (N, n), the same floats: the predicted error's spectra of all of them in
     one batched product and eigen-solve, whose call costs a chunk of machines about what
-    one machine's costs."""
+    one machine's costs (view 2 has none)."""
+    tails = observation_tails(beliefs)
+    if beliefs[0].version not in SPECTRUM_VIEWS:
+        return tails.astype(np.float32)
     n = N_MACHINE
     logs = _log_mean_squares(_spectra(beliefs[0].factor, np.stack(
         [b.covariance[:n, :n] for b in beliefs])))
-    tails = observation_tails(beliefs)
     return np.concatenate((logs, tails), axis=1).astype(np.float32)
 
 
