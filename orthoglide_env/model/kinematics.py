@@ -154,13 +154,30 @@ def direct(machine: MachineParams, rho: np.ndarray, *, tol: float = 1e-11, max_i
         return p
     a = g.o + (_slide(machine) + g.drho + rho)[..., :, None] * g.u
     shape = p.shape[:-1]
+    lengths2 = np.broadcast_to(g.lengths**2, (*shape, 3))
+    if p.size == 3:
+        # One posture (a single env's step): numpy scalars, whose arithmetic costs a
+        # fraction of one-element arrays', in the same operations (the same bits).
+        attach, carriage = (_components(np.reshape(x, (3, 3)), ()) for x in (g.attach, a))
+        q = _newton(attach, carriage, list(lengths2.reshape(3)), list(p.reshape(3)), (),
+                    tol, max_iter)
+        return q.reshape(p.shape)
     # Every coordinate of every leg as one contiguous array over the whole batch: numpy then
     # runs each operation below as one long loop (a third faster on a sweep's scoring
     # grid), with the same arithmetic in the same order as the vector form.
-    attach, carriage = (_components(np.broadcast_to(x, (*shape, 3, 3))) for x in (g.attach, a))
-    lengths2 = [np.array(x) for x in np.moveaxis(np.broadcast_to(g.lengths**2, (*shape, 3)),
-                                                   -1, 0)]
-    q = [np.array(p[..., j]) for j in range(3)]
+    attach, carriage = (_components(np.broadcast_to(x, (*shape, 3, 3)), shape)
+                        for x in (g.attach, a))
+    return _newton(attach, carriage, [np.array(x) for x in np.moveaxis(lengths2, -1, 0)],
+                   [np.array(p[..., j]) for j in range(3)], shape, tol, max_iter)
+
+
+def _newton(attach: list[list[np.ndarray]], carriage: list[list[np.ndarray]],
+            lengths2: list[np.ndarray], q: list[np.ndarray], shape: tuple[int, ...],
+            tol: float, max_iter: int) -> np.ndarray:
+    """:func:`direct`'s Newton iterations from the TCP ``q`` (its three coordinates), each
+    leg ``i`` of squared length ``lengths2[i]`` between its carriage's R1 centre
+    ``carriage[i]`` and the TCP plus ``attach[i]`` (coordinates ``[i][j]``, each of batch
+    ``shape``, or scalars for ``()``): the TCPs ``(*shape, 3)``."""
     moving = np.ones(shape, dtype=bool)
     for _ in range(max_iter):
         v = [[(q[j] + attach[i][j]) - carriage[i][j] for j in range(3)] for i in range(3)]
@@ -175,17 +192,22 @@ def direct(machine: MachineParams, rho: np.ndarray, *, tol: float = 1e-11, max_i
         det = r[0][0] * c0[0] + r[0][1] * c0[1] + r[0][2] * c0[2]
         step = [(f[0] * c0[j] + f[1] * c1[j] + f[2] * c2[j]) / det for j in range(3)]
         # A converged posture stops moving, so its result does not depend on the batch
-        # it was solved in (one machine or many give the same bits).
-        q = [q[j] - np.where(moving, step[j], 0.0) for j in range(3)]
-        size = np.maximum(np.maximum(np.abs(step[0]), np.abs(step[1])), np.abs(step[2]))
+        # it was solved in (one machine or many give the same bits); while every one
+        # moves, each takes its step as it is.
+        held = step if moving.all() else [np.where(moving, s, 0.0) for s in step]
+        q = [q[j] - held[j] for j in range(3)]
+        size = np.maximum(np.maximum(abs(step[0]), abs(step[1])), abs(step[2]))
         moving &= size >= tol
         if not moving.any():
             return np.stack(q, axis=-1)
     raise UnreachableError("direct kinematics did not converge: posture near a singularity")
 
 
-def _components(x: np.ndarray) -> list[list[np.ndarray]]:
-    """``x[..., i, j]`` (``(..., 3, 3)``) as contiguous copies, ``[i][j]``."""
+def _components(x: np.ndarray, shape: tuple[int, ...]) -> list[list[np.ndarray]]:
+    """``x[..., i, j]`` (``(*shape, 3, 3)``) as contiguous copies, ``[i][j]`` (numpy
+    scalars for ``shape`` ``()``)."""
+    if not shape:
+        return [[x[i, j] for j in range(3)] for i in range(3)]
     return [[np.array(x[..., i, j]) for j in range(3)] for i in range(3)]
 
 
