@@ -41,6 +41,7 @@ def played_alone(env: gym.Env, seed: int) -> list:
     return env.unwrapped.records
 
 
+@pytest.mark.slow
 def test_the_active_expert_played_alone_reads_what_active_reads() -> None:
     """On the comparison's machines, the filtered view's expert takes ``active``'s
     operations: the same postures, plungers and readings, value for value, until the last

@@ -281,6 +281,7 @@ def test_a_bad_world_in_a_machine_file_is_refused(change, words: str) -> None:
     assert words in str(info.value)
 
 
+@pytest.mark.slow
 def test_calibrate_writes_a_truth_that_replays(tmp_path) -> None:
     """``calibrate --save-truth`` writes the machine and its world; ``--machine FILE``
     replays it under the file's conditions (left out on the command line), and refuses

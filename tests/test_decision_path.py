@@ -94,6 +94,7 @@ def play(machines: list[int], together: bool, stop_s: float,
     return taken, agents
 
 
+@pytest.mark.slow
 def test_a_chunk_decides_as_each_agent_alone_did() -> None:
     """Three machines of the one-hour policy, half an hour each: the chunk's fast path
     takes today's operations, action for action, and its beliefs are each agent's own

@@ -139,6 +139,7 @@ def test_the_tcp_on_an_axis_keeps_that_legs_gauges_at_their_zero_distance() -> N
         assert np.all(table.postures == paper_posture(name, PROTOTYPE), axis=1).any()
 
 
+@pytest.mark.slow
 def test_a_plan_spends_at_most_its_budget_and_the_lab_charges_what_it_planned() -> None:
     """The plan's clock and the lab's are the same time table: replayed on a machine, the
     optimal agent ends exactly when its plan says, within the budget, and no gauge is
@@ -193,6 +194,7 @@ def test_the_designed_plan_beats_the_papers_experiment_at_equal_time() -> None:
     assert designed < paper_predicted
 
 
+@pytest.mark.slow
 def test_remounts_are_taken_when_they_pay() -> None:
     """A plan moves stands when that buys accuracy: over 20 minutes it re-mounts at least
     once, and ends with a smaller predicted error than the same greedy plan that may not

@@ -63,6 +63,7 @@ def test_the_collector_is_as_it_was_after_a_command() -> None:
     assert gc.get_threshold() == before and gc.get_freeze_count() == frozen
 
 
+@pytest.mark.slow
 def test_local_workers_start_single_threaded(monkeypatch) -> None:
     """Spawned workers get one thread per numerical library (or the user's setting): two
     workers with a multi-threaded BLAS each on two cores spin against each other (a

@@ -47,6 +47,7 @@ def test_a_seed_schedules_its_faults_before_the_episode_draws() -> None:
         assert round(events[0][0]) == FIRST_S
 
 
+@pytest.mark.slow
 def test_until_the_first_fault_the_readings_are_those_of_a_lab_without(pair) -> None:
     clean, faulted = pair
     # It acts at the first look at the machine from its time on.

@@ -54,6 +54,7 @@ def longest_mounting(data: Measurements) -> list[int]:
     return max(by.values(), key=len)
 
 
+@pytest.mark.slow
 def test_a_clean_sheet_names_no_fault(sheet) -> None:
     folder, data = sheet
     assert not [w for w in fit(folder, data, "same.csv") if w.startswith("warning: fault")]

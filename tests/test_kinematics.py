@@ -176,3 +176,16 @@ def test_tcp_sensitivity_is_the_derivative_of_the_direct_kinematics() -> None:
         plus = direct(MachineParams.from_vector(theta + step, PROTOTYPE), rho)
         minus = direct(MachineParams.from_vector(theta - step, PROTOTYPE), rho)
         assert np.allclose(jac[..., k], (plus - minus) / (2 * h), rtol=1e-6, atol=1e-7)
+
+
+@pytest.mark.parametrize("preset", ["paper", "realistic"])
+def test_a_posture_alone_has_the_bits_it_has_in_a_batch(preset: str,
+                                                        joint_samples: np.ndarray) -> None:
+    # A single env's step solves one posture on Python floats, a batch on arrays in place:
+    # the two forms must agree bit for bit, or a machine's readings would depend on how
+    # many machines it is simulated with.
+    machine = random_machine(7, preset, design=PROTOTYPE)
+    together = direct(machine, joint_samples)
+    for rho, tcp in zip(joint_samples, together):
+        assert np.array_equal(direct(machine, rho), tcp)
+        assert np.array_equal(direct(machine, rho[None])[0], tcp)

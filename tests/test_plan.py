@@ -250,6 +250,7 @@ def test_the_page_draws_d_and_its_drawn_pdf_holds_it(paper_plan, tmp_path) -> No
     assert len(images) == 2  # the bars and the set-up
 
 
+@pytest.mark.slow
 def test_the_typeset_pdf_is_the_page_with_its_pictures(paper_plan, tmp_path) -> None:
     """With the pdf extra the PDF is the HTML page typeset: the same steps and sheet rows,
     the bars' and the set-up's pictures embedded, A4 pages."""
@@ -367,6 +368,7 @@ class _Actions:
                           else None))
 
 
+@pytest.mark.slow
 def test_the_optimal_plan_is_the_one_compare_plays(optimal_plan) -> None:
     """The procedure `plan` writes for `optimal` is, step for step, the experiment
     `compare`'s `optimal` plays on the nominal machine with compare's defaults (its lab's

@@ -174,6 +174,7 @@ def ballbar_verified() -> dict[str, list]:
             for stated in ("workshop", "lab")}
 
 
+@pytest.mark.slow
 def test_a_ballbar_fails_an_understated_world_and_passes_the_stated_one(
         ballbar_verified) -> None:
     """A ballbar reads the tool to 0.35 um, where the workshop's lead error and backlash

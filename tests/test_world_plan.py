@@ -172,6 +172,7 @@ def test_a_lab_plan_ends_only_when_no_move_pays() -> None:
     assert p._ends(float(np.max(rate)))
 
 
+@pytest.mark.slow
 def test_optimal_stay_never_remounts() -> None:
     """``optimal-stay``'s plan keeps the set-up's stands where ``optimal``'s moves some,
     and is a plan: it ends with a stop within its budget."""

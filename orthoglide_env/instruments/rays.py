@@ -51,7 +51,7 @@ def ray_box_interval(origin: np.ndarray, direction: np.ndarray, centre: np.ndarr
     # the same order, as to_box_frame.
     v = _components(origin - centre, shape)
     d = _components(direction, shape)
-    r = np.ascontiguousarray(np.broadcast_to(np.moveaxis(rot, (-2, -1), (0, 1)), (3, 3, *shape)))
+    r = np.ascontiguousarray(np.broadcast_to(_leading(rot, 2), (3, 3, *shape)))
     h = _components(half, shape)
     t_in = t_out = None
     for i in range(3):
@@ -73,7 +73,14 @@ def ray_box_interval(origin: np.ndarray, direction: np.ndarray, centre: np.ndarr
 def _components(vector: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     """The three coordinates of ``vector`` (``(..., 3)``) as one contiguous array
     ``(3, *shape)``."""
-    return np.ascontiguousarray(np.broadcast_to(np.moveaxis(vector, -1, 0), (3, *shape)))
+    return np.ascontiguousarray(np.broadcast_to(_leading(vector, 1), (3, *shape)))
+
+
+def _leading(x: np.ndarray, tail: int) -> np.ndarray:
+    """``x`` with its last ``tail`` axes moved to the front, as ``np.moveaxis`` moves them
+    (a view), without its checks of the axes (a tenth of a single env's look)."""
+    axes = range(x.ndim)
+    return x.transpose(*axes[x.ndim - tail:], *axes[:x.ndim - tail])
 
 
 def ray_box_distance(origin: np.ndarray, direction: np.ndarray, centre: np.ndarray, rot: np.ndarray,

@@ -53,7 +53,8 @@ class Part(IntEnum):
 
 def on_platform(part: np.ndarray | int) -> np.ndarray:
     """Whether a gauge of ``part`` touches a platform face (a platform or reference gauge)."""
-    return np.isin(part, (Part.PLATFORM, Part.REFERENCE))
+    part = np.asarray(part)
+    return (part == Part.PLATFORM) | (part == Part.REFERENCE)
 
 
 #: The leg of a platform gauge: it has none.

@@ -172,10 +172,20 @@ def direct(machine: MachineParams, rho: np.ndarray, *, tol: float = 1e-11, max_i
     if machine.is_paper_model:
         return np.stack(p, axis=-1)
     shape = np.broadcast_shapes(*(x.shape for x in p))
+    slide = [_slide(machine) + drho[i] + rho[..., i] for i in range(3)]
+    if np.prod(shape) == 1:
+        # One posture (a single env's step): Python floats, whose arithmetic costs a
+        # fraction of one-element arrays', in the same IEEE operations (the same bits).
+        one = _newton_one(
+            [x.item() for x in p], [[g.attach[..., i, j].item() for j in range(3)]
+                                    for i in range(3)],
+            [[(g.o[..., i, j] + slide[i] * g.u[..., i, j]).item() for j in range(3)]
+             for i in range(3)],
+            [x.item() for x in _coordinates(g.lengths**2)], tol, max_iter)
+        return np.array(one).reshape((*shape, 3))
     # Every coordinate of every leg as one contiguous array over the whole batch, flat:
     # numpy then runs each operation below as one long loop, with the same arithmetic in
     # the same order as the vector form.
-    slide = [_slide(machine) + drho[i] + rho[..., i] for i in range(3)]
 
     def flat(x: np.ndarray) -> np.ndarray:
         return np.ascontiguousarray(np.broadcast_to(x, shape)).reshape(-1)
@@ -244,6 +254,24 @@ def _newton(q: list[np.ndarray], attach: list[list[np.ndarray]],
         moving &= np.greater_equal(part, tol, out=big)
         if not moving.any():
             return
+    raise UnreachableError("direct kinematics did not converge: posture near a singularity")
+
+
+def _newton_one(q: list[float], attach: list[list[float]], carriage: list[list[float]],
+                lengths2: list[float], tol: float, max_iter: int) -> list[float]:
+    """:func:`_newton` for one posture, on Python floats: each operation of the arrays'
+    form in the same order, so the TCP has the bits a batch would give it."""
+    for _ in range(max_iter):
+        v = [[(q[j] + attach[i][j]) - carriage[i][j] for j in range(3)] for i in range(3)]
+        f = [v[i][0] * v[i][0] + v[i][1] * v[i][1] + v[i][2] * v[i][2] - lengths2[i]
+             for i in range(3)]
+        rows = [_cross_rows(v[1], v[2]), _cross_rows(v[2], v[0]), _cross_rows(v[0], v[1])]
+        det = (v[0][0] * rows[0][0] + v[0][1] * rows[0][1] + v[0][2] * rows[0][2]) * 2
+        step = [(f[0] * rows[0][j] + f[1] * rows[1][j] + f[2] * rows[2][j]) / det
+                for j in range(3)]
+        q = [q[j] - step[j] for j in range(3)]
+        if max(abs(step[0]), abs(step[1]), abs(step[2])) < tol:
+            return q
     raise UnreachableError("direct kinematics did not converge: posture near a singularity")
 
 
