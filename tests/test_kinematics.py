@@ -186,6 +186,6 @@ def test_a_posture_alone_has_the_bits_it_has_in_a_batch(preset: str,
     # many machines it is simulated with.
     machine = random_machine(7, preset, design=PROTOTYPE)
     together = direct(machine, joint_samples)
-    for rho, tcp in zip(joint_samples, together):
+    for rho, tcp in zip(joint_samples, together, strict=True):
         assert np.array_equal(direct(machine, rho), tcp)
         assert np.array_equal(direct(machine, rho[None])[0], tcp)
