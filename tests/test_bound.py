@@ -3,6 +3,7 @@ design, equal to the analytic optimum on a tiny problem, below every discrete pl
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import gymnasium as gym
@@ -308,3 +309,40 @@ def test_plans_of_the_labs_operations_lie_in_the_polytope_and_above_the_bound(qu
         assert found.bound_mm <= np.sqrt(model.value(counts))
     finally:
         env.close()
+
+
+def test_the_bounds_model_prices_a_plan_as_the_planner_does():
+    # One source of truth: the bound's model carries the planner's unknowns (the machine's,
+    # each stand's installation and zero; no world or lead terms under `ideal`), so a plan
+    # of moves from the paper's stands is priced alike.  The planner counts a reading at
+    # its contact probability under its belief, whose spread is at most the prior's, so
+    # its criterion lies between the plan's readings counted whole and counted at their
+    # a-priori contact (before the installations, the model was 12 % below the planner).
+    ideal = Conditions("ideal")
+    model = bound_model(PROTOTYPE, ideal, SIGMA, False)
+    table = slot_table(PROTOTYPE)
+    dials = np.flatnonzero(model.laser == -1)
+    contact = np.ones(model.rows.shape[0])
+    contact[dials] = table.prior_reach[1][model.label[dials, 0], model.label[dials, 1]]
+    steps, predicted = fixed_plan(PAPER_SLOTS, (True,) * len(PAPER_SLOTS), SIGMA, 600.0,
+                                  PROTOTYPE, ideal, remounts=False)
+    counts = plan_counts(model, PROTOTYPE, PAPER_SLOTS, (True,) * len(PAPER_SLOTS),
+                         [{"op": s.op, "rho": s.rho, "stand": s.stand, "slot": s.slot}
+                          for s in steps])
+    assert not any(s.op == Op.REMOUNT for s in steps)
+    whole, at_contact = np.sqrt(model.value(counts)), np.sqrt(model.value(counts * contact))
+    assert whole <= predicted <= at_contact
+    assert at_contact <= 1.02 * predicted
+
+
+def test_the_local_blocks_give_the_dense_information():
+    # The model's information and its readings' falls, computed block by block (each
+    # slot's zero and installation apart), are the dense products.
+    model = bound_model(PROTOTYPE, LAB, SIGMA, True, True)
+    dense = dataclasses.replace(model, local=None)
+    counts = np.random.default_rng(1).exponential(size=model.rows.shape[0])
+    counts[::3] = 0.0
+    assert np.allclose(model.information(counts), dense.information(counts), rtol=1e-12,
+                       atol=1e-9)
+    x = np.random.default_rng(2).normal(size=model.factor.shape)
+    assert np.allclose(model.fall(x), dense.fall(x), rtol=1e-12, atol=1e-12)

@@ -148,7 +148,7 @@ def test_an_instrument_the_design_leaves_unread_gets_no_bundle():
     # In the ideal world the relaxation may give the bar (or a laser axis) no weight at all:
     # that set-up is not taken, where apportioning its zero readings used to fail.
     model = bound_model(PROTOTYPE, IDEAL, SIGMA, True, True)
-    counts = np.zeros(len(model.rows))
+    counts = np.zeros(model.rows.shape[0])
     counts[np.flatnonzero(model.laser == 0)[:3]] = 2.0
     bundles = rounding._bundles(model, PROTOTYPE, (0, 1), True, counts)
     assert [(b.instrument, b.axis) for b in bundles] == [("interferometer", 0)]

@@ -18,9 +18,11 @@ optimal design, whose optimum no discrete plan can beat.
 
 The unknowns: the machine's 27 errors (the realistic preset's sigmas), the lead error's
 terms as the ``full`` estimator fits them (the pitch table's coefficients, whitened, and
-the screw's periodic error: :func:`~calibrators.estimators.consider.lead_terms`), and a
+the screw's periodic error: :func:`~calibrators.estimators.consider.lead_terms`), a
 zero per dial slot and per drive's interferometer set-up (diffuse, :data:`~orthoglide_env.
-lab.design_belief.ZERO_SCALE`), and the ballbar set-up's pivot centre (the fit's prior,
+lab.design_belief.ZERO_SCALE`), the installation of a stand at each slot (its
+:data:`N_INSTALL` errors at the realistic preset's tolerances, unknowns of the fit and of
+the planner), and the ballbar set-up's pivot centre (the fit's prior,
 :func:`~calibrators.estimators.consider.pivot_sigmas`) and zero (the fit's rows:
 :func:`~calibrators.planning.instruments.reading_rows`).  ``W`` is the TCP error's weight
 over the first two groups (:func:`~orthoglide_env.scoring.predicted.rigid_weight_with_drives`).
@@ -29,11 +31,11 @@ What is relaxed, each a superset of what a plan can do, so the bound stays below
 plan (a Gaussian posterior only narrows when more is known or read):
 
 * every world term but the lead error is known (drift, backlash, warm-up, the room, the
-  indicators' curves, the interferometer's scale error), and so is every stand's
-  installation: their unknowns only widen a plan's error;
-* a slot's readings share one zero, however often a plan mounts a stand there, and so
-  do a drive's set-ups and the ballbar's (a shared zero is separate zeros known to be
-  equal; the pivots' centres likewise);
+  indicators' curves, the interferometer's scale error): their unknowns only widen a
+  plan's error;
+* a slot's readings share one zero and one installation, however often a plan mounts a
+  stand there, and so do a drive's set-ups and the ballbar's (a shared zero is separate
+  zeros known to be equal; the installations and the pivots' centres likewise);
 * a stand reads wherever the nominal machine's tip touches its bar (a priori contact
   above 0), and the stands may be at any slots on any visit, at a fraction of the
   re-mounts' price: a slot the stands do not start at (the paper's) is read only after a
@@ -80,7 +82,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import asdict, dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
@@ -90,7 +92,7 @@ from calibrators.estimators.consider import DEFAULT_NODE_SPACING, lead_terms
 from calibrators.planning.instruments import Bundle, reading_rows
 from orthoglide_env.instruments import interferometer
 from orthoglide_env.instruments.slots import PAPER_LAYOUT
-from orthoglide_env.lab.design_belief import N_MACHINE, ZERO_SCALE
+from orthoglide_env.lab.design_belief import N_MACHINE, N_STAND, ZERO_SCALE
 from orthoglide_env.lab.operations import PAPER_SLOTS, TIME, Op, slot_index
 from orthoglide_env.lab.slot_table import slot_table
 from orthoglide_env.model.design import MachineDesign
@@ -103,6 +105,8 @@ from orthoglide_env.world.table import BALLBAR_LENGTHS_MM
 
 #: The instruments whose readings are candidates of the bound.
 BOUND_INSTRUMENTS: tuple[str, ...] = ("dial", "interferometer", "ballbar")
+#: A stand's installation unknowns (a mounting's unknowns but its dial's zero).
+N_INSTALL: int = N_STAND - 1
 #: ``BoundModel.laser``'s mark of a ballbar candidate (a dial's is -1, a laser's its drive).
 BAR: int = -2
 #: The ballbar's candidate readings lie on the 50 mm bar's circles about ISO 230-4's centre
@@ -134,12 +138,16 @@ class BoundModel:
     """The candidate readings of a lab and the criterion over them.
 
     ``rows`` (N, n): each candidate's whitened row over the unknowns (machine, lead terms,
-    zeros, and a ballbar set-up's pivot centre and zero); ``laser`` (N,): the drive a
+    zeros, the stands' installations per slot, and a ballbar set-up's pivot centre and
+    zero); ``laser`` (N,): the drive a
     laser candidate reads (-1: a dial reading, :data:`BAR`: a ballbar reading);
     ``label`` (N, 3): a dial's (slot, posture, -1), a laser's (-1, axis, target index) or
     a ballbar's (:data:`BAR`, -1, point index);
     ``factor`` (n, r): ``F`` with ``F F^T`` the TCP error's weight padded with zeros
-    (the zeros do not move the tool)."""
+    (the zeros do not move the tool); ``local`` (N, k): the columns of each candidate's
+    own unknowns (a dial's slot's zero and installation; -1: none), which no other
+    slot's candidate reads (None: every column is shared), so that the information costs
+    the shared columns' square and not all of them'."""
 
     rows: np.ndarray
     laser: np.ndarray
@@ -150,11 +158,63 @@ class BoundModel:
     #: and bar index (None: no ballbar).
     bar_points: np.ndarray | None = None
     pivot: tuple[tuple[float, float, float], int] | None = None
+    local: np.ndarray | None = None
 
     def value(self, counts: np.ndarray) -> float:
         """``f(n)``: the predicted mean-square TCP error after rigid motion (mm^2) of
         ``counts`` (N,) readings of each candidate."""
-        return _value(_information(self.rows, counts), self.factor)[0]
+        return _value(self.information(counts), self.factor)[0]
+
+    @cached_property
+    def _blocks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The shared columns and every candidate's values there (N, g), and the local
+        candidates (sorted by slot) with their local values (M, k)."""
+        assert self.local is not None
+        owned = np.flatnonzero(self.local[:, 0] >= 0)
+        if np.any(np.diff(self.local[owned, 0]) < 0):
+            raise ValueError("a model's local candidates must come sorted by their columns")
+        shared = np.setdiff1d(np.arange(self.rows.shape[1]), self.local[owned])
+        return (shared, np.ascontiguousarray(self.rows[:, shared]), owned,
+                np.take_along_axis(self.rows[owned], self.local[owned], axis=1))
+
+    def information(self, counts: np.ndarray) -> np.ndarray:
+        """``sum_i n_i a_i a_i^T`` (n, n) over the candidates read (``counts`` > 0)."""
+        if self.local is None:
+            return _information(self.rows, counts)
+        shared, on_shared, owned, values = self._blocks
+        used = np.flatnonzero(counts > 0)
+        part = on_shared[used]
+        out = np.zeros((self.rows.shape[1],) * 2)
+        out[np.ix_(shared, shared)] = (part * counts[used, None]).T @ part
+        mine = counts[owned] > 0
+        rows, n, values = owned[mine], counts[owned][mine], values[mine]
+        if not rows.size:
+            return out
+        columns = self.local[rows]
+        # Each slot's candidates are contiguous: sum their outer products per slot.
+        starts = np.flatnonzero(np.r_[True, columns[1:, 0] != columns[:-1, 0]])
+        weighted = values * n[:, None]
+        cross = np.add.reduceat(np.einsum("ig,ik->igk", on_shared[rows], weighted), starts,
+                                axis=0)
+        own = np.add.reduceat(np.einsum("ij,ik->ijk", values, weighted), starts, axis=0)
+        for block, across, local in zip(columns[starts], cross, own, strict=True):
+            out[np.ix_(shared, block)] = across
+            out[np.ix_(block, shared)] = across.T
+            out[np.ix_(block, block)] = local
+        return out
+
+    def projected(self, x: np.ndarray) -> np.ndarray:
+        """``rows @ x`` (N, r) for ``x`` (n, r)."""
+        if self.local is None:
+            return self.rows @ x
+        shared, on_shared, owned, values = self._blocks
+        out = on_shared @ x[shared]
+        out[owned] += np.einsum("ik,ikr->ir", values, x[self.local[owned]])
+        return out
+
+    def fall(self, x: np.ndarray) -> np.ndarray:
+        """Each reading's fall of ``f`` (minus its gradient) where ``X = M^-1 F``."""
+        return np.sum(self.projected(x) ** 2, axis=1)
 
     def index(self, slot: int, posture: int) -> int:
         """The candidate of a dial at ``slot`` read at ``posture`` (``ValueError`` where the
@@ -215,10 +275,15 @@ def bound_model(design: MachineDesign, conditions: Conditions, dial_sigma: float
                 else np.zeros((*np.shape(rho), 0)))
 
     n_lead = lead(np.zeros((1, 3))).shape[-1]
-    n = N_MACHINE + n_lead + n_slots + 3 + (4 if ballbar_owned else 0)
+    n = N_MACHINE + n_lead + n_slots + 3 + N_INSTALL * n_slots + (4 if ballbar_owned else 0)
     zero = N_MACHINE + n_lead  # the first zero's column
+    installed = zero + n_slots + 3  # the first slot's installation's first column
     dial = np.zeros((len(slots), n))
     dial[:, :N_MACHINE] = table.change[slots, postures, :N_MACHINE]
+    # The stand's installation, one per slot (the fit's and the planner's unknowns: a plan
+    # that mounts a stand at a slot twice has two, which the bound knows to be equal).
+    columns = installed + N_INSTALL * slots[:, None] + np.arange(N_INSTALL)
+    dial[np.arange(len(slots))[:, None], columns] = table.change[slots, postures, N_MACHINE:]
     # A carriage's error moves a reading as its drive's encoder offset does, at the
     # posture (the zero takes the reading's value at Zero).
     drive = (table.change[slots, postures, :3] + table.at_zero[slots, :3]) / scale[:3]
@@ -261,9 +326,13 @@ def bound_model(design: MachineDesign, conditions: Conditions, dial_sigma: float
     keep = value > 1e-12 * value[-1]
     factor = np.zeros((n, int(keep.sum())))
     factor[:zero] = vector[:, keep] * np.sqrt(value[keep])
+    # A dial's own columns: its slot's zero and installation; no other candidate's.
+    local = np.full((sum(len(r) for r in rows), 1 + N_INSTALL), -1)
+    local[:len(slots), 0] = zero + slots
+    local[:len(slots), 1:] = columns
     return BoundModel(np.vstack(rows), np.concatenate(laser), np.vstack(label), factor,
                       targets, None if bar is None else bar.path,
-                      None if bar is None else (bar.centre, bar.bar))
+                      None if bar is None else (bar.centre, bar.bar), local)
 
 
 def plan_counts(model: BoundModel, design: MachineDesign, slots: tuple[int, ...],
@@ -279,7 +348,7 @@ def plan_counts(model: BoundModel, design: MachineDesign, slots: tuple[int, ...]
     the plan's error on the bound's model, which the bound is below."""
     table = slot_table(design)
     slots_, down = list(slots), list(engaged)
-    counts = np.zeros(len(model.rows))
+    counts = np.zeros(model.rows.shape[0])
     axis = -1
     bar_in = False
     where = {tuple(p): k for k, p in enumerate(table.postures)}
@@ -436,11 +505,6 @@ def _atoms(members: list[np.ndarray], n: int) -> csr_matrix:
     return csr_matrix((np.ones(len(indices)), indices, indptr), shape=(len(members), n))
 
 
-def _fall(rows: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Each reading's fall of ``f`` (minus its gradient) where ``X = M^-1 F``."""
-    return np.sum((rows @ x) ** 2, axis=1)
-
-
 def solve(model: BoundModel, visits: Visits, lasers: np.ndarray,
           stop_above: float = np.inf, bars: np.ndarray | None = None
           ) -> tuple[float, float, np.ndarray]:
@@ -465,12 +529,12 @@ def solve(model: BoundModel, visits: Visits, lasers: np.ndarray,
     rows, factor = model.rows, model.factor
     grid = dial_grid(model)
     bars = np.zeros(0, dtype=int) if bars is None else bars
-    _, picked = best_visits(grid, _fall(rows, factor), visits, visits.settle_s)
+    _, picked = best_visits(grid, model.fall(factor), visits, visits.settle_s)
     members = [p[p >= 0] for p in picked] + [np.array([b]) for b in bars]
     place = np.concatenate([np.arange(len(picked)), len(picked) + np.arange(len(bars))])
     touched = np.array([len(m) > 0 for m in members])
     members, place = [m for m, t in zip(members, touched, strict=True) if t], place[touched]
-    atoms = _atoms(members, len(rows))
+    atoms = _atoms(members, rows.shape[0])
     price = np.concatenate([visits.prices(members, grid),
                             np.full(len(lasers), visits.dwell_s)])
     share = np.full(len(price), 1.0 / len(price))
@@ -480,8 +544,8 @@ def solve(model: BoundModel, visits: Visits, lasers: np.ndarray,
         n_atoms = atoms.shape[0]
         counts = atoms.T @ taken[:n_atoms]
         counts[lasers] += taken[n_atoms:]
-        value, x = _value(_information(rows, counts), factor)
-        fall = _fall(rows, x)
+        value, x = _value(model.information(counts), factor)
+        fall = model.fall(x)
         gains = np.concatenate([atoms @ fall, fall[lasers]])
         if iteration % GAP_EVERY == 0 or iteration == MAX_ITERATIONS:
             lower = max(lower, value - gap(visits, grid, lasers, bars, counts, fall))

@@ -42,7 +42,6 @@ from calibrators.planning.belief import PlannedOperation
 from calibrators.planning.bound import (
     BAR,
     BoundModel,
-    _information,
     _value,
     bar_bundle,
     best_design,
@@ -108,7 +107,7 @@ def dial_visits(model: BoundModel, design: MachineDesign, slots: tuple[int, ...]
     dial = np.flatnonzero(model.laser == -1)
     slot, posture = model.label[dial, 0], model.label[dial, 1]
     read = np.isin(slot, slots) & safe[slot, posture]
-    out = np.zeros((len(table.postures), len(model.rows)))
+    out = np.zeros((len(table.postures), model.rows.shape[0]))
     out[posture[read], dial[read]] = contact[slot[read], posture[read]]
     return out
 
@@ -130,17 +129,17 @@ def sequential_design(model: BoundModel, seconds: float, drives: tuple[int, ...]
         model.laser[instrument] == BAR, visit,
         TIME.settle_and_read_s + TIME.interferometer_target_s)])
     w = np.full(len(price), 1.0 / len(price))
-    counts = np.zeros(len(model.rows))
+    counts = np.zeros(model.rows.shape[0])
     value = np.inf
     for step in range(steps + 1):
         taken = w * seconds / price
         counts[read] = taken[:len(postures)] @ expected
         counts[instrument] = taken[len(postures):]
-        value, x = _value(_information(model.rows, counts), model.factor)
+        value, x = _value(model.information(counts), model.factor)
         if step == steps:
             break
-        gain = np.concatenate([expected @ np.sum((model.rows[read] @ x) ** 2, axis=1),
-                               np.sum((model.rows[instrument] @ x) ** 2, axis=1)])
+        fall = model.fall(x)
+        gain = np.concatenate([expected @ fall[read], fall[instrument]])
         per_second = gain / price
         w = w * per_second / float(w @ per_second)
         w /= w.sum()
