@@ -10,6 +10,7 @@ import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.agents.optimal import fixed_plan
 from calibrators.estimators.catalogue import for_study
+from calibrators.planning import belief as belief_module
 from calibrators.planning.belief import N_MACHINE, SPREAD_SLACK, rigid_weight
 from calibrators.planning.search import Planner, greedy_plan
 from calibrators.study.episodes import measurements_of, run_episode
@@ -283,13 +284,14 @@ def test_the_filter_computes_only_the_spreads_that_decide_its_reach(monkeypatch)
     rng = np.random.default_rng(5)
     table = slot_table(PROTOTYPE)
     computed = [0]
-    spread_of = Planner._spread
+    spreads_of = belief_module.spreads_many
 
-    def counted(self: Planner, stand: int, postures: np.ndarray) -> np.ndarray:
-        computed[0] += len(postures)
-        return spread_of(self, stand, postures)
+    def counted(beliefs: list[Planner], stands: list[tuple[int, int]],
+                postures: list[np.ndarray]) -> list[np.ndarray]:
+        computed[0] += sum(len(p) for p in postures)
+        return spreads_of(beliefs, stands, postures)
 
-    monkeypatch.setattr(Planner, "_spread", counted)
+    monkeypatch.setattr(belief_module, "spreads_many", counted)
     mine = every = 0
     for step in range(40):
         if step == 20:

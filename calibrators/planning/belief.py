@@ -54,7 +54,7 @@ from orthoglide_env.lab.design_belief import (
     woodbury_gain,
 )
 from orthoglide_env.lab.operations import TIME, Op
-from orthoglide_env.lab.slot_table import END_GAP, reach, slot_table
+from orthoglide_env.lab.slot_table import END_GAP, reach_at, slot_table
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.world.conditions import Conditions
 
@@ -250,22 +250,12 @@ class Belief:
             return self.table.tip[np.maximum(np.array(self.slots), 0)][:, postures]
         return predicted_tips_many([self], postures)[0]
 
-    def _spread(self, stand: int, postures: np.ndarray) -> np.ndarray:
-        """Standard deviation (L,) of ``stand``'s predicted tip at ``postures`` (L,), mm,
-        from the covariance.  A posture's value is the same to the bit whichever others
-        are computed with it: the rows go to BLAS in an even count (its kernels take a
-        lone last row their own way, a few ulps off)."""
-        cols = self._columns(stand)[:-1]
-        even = np.append(postures, postures[-1]) if len(postures) % 2 else postures
-        change = self.table.change[self.slots[stand], even]
-        product = change @ self.covariance[cols[:, None], cols]
-        return np.sqrt(np.clip(np.sum(product * change, axis=-1), 0.0, None))[:len(postures)]
-
     def _reach(self, postures: np.ndarray | slice = slice(None)
                ) -> tuple[np.ndarray, np.ndarray]:
-        """:func:`reach` of every stand at ``postures`` (nothing for an empty stand, no
-        contact where it was seen not to read): :func:`reaches` of this belief alone once
-        readings were observed, else the table's prior reach."""
+        """:func:`~orthoglide_env.lab.slot_table.reach` of every stand at ``postures``
+        (nothing for an empty stand, no contact where it was seen not to read):
+        :func:`reaches` of this belief alone once readings were observed, else the
+        table's prior reach."""
         if self.mean is not None:
             return reaches([self], postures)[0]
         slots = np.array(self.slots)
@@ -414,9 +404,10 @@ def predicted_tips_many(beliefs: list[Belief], postures: np.ndarray | slice = sl
 
 def reaches(beliefs: list[Belief], postures: np.ndarray | slice = slice(None)
             ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """:func:`reach` of every stand at ``postures`` (nothing for an empty stand, no contact
-    where it was seen not to read) of each of filters ``beliefs`` (readings observed, one
-    design, as many stands each), stacked over them: each to the bit as alone.
+    """:func:`~orthoglide_env.lab.slot_table.reach` of every stand at ``postures``
+    (nothing for an empty stand, no contact where it was seen not to read) of each of
+    filters ``beliefs`` (readings observed, one design, as many stands each), stacked over
+    them: each to the bit as alone.
 
     A spread is computed only where the answer depends on it.  Not where the tip misses
     its bar or a bar presses the gauge, nor where the tip is less than :data:`END_GAP` off
@@ -425,29 +416,109 @@ def reaches(beliefs: list[Belief], postures: np.ndarray | slice = slice(None)
     it so too.  The bound is the prior spread at a mounting, then each spread as last
     computed, plus :data:`SPREAD_SLACK`: readings only shrink the covariance, so a spread
     never grows until its stand is re-mounted."""
+    tip, spread, index = _tips_and_bounds(beliefs, postures)
+    safe, contact = _reach_where(beliefs, tip, spread, index, np.ones(tip.shape, dtype=bool))
+    return _unread(beliefs, safe, contact, postures)
+
+
+def move_reaches(beliefs: list[Belief]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """:func:`reaches` at every posture of filters ``beliefs``, as far as the moves from
+    where each stands depend on it (:meth:`~calibrators.pricing.Pricer._moves_from`: the
+    plungers down after a move and how likely each reads), each to the bit as
+    :func:`reaches` has it there.
+
+    A plunger is down after a move only if it is down now or safe here, so every stand's
+    reach is worked out here first; then a stand that may be down is predicted only where
+    its tip meets its bar and no bar presses it, a few hundred of the 1,500 postures (a
+    missed bar's safety is the table's, a pressed gauge is never safe, and neither
+    reads).  A stand that stays up is left out everywhere else: its ``safe`` there is
+    False, whatever its reach."""
     table = beliefs[0].table
     slots = np.array([b.slots for b in beliefs])  # (M, K)
-    used, mounted = np.maximum(slots, 0), (slots >= 0)[..., None]
+    used, mounted = np.maximum(slots, 0), slots >= 0
+    tip, spread, index = _tips_and_bounds(beliefs, slice(None))
+    machines, here = np.arange(len(beliefs)), np.array([b.here for b in beliefs])
+    asked = np.zeros(tip.shape, dtype=bool)
+    asked[machines, :, here] = True
+    safe, contact = _reach_where(beliefs, tip, spread, index, asked)
+    may = (np.array([b.engaged for b in beliefs]) | safe[machines, :, here]) & mounted
+    missed = np.isnan(tip)
+    asked = may[..., None] & ~missed & ~table.pressed[used]
+    asked[machines, :, here] = False
+    more_safe, more_contact = _reach_where(beliefs, tip, spread, index, asked)
+    safe |= more_safe | (may[..., None] & missed & ~table.near[used])
+    np.copyto(contact, more_contact, where=asked)
+    return _unread(beliefs, safe, contact, slice(None))
+
+
+def _tips_and_bounds(beliefs: list[Belief], postures: np.ndarray | slice
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every stand's predicted tip (M, K, P') at ``postures`` of each of ``beliefs``, the
+    upper bound of its spread there (:data:`SPREAD_SLACK` added) and the postures'
+    indices (P')."""
     tip = predicted_tips_many(beliefs, postures)
-    shape = tip.shape
     spread = np.stack([b.spread_bound[:, postures] for b in beliefs]) + SPREAD_SLACK
-    flat = (-1, shape[-1])
-    safe, contact = (a.reshape(shape) for a in reach(
-        table, used.reshape(-1), tip.reshape(flat), spread.reshape(flat), postures))
-    index = np.arange(len(table.postures))[postures]
+    return tip, spread, np.arange(len(beliefs[0].table.postures))[postures]
+
+
+def _reach_where(beliefs: list[Belief], tip: np.ndarray, spread: np.ndarray,
+                 index: np.ndarray, asked: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`reaches`' ``safe`` and ``contact`` (M, K, P') from the tips and spread bounds
+    of :func:`_tips_and_bounds`, at the entries ``asked`` (False and 0 elsewhere), each
+    entry's answer its own: a spread computed where the bound leaves it open (each
+    stand's together, in the order of its postures), its bound lowered to it."""
+    table = beliefs[0].table
+    slots = np.array([b.slots for b in beliefs])
+    m, k, j = np.nonzero(asked)
+    slot, posture, tips, spreads = np.maximum(slots[m, k], 0), index[j], tip[m, k, j], spread[
+        m, k, j]
+    safe_at, contact_at = reach_at(table, slot, posture, tips, spreads)
     with np.errstate(invalid="ignore"):
-        open_ = ((tip >= END_GAP) & (contact < 1.0)
-                 & ~table.pressed[used][..., postures] & mounted)
-    rows = np.argwhere(open_.any(axis=-1))  # (machine, stand) pairs
-    for m, k in rows:
-        at = np.flatnonzero(open_[m, k])
-        spread[m, k, at] = beliefs[m].spread_bound[k, index[at]] = beliefs[m]._spread(
-            k, index[at])
-    if len(rows):
-        # Again only for the stands whose spreads were computed: the rest stand.
-        m, k = rows.T
-        safe[m, k], contact[m, k] = reach(table, used[m, k], tip[m, k], spread[m, k],
-                                          postures)
+        open_ = np.flatnonzero((tips >= END_GAP) & (contact_at < 1.0)
+                               & ~table.pressed[slot, posture] & (slots[m, k] >= 0))
+    if open_.size:
+        stand = m[open_] * slots.shape[1] + k[open_]
+        groups = np.split(open_, np.flatnonzero(np.diff(stand)) + 1)
+        pairs = [(int(m[g[0]]), int(k[g[0]])) for g in groups]
+        for group, (i, own), value in zip(groups, pairs, spreads_many(
+                beliefs, pairs, [posture[g] for g in groups]), strict=True):
+            spreads[group] = beliefs[i].spread_bound[own, posture[group]] = value
+        safe_at[open_], contact_at[open_] = reach_at(table, slot[open_], posture[open_],
+                                                     tips[open_], spreads[open_])
+    safe, contact = np.zeros(tip.shape, dtype=bool), np.zeros(tip.shape)
+    safe[m, k, j], contact[m, k, j] = safe_at, contact_at
+    return safe, contact
+
+
+def spreads_many(beliefs: list[Belief], stands: list[tuple[int, int]],
+                 postures: list[np.ndarray]) -> list[np.ndarray]:
+    """Standard deviation of the predicted tip of each (belief, stand) of ``stands``
+    (indices in ``beliefs``, one design) at its ``postures`` (L_i,), mm, from the
+    covariances, in one stacked product.  Each
+    stand's rows are padded to one even count by repeating its last posture, so each
+    item goes to BLAS as an even count of rows, the value of a posture the same to the
+    bit whichever others are computed with it (BLAS's kernels take a lone last row their
+    own way, a few ulps off)."""
+    table = beliefs[0].table
+    longest = max(len(p) for p in postures)
+    longest += longest % 2
+    steps = np.arange(longest)
+    index = np.array([p[np.minimum(steps, len(p) - 1)] for p in postures])  # (G, L)
+    slots = np.array([beliefs[i].slots[k] for i, k in stands])
+    change = table.change[slots[:, None], index]  # (G, L, C)
+    covariance = np.stack([beliefs[i].covariance[np.ix_(_stand_columns(k)[:-1],
+                                                        _stand_columns(k)[:-1])]
+                           for i, k in stands])
+    product = change @ covariance
+    values = np.sqrt(np.clip(np.sum(product * change, axis=-1), 0.0, None))
+    return [v[:len(p)] for v, p in zip(values, postures, strict=True)]
+
+
+def _unread(beliefs: list[Belief], safe: np.ndarray, contact: np.ndarray,
+            postures: np.ndarray | slice) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Each belief's ``safe`` and ``contact`` (K, P') at ``postures``, nothing for an
+    empty stand and no contact where it was seen not to read."""
+    mounted = (np.array([b.slots for b in beliefs]) >= 0)[..., None]
     silent = np.stack([b.silent[:, postures] for b in beliefs])
     safe, contact = safe & mounted, np.where(silent, 0.0, contact) * mounted
     return list(zip(safe, contact, strict=True))

@@ -23,7 +23,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from calibrators.planning.belief import N_MACHINE, Belief, reaches, rigid_factor
+from calibrators.planning.belief import N_MACHINE, Belief, move_reaches, rigid_factor
 from calibrators.planning.world_terms import directions, gains_many, rows_many
 from orthoglide_env.lab.operations import TIME
 from orthoglide_env.lab.slot_table import slot_table
@@ -210,15 +210,7 @@ class Pricer(Belief):
         With the world's terms only the :data:`WORLD_SHORTLIST` moves of the highest
         bounds per second and Zero are priced, with the world's terms
         (:meth:`_price`): their rates are returned, -inf for the others."""
-        return self._top_rates_of(count, *self._moves())
-
-    def _top_rates_of(self, count: int, seconds: np.ndarray, after: np.ndarray,
-                      reads: np.ndarray) -> tuple[np.ndarray, PricedMoves]:
-        """:meth:`top_rates` from the moves' seconds, plungers and readings (:meth:`_moves`)."""
-        rate, priced, moves = self._top_rates_open(count, seconds, after, reads)
-        if moves is not None:
-            self._take_prices(rate, priced, moves, self._price(reads, seconds, moves))
-        return rate, priced
+        return top_rates_many([self], count)[0]
 
     @staticmethod
     def _take_prices(rate: np.ndarray, priced: PricedMoves, moves: np.ndarray,
@@ -230,7 +222,7 @@ class Pricer(Belief):
     def _top_rates_open(self, count: int, seconds: np.ndarray, after: np.ndarray,
                         reads: np.ndarray
                         ) -> tuple[np.ndarray, PricedMoves, np.ndarray | None]:
-        """:meth:`_top_rates_of`, but with the world's terms the moves of the shortlist
+        """:meth:`top_rates`, but with the world's terms the moves of the shortlist
         are left for the caller to price (:meth:`_price`, then :meth:`_take_prices`):
         the rates, the priced moves, and those moves (None: nothing left to price)."""
         wanted = count if self.world is None else max(count, WORLD_SHORTLIST)
@@ -273,7 +265,7 @@ def top_rates_many(pricers: list[Pricer], count: int
         return []
     if all(p.mean is not None and p.table is pricers[0].table
            and len(p.slots) == len(pricers[0].slots) for p in pricers):
-        reached = reaches(pricers)
+        reached = move_reaches(pricers)
     else:
         reached = [pricer._reach() for pricer in pricers]
     opened = []

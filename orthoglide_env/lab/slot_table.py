@@ -94,15 +94,24 @@ def reach(table: SlotTable, slots: np.ndarray, tip: np.ndarray, spread: np.ndarr
     """For gauges at ``slots`` (K,) whose tips are predicted at ``tip`` give or take
     ``spread`` (K, P') at ``postures``, mm: ``safe`` (K, P'), the plunger may be down
     there, and ``contact`` (K, P'), the probability that the tip then touches (0 where
-    it misses).
+    it misses): :func:`reach_at` of every slot at every posture."""
+    index = np.arange(len(table.postures))[postures]
+    return reach_at(table, np.asarray(slots)[:, None], index[None, :], tip, spread)
+
+
+def reach_at(table: SlotTable, slots: np.ndarray, postures: np.ndarray, tip: np.ndarray,
+             spread: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`reach` of gauges at ``slots`` and candidate ``postures`` (indices, broadcast
+    to the shape of ``tip`` and ``spread``), entry by entry: each answer depends on its
+    own entry alone, so a caller may ask only the entries it needs.
 
     Where the tip is on its bar, the tip must be :data:`SAFETY_SIGMAS` of its spread plus
     :data:`END_GAP` off the pushed-in end; where it misses, the bar must be
     :data:`PRESS_MARGIN` clear of pressing the gauge's body."""
     missed = np.isnan(tip)
     with np.errstate(invalid="ignore"):
-        safe = np.where(missed, ~table.near[slots][:, postures],
-                        ~table.pressed[slots][:, postures]
+        safe = np.where(missed, ~table.near[slots, postures],
+                        ~table.pressed[slots, postures]
                         & (tip - SAFETY_SIGMAS * spread >= END_GAP))
     contact = np.zeros(tip.shape)
     touches = safe & ~missed
