@@ -83,22 +83,16 @@ def _register(gymnasium: ModuleType) -> None:
         gymnasium.register(id=DESIGN_LAB_ENV_ID,
                            entry_point="orthoglide_env.wrappers:design_lab_env",
                            vector_entry_point="orthoglide_env.wrappers:DesignLabVector")
-    if DESIGN_LAB_V1_ENV_ID not in gymnasium.registry:
-        # v1 adds the readings at the present posture to v0's observation; v0 stays what
-        # the shipped 330 s policy plays, so Gymnasium's note that a v1 exists is not said.
-        warnings.filterwarnings("ignore", message=f".*{DESIGN_LAB_ENV_ID} is out of date")
-        gymnasium.register(id=DESIGN_LAB_V1_ENV_ID,
-                           entry_point="orthoglide_env.wrappers:design_lab_env",
-                           vector_entry_point="orthoglide_env.wrappers:DesignLabVector",
-                           kwargs={"version": 1})
-    if DESIGN_LAB_V2_ENV_ID not in gymnasium.registry:
-        # v2 observes the readings' counts in place of v1's spectrum; v1 stays what the
-        # shipped one-hour policy plays.
-        warnings.filterwarnings("ignore", message=f".*{DESIGN_LAB_V1_ENV_ID} is out of date")
-        gymnasium.register(id=DESIGN_LAB_V2_ENV_ID,
-                           entry_point="orthoglide_env.wrappers:design_lab_env",
-                           vector_entry_point="orthoglide_env.wrappers:DesignLabVector",
-                           kwargs={"version": 2})
+    # v1 adds the readings at the present posture to v0's observation, v2 observes the
+    # readings' counts in place of v1's spectrum. Each older view stays what a shipped
+    # policy plays, so Gymnasium's note that a newer version exists is not said.
+    for version, (env_id, older) in {1: (DESIGN_LAB_V1_ENV_ID, DESIGN_LAB_ENV_ID),
+                                     2: (DESIGN_LAB_V2_ENV_ID, DESIGN_LAB_V1_ENV_ID)}.items():
+        if env_id not in gymnasium.registry:
+            warnings.filterwarnings("ignore", message=f".*{older} is out of date")
+            gymnasium.register(id=env_id, entry_point="orthoglide_env.wrappers:design_lab_env",
+                               vector_entry_point="orthoglide_env.wrappers:DesignLabVector",
+                               kwargs={"version": version})
 
 
 class _RegisterOnImport(importlib.abc.MetaPathFinder):

@@ -11,6 +11,7 @@ import subprocess
 import sys
 import zipfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -60,58 +61,50 @@ print(decisions, float(observation["time"][0]))
     assert 10 <= int(decisions) and float(seconds) <= 330.0
 
 
-def test_the_one_hour_policy_plays_view_1_within_its_mask() -> None:
-    """The shipped one-hour policy acted in the design view's version 1: its agent keeps
-    that view's belief (the readings here in its observation) on an hour's budget, and
-    its first decisions are open operations."""
+def _play_first_moves(path: Path, env_id: str) -> Any:
+    """Starts the shipped one-hour policy ``path`` (made for ``env_id``) on a lab machine
+    and plays 20 steps, each decision an open operation and none ending the episode: its
+    agent's belief."""
     import gymnasium as gym
 
     import orthoglide_env
     from calibrators.agents.names import get_agent
     from calibrators.agents.policy import read_spec
 
-    spec = read_spec(SHIPPED_HOUR)
-    assert (spec.env_id, spec.budget_s, spec.play) == (orthoglide_env.DESIGN_LAB_V1_ENV_ID,
-                                                       3600.0, "argmax")
-    agent = get_agent(f"policy:{SHIPPED_HOUR}")
+    spec = read_spec(path)
+    assert (spec.env_id, spec.budget_s, spec.play) == (env_id, 3600.0, "argmax")
+    agent = get_agent(f"policy:{path}")
     lab = gym.make(orthoglide_env.LAB_ENV_ID, conditions="lab", gauge_sigma=0.02,
                    budget_s=3600.0)
     observation, info = lab.reset(seed=5)
     agent.reset(lab, observation, np.random.default_rng(0))
-    assert agent.belief.version == 1 and len(agent.belief.observation()) == 272
     for _ in range(20):
         if not agent.queue:
             assert agent.belief.action_mask()[agent.decide()]
         observation, _, terminated, truncated, info = lab.step(agent.act(observation, info))
         assert not (terminated or truncated)
+    return agent.belief
+
+
+def test_the_one_hour_policy_plays_view_1_within_its_mask() -> None:
+    """The shipped one-hour policy acted in the design view's version 1: its agent keeps
+    that view's belief (the readings here in its observation) on an hour's budget, and
+    its first decisions are open operations."""
+    import orthoglide_env
+
+    belief = _play_first_moves(SHIPPED_HOUR, orthoglide_env.DESIGN_LAB_V1_ENV_ID)
+    assert belief.version == 1 and len(belief.observation()) == 272
 
 
 def test_the_counting_policy_plays_view_2_without_the_covariance() -> None:
     """The shipped one-hour policy of view 2 keeps a belief that counts the readings and
     never forms the covariance (it stays the prior's identity), and its first decisions
     are open operations that read: the counts of the postures it chose grow."""
-    import gymnasium as gym
-
     import orthoglide_env
-    from calibrators.agents.names import get_agent
-    from calibrators.agents.policy import read_spec
 
-    spec = read_spec(SHIPPED_COUNTS)
-    assert (spec.env_id, spec.budget_s, spec.play) == (orthoglide_env.DESIGN_LAB_V2_ENV_ID,
-                                                       3600.0, "argmax")
-    agent = get_agent(f"policy:{SHIPPED_COUNTS}")
-    lab = gym.make(orthoglide_env.LAB_ENV_ID, conditions="lab", gauge_sigma=0.02,
-                   budget_s=3600.0)
-    observation, info = lab.reset(seed=5)
-    agent.reset(lab, observation, np.random.default_rng(0))
-    belief = agent.belief
+    belief = _play_first_moves(SHIPPED_COUNTS, orthoglide_env.DESIGN_LAB_V2_ENV_ID)
     assert belief.version == 2 and not belief.follows
     assert len(belief.observation()) == 6 * (39 + 3) + 3 + 1 + 2 + 1500
-    for _ in range(20):
-        if not agent.queue:
-            assert belief.action_mask()[agent.decide()]
-        observation, _, terminated, truncated, info = lab.step(agent.act(observation, info))
-        assert not (terminated or truncated)
     # Zero read at the reset, then a reading after each move.
     assert belief.readings_at.sum() > 1
     np.testing.assert_array_equal(belief.covariance, np.eye(len(belief.covariance)))
