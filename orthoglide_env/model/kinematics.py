@@ -316,27 +316,16 @@ def axis_direction_derivatives(machine: MachineParams) -> np.ndarray:
     return np.einsum("ijk,...ilk->...ilj", R_LEG, dlocal)
 
 
-def carriage_gradients(machine: MachineParams, rho: np.ndarray, weights: np.ndarray,
-                       legs: np.ndarray | None = None) -> np.ndarray:
-    """``weights . dA/dtheta`` for the R1 centre ``A`` of leg ``legs`` at commands ``rho``
-    (``(*batch, *postures, 3)``) over the errors that move it, at fixed commands:
-    ``weights`` ``(..., K, 3)`` and ``legs`` ``(..., K)`` broadcast against the batch and
-    postures (``None``: the three legs in order; ``rho`` ``(..., R, 3)`` with ``legs``
-    ``(R, 1)``: one leg per posture), giving ``(..., K, 5)``, the columns
-    ``CARRIAGE_COLUMNS[legs]`` of the 27 (the others are zero).
-
-    ``A_i = o_i + (L + r + drho_i + rho_i) u_i``: each column in closed form."""
-    parts = carriage_parts(machine, rho, weights, legs)
-    lead = np.broadcast_shapes(*(part.shape[:-1] for part in parts))
-    return np.concatenate([np.broadcast_to(part, (*lead, part.shape[-1])) for part in parts],
-                          axis=-1)
-
-
 def carriage_parts(machine: MachineParams, rho: np.ndarray, weights: np.ndarray,
                    legs: np.ndarray | None, kinds: tuple[bool, bool, bool] = (True, True, True)
                    ) -> list[np.ndarray | None]:
-    """:func:`carriage_gradients`' columns by kind, each broadcasting to its shape: the
-    encoder offset's (..., K, 1), the two tilts' (..., K, 2) and the two offsets'; None for
+    """``weights . dA/dtheta`` for the R1 centre ``A`` of leg ``legs`` at commands ``rho``
+    (``(*batch, *postures, 3)``) over the errors that move it, at fixed commands, by kind
+    (``A_i = o_i + (L + r + drho_i + rho_i) u_i``, each in closed form): ``weights``
+    ``(..., K, 3)`` and ``legs`` ``(..., K)`` broadcast against the batch and postures
+    (``None``: the three legs in order), giving the columns ``CARRIAGE_COLUMNS[legs]`` of
+    the 27 (the others are zero), each broadcasting to its shape: the encoder offset's
+    (..., K, 1), the two tilts' (..., K, 2) and the two offsets'; None for
     a kind not in ``kinds`` (a fit that leaves the axes' tilts and offsets fixed needs only
     the encoder offsets', and the tilts' cost the most)."""
     g, rho = geometry(machine, rho)
