@@ -75,14 +75,6 @@ def directions(start: np.ndarray, targets: np.ndarray, last: np.ndarray) -> np.n
     return np.where(targets > start, 1.0, np.where(targets < start, -1.0, last))
 
 
-def _at(table: np.ndarray, slots: np.ndarray, postures: np.ndarray | slice) -> np.ndarray:
-    """``table[slots][:, postures]`` of a table (S, P, ...) by slot and posture, gathering
-    only the postures asked for (a plan prices a few of some 1,500 at a time)."""
-    if isinstance(postures, slice):
-        return table[slots][:, postures]
-    return table[slots[:, None], np.asarray(postures)[None, :]]
-
-
 @dataclass
 class WorldTerms:
     """The world's unknowns of one experiment being designed on ``table`` (its design's
