@@ -51,6 +51,7 @@ from calibrators.agents import policy as policy_module
 from calibrators.agents.names import POLICY_PREFIX
 from calibrators.agents.policy import save_policy, spec_of
 from calibrators.study.episodes import agent_rng, machine_seed
+from orthoglide_env.lab.counting_rows import CountingRows
 from orthoglide_env.wrappers import design_lab_env
 
 
@@ -65,21 +66,29 @@ def untrained_policy(kwargs: dict, folder: Path) -> Path:
 
 
 #: Each agent's choice alone, without taking in the readings: the policy's (its agents'
-#: observations, network and masks, for a chunk at once), the planner's (each agent's
-#: next operation readied, refits included, the chunk's moves priced at once, the chosen
-#: one taken): the module's functions, then each agent's methods.
-CHOICE = {"policy": (policy_module, "decide_all", ()),
-          "active": (active_module, "best_moves", ("_ready", "_moved"))}
+#: observations, network and masks, for a chunk at once; a view-2 chunk's groups of equal
+#: states), the planner's (each agent's next operation readied, refits included, the
+#: chunk's moves priced at once, the chosen one taken): the module's functions, then each
+#: agent's methods.
+CHOICE = {"policy": (policy_module, ("decide_all", "decide_counting"), ()),
+          "active": (active_module, ("best_moves",), ("_ready", "_moved"))}
 
 
 #: The parts of a policy's decision, each one call for a chunk's agents: taking in a lab
 #: step's readings (the beliefs' stacked Woodbury steps,
-#: :func:`~orthoglide_env.lab.design_belief.observe_many`), the observations (the predicted
-#: error's spectra, ``observations``), the masks (``action_masks``), the network's choice
+#: :func:`~orthoglide_env.lab.design_belief.observe_many`, or a view-2 chunk's rows',
+#: :meth:`~orthoglide_env.lab.counting_rows.CountingRows.observe`), the observations (the
+#: predicted error's spectra, ``observations``, or the rows'), the masks
+#: (``action_masks``, or the rows' candidate moves and masks), the network's choice
 #: (:meth:`~calibrators.agents.actor_weights.ActorWeights.choose_many`).
 PARTS: tuple[str, ...] = ("update", "observation", "mask", "network")
-#: The policy module's functions timed as :data:`PARTS`' first three.
-PART_FUNCTIONS: tuple[str, ...] = ("observe_many", "observations", "action_masks")
+#: The functions and methods timed as :data:`PARTS`' first three: (owner, name, part).
+PART_FUNCTIONS: tuple[tuple[object, str, str], ...] = (
+    (policy_module, "observe_many", "update"), (CountingRows, "observe", "update"),
+    (policy_module, "observations", "observation"),
+    (CountingRows, "observations", "observation"),
+    (policy_module, "action_masks", "mask"), (CountingRows, "moves", "mask"),
+    (CountingRows, "masks", "mask"))
 
 
 def timed(owner: object, method: str, seconds: list[float], k: int) -> None:
@@ -120,16 +129,17 @@ def play(label: str, name: str, kwargs: dict, seed: int, machines: list[int]
     for agent, lab, (observation, _), m in zip(agents, labs, firsts, machines, strict=True):
         agent.reset(lab, observation, agent_rng(machine_seed(seed, m)))
     choosing = [0.0] * (1 + len(PARTS))
-    owner, method, methods = CHOICE[label]
-    restore = [(owner, method, getattr(owner, method))]
-    timed(owner, method, choosing, 0)
+    owner, functions, methods = CHOICE[label]
+    restore = [(owner, function, getattr(owner, function)) for function in functions]
+    for function in functions:
+        timed(owner, function, choosing, 0)
     for agent in agents:
         for own in methods:
             timed(agent, own, choosing, 0)
     if label == "policy":
-        for k, function in enumerate(PART_FUNCTIONS):
-            restore.append((policy_module, function, getattr(policy_module, function)))
-            timed(policy_module, function, choosing, 1 + k)
+        for part_owner, function, part in PART_FUNCTIONS:
+            restore.append((part_owner, function, getattr(part_owner, function)))
+            timed(part_owner, function, choosing, 1 + PARTS.index(part))
         actor = TimedActor(agents[0].actor, choosing)
         for agent in agents:
             agent.actor = actor

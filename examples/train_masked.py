@@ -68,6 +68,7 @@ from training_curve import (
     mean_episode_reward,
     median_rigid,
     plot_curve,
+    silent_logger,
     write_curve,
 )
 
@@ -614,6 +615,7 @@ def main(argv: list[str] | None = None) -> None:
                         learning_rate=args.learning_rate, target_kl=args.target_kl or None,
                         seed=args.seed, device="cpu", policy_kwargs={"net_arch": args.net},
                         verbose=0)
+    silent_logger(model)
     start = time.perf_counter()
     rows = imitate(args, kwargs, model) if args.imitate else []
     if args.start is not None:

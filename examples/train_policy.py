@@ -47,6 +47,7 @@ from training_curve import (
     mean_episode_reward,
     median_rigid,
     plot_curve,
+    silent_logger,
 )
 
 from calibrators.agents import available
@@ -211,6 +212,7 @@ def main() -> None:
                        norm_obs=True, norm_reward=True, gamma=0.99)
     model = PPO("MlpPolicy", vec, n_steps=128, batch_size=256, gamma=0.99, seed=args.seed,
                 policy_kwargs={"log_std_init": LOG_STD_INIT}, verbose=0)
+    silent_logger(model)
     start_near_zero(model)
     curve = curve_callback(args.out, args.every, args.max_minutes,
                            curve_score(lab, env_kwargs, args.eval_seed, args.curve_machines))

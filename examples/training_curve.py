@@ -116,6 +116,16 @@ def curve_callback(out: Path, every: int, max_minutes: float, score: Score,
     return Curve()
 
 
+def silent_logger(model: Any) -> None:
+    """Give ``model`` (a stable-baselines3 algorithm) a logger that writes nowhere: without
+    one, each ``learn`` call makes stable-baselines3's default logger, which creates an
+    empty ``SB3-<date>`` folder in the system's temporary directory (the curve's CSV and
+    picture are the record of a run)."""
+    from stable_baselines3.common.logger import Logger
+
+    model.set_logger(Logger(folder=None, output_formats=[]))
+
+
 def mean_episode_reward(model: Any) -> float:
     """The mean reward of the model's last 100 training episodes (NaN before the first)."""
     rewards = [e["r"] for e in model.ep_info_buffer]

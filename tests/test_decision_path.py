@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import itertools
 from collections.abc import Callable
 from pathlib import Path
@@ -24,6 +25,7 @@ from calibrators.agents.base import action
 from calibrators.agents.names import get_agent
 from calibrators.agents.policy import DesignPolicyAgent
 from calibrators.study.episodes import machine_seed
+from orthoglide_env.lab.counting_rows import FAMILY
 from orthoglide_env.lab.design_belief import DesignBelief, action_masks, observations
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.wrappers import design_lab_env
@@ -36,11 +38,14 @@ LAB = {"conditions": "lab", "gauge_sigma": 0.02, "budget_s": 3600.0}
 def one_by_one(agent: DesignPolicyAgent, observation: dict[str, np.ndarray],
                info: dict[str, Any]) -> dict[str, Any]:
     """The agent's lab action as each agent decided alone before the fast path: its own
-    belief's update, observation and mask, and the float64 logits' arg-max."""
+    belief's update, observation and mask, and the float64 logits' arg-max (plus a draw's
+    noise from the agent's stream, for a policy that draws)."""
     if agent.last is not None:
         agent.belief.observe(agent.last, observation, bool(info.get("refused")))
     if not agent.queue and observation["time"][0] < agent.spec.budget_s:
         logits = agent.actor.logits_many(agent.belief.observation()[None])[0]
+        if agent.spec.play == "draw":
+            logits += agent.rng.gumbel(size=logits.shape)
         chosen = int(np.argmax(np.where(agent.belief.action_mask(), logits, -np.inf)))
         agent.queue = agent.belief.operations(chosen)
     if not agent.queue:
@@ -114,24 +119,31 @@ def test_a_chunk_decides_as_each_agent_alone_did() -> None:
         np.testing.assert_array_equal(action_masks([a.belief])[0], b.belief.action_mask())
 
 
-def counting_agent() -> DesignPolicyAgent:
-    """An agent of view 2 (``OrthoglideLabDesign-v2``): the shipped file's spec in that
-    view, with a network of random weights of its sizes (seeded; its stop's bias far
-    below, so that it plays the half hour).  What is tested is the path to a choice, which
-    is the same whatever the weights."""
+def counting_agent(play: str = "argmax") -> DesignPolicyAgent:
+    """An agent of view 2 (``OrthoglideLabDesign-v2``) that plays as ``play`` says: the
+    shipped file's spec in that view, with a network of random weights of its sizes
+    (seeded; its stop's bias far below, so that it plays the half hour).  What is tested
+    is the path to a choice, which is the same whatever the weights."""
     agent = shipped_agent()
     env = design_lab_env(version=2, **LAB)
     size = env.observation_space.shape[0]
     agent.spec = dataclasses.replace(agent.spec, env_id=orthoglide_env.DESIGN_LAB_V2_ENV_ID,
-                                     observation_size=size)
+                                     observation_size=size, play=play)
+    agent.actor = random_actor(size, env.action_space.n)
+    return agent
+
+
+@functools.cache
+def random_actor(inputs: int, actions: int) -> ActorWeights:
+    """A network of random weights (seeded) of the shipped one's hidden layers, one for
+    all agents of a chunk, as one policy file's agents share theirs."""
     rng = np.random.default_rng(7)
-    sizes = (size, 128, 128, env.action_space.n)
-    weights = tuple((rng.standard_normal((out, inputs)) / np.sqrt(inputs)).astype(np.float32)
-                    for inputs, out in itertools.pairwise(sizes))
+    sizes = (inputs, 128, 128, actions)
+    weights = tuple((rng.standard_normal((out, size)) / np.sqrt(size)).astype(np.float32)
+                    for size, out in itertools.pairwise(sizes))
     biases = [np.zeros(out, dtype=np.float32) for out in sizes[1:]]
     biases[-1][-1] = -100.0
-    agent.actor = ActorWeights(weights, tuple(biases))
-    return agent
+    return ActorWeights(weights, tuple(biases))
 
 
 def test_view_2_decides_from_counts_as_the_view_s_belief_does() -> None:
@@ -144,6 +156,38 @@ def test_view_2_decides_from_counts_as_the_view_s_belief_does() -> None:
     slow, slow_agents = play(machines, together=False, stop_s=1800.0, make=counting_agent)
     assert fast == slow
     assert min(len(taken) for taken in fast) > 100
+    # The view holds no value read: the machines passed the same states, one group.
+    rows = fast_agents[0]._rows
+    assert all(a._rows is rows for a in fast_agents)
+    assert len(rows.groups(np.arange(len(machines)))[0]) == 1
+    assert_same_beliefs(fast_agents, slow_agents)
+
+
+def test_view_2_draws_as_each_agent_alone_does() -> None:
+    """A view-2 policy that draws: each machine's noise is its own, so the chunk's states
+    part and its rows fall into several groups of equal states (and of equal counts);
+    each machine still takes, action for action, what its agent alone took, on four
+    machines for half an hour."""
+    machines = [0, 1, 2, 3]
+
+    def drawing() -> DesignPolicyAgent:
+        return counting_agent("draw")
+
+    fast, fast_agents = play(machines, together=True, stop_s=1800.0, make=drawing)
+    slow, slow_agents = play(machines, together=False, stop_s=1800.0, make=drawing)
+    assert fast == slow
+    # A draw of random weights spends more of its time on re-mounts and far moves.
+    assert min(len(taken) for taken in fast) > 50
+    rows = fast_agents[0]._rows
+    families = rows.state[:, FAMILY]
+    assert len(set(families.tolist())) == len(machines)
+    assert_same_beliefs(fast_agents, slow_agents)
+
+
+def assert_same_beliefs(fast_agents: list[DesignPolicyAgent],
+                        slow_agents: list[DesignPolicyAgent]) -> None:
+    """The chunk's counting beliefs (written back) observe and mask as the view's own
+    beliefs, which followed the covariance, and kept their prior."""
     for a, b in zip(fast_agents, slow_agents, strict=True):
         assert not a.belief.follows and b.belief.follows
         # The view's belief learnt from its readings; the lean one kept its prior.

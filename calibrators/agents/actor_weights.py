@@ -102,15 +102,20 @@ class ActorWeights:
                 last_layer_bounds(weight, self.biases[-1]))
 
     def choose_many(self, observations: np.ndarray, masks: np.ndarray,
-                    noise: np.ndarray | None = None) -> np.ndarray:
+                    noise: np.ndarray | None = None, states: np.ndarray | None = None
+                    ) -> np.ndarray:
         """Each row's most likely open action (N,): the arg-max over ``masks`` (N, actions)
         of :meth:`logits_many` (plus ``noise`` (N, actions), a draw's), the same choice.
+        With ``states`` (N,), the observations and masks are those of G distinct states
+        (G, ...) and row ``k``'s are state ``states[k]``'s: the network runs once per state,
+        and the draws' noise is each row's.
 
         The hidden layers are :meth:`logits_many`'s, float64; the last, most of the
         arithmetic (1735 actions on the prototype), is found in float32 and only for the
         actions open in some row.  A row's choice stands where its best open logit leads
-        every other by more than the two actions' bounds of their float32 logits'
-        distance from float64's (:func:`last_layer_bounds`); any other row is decided by
+        every other by more than its action's bound and the largest action's bound of
+        their float32 logits' distance from float64's (:func:`last_layer_bounds`, plus
+        the rounding of a draw's noise); any other row is decided by
         its float64 logits, so that a row is never decided otherwise than
         :meth:`logits_many` decides it (a tie within the bound costs that row a float64
         pass)."""
@@ -119,6 +124,10 @@ class ActorWeights:
                 axis=1).all():
             raise ValueError(f"masks are (N, {self.weights[-1].shape[0]}) with an open action "
                              f"in every row, got {masks.shape}")
+        if states is not None and (np.ndim(states) != 1 or len(states) == 0 or not (
+                0 <= np.min(states) and np.max(states) < len(hidden))):
+            raise ValueError(f"states are N indices of the {len(hidden)} observations' rows, "
+                             f"got {states!r}")
         weight, transposed, bounds = self.last_float32
         open_ = np.flatnonzero(masks.any(axis=0))
         if len(hidden) >= GATHER_ROWS:
@@ -127,18 +136,21 @@ class ActorWeights:
         else:
             logits = (hidden.astype(np.float32) @ transposed)[:, open_].astype(np.float64)
         logits += self.biases[-1][open_]
+        if states is not None:
+            logits, masks, hidden = logits[states], masks[states], hidden[states]
         if noise is not None:
             logits += noise[:, open_]
+        # A value with a draw's noise added is rounded once more (float64's half ulp each
+        # of the two compared, both at most the row's largest open logit).
+        rounding = 4 * 2.0**-53 * 2 * np.max(np.abs(logits), axis=1)
         logits[~masks[:, open_]] = -np.inf
         rows = np.arange(len(logits))
         top = np.argmax(logits, axis=1)
         best = logits[rows, top]
         logits[rows, top] = -np.inf
-        # A value with a draw's noise added is rounded once more (float64's half ulp each).
-        slack = (bounds[open_][top] + np.max(bounds[open_])
-                 + 4 * 2.0**-53 * (np.abs(best) + np.max(np.abs(logits), axis=1,
-                                                         initial=0.0, where=logits > -np.inf)))
         chosen = open_[top]
+        # The runner-up's bound is at most the largest of any action's.
+        slack = bounds[chosen] + bounds.max() + rounding
         close = np.flatnonzero(best - np.max(logits, axis=1) <= slack)
         if close.size:
             exact = self._last64(hidden[close])

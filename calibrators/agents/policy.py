@@ -48,6 +48,7 @@ from orthoglide_env import (
     FLAT_LAB_ENV_ID,
 )
 from orthoglide_env.instruments.dial import weighting_sigma
+from orthoglide_env.lab.counting_rows import CountingRows
 from orthoglide_env.lab.design_belief import (
     SPECTRUM_VIEWS,
     DesignBelief,
@@ -379,6 +380,21 @@ class DesignPolicyAgent(PolicyAgent):
         self.queue: list[dict[str, Any]] = []
         self.last: dict[str, Any] | None = None
 
+    @property
+    def belief(self) -> DesignBelief:
+        """The agent's belief.  Played in a chunk of counting agents (:func:`counting`),
+        its state is kept in the chunk's rows; read here, it is written back first, and
+        the agent leaves the rows (the next chunk's rows start from the beliefs)."""
+        rows = self.__dict__.get("_rows")
+        if rows is not None:
+            rows.write_back(self._row, self._belief)
+            self._rows = None
+        return self._belief
+
+    @belief.setter
+    def belief(self, value: DesignBelief) -> None:
+        self._belief, self._rows = value, None
+
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
         return self.act_all([self], [observation], [info])[0]
 
@@ -386,10 +402,17 @@ class DesignPolicyAgent(PolicyAgent):
     def act_all(cls, agents: list[Agent], observations: list[dict[str, np.ndarray]],
                 infos: list[Mapping[str, Any]]) -> list[dict[str, Any]]:
         """Each agent takes in its lab's observation (their beliefs together,
-        :func:`~orthoglide_env.lab.design_belief.observe_many`); those that choose an
-        operation now choose together (:func:`decide_all`, one network pass per policy
-        file); each plays its operation's next lab action, or stops once the training
-        episode's time is used."""
+        :func:`~orthoglide_env.lab.design_belief.observe_many`, or the chunk's rows of
+        counting agents, :func:`counting`); those that choose an operation now choose
+        together (:func:`decide_all`, one network pass per policy file; counting agents
+        once per distinct state); each plays its operation's next lab action, or stops
+        once the training episode's time is used."""
+        if counting(agents):
+            rows, index = _counting_rows(agents)
+            deciding = _take_in_counting(rows, index, agents, observations, infos)
+            if deciding:
+                decide_counting(rows, index[deciding], [agents[k] for k in deciding])
+            return _lab_actions(agents)
         following = [(agent, observation, info) for agent, observation, info
                      in zip(agents, observations, infos, strict=True) if agent.last is not None]
         observe_many([a.belief for a, _, _ in following], [a.last for a, _, _ in following],
@@ -404,15 +427,7 @@ class DesignPolicyAgent(PolicyAgent):
             for agent, chosen in zip(group, decide_all(group), strict=True):
                 agent.queue = (agent.belief.operations(chosen) if agent.filter is None
                                else agent.filter.operations(chosen, agent.belief))
-        actions = []
-        for agent in agents:
-            if not agent.queue:
-                actions.append(action(Op.STOP))
-                continue
-            agent.last = agent.queue.pop(0)
-            actions.append(action(agent.last["op"], agent.last["rho"], agent.last["stand"],
-                                  agent.last["slot"]))
-        return actions
+        return _lab_actions(agents)
 
     def decide(self) -> int:
         """An operation among the open ones (the mask), from the policy's network's logits
@@ -423,6 +438,79 @@ class DesignPolicyAgent(PolicyAgent):
         (the flat agent's finding too): such a policy draws.  :func:`decide_all` of this
         agent alone."""
         return decide_all([self])[0]
+
+
+def _lab_actions(agents: list[DesignPolicyAgent]) -> list[dict[str, Any]]:
+    """Each agent's next lab action: its operation's next, or stop when it has none."""
+    actions = []
+    for agent in agents:
+        if not agent.queue:
+            actions.append(action(Op.STOP))
+            continue
+        agent.last = agent.queue.pop(0)
+        actions.append(action(agent.last["op"], agent.last["rho"], agent.last["stand"],
+                              agent.last["slot"]))
+    return actions
+
+
+def counting(agents: list[DesignPolicyAgent]) -> bool:
+    """Whether ``agents`` all play one network of view 2 (the readings' counts) by the
+    view's own moves (no filter beside the belief, no inputs of one): their beliefs only
+    count, and the chunk keeps them as rows (:class:`~orthoglide_env.lab.counting_rows.
+    CountingRows`)."""
+    first = agents[0]
+    return (DESIGN_VIEW_IDS[first.spec.env_id] == 2 and not first.spec.reach
+            and all(a.actor is first.actor and a.filter is None for a in agents))
+
+
+def _counting_rows(agents: list[DesignPolicyAgent]) -> tuple[CountingRows, np.ndarray]:
+    """The rows of ``agents``' beliefs and each agent's row: those they share, else new
+    rows of their beliefs as they are (each written back first)."""
+    rows = agents[0].__dict__.get("_rows")
+    if rows is None or not all(a.__dict__.get("_rows") is rows for a in agents):
+        rows = CountingRows([a.belief for a in agents])
+        for k, agent in enumerate(agents):
+            agent._rows, agent._row = rows, k
+    return rows, np.array([a._row for a in agents])
+
+
+def _take_in_counting(rows: CountingRows, index: np.ndarray,
+                      agents: list[DesignPolicyAgent],
+                      observations: list[dict[str, np.ndarray]],
+                      infos: list[Mapping[str, Any]]) -> list[int]:
+    """:meth:`DesignPolicyAgent.act_all`'s taking in for counting agents (:func:`counting`)
+    of ``rows`` ``index``: their rows take in the lab's step together; the agents (their
+    positions) that choose an operation now."""
+    following = [k for k, agent in enumerate(agents) if agent.last is not None]
+    if following:
+        rows.observe(index[following], [agents[k].last for k in following],
+                     [observations[k] for k in following],
+                     [bool(infos[k].get("refused")) for k in following])
+    return [k for k, agent in enumerate(agents)
+            if not agent.queue and observations[k]["time"][0] < agent.spec.budget_s]
+
+
+def decide_counting(rows: CountingRows, index: np.ndarray,
+                    agents: list[DesignPolicyAgent]) -> None:
+    """Each of ``agents`` (counting agents of ``rows`` ``index``) chooses its operation and
+    queues its lab actions: the rows of equal states are grouped
+    (:meth:`~orthoglide_env.lab.counting_rows.CountingRows.groups`), and each group's
+    observation, mask and operation are found once, with one network pass for the groups
+    (a draw's noise is each agent's own)."""
+    reps, groups = rows.groups(index)
+    moves = rows.moves(reps)
+    seen, masks = rows.observations(reps), rows.masks(reps, moves)
+    first = agents[0]
+    if first.spec.play == "draw":
+        noise = np.array([agent.rng.gumbel(size=masks.shape[1]) for agent in agents])
+        chosen = first.actor.choose_many(seen, masks, noise, groups)
+    else:
+        chosen = first.actor.choose_many(seen, masks)[groups]
+    made: dict[tuple[int, int], list[dict[str, object]]] = {}
+    for agent, group, operation in zip(agents, groups.tolist(), chosen.tolist(), strict=True):
+        if (group, operation) not in made:
+            made[group, operation] = rows.operations(reps[group], operation, moves[group])
+        agent.queue = list(made[group, operation])
 
 
 def _by_actor(agents: list[DesignPolicyAgent]) -> list[list[DesignPolicyAgent]]:

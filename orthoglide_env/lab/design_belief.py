@@ -394,18 +394,29 @@ class DesignBelief:
         then the move, a re-mount, or stop."""
         if not 0 <= action < self.n_actions:
             raise ValueError(f"an operation is an integer in [0, {self.n_actions}), got {action}")
-        idle = {"rho": np.zeros(3), "stand": 0, "slot": 0}
-        if action == self.n_actions - 1:
-            return [{**idle, "op": Op.STOP}]
-        if action >= self.n_postures:
-            stand, slot = divmod(action - self.n_postures, self.n_slots)
-            return [{**idle, "op": Op.REMOUNT, "stand": stand, "slot": slot}]
-        _, after, _ = self.moves()
-        flicks = [{**idle, "op": Op.ENGAGE if down else Op.LIFT, "stand": k}
-                  for k, (down, now) in enumerate(zip(after[:, action].tolist(),
-                                                      self.engaged.tolist(), strict=True))
-                  if down != now]
-        return [*flicks, {**idle, "op": Op.MOVE, "rho": self.table.postures[action].copy()}]
+        after = self.moves()[1] if action < self.n_postures else None
+        return operations_of(self.table, self.n_stands, self.n_slots, action, after,
+                             self.engaged)
+
+
+def operations_of(table: SlotTable, stands: int, slots: int, action: int,
+                  after: np.ndarray | None, engaged: np.ndarray) -> list[dict[str, object]]:
+    """:meth:`DesignBelief.operations` of ``action`` on a design's slot ``table`` with
+    ``stands`` stands and ``slots`` slots, for a state whose plungers are down after each
+    move as ``after`` (K, P) says (:meth:`DesignBelief.moves`; unread unless ``action`` is
+    a move) and now as ``engaged`` (K,)."""
+    postures = len(table.postures)
+    idle = {"rho": np.zeros(3), "stand": 0, "slot": 0}
+    if action == postures + stands * slots:
+        return [{**idle, "op": Op.STOP}]
+    if action >= postures:
+        stand, slot = divmod(action - postures, slots)
+        return [{**idle, "op": Op.REMOUNT, "stand": stand, "slot": slot}]
+    flicks = [{**idle, "op": Op.ENGAGE if down else Op.LIFT, "stand": k}
+              for k, (down, now) in enumerate(zip(after[:, action].tolist(),
+                                                  engaged.tolist(), strict=True))
+              if down != now]
+    return [*flicks, {**idle, "op": Op.MOVE, "rho": table.postures[action].copy()}]
 
 
 def _sync_many(beliefs: list[DesignBelief], seen: list[dict[str, np.ndarray]]) -> None:
@@ -507,23 +518,37 @@ def observation_tails(beliefs: list[DesignBelief]) -> np.ndarray:
     mounted"), engaged and out of service, the posture scaled to [-1, 1] over the design's
     control limits, the time used over the budget, in view 1 the reading history, in
     view 2 its counts and every posture's (:meth:`DesignBelief.posture_counts`)."""
-    first = beliefs[0]
-    count, stands, slots = len(beliefs), first.n_stands, first.n_slots
-    held = np.array([b.slots for b in beliefs])
+    history = (np.array([b.run for b in beliefs]),
+               np.array([b.readings_at[b.here] for b in beliefs]),
+               np.array([b.fall for b in beliefs])) if beliefs[0].version >= 1 else None
+    return tails_of(beliefs[0], np.array([b.slots for b in beliefs]),
+                    np.array([b.engaged for b in beliefs]),
+                    np.array([b.faulted for b in beliefs]), np.array([b.rho for b in beliefs]),
+                    np.array([b.time_s / b.budget_s for b in beliefs]), history,
+                    np.stack([b.readings_at for b in beliefs])
+                    if beliefs[0].version == 2 else None)
+
+
+def tails_of(first: DesignBelief, held: np.ndarray, engaged: np.ndarray, faulted: np.ndarray,
+             rho: np.ndarray, clock: np.ndarray,
+             history: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
+             counts: np.ndarray | None) -> np.ndarray:
+    """:func:`observation_tails` (N, m) of N states of beliefs like ``first`` (its design,
+    stands and view) from their arrays: the slots held (N, K; -1: none), plungers down and
+    stands out of service (N, K), postures (N, 3), the time used over the budget (N,),
+    in views 1 and 2 the readings in a row here, in all here and the last one's fall (N,
+    each), in view 2 the readings at every posture (N, P)."""
+    count, stands, slots = len(held), first.n_stands, first.n_slots
     tails = np.zeros((count, stands, slots + 3))
     tails[np.arange(count)[:, None], np.arange(stands), np.where(held >= 0, held, slots)] = 1
-    tails[:, :, -2] = [b.engaged for b in beliefs]
-    tails[:, :, -1] = [b.faulted for b in beliefs]
+    tails[:, :, -2] = engaged
+    tails[:, :, -1] = faulted
     low, high = first.design.rho_min, first.design.rho_max
-    rho = (2 * np.array([b.rho for b in beliefs]) - (high + low)) / (high - low)
-    parts = [tails.reshape(count, -1), rho, [[b.time_s / b.budget_s] for b in beliefs]]
+    parts = [tails.reshape(count, -1), (2 * rho - (high + low)) / (high - low), clock[:, None]]
     if first.version >= 1:
-        history = _history(np.array([b.run for b in beliefs]),
-                           np.array([b.readings_at[b.here] for b in beliefs]),
-                           np.array([b.fall for b in beliefs]))
-        parts.append(history if first.version == 1 else history[:, :2])
+        parts.append(_history(*history) if first.version == 1 else _history(*history)[:, :2])
     if first.version == 2:
-        parts.append(np.stack([b.readings_at for b in beliefs]) / COUNT_SCALE)
+        parts.append(counts / COUNT_SCALE)
     return np.concatenate(parts, axis=1)
 
 
@@ -538,11 +563,18 @@ def action_masks(beliefs: list[DesignBelief]) -> np.ndarray:
     """:meth:`DesignBelief.action_mask` of each of ``beliefs`` (of one design and stands),
     stacked (N, ``n_actions``): each state's candidate moves from the cache
     (:func:`candidate_moves`), the clock and the held slots of all of them at once."""
-    first = beliefs[0]
-    count, postures, slots = len(beliefs), first.n_postures, first.n_slots
-    moves = [b._candidates() for b in beliefs]
-    clock = np.array([b.time_s for b in beliefs])
-    budget = np.array([b.budget_s for b in beliefs])
+    return masks_of(beliefs[0], [b._candidates() for b in beliefs],
+                    np.array([b.time_s for b in beliefs]),
+                    np.array([b.budget_s for b in beliefs]), [b.here for b in beliefs],
+                    np.array([b.slots for b in beliefs]))
+
+
+def masks_of(first: DesignBelief, moves: list[Moves], clock: np.ndarray, budget: np.ndarray,
+             here: list[int] | np.ndarray, held: np.ndarray) -> np.ndarray:
+    """:func:`action_masks` (N, ``n_actions``) of N states of beliefs like ``first`` (its
+    design and stands) from their candidate moves (:func:`candidate_moves`), clocks and
+    budgets (N,), postures' indices (N,) and slots held (N, K; -1: none)."""
+    count, postures, slots = len(moves), first.n_postures, first.n_slots
     masks = np.empty((count, first.n_actions), dtype=bool)
     np.stack([m[3] for m in moves], out=masks[:, :postures])
     # A state's readable moves all end within the budget while its longest one does: only
@@ -551,9 +583,8 @@ def action_masks(beliefs: list[DesignBelief]) -> np.ndarray:
     for k in np.flatnonzero(late).tolist():
         masks[k, :postures] &= clock[k] + moves[k][0] <= budget[k]
     # The drive to Zero, as the lab times it, from the table of every move.
-    remount_s = first.drive_s[[b.here for b in beliefs], first.table.zero] + TIME.remount_s
+    remount_s = first.drive_s[here, first.table.zero] + TIME.remount_s
     free = np.repeat(clock + remount_s <= budget, slots).reshape(count, slots)
-    held = np.array([b.slots for b in beliefs])
     rows, stands = np.nonzero(held >= 0)
     free[rows, held[rows, stands]] = False
     masks[:, postures:-1] = np.tile(free, first.n_stands)

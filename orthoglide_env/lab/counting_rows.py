@@ -1,0 +1,193 @@
+"""A chunk of design beliefs that count readings (view 2's, without the covariance), kept as
+rows of arrays, so that a chunk of machines takes in its lab steps, observes and finds its
+masks in a few array calls per step, not a few per machine.
+
+A belief of view 2 that does not follow the covariance
+(:class:`~orthoglide_env.lab.design_belief.DesignBelief` with ``covariance=False``) is its
+stands' states, its posture, its clock, the readings in a row here and the readings taken
+at every candidate posture.  :class:`CountingRows` keeps those of N beliefs as arrays of
+N rows, takes in a lab step of any of them at once (:meth:`CountingRows.observe`, the
+beliefs' own :meth:`~orthoglide_env.lab.design_belief.DesignBelief.observe`), and groups
+the rows whose states are equal (:meth:`CountingRows.groups`): their observations, masks
+and operations are the same, found once per group.  The view's observation never holds a
+value read, so machines played alike (one policy, one lab's clock, no refusal) pass the
+same states, and a chunk's decision then costs about one machine's.
+
+Which rows read the same readings is followed exactly, without comparing the counts: rows
+of one family (the column :data:`FAMILY` of :attr:`CountingRows.state`) have equal
+counts, and two of them stay in one family while each step either reads at the same
+posture in both or in neither (a count changes only where a reading is taken, by one).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Hashable, Iterable
+
+import numpy as np
+
+from orthoglide_env.lab.design_belief import (
+    DesignBelief,
+    Moves,
+    masks_of,
+    operations_of,
+    tails_of,
+)
+from orthoglide_env.lab.operations import Op
+
+#: The columns of :attr:`CountingRows.state` before the stands': the row's family (see the
+#: module), its posture's index, its readings in a row here, its clock and budget (s), its
+#: posture's joint targets (3); then each stand's slot (-1: none), plunger down, out of
+#: service (K each).
+FAMILY, HERE, RUN, CLOCK, BUDGET, RHO = 0, 1, 2, 3, 4, slice(5, 8)
+STANDS_FROM: int = 8
+
+
+class CountingRows:
+    """The bookkeeping of ``beliefs`` (counting beliefs of one design, stands, budget and
+    view 2, in that order) as rows of arrays; the beliefs themselves are left as they are
+    (:meth:`write_back` brings one up to date)."""
+
+    def __init__(self, beliefs: list[DesignBelief]) -> None:
+        first = beliefs[0]
+        if any(b.follows or b.version != 2 or b.design != first.design
+               or b.n_stands != first.n_stands for b in beliefs):
+            raise ValueError("counting rows are of view-2 beliefs that count readings "
+                             "(covariance=False), of one design and stand count")
+        self.first = first
+        k = first.n_stands
+        self.slots = slice(STANDS_FROM, STANDS_FROM + k)
+        self.engaged = slice(STANDS_FROM + k, STANDS_FROM + 2 * k)
+        self.faulted = slice(STANDS_FROM + 2 * k, STANDS_FROM + 3 * k)
+        #: Each row's state but its counts (N, :data:`STANDS_FROM` + 3 K), in float64
+        #: (integers and flags exactly): one array, so that a chunk's rows are compared
+        #: and gathered in one call each.
+        self.state = np.array([[0.0, b.here, b.run, b.time_s, b.budget_s, *b.rho, *b.slots,
+                                *b.engaged, *b.faulted] for b in beliefs])
+        self.counts = np.stack([b.readings_at for b in beliefs])
+        self.state[:, FAMILY] = _families(self.counts)
+
+    def observe(self, rows: np.ndarray, operations: list[dict[str, object]],
+                seen: list[dict[str, np.ndarray]], refused: list[bool]) -> None:
+        """:meth:`DesignBelief.observe` of the beliefs of ``rows`` (distinct) after their
+        lab ``operations``, from their labs' observations ``seen`` (a refused operation
+        changes nothing but the clock)."""
+        first = self.first
+        # One pass over the operations: which moved (and where to), which re-mounted.
+        moved, to, remounted = [], [], []
+        for k, (operation, no) in enumerate(zip(operations, refused, strict=True)):
+            if not no and operation["op"] == Op.MOVE:
+                moved.append(k)
+                to.append(first.index[operation["rho"].tobytes()])
+            elif not no and operation["op"] == Op.REMOUNT:
+                remounted.append(k)
+        state = self.state[rows]
+        reads = np.array(moved + remounted, dtype=np.int64)
+        if moved:
+            # A stay ends where the move goes elsewhere.
+            state[[k for k, t in zip(moved, to, strict=True) if t != state[k, HERE]], RUN] = 0
+            state[moved, HERE] = to
+            state[moved, RHO] = first.table.postures[to]
+        if remounted:
+            # A re-mount reads at Zero with another set of mountings: a new stay.
+            state[remounted, RUN] = 0
+            state[remounted, HERE] = first.table.zero
+            state[remounted, RHO] = 0.0
+        slot = np.array([o["slot"] for o in seen], dtype=np.int64)
+        # A stand at a slot beyond the design's catalogue (or none) holds no slot here.
+        held = np.where(slot < first.n_slots, slot, -1)
+        state[:, self.slots] = held
+        state[:, self.engaged] = np.array([o["engaged"] for o in seen], dtype=bool) & (
+            held >= 0)
+        state[:, self.faulted] = np.array([o["faulted"] for o in seen], dtype=bool)
+        state[:, CLOCK] = [float(o["time"][0]) for o in seen]
+        at = np.array(to + [first.table.zero] * len(remounted), dtype=np.int64)
+        self.counts[rows[reads], at] += 1
+        state[reads, RUN] += 1
+        self.state[rows] = state
+        key = self.state[:, FAMILY] * (first.n_postures + 1)
+        key[rows[reads]] += at + 1
+        self.state[:, FAMILY] = _numbered(key.tolist())[1]
+
+    def groups(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The rows of ``rows`` whose states are equal, grouped: one row of each group
+        (G,) and each row's group (len(rows),).  Equal states are equal counts (one
+        family), stands, posture, clock, budget and readings in a row."""
+        state = self.state[rows]
+        # Rows compared by their bytes, a row's floats to the bit.
+        flat, width = state.tobytes(), state.itemsize * state.shape[1]
+        firsts, inverse = _numbered(flat[start:start + width]
+                                    for start in range(0, len(flat), width))
+        return rows[firsts], inverse
+
+    def moves(self, rows: np.ndarray) -> list[Moves]:
+        """The candidate moves of the states of ``rows``
+        (:func:`~orthoglide_env.lab.design_belief.candidate_moves`, from the design's
+        cache of states)."""
+        state = self.state[rows]
+        return [self.first._moves_of(slots.tobytes(), faulted.tobytes(), engaged.tobytes(),
+                                     here)
+                for slots, faulted, engaged, here in zip(
+                    state[:, self.slots].astype(np.int64), state[:, self.faulted] != 0,
+                    state[:, self.engaged] != 0, state[:, HERE].astype(int).tolist(),
+                    strict=True)]
+
+    def observations(self, rows: np.ndarray) -> np.ndarray:
+        """:meth:`DesignBelief.observation` (len(rows), n) of the beliefs of ``rows``, the
+        same floats."""
+        state, counts = self.state[rows], self.counts[rows]
+        total = counts[np.arange(len(rows)), state[:, HERE].astype(np.int64)]
+        return tails_of(self.first, state[:, self.slots].astype(np.int64),
+                        state[:, self.engaged], state[:, self.faulted], state[:, RHO],
+                        state[:, CLOCK] / state[:, BUDGET],
+                        (state[:, RUN], total, np.zeros(len(rows))), counts
+                        ).astype(np.float32)
+
+    def masks(self, rows: np.ndarray, moves: list[Moves]) -> np.ndarray:
+        """:meth:`DesignBelief.action_mask` (len(rows), ``n_actions``) of the beliefs of
+        ``rows``, whose candidate moves are ``moves`` (:meth:`moves`)."""
+        state = self.state[rows]
+        return masks_of(self.first, moves, state[:, CLOCK], state[:, BUDGET],
+                        state[:, HERE].astype(np.int64),
+                        state[:, self.slots].astype(np.int64))
+
+    def operations(self, row: int, action: int, moves: Moves) -> list[dict[str, object]]:
+        """:meth:`DesignBelief.operations` of ``action`` for the belief of ``row``, whose
+        candidate moves are ``moves``."""
+        first = self.first
+        return operations_of(first.table, first.n_stands, first.n_slots, action, moves[1],
+                             self.state[row, self.engaged] != 0)
+
+    def write_back(self, row: int, belief: DesignBelief) -> None:
+        """Bring ``belief``, the belief of ``row``, up to this row's state (its own arrays,
+        copied out)."""
+        state = self.state[row]
+        belief.slots = state[self.slots].astype(np.int64)
+        belief.engaged, belief.faulted = state[self.engaged] != 0, state[self.faulted] != 0
+        belief.rho, belief.readings_at = state[RHO].copy(), self.counts[row].copy()
+        belief.here, belief.run = int(state[HERE]), int(state[RUN])
+        belief.time_s, belief.fall = float(state[CLOCK]), 0.0
+        belief._moves = None
+
+
+def _numbered(keys: Iterable[Hashable]) -> tuple[list[int], np.ndarray]:
+    """Equal ``keys`` numbered alike, in the order of their first: the first's position
+    of each number, and each key's number."""
+    numbers: dict[Hashable, int] = {}
+    firsts: list[int] = []
+    numbered = []
+    for position, key in enumerate(keys):
+        number = numbers.setdefault(key, len(numbers))
+        if number == len(firsts):
+            firsts.append(position)
+        numbered.append(number)
+    return firsts, np.array(numbered, dtype=np.int64)
+
+
+def _families(counts: np.ndarray) -> np.ndarray:
+    """Each row's family (N,) of readings' ``counts`` (N, P): rows of equal counts share
+    one, numbered in their first row's order."""
+    family = np.full(len(counts), -1, dtype=np.int64)
+    for row in range(len(counts)):
+        if family[row] < 0:
+            family[(family < 0) & (counts == counts[row]).all(axis=1)] = family.max() + 1
+    return family
