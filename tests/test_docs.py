@@ -8,9 +8,10 @@ with each group (each ``A | B`` alternative of a group, each ``a|b`` value) in t
 Each variant must parse, and every value a synopsis offers for an option must be one the
 option's ``--help`` names. A line with a placeholder (``FILE``, ``MM``, ``...``) is a
 synopsis, only parsed; each variant of a concrete line of a code block is run, with at
-most one machine and one job, in a fresh folder holding the ``m.json`` and ``r.csv`` the
-documents use (a command that several lines give alike, for the first of them). Inline
-spans are the measured runs behind the tables (minutes): parsed only.
+most one machine, one job and a quarter hour of lab time, in a fresh folder holding the
+``m.json`` and ``r.csv`` the documents use (a command that several lines give alike, for
+the first of them). Inline spans are the measured runs behind the tables (minutes): parsed
+only.
 """
 
 from __future__ import annotations
@@ -37,8 +38,12 @@ ROOT = Path(__file__).resolve().parent.parent
 DOCUMENTS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 #: The paper's Table 1 machine: the documents' ``m.json``.
 TABLE1 = json.dumps(TABLE1_ERRORS)
-#: Options whose value is cut down to keep each run small.
-TINY = {"--machines": "1", "--jobs": "1"}
+#: Options whose value is cut down to keep each run small.  The lab time is given where a
+#: command takes it and a line leaves it at its default hour: a planning agent's plan and a
+#: random agent's play grow with it (the documents' one-hour lines took 12 to 42 CPU-s, a
+#: quarter hour 4 to 15), while the options and the paths a command takes are those of any
+#: budget.  Hour-long plans are played in tests/test_plan.py and tests/test_design.py.
+TINY = {"--machines": "1", "--jobs": "1", "--budget": "900"}
 PLACEHOLDER = re.compile(r"\.\.\.|\b[A-Z][A-Z_]*\b")
 
 
@@ -233,12 +238,16 @@ def _tiny(argv: list[str]) -> list[str]:
     paths from the repository's top) found from the repository."""
     out = [str(ROOT / w) if "/" in w and (ROOT / w).is_file() else w for w in argv]
     for k, word in enumerate(argv[:-1]):
-        if word in TINY and int(argv[k + 1]) > int(TINY[word]):
+        if word in TINY and float(argv[k + 1]) > float(TINY[word]):
             out[k + 1] = TINY[word]
         if word in ("--agents", "--agent"):
             out[k + 1] = ",".join(
                 POLICY_PREFIX + str(ROOT / a[len(POLICY_PREFIX):])
                 if a.startswith(POLICY_PREFIX) else a for a in argv[k + 1].split(","))
+    command = _commands().get(argv[0])
+    if command is not None and "--budget" in command._option_string_actions and (
+            "--budget" not in argv):
+        out += ["--budget", TINY["--budget"]]
     return out
 
 
