@@ -92,6 +92,22 @@ def test_a_slot_the_stands_do_not_start_at_pays_for_its_re_mount():
     assert free[1] < best
 
 
+def test_held_stands_read_only_where_they_start():
+    # An infinite re-mount holds the stands where they start: slot 1 is never read, so
+    # its unknown keeps its prior (1) and the least f is slot 0's alone, every visit on it.
+    a, b, seconds = 2.0, 1.5, 60.0
+    held = Visits(seconds, 1.0, 2.0, 6, (0,), np.inf)
+    lower, value, counts = solve(tiny(a, b), held, np.zeros(0, dtype=int))
+    best = 1 / (1 + seconds * a**2) + 1.0
+    assert counts[1] == 0.0
+    assert lower <= best + 1e-12 <= value + 2e-12
+    assert value - lower <= bound.GAP_SHARE * value
+    # With a re-mount's price the second slot is worth reading: the bound of every plan is
+    # below the held stands' one.
+    moved = solve(tiny(a, b), Visits(seconds, 1.0, 2.0, 6, (0,), 20.0), np.zeros(0, dtype=int))
+    assert moved[1] < lower
+
+
 def test_the_laser_pays_its_dwell_on_a_visit():
     # One dial candidate on the first unknown, one laser candidate on the second: the
     # least of f over the polytope, found by brute force over the laser's readings L
@@ -154,6 +170,18 @@ def test_bound_is_below_every_discrete_plan(quick):
     # Owning more can only help: the dial-only problem is one of the laser lab's.
     assert laser.bound_mm <= dial.bound_mm
     assert 0 < dial.bound_mm <= dial.design_mm
+    # The plans that never re-mount have a bound of their own, above every plan's: the
+    # paper's plan is one, and so is optimal's without re-mounts.
+    held = lower_bound(PROTOTYPE, LAB, SIGMA, budget, remounts=False)
+    assert dial.bound_mm <= held.bound_mm
+    steps, _ = fixed_plan(PAPER_SLOTS, (True,) * len(PAPER_SLOTS), SIGMA, budget, PROTOTYPE,
+                          LAB, remounts=False)
+    still = {"paper": paper,
+             "optimal without re-mounts": [{"op": s.op, "rho": s.rho, "stand": s.stand,
+                                             "slot": s.slot} for s in steps]}
+    for name, actions in still.items():
+        assert not any(a["op"] == Op.REMOUNT for a in actions), name
+        assert held.bound_mm <= _plan_mm(model, actions), name
 
 
 def test_bound_round_trips_and_refuses_bad_input():

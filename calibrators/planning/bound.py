@@ -408,7 +408,9 @@ class Visits:
     candidate it is at most once and at most ``stands`` of them (or the bar's point), and
     the laser at one target for ``dwell_s`` more (a visit of its own where no dial or bar
     is read).  A slot the stands do not ``start`` at is read only after a re-mount there
-    (``remount_s``), so each of its readings adds :attr:`moved_s` to its visit."""
+    (``remount_s``), so each of its readings adds :attr:`moved_s` to its visit (an
+    infinite ``remount_s``: the stands are held where they start, the polytope of the
+    plans that never re-mount)."""
 
     seconds: float
     settle_s: float
@@ -424,10 +426,17 @@ class Visits:
         visits, so its readings ``n`` took at least ``n settle_s / seconds`` re-mounts."""
         return self.remount_s * self.settle_s / self.seconds
 
+    def moved_seconds(self, count: np.ndarray) -> np.ndarray:
+        """What ``count`` readings of slots the stands do not start at add to a visit
+        (infinite where the stands are held and ``count`` is not 0)."""
+        if np.isfinite(self.remount_s):
+            return self.moved_s * np.asarray(count)
+        return np.where(np.asarray(count) > 0, np.inf, 0.0)
+
     def prices(self, members: list[np.ndarray], grid: np.ndarray) -> np.ndarray:
         """The seconds of a visit that reads each of ``members`` (dial or bar candidates)."""
         moved = _moved(grid, self.start)
-        return np.array([self.settle_s + self.moved_s * np.count_nonzero(np.isin(m, moved))
+        return np.array([self.settle_s + self.moved_seconds(np.count_nonzero(np.isin(m, moved)))
                          for m in members])
 
 
@@ -466,10 +475,12 @@ def best_visits(grid: np.ndarray, fall: np.ndarray, visits: Visits, base_s: floa
         top = np.take_along_axis(gains[:, columns], order, axis=1)
         sums.append(np.concatenate([np.zeros((len(grid), 1)), np.cumsum(top, axis=1)], axis=1))
     own, other = np.arange(sums[0].shape[1]), np.arange(sums[1].shape[1])
+    moved = visits.moved_seconds(other)
     with np.errstate(invalid="ignore"):
         rate = ((base_gain + sums[0][:, :, None] + sums[1][:, None, :])
-                / (base_s + visits.moved_s * other[None, None, :]))
+                / (base_s + moved[None, None, :]))
     rate[:, own[:, None] + other[None, :] > k] = -np.inf
+    rate[:, :, ~np.isfinite(moved)] = -np.inf
     rate = np.nan_to_num(rate, nan=-np.inf).reshape(len(grid), -1)
     best = np.argmax(rate, axis=1)
     a, b = np.divmod(best, len(other))
@@ -654,11 +665,13 @@ def setup_seconds(drives: tuple[int, ...]) -> float:
 
 def lower_bound(design: MachineDesign, conditions: Conditions, dial_sigma: float,
                 budget_s: float, instruments: tuple[str, ...] = ("dial",),
-                stands: int = len(PAPER_SLOTS)) -> Bound:
+                stands: int = len(PAPER_SLOTS), remounts: bool = True) -> Bound:
     """The bound (see the module) of a lab of ``design`` under ``conditions`` with dials of
     weighting sigma ``dial_sigma`` (mm) on ``stands`` stands, owning ``instruments``, over
-    a budget of ``budget_s`` seconds."""
-    return best_design(design, conditions, dial_sigma, budget_s, instruments, stands).bound
+    a budget of ``budget_s`` seconds; without ``remounts``, the bound of the plans that
+    never re-mount a stand (the stands held at the paper's slots: above the bound)."""
+    return best_design(design, conditions, dial_sigma, budget_s, instruments, stands,
+                       remounts).bound
 
 
 @dataclass(frozen=True)
@@ -675,7 +688,7 @@ class Design:
 
 def best_design(design: MachineDesign, conditions: Conditions, dial_sigma: float,
                 budget_s: float, instruments: tuple[str, ...] = ("dial",),
-                stands: int = len(PAPER_SLOTS)) -> Design:
+                stands: int = len(PAPER_SLOTS), remounts: bool = True) -> Design:
     """:func:`lower_bound` with the design that reaches it (a plan rounds it:
     :mod:`calibrators.planning.rounding`)."""
     if not (np.isfinite(budget_s) and budget_s > 0):
@@ -705,7 +718,7 @@ def best_design(design: MachineDesign, conditions: Conditions, dial_sigma: float
             if seconds <= 0:
                 continue
             visits = Visits(seconds, TIME.settle_and_read_s, TIME.interferometer_target_s,
-                            stands, start, TIME.remount_s)
+                            stands, start, TIME.remount_s if remounts else np.inf)
             lasers = np.flatnonzero(np.isin(model.laser, drives))
             bars = np.flatnonzero(model.laser == BAR) if pivot else None
             lower, value, counts = solve(model, visits, lasers, best[0] if best else np.inf,
