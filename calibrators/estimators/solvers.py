@@ -55,16 +55,20 @@ def centre(values: np.ndarray, mask: np.ndarray, onehot: np.ndarray,
     arrays are large, and fresh): it is returned."""
     weights = mask.astype(float)
     counts = np.maximum(weights @ onehot, 1.0)  # (M, K)
+    # Where every reading is used (most fits), a weight of one leaves each value's bits.
+    every = bool(mask.all())
     if values.ndim == 3:
         weights = weights[..., None]
         counts = counts[..., None]
-    values *= weights
+    if not every:
+        values *= weights
     if values.ndim == 2:
         mean = (values @ onehot) / counts
     else:
         mean = (onehot.T @ values) / counts
     values -= mean[:, mounting]
-    values *= weights
+    if not every:
+        values *= weights
     return values
 
 
