@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
 
@@ -292,31 +293,75 @@ class ReadingLayout:
 #: The earlier name of :class:`ReadingLayout` ("design" now means a MachineDesign only).
 Design = ReadingLayout
 
-def predict(theta: np.ndarray, layout: ReadingLayout) -> np.ndarray:
+class GaugeSight(NamedTuple):
+    """What the dial gauges of machines ``(*b,)`` meet where they were read (the rows of
+    :attr:`ReadingLayout.gauge_reads`, in that order; a layout and its
+    :attr:`~ReadingLayout.distinct` one have the same): the part of the model that its
+    readings (:func:`predict`) and their derivatives (:func:`jacobian`) share.  One
+    computation serves both, so a fit passes the readings' own to the derivatives at the
+    same parameters instead of computing them again, with the same bits (each machine's
+    numbers are its own, whatever its batch)."""
+
+    aim: np.ndarray  # (G, 3) each stand's ray's direction as aimed (a world axis)
+    origins: np.ndarray  # (*b, G, 3) the rays as the stands hold them
+    directions: np.ndarray  # (*b, G, 3)
+    tcp: np.ndarray  # (*b, P, 3) the TCP at each posture of the layout
+    a: np.ndarray  # (*b, R, 3) each reading's leg's R1 centre
+    c: np.ndarray  # (*b, R, 3) and R2 centre
+    centre: np.ndarray  # (*b, R, 3) its target box's centre
+    normal: np.ndarray  # (*b, R, 3) and the normal of the face it reads
+    t: np.ndarray  # (*b, R) the distance along its ray to the face's plane
+
+    def rows(self, index: np.ndarray | slice | int) -> GaugeSight:
+        """The sight of the machines ``index`` of the batch."""
+        return GaugeSight(self.aim, *(x[index] for x in self[1:]))
+
+
+def gauge_sight(theta: np.ndarray, layout: ReadingLayout,
+                machine: MachineParams | None = None) -> GaugeSight:
+    """The :class:`GaugeSight` of parameter vectors ``theta`` (``(*batch, n)``; their
+    ``machine``, when made already) in a layout with dial gauges."""
+    batch = theta.shape[:-1]
+    if machine is None:
+        machine = MachineParams.from_vector(theta[..., :N_MACHINE], layout.machine_design)
+    gauges = layout.space.gauges
+    specs = [layout.specs[k] for k in gauges]
+    stand = theta[..., N_MACHINE:N_MACHINE + 4 * len(gauges)].reshape(*batch, -1, 4)
+    ideal, aim = ideal_rays(specs, machine)
+    origins, directions = stand_rays(specs, ideal, aim, stand)
+    at, read = layout.gauge_reads
+    gauge = np.searchsorted(gauges, read)  # (``space.gauges`` is in mounting order)
+    postures = layout.postures.reshape((1,) * len(batch) + layout.postures.shape)
+    tcp = direct(machine, postures)
+    a, c, centre, normal, t = _gauge_targets(
+        machine, spec_arrays([layout.specs[k] for k in read]), postures[..., at, :],
+        tcp[..., at, :], origins[..., gauge, :], directions[..., gauge, :])
+    return GaugeSight(aim, origins, directions, tcp, a, c, centre, normal, t)
+
+
+def predict(theta: np.ndarray, layout: ReadingLayout, sight: GaugeSight | None = None
+            ) -> np.ndarray:
     """Model readings (mm, up to one constant per mounting) of every reading of
-    ``layout`` for parameter vectors ``theta`` of shape ``(*batch, n)``: ``(*batch, N)``."""
+    ``layout`` for parameter vectors ``theta`` of shape ``(*batch, n)``: ``(*batch, N)``;
+    ``sight``: their :func:`gauge_sight`, when known."""
     theta = np.asarray(theta, dtype=float)
     batch = theta.shape[:-1]
     flat = theta.reshape(-1, theta.shape[-1])
     if len(flat) > 1 and bool((flat == flat[0]).all()):
         # Every fit of a batch starts at the same point (nominal): one evaluation serves all.
-        return np.broadcast_to(predict(flat[0], layout), (*batch, len(layout))).copy()
+        one = None if sight is None else sight.rows(0)
+        return np.broadcast_to(predict(flat[0], layout, one), (*batch, len(layout))).copy()
     space = layout.space
     machine = MachineParams.from_vector(theta[..., :N_MACHINE], layout.machine_design)
     postures = layout.postures.reshape((1,) * len(batch) + layout.postures.shape)
     values = np.zeros((*batch, len(layout.postures), len(layout.specs)))  # (*b, P, K)
     gauges = space.gauges
     if gauges:
-        specs = [layout.specs[k] for k in gauges]
-        stand = theta[..., N_MACHINE:N_MACHINE + 4 * len(gauges)].reshape(*batch, -1, 4)
-        origins, directions = ideal_rays(specs, machine)
-        origins, directions = stand_rays(specs, origins, directions, stand)
+        if sight is None:
+            sight = gauge_sight(theta, layout, machine)
+        directions = sight.directions
         at, read = layout.gauge_reads
-        gauge = np.searchsorted(gauges, read)  # (``space.gauges`` is in mounting order)
-        values[..., at, read] = _gauge_targets(
-            machine, spec_arrays([layout.specs[k] for k in read]), postures[..., at, :],
-            direct(machine, postures)[..., at, :], origins[..., gauge, :],
-            directions[..., gauge, :])[-1]
+        values[..., at, read] = sight.t
     stations = space.stations
     if stations:
         tcp = direct(machine, postures)  # (*b, P, 3)
@@ -395,10 +440,11 @@ def rotated_derivatives(rotvec: np.ndarray, points: np.ndarray) -> np.ndarray:
     return -skew(points) @ right
 
 
-def jacobian(theta: np.ndarray, layout: ReadingLayout, free: np.ndarray, scale: np.ndarray
-             ) -> np.ndarray:
+def jacobian(theta: np.ndarray, layout: ReadingLayout, free: np.ndarray, scale: np.ndarray,
+             sight: GaugeSight | None = None) -> np.ndarray:
     """Derivative of :func:`predict` over the ``free`` parameters, per unit of their
-    ``scale``: ``(*batch, N, n_free)``.
+    ``scale``: ``(*batch, N, n_free)``; ``sight``: the :func:`gauge_sight` of ``theta``
+    (flattened to one batch axis), when known.
 
     By the chain rule, each reading's kinematics solved once: a reading ``t = (n . (c -
     o) - h sign(n . d)) / (n . d)`` depends on the machine through its target box (the
@@ -412,7 +458,10 @@ def jacobian(theta: np.ndarray, layout: ReadingLayout, free: np.ndarray, scale: 
     # Every fit of a batch starts at the same point (nominal): one evaluation serves all.
     same = len(flat) > 1 and bool((flat == flat[0]).all())
     distinct, rows = layout.distinct
-    full = _derivatives(flat[:1] if same else flat, distinct, np.asarray(free, dtype=bool))
+    if sight is not None and same:
+        sight = sight.rows(slice(0, 1))
+    full = _derivatives(flat[:1] if same else flat, distinct, np.asarray(free, dtype=bool),
+                        sight=sight)
     if len(idx) == full.shape[-1]:
         full *= scale
     else:
@@ -424,17 +473,19 @@ def jacobian(theta: np.ndarray, layout: ReadingLayout, free: np.ndarray, scale: 
 
 
 def _derivatives(theta: np.ndarray, layout: ReadingLayout, wanted: np.ndarray,
-                 aimed: bool = True) -> np.ndarray:
+                 aimed: bool = True, sight: GaugeSight | None = None) -> np.ndarray:
     """Derivative of every reading over every parameter, ``(B, N, n)`` for ``theta``
     ``(B, n)``; the stands' columns are left at zero unless one of them is ``wanted``, and
     so are the machine's errors' kinds (:func:`~orthoglide_env.model.kinematics.
     tcp_sensitivity_factors`) of which none is;
     ``aimed`` False: a gauge's ray stays where its stand was aimed (see
-    :func:`_gauge_derivatives`)."""
+    :func:`_gauge_derivatives`); ``sight``: ``theta``'s :func:`gauge_sight`, when known."""
     space = layout.space
     machine = MachineParams.from_vector(theta[:, :N_MACHINE], layout.machine_design)
     postures = layout.postures[None]
-    p = direct(machine, postures)  # (B, P, 3)
+    if space.gauges and sight is None:
+        sight = gauge_sight(theta, layout, machine)
+    p = direct(machine, postures) if sight is None else sight.tcp  # (B, P, 3)
     # The TCP's derivative (B, P, 3, 27) as its factors (B, P, 3, 3) and (B, P, 27).
     columns = np.flatnonzero(wanted[:N_MACHINE])
     inv, row = tcp_sensitivity_factors(machine, postures, p, columns)
@@ -445,7 +496,7 @@ def _derivatives(theta: np.ndarray, layout: ReadingLayout, wanted: np.ndarray,
         where = np.full(len(layout.specs), -1)
         where[gauges] = np.arange(len(gauges))
         rows = np.flatnonzero(where[layout.mounting] >= 0)
-        _gauge_derivatives(theta, layout, machine, p, (inv, row), rows,
+        _gauge_derivatives(theta, layout, machine, sight, (inv, row), rows,  # type: ignore[arg-type]
                            where[layout.mounting[rows]], at[rows], out,
                            stands=bool(wanted[N_MACHINE:N_MACHINE + 4 * len(gauges)].any()),
                            columns=columns, aimed=aimed)
@@ -532,43 +583,51 @@ def pivot_derivatives(layout: ReadingLayout) -> np.ndarray:
 
 def _gauge_targets(machine: MachineParams, g: GaugeArray, rho: np.ndarray, p: np.ndarray,
                    origins: np.ndarray, directions: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...], np.ndarray]:
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """What gauge readings ``g`` (``(R,)``) of ``machine`` (batch ``(*b,)``) touch at
     commands ``rho`` and TCPs ``p`` (``(*b | 1, R, 3)``), along rays ``origins`` and
-    ``directions`` (``(*b, R, 3)``): their legs' R1 and R2 centres, their target boxes
-    (:func:`~orthoglide_env.instruments.rays.boxes_at`) and the distance along each ray
-    to its face's plane (:func:`~orthoglide_env.instruments.rays.face_distances`, each
-    reading alone)."""
+    ``directions`` (``(*b, R, 3)``): their legs' R1 and R2 centres, their target boxes'
+    centres (:func:`~orthoglide_env.instruments.rays.boxes_at`), the normals of the faces
+    read, and the distance along each ray to its face's plane
+    (:func:`~orthoglide_env.instruments.rays.face_distances`, each reading alone)."""
     legs = np.maximum(g.leg, 0)
     each = np.arange(len(legs))
     a = carriage_points(machine, rho)[..., each, legs, :]
     c = platform_points(machine, p)[..., each, legs, :]
-    boxes = boxes_at(g, a, c, p, machine.design)
-    return a, c, boxes, plane_distances(*boxes, g.face, origins, directions)
+    centre, rot, half = boxes_at(g, a, c, p, machine.design)
+    normal = face_normals(rot, g.face)
+    return a, c, centre, normal, plane_distances(centre, rot, half, g.face, origins,
+                                                 directions, normal)
 
 
 def _gauge_derivatives(theta: np.ndarray, layout: ReadingLayout, machine: MachineParams,
-                       p: np.ndarray, dp: tuple[np.ndarray, np.ndarray], rows: np.ndarray,
+                       sight: GaugeSight, dp: tuple[np.ndarray, np.ndarray], rows: np.ndarray,
                        gauge: np.ndarray, at: np.ndarray, out: np.ndarray, stands: bool,
                        columns: np.ndarray, aimed: bool = True) -> None:
     """Fill ``out[:, rows]``: the derivatives of the gauge readings ``rows`` (their gauge
-    among the layout's gauges, their posture index ``at``) over the machine's errors
-    ``columns`` (the others are left as they are), and over the stand parameters when
-    ``stands``.  ``aimed``: the ray moves with the machine at Zero, where its stand was
-    aimed (a geometric error); else it stays (an error of the carriages at the reading
-    only, which the stand's aim did not see)."""
+    among the layout's gauges, their posture index ``at``, what they meet ``sight``) over
+    the machine's errors ``columns`` (the others are left as they are), and over the stand
+    parameters when ``stands``.  ``aimed``: the ray moves with the machine at Zero, where
+    its stand was aimed (a geometric error); else it stays (an error of the carriages at
+    the reading only, which the stand's aim did not see)."""
     space = layout.space
     specs = [layout.specs[k] for k in space.gauges]
     count = len(specs)
     stand = theta[:, N_MACHINE:N_MACHINE + 4 * count].reshape(-1, count, 4)
-    ideal, aim = ideal_rays(specs, machine)
-    origins, directions = stand_rays(specs, ideal, aim, stand)
+    aim = sight.aim
     g = spec_arrays([specs[j] for j in gauge])
     legs = np.maximum(g.leg, 0)
     postures = layout.postures[at]
-    o, d = origins[:, gauge], directions[:, gauge]
-    a, c, (centre, rot, _), t = _gauge_targets(machine, g, postures[None], p[:, at], o, d)
-    normal = face_normals(rot, g.face)
+    o, d = sight.origins[:, gauge], sight.directions[:, gauge]
+    a, c, centre, normal, t = sight.a, sight.c, sight.centre, sight.normal, sight.t
+    # The sight holds the readings in ``gauge_reads``' order; a layout of distinct readings
+    # only is its own ``distinct`` layout, in its readings' order.
+    reads_at, reads = layout.gauge_reads
+    count_specs = len(layout.specs)
+    order = np.searchsorted(reads_at * count_specs + reads,
+                            at * count_specs + layout.mounting[rows])
+    if not np.array_equal(order, np.arange(len(order))):
+        a, c, centre, normal, t = (x[:, order] for x in (a, c, centre, normal, t))
     nd = dot(normal, d)[..., None]
     towards_centre = normal / nd  # dt/dc, and -dt/do
     # dt/dn = (c - hit) / (n . d) through the bar's normal, which turns with v = c - a.

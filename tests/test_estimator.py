@@ -313,6 +313,62 @@ def test_jacobian_of_a_few_parameters_is_their_columns_of_the_whole_bit_for_bit(
         np.testing.assert_array_equal(part, whole[..., picked])
 
 
+def test_a_kept_gauge_sight_gives_the_readings_and_jacobian_bit_for_bit() -> None:
+    """A fit's Jacobian starts from the gauge sight its readings were predicted from, solved
+    over another batch of machines (a trial step's, a start's one machine for all) or
+    solved again where a rejected trial left another one: the readings and the Jacobian
+    must carry the very bits they have when solved afresh, on bars, carriages, the platform
+    and a reference gauge's block at Zero, with repeated readings and with every reading
+    distinct (a layout that is its own distinct one, in its readings' order)."""
+    from calibrators.estimators.solvers import Problem, centre
+    from orthoglide_env.instruments.slots import layout_from_names
+    from orthoglide_env.reading_model import default_scales, gauge_sight, jacobian
+
+    rng = np.random.default_rng(4)
+    names = ["x-leg/y", "y/z@0.3", "z-leg/x", "x-carriage/y", "platform/x", "reference/y"]
+    specs = layout_from_names(names)
+    base = _random_layout(rng, names, specs, 4, keep=0.8)
+    # Every reading again at Zero: repeated readings, and the reference gauge's through
+    # its block.
+    mountings = [base.mountings[m] for m in base.mounting]
+    chosen = [base.specs[m] for m in base.mounting]
+    repeated = ReadingLayout.of(mountings * 2, chosen * 2,
+                                np.concatenate([base.rho, 0.0 * base.rho]), PROTOTYPE)
+    assert base.distinct[0] is base and len(repeated.distinct[0]) < len(repeated)
+    assert repeated.through.any()
+    for layout in (base, repeated):
+        count = len(layout.space)
+        scale = default_scales(layout.space)
+        free = select("paper6,stands", layout.space)
+        theta = rng.normal(0.0, 1.0, (6, count)) * scale
+        fresh_model = predict(theta, layout)
+        fresh_jac = jacobian(theta, layout, free, scale)
+        sight = gauge_sight(theta, layout)
+        np.testing.assert_array_equal(predict(theta[2:4], layout, sight.rows(slice(2, 4))),
+                                      fresh_model[2:4])
+        np.testing.assert_array_equal(jacobian(theta[1:], layout, free, scale,
+                                               sight.rows(slice(1, None))), fresh_jac[1:])
+        problem = Problem(layout, np.zeros((len(theta), len(layout))),
+                          np.ones((len(theta), len(layout)), dtype=bool), 0.01, free,
+                          np.full(count, np.inf), scale)
+        everyone = np.arange(len(theta))
+        problem.predict(theta, everyone)
+        trial = theta.copy()
+        trial[[1, 4]] += scale * 0.1  # a trial step of two machines, then rejected
+        problem.predict(trial[[1, 4]], np.array([1, 4]))
+        whitened = fresh_jac * problem.weight[:, None]
+        np.testing.assert_array_equal(
+            problem.jacobian(theta, everyone),
+            centre(whitened, problem.mask, problem.onehot, layout.mounting))
+        start = np.broadcast_to(theta[0], theta.shape)
+        np.testing.assert_array_equal(problem.predict(start, everyone),
+                                      predict(start, layout))
+        np.testing.assert_array_equal(
+            problem.jacobian(start[:3], np.arange(3)),
+            centre(jacobian(start[:3], layout, free, scale) * problem.weight[:, None],
+                   problem.mask[:3], problem.onehot, layout.mounting))
+
+
 def test_valid_vectors_agree_with_check_validity_machine_by_machine() -> None:
     """The batched validity test takes exactly the machines that ``from_vector`` and
     ``check_validity`` take: drawn machines, some pushed past one group's limit (just

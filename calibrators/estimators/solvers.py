@@ -18,7 +18,13 @@ from __future__ import annotations
 import numpy as np
 
 from orthoglide_env.instruments.dial import weighting_sigma
-from orthoglide_env.reading_model import ReadingLayout, jacobian, predict
+from orthoglide_env.reading_model import (
+    GaugeSight,
+    ReadingLayout,
+    gauge_sight,
+    jacobian,
+    predict,
+)
 
 #: A combination is identifiable (and moved by a base-parameter fit) when its information
 #: in scaled units is at least this: the data determine it at least as well as its
@@ -49,16 +55,20 @@ def centre(values: np.ndarray, mask: np.ndarray, onehot: np.ndarray,
     arrays are large, and fresh): it is returned."""
     weights = mask.astype(float)
     counts = np.maximum(weights @ onehot, 1.0)  # (M, K)
+    # Where every reading is used (most fits), a weight of one leaves each value's bits.
+    every = bool(mask.all())
     if values.ndim == 3:
         weights = weights[..., None]
         counts = counts[..., None]
-    values *= weights
+    if not every:
+        values *= weights
     if values.ndim == 2:
         mean = (values @ onehot) / counts
     else:
         mean = (onehot.T @ values) / counts
     values -= mean[:, mounting]
-    values *= weights
+    if not every:
+        values *= weights
     return values
 
 
@@ -87,13 +97,50 @@ class Problem:
         # A prior that alone keeps every direction of the normal matrix at or above RETAIN
         # (as the extended fit's does) leaves none to truncate: a step is a linear solve.
         self.full_rank = bool(np.all(self.precision >= RETAIN * (1 - 1e-9)))
+        # The last gauge sight each machine's readings were predicted from, and where: a
+        # Jacobian at the same parameters (the next iteration's, after an accepted or
+        # untested step) starts from it instead of solving the gauges' geometry again.
+        self._sights: GaugeSight | None = None
+        self._seen_at = np.full((len(values), self.n), np.nan)
 
     def predict(self, theta: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """The readings of machines ``rows`` at ``theta`` (mm)."""
-        model = predict(theta[:, :self.n], self.design)
+        sight = self._sight(theta, rows)
+        model = predict(theta[:, :self.n], self.design, sight)
         if self.world.shape[-1]:
             model += (self.world[rows] @ theta[:, self.n:, None])[..., 0]
         return model
+
+    def _sight(self, theta: np.ndarray, rows: np.ndarray) -> GaugeSight | None:
+        """The gauge sight of machines ``rows`` at ``theta`` (None without dial gauges),
+        kept for them; all machines alike (a fit's start) are solved as one."""
+        if not self.design.space.gauges:
+            return None
+        th = theta[:, :self.n]
+        same = len(th) > 1 and bool((th == th[0]).all())
+        sight = gauge_sight(th[:1] if same else th, self.design)
+        if self._sights is None:
+            self._sights = GaugeSight(sight.aim, *(np.empty((len(self.values), *x.shape[1:]))
+                                                   for x in sight[1:]))
+        for kept, new in zip(self._sights[1:], sight[1:], strict=True):
+            kept[rows] = new
+        self._seen_at[rows] = th
+        return sight.rows(np.zeros(len(th), dtype=int)) if same else sight
+
+    def _kept_sight(self, theta: np.ndarray, rows: np.ndarray) -> GaugeSight | None:
+        """The gauge sight of machines ``rows`` at ``theta``: kept where they were last
+        predicted at ``theta``, solved for the others."""
+        if self._sights is None:
+            return None
+        th = theta[:, :self.n]
+        kept = (self._seen_at[rows] == th).all(axis=1)
+        sight = self._sights.rows(rows)
+        if not kept.all():
+            fresh = np.flatnonzero(~kept)
+            solved = gauge_sight(th[fresh], self.design)
+            for out, new in zip(sight[1:], solved[1:], strict=True):
+                out[fresh] = new
+        return sight
 
     def residual(self, theta: np.ndarray, rows: np.ndarray,
                  model: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -109,7 +156,8 @@ class Problem:
         """Whitened Jacobian over ``free`` (default: the free parameters), scaled units."""
         free = self.free if free is None else free
         n = self.n
-        jac = jacobian(theta[:, :n], self.design, free[:n], self.scale[:n])
+        jac = jacobian(theta[:, :n], self.design, free[:n], self.scale[:n],
+                       self._kept_sight(theta, rows))
         if free[n:].any():
             jac = np.concatenate([jac, self.world[rows][..., free[n:]] * self.scale[n:][free[n:]]],
                                  axis=-1)

@@ -215,11 +215,14 @@ def face_distances(machine: MachineParams, specs: tuple[GaugeSpec, ...] | list[G
 
 
 def plane_distances(centre: np.ndarray, rot: np.ndarray, half: np.ndarray, face: np.ndarray,
-                    origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+                    origins: np.ndarray, directions: np.ndarray,
+                    normal: np.ndarray | None = None) -> np.ndarray:
     """Distance along each ray ``origins + t directions`` (``(..., G, 3)``) to the plane of
     face ``face`` (box axis, ``(G,)``) of its box (centres ``(..., G, 3)``, rotations
-    ``(..., G, 3, 3)``, half extents ``(..., G, 3)``), on the side the ray comes from."""
-    normal = face_normals(rot, face)
+    ``(..., G, 3, 3)``, half extents ``(..., G, 3)``), on the side the ray comes from;
+    ``normal``: the faces' :func:`face_normals`, when known."""
+    if normal is None:
+        normal = face_normals(rot, face)
     thickness = half[..., np.arange(len(face)), face]
     nd = dot(normal, directions)
     return (dot(normal, centre - origins) - thickness * np.sign(nd)) / nd
