@@ -45,6 +45,36 @@ def test_predicted_error_is_the_scorings_prediction() -> None:
     assert np.allclose(rigid_weight(PROTOTYPE), rigid_weight(PROTOTYPE).T)
 
 
+def test_a_stands_rows_are_its_slots_changes_in_its_columns() -> None:
+    """The rows of a reading (``rows_at``, made at the postures asked for): at every slot
+    of the catalogue, the slot's changes over the machine's errors and the mounting's in
+    the stand's columns and the zero's scale in its last, bit for bit, nothing elsewhere;
+    a stand's rows asked alone or with the others are the same, and the rows the gain
+    bounds take over the unknowns a stand touches are those rows' entries there."""
+    p = planner()
+    postures = np.random.default_rng(1).choice(len(p.table.postures), 41, replace=False)
+    table = p.table
+    for slot in range(len(slot_catalogue(PROTOTYPE))):
+        trial = p.fork()
+        if slot not in trial.slots:
+            trial.remount(2, slot)
+        rows = trial.rows_at(postures)
+        for k, at in enumerate(trial.slots):
+            columns = trial._columns(k)
+            expected = np.zeros((len(postures), len(trial.covariance)))
+            expected[:, columns[:-1]] = table.change[at][postures]
+            expected[:, columns[-1]] = belief_module.ZERO_SCALE
+            assert np.array_equal(rows[:, k].view(np.int64), expected.view(np.int64))
+            alone = trial.rows_at(postures, [k])[:, 0]
+            assert np.array_equal(alone.view(np.int64), expected.view(np.int64))
+            picked, _ = belief_module._touched_block(PROTOTYPE, at)
+            used = trial.touched_columns[k, :np.count_nonzero(picked)]
+            assert np.array_equal(trial.touched_rows[k][postures][:, :len(used)],
+                                  rows[:, k][:, used])
+    trial.retire(2)
+    assert not trial.rows_at(postures)[:, 2].any()
+
+
 @pytest.mark.parametrize("criterion", ["I", "D"])
 def test_the_price_of_a_move_is_what_taking_it_changes(criterion: str) -> None:
     """The gain the planner quotes for a move (Woodbury, every posture at once) is the

@@ -28,6 +28,7 @@ more time does not pay (:mod:`calibrators.planning.world_terms`).
 from __future__ import annotations
 
 from collections.abc import Mapping
+from functools import lru_cache
 from typing import Any
 
 import gymnasium as gym
@@ -35,6 +36,7 @@ import numpy as np
 
 from calibrators.agents.base import Agent, action, register
 from calibrators.agents.optimal import fixed_plan, lab_setup, move_dwell_s, owned_instruments
+from calibrators.estimators.base import Estimator
 from calibrators.estimators.catalogue import for_study
 from calibrators.planning.belief import (
     N_MACHINE,
@@ -57,6 +59,13 @@ from orthoglide_env.reading_model import ParameterSpace, default_scales
 
 #: Seconds of lab time between two full refits of the notebook.
 REFIT_S: float = 600.0
+
+
+@lru_cache(maxsize=8)
+def _refitter(sigma: float) -> Estimator:
+    """The extended estimator of the refits, for readings of weighting ``sigma`` (mm),
+    made once: only its estimate is read, so its error bars' curvature is left out."""
+    return for_study("extended", sigma).clone(curvature=False)
 
 
 @register
@@ -252,9 +261,7 @@ class ActiveAgent(Agent):
         records = self.env.records
         planner = self.planner
         try:
-            # Only the estimate is read: its error bars' curvature is left out.
-            est = for_study("extended", planner.sigma).clone(curvature=False).fit(
-                measurements_of(records, design=planner.design))
+            est = _refitter(planner.sigma).fit(measurements_of(records, design=planner.design))
         except (ValueError, RuntimeError, np.linalg.LinAlgError):
             return  # the filter goes on alone; the next refit has more data
         theta = dict(zip(est.space, est.theta, strict=True))
@@ -275,7 +282,7 @@ class ActiveAgent(Agent):
                 postures = [p for p, _ in self.readings[k]]
                 values = np.array([v for _, v in self.readings[k]])
                 nominal = planner.table.reading[slot, postures]
-                residual = values - nominal - planner.rows[k, postures] @ mean
+                residual = values - nominal - planner.rows_at(postures, [k])[:, 0] @ mean
                 mean[cols[-1] + 1] = np.mean(residual) / ZERO_SCALE
         planner.mean = mean
 

@@ -38,6 +38,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import lru_cache
+from itertools import groupby
+from operator import itemgetter
 from typing import NamedTuple
 
 import numpy as np
@@ -83,6 +85,14 @@ def _stand_columns(stand: int) -> np.ndarray:
     out = np.concatenate((np.arange(N_MACHINE), np.arange(start, start + N_STAND)))
     out.setflags(write=False)
     return out
+
+
+@lru_cache(maxsize=256)
+def _block_index(stands: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """The index (G, C, C) into the covariance of the blocks of ``stands`` (G) over the
+    unknowns their tips move with (:meth:`Belief._columns` but the zero), made once."""
+    columns = np.stack([_stand_columns(k)[:-1] for k in stands])
+    return columns[:, :, None], columns[:, None, :]
 
 
 @lru_cache(maxsize=512)
@@ -163,17 +173,14 @@ class Belief:
         # to candidate postures.
         self.rho, self.here = np.zeros(3), self.table.zero
         k, p = len(self.slots), len(self.table.postures)
-        # Each stand's rows (P, n) at its present mounting (:meth:`rows_of`).  A stand's
-        # array is replaced at a re-mount, never written to, so a fork shares the others:
-        # copying every stand's (megabytes) at each re-mount a search tries cost the
-        # planner a tenth of its time.
-        self.stand_rows: list[np.ndarray] = [np.zeros((p, n))] * k
-        self._stacked: np.ndarray | None = None
         # An upper bound of each stand's spread at every posture (see _reach).
         self.spread_bound = np.zeros((k, p))
         # Each stand's columns of the unknowns its rows touch (K, T) and its rows over
         # them (P, T) each, padded to T = N_MACHINE + N_STAND (the most a mounting
         # touches) with zero rows at column 0; replaced at a re-mount, as its rows are.
+        # Its rows over every unknown (:meth:`rows_of`) are made only at the postures
+        # asked for (:meth:`rows_at`): held for every posture, they were a megabyte per
+        # stand, made at each re-mount a search tries.
         self.touched_columns = np.zeros((k, N_MACHINE + N_STAND), dtype=int)
         self.touched_rows: list[np.ndarray] = [np.zeros((p, N_MACHINE + N_STAND))] * k
         self._touched: np.ndarray | None = None
@@ -195,19 +202,27 @@ class Belief:
 
     def rows_of(self, stand: int) -> np.ndarray:
         """Rows (P, n) in mm per unit scale of a reading of ``stand`` at every posture."""
-        out = np.zeros((len(self.table.postures), len(self.covariance)))
-        if self.slots[stand] >= 0:
-            out[:, self._columns(stand)[:-1]] = self.table.change[self.slots[stand]]
-            out[:, self._columns(stand)[-1]] = ZERO_SCALE
+        return self.rows_at(slice(None), [stand])[:, 0]
+
+    def rows_at(self, postures: np.ndarray | slice, stands: list[int] | None = None
+                ) -> np.ndarray:
+        """Rows (L, K', n) in mm per unit scale of a reading of each of ``stands`` (K';
+        default: every stand) at ``postures`` (L): its slot's changes over the machine's
+        errors and its mounting's, and its zero's scale (an empty stand's are zero)."""
+        change = self.table.change
+        stands = range(len(self.slots)) if stands is None else stands
+        out = np.zeros((len(self.table.postures[postures]), len(stands), len(self.covariance)))
+        for i, stand in enumerate(stands):
+            slot = self.slots[stand]
+            if slot >= 0:
+                out[:, i, self._columns(stand)[:-1]] = change[slot, postures]
+                out[:, i, self._columns(stand)[-1]] = ZERO_SCALE
         return out
 
     def _set_rows(self, stand: int) -> None:
-        """Make ``stand``'s rows those of its present mounting (:meth:`rows_of`), also
-        over the unknowns they touch (``touched_columns``, ``touched_rows``); its spread
-        bound is the prior spread (its unknowns are as wide as a priori, the machine's at
-        most)."""
-        rows = self.rows_of(stand)
-        self.stand_rows[stand], self._stacked = rows, None
+        """Make ``stand``'s rows those of its present mounting (:meth:`rows_of`) over the
+        unknowns they touch (``touched_columns``, ``touched_rows``); its spread bound is
+        the prior spread (its unknowns are as wide as a priori, the machine's at most)."""
         self.spread_bound[stand] = self.table.prior_spread[max(self.slots[stand], 0)]
         picked, touched = _touched_block(self.design, self.slots[stand])
         used = self._columns(stand)[picked]
@@ -225,12 +240,9 @@ class Belief:
 
     @property
     def rows(self) -> np.ndarray:
-        """Rows (K, P, n) of every stand at every posture (:attr:`stand_rows` stacked,
-        read-only)."""
-        if self._stacked is None:
-            self._stacked = np.stack(self.stand_rows)
-            self._stacked.setflags(write=False)
-        return self._stacked
+        """Rows (K, P, n) of every stand at every posture (:meth:`rows_at`, made anew at
+        each call)."""
+        return np.swapaxes(self.rows_at(slice(None)), 0, 1)
 
     @property
     def touched(self) -> np.ndarray:
@@ -319,8 +331,7 @@ class Belief:
         """Rows (R, n) of readings of ``stands`` here and now, mm per unit, and (with
         world terms) their rows over the considered terms (R, m); ``world``: the world's
         rows of them (:func:`world_rows_here`), if already computed."""
-        rows = np.array([self.stand_rows[k][self.here] for k in stands]).reshape(
-            len(stands), len(self.covariance))
+        rows = self.rows_at(np.array([self.here]), [int(k) for k in stands])[0]
         if self.world is None:
             return rows, np.zeros((len(stands), 0))
         fitted, considered = world or world_rows_here([self], [stands])[0]
@@ -500,15 +511,20 @@ def spreads_many(beliefs: list[Belief], stands: list[tuple[int, int]],
     bit whichever others are computed with it (BLAS's kernels take a lone last row their
     own way, a few ulps off)."""
     table = beliefs[0].table
-    longest = max(len(p) for p in postures)
+    lengths = np.array([len(p) for p in postures])
+    longest = int(lengths.max())
     longest += longest % 2
-    steps = np.arange(longest)
-    index = np.array([p[np.minimum(steps, len(p) - 1)] for p in postures])  # (G, L)
+    # Each group's postures, its last repeated up to the even count (G, L).
+    ends = np.cumsum(lengths)
+    index = np.concatenate(postures)[(ends - lengths)[:, None] + np.minimum(
+        np.arange(longest), lengths[:, None] - 1)]
     slots = np.array([beliefs[i].slots[k] for i, k in stands])
     change = table.change[slots[:, None], index]  # (G, L, C)
-    covariance = np.stack([beliefs[i].covariance[np.ix_(_stand_columns(k)[:-1],
-                                                        _stand_columns(k)[:-1])]
-                           for i, k in stands])
+    # Each belief's stands' blocks of its covariance gathered at once (the pairs come
+    # belief by belief).
+    covariance = np.concatenate([
+        beliefs[i].covariance[_block_index(tuple(k for _, k in pairs))]
+        for i, pairs in groupby(stands, key=itemgetter(0))])
     product = change @ covariance
     values = np.sqrt(np.clip(np.sum(product * change, axis=-1), 0.0, None))
     return [v[:len(p)] for v, p in zip(values, postures, strict=True)]

@@ -150,8 +150,7 @@ class Pricer(Belief):
         0))`` or ``slogdet(I)``, zeros that differ at most in their sign).  A posture's
         gain is computed alone (stacked products and solves work item by item), so it is
         the same to the bit whichever others are priced with it."""
-        return (np.stack([rows[postures] for rows in self.stand_rows], axis=1)
-                * np.sqrt(reads.T[postures])[:, :, None] / self.sigma)
+        return self.rows_at(postures) * np.sqrt(reads.T[postures])[:, :, None] / self.sigma
 
     def _gains(self, rows: np.ndarray) -> np.ndarray:
         """Gain of adding each batch of whitened rows (B, K, n) to the covariance."""

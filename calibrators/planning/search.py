@@ -65,7 +65,7 @@ class Planner(Pricer):
         trial = copy.copy(self)
         trial.slots, trial.engaged, trial.steps = list(self.slots), list(self.engaged), []
         trial.covariance = self.covariance.copy()
-        trial.stand_rows, trial.touched_rows = list(self.stand_rows), list(self.touched_rows)
+        trial.touched_rows = list(self.touched_rows)
         trial.silent = self.silent.copy()
         trial.spread_bound = self.spread_bound.copy()
         trial.mean = None if self.mean is None else self.mean.copy()
