@@ -1,6 +1,7 @@
 """The interferometer's readings in the fit and in measurement files: its model rows, the
 ``full`` fit of its readings as the controller's pitch table, the file's ``instrument``
-column, and the ``iso230-2`` agent's refusal in a lab without one."""
+column, and the ``iso230-2`` agent's refusal in a lab without one or in a budget shorter
+than its programme."""
 
 from __future__ import annotations
 
@@ -13,13 +14,13 @@ import pytest
 import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.agents.base import PlannedAgent, action
-from calibrators.agents.iso230 import drive_steps, runs_for, targets_of
+from calibrators.agents.iso230 import drive_steps, least_budget_s, runs_for, targets_of
 from calibrators.estimators.catalogue import get_estimator
 from calibrators.measurements import Measurement, MeasurementFileError, Measurements
 from calibrators.study.episodes import machine_seed, run_episode
 from calibrators.study.labs import lab_kwargs
 from orthoglide_env.instruments.interferometer import InterferometerAxis
-from orthoglide_env.lab.operations import Op
+from orthoglide_env.lab.operations import PAPER_SLOTS, Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.reading_model import ReadingLayout, jacobian, predict
 from orthoglide_env.world.conditions import Conditions
@@ -149,7 +150,37 @@ def test_iso230_2_plans_the_standard_and_shortens_runs_to_the_budget():
     assert runs_for(3600.0, PROTOTYPE) == 1
 
 
+def test_iso230_2_takes_the_time_the_lab_charges_for_its_programme():
+    """The least budget is the lab's own clock at the end of the programme with one run
+    per drive, on a realistic machine (the clock counts commands, not the truth): one
+    source, the time table, for the agent's refusal and the lab's charge."""
+    episode = _episode(Conditions("lab"))
+    assert episode.time_s == pytest.approx(least_budget_s(PROTOTYPE, len(PAPER_SLOTS)),
+                                           rel=1e-12)
+
+
+def test_iso230_2_refuses_a_budget_shorter_than_its_programme():
+    """Below the least budget the procedure is refused before the lab starts, in the
+    API's lab arguments and at the agent's reset in a lab made without them; from the
+    least budget up it is accepted (an hour's plan is unchanged: one run per drive)."""
+    agent = get_agent("iso230-2")
+    least = least_budget_s(PROTOTYPE, len(PAPER_SLOTS))
+    assert 2900.0 < least < 3000.0  # the soak, three set-ups, three runs: about 49 min
+    with pytest.raises(ValueError, match=f"needs a budget of at least {least:.1f} s"):
+        lab_kwargs(agent, tuple(OWNED), budget_s=1500.0)
+    lab_kwargs(agent, tuple(OWNED), budget_s=least)
+    env = gym.make(orthoglide_env.LAB_V1_ENV_ID, backend="exact", conditions="lab",
+                   instruments=OWNED, budget_s=1500.0)
+    observation, _ = env.reset(seed=0)
+    with pytest.raises(ValueError, match=f"needs a budget of at least {least:.1f} s"):
+        agent.reset(env, observation, np.random.default_rng(0))
+
+
 @pytest.mark.parametrize(("argv", "words"), [
+    (["compare", "--agents", "iso230-2,active", "--instruments", "dial,interferometer",
+      "--budget", "1500", "--machines", "1"], "needs a budget of at least 2952.4 s"),
+    (["plan", "--agent", "iso230-2", "--instruments", "dial,interferometer", "--budget",
+      "1500", "--out", "unused"], "needs a budget of at least 2952.4 s"),
     (["compare", "--agents", "iso230-2", "--conditions", "lab", "--machines", "1"],
      "needs the interferometer"),
     (["compare", "--agents", "tracker", "--instruments", "dial", "--machines", "1"],

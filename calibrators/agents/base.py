@@ -10,6 +10,7 @@ import numpy as np
 
 from calibrators.registry import Registry
 from orthoglide_env.lab.operations import Op
+from orthoglide_env.model.design import MachineDesign
 
 
 class Agent:
@@ -17,7 +18,8 @@ class Agent:
     the episode ends.  ``needs_tracker``: the lab must have a laser tracker;
     ``needs_reference``: the gauge block; ``needs_instruments``: the other instruments the
     lab must own (``interferometer``).  ``reserved_s``: seconds of the budget an agent
-    that plans to the budget leaves to what follows it (:mod:`calibrators.agents.reference`)."""
+    that plans to the budget leaves to what follows it (:mod:`calibrators.agents.reference`).
+    :meth:`check_budget` refuses a budget the agent's procedure cannot be played in."""
 
     name: ClassVar[str] = ""
     needs_tracker: ClassVar[bool] = False
@@ -34,6 +36,11 @@ class Agent:
 
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
         raise NotImplementedError
+
+    def check_budget(self, budget_s: float, design: MachineDesign, stands: int) -> None:
+        """``ValueError`` in one line, naming the least budget, when ``budget_s`` seconds
+        of lab time cannot hold what the agent must do on ``design`` with ``stands`` gauge
+        stands; an agent that fits its experiment to any budget accepts every one."""
 
     @classmethod
     def act_all(cls, agents: list[Agent], observations: list[dict[str, np.ndarray]],

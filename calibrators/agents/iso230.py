@@ -20,6 +20,12 @@ from its command.  The procedure, the same on every machine:
 ISO 230-2 asks for 5 runs in each direction; an hour cannot hold them on three drives
 with the time table's set-ups, so :func:`runs_for` takes as many as leave
 :data:`GAUGE_SHARE` of the budget to the gauges (at least one run, at most five).
+
+A budget shorter than the programme with one run per drive (:func:`least_budget_s`, about
+49 minutes on the prototype) is refused before the lab starts, naming that least budget: a
+lab books the time a whole test of the three drives takes, as a certificate of ISO 230-2
+reports every axis it names, rather than cut the test at a drive or leave the gauges no
+time.
 """
 
 from __future__ import annotations
@@ -31,6 +37,7 @@ import numpy as np
 from calibrators.agents.base import action, register
 from calibrators.agents.instrument_first import GAUGES as GAUGES
 from calibrators.agents.instrument_first import InstrumentFirst
+from orthoglide_env.lab.clock import travel_seconds
 from orthoglide_env.lab.operations import TIME, Op
 from orthoglide_env.model.design import MachineDesign
 
@@ -108,6 +115,30 @@ def drive_steps(stands: int, design: MachineDesign, runs: int) -> list[dict[str,
     return steps + [action(Op.ENGAGE, stand=k) for k in range(stands)]
 
 
+def programme_seconds(design: MachineDesign, stands: int, runs: int) -> float:
+    """The lab time (s) :func:`drive_steps` takes from a reset at Zero, charged as the lab
+    charges it (:func:`~orthoglide_env.lab.clock.travel_seconds` on the time table): each
+    lift and engagement a flick, each set-up its drive to Zero, its work and the first's
+    soak, each move its drive, settle and the laser's dwell."""
+    rho, seconds, aligned = np.zeros(3), 0.0, False
+    for step in drive_steps(stands, design, runs):
+        op = Op(step["op"])
+        if op in (Op.LIFT, Op.ENGAGE):
+            seconds += TIME.lift_s
+            continue
+        goal = np.zeros(3) if op == Op.ALIGN else step["rho"]
+        seconds += float(travel_seconds(np.array([op]), rho[None], goal[None], False,
+                                        laser=np.array([aligned]),
+                                        soak=np.array([not aligned]))[0])
+        rho, aligned = goal, aligned or op == Op.ALIGN
+    return seconds
+
+
+def least_budget_s(design: MachineDesign, stands: int) -> float:
+    """The shortest budget (s) that holds the programme: one run on each drive."""
+    return programme_seconds(design, stands, 1)
+
+
 @register
 class Iso230Agent(InstrumentFirst):
     """The drives by ISO 230-2 with the interferometer, then :data:`GAUGES` with the
@@ -116,7 +147,16 @@ class Iso230Agent(InstrumentFirst):
     name = "iso230-2"
     needs_instruments = ("interferometer",)
 
+    def check_budget(self, budget_s: float, design: MachineDesign, stands: int) -> None:
+        least = least_budget_s(design, stands)
+        if budget_s < least:
+            raise ValueError(f"agent '{self.name}' needs a budget of at least {least:.1f} s "
+                             f"(the laser's soak, a set-up and one ISO 230-2 run on each of "
+                             f"the three drives), got {budget_s:g} s")
+
     def programme(self, observation: dict[str, np.ndarray]) -> list[dict[str, Any]]:
-        self.runs = runs_for(float(self.env.budget_s) - float(observation["time"][0]),
-                             self.env.design)
-        return drive_steps(len(observation["slot"]), self.env.design, self.runs)
+        left = float(self.env.budget_s) - float(observation["time"][0])
+        stands = len(observation["slot"])
+        self.check_budget(left, self.env.design, stands)
+        self.runs = runs_for(left, self.env.design)
+        return drive_steps(stands, self.env.design, self.runs)

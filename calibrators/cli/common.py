@@ -190,7 +190,8 @@ def add_instruments(p: argparse.ArgumentParser) -> None:
 def instruments_of(args: argparse.Namespace, agents: tuple[Agent, ...] = ()
                    ) -> tuple[str, ...]:
     """The instruments of ``--instruments`` (empty when not given: today's lab), each of
-    ``agents`` checked against them; :class:`UsageError` in one line if bad."""
+    ``agents`` checked against them and against ``--budget`` on ``--design``'s machine;
+    :class:`UsageError` in one line if bad."""
     # (Here, not at the top: the labs import Gymnasium, which --help does without.)
     from calibrators.study.labs import lab_kwargs
     from orthoglide_env.instruments.catalogue import check_instruments
@@ -207,6 +208,10 @@ def instruments_of(args: argparse.Namespace, agents: tuple[Agent, ...] = ()
             lab_kwargs(agent, owned)
         except ValueError as exc:
             raise UsageError(f"{exc}: add it to --instruments") from None
+        try:
+            lab_kwargs(agent, owned, budget_s=args.budget, design=machine_design_of(args))
+        except ValueError as exc:
+            raise UsageError(f"{exc}: give a longer --budget") from None
     return owned
 
 

@@ -16,7 +16,8 @@ import gymnasium as gym
 
 import orthoglide_env
 from calibrators.agents import Agent
-from orthoglide_env.model.design import MachineDesign
+from orthoglide_env.lab.spec import LAB
+from orthoglide_env.model.design import PROTOTYPE, MachineDesign
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.world.machine_file import machine_dict
@@ -29,13 +30,18 @@ def lab_kwargs(agent: Agent, instruments: tuple[str, ...] = (), **settings: Any
     ``instruments``: what the lab owns (names of :data:`~orthoglide_env.instruments.
     catalogue.INSTRUMENT_NAMES`; empty: today's lab, the dial gauges and the tracker
     for an agent that reads one); ``ValueError`` in one line when ``agent`` needs one the
-    lab does not own.  The tracker is read only by an agent that needs it."""
+    lab does not own, or when the budget (``settings``' ``budget_s``, else the lab's
+    default) cannot hold the agent's procedure (:meth:`~calibrators.agents.base.Agent.
+    check_budget`).  The tracker is read only by an agent that needs it."""
     owned = tuple(instruments) or ("dial", *(("tracker",) if agent.needs_tracker else ()))
     needs = (*(("tracker",) if agent.needs_tracker else ()), *agent.needs_instruments)
     missing = [n for n in needs if n not in owned]
     if missing:
         raise ValueError(f"agent '{agent.name}' needs the {missing[0]}, which the lab does "
                          f"not own (instruments {','.join(owned)})")
+    agent.check_budget(settings.get("budget_s", LAB["budget_s"].default),
+                       settings.get("design") or PROTOTYPE,
+                       settings.get("stands", LAB["stands"].default))
     kwargs = {**settings, "tracker": agent.needs_tracker, "reference": agent.needs_reference}
     if instruments:
         kwargs["instruments"] = [n for n in owned if n != "tracker"]
