@@ -195,6 +195,7 @@ def instruments_of(args: argparse.Namespace, agents: tuple[Agent, ...] = ()
     # (Here, not at the top: the labs import Gymnasium, which --help does without.)
     from calibrators.study.labs import lab_kwargs
     from orthoglide_env.instruments.catalogue import check_instruments
+    from orthoglide_env.lab.spec import LAB
     if args.instruments is None:
         owned: tuple[str, ...] = ()
     else:
@@ -209,7 +210,8 @@ def instruments_of(args: argparse.Namespace, agents: tuple[Agent, ...] = ()
         except ValueError as exc:
             raise UsageError(f"{exc}: add it to --instruments") from None
         try:
-            lab_kwargs(agent, owned, budget_s=args.budget, design=machine_design_of(args))
+            # The lab's own stands: the commands that check here give no other count.
+            agent.check_budget(args.budget, machine_design_of(args), LAB["stands"].default)
         except ValueError as exc:
             raise UsageError(f"{exc}: give a longer --budget") from None
     return owned
