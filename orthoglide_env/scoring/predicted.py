@@ -192,7 +192,8 @@ def _rigid_weights(models: Sequence[MachineParams], targets: np.ndarray,
             out[:, ca[:, None], cb] = block
             out[:, cb[:, None], ca] = np.swapaxes(block, -1, -2)
     # Q_t^T A's column of leg a, (M, n, 6), against that leg's entries.
-    along = [np.moveaxis(basis[..., k, :], -1, 0) for k in range(3)]  # (6, 1 | M, n) each
+    along = [np.ascontiguousarray(np.moveaxis(basis[..., k, :], -1, 0))
+             for k in range(3)]  # (6, 1 | M, n) each
     taken = np.concatenate([np.swapaxes(_turned(along, legs[a]), -1, -2) @ rows[a]
                             for a in range(3)], axis=-1)  # (M, 6, 27) in the order of ``columns``
     order = np.concatenate(columns)
