@@ -12,7 +12,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
-from tqdm import tqdm
 
 from calibrators.agents import available as agents_available
 from calibrators.agents import get_agent
@@ -29,6 +28,7 @@ from calibrators.cli.common import (
     instruments_of,
     machine_design_of,
 )
+from calibrators.cli.parser import listing
 from calibrators.estimators.catalogue import CATALOGUE, exact_estimators, get_estimator
 from calibrators.study.compare import CHUNK, Config, Trial, run, study_bound
 from calibrators.study.engines import ENGINES, RAY_INSTALL_HINT, ray_available
@@ -185,17 +185,22 @@ def run_command(args: argparse.Namespace) -> None:
             handle.write(trial.to_json() + "\n")
             handle.flush()
 
-    bar = tqdm(total=args.machines, initial=len({t.machine for t in done}), desc="machines",
-               unit="machine", disable=args.quiet or args.json, file=sys.stderr)
+    bar = None
+    if not (args.quiet or args.json):
+        from tqdm import tqdm  # imported for a bar that is shown only
+
+        bar = tqdm(total=args.machines, initial=len({t.machine for t in done}),
+                   desc="machines", unit="machine", file=sys.stderr)
     start = time.perf_counter()
     try:
         trials = run(config, args.machines, args.jobs, done, on_trial=keep,
-                     progress=bar.update, engine=args.engine, address=args.address,
-                     chunk=args.chunk)
+                     progress=None if bar is None else bar.update, engine=args.engine,
+                     address=args.address, chunk=args.chunk)
     except KeyboardInterrupt:
         trials = None
     finally:
-        bar.close()
+        if bar is not None:
+            bar.close()
         if handle:
             handle.close()
     if trials is None:
@@ -355,9 +360,10 @@ def _write(trials: list[Trial], rows: list[dict], out: Path, config: Config) -> 
 
 
 def add(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--agents", default="paper,random,tracker",
-                   help=f"comma list of agents ({', '.join(agents_available())}, or "
-                        "policy:FILE, a learned policy) (default: %(default)s)")
+    listing(p.add_argument("--agents", default="paper,random,tracker",
+                           help="comma list of agents (%(listed)s, or policy:FILE, a learned "
+                                "policy) (default: %(default)s)"),
+            agents_available)
     p.add_argument("--estimators", default="paper,extended",
                    help=f"comma list of estimators ({', '.join(CATALOGUE)}) "
                         "(default: %(default)s)")

@@ -24,10 +24,8 @@ from typing import TYPE_CHECKING, Any
 import gymnasium as gym
 import numpy as np
 
-# Registers the filters that policy files of flicks "filter", "shortlist" and "ranked"
-# play their moves with (the short list's module imports the filter's).
-import calibrators.planning.shortlist  # noqa: F401
 from calibrators.agents import Agent, get_agent
+from calibrators.agents.names import POLICY_PREFIX
 from calibrators.estimators.base import Estimate
 from calibrators.estimators.catalogue import for_study, get_estimator
 from calibrators.estimators.prediction import predicted_rigid_mm
@@ -359,6 +357,11 @@ def agent_episodes(config: Config, agent_name: str, runs: list[int], batched: bo
                    ) -> list[_Episode]:
     """The agent's episode on each machine of ``runs`` (machine ``i`` from its seed)."""
     seeds = [machine_seed(config.seed, i) for i in runs]
+    if agent_name.startswith(POLICY_PREFIX):
+        # Registers the filters that policy files of flicks "filter", "shortlist" and
+        # "ranked" play their moves with (the short list's module imports the filter's);
+        # only a policy needs the planner they bring.
+        import calibrators.planning.shortlist  # noqa: F401
     kwargs = config.lab_kwargs(get_agent(agent_name))
     if batched and config.backend == "exact":
         with closing(gym.make_vec(lab_id(kwargs), num_envs=len(runs),

@@ -192,13 +192,26 @@ def _rigid_weights(models: Sequence[MachineParams], targets: np.ndarray,
             out[:, ca[:, None], cb] = block
             out[:, cb[:, None], ca] = np.swapaxes(block, -1, -2)
     # Q_t^T A's column of leg a, (M, n, 6), against that leg's entries.
-    taken = np.concatenate([np.swapaxes(
-        basis[..., 0, :] * legs[a][0][..., None] + basis[..., 1, :] * legs[a][1][..., None]
-        + basis[..., 2, :] * legs[a][2][..., None], -1, -2) @ rows[a] for a in range(3)],
-        axis=-1)  # (M, 6, 27) in the order of ``columns``
+    along = [np.ascontiguousarray(np.moveaxis(basis[..., k, :], -1, 0))
+             for k in range(3)]  # (6, 1 | M, n) each
+    taken = np.concatenate([np.swapaxes(_turned(along, legs[a]), -1, -2) @ rows[a]
+                            for a in range(3)], axis=-1)  # (M, 6, 27) in the order of ``columns``
     order = np.concatenate(columns)
     out[:, order[:, None], order] -= np.swapaxes(taken, -1, -2) @ taken
     return out / usable.sum(axis=-1)[:, None, None]
+
+
+def _turned(along: list[np.ndarray], leg: list[np.ndarray]) -> np.ndarray:
+    """``sum_k Q_t[k] A_t[k]``, (M, n, 6), of the basis's coordinates ``along`` (three of
+    (6, 1 | M, n)) and a column of the inverse ``leg`` (three of (M, n)): each of the six
+    columns over every target in one run, where the product of (..., 6) and (..., 1)
+    operands went through numpy's buffers six numbers at a time (the same operations in
+    the same order, in the same layout)."""
+    out = np.empty((*leg[0].shape, 6))
+    for j in range(6):
+        np.add(along[0][j] * leg[0] + along[1][j] * leg[1], along[2][j] * leg[2],
+               out=out[..., j])
+    return out
 
 
 def rigid_weight_with_drives(model: MachineParams, drive: DriveTerms,
