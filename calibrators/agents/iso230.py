@@ -14,8 +14,9 @@ from its command.  The procedure, the same on every machine:
    the first target too is approached in the run's direction (backlash shows as the
    reversal).  The targets are spread unevenly (ISO 230-2 asks for it: equal spacing
    would sample the screw's periodic error at one phase);
-3. back at Zero, let every plunger down again (their zeros were kept), and hand the rest
-   of the budget to :data:`GAUGES`, which plans the gauges' experiment from there.
+3. back at Zero, let every plunger down again (their zeros were kept) and read them there,
+   and hand the rest of the budget to :data:`GAUGES`, which plans the gauges' experiment
+   from there (:func:`~calibrators.agents.instrument_first.gauges_down`).
 
 ISO 230-2 asks for 5 runs in each direction; an hour cannot hold them on three drives
 with the time table's set-ups, so :func:`runs_for` takes as many as leave
@@ -36,7 +37,7 @@ import numpy as np
 
 from calibrators.agents.base import action, register
 from calibrators.agents.instrument_first import GAUGES as GAUGES
-from calibrators.agents.instrument_first import InstrumentFirst
+from calibrators.agents.instrument_first import InstrumentFirst, gauges_down
 from orthoglide_env.lab.clock import travel_seconds
 from orthoglide_env.lab.operations import TIME, Op
 from orthoglide_env.model.design import MachineDesign
@@ -101,7 +102,7 @@ def runs_for(budget_s: float, design: MachineDesign) -> int:
 
 def drive_steps(stands: int, design: MachineDesign, runs: int) -> list[dict[str, Any]]:
     """The procedure's lab actions on the drives: lift the ``stands``, and per drive a
-    set-up and ``runs`` runs; then back to Zero and every plunger down."""
+    set-up and ``runs`` runs; then back to Zero, every plunger down and read there."""
     steps = [action(Op.LIFT, stand=k) for k in range(stands)]
     targets = targets_of(design)
     for axis in range(3):
@@ -112,7 +113,7 @@ def drive_steps(stands: int, design: MachineDesign, runs: int) -> list[dict[str,
                 rho[axis] = value
                 steps.append(action(Op.MOVE, rho))
     steps.append(action(Op.MOVE, np.zeros(3)))
-    return steps + [action(Op.ENGAGE, stand=k) for k in range(stands)]
+    return steps + gauges_down(stands)
 
 
 def programme_seconds(design: MachineDesign, stands: int, runs: int) -> float:
