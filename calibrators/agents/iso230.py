@@ -78,28 +78,6 @@ def run_postures(targets: np.ndarray) -> list[float]:
             *targets[::-1]]
 
 
-def run_seconds(design: MachineDesign) -> float:
-    """What one bidirectional run on one drive costs by the time table."""
-    postures = run_postures(targets_of(design))
-    moves = np.abs(np.diff([postures[-1], *postures]))
-    return float(np.sum(moves / TIME.drive_speed_mm_s + TIME.settle_and_read_s
-                        + TIME.interferometer_target_s))
-
-
-def setup_seconds(design: MachineDesign) -> float:
-    """The three set-ups (the first with the material sensor's soak), each from the far
-    end of the last drive's run."""
-    back = float(TIME.move(np.full(3, design.rho_max), np.zeros(3)))
-    return 3 * (back + TIME.interferometer_setup_s) + TIME.interferometer_soak_s
-
-
-def runs_for(budget_s: float, design: MachineDesign) -> int:
-    """How many bidirectional runs per drive fit in ``budget_s`` with :data:`GAUGE_SHARE`
-    of it left to the gauges: at most :data:`ISO_RUNS`, at least one."""
-    spare = (1 - GAUGE_SHARE) * budget_s - setup_seconds(design)
-    return int(np.clip(spare // (3 * run_seconds(design)), 1, ISO_RUNS))
-
-
 def drive_steps(stands: int, design: MachineDesign, runs: int) -> list[dict[str, Any]]:
     """The procedure's lab actions on the drives: lift the ``stands``, and per drive a
     set-up and ``runs`` runs; then back to Zero, every plunger down and read there."""
@@ -135,6 +113,15 @@ def programme_seconds(design: MachineDesign, stands: int, runs: int) -> float:
     return seconds
 
 
+def runs_for(budget_s: float, design: MachineDesign, stands: int) -> int:
+    """How many bidirectional runs per drive fit in ``budget_s`` with :data:`GAUGE_SHARE`
+    of it left to the gauges, the programme timed by :func:`programme_seconds` (the lab's
+    own charge, lifts and engagements included): at most :data:`ISO_RUNS`, at least one."""
+    room = (1 - GAUGE_SHARE) * budget_s
+    return max((runs for runs in range(2, ISO_RUNS + 1)
+                if programme_seconds(design, stands, runs) <= room), default=1)
+
+
 def least_budget_s(design: MachineDesign, stands: int) -> float:
     """The shortest budget (s) that holds the programme: one run on each drive."""
     return programme_seconds(design, stands, 1)
@@ -159,5 +146,5 @@ class Iso230Agent(InstrumentFirst):
         left = float(self.env.budget_s) - float(observation["time"][0])
         stands = len(observation["slot"])
         self.check_budget(left, self.env.design, stands)
-        self.runs = runs_for(left, self.env.design)
+        self.runs = runs_for(left, self.env.design, stands)
         return drive_steps(stands, self.env.design, self.runs)
