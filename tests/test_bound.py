@@ -158,7 +158,8 @@ def test_bound_is_below_every_discrete_plan(quick):
     optimal = [{"op": s.op, "rho": s.rho, "stand": s.stand, "slot": s.slot} for s in steps]
     legs = tuple(spec.leg for spec in PAPER_LAYOUT)
     paper = [dict(a) for a in paper_plan(legs, (True,) * len(legs), REPETITIONS, PROTOTYPE)]
-    iso = drive_steps(len(PAPER_SLOTS), PROTOTYPE, runs_for(budget, PROTOTYPE))
+    iso = drive_steps(len(PAPER_SLOTS), PROTOTYPE, runs_for(budget, PROTOTYPE,
+                                                            len(PAPER_SLOTS)))
     plans = {"optimal": _plan_mm(model, optimal), "paper": _plan_mm(model, paper),
              "iso230-2's drives": _plan_mm(model, iso)}
     # Readings count where the nominal tip touches, so each plan's error is finite and

@@ -263,8 +263,9 @@ def test_the_agent_plans_the_gauge_along_each_axis_and_needs_it():
     steps = gauge_steps(6, PROTOTYPE, 1)
     places = [s for s in steps if s["op"] == Op.PLACE]
     assert [s["axis"] for s in places] == [0, 1, 2]
-    # Every face is read both ways in a run: 1 + 2 (faces - 1) readings per axis.
-    assert sum(s["op"] == Op.MOVE for s in steps) == 3 * 2 * (STEP_GAUGE_FACES - 1) + 1
+    # Every face is read both ways in a run: 1 + 2 (faces - 1) readings per axis; then the
+    # way back to Zero and the gauges' zeros read there.
+    assert sum(s["op"] == Op.MOVE for s in steps) == 3 * 2 * (STEP_GAUGE_FACES - 1) + 2
 
 
 def _file(tmp_path: Path, *rows: str) -> Path:

@@ -12,8 +12,9 @@ machine:
    first (:data:`OVERSHOOT_DEG`: ISO 230-4's overshoot arc, so every point is approached
    in the run's direction); the clockwise run's points lie between the anticlockwise
    run's, so the two also sample the circle twice as finely;
-3. back at Zero, let every plunger down again (their zeros were kept), and hand the
-   rest of the budget to :data:`GAUGES`, which plans the gauges' experiment from there.
+3. back at Zero, let every plunger down again (their zeros were kept) and read them there,
+   and hand the rest of the budget to :data:`GAUGES`, which plans the gauges' experiment
+   from there (:func:`~calibrators.agents.instrument_first.gauges_down`).
 
 The readings are taken at rest (the bar also reads statically): the time table's settle
 per point, where a real test samples on the fly at its feed; the dynamic errors a real
@@ -68,7 +69,7 @@ def circle_postures(design: MachineDesign, plane: tuple[int, int], clockwise: bo
 
 def circle_steps(stands: int, design: MachineDesign) -> list[dict[str, Any]]:
     """The procedure's lab actions on the ballbar: lift the ``stands``, set the pivot up,
-    and per plane a run each way; then back to Zero and every plunger down."""
+    and per plane a run each way; then back to Zero, every plunger down and read there."""
     steps = [action(Op.LIFT, stand=k) for k in range(stands)]
     nominal = MachineParams(design=design)
     centre = inverse(nominal, np.full(3, CENTRE_MM))

@@ -14,8 +14,9 @@ from its command.  The procedure, the same on every machine:
    the first target too is approached in the run's direction (backlash shows as the
    reversal).  The targets are spread unevenly (ISO 230-2 asks for it: equal spacing
    would sample the screw's periodic error at one phase);
-3. back at Zero, let every plunger down again (their zeros were kept), and hand the rest
-   of the budget to :data:`GAUGES`, which plans the gauges' experiment from there.
+3. back at Zero, let every plunger down again (their zeros were kept) and read them there,
+   and hand the rest of the budget to :data:`GAUGES`, which plans the gauges' experiment
+   from there (:func:`~calibrators.agents.instrument_first.gauges_down`).
 
 ISO 230-2 asks for 5 runs in each direction; an hour cannot hold them on three drives
 with the time table's set-ups, so :func:`runs_for` takes as many as leave
@@ -36,7 +37,7 @@ import numpy as np
 
 from calibrators.agents.base import action, register
 from calibrators.agents.instrument_first import GAUGES as GAUGES
-from calibrators.agents.instrument_first import InstrumentFirst
+from calibrators.agents.instrument_first import InstrumentFirst, gauges_down
 from orthoglide_env.lab.clock import travel_seconds
 from orthoglide_env.lab.operations import TIME, Op
 from orthoglide_env.model.design import MachineDesign
@@ -77,31 +78,9 @@ def run_postures(targets: np.ndarray) -> list[float]:
             *targets[::-1]]
 
 
-def run_seconds(design: MachineDesign) -> float:
-    """What one bidirectional run on one drive costs by the time table."""
-    postures = run_postures(targets_of(design))
-    moves = np.abs(np.diff([postures[-1], *postures]))
-    return float(np.sum(moves / TIME.drive_speed_mm_s + TIME.settle_and_read_s
-                        + TIME.interferometer_target_s))
-
-
-def setup_seconds(design: MachineDesign) -> float:
-    """The three set-ups (the first with the material sensor's soak), each from the far
-    end of the last drive's run."""
-    back = float(TIME.move(np.full(3, design.rho_max), np.zeros(3)))
-    return 3 * (back + TIME.interferometer_setup_s) + TIME.interferometer_soak_s
-
-
-def runs_for(budget_s: float, design: MachineDesign) -> int:
-    """How many bidirectional runs per drive fit in ``budget_s`` with :data:`GAUGE_SHARE`
-    of it left to the gauges: at most :data:`ISO_RUNS`, at least one."""
-    spare = (1 - GAUGE_SHARE) * budget_s - setup_seconds(design)
-    return int(np.clip(spare // (3 * run_seconds(design)), 1, ISO_RUNS))
-
-
 def drive_steps(stands: int, design: MachineDesign, runs: int) -> list[dict[str, Any]]:
     """The procedure's lab actions on the drives: lift the ``stands``, and per drive a
-    set-up and ``runs`` runs; then back to Zero and every plunger down."""
+    set-up and ``runs`` runs; then back to Zero, every plunger down and read there."""
     steps = [action(Op.LIFT, stand=k) for k in range(stands)]
     targets = targets_of(design)
     for axis in range(3):
@@ -112,7 +91,7 @@ def drive_steps(stands: int, design: MachineDesign, runs: int) -> list[dict[str,
                 rho[axis] = value
                 steps.append(action(Op.MOVE, rho))
     steps.append(action(Op.MOVE, np.zeros(3)))
-    return steps + [action(Op.ENGAGE, stand=k) for k in range(stands)]
+    return steps + gauges_down(stands)
 
 
 def programme_seconds(design: MachineDesign, stands: int, runs: int) -> float:
@@ -132,6 +111,15 @@ def programme_seconds(design: MachineDesign, stands: int, runs: int) -> float:
                                         soak=np.array([not aligned]))[0])
         rho, aligned = goal, aligned or op == Op.ALIGN
     return seconds
+
+
+def runs_for(budget_s: float, design: MachineDesign, stands: int) -> int:
+    """How many bidirectional runs per drive fit in ``budget_s`` with :data:`GAUGE_SHARE`
+    of it left to the gauges, the programme timed by :func:`programme_seconds` (the lab's
+    own charge, lifts and engagements included): at most :data:`ISO_RUNS`, at least one."""
+    room = (1 - GAUGE_SHARE) * budget_s
+    return max((runs for runs in range(2, ISO_RUNS + 1)
+                if programme_seconds(design, stands, runs) <= room), default=1)
 
 
 def least_budget_s(design: MachineDesign, stands: int) -> float:
@@ -158,5 +146,5 @@ class Iso230Agent(InstrumentFirst):
         left = float(self.env.budget_s) - float(observation["time"][0])
         stands = len(observation["slot"])
         self.check_budget(left, self.env.design, stands)
-        self.runs = runs_for(left, self.env.design)
+        self.runs = runs_for(left, self.env.design, stands)
         return drive_steps(stands, self.env.design, self.runs)

@@ -11,8 +11,9 @@ the same on every machine:
    face 0 at the back end of the stroke (:func:`start_mm`), zeroing the probe there, then
    :func:`runs_for` runs, each up through every face in reach (:func:`faces_in_reach`)
    and down through them again (both directions: backlash shows as the reversal);
-3. back at Zero, let every plunger down again (their zeros were kept), and hand the rest
-   of the budget to :data:`GAUGES`, which plans the gauges' experiment from there.
+3. back at Zero, let every plunger down again (their zeros were kept) and read them there,
+   and hand the rest of the budget to :data:`GAUGES`, which plans the gauges' experiment
+   from there (:func:`~calibrators.agents.instrument_first.gauges_down`).
 
 On the world axis through Zero each drive carries its own axis one to one (the x leg's
 carriage follows ``x`` exactly where ``y`` and ``z`` are fixed), so the gauge along an
@@ -106,7 +107,7 @@ def runs_for(budget_s: float, design: MachineDesign) -> int:
 
 def gauge_steps(stands: int, design: MachineDesign, runs: int) -> list[dict[str, Any]]:
     """The procedure's lab actions on the step gauge: lift the ``stands``, and per axis a
-    set-up and ``runs`` runs; then back to Zero and every plunger down."""
+    set-up and ``runs`` runs; then back to Zero, every plunger down and read there."""
     steps = [action(Op.LIFT, stand=k) for k in range(stands)]
     for axis in range(3):
         steps.append(action(Op.PLACE, face_command(design, axis, 0), axis=axis))
