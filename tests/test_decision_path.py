@@ -20,14 +20,25 @@ import numpy as np
 import pytest
 
 import orthoglide_env
-from calibrators.agents.actor_weights import ActorWeights, last_layer_bounds, read_actor
+from calibrators.agents.actor_weights import (
+    OPEN_LASTS_KEPT,
+    ActorWeights,
+    last_layer_bounds,
+    read_actor,
+)
 from calibrators.agents.base import action
 from calibrators.agents.names import get_agent
 from calibrators.agents.policy import DesignPolicyAgent
 from calibrators.study.episodes import machine_seed
-from orthoglide_env.lab.counting_rows import FAMILY
-from orthoglide_env.lab.design_belief import DesignBelief, action_masks, observations
+from orthoglide_env.lab.counting_rows import FAMILY, CountingRows
+from orthoglide_env.lab.design_belief import (
+    DesignBelief,
+    action_masks,
+    observations,
+    operations_of,
+)
 from orthoglide_env.lab.operations import Op
+from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.wrappers import design_lab_env
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -238,6 +249,26 @@ def test_the_float32_choice_is_the_float64_choice(states: tuple[np.ndarray, np.n
                                   np.argmax(np.where(masks, exact + noise, -np.inf), axis=1))
 
 
+def test_open_actions_last_layers_are_kept_and_choose_alike(
+        states: tuple[np.ndarray, np.ndarray]) -> None:
+    """``choose_many`` keeps the last layer of each set of open actions for the next
+    states of the same set: a state decides as float64 does whether its block was made
+    or kept, and at most ``OPEN_LASTS_KEPT`` blocks are kept, however many sets pass
+    (random masks over the states reached, twice as many sets as are kept)."""
+    actor = dataclasses.replace(read_actor(SHIPPED_HOUR))
+    seen, masks = states
+    exact = actor.logits_many(seen)
+    rng = np.random.default_rng(3)
+    drawn = rng.random((2 * OPEN_LASTS_KEPT, masks.shape[1])) < 0.25
+    for mask_of in (masks, drawn[np.arange(len(seen)) % len(drawn)]):
+        best = np.argmax(np.where(mask_of, exact, -np.inf), axis=1)
+        for _ in range(2):
+            np.testing.assert_array_equal([actor.choose_many(s[None], m[None])[0]
+                                           for s, m in zip(seen, mask_of, strict=True)], best)
+        assert 1 < len(actor._open_lasts) <= OPEN_LASTS_KEPT
+    assert len(actor._open_lasts) == OPEN_LASTS_KEPT
+
+
 def test_a_near_tie_is_decided_in_float64(states: tuple[np.ndarray, np.ndarray]) -> None:
     """Where two open actions' logits are closer than the float32 bound, float64 decides:
     a noise that brings the runner-up to 1e-12 below or above the best (far inside the
@@ -303,3 +334,65 @@ def test_bad_masks_are_refused(states: tuple[np.ndarray, np.ndarray]) -> None:
         actor.choose_many(seen[:2], np.zeros_like(masks[:2]))
     with pytest.raises(ValueError, match=r"masks are \(N, 1735\)"):
         actor.choose_many(seen[:2], masks[:3])
+
+
+def lab_observation(slots: list[int], engaged: list[int], faulted: list[int],
+                    time_s: float) -> dict[str, np.ndarray]:
+    """A lab observation's entries that a counting belief reads, of the lab's dtypes."""
+    return {"slot": np.array(slots, dtype=np.int64), "engaged": np.array(engaged, dtype=np.int8),
+            "faulted": np.array(faulted, dtype=np.int8), "valid": np.zeros(len(slots), np.int8),
+            "time": np.array([time_s])}
+
+
+def test_counting_rows_take_in_a_step_as_each_belief_does() -> None:
+    """``CountingRows.observe`` of one step in which five rows did different things (a
+    move, the same move refused, a re-mount, a lever flick, the same move again with a
+    stand at a slot beyond the catalogue and another out of service), then a step that
+    stays for one row and leaves for another: each row is what its belief's own
+    ``observe`` makes of it, and observes and masks as it does."""
+    design = PROTOTYPE
+    beliefs = [DesignBelief(design, 6, 0.02, 3600.0, 2, covariance=False) for _ in range(5)]
+    first = lab_observation([0, 5, 10, 15, 20, 25], [0] * 6, [0] * 6, 0.0)
+    for belief in beliefs:
+        belief.start(first)
+    rows = CountingRows(beliefs)
+    everyone = np.arange(len(beliefs))
+    table = beliefs[0].table
+    here, there = (int(k) for k in np.flatnonzero(beliefs[0].action_mask()[:table.zero])[:2])
+    move = operations_of(table, 6, beliefs[0].n_slots, here, beliefs[0].moves()[1],
+                         beliefs[0].engaged)[-1]
+    leave = {**move, "rho": table.postures[there].copy()}
+    remount = {"op": Op.REMOUNT, "rho": np.zeros(3), "stand": 1, "slot": 3}
+    flick = {"op": Op.ENGAGE, "rho": np.zeros(3), "stand": 0, "slot": 0}
+    beyond = beliefs[0].n_slots + 2
+    steps = [([move, move, remount, flick, move], [False, True, False, False, False],
+              [lab_observation([0, 5, 10, 15, 20, 25], [1, 0, 0, 0, 0, 0], [0] * 6, 40.0),
+               lab_observation([0, 5, 10, 15, 20, 25], [0] * 6, [0] * 6, 41.0),
+               lab_observation([0, 3, 10, 15, 20, 25], [0] * 6, [0] * 6, 90.0),
+               lab_observation([0, 5, 10, 15, 20, 25], [1, 0, 0, 0, 0, 0], [0] * 6, 2.0),
+               lab_observation([0, 5, beyond, 15, 20, 25], [0, 0, 1, 0, 0, 0],
+                               [0, 0, 0, 1, 0, 0], 40.0)]),
+             ([move, leave], [False, False],
+              [lab_observation([0, 5, 10, 15, 20, 25], [1, 0, 0, 0, 0, 0], [0] * 6, 80.0),
+               lab_observation([0, 5, beyond, 15, 20, 25], [0, 0, 1, 0, 0, 0],
+                               [0, 0, 0, 1, 0, 0], 80.0)])]
+    for which, (operations, refused, seen) in zip((everyone, np.array([0, 4])), steps,
+                                                  strict=True):
+        rows.observe(which, operations, seen, refused)
+        for k, operation, observation, no in zip(which.tolist(), operations, seen, refused,
+                                                 strict=True):
+            beliefs[k].observe(operation, observation, no)
+        for k, belief in enumerate(beliefs):
+            written = copy.copy(belief)
+            rows.write_back(k, written)
+            for name in ("slots", "engaged", "faulted", "rho", "readings_at"):
+                np.testing.assert_array_equal(getattr(written, name), getattr(belief, name))
+            assert (written.here, written.run, written.time_s) == (
+                belief.here, belief.run, belief.time_s)
+        np.testing.assert_array_equal(rows.observations(everyone),
+                                      [b.observation() for b in beliefs])
+        np.testing.assert_array_equal(rows.masks(everyone, rows.moves(everyone)),
+                                      [b.action_mask() for b in beliefs])
+    # The second step stayed for row 0 (two readings in a row), left for row 4.
+    assert (beliefs[0].run, beliefs[4].run) == (2, 1)
+    assert beliefs[4].here == there and beliefs[2].here == table.zero

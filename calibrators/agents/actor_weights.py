@@ -92,14 +92,31 @@ class ActorWeights:
         return x
 
     @cached_property
-    def last_float32(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`choose_many`'s last layer, made once per file: its float32 weights (out,
-        in), to take the open actions' rows, and transposed (in, out); each action's bound
-        of its float32 logit's distance from :meth:`logits_many`'s
-        (:func:`last_layer_bounds`)."""
-        weight = self.weights[-1]
-        return (weight, np.ascontiguousarray(weight.T),
-                last_layer_bounds(weight, self.biases[-1]))
+    def _open_lasts(self) -> OrderedDict[bytes, OpenLast]:
+        """:meth:`open_last`'s blocks, the last :data:`OPEN_LASTS_KEPT` used first."""
+        return OrderedDict()
+
+    def open_last(self, open_: np.ndarray) -> OpenLast:
+        """The last layer of the actions ``open_`` (actions,) bool, as :meth:`choose_many`
+        multiplies it, kept for the next states of the same open actions (a state's stands
+        and clock open them: they change at a re-mount and near the budget's end)."""
+        key = np.packbits(open_).tobytes()
+        kept = self._open_lasts
+        block = kept.get(key)
+        if block is None:
+            block = kept[key] = OpenLast.of(self.weights[-1], self.biases[-1], open_,
+                                            self.bounds)
+            if len(kept) > OPEN_LASTS_KEPT:
+                kept.popitem(last=False)
+        else:
+            kept.move_to_end(key)
+        return block
+
+    @cached_property
+    def bounds(self) -> np.ndarray:
+        """Each action's bound of its float32 logit's distance from :meth:`logits_many`'s
+        (:func:`last_layer_bounds`), made once per file."""
+        return last_layer_bounds(self.weights[-1], self.biases[-1])
 
     def choose_many(self, observations: np.ndarray, masks: np.ndarray,
                     noise: np.ndarray | None = None, states: np.ndarray | None = None
@@ -112,11 +129,12 @@ class ActorWeights:
 
         The hidden layers are :meth:`logits_many`'s, float64; the last, most of the
         arithmetic (1735 actions on the prototype), is found in float32 and only for the
-        actions open in some row.  A row's choice stands where its best open logit leads
-        every other by more than its action's bound and the largest action's bound of
-        their float32 logits' distance from float64's (:func:`last_layer_bounds`, plus
-        the rounding of a draw's noise); any other row is decided by
-        its float64 logits, so that a row is never decided otherwise than
+        actions open in some row (their block of the layer kept for the next states of
+        the same open actions, :meth:`open_last`).  A row's choice stands where its best
+        open logit leads every other by more than its action's bound and the largest
+        action's bound of their float32 logits' distance from float64's
+        (:func:`last_layer_bounds`, plus the rounding of a draw's noise); any other row is
+        decided by its float64 logits, so that a row is never decided otherwise than
         :meth:`logits_many` decides it (a tie within the bound costs that row a float64
         pass)."""
         hidden = self._hidden(observations)
@@ -128,14 +146,12 @@ class ActorWeights:
                 0 <= np.min(states) and np.max(states) < len(hidden))):
             raise ValueError(f"states are N indices of the {len(hidden)} observations' rows, "
                              f"got {states!r}")
-        weight, transposed, bounds = self.last_float32
-        open_ = np.flatnonzero(masks.any(axis=0))
-        if len(hidden) >= GATHER_ROWS:
-            # The open rows taken, then that block times the chunk's columns.
-            logits = (weight[open_] @ hidden.astype(np.float32).T).T.astype(np.float64)
-        else:
-            logits = (hidden.astype(np.float32) @ transposed)[:, open_].astype(np.float64)
-        logits += self.biases[-1][open_]
+        last = self.open_last(masks.any(axis=0))
+        open_ = last.actions
+        logits = (hidden.astype(np.float32) @ last.weight).astype(np.float64)
+        logits += last.bias
+        # One state's open actions are all the open actions.
+        masked = len(hidden) > 1
         if states is not None:
             logits, masks, hidden = logits[states], masks[states], hidden[states]
         if noise is not None:
@@ -143,14 +159,15 @@ class ActorWeights:
         # A value with a draw's noise added is rounded once more (float64's half ulp each
         # of the two compared, both at most the row's largest open logit).
         rounding = 4 * 2.0**-53 * 2 * np.max(np.abs(logits), axis=1)
-        logits[~masks[:, open_]] = -np.inf
+        if masked:
+            logits[~masks[:, open_]] = -np.inf
         rows = np.arange(len(logits))
         top = np.argmax(logits, axis=1)
         best = logits[rows, top]
         logits[rows, top] = -np.inf
         chosen = open_[top]
         # The runner-up's bound is at most the largest of any action's.
-        slack = bounds[chosen] + bounds.max() + rounding
+        slack = last.bounds[top] + last.largest + rounding
         close = np.flatnonzero(best - np.max(logits, axis=1) <= slack)
         if close.size:
             exact = self._last64(hidden[close])
@@ -160,12 +177,33 @@ class ActorWeights:
         return chosen
 
 
-#: From this many rows on, :meth:`ActorWeights.choose_many` copies out the open actions'
-#: weights before its product (the copy costs what a few rows' whole products cost).  On
-#: the shipped one-hour policy (about 430 open actions of 1735 a row, 650 over a chunk),
-#: float32, one thread: 1 row 24 µs with the copy, 11 without; 8 rows 72 and 136; 25
-#: rows 135 and 222.
-GATHER_ROWS: int = 4
+#: How many open actions' last layers :meth:`ActorWeights.open_last` keeps (each about
+#: 0.2 MB on the shipped one-hour policy, about 430 open actions of 1735 a state; a
+#: chunk's states take a few dozen sets of open actions an episode).
+OPEN_LASTS_KEPT: int = 16
+
+
+@dataclass(frozen=True)
+class OpenLast:
+    """The last layer of a set of open actions: their indices (O,), their float32 weights
+    transposed (in, O), contiguous, their biases (O,) in float64, their bounds (O,)
+    (:func:`last_layer_bounds`) and the largest bound of all actions (the runner-up's,
+    open or not, is at most that)."""
+
+    actions: np.ndarray
+    weight: np.ndarray
+    bias: np.ndarray
+    bounds: np.ndarray
+    largest: float
+
+    @classmethod
+    def of(cls, weight: np.ndarray, bias: np.ndarray, open_: np.ndarray,
+           bounds: np.ndarray) -> OpenLast:
+        """The block of a last layer ``weight`` (out, in), ``bias`` (out,) and its actions'
+        ``bounds`` (out,), for the actions ``open_`` (out,) bool."""
+        actions = np.flatnonzero(open_)
+        return cls(actions, np.ascontiguousarray(weight[actions].T),
+                   bias[actions].astype(np.float64), bounds[actions], float(bounds.max()))
 
 
 def last_layer_bounds(weight: np.ndarray, bias: np.ndarray) -> np.ndarray:

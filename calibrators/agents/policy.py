@@ -441,15 +441,21 @@ class DesignPolicyAgent(PolicyAgent):
 
 
 def _lab_actions(agents: list[DesignPolicyAgent]) -> list[dict[str, Any]]:
-    """Each agent's next lab action: its operation's next, or stop when it has none."""
+    """Each agent's next lab action: its operation's next, or stop when it has none.  An
+    operation's lab action is made once for the agents that queued it together (a chunk's
+    group of equal states, :func:`decide_counting`): the labs only read their actions."""
+    made: dict[int, dict[str, Any]] = {}
     actions = []
     for agent in agents:
         if not agent.queue:
             actions.append(action(Op.STOP))
             continue
-        agent.last = agent.queue.pop(0)
-        actions.append(action(agent.last["op"], agent.last["rho"], agent.last["stand"],
-                              agent.last["slot"]))
+        last = agent.last = agent.queue.pop(0)
+        # By the operation's id: the agents hold their operations throughout the call.
+        lab = made.get(id(last))
+        if lab is None:
+            lab = made[id(last)] = action(last["op"], last["rho"], last["stand"], last["slot"])
+        actions.append(lab)
     return actions
 
 

@@ -22,6 +22,7 @@ posture in both or in neither (a count changes only where a reading is taken, by
 from __future__ import annotations
 
 from collections.abc import Hashable, Iterable
+from functools import lru_cache
 
 import numpy as np
 
@@ -40,6 +41,9 @@ from orthoglide_env.lab.operations import Op
 #: service (K each).
 FAMILY, HERE, RUN, CLOCK, BUDGET, RHO = 0, 1, 2, 3, 4, slice(5, 8)
 STANDS_FROM: int = 8
+#: The entries of a lab observation that a row takes in (contiguous arrays, each of one
+#: shape and dtype in every lab of a chunk).
+TAKEN: tuple[str, ...] = ("slot", "engaged", "faulted", "time")
 
 
 class CountingRows:
@@ -72,47 +76,50 @@ class CountingRows:
         lab ``operations``, from their labs' observations ``seen`` (a refused operation
         changes nothing but the clock)."""
         first = self.first
-        # One pass over the operations: which moved (and where to), which re-mounted.
-        moved, to, remounted = [], [], []
-        for k, (operation, no) in enumerate(zip(operations, refused, strict=True)):
-            if not no and operation["op"] == Op.MOVE:
-                moved.append(k)
-                to.append(first.index[operation["rho"].tobytes()])
-            elif not no and operation["op"] == Op.REMOUNT:
-                remounted.append(k)
+        # Each operation's reading found once: the rows of a group share its dicts.
+        readings: dict[int, tuple[int, bool]] = {}
+        at, anew = [], []
+        for operation, no in zip(operations, refused, strict=True):
+            reading = (-1, False) if no else readings.get(id(operation))
+            if reading is None:
+                reading = readings[id(operation)] = _reading(first, operation)
+            at.append(reading[0])
+            anew.append(reading[1])
         state = self.state[rows]
-        reads = np.array(moved + remounted, dtype=np.int64)
-        if moved:
-            # A stay ends where the move goes elsewhere.
-            state[[k for k, t in zip(moved, to, strict=True) if t != state[k, HERE]], RUN] = 0
-            state[moved, HERE] = to
-            state[moved, RHO] = first.table.postures[to]
-        if remounted:
-            # A re-mount reads at Zero with another set of mountings: a new stay.
-            state[remounted, RUN] = 0
-            state[remounted, HERE] = first.table.zero
-            state[remounted, RHO] = 0.0
-        slot = np.array([o["slot"] for o in seen], dtype=np.int64)
+        # The labs' stands and clocks in one pass over their bytes: a record of each lab.
+        record = _record(tuple((seen[0][key].dtype, seen[0][key].shape) for key in TAKEN))
+        taken = np.frombuffer(b"".join([o[key] for o in seen for key in TAKEN]), record)
+        state[:, CLOCK] = taken["time"][:, 0]
+        held = state[:, self.slots]
+        held[:] = taken["slot"]
         # A stand at a slot beyond the design's catalogue (or none) holds no slot here.
-        held = np.where(slot < first.n_slots, slot, -1)
-        state[:, self.slots] = held
-        state[:, self.engaged] = np.array([o["engaged"] for o in seen], dtype=bool) & (
-            held >= 0)
-        state[:, self.faulted] = np.array([o["faulted"] for o in seen], dtype=bool)
-        state[:, CLOCK] = [float(o["time"][0]) for o in seen]
-        at = np.array(to + [first.table.zero] * len(remounted), dtype=np.int64)
-        self.counts[rows[reads], at] += 1
-        state[reads, RUN] += 1
+        held[held >= first.n_slots] = -1
+        state[:, self.engaged] = (taken["engaged"] != 0) & (held >= 0)
+        state[:, self.faulted] = taken["faulted"] != 0
+        posture = np.array(at, dtype=np.int64)
+        reads = np.flatnonzero(posture >= 0)
+        family = self.state[:, FAMILY] * (first.n_postures + 1)
+        if reads.size:
+            to = posture[reads]
+            # A stay ends where the reading is elsewhere, or after a re-mount (at Zero with
+            # another set of mountings).
+            stays = (to == state[reads, HERE]) & ~np.array(anew)[reads]
+            state[reads, RUN] = np.where(stays, state[reads, RUN], 0.0) + 1
+            state[reads, HERE] = to
+            state[reads, RHO] = first.table.postures[to]
+            self.counts[rows[reads], to] += 1
+            family[rows[reads]] += to + 1
         self.state[rows] = state
-        key = self.state[:, FAMILY] * (first.n_postures + 1)
-        key[rows[reads]] += at + 1
-        self.state[:, FAMILY] = _numbered(key.tolist())[1]
+        self.state[:, FAMILY] = _numbered_values(family)
 
     def groups(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The rows of ``rows`` whose states are equal, grouped: one row of each group
         (G,) and each row's group (len(rows),).  Equal states are equal counts (one
         family), stands, posture, clock, budget and readings in a row."""
         state = self.state[rows]
+        if _uniform(state.view(np.int64)):
+            # One state, the rows of machines played alike (a row's floats to the bit).
+            return rows[:1], np.zeros(len(rows), dtype=np.int64)
         # Rows compared by their bytes, a row's floats to the bit.
         flat, width = state.tobytes(), state.itemsize * state.shape[1]
         firsts, inverse = _numbered(flat[start:start + width]
@@ -167,6 +174,37 @@ class CountingRows:
         belief.here, belief.run = int(state[HERE]), int(state[RUN])
         belief.time_s, belief.fall = float(state[CLOCK]), 0.0
         belief._moves = None
+
+
+def _reading(first: DesignBelief, operation: dict[str, object]) -> tuple[int, bool]:
+    """Where lab ``operation`` (not refused) reads, as the posture's index (-1: nowhere),
+    and whether it starts a new stay wherever it reads (a re-mount)."""
+    if operation["op"] == Op.MOVE:
+        return first.index[operation["rho"].tobytes()], False
+    if operation["op"] == Op.REMOUNT:
+        return first.table.zero, True
+    return -1, False
+
+
+@lru_cache(maxsize=4)
+def _record(layout: tuple[tuple[np.dtype, tuple[int, ...]], ...]) -> np.dtype:
+    """The record of a lab observation's :data:`TAKEN` entries of dtypes and shapes
+    ``layout``, packed as their bytes are joined."""
+    return np.dtype([(key, dtype, shape) for key, (dtype, shape) in zip(TAKEN, layout,
+                                                                         strict=True)])
+
+
+def _uniform(values: np.ndarray) -> bool:
+    """Whether the rows of ``values`` (N, ...) are all equal (N >= 1)."""
+    return bool((values == values[0]).all())
+
+
+def _numbered_values(keys: np.ndarray) -> np.ndarray:
+    """:func:`_numbered`'s numbers of ``keys`` (N,), without a pass in Python when all
+    are equal."""
+    if _uniform(keys):
+        return np.zeros(len(keys), dtype=np.int64)
+    return _numbered(keys.tolist())[1]
 
 
 def _numbered(keys: Iterable[Hashable]) -> tuple[list[int], np.ndarray]:
