@@ -28,14 +28,17 @@ import numpy as np
 # play their moves with (the short list's module imports the filter's).
 import calibrators.planning.shortlist  # noqa: F401
 from calibrators.agents import Agent, get_agent
+from calibrators.agents.optimal import handed_plans, made_plans
 from calibrators.estimators.base import Estimate
 from calibrators.estimators.catalogue import for_study, get_estimator
 from calibrators.estimators.prediction import predicted_rigid_mm
 from calibrators.estimators.world_sizes import DETERMINED
+from calibrators.planning.search import screening_over
 from calibrators.study.engines import results
 from calibrators.study.episodes import (
     DEFAULT_BUDGET_S,
     Episode,
+    agent_rng,
     machine_seed,
     measurements_of,
     run_episode,
@@ -321,12 +324,15 @@ def _worlds(episodes: list[_Episode]) -> list[World] | None:
 
 
 def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]],
-              batched: bool = True) -> list[Trial]:
+              batched: bool = True, plans: dict[tuple, Any] | None = None) -> list[Trial]:
     """Machines ``indices``: every agent's episode on each, then every estimator over all
     of an agent's notebooks at once (a fixed design is fitted in one batched solve).
     ``batched``: the episodes of an agent run together in the lab's native vector env (on
     the exact backend); else one machine at a time in a lone lab, step by step (the
-    reference path, same numbers)."""
+    reference path, same numbers).  ``plans``: the agents' shared plans made already
+    (:func:`shared_plans`)."""
+    if plans:
+        handed_plans(plans)
     trials = []
     uncalibrated: dict[int, np.ndarray] = {}  # a machine's, whichever agent worked on it
     for agent_name in config.agents:
@@ -370,6 +376,24 @@ def agent_episodes(config: Config, agent_name: str, runs: list[int], batched: bo
     return [_Episode(agent_name, index, e) for index, e in zip(runs, done, strict=True)]
 
 
+def shared_plans(config: Config, machine: int, processes: int) -> dict[tuple, Any]:
+    """The plans of the lab's set-up that the comparison's agents make at reset
+    (:attr:`~calibrators.agents.base.Agent.shares_a_plan`), each made once here on
+    ``machine``'s lab, its re-mounts screened over ``processes`` processes
+    (:func:`~calibrators.planning.search.screening_over`): what each worker would make
+    alone, by all of the set-up's arguments (:func:`~calibrators.agents.optimal.
+    made_plans`); none when no agent shares one."""
+    seed = machine_seed(config.seed, machine)
+    planners = [a for a in map(get_agent, config.agents) if a.shares_a_plan]
+    with screening_over(processes):
+        for agent in planners:
+            kwargs = config.lab_kwargs(agent)
+            with closing(gym.make(lab_id(kwargs), **kwargs)) as env:
+                observation, _ = env.reset(seed=seed)
+                agent.reset(env, observation, agent_rng(seed))
+    return made_plans() if planners else {}
+
+
 #: Machines per task: their episodes run in one lab vector env and a fixed design's fits
 #: in one batched solve, whose fixed costs per step and per iteration (the outlier refits
 #: of a few machines above all) are still paid down up to about 500 machines; the scoring
@@ -403,8 +427,12 @@ def run(config: Config, machines: int, jobs: int = 1, done: list[Trial] | None =
     size = max(1, min(chunk, -(-machines // jobs)))
     chunks = [list(range(i, min(i + size, machines))) for i in range(0, machines, size)]
     trials = list(done)
-    with closing(results(partial(run_chunk, config, skip=skip), chunks, jobs, engine,
-                         address)) as finished:
+    # Each worker would make the agents' shared plans (seconds of a core each): made once
+    # here instead, their screening spread over the cores the workers are about to take.
+    plans = (shared_plans(config, chunks[0][0], jobs)
+             if jobs > 1 and len(chunks) > 1 else None)
+    with closing(results(partial(run_chunk, config, skip=skip, plans=plans), chunks, jobs,
+                         engine, address)) as finished:
         for chunk, new in finished:
             for trial in new:
                 trials.append(trial)
