@@ -27,6 +27,7 @@ from calibrators.planning.search import (
     lookahead_rates,
     screening_over,
 )
+from calibrators.study.compare import Config, run_chunk, shared_plans
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
@@ -345,3 +346,21 @@ def test_a_handed_plan_serves_only_its_own_set_up(monkeypatch: pytest.MonkeyPatc
     assert fixed_plan(*setup[:6]) is handed
     steps, predicted = fixed_plan(*setup[:6], remounts=False)
     assert predicted < 1.0 and len(steps) > 1
+
+
+def test_a_sweeps_workers_make_no_plan_of_their_own(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The plan a comparison makes before its workers start
+    (:func:`~calibrators.study.compare.shared_plans`, on its first machine) is the one
+    every worker's agents ask for on their machines: handed to a process that has none, its
+    chunk of other machines, ``active`` and ``optimal`` both, plans nothing again."""
+    config = Config(("active", "optimal"), ("extended",), seed=1, conditions=LAB,
+                    budget_s=240.0)
+    monkeypatch.setattr(optimal, "_PLANS", {})
+    plans = shared_plans(config, 0, 1)
+    assert len(plans) == 1  # the two agents share one set-up
+    monkeypatch.setattr(optimal, "_PLANS", {})
+    made = []
+    planning = optimal._fixed_plan
+    monkeypatch.setattr(optimal, "_fixed_plan", lambda *key: made.append(key) or planning(*key))
+    trials = run_chunk(config, [3, 4], set(), plans=plans)
+    assert len(trials) == 4 and not made

@@ -10,7 +10,8 @@ weighs the world's drift, backlash and indicator curves, and may stop before the
 (:mod:`calibrators.planning.world_terms`).  ``optimal-d`` plans for the D criterion instead
 (the information about every unknown); ``optimal-stay`` never re-mounts a stand.  The
 plan depends only on the lab's set-up (stands, noise, budget, conditions), so it is made
-once per process and replayed on every machine.
+once per process and replayed on every machine; a comparison on several workers makes it
+once before they start and hands it to them (:func:`made_plans`, :func:`handed_plans`).
 """
 
 from __future__ import annotations
