@@ -394,6 +394,16 @@ def shared_plans(config: Config, machine: int, processes: int) -> dict[tuple, An
     return made_plans() if planners else {}
 
 
+def _plans_made_once(config: Config, machine: int, processes: int) -> dict[tuple, Any]:
+    """:func:`shared_plans` made in one spawned process, whose BLAS runs on one thread as
+    the sweep's workers' does: this process's may run threads of its own, which beside the
+    screening's forks spend three times the CPU and wall time (17 CPU-s against 51 for the
+    one-hour ``lab`` plan on 2 cores)."""
+    with closing(results(partial(shared_plans, config, processes=processes), [machine],
+                         jobs=2)) as made:
+        return next(made)[1]
+
+
 #: Machines per task: their episodes run in one lab vector env and a fixed design's fits
 #: in one batched solve, whose fixed costs per step and per iteration (the outlier refits
 #: of a few machines above all) are still paid down up to about 500 machines; the scoring
@@ -428,8 +438,8 @@ def run(config: Config, machines: int, jobs: int = 1, done: list[Trial] | None =
     chunks = [list(range(i, min(i + size, machines))) for i in range(0, machines, size)]
     trials = list(done)
     # Each worker would make the agents' shared plans (seconds of a core each): made once
-    # here instead, their screening spread over the cores the workers are about to take.
-    plans = (shared_plans(config, chunks[0][0], jobs)
+    # instead, their screening spread over the cores the workers are about to take.
+    plans = (_plans_made_once(config, chunks[0][0], jobs)
              if jobs > 1 and len(chunks) > 1 else None)
     with closing(results(partial(run_chunk, config, skip=skip, plans=plans), chunks, jobs,
                          engine, address)) as finished:
