@@ -3,20 +3,31 @@ a plan."""
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
-from calibrators.agents import get_agent
-from calibrators.agents.optimal import fixed_plan
-from calibrators.planning.belief import N_MACHINE, N_STAND, observe_many, predicted_tips_many
+from calibrators.agents import get_agent, optimal
+from calibrators.agents.optimal import fixed_plan, handed_plans, made_plans
+from calibrators.planning.belief import (
+    N_MACHINE,
+    N_STAND,
+    PlannedOperation,
+    observe_many,
+    predicted_tips_many,
+)
 from calibrators.planning.pricing import WORLD_SHORTLIST, top_rates_many
 from calibrators.planning.search import (
     LOOKAHEAD_MOVES,
     Planner,
+    _spread,
     best_moves,
     greedy_plan,
     lookahead_rates,
+    screening_over,
 )
+from calibrators.study.compare import Config, run_chunk, shared_plans
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
@@ -282,3 +293,74 @@ def test_a_remount_checks_options_priced_together_as_each_alone() -> None:
     alone = [played_alone(option) for option in played]
     assert {moves for _, moves in alone} > {LOOKAHEAD_MOVES}  # some run out, one does not
     assert lookahead_rates(played, start, p.time_s) == [rate for rate, _ in alone]
+
+
+def test_spread_answers_in_order_from_forks() -> None:
+    """Under :func:`~calibrators.planning.search.screening_over` a screening's items are
+    answered in their order, the later part by a fork of this process (another pid) that
+    holds the caller's state; outside it, all here."""
+    def pids(items: list[int]) -> list[tuple[int, int]]:
+        return [(item, os.getpid()) for item in items]
+
+    with screening_over(2):
+        spread = _spread(pids, list(range(7)))
+    assert [item for item, _ in spread] == list(range(7))
+    assert [pid for _, pid in spread[:4]] == [os.getpid()] * 4
+    assert {pid for _, pid in spread[4:]} - {os.getpid()}
+    assert {pid for _, pid in _spread(pids, list(range(7)))} == {os.getpid()}
+
+
+@pytest.mark.slow
+def test_a_remount_check_spread_over_processes_chooses_as_in_one() -> None:
+    """A re-mount check whose screening and play-outs are spread over two processes (a
+    sweep's start-up plan, :func:`~calibrators.study.compare.shared_plans`) screens and
+    plays out its options with the same numbers, to the bit, as in one process, and
+    makes the same choice."""
+    p = planner(LAB, budget_s=420.0)
+    for _ in range(5):
+        assert p.greedy_move()
+    start = p._criterion_value()
+    options = [[(0, slot)] for slot in range(len(p.table.tip)) if slot not in p.slots][:6]
+    screened = [rate for chunk in options for rate in p._screening_rates([chunk], start)]
+    groups = [[None, options[0][0]], [options[1][0], options[2][0]]]
+    played = [rate for group in groups for rate in p._played_rates(group, start)]
+    with screening_over(2):
+        assert _spread(lambda part: p._screening_rates(part, start), options) == screened
+        assert _spread(lambda part: [rate for group in part
+                                     for rate in p._played_rates(group, start)],
+                       groups) == played
+        choice = p.fork().best_remount()
+    assert choice == p.fork().best_remount()
+
+
+def test_a_handed_plan_serves_only_its_own_set_up(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A plan handed to a process (:func:`~calibrators.agents.optimal.handed_plans`, a
+    sweep's workers) is the plan of a set-up equal to its key in every argument; a set-up
+    one argument away is planned as before."""
+    setup = (tuple(PAPER_SLOTS), (True,) * len(PAPER_SLOTS), SIGMA, 60.0, PROTOTYPE, LAB,
+             "I", True, (), 0.0)
+    handed = ((PlannedOperation(Op.STOP, time_s=0.0),), 1.0)  # not what planning makes
+    monkeypatch.setattr(optimal, "_PLANS", {})  # the process's other plans kept out
+    handed_plans({setup: handed})
+    assert setup in made_plans()
+    assert fixed_plan(*setup[:6]) is handed
+    steps, predicted = fixed_plan(*setup[:6], remounts=False)
+    assert predicted < 1.0 and len(steps) > 1
+
+
+def test_a_sweeps_workers_make_no_plan_of_their_own(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The plan a comparison makes before its workers start
+    (:func:`~calibrators.study.compare.shared_plans`, on its first machine) is the one
+    every worker's agents ask for on their machines: handed to a process that has none, its
+    chunk of other machines, ``active`` and ``optimal`` both, plans nothing again."""
+    config = Config(("active", "optimal"), ("extended",), seed=1, conditions=LAB,
+                    budget_s=240.0)
+    monkeypatch.setattr(optimal, "_PLANS", {})
+    plans = shared_plans(config, 0, 1)
+    assert len(plans) == 1  # the two agents share one set-up
+    monkeypatch.setattr(optimal, "_PLANS", {})
+    made = []
+    planning = optimal._fixed_plan
+    monkeypatch.setattr(optimal, "_fixed_plan", lambda *key: made.append(key) or planning(*key))
+    trials = run_chunk(config, [3, 4], set(), plans=plans)
+    assert len(trials) == 4 and not made

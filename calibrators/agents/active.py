@@ -72,6 +72,7 @@ def _refitter(sigma: float) -> Estimator:
 class ActiveAgent(Agent):
     name = "active"
     criterion = "I"
+    shares_a_plan = True
     #: Stop once the predicted TCP error after rigid motion is at most this (mm); 0: use
     #: the whole budget.
     target_mm: float = 0.0

@@ -25,6 +25,10 @@ class Agent:
     needs_tracker: ClassVar[bool] = False
     needs_reference: ClassVar[bool] = False
     needs_instruments: ClassVar[tuple[str, ...]] = ()
+    #: Whether ``reset`` makes a plan of the lab's set-up alone, the same on every machine
+    #: of a sweep (:func:`calibrators.agents.optimal.fixed_plan`): a sweep makes it once,
+    #: before its workers start, and hands it to them.
+    shares_a_plan: ClassVar[bool] = False
     reserved_s: float = 0.0
 
     def reset(self, env: gym.Env, observation: dict[str, np.ndarray],

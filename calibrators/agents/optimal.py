@@ -10,12 +10,12 @@ weighs the world's drift, backlash and indicator curves, and may stop before the
 (:mod:`calibrators.planning.world_terms`).  ``optimal-d`` plans for the D criterion instead
 (the information about every unknown); ``optimal-stay`` never re-mounts a stand.  The
 plan depends only on the lab's set-up (stands, noise, budget, conditions), so it is made
-once per process and replayed on every machine.
+once per process and replayed on every machine; a comparison on several workers makes it
+once before they start and hands it to them (:func:`made_plans`, :func:`handed_plans`).
 """
 
 from __future__ import annotations
 
-from functools import lru_cache
 from typing import Any
 
 import gymnasium as gym
@@ -52,16 +52,44 @@ def fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
     the plan, whose rounded designs' greedy fills cost about half a CPU-minute each."""
     # Every argument by position: a cache keyed on the call's form made a second plan
     # for the same set-up when a caller left out a default another passed.
-    return _fixed_plan(tuple(slots), tuple(engaged), sigma, budget_s, design, conditions,
-                       criterion, remounts, tuple(instruments), float(dwell_s))
+    key = (tuple(slots), tuple(engaged), sigma, budget_s, design, conditions, criterion,
+           remounts, tuple(instruments), float(dwell_s))
+    plan = _PLANS.get(key)
+    if plan is None:
+        plan = _PLANS[key] = _fixed_plan(*key)
+        if len(_PLANS) > PLANS_KEPT:
+            del _PLANS[next(iter(_PLANS))]  # the oldest
+    return plan
 
 
-@lru_cache(maxsize=8)
+#: Set-ups whose plans a process keeps (a plan is a few kilobytes; a comparison has one
+#: per planning agent).
+PLANS_KEPT: int = 8
+#: The plans this process made or was handed (:func:`handed_plans`), by every argument of
+#: :func:`_fixed_plan`.
+_PLANS: dict[tuple, tuple[tuple[PlannedOperation, ...], float]] = {}
+
+
+def made_plans() -> dict[tuple, tuple[tuple[PlannedOperation, ...], float]]:
+    """The plans this process has made, by all of their set-up's arguments: for a
+    sweep's workers (:func:`handed_plans`), which then need not make them again."""
+    return dict(_PLANS)
+
+
+def handed_plans(plans: dict[tuple, tuple[tuple[PlannedOperation, ...], float]]) -> None:
+    """Keep ``plans`` (:func:`made_plans` of another process) as if made here: a set-up
+    that is one of their keys, all of its arguments equal, gets its plan without making
+    it; any other is made as before."""
+    _PLANS.update(plans)
+    while len(_PLANS) > PLANS_KEPT:
+        del _PLANS[next(iter(_PLANS))]
+
+
 def _fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
                 budget_s: float, design: MachineDesign, conditions: Conditions | None,
                 criterion: str, remounts: bool, instruments: tuple[str, ...], dwell_s: float
                 ) -> tuple[tuple[PlannedOperation, ...], float]:
-    """:func:`fixed_plan`, its arguments all given, cached per process."""
+    """:func:`fixed_plan`, its arguments all given, made."""
     def opened() -> Planner:
         planner = Planner(list(slots), list(engaged), sigma, budget_s, criterion=criterion,
                           design=design, conditions=conditions, instruments=instruments,
@@ -120,6 +148,7 @@ def owned_instruments(env: gym.Env) -> tuple[str, ...]:
 class OptimalAgent(PlannedAgent):
     name = "optimal"
     criterion = "I"
+    shares_a_plan = True
     #: Whether the plan may move stands to other slots.
     remounts = True
     #: Whether the instruments the lab owns beyond its dials are among the options.

@@ -83,6 +83,7 @@ class ReferenceAfter(Agent):
         self.inner = inner
         self.name = inner.name + REFERENCE_SUFFIX  # type: ignore[misc]
         self.needs_tracker = inner.needs_tracker  # type: ignore[misc]
+        self.shares_a_plan = inner.shares_a_plan  # type: ignore[misc]
 
     def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
               rng: np.random.Generator) -> None:

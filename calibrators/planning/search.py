@@ -16,6 +16,12 @@ values :func:`observe`) here, where the planner's state lives.
 from __future__ import annotations
 
 import copy
+import os
+import pickle
+import traceback
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import TypeVar
 
 import numpy as np
 
@@ -52,6 +58,64 @@ SCREENED_TOGETHER: int = 8
 #: What every move costs on top of its drive and settle once a plan has set the laser up
 #: (s): the lab's charge.
 LASER_DWELL_S: float = float(move_dwell_seconds(laser=True))
+#: Processes a re-mount check's screening is spread over (:func:`screening_over`).
+_SCREENING_PROCESSES: int = 1
+
+Item = TypeVar("Item")
+Result = TypeVar("Result")
+
+
+@contextmanager
+def screening_over(processes: int) -> Iterator[None]:
+    """While it lasts, every re-mount check of this process (:meth:`Planner.best_remount`)
+    screens its re-mounts over ``processes`` processes, this one and forks of it: for a
+    plan made once while cores are idle (a sweep's start-up plan, before its workers
+    start).  The same numbers, to the bit: each re-mount's are its own alone."""
+    global _SCREENING_PROCESSES
+    saved, _SCREENING_PROCESSES = _SCREENING_PROCESSES, max(1, processes)
+    try:
+        yield
+    finally:
+        _SCREENING_PROCESSES = saved
+
+
+def _spread(function: Callable[[list[Item]], list[Result]], items: list[Item]
+            ) -> list[Result]:
+    """``function(items)``, ``items`` split in order over the screening's processes
+    (:func:`screening_over`): the first part here and each other in a fork of this process
+    (which holds the caller's state as it is, with nothing to send), its results sent back
+    pickled; ``function`` answers each item alone, whatever the others."""
+    parts = [[items[i] for i in part] for part in np.array_split(
+        np.arange(len(items)), max(1, min(_SCREENING_PROCESSES, len(items))))]
+    if len(parts) < 2 or not hasattr(os, "fork"):
+        return function(items)
+    children = []
+    for part in parts[1:]:
+        read, write = os.pipe()
+        pid = os.fork()
+        if pid == 0:  # the fork: its part, sent back, and out without any clean-up
+            os.close(read)
+            try:
+                try:
+                    answer = (True, function(part))
+                except BaseException:
+                    answer = (False, traceback.format_exc())
+                with os.fdopen(write, "wb") as out:
+                    pickle.dump(answer, out, pickle.HIGHEST_PROTOCOL)
+            finally:
+                os._exit(0)
+        os.close(write)
+        children.append((pid, read))
+    results = function(parts[0])
+    for pid, read in children:
+        with os.fdopen(read, "rb") as answer:
+            data = answer.read()
+        os.waitpid(pid, 0)
+        done, value = pickle.loads(data) if data else (False, "no answer")
+        if not done:
+            raise RuntimeError(f"a forked re-mount screening failed: {value}")
+        results += value
+    return results
 
 
 class Planner(Pricer):
@@ -174,6 +238,31 @@ class Planner(Pricer):
         priced = self.priced_moves()
         return np.argsort(self.affordable_rates(priced))[-LOOKAHEAD_MOVES:], priced
 
+    def _screening_rates(self, chunks: list[list[tuple[int, int]]], start: float
+                         ) -> list[tuple[float, int, int]]:
+        """Each re-mount (stand, slot) of ``chunks`` (stacked a chunk at a time) with the
+        gain per second, since criterion value ``start`` and the re-mount included, of the
+        best :data:`LOOKAHEAD_MOVES` moves it opens, each priced alone:
+        ``(rate, stand, slot)``."""
+        candidates = []
+        for chunk in chunks:
+            trials = self._remounted(chunk)
+            for (stand, slot), trial, opened in zip(chunk, trials, top_rates_many(
+                    trials, LOOKAHEAD_MOVES), strict=True):
+                top, priced = trial._screened(*opened)
+                gain = start - trial._criterion_value() + priced.gain[top].sum()
+                spent = trial.time_s - self.time_s + priced.seconds[top].sum()
+                candidates.append((gain / spent, stand, slot))
+        return candidates
+
+    def _played_rates(self, options: list[tuple[int, int] | None], start: float
+                      ) -> list[float]:
+        """:meth:`lookahead_rate` since criterion value ``start`` now of each of ``options``:
+        a re-mount (stand, slot), or None for staying; played out together."""
+        moved = iter(self._remounted([o for o in options if o is not None]))
+        return lookahead_rates([self if o is None else next(moved) for o in options], start,
+                               self.time_s)
+
     def best_remount(self, screened: int | None = SCREENED) -> tuple[int, int] | None:
         """The re-mount (stand, slot) whose next moves gain more per second, re-mount
         included, than the next moves of the present configuration, or None.  Every
@@ -183,35 +272,27 @@ class Planner(Pricer):
         The re-mounts are screened :data:`SCREENED_TOGETHER` at a time and the options
         played out :data:`PLAYED_TOGETHER` at a time, their prices stacked
         (:func:`~calibrators.planning.pricing.top_rates_many`): each option's numbers are
-        its own alone, to the bit.  None when a re-mount would end past the budget: a
-        plan's every operation ends within it, as its moves do (:meth:`affordable_rates`)."""
+        its own alone, to the bit; under :func:`screening_over` both are spread over its
+        processes.  None when a re-mount would end past the budget: a plan's every
+        operation ends within it, as its moves do (:meth:`affordable_rates`)."""
         if self.time_s + self.remount_seconds() > self.budget_s:
             return None
         start = self._criterion_value()
-        candidates = []
         options = [(stand, slot) for stand in range(len(self.slots))
                    for slot in range(len(slot_catalogue(self.design)))
                    if slot not in self.slots]
         together = SCREENED_TOGETHER if self.world is not None else 1
-        for first in range(0, len(options), together):
-            chunk = options[first:first + together]
-            trials = self._remounted(chunk)
-            for (stand, slot), trial, opened in zip(chunk, trials, top_rates_many(
-                    trials, LOOKAHEAD_MOVES), strict=True):
-                top, priced = trial._screened(*opened)
-                gain = start - trial._criterion_value() + priced.gain[top].sum()
-                spent = trial.time_s - self.time_s + priced.seconds[top].sum()
-                candidates.append((gain / spent, stand, slot))
-        ranked = sorted(candidates)
+        chunks = [options[first:first + together]
+                  for first in range(0, len(options), together)]
+        ranked = sorted(_spread(lambda part: self._screening_rates(part, start), chunks))
         # Staying first, then the screened re-mounts from the least promising up.
         played = [None] + [(stand, slot) for _, stand, slot in (
             ranked[-screened:] if screened else ranked)]
-        rates = []
-        for first in range(0, len(played), PLAYED_TOGETHER):
-            chunk = played[first:first + PLAYED_TOGETHER]
-            moved = iter(self._remounted([o for o in chunk if o is not None]))
-            rates += lookahead_rates([self if o is None else next(moved) for o in chunk],
-                                     start, self.time_s)
+        # Spread over the screening's processes too, each playing a group at a time.
+        size = min(PLAYED_TOGETHER, -(-len(played) // _SCREENING_PROCESSES))
+        rates = _spread(lambda part: [rate for group in part
+                                      for rate in self._played_rates(group, start)],
+                        [played[first:first + size] for first in range(0, len(played), size)])
         best, best_rate = None, rates[0]
         for option, rate in zip(played[1:], rates[1:], strict=True):
             if rate > best_rate:

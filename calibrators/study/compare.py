@@ -34,6 +34,7 @@ from calibrators.study.engines import results
 from calibrators.study.episodes import (
     DEFAULT_BUDGET_S,
     Episode,
+    agent_rng,
     machine_seed,
     measurements_of,
     run_episode,
@@ -319,12 +320,17 @@ def _worlds(episodes: list[_Episode]) -> list[World] | None:
 
 
 def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]],
-              batched: bool = True) -> list[Trial]:
+              batched: bool = True, plans: dict[tuple, Any] | None = None) -> list[Trial]:
     """Machines ``indices``: every agent's episode on each, then every estimator over all
     of an agent's notebooks at once (a fixed design is fitted in one batched solve).
     ``batched``: the episodes of an agent run together in the lab's native vector env (on
     the exact backend); else one machine at a time in a lone lab, step by step (the
-    reference path, same numbers)."""
+    reference path, same numbers).  ``plans``: the agents' shared plans made already
+    (:func:`shared_plans`)."""
+    if plans:
+        # Only a sweep of planning agents is handed plans, and only it needs the planner.
+        from calibrators.agents.optimal import handed_plans
+        handed_plans(plans)
     trials = []
     uncalibrated: dict[int, np.ndarray] = {}  # a machine's, whichever agent worked on it
     for agent_name in config.agents:
@@ -373,6 +379,39 @@ def agent_episodes(config: Config, agent_name: str, runs: list[int], batched: bo
     return [_Episode(agent_name, index, e) for index, e in zip(runs, done, strict=True)]
 
 
+def shared_plans(config: Config, machine: int, processes: int) -> dict[tuple, Any]:
+    """The plans of the lab's set-up that the comparison's agents make at reset
+    (:attr:`~calibrators.agents.base.Agent.shares_a_plan`), each made once here on
+    ``machine``'s lab, its re-mounts screened over ``processes`` processes
+    (:func:`~calibrators.planning.search.screening_over`): what each worker would make
+    alone, by all of the set-up's arguments (:func:`~calibrators.agents.optimal.
+    made_plans`); none when no agent shares one."""
+    planners = [a for a in map(get_agent, config.agents) if a.shares_a_plan]
+    if not planners:
+        return {}
+    # The planner is imported only by a comparison with an agent that plans.
+    from calibrators.agents.optimal import made_plans
+    from calibrators.planning.search import screening_over
+    seed = machine_seed(config.seed, machine)
+    with screening_over(processes):
+        for agent in planners:
+            kwargs = config.lab_kwargs(agent)
+            with closing(gym.make(lab_id(kwargs), **kwargs)) as env:
+                observation, _ = env.reset(seed=seed)
+                agent.reset(env, observation, agent_rng(seed))
+    return made_plans()
+
+
+def _plans_made_once(config: Config, machine: int, processes: int) -> dict[tuple, Any]:
+    """:func:`shared_plans` made in one spawned process, whose BLAS runs on one thread as
+    the sweep's workers' does: this process's may run threads of its own, which beside the
+    screening's forks spend three times the CPU and wall time (17 CPU-s against 51 for the
+    one-hour ``lab`` plan on 2 cores)."""
+    with closing(results(partial(shared_plans, config, processes=processes), [machine],
+                         jobs=2)) as made:
+        return next(made)[1]
+
+
 #: Machines per task: their episodes run in one lab vector env and a fixed design's fits
 #: in one batched solve, whose fixed costs per step and per iteration (the outlier refits
 #: of a few machines above all) are still paid down up to about 500 machines; the scoring
@@ -406,8 +445,12 @@ def run(config: Config, machines: int, jobs: int = 1, done: list[Trial] | None =
     size = max(1, min(chunk, -(-machines // jobs)))
     chunks = [list(range(i, min(i + size, machines))) for i in range(0, machines, size)]
     trials = list(done)
-    with closing(results(partial(run_chunk, config, skip=skip), chunks, jobs, engine,
-                         address)) as finished:
+    # Each worker would make the agents' shared plans (seconds of a core each): made once
+    # instead, their screening spread over the cores the workers are about to take.
+    plans = (_plans_made_once(config, chunks[0][0], jobs)
+             if jobs > 1 and len(chunks) > 1 else None)
+    with closing(results(partial(run_chunk, config, skip=skip, plans=plans), chunks, jobs,
+                         engine, address)) as finished:
         for chunk, new in finished:
             for trial in new:
                 trials.append(trial)
