@@ -53,6 +53,17 @@ def paper_matrix() -> np.ndarray:
     )  # fmt: skip
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _learning_logs_under_pytest(tmp_path_factory: pytest.TempPathFactory) -> Any:
+    """stable-baselines3's default logger makes an empty ``SB3-<date>`` folder in the
+    system's temporary directory at each ``learn``: the tests' go under pytest's own
+    temporary directory, which pytest prunes."""
+    patch = pytest.MonkeyPatch()
+    patch.setenv("SB3_LOGDIR", str(tmp_path_factory.mktemp("sb3")))
+    yield
+    patch.undo()
+
+
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(20261122)
