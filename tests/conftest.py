@@ -174,12 +174,28 @@ def assert_view_plays_as_lab(view: gym.Env, agent: Any, episode: Episode, seed: 
     assert len(played) > 12
 
 
+def _module_fixtures(item: pytest.Item) -> set[tuple[str, str]]:
+    """The module-scoped fixtures ``item`` uses, each with its module's name (read from
+    pytest's ``_fixtureinfo``: a fixture's scope has no public view on an item)."""
+    defs = getattr(item, "_fixtureinfo", None)
+    if defs is None:
+        return set()
+    return {(item.module.__name__, name) for name, chain in defs.name2fixturedefs.items()
+            if chain and chain[-1].scope == "module"}
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The tests marked ``slow`` run first, each in collection order.  Spread over workers
-    (``make test``: ``-n auto``), the suite lasts as long as its busiest worker: a long
-    test handed out last would keep one worker busy while the others idle, whereas
-    started first it overlaps the many short ones.  ``make test`` lets a worker that runs
-    out take half of another's queue (``--dist worksteal``): the default's opening blocks
-    gave every slow test to the first worker.  The order is only a schedule: no test
-    depends on another having run."""
-    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+    """The tests marked ``slow`` run first, each in collection order, and with them the
+    tests that share a module-scoped fixture with one: the fixture is built once per
+    worker, and scheduled apart a slow test's plan or sheet was built on both workers
+    (`tests/test_plan.py`'s `optimal` plan, 20 CPU-s each when it was an hour's).
+    Spread over workers (``make test``: ``-n auto``), the suite lasts as long as its
+    busiest worker: a long test handed out last would keep one worker busy while the
+    others idle, whereas started first it overlaps the many short ones.  ``make test``
+    lets a worker that runs out take half of another's queue (``--dist worksteal``): the
+    default's opening blocks gave every slow test to the first worker.  The order is only
+    a schedule: no test depends on another having run."""
+    shared = set().union(*(_module_fixtures(item) for item in items
+                           if item.get_closest_marker("slow")))
+    items.sort(key=lambda item: not (item.get_closest_marker("slow")
+                                     or _module_fixtures(item) & shared))

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import gymnasium as gym
 import numpy as np
+import pytest
 
 import orthoglide_env
 from calibrators.agents.names import get_agent
@@ -58,6 +59,7 @@ def test_a_re_mount_that_no_longer_fits_is_dropped_and_the_moves_go_on() -> None
     env.close()
 
 
+@pytest.mark.slow
 def test_re_mounts_are_due_on_the_lab_s_clock_from_where_the_agent_began() -> None:
     """Begun 6 minutes into the lab's clock (three re-mounts of a stand onto its own slot,
     as a reference procedure's programme takes time first), the agent re-mounts no stand

@@ -157,6 +157,7 @@ def random_actor(inputs: int, actions: int) -> ActorWeights:
     return ActorWeights(weights, tuple(biases))
 
 
+@pytest.mark.slow
 def test_view_2_decides_from_counts_as_the_view_s_belief_does() -> None:
     """A policy of view 2 decides without the covariance: its chunk's beliefs only count
     the readings, and take, action for action, the operations that the view's own

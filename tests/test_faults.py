@@ -58,6 +58,7 @@ def test_until_the_first_fault_the_readings_are_those_of_a_lab_without(pair) -> 
     assert clean.truth.to_vector().tolist() == faulted.truth.to_vector().tolist()
 
 
+@pytest.mark.slow
 def test_a_knock_moves_its_mounting_readings_by_its_size_and_nothing_else() -> None:
     clean, knocked = episode(None), episode("knock")
     events = [e for e in knocked.faults if e["stand"] >= 0]

@@ -102,6 +102,7 @@ def test_fixed_plan_keeps_the_better_plan_and_active_finds_its_bundles(half_hour
     assert len(taken) == sum(s.op == Op.PIVOT for s in steps)
 
 
+@pytest.mark.slow
 def test_the_bounds_own_design_rounds_to_its_readings(monkeypatch):
     # best_design is the bound's with the design that reaches it: its counts give the
     # design's value, and its bar readings, rounded, are its bundle's path.

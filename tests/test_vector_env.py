@@ -17,6 +17,12 @@ from orthoglide_env.model.kinematics import paper_posture
 N = 5
 #: Short episodes, so that a few hundred steps truncate each env many times.
 EPISODE = 23
+#: Steps of an equivalence run: every case covers what it compares (see the test) by step
+#: 146 at the latest (ideal gauges, autoreset disabled, its first reset with gauges).
+STEPS = 200
+#: The forms of a reset call a run must make: its seed none, one int or one per env, the
+#: machine and gauge options, a reset mask.
+RESET_FORMS = {"seed none", "seed int", "seed list", "machine", "gauges", "reset_mask"}
 #: The machine of tests/test_env.py whose couplers meet near the (60, 60, 60) corner.
 CRASHING = MachineParams(
     drho=[0.0, 0.0, -10.0], dL=[-10.0, 0.0, -10.0],
@@ -96,6 +102,13 @@ def random_reset(rng: np.random.Generator, ended: np.ndarray) -> dict:
     return kwargs
 
 
+def reset_forms(kwargs: dict) -> set[str]:
+    """The forms of reset call ``kwargs`` makes (:data:`RESET_FORMS`)."""
+    seed = kwargs.get("seed")
+    form = "seed none" if seed is None else "seed list" if isinstance(seed, list) else "seed int"
+    return {form, *kwargs["options"]}
+
+
 def copied(kwargs: dict) -> dict:
     """A fresh copy of reset arguments (SyncVectorEnv pops the mask from the options)."""
     options = {k: (v.copy() if isinstance(v, np.ndarray) else v)
@@ -114,35 +127,39 @@ def test_native_vector_env_is_n_separate_envs(mode: AutoresetMode, noise: dict) 
     slow = separate(mode, max_episode_steps=EPISODE, **noise)
     assert_same(fast.reset(seed=11), slow.reset(seed=11))
     ended = np.zeros(N, dtype=bool)
-    seen = {"terminated": 0, "truncated": 0, "resets": 0, "overtravel": 0}
-    for step in range(300):
+    crashes, truncations, overtravel = (np.zeros(N, dtype=int) for _ in range(3))
+    forms: set[str] = set()
+    for step in range(STEPS):
         kwargs = None
         if mode == AutoresetMode.DISABLED and ended.any():
             # What the other modes do on their own: the ended envs start again.
             kwargs = {"options": {"reset_mask": ended}}
         elif rng.random() < 0.05:
             kwargs = random_reset(rng, ended)
+            forms |= reset_forms(kwargs)
         if kwargs is not None:
             assert_same(fast.reset(**copied(kwargs)), slow.reset(**copied(kwargs)),
                         f"reset at {step}")
             ended[:] = False
-            seen["resets"] += 1
         actions = random_actions(rng)
         out = fast.step(actions)
         assert_same(out, slow.step(actions), f"step {step}")
         _, _, terminated, truncated, info = out
         ended = terminated | truncated
-        seen["terminated"] += terminated.sum()
-        seen["truncated"] += truncated.sum()
-        seen["overtravel"] += sum(map(len, info["overtravel"]))
+        crashes += terminated
+        truncations += truncated
+        overtravel += [len(o) for o in info["overtravel"]]
     np.testing.assert_array_equal(fast.unwrapped.true_machines.to_vector(),
                                   np.stack([m.to_vector()
                                             for m in slow.get_attr("true_machine")]))
     fast.close()
     slow.close()
-    # The run went through what it is meant to compare.
-    assert seen["terminated"] >= 10 and seen["truncated"] >= 20, seen
-    assert seen["resets"] >= 5 and seen["overtravel"] >= 50, seen
+    # The run went through what it is meant to compare: every form of reset call, as many
+    # crashes as envs (the crashing machine comes only with a reset's option), a truncation
+    # and the start after it in every env, and every env's gauges pressed past their travel.
+    assert forms == RESET_FORMS, forms
+    assert crashes.sum() >= N, crashes
+    assert truncations.min() >= 1 and overtravel.min() >= 1, (truncations, overtravel)
 
 
 def test_made_through_make_vec_with_gymnasiums_conventions() -> None:
