@@ -18,7 +18,7 @@ or the perturbations of a finite-difference Jacobian), evaluated in one numpy pa
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
 from typing import NamedTuple
 
 import numpy as np
@@ -53,8 +53,10 @@ from orthoglide_env.model.kinematics import (
     carriage_parts,
     carriage_points,
     direct,
+    divided,
     dot,
     platform_points,
+    scaled,
     sensitivity_along,
     skew,
     tcp_sensitivity_factors,
@@ -199,7 +201,7 @@ class ReadingLayout:
 
     @cached_property
     def space(self) -> ParameterSpace:
-        return ParameterSpace(self.mountings, self.specs)
+        return _space(self.mountings, self.specs)
 
     @cached_property
     def distinct(self) -> tuple[ReadingLayout, np.ndarray]:
@@ -288,6 +290,14 @@ class ReadingLayout:
         return cls(tuple(names), tuple(spec_of[n] for n in names), index,
                    np.asarray(rho, dtype=float).reshape(-1, 3), machine_design)
 
+
+
+@lru_cache(maxsize=64)
+def _space(mountings: tuple[str, ...], specs: tuple[Spec, ...]) -> ParameterSpace:
+    """The :class:`ParameterSpace` of ``mountings`` holding ``specs``, one for every layout
+    of them: a sweep's fits (every machine its own layout of the same mountings) share
+    its names and groups, made once."""
+    return ParameterSpace(mountings, specs)
 
 
 #: The earlier name of :class:`ReadingLayout` ("design" now means a MachineDesign only).
@@ -628,10 +638,10 @@ def _gauge_derivatives(theta: np.ndarray, layout: ReadingLayout, machine: Machin
                             at * count_specs + layout.mounting[rows])
     if not np.array_equal(order, np.arange(len(order))):
         a, c, centre, normal, t = (x[:, order] for x in (a, c, centre, normal, t))
-    nd = dot(normal, d)[..., None]
-    towards_centre = normal / nd  # dt/dc, and -dt/do
+    nd = dot(normal, d)
+    towards_centre = divided(normal, nd)  # dt/dc, and -dt/do
     # dt/dn = (c - hit) / (n . d) through the bar's normal, which turns with v = c - a.
-    turn = bar_normal_pullback((centre - o - t[..., None] * d) / nd, a, c, legs, g.face)
+    turn = bar_normal_pullback(divided(centre - o - scaled(d, t), nd), a, c, legs, g.face)
     bar = (g.part == Part.BAR)[:, None]
     d_a = np.where(bar, towards_centre / 2 - turn,
                    np.where((g.part == Part.CARRIAGE)[:, None], towards_centre, 0.0))

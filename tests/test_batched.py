@@ -20,9 +20,13 @@ from orthoglide_env.instruments.dial import (
     readings_from_distances,
     status_of,
 )
-from orthoglide_env.instruments.gauges import GaugeArray
-from orthoglide_env.instruments.rays import exact_ray_distances, exact_target_boxes
-from orthoglide_env.instruments.slots import GaugeSpec
+from orthoglide_env.instruments.gauges import GaugeArray, spec_arrays
+from orthoglide_env.instruments.rays import (
+    exact_ray_distances,
+    exact_target_boxes,
+    target_boxes,
+)
+from orthoglide_env.instruments.slots import GaugeSpec, Part
 from orthoglide_env.instruments.stands import (
     install,
     install_array,
@@ -148,6 +152,25 @@ def test_overtravel_and_collision_flags_are_the_per_machine_ones(world: dict) ->
             assert collisions(machine, rho[k, p]) == list(np.array(PAIR_NAMES)[crashed[k, p]])
     assert 100 <= pressed.sum() <= pressed.size - 100
     assert crashed.any(axis=-1).sum() >= 20
+
+
+def test_a_set_of_bars_alone_boxes_them_as_a_set_with_every_part(world: dict) -> None:
+    # Gauges all on bars skip the carriages' and the platform's boxes: each array the
+    # same numbers, shape and layout as the bars' rows of a set that also holds a
+    # carriage and a platform gauge (where every part's box is made and selected).
+    batch, rho = world["batch"], world["rho"]
+    bars = [GaugeSpec(leg, axis, at) for leg, axis, at in
+            ((0, 1, 0.5), (0, 2, 0.3), (1, 0, 0.7), (1, 2, 0.5), (2, 0, 0.5), (2, 1, 0.9))]
+    mixed = [*bars, GaugeSpec.carriage(0, 1), GaugeSpec.platform(2)]
+    assert {s.part for s in mixed} == {Part.BAR, Part.CARRIAGE, Part.PLATFORM}
+    p = direct(batch, rho)
+    for tcp in (p, p[:1]):  # every machine's TCP, or one broadcast to all
+        alone = target_boxes(batch, spec_arrays(bars), rho, tcp)
+        among = target_boxes(batch, spec_arrays(mixed), rho, tcp)
+        for own, every, tail in zip(alone, among, (1, 2, 1), strict=True):
+            rows = every[(..., slice(0, len(bars)), *(slice(None),) * tail)]
+            assert own.shape == rows.shape and own.flags.c_contiguous
+            np.testing.assert_array_equal(own, rows)
 
 
 def test_the_bounding_box_cull_decides_as_the_separating_axis_test(world: dict) -> None:

@@ -8,12 +8,15 @@ import pytest
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import MachineParams, random_machine
 from orthoglide_env.model.kinematics import (
+    ERROR_LEGS,
     UnreachableError,
     axis_postures,
     carriage_points,
     check_reachable,
+    cross,
     direct,
     direct_paper,
+    divided,
     inverse,
     inverse_paper,
     jacobian_paper,
@@ -21,10 +24,41 @@ from orthoglide_env.model.kinematics import (
     leg_vectors,
     paper_posture,
     platform_points,
+    scaled,
+    sensitivity_along,
 )
 
 # Round-off on ~300 mm quantities is ~1e-13 mm; the Newton solver stops at 1e-11 mm.
 EXACT = 1e-9
+
+
+def _bits(x: np.ndarray) -> np.ndarray:
+    """The numbers' bit patterns (as integers), so -0.0 and 0.0 or two NaNs differ."""
+    return np.ascontiguousarray(x, dtype=float).view(np.int64)
+
+
+@pytest.mark.parametrize(("vectors", "scalars"), [((40, 7, 3), (40, 7)), ((7, 3), (40, 7)),
+                                                  ((40, 7, 3), (7,)), ((40, 1, 3), (1, 5))])
+def test_products_coordinate_by_coordinate_are_numpys_broadcast_ones(
+        vectors: tuple[int, ...], scalars: tuple[int, ...]) -> None:
+    # The geometry's (..., 3) by (...) products, written coordinate by coordinate, give
+    # numpy's broadcast results to the bit, in its shape and C order, so that a model's
+    # readings and derivatives keep their bits.
+    rng = np.random.default_rng(3)
+    v, s = rng.normal(size=vectors), rng.normal(size=scalars)
+    s.flat[0] = 0.0  # a zero divisor: inf, -inf or NaN as numpy gives them
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for ours, theirs in ((scaled(v, s), s[..., None] * v), (divided(v, s), v / s[..., None])):
+            assert ours.shape == theirs.shape and ours.flags.c_contiguous
+            np.testing.assert_array_equal(_bits(ours), _bits(theirs))
+    w = rng.normal(size=vectors)
+    np.testing.assert_array_equal(_bits(cross(v, w)), _bits(np.cross(v, w)))
+    inv = rng.normal(size=(*vectors, 3))
+    through = (v[..., 0, None] * inv[..., 0, :] + v[..., 1, None] * inv[..., 1, :]
+               + v[..., 2, None] * inv[..., 2, :])
+    row = rng.normal(size=(*vectors[:-1], 27))
+    np.testing.assert_array_equal(_bits(sensitivity_along(inv, row, v)),
+                                  _bits(np.take(through, ERROR_LEGS, axis=-1) * row))
 
 
 @pytest.mark.parametrize("preset", ["paper", "realistic"])

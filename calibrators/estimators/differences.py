@@ -54,15 +54,17 @@ def check_zeros(items: Collection[Measurement]) -> None:
     readings but none at Zero.  A fit could estimate such a zero as one more unknown, but
     a technician's sheet without it has lost a line, and the paper's procedure and the
     lab's re-mounting both read at Zero first; a tracker's coordinates need no zero."""
-    first: dict[tuple[str, GaugeSpec], Measurement] = {}
-    zeroed: set[tuple[str, GaugeSpec]] = set()
+    # Whether each (mounting, gauge) was read at Zero yet, in the order of their first
+    # readings: one lookup per reading once it was (a sweep checks tens of thousands).
+    zeroed: dict[tuple[str, GaugeSpec], bool] = {}
     for m in items:
         if isinstance(m.gauge, GaugeSpec):
-            first.setdefault((m.mounting, m.gauge), m)
-            if m.is_zero:
-                zeroed.add((m.mounting, m.gauge))
-    for (mounting, gauge), m in first.items():
-        if (mounting, gauge) not in zeroed:
+            key = (m.mounting, m.gauge)
+            if not zeroed.get(key, False):
+                zeroed[key] = m.rho == ZERO_RHO
+    for (mounting, gauge), zero in zeroed.items():
+        if not zero:
+            m = next(m for m in items if m.mounting == mounting and m.gauge == gauge)
             where = f" (first reading: line {m.line})" if m.line is not None else ""
             raise MissingZeroError(f"gauge {gauge_name(gauge)}, mounting '{mounting}', has "
                                    f"readings but none at Zero{where}: its zero is unknown")

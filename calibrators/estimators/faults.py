@@ -245,7 +245,8 @@ def find_faults(data: Measurements, residuals: np.ndarray, used: np.ndarray,
         return []
     spread = max(sigma, 1.4826 * float(np.median(np.abs(residuals[finite]))))
     found: list[Finding] = []
-    names = {k: data.items[k].mounting or data.items[k].gauge.slot for k in range(len(values))}
+    # Each reading's mounting, which only the outliers are named by (most fits have none).
+    names = [m.mounting or m.gauge.slot for m in data.items] if outliers else []
     # Steps and rows written late are looked for only where the model can fit the machine.
     groups = _mountings(data, finite) if structural else {}
     # Rows written late are far from the model, and mostly left out: all of a mounting's

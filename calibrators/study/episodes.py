@@ -49,14 +49,16 @@ def measurements_of(records: list[Record], time_s: float = 0.0,
     labels = {rho: name for name, rho in paper_rhos(design).items()}
     zeros: dict[str, int] = {}
     items = []
-    for r in records:
-        if until_s is not None and r.time_s > until_s:
-            continue
-        if r.rho == ZERO_RHO:
-            zeros[r.mounting] = zeros.get(r.mounting, 0) + 1
-        items.append(Measurement.recorded(r.spec, labels.get(r.rho, ""), r.reading, r.rho,
-                                          r.mounting, max(zeros.get(r.mounting, 0), 1),
-                                          r.time_s, r.temperature_c))
+    recorded = Measurement.recorded
+    # Each field read once per record: a sweep's notebooks hold tens of thousands.
+    for r in records if until_s is None else [r for r in records if r.time_s <= until_s]:
+        rho, mounting = r.rho, r.mounting
+        if rho == ZERO_RHO:
+            repetition = zeros[mounting] = zeros.get(mounting, 0) + 1
+        else:
+            repetition = zeros.get(mounting, 0) or 1
+        items.append(recorded(r.spec, labels.get(rho, ""), r.reading, rho, mounting,
+                              repetition, r.time_s, r.temperature_c))
     return Measurements(items, time_s if until_s is None else min(time_s, until_s), design)
 
 

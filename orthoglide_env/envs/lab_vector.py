@@ -60,6 +60,10 @@ class OrthoglideLabVectorEnv(LabFace, EngineVectorEnv):
         """Every env's notebook (its records, in order)."""
         return [book.records for book in self._batch.notebooks]
 
+    def records_of(self, i: int) -> list[Record]:
+        """Env ``i``'s notebook (its records, in order), without the others' list."""
+        return self._batch.notebooks[i].records
+
     def sub_env(self, i: int) -> SubLab:
         """Env ``i`` as an agent sees a lone lab (see :class:`SubLab`)."""
         return SubLab(self, i)
@@ -97,7 +101,9 @@ class SubLab:
 
     @property
     def records(self) -> list[Record]:
-        return self._envs.records[self.index]
+        # Not ``records[index]``: every lab's notebook asked for is a list of them all,
+        # once per machine of a chunk.
+        return self._envs.records_of(self.index)
 
 
 class OrthoglideLabV1VectorEnv(OrthoglideLabVectorEnv):

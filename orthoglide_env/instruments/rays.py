@@ -132,14 +132,23 @@ def boxes_at(gauges: GaugeArray, a: np.ndarray, c: np.ndarray, p: np.ndarray,
     :func:`target_boxes`."""
     legs = np.maximum(gauges.leg, 0)
     bars = bar_boxes(a, c, legs, np.where(gauges.face == 1, 1, -1), design)
+    part = gauges.part
+    tails = (1, 2, 1)  # the trailing axes of a centre, a rotation and a half extent
+    if (part == Part.BAR).all():
+        # Every gauge on a bar (the paper's procedure, and every fit of it): the bars'
+        # boxes as the selection below shapes them, without the carriages' and the
+        # platform's that it would drop.
+        lead = np.broadcast_shapes(np.shape(a), np.shape(c), np.shape(p))[:-1]
+        return tuple(  # type: ignore[return-value]
+            np.ascontiguousarray(np.broadcast_to(b, (*lead, *b.shape[b.ndim - tail:])))
+            for b, tail in zip(bars, tails, strict=True))
     carriages = carriage_boxes(a, legs, design)
     platform = platform_box(np.broadcast_to(p, np.broadcast_shapes(np.shape(p), np.shape(a))),
                              design)
-    part = gauges.part
     return tuple(  # type: ignore[return-value]
         np.where((part == Part.BAR).reshape(-1, *(1,) * tail), b,
                  np.where((part == Part.CARRIAGE).reshape(-1, *(1,) * tail), c, f))
-        for b, c, f, tail in zip(bars, carriages, platform, (1, 2, 1), strict=True))
+        for b, c, f, tail in zip(bars, carriages, platform, tails, strict=True))
 
 
 def exact_target_boxes(gauges: GaugeArray | Sequence[Gauge],

@@ -120,6 +120,13 @@ class GaugeSpec:
         if self.part != Part.BAR and self.at != 0.5:
             raise ValueError("a carriage or platform gauge has one place per face: 'at' is "
                              "for bars")
+        # A gauge is a key of the notebooks' groupings, read by read: its hash is kept
+        # (the fields' hash, as the dataclass's own, and the same in every process: no
+        # field hashes a string).
+        object.__setattr__(self, "_hash", hash((self.leg, self.axis, self.at, self.part)))
+
+    def __hash__(self) -> int:
+        return self._hash
 
     @classmethod
     def carriage(cls, leg: int, axis: int) -> GaugeSpec:

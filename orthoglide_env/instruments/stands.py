@@ -15,7 +15,7 @@ from orthoglide_env.instruments.gauges import DEFAULT_TRAVEL, Gauge, GaugeArray,
 from orthoglide_env.instruments.rays import exact_ray_distances, target_boxes
 from orthoglide_env.instruments.slots import PLATFORM_AIM, GaugeSpec, Part, on_platform
 from orthoglide_env.model.errors import AXIS_NAMES, ErrorPreset, MachineParams
-from orthoglide_env.model.kinematics import cross, direct, dot
+from orthoglide_env.model.kinematics import cross, direct, divided, dot
 
 
 def ideal_rays(specs: tuple[GaugeSpec, ...] | list[GaugeSpec], machine: MachineParams,
@@ -87,7 +87,7 @@ def stand_rays(specs: tuple[GaugeSpec, ...] | list[GaugeSpec], origins: np.ndarr
     stand = np.asarray(stand, dtype=float)
     origin = origins + np.einsum("...gk,gkj->...gj", stand[..., :2], across)
     direction = directions + np.einsum("...gk,gkj->...gj", stand[..., 2:], across)
-    return origin, direction / np.sqrt(dot(direction, direction))[..., None]
+    return origin, divided(direction, np.sqrt(dot(direction, direction)))
 
 
 def stand_errors(specs: tuple[GaugeSpec, ...] | list[GaugeSpec], origins: np.ndarray,

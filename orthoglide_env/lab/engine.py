@@ -899,11 +899,12 @@ class LabBatch:
         steps, stamps = self.steps[rows].tolist(), (self.time[rows] + pending).tolist()
         read, slots = values.tolist(), self.slot[rows].tolist()
         room = self._room(rows, self.time[rows] + pending)
+        notebooks, places, mountings, written = (self.notebooks, self.places, self.mounting,
+                                                 Record.written)
         for r, k in zip(*(part.tolist() for part in np.nonzero(valid)), strict=True):
             i = index[r]
-            self.notebooks[i].records.append(Record.written(
-                self.places[slots[r][k]], self.mounting[i][k], rho[r], read[r][k], steps[r],
-                stamps[r], room[r]))
+            notebooks[i].records.append(written(places[slots[r][k]], mountings[i][k], rho[r],
+                                                read[r][k], steps[r], stamps[r], room[r]))
         if settings.tracker:
             tracker = self.tracker_reading[rows].tolist()
             for r, i in enumerate(index):

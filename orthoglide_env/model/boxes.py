@@ -12,9 +12,11 @@ from orthoglide_env.model.errors import LEG_NAMES, R_LEG, MachineParams
 from orthoglide_env.model.kinematics import (
     carriage_points,
     cross,
+    divided,
     dot,
     leg_angles,
     platform_points,
+    scaled,
 )
 
 #: Names of the moving boxes (the simulator's link names): the bars, the couplers, the
@@ -62,9 +64,9 @@ def bar_boxes(a: np.ndarray, c: np.ndarray, legs: np.ndarray, bars: np.ndarray,
     r_axis = R_LEG[legs][..., :, 2]
     v = c - a
     length = np.sqrt(dot(v, v))
-    along = v / length[..., None]
+    along = divided(v, length)
     hinge = cross(r_axis, along)
-    hinge /= np.sqrt(dot(hinge, hinge))[..., None]
+    hinge = divided(hinge, np.sqrt(dot(hinge, hinge)))
     normal = cross(along, hinge)
     rot = np.stack([along, hinge, normal], axis=-1)
     half = np.stack([length / 2 - design.bar_clearance,
@@ -113,17 +115,17 @@ def bar_normal_pullback(weights: np.ndarray, a: np.ndarray, c: np.ndarray, legs:
     (I - h h^T) [r]x du / |w|``, ``dm = -[h]x du + [u]x dh``, and ``z^T [x]x = (z x x)^T``."""
     r_axis = R_LEG[legs][..., :, 2]
     v = c - a
-    length = np.sqrt(dot(v, v))[..., None]
-    along = v / length
+    length = np.sqrt(dot(v, v))
+    along = divided(v, length)
     w = cross(r_axis, along)
-    size = np.sqrt(dot(w, w))[..., None]
-    hinge = w / size
+    size = np.sqrt(dot(w, w))
+    hinge = divided(w, size)
 
     def through_along(z: np.ndarray) -> np.ndarray:
-        return (z - dot(z, along)[..., None] * along) / length
+        return divided(z - scaled(along, dot(z, along)), length)
 
     def through_hinge(z: np.ndarray) -> np.ndarray:
-        return through_along(cross(z - dot(z, hinge)[..., None] * hinge, r_axis)) / size
+        return divided(through_along(cross(z - scaled(hinge, dot(z, hinge)), r_axis)), size)
 
     normal = through_hinge(cross(weights, along)) - through_along(cross(weights, hinge))
     return np.where((np.asarray(face) == 1)[..., None], through_hinge(weights), normal)

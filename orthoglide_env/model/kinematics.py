@@ -140,7 +140,7 @@ def carriage_points(machine: MachineParams, rho: np.ndarray) -> np.ndarray:
     """Centres A_i of the R1 joints, shape ``(..., 3 legs, 3)``."""
     g, rho = geometry(machine, rho)
     s = _slide(machine) + g.drho + rho
-    return g.o + s[..., :, None] * g.u
+    return g.o + scaled(g.u, s)
 
 
 def platform_points(machine: MachineParams, p: np.ndarray) -> np.ndarray:
@@ -454,8 +454,14 @@ def sensitivity_along(inverse: np.ndarray, row: np.ndarray, weights: np.ndarray,
     the weights go through the 3 x 3 inverse first, so the 27 columns are formed once,
     not three times.  ``columns``: only these of the 27 (``row`` holding their entries
     alone), each with the bits it has among all 27."""
-    through = (weights[..., 0, None] * inverse[..., 0, :] + weights[..., 1, None]
-               * inverse[..., 1, :] + weights[..., 2, None] * inverse[..., 2, :])
+    # Column by column of the inverse: the products of (..., 1) and (..., 3) operands went
+    # through numpy's buffers three numbers at a time (the same products and sums, in the
+    # same order; ~4x less time).
+    through = np.empty(np.broadcast_shapes(weights.shape, inverse.shape[:-1]))
+    w = [weights[..., k] for k in range(3)]
+    for j in range(3):
+        np.add(w[0] * inverse[..., 0, j] + w[1] * inverse[..., 1, j],
+               w[2] * inverse[..., 2, j], out=through[..., j])
     legs = ERROR_LEGS if columns is None else ERROR_LEGS[columns]
     return np.take(through, legs, axis=-1) * row
 
@@ -466,12 +472,38 @@ def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
 
 
+def scaled(vectors: np.ndarray, factors: np.ndarray) -> np.ndarray:
+    """``factors[..., None] * vectors`` (``(...)`` and ``(..., 3)``, broadcast) coordinate
+    by coordinate: numpy runs the product of (..., 1) and (..., 3) operands through its
+    buffers three numbers at a time, and each coordinate's is one long loop (the same
+    products, ~2x less time)."""
+    return _coordinatewise(np.multiply, vectors, factors)
+
+
+def divided(vectors: np.ndarray, divisors: np.ndarray) -> np.ndarray:
+    """``vectors / divisors[..., None]`` coordinate by coordinate (see :func:`scaled`)."""
+    return _coordinatewise(np.divide, vectors, divisors)
+
+
+def _coordinatewise(op: np.ufunc, vectors: np.ndarray, scalars: np.ndarray) -> np.ndarray:
+    """``op(vectors, scalars[..., None])`` in floating point, one coordinate at a time into
+    a C-ordered array."""
+    vectors, scalars = np.asarray(vectors, dtype=float), np.asarray(scalars, dtype=float)
+    out = np.empty((*np.broadcast_shapes(vectors.shape[:-1], scalars.shape),
+                    vectors.shape[-1]))
+    for k in range(vectors.shape[-1]):
+        op(vectors[..., k], scalars, out=out[..., k])
+    return out
+
+
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product over the last axis (np.cross costs ~10x more on small arrays)."""
+    """Cross product over the last axis (np.cross costs ~10x more on small arrays), each
+    coordinate written into its place (no stacking of the three)."""
     a, b = np.broadcast_arrays(a, b)
-    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
-                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
-                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+    out = np.empty(a.shape, dtype=np.result_type(a, b))
+    for k, (i, j) in enumerate(((1, 2), (2, 0), (0, 1))):
+        np.subtract(a[..., i] * b[..., j], a[..., j] * b[..., i], out=out[..., k])
+    return out
 
 
 def skew(x: np.ndarray) -> np.ndarray:

@@ -18,7 +18,7 @@ from orthoglide_env.model.kinematics import (
     sensitivity_parts,
     tcp_sensitivity,
 )
-from orthoglide_env.scoring.grid import blocks, commands_many, grid_targets
+from orthoglide_env.scoring.grid import blocks, commands_many, grid_targets, kept_rows
 from orthoglide_env.scoring.reports import FRAMES, ErrorStats, FrameErrors
 
 #: Error terms of the drives at the commands, mm per unit coefficient: (n, 3) -> (n, 3, K).
@@ -43,8 +43,8 @@ def _commanded(models: Sequence[MachineParams], targets: np.ndarray,
     rho = (commands_many(models, targets, machines) if commands is None
            else commands)  # (M, n, 3)
     usable = np.isfinite(rho).all(axis=-1)
-    rho = np.where(usable[..., None], rho, 0.0)
-    p = np.where(usable[..., None], targets, 0.0)
+    rho = kept_rows(rho, usable, 0.0)
+    p = kept_rows(targets, usable, 0.0)
     return usable, machines, rho, p
 
 

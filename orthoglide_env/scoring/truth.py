@@ -24,7 +24,14 @@ import numpy as np
 
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import UnreachableError, direct, dot
-from orthoglide_env.scoring.grid import BLOCK, blocks, commands_many, grid_targets, rowwise
+from orthoglide_env.scoring.grid import (
+    BLOCK,
+    blocks,
+    commands_many,
+    grid_targets,
+    kept_rows,
+    rowwise,
+)
 from orthoglide_env.scoring.reports import ErrorStats, FrameErrors, ScoreReport
 from orthoglide_env.world.truth import World
 
@@ -78,10 +85,10 @@ def tcp_error_vectors_many(models: Sequence[MachineParams], truths: Sequence[Mac
     # Rows without a command are solved at Zero (any posture will do) and dropped; when a
     # posture cannot be assembled, each machine alone.
     try:
-        reached = direct(MachineParams.stack(list(truths)), np.where(inside[..., None], rho, 0.0))
+        reached = direct(MachineParams.stack(list(truths)), kept_rows(rho, inside, 0.0))
     except UnreachableError:
         reached = np.stack([alone(m) for m in range(len(truths))])
-    return np.where(inside[..., None], reached, np.nan) - targets
+    return kept_rows(reached, inside, np.nan, fresh=True) - targets
 
 
 
@@ -95,14 +102,13 @@ def _masked_centroids(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Targets and reached points about their centroids over ``mask``, zero (not NaN) in
     the rows left out so that sums ignore them, and the two centroids (..., 3)."""
-    keep = mask[..., None]
-    q = np.where(keep, targets, 0.0)
-    p = np.where(keep, reached, 0.0)
+    q = kept_rows(targets, mask, 0.0)
+    p = kept_rows(reached, mask, 0.0)
     count = np.sum(mask, axis=-1)[..., None]
     cq = q.sum(axis=-2) / count
     cp = p.sum(axis=-2) / count
-    return (np.where(keep, q - cq[..., None, :], 0.0), np.where(keep, p - cp[..., None, :], 0.0),
-            cq, cp)
+    return (kept_rows(q - cq[..., None, :], mask, 0.0, fresh=True),
+            kept_rows(p - cp[..., None, :], mask, 0.0, fresh=True), cq, cp)
 
 
 def best_rigid_motion(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray
@@ -137,7 +143,7 @@ def remove_translation(targets: np.ndarray, reached: np.ndarray, mask: np.ndarra
     caller has them."""
     mask = np.asarray(mask, dtype=bool)
     q, p, _, _ = _masked_centroids(targets, reached, mask) if centred is None else centred
-    return np.where(mask[..., None], p - q, np.nan)
+    return kept_rows(p - q, mask, np.nan, fresh=True)
 
 
 def remove_rigid(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray,
@@ -148,12 +154,12 @@ def remove_rigid(targets: np.ndarray, reached: np.ndarray, mask: np.ndarray,
     rotation, shift = (best_rigid_motion(targets, reached, mask) if centred is None
                        else _rigid_motion(*centred))
     moved = np.einsum("...ij,...nj->...ni", rotation, reached) + shift[..., None, :]
-    return np.where(np.asarray(mask, dtype=bool)[..., None], moved - targets, np.nan)
+    return kept_rows(moved - targets, np.asarray(mask, dtype=bool), np.nan, fresh=True)
 
 
 def _stats(errors: np.ndarray, mask: np.ndarray) -> list[ErrorStats]:
     """RMS and max of the lengths of error vectors (B, n, 3) over ``mask`` (B, n)."""
-    kept = np.where(mask[..., None], errors, 0.0)
+    kept = kept_rows(errors, mask, 0.0)
     length2 = dot(kept, kept)
     rms = np.sqrt(length2.sum(axis=-1) / mask.sum(axis=-1))
     worst = np.sqrt(np.max(length2, axis=-1))
