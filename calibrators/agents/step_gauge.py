@@ -22,6 +22,7 @@ axis reads that drive's lead error over its whole stroke.
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -85,9 +86,12 @@ def run_faces(design: MachineDesign) -> list[int]:
     return [*range(1, count), *range(count - 2, -1, -1)]
 
 
+@lru_cache(maxsize=64)
 def programme_seconds(design: MachineDesign, stands: int, runs: int) -> float:
     """The lab time (s) :func:`gauge_steps` takes from a reset at Zero, charged as the lab
-    charges it (:func:`~calibrators.agents.instrument_first.programme_seconds`)."""
+    charges it (:func:`~calibrators.agents.instrument_first.programme_seconds`).  Kept
+    per design, stand count and run count: a programme is hundreds of inverse kinematics
+    solves, and every episode's :func:`runs_for` asks for the same few."""
     return programme_clock(gauge_steps(stands, design, runs))
 
 
