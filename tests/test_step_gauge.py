@@ -19,14 +19,20 @@ from conftest import assert_batch_reads_as_alone, assert_refused_in_one_line
 import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.agents.base import PlannedAgent, action
-from calibrators.agents.step_gauge import face_command, gauge_steps, runs_for
+from calibrators.agents.step_gauge import (
+    MAX_RUNS,
+    face_command,
+    gauge_steps,
+    programme_seconds,
+    runs_for,
+)
 from calibrators.estimators.catalogue import get_estimator
 from calibrators.measurements import Measurements
 from calibrators.study.episodes import machine_seed, run_episode
 from calibrators.study.labs import lab_kwargs
 from orthoglide_env.instruments import step_gauge
 from orthoglide_env.instruments.step_gauge import StepGaugeSpec
-from orthoglide_env.lab.operations import TIME, V2_OPS, Op
+from orthoglide_env.lab.operations import PAPER_SLOTS, TIME, V2_OPS, Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import direct
@@ -259,13 +265,45 @@ def test_the_agent_plans_the_gauge_along_each_axis_and_needs_it():
     with pytest.raises(ValueError, match="needs the step-gauge"):
         lab_kwargs(agent, ("dial",))
     assert lab_kwargs(agent, tuple(OWNED))["instruments"] == OWNED
-    assert runs_for(3 * 3600.0, PROTOTYPE) == 5 and runs_for(3600.0, PROTOTYPE) == 2
+    stands = len(PAPER_SLOTS)
+    assert runs_for(3 * 3600.0, PROTOTYPE, stands) == 5
+    assert runs_for(3600.0, PROTOTYPE, stands) == 2
     steps = gauge_steps(6, PROTOTYPE, 1)
     places = [s for s in steps if s["op"] == Op.PLACE]
     assert [s["axis"] for s in places] == [0, 1, 2]
     # Every face is read both ways in a run: 1 + 2 (faces - 1) readings per axis; then the
     # way back to Zero and the gauges' zeros read there.
     assert sum(s["op"] == Op.MOVE for s in steps) == 3 * 2 * (STEP_GAUGE_FACES - 1) + 2
+
+
+def test_the_runs_are_the_most_whose_programme_leaves_the_gauges_half():
+    """The run count is timed by the programme the lab charges: the most runs whose
+    programme leaves :data:`~calibrators.agents.step_gauge.GAUGE_SHARE` of the budget, on
+    a grid from ten minutes to four hours.  The count steps up at each
+    ``programme_seconds(runs) / (1 - GAUGE_SHARE)``: 3500.7, 4268.7, 5036.7 and 5804.7 s
+    on the prototype, 86.7 s later than the sum of set-ups and runs the count took before
+    (it left out the lifts, the drive to the first set-up, the way back to Zero, the
+    engagements and the zeros' reading: 43.3 s of programme), so budgets in those 87 s
+    windows take one run fewer; an hour (two runs) and three hours (five) keep theirs."""
+    stands = len(PAPER_SLOTS)
+    seconds = {runs: programme_seconds(PROTOTYPE, stands, runs)
+               for runs in range(1, MAX_RUNS + 1)}
+    for budget in np.arange(600.0, 4 * 3600.0, 50.0):
+        runs, room = runs_for(budget, PROTOTYPE, stands), 0.5 * budget
+        assert runs == 1 or seconds[runs] <= room
+        assert runs == MAX_RUNS or seconds[runs + 1] > room
+    # The first window: two runs by the former sum from 3414.0 s, by the clock from 3500.7 s.
+    assert runs_for(3450.0, PROTOTYPE, stands) == 1
+    assert runs_for(3501.0, PROTOTYPE, stands) == 2
+
+
+def test_the_programme_takes_the_time_the_lab_charges():
+    """The programme's clock is the lab's: a lab that plays the gauge's runs and stops
+    ends at :func:`~calibrators.agents.step_gauge.programme_seconds` of them (one source,
+    the time table, for the agent's run count and the lab's charge)."""
+    episode = _episode(Conditions("ideal"))
+    assert episode.time_s == pytest.approx(
+        programme_seconds(PROTOTYPE, len(PAPER_SLOTS), GaugeOnly.RUNS), rel=1e-12)
 
 
 def _file(tmp_path: Path, *rows: str) -> Path:

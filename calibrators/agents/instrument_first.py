@@ -14,7 +14,8 @@ import gymnasium as gym
 import numpy as np
 
 from calibrators.agents.base import Agent, action
-from orthoglide_env.lab.operations import Op
+from orthoglide_env.lab.clock import travel_seconds
+from orthoglide_env.lab.operations import TIME, Op
 
 #: The agent whose experiment follows the programme, with the time left.
 GAUGES: str = "active"
@@ -37,6 +38,31 @@ def back_to_the_gauges(stands: int) -> list[dict[str, Any]]:
     the way back to Zero would pull a bar out or leave a step gauge's faces, so a lift of
     the first stand comes first."""
     return [action(Op.LIFT, stand=0), action(Op.MOVE, np.zeros(3)), *gauges_down(stands)]
+
+
+def programme_seconds(steps: list[dict[str, Any]]) -> float:
+    """The lab time (s) a fixed programme ``steps`` takes from a reset at Zero, charged as
+    the lab charges it (:func:`~orthoglide_env.lab.clock.travel_seconds` on the time
+    table): each lift and engagement a flick; a move its drive, settle and dwell (the
+    interferometer's while one is set up, the probe's while it is on a step gauge); an
+    interferometer's set-up its drive to Zero, its work and, the first, the soak; a step
+    gauge's set-up its drive and work.  One clock for the procedures' run counts and the
+    lab's charge: a count summed by hand drifts from it as the programme changes."""
+    rho, seconds, aligned, probing = np.zeros(3), 0.0, False, False
+    for step in steps:
+        op = Op(step["op"])
+        if op in (Op.LIFT, Op.ENGAGE):
+            # Any operation but a move takes the probe off the step gauge.
+            seconds, probing = seconds + TIME.lift_s, False
+            continue
+        goal = np.zeros(3) if op == Op.ALIGN else np.asarray(step["rho"], dtype=float)
+        seconds += float(travel_seconds(np.array([op]), rho[None], goal[None], False,
+                                        laser=np.array([aligned]),
+                                        soak=np.array([not aligned]),
+                                        probe=np.array([probing]))[0])
+        rho, aligned = goal, aligned or op == Op.ALIGN
+        probing = op == Op.PLACE or (probing and op == Op.MOVE)
+    return seconds
 
 
 class InstrumentFirst(Agent):

@@ -38,8 +38,8 @@ import numpy as np
 from calibrators.agents.base import action, register
 from calibrators.agents.instrument_first import GAUGES as GAUGES
 from calibrators.agents.instrument_first import InstrumentFirst, gauges_down
-from orthoglide_env.lab.clock import travel_seconds
-from orthoglide_env.lab.operations import TIME, Op
+from calibrators.agents.instrument_first import programme_seconds as programme_clock
+from orthoglide_env.lab.operations import Op
 from orthoglide_env.model.design import MachineDesign
 
 #: Targets per drive: ISO 230-2's at least 5 per metre and 5 in all, and more: about two
@@ -96,21 +96,8 @@ def drive_steps(stands: int, design: MachineDesign, runs: int) -> list[dict[str,
 
 def programme_seconds(design: MachineDesign, stands: int, runs: int) -> float:
     """The lab time (s) :func:`drive_steps` takes from a reset at Zero, charged as the lab
-    charges it (:func:`~orthoglide_env.lab.clock.travel_seconds` on the time table): each
-    lift and engagement a flick, each set-up its drive to Zero, its work and the first's
-    soak, each move its drive, settle and the laser's dwell."""
-    rho, seconds, aligned = np.zeros(3), 0.0, False
-    for step in drive_steps(stands, design, runs):
-        op = Op(step["op"])
-        if op in (Op.LIFT, Op.ENGAGE):
-            seconds += TIME.lift_s
-            continue
-        goal = np.zeros(3) if op == Op.ALIGN else step["rho"]
-        seconds += float(travel_seconds(np.array([op]), rho[None], goal[None], False,
-                                        laser=np.array([aligned]),
-                                        soak=np.array([not aligned]))[0])
-        rho, aligned = goal, aligned or op == Op.ALIGN
-    return seconds
+    charges it (:func:`~calibrators.agents.instrument_first.programme_seconds`)."""
+    return programme_clock(drive_steps(stands, design, runs))
 
 
 def runs_for(budget_s: float, design: MachineDesign, stands: int) -> int:

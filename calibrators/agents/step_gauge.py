@@ -22,6 +22,7 @@ axis reads that drive's lead error over its whole stroke.
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -29,8 +30,9 @@ import numpy as np
 from calibrators.agents.base import action, register
 from calibrators.agents.instrument_first import GAUGES as GAUGES
 from calibrators.agents.instrument_first import InstrumentFirst, back_to_the_gauges
+from calibrators.agents.instrument_first import programme_seconds as programme_clock
 from orthoglide_env.instruments.step_gauge import face_lengths
-from orthoglide_env.lab.operations import TIME, Op
+from orthoglide_env.lab.operations import Op
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import MachineParams, within_limits
 from orthoglide_env.model.kinematics import inverse
@@ -84,25 +86,23 @@ def run_faces(design: MachineDesign) -> list[int]:
     return [*range(1, count), *range(count - 2, -1, -1)]
 
 
-def run_seconds(design: MachineDesign) -> float:
-    """What one run on one axis costs by the time table."""
-    faces = [0, *run_faces(design)]
-    moves = np.abs(np.diff([face_lengths()[f] for f in faces]))
-    return float(np.sum(moves / TIME.drive_speed_mm_s + TIME.settle_and_read_s
-                        + TIME.step_gauge_face_s))
+@lru_cache(maxsize=64)
+def programme_seconds(design: MachineDesign, stands: int, runs: int) -> float:
+    """The lab time (s) :func:`gauge_steps` takes from a reset at Zero, charged as the lab
+    charges it (:func:`~calibrators.agents.instrument_first.programme_seconds`).  Kept
+    per design, stand count and run count: a programme is hundreds of inverse kinematics
+    solves, and every episode's :func:`runs_for` asks for the same few."""
+    return programme_clock(gauge_steps(stands, design, runs))
 
 
-def setup_seconds(design: MachineDesign) -> float:
-    """The three set-ups, each driven to from the far end of the last axis' run."""
-    back = float(TIME.move(np.full(3, design.rho_max), np.full(3, design.rho_min)))
-    return 3 * (back + TIME.step_gauge_setup_s)
-
-
-def runs_for(budget_s: float, design: MachineDesign) -> int:
+def runs_for(budget_s: float, design: MachineDesign, stands: int) -> int:
     """How many runs per axis fit in ``budget_s`` with :data:`GAUGE_SHARE` of it left to
-    the gauges: at most :data:`MAX_RUNS`, at least one."""
-    spare = (1 - GAUGE_SHARE) * budget_s - setup_seconds(design)
-    return int(np.clip(spare // (3 * run_seconds(design)), 1, MAX_RUNS))
+    the gauges, the programme timed by :func:`programme_seconds` (the lab's own charge:
+    lifts, set-ups, the way back to Zero and the zeros' reading included): at most
+    :data:`MAX_RUNS`, at least one."""
+    room = (1 - GAUGE_SHARE) * budget_s
+    return max((runs for runs in range(2, MAX_RUNS + 1)
+                if programme_seconds(design, stands, runs) <= room), default=1)
 
 
 def gauge_steps(stands: int, design: MachineDesign, runs: int) -> list[dict[str, Any]]:
@@ -126,6 +126,7 @@ class StepGaugeAgent(InstrumentFirst):
     needs_instruments = ("step-gauge",)
 
     def programme(self, observation: dict[str, np.ndarray]) -> list[dict[str, Any]]:
+        stands = len(observation["slot"])
         self.runs = runs_for(float(self.env.budget_s) - float(observation["time"][0]),
-                             self.env.design)
-        return gauge_steps(len(observation["slot"]), self.env.design, self.runs)
+                             self.env.design, stands)
+        return gauge_steps(stands, self.env.design, self.runs)
