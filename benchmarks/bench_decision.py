@@ -79,7 +79,8 @@ CHOICE = {"policy": (policy_module, ("decide_all", "decide_counting"), ()),
 #: :func:`~orthoglide_env.lab.design_belief.observe_many`, or a view-2 chunk's rows',
 #: :meth:`~orthoglide_env.lab.counting_rows.CountingRows.observe`), the observations (the
 #: predicted error's spectra, ``observations``, or the rows'), the masks
-#: (``action_masks``, or the rows' candidate moves and masks), the network's choice
+#: (``action_masks``, or the rows' states' parts, their candidate moves among them,
+#: and masks), the network's choice
 #: (:meth:`~calibrators.agents.actor_weights.ActorWeights.choose_many`).
 PARTS: tuple[str, ...] = ("update", "observation", "mask", "network")
 #: The functions and methods timed as :data:`PARTS`' first three: (owner, name, part).
@@ -87,7 +88,7 @@ PART_FUNCTIONS: tuple[tuple[object, str, str], ...] = (
     (policy_module, "observe_many", "update"), (CountingRows, "observe", "update"),
     (policy_module, "observations", "observation"),
     (CountingRows, "observations", "observation"),
-    (policy_module, "action_masks", "mask"), (CountingRows, "moves", "mask"),
+    (policy_module, "action_masks", "mask"), (CountingRows, "parts", "mask"),
     (CountingRows, "masks", "mask"))
 
 

@@ -169,9 +169,10 @@ def test_view_2_decides_from_counts_as_the_view_s_belief_does() -> None:
     assert fast == slow
     assert min(len(taken) for taken in fast) > 100
     # The view holds no value read: the machines passed the same states, one group.
-    rows = fast_agents[0]._rows
-    assert all(a._rows is rows for a in fast_agents)
-    assert len(rows.groups(np.arange(len(machines)))[0]) == 1
+    chunk = fast_agents[0]._chunk
+    assert all(a._chunk is chunk for a in fast_agents)
+    assert chunk.rows.alike
+    assert len(chunk.rows.groups(np.arange(len(machines)))[0]) == 1
     assert_same_beliefs(fast_agents, slow_agents)
 
 
@@ -190,7 +191,8 @@ def test_view_2_draws_as_each_agent_alone_does() -> None:
     assert fast == slow
     # A draw of random weights spends more of its time on re-mounts and far moves.
     assert min(len(taken) for taken in fast) > 50
-    rows = fast_agents[0]._rows
+    rows = fast_agents[0]._chunk.rows
+    assert not rows.alike
     families = rows.state[:, FAMILY]
     assert len(set(families.tolist())) == len(machines)
     assert_same_beliefs(fast_agents, slow_agents)
@@ -379,21 +381,102 @@ def test_counting_rows_take_in_a_step_as_each_belief_does() -> None:
                                [0, 0, 0, 1, 0, 0], 80.0)])]
     for which, (operations, refused, seen) in zip((everyone, np.array([0, 4])), steps,
                                                   strict=True):
-        rows.observe(which, operations, seen, refused)
-        for k, operation, observation, no in zip(which.tolist(), operations, seen, refused,
-                                                 strict=True):
-            beliefs[k].observe(operation, observation, no)
-        for k, belief in enumerate(beliefs):
-            written = copy.copy(belief)
-            rows.write_back(k, written)
-            for name in ("slots", "engaged", "faulted", "rho", "readings_at"):
-                np.testing.assert_array_equal(getattr(written, name), getattr(belief, name))
-            assert (written.here, written.run, written.time_s) == (
-                belief.here, belief.run, belief.time_s)
-        np.testing.assert_array_equal(rows.observations(everyone),
-                                      [b.observation() for b in beliefs])
-        np.testing.assert_array_equal(rows.masks(everyone, rows.moves(everyone)),
-                                      [b.action_mask() for b in beliefs])
+        step_both(rows, beliefs, which, operations, seen, refused)
     # The second step stayed for row 0 (two readings in a row), left for row 4.
     assert (beliefs[0].run, beliefs[4].run) == (2, 1)
     assert beliefs[4].here == there and beliefs[2].here == table.zero
+    assert not rows.alike
+
+
+def step_both(rows: CountingRows, beliefs: list[DesignBelief], which: np.ndarray,
+              operations: list[dict[str, object]], seen: list[dict[str, np.ndarray]],
+              refused: list[bool]) -> None:
+    """One step taken in by ``rows`` ``which`` and by their beliefs' own ``observe``: each
+    row, written back, is its belief, and the rows observe and mask as the beliefs do."""
+    rows.observe(which, operations, seen, refused)
+    for k, operation, observation, no in zip(which.tolist(), operations, seen, refused,
+                                             strict=True):
+        beliefs[k].observe(operation, observation, no)
+    assert_rows_are(rows, beliefs)
+
+
+def assert_rows_are(rows: CountingRows, beliefs: list[DesignBelief]) -> None:
+    """Each row of ``rows``, written back, is its belief of ``beliefs``, and the rows
+    observe and mask as the beliefs do."""
+    for k, belief in enumerate(beliefs):
+        written = copy.copy(belief)
+        rows.write_back(k, written)
+        for name in ("slots", "engaged", "faulted", "rho", "readings_at"):
+            np.testing.assert_array_equal(getattr(written, name), getattr(belief, name))
+        assert (written.here, written.run, written.time_s) == (
+            belief.here, belief.run, belief.time_s)
+    everyone = np.arange(len(beliefs))
+    parts = rows.parts(everyone)
+    np.testing.assert_array_equal(rows.observations(everyone, parts),
+                                  [b.observation() for b in beliefs])
+    np.testing.assert_array_equal(rows.masks(everyone, parts),
+                                  [b.action_mask() for b in beliefs])
+
+
+def started_beliefs(count: int, time_s: float = 0.0) -> list[DesignBelief]:
+    """``count`` counting beliefs of the prototype's lab (6 stands), started at Zero at
+    ``time_s`` with the stands at slots 0, 5, ... 25, plungers up."""
+    beliefs = [DesignBelief(PROTOTYPE, 6, 0.02, 3600.0, 2, covariance=False)
+               for _ in range(count)]
+    for belief in beliefs:
+        belief.start(lab_observation([0, 5, 10, 15, 20, 25], [0] * 6, [0] * 6, time_s))
+    return beliefs
+
+
+def test_counting_rows_take_in_a_step_alike_on_one_row(monkeypatch: pytest.MonkeyPatch
+                                                        ) -> None:
+    """A step that every row of one state takes alike (one operation's dict, labs of
+    equal records) is taken in on one row and given to all: twice the same move (a stay),
+    the rows stay one state, each its belief's own ``observe``.  A step in which one lab
+    differs (a stand out of service) is taken in row by row and parts the rows."""
+    beliefs = started_beliefs(4)
+    rows = CountingRows(beliefs)
+    assert rows.alike
+    stepped: list[int] = []
+    step = rows._step
+
+    def counted(state: np.ndarray, *rest: Any) -> tuple[np.ndarray, np.ndarray]:
+        stepped.append(len(state))
+        return step(state, *rest)
+
+    monkeypatch.setattr(rows, "_step", counted)
+    everyone = np.arange(len(beliefs))
+    here = int(np.flatnonzero(beliefs[0].action_mask()[:beliefs[0].n_postures])[0])
+    move = beliefs[0].operations(here)[-1]
+    for time_s in (40.0, 80.0):
+        seen = [lab_observation([0, 5, 10, 15, 20, 25], [0] * 6, [0] * 6, time_s)
+                for _ in beliefs]
+        step_both(rows, beliefs, everyone, [move] * len(beliefs), seen, [False] * 4)
+        assert rows.alike
+    assert stepped == [1, 1] and beliefs[0].run == 2
+    seen = [lab_observation([0, 5, 10, 15, 20, 25], [0] * 6, [0] * 6, 120.0)
+            for _ in beliefs]
+    seen[2]["faulted"][1] = 1
+    step_both(rows, beliefs, everyone, [move] * len(beliefs), seen, [False] * 4)
+    assert stepped == [1, 1, 4] and not rows.alike
+    assert rows.groups(everyone)[1].tolist() == [0, 0, 1, 0]
+
+
+def test_counting_rows_mask_near_the_budget_s_end_as_each_belief_does() -> None:
+    """The rows' masks are each state's kept mask until its longest operation would end
+    past the budget, then each operation's end against it, as each belief's own
+    ``action_mask``: beliefs at Zero (longest readable move 25 s, a re-mount 125 s) at
+    clocks from the start to past the budget."""
+    budget = 3600.0
+    clocks = [0.0, budget - 125.0, budget - 124.0, budget - 24.0, budget - 18.0,
+              budget + 1.0]
+    beliefs = [started_beliefs(1, clock)[0] for clock in clocks]
+    rows = CountingRows(beliefs)
+    assert_rows_are(rows, beliefs)
+    everyone = np.arange(len(beliefs))
+    masks = rows.masks(everyone, rows.parts(everyone))
+    postures = beliefs[0].n_postures
+    moves, remounts = masks[:, :postures].sum(axis=1), masks[:, postures:-1].sum(axis=1)
+    # Both closings are taken: re-mounts from budget - 124 s on, moves from budget - 24 s.
+    assert remounts[0] == remounts[1] > 0 == remounts[2]
+    assert moves[0] == moves[2] > moves[3] > moves[4] > 0 == moves[5]

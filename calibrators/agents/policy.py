@@ -48,7 +48,7 @@ from orthoglide_env import (
     FLAT_LAB_ENV_ID,
 )
 from orthoglide_env.instruments.dial import weighting_sigma
-from orthoglide_env.lab.counting_rows import CountingRows
+from orthoglide_env.lab.counting_rows import BUDGET, CLOCK, CountingRows
 from orthoglide_env.lab.design_belief import (
     SPECTRUM_VIEWS,
     DesignBelief,
@@ -384,16 +384,25 @@ class DesignPolicyAgent(PolicyAgent):
     def belief(self) -> DesignBelief:
         """The agent's belief.  Played in a chunk of counting agents (:func:`counting`),
         its state is kept in the chunk's rows; read here, it is written back first, and
-        the agent leaves the rows (the next chunk's rows start from the beliefs)."""
-        rows = self.__dict__.get("_rows")
-        if rows is not None:
-            rows.write_back(self._row, self._belief)
-            self._rows = None
+        the agent leaves the chunk (the next chunk's rows start from the beliefs)."""
+        chunk = self.__dict__.get("_chunk")
+        if chunk is not None:
+            chunk.rows.write_back(self._row, self._belief)
+            self._leave()
         return self._belief
 
     @belief.setter
     def belief(self, value: DesignBelief) -> None:
-        self._belief, self._rows = value, None
+        self._leave()
+        self._belief = value
+
+    def _leave(self) -> None:
+        """Leave the chunk of counting agents this agent played in, if any: the chunk no
+        longer holds all its agents' beliefs."""
+        chunk = self.__dict__.get("_chunk")
+        if chunk is not None:
+            chunk.agents = None
+        self._chunk = None
 
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
         return self.act_all([self], [observation], [info])[0]
@@ -407,11 +416,12 @@ class DesignPolicyAgent(PolicyAgent):
         together (:func:`decide_all`, one network pass per policy file; counting agents
         once per distinct state); each plays its operation's next lab action, or stops
         once the training episode's time is used."""
-        if counting(agents):
-            rows, index = _counting_rows(agents)
-            deciding = _take_in_counting(rows, index, agents, observations, infos)
-            if deciding:
-                decide_counting(rows, index[deciding], [agents[k] for k in deciding])
+        chunk = CountingChunk.of(agents)
+        if chunk is not None:
+            deciding = chunk.take_in(agents, observations, infos)
+            if deciding.size:
+                decide_counting(chunk.rows, chunk.index[deciding],
+                                [agents[k] for k in deciding.tolist()])
             return _lab_actions(agents)
         following = [(agent, observation, info) for agent, observation, info
                      in zip(agents, observations, infos, strict=True) if agent.last is not None]
@@ -469,31 +479,54 @@ def counting(agents: list[DesignPolicyAgent]) -> bool:
             and all(a.actor is first.actor and a.filter is None for a in agents))
 
 
-def _counting_rows(agents: list[DesignPolicyAgent]) -> tuple[CountingRows, np.ndarray]:
-    """The rows of ``agents``' beliefs and each agent's row: those they share, else new
-    rows of their beliefs as they are (each written back first)."""
-    rows = agents[0].__dict__.get("_rows")
-    if rows is None or not all(a.__dict__.get("_rows") is rows for a in agents):
-        rows = CountingRows([a.belief for a in agents])
+class CountingChunk:
+    """Counting agents (:func:`counting`) played together, their beliefs' rows
+    (:class:`~orthoglide_env.lab.counting_rows.CountingRows`) and each agent's row
+    (``agent._row``; ``agent._chunk`` is the chunk)."""
+
+    def __init__(self, agents: list[DesignPolicyAgent]) -> None:
+        self.rows = CountingRows([a.belief for a in agents])
         for k, agent in enumerate(agents):
-            agent._rows, agent._row = rows, k
-    return rows, np.array([a._row for a in agents])
+            agent._chunk, agent._row = self, k
+        #: The agents of the last call, in order (None once one has left), and their rows.
+        self.agents: list[DesignPolicyAgent] | None = list(agents)
+        self.index = np.arange(len(agents))
 
+    @classmethod
+    def of(cls, agents: list[DesignPolicyAgent]) -> CountingChunk | None:
+        """The chunk that ``agents`` play in: the last call's (the same agents, or those of
+        them still playing), else a new one of their beliefs as they are (each written
+        back first); None unless they count (:func:`counting`)."""
+        chunk = agents[0].__dict__.get("_chunk")
+        if chunk is not None and chunk.agents is not None:
+            if agents == chunk.agents:
+                return chunk
+            if all(a.__dict__.get("_chunk") is chunk for a in agents):
+                chunk.agents, chunk.index = list(agents), np.array([a._row for a in agents])
+                return chunk
+        return cls(agents) if counting(agents) else None
 
-def _take_in_counting(rows: CountingRows, index: np.ndarray,
-                      agents: list[DesignPolicyAgent],
-                      observations: list[dict[str, np.ndarray]],
-                      infos: list[Mapping[str, Any]]) -> list[int]:
-    """:meth:`DesignPolicyAgent.act_all`'s taking in for counting agents (:func:`counting`)
-    of ``rows`` ``index``: their rows take in the lab's step together; the agents (their
-    positions) that choose an operation now."""
-    following = [k for k, agent in enumerate(agents) if agent.last is not None]
-    if following:
-        rows.observe(index[following], [agents[k].last for k in following],
-                     [observations[k] for k in following],
-                     [bool(infos[k].get("refused")) for k in following])
-    return [k for k, agent in enumerate(agents)
-            if not agent.queue and observations[k]["time"][0] < agent.spec.budget_s]
+    def take_in(self, agents: list[DesignPolicyAgent],
+                observations: list[dict[str, np.ndarray]],
+                infos: list[Mapping[str, Any]]) -> np.ndarray:
+        """:meth:`DesignPolicyAgent.act_all`'s taking in for this chunk's ``agents`` (those
+        of the last :meth:`of`): their rows take in the lab's step together; the agents
+        (their positions) that choose an operation now, with no operation queued and
+        before their budget's end."""
+        following = [k for k, agent in enumerate(agents) if agent.last is not None]
+        if len(following) < len(agents):
+            observations = [observations[k] for k in following]
+            infos = [infos[k] for k in following]
+        idle = np.array([k for k, agent in enumerate(agents) if not agent.queue],
+                        dtype=np.int64)
+        rows = self.rows
+        if following:
+            rows.observe(self.index[following], [agents[k].last for k in following],
+                         observations, [bool(info.get("refused")) for info in infos])
+        # A row's clock is its lab's time as it last took it in: this step's, where it
+        # followed one, else the first observation's, which its belief started from.
+        state = rows.state[self.index[idle]]
+        return idle[state[:, CLOCK] < state[:, BUDGET]]
 
 
 def decide_counting(rows: CountingRows, index: np.ndarray,
@@ -504,8 +537,8 @@ def decide_counting(rows: CountingRows, index: np.ndarray,
     observation, mask and operation are found once, with one network pass for the groups
     (a draw's noise is each agent's own)."""
     reps, groups = rows.groups(index)
-    moves = rows.moves(reps)
-    seen, masks = rows.observations(reps), rows.masks(reps, moves)
+    parts = rows.parts(reps)
+    seen, masks = rows.observations(reps, parts), rows.masks(reps, parts)
     first = agents[0]
     if first.spec.play == "draw":
         noise = np.array([agent.rng.gumbel(size=masks.shape[1]) for agent in agents])
@@ -515,7 +548,8 @@ def decide_counting(rows: CountingRows, index: np.ndarray,
     made: dict[tuple[int, int], list[dict[str, object]]] = {}
     for agent, group, operation in zip(agents, groups.tolist(), chosen.tolist(), strict=True):
         if (group, operation) not in made:
-            made[group, operation] = rows.operations(reps[group], operation, moves[group])
+            made[group, operation] = rows.operations(reps[group], operation,
+                                                     parts[group].moves)
         agent.queue = list(made[group, operation])
 
 

@@ -11,7 +11,12 @@ beliefs' own :meth:`~orthoglide_env.lab.design_belief.DesignBelief.observe`), an
 the rows whose states are equal (:meth:`CountingRows.groups`): their observations, masks
 and operations are the same, found once per group.  The view's observation never holds a
 value read, so machines played alike (one policy, one lab's clock, no refusal) pass the
-same states, and a chunk's decision then costs about one machine's.
+same states, and a chunk's decision then costs about one machine's.  While all rows are
+one state (:attr:`CountingRows.alike`) and every lab's step is the same, the step is taken
+in on one row and given to all; what a state's stands and posture alone decide (its
+candidate moves, the stands' part of its observation, its mask) is found once per such
+state (:meth:`CountingRows.parts`: the shipped one-hour policy decides 484 times an
+episode in 77 of them).
 
 Which rows read the same readings is followed exactly, without comparing the counts: rows
 of one family (the column :data:`FAMILY` of :attr:`CountingRows.state`) have equal
@@ -22,15 +27,20 @@ posture in both or in neither (a count changes only where a reading is taken, by
 from __future__ import annotations
 
 from collections.abc import Hashable, Iterable
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
 
 from orthoglide_env.lab.design_belief import (
+    MOVES_KEPT,
     DesignBelief,
     Moves,
-    masks_of,
+    close_late,
+    open_masks,
     operations_of,
+    remount_seconds,
+    stands_of,
     tails_of,
 )
 from orthoglide_env.lab.operations import Op
@@ -44,6 +54,22 @@ STANDS_FROM: int = 8
 #: The entries of a lab observation that a row takes in (contiguous arrays, each of one
 #: shape and dtype in every lab of a chunk).
 TAKEN: tuple[str, ...] = ("slot", "engaged", "faulted", "time")
+
+
+@dataclass(frozen=True)
+class StateParts:
+    """What a state's stands and posture alone decide (:meth:`CountingRows.parts`): its
+    candidate moves, the stands' part of its observation (1, K (S + 3)) (float64,
+    :func:`~orthoglide_env.lab.design_belief.stands_of`), its mask with all the budget left
+    (read-only, :func:`~orthoglide_env.lab.design_belief.open_masks`), a re-mount's
+    seconds from its posture, and the longest operation's it may open (a readable move
+    or a re-mount): while that one ends within the budget, the mask is the kept one."""
+
+    moves: Moves
+    stands: np.ndarray
+    mask: np.ndarray
+    remount_s: float
+    longest: float
 
 
 class CountingRows:
@@ -69,12 +95,60 @@ class CountingRows:
                                 *b.engaged, *b.faulted] for b in beliefs])
         self.counts = np.stack([b.readings_at for b in beliefs])
         self.state[:, FAMILY] = _families(self.counts)
+        #: Whether all rows are one state (counts included: one family), so that a step
+        #: that is the same in every lab is taken in on one row.
+        self.alike = _uniform(self.state.view(np.int64))
+        #: The record of a lab observation's :data:`TAKEN` entries, found at the first step
+        #: (the chunk's labs are of one env).
+        self.record: np.dtype | None = None
+        #: :meth:`parts` of a state, by its posture and stands, the last MOVES_KEPT kept (a
+        #: one-hour episode of the shipped policy decides 484 times in 77 such states).
+        self._parts = lru_cache(maxsize=MOVES_KEPT)(self._parts_of)
 
     def observe(self, rows: np.ndarray, operations: list[dict[str, object]],
                 seen: list[dict[str, np.ndarray]], refused: list[bool]) -> None:
         """:meth:`DesignBelief.observe` of the beliefs of ``rows`` (distinct) after their
         lab ``operations``, from their labs' observations ``seen`` (a refused operation
         changes nothing but the clock)."""
+        if self.record is None:
+            self.record = _record(tuple((seen[0][key].dtype, seen[0][key].shape)
+                                        for key in TAKEN))
+        # The labs' stands and clocks in one pass over their bytes: a record of each lab.
+        taken = np.frombuffer(b"".join([o[key] for o in seen for key in TAKEN]), self.record)
+        if self._one_step(rows, operations, refused, taken):
+            # Every row is one state and takes one step: one row's, for all of them.
+            state = self.state[:1].copy()
+            reads, to = self._step(state, operations[:1], refused[:1], taken[:1])
+            self.state[:] = state
+            self.counts[:, to] += 1
+            return
+        state = self.state[rows]
+        reads, to = self._step(state, operations, refused, taken)
+        family = self.state[:, FAMILY] * (self.first.n_postures + 1)
+        if reads.size:
+            self.counts[rows[reads], to] += 1
+            family[rows[reads]] += to + 1
+        self.state[rows] = state
+        self.state[:, FAMILY] = _numbered_values(family)
+        self.alike = _uniform(self.state.view(np.int64))
+
+    def _one_step(self, rows: np.ndarray, operations: list[dict[str, object]],
+                  refused: list[bool], taken: np.ndarray) -> bool:
+        """Whether all rows, one state (:attr:`alike`), take one step: each row's
+        operation the same (one dict: a group's), refused alike, and their labs' records
+        the same bytes."""
+        if not self.alike or len(rows) != len(self.state):
+            return False
+        first = operations[0]
+        if not all(operation is first for operation in operations) or len(set(refused)) > 1:
+            return False
+        return _uniform(taken.view(np.uint8).reshape(len(taken), -1))
+
+    def _step(self, state: np.ndarray, operations: list[dict[str, object]],
+              refused: list[bool], taken: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``state``'s rows (in place) after their ``operations`` and labs' records
+        ``taken`` (their stands, clocks, postures and stays); the positions of the rows
+        that read (R,) and the postures where (R,), whose counts are the caller's."""
         first = self.first
         # Each operation's reading found once: the rows of a group share its dicts.
         readings: dict[int, tuple[int, bool]] = {}
@@ -85,10 +159,6 @@ class CountingRows:
                 reading = readings[id(operation)] = _reading(first, operation)
             at.append(reading[0])
             anew.append(reading[1])
-        state = self.state[rows]
-        # The labs' stands and clocks in one pass over their bytes: a record of each lab.
-        record = _record(tuple((seen[0][key].dtype, seen[0][key].shape) for key in TAKEN))
-        taken = np.frombuffer(b"".join([o[key] for o in seen for key in TAKEN]), record)
         state[:, CLOCK] = taken["time"][:, 0]
         held = state[:, self.slots]
         held[:] = taken["slot"]
@@ -98,64 +168,74 @@ class CountingRows:
         state[:, self.faulted] = taken["faulted"] != 0
         posture = np.array(at, dtype=np.int64)
         reads = np.flatnonzero(posture >= 0)
-        family = self.state[:, FAMILY] * (first.n_postures + 1)
+        to = posture[reads]
         if reads.size:
-            to = posture[reads]
             # A stay ends where the reading is elsewhere, or after a re-mount (at Zero with
             # another set of mountings).
             stays = (to == state[reads, HERE]) & ~np.array(anew)[reads]
             state[reads, RUN] = np.where(stays, state[reads, RUN], 0.0) + 1
             state[reads, HERE] = to
             state[reads, RHO] = first.table.postures[to]
-            self.counts[rows[reads], to] += 1
-            family[rows[reads]] += to + 1
-        self.state[rows] = state
-        self.state[:, FAMILY] = _numbered_values(family)
+        return reads, to
 
     def groups(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The rows of ``rows`` whose states are equal, grouped: one row of each group
         (G,) and each row's group (len(rows),).  Equal states are equal counts (one
         family), stands, posture, clock, budget and readings in a row."""
-        state = self.state[rows]
-        if _uniform(state.view(np.int64)):
+        if self.alike:
             # One state, the rows of machines played alike (a row's floats to the bit).
             return rows[:1], np.zeros(len(rows), dtype=np.int64)
+        state = self.state[rows]
         # Rows compared by their bytes, a row's floats to the bit.
         flat, width = state.tobytes(), state.itemsize * state.shape[1]
         firsts, inverse = _numbered(flat[start:start + width]
                                     for start in range(0, len(flat), width))
         return rows[firsts], inverse
 
-    def moves(self, rows: np.ndarray) -> list[Moves]:
-        """The candidate moves of the states of ``rows``
-        (:func:`~orthoglide_env.lab.design_belief.candidate_moves`, from the design's
-        cache of states)."""
+    def parts(self, rows: np.ndarray) -> list[StateParts]:
+        """The :class:`StateParts` of the states of ``rows`` (their candidate moves from
+        the design's cache of states, :func:`~orthoglide_env.lab.design_belief.
+        candidate_moves`)."""
         state = self.state[rows]
-        return [self.first._moves_of(slots.tobytes(), faulted.tobytes(), engaged.tobytes(),
-                                     here)
-                for slots, faulted, engaged, here in zip(
-                    state[:, self.slots].astype(np.int64), state[:, self.faulted] != 0,
-                    state[:, self.engaged] != 0, state[:, HERE].astype(int).tolist(),
-                    strict=True)]
+        return [self._parts(here, stands.tobytes()) for here, stands in zip(
+            state[:, HERE].tolist(), state[:, STANDS_FROM:], strict=True)]
 
-    def observations(self, rows: np.ndarray) -> np.ndarray:
-        """:meth:`DesignBelief.observation` (len(rows), n) of the beliefs of ``rows``, the
-        same floats."""
+    def _parts_of(self, here: float, stands: bytes) -> StateParts:
+        """:class:`StateParts` of the state at posture ``here`` whose stands' columns of
+        :attr:`state` are the bytes ``stands``."""
+        first, k = self.first, self.first.n_stands
+        columns = np.frombuffer(stands).reshape(1, 3, k)
+        held, engaged, faulted = columns[:, 0].astype(np.int64), columns[:, 1], columns[:, 2]
+        at = int(here)
+        moves = first._moves_of(held[0].tobytes(), (faulted[0] != 0).tobytes(),
+                                (engaged[0] != 0).tobytes(), at)
+        mask = open_masks(first, [moves], held)[0]
+        mask.flags.writeable = False
+        remount_s = float(remount_seconds(first, [at])[0])
+        return StateParts(moves, stands_of(first, held, engaged, faulted), mask, remount_s,
+                          max(moves[4], remount_s))
+
+    def observations(self, rows: np.ndarray, parts: list[StateParts]) -> np.ndarray:
+        """:meth:`DesignBelief.observation` (len(rows), n) of the beliefs of ``rows``,
+        whose :meth:`parts` are ``parts``, the same floats."""
         state, counts = self.state[rows], self.counts[rows]
         total = counts[np.arange(len(rows)), state[:, HERE].astype(np.int64)]
-        return tails_of(self.first, state[:, self.slots].astype(np.int64),
-                        state[:, self.engaged], state[:, self.faulted], state[:, RHO],
-                        state[:, CLOCK] / state[:, BUDGET],
-                        (state[:, RUN], total, np.zeros(len(rows))), counts
-                        ).astype(np.float32)
+        stands = parts[0].stands if len(parts) == 1 else np.concatenate(
+            [p.stands for p in parts])
+        return tails_of(self.first, stands, state[:, RHO], state[:, CLOCK] / state[:, BUDGET],
+                        (state[:, RUN], total, None), counts).astype(np.float32)
 
-    def masks(self, rows: np.ndarray, moves: list[Moves]) -> np.ndarray:
+    def masks(self, rows: np.ndarray, parts: list[StateParts]) -> np.ndarray:
         """:meth:`DesignBelief.action_mask` (len(rows), ``n_actions``) of the beliefs of
-        ``rows``, whose candidate moves are ``moves`` (:meth:`moves`)."""
+        ``rows``, whose :meth:`parts` are ``parts``: each state's kept mask, with the
+        operations that would end past the budget closed near its end."""
         state = self.state[rows]
-        return masks_of(self.first, moves, state[:, CLOCK], state[:, BUDGET],
-                        state[:, HERE].astype(np.int64),
-                        state[:, self.slots].astype(np.int64))
+        clock, budget = state[:, CLOCK], state[:, BUDGET]
+        masks = np.array([p.mask for p in parts])
+        if (clock + np.array([p.longest for p in parts]) <= budget).all():
+            return masks
+        return close_late(self.first, masks, [p.moves for p in parts], clock, budget,
+                          np.array([p.remount_s for p in parts]))
 
     def operations(self, row: int, action: int, moves: Moves) -> list[dict[str, object]]:
         """:meth:`DesignBelief.operations` of ``action`` for the belief of ``row``, whose
@@ -186,7 +266,6 @@ def _reading(first: DesignBelief, operation: dict[str, object]) -> tuple[int, bo
     return -1, False
 
 
-@lru_cache(maxsize=4)
 def _record(layout: tuple[tuple[np.dtype, tuple[int, ...]], ...]) -> np.dtype:
     """The record of a lab observation's :data:`TAKEN` entries of dtypes and shapes
     ``layout``, packed as their bytes are joined."""

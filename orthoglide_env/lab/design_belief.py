@@ -521,34 +521,46 @@ def observation_tails(beliefs: list[DesignBelief]) -> np.ndarray:
     history = (np.array([b.run for b in beliefs]),
                np.array([b.readings_at[b.here] for b in beliefs]),
                np.array([b.fall for b in beliefs])) if beliefs[0].version >= 1 else None
-    return tails_of(beliefs[0], np.array([b.slots for b in beliefs]),
-                    np.array([b.engaged for b in beliefs]),
-                    np.array([b.faulted for b in beliefs]), np.array([b.rho for b in beliefs]),
+    stands = stands_of(beliefs[0], np.array([b.slots for b in beliefs]),
+                       np.array([b.engaged for b in beliefs]),
+                       np.array([b.faulted for b in beliefs]))
+    return tails_of(beliefs[0], stands, np.array([b.rho for b in beliefs]),
                     np.array([b.time_s / b.budget_s for b in beliefs]), history,
                     np.stack([b.readings_at for b in beliefs])
                     if beliefs[0].version == 2 else None)
 
 
-def tails_of(first: DesignBelief, held: np.ndarray, engaged: np.ndarray, faulted: np.ndarray,
-             rho: np.ndarray, clock: np.ndarray,
-             history: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
-             counts: np.ndarray | None) -> np.ndarray:
-    """:func:`observation_tails` (N, m) of N states of beliefs like ``first`` (its design,
-    stands and view) from their arrays: the slots held (N, K; -1: none), plungers down and
-    stands out of service (N, K), postures (N, 3), the time used over the budget (N,),
-    in views 1 and 2 the readings in a row here, in all here and the last one's fall (N,
-    each), in view 2 the readings at every posture (N, P)."""
+def stands_of(first: DesignBelief, held: np.ndarray, engaged: np.ndarray,
+              faulted: np.ndarray) -> np.ndarray:
+    """The stands' part (N, K (S + 3)) of :func:`observation_tails` of N states of beliefs
+    like ``first`` (its design and stands): each stand's slot one-hot (then "not mounted"),
+    engaged and out of service, from the slots held (N, K; -1: none), plungers down and
+    stands out of service (N, K)."""
     count, stands, slots = len(held), first.n_stands, first.n_slots
     tails = np.zeros((count, stands, slots + 3))
     tails[np.arange(count)[:, None], np.arange(stands), np.where(held >= 0, held, slots)] = 1
     tails[:, :, -2] = engaged
     tails[:, :, -1] = faulted
+    return tails.reshape(count, -1)
+
+
+def tails_of(first: DesignBelief, stands: np.ndarray, rho: np.ndarray, clock: np.ndarray,
+             history: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
+             counts: np.ndarray | None) -> np.ndarray:
+    """:func:`observation_tails` (N, m) of N states of beliefs like ``first`` (its design,
+    stands and view) from their arrays: the stands' part (:func:`stands_of`), postures
+    (N, 3), the time used over the budget (N,), in views 1 and 2 the readings in a row
+    here, in all here and the last one's fall (N, each), in view 2 the readings at every
+    posture (N, P)."""
     low, high = first.design.rho_min, first.design.rho_max
-    parts = [tails.reshape(count, -1), (2 * rho - (high + low)) / (high - low), clock[:, None]]
-    if first.version >= 1:
-        parts.append(_history(*history) if first.version == 1 else _history(*history)[:, :2])
+    parts = [stands, (2 * rho - (high + low)) / (high - low), clock[:, None]]
+    if first.version == 1:
+        parts.append(_history(*history))
     if first.version == 2:
-        parts.append(counts / COUNT_SCALE)
+        # The fall is not view 2's (nor its log's cost).
+        run, total, _ = history
+        parts.extend((run[:, None] / COUNT_SCALE, total[:, None] / COUNT_SCALE,
+                      counts / COUNT_SCALE))
     return np.concatenate(parts, axis=1)
 
 
@@ -574,21 +586,42 @@ def masks_of(first: DesignBelief, moves: list[Moves], clock: np.ndarray, budget:
     """:func:`action_masks` (N, ``n_actions``) of N states of beliefs like ``first`` (its
     design and stands) from their candidate moves (:func:`candidate_moves`), clocks and
     budgets (N,), postures' indices (N,) and slots held (N, K; -1: none)."""
+    return close_late(first, open_masks(first, moves, held), moves, clock, budget,
+                      remount_seconds(first, here))
+
+
+def open_masks(first: DesignBelief, moves: list[Moves], held: np.ndarray) -> np.ndarray:
+    """:func:`masks_of` with all the budget left (N, ``n_actions``): the readable moves, a
+    re-mount at each slot no stand holds, stop."""
     count, postures, slots = len(moves), first.n_postures, first.n_slots
     masks = np.empty((count, first.n_actions), dtype=bool)
     np.stack([m[3] for m in moves], out=masks[:, :postures])
+    free = np.ones((count, slots), dtype=bool)
+    rows, stands = np.nonzero(held >= 0)
+    free[rows, held[rows, stands]] = False
+    masks[:, postures:-1] = np.tile(free, first.n_stands)
+    masks[:, -1] = True
+    return masks
+
+
+def remount_seconds(first: DesignBelief, here: list[int] | np.ndarray) -> np.ndarray:
+    """A re-mount's seconds from postures ``here`` (N,): the drive to Zero, as the lab
+    times it, from the table of every move, and the re-mount itself."""
+    return first.drive_s[here, first.table.zero] + TIME.remount_s
+
+
+def close_late(first: DesignBelief, masks: np.ndarray, moves: list[Moves], clock: np.ndarray,
+               budget: np.ndarray, remount_s: np.ndarray) -> np.ndarray:
+    """``masks`` (N, ``n_actions``; :func:`open_masks`) with the operations that would end
+    past the budget closed, in place, of states of candidate moves ``moves``, clocks and
+    budgets (N,) and re-mounts' seconds ``remount_s`` (N,)."""
+    postures = first.n_postures
     # A state's readable moves all end within the budget while its longest one does: only
     # a row near the budget's end compares each move's end with it.
     late = clock + np.array([m[4] for m in moves]) > budget
     for k in np.flatnonzero(late).tolist():
         masks[k, :postures] &= clock[k] + moves[k][0] <= budget[k]
-    # The drive to Zero, as the lab times it, from the table of every move.
-    remount_s = first.drive_s[here, first.table.zero] + TIME.remount_s
-    free = np.repeat(clock + remount_s <= budget, slots).reshape(count, slots)
-    rows, stands = np.nonzero(held >= 0)
-    free[rows, held[rows, stands]] = False
-    masks[:, postures:-1] = np.tile(free, first.n_stands)
-    masks[:, -1] = True
+    masks[clock + remount_s > budget, postures:-1] = False
     return masks
 
 
