@@ -356,7 +356,8 @@ def test_a_sweeps_workers_make_no_plan_of_their_own(monkeypatch: pytest.MonkeyPa
     (:func:`~calibrators.study.compare.shared_start`, on its first machine) is the one
     every worker's agents ask for on their machines, and its slot table the one they plan
     and read on: handed to a process that has neither, its chunk of other machines,
-    ``active`` and ``optimal`` both, plans nothing and makes no slot table again."""
+    ``active`` and ``optimal`` both, plans nothing and makes no slot table again, and
+    plays and scores them as it does when it makes both itself."""
     config = Config(("active", "optimal"), ("extended",), seed=1, conditions=LAB,
                     budget_s=240.0)
     monkeypatch.setattr(optimal, "_PLANS", Kept(optimal.PLANS_KEPT))
@@ -372,3 +373,9 @@ def test_a_sweeps_workers_make_no_plan_of_their_own(monkeypatch: pytest.MonkeyPa
     monkeypatch.setattr(tables, "_slot_table", lambda d: made.append(d) or tabling(d))
     trials = run_chunk(config, [3, 4], set(), start=start)
     assert len(trials) == 4 and not made
+    # What the process makes of its own is what it was handed: the same trials, to the byte.
+    monkeypatch.setattr(optimal, "_PLANS", Kept(optimal.PLANS_KEPT))
+    monkeypatch.setattr(tables, "_TABLES", Kept(2))
+    alone = run_chunk(config, [3, 4], set())
+    assert len(made) == 2  # the plan and the slot table
+    assert [t.to_json() for t in alone] == [t.to_json() for t in trials]
