@@ -22,11 +22,17 @@ from calibrators.agents.base import action
 from calibrators.agents.paper import PaperAgent
 from calibrators.estimators.catalogue import for_study
 from calibrators.study.compare import Config, agent_episodes, run, run_chunk
-from calibrators.study.episodes import make_estimator, measurements_of, run_episode
+from calibrators.study.episodes import (
+    NotebookReadings,
+    make_estimator,
+    measurements_of,
+    run_episode,
+)
 from calibrators.study.statistics import summary
-from orthoglide_env.lab.notebook import Record
+from orthoglide_env.lab.notebook import Notebook, Record, _mounting_columns
 from orthoglide_env.lab.operations import SLOTS, TIME, Op, slot_index
 from orthoglide_env.model.design import PROTOTYPE
+from orthoglide_env.reading_model import ReadingLayout, default_scales, jacobian
 from orthoglide_env.scoring import score
 from orthoglide_env.world.conditions import IDEAL
 from orthoglide_env.world.machine_file import machine_dict
@@ -157,6 +163,57 @@ def test_information_reward_adds_up_to_the_designs_log_det() -> None:
     first, _ = reset_only.unwrapped.information()
     start = np.linalg.slogdet(np.eye(len(first)) + first)[1]
     assert total == pytest.approx(logdet - start, rel=1e-9)
+
+
+def _random_notebook(seed: int) -> list[Record]:
+    """The records of a ``random`` agent's episode in the workshop: many mountings, each
+    re-mounted stand a new one, read at many postures."""
+    config = Config(("random",), ("extended",), seed=seed, conditions="workshop",
+                    budget_s=900.0)
+    return agent_episodes(config, "random", [0])[0].run.records
+
+
+def test_a_notebooks_information_is_summed_as_record_by_record() -> None:
+    """The information sums of a notebook (each mounting's records summed together) hold
+    the same bits as the records added one at a time in their order, however the records
+    come in: all at once or in pieces, as the lab's steps hand them over."""
+    records = _random_notebook(4)
+    assert len({r.mounting for r in records}) > 10
+    whole, pieces = (Notebook(0.002, 0.01, PROTOTYPE) for _ in range(2))
+    whole._add_information(records)
+    for first in range(0, len(records), 17):
+        pieces._add_information(records[first:first + 17])
+    layout = ReadingLayout.of([r.mounting for r in records], [r.spec for r in records],
+                              np.array([r.rho for r in records]), PROTOTYPE)
+    rows = jacobian(np.zeros(len(layout.space)), layout, np.ones(len(layout.space), bool),
+                    default_scales(layout.space))
+    one_by_one: dict[str, tuple] = {}
+    for record, row, m in zip(records, rows, layout.mounting, strict=True):
+        row = row[_mounting_columns(layout.space, m)] / whole._sigma(record.spec)
+        n, s1, s2 = one_by_one.get(record.mounting, (0, 0.0, 0.0))
+        one_by_one[record.mounting] = (n + 1, s1 + row, s2 + np.outer(row, row))
+    for book in (whole, pieces):
+        assert list(book._sums) == list(one_by_one)
+        for name, (n, s1, s2) in one_by_one.items():
+            assert book._sums[name][0] == n
+            assert book._sums[name][1].tobytes() == s1.tobytes()
+            assert book._sums[name][2].tobytes() == s2.tobytes()
+
+
+def test_a_growing_notebook_reads_as_measurements_of_it_whole() -> None:
+    """A notebook read as it grows (:class:`~calibrators.study.episodes.NotebookReadings`,
+    each record converted once) gives at every length the measurements of the notebook
+    read whole, repetitions numbered alike; another notebook is refused."""
+    records = _random_notebook(5)
+    reader = NotebookReadings(PROTOTYPE)
+    for end in (1, 2, len(records) // 3, len(records) // 3 + 1, len(records)):
+        grown = reader.of(records[:end], 12.0)
+        whole = measurements_of(records[:end], 12.0, design=PROTOTYPE)
+        assert grown.items == whole.items and len(grown) == end
+        assert (grown.experiment_time_s, grown.design) == (12.0, PROTOTYPE)
+    assert max(m.repetition for m in grown.items) > 1
+    with pytest.raises(ValueError, match="grown by later records only"):
+        reader.of(_random_notebook(6))
 
 
 def test_accuracy_reward_is_the_estimates_score() -> None:

@@ -27,7 +27,9 @@ from calibrators.planning.search import (
     lookahead_rates,
     screening_over,
 )
-from calibrators.study.compare import Config, run_chunk, shared_plans
+from calibrators.study.compare import Config, run_chunk, shared_start
+from orthoglide_env.lab import slot_table as tables
+from orthoglide_env.lab.kept import Kept
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
@@ -313,7 +315,7 @@ def test_spread_answers_in_order_from_forks() -> None:
 @pytest.mark.slow
 def test_a_remount_check_spread_over_processes_chooses_as_in_one() -> None:
     """A re-mount check whose screening and play-outs are spread over two processes (a
-    sweep's start-up plan, :func:`~calibrators.study.compare.shared_plans`) screens and
+    sweep's start-up plan, :func:`~calibrators.study.compare.shared_start`) screens and
     plays out its options with the same numbers, to the bit, as in one process, and
     makes the same choice."""
     p = planner(LAB, budget_s=420.0)
@@ -340,7 +342,8 @@ def test_a_handed_plan_serves_only_its_own_set_up(monkeypatch: pytest.MonkeyPatc
     setup = (tuple(PAPER_SLOTS), (True,) * len(PAPER_SLOTS), SIGMA, 60.0, PROTOTYPE, LAB,
              "I", True, (), 0.0)
     handed = ((PlannedOperation(Op.STOP, time_s=0.0),), 1.0)  # not what planning makes
-    monkeypatch.setattr(optimal, "_PLANS", {})  # the process's other plans kept out
+    # The process's other plans kept out.
+    monkeypatch.setattr(optimal, "_PLANS", Kept(optimal.PLANS_KEPT))
     handed_plans({setup: handed})
     assert setup in made_plans()
     assert fixed_plan(*setup[:6]) is handed
@@ -350,17 +353,29 @@ def test_a_handed_plan_serves_only_its_own_set_up(monkeypatch: pytest.MonkeyPatc
 
 def test_a_sweeps_workers_make_no_plan_of_their_own(monkeypatch: pytest.MonkeyPatch) -> None:
     """The plan a comparison makes before its workers start
-    (:func:`~calibrators.study.compare.shared_plans`, on its first machine) is the one
-    every worker's agents ask for on their machines: handed to a process that has none, its
-    chunk of other machines, ``active`` and ``optimal`` both, plans nothing again."""
+    (:func:`~calibrators.study.compare.shared_start`, on its first machine) is the one
+    every worker's agents ask for on their machines, and its slot table the one they plan
+    and read on: handed to a process that has neither, its chunk of other machines,
+    ``active`` and ``optimal`` both, plans nothing and makes no slot table again, and
+    plays and scores them as it does when it makes both itself."""
     config = Config(("active", "optimal"), ("extended",), seed=1, conditions=LAB,
                     budget_s=240.0)
-    monkeypatch.setattr(optimal, "_PLANS", {})
-    plans = shared_plans(config, 0, 1)
-    assert len(plans) == 1  # the two agents share one set-up
-    monkeypatch.setattr(optimal, "_PLANS", {})
+    monkeypatch.setattr(optimal, "_PLANS", Kept(optimal.PLANS_KEPT))
+    monkeypatch.setattr(tables, "_TABLES", Kept(2))
+    start = shared_start(config, 0, 1)
+    assert len(start.plans) == 1  # the two agents share one set-up
+    assert list(start.tables) == [PROTOTYPE]
+    monkeypatch.setattr(optimal, "_PLANS", Kept(optimal.PLANS_KEPT))
+    monkeypatch.setattr(tables, "_TABLES", Kept(2))
     made = []
-    planning = optimal._fixed_plan
+    planning, tabling = optimal._fixed_plan, tables._slot_table
     monkeypatch.setattr(optimal, "_fixed_plan", lambda *key: made.append(key) or planning(*key))
-    trials = run_chunk(config, [3, 4], set(), plans=plans)
+    monkeypatch.setattr(tables, "_slot_table", lambda d: made.append(d) or tabling(d))
+    trials = run_chunk(config, [3, 4], set(), start=start)
     assert len(trials) == 4 and not made
+    # What the process makes of its own is what it was handed: the same trials, to the byte.
+    monkeypatch.setattr(optimal, "_PLANS", Kept(optimal.PLANS_KEPT))
+    monkeypatch.setattr(tables, "_TABLES", Kept(2))
+    alone = run_chunk(config, [3, 4], set())
+    assert len(made) == 2  # the plan and the slot table
+    assert [t.to_json() for t in alone] == [t.to_json() for t in trials]

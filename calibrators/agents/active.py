@@ -107,6 +107,9 @@ class ActiveAgent(Agent):
         self.queue: list[PlannedOperation] = []
         self.last: PlannedOperation | None = None
         self.fitted = start
+        # Imported here: the experiment module imports the agents package.
+        from calibrators.study.episodes import NotebookReadings
+        self.notebook = NotebookReadings(design)  # what the refits read, kept converted
         self._observe(observation, {})
 
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
@@ -256,13 +259,10 @@ class ActiveAgent(Agent):
 
     def _refit(self) -> None:
         """Replace the filter's mean by the extended estimator's fit of the notebook."""
-        # Imported here: the experiment module imports the agents package.
-        from calibrators.study.episodes import measurements_of
-
         records = self.env.records
         planner = self.planner
         try:
-            est = _refitter(planner.sigma).fit(measurements_of(records, design=planner.design))
+            est = _refitter(planner.sigma).fit(self.notebook.of(records))
         except (ValueError, RuntimeError, np.linalg.LinAlgError):
             return  # the filter goes on alone; the next refit has more data
         theta = dict(zip(est.space, est.theta, strict=True))

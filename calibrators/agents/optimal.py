@@ -28,6 +28,7 @@ from calibrators.planning.rounding import plan_bundles, relaxed_plan
 from calibrators.planning.search import Planner, greedy_plan
 from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.lab.clock import move_dwell_seconds
+from orthoglide_env.lab.kept import Kept
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.world.conditions import Conditions
 
@@ -54,12 +55,7 @@ def fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
     # for the same set-up when a caller left out a default another passed.
     key = (tuple(slots), tuple(engaged), sigma, budget_s, design, conditions, criterion,
            remounts, tuple(instruments), float(dwell_s))
-    plan = _PLANS.get(key)
-    if plan is None:
-        plan = _PLANS[key] = _fixed_plan(*key)
-        if len(_PLANS) > PLANS_KEPT:
-            del _PLANS[next(iter(_PLANS))]  # the oldest
-    return plan
+    return _PLANS.get(key, lambda: _fixed_plan(*key))
 
 
 #: Set-ups whose plans a process keeps (a plan is a few kilobytes; a comparison has one
@@ -67,22 +63,20 @@ def fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
 PLANS_KEPT: int = 8
 #: The plans this process made or was handed (:func:`handed_plans`), by every argument of
 #: :func:`_fixed_plan`.
-_PLANS: dict[tuple, tuple[tuple[PlannedOperation, ...], float]] = {}
+_PLANS: Kept[tuple, tuple[tuple[PlannedOperation, ...], float]] = Kept(PLANS_KEPT)
 
 
 def made_plans() -> dict[tuple, tuple[tuple[PlannedOperation, ...], float]]:
     """The plans this process has made, by all of their set-up's arguments: for a
     sweep's workers (:func:`handed_plans`), which then need not make them again."""
-    return dict(_PLANS)
+    return _PLANS.made()
 
 
 def handed_plans(plans: dict[tuple, tuple[tuple[PlannedOperation, ...], float]]) -> None:
     """Keep ``plans`` (:func:`made_plans` of another process) as if made here: a set-up
     that is one of their keys, all of its arguments equal, gets its plan without making
     it; any other is made as before."""
-    _PLANS.update(plans)
-    while len(_PLANS) > PLANS_KEPT:
-        del _PLANS[next(iter(_PLANS))]
+    _PLANS.handed(plans)
 
 
 def _fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,

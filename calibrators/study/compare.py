@@ -19,7 +19,7 @@ from collections.abc import Callable
 from contextlib import closing
 from dataclasses import dataclass, field
 from functools import cache, partial
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import gymnasium as gym
 import numpy as np
@@ -320,17 +320,19 @@ def _worlds(episodes: list[_Episode]) -> list[World] | None:
 
 
 def run_chunk(config: Config, indices: list[int], skip: set[tuple[str, str, int]],
-              batched: bool = True, plans: dict[tuple, Any] | None = None) -> list[Trial]:
+              batched: bool = True, start: StartUp | None = None) -> list[Trial]:
     """Machines ``indices``: every agent's episode on each, then every estimator over all
     of an agent's notebooks at once (a fixed design is fitted in one batched solve).
     ``batched``: the episodes of an agent run together in the lab's native vector env (on
     the exact backend); else one machine at a time in a lone lab, step by step (the
-    reference path, same numbers).  ``plans``: the agents' shared plans made already
-    (:func:`shared_plans`)."""
-    if plans:
-        # Only a sweep of planning agents is handed plans, and only it needs the planner.
+    reference path, same numbers).  ``start``: what the agents would make at their
+    start, made already (:func:`shared_start`)."""
+    if start is not None:
+        # Only a sweep of planning agents is handed a start, and only it needs the planner.
         from calibrators.agents.optimal import handed_plans
-        handed_plans(plans)
+        from orthoglide_env.lab.slot_table import handed_tables
+        handed_plans(start.plans)
+        handed_tables(start.tables)
     trials = []
     uncalibrated: dict[int, np.ndarray] = {}  # a machine's, whichever agent worked on it
     for agent_name in config.agents:
@@ -379,19 +381,37 @@ def agent_episodes(config: Config, agent_name: str, runs: list[int], batched: bo
     return [_Episode(agent_name, index, e) for index, e in zip(runs, done, strict=True)]
 
 
-def shared_plans(config: Config, machine: int, processes: int) -> dict[tuple, Any]:
+class StartUp(NamedTuple):
+    """What each process of a sweep would make before its first machine, made once
+    (:func:`shared_start`)."""
+
+    #: The planning agents' plans (:func:`~calibrators.agents.optimal.made_plans`).
+    plans: dict[tuple, Any]
+    #: The slot tables they plan on (:func:`~orthoglide_env.lab.slot_table.made_tables`).
+    tables: dict[MachineDesign, Any]
+
+
+def _shares_a_plan(config: Config) -> bool:
+    """Whether an agent of the comparison makes a plan of the lab's set-up at reset
+    (:attr:`~calibrators.agents.base.Agent.shares_a_plan`)."""
+    return any(get_agent(name).shares_a_plan for name in config.agents)
+
+
+def shared_start(config: Config, machine: int, processes: int) -> StartUp:
     """The plans of the lab's set-up that the comparison's agents make at reset
     (:attr:`~calibrators.agents.base.Agent.shares_a_plan`), each made once here on
     ``machine``'s lab, its re-mounts screened over ``processes`` processes
     (:func:`~calibrators.planning.search.screening_over`): what each worker would make
     alone, by all of the set-up's arguments (:func:`~calibrators.agents.optimal.
-    made_plans`); none when no agent shares one."""
+    made_plans`); and the slot tables they were made on.  Nothing when no agent shares
+    a plan."""
     planners = [a for a in map(get_agent, config.agents) if a.shares_a_plan]
     if not planners:
-        return {}
+        return StartUp({}, {})
     # The planner is imported only by a comparison with an agent that plans.
     from calibrators.agents.optimal import made_plans
     from calibrators.planning.search import screening_over
+    from orthoglide_env.lab.slot_table import made_tables
     seed = machine_seed(config.seed, machine)
     with screening_over(processes):
         for agent in planners:
@@ -399,15 +419,15 @@ def shared_plans(config: Config, machine: int, processes: int) -> dict[tuple, An
             with closing(gym.make(lab_id(kwargs), **kwargs)) as env:
                 observation, _ = env.reset(seed=seed)
                 agent.reset(env, observation, agent_rng(seed))
-    return made_plans()
+    return StartUp(made_plans(), made_tables())
 
 
-def _plans_made_once(config: Config, machine: int, processes: int) -> dict[tuple, Any]:
-    """:func:`shared_plans` made in one spawned process, whose BLAS runs on one thread as
+def _start_made_once(config: Config, machine: int, processes: int) -> StartUp:
+    """:func:`shared_start` made in one spawned process, whose BLAS runs on one thread as
     the sweep's workers' does: this process's may run threads of its own, which beside the
     screening's forks spend three times the CPU and wall time (17 CPU-s against 51 for the
     one-hour ``lab`` plan on 2 cores)."""
-    with closing(results(partial(shared_plans, config, processes=processes), [machine],
+    with closing(results(partial(shared_start, config, processes=processes), [machine],
                          jobs=2)) as made:
         return next(made)[1]
 
@@ -445,11 +465,12 @@ def run(config: Config, machines: int, jobs: int = 1, done: list[Trial] | None =
     size = max(1, min(chunk, -(-machines // jobs)))
     chunks = [list(range(i, min(i + size, machines))) for i in range(0, machines, size)]
     trials = list(done)
-    # Each worker would make the agents' shared plans (seconds of a core each): made once
-    # instead, their screening spread over the cores the workers are about to take.
-    plans = (_plans_made_once(config, chunks[0][0], jobs)
-             if jobs > 1 and len(chunks) > 1 else None)
-    with closing(results(partial(run_chunk, config, skip=skip, plans=plans), chunks, jobs,
+    # Each worker would make the agents' shared plans and their slot tables (seconds of a
+    # core each): made once instead, the plans' screening spread over the cores the
+    # workers are about to take.
+    start = (_start_made_once(config, chunks[0][0], jobs)
+             if jobs > 1 and len(chunks) > 1 and _shares_a_plan(config) else None)
+    with closing(results(partial(run_chunk, config, skip=skip, start=start), chunks, jobs,
                          engine, address)) as finished:
         for chunk, new in finished:
             for trial in new:

@@ -46,20 +46,44 @@ def measurements_of(records: list[Record], time_s: float = 0.0,
     with its name (a measurement file's paper postures are its design's); each Zero
     reading of a mounting opens its next repetition (the file format's meaning), so the
     paper's procedure is numbered as the paper numbers it."""
-    labels = {rho: name for name, rho in paper_rhos(design).items()}
-    zeros: dict[str, int] = {}
-    items = []
-    recorded = Measurement.recorded
-    # Each field read once per record: a sweep's notebooks hold tens of thousands.
-    for r in records if until_s is None else [r for r in records if r.time_s <= until_s]:
-        rho, mounting = r.rho, r.mounting
-        if rho == ZERO_RHO:
-            repetition = zeros[mounting] = zeros.get(mounting, 0) + 1
-        else:
-            repetition = zeros.get(mounting, 0) or 1
-        items.append(recorded(r.spec, labels.get(rho, ""), r.reading, rho, mounting,
-                              repetition, r.time_s, r.temperature_c))
-    return Measurements(items, time_s if until_s is None else min(time_s, until_s), design)
+    kept = records if until_s is None else [r for r in records if r.time_s <= until_s]
+    return NotebookReadings(design).of(kept, time_s if until_s is None else min(time_s,
+                                                                                 until_s))
+
+
+class NotebookReadings:
+    """:func:`measurements_of` a notebook that grows, each record converted once: an agent
+    that refits its whole notebook every few minutes of lab time (``active``) converted
+    every earlier record again at each refit, 2 % of its sweep's CPU."""
+
+    def __init__(self, design: MachineDesign) -> None:
+        self.design = design
+        self._labels = {rho: name for name, rho in paper_rhos(design).items()}
+        self._zeros: dict[str, int] = {}  # Zero readings so far, by mounting
+        self._items: list[Measurement] = []
+        self._last: Record | None = None
+
+    def of(self, records: list[Record], time_s: float = 0.0) -> Measurements:
+        """The measurements of ``records``, the notebook this reader has read so far
+        grown by any records since, at experiment time ``time_s``."""
+        done = len(self._items)
+        if done and (len(records) < done or records[done - 1] is not self._last):
+            raise ValueError("a notebook's readings are of the notebook they have read, "
+                             "grown by later records only")
+        labels, zeros, items = self._labels, self._zeros, self._items
+        recorded = Measurement.recorded
+        # Each field read once per record: a sweep's notebooks hold tens of thousands.
+        for r in records[done:]:
+            rho, mounting = r.rho, r.mounting
+            if rho == ZERO_RHO:
+                repetition = zeros[mounting] = zeros.get(mounting, 0) + 1
+            else:
+                repetition = zeros.get(mounting, 0) or 1
+            items.append(recorded(r.spec, labels.get(rho, ""), r.reading, rho, mounting,
+                                  repetition, r.time_s, r.temperature_c))
+        if len(records) > done:
+            self._last = records[-1]
+        return Measurements(list(self._items), time_s, self.design)
 
 
 def make_estimator(name: str = "extended", design: MachineDesign = PROTOTYPE

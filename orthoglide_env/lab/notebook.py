@@ -110,23 +110,35 @@ class Notebook:
     def _add_information(self, records: list[Record]) -> None:
         """Add the records' rows of the Jacobian (at the nominal machine, per unit of each
         parameter's scale, per unit of noise; one batched call) to their mountings' sums:
-        the information of a mounting, its zero eliminated, is ``S2 - S1 S1^T / n``."""
+        the information of a mounting, its zero eliminated, is ``S2 - S1 S1^T / n``.  A
+        mounting's records are summed together, each added in its turn to the sum before
+        it as one at a time would (``np.add.accumulate``, no pairwise summation): the
+        same bits, without a mounting's columns worked out again for every record."""
         layout = ReadingLayout.of([r.mounting for r in records], [r.spec for r in records],
                                   np.array([r.rho for r in records]), self._design)
         space = layout.space
         rows = jacobian(np.zeros(len(space)), layout, np.ones(len(space), bool),
                         default_scales(space))
-        for record, row, m in zip(records, rows, layout.mounting, strict=True):
-            sigma = (self._tracker_sigma if isinstance(record.spec, TrackerAxis)
-                     else self._bar_sigma if isinstance(record.spec, BallbarSpec)
-                     else self._probe_sigma if isinstance(record.spec, StepGaugeSpec)
-                     else self._gauge_sigma)
+        for m, spec in enumerate(layout.specs):
+            at = np.flatnonzero(layout.mounting == m)
             # The mounting's own columns: the machine's errors and its instrument's.
             mine = _mounting_columns(space, m)
             names = tuple(space.names[c] for c in mine)
-            row = row[mine] / sigma
-            n, s1, s2, _ = self._sums.get(record.mounting, (0, 0.0, 0.0, names))
-            self._sums[record.mounting] = (n + 1, s1 + row, s2 + np.outer(row, row), names)
+            own = rows[np.ix_(at, mine)] / self._sigma(spec)
+            n, s1, s2, _ = self._sums.get(space.mountings[m], (0, 0.0, 0.0, names))
+            s1 = np.add.accumulate(np.concatenate(
+                [np.broadcast_to(s1, (1, len(mine))), own]))[-1]
+            s2 = np.add.accumulate(np.concatenate(
+                [np.broadcast_to(s2, (1, len(mine), len(mine))),
+                 own[:, :, None] * own[:, None, :]]))[-1]
+            self._sums[space.mountings[m]] = (n + len(at), s1, s2, names)
+
+    def _sigma(self, spec: Spec) -> float:
+        """The weight's sigma of a reading of ``spec``'s instrument."""
+        return (self._tracker_sigma if isinstance(spec, TrackerAxis)
+                else self._bar_sigma if isinstance(spec, BallbarSpec)
+                else self._probe_sigma if isinstance(spec, StepGaugeSpec)
+                else self._gauge_sigma)
 
     def information(self) -> tuple[np.ndarray, list[str]]:
         """The records' information about every parameter they involve, in units of each

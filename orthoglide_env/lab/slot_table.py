@@ -10,7 +10,7 @@ computed once per process and design (seconds).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property, lru_cache
+from functools import cached_property
 
 import numpy as np
 from scipy.special import ndtr
@@ -18,6 +18,7 @@ from scipy.special import ndtr
 from orthoglide_env.instruments.dial import pressed_past_travel
 from orthoglide_env.instruments.rays import exact_ray_distances, exact_target_boxes
 from orthoglide_env.instruments.stands import install, installed_on
+from orthoglide_env.lab.kept import Kept
 from orthoglide_env.lab.operations import slot_catalogue
 from orthoglide_env.model.boxes import collision_boxes
 from orthoglide_env.model.collisions import clearance
@@ -119,11 +120,32 @@ def reach_at(table: SlotTable, slots: np.ndarray, postures: np.ndarray, tip: np.
     return safe, contact
 
 
-@lru_cache(maxsize=2)
+#: The slot tables this process made or was handed (:func:`handed_tables`), by design.
+_TABLES: Kept[MachineDesign, SlotTable] = Kept(2)
+
+
 def slot_table(machine_design: MachineDesign) -> SlotTable:
     """The :class:`SlotTable` of every slot of the design's catalogue over the
     :func:`candidate_postures` the nominal machine of ``machine_design`` reaches with its
-    parts :data:`CLEARANCE` apart (once per process and design: seconds)."""
+    parts :data:`CLEARANCE` apart (once per process and design: seconds; a sweep's
+    workers are handed it, :func:`handed_tables`)."""
+    return _TABLES.get(machine_design, lambda: _slot_table(machine_design))
+
+
+def made_tables() -> dict[MachineDesign, SlotTable]:
+    """The slot tables this process has made, by design: for a sweep's workers
+    (:func:`handed_tables`), which then need not make them again."""
+    return _TABLES.made()
+
+
+def handed_tables(tables: dict[MachineDesign, SlotTable]) -> None:
+    """Keep ``tables`` (:func:`made_tables` of another process) as if made here, with
+    what each has worked out since (its a-priori spread and reach)."""
+    _TABLES.handed(tables)
+
+
+def _slot_table(machine_design: MachineDesign) -> SlotTable:
+    """:func:`slot_table`, made."""
     nominal = MachineParams(design=machine_design)
     postures = candidate_postures(machine_design)
     boxes = collision_boxes(nominal, postures, direct(nominal, postures))
