@@ -391,10 +391,10 @@ class StartUp(NamedTuple):
     tables: dict[MachineDesign, Any]
 
 
-def _shares_a_plan(config: Config) -> bool:
-    """Whether an agent of the comparison makes a plan of the lab's set-up at reset
+def _planners(config: Config) -> list[Agent]:
+    """The comparison's agents that make a plan of the lab's set-up at reset
     (:attr:`~calibrators.agents.base.Agent.shares_a_plan`)."""
-    return any(get_agent(name).shares_a_plan for name in config.agents)
+    return [agent for agent in map(get_agent, config.agents) if agent.shares_a_plan]
 
 
 def shared_start(config: Config, machine: int, processes: int) -> StartUp:
@@ -405,7 +405,7 @@ def shared_start(config: Config, machine: int, processes: int) -> StartUp:
     alone, by all of the set-up's arguments (:func:`~calibrators.agents.optimal.
     made_plans`); and the slot tables they were made on.  Nothing when no agent shares
     a plan."""
-    planners = [a for a in map(get_agent, config.agents) if a.shares_a_plan]
+    planners = _planners(config)
     if not planners:
         return StartUp({}, {})
     # The planner is imported only by a comparison with an agent that plans.
@@ -469,7 +469,7 @@ def run(config: Config, machines: int, jobs: int = 1, done: list[Trial] | None =
     # core each): made once instead, the plans' screening spread over the cores the
     # workers are about to take.
     start = (_start_made_once(config, chunks[0][0], jobs)
-             if jobs > 1 and len(chunks) > 1 and _shares_a_plan(config) else None)
+             if jobs > 1 and len(chunks) > 1 and _planners(config) else None)
     with closing(results(partial(run_chunk, config, skip=skip, start=start), chunks, jobs,
                          engine, address)) as finished:
         for chunk, new in finished:
