@@ -259,3 +259,36 @@ def test_a_carriage_error_moves_a_dial_reading_as_the_lab_does_under_its_aimed_s
     np.testing.assert_allclose(carriage_derivatives(design), moved, rtol=0, atol=1e-8)
     aimed = jacobian(theta, design, np.arange(len(theta)) < 3, np.ones(3))
     assert np.abs(aimed - moved).max() > 0.4
+
+
+def test_fits_split_and_joined_again_are_the_batch_to_the_bit() -> None:
+    """:meth:`BatchFit.joined` is the inverse of :meth:`BatchFit.split`: every field, the
+    chi-square verdict taken for the whole batch, and the reported covariance worked out
+    over the joined machines are each machine's own (an estimate's figures come from the
+    joined batch).  Two machines read at the fit's sigma and two at ten times it, so that
+    both verdicts are there; the lead error is considered, so every field has columns."""
+    from dataclasses import fields
+
+    from calibrators.estimators.exact_fit import BatchFit
+
+    design, _, _ = _experiment(100, 5)
+    space = design.space
+    free = select("extended", space)
+    prior = prior_sigmas("auto", space, free)
+    scale = scales(space, prior)
+    rng = np.random.default_rng(4)
+    theta = rng.normal(0.0, 1.0, len(scale)) * scale
+    values = np.tile(predict(theta, design), (4, 1))
+    values += rng.normal(0.0, 1.0, values.shape) * np.array([0.01, 0.01, 0.1, 0.1])[:, None]
+    consider = consider_terms(design, values, None, Conditions("workshop", effects=("lead",)))
+    fit = fit_batch(design, values, np.ones(values.shape, bool), 0.01, free,
+                    np.zeros(len(scale)), prior, scale, consider=consider)
+    assert fit.misfit.tolist() == [False, False, True, True]
+    parts = fit.split()
+    joined = BatchFit.joined(parts)
+    for f in fields(BatchFit):
+        assert np.array_equal(getattr(joined, f.name), getattr(fit, f.name)), f.name
+    assert np.array_equal(joined.misfit, fit.misfit)
+    covariance = joined.scaled_covariance
+    for m, part in enumerate(parts):
+        assert np.array_equal(covariance[m], part.scaled_covariance[0]), m

@@ -39,6 +39,10 @@ from orthoglide_env.scoring.grid import blocks
 CHI2_LEVEL: float = 1e-3
 
 
+#: What every machine of a :class:`BatchFit` shares: its parameters and their weights.
+_SHARED = ("free", "scale", "prior", "sigma")
+
+
 @dataclass
 class BatchFit:
     """The result of fitting M machines of one design."""
@@ -66,12 +70,21 @@ class BatchFit:
     def split(self) -> list[BatchFit]:
         """One fit per machine (each a batch of one), with its chi-square test's verdict
         (:attr:`misfit`, taken for the whole batch at once)."""
-        shared = ("free", "scale", "prior", "sigma")
         out = [replace(self, **{f.name: getattr(self, f.name)[m:m + 1] for f in fields(self)
-                                if f.name not in shared})
+                                if f.name not in _SHARED})
                for m in range(len(self.theta))]
         for m, part in enumerate(out):
             part.__dict__["misfit"] = self.misfit[m:m + 1]
+        return out
+
+    @classmethod
+    def joined(cls, parts: list[BatchFit]) -> BatchFit:
+        """The fits ``parts`` of one design (each with its own verdict) as one batch, the
+        inverse of :meth:`split`: what is worked out per machine from a fit is then worked
+        out over the arrays of machines at once, the same numbers."""
+        out = replace(parts[0], **{f.name: np.concatenate([getattr(p, f.name) for p in parts])
+                                   for f in fields(cls) if f.name not in _SHARED})
+        out.__dict__["misfit"] = np.concatenate([p.misfit for p in parts])
         return out
 
     @property

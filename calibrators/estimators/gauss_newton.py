@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numbers
 from collections.abc import Callable
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
@@ -588,15 +588,15 @@ class GaussNewtonCalibrator(Estimator):
                 for m, result in zip(flagged, fit(flagged, mask).split(), strict=True):
                     results[m] = result
         out: list[Estimate | Exception] = []
+        whole = BatchFit.joined(results)
         # The information's eigenvalues, most first, of every machine in one call.
-        eigenvalues = np.linalg.eigvalsh(np.concatenate([r.information for r in results]))
-        eigenvalues = eigenvalues[:, ::-1]
+        eigenvalues = np.linalg.eigvalsh(whole.information)[:, ::-1]
         # Every machine's residuals, a left-out reading's with its mounting's zero from
         # the readings used, what the report compares with its repetitions, and the
         # readings the model does not fit, over the arrays of machines at once.
-        residuals = np.stack([r.residuals[0] for r in results])
+        residuals = whole.residuals
         every = residuals.copy()
-        converged = np.array([r.converged[0] for r in results])
+        converged = whole.converged
         for m in np.flatnonzero(~mask.all(axis=1) & converged):
             every[m] = np.where(mask[m], residuals[m], held_out_residuals(
                 design, values[m], results[m].theta[0], mask[m], ~mask[m],
@@ -607,13 +607,15 @@ class GaussNewtonCalibrator(Estimator):
         fitting = mask.copy()
         for m, rows in enumerate(misfits):
             fitting[m, rows] = False
-        thetas = np.stack([r.theta[0] for r in results])
+        thetas = whole.theta
         # Most estimates are inside the validity range: only the others are made into a
         # machine each, for their warning's words.
         valid = valid_vectors(thetas[:, :len(ERROR_NAMES)], design.machine_design)
+        columns = _Columns.of(names, whole.free, whole.scale, consider.names, space.groups)
+        reported = _Reported.of(whole, columns)
         judged = ([None] * m_count if auto or not world_check else _world_warnings(
             design, values, fitting, noise, thetas, free, scale, told_terms, base_of,
-            conditions, np.stack([r.scaled_covariance[0] for r in results]),
+            conditions, reported.covariance,
             lambda terms: fit(np.arange(m_count), mask, terms, thetas).considered_gain))
         for m, result in enumerate(results):
             if not result.converged[0]:
@@ -624,9 +626,10 @@ class GaussNewtonCalibrator(Estimator):
                                       "a-priori scale)"))
             else:
                 out.append(self._estimate(datas[m], params, prior, sigma, design, values[m],
-                                          result, eigenvalues[m], mask[m], held, outliers[m],
+                                          result, reported, m,
+                                          eigenvalues[m], mask[m], held, outliers[m],
                                           causes[m], every[m], repeated[m], misfits[m],
-                                          verify, explain, consider, names,
+                                          verify, explain, consider, columns,
                                           None if world is None else world[m],
                                           conditions, spacing, judged[m], shown[m],
                                           bool(valid[m]), int(ends[m].sum())))
@@ -634,40 +637,35 @@ class GaussNewtonCalibrator(Estimator):
 
     def _estimate(self, data: Measurements, params: str, prior: str, sigma: float,
                   design: ReadingLayout, values: np.ndarray, result: BatchFit,
+                  reported: _Reported, m: int,
                   eigenvalues: np.ndarray, mask: np.ndarray, held: np.ndarray,
                   outliers: list[int], causes: list[str], every_residual: np.ndarray,
                   repeated: np.ndarray, misfits: np.ndarray, verify: bool, explain: bool,
-                  considered: Consider, every: list[str], world: np.ndarray | None,
+                  considered: Consider, columns: _Columns, world: np.ndarray | None,
                   conditions: Conditions, spacing: float | None, judged: str | None,
                   world_scales: dict[str, float], valid: bool, ends: int) -> Estimate:
-        """The estimate of machine ``data`` from its fit ``result``; ``valid``: whether
-        its machine is inside the validity range (:func:`~orthoglide_env.model.errors.
-        valid_vectors`); ``ends``: how many of its readings a digital indicator took at its
-        stroke's ends, left out (:func:`~calibrators.estimators.consider.indicator_end`)."""
-        space = design.space
-        names = [n for n, f in zip(every, result.free, strict=True) if f]
-        idx = np.flatnonzero(result.free)
-        s = result.scale[idx]
+        """The estimate of machine ``data`` from its fit ``result``, row ``m`` of its
+        group's ``reported`` figures (``columns``: the group's parameters); ``valid``:
+        whether its machine is inside the validity range
+        (:func:`~orthoglide_env.model.errors.valid_vectors`); ``ends``: how many of its
+        readings a digital indicator took at its stroke's ends, left out
+        (:func:`~calibrators.estimators.consider.indicator_end`)."""
+        # Its own copies: an estimate is a caller's to change.
+        every, names, s = columns.every, list(columns.names), columns.scale.copy()
+        cov, error_cov = reported.covariance[m], reported.error_covariance[m]
         info = result.information[0]
         seen, unseen = directions(info) if explain else ((), ())
-        cov = result.scaled_covariance[0]
-        error_cov = result.error_covariance[0].copy()
-        error_cov[np.ix_(idx, idx)] = cov
         theta = result.theta[0]
         warnings = [] if judged is None else [judged]
-        if result.misfit[0]:
-            beyond = [g not in ("drho", "dL", "tracker_rotation", "ballbar_centre")
-                      for g in space.groups]
-            hint = ("try --params extended" if not result.free[:len(beyond)][beyond].any() else
-                    "look for outliers, a gauge that moved, or a slipping stand")
-            left_out = np.diagonal(result.error_covariance[0])[~result.free].any()
+        if reported.misfit[m]:
+            chi2_dof = reported.chi2_dof[m]
             widened = ("error bars carry the errors the model leaves out, at the size the "
-                       "misfit shows" if left_out else "error bars are scaled by "
-                       f"sqrt(chi2/dof) = {np.sqrt(result.chi2_dof[0]):.2f}")
+                       "misfit shows" if reported.left_out[m] else "error bars are scaled by "
+                       f"sqrt(chi2/dof) = {np.sqrt(chi2_dof):.2f}")
             warnings.append(
                 f"the model does not explain the readings: chi2/dof = "
-                f"{result.chi2_dof[0]:.1f} (chi-square test at {CHI2_LEVEL:g}); {widened}; "
-                f"{hint}")
+                f"{chi2_dof:.1f} (chi-square test at {CHI2_LEVEL:g}); {widened}; "
+                f"{columns.hint}")
         try:
             if not valid:
                 check_validity(MachineParams.from_vector(theta[:len(ERROR_NAMES)],
@@ -715,7 +713,7 @@ class GaussNewtonCalibrator(Estimator):
             fisher=info / np.outer(s, s) * weighting_sigma(sigma) ** 2,
             readings=data, names=names, space=every, theta=theta, prior=prior,
             chi2=float(result.chi2[0]), dof=int(result.dof[0]),
-            covariance_scale=float(result.covariance_scale[0]), warnings=warnings,
+            covariance_scale=float(reported.covariance_scale[m]), warnings=warnings,
             identifiable=[describe(d, names) for d in seen],
             unidentifiable=[act_together(d, names) for d in sparse_basis(unseen)]
             if explain else [],
@@ -725,7 +723,7 @@ class GaussNewtonCalibrator(Estimator):
             information=info, scale=s, error_covariance=error_cov,
             holdout_rms_mm=float(np.sqrt(np.mean(residuals[held] ** 2))) if held.any() else None,
             considered=considered.effects, world_scales=world_scales,
-            **_lead(result, every, considered.names, error_cov, conditions, spacing),
+            **_lead(result, columns, considered.names, error_cov, conditions, spacing),
         )
 
 def _world_terms(design: ReadingLayout, datas: list[Measurements], conditions: Conditions,
@@ -834,7 +832,61 @@ def _world_warnings(design: ReadingLayout, values: np.ndarray, mask: np.ndarray,
     return words
 
 
-def _lead(result: BatchFit, every: list[str], considered: tuple[str, ...],
+class _Columns(NamedTuple):
+    """The parameters of a group's fits, the same for each of its machines: their names,
+    the free ones' names, columns and scales, and the lead error's terms, fitted
+    (columns of ``every``) and considered (of the considered terms)."""
+
+    every: list[str]
+    names: list[str]
+    free: np.ndarray
+    scale: np.ndarray
+    fitted_lead: list[int]
+    other_lead: list[int]
+    #: What a fit the model does not explain should try.
+    hint: str
+
+    @classmethod
+    def of(cls, every: list[str], free: np.ndarray, scale: np.ndarray,
+           considered: tuple[str, ...], groups: tuple[str, ...]) -> _Columns:
+        """The columns of fits over the parameters ``every`` (``free``: which are free;
+        ``scale``: each one's; ``groups``: the reading model's groups of its first ones)
+        that consider the terms ``considered``."""
+        idx = np.flatnonzero(free)
+        beyond = [g not in ("drho", "dL", "tracker_rotation", "ballbar_centre") for g in groups]
+        return cls(every, [n for n, f in zip(every, free, strict=True) if f], idx, scale[idx],
+                   [k for k, name in enumerate(every) if name.startswith(f"{WORLD_PREFIX}lead.")],
+                   [k for k, name in enumerate(considered) if name.startswith("lead.")],
+                   "try --params extended" if not free[:len(beyond)][beyond].any() else
+                   "look for outliers, a gauge that moved, or a slipping stand")
+
+
+class _Reported(NamedTuple):
+    """What a group's estimates report of their fits, over the arrays of machines at once:
+    the covariances over the free parameters (:attr:`~calibrators.estimators.exact_fit.
+    BatchFit.scaled_covariance`) and, with the errors the model leaves out, over every
+    parameter; the chi-square test's verdict, chi2/dof and the covariance's scale; and
+    whether the model's error bars carry errors it leaves out."""
+
+    covariance: np.ndarray
+    error_covariance: np.ndarray
+    misfit: np.ndarray
+    chi2_dof: np.ndarray
+    covariance_scale: np.ndarray
+    left_out: np.ndarray
+
+    @classmethod
+    def of(cls, whole: BatchFit, columns: _Columns) -> _Reported:
+        """The figures of the fits ``whole`` over the parameters ``columns``."""
+        covariance = whole.scaled_covariance
+        error_covariance = whole.error_covariance.copy()
+        error_covariance[:, columns.free[:, None], columns.free] = covariance
+        left_out = np.diagonal(whole.error_covariance, axis1=1, axis2=2)[:, ~whole.free]
+        return cls(covariance, error_covariance, whole.misfit, whole.chi2_dof,
+                   whole.covariance_scale, left_out.any(axis=1))
+
+
+def _lead(result: BatchFit, columns: _Columns, considered: tuple[str, ...],
           error_cov: np.ndarray, conditions: Conditions, spacing: float | None
           ) -> dict[str, Any]:
     """The lead error's terms of an estimate (fitted or considered), with the joint
@@ -842,8 +894,7 @@ def _lead(result: BatchFit, every: list[str], considered: tuple[str, ...],
     (a considered term's estimate is 0; the estimate moved with it): what the tool's
     position after compensation needs."""
     n = len(ERROR_NAMES)
-    fitted = [k for k, name in enumerate(every) if name.startswith(f"{WORLD_PREFIX}lead.")]
-    other = [k for k, name in enumerate(considered) if name.startswith("lead.")]
+    every, fitted, other = columns.every, columns.fitted_lead, columns.other_lead
     if not fitted and not other:
         return {}
     rows = list(range(n)) + fitted
