@@ -6,12 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from calibrators.agents import optimal
 from calibrators.agents.optimal import fixed_plan
 from calibrators.planning import bound, rounding
 from calibrators.planning.bound import bound_model, lower_bound, plan_counts
 from calibrators.planning.instruments import operation_keys, planned_bundles
 from calibrators.planning.rounding import apportion, plan_bundles, relaxed_plan
 from calibrators.planning.search import Planner
+from orthoglide_env.lab.kept import Kept
 from orthoglide_env.lab.operations import PAPER_SLOTS, TIME, Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
@@ -61,12 +63,20 @@ def half_hour_plan():
     return budget, bundles, steps, planner.predicted_rigid_mm()
 
 
-def test_a_rounded_plan_lies_above_the_bound_and_near_it(half_hour_plan, monkeypatch):
-    # Fewer solver steps: the bound stays certified (f - gap), only less tight.
-    monkeypatch.setattr(bound, "MAX_ITERATIONS", 40)
-    budget, bundles, steps, _ = half_hour_plan
+@pytest.fixture(scope="module")
+def half_hour_design() -> bound.Design:
+    """The bound's best design of half an hour under ``ideal`` with the dials and the
+    ballbar, after 40 solver steps (the bound stays certified, f - gap, only less tight):
+    the rounded plan is held to its bound and the design rounded, one solve for both."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(bound, "MAX_ITERATIONS", 40)
+        return bound.best_design(PROTOTYPE, IDEAL, SIGMA, 1800.0, ("dial", "ballbar"))
+
+
+def test_a_rounded_plan_lies_above_the_bound_and_near_it(half_hour_plan, half_hour_design):
+    _, bundles, steps, _ = half_hour_plan
     assert [b.instrument for b in bundles] == ["ballbar"]
-    found = lower_bound(PROTOTYPE, IDEAL, SIGMA, budget, ("dial", "ballbar"))
+    found = half_hour_design.bound
     model = bound_model(PROTOTYPE, IDEAL, SIGMA, False, True)
     actions = [{"op": s.op, "rho": s.rho, "stand": s.stand, "slot": s.slot,
                 **operation_keys(s)} for s in steps]
@@ -83,8 +93,21 @@ def test_a_rounded_plan_lies_above_the_bound_and_near_it(half_hour_plan, monkeyp
 
 
 @pytest.mark.slow
-def test_fixed_plan_keeps_the_better_plan_and_active_finds_its_bundles(half_hour_plan):
+def test_fixed_plan_keeps_the_better_plan_and_active_finds_its_bundles(half_hour_plan,
+                                                                        monkeypatch):
     budget, bundles, _, predicted = half_hour_plan
+    # The greedy plan fixed_plan makes beside the rounded one, watched as it is made
+    # rather than made again here (a third of the test's CPU): a store of plans of its
+    # own, so that this set-up is planned in this test whatever ran before it.
+    monkeypatch.setattr(optimal, "_PLANS", Kept(optimal.PLANS_KEPT))
+    greedy: list[Planner] = []
+
+    def watched(planner: Planner, remounts: bool = True) -> list:
+        steps = rounding.greedy_plan(planner, remounts=remounts)
+        greedy.append(planner)
+        return steps
+
+    monkeypatch.setattr(optimal, "greedy_plan", watched)
     plan = fixed_plan(PAPER_SLOTS, STANDS, SIGMA, budget, PROTOTYPE, IDEAL,
                       instruments=("ballbar",))
     steps, kept = plan
@@ -92,23 +115,21 @@ def test_fixed_plan_keeps_the_better_plan_and_active_finds_its_bundles(half_hour
     # set-up is planned once per process (its greedy fills cost a CPU-minute in a lab).
     assert fixed_plan(PAPER_SLOTS, STANDS, SIGMA, budget, PROTOTYPE, IDEAL, criterion="I",
                       remounts=True, instruments=("ballbar",)) is plan
-    greedy = Planner(list(PAPER_SLOTS), list(STANDS), SIGMA, budget, design=PROTOTYPE,
-                     conditions=IDEAL, instruments=("ballbar",))
-    greedy.expect_readings()
-    rounding.greedy_plan(greedy)
-    assert kept == pytest.approx(min(predicted, greedy.predicted_rigid_mm()), rel=1e-12)
+    # One greedy fill of the whole budget, of a planner opened on this set-up.
+    (alone,) = greedy
+    assert alone.budget_s == budget and alone.time_s <= budget
+    assert kept == pytest.approx(min(predicted, alone.predicted_rigid_mm()), rel=1e-12)
     # Whichever plan is kept, active recovers its bundles from the steps.
     taken = planned_bundles(steps, PROTOTYPE, ("ballbar",), bundles)
     assert len(taken) == sum(s.op == Op.PIVOT for s in steps)
 
 
 @pytest.mark.slow
-def test_the_bounds_own_design_rounds_to_its_readings(monkeypatch):
+def test_the_bounds_own_design_rounds_to_its_readings(half_hour_design, monkeypatch):
     # best_design is the bound's with the design that reaches it: its counts give the
     # design's value, and its bar readings, rounded, are its bundle's path.
     monkeypatch.setattr(bound, "MAX_ITERATIONS", 40)
-    budget, owned = 1800.0, ("dial", "ballbar")
-    found = bound.best_design(PROTOTYPE, IDEAL, SIGMA, budget, owned)
+    budget, owned, found = 1800.0, ("dial", "ballbar"), half_hour_design
     assert found.bound == lower_bound(PROTOTYPE, IDEAL, SIGMA, budget, owned)
     model = bound_model(PROTOTYPE, IDEAL, SIGMA, False, True)
     assert np.sqrt(model.value(found.counts)) == pytest.approx(found.bound.design_mm,
@@ -116,6 +137,13 @@ def test_the_bounds_own_design_rounds_to_its_readings(monkeypatch):
     bar = found.counts[model.laser == bound.BAR].sum()
     # The bar pays for its pivot in half an hour (about 180 readings).
     assert found.pivot and bar == pytest.approx(found.bound.ballbar_readings) and bar > 100
+    # bound_bundles rounds what best_design gives for its set-up: the design above,
+    # solved once for this module.
+    def solved(*setup: object) -> bound.Design:
+        assert setup == (PROTOTYPE, IDEAL, SIGMA, budget, owned)
+        return found
+
+    monkeypatch.setattr(rounding, "best_design", solved)
     (bundle,) = rounding.bound_bundles(PROTOTYPE, IDEAL, SIGMA, budget, owned)
     assert bundle.instrument == "ballbar" and len(bundle.path) == round(bar)
 
