@@ -242,7 +242,8 @@ def main() -> None:
           f"{'agent s/episode':>17}{'lab s/episode':>15}{'lab steps':>11}")
     episodes_played = args.machines * args.rounds
     for label, (acting, stepping, decisions, steps, choosing, *_) in totals.items():
-        print(f"{label:8}{1e3 * acting / decisions:13.3f}{1e3 * choosing / decisions:11.3f}"
+        choice = "-" if args.whole else f"{1e3 * choosing / decisions:.3f}"
+        print(f"{label:8}{1e3 * acting / decisions:13.3f}{choice:>11}"
               f"{decisions / episodes_played:11.1f}{acting / episodes_played:17.3f}"
               f"{stepping / episodes_played:15.3f}{steps / episodes_played:11.1f}")
     p = totals["policy"]
