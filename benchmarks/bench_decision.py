@@ -3,14 +3,21 @@ run on the same machines of the same lab.
 
     python benchmarks/bench_decision.py [--policy results/masked.zip] [--machines 5]
         [--budget 330] [--conditions lab] [--sigma 0.02] [--seed 1] [--chunk 1]
+        [--whole] [--rounds 1]
 
-Each agent plays its episodes through the lab env (``OrthoglideLab-v0``), as ``compare``
-plays them, ``--chunk`` machines together (each agent class's ``act_all``: the policy's
-agents decide together, one batched observation and one network pass for the chunk;
-``active``'s price their moves together); every ``act_all`` call is timed in CPU seconds
-of the process (``time.process_time``), which a machine shared with other work inflates
-far less than its wall clock (on a 2-core machine at load 35, the policy's choice took
-0.4 ms of CPU and 5.6 ms of wall time).
+Each agent plays its episodes as ``compare`` plays them: ``--chunk`` machines together in
+the lab's native vector env (``OrthoglideLab-v0``'s, its steps batched), by
+:func:`~calibrators.study.episodes.run_episodes` (each agent class's ``act_all``: the
+policy's agents decide together, one batched observation and one network pass for the
+chunk, reading their labs' entries from the vector env's arrays; ``active``'s price their
+moves together); every ``act_all`` call is timed in CPU seconds of the process
+(``time.process_time``), which a machine shared with other work inflates far less than
+its wall clock (on a 2-core machine at load 35, the policy's choice took 0.4 ms of CPU and
+5.6 ms of wall time).  ``--whole`` times ``act_all`` alone: without it, the choice and the
+policy's parts are timed inside it too, at about 1 µs a decision of the policy's (six
+part timers a call).  ``--rounds R`` plays every chunk R times by both agents, the
+order of the two swapped each round, and prints each round's ratios: the spread of a
+loaded machine, measured in one run.
 A decision is a call that chose a new operation (a move with its lever flicks, a
 re-mount, stop); the calls that play a chosen operation's further lab actions are counted
 in the agent's time but are not decisions.
@@ -37,6 +44,7 @@ import argparse
 import os
 import tempfile
 import time
+from contextlib import closing
 from pathlib import Path
 
 import gymnasium as gym
@@ -50,7 +58,8 @@ from calibrators.agents import get_agent
 from calibrators.agents import policy as policy_module
 from calibrators.agents.names import POLICY_PREFIX
 from calibrators.agents.policy import save_policy, spec_of
-from calibrators.study.episodes import agent_rng, machine_seed
+from calibrators.study import episodes
+from calibrators.study.episodes import machine_seed, run_episodes
 from orthoglide_env.lab.counting_rows import CountingRows
 from orthoglide_env.wrappers import design_lab_env
 
@@ -117,57 +126,64 @@ class TimedActor:
         return self.actor.choose_many(*args)
 
 
-def play(label: str, name: str, kwargs: dict, seed: int, machines: list[int]
-         ) -> list[float]:
-    """One episode of agent ``name`` on each of ``machines``, played together as
-    ``compare`` plays a chunk (each agent's ``act_all``): its seconds in ``act_all``, the
-    labs' seconds in ``step``, its decisions, its lab steps, its seconds in its choice
-    (:data:`CHOICE`) and, for the policy, in each of :data:`PARTS` (0 for ``active``)."""
-    labs = [gym.make(orthoglide_env.LAB_ENV_ID, **kwargs) for _ in machines]
-    firsts = [lab.reset(seed=machine_seed(seed, m)) for lab, m in zip(labs, machines,
-                                                                       strict=True)]
+def play(label: str, name: str, kwargs: dict, seed: int, machines: list[int],
+         whole: bool = False) -> list[float]:
+    """One episode of agent ``name`` on each of ``machines``, played as ``compare`` plays a
+    chunk (:func:`~calibrators.study.episodes.run_episodes` on the lab's native vector env,
+    each agent class's ``act_all``): its seconds in ``act_all``, the labs' seconds in their
+    steps, its decisions, its lab steps, its seconds in its choice (:data:`CHOICE`) and,
+    for the policy, in each of :data:`PARTS` (0 for ``active``).  ``whole``: ``act_all``
+    alone is timed (no timer inside it: the choice and the parts are 0)."""
     agents = [get_agent(name) for _ in machines]
-    for agent, lab, (observation, _), m in zip(agents, labs, firsts, machines, strict=True):
-        agent.reset(lab, observation, agent_rng(machine_seed(seed, m)))
     choosing = [0.0] * (1 + len(PARTS))
-    owner, functions, methods = CHOICE[label]
-    restore = [(owner, function, getattr(owner, function)) for function in functions]
-    for function in functions:
-        timed(owner, function, choosing, 0)
-    for agent in agents:
-        for own in methods:
-            timed(agent, own, choosing, 0)
-    if label == "policy":
-        for part_owner, function, part in PART_FUNCTIONS:
-            restore.append((part_owner, function, getattr(part_owner, function)))
-            timed(part_owner, function, choosing, 1 + PARTS.index(part))
-        actor = TimedActor(agents[0].actor, choosing)
+    restore = []
+    if not whole:
+        owner, functions, methods = CHOICE[label]
+        restore = [(owner, function, getattr(owner, function)) for function in functions]
+        for function in functions:
+            timed(owner, function, choosing, 0)
         for agent in agents:
-            agent.actor = actor
-    acting = stepping = 0.0
-    decisions = steps = 0
-    running = list(range(len(machines)))
-    state = [list(first) for first in firsts]
-    while running:
-        decisions += sum(not agents[i].queue for i in running)
+            for own in methods:
+                timed(agent, own, choosing, 0)
+        if label == "policy":
+            for part_owner, function, part in PART_FUNCTIONS:
+                restore.append((part_owner, function, getattr(part_owner, function)))
+                timed(part_owner, function, choosing, 1 + PARTS.index(part))
+            actor = TimedActor(agents[0].actor, choosing)
+            for agent in agents:
+                agent.actor = actor
+    counted = [0.0, 0.0, 0, 0]  # act_all's seconds, the labs' seconds, decisions, steps
+    act_all = episodes._act_all
+
+    def acting(chunk: list, observations: list, infos: list) -> list:
+        counted[2] += sum(not agent.queue for agent in chunk)
+        counted[3] += len(chunk)
         start = time.process_time()
-        actions = type(agents[0]).act_all([agents[i] for i in running],
-                                          [state[i][0] for i in running],
-                                          [state[i][1] for i in running])
-        middle = time.process_time()
-        done = []
-        for i, chosen in zip(running, actions, strict=True):
-            observation, _, terminated, truncated, info = labs[i].step(chosen)
-            state[i] = [observation, info]
-            if terminated or truncated:
-                done.append(i)
-        stepping += time.process_time() - middle
-        acting += middle - start
-        steps += len(running)
-        running = [i for i in running if i not in done]
-    for owner_, method_, inner in restore:
-        setattr(owner_, method_, inner)
-    return [acting, stepping, decisions, steps, *choosing]
+        try:
+            return act_all(chunk, observations, infos)
+        finally:
+            counted[0] += time.process_time() - start
+
+    with closing(gym.make_vec(orthoglide_env.LAB_ENV_ID, num_envs=len(machines),
+                              vectorization_mode="vector_entry_point", **kwargs)) as envs:
+        step = envs.step
+
+        def stepping(actions: dict) -> tuple:
+            start = time.process_time()
+            try:
+                return step(actions)
+            finally:
+                counted[1] += time.process_time() - start
+
+        envs.step = stepping
+        episodes._act_all = acting
+        try:
+            run_episodes(envs, agents, [machine_seed(seed, m) for m in machines])
+        finally:
+            episodes._act_all = act_all
+            for owner_, method_, inner in restore:
+                setattr(owner_, method_, inner)
+    return [*counted, *choosing]
 
 
 def main() -> None:
@@ -182,9 +198,14 @@ def main() -> None:
     parser.add_argument("--chunk", type=int, default=1,
                         help="machines played together, as a comparison's chunk: the "
                              "policy decides for them at once")
+    parser.add_argument("--whole", action="store_true",
+                        help="time act_all alone, no timer inside it (no choice or parts)")
+    parser.add_argument("--rounds", type=int, default=1,
+                        help="every chunk played by both agents this many times, the "
+                             "order of the agents swapped each round")
     args = parser.parse_args()
-    if args.machines < 1 or args.chunk < 1:
-        parser.error("--machines and --chunk must be at least 1")
+    if args.machines < 1 or args.chunk < 1 or args.rounds < 1:
+        parser.error("--machines, --chunk and --rounds must be at least 1")
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import torch
 
@@ -197,28 +218,53 @@ def main() -> None:
         # One episode each first: the slot table, the fixed plan and torch start once per
         # process, a cost no decision of a sweep pays again.
         for label, name in agents.items():
-            play(label, name, kwargs, args.seed, [0])
-        totals = {}
+            play(label, name, kwargs, args.seed, [0], args.whole)
         chunks = [list(range(args.machines))[k:k + args.chunk]
                   for k in range(0, args.machines, args.chunk)]
-        for label, name in agents.items():
-            runs = [play(label, name, kwargs, args.seed, chunk) for chunk in chunks]
-            totals[label] = np.sum(runs, axis=0)
+        rounds = []
+        for r in range(args.rounds):
+            order = list(agents.items())[::-1 if r % 2 else 1]
+            runs = {label: [] for label in agents}
+            for chunk in chunks:
+                for label, name in order:
+                    runs[label].append(play(label, name, kwargs, args.seed, chunk,
+                                            args.whole))
+            rounds.append({label: np.sum(done, axis=0) for label, done in runs.items()})
     print(f"{args.machines} machines in chunks of {args.chunk}, seed {args.seed}, "
-          f"{args.conditions} conditions, sigma {args.sigma} mm, budget {args.budget:g} s")
+          f"{args.conditions} conditions, sigma {args.sigma} mm, budget {args.budget:g} s, "
+          f"{args.rounds} round(s), " + ("act_all alone timed" if args.whole
+                                         else "the choice and its parts timed inside act_all"))
+    if args.rounds > 1:
+        for r, totals in enumerate(rounds):
+            print(f"round {r + 1}: " + ratios(totals))
+    totals = {label: np.sum([done[label] for done in rounds], axis=0) for label in agents}
     print(f"{'agent':8}{'ms/decision':>13}{'ms/choice':>11}{'decisions':>11}"
           f"{'agent s/episode':>17}{'lab s/episode':>15}{'lab steps':>11}")
+    episodes_played = args.machines * args.rounds
     for label, (acting, stepping, decisions, steps, choosing, *_) in totals.items():
-        print(f"{label:8}{1e3 * acting / decisions:13.3f}{1e3 * choosing / decisions:11.3f}"
-              f"{decisions / args.machines:11.1f}{acting / args.machines:17.3f}"
-              f"{stepping / args.machines:15.3f}{steps / args.machines:11.1f}")
+        choice = "-" if args.whole else f"{1e3 * choosing / decisions:.3f}"
+        print(f"{label:8}{1e3 * acting / decisions:13.3f}{choice:>11}"
+              f"{decisions / episodes_played:11.1f}{acting / episodes_played:17.3f}"
+              f"{stepping / episodes_played:15.3f}{steps / episodes_played:11.1f}")
+    p = totals["policy"]
+    if not args.whole:
+        print("the policy's decision, ms: " + ", ".join(
+            f"{part} {1e3 * seconds / p[2]:.3f}" for part, seconds in zip(PARTS, p[5:],
+                                                                            strict=True))
+            + f", the rest of act {1e3 * (p[0] - sum(p[5:])) / p[2]:.3f}")
+    print(("all rounds: " if args.rounds > 1 else "") + ratios(totals))
+
+
+def ratios(totals: dict[str, np.ndarray]) -> str:
+    """``active``'s costs over the policy's in ``totals`` (each agent's :func:`play`
+    sums): per decision (all of ``act_all``), per choice (where timed) and per episode
+    (``act_all`` and the labs' steps)."""
     p, a = totals["policy"], totals["active"]
-    print("the policy's decision, ms: " + ", ".join(
-        f"{part} {1e3 * seconds / p[2]:.3f}" for part, seconds in zip(PARTS, p[5:], strict=True))
-        + f", the rest of act {1e3 * (p[0] - sum(p[5:])) / p[2]:.3f}")
-    print(f"active / policy: {(a[0] / a[2]) / (p[0] / p[2]):.0f}x per decision (all of act), "
-          f"{(a[4] / a[2]) / (p[4] / p[2]):.0f}x per choice, "
-          f"{(a[0] + a[1]) / (p[0] + p[1]):.1f}x per episode (agent and lab)")
+    choice = (f"{(a[4] / a[2]) / (p[4] / p[2]):.0f}x per choice, " if p[4] > 0 else "")
+    return (f"active / policy: {(a[0] / a[2]) / (p[0] / p[2]):.0f}x per decision (all of "
+            f"act; policy {1e3 * p[0] / p[2]:.4f} ms, active {1e3 * a[0] / a[2]:.3f} ms), "
+            f"{choice}{a[0] / p[0]:.0f}x per episode in agent time, "
+            f"{(a[0] + a[1]) / (p[0] + p[1]):.1f}x with the labs' steps")
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ import dataclasses
 import functools
 import itertools
 from collections.abc import Callable
+from contextlib import closing
 from pathlib import Path
 from typing import Any
 
@@ -26,11 +27,11 @@ from calibrators.agents.actor_weights import (
     last_layer_bounds,
     read_actor,
 )
-from calibrators.agents.base import action
+from calibrators.agents.base import LabRows, action
 from calibrators.agents.names import get_agent
-from calibrators.agents.policy import DesignPolicyAgent
-from calibrators.study.episodes import machine_seed
-from orthoglide_env.lab.counting_rows import FAMILY, CountingRows
+from calibrators.agents.policy import DesignPolicyAgent, _taken
+from calibrators.study.episodes import agent_rng, machine_seed, run_episodes
+from orthoglide_env.lab.counting_rows import FAMILY, TAKEN, CountingRows, taken_of
 from orthoglide_env.lab.design_belief import (
     DesignBelief,
     action_masks,
@@ -71,18 +72,20 @@ def shipped_agent() -> DesignPolicyAgent:
 
 
 def play(machines: list[int], together: bool, stop_s: float,
-         make: Callable[[], DesignPolicyAgent] = shipped_agent
+         make: Callable[[], DesignPolicyAgent] = shipped_agent, lab: dict[str, Any] = LAB,
+         stream: Callable[[int], np.random.Generator] = np.random.default_rng
          ) -> tuple[list[list[tuple[Any, ...]]], list[DesignPolicyAgent]]:
-    """Each machine's lab actions (until ``stop_s`` of lab time) and its agent (of
-    ``make``), the chunk deciding together (``act_all``) or each agent alone
-    (:func:`one_by_one`), its belief then one that follows the covariance, as the view's
-    own does."""
-    labs = [gym.make(orthoglide_env.LAB_ENV_ID, **LAB) for _ in machines]
+    """Each machine's lab actions (until ``stop_s`` of lab time, or its episode's end) and
+    its agent (of ``make``, its stream ``stream`` of the machine's index), on lone labs of
+    arguments ``lab``, the chunk deciding together (``act_all``, on lists of the labs'
+    observations) or each agent alone (:func:`one_by_one`), its belief then one that
+    follows the covariance, as the view's own does."""
+    labs = [gym.make(orthoglide_env.LAB_ENV_ID, **lab) for _ in machines]
     agents = [make() for _ in machines]
     state = []
-    for lab, agent, m in zip(labs, agents, machines, strict=True):
-        observation, info = lab.reset(seed=machine_seed(1, m))
-        agent.reset(lab, observation, np.random.default_rng(m))
+    for lab_, agent, m in zip(labs, agents, machines, strict=True):
+        observation, info = lab_.reset(seed=machine_seed(1, m))
+        agent.reset(lab_, observation, stream(m))
         if not together and not agent.belief.follows:
             lean = agent.belief
             agent.belief = DesignBelief(lean.design, lean.n_stands, lean.sigma, lean.budget_s,
@@ -196,6 +199,75 @@ def test_view_2_draws_as_each_agent_alone_does() -> None:
     families = rows.state[:, FAMILY]
     assert len(set(families.tolist())) == len(machines)
     assert_same_beliefs(fast_agents, slow_agents)
+
+
+class Taken:
+    """A watcher of :func:`~calibrators.study.episodes.run_episodes` that keeps each lab's
+    actions, as :func:`play` keeps them, and counts the operations its labs refused."""
+
+    def __init__(self, labs: int) -> None:
+        self.taken: list[list[tuple[Any, ...]]] = [[] for _ in range(labs)]
+        self.refused = 0
+
+    def reset(self, i: int, observation: dict[str, np.ndarray]) -> None:
+        pass
+
+    def step(self, i: int, action: dict[str, Any], observation: dict[str, np.ndarray],
+             info: Any) -> None:
+        self.taken[i].append((action["op"], tuple(action["rho"]), action["stand"],
+                              action["slot"]))
+        self.refused += bool(info.get("refused"))
+
+
+def test_a_chunk_reads_its_vector_env_s_arrays_as_its_labs_observations() -> None:
+    """Played as ``compare`` plays a chunk (``run_episodes`` on the lab's native vector
+    env, which hands over its arrays, :class:`~calibrators.agents.base.LabRows`), a
+    view-2 chunk that draws (its rows in several groups) takes, action for action, what
+    it takes from lone labs' observations and infos, refusals included: ten-minute labs,
+    whose budget's end refuses the operations of a policy trained for an hour."""
+    machines, lab = [0, 1, 2], {**LAB, "budget_s": 600.0}
+
+    def drawing() -> DesignPolicyAgent:
+        return counting_agent("draw")
+
+    lone, _ = play(machines, together=True, stop_s=np.inf, make=drawing, lab=lab,
+                   stream=lambda m: agent_rng(machine_seed(1, m)))
+    watched = Taken(len(machines))
+    with closing(gym.make_vec(orthoglide_env.LAB_ENV_ID, num_envs=len(machines),
+                              vectorization_mode="vector_entry_point", **lab)) as envs:
+        run_episodes(envs, [drawing() for _ in machines],
+                     [machine_seed(1, m) for m in machines], watch=watched)
+    assert watched.taken == lone
+    assert watched.refused > 0
+    assert min(len(taken) for taken in lone) > 20
+
+
+def test_a_vector_env_s_arrays_are_taken_in_as_its_labs_observations() -> None:
+    """The entries a chunk's rows take in and the refusals, read from a vector env's arrays
+    (:class:`~calibrators.agents.base.LabRows`) for labs ``following``, are those read
+    lab by lab from each lab's observation and info: a step of three labs in which the
+    second refuses a re-mount that would end past the budget."""
+    with closing(gym.make_vec(orthoglide_env.LAB_ENV_ID, num_envs=3,
+                              vectorization_mode="vector_entry_point",
+                              **{**LAB, "budget_s": 10.0})) as envs:
+        envs.reset(seed=[machine_seed(1, m) for m in range(3)])
+        seen, _, _, _, info = envs.step({"op": np.array([Op.LIFT, Op.REMOUNT, Op.ENGAGE]),
+                                         "rho": np.zeros((3, 3)), "stand": np.array([0, 1, 1]),
+                                         "slot": np.array([0, 3, 0])})
+    labs = [{key: value[i] for key, value in seen.items()} for i in range(3)]
+    infos = [{key: value[i] for key, value in info.items()
+              if not key.startswith("_") and info[f"_{key}"][i]} for i in range(3)]
+    assert [bool(i.get("refused")) for i in infos] == [False, True, False]
+    index = np.array([2, 0, 1])
+    rows = LabRows([labs[i] for i in index], seen, index)
+    infos_rows = LabRows([infos[i] for i in index], info, index)
+    for following in ([0, 1, 2], [1, 2]):
+        batch, refused = _taken(rows, infos_rows, following)
+        lone, lone_refused = _taken(list(rows), list(infos_rows), following)
+        for key in TAKEN:
+            np.testing.assert_array_equal(batch[key], lone[key])
+        np.testing.assert_array_equal(refused, lone_refused)
+    assert refused.tolist() == [False, True]
 
 
 def assert_same_beliefs(fast_agents: list[DesignPolicyAgent],
@@ -393,7 +465,7 @@ def step_both(rows: CountingRows, beliefs: list[DesignBelief], which: np.ndarray
               refused: list[bool]) -> None:
     """One step taken in by ``rows`` ``which`` and by their beliefs' own ``observe``: each
     row, written back, is its belief, and the rows observe and mask as the beliefs do."""
-    rows.observe(which, operations, seen, refused)
+    rows.observe(which, operations, taken_of(seen), refused)
     for k, operation, observation, no in zip(which.tolist(), operations, seen, refused,
                                              strict=True):
         beliefs[k].observe(operation, observation, no)

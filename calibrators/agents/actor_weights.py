@@ -75,11 +75,15 @@ class ActorWeights:
                              f"{x.shape}")
         # The design view's observation is mostly its stands' one-hots (about 33 of 272
         # inputs are non-zero over a chunk): the first layer multiplies only the columns
-        # some row reads, the same sums but for their zero terms.
-        used = np.flatnonzero(x.any(axis=0))
-        x = x[:, used].astype(np.float64)
-        for k, (weight, bias) in enumerate(self.fused[:-1]):
-            x = x @ (weight[used] if k == 0 else weight)
+        # some row reads, the same sums but for their zero terms.  A chunk of machines
+        # played alike decides on one row, whose non-zero inputs are found directly.
+        used = np.flatnonzero(x[0] if len(x) == 1 else x.any(axis=0))
+        (first, bias), *rest = self.fused
+        x = np.matmul(x[:, used].astype(np.float64), first.take(used, axis=0))
+        x += bias
+        np.tanh(x, out=x)
+        for weight, bias in rest[:-1]:
+            x = np.matmul(x, weight)
             x += bias
             np.tanh(x, out=x)
         return x
@@ -100,7 +104,7 @@ class ActorWeights:
         """The last layer of the actions ``open_`` (actions,) bool, as :meth:`choose_many`
         multiplies it, kept for the next states of the same open actions (a state's stands
         and clock open them: they change at a re-mount and near the budget's end)."""
-        key = np.packbits(open_).tobytes()
+        key = open_.tobytes()
         kept = self._open_lasts
         block = kept.get(key)
         if block is None:
@@ -138,20 +142,20 @@ class ActorWeights:
         :meth:`logits_many` decides it (a tie within the bound costs that row a float64
         pass)."""
         hidden = self._hidden(observations)
-        if masks.shape != (len(hidden), self.weights[-1].shape[0]) or not masks.any(
-                axis=1).all():
+        one = len(hidden) == 1
+        if masks.shape != (len(hidden), self.weights[-1].shape[0]) or not (
+                masks[0].any() if one else masks.any(axis=1).all()):
             raise ValueError(f"masks are (N, {self.weights[-1].shape[0]}) with an open action "
                              f"in every row, got {masks.shape}")
         if states is not None and (np.ndim(states) != 1 or len(states) == 0 or not (
                 0 <= np.min(states) and np.max(states) < len(hidden))):
             raise ValueError(f"states are N indices of the {len(hidden)} observations' rows, "
                              f"got {states!r}")
-        last = self.open_last(masks.any(axis=0))
-        open_ = last.actions
-        logits = (hidden.astype(np.float32) @ last.weight).astype(np.float64)
-        logits += last.bias
         # One state's open actions are all the open actions.
-        masked = len(hidden) > 1
+        last = self.open_last(masks[0] if one else masks.any(axis=0))
+        open_ = last.actions
+        # float32 products, then float64 sums with the bias (each float32 exactly widened).
+        logits = np.add(np.matmul(hidden.astype(np.float32), last.weight), last.bias)
         if states is not None:
             logits, masks, hidden = logits[states], masks[states], hidden[states]
         if noise is not None:
@@ -159,7 +163,7 @@ class ActorWeights:
         # A value with a draw's noise added is rounded once more (float64's half ulp each
         # of the two compared, both at most the row's largest open logit).
         rounding = 4 * 2.0**-53 * 2 * np.max(np.abs(logits), axis=1)
-        if masked:
+        if not one:
             logits[~masks[:, open_]] = -np.inf
         rows = np.arange(len(logits))
         top = np.argmax(logits, axis=1)

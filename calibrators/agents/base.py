@@ -55,6 +55,20 @@ class Agent:
         return [a.act(o, i) for a, o, i in zip(agents, observations, infos, strict=True)]
 
 
+class LabRows(list):
+    """The observations, or the infos, of labs of one vector env, lab by lab, as
+    :meth:`Agent.act_all` takes them (a list of each lab's own), that also hand over the
+    vector env's: ``batch``, its dict of arrays of one row per lab (its observation, or its
+    info in Gymnasium's vector form, an array and a ``_key`` mask per key), and ``index``,
+    each lab's row of it (int64), so that agents deciding together read a field of all
+    their labs in one call instead of one per lab."""
+
+    def __init__(self, rows: list[Any], batch: Mapping[str, np.ndarray],
+                 index: np.ndarray) -> None:
+        super().__init__(rows)
+        self.batch, self.index = batch, index
+
+
 class PlannedAgent(Agent):
     """An agent whose whole experiment is decided at reset: ``plan``, the list of actions
     :meth:`make_plan` makes of the first observation, is played in order."""

@@ -40,7 +40,7 @@ import numpy as np
 from gymnasium.spaces import flatten, flatten_space
 
 from calibrators.agents.actor_weights import read_actor
-from calibrators.agents.base import Agent, action
+from calibrators.agents.base import Agent, LabRows, action
 from orthoglide_env import (
     DESIGN_LAB_ENV_ID,
     DESIGN_LAB_V1_ENV_ID,
@@ -48,7 +48,7 @@ from orthoglide_env import (
     FLAT_LAB_ENV_ID,
 )
 from orthoglide_env.instruments.dial import weighting_sigma
-from orthoglide_env.lab.counting_rows import BUDGET, CLOCK, CountingRows
+from orthoglide_env.lab.counting_rows import BUDGET, CLOCK, TAKEN, CountingRows, taken_of
 from orthoglide_env.lab.design_belief import (
     SPECTRUM_VIEWS,
     DesignBelief,
@@ -514,19 +514,36 @@ class CountingChunk:
         (their positions) that choose an operation now, with no operation queued and
         before their budget's end."""
         following = [k for k, agent in enumerate(agents) if agent.last is not None]
-        if len(following) < len(agents):
-            observations = [observations[k] for k in following]
-            infos = [infos[k] for k in following]
         idle = np.array([k for k, agent in enumerate(agents) if not agent.queue],
                         dtype=np.int64)
         rows = self.rows
         if following:
             rows.observe(self.index[following], [agents[k].last for k in following],
-                         observations, [bool(info.get("refused")) for info in infos])
+                         *_taken(observations, infos, following))
         # A row's clock is its lab's time as it last took it in: this step's, where it
         # followed one, else the first observation's, which its belief started from.
         state = rows.state[self.index[idle]]
         return idle[state[:, CLOCK] < state[:, BUDGET]]
+
+
+def _taken(observations: list[dict[str, np.ndarray]], infos: list[Mapping[str, Any]],
+           following: list[int]) -> tuple[Mapping[str, np.ndarray], np.ndarray]:
+    """The :data:`~orthoglide_env.lab.counting_rows.TAKEN` entries of the labs at positions
+    ``following`` of ``observations``, stacked a row per lab, and whether each refused its
+    operation (``infos``): read from their vector env's arrays in one call a field where
+    they hand them over (:class:`~calibrators.agents.base.LabRows`), else lab by lab."""
+    if isinstance(observations, LabRows) and isinstance(infos, LabRows):
+        index = observations.index[following]
+        batch, info = observations.batch, infos.batch
+        refused = info.get("refused")
+        return ({key: batch[key][index] for key in TAKEN},
+                np.zeros(len(index), dtype=bool) if refused is None
+                else refused[index].astype(bool) & info["_refused"][index])
+    if len(following) < len(observations):
+        observations = [observations[k] for k in following]
+        infos = [infos[k] for k in following]
+    return taken_of(observations), np.array([bool(info.get("refused")) for info in infos],
+                                            dtype=bool)
 
 
 def decide_counting(rows: CountingRows, index: np.ndarray,

@@ -21,7 +21,7 @@ import gymnasium as gym
 import numpy as np
 
 from calibrators.agents import Agent
-from calibrators.agents.base import PlannedAgent
+from calibrators.agents.base import LabRows, PlannedAgent
 
 # The catalogue moved to calibrators.estimators.catalogue; its names stay here for
 # earlier scripts.
@@ -185,9 +185,11 @@ def run_episodes(envs: gym.vector.VectorEnv, agents: list[Agent], seeds: list[in
             actions = {key: value[:, step] for key, value in plans.items()}
         else:
             running = [i for i in range(len(agents)) if out[i] is None]
+            index = np.array(running, dtype=np.int64)
             acted = iter(_act_all([agents[i] for i in running],
-                                  [_row(observation, i) for i in running],
-                                  [_InfoRow(info, i) for i in running]))
+                                  LabRows([_row(observation, i) for i in running],
+                                          observation, index),
+                                  LabRows([_InfoRow(info, i) for i in running], info, index)))
             moves = [idle if out[i] is not None else next(acted) for i in range(len(agents))]
             actions = {key: np.array([m.get(key, idle[key]) for m in moves])
                        for key in idle}

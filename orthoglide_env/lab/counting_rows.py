@@ -26,7 +26,7 @@ posture in both or in neither (a count changes only where a reading is taken, by
 
 from __future__ import annotations
 
-from collections.abc import Hashable, Iterable
+from collections.abc import Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -51,8 +51,8 @@ from orthoglide_env.lab.operations import Op
 #: service (K each).
 FAMILY, HERE, RUN, CLOCK, BUDGET, RHO = 0, 1, 2, 3, 4, slice(5, 8)
 STANDS_FROM: int = 8
-#: The entries of a lab observation that a row takes in (contiguous arrays, each of one
-#: shape and dtype in every lab of a chunk).
+#: The entries of a lab observation that a row takes in (each of one shape and dtype in
+#: every lab of a chunk).
 TAKEN: tuple[str, ...] = ("slot", "engaged", "faulted", "time")
 
 
@@ -98,27 +98,21 @@ class CountingRows:
         #: Whether all rows are one state (counts included: one family), so that a step
         #: that is the same in every lab is taken in on one row.
         self.alike = _uniform(self.state.view(np.int64))
-        #: The record of a lab observation's :data:`TAKEN` entries, found at the first step
-        #: (the chunk's labs are of one env).
-        self.record: np.dtype | None = None
         #: :meth:`parts` of a state, by its posture and stands, the last MOVES_KEPT kept (a
         #: one-hour episode of the shipped policy decides 484 times in 77 such states).
         self._parts = lru_cache(maxsize=MOVES_KEPT)(self._parts_of)
 
     def observe(self, rows: np.ndarray, operations: list[dict[str, object]],
-                seen: list[dict[str, np.ndarray]], refused: list[bool]) -> None:
+                taken: Mapping[str, np.ndarray], refused: Sequence[bool]) -> None:
         """:meth:`DesignBelief.observe` of the beliefs of ``rows`` (distinct) after their
-        lab ``operations``, from their labs' observations ``seen`` (a refused operation
-        changes nothing but the clock)."""
-        if self.record is None:
-            self.record = _record(tuple((seen[0][key].dtype, seen[0][key].shape)
-                                        for key in TAKEN))
-        # The labs' stands and clocks in one pass over their bytes: a record of each lab.
-        taken = np.frombuffer(b"".join([o[key] for o in seen for key in TAKEN]), self.record)
+        lab ``operations``, from their labs' observations' :data:`TAKEN` entries ``taken``,
+        each stacked a row per lab (a vector env's arrays, or :func:`taken_of` lone labs'
+        observations); a refused operation changes nothing but the clock."""
         if self._one_step(rows, operations, refused, taken):
             # Every row is one state and takes one step: one row's, for all of them.
             state = self.state[:1].copy()
-            reads, to = self._step(state, operations[:1], refused[:1], taken[:1])
+            reads, to = self._step(state, operations[:1], refused[:1],
+                                   {key: taken[key][:1] for key in TAKEN})
             self.state[:] = state
             self.counts[:, to] += 1
             return
@@ -133,20 +127,22 @@ class CountingRows:
         self.alike = _uniform(self.state.view(np.int64))
 
     def _one_step(self, rows: np.ndarray, operations: list[dict[str, object]],
-                  refused: list[bool], taken: np.ndarray) -> bool:
+                  refused: Sequence[bool], taken: Mapping[str, np.ndarray]) -> bool:
         """Whether all rows, one state (:attr:`alike`), take one step: each row's
-        operation the same (one dict: a group's), refused alike, and their labs' records
-        the same bytes."""
+        operation the same (one dict: a group's), refused alike, and their labs' entries
+        the same (a clock, never NaN, equal to the bit)."""
         if not self.alike or len(rows) != len(self.state):
             return False
         first = operations[0]
-        if not all(operation is first for operation in operations) or len(set(refused)) > 1:
+        if not all(operation is first for operation in operations) or not _uniform(
+                np.asarray(refused)):
             return False
-        return _uniform(taken.view(np.uint8).reshape(len(taken), -1))
+        return all(_uniform(taken[key]) for key in TAKEN)
 
     def _step(self, state: np.ndarray, operations: list[dict[str, object]],
-              refused: list[bool], taken: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``state``'s rows (in place) after their ``operations`` and labs' records
+              refused: Sequence[bool], taken: Mapping[str, np.ndarray]
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """``state``'s rows (in place) after their ``operations`` and labs' entries
         ``taken`` (their stands, clocks, postures and stays); the positions of the rows
         that read (R,) and the postures where (R,), whose counts are the caller's."""
         first = self.first
@@ -266,11 +262,12 @@ def _reading(first: DesignBelief, operation: dict[str, object]) -> tuple[int, bo
     return -1, False
 
 
-def _record(layout: tuple[tuple[np.dtype, tuple[int, ...]], ...]) -> np.dtype:
-    """The record of a lab observation's :data:`TAKEN` entries of dtypes and shapes
-    ``layout``, packed as their bytes are joined."""
-    return np.dtype([(key, dtype, shape) for key, (dtype, shape) in zip(TAKEN, layout,
-                                                                         strict=True)])
+def taken_of(seen: list[dict[str, np.ndarray]]) -> np.ndarray:
+    """The :data:`TAKEN` entries of lone labs' observations ``seen`` (of one env), stacked
+    a row per lab (a record of their fields) in one pass over their bytes."""
+    first = seen[0]
+    record = np.dtype([(key, first[key].dtype, first[key].shape) for key in TAKEN])
+    return np.frombuffer(b"".join([o[key] for o in seen for key in TAKEN]), record)
 
 
 def _uniform(values: np.ndarray) -> bool:
