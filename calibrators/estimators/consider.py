@@ -383,14 +383,23 @@ def _carriage_terms(rho: np.ndarray, approach: np.ndarray, t: np.ndarray | None,
         # 0.35 um.  Its size is the table's (an assumption): considered at that size.
         out.append(("compliance.weight", deflection(rho, machine, conditions)[None]))
     if on("warmup"):
-        # A x (1 - exp(-t / tau)): A's mean times tau's mean curve acts on every axis at
-        # once; what tau's spread and A's spread add, on each alone.
-        curves, mean_curve = warmup_curves(x, t, conditions)
-        mean, spread = warmup_sizes(conditions)
-        out.append(("warmup.mean", mean * mean_curve))
-        for j, (w, c) in enumerate(zip(_WEIGHTS, curves, strict=True)):
-            out += _per_axis(f"warmup.tau{j}", np.sqrt(w) * mean * (c - mean_curve))
-            out += _per_axis(f"warmup.spread{j}", np.sqrt(w) * spread * c)
+        out += warmup_terms(x, t, conditions)
+    return out
+
+
+def warmup_terms(x: np.ndarray, t: np.ndarray, conditions: Conditions
+                 ) -> list[tuple[str, np.ndarray]]:
+    """The warm-up's terms as ``full`` fits them, for carriages at ``x`` (..., 3), a
+    fraction of the stroke, at lab times ``t`` (...): (name, pattern (..., 3) in mm per
+    unit coefficient)."""
+    # A x (1 - exp(-t / tau)): A's mean times tau's mean curve acts on every axis at
+    # once; what tau's spread and A's spread add, on each alone.
+    curves, mean_curve = warmup_curves(x, t, conditions)
+    mean, spread = warmup_sizes(conditions)
+    out = [("warmup.mean", mean * mean_curve)]
+    for j, (w, c) in enumerate(zip(_WEIGHTS, curves, strict=True)):
+        out += _per_axis(f"warmup.tau{j}", np.sqrt(w) * mean * (c - mean_curve))
+        out += _per_axis(f"warmup.spread{j}", np.sqrt(w) * spread * c)
     return out
 
 

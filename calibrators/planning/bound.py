@@ -346,14 +346,22 @@ def plan_counts(model: BoundModel, design: MachineDesign, slots: tuple[int, ...]
     model's, at every move until any other operation takes the bar off (a point off the
     candidates counts nothing).  ``f`` of these counts (:meth:`BoundModel.value`) is
     the plan's error on the bound's model, which the bound is below."""
+    hits = plan_hits(model, design, slots, engaged, actions)
+    return np.bincount(hits[:, 1], minlength=model.rows.shape[0]).astype(float)
+
+
+def plan_hits(model: BoundModel, design: MachineDesign, slots: tuple[int, ...],
+              engaged: tuple[bool, ...], actions: list[dict[str, object]]) -> np.ndarray:
+    """(R, 2) each reading :func:`plan_counts` counts: the index of the action that took
+    it and its candidate of ``model``."""
     table = slot_table(design)
     slots_, down = list(slots), list(engaged)
-    counts = np.zeros(model.rows.shape[0])
+    hits: list[tuple[int, int]] = []
     axis = -1
     bar_in = False
     where = {tuple(p): k for k, p in enumerate(table.postures)}
     dial = {(int(a), int(b)): k for k, (a, b, _) in enumerate(model.label) if a >= 0}
-    for step in actions:
+    for i, step in enumerate(actions):
         op = Op(int(step["op"]))  # type: ignore[call-overload]
         if op == Op.PIVOT:
             bar_in = model.pivot is not None and np.allclose(
@@ -365,7 +373,7 @@ def plan_counts(model: BoundModel, design: MachineDesign, slots: tuple[int, ...]
         elif bar_in:
             k = model.bar_index(np.asarray(step["rho"], dtype=float))
             if k is not None:
-                counts[k] += 1
+                hits.append((i, k))
         if op in (Op.LIFT, Op.ENGAGE):
             down[int(step["stand"])] = op == Op.ENGAGE  # type: ignore[call-overload]
             continue
@@ -381,10 +389,10 @@ def plan_counts(model: BoundModel, design: MachineDesign, slots: tuple[int, ...]
         for slot, on in zip(slots_, down, strict=True):
             k = dial.get((slot, posture)) if posture is not None and on else None
             if k is not None:
-                counts[k] += 1
+                hits.append((i, k))
         if axis >= 0:
-            counts[model.laser_index(axis, float(rho[axis]))] += 1
-    return counts
+            hits.append((i, model.laser_index(axis, float(rho[axis]))))
+    return np.array(hits, dtype=int).reshape(-1, 2)
 
 
 def _information(rows: np.ndarray, counts: np.ndarray) -> np.ndarray:
@@ -498,6 +506,13 @@ def gap(visits: Visits, grid: np.ndarray, lasers: np.ndarray, bars: np.ndarray,
     oracle: the polytope's vertices spend the budget on one kind of visit, so the most is
     the budget times the best gain per second of a visit (:func:`best_visits`, or a bar
     point of ``bars``), reading the laser's best candidate of ``lasers`` or not."""
+    return visits.seconds * best_rate(visits, grid, lasers, bars, fall) - float(fall @ counts)
+
+
+def best_rate(visits: Visits, grid: np.ndarray, lasers: np.ndarray, bars: np.ndarray,
+              fall: np.ndarray) -> float:
+    """The most any kind of visit of ``visits``'s polytope gains per second against the
+    readings' gains ``fall``: :func:`gap`'s linear oracle per second of the budget."""
     settle, both = visits.settle_s, visits.settle_s + visits.dwell_s
     bar = float(fall[bars].max()) if bars.size else -np.inf
     rate = max(float(best_visits(grid, fall, visits, settle)[0].max()), bar / settle)
@@ -505,7 +520,7 @@ def gap(visits: Visits, grid: np.ndarray, lasers: np.ndarray, bars: np.ndarray,
         laser = float(fall[lasers].max())
         rate = max(rate, float(best_visits(grid, fall, visits, both, laser)[0].max()),
                    (bar + laser) / both)
-    return visits.seconds * rate - float(fall @ counts)
+    return rate
 
 
 def _atoms(members: list[np.ndarray], n: int) -> csr_matrix:
@@ -691,6 +706,35 @@ def best_design(design: MachineDesign, conditions: Conditions, dial_sigma: float
                 stands: int = len(PAPER_SLOTS), remounts: bool = True) -> Design:
     """:func:`lower_bound` with the design that reaches it (a plan rounds it:
     :mod:`calibrators.planning.rounding`)."""
+    model = lab_model(design, conditions, dial_sigma, budget_s, instruments, stands)
+    best: tuple[float, tuple[int, ...], bool, np.ndarray] | None = None
+    lowest = np.inf
+    for drives, pivot, visits in problems(design, budget_s, instruments, stands, remounts):
+        lasers = np.flatnonzero(np.isin(model.laser, drives))
+        bars = np.flatnonzero(model.laser == BAR) if pivot else None
+        lower, value, counts = solve(model, visits, lasers, best[0] if best else np.inf,
+                                     bars)
+        lowest = min(lowest, lower)
+        if best is None or value < best[0]:
+            best = (value, drives, pivot, counts)
+    assert best is not None  # the dial-only problem always has a budget
+    return _design(model, lowest, *best)
+
+
+def _design(model: BoundModel, lowest: float, value: float, drives: tuple[int, ...],
+            pivot: bool, counts: np.ndarray) -> Design:
+    """The :class:`Design` of ``model``'s least certified value ``lowest`` and its best
+    design's ``value`` (mm^2) with its set-ups and ``counts``."""
+    lowest = max(lowest, 0.0)
+    found = Bound(float(np.sqrt(lowest)), float(np.sqrt(value)), float(value - lowest),
+                  tuple(drives), float(counts[model.laser >= 0].sum()),
+                  float(counts[model.laser == BAR].sum()))
+    return Design(found, tuple(drives), pivot, counts)
+
+
+def lab_model(design: MachineDesign, conditions: Conditions, dial_sigma: float,
+              budget_s: float, instruments: tuple[str, ...], stands: int) -> BoundModel:
+    """:func:`bound_model` of a lab owning ``instruments``, its arguments checked."""
     if not (np.isfinite(budget_s) and budget_s > 0):
         raise ValueError(f"budget_s must be a positive number of seconds, got {budget_s}")
     if not (isinstance(stands, int) and stands >= 1):
@@ -698,38 +742,35 @@ def best_design(design: MachineDesign, conditions: Conditions, dial_sigma: float
     if "dial" not in instruments:
         raise ValueError(f"instruments must include 'dial', got {list(instruments)}")
     owned = "interferometer" in instruments
-    bar = "ballbar" in instruments
-    model = (bound_model(design, conditions, float(dial_sigma), owned, True) if bar
-             else bound_model(design, conditions, float(dial_sigma), owned))
-    # The lab mounts its stands at the paper's slots at every reset.
-    start = tuple(slot_index(spec, design=design) for spec in PAPER_LAYOUT[:stands])
+    return (bound_model(design, conditions, float(dial_sigma), owned, True)
+            if "ballbar" in instruments
+            else bound_model(design, conditions, float(dial_sigma), owned))
+
+
+def start_slots(design: MachineDesign, stands: int) -> tuple[int, ...]:
+    """The slots the lab's ``stands`` stands are mounted at on every reset: the paper's."""
+    return tuple(slot_index(spec, design=design) for spec in PAPER_LAYOUT[:stands])
+
+
+def problems(design: MachineDesign, budget_s: float, instruments: tuple[str, ...],
+             stands: int, remounts: bool = True
+             ) -> list[tuple[tuple[int, ...], bool, Visits]]:
+    """The bound's problems, one per choice of set-ups: the drives the laser is set up on,
+    the pivot set up or not, and the polytope of the visits the budget leaves them."""
+    start = start_slots(design, stands)
     choices = [()] + ([c for k in (1, 2, 3) for c in itertools.combinations(range(3), k)]
-                      if owned else [])
+                      if "interferometer" in instruments else [])
     # The pivot's set-up is paid once or not at all, as the laser's are.
-    pivots = [False, True] if bar else [False]
-    best: tuple[float, tuple[int, ...], bool, np.ndarray] | None = None
-    lowest = np.inf
+    pivots = [False, True] if "ballbar" in instruments else [False]
+    out = []
     for pivot in pivots:
         for drives in choices:
             # A set-up's own visit (at Zero, its settle on the clock) reads the laser
             # without a dwell: each is given one.
             seconds = (budget_s - setup_seconds(drives) - (TIME.ballbar_setup_s if pivot else 0)
                        + TIME.interferometer_target_s * len(drives))
-            if seconds <= 0:
-                continue
-            visits = Visits(seconds, TIME.settle_and_read_s, TIME.interferometer_target_s,
-                            stands, start, TIME.remount_s if remounts else np.inf)
-            lasers = np.flatnonzero(np.isin(model.laser, drives))
-            bars = np.flatnonzero(model.laser == BAR) if pivot else None
-            lower, value, counts = solve(model, visits, lasers, best[0] if best else np.inf,
-                                         bars)
-            lowest = min(lowest, lower)
-            if best is None or value < best[0]:
-                best = (value, drives, pivot, counts)
-    assert best is not None  # the dial-only problem always has a budget
-    value, drives, pivot, counts = best
-    lowest = max(lowest, 0.0)
-    found = Bound(float(np.sqrt(lowest)), float(np.sqrt(value)), float(value - lowest),
-                  tuple(drives), float(counts[model.laser >= 0].sum()),
-                  float(counts[model.laser == BAR].sum()))
-    return Design(found, tuple(drives), pivot, counts)
+            if seconds > 0:
+                out.append((drives, pivot, Visits(
+                    seconds, TIME.settle_and_read_s, TIME.interferometer_target_s, stands,
+                    start, TIME.remount_s if remounts else np.inf)))
+    return out

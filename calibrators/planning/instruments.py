@@ -235,9 +235,7 @@ def reading_rows(bundle: Bundle, design: MachineDesign, conditions: Conditions |
         setup = np.full((len(path), 1), ZERO_SCALE)
         return rows / interferometer.sigma(world), setup / interferometer.sigma(world), \
             np.zeros(len(path))
-    spec = bundle.spec
-    layout = ReadingLayout.of(["ballbar#planned"] * len(path), [spec] * len(path), path,
-                              design)
+    layout = bar_layout(bundle, design, path)
     space = layout.space
     derivative = jacobian(np.zeros(len(space)), layout, np.ones(len(space), dtype=bool),
                           default_scales(space))
@@ -248,7 +246,14 @@ def reading_rows(bundle: Bundle, design: MachineDesign, conditions: Conditions |
     centre = derivative[:, N_MACHINE:] * pivot_sigmas(layout, world) / BALLBAR_CENTRE_SCALE
     setup = np.column_stack([centre, np.full(len(path), ZERO_SCALE)])
     sigma = ballbar.sigma(world)
-    return rows / sigma, setup / sigma, ballbar.nominal_readings(design, spec, path)
+    return rows / sigma, setup / sigma, ballbar.nominal_readings(design, bundle.spec, path)
+
+
+def bar_layout(bundle: Bundle, design: MachineDesign, path: np.ndarray) -> ReadingLayout:
+    """The fit's layout of a ballbar ``bundle``'s readings at commands ``path`` (R, 3): one
+    set-up."""
+    return ReadingLayout.of(["ballbar#planned"] * len(path), [bundle.spec] * len(path),
+                            path, design)
 
 
 def marginal(rows: np.ndarray, setup: np.ndarray, residual: np.ndarray | None = None
