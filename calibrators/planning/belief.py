@@ -503,7 +503,6 @@ def _reach_where(beliefs: list[Belief], tip: np.ndarray, spread: np.ndarray,
         safe_at[open_], contact_at[open_] = reach_at(table, slot[open_], posture[open_],
                                                      tips[open_], spreads[open_])
     safe[m, k, j], contact[m, k, j] = safe_at, contact_at
-    return safe, contact
 
 
 def spreads_many(beliefs: list[Belief], stands: list[tuple[int, int]],
