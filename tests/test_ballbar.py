@@ -311,6 +311,39 @@ def test_a_set_ups_first_reading_is_approached_from_its_centre():
     assert z > 0
 
 
+def test_the_approach_is_the_last_move_of_each_axis_read_in_order():
+    """Each reading's and each set-up centre's approach, from the array of the points
+    driven to, is the one found by walking the readings one by one: the sign of each
+    axis's last non-zero step, +1 before it first moves, a set-up's centre driven to
+    unread before its first reading (set-ups out of order, repeated points, a first
+    reading that is a set-up's)."""
+    from calibrators.estimators.consider import _approach
+    from orthoglide_env.instruments.slots import PAPER_LAYOUT
+    stream = np.random.default_rng(5)
+    points = np.round(CENTRE + stream.uniform(-20.0, 20.0, (40, 3)), 0)
+    points[[7, 8, 21]] = points[[6, 7, 20]]  # moves that leave the axes where they were
+    mounting = ["ballbar#2"] * 4 + ["g"] * 10 + ["ballbar#1"] * 12 + ["g"] * 14
+    centres = {"ballbar#1": CENTRE - 5.0, "ballbar#2": CENTRE + 3.0}
+    names = list(dict.fromkeys(mounting))
+    spec = {n: PAPER_LAYOUT[0] if n == "g" else BallbarSpec(tuple(centres[n]), 50.0)
+            for n in names}
+    layout = ReadingLayout.of(mounting, [spec[n] for n in mounting], points, PROTOTYPE)
+    state, last, expected, at_centres = np.ones(3), points[0], [], {}
+    for k, posture in enumerate(points):
+        first = mounting[k] != "g" and mounting.index(mounting[k]) == k
+        for point in ((centres[mounting[k]], posture) if first else (posture,)):
+            step = point - last
+            state = np.where(step > 0, 1.0, np.where(step < 0, -1.0, state))
+            last = point
+            if first and point is not posture:
+                at_centres[mounting[k]] = state
+        expected.append(state)
+    approach, centre_approach = _approach(layout)
+    np.testing.assert_array_equal(approach, expected)
+    np.testing.assert_array_equal(
+        centre_approach, [at_centres[names[k]] for k in layout.space.ballbars])
+
+
 def _circles_in_a_warming_workshop(effects: tuple[str, ...] | None = None
                                    ) -> tuple[gym.Env, list[float]]:
     """A workshop lab whose stands are lifted, then twice the three planes' circles, each

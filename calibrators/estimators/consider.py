@@ -243,20 +243,26 @@ def _approach(design: ReadingLayout) -> tuple[np.ndarray, np.ndarray]:
     there.  And (B, 3) the same at each of the B ballbar set-ups' centres, where its pivot
     was centred."""
     bars = design.space.ballbars
-    hidden = {int(np.flatnonzero(design.mounting == k)[0]): np.asarray(design.specs[k].centre)
-              for k in bars}
-    out = np.ones(design.rho.shape)
-    centres: dict[int, np.ndarray] = {}
-    state, last = out[0], design.rho[0]
-    for k, posture in enumerate(design.rho):
-        for point in ((hidden[k], posture) if k in hidden else (posture,)):
-            step = point - last
-            state = np.where(step > 0, 1.0, np.where(step < 0, -1.0, state))
-            last = point
-            if point is not posture:
-                centres[k] = state
-        out[k] = state
-    return out, np.array([centres[first] for first in hidden]).reshape(len(bars), 3)
+    firsts = [int(np.flatnonzero(design.mounting == k)[0]) for k in bars]
+    # The points driven to in order: each set-up's centre just before its first reading.
+    centre = np.array([design.specs[k].centre for k in bars], dtype=float).reshape(-1, 3)
+    state = _last_directions(np.insert(design.rho, firsts, centre, axis=0), design.rho[0])
+    # Where each reading and each centre landed among the points.
+    ordered = np.sort(firsts)
+    readings = np.arange(len(design.rho))
+    at = readings + np.searchsorted(ordered, readings, side="right")
+    centres = np.array(firsts, dtype=int) + np.searchsorted(ordered, firsts)
+    return state[at], state[centres].reshape(len(bars), 3)
+
+
+def _last_directions(points: np.ndarray, start: np.ndarray) -> np.ndarray:
+    """(N, 3) the sign (+-1.0) of each axis's last non-zero step up to each of
+    ``points`` (N, 3) driven to in order from ``start`` (3,), +1 before the first."""
+    step = np.diff(points, axis=0, prepend=start[None])
+    moved = (step > 0) | (step < 0)
+    last = np.maximum.accumulate(np.where(moved, np.arange(len(points))[:, None], -1), axis=0)
+    sign = np.where(step > 0, 1.0, -1.0)
+    return np.where(last >= 0, np.take_along_axis(sign, np.maximum(last, 0), axis=0), 1.0)
 
 
 def _per_axis(name: str, pattern: np.ndarray) -> list[tuple[str, np.ndarray]]:

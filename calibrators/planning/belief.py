@@ -428,15 +428,17 @@ def reaches(beliefs: list[Belief], postures: np.ndarray | slice = slice(None)
     computed, plus :data:`SPREAD_SLACK`: readings only shrink the covariance, so a spread
     never grows until its stand is re-mounted."""
     tip, spread, index = _tips_and_bounds(beliefs, postures)
-    safe, contact = _reach_where(beliefs, tip, spread, index, np.ones(tip.shape, dtype=bool))
-    return _unread(beliefs, safe, contact, postures)
+    safe, contact = np.zeros(tip.shape, dtype=bool), np.zeros(tip.shape)
+    _reach_where(beliefs, tip, spread, index, np.nonzero(np.ones(tip.shape, dtype=bool)),
+                 safe, contact)
+    return list(zip(*_unread(beliefs, safe, contact, postures), strict=True))
 
 
-def move_reaches(beliefs: list[Belief]) -> list[tuple[np.ndarray, np.ndarray]]:
+def move_reaches(beliefs: list[Belief]) -> tuple[np.ndarray, np.ndarray]:
     """:func:`reaches` at every posture of filters ``beliefs``, as far as the moves from
-    where each stands depend on it (:meth:`~calibrators.pricing.Pricer._moves_from`: the
+    where each stands depend on it (:func:`~calibrators.planning.pricing.moves_many`: the
     plungers down after a move and how likely each reads), each to the bit as
-    :func:`reaches` has it there.
+    :func:`reaches` has it there, stacked (M, K, P).
 
     A plunger is down after a move only if it is down now or safe here, so every stand's
     reach is worked out here first; then a stand that may be down is predicted only where
@@ -449,16 +451,18 @@ def move_reaches(beliefs: list[Belief]) -> list[tuple[np.ndarray, np.ndarray]]:
     used, mounted = np.maximum(slots, 0), slots >= 0
     tip, spread, index = _tips_and_bounds(beliefs, slice(None))
     machines, here = np.arange(len(beliefs)), np.array([b.here for b in beliefs])
-    asked = np.zeros(tip.shape, dtype=bool)
-    asked[machines, :, here] = True
-    safe, contact = _reach_where(beliefs, tip, spread, index, asked)
+    count = slots.shape[1]
+    # Both passes fill one pair of arrays: their entries are apart (here, then elsewhere),
+    # the first's taken in the order a mask's would be (machine, stand).
+    safe, contact = np.zeros(tip.shape, dtype=bool), np.zeros(tip.shape)
+    _reach_where(beliefs, tip, spread, index, (np.repeat(machines, count), np.tile(
+        np.arange(count), len(beliefs)), np.repeat(here, count)), safe, contact)
     may = (np.array([b.engaged for b in beliefs]) | safe[machines, :, here]) & mounted
     missed = np.isnan(tip)
     asked = may[..., None] & ~missed & ~table.pressed[used]
     asked[machines, :, here] = False
-    more_safe, more_contact = _reach_where(beliefs, tip, spread, index, asked)
-    safe |= more_safe | (may[..., None] & missed & ~table.near[used])
-    np.copyto(contact, more_contact, where=asked)
+    _reach_where(beliefs, tip, spread, index, np.nonzero(asked), safe, contact)
+    safe |= may[..., None] & missed & ~table.near[used]
     return _unread(beliefs, safe, contact, slice(None))
 
 
@@ -473,14 +477,16 @@ def _tips_and_bounds(beliefs: list[Belief], postures: np.ndarray | slice
 
 
 def _reach_where(beliefs: list[Belief], tip: np.ndarray, spread: np.ndarray,
-                 index: np.ndarray, asked: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                 index: np.ndarray, asked: tuple[np.ndarray, np.ndarray, np.ndarray],
+                 safe: np.ndarray, contact: np.ndarray) -> None:
     """:func:`reaches`' ``safe`` and ``contact`` (M, K, P') from the tips and spread bounds
-    of :func:`_tips_and_bounds`, at the entries ``asked`` (False and 0 elsewhere), each
-    entry's answer its own: a spread computed where the bound leaves it open (each
-    stand's together, in the order of its postures), its bound lowered to it."""
+    of :func:`_tips_and_bounds`, entered at the entries ``asked`` (machine, stand and
+    posture indices, in C order), each entry's answer its own: a spread computed where
+    the bound leaves it open (each stand's together, in the order of its postures), its
+    bound lowered to it."""
     table = beliefs[0].table
     slots = np.array([b.slots for b in beliefs])
-    m, k, j = np.nonzero(asked)
+    m, k, j = asked
     slot, posture, tips, spreads = np.maximum(slots[m, k], 0), index[j], tip[m, k, j], spread[
         m, k, j]
     safe_at, contact_at = reach_at(table, slot, posture, tips, spreads)
@@ -496,9 +502,7 @@ def _reach_where(beliefs: list[Belief], tip: np.ndarray, spread: np.ndarray,
             spreads[group] = beliefs[i].spread_bound[own, posture[group]] = value
         safe_at[open_], contact_at[open_] = reach_at(table, slot[open_], posture[open_],
                                                      tips[open_], spreads[open_])
-    safe, contact = np.zeros(tip.shape, dtype=bool), np.zeros(tip.shape)
     safe[m, k, j], contact[m, k, j] = safe_at, contact_at
-    return safe, contact
 
 
 def spreads_many(beliefs: list[Belief], stands: list[tuple[int, int]],
@@ -531,13 +535,12 @@ def spreads_many(beliefs: list[Belief], stands: list[tuple[int, int]],
 
 
 def _unread(beliefs: list[Belief], safe: np.ndarray, contact: np.ndarray,
-            postures: np.ndarray | slice) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Each belief's ``safe`` and ``contact`` (K, P') at ``postures``, nothing for an
+            postures: np.ndarray | slice) -> tuple[np.ndarray, np.ndarray]:
+    """The beliefs' ``safe`` and ``contact`` (M, K, P') at ``postures``, nothing for an
     empty stand and no contact where it was seen not to read."""
     mounted = (np.array([b.slots for b in beliefs]) >= 0)[..., None]
     silent = np.stack([b.silent[:, postures] for b in beliefs])
-    safe, contact = safe & mounted, np.where(silent, 0.0, contact) * mounted
-    return list(zip(safe, contact, strict=True))
+    return safe & mounted, np.where(silent, 0.0, contact) * mounted
 
 
 def world_rows_here(beliefs: list[Belief], stands: list[np.ndarray]

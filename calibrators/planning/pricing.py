@@ -130,16 +130,8 @@ class Pricer(Belief):
     def _moves_from(self, safe: np.ndarray, contact: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`_moves` from the stands' reach at every posture (:meth:`_reach`)."""
-        here = safe[:, self.here]
-        engaged = np.array(self.engaged, dtype=bool)
-        after = safe & (engaged | here)[:, None]
-        reads = np.where(after, contact, 0.0)
-        flicks = np.sum(after != engaged[:, None], axis=0)
-        drive = drive_seconds(self.design, tuple(float(v) for v in self.rho))
-        seconds = drive + TIME.lift_s * flicks
-        if self.dwell_s:
-            seconds = seconds + self.dwell_s  # a laser left set up reads at every move
-        return seconds, after, reads
+        seconds, after, reads = moves_many([self], safe[None], contact[None])
+        return seconds[0], after[0], reads[0]
 
     def _rows(self, reads: np.ndarray, postures: np.ndarray) -> np.ndarray:
         """Whitened rows (L, K, n) of the readings at ``postures`` (L,), each stand's
@@ -264,12 +256,11 @@ def top_rates_many(pricers: list[Pricer], count: int
         return []
     if all(p.mean is not None and p.table is pricers[0].table
            and len(p.slots) == len(pricers[0].slots) for p in pricers):
-        reached = move_reaches(pricers)
+        moved = list(zip(*moves_many(pricers, *move_reaches(pricers)), strict=True))
     else:
-        reached = [pricer._reach() for pricer in pricers]
+        moved = [pricer._moves() for pricer in pricers]
     opened = []
-    for pricer, (safe, contact) in zip(pricers, reached, strict=True):
-        moves = pricer._moves_from(safe, contact)
+    for pricer, moves in zip(pricers, moved, strict=True):
         opened.append((*pricer._top_rates_open(count, *moves), moves))
     asked = [i for i, (_, _, shortlist, _) in enumerate(opened) if shortlist is not None]
     gains = price_many([pricers[i] for i in asked],
@@ -277,6 +268,26 @@ def top_rates_many(pricers: list[Pricer], count: int
     for i, gain in zip(asked, gains, strict=True):
         Pricer._take_prices(opened[i][0], opened[i][1], opened[i][2], gain)
     return [(rate, priced) for rate, priced, _, _ in opened]
+
+
+def moves_many(pricers: list[Pricer], safe: np.ndarray, contact: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:meth:`Pricer._moves` of each of ``pricers`` (as many stands each) from their
+    stands' reach at every posture, stacked (M, K, P): the seconds (M, P), the plungers
+    down after each move (M, K, P) and how likely each reads there (M, K, P), each
+    pricer's entries worked out from its own alone."""
+    here = safe[np.arange(len(pricers)), :, [p.here for p in pricers]]  # (M, K)
+    engaged = np.array([p.engaged for p in pricers], dtype=bool)
+    after = safe & (engaged | here)[..., None]
+    reads = np.where(after, contact, 0.0)
+    flicks = np.sum(after != engaged[..., None], axis=1)
+    drive = np.stack([drive_seconds(p.design, tuple(float(v) for v in p.rho))
+                      for p in pricers])
+    seconds = drive + TIME.lift_s * flicks
+    for row, pricer in enumerate(pricers):
+        if pricer.dwell_s:
+            seconds[row] += pricer.dwell_s  # a laser left set up reads at every move
+    return seconds, after, reads
 
 
 def price_many(pricers: list[Pricer], asked: list[tuple[np.ndarray, np.ndarray, np.ndarray]]
