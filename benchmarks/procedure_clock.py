@@ -12,7 +12,8 @@ realistic machines of seed 1, dial sigma 0.02 mm.  With ``--gauges optimal`` (th
 part a written procedure takes) the gap is measured step by step against the plan made
 where the programme left the lab; with ``active`` (``compare``'s) only the refusals and
 the end are shown: its planner takes the lab's clock at every step.  A budget a procedure
-refuses (``iso230-2`` below its programme's 2959.4 s) is shown refused, in its one line.
+refuses (``iso230-2`` below its programme's 2959.4 s, ``step-gauge`` below its 1366.3 s)
+is shown refused, in its one line.
 """
 
 from __future__ import annotations

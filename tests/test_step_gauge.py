@@ -23,6 +23,7 @@ from calibrators.agents.step_gauge import (
     MAX_RUNS,
     face_command,
     gauge_steps,
+    least_budget_s,
     programme_seconds,
     runs_for,
 )
@@ -304,6 +305,30 @@ def test_the_programme_takes_the_time_the_lab_charges():
     episode = _episode(Conditions("ideal"))
     assert episode.time_s == pytest.approx(
         programme_seconds(PROTOTYPE, len(PAPER_SLOTS), GaugeOnly.RUNS), rel=1e-12)
+
+
+def test_a_budget_shorter_than_one_run_along_each_axis_is_refused(capsys):
+    """Below the programme with one run per axis the procedure is refused before the lab
+    starts, as ``iso230-2`` refuses its own: in the API's lab arguments, at the agent's
+    reset in a lab made without them, and by ``compare`` in one line with exit 2.  From
+    the least budget up it is accepted."""
+    from calibrators.cli import main
+    agent = get_agent("step-gauge")
+    least = least_budget_s(PROTOTYPE, len(PAPER_SLOTS))
+    # Three set-ups and three runs of the paper's 6 stands: about 23 minutes.
+    assert least == pytest.approx(1366.3, abs=0.05)
+    words = f"needs a budget of at least {least:.1f} s"
+    with pytest.raises(ValueError, match=words):
+        lab_kwargs(agent, tuple(OWNED), budget_s=least - 1.0)
+    lab_kwargs(agent, tuple(OWNED), budget_s=least)
+    env = gym.make(V3, backend="exact", conditions="lab", instruments=OWNED, budget_s=900.0)
+    observation, _ = env.reset(seed=0)
+    with pytest.raises(ValueError, match=words):
+        agent.reset(env, observation, np.random.default_rng(0))
+    assert main(["compare", "--agents", "step-gauge,active", "--instruments",
+                 "dial,step-gauge", "--budget", "900", "--machines", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert words in err and "\n" not in err
 
 
 def _file(tmp_path: Path, *rows: str) -> Path:

@@ -3,12 +3,14 @@
 The reference procedures a lab follows (``iso230-2``, ``ballbar``) read their instrument
 by a fixed programme, the same on every machine, and leave the rest of the budget to
 :data:`GAUGES`, which plans the gauges' experiment from where the programme left the
-lab.  A subclass says which instruments it needs (``needs_instruments``) and writes its
-programme (:meth:`InstrumentFirst.programme`)."""
+lab.  A subclass says which instruments it needs (``needs_instruments``), writes its
+programme (:meth:`InstrumentFirst.programme`) and, where a budget can be too short for the
+programme's least form, names that least budget (:meth:`InstrumentFirst.least_budget_s`):
+a shorter one is refused before the lab starts (:meth:`InstrumentFirst.check_budget`)."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
@@ -16,6 +18,7 @@ import numpy as np
 from calibrators.agents.base import Agent, action
 from orthoglide_env.lab.clock import travel_seconds
 from orthoglide_env.lab.operations import TIME, Op
+from orthoglide_env.model.design import MachineDesign
 
 #: The agent whose experiment follows the programme, with the time left.
 GAUGES: str = "active"
@@ -71,6 +74,20 @@ class InstrumentFirst(Agent):
     #: The agent that plays the gauges' part (a written plan takes one that decides it
     #: at the start: :mod:`calibrators.workflow.plan`).
     gauges: str = GAUGES
+    #: What :meth:`least_budget_s` holds, in the refusal's words.
+    least_holds: ClassVar[str] = ""
+
+    def least_budget_s(self, design: MachineDesign, stands: int) -> float:
+        """The shortest budget (s) that holds the programme's least form on ``design``
+        with ``stands`` gauge stands; 0 for a programme the lab cuts where the budget
+        ends."""
+        return 0.0
+
+    def check_budget(self, budget_s: float, design: MachineDesign, stands: int) -> None:
+        least = self.least_budget_s(design, stands)
+        if budget_s < least:
+            raise ValueError(f"agent '{self.name}' needs a budget of at least {least:.1f} s "
+                             f"({self.least_holds}), got {budget_s:g} s")
 
     def programme(self, observation: dict[str, np.ndarray]) -> list[dict[str, Any]]:
         """The fixed programme's actions, from the lab as reset (``self.env`` is set)."""
@@ -85,6 +102,9 @@ class InstrumentFirst(Agent):
             raise ValueError(f"agent '{self.name}' needs a lab with the {missing[0]} "
                              f"(instruments {owned})")
         from calibrators.agents.names import get_agent  # (names imports the subclasses)
+        # A lab made without the lab arguments' check (a gym.make of its own) is checked here.
+        self.check_budget(float(self.env.budget_s) - float(observation["time"][0]),
+                          self.env.design, len(observation["slot"]))
         self.queue = self.programme(observation)
         self.inner = get_agent(self.gauges)
         # The programme is the procedure's instrument work: the gauges do the rest.
