@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
+from plan_gap import lab_arguments, lab_options
 from scipy.linalg import cho_factor, cho_solve
 
 from calibrators.agents.optimal import fixed_plan
@@ -31,7 +32,6 @@ from calibrators.planning.warm_bound import warm_design
 from orthoglide_env.instruments.dial import GaugeNoise, weighting_sigma
 from orthoglide_env.lab.operations import PAPER_SLOTS
 from orthoglide_env.model.design import PROTOTYPE
-from orthoglide_env.world.conditions import CONDITION_NAMES, Conditions
 
 UM = 1e3  # per mm
 #: Machines drawn from the model per design: the median's sampling error is then about
@@ -55,23 +55,9 @@ def spread(models: list[BoundModel], counts: np.ndarray) -> tuple[float, float, 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--conditions", default="lab", choices=CONDITION_NAMES)
-    parser.add_argument("--budget", type=float, default=3600.0, help="lab seconds")
-    parser.add_argument("--instruments", default="dial,ballbar",
-                        help="what the lab owns, comma-separated (dial, interferometer, "
-                             "ballbar)")
-    parser.add_argument("--warm-bins", type=int, default=0,
-                        help="bins of time of the bound with the warm-up unknown (0: none)")
+    lab_arguments(parser)
     args = parser.parse_args()
-    owned = tuple(args.instruments.split(","))
-    if sorted(set(owned) - {"dial", "interferometer", "ballbar"}) or "dial" not in owned:
-        parser.error(f"--instruments must name dial and any of interferometer, ballbar, "
-                     f"got {args.instruments!r}")
-    if not (np.isfinite(args.budget) and args.budget > 0):
-        parser.error(f"--budget must be a positive number of seconds, got {args.budget}")
-    conditions = Conditions(args.conditions)
-    if args.warm_bins < 0 or (args.warm_bins and "warmup" not in conditions):
-        parser.error(f"--warm-bins must be 0 or, with a warm-up, positive, got {args.warm_bins}")
+    owned, conditions = lab_options(parser, args)
     sigma = float(weighting_sigma(GaugeNoise(0.02, 0.01).effective_sigma))
     found = best_design(PROTOTYPE, conditions, sigma, args.budget, owned)
     model = lab_model(PROTOTYPE, conditions, sigma, args.budget, owned, len(PAPER_SLOTS))

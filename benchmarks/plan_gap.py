@@ -44,28 +44,42 @@ from orthoglide_env.world.conditions import CONDITION_NAMES, Conditions
 UM = 1e3  # per mm
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def lab_arguments(parser: argparse.ArgumentParser) -> None:
+    """The bound's lab on the command line: its conditions, budget, instruments and the
+    bins of time of the bound with the timed terms unknown."""
     parser.add_argument("--conditions", default="lab", choices=CONDITION_NAMES)
     parser.add_argument("--budget", type=float, default=3600.0, help="lab seconds")
     parser.add_argument("--instruments", default="dial,ballbar",
                         help="what the lab owns, comma-separated (dial, interferometer, "
                              "ballbar)")
-    parser.add_argument("--sigma", type=float, default=0.02, help="dial repeatability, mm")
-    parser.add_argument("--resolution", type=float, default=0.01, help="dial display, mm")
     parser.add_argument("--warm-bins", type=int, default=0,
                         help="bins of time of the bound with the warm-up unknown (0: none)")
-    args = parser.parse_args()
+
+
+def lab_options(parser: argparse.ArgumentParser,
+                args: argparse.Namespace) -> tuple[tuple[str, ...], Conditions]:
+    """The instruments owned and the conditions of :func:`lab_arguments`' options, or the
+    parser's one-line error for a bad one."""
     owned = tuple(args.instruments.split(","))
     unknown = sorted(set(owned) - {"dial", "interferometer", "ballbar"})
     if unknown or "dial" not in owned:
         parser.error(f"--instruments must name dial and any of interferometer, "
-                 f"ballbar, got {args.instruments!r}")
+                     f"ballbar, got {args.instruments!r}")
     if not (np.isfinite(args.budget) and args.budget > 0):
         parser.error(f"--budget must be a positive number of seconds, got {args.budget}")
     conditions = Conditions(args.conditions)
     if args.warm_bins < 0 or (args.warm_bins and "warmup" not in conditions):
         parser.error(f"--warm-bins must be 0 or, with a warm-up, positive, got {args.warm_bins}")
+    return owned, conditions
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    lab_arguments(parser)
+    parser.add_argument("--sigma", type=float, default=0.02, help="dial repeatability, mm")
+    parser.add_argument("--resolution", type=float, default=0.01, help="dial display, mm")
+    args = parser.parse_args()
+    owned, conditions = lab_options(parser, args)
     sigma = float(weighting_sigma(GaugeNoise(args.sigma, args.resolution).effective_sigma))
     slots, engaged = tuple(PAPER_SLOTS), (True,) * len(PAPER_SLOTS)
     found = best_design(PROTOTYPE, conditions, sigma, args.budget, owned).bound
