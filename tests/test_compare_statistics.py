@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calibrators.study.compare import Trial
+from calibrators.estimators.catalogue import for_study
+from calibrators.study.compare import Config, Trial, _machines, agent_episodes, machine_z_scores
 from calibrators.study.statistics import (
     median_interval,
     paired,
@@ -14,6 +15,8 @@ from calibrators.study.statistics import (
     warning_kind,
     warning_title,
 )
+from orthoglide_env.model.errors import MachineParams
+from orthoglide_env.world.conditions import Conditions
 
 
 def _trial(agent: str, machine: int, rigid: float, *, before: float = 0.5,
@@ -99,3 +102,25 @@ def test_a_paired_row_counts_the_machines_with_a_failed_fit() -> None:
     assert pair["machines"] == 6 and pair["failed"] == 3  # machines 0, 1 and 3
     clean = [t for t in trials if t.machine >= 4]
     assert paired(clean)[0]["failed"] == 0
+
+
+def test_the_scored_machines_and_z_scores_of_a_batch_are_each_estimates_own() -> None:
+    """The scoring takes the estimated machines from their vectors at once and the
+    z-scores from the group's stacked covariances: each machine is its estimate's own
+    (the nominal one for a failed fit) and each trial's z-scores are those its estimate
+    gets alone, to the bit."""
+    config = Config(("paper",), ("paper6",), seed=3, conditions=Conditions("ideal"))
+    episodes = agent_episodes(config, "paper", [0, 1, 2, 3])
+    estimates: list = for_study("paper6", episodes[0].run.sigma).fit_many(
+        [e.run.measurements for e in episodes])
+    estimates[1] = ValueError("not fitted")
+    batch, rows = _machines(episodes, estimates)
+    assert batch.batch_shape == (4,)
+    nominal = MachineParams(design=episodes[1].run.truth.design)
+    for est, row in zip(estimates, rows, strict=True):
+        assert row == (nominal if isinstance(est, Exception) else est.machine)
+    fitted = [estimates[k] for k in (0, 2, 3)]
+    truths = [episodes[k].run.truth for k in (0, 2, 3)]
+    together = machine_z_scores(fitted, truths, [t.to_vector() for t in truths])
+    for est, truth, z in zip(fitted, truths, together, strict=True):
+        assert z.size and np.array_equal(z, machine_z_scores([est], [truth])[0])

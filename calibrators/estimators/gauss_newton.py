@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numbers
 from collections.abc import Callable
+from operator import attrgetter
 from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
@@ -195,8 +196,9 @@ def _every_reading(datas: list[Measurements], name: str) -> np.ndarray | None:
     """Field ``name`` of every reading of every experiment (M, N), or None when one
     reading lacks it."""
     rows = []
+    field = attrgetter(name)
     for data in datas:
-        rows.append([getattr(m, name) for m in data.items])
+        rows.append(list(map(field, data.items)))
         if None in rows[-1]:  # e.g. no thermometer: known from the first experiment
             return None
     return np.array(rows, dtype=float)
@@ -523,7 +525,7 @@ class GaussNewtonCalibrator(Estimator):
         # A digital indicator's readings near its stroke's ends scatter beyond its sigma.
         ends = indicator_end(design, values, conditions)
         used = ~held & ~ends
-        base_of = _world_terms(design, datas, conditions, spacing)
+        base_of = _world_terms(design, times, temperatures, conditions, spacing)
         told_terms = consider
         shown: list[dict[str, float]] = [{} for _ in values]
         if auto:
@@ -726,13 +728,14 @@ class GaussNewtonCalibrator(Estimator):
             **_lead(result, columns, considered.names, error_cov, conditions, spacing),
         )
 
-def _world_terms(design: ReadingLayout, datas: list[Measurements], conditions: Conditions,
+def _world_terms(design: ReadingLayout, times: np.ndarray | None,
+                 temperatures: np.ndarray | None, conditions: Conditions,
                  spacing: float | None) -> Callable[[str | Conditions, np.ndarray], Consider]:
-    """The consider terms of these experiments' readings (given as (M, N) values: those
-    the geometry predicts, :func:`~calibrators.estimators.world_sizes.noiseless_readings`)
-    under the named conditions, every effect acting and the told conditions' indicator
-    (or under given conditions): what the told world is measured against."""
-    times, temperatures = (_every_reading(datas, name) for name in ("time_s", "temperature_c"))
+    """The consider terms of experiments' readings (given as (M, N) values: those the
+    geometry predicts, :func:`~calibrators.estimators.world_sizes.noiseless_readings`)
+    read at ``times`` and ``temperatures`` (:func:`_every_reading`), under the named
+    conditions, every effect acting and the told conditions' indicator (or under given
+    conditions): what the told world is measured against."""
     indicator = conditions.indicator
 
     def of(name: str | Conditions, readings: np.ndarray) -> Consider:
