@@ -47,17 +47,24 @@ from orthoglide_env.world.conditions import Conditions
 UM = 1e3  # per mm
 
 
+def fixed(value: float | None, digits: int, scale: float = 1.0) -> str:
+    """``value * scale`` to ``digits`` decimals, or a dash where compare's summary has none
+    (too few machines for an interval or a p95; every fit failed, so no z-RMS)."""
+    return "-" if value is None else f"{scale * value:.{digits}f}"
+
+
 def cell(trials: list[Trial], bound: Bound | None = None, mark: str = "") -> str:
     """One agent x estimator's row of compare's summary, in um (and its median over
     ``bound``)."""
     (row,) = summary(trials)
     rigid = row["tcp_after_mm"]["rigid"]
-    low, high = (UM * v for v in rigid["ci95"])
+    low, high = rigid["ci95"] or (None, None)
     ratio = (f", {rigid['median'] / bound.bound_mm:.2f}x{mark}"
              if bound is not None and bound.bound_mm > 0 else "")
-    return (f"{UM * rigid['median']:.1f} [{low:.1f}, {high:.1f}] ({UM * rigid['p95']:.1f}),"
-            f" {row['time_s']['median'] / 60:.0f}, {row['z_rms']:.2f},"
-            f" {row['chi2_rejected']:.2f}, {row['failed']}{ratio}")
+    return (f"{fixed(rigid['median'], 1, UM)} [{fixed(low, 1, UM)}, {fixed(high, 1, UM)}]"
+            f" ({fixed(rigid['p95'], 1, UM)}), {row['time_s']['median'] / 60:.0f},"
+            f" {fixed(row['z_rms'], 2)}, {fixed(row['chi2_rejected'], 2)}, {row['failed']}"
+            f"{ratio}")
 
 
 def agent_instruments(agent: str, owned: tuple[str, ...]) -> tuple[str, ...]:
@@ -98,12 +105,19 @@ def folder_bound(folder: Path, config: dict, instruments: tuple[str, ...]) -> Bo
     return found
 
 
+def budget_label(seconds: float) -> str:
+    """A budget as a reader says it: whole hours in h, anything else in s (330 s, not
+    0.0916667 h)."""
+    return f"{seconds / 3600:g} h" if seconds % 3600 == 0 else f"{seconds:g} s"
+
+
 def labels(configs: list[dict]) -> list[str]:
     """Each folder's name: its conditions, with its budget and instruments where the
     folders differ in them."""
     names = [c.get("conditions", "ideal") for c in configs]
     if len({c.get("budget_s") for c in configs}) > 1:
-        names = [f"{n} {c['budget_s'] / 3600:g} h" for n, c in zip(names, configs, strict=True)]
+        names = [f"{n} {budget_label(c['budget_s'])}"
+                 for n, c in zip(names, configs, strict=True)]
     if len({tuple(c.get("instruments", ())) for c in configs}) > 1:
         names = [f"{n} {'+'.join(c.get('instruments', ['dial']))}"
                  for n, c in zip(names, configs, strict=True)]
@@ -153,14 +167,17 @@ def main() -> None:
         f"{name}: rigid µm median [95 % interval] (p95), min, z-RMS, chi2 rejected, failed"
         f"{ratio}" for name in runs) + " |")
     print("|---|---|" + "---|" * len(runs))
-    first = next(iter(runs.values()))
-    rows = list(dict.fromkeys((t.agent, t.estimator) for t in first))
+    # Folders may hold different agents: a row is every pair any folder ran, and a folder
+    # that did not run it shows a dash.
+    rows = list(dict.fromkeys((t.agent, t.estimator) for trials in runs.values()
+                              for t in trials))
     for agent, estimator in rows:
         cells = []
         for (name, trials), config in zip(runs.items(), configs, strict=True):
             kind = agent_instruments(agent, tuple(config.get("instruments", ("dial",))))
-            cells.append(cell([t for t in trials if (t.agent, t.estimator) == (agent, estimator)],
-                              bounds.get((name, kind)), outside_bound(agent)))
+            mine = [t for t in trials if (t.agent, t.estimator) == (agent, estimator)]
+            cells.append(cell(mine, bounds.get((name, kind)), outside_bound(agent)) if mine
+                         else "–")
         print(f"| `{agent}` | `{estimator}` | " + " | ".join(cells) + " |")
     if bounds:
         print("\n| world | instruments | bound µm | best continuous design µm | laser set up on "
