@@ -69,7 +69,7 @@ def main() -> None:
                      list(warm.models), held.counts))
     slots, engaged = tuple(PAPER_SLOTS), (True,) * len(PAPER_SLOTS)
     steps, _ = fixed_plan(slots, engaged, sigma, args.budget, PROTOTYPE, conditions,
-                          instruments=tuple(n for n in owned if n != "dial"))
+                          instruments=tuple(n for n in owned if n != "dial"), warm_judged=True)
     actions = [{"op": s.op, "rho": s.rho, "stand": s.stand, "slot": s.slot,
                 **operation_keys(s)} for s in steps]
     rows.append(("`optimal`'s kept plan", np.nan, [model],

@@ -8,8 +8,10 @@ planner's criterion and on the bound's own model, over the bound.
 ``optimal`` (:func:`calibrators.agents.optimal.fixed_plan`) makes the greedy plan and, in
 a lab that owns the interferometer or the ballbar, a plan from each rounded design
 (:func:`calibrators.planning.rounding.plan_bundles`), and keeps the one whose criterion
-predicts least; the last row is the bound's own design rounded so
-(:func:`calibrators.planning.rounding.bound_bundles`), which ``optimal`` does not weigh.
+predicts least, or in a lab with a warm-up the one least on the model with the timed
+terms unknown in six bins (the last column with ``--warm-bins 6``); the last row is the
+bound's own design rounded so (:func:`calibrators.planning.rounding.bound_bundles`),
+which ``optimal`` does not weigh.
 Per plan: its predicted TCP error after rigid motion (the planner's
 criterion, um), its readings counted on the bound's model
 (:func:`calibrators.planning.bound.plan_counts`) and their error there (um), that over
@@ -31,11 +33,11 @@ import argparse
 
 import numpy as np
 
-from calibrators.planning.bound import BAR, best_design, bound_model, plan_counts, plan_hits
+from calibrators.planning.bound import BAR, best_design, bound_model, plan_counts
 from calibrators.planning.instruments import operation_keys
 from calibrators.planning.rounding import bound_bundles, plan_bundles, relaxed_plan
 from calibrators.planning.search import Planner, greedy_plan
-from calibrators.planning.warm_bound import plan_value, warm_design
+from calibrators.planning.warm_bound import steps_value, warm_design
 from orthoglide_env.instruments.dial import GaugeNoise, weighting_sigma
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op
 from orthoglide_env.model.design import PROTOTYPE
@@ -122,8 +124,7 @@ def main() -> None:
                            + [f"{sum(s.op == Op.REMOUNT for s in steps)} re-mounts"])
         extra = ""
         if warm is not None:
-            hits = plan_hits(model, PROTOTYPE, slots, engaged, actions)
-            on_warm = float(np.sqrt(plan_value(warm, hits, np.array([s.time_s for s in steps]))))
+            on_warm = float(np.sqrt(steps_value(warm, PROTOTYPE, slots, engaged, tuple(steps))))
             extra = f" {UM * on_warm:.3f}, {on_warm / held.bound.bound_mm:.2f} |"
         print(f"| {name} | {UM * planner.predicted_rigid_mm():.3f} | {UM * on_model:.3f} | "
               f"{on_model / found.bound_mm:.2f} | {counts[model.laser == -1].sum():.0f}, "

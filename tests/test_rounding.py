@@ -100,6 +100,7 @@ def test_fixed_plan_keeps_the_better_plan_and_active_finds_its_bundles(half_hour
     # rather than made again here (a third of the test's CPU): a store of plans of its
     # own, so that this set-up is planned in this test whatever ran before it.
     monkeypatch.setattr(optimal, "_PLANS", Kept(optimal.PLANS_KEPT))
+    monkeypatch.setattr(optimal, "_CANDIDATES", Kept(optimal.PLANS_KEPT))
     greedy: list[Planner] = []
 
     def watched(planner: Planner, remounts: bool = True) -> list:

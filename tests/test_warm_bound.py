@@ -6,10 +6,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from calibrators.agents import optimal
 from calibrators.agents.optimal import fixed_plan
 from calibrators.planning import warm_bound
 from calibrators.planning.bound import best_design, lab_model, plan_hits
-from calibrators.planning.warm_bound import plan_value, warm_design, warm_models, warm_rows
+from calibrators.planning.warm_bound import (
+    plan_value,
+    steps_value,
+    warm_design,
+    warm_models,
+    warm_rows,
+)
 from orthoglide_env.lab.operations import PAPER_SLOTS, TIME
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
@@ -83,3 +90,29 @@ def test_it_refuses_a_world_without_a_warm_up():
         warm_models(PROTOTYPE, Conditions("ideal"), SIGMA, BUDGET)
     with pytest.raises(ValueError, match="bins"):
         warm_models(PROTOTYPE, LAB, SIGMA, BUDGET, bins=0)
+
+
+@pytest.mark.slow
+def test_optimal_keeps_the_plan_the_timed_terms_price_least():
+    """In a lab with a warm-up and the bar, ``optimal`` keeps of its candidate plans the one
+    least on the model with the timed terms unknown, where the planner's criterion (which
+    ``active`` replays) keeps the one it predicts least; with no warm-up the two are one."""
+    instruments = ("ballbar",)
+    setup = (tuple(PAPER_SLOTS), (True,) * len(PAPER_SLOTS), SIGMA, BUDGET, PROTOTYPE)
+    judged = fixed_plan(*setup, LAB, instruments=instruments, warm_judged=True)
+    planned = fixed_plan(*setup, LAB, instruments=instruments)
+    # Both judges chose among the same candidates, made once.
+    plans = optimal._CANDIDATES.made()[(*setup, LAB, "I", True, instruments, 0.0)]
+    assert len(plans) >= 2  # the greedy plan and the rounded design's
+    assert any(judged is p for p in plans) and any(planned is p for p in plans)
+    warm = warm_models(PROTOTYPE, LAB, SIGMA, BUDGET, ("dial", *instruments))
+    values = [steps_value(warm, PROTOTYPE, *setup[:2], steps) for steps, _ in plans]
+    # Each judge's plan is the least of the candidates on its own model, so no worse
+    # there than the other judge's.
+    assert steps_value(warm, PROTOTYPE, *setup[:2], judged[0]) == pytest.approx(min(values),
+                                                                                rel=1e-12)
+    assert planned[1] == min(p for _, p in plans) <= judged[1]
+    # Without a warm-up there is nothing the planner's criterion leaves unpriced: one plan.
+    ideal = fixed_plan(*setup, Conditions("ideal"), instruments=instruments)
+    assert fixed_plan(*setup, Conditions("ideal"), instruments=instruments,
+                      warm_judged=True) is ideal

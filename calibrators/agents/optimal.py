@@ -7,7 +7,11 @@ motion per second of lab time, again and again until the budget is spent.  A pla
 no reading, so every plunger keeps three a-priori standard deviations of its reading
 clear of the pushed-in end.  Under ``lab`` or ``workshop`` conditions the plan also
 weighs the world's drift, backlash and indicator curves, and may stop before the budget
-(:mod:`calibrators.planning.world_terms`).  ``optimal-d`` plans for the D criterion instead
+(:mod:`calibrators.planning.world_terms`).  In a lab that owns the ballbar or the
+interferometer, plans that take a rounded design's bundles first are made too, and where
+the lab has a warm-up the one kept is judged on the bound's model with the warm-up and
+the stands' drift unknown (:func:`warm_judged_plan`), the terms ``full`` learns from the
+same readings.  ``optimal-d`` plans for the D criterion instead
 (the information about every unknown); ``optimal-stay`` never re-mounts a stand.  The
 plan depends only on the lab's set-up (stands, noise, budget, conditions), so it is made
 once per process and replayed on every machine; a comparison on several workers makes it
@@ -26,6 +30,7 @@ from calibrators.planning.belief import PlannedOperation
 from calibrators.planning.instruments import PLANNED_INSTRUMENTS, operation_keys
 from calibrators.planning.rounding import plan_bundles, relaxed_plan
 from calibrators.planning.search import Planner, greedy_plan
+from calibrators.planning.warm_bound import steps_value, warm_models
 from orthoglide_env.instruments.dial import weighting_sigma
 from orthoglide_env.lab.clock import move_dwell_seconds
 from orthoglide_env.lab.kept import Kept
@@ -36,8 +41,8 @@ from orthoglide_env.world.conditions import Conditions
 def fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
                budget_s: float, design: MachineDesign,
                conditions: Conditions | None = None, criterion: str = "I",
-               remounts: bool = True, instruments: tuple[str, ...] = (), dwell_s: float = 0.0
-               ) -> tuple[tuple[PlannedOperation, ...], float]:
+               remounts: bool = True, instruments: tuple[str, ...] = (), dwell_s: float = 0.0,
+               warm_judged: bool = False) -> tuple[tuple[PlannedOperation, ...], float]:
     """The greedy plan from stands at ``slots`` (-1: none) with plungers ``engaged`` on a
     machine of ``design`` in a lab of ``conditions`` (None: ideal) that owns
     ``instruments`` (the interferometer's and the ballbar's bundles are among the plan's
@@ -45,16 +50,20 @@ def fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
     move ``dwell_s`` longer than its drive and settle from the start (:func:`move_dwell_s`),
     and the TCP error after rigid motion it predicts (mm).  In a lab that owns the interferometer
     or the ballbar, the plans that first take a continuous design of the bound's model
-    rounded to bundles (:mod:`calibrators.planning.rounding`) are made too, and the one
-    predicting the least error kept (criterion ``I``).
+    rounded to bundles (:mod:`calibrators.planning.rounding`) are made too (criterion
+    ``I``), and the one kept that predicts the least error: on the planner's criterion,
+    or with ``warm_judged`` in a lab with a warm-up, on the bound's model with the timed
+    terms unknown (:func:`warm_judged_plan`).
 
     Made once per process for each set-up, however the arguments are passed: ``optimal``
     and ``active`` in one comparison (``active`` replays its re-mounts and bundles) share
-    the plan, whose rounded designs' greedy fills cost about half a CPU-minute each."""
+    the candidate plans, whose rounded designs' greedy fills cost about half a CPU-minute
+    each, and the plan too where the two judges cannot differ."""
     # Every argument by position: a cache keyed on the call's form made a second plan
     # for the same set-up when a caller left out a default another passed.
-    key = (tuple(slots), tuple(engaged), sigma, budget_s, design, conditions, criterion,
-           remounts, tuple(instruments), float(dwell_s))
+    made = (tuple(slots), tuple(engaged), sigma, budget_s, design, conditions, criterion,
+            remounts, tuple(instruments), float(dwell_s))
+    key = (*made, warm_judged and _judged_apart(conditions, criterion, instruments))
     return _PLANS.get(key, lambda: _fixed_plan(*key))
 
 
@@ -64,6 +73,11 @@ PLANS_KEPT: int = 8
 #: The plans this process made or was handed (:func:`handed_plans`), by every argument of
 #: :func:`_fixed_plan`.
 _PLANS: Kept[tuple, tuple[tuple[PlannedOperation, ...], float]] = Kept(PLANS_KEPT)
+
+#: The candidate plans (:func:`_candidate_plans`) this process made, by the set-up's
+#: arguments: both judges choose among the same ones.
+_CANDIDATES: Kept[tuple, tuple[tuple[tuple[PlannedOperation, ...], float], ...]] = Kept(
+    PLANS_KEPT)
 
 
 def made_plans() -> dict[tuple, tuple[tuple[PlannedOperation, ...], float]]:
@@ -79,11 +93,60 @@ def handed_plans(plans: dict[tuple, tuple[tuple[PlannedOperation, ...], float]])
     _PLANS.handed(plans)
 
 
+def _judged_apart(conditions: Conditions | None, criterion: str,
+                  instruments: tuple[str, ...]) -> bool:
+    """Whether judging the candidate plans with the timed terms unknown can keep another
+    plan than the planner's criterion does: only where there are plans to choose among
+    (criterion ``I``, an instrument the bound holds) and a warm-up to learn; elsewhere
+    (``ideal``, a lab of dials only) the plan is the planner's, bit for bit."""
+    return (criterion == "I" and conditions is not None and "warmup" in conditions
+            and bool({"interferometer", "ballbar"} & set(instruments)))
+
+
 def _fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
                 budget_s: float, design: MachineDesign, conditions: Conditions | None,
-                criterion: str, remounts: bool, instruments: tuple[str, ...], dwell_s: float
-                ) -> tuple[tuple[PlannedOperation, ...], float]:
+                criterion: str, remounts: bool, instruments: tuple[str, ...], dwell_s: float,
+                warm_judged: bool) -> tuple[tuple[PlannedOperation, ...], float]:
     """:func:`fixed_plan`, its arguments all given, made."""
+    made = (slots, engaged, sigma, budget_s, design, conditions, criterion, remounts,
+            instruments, dwell_s)
+    plans = _CANDIDATES.get(made, lambda: _candidate_plans(*made))
+    if not warm_judged:
+        return min(plans, key=lambda plan: plan[1])  # the first of the least, as ever
+    assert conditions is not None  # _judged_apart: a lab with a warm-up
+    return warm_judged_plan(plans, slots, engaged, sigma, budget_s, design, conditions,
+                            instruments)
+
+
+def warm_judged_plan(plans: tuple[tuple[tuple[PlannedOperation, ...], float], ...],
+                     slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
+                     budget_s: float, design: MachineDesign, conditions: Conditions,
+                     instruments: tuple[str, ...]) -> tuple[tuple[PlannedOperation, ...], float]:
+    """Of ``plans`` (steps and predicted error) from stands at ``slots`` with plungers
+    ``engaged``, the first whose error on the bound's model with the warm-up and the
+    stands' drift unknown (:func:`~calibrators.planning.warm_bound.steps_value`, its
+    readings in :data:`~calibrators.planning.warm_bound.TIME_BINS` bins of
+    ``budget_s``) is least.  The ``full`` fit learns those terms from every reading, the
+    bar's and the laser's among them, where the planner's criterion weighs the warm-up on
+    the dials' readings only (an instrument's rows,
+    :func:`~calibrators.planning.instruments.reading_rows`, carry none): on it a plan that
+    reads the bar once the warm-up has grown looks no worse than one that reads it cold
+    and spread over the time; on this model, the one the fit and the bound share, it
+    does."""
+    start = tuple(int(s) for s in slots if s >= 0)
+    warm = warm_models(design, conditions, sigma, budget_s, ("dial", *instruments),
+                       len(slots), start=start)
+    values = [steps_value(warm, design, slots, engaged, steps) for steps, _ in plans]
+    return plans[int(np.argmin(values))]
+
+
+def _candidate_plans(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
+                     budget_s: float, design: MachineDesign, conditions: Conditions | None,
+                     criterion: str, remounts: bool, instruments: tuple[str, ...],
+                     dwell_s: float) -> tuple[tuple[tuple[PlannedOperation, ...], float], ...]:
+    """The plans :func:`fixed_plan` chooses among, each with its predicted error (mm): the
+    greedy plan, then one per rounded design (:func:`~calibrators.planning.rounding.
+    plan_bundles`, criterion ``I``)."""
     def opened() -> Planner:
         planner = Planner(list(slots), list(engaged), sigma, budget_s, criterion=criterion,
                           design=design, conditions=conditions, instruments=instruments,
@@ -92,17 +155,14 @@ def _fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
         return planner
 
     planner = opened()
-    steps = greedy_plan(planner, remounts=remounts)
-    best = tuple(steps), planner.predicted_rigid_mm()
+    plans = [(tuple(greedy_plan(planner, remounts=remounts)), planner.predicted_rigid_mm())]
     for relaxed in plan_bundles(slots, sigma, budget_s, design, conditions, instruments
                                 ) if criterion == "I" else ():
-        # A design of the bound's model rounded, the dials greedy around it: kept where
-        # it predicts better than the greedy plan alone.
+        # A design of the bound's model rounded, the dials greedy around it.
         planner = opened()
-        steps = relaxed_plan(planner, relaxed, remounts)
-        if planner.predicted_rigid_mm() < best[1]:
-            best = tuple(steps), planner.predicted_rigid_mm()
-    return best
+        plans.append((tuple(relaxed_plan(planner, relaxed, remounts)),
+                      planner.predicted_rigid_mm()))
+    return tuple(plans)
 
 
 def lab_setup(env: gym.Env, observation: dict[str, np.ndarray], reserved_s: float = 0.0
@@ -147,6 +207,9 @@ class OptimalAgent(PlannedAgent):
     remounts = True
     #: Whether the instruments the lab owns beyond its dials are among the options.
     plans_instruments = True
+    #: Whether the plan is kept on the bound's model with the timed terms unknown
+    #: (:func:`warm_judged_plan`), where the lab has a warm-up.
+    warm_judged = True
 
     def make_plan(self, observation: dict[str, np.ndarray]) -> list[dict[str, Any]]:
         steps, self.predicted_rigid_mm = fixed_plan(*lab_setup(self.env, observation,
@@ -155,7 +218,8 @@ class OptimalAgent(PlannedAgent):
                                                     remounts=self.remounts,
                                                     instruments=owned_instruments(self.env)
                                                     if self.plans_instruments else (),
-                                                    dwell_s=move_dwell_s(observation))
+                                                    dwell_s=move_dwell_s(observation),
+                                                    warm_judged=self.warm_judged)
         return [action(s.op, s.rho, s.stand, s.slot, **operation_keys(s)) for s in steps]
 
 

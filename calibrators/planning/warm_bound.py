@@ -46,6 +46,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from calibrators.estimators.consider import drift_terms, warmup_terms
+from calibrators.planning.belief import PlannedOperation
 from calibrators.planning.bound import (
     BAR,
     GAP_EVERY,
@@ -66,10 +67,11 @@ from calibrators.planning.bound import (
     best_visits,
     dial_grid,
     lab_model,
+    plan_hits,
     problems,
     start_slots,
 )
-from calibrators.planning.instruments import bar_layout
+from calibrators.planning.instruments import bar_layout, operation_keys
 from orthoglide_env.instruments import ballbar, interferometer
 from orthoglide_env.lab.operations import PAPER_SLOTS
 from orthoglide_env.lab.slot_table import slot_table
@@ -158,10 +160,12 @@ def warm_rows(model: BoundModel, design: MachineDesign, conditions: Conditions,
 def warm_models(design: MachineDesign, conditions: Conditions, dial_sigma: float,
                 budget_s: float, instruments: tuple[str, ...] = ("dial",),
                 stands: int = len(PAPER_SLOTS), bins: int = TIME_BINS,
-                terms: tuple[str, ...] = TIMED_TERMS) -> WarmModels:
+                terms: tuple[str, ...] = TIMED_TERMS, start: tuple[int, ...] | None = None
+                ) -> WarmModels:
     """The bound's model of the lab (:func:`~calibrators.planning.bound.lab_model`) per
     bin of ``bins`` over ``budget_s``, the timed ``terms`` appended to its unknowns
-    (:func:`warm_rows`)."""
+    (:func:`warm_rows`), the stands' drift at the ``start`` slots (None: the lab's,
+    :func:`~calibrators.planning.bound.start_slots`)."""
     if "warmup" not in conditions:
         raise ValueError(f"conditions {conditions.name!r} have no warm-up to bound")
     if not (isinstance(bins, int) and bins >= 1):
@@ -171,7 +175,7 @@ def warm_models(design: MachineDesign, conditions: Conditions, dial_sigma: float
     models = []
     for t in (edges[:-1] + edges[1:]) / 2:
         warm = warm_rows(model, design, conditions, dial_sigma, t,
-                         start_slots(design, stands), terms)
+                         start_slots(design, stands) if start is None else start, terms)
         models.append(replace(model, rows=np.hstack([model.rows, warm]), factor=np.vstack(
             [model.factor, np.zeros((warm.shape[1], model.factor.shape[1]))])))
     return WarmModels(tuple(models), edges)
@@ -301,3 +305,13 @@ def plan_value(warm: WarmModels, hits: np.ndarray, times: np.ndarray) -> float:
     counts = np.zeros((len(warm.models), n))
     np.add.at(counts, (when, hits[:, 1]), 1.0)
     return warm.value(counts)
+
+
+def steps_value(warm: WarmModels, design: MachineDesign, slots: tuple[int, ...],
+                engaged: tuple[bool, ...], steps: tuple[PlannedOperation, ...]) -> float:
+    """:func:`plan_value` (mm^2) of a planner's ``steps`` from stands at ``slots`` with
+    plungers ``engaged``, each reading at its step's planned time."""
+    actions = [{"op": s.op, "rho": s.rho, "stand": s.stand, "slot": s.slot,
+                **operation_keys(s)} for s in steps]
+    hits = plan_hits(warm.models[0], design, slots, engaged, actions)
+    return plan_value(warm, hits, np.array([s.time_s for s in steps]))
