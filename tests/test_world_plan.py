@@ -14,8 +14,10 @@ from calibrators.planning.belief import (
     N_MACHINE,
     N_STAND,
     PlannedOperation,
+    _missed,
     observe_many,
     predicted_tips_many,
+    tips_at,
 )
 from calibrators.planning.pricing import WORLD_SHORTLIST, top_rates_many
 from calibrators.planning.search import (
@@ -226,6 +228,16 @@ def test_filters_priced_together_price_as_each_alone() -> None:
             columns = np.r_[:N_MACHINE, N_MACHINE + N_STAND * k + np.arange(N_STAND - 1)]
             own = p.table.change[slot] @ p.mean[columns]
             np.testing.assert_array_equal(tips[k], p.table.tip[slot] + p.table.sign[slot] * own)
+    # At any entries alone (the moves' pricing asks a few hundred postures a stand), the
+    # same tips to the bit: counts of postures that are and are not multiples of four,
+    # where the tip meets its bar (elsewhere it is NaN whatever the product).
+    full = predicted_tips_many(filters)
+    meets = np.flatnonzero(~np.isnan(full))
+    for size in (1, 2, 3, 4, 5, 7, 301, meets.size - 1):
+        asked = np.unravel_index(np.sort(rng.choice(meets, size, replace=False)), full.shape)
+        np.testing.assert_array_equal(tips_at(filters, asked), full[asked])
+    np.testing.assert_array_equal(_missed(filters, np.maximum([p.slots for p in filters], 0)),
+                                  np.isnan(full))
     alone = [p.fork().top_rates(1) for p in filters]
     together = top_rates_many([p.fork() for p in filters], 1)
     for (rate, priced), (rate_, priced_) in zip(alone, together, strict=True):

@@ -404,13 +404,77 @@ def predicted_tips_many(beliefs: list[Belief], postures: np.ndarray | slice = sl
     table = beliefs[0].table
     slots = np.maximum(np.array([b.slots for b in beliefs]), 0)  # (M, K)
     tip = table.tip[slots][..., postures]
-    columns = np.stack([_stand_columns(k)[:-1] for k in range(slots.shape[1])])
-    means = np.stack([b.mean for b in beliefs])[:, columns]  # (M, K, C)
+    means = _tip_means(beliefs)
     for slot in np.unique(slots):
         at = slots == slot
         change = np.matmul(table.change[slot][postures], means[at][..., None])[..., 0]
         tip[at] += table.sign[slot] * change
     return tip
+
+
+def tips_at(beliefs: list[Belief], asked: tuple[np.ndarray, np.ndarray, np.ndarray]
+            ) -> np.ndarray:
+    """:func:`predicted_tips_many` at every posture, at the entries ``asked`` alone
+    (machine, stand and posture indices), each to the bit as it has it there.
+
+    A slot's stands get their changes at the postures asked of any of them, not at all
+    1,500: a few hundred where a stand may go down.  BLAS's matrix-vector kernel takes
+    the rows of a stand's product four at a time and any rows left over its own way (a
+    few ulps off), and a slot table holds a multiple of four postures: so the postures
+    asked are padded to a multiple of four by repeating the last, and each row's value
+    is the full product's, whichever others are computed with it."""
+    table = beliefs[0].table
+    slots = np.maximum(np.array([b.slots for b in beliefs]), 0)  # (M, K)
+    m, k, j = asked
+    pair = m * slots.shape[1] + k
+    slot = slots.ravel()[pair]
+    tips = table.tip[slot, j]
+    means = _tip_means(beliefs)
+    # Each (machine, stand)'s row in its slot's product, each posture's column in it.
+    row_of = np.zeros(slots.size, dtype=int)
+    column_of = np.zeros(len(table.postures), dtype=int)
+    # The slots of the (machine, stand) pairs, not of the entries: as many, far fewer.
+    for value in np.unique(slots):
+        mine = np.flatnonzero(slot == value)
+        if not mine.size:
+            continue
+        at = slots == value
+        row_of[np.flatnonzero(at)] = np.arange(np.count_nonzero(at))
+        needed = np.zeros(len(table.postures), dtype=bool)
+        needed[j[mine]] = True
+        postures = np.flatnonzero(needed)
+        column_of[postures] = np.arange(len(postures))
+        rows = np.concatenate((postures, np.full(-len(postures) % 4, postures[-1])))
+        change = np.matmul(table.change[value][rows], means[at][..., None])[..., 0]
+        tips[mine] += table.sign[value] * change[row_of[pair[mine]], column_of[j[mine]]]
+    return tips
+
+
+def _tip_means(beliefs: list[Belief]) -> np.ndarray:
+    """The means (M, K, C) of the unknowns each stand's tip moves with (:meth:`Belief.
+    _columns` but the zero) of filters ``beliefs``."""
+    columns = np.stack([_stand_columns(k)[:-1] for k in range(len(beliefs[0].slots))])
+    return np.stack([b.mean for b in beliefs])[:, columns]
+
+
+@lru_cache(maxsize=8)
+def _change_bound(design: MachineDesign) -> float:
+    """The largest sum of absolute changes (mm per unit) over a row of the design's slot
+    table: a tip's change from means of at most ``x`` in size is at most this times
+    ``x``."""
+    return float(np.max(np.sum(np.abs(slot_table(design).change), axis=-1)))
+
+
+def _missed(beliefs: list[Belief], used: np.ndarray) -> np.ndarray:
+    """Where each stand's predicted tip (:func:`predicted_tips_many`, M, K, P) misses its
+    bar (NaN), read off the table's nominal tips: a predicted tip is the nominal one
+    plus a product of finite changes with the means, finite (no NaN, no overflow) when
+    the means are finite and below ``1e300`` over :func:`_change_bound`; else from the
+    tips themselves."""
+    size = np.max(np.abs(_tip_means(beliefs)))
+    if np.isfinite(size) and size * _change_bound(beliefs[0].design) < 1e300:
+        return np.isnan(beliefs[0].table.tip[used])
+    return np.isnan(predicted_tips_many(beliefs))
 
 
 def reaches(beliefs: list[Belief], postures: np.ndarray | slice = slice(None)
@@ -429,8 +493,8 @@ def reaches(beliefs: list[Belief], postures: np.ndarray | slice = slice(None)
     never grows until its stand is re-mounted."""
     tip, spread, index = _tips_and_bounds(beliefs, postures)
     safe, contact = np.zeros(tip.shape, dtype=bool), np.zeros(tip.shape)
-    _reach_where(beliefs, tip, spread, index, np.nonzero(np.ones(tip.shape, dtype=bool)),
-                 safe, contact)
+    _reach_where(beliefs, tip.ravel(), spread, index,
+                 np.nonzero(np.ones(tip.shape, dtype=bool)), safe, contact)
     return list(zip(*_unread(beliefs, safe, contact, postures), strict=True))
 
 
@@ -449,19 +513,24 @@ def move_reaches(beliefs: list[Belief]) -> tuple[np.ndarray, np.ndarray]:
     table = beliefs[0].table
     slots = np.array([b.slots for b in beliefs])  # (M, K)
     used, mounted = np.maximum(slots, 0), slots >= 0
-    tip, spread, index = _tips_and_bounds(beliefs, slice(None))
+    spread = _spread_bounds(beliefs, slice(None))
+    index = np.arange(len(table.postures))
     machines, here = np.arange(len(beliefs)), np.array([b.here for b in beliefs])
     count = slots.shape[1]
     # Both passes fill one pair of arrays: their entries are apart (here, then elsewhere),
-    # the first's taken in the order a mask's would be (machine, stand).
-    safe, contact = np.zeros(tip.shape, dtype=bool), np.zeros(tip.shape)
-    _reach_where(beliefs, tip, spread, index, (np.repeat(machines, count), np.tile(
-        np.arange(count), len(beliefs)), np.repeat(here, count)), safe, contact)
+    # the first's taken in the order a mask's would be (machine, stand).  The second
+    # reads no spread bound the first lowered.
+    safe, contact = np.zeros((*slots.shape, len(index)), dtype=bool), np.zeros(
+        (*slots.shape, len(index)))
+    first = (np.repeat(machines, count), np.tile(np.arange(count), len(beliefs)),
+             np.repeat(here, count))
+    _reach_where(beliefs, tips_at(beliefs, first), spread, index, first, safe, contact)
     may = (np.array([b.engaged for b in beliefs]) | safe[machines, :, here]) & mounted
-    missed = np.isnan(tip)
+    missed = _missed(beliefs, used)
     asked = may[..., None] & ~missed & ~table.pressed[used]
     asked[machines, :, here] = False
-    _reach_where(beliefs, tip, spread, index, np.nonzero(asked), safe, contact)
+    second = np.nonzero(asked)
+    _reach_where(beliefs, tips_at(beliefs, second), spread, index, second, safe, contact)
     safe |= may[..., None] & missed & ~table.near[used]
     return _unread(beliefs, safe, contact, slice(None))
 
@@ -469,26 +538,31 @@ def move_reaches(beliefs: list[Belief]) -> tuple[np.ndarray, np.ndarray]:
 def _tips_and_bounds(beliefs: list[Belief], postures: np.ndarray | slice
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every stand's predicted tip (M, K, P') at ``postures`` of each of ``beliefs``, the
-    upper bound of its spread there (:data:`SPREAD_SLACK` added) and the postures'
-    indices (P')."""
-    tip = predicted_tips_many(beliefs, postures)
-    spread = np.stack([b.spread_bound[:, postures] for b in beliefs]) + SPREAD_SLACK
-    return tip, spread, np.arange(len(beliefs[0].table.postures))[postures]
+    upper bound of its spread there (:func:`_spread_bounds`) and the postures' indices
+    (P')."""
+    return (predicted_tips_many(beliefs, postures), _spread_bounds(beliefs, postures),
+            np.arange(len(beliefs[0].table.postures))[postures])
 
 
-def _reach_where(beliefs: list[Belief], tip: np.ndarray, spread: np.ndarray,
+def _spread_bounds(beliefs: list[Belief], postures: np.ndarray | slice) -> np.ndarray:
+    """The upper bound (M, K, P') of every stand's spread at ``postures`` of each of
+    ``beliefs``, :data:`SPREAD_SLACK` added."""
+    return np.stack([b.spread_bound[:, postures] for b in beliefs]) + SPREAD_SLACK
+
+
+def _reach_where(beliefs: list[Belief], tips: np.ndarray, spread: np.ndarray,
                  index: np.ndarray, asked: tuple[np.ndarray, np.ndarray, np.ndarray],
                  safe: np.ndarray, contact: np.ndarray) -> None:
-    """:func:`reaches`' ``safe`` and ``contact`` (M, K, P') from the tips and spread bounds
-    of :func:`_tips_and_bounds`, entered at the entries ``asked`` (machine, stand and
-    posture indices, in C order), each entry's answer its own: a spread computed where
+    """:func:`reaches`' ``safe`` and ``contact`` (M, K, P') from the predicted tips at the
+    entries ``asked`` (machine, stand and posture indices, in C order) and the spread
+    bounds (M, K, P') of :func:`_tips_and_bounds`, entered at those entries, each
+    entry's answer its own: a spread computed where
     the bound leaves it open (each stand's together, in the order of its postures), its
     bound lowered to it."""
     table = beliefs[0].table
     slots = np.array([b.slots for b in beliefs])
     m, k, j = asked
-    slot, posture, tips, spreads = np.maximum(slots[m, k], 0), index[j], tip[m, k, j], spread[
-        m, k, j]
+    slot, posture, spreads = np.maximum(slots[m, k], 0), index[j], spread[m, k, j]
     safe_at, contact_at = reach_at(table, slot, posture, tips, spreads)
     with np.errstate(invalid="ignore"):
         open_ = np.flatnonzero((tips >= END_GAP) & (contact_at < 1.0)
