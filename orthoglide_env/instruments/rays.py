@@ -22,6 +22,7 @@ from orthoglide_env.model.boxes import (
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import (
+    broadcast_copy,
     carriage_points,
     direct,
     dot,
@@ -53,7 +54,7 @@ def ray_box_interval(origin: np.ndarray, direction: np.ndarray, centre: np.ndarr
     # batch is mostly calls on short arrays), each number computed as the loop did.
     v = _components(origin - centre, shape)
     d = _components(direction, shape)
-    r = np.ascontiguousarray(np.broadcast_to(_leading(rot, 2), (3, 3, *shape)))
+    r = broadcast_copy(_leading(rot, 2), (3, 3, *shape))
     h = _components(half, shape)
     o = r[0] * v[0] + r[1] * v[1] + r[2] * v[2]
     d = r[0] * d[0] + r[1] * d[1] + r[2] * d[2]
@@ -73,7 +74,7 @@ def ray_box_interval(origin: np.ndarray, direction: np.ndarray, centre: np.ndarr
 def _components(vector: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     """The three coordinates of ``vector`` (``(..., 3)``) as one contiguous array
     ``(3, *shape)``."""
-    return np.ascontiguousarray(np.broadcast_to(_leading(vector, 1), (3, *shape)))
+    return broadcast_copy(_leading(vector, 1), (3, *shape))
 
 
 def _leading(x: np.ndarray, tail: int) -> np.ndarray:
