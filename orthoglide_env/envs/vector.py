@@ -17,7 +17,7 @@ from orthoglide_env.envs.base import Face, check_seed
 from orthoglide_env.instruments.slots import GaugeSpec
 from orthoglide_env.lab.engine import LabBatch, StepResult
 from orthoglide_env.lab.machines import ExactMachines
-from orthoglide_env.lab.operations import Op
+from orthoglide_env.lab.operations import CODE
 from orthoglide_env.lab.settings import LabSettings
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.world.truth import World
@@ -113,7 +113,7 @@ class EngineVectorEnv(Face, VectorEnv):
         rows = np.flatnonzero(~resetting)
         # Only a re-mount draws before it can fail (a slot its machine cannot reach): then
         # no env has stepped and no stream has moved.
-        with self._streams_kept(rows[op[rows] == Op.REMOUNT]):
+        with self._streams_kept(rows[op[rows] == CODE.REMOUNT]):
             result = self._batch.step(rows, op[rows], rho[rows], stand[rows], slot[rows])
         obs = self._copy_obs()
         for key, value in result.obs.items():

@@ -115,12 +115,18 @@ class GaugeArray:
         return GaugeArray(**{f.name: getattr(self, f.name)[index] for f in fields(self)})
 
     def columns(self, index: np.ndarray) -> GaugeArray:
-        """The gauges ``index`` of every set (along the gauge axis)."""
+        """The gauges ``index`` of every set (along the gauge axis); remembered, with what
+        they work out (their targets), for the next ask of the same gauges: a lab looks
+        at the stands down at every step, and its gauges change only at a re-mount."""
         if np.array_equal(index, np.arange(self.count)):  # all of them, as most looks ask
             return self
-        at = len(self.batch_shape)
-        return GaugeArray(**{f.name: np.take(getattr(self, f.name), index, axis=at)
-                             for f in fields(self)})
+        kept = self.__dict__.setdefault("_columns", {})  # (frozen: as cached_property does)
+        key = tuple(np.asarray(index).tolist())
+        if key not in kept:
+            at = len(self.batch_shape)
+            kept[key] = GaugeArray(**{f.name: np.take(getattr(self, f.name), index, axis=at)
+                                      for f in fields(self)})
+        return kept[key]
 
     def with_rows(self, index: Any, rows: GaugeArray) -> GaugeArray:
         """A copy of this batch whose gauges at ``index`` (machines along the first batch

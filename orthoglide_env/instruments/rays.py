@@ -22,6 +22,7 @@ from orthoglide_env.model.boxes import (
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import (
+    broadcast_copy,
     carriage_points,
     direct,
     dot,
@@ -48,32 +49,32 @@ def ray_box_interval(origin: np.ndarray, direction: np.ndarray, centre: np.ndarr
     # Coordinates first, each a contiguous array of the full shape: numpy then runs every
     # operation below as one long loop instead of one loop per three numbers (rays
     # against every box of thousands of machines is ~10x faster).  Same arithmetic, in
-    # the same order, as to_box_frame.
+    # the same order, as to_box_frame.  The three slabs at once, row i of each array the
+    # slab of box axis i: a third of the calls of a loop over them (a look of a lab's
+    # batch is mostly calls on short arrays), each number computed as the loop did.
     v = _components(origin - centre, shape)
     d = _components(direction, shape)
-    r = np.ascontiguousarray(np.broadcast_to(_leading(rot, 2), (3, 3, *shape)))
+    r = broadcast_copy(_leading(rot, 2), (3, 3, *shape))
     h = _components(half, shape)
-    t_in = t_out = None
-    for i in range(3):
-        o_i = r[0, i] * v[0] + r[1, i] * v[1] + r[2, i] * v[2]
-        d_i = r[0, i] * d[0] + r[1, i] * d[1] + r[2, i] * d[2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t1 = (-h[i] - o_i) / d_i
-            t2 = (h[i] - o_i) / d_i
-        # A ray parallel to a slab is inside it everywhere or nowhere.
-        inside = np.abs(o_i) <= h[i]
-        parallel = d_i == 0
-        lo = np.where(parallel, np.where(inside, -np.inf, np.inf), np.minimum(t1, t2))
-        hi = np.where(parallel, np.where(inside, np.inf, -np.inf), np.maximum(t1, t2))
-        t_in = lo if t_in is None else np.maximum(t_in, lo)
-        t_out = hi if t_out is None else np.minimum(t_out, hi)
-    return t_in, t_out  # type: ignore[return-value]
+    o = r[0] * v[0] + r[1] * v[1] + r[2] * v[2]
+    d = r[0] * d[0] + r[1] * d[1] + r[2] * d[2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1 = (-h - o) / d
+        t2 = (h - o) / d
+    # A ray parallel to a slab is inside it everywhere or nowhere.
+    inside = np.abs(o) <= h
+    parallel = d == 0
+    lo = np.where(parallel, np.where(inside, -np.inf, np.inf), np.minimum(t1, t2))
+    hi = np.where(parallel, np.where(inside, np.inf, -np.inf), np.maximum(t1, t2))
+    t_in = np.maximum(np.maximum(lo[0], lo[1]), lo[2])
+    t_out = np.minimum(np.minimum(hi[0], hi[1]), hi[2])
+    return t_in, t_out
 
 
 def _components(vector: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     """The three coordinates of ``vector`` (``(..., 3)``) as one contiguous array
     ``(3, *shape)``."""
-    return np.ascontiguousarray(np.broadcast_to(_leading(vector, 1), (3, *shape)))
+    return broadcast_copy(_leading(vector, 1), (3, *shape))
 
 
 def _leading(x: np.ndarray, tail: int) -> np.ndarray:
@@ -172,6 +173,7 @@ def _pick(values: np.ndarray, index: np.ndarray, tail: int) -> np.ndarray:
 def exact_ray_distances(
     machine: MachineParams, gauges: GaugeArray | Sequence[Gauge], rho: np.ndarray,
     boxes: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    targets: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Exact tip distances ``t`` of every gauge, shape ``(*batch, *postures, G)`` for
     ``rho`` of shape ``(*batch, *postures, 3)`` and gauges of batch shape ``batch`` (or one
@@ -181,7 +183,8 @@ def exact_ray_distances(
     before the target within the window a gauge can see (``-RAY_BACKOFF`` to
     ``travel + RAY_BACKOFF``).  A target behind the tip (``t < 0``) is an overtravel
     whatever else is on the ray: it presses the gauge.  ``boxes``: the
-    :func:`collision_boxes` at ``rho`` when already computed.
+    :func:`collision_boxes` at ``rho`` when already computed, ``targets`` their
+    :func:`exact_target_boxes`.
     """
     rho = np.asarray(rho, dtype=float)
     centre, rot, half = boxes or collision_boxes(machine, rho, direct(machine, rho))
@@ -194,8 +197,9 @@ def exact_ray_distances(
     t_out_target = _pick(t_out, target[..., None], 0)[..., 0]
     t = np.where(t_out_target >= t_in_target, t_in_target, np.nan)
     hit = g.origin + np.nan_to_num(t)[..., None] * g.direction
-    t = np.where(on_flat_face(hit, *exact_target_boxes(g, (centre, rot, half)), face=g.face),
-                 t, np.nan)
+    if targets is None:
+        targets = exact_target_boxes(g, (centre, rot, half))
+    t = np.where(on_flat_face(hit, *targets, face=g.face), t, np.nan)
     others = np.arange(len(BOX_NAMES)) != target[..., None]
     reach = g.travel + RAY_BACKOFF
     in_window = (t_out >= -RAY_BACKOFF) & (t_in <= t_out) & (t_in < t[..., None])

@@ -54,7 +54,8 @@ class Part(IntEnum):
 def on_platform(part: np.ndarray | int) -> np.ndarray:
     """Whether a gauge of ``part`` touches a platform face (a platform or reference gauge)."""
     part = np.asarray(part)
-    return (part == Part.PLATFORM) | (part == Part.REFERENCE)
+    # Plain ints: numpy compares an array with an IntEnum member several times slower.
+    return (part == int(Part.PLATFORM)) | (part == int(Part.REFERENCE))
 
 
 #: The leg of a platform gauge: it has none.
@@ -80,8 +81,8 @@ def target_index(part: np.ndarray | int, leg: np.ndarray | int, face: np.ndarray
     below), the leg's carriage, or the platform."""
     part, leg = np.asarray(part), np.asarray(leg)
     bar = 2 * leg + (np.asarray(face) == 2)
-    return np.where(part == Part.BAR, bar,
-                    np.where(part == Part.CARRIAGE, CARRIAGE_BOX + leg, PLATFORM_BOX))
+    return np.where(part == int(Part.BAR), bar,
+                    np.where(part == int(Part.CARRIAGE), CARRIAGE_BOX + leg, PLATFORM_BOX))
 
 
 @dataclass(frozen=True)

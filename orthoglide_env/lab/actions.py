@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from orthoglide_env.lab.operations import V0_OPS, V1_OPS, V2_OPS, Op
+from orthoglide_env.lab.operations import CODE, V0_OPS, V1_OPS, V2_OPS, Op
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import check_rho
 from orthoglide_env.world.table import BALLBAR_LENGTHS_MM
@@ -87,19 +87,19 @@ def check_lab_actions(action: Any, shape: tuple[int, ...], stands: int, slots: i
     op = _integers(action["op"], "op", ops, shape, used)
     stand = _integers(action["stand"], "stand", stands, shape, used)
     slot = _integers(action["slot"], "slot", slots, shape, used)
-    for kind, key, size, what in ((Op.ALIGN, "axis", 3, "align: the drive (0, 1, 2 for x, y, "
+    for kind, key, size, what in ((CODE.ALIGN, "axis", 3, "align: the drive (0, 1, 2 for x, y, "
                                    "z) to set the interferometer up along"),
-                                  (Op.PIVOT, "bar", len(BALLBAR_LENGTHS_MM), "pivot: the "
+                                  (CODE.PIVOT, "bar", len(BALLBAR_LENGTHS_MM), "pivot: the "
                                    f"index of the bar's length in {list(BALLBAR_LENGTHS_MM)} "
                                    "mm"),
-                                  (Op.PLACE, "axis", 3, "place: the world axis (0, 1, 2 for "
+                                  (CODE.PLACE, "axis", 3, "place: the world axis (0, 1, 2 for "
                                    "x, y, z) to lay the step gauge along")):
         doing = used & (op == kind)
         if doing.any():
             if key not in action:
                 raise ValueError(f"action {key} is needed by {what}")
             slot = np.where(doing, _integers(action[key], key, size, shape, doing), slot)
-    moving = used & ((op == Op.MOVE) | (op == Op.PIVOT) | (op == Op.PLACE))
+    moving = used & ((op == CODE.MOVE) | (op == CODE.PIVOT) | (op == CODE.PLACE))
     rho = np.zeros((*shape, 3))
     if moving.any():
         given = check_targets(action["rho"], (*shape, 3), rows=moving if shape else None,

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from orthoglide_env.lab.operations import TIME, Op
+from orthoglide_env.lab.operations import CODE, TIME
 
 
 def move_dwell_seconds(tracker: bool = False, laser: np.ndarray | bool = False,
@@ -35,15 +35,15 @@ def travel_seconds(op: np.ndarray, before: np.ndarray, goal: np.ndarray, tracker
     reference slot (``blocked``, (R,), in a lab with the gauge block) the block's; in a
     lab with the interferometer, a set-up its work (and the material sensor's soak before
     the first, ``soak`` (R,)); in a lab with the step gauge, a set-up its work."""
-    work = np.where(op == Op.PIVOT, TIME.ballbar_setup_s, TIME.remount_s)
+    work = np.where(op == CODE.PIVOT, TIME.ballbar_setup_s, TIME.remount_s)
     if laser is not None and soak is not None:
         setup = TIME.interferometer_setup_s + np.where(soak, TIME.interferometer_soak_s, 0.0)
-        work = np.where(op == Op.ALIGN, setup, work)
+        work = np.where(op == CODE.ALIGN, setup, work)
     if probe is not None:
-        work = np.where(op == Op.PLACE, TIME.step_gauge_setup_s, work)
+        work = np.where(op == CODE.PLACE, TIME.step_gauge_setup_s, work)
     dwell = move_dwell_seconds(tracker, False if laser is None or soak is None else laser,
                                False if probe is None else probe)
-    seconds = TIME.move(before, goal) + np.where(op == Op.MOVE, dwell, work)
+    seconds = TIME.move(before, goal) + np.where(op == CODE.MOVE, dwell, work)
     if blocked is not None:
         seconds = seconds + np.where(blocked, TIME.reference_s, 0.0)
     return seconds

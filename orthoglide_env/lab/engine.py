@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from orthoglide_env.instruments import ballbar, interferometer, step_gauge, thermometer
-from orthoglide_env.instruments.dial import Status, readings_from_distances, status_of
+from orthoglide_env.instruments.dial import Status, readings_of_status, status_of
 from orthoglide_env.instruments.gauges import Gauge, GaugeArray
 from orthoglide_env.instruments.slots import GaugeSpec, Part, on_platform
 from orthoglide_env.instruments.stands import install_array, installation_errors
@@ -29,7 +29,7 @@ from orthoglide_env.lab.clock import overtravel_seconds, step_seconds, travel_se
 from orthoglide_env.lab.faults import LabFaults
 from orthoglide_env.lab.machines import ExactMachine, LabMachines, Sight
 from orthoglide_env.lab.notebook import Notebook, Record, predicted_many
-from orthoglide_env.lab.operations import OP_NAMES, TIME, TRACKER_DISTANCE, Op
+from orthoglide_env.lab.operations import CODE, OP_NAMES, TIME, TRACKER_DISTANCE, Op
 from orthoglide_env.lab.refusals import assembled as assembled  # re-exported: its old home
 from orthoglide_env.lab.refusals import raise_unreachable, refusals
 from orthoglide_env.lab.rewards import ACCURACY_UNIT_MM as ACCURACY_UNIT_MM  # (its old home)
@@ -335,13 +335,13 @@ class LabBatch:
         settings, machines = self.settings, self.require()
         # Where each move or re-mount takes the carriages, and when: the commanded posture
         # in an ideal world.
-        aligns = op == Op.ALIGN  # (its axis is in ``slot``)
-        pivots = op == Op.PIVOT  # (its bar is in ``slot``)
-        places = op == Op.PLACE  # (its axis is in ``slot``)
-        goal = np.where(((op == Op.REMOUNT) | aligns)[:, None], 0.0, rho)
+        aligns = op == CODE.ALIGN  # (its axis is in ``slot``)
+        pivots = op == CODE.PIVOT  # (its bar is in ``slot``)
+        places = op == CODE.PLACE  # (its axis is in ``slot``)
+        goal = np.where(((op == CODE.REMOUNT) | aligns)[:, None], 0.0, rho)
         laser = self.laser_axis[rows] >= 0
         travel_s = travel_seconds(op, self.rho[rows], goal, settings.tracker, (
-            (op == Op.REMOUNT) & self._references(slot) if settings.reference else None),
+            (op == CODE.REMOUNT) & self._references(slot) if settings.reference else None),
             *((laser, self.laser_setups[rows] == 0) if settings.interferometer else
               (None, None)), probe=self.gauge_in[rows] if settings.step_gauge else None)
         approach, target = self._carriages(rows, goal, self.time[rows] + travel_s)
@@ -363,14 +363,14 @@ class LabBatch:
         ok = np.array([not r for r in refused], dtype=bool)
         inserted = self._bar_after(rows, ok, op, goal)
         probing = self._gauge_after(rows, ok, op, goal)
-        moves, remounts = ok & (op == Op.MOVE), ok & (op == Op.REMOUNT)
+        moves, remounts = ok & (op == CODE.MOVE), ok & (op == CODE.REMOUNT)
         aligned, pivoted, placed = ok & aligns, ok & pivots, ok & places
-        flicks = ok & ((op == Op.LIFT) | (op == Op.ENGAGE))
+        flicks = ok & ((op == CODE.LIFT) | (op == CODE.ENGAGE))
         # New installations first (they draw from the streams before the readings do, and
         # may fail): nothing is stored before they are made.
         mounted = self._installations(rows[remounts], stand[remounts], slot[remounts],
                                       (self.time[rows] + travel_s)[remounts],
-                                      approach[remounts])
+                                      approach[remounts]) if remounts.any() else None
         seconds = step_seconds(ok, flicks, moves | remounts | aligned | pivoted | placed,
                                travel_s)
         # An operation that cannot end within the budget is not begun: the time is up.
@@ -382,12 +382,14 @@ class LabBatch:
         self.bar_ready[rows] &= ~ok  # (a set-up below makes its own ready)
         if aligned.any():
             self._align(rows[aligned], slot[aligned])
-        self._flick(rows[flicks], stand[flicks], (op == Op.ENGAGE)[flicks])
+        if flicks.any():
+            self._flick(rows[flicks], stand[flicks], (op == CODE.ENGAGE)[flicks])
         if remounts.any():
-            self._mount(rows[remounts], stand[remounts], slot[remounts], mounted)
+            self._mount(rows[remounts], stand[remounts], slot[remounts],
+                        mounted)  # type: ignore[arg-type]
             self._sync(rows[remounts])
         reads = ok & _READS[op]
-        presses = reads | (ok & (op == Op.ENGAGE))
+        presses = reads | (ok & (op == CODE.ENGAGE))
         looks = _READS[op] | presses  # a refused move still checks for a crash
         sight = self._look(rows[looks], (self.time[rows] + seconds)[looks])
         at = np.cumsum(looks) - 1  # row of each looked-at episode in ``sight``
@@ -404,7 +406,8 @@ class LabBatch:
         if reads.any():
             values[reads] = self._read(rows[reads], seconds[reads], Sight(
                 *(part[at[reads]] for part in sight)))
-        self._take_blocks_away(rows[remounts], stand[remounts])
+        if remounts.any():
+            self._take_blocks_away(rows[remounts], stand[remounts])
         # The budget ends the lab's time, whatever a step's stands pushed past their travel
         # (or a refusal's lever flick) would have taken after it: equal lab time for every
         # agent, enforced.
@@ -416,7 +419,8 @@ class LabBatch:
         ended = terminated | truncated
         reward = self._rewards(rows, seconds, ended)
         predicted = np.full(len(rows), np.nan)
-        predicted[ended] = predicted_many([self.notebooks[i] for i in rows[ended]])
+        if ended.any():
+            predicted[ended] = predicted_many([self.notebooks[i] for i in rows[ended]])
         return StepResult(self.observation(rows, values, reads), reward, terminated, truncated,
                           op, seconds, overtravel, new_overtravel, collision, refused,
                           predicted,
@@ -489,7 +493,7 @@ class LabBatch:
         anything changes); any other operation takes it off."""
         before = self.bar_in[rows] | self.bar_ready[rows]
         after = self.bar_in[rows] & ~ok
-        moving = ok & (op == Op.MOVE) & before
+        moving = ok & (op == CODE.MOVE) & before
         travel, design = ballbar.travel_mm(), self.settings.design
         for r in np.flatnonzero(moving).tolist():
             i = int(rows[r])
@@ -532,9 +536,9 @@ class LabBatch:
         set-up puts it on, and every move while it is on keeps it there (each must bring
         the nominal machine's TCP to a face: ``ValueError`` before anything changes); any
         other operation takes it off."""
-        after = (self.gauge_in[rows] & ~ok) | (ok & (op == Op.PLACE))
+        after = (self.gauge_in[rows] & ~ok) | (ok & (op == CODE.PLACE))
         design = self.settings.design
-        for r in np.flatnonzero(ok & (op == Op.MOVE) & self.gauge_in[rows]).tolist():
+        for r in np.flatnonzero(ok & (op == CODE.MOVE) & self.gauge_in[rows]).tolist():
             i = int(rows[r])
             spec = step_gauge.StepGaugeSpec(int(self.gauge_axis[i]),
                                             tuple(self.gauge_start[i].tolist()))
@@ -643,7 +647,7 @@ class LabBatch:
         past the budget (its drive and work, ``travel_s``; a lever's flick); the mask of
         them."""
         budget = self.settings.budget_s
-        flick = (op == Op.LIFT) | (op == Op.ENGAGE)
+        flick = (op == CODE.LIFT) | (op == CODE.ENGAGE)
         ends = self.time[rows] + np.where(flick, TIME.lift_s, np.where(_READS[op], travel_s,
                                                                        0.0))
         late = (ends > budget) & np.array([not r for r in refused], dtype=bool)
@@ -657,7 +661,7 @@ class LabBatch:
         """Which episodes of ``rows`` end now: terminated (a stop, a crash) and truncated
         (the time budget spent, or the step limit reached, crashed or not)."""
         settings = self.settings
-        terminated = (op == Op.STOP) | np.array([bool(c) for c in collision], dtype=bool)
+        terminated = (op == CODE.STOP) | np.array([bool(c) for c in collision], dtype=bool)
         truncated = ~terminated & (self.time[rows] >= settings.budget_s)
         if settings.max_steps is not None:
             truncated |= self.steps[rows] >= settings.max_steps
@@ -690,7 +694,7 @@ class LabBatch:
         # The indicators press as they did at the last look (the plunger's next depth is
         # a micrometre-level change of a force that moves the platform by nanometres).
         pressing = np.where(self.engaged[rows], self.last_t[rows], np.nan)
-        share = np.where(gauges.part == Part.BAR, 1 - gauges.at,
+        share = np.where(gauges.part == int(Part.BAR), 1 - gauges.at,
                          np.where(on_platform(gauges.part), 1.0, 0.0))
         load = world.platform_load(pressing, gauges.travel, gauges.direction, share)
         return approach, world.joints(goal, approach, when, self.settings.design, load)
@@ -716,13 +720,11 @@ class LabBatch:
 
     def _installations(self, rows: np.ndarray, stand: np.ndarray, slot: np.ndarray,
                        when: np.ndarray, approach: np.ndarray
-                       ) -> tuple[GaugeArray, World | None] | None:
+                       ) -> tuple[GaugeArray, World | None]:
         """New installations of stands ``stand`` at ``slot`` on the machines of ``rows``
-        (drawn from their streams), zeroed at Zero at lab time ``when`` (reached from the
-        ``approach`` directions): one gauge per row, (R,), and the machines' worlds with
-        the new mountings."""
-        if not len(rows):
-            return None
+        (some; drawn from their streams), zeroed at Zero at lab time ``when`` (reached
+        from the ``approach`` directions): one gauge per row, (R,), and the machines'
+        worlds with the new mountings."""
         errors, worlds = [], []
         for r, i in enumerate(rows):
             errors.append(installation_errors(1, self.settings.preset, self.streams[i]))
@@ -834,7 +836,7 @@ class LabBatch:
                 followed & (t > last), -1.0, self.going_in[rows]))
         self.going_in[rows] = going
         self.last_t[rows] = np.where(followed, t, last)
-        t = t + world.distance_offsets(t, going, when, gauges.at, gauges.part == Part.BAR,
+        t = t + world.distance_offsets(t, going, when, gauges.at, gauges.part == int(Part.BAR),
                                        gauges.travel, self.settings.design)
         return sight._replace(t=t, tcp=sight.tcp * scale[:, None])
 
@@ -845,18 +847,19 @@ class LabBatch:
         settings = self.settings
         gauges = self._of(self.gauges, rows)
         mounted = self.slot[rows] >= 0
-        ideal = readings_from_distances(gauges, sight.t)
         status = status_of(gauges, sight.t)
         self.status[rows] = status
-        good = status == Status.VALID
+        good = status == int(Status.VALID)
+        ideal = readings_of_status(gauges, sight.t, status)
         draws = np.zeros(ideal.shape)
         laser = self.laser_axis[rows] >= 0
         laser_draws = np.zeros(len(rows))
         counts = mounted.sum(axis=1).tolist()
+        drawn = []
         for r, i in enumerate(rows.tolist()):
             # A lone lab draws one number per mounted gauge, then the tracker's three.
             stream: np.random.Generator = self.streams[i]  # type: ignore[assignment]
-            draws[r, mounted[r]] = settings.noise.draws(stream, (counts[r],))
+            drawn.append(settings.noise.draws(stream, (counts[r],)))
             if settings.tracker:
                 seen = self.tracker_rotation[i] @ sight.tcp[r] + self.tracker_position[i]
                 if self.world is not None and "tracker" in settings.conditions:
@@ -867,6 +870,7 @@ class LabBatch:
                 self.tracker_reading[i] = seen + noise
             if laser[r]:
                 laser_draws[r] = stream.normal()
+        draws[mounted] = np.concatenate(drawn)  # row by row, each row's stands in order
         if laser.any():
             self.laser_reading[rows[laser]] = self._laser(
                 rows[laser], (self.time[rows] + pending)[laser], laser_draws[laser])

@@ -49,6 +49,7 @@ class ExactMachine:
         tcp = direct(self.machine, rho) if tcp is None else np.asarray(tcp, dtype=float)
         self._boxes = collision_boxes(self.machine, rho, tcp)
         self._rho, self._tcp = rho, tcp
+        self._picked: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def encoders(self) -> np.ndarray:
         return self._rho.copy()
@@ -59,7 +60,8 @@ class ExactMachine:
     def gauge_distances(self) -> np.ndarray:
         """Ray distance ``t`` (mm) of every gauge's tip to its target; NaN when the ray
         does not hit the target first."""
-        return exact_ray_distances(self.machine, self.gauge_array, self._rho, self._boxes)
+        return exact_ray_distances(self.machine, self.gauge_array, self._rho, self._boxes,
+                                   self._targets())
 
     def collision_mask(self) -> np.ndarray:
         """Which pairs of :data:`~orthoglide_env.model.collisions.PAIR_NAMES` are in contact.
@@ -71,7 +73,13 @@ class ExactMachine:
 
     def target_boxes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Box of every gauge's target: centres (mm), rotations, half extents (mm)."""
-        return exact_target_boxes(self.gauge_array, self._boxes)
+        return tuple(part.copy() for part in self._targets())  # type: ignore[return-value]
+
+    def _targets(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`target_boxes` at this posture, picked once (a look asks twice)."""
+        if self._picked is None:
+            self._picked = exact_target_boxes(self.gauge_array, self._boxes)
+        return self._picked
 
 
 class Sight(NamedTuple):

@@ -112,8 +112,8 @@ class Notebook:
         parameter's scale, per unit of noise; one batched call) to their mountings' sums:
         the information of a mounting, its zero eliminated, is ``S2 - S1 S1^T / n``.  A
         mounting's records are summed together, each added in its turn to the sum before
-        it as one at a time would (``np.add.accumulate``, no pairwise summation): the
-        same bits, without a mounting's columns worked out again for every record."""
+        it as one at a time would (no pairwise summation, :func:`_outer_sum`): the same
+        bits, without a mounting's columns worked out again for every record."""
         layout = ReadingLayout.of([r.mounting for r in records], [r.spec for r in records],
                                   np.array([r.rho for r in records]), self._design)
         space = layout.space
@@ -128,9 +128,7 @@ class Notebook:
             n, s1, s2, _ = self._sums.get(space.mountings[m], (0, 0.0, 0.0, names))
             s1 = np.add.accumulate(np.concatenate(
                 [np.broadcast_to(s1, (1, len(mine))), own]))[-1]
-            s2 = np.add.accumulate(np.concatenate(
-                [np.broadcast_to(s2, (1, len(mine), len(mine))),
-                 own[:, :, None] * own[:, None, :]]))[-1]
+            s2 = _outer_sum(s2, own)
             self._sums[space.mountings[m]] = (n + len(at), s1, s2, names)
 
     def _sigma(self, spec: Spec) -> float:
@@ -171,6 +169,23 @@ class Notebook:
         posterior = np.linalg.inv(np.eye(len(info)) + info)[:n, :n]
         covariance = posterior * np.outer(scale, scale)
         return predicted_tcp_frames(MachineParams(design=self._design), covariance).rigid.rms
+
+
+def _outer_sum(start: np.ndarray | float, rows: np.ndarray) -> np.ndarray:
+    """``start`` (k, k, symmetric; or 0.0) plus the outer product of each of ``rows`` (n, k)
+    with itself, added one at a time in row order: the bits of ``np.add.accumulate`` over
+    them, without its (n, k, k) arrays (most of an episode's predicted error).  A row's
+    product is symmetric to the bit (a product does not depend on its factors' order), so
+    every sum is too: the upper triangle is summed and mirrored."""
+    k = rows.shape[1]
+    i, j = np.triu_indices(k)
+    total = np.array(np.broadcast_to(start, (k, k))[i, j])
+    # In place, row by row: ``np.add.reduce`` over the rows may sum them pairwise.
+    for product in rows[:, i] * rows[:, j]:
+        total += product
+    out = np.empty((k, k))
+    out[i, j] = out[j, i] = total
+    return out
 
 
 def _mounting_columns(space: ParameterSpace, mounting: int) -> list[int]:

@@ -57,6 +57,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import IntEnum
 from functools import lru_cache
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -163,6 +164,12 @@ class Op(IntEnum):
     PIVOT = 6  # set the ballbar's pivot at the TCP of ``rho``, bar ``bar`` (``-v2``)
     PLACE = 7  # lay the step gauge along ``axis``, face 0 at the TCP of ``rho`` (``-v3``)
 
+
+#: The codes of :class:`Op` as plain ints (``CODE.MOVE``), to compare arrays of codes
+#: with: numpy compares an array with an IntEnum member several times slower than with an
+#: int (Python 3.11's enum class answers numpy's look-ups of the array protocols in
+#: Python), and a lab's step makes dozens of such masks.
+CODE = SimpleNamespace(**{op.name: int(op) for op in Op})
 
 #: The operations of ``OrthoglideLab-v0``'s action (every one before ``ALIGN``).
 V0_OPS: int = int(Op.ALIGN)

@@ -8,7 +8,7 @@ import contextlib
 import numpy as np
 
 from orthoglide_env.instruments.slots import GaugeSpec
-from orthoglide_env.lab.operations import Op
+from orthoglide_env.lab.operations import CODE
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import UnreachableError, direct
 
@@ -39,13 +39,13 @@ def refusals(machines: MachineParams, rows: np.ndarray, op: np.ndarray, rho: np.
     ``places``."""
     out = [""] * len(rows)
     reached = np.full((len(rows), 3), np.nan)
-    flick = (op == Op.LIFT) | (op == Op.ENGAGE)
+    flick = (op == CODE.LIFT) | (op == CODE.ENGAGE)
     for r in np.flatnonzero(flick & (held[np.arange(len(rows)), stand] < 0)):
         out[r] = f"stand {stand[r]} is not mounted"
     others = (held == slot[:, None]) & (np.arange(held.shape[1]) != stand[:, None])
-    for r in np.flatnonzero((op == Op.REMOUNT) & others.any(axis=-1)):
+    for r in np.flatnonzero((op == CODE.REMOUNT) & others.any(axis=-1)):
         out[r] = f"slot {places[slot[r]].slot} already holds a stand"
-    moves = np.flatnonzero((op == Op.MOVE) | (op == Op.PIVOT) | (op == Op.PLACE))
+    moves = np.flatnonzero((op == CODE.MOVE) | (op == CODE.PIVOT) | (op == CODE.PLACE))
     if len(moves):
         reached[moves] = assembled(machines[rows[moves]], target[moves])
         for r in moves[np.isnan(reached[moves, 0])]:
@@ -58,7 +58,7 @@ def raise_unreachable(machines: MachineParams, rows: np.ndarray, op: np.ndarray,
                       size: int) -> None:
     """``ValueError`` for the first move its machine cannot be assembled at (naming its env
     in a batch of ``size`` > 1), before anything changes (a lab of strict moves)."""
-    bad = np.flatnonzero((op == Op.MOVE) & np.isnan(reached[:, 0]))
+    bad = np.flatnonzero((op == CODE.MOVE) & np.isnan(reached[:, 0]))
     if not len(bad):
         return
     r = int(bad[0])

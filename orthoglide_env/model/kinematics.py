@@ -188,13 +188,13 @@ def direct(machine: MachineParams, rho: np.ndarray, *, tol: float = 1e-11, max_i
     # the same order as the vector form.
 
     def flat(x: np.ndarray) -> np.ndarray:
-        return np.ascontiguousarray(np.broadcast_to(x, shape)).reshape(-1)
+        return broadcast_copy(x, shape).reshape(-1)
 
     carriage = [[flat(g.o[..., i, j] + slide[i] * g.u[..., i, j]) for j in range(3)]
                 for i in range(3)]
     attach = [[flat(g.attach[..., i, j]) for j in range(3)] for i in range(3)]
     lengths2 = [flat(x) for x in _coordinates(g.lengths**2)]
-    q = [np.array(flat(x)) for x in p]  # iterated in place
+    q = [flat(x) for x in p]  # new arrays, iterated in place
     # Newton in cache-sized runs of postures: each posture's iterates are its own, so the
     # runs give the bits of one pass over all.
     for start in range(0, len(q[0]), NEWTON_RUN):
@@ -203,6 +203,16 @@ def direct(machine: MachineParams, rho: np.ndarray, *, tol: float = 1e-11, max_i
                 [[x[run] for x in line] for line in carriage], [x[run] for x in lengths2],
                 tol, max_iter)
     return np.stack([x.reshape(shape) for x in q], axis=-1)
+
+
+def broadcast_copy(x: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """A new contiguous float array of ``shape`` holding ``x`` broadcast to it: the values
+    of ``np.ascontiguousarray(np.broadcast_to(x, shape))`` without ``broadcast_to``'s
+    Python-level checks, which cost more than the copy on a lab's small batches (a step
+    makes a few dozen of these)."""
+    out = np.empty(shape)
+    out[...] = x
+    return out
 
 
 #: Postures per run of :func:`direct`'s Newton iterations: their two dozen working arrays
