@@ -19,12 +19,17 @@ import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.measurements import Measurements
 from calibrators.study.episodes import Episode, run_episode
+from orthoglide_env.instruments.dial import GaugeNoise, weighting_sigma
 from orthoglide_env.model.design import PROTOTYPE
 
 #: Rows of eq. (10) as (posture, index of the gauge in the paper layout).  The paper's
 #: labels of rows 9-12 are misprinted (docs/estimators.md); these are the physical ones.
 #: The paper's Table 1: the machine its experiment identified (mm).
 TABLE1: dict[str, list[float]] = {"drho": [4.66, -5.36, 1.46], "dL": [5.20, -5.96, 3.16]}
+
+#: The weighting sigma (mm) of the default dials (0.02 mm scatter read to 0.01 mm), as the
+#: planners and the bound weigh a reading.
+DIAL_SIGMA: float = float(weighting_sigma(GaugeNoise(0.02, 0.01).effective_sigma))
 
 EQ10_ROWS: tuple[tuple[str, int], ...] = (
     ("YMax", 2), ("XMax", 0), ("YMin", 2), ("XMin", 0),

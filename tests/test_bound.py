@@ -9,6 +9,7 @@ import json
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import DIAL_SIGMA as SIGMA
 
 import orthoglide_env
 from calibrators.agents.iso230 import drive_steps, runs_for
@@ -31,8 +32,6 @@ from orthoglide_env.lab.slot_table import slot_table
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
 
-#: The weighting sigma of the default dials (0.02 mm, 0.01 mm resolution).
-SIGMA = float(np.hypot(0.02, 0.01 / np.sqrt(12)))
 LAB = Conditions("lab")
 
 

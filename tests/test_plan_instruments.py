@@ -7,6 +7,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import DIAL_SIGMA as SIGMA
 
 import orthoglide_env
 from calibrators.agents.base import action
@@ -20,7 +21,6 @@ from orthoglide_env.lab.operations import PAPER_SLOTS, TIME, Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
 
-SIGMA = float(np.hypot(0.02, 0.01 / np.sqrt(12)))
 LAB = Conditions("lab")
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import DIAL_SIGMA as SIGMA
 
 from calibrators.agents import optimal
 from calibrators.agents.optimal import fixed_plan
@@ -18,7 +19,6 @@ from orthoglide_env.lab.operations import PAPER_SLOTS, TIME, Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
 
-SIGMA = float(np.hypot(0.02, 0.01 / np.sqrt(12)))
 IDEAL = Conditions("ideal")
 LAB = Conditions("lab")
 STANDS = (True,) * len(PAPER_SLOTS)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import DIAL_SIGMA as SIGMA
 
 from calibrators.agents import optimal
 from calibrators.agents.optimal import fixed_plan
@@ -21,8 +22,6 @@ from orthoglide_env.lab.operations import PAPER_SLOTS, TIME
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
 
-#: The weighting sigma of the default dials (0.02 mm, 0.01 mm resolution).
-SIGMA = float(np.hypot(0.02, 0.01 / np.sqrt(12)))
 LAB = Conditions("lab")
 #: Twenty minutes in three bins: the warm-up's curves change most then, and the plan and
 #: both bounds take seconds.
