@@ -567,7 +567,9 @@ def retrace_terms(values: np.ndarray, sign: float, rho: np.ndarray, conditions: 
 def repeated_readings(rho: np.ndarray) -> np.ndarray:
     """(R,) which of one mounting's readings at commanded postures ``rho`` (R, 3), in the
     order taken, repeat the posture of the reading before (the plunger was not moved)."""
-    return np.r_[False, np.all(rho[1:] == rho[:-1], axis=-1)]
+    out = np.zeros(len(rho), dtype=bool)
+    out[1:] = np.all(rho[1:] == rho[:-1], axis=-1)
+    return out
 
 
 def indicator_end(design: ReadingLayout, values: np.ndarray, conditions: Conditions
