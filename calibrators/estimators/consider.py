@@ -43,7 +43,9 @@ considered):
   ``sin``/``cos(2 pi y / revolution)`` (the phase is random, so the zero's offset is in
   it); each mounting is taken as its own indicator.  And its retrace
   (:func:`retrace_terms`): half of it, one way with the plunger going in and the other
-  coming out, the way read from the mounting's readings in their order.  A digital
+  coming out, the way read from the mounting's readings in their order; a digital
+  indicator's way at a posture's repetitions is unknown where a drift acts, one
+  considered sign per run of them (``dial.turn``).  A digital
   indicator's readings within the last part of its stroke, where they scatter more, are
   not fitted (:func:`indicator_end`).
 
@@ -126,6 +128,13 @@ from orthoglide_env.world.truth import (
 WORLD_PREFIX: str = "world."
 #: The effects whose terms need each reading's time.
 TIMED_EFFECTS: tuple[str, ...] = ("warmup", "stands")
+#: What moves a gauge's plunger between its readings at one posture: the room's growth,
+#: the drives' warm-up, a stand's creep (:func:`retrace_terms`).
+TURNING: tuple[str, ...] = ("room", "warmup", "stands")
+#: A digital indicator's retrace turned at a posture's repetitions: one term per run of
+#: them, considered even where the ``dial`` family is fitted (as many coefficients as the
+#: plan's visits, which the readings cannot tell apart from the noise).
+TURN_TERM: str = "dial.turn"
 #: The pitch-error table's terms are named this and their index.
 TABLE_TERM: str = "lead.table"
 #: The families of terms an estimator fits or considers: the lead error's curve (its
@@ -173,9 +182,11 @@ class Consider:
                         None if self.pivot is None else self.pivot[rows])
 
     def split(self, families: tuple[str, ...]) -> tuple[Consider, Consider]:
-        """The terms of ``families`` (:func:`term_family`), and the others."""
+        """The terms of ``families`` (:func:`term_family`), and the others (with every
+        :data:`TURN_TERM`, which is never fitted)."""
         k = self.drive.shape[-1]
-        chosen = np.array([term_family(n) in families for n in self.names], dtype=bool)
+        chosen = np.array([term_family(n) in families and not n.startswith(TURN_TERM)
+                           for n in self.names], dtype=bool)
 
         def part(keep: np.ndarray) -> Consider:
             return Consider(tuple(n for n, c in zip(self.names, keep, strict=True) if c),
@@ -514,7 +525,7 @@ def plunger_directions(values: np.ndarray, sign: float, rho: np.ndarray) -> np.n
     if not out.shape[-1]:
         return out
     tip = sign * np.asarray(values, dtype=float)
-    moved = np.any(rho[1:] != rho[:-1], axis=-1)
+    moved = ~repeated_readings(rho)[1:]
     step = np.where(moved, np.sign(tip[:, :-1] - tip[:, 1:]), 0.0)
     for j in range(1, out.shape[-1]):
         out[:, j] = np.where(step[:, j - 1] != 0, step[:, j - 1], out[:, j - 1])
@@ -528,11 +539,37 @@ def retrace_terms(values: np.ndarray, sign: float, rho: np.ndarray, conditions: 
     and the other coming out (:func:`plunger_directions`); (name, pattern in mm per unit
     coefficient), its coefficient's second moment the table's; none without the ``dial``
     effect.  A 2 um digital reading shows it (up to 1 um each way): left out, it made a
-    digital indicator's error bars 1.5x too small with the indicator's errors alone."""
+    digital indicator's error bars 1.5x too small with the indicator's errors alone.
+
+    A digital indicator's repetitions at one posture (:func:`repeated_readings`) where a
+    drift acts (:data:`TURNING`) take no way from the readings: a retrace turns on the
+    plunger's last move however small, and between repetitions the room's growth, the
+    drives' warm-up and a stand's creep move it by nanometres either way, which no
+    reading shows.  Its way there is an unknown sign, one per run of repetitions (the
+    drift that turns them is slow): the retrace's pattern is zero on them and each run
+    has a term :data:`TURN_TERM` at half the retrace, a zero-mean sign of second moment
+    one (the second moment of ``(r / 2) d`` with ``d`` either way at even odds).  A dial
+    indicator keeps the way of its run's first reading: its 20 um scatter hides the
+    retrace."""
     if "dial" not in conditions:
         return []
     size = np.sqrt(second_moment("dial", "retrace", conditions)) / 2 * UM
-    return [("dial.retrace", size * plunger_directions(values, sign, rho))]
+    directions = plunger_directions(values, sign, rho)
+    if conditions.indicator != "digital" or not any(e in conditions for e in TURNING):
+        return [("dial.retrace", size * directions)]
+    repeated = repeated_readings(rho)
+    run = np.cumsum(~repeated)
+    out = [("dial.retrace", size * np.where(repeated, 0.0, directions))]
+    return out + [(TURN_TERM, np.broadcast_to(size * (repeated & (run == j)), values.shape))
+                  for j in np.unique(run[repeated])]
+
+
+def repeated_readings(rho: np.ndarray) -> np.ndarray:
+    """(R,) which of one mounting's readings at commanded postures ``rho`` (R, 3), in the
+    order taken, repeat the posture of the reading before (the plunger was not moved)."""
+    out = np.zeros(len(rho), dtype=bool)
+    out[1:] = np.all(rho[1:] == rho[:-1], axis=-1)
+    return out
 
 
 def indicator_end(design: ReadingLayout, values: np.ndarray, conditions: Conditions
