@@ -246,7 +246,8 @@ def test_a_vector_env_s_arrays_are_taken_in_as_its_labs_observations() -> None:
     """The entries a chunk's rows take in and the refusals, read from a vector env's arrays
     (:class:`~calibrators.agents.base.LabRows`) for labs ``following``, are those read
     lab by lab from each lab's observation and info: a step of three labs in which the
-    second refuses a re-mount that would end past the budget."""
+    second refuses a re-mount that would end past the budget, the labs in another order
+    than the env's or in its own (whose arrays are then taken in as they are)."""
     with closing(gym.make_vec(orthoglide_env.LAB_ENV_ID, num_envs=3,
                               vectorization_mode="vector_entry_point",
                               **{**LAB, "budget_s": 10.0})) as envs:
@@ -258,16 +259,16 @@ def test_a_vector_env_s_arrays_are_taken_in_as_its_labs_observations() -> None:
     infos = [{key: value[i] for key, value in info.items()
               if not key.startswith("_") and info[f"_{key}"][i]} for i in range(3)]
     assert [bool(i.get("refused")) for i in infos] == [False, True, False]
-    index = np.array([2, 0, 1])
-    rows = LabRows([labs[i] for i in index], seen, index)
-    infos_rows = LabRows([infos[i] for i in index], info, index)
-    for following in ([0, 1, 2], [1, 2]):
-        batch, refused = _taken(rows, infos_rows, following)
-        lone, lone_refused = _taken(list(rows), list(infos_rows), following)
-        for key in TAKEN:
-            np.testing.assert_array_equal(batch[key], lone[key])
-        np.testing.assert_array_equal(refused, lone_refused)
-    assert refused.tolist() == [False, True]
+    for index in (np.array([2, 0, 1]), np.arange(3)):
+        rows = LabRows([labs[i] for i in index], seen, index)
+        infos_rows = LabRows([infos[i] for i in index], info, index)
+        for following in ([0, 1, 2], [1, 2]):
+            batch, refused = _taken(rows, infos_rows, following)
+            lone, lone_refused = _taken(list(rows), list(infos_rows), following)
+            for key in TAKEN:
+                np.testing.assert_array_equal(batch[key], lone[key])
+            np.testing.assert_array_equal(refused, lone_refused)
+            assert refused.tolist() == [i == 1 for i in index[following].tolist()]
 
 
 def assert_same_beliefs(fast_agents: list[DesignPolicyAgent],

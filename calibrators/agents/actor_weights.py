@@ -76,10 +76,12 @@ class ActorWeights:
         # The design view's observation is mostly its stands' one-hots (about 33 of 272
         # inputs are non-zero over a chunk): the first layer multiplies only the columns
         # some row reads, the same sums but for their zero terms.  A chunk of machines
-        # played alike decides on one row, whose non-zero inputs are found directly.
-        used = np.flatnonzero(x[0] if len(x) == 1 else x.any(axis=0))
+        # played alike decides on one row, whose non-zero inputs are found directly (as
+        # flags: NumPy finds the non-zero flags of a row four times faster than its
+        # non-zero floats).
+        used = (x[0] != 0 if len(x) == 1 else x.any(axis=0)).nonzero()[0]
         (first, bias), *rest = self.fused
-        x = np.matmul(x[:, used].astype(np.float64), first.take(used, axis=0))
+        x = np.matmul(x.take(used, axis=1).astype(np.float64), first.take(used, axis=0))
         x += bias
         np.tanh(x, out=x)
         for weight, bias in rest[:-1]:
@@ -162,17 +164,17 @@ class ActorWeights:
             logits += noise[:, open_]
         # A value with a draw's noise added is rounded once more (float64's half ulp each
         # of the two compared, both at most the row's largest open logit).
-        rounding = 4 * 2.0**-53 * 2 * np.max(np.abs(logits), axis=1)
+        rounding = 4 * 2.0**-53 * 2 * np.abs(logits).max(axis=1)
         if not one:
             logits[~masks[:, open_]] = -np.inf
         rows = np.arange(len(logits))
-        top = np.argmax(logits, axis=1)
-        best = logits[rows, top]
+        top = logits.argmax(axis=1)
+        best = logits.max(axis=1)
         logits[rows, top] = -np.inf
-        chosen = open_[top]
+        chosen = open_.take(top)
         # The runner-up's bound is at most the largest of any action's.
-        slack = last.bounds[top] + last.largest + rounding
-        close = np.flatnonzero(best - np.max(logits, axis=1) <= slack)
+        slack = last.bounds.take(top) + last.largest + rounding
+        close = (best - logits.max(axis=1) <= slack).nonzero()[0]
         if close.size:
             exact = self._last64(hidden[close])
             if noise is not None:

@@ -420,7 +420,7 @@ class DesignPolicyAgent(PolicyAgent):
         if chunk is not None:
             deciding = chunk.take_in(agents, observations, infos)
             if deciding.size:
-                decide_counting(chunk.rows, chunk.index[deciding],
+                decide_counting(chunk.rows, chunk.index.take(deciding),
                                 [agents[k] for k in deciding.tolist()])
             return _lab_actions(agents)
         following = [(agent, observation, info) for agent, observation, info
@@ -518,12 +518,13 @@ class CountingChunk:
                         dtype=np.int64)
         rows = self.rows
         if following:
-            rows.observe(self.index[following], [agents[k].last for k in following],
+            rows.observe(self.index if len(following) == len(agents)
+                         else self.index[following], [agents[k].last for k in following],
                          *_taken(observations, infos, following))
         # A row's clock is its lab's time as it last took it in: this step's, where it
         # followed one, else the first observation's, which its belief started from.
-        state = rows.state[self.index[idle]]
-        return idle[state[:, CLOCK] < state[:, BUDGET]]
+        ready = rows.state[:, CLOCK] < rows.state[:, BUDGET]
+        return idle[ready.take(self.index.take(idle))]
 
 
 def _taken(observations: list[dict[str, np.ndarray]], infos: list[Mapping[str, Any]],
@@ -533,9 +534,16 @@ def _taken(observations: list[dict[str, np.ndarray]], infos: list[Mapping[str, A
     operation (``infos``): read from their vector env's arrays in one call a field where
     they hand them over (:class:`~calibrators.agents.base.LabRows`), else lab by lab."""
     if isinstance(observations, LabRows) and isinstance(infos, LabRows):
-        index = observations.index[following]
         batch, info = observations.batch, infos.batch
         refused = info.get("refused")
+        index = observations.index
+        if len(following) < len(index):
+            index = index[following]
+        elif len(index) == len(batch["time"]) and (
+                index.tobytes() == np.arange(len(index), dtype=index.dtype).tobytes()):
+            # Every lab of the vector env, in its order: its arrays as they are.
+            return (batch, np.zeros(len(index), dtype=bool) if refused is None
+                    else refused.astype(bool) & info["_refused"])
         return ({key: batch[key][index] for key in TAKEN},
                 np.zeros(len(index), dtype=bool) if refused is None
                 else refused[index].astype(bool) & info["_refused"][index])
@@ -561,13 +569,12 @@ def decide_counting(rows: CountingRows, index: np.ndarray,
         noise = np.array([agent.rng.gumbel(size=masks.shape[1]) for agent in agents])
         chosen = first.actor.choose_many(seen, masks, noise, groups)
     else:
-        chosen = first.actor.choose_many(seen, masks)[groups]
-    made: dict[tuple[int, int], list[dict[str, object]]] = {}
-    for agent, group, operation in zip(agents, groups.tolist(), chosen.tolist(), strict=True):
-        if (group, operation) not in made:
-            made[group, operation] = rows.operations(reps[group], operation,
-                                                     parts[group].moves)
-        agent.queue = list(made[group, operation])
+        chosen = first.actor.choose_many(seen, masks).take(groups)
+    keys = list(zip(groups.tolist(), chosen.tolist(), strict=True))
+    made = {key: rows.operations(reps[key[0]], key[1], parts[key[0]].moves)
+            for key in dict.fromkeys(keys)}
+    for agent, key in zip(agents, keys, strict=True):
+        agent.queue = made[key].copy()
 
 
 def _by_actor(agents: list[DesignPolicyAgent]) -> list[list[DesignPolicyAgent]]:

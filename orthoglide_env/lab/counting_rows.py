@@ -26,9 +26,9 @@ posture in both or in neither (a count changes only where a reading is taken, by
 
 from __future__ import annotations
 
-from collections.abc import Hashable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import lru_cache, partial
 
 import numpy as np
 
@@ -44,6 +44,7 @@ from orthoglide_env.lab.design_belief import (
     tails_of,
 )
 from orthoglide_env.lab.operations import Op
+from orthoglide_env.model.design import MachineDesign
 
 #: The columns of :attr:`CountingRows.state` before the stands': the row's family (see the
 #: module), its posture's index, its readings in a row here, its clock and budget (s), its
@@ -98,9 +99,10 @@ class CountingRows:
         #: Whether all rows are one state (counts included: one family), so that a step
         #: that is the same in every lab is taken in on one row.
         self.alike = _uniform(self.state.view(np.int64))
-        #: :meth:`parts` of a state, by its posture and stands, the last MOVES_KEPT kept (a
-        #: one-hour episode of the shipped policy decides 484 times in 77 such states).
-        self._parts = lru_cache(maxsize=MOVES_KEPT)(self._parts_of)
+        #: :meth:`parts` of a state, by its posture and stands (a one-hour episode of the
+        #: shipped policy decides 484 times in 77 such states): every chunk's of this
+        #: design and stand count (:func:`state_parts`).
+        self._parts = state_parts(first.design, k)
 
     def observe(self, rows: np.ndarray, operations: list[dict[str, object]],
                 taken: Mapping[str, np.ndarray], refused: Sequence[bool]) -> None:
@@ -114,7 +116,8 @@ class CountingRows:
             reads, to = self._step(state, operations[:1], refused[:1],
                                    {key: taken[key][:1] for key in TAKEN})
             self.state[:] = state
-            self.counts[:, to] += 1
+            for posture in to.tolist():
+                self.counts[:, posture] += 1
             return
         state = self.state[rows]
         reads, to = self._step(state, operations, refused, taken)
@@ -133,9 +136,7 @@ class CountingRows:
         the same (a clock, never NaN, equal to the bit)."""
         if not self.alike or len(rows) != len(self.state):
             return False
-        first = operations[0]
-        if not all(operation is first for operation in operations) or not _uniform(
-                np.asarray(refused)):
+        if len(set(map(id, operations))) > 1 or not _uniform(np.asarray(refused)):
             return False
         return all(_uniform(taken[key]) for key in TAKEN)
 
@@ -148,13 +149,17 @@ class CountingRows:
         first = self.first
         # Each operation's reading found once: the rows of a group share its dicts.
         readings: dict[int, tuple[int, bool]] = {}
-        at, anew = [], []
-        for operation, no in zip(operations, refused, strict=True):
-            reading = (-1, False) if no else readings.get(id(operation))
+        reads, to, anew = [], [], []
+        for row, (operation, no) in enumerate(zip(operations, refused, strict=True)):
+            if no:
+                continue
+            reading = readings.get(id(operation))
             if reading is None:
                 reading = readings[id(operation)] = _reading(first, operation)
-            at.append(reading[0])
-            anew.append(reading[1])
+            if reading[0] >= 0:
+                reads.append(row)
+                to.append(reading[0])
+                anew.append(reading[1])
         state[:, CLOCK] = taken["time"][:, 0]
         held = state[:, self.slots]
         held[:] = taken["slot"]
@@ -162,16 +167,19 @@ class CountingRows:
         held[held >= first.n_slots] = -1
         state[:, self.engaged] = (taken["engaged"] != 0) & (held >= 0)
         state[:, self.faulted] = taken["faulted"] != 0
-        posture = np.array(at, dtype=np.int64)
-        reads = np.flatnonzero(posture >= 0)
-        to = posture[reads]
-        if reads.size:
+        if anew:
+            # Every row reads (a chunk's rows played alike): its columns as they are.
+            at = slice(None) if len(reads) == len(state) else reads
             # A stay ends where the reading is elsewhere, or after a re-mount (at Zero with
-            # another set of mountings).
-            stays = (to == state[reads, HERE]) & ~np.array(anew)[reads]
-            state[reads, RUN] = np.where(stays, state[reads, RUN], 0.0) + 1
-            state[reads, HERE] = to
-            state[reads, RHO] = first.table.postures[to]
+            # another set of mountings); row by row in Python, a handful of rows' floats
+            # (a chunk's, or its one row played alike) costing less than array calls.
+            state[at, RUN] = [run + 1 if posture == here and not new else 1.0
+                              for posture, here, run, new in zip(
+                                  to, state[at, HERE].tolist(), state[at, RUN].tolist(),
+                                  anew, strict=True)]
+            state[at, HERE] = to
+            state[at, RHO] = first.table.postures.take(to, axis=0)
+        reads, to = np.array(reads, dtype=np.int64), np.array(to, dtype=np.int64)
         return reads, to
 
     def groups(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -192,29 +200,14 @@ class CountingRows:
         """The :class:`StateParts` of the states of ``rows`` (their candidate moves from
         the design's cache of states, :func:`~orthoglide_env.lab.design_belief.
         candidate_moves`)."""
-        state = self.state[rows]
+        state = self.state.take(rows, axis=0)
         return [self._parts(here, stands.tobytes()) for here, stands in zip(
             state[:, HERE].tolist(), state[:, STANDS_FROM:], strict=True)]
-
-    def _parts_of(self, here: float, stands: bytes) -> StateParts:
-        """:class:`StateParts` of the state at posture ``here`` whose stands' columns of
-        :attr:`state` are the bytes ``stands``."""
-        first, k = self.first, self.first.n_stands
-        columns = np.frombuffer(stands).reshape(1, 3, k)
-        held, engaged, faulted = columns[:, 0].astype(np.int64), columns[:, 1], columns[:, 2]
-        at = int(here)
-        moves = first._moves_of(held[0].tobytes(), (faulted[0] != 0).tobytes(),
-                                (engaged[0] != 0).tobytes(), at)
-        mask = open_masks(first, [moves], held)[0]
-        mask.flags.writeable = False
-        remount_s = float(remount_seconds(first, [at])[0])
-        return StateParts(moves, stands_of(first, held, engaged, faulted), mask, remount_s,
-                          max(moves[4], remount_s))
 
     def observations(self, rows: np.ndarray, parts: list[StateParts]) -> np.ndarray:
         """:meth:`DesignBelief.observation` (len(rows), n) of the beliefs of ``rows``,
         whose :meth:`parts` are ``parts``, the same floats."""
-        state, counts = self.state[rows], self.counts[rows]
+        state, counts = self.state.take(rows, axis=0), self.counts.take(rows, axis=0)
         total = counts[np.arange(len(rows)), state[:, HERE].astype(np.int64)]
         stands = parts[0].stands if len(parts) == 1 else np.concatenate(
             [p.stands for p in parts])
@@ -225,10 +218,11 @@ class CountingRows:
         """:meth:`DesignBelief.action_mask` (len(rows), ``n_actions``) of the beliefs of
         ``rows``, whose :meth:`parts` are ``parts``: each state's kept mask, with the
         operations that would end past the budget closed near its end."""
-        state = self.state[rows]
+        state = self.state.take(rows, axis=0)
         clock, budget = state[:, CLOCK], state[:, BUDGET]
         masks = np.array([p.mask for p in parts])
-        if (clock + np.array([p.longest for p in parts]) <= budget).all():
+        if all(at + p.longest <= end for at, end, p in zip(clock.tolist(), budget.tolist(),
+                                                           parts, strict=True)):
             return masks
         return close_late(self.first, masks, [p.moves for p in parts], clock, budget,
                           np.array([p.remount_s for p in parts]))
@@ -252,6 +246,35 @@ class CountingRows:
         belief._moves = None
 
 
+@lru_cache(maxsize=2)
+def state_parts(design: MachineDesign, stands: int) -> Callable[[float, bytes], StateParts]:
+    """:class:`StateParts` of the states of ``design`` with ``stands`` stands, by a state's
+    posture and the bytes of its stands' columns of :attr:`CountingRows.state`, the last
+    :data:`~orthoglide_env.lab.design_belief.MOVES_KEPT` kept: shared by every chunk of
+    them (each chunk of the shipped one-hour policy found its 77 states' parts again, 1.6 %
+    of its decisions' instructions)."""
+    # A belief of the design and stands, whose tables alone are read.
+    return lru_cache(maxsize=MOVES_KEPT)(partial(_parts_of, DesignBelief(
+        design, stands, 1.0, 1.0, 2, covariance=False)))
+
+
+def _parts_of(first: DesignBelief, here: float, stands: bytes) -> StateParts:
+    """:class:`StateParts` of the state of beliefs like ``first`` (its design and stands) at
+    posture ``here`` whose stands' columns of :attr:`CountingRows.state` are the bytes
+    ``stands``."""
+    k = first.n_stands
+    columns = np.frombuffer(stands).reshape(1, 3, k)
+    held, engaged, faulted = columns[:, 0].astype(np.int64), columns[:, 1], columns[:, 2]
+    at = int(here)
+    moves = first._moves_of(held[0].tobytes(), (faulted[0] != 0).tobytes(),
+                            (engaged[0] != 0).tobytes(), at)
+    mask = open_masks(first, [moves], held)[0]
+    mask.flags.writeable = False
+    remount_s = float(remount_seconds(first, [at])[0])
+    return StateParts(moves, stands_of(first, held, engaged, faulted), mask, remount_s,
+                      max(moves[4], remount_s))
+
+
 def _reading(first: DesignBelief, operation: dict[str, object]) -> tuple[int, bool]:
     """Where lab ``operation`` (not refused) reads, as the posture's index (-1: nowhere),
     and whether it starts a new stay wherever it reads (a re-mount)."""
@@ -271,8 +294,11 @@ def taken_of(seen: list[dict[str, np.ndarray]]) -> np.ndarray:
 
 
 def _uniform(values: np.ndarray) -> bool:
-    """Whether the rows of ``values`` (N, ...) are all equal (N >= 1)."""
-    return bool((values == values[0]).all())
+    """Whether the rows of ``values`` (N, ...) are all equal to the bit (N >= 1): their
+    bytes compared, a few calls of Python's where an array comparison and its reduction
+    cost a chunk's step about as much as the step's own arithmetic."""
+    raw = values.tobytes()
+    return raw[:len(raw) // len(values)] * len(values) == raw
 
 
 def _numbered_values(keys: np.ndarray) -> np.ndarray:
