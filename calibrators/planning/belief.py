@@ -183,7 +183,6 @@ class Belief:
         # stand, made at each re-mount a search tries.
         self.touched_columns = np.zeros((k, N_MACHINE + N_STAND), dtype=int)
         self.touched_rows: list[np.ndarray] = [np.zeros((p, N_MACHINE + N_STAND))] * k
-        self._touched: np.ndarray | None = None
         for k in range(len(self.slots)):
             self._set_rows(k)
         # Where an engaged gauge was seen not to read (its tip beyond the travel): it will
@@ -204,19 +203,32 @@ class Belief:
         """Rows (P, n) in mm per unit scale of a reading of ``stand`` at every posture."""
         return self.rows_at(slice(None), [stand])[:, 0]
 
-    def rows_at(self, postures: np.ndarray | slice, stands: list[int] | None = None
-                ) -> np.ndarray:
+    def rows_at(self, postures: np.ndarray | slice, stands: list[int] | None = None,
+                weight: np.ndarray | None = None) -> np.ndarray:
         """Rows (L, K', n) in mm per unit scale of a reading of each of ``stands`` (K';
         default: every stand) at ``postures`` (L): its slot's changes over the machine's
-        errors and its mounting's, and its zero's scale (an empty stand's are zero)."""
+        errors and its mounting's, and its zero's scale (an empty stand's are zero).
+        With ``weight`` (L, K'), each stand's row at a posture times its weight, over the
+        gauge's sigma: the readings' whitened rows, each entry ``(row * weight) / sigma``
+        as a product of the whole array would have it, but made only where a row has
+        entries (a mounting's columns are the machine's, then its stand's, two runs)."""
         change = self.table.change
         stands = range(len(self.slots)) if stands is None else stands
-        out = np.zeros((len(self.table.postures[postures]), len(stands), len(self.covariance)))
+        count = len(range(len(self.table.postures))[postures]) if isinstance(
+            postures, slice) else len(postures)
+        out = np.zeros((count, len(stands), len(self.covariance)))
         for i, stand in enumerate(stands):
             slot = self.slots[stand]
-            if slot >= 0:
-                out[:, i, self._columns(stand)[:-1]] = change[slot, postures]
-                out[:, i, self._columns(stand)[-1]] = ZERO_SCALE
+            if slot < 0:
+                continue
+            values, zero = change[slot, postures], ZERO_SCALE
+            if weight is not None:
+                values = values * weight[:, i, None] / self.sigma
+                zero = ZERO_SCALE * weight[:, i] / self.sigma
+            first = N_MACHINE + N_STAND * stand  # its mounting's columns, the zero's last
+            out[:, i, :N_MACHINE] = values[:, :N_MACHINE]
+            out[:, i, first:first + N_STAND - 1] = values[:, N_MACHINE:]
+            out[:, i, first + N_STAND - 1] = zero
         return out
 
     def _set_rows(self, stand: int) -> None:
@@ -230,29 +242,12 @@ class Belief:
         columns[stand] = 0
         columns[stand, :len(used)] = used
         self.touched_columns, self.touched_rows[stand] = columns, touched
-        if self._touched is not None:
-            # A copy of the stack with this stand's rows replaced: a re-mount the search
-            # tries changes one stand, and copying is cheaper than stacking anew.
-            stacked = self._touched.copy()
-            stacked[:, stand] = touched
-            stacked.setflags(write=False)
-            self._touched = stacked
 
     @property
     def rows(self) -> np.ndarray:
         """Rows (K, P, n) of every stand at every posture (:meth:`rows_at`, made anew at
         each call)."""
         return np.swapaxes(self.rows_at(slice(None)), 0, 1)
-
-    @property
-    def touched(self) -> np.ndarray:
-        """:attr:`touched_rows` stacked by posture (P, K, T), read-only: made once per
-        mounting of the stands, where gathering each stand's at every decision cost the
-        ``active`` agent a twentieth of its choice."""
-        if self._touched is None:
-            self._touched = np.stack(self.touched_rows, axis=1)
-            self._touched.setflags(write=False)
-        return self._touched
 
     def predicted_tips(self, postures: np.ndarray | slice = slice(None)) -> np.ndarray:
         """Predicted tip distance of every stand's gauge at ``postures`` (K, P'), mm:

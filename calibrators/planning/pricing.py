@@ -142,7 +142,7 @@ class Pricer(Belief):
         0))`` or ``slogdet(I)``, zeros that differ at most in their sign).  A posture's
         gain is computed alone (stacked products and solves work item by item), so it is
         the same to the bit whichever others are priced with it."""
-        return self.rows_at(postures) * np.sqrt(reads.T[postures])[:, :, None] / self.sigma
+        return self.rows_at(postures, weight=np.sqrt(reads.T[postures]))
 
     def _gains(self, rows: np.ndarray) -> np.ndarray:
         """Gain of adding each batch of whitened rows (B, K, n) to the covariance."""
@@ -172,8 +172,9 @@ class Pricer(Belief):
         the form is ``(C F)(C F)'`` (``F``: :func:`rigid_factor`), so a row's is the
         square of its product with ``C F``, r columns instead of every unknown's."""
         c, cols = self.covariance, self.touched_columns  # (K, T)
-        # (K, L, T), laid out as the stands' rows at the postures were before (L, K, T).
-        part = np.swapaxes(self.touched[postures], 0, 1)
+        part = np.empty((len(cols), len(postures), cols.shape[1]))  # (K, L, T)
+        for rows, out in zip(self.touched_rows, part, strict=True):
+            np.take(rows, postures, axis=0, out=out)
         if self.criterion == "D":
             left, right = part @ c[cols[:, :, None], cols[:, None, :]], part
         else:
@@ -233,11 +234,11 @@ class Pricer(Belief):
             ceiling = bound / seconds[live]
             order = np.argsort(-ceiling, kind="stable")
             if self.world is not None:
-                zero = self.table.zero
+                zero, moves = self.table.zero, live[order[:wanted]]  # distinct
                 # Zero when it is live: a test of its own entries, not a search of ``live``.
-                moves = np.union1d(live[order[:wanted]], np.array(
-                    [zero] if fits[zero] and reads[:, zero].any() else [], dtype=live.dtype))
-                return rate, PricedMoves(gain, seconds, after, reads), moves
+                if fits[zero] and reads[:, zero].any() and zero not in moves:
+                    moves = np.append(moves, zero)
+                return rate, PricedMoves(gain, seconds, after, reads), np.sort(moves)
             first, rest = np.split(order, [max(FIRST_PRICED, wanted)])
             price(first)
             if rest.size:

@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -55,7 +56,7 @@ from calibrators.estimators.consider import (
     warmup_curves,
     warmup_sizes,
 )
-from orthoglide_env.lab.slot_table import SlotTable
+from orthoglide_env.lab.slot_table import SlotTable, slot_table
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.reading_model import ParameterSpace, default_scales
 from orthoglide_env.world.conditions import Conditions
@@ -223,12 +224,24 @@ def rows_many(terms: list[WorldTerms], slots: np.ndarray, postures: np.ndarray,
                 pattern * mounted[..., None])
     considered = np.zeros((m_count, k, p, first.consider.shape[1]))
     if first.per_dial:
-        y = first.table.reading[slot[..., None], postures[:, None, :]]
         dials = np.stack([t.dial_columns for t in terms])[machines, stands]  # (M, K', d)
-        for j, (_, pattern) in enumerate(dial_terms(y, first.table.travel,
-                                                    first.conditions)):
-            considered[machines, rows, :, dials[..., j]] = pattern * mounted[..., None]
+        for j, pattern in enumerate(dial_patterns(first.design, first.conditions)):
+            considered[machines, rows, :, dials[..., j]] = (
+                pattern[slot[..., None], postures[:, None, :]] * mounted[..., None])
     return fitted, considered
+
+
+@lru_cache(maxsize=8)
+def dial_patterns(design: MachineDesign, conditions: Conditions) -> np.ndarray:
+    """The indicators' error patterns (d, S, P) of :func:`~calibrators.estimators.consider.
+    dial_terms` at the nominal reading of every slot at every candidate posture of
+    ``design``, read-only: made once, where each pricing's world rows made them anew at
+    the postures it asked (the same values, element by element)."""
+    table = slot_table(design)
+    out = np.array([pattern for _, pattern in dial_terms(table.reading, table.travel,
+                                                          conditions)])
+    out.setflags(write=False)
+    return out
 
 
 def gains_many(rows: np.ndarray, considered: np.ndarray, covariances: np.ndarray,
