@@ -316,10 +316,10 @@ def test_the_filter_computes_only_the_spreads_that_decide_its_reach(monkeypatch)
     computed = [0]
     spreads_of = belief_module.spreads_many
 
-    def counted(beliefs: list[Planner], stands: list[tuple[int, int]],
-                postures: list[np.ndarray]) -> list[np.ndarray]:
-        computed[0] += sum(len(p) for p in postures)
-        return spreads_of(beliefs, stands, postures)
+    def counted(beliefs: list[Planner], machines: np.ndarray, stands: np.ndarray,
+                postures: np.ndarray) -> np.ndarray:
+        computed[0] += len(postures)
+        return spreads_of(beliefs, machines, stands, postures)
 
     monkeypatch.setattr(belief_module, "spreads_many", counted)
     mine = every = 0

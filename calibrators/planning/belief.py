@@ -212,23 +212,27 @@ class Belief:
         gauge's sigma: the readings' whitened rows, each entry ``(row * weight) / sigma``
         as a product of the whole array would have it, but made only where a row has
         entries (a mounting's columns are the machine's, then its stand's, two runs)."""
-        change = self.table.change
-        stands = range(len(self.slots)) if stands is None else stands
+        stands = np.arange(len(self.slots)) if stands is None else np.asarray(stands, dtype=int)
         count = len(range(len(self.table.postures))[postures]) if isinstance(
             postures, slice) else len(postures)
         out = np.zeros((count, len(stands), len(self.covariance)))
-        for i, stand in enumerate(stands):
-            slot = self.slots[stand]
-            if slot < 0:
-                continue
-            values, zero = change[slot, postures], ZERO_SCALE
-            if weight is not None:
-                values = values * weight[:, i, None] / self.sigma
-                zero = ZERO_SCALE * weight[:, i] / self.sigma
-            first = N_MACHINE + N_STAND * stand  # its mounting's columns, the zero's last
-            out[:, i, :N_MACHINE] = values[:, :N_MACHINE]
-            out[:, i, first:first + N_STAND - 1] = values[:, N_MACHINE:]
-            out[:, i, first + N_STAND - 1] = zero
+        slots = np.array(self.slots)[stands]
+        mounted = np.flatnonzero(slots >= 0)  # the stands' places in ``stands`` with rows
+        if not mounted.size:
+            return out
+        # (L, K'', C): each mounted stand's changes at the postures.
+        values = np.moveaxis(self.table.change[slots[mounted]][:, postures] if isinstance(
+            postures, slice) else self.table.change[slots[mounted][:, None], postures], 0, 1)
+        zero = ZERO_SCALE
+        if weight is not None:
+            values = values * weight[:, mounted, None] / self.sigma
+            zero = ZERO_SCALE * weight[:, mounted] / self.sigma
+        # A mounting's columns are the machine's, then its stand's (the zero's last).
+        first = N_MACHINE + N_STAND * stands[mounted]
+        out[:, mounted, :N_MACHINE] = values[..., :N_MACHINE]
+        out[:, mounted[:, None], first[:, None] + np.arange(N_STAND - 1)] = values[
+            ..., N_MACHINE:]
+        out[:, mounted, first + N_STAND - 1] = zero
         return out
 
     def _set_rows(self, stand: int) -> None:
@@ -266,8 +270,10 @@ class Belief:
         if self.mean is not None:
             return reaches([self], postures)[0]
         slots = np.array(self.slots)
-        mounted = (slots >= 0)[:, None]
-        safe, contact = (a[np.maximum(slots, 0)][:, postures] for a in self.table.prior_reach)
+        mounted, used = (slots >= 0)[:, None], np.maximum(slots, 0)
+        # Only the postures asked are gathered (one, to read here), not every one first.
+        at = (used, postures) if isinstance(postures, slice) else (used[:, None], postures)
+        safe, contact = (a[at] for a in self.table.prior_reach)
         return safe & mounted, np.where(self.silent[:, postures], 0.0, contact) * mounted
 
     def predicted_rigid_mm(self) -> float:
@@ -563,44 +569,49 @@ def _reach_where(beliefs: list[Belief], tips: np.ndarray, spread: np.ndarray,
         open_ = np.flatnonzero((tips >= END_GAP) & (contact_at < 1.0)
                                & ~table.pressed[slot, posture] & (slots[m, k] >= 0))
     if open_.size:
-        stand = m[open_] * slots.shape[1] + k[open_]
-        groups = np.split(open_, np.flatnonzero(np.diff(stand)) + 1)
-        pairs = [(int(m[g[0]]), int(k[g[0]])) for g in groups]
-        for group, (i, own), value in zip(groups, pairs, spreads_many(
-                beliefs, pairs, [posture[g] for g in groups]), strict=True):
-            spreads[group] = beliefs[i].spread_bound[own, posture[group]] = value
-        safe_at[open_], contact_at[open_] = reach_at(table, slot[open_], posture[open_],
-                                                     tips[open_], spreads[open_])
+        mine, own, at = m[open_], k[open_], posture[open_]
+        spreads[open_] = value = spreads_many(beliefs, mine, own, at)
+        # Each belief's bounds lowered at once (its entries are consecutive).
+        firsts = np.flatnonzero(np.r_[True, mine[1:] != mine[:-1]])
+        for first, last in zip(firsts, [*firsts[1:], len(mine)], strict=True):
+            beliefs[mine[first]].spread_bound[own[first:last], at[first:last]] = value[
+                first:last]
+        safe_at[open_], contact_at[open_] = reach_at(table, slot[open_], at, tips[open_],
+                                                     spreads[open_])
     safe[m, k, j], contact[m, k, j] = safe_at, contact_at
 
 
-def spreads_many(beliefs: list[Belief], stands: list[tuple[int, int]],
-                 postures: list[np.ndarray]) -> list[np.ndarray]:
-    """Standard deviation of the predicted tip of each (belief, stand) of ``stands``
-    (indices in ``beliefs``, one design) at its ``postures`` (L_i,), mm, from the
-    covariances, in one stacked product.  Each
+def spreads_many(beliefs: list[Belief], machines: np.ndarray, stands: np.ndarray,
+                 postures: np.ndarray) -> np.ndarray:
+    """Standard deviation (N,) of the predicted tip of each entry's stand of ``stands``
+    (N,) of its belief of ``machines`` (N,, indices in ``beliefs``, one design) at its
+    posture of ``postures`` (N,), mm, from the covariances, in one stacked product: the
+    entries of one (belief, stand) are consecutive, the beliefs in order.  Each
     stand's rows are padded to one even count by repeating its last posture, so each
     item goes to BLAS as an even count of rows, the value of a posture the same to the
     bit whichever others are computed with it (BLAS's kernels take a lone last row their
     own way, a few ulps off)."""
     table = beliefs[0].table
-    lengths = np.array([len(p) for p in postures])
+    pair = machines * len(beliefs[0].slots) + stands
+    starts = np.flatnonzero(np.r_[True, pair[1:] != pair[:-1]])  # each (belief, stand)'s
+    lengths = np.diff(np.r_[starts, len(pair)])
     longest = int(lengths.max())
     longest += longest % 2
     # Each group's postures, its last repeated up to the even count (G, L).
-    ends = np.cumsum(lengths)
-    index = np.concatenate(postures)[(ends - lengths)[:, None] + np.minimum(
-        np.arange(longest), lengths[:, None] - 1)]
-    slots = np.array([beliefs[i].slots[k] for i, k in stands])
+    index = postures[starts[:, None] + np.minimum(np.arange(longest), lengths[:, None] - 1)]
+    first_machine, first_stand = machines[starts], stands[starts]
+    slots = np.array([b.slots for b in beliefs])[first_machine, first_stand]
     change = table.change[slots[:, None], index]  # (G, L, C)
     # Each belief's stands' blocks of its covariance gathered at once (the pairs come
     # belief by belief).
     covariance = np.concatenate([
-        beliefs[i].covariance[_block_index(tuple(k for _, k in pairs))]
-        for i, pairs in groupby(stands, key=itemgetter(0))])
+        beliefs[i].covariance[_block_index(tuple(int(s) for _, s in pairs))]
+        for i, pairs in groupby(zip(first_machine, first_stand, strict=True),
+                                key=itemgetter(0))])
     product = change @ covariance
     values = np.sqrt(np.clip(np.sum(product * change, axis=-1), 0.0, None))
-    return [v[:len(p)] for v, p in zip(values, postures, strict=True)]
+    group = np.repeat(np.arange(len(starts)), lengths)
+    return values[group, np.arange(len(pair)) - starts[group]]
 
 
 def _unread(beliefs: list[Belief], safe: np.ndarray, contact: np.ndarray,
