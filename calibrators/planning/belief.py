@@ -183,6 +183,12 @@ class Belief:
         # stand, made at each re-mount a search tries.
         self.touched_columns = np.zeros((k, N_MACHINE + N_STAND), dtype=int)
         self.touched_rows: list[np.ndarray] = [np.zeros((p, N_MACHINE + N_STAND))] * k
+        # Their stack by posture (P, K, T), read-only and shared by forks, the stands
+        # re-mounted since it was made, and how often their rows were put in place since
+        # the last re-mount (:meth:`touched_at`).
+        self._touched: np.ndarray | None = None
+        self._stale: frozenset[int] = frozenset()
+        self._patched = 0
         for k in range(len(self.slots)):
             self._set_rows(k)
         # Where an engaged gauge was seen not to read (its tip beyond the travel): it will
@@ -246,6 +252,25 @@ class Belief:
         columns[stand] = 0
         columns[stand, :len(used)] = used
         self.touched_columns, self.touched_rows[stand] = columns, touched
+        self._stale, self._patched = self._stale | {stand}, 0
+
+    def touched_at(self, postures: np.ndarray) -> np.ndarray:
+        """:attr:`touched_rows` at ``postures`` (L,), stacked by stand (K, L, T), laid out
+        as a posture-major stack's rows are (a view of (L, K, T)).  Gathered from the
+        stack of every stand's rows, made once per mounting of the stands, with the rows
+        of a stand re-mounted since (one, in each re-mount a search tries) put in place:
+        where each tried re-mount copied the stack (a megabyte), and gathering stand by
+        stand cost every decision.  A belief asked again after a re-mount (a plan's own, a
+        filter's, a look-ahead's) stacks them anew instead."""
+        if self._touched is None or (self._stale and self._patched):
+            self._touched = np.stack(self.touched_rows, axis=1)
+            self._touched.setflags(write=False)
+            self._stale, self._patched = frozenset(), 0
+        part = np.swapaxes(self._touched[postures], 0, 1)
+        for stand in self._stale:
+            part[stand] = self.touched_rows[stand][postures]
+        self._patched += bool(self._stale)
+        return part
 
     @property
     def rows(self) -> np.ndarray:

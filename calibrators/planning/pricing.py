@@ -172,9 +172,7 @@ class Pricer(Belief):
         the form is ``(C F)(C F)'`` (``F``: :func:`rigid_factor`), so a row's is the
         square of its product with ``C F``, r columns instead of every unknown's."""
         c, cols = self.covariance, self.touched_columns  # (K, T)
-        part = np.empty((len(cols), len(postures), cols.shape[1]))  # (K, L, T)
-        for rows, out in zip(self.touched_rows, part, strict=True):
-            np.take(rows, postures, axis=0, out=out)
+        part = self.touched_at(postures)  # (K, L, T)
         if self.criterion == "D":
             left, right = part @ c[cols[:, :, None], cols[:, None, :]], part
         else:
