@@ -93,6 +93,11 @@ class WorldTerms:
     def __post_init__(self) -> None:
         on = self.conditions.__contains__
         self.axis_count = 4 * sum(on(e) for e in AXIS_EFFECTS)
+        # The drive effects' sizes (mm), mean and spread, or None where they do not act.
+        self.warmup: tuple[float, ...] | None = (
+            warmup_sizes(self.conditions) if on("warmup") else None)
+        self.backlash: tuple[float, ...] | None = tuple(
+            size * UM for size in backlash_sizes(self.conditions)) if on("backlash") else None
         zero = np.zeros(1)
         self.per_stand = len(drift_terms(zero, zero, self.conditions)) if on("stands") else 0
         self.per_dial = len(dial_terms(zero, 1.0, self.conditions))
@@ -194,21 +199,19 @@ def rows_many(terms: list[WorldTerms], slots: np.ndarray, postures: np.ndarray,
     first = terms[0]
     m_count, k = stands.shape
     machines = np.arange(m_count)[:, None]
-    mounted = slots[machines, stands] >= 0  # (M, K')
-    slot = np.maximum(slots[machines, stands], 0)
+    slot = slots[machines, stands]
+    mounted, slot = slot >= 0, np.maximum(slot, 0)  # (M, K')
     drho = (first.drive[slot[..., None], postures[:, None, :]]
             * mounted[..., None, None])  # (M, K', P', 3)
     p = drho.shape[2]
     fitted = np.zeros((m_count, k, p, first.count))
     column = 0
-    on = first.conditions.__contains__
     carriage = []  # (mean size, spread size, per-axis pattern (M, P', 3))
-    if on("warmup"):
-        carriage.append((*warmup_sizes(first.conditions),
+    if first.warmup is not None:
+        carriage.append((*first.warmup,
                          warmup_curves(first.x[postures], times, first.conditions)[1]))
-    if on("backlash"):
-        mean, spread = backlash_sizes(first.conditions)
-        carriage.append((mean * UM, spread * UM, -approach / 2))
+    if first.backlash is not None:
+        carriage.append((*first.backlash, -approach / 2))
     for mean, spread, pattern in carriage:
         moved = drho * pattern[:, None]  # (M, K', P', 3)
         fitted[..., column] = mean * moved.sum(axis=-1)
