@@ -2,6 +2,10 @@
 workers, against the target of 100 machines within 2 minutes on 2 cores.
 
     python benchmarks/bench_active.py [--machines 100] [--jobs 2] [--conditions lab]
+                                      [--budget 3600]
+
+(``--budget``: the lab seconds of each machine; a shorter one makes a smaller case to
+count instructions on, whose start-up plan has fewer re-mount checks.)
 
 Runs ``compare``'s own path (``calibrators.study.compare.run``: the batched lab, the batched
 fits) for ``active`` with the ``extended`` estimator and reports the wall time (each
@@ -19,6 +23,7 @@ import resource
 import time
 
 from calibrators.study.compare import Config, run
+from orthoglide_env.lab.operations import DEFAULT_BUDGET_S
 from orthoglide_env.world.conditions import Conditions
 
 #: The target: machines and wall seconds (issue: 100 machines within 2 minutes, 2 cores).
@@ -31,9 +36,10 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--conditions", default="lab")
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--budget", type=float, default=DEFAULT_BUDGET_S, metavar="S")
     args = parser.parse_args()
     config = Config(("active",), ("extended",), seed=args.seed,
-                    conditions=Conditions(args.conditions))
+                    conditions=Conditions(args.conditions), budget_s=args.budget)
     start, cpu = time.perf_counter(), _cpu_seconds()
     trials = run(config, args.machines, jobs=args.jobs)
     wall, cpu = time.perf_counter() - start, _cpu_seconds() - cpu

@@ -316,10 +316,10 @@ def test_the_filter_computes_only_the_spreads_that_decide_its_reach(monkeypatch)
     computed = [0]
     spreads_of = belief_module.spreads_many
 
-    def counted(beliefs: list[Planner], stands: list[tuple[int, int]],
-                postures: list[np.ndarray]) -> list[np.ndarray]:
-        computed[0] += sum(len(p) for p in postures)
-        return spreads_of(beliefs, stands, postures)
+    def counted(beliefs: list[Planner], machines: np.ndarray, stands: np.ndarray,
+                postures: np.ndarray) -> np.ndarray:
+        computed[0] += len(postures)
+        return spreads_of(beliefs, machines, stands, postures)
 
     monkeypatch.setattr(belief_module, "spreads_many", counted)
     mine = every = 0
@@ -359,3 +359,38 @@ def test_planner_module_keeps_its_earlier_names() -> None:
     assert issubclass(search.Planner, pricing.Pricer) and issubclass(pricing.Pricer, belief.Belief)
     p = planner(budget_s=60.0)
     assert np.array_equal(p.options().gain, p.priced_moves().gain)
+
+
+def test_a_tried_remounts_rows_are_its_stands_own_at_every_gather() -> None:
+    """The gain bounds' rows (``touched_at``) of a fork re-mounted once and twice, asked
+    once and again, are each stand's own rows at the postures asked, bit for bit, and the
+    parent's are left as they were: a re-mount puts its stand's rows in place or stacks
+    them anew, never reads another mounting's."""
+    parent = planner()
+    rng = np.random.default_rng(3)
+    postures = np.sort(rng.choice(len(parent.table.postures), 300, replace=False))
+    before = parent.touched_at(postures).copy()
+    free = [s for s in range(len(slot_catalogue(PROTOTYPE))) if s not in parent.slots]
+    trial = parent.fork()
+    for stand, slot in ((2, free[0]), (4, free[1])):
+        trial.remount(stand, slot)
+        for _ in range(2):
+            got = trial.touched_at(postures)
+            want = np.stack([rows[postures] for rows in trial.touched_rows])
+            assert np.array_equal(got, want)
+    assert np.array_equal(parent.touched_at(postures), before)
+
+
+def test_the_world_shortlist_is_the_start_of_a_stable_order() -> None:
+    """The moves the world prices are the first of a stable sort of their bounds, found
+    by a partition: the same set with ties broken by index and NaN last, whatever the
+    values (ties, signed zeros, infinities, NaN)."""
+    from calibrators.planning.pricing import _first_of_stable_order
+    rng = np.random.default_rng(11)
+    for trial in range(2000):
+        values = rng.integers(-3, 3, int(rng.integers(1, 50))).astype(float)
+        for mark, share in ((-0.0, 0.2), (np.inf, 0.1), (-np.inf, 0.1), (np.nan, 0.2)):
+            values[rng.random(len(values)) < share * (trial % 2)] = mark
+        count = int(rng.integers(1, 40))
+        assert np.array_equal(_first_of_stable_order(values, count),
+                              np.sort(np.argsort(values, kind="stable")[:count]))

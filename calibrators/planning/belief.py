@@ -183,7 +183,12 @@ class Belief:
         # stand, made at each re-mount a search tries.
         self.touched_columns = np.zeros((k, N_MACHINE + N_STAND), dtype=int)
         self.touched_rows: list[np.ndarray] = [np.zeros((p, N_MACHINE + N_STAND))] * k
+        # Their stack by posture (P, K, T), read-only and shared by forks, the stands
+        # re-mounted since it was made, and how often their rows were put in place since
+        # the last re-mount (:meth:`touched_at`).
         self._touched: np.ndarray | None = None
+        self._stale: frozenset[int] = frozenset()
+        self._patched = 0
         for k in range(len(self.slots)):
             self._set_rows(k)
         # Where an engaged gauge was seen not to read (its tip beyond the travel): it will
@@ -204,19 +209,36 @@ class Belief:
         """Rows (P, n) in mm per unit scale of a reading of ``stand`` at every posture."""
         return self.rows_at(slice(None), [stand])[:, 0]
 
-    def rows_at(self, postures: np.ndarray | slice, stands: list[int] | None = None
-                ) -> np.ndarray:
+    def rows_at(self, postures: np.ndarray | slice, stands: list[int] | None = None,
+                weight: np.ndarray | None = None) -> np.ndarray:
         """Rows (L, K', n) in mm per unit scale of a reading of each of ``stands`` (K';
         default: every stand) at ``postures`` (L): its slot's changes over the machine's
-        errors and its mounting's, and its zero's scale (an empty stand's are zero)."""
-        change = self.table.change
-        stands = range(len(self.slots)) if stands is None else stands
-        out = np.zeros((len(self.table.postures[postures]), len(stands), len(self.covariance)))
-        for i, stand in enumerate(stands):
-            slot = self.slots[stand]
-            if slot >= 0:
-                out[:, i, self._columns(stand)[:-1]] = change[slot, postures]
-                out[:, i, self._columns(stand)[-1]] = ZERO_SCALE
+        errors and its mounting's, and its zero's scale (an empty stand's are zero).
+        With ``weight`` (L, K'), each stand's row at a posture times its weight, over the
+        gauge's sigma: the readings' whitened rows, each entry ``(row * weight) / sigma``
+        as a product of the whole array would have it, but made only where a row has
+        entries (a mounting's columns are the machine's, then its stand's, two runs)."""
+        stands = np.arange(len(self.slots)) if stands is None else np.asarray(stands, dtype=int)
+        count = len(range(len(self.table.postures))[postures]) if isinstance(
+            postures, slice) else len(postures)
+        out = np.zeros((count, len(stands), len(self.covariance)))
+        slots = np.array(self.slots)[stands]
+        mounted = np.flatnonzero(slots >= 0)  # the stands' places in ``stands`` with rows
+        if not mounted.size:
+            return out
+        # (L, K'', C): each mounted stand's changes at the postures.
+        values = np.moveaxis(self.table.change[slots[mounted]][:, postures] if isinstance(
+            postures, slice) else self.table.change[slots[mounted][:, None], postures], 0, 1)
+        zero = ZERO_SCALE
+        if weight is not None:
+            values = values * weight[:, mounted, None] / self.sigma
+            zero = ZERO_SCALE * weight[:, mounted] / self.sigma
+        # A mounting's columns are the machine's, then its stand's (the zero's last).
+        first = N_MACHINE + N_STAND * stands[mounted]
+        out[:, mounted, :N_MACHINE] = values[..., :N_MACHINE]
+        out[:, mounted[:, None], first[:, None] + np.arange(N_STAND - 1)] = values[
+            ..., N_MACHINE:]
+        out[:, mounted, first + N_STAND - 1] = zero
         return out
 
     def _set_rows(self, stand: int) -> None:
@@ -230,29 +252,31 @@ class Belief:
         columns[stand] = 0
         columns[stand, :len(used)] = used
         self.touched_columns, self.touched_rows[stand] = columns, touched
-        if self._touched is not None:
-            # A copy of the stack with this stand's rows replaced: a re-mount the search
-            # tries changes one stand, and copying is cheaper than stacking anew.
-            stacked = self._touched.copy()
-            stacked[:, stand] = touched
-            stacked.setflags(write=False)
-            self._touched = stacked
+        self._stale, self._patched = self._stale | {stand}, 0
+
+    def touched_at(self, postures: np.ndarray) -> np.ndarray:
+        """:attr:`touched_rows` at ``postures`` (L,), stacked by stand (K, L, T), laid out
+        as a posture-major stack's rows are (a view of (L, K, T)).  Gathered from the
+        stack of every stand's rows, made once per mounting of the stands, with the rows
+        of a stand re-mounted since (one, in each re-mount a search tries) put in place:
+        where each tried re-mount copied the stack (a megabyte), and gathering stand by
+        stand cost every decision.  A belief asked again after a re-mount (a plan's own, a
+        filter's, a look-ahead's) stacks them anew instead."""
+        if self._touched is None or (self._stale and self._patched):
+            self._touched = np.stack(self.touched_rows, axis=1)
+            self._touched.setflags(write=False)
+            self._stale, self._patched = frozenset(), 0
+        part = np.swapaxes(self._touched[postures], 0, 1)
+        for stand in self._stale:
+            part[stand] = self.touched_rows[stand][postures]
+        self._patched += bool(self._stale)
+        return part
 
     @property
     def rows(self) -> np.ndarray:
         """Rows (K, P, n) of every stand at every posture (:meth:`rows_at`, made anew at
         each call)."""
         return np.swapaxes(self.rows_at(slice(None)), 0, 1)
-
-    @property
-    def touched(self) -> np.ndarray:
-        """:attr:`touched_rows` stacked by posture (P, K, T), read-only: made once per
-        mounting of the stands, where gathering each stand's at every decision cost the
-        ``active`` agent a twentieth of its choice."""
-        if self._touched is None:
-            self._touched = np.stack(self.touched_rows, axis=1)
-            self._touched.setflags(write=False)
-        return self._touched
 
     def predicted_tips(self, postures: np.ndarray | slice = slice(None)) -> np.ndarray:
         """Predicted tip distance of every stand's gauge at ``postures`` (K, P'), mm:
@@ -271,8 +295,10 @@ class Belief:
         if self.mean is not None:
             return reaches([self], postures)[0]
         slots = np.array(self.slots)
-        mounted = (slots >= 0)[:, None]
-        safe, contact = (a[np.maximum(slots, 0)][:, postures] for a in self.table.prior_reach)
+        mounted, used = (slots >= 0)[:, None], np.maximum(slots, 0)
+        # Only the postures asked are gathered (one, to read here), not every one first.
+        at = (used, postures) if isinstance(postures, slice) else (used[:, None], postures)
+        safe, contact = (a[at] for a in self.table.prior_reach)
         return safe & mounted, np.where(self.silent[:, postures], 0.0, contact) * mounted
 
     def predicted_rigid_mm(self) -> float:
@@ -568,44 +594,49 @@ def _reach_where(beliefs: list[Belief], tips: np.ndarray, spread: np.ndarray,
         open_ = np.flatnonzero((tips >= END_GAP) & (contact_at < 1.0)
                                & ~table.pressed[slot, posture] & (slots[m, k] >= 0))
     if open_.size:
-        stand = m[open_] * slots.shape[1] + k[open_]
-        groups = np.split(open_, np.flatnonzero(np.diff(stand)) + 1)
-        pairs = [(int(m[g[0]]), int(k[g[0]])) for g in groups]
-        for group, (i, own), value in zip(groups, pairs, spreads_many(
-                beliefs, pairs, [posture[g] for g in groups]), strict=True):
-            spreads[group] = beliefs[i].spread_bound[own, posture[group]] = value
-        safe_at[open_], contact_at[open_] = reach_at(table, slot[open_], posture[open_],
-                                                     tips[open_], spreads[open_])
+        mine, own, at = m[open_], k[open_], posture[open_]
+        spreads[open_] = value = spreads_many(beliefs, mine, own, at)
+        # Each belief's bounds lowered at once (its entries are consecutive).
+        firsts = np.flatnonzero(np.r_[True, mine[1:] != mine[:-1]])
+        for first, last in zip(firsts, [*firsts[1:], len(mine)], strict=True):
+            beliefs[mine[first]].spread_bound[own[first:last], at[first:last]] = value[
+                first:last]
+        safe_at[open_], contact_at[open_] = reach_at(table, slot[open_], at, tips[open_],
+                                                     spreads[open_])
     safe[m, k, j], contact[m, k, j] = safe_at, contact_at
 
 
-def spreads_many(beliefs: list[Belief], stands: list[tuple[int, int]],
-                 postures: list[np.ndarray]) -> list[np.ndarray]:
-    """Standard deviation of the predicted tip of each (belief, stand) of ``stands``
-    (indices in ``beliefs``, one design) at its ``postures`` (L_i,), mm, from the
-    covariances, in one stacked product.  Each
+def spreads_many(beliefs: list[Belief], machines: np.ndarray, stands: np.ndarray,
+                 postures: np.ndarray) -> np.ndarray:
+    """Standard deviation (N,) of the predicted tip of each entry's stand of ``stands``
+    (N,) of its belief of ``machines`` (N,, indices in ``beliefs``, one design) at its
+    posture of ``postures`` (N,), mm, from the covariances, in one stacked product: the
+    entries of one (belief, stand) are consecutive, the beliefs in order.  Each
     stand's rows are padded to one even count by repeating its last posture, so each
     item goes to BLAS as an even count of rows, the value of a posture the same to the
     bit whichever others are computed with it (BLAS's kernels take a lone last row their
     own way, a few ulps off)."""
     table = beliefs[0].table
-    lengths = np.array([len(p) for p in postures])
+    pair = machines * len(beliefs[0].slots) + stands
+    starts = np.flatnonzero(np.r_[True, pair[1:] != pair[:-1]])  # each (belief, stand)'s
+    lengths = np.diff(np.r_[starts, len(pair)])
     longest = int(lengths.max())
     longest += longest % 2
     # Each group's postures, its last repeated up to the even count (G, L).
-    ends = np.cumsum(lengths)
-    index = np.concatenate(postures)[(ends - lengths)[:, None] + np.minimum(
-        np.arange(longest), lengths[:, None] - 1)]
-    slots = np.array([beliefs[i].slots[k] for i, k in stands])
+    index = postures[starts[:, None] + np.minimum(np.arange(longest), lengths[:, None] - 1)]
+    first_machine, first_stand = machines[starts], stands[starts]
+    slots = np.array([b.slots for b in beliefs])[first_machine, first_stand]
     change = table.change[slots[:, None], index]  # (G, L, C)
     # Each belief's stands' blocks of its covariance gathered at once (the pairs come
     # belief by belief).
     covariance = np.concatenate([
-        beliefs[i].covariance[_block_index(tuple(k for _, k in pairs))]
-        for i, pairs in groupby(stands, key=itemgetter(0))])
+        beliefs[i].covariance[_block_index(tuple(int(s) for _, s in pairs))]
+        for i, pairs in groupby(zip(first_machine, first_stand, strict=True),
+                                key=itemgetter(0))])
     product = change @ covariance
     values = np.sqrt(np.clip(np.sum(product * change, axis=-1), 0.0, None))
-    return [v[:len(p)] for v, p in zip(values, postures, strict=True)]
+    group = np.repeat(np.arange(len(starts)), lengths)
+    return values[group, np.arange(len(pair)) - starts[group]]
 
 
 def _unread(beliefs: list[Belief], safe: np.ndarray, contact: np.ndarray,

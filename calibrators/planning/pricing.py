@@ -142,7 +142,7 @@ class Pricer(Belief):
         0))`` or ``slogdet(I)``, zeros that differ at most in their sign).  A posture's
         gain is computed alone (stacked products and solves work item by item), so it is
         the same to the bit whichever others are priced with it."""
-        return self.rows_at(postures) * np.sqrt(reads.T[postures])[:, :, None] / self.sigma
+        return self.rows_at(postures, weight=np.sqrt(reads.T[postures]))
 
     def _gains(self, rows: np.ndarray) -> np.ndarray:
         """Gain of adding each batch of whitened rows (B, K, n) to the covariance."""
@@ -172,8 +172,7 @@ class Pricer(Belief):
         the form is ``(C F)(C F)'`` (``F``: :func:`rigid_factor`), so a row's is the
         square of its product with ``C F``, r columns instead of every unknown's."""
         c, cols = self.covariance, self.touched_columns  # (K, T)
-        # (K, L, T), laid out as the stands' rows at the postures were before (L, K, T).
-        part = np.swapaxes(self.touched[postures], 0, 1)
+        part = self.touched_at(postures)  # (K, L, T)
         if self.criterion == "D":
             left, right = part @ c[cols[:, :, None], cols[:, None, :]], part
         else:
@@ -229,20 +228,34 @@ class Pricer(Belief):
 
         if live.size:
             bound = self._gain_bounds(reads, live)
-            bound = bound + BOUND_SLACK * (np.abs(bound) + np.max(np.abs(bound)))
+            size = np.abs(bound)
+            bound = bound + BOUND_SLACK * (size + np.max(size))
             ceiling = bound / seconds[live]
-            order = np.argsort(-ceiling, kind="stable")
             if self.world is not None:
-                zero = self.table.zero
+                zero, moves = self.table.zero, live[_first_of_stable_order(-ceiling, wanted)]
                 # Zero when it is live: a test of its own entries, not a search of ``live``.
-                moves = np.union1d(live[order[:wanted]], np.array(
-                    [zero] if fits[zero] and reads[:, zero].any() else [], dtype=live.dtype))
-                return rate, PricedMoves(gain, seconds, after, reads), moves
-            first, rest = np.split(order, [max(FIRST_PRICED, wanted)])
+                if fits[zero] and reads[:, zero].any() and zero not in moves:
+                    moves = np.append(moves, zero)
+                return rate, PricedMoves(gain, seconds, after, reads), np.sort(moves)
+            first, rest = np.split(np.argsort(-ceiling, kind="stable"),
+                                   [max(FIRST_PRICED, wanted)])
             price(first)
             if rest.size:
                 price(rest[ceiling[rest] >= np.sort(rate[live[first]])[-wanted]])
         return rate, PricedMoves(gain, seconds, after, reads), None
+
+
+def _first_of_stable_order(values: np.ndarray, count: int) -> np.ndarray:
+    """The indices of the first ``count`` of ``values`` (L,) in ascending order, ties by
+    index and NaN last, as the start of ``np.argsort(values, kind="stable")`` has them,
+    in increasing order: found by a partition, not a sort of every value."""
+    if count >= len(values):
+        return np.arange(len(values))
+    last = np.partition(values, count - 1)[count - 1]  # the count-th value (NaN last)
+    below, tied = (~np.isnan(values), np.isnan(values)) if np.isnan(last) else (
+        values < last, values == last)
+    below = np.flatnonzero(below)
+    return np.union1d(below, np.flatnonzero(tied)[:count - len(below)])
 
 
 def top_rates_many(pricers: list[Pricer], count: int

@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -55,7 +56,7 @@ from calibrators.estimators.consider import (
     warmup_curves,
     warmup_sizes,
 )
-from orthoglide_env.lab.slot_table import SlotTable
+from orthoglide_env.lab.slot_table import SlotTable, slot_table
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.reading_model import ParameterSpace, default_scales
 from orthoglide_env.world.conditions import Conditions
@@ -92,6 +93,11 @@ class WorldTerms:
     def __post_init__(self) -> None:
         on = self.conditions.__contains__
         self.axis_count = 4 * sum(on(e) for e in AXIS_EFFECTS)
+        # The drive effects' sizes (mm), mean and spread, or None where they do not act.
+        self.warmup: tuple[float, ...] | None = (
+            warmup_sizes(self.conditions) if on("warmup") else None)
+        self.backlash: tuple[float, ...] | None = tuple(
+            size * UM for size in backlash_sizes(self.conditions)) if on("backlash") else None
         zero = np.zeros(1)
         self.per_stand = len(drift_terms(zero, zero, self.conditions)) if on("stands") else 0
         self.per_dial = len(dial_terms(zero, 1.0, self.conditions))
@@ -193,21 +199,19 @@ def rows_many(terms: list[WorldTerms], slots: np.ndarray, postures: np.ndarray,
     first = terms[0]
     m_count, k = stands.shape
     machines = np.arange(m_count)[:, None]
-    mounted = slots[machines, stands] >= 0  # (M, K')
-    slot = np.maximum(slots[machines, stands], 0)
+    slot = slots[machines, stands]
+    mounted, slot = slot >= 0, np.maximum(slot, 0)  # (M, K')
     drho = (first.drive[slot[..., None], postures[:, None, :]]
             * mounted[..., None, None])  # (M, K', P', 3)
     p = drho.shape[2]
     fitted = np.zeros((m_count, k, p, first.count))
     column = 0
-    on = first.conditions.__contains__
     carriage = []  # (mean size, spread size, per-axis pattern (M, P', 3))
-    if on("warmup"):
-        carriage.append((*warmup_sizes(first.conditions),
+    if first.warmup is not None:
+        carriage.append((*first.warmup,
                          warmup_curves(first.x[postures], times, first.conditions)[1]))
-    if on("backlash"):
-        mean, spread = backlash_sizes(first.conditions)
-        carriage.append((mean * UM, spread * UM, -approach / 2))
+    if first.backlash is not None:
+        carriage.append((*first.backlash, -approach / 2))
     for mean, spread, pattern in carriage:
         moved = drho * pattern[:, None]  # (M, K', P', 3)
         fitted[..., column] = mean * moved.sum(axis=-1)
@@ -223,12 +227,24 @@ def rows_many(terms: list[WorldTerms], slots: np.ndarray, postures: np.ndarray,
                 pattern * mounted[..., None])
     considered = np.zeros((m_count, k, p, first.consider.shape[1]))
     if first.per_dial:
-        y = first.table.reading[slot[..., None], postures[:, None, :]]
         dials = np.stack([t.dial_columns for t in terms])[machines, stands]  # (M, K', d)
-        for j, (_, pattern) in enumerate(dial_terms(y, first.table.travel,
-                                                    first.conditions)):
-            considered[machines, rows, :, dials[..., j]] = pattern * mounted[..., None]
+        for j, pattern in enumerate(dial_patterns(first.design, first.conditions)):
+            considered[machines, rows, :, dials[..., j]] = (
+                pattern[slot[..., None], postures[:, None, :]] * mounted[..., None])
     return fitted, considered
+
+
+@lru_cache(maxsize=8)
+def dial_patterns(design: MachineDesign, conditions: Conditions) -> np.ndarray:
+    """The indicators' error patterns (d, S, P) of :func:`~calibrators.estimators.consider.
+    dial_terms` at the nominal reading of every slot at every candidate posture of
+    ``design``, read-only: made once, where each pricing's world rows made them anew at
+    the postures it asked (the same values, element by element)."""
+    table = slot_table(design)
+    out = np.array([pattern for _, pattern in dial_terms(table.reading, table.travel,
+                                                          conditions)])
+    out.setflags(write=False)
+    return out
 
 
 def gains_many(rows: np.ndarray, considered: np.ndarray, covariances: np.ndarray,
