@@ -38,6 +38,9 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--budget", type=float, default=DEFAULT_BUDGET_S, metavar="S")
     args = parser.parse_args()
+    if args.machines < 1 or args.jobs < 1 or not args.budget > 0:
+        parser.error("--machines and --jobs must be at least 1, --budget a positive number "
+                     "of seconds")
     config = Config(("active",), ("extended",), seed=args.seed,
                     conditions=Conditions(args.conditions), budget_s=args.budget)
     start, cpu = time.perf_counter(), _cpu_seconds()
