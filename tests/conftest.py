@@ -3,11 +3,14 @@ experiment in the lab."""
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import io
 import re
 import signal
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +20,7 @@ import pytest
 
 import orthoglide_env
 from calibrators.agents import get_agent
+from calibrators.cli import main
 from calibrators.measurements import Measurements
 from calibrators.study.episodes import Episode, run_episode
 from orthoglide_env.instruments.dial import GaugeNoise, weighting_sigma
@@ -96,14 +100,40 @@ def paper_experiment(machine: dict | None = None, seed: int = 0, **lab: Any
     return episode, env.unwrapped
 
 
-def assert_refused_in_one_line(path: Path, words: str) -> None:
+#: The warnings a child interpreter does not print by default (outside ``__main__``).
+_UNSHOWN = (DeprecationWarning, PendingDeprecationWarning, ImportWarning, ResourceWarning)
+
+
+def command_here(argv: list[str]) -> subprocess.CompletedProcess:
+    """``orthoglide ARGV`` run by ``main`` in this process, with the exit status (argparse's
+    exit as its code), stdout and stderr that ``python -m calibrators.cli ARGV`` gives.  A
+    warning the command raises is added to that stderr, as a child prints it; an exception
+    the command lets through fails the test, where a child printed its traceback.  For a
+    test of what a command does or refuses, not of its process: a child costs a CPU-second
+    or two to import the command, and each command keeps tests that start one."""
+    out, err = io.StringIO(), io.StringIO()
+    with (warnings.catch_warnings(record=True) as caught, contextlib.redirect_stdout(out),
+          contextlib.redirect_stderr(err)):
+        warnings.simplefilter("always")
+        try:
+            status = main(argv)
+        except SystemExit as ended:
+            status = ended.code
+    shown = "".join(f"{w.category.__name__}: {w.message}\n" for w in caught
+                    if not issubclass(w.category, _UNSHOWN))
+    return subprocess.CompletedProcess(argv, status, out.getvalue(), err.getvalue() + shown)
+
+
+def assert_refused_in_one_line(path: Path, words: str, child: bool = True) -> None:
     """A bad reading file: reading it raises ``ValueError`` with ``words`` in one line, and
-    ``fit`` ends with that one line on stderr and exit 2."""
+    ``fit`` ends with that one line on stderr and exit 2 (run as a ``child`` process, or
+    in this one: :func:`command_here`)."""
     with pytest.raises(ValueError, match=re.escape(words)) as info:
         Measurements.read(path)
     assert "\n" not in str(info.value)
-    done = subprocess.run([sys.executable, "-m", "calibrators.cli", "fit", str(path)],
-                          capture_output=True, text=True, check=False)
+    done = (subprocess.run([sys.executable, "-m", "calibrators.cli", "fit", str(path)],
+                           capture_output=True, text=True, check=False) if child
+            else command_here(["fit", str(path)]))
     assert done.returncode == 2
     assert words in done.stderr and len(done.stderr.strip().splitlines()) == 1
 

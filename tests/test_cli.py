@@ -13,6 +13,7 @@ import sys
 import numpy as np
 import pytest
 from conftest import TABLE1 as TABLE1_ERRORS
+from conftest import command_here
 
 from calibrators.cli import build_parser, main
 from calibrators.study.compare import Trial
@@ -234,66 +235,73 @@ def test_resume_refuses_a_trial_of_other_error_names_in_one_line(tmp_path, capsy
     assert len(err) == 1 and f"{trials}:1: not a trial (the trial's error names" in err[0], err
 
 
-@pytest.mark.parametrize(
-    ("argv", "fragment"),
-    [
-        (["pose", "--machine", "MISSING", "--rho", "0", "0", "0"], "not found"),
-        (["pose", "--machine", "BAD_KEY", "--rho", "0", "0", "0"], "unknown machine key"),
-        (["pose", "--machine", "NOT_NUMBER", "--rho", "0", "0", "0"], "must hold numbers"),
-        (["pose", "--machine", "UNASSEMBLABLE", "--rho", "0", "0", "0"], "validity range"),
-        (["pose", "--machine", "GOOD", "--rho", "0", "0", "75"], "joint limits"),
-        (["render", "--machine", "GOOD", "--rho", "0", "0", "0", "--out", "x.jpg"], ".png"),
-        (["calibrate", "--strategy", "oracle"], "unknown strategy"),
-        (["calibrate", "--machine", "MISSING"], "not found"),
-        (["calibrate", "--sigma", "-1"], "--sigma"),
-        (["pose", "--machine", "GOOD", "--rho", "0", "0", "0", "--resolution", "nan"],
-         "--resolution"),
-        (["calibrate", "--params", "all"], "unknown parameter 'all'"),
-        (["calibrate", "--prior", "attach=-1", "--params", "extended"], "must be > 0"),
-        (["calibrate", "--fix", "drho_x"], "NAME=NUMBER"),
-        (["fit", "GOOD_CSV", "--sigma", "1e308"], "--sigma"),
-        (["fit", "MISSING"], "not found"),
-        (["fit", "BAD_CSV"], "column 5"),
-        (["fit", "GOOD"], ".csv or .json"),
-        # What only the exact-model fit can do names the option that chooses it.
-        (["calibrate", "--strategy", "paper", "--agent", "tracker", "--backend", "exact",
-          "--conditions", "ideal"],
-         "reads dial gauges only; the exact-model fit reads a tracker's readings too: use an "
-         "exact-model estimator, --estimator paper6 or extended"),
-        (["fit", "GOOD_CSV", "--strategy", "paper", "--params", "extended"],
-         "not 'extended'; the exact-model fit estimates any parameters: use an exact-model "
-         "estimator, --estimator paper6"),
-        (["fit", "GOOD_CSV", "--estimator", "paper", "--prior", "none"],
-         "the paper's linear fit (eq. 10) takes no prior; the exact-model fit does"),
-        (["calibrate", "--estimator", "oracle"], "unknown estimator 'oracle'"),
-        (["calibrate", "--estimator", "full", "--strategy", "paper"], "give one"),
-        (["fit", "GOOD_CSV", "--holdout", "1.5"],
-         "--holdout: estimator 'gauss-newton': parameter 'holdout' must be a number in [0, 1)"),
-        (["compare", "--agents", "paper,oracle"], "unknown agent 'oracle'"),
-        (["compare", "--agents", ","], "--agents needs"),
-        (["compare", "--estimators", "oracle"], "unknown estimator"),
-        (["compare", "--seed", "-1"], "--seed"),
-        (["compare", "--jobs", "0"], "--jobs"),
-        (["compare", "--resume"], "--resume"),
-        # A bad --out is refused before any machine is run, not after the whole run.
-        (["compare", "--out", "GOOD"], "is not a folder"),
-        (["compare", "--machines", "0"], "--machines"),
-        (["compare", "--success-mm", "0"], "--success-mm must be a positive"),
-        (["compare", "--success-mm", "nan"], "--success-mm must be a positive"),
-        (["fit", "GOOD_CSV", "--conditions", "lab"], "needs its time (time_s)"),
-        (["fit", "GOOD_CSV", "--left-out", "huge"], "--left-out"),
-        (["compare", "--address", "auto"], "--engine ray"),
-        (["fit", "GOOD_CSV", "--params", "full", "--node-spacing", "0"],
-         "--node-spacing: estimator 'gauss-newton': parameter 'node_spacing' must be None or a "
-         "number in (0, inf)"),
-        (["fit", "GOOD_CSV", "--params", "full", "--node-spacing", "500"],
-         "larger than the drives' travel"),
-        (["fit", "GOOD_CSV", "--params", "full", "--terms", "lead,heat"],
-         "unknown estimator term(s) ['heat']"),
-        (["fit", "GOOD_CSV", "--fit-world", "--terms", "lead"], "not both"),
-    ],
-)
-def test_bad_input_gives_one_line_and_status_2(tmp_path, argv, fragment: str) -> None:
+#: Bad command lines (a capitalised word: a file the test writes) and the words of
+#: their refusal.
+BAD_INPUT = [
+    (["pose", "--machine", "MISSING", "--rho", "0", "0", "0"], "not found"),
+    (["pose", "--machine", "BAD_KEY", "--rho", "0", "0", "0"], "unknown machine key"),
+    (["pose", "--machine", "NOT_NUMBER", "--rho", "0", "0", "0"], "must hold numbers"),
+    (["pose", "--machine", "UNASSEMBLABLE", "--rho", "0", "0", "0"], "validity range"),
+    (["pose", "--machine", "GOOD", "--rho", "0", "0", "75"], "joint limits"),
+    (["render", "--machine", "GOOD", "--rho", "0", "0", "0", "--out", "x.jpg"], ".png"),
+    (["calibrate", "--strategy", "oracle"], "unknown strategy"),
+    (["calibrate", "--machine", "MISSING"], "not found"),
+    (["calibrate", "--sigma", "-1"], "--sigma"),
+    (["pose", "--machine", "GOOD", "--rho", "0", "0", "0", "--resolution", "nan"],
+     "--resolution"),
+    (["calibrate", "--params", "all"], "unknown parameter 'all'"),
+    (["calibrate", "--prior", "attach=-1", "--params", "extended"], "must be > 0"),
+    (["calibrate", "--fix", "drho_x"], "NAME=NUMBER"),
+    (["fit", "GOOD_CSV", "--sigma", "1e308"], "--sigma"),
+    (["fit", "MISSING"], "not found"),
+    (["fit", "BAD_CSV"], "column 5"),
+    (["fit", "GOOD"], ".csv or .json"),
+    # What only the exact-model fit can do names the option that chooses it.
+    (["calibrate", "--strategy", "paper", "--agent", "tracker", "--backend", "exact",
+      "--conditions", "ideal"],
+     "reads dial gauges only; the exact-model fit reads a tracker's readings too: use an "
+     "exact-model estimator, --estimator paper6 or extended"),
+    (["fit", "GOOD_CSV", "--strategy", "paper", "--params", "extended"],
+     "not 'extended'; the exact-model fit estimates any parameters: use an exact-model "
+     "estimator, --estimator paper6"),
+    (["fit", "GOOD_CSV", "--estimator", "paper", "--prior", "none"],
+     "the paper's linear fit (eq. 10) takes no prior; the exact-model fit does"),
+    (["calibrate", "--estimator", "oracle"], "unknown estimator 'oracle'"),
+    (["calibrate", "--estimator", "full", "--strategy", "paper"], "give one"),
+    (["fit", "GOOD_CSV", "--holdout", "1.5"],
+     "--holdout: estimator 'gauss-newton': parameter 'holdout' must be a number in [0, 1)"),
+    (["compare", "--agents", "paper,oracle"], "unknown agent 'oracle'"),
+    (["compare", "--agents", ","], "--agents needs"),
+    (["compare", "--estimators", "oracle"], "unknown estimator"),
+    (["compare", "--seed", "-1"], "--seed"),
+    (["compare", "--jobs", "0"], "--jobs"),
+    (["compare", "--resume"], "--resume"),
+    # A bad --out is refused before any machine is run, not after the whole run.
+    (["compare", "--out", "GOOD"], "is not a folder"),
+    (["compare", "--machines", "0"], "--machines"),
+    (["compare", "--success-mm", "0"], "--success-mm must be a positive"),
+    (["compare", "--success-mm", "nan"], "--success-mm must be a positive"),
+    (["fit", "GOOD_CSV", "--conditions", "lab"], "needs its time (time_s)"),
+    (["fit", "GOOD_CSV", "--left-out", "huge"], "--left-out"),
+    (["compare", "--address", "auto"], "--engine ray"),
+    (["fit", "GOOD_CSV", "--params", "full", "--node-spacing", "0"],
+     "--node-spacing: estimator 'gauss-newton': parameter 'node_spacing' must be None or a "
+     "number in (0, inf)"),
+    (["fit", "GOOD_CSV", "--params", "full", "--node-spacing", "500"],
+     "larger than the drives' travel"),
+    (["fit", "GOOD_CSV", "--params", "full", "--terms", "lead,heat"],
+     "unknown estimator term(s) ['heat']"),
+    (["fit", "GOOD_CSV", "--fit-world", "--terms", "lead"], "not both"),
+]
+#: Each command's first bad command line.
+FIRST_REFUSALS = {argv[0]: argv for argv, _ in reversed(BAD_INPUT)}
+
+
+@pytest.mark.parametrize(("argv", "fragment"), BAD_INPUT)
+def test_bad_input_gives_one_line_and_status_2(tmp_path, argv, fragment: str,
+                                               monkeypatch) -> None:
+    """Each command's first refusal here starts the command as a user does (its process:
+    no traceback, the one line); the others run it in this process (``command_here``)."""
     files = {
         "MISSING": tmp_path / "missing.json",
         "BAD_KEY": '{"drho": [0, 0, 0], "speed": 3}',
@@ -313,8 +321,12 @@ def test_bad_input_gives_one_line_and_status_2(tmp_path, argv, fragment: str) ->
             resolved.append(str(files[arg]))
         else:
             resolved.append(arg)
-    proc = subprocess.run([sys.executable, "-m", "calibrators.cli", *resolved],
-                          capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    if argv == FIRST_REFUSALS[argv[0]]:
+        proc = subprocess.run([sys.executable, "-m", "calibrators.cli", *resolved],
+                              capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    else:
+        monkeypatch.chdir(tmp_path)
+        proc = command_here(resolved)
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr
     lines = proc.stderr.strip().splitlines()

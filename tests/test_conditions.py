@@ -12,6 +12,7 @@ import sys
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import command_here
 
 import orthoglide_env
 from orthoglide_env.lab.operations import Op
@@ -204,14 +205,21 @@ def test_bad_conditions_are_refused_by_both_envs(env_id: str, value, words: str)
     assert words in str(info.value)
 
 
-@pytest.mark.parametrize("args, words", [
+#: Bad conditions of ``calibrate`` and the words of their refusal.
+BAD_CONDITIONS = [
     (["--conditions", "indoors"], "invalid choice: 'indoors'"),
     (["--conditions", "lab", "--effects", "lead,rust"], "unknown effect(s) ['rust']"),
     (["--conditions", "ideal", "--effects", "lead"], "the ideal conditions have no effects"),
-])
+]
+
+
+@pytest.mark.parametrize("args, words", BAD_CONDITIONS)
 def test_bad_conditions_exit_2_with_one_line(args: list[str], words: str) -> None:
-    result = subprocess.run([sys.executable, "-m", "calibrators.cli", "calibrate", *args],
-                            capture_output=True, text=True, timeout=120)
+    """The first refusal as the command's child process, the others in this process
+    (``command_here``)."""
+    result = (subprocess.run([sys.executable, "-m", "calibrators.cli", "calibrate", *args],
+                             capture_output=True, text=True, timeout=120)
+              if args == BAD_CONDITIONS[0][0] else command_here(["calibrate", *args]))
     assert result.returncode == 2
     assert words in result.stderr and len(result.stderr.strip().splitlines()) == 1
 
@@ -288,21 +296,23 @@ def test_calibrate_writes_a_truth_that_replays(tmp_path) -> None:
     other ones with exit 2."""
     import json
 
+    # The file is written and refused in this process (``command_here``); it is replayed
+    # once by a command started as a user starts it and once here, the same estimate.
     truth = tmp_path / "truth.json"
-    base = [sys.executable, "-m", "calibrators.cli", "calibrate", "--backend", "exact",
-            "--budget", "600", "--json"]
-    first = subprocess.run([*base, "--conditions", "lab", "--save-truth", str(truth)],
-                           capture_output=True, text=True, timeout=300, check=True)
+    base = ["calibrate", "--backend", "exact", "--budget", "600", "--json"]
+    first = command_here([*base, "--conditions", "lab", "--save-truth", str(truth)])
+    assert first.returncode == 0, first.stderr
     written = json.loads(truth.read_text())
     assert written["world"]["conditions"]["name"] == "lab"
     assert json.loads(first.stdout)["truth"] == written
     replay = [*base, "--machine", str(truth)]
-    runs = [json.loads(subprocess.run(replay, capture_output=True, text=True, timeout=300,
-                                      check=True).stdout) for _ in range(2)]
+    runs = [subprocess.run([sys.executable, "-m", "calibrators.cli", *replay],
+                           capture_output=True, text=True, timeout=300), command_here(replay)]
+    assert all(run.returncode == 0 for run in runs), [run.stderr for run in runs]
+    runs = [json.loads(run.stdout) for run in runs]
     assert runs[0]["truth"] == written
     assert runs[0]["estimate"] == runs[1]["estimate"]
-    refused = subprocess.run([*replay, "--conditions", "workshop"], capture_output=True,
-                             text=True, timeout=120)
+    refused = command_here([*replay, "--conditions", "workshop"])
     assert refused.returncode == 2 and "drawn under lab" in refused.stderr
 
 

@@ -11,6 +11,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from conftest import command_here
+
 ROOT = Path(__file__).resolve().parent.parent
 
 
@@ -21,11 +23,12 @@ def run(*args: str) -> subprocess.CompletedProcess:
 
 
 def test_folders_of_different_agents_and_budgets_share_one_table(tmp_path: Path) -> None:
+    # The folders are made in this process (``command_here``); the script is what is
+    # tested, as a user runs it.
     for agent, budget in (("paper", "3600"), ("random", "330")):
-        done = run("-m", "calibrators.cli", "compare", "--machines", "2", "--seed", "1",
-                   "--agents", agent, "--estimators", "paper6", "--budget", budget,
-                   "--conditions", "ideal",
-                   "--jobs", "1", "--quiet", "--out", str(tmp_path / agent))
+        done = command_here(["compare", "--machines", "2", "--seed", "1", "--agents", agent,
+                             "--estimators", "paper6", "--budget", budget, "--conditions",
+                             "ideal", "--jobs", "1", "--quiet", "--out", str(tmp_path / agent)])
         assert done.returncode == 0, done.stderr
     done = run("benchmarks/headline.py", str(tmp_path / "paper"), str(tmp_path / "random"))
     assert done.returncode == 0, done.stderr

@@ -6,24 +6,25 @@ exit status 2 (``ValueError`` in the env)."""
 from __future__ import annotations
 
 import subprocess
-import sys
 from dataclasses import replace
 from pathlib import Path
 
 import gymnasium as gym
 import pytest
+from conftest import command_here
 
 import orthoglide_env
 from calibrators.measurements import Measurements
 
-CLI = [sys.executable, "-m", "calibrators.cli"]
 #: The clean sheet: a 20-minute designed experiment on realistic machine 3, dial sigma
 #: 0.02 mm read to 0.01 mm, in the textbook's world (explicit: the default changes).
 SIGMA = "0.02"
 
 
 def run(*argv: str) -> subprocess.CompletedProcess:
-    return subprocess.run([*CLI, *argv], capture_output=True, text=True, timeout=900)
+    """The command, run in this process (``command_here``): what it writes and its status
+    are tested here, the process a user starts in tests/test_cli.py."""
+    return command_here(list(argv))
 
 
 @pytest.fixture(scope="module")

@@ -4,11 +4,10 @@ line of the key at fault and the rule; the validity range; array equality."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from conftest import command_here
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -67,9 +66,7 @@ def test_hostile_files_give_one_clear_error(tmp_path, text: str, place: str,
 def test_the_command_line_reports_the_same_one_line(tmp_path) -> None:
     path = tmp_path / "m.json"
     path.write_text('{"drho": [%s, 0, 0]}' % ("9" * 401))
-    proc = subprocess.run([sys.executable, "-m", "calibrators.cli", "pose", "--machine",
-                           str(path), "--rho", "0", "0", "0"], capture_output=True, text=True,
-                          timeout=120)
+    proc = command_here(["pose", "--machine", str(path), "--rho", "0", "0", "0"])
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert proc.stderr.strip() == (f"orthoglide pose: error: {path}:1: machine key 'drho' "
                                    "holds an integer beyond the range of a float (+-1.8e+308)")

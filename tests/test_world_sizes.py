@@ -6,11 +6,10 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import command_here
 
 from calibrators.estimators.world_sizes import (
     BLIND_SPOT,
@@ -28,8 +27,6 @@ from calibrators.estimators.world_sizes import (
     thresholds,
     widening,
 )
-
-ROOT = Path(__file__).resolve().parents[1]
 
 #: The linear model of the module: N whitened readings, P geometric columns, K terms in
 #: two families (the first K / 2 terms family 0).
@@ -245,8 +242,9 @@ def test_a_blind_spot_is_asked_of_every_harsher_world_and_gone_when_told_the_har
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "calibrators.cli", *args],
-                          capture_output=True, text=True, cwd=ROOT, timeout=600)
+    """The command, run in this process (``command_here``: what it writes and its status
+    are tested here, the process a user starts in tests/test_cli.py)."""
+    return command_here(list(args))
 
 
 def test_calibrate_tells_the_fit_auto_and_refuses_an_auto_lab() -> None:
