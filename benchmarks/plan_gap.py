@@ -3,14 +3,16 @@ planner's criterion and on the bound's own model, over the bound.
 
     python benchmarks/plan_gap.py [--conditions lab] [--budget 3600]
                                   [--instruments dial,ballbar] [--sigma 0.02]
-                                  [--resolution 0.01] [--warm-bins 6]
+                                  [--resolution 0.01] [--warm-bins 6 [--no-warm-bound]]
+                                  [--stay]
 
 ``optimal`` (:func:`calibrators.agents.optimal.fixed_plan`) makes the greedy plan and, in
 a lab that owns the interferometer or the ballbar, a plan from each rounded design
 (:func:`calibrators.planning.rounding.plan_bundles`), and keeps the one whose criterion
 predicts least, or in a lab with a warm-up the one least on the model with the timed
-terms unknown in six bins (the last column with ``--warm-bins 6``); the last row is the
+terms unknown in six bins (the last column with ``--warm-bins 6``); the last rows are the
 bound's own design rounded so (:func:`calibrators.planning.rounding.bound_bundles`),
+and the design of the bound with the stands held at the paper's slots rounded so,
 which ``optimal`` does not weigh.
 Per plan: its predicted TCP error after rigid motion (the planner's
 criterion, um), its readings counted on the bound's model
@@ -23,7 +25,9 @@ terms but the lead error, so a plan whose ratio here is near 1 and whose realise
 (``compare --bound``) is far above it is held by the world, not by its plan.  With
 ``--warm-bins K`` each plan is also counted on the model whose timed terms (the warm-up,
 the stands' drift) are unknown, its readings in K bins of time
-(:mod:`calibrators.planning.warm_bound`), over that bound.  The
+(:mod:`calibrators.planning.warm_bound`), over that bound (with ``--no-warm-bound``, the
+value alone: ``optimal`` keeps its plan by it).  With ``--stay`` every plan is made
+without re-mounts, as ``optimal-stay`` makes them.  The
 prototype, the paper's stands; no lab episodes (a few CPU-minutes at three hours).
 """
 
@@ -37,7 +41,7 @@ from calibrators.planning.bound import BAR, best_design, bound_model, plan_count
 from calibrators.planning.instruments import operation_keys
 from calibrators.planning.rounding import bound_bundles, plan_bundles, relaxed_plan
 from calibrators.planning.search import Planner, greedy_plan
-from calibrators.planning.warm_bound import steps_value, warm_design
+from calibrators.planning.warm_bound import steps_value, warm_design, warm_models
 from orthoglide_env.instruments.dial import GaugeNoise, weighting_sigma
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op
 from orthoglide_env.model.design import PROTOTYPE
@@ -80,6 +84,11 @@ def main() -> None:
     lab_arguments(parser)
     parser.add_argument("--sigma", type=float, default=0.02, help="dial repeatability, mm")
     parser.add_argument("--resolution", type=float, default=0.01, help="dial display, mm")
+    parser.add_argument("--stay", action="store_true",
+                        help="plans that never re-mount a stand (optimal-stay's)")
+    parser.add_argument("--no-warm-bound", action="store_true",
+                        help="with --warm-bins, the plans on that model without its bound "
+                             "(CPU-minutes with the laser at three hours)")
     args = parser.parse_args()
     owned, conditions = lab_options(parser, args)
     sigma = float(weighting_sigma(GaugeNoise(args.sigma, args.resolution).effective_sigma))
@@ -96,8 +105,11 @@ def main() -> None:
         return planner
 
     print(f"bound {UM * found.bound_mm:.3f} um (design {UM * found.design_mm:.3f} um)")
-    warm = None
-    if args.warm_bins:
+    warm, held = None, None
+    if args.warm_bins and args.no_warm_bound:
+        warm = warm_models(PROTOTYPE, conditions, sigma, args.budget, owned,
+                           bins=args.warm_bins)
+    elif args.warm_bins:
         held, warm = warm_design(PROTOTYPE, conditions, sigma, args.budget, owned,
                                  bins=args.warm_bins)
         print(f"with the timed terms unknown, {args.warm_bins} bins: bound "
@@ -107,14 +119,17 @@ def main() -> None:
                                                     if warm else ""))
     print("|---|---|---|---|---|---|" + ("---|" if warm else ""))
     groups = plan_bundles(slots, sigma, args.budget, PROTOTYPE, conditions, instruments)
-    rounded = bound_bundles(PROTOTYPE, conditions, sigma, args.budget, owned)
+    rounded = [(f"the bound's design{held}: " + " + ".join(b.label for b in bundles), bundles)
+               for held, bundles in (
+                   ("", bound_bundles(PROTOTYPE, conditions, sigma, args.budget, owned)),
+                   (" with the stands held", bound_bundles(PROTOTYPE, conditions, sigma,
+                                                           args.budget, owned, False)))
+               if bundles]
     for name, bundles in [("greedy", None)] + [
-            (" + ".join(b.label for b in group), group) for group in groups] + (
-            [("the bound's design: " + " + ".join(b.label for b in rounded), rounded)]
-            if rounded else []):
+            (" + ".join(b.label for b in group), group) for group in groups] + rounded:
         planner = opened()
-        steps = (greedy_plan(planner) if bundles is None
-                 else relaxed_plan(planner, bundles))
+        steps = (greedy_plan(planner, remounts=not args.stay) if bundles is None
+                 else relaxed_plan(planner, bundles, not args.stay))
         actions = [{"op": s.op, "rho": s.rho, "stand": s.stand, "slot": s.slot,
                     **operation_keys(s)} for s in steps]
         counts = plan_counts(model, PROTOTYPE, slots, engaged, actions)
@@ -125,7 +140,8 @@ def main() -> None:
         extra = ""
         if warm is not None:
             on_warm = float(np.sqrt(steps_value(warm, PROTOTYPE, slots, engaged, tuple(steps))))
-            extra = f" {UM * on_warm:.3f}, {on_warm / held.bound.bound_mm:.2f} |"
+            extra = f" {UM * on_warm:.3f}, " + (f"{on_warm / held.bound.bound_mm:.2f} |"
+                                                if held else "- |")
         print(f"| {name} | {UM * planner.predicted_rigid_mm():.3f} | {UM * on_model:.3f} | "
               f"{on_model / found.bound_mm:.2f} | {counts[model.laser == -1].sum():.0f}, "
               f"{counts[model.laser == BAR].sum():.0f}, {counts[model.laser >= 0].sum():.0f}"

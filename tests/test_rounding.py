@@ -140,8 +140,8 @@ def test_the_bounds_own_design_rounds_to_its_readings(half_hour_design, monkeypa
     assert found.pivot and bar == pytest.approx(found.bound.ballbar_readings) and bar > 100
     # bound_bundles rounds what best_design gives for its set-up: the design above,
     # solved once for this module.
-    def solved(*setup: object) -> bound.Design:
-        assert setup == (PROTOTYPE, IDEAL, SIGMA, budget, owned)
+    def solved(*setup: object, remounts: bool = True) -> bound.Design:
+        assert setup == (PROTOTYPE, IDEAL, SIGMA, budget, owned) and remounts
         return found
 
     monkeypatch.setattr(rounding, "best_design", solved)

@@ -213,14 +213,18 @@ def _rounded(counts: np.ndarray) -> np.ndarray:
 
 
 def bound_bundles(design: MachineDesign, conditions: Conditions, dial_sigma: float,
-                  budget_s: float, instruments: tuple[str, ...]) -> tuple[Bundle, ...]:
+                  budget_s: float, instruments: tuple[str, ...], remounts: bool = True
+                  ) -> tuple[Bundle, ...]:
     """The bound's own design (:func:`~calibrators.planning.bound.best_design`, whose
-    instruments share its visits with the dials) rounded to bundles as
+    instruments share its visits with the dials; without ``remounts``, that of the bound
+    with the stands held at the paper's slots) rounded to bundles as
     :func:`relaxed_bundles` rounds the sequential designs: its set-ups, its laser targets
-    and its bar points.  Not among ``optimal``'s choices: where its plan was kept its
-    prediction was within 1 % of the plan kept before and its error in the lab no
-    measurably lower (``benchmarks/plan_gap.py``, docs/instruments.md)."""
-    found = best_design(design, conditions, dial_sigma, budget_s, instruments)
+    and its bar points.  Not among ``optimal``'s choices: with the bar, where its plan was
+    kept, its prediction was within 1 % of the plan kept before and its error in the lab
+    no measurably lower; with the laser at three hours, kept on the model with the timed
+    terms unknown, no lower either (``benchmarks/plan_gap.py``, docs/instruments.md)."""
+    found = best_design(design, conditions, dial_sigma, budget_s, instruments,
+                        remounts=remounts)
     model = (bound_model(design, conditions, float(dial_sigma), "interferometer" in instruments,
                          True) if "ballbar" in instruments
              else bound_model(design, conditions, float(dial_sigma),
