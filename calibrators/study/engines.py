@@ -13,12 +13,13 @@ import os
 import signal
 import traceback
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import closing, contextmanager
+from functools import partial
 from importlib.util import find_spec
 from multiprocessing import get_context
 from multiprocessing.connection import Connection, wait
 from multiprocessing.process import BaseProcess
-from typing import TypeVar
+from typing import Any, TypeVar
 
 #: The engines, the first the default.
 ENGINES: tuple[str, ...] = ("local", "ray")
@@ -101,9 +102,9 @@ def _ignore_interrupts() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-def results(function: Callable[[Item], Result], items: list[Item], jobs: int = 1,
-            engine: str = "local", address: str | None = None
-            ) -> Iterator[tuple[Item, Result]]:
+def results(function: Callable[..., Result], items: list[Item], jobs: int = 1,
+            engine: str = "local", address: str | None = None,
+            prepare: Callable[[], Any] | None = None) -> Iterator[tuple[Item, Result]]:
     """``(item, function(item))`` for every item, in the order they end.
 
     ``local`` runs them in this process (``jobs`` 1) or over ``jobs`` spawned processes;
@@ -111,14 +112,31 @@ def results(function: Callable[[Item], Result], items: list[Item], jobs: int = 1
     ``host:port``, ``ray://host:port``, ``auto`` for the latest cluster started on this
     machine; none given, ``RAY_ADDRESS``), or, with neither, to a local Ray instance of
     ``jobs`` CPUs started for the run.  ``function`` and the items must pickle.
+
+    ``prepare``: what every item's call needs, made once before any of them, then handed
+    to each as ``function(prepare(), item)``: in this process with ``jobs`` 1; over
+    spawned processes, on the first worker while the others start, which then takes
+    items as they do (no process is spawned and set up only to make it); for Ray, in one
+    spawned local process (its workers' thread settings, :func:`worker_environment`).
     """
     if engine == "local":
-        return _in_process(function, items) if jobs == 1 else _pool(function, items, jobs)
+        if jobs == 1:
+            return _in_process(function if prepare is None else partial(function, prepare()),
+                               items)
+        return _pool(function, items, jobs, prepare)
     if engine == "ray":
         if not ray_available():
             raise RuntimeError(f"the ray engine needs Ray: {RAY_INSTALL_HINT}")
+        if prepare is not None:
+            with closing(_pool(_made, [prepare], 1)) as made:
+                function = partial(function, next(made)[1])
         return _ray(function, items, jobs, address or os.environ.get("RAY_ADDRESS"))
     raise ValueError(f"unknown engine '{engine}'; choose from {list(ENGINES)}")
+
+
+def _made(prepare: Callable[[], Result]) -> Result:
+    """``prepare()``, a worker's item (:func:`results`' ``prepare``)."""
+    return prepare()
 
 
 def _in_process(function: Callable[[Item], Result], items: list[Item]
@@ -127,9 +145,10 @@ def _in_process(function: Callable[[Item], Result], items: list[Item]
         yield item, function(item)
 
 
-def _pool(function: Callable[[Item], Result], items: list[Item], jobs: int
-          ) -> Iterator[tuple[Item, Result]]:
-    """A pool of spawned workers, each with a pipe of its own.
+def _pool(function: Callable[..., Result], items: list[Item], jobs: int,
+          prepare: Callable[[], Any] | None = None) -> Iterator[tuple[Item, Result]]:
+    """A pool of spawned workers, each with a pipe of its own; ``prepare`` (see
+    :func:`results`) made on the first.
 
     Not :class:`concurrent.futures.ProcessPoolExecutor`: an interrupted comparison
     sometimes hung at exit in its threads and shared queues.  Here the parent alone
@@ -140,28 +159,27 @@ def _pool(function: Callable[[Item], Result], items: list[Item], jobs: int
     workers: list[tuple[BaseProcess, Connection]] = []
     todo = iter(items)
     busy: dict[Connection, Item] = {}
+    holding: set[Connection] = set()  # the workers sent the items' function
     try:
         with _single_threaded():
             for _ in range(min(jobs, len(items))):
                 mine, theirs = context.Pipe()
-                process = context.Process(target=_serve, args=(function, theirs), daemon=True)
+                process = context.Process(target=_serve, args=(theirs,), daemon=True)
                 process.start()
                 theirs.close()
                 workers.append((process, mine))
+        if prepare is not None and workers:
+            first = workers[0][1]
+            first.send((_made, prepare))
+            function = partial(function, _answer(first))
         for _, connection in workers:
-            _hand(connection, todo, busy)
+            _hand(connection, function, todo, busy, holding)
         while busy:
             for connection in wait(list(busy)):
                 item = busy.pop(connection)
-                try:
-                    done, value = connection.recv()
-                except EOFError:
-                    raise RuntimeError("a worker process ended without an answer") from None
-                if not done:
-                    error, remote = value
-                    raise error from RemoteTraceback(remote)
+                value = _answer(connection)
                 # The worker starts on its next item while this one is consumed.
-                _hand(connection, todo, busy)
+                _hand(connection, function, todo, busy, holding)
                 yield item, value
     except BaseException:
         # Includes the consumer going away (GeneratorExit): no worker outlives the run.
@@ -177,27 +195,48 @@ def _pool(function: Callable[[Item], Result], items: list[Item], jobs: int
                 process.join()
 
 
-def _hand(connection: Connection, todo: Iterator[Item], busy: dict[Connection, Item]
-          ) -> None:
-    """Send the worker at ``connection`` the next item, if any is left."""
+def _answer(connection: Connection) -> Any:
+    """The worker's result at ``connection``, or its error raised here."""
+    try:
+        done, value = connection.recv()
+    except EOFError:
+        raise RuntimeError("a worker process ended without an answer") from None
+    if not done:
+        error, remote = value
+        raise error from RemoteTraceback(remote)
+    return value
+
+
+def _hand(connection: Connection, function: Callable[[Item], Result], todo: Iterator[Item],
+          busy: dict[Connection, Item], holding: set[Connection]) -> None:
+    """Send the worker at ``connection`` the next item, if any is left, and ``function``
+    with it unless the worker holds it already (``holding``)."""
     item = next(todo, _NONE)
     if item is not _NONE:
-        connection.send(item)
+        connection.send((None if connection in holding else function, item))
+        holding.add(connection)
         busy[connection] = item
 
 
-def _serve(function: Callable[[Item], Result], connection: Connection) -> None:
+def _serve(connection: Connection) -> None:
     """A worker's loop: answer each item with ``(True, result)`` or ``(False, (error,
-    its traceback))`` until the parent closes the pipe."""
+    its traceback))`` until the parent closes the pipe.  An item comes as ``(function,
+    item)``, the function None while it is the last one sent."""
     _ignore_interrupts()
-    with imports_kept():  # ``function`` came with its modules
+    function: Callable[[Any], Any] | None = None
+    with imports_kept():
         while True:
             try:
-                item = connection.recv()
+                sent, item = connection.recv()
             except EOFError:
                 return
+            if sent is not None:
+                # The function came with its modules and what it binds: they outlive
+                # its items.
+                function = sent
+                gc.freeze()
             try:
-                answer = (True, function(item))
+                answer = (True, function(item))  # type: ignore[misc]
             except Exception as error:
                 # A traceback does not pickle: its text goes along.
                 answer = (False, (error, traceback.format_exc()))
