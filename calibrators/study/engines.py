@@ -115,9 +115,10 @@ def results(function: Callable[..., Result], items: list[Item], jobs: int = 1,
 
     ``prepare``: what every item's call needs, made once before any of them, then handed
     to each as ``function(prepare(), item)``: in this process with ``jobs`` 1; over
-    spawned processes, on the first worker while the others start, which then takes
-    items as they do (no process is spawned and set up only to make it); for Ray, in one
-    spawned local process (its workers' thread settings, :func:`worker_environment`).
+    spawned processes, on the first worker while the others start and import what
+    ``function`` needs, which then takes items as they do (no process is spawned and set
+    up only to make it); for Ray, in one spawned local process (its workers' thread
+    settings, :func:`worker_environment`).
     """
     if engine == "local":
         if jobs == 1:
@@ -148,7 +149,7 @@ def _in_process(function: Callable[[Item], Result], items: list[Item]
 def _pool(function: Callable[..., Result], items: list[Item], jobs: int,
           prepare: Callable[[], Any] | None = None) -> Iterator[tuple[Item, Result]]:
     """A pool of spawned workers, each with a pipe of its own; ``prepare`` (see
-    :func:`results`) made on the first.
+    :func:`results`) made on the first, while the others import what ``function`` needs.
 
     Not :class:`concurrent.futures.ProcessPoolExecutor`: an interrupted comparison
     sometimes hung at exit in its threads and shared queues.  Here the parent alone
@@ -159,27 +160,27 @@ def _pool(function: Callable[..., Result], items: list[Item], jobs: int,
     workers: list[tuple[BaseProcess, Connection]] = []
     todo = iter(items)
     busy: dict[Connection, Item] = {}
-    holding: set[Connection] = set()  # the workers sent the items' function
     try:
         with _single_threaded():
             for _ in range(min(jobs, len(items))):
                 mine, theirs = context.Pipe()
-                process = context.Process(target=_serve, args=(theirs,), daemon=True)
+                process = context.Process(target=_serve, args=(function, theirs), daemon=True)
                 process.start()
                 theirs.close()
                 workers.append((process, mine))
         if prepare is not None and workers:
-            first = workers[0][1]
-            first.send((_made, prepare))
-            function = partial(function, _answer(first))
+            workers[0][1].send((_PREPARE, prepare))
+            prepared = _answer(workers[0][1])
+            for _, connection in workers:
+                connection.send((_BIND, prepared))
         for _, connection in workers:
-            _hand(connection, function, todo, busy, holding)
+            _hand(connection, todo, busy)
         while busy:
             for connection in wait(list(busy)):
                 item = busy.pop(connection)
                 value = _answer(connection)
                 # The worker starts on its next item while this one is consumed.
-                _hand(connection, function, todo, busy, holding)
+                _hand(connection, todo, busy)
                 yield item, value
     except BaseException:
         # Includes the consumer going away (GeneratorExit): no worker outlives the run.
@@ -207,36 +208,36 @@ def _answer(connection: Connection) -> Any:
     return value
 
 
-def _hand(connection: Connection, function: Callable[[Item], Result], todo: Iterator[Item],
-          busy: dict[Connection, Item], holding: set[Connection]) -> None:
-    """Send the worker at ``connection`` the next item, if any is left, and ``function``
-    with it unless the worker holds it already (``holding``)."""
+def _hand(connection: Connection, todo: Iterator[Item], busy: dict[Connection, Item]
+          ) -> None:
+    """Send the worker at ``connection`` the next item, if any is left."""
     item = next(todo, _NONE)
     if item is not _NONE:
-        connection.send((None if connection in holding else function, item))
-        holding.add(connection)
+        connection.send((_ITEM, item))
         busy[connection] = item
 
 
-def _serve(connection: Connection) -> None:
-    """A worker's loop: answer each item with ``(True, result)`` or ``(False, (error,
-    its traceback))`` until the parent closes the pipe.  An item comes as ``(function,
-    item)``, the function None while it is the last one sent."""
+#: What a worker is sent: an item, the ``prepare`` of :func:`results` to make, or what
+#: it made, to hand to the function before each item.
+_ITEM, _PREPARE, _BIND = range(3)
+
+
+def _serve(function: Callable[..., Result], connection: Connection) -> None:
+    """A worker's loop: answer each item (and a ``prepare`` to make) with ``(True,
+    result)`` or ``(False, (error, its traceback))`` until the parent closes the pipe."""
     _ignore_interrupts()
-    function: Callable[[Any], Any] | None = None
-    with imports_kept():
+    with imports_kept():  # ``function`` came with its modules
         while True:
             try:
-                sent, item = connection.recv()
+                kind, sent = connection.recv()
             except EOFError:
                 return
-            if sent is not None:
-                # The function came with its modules and what it binds: they outlive
-                # its items.
-                function = sent
-                gc.freeze()
+            if kind == _BIND:
+                function = partial(function, sent)
+                gc.freeze()  # what was made outlives the items, as the function does
+                continue
             try:
-                answer = (True, function(item))  # type: ignore[misc]
+                answer = (True, sent() if kind == _PREPARE else function(sent))
             except Exception as error:
                 # A traceback does not pickle: its text goes along.
                 answer = (False, (error, traceback.format_exc()))
