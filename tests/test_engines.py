@@ -129,3 +129,40 @@ def test_an_interrupt_while_a_worker_sends_its_answer_ends_the_program(tmp_path)
                          timeout=60)
     # An uncaught KeyboardInterrupt ends Python by the signal itself.
     assert run.returncode == -signal.SIGINT and "KeyboardInterrupt" in run.stderr
+
+
+def _pid() -> int:
+    import os
+
+    return os.getpid()
+
+
+def _with_prepared(prepared: int, item: int) -> tuple[int, int]:
+    import os
+
+    return prepared, os.getpid()
+
+
+def _refuse() -> None:
+    raise ValueError("nothing to prepare")
+
+
+def test_a_prepared_value_is_made_once_on_a_worker_that_then_takes_items() -> None:
+    """``prepare`` runs once, on a spawned worker (not in the caller, whose BLAS may run
+    threads of its own), and its value reaches every item's call; the worker that made it
+    takes items as the others do, none spawned only to make it.  An error in it reaches
+    the caller as an item's does."""
+    import os
+
+    from calibrators.study.engines import RemoteTraceback, results
+
+    got = [value for _, value in results(_with_prepared, [0, 1, 2, 3], jobs=2, prepare=_pid)]
+    made = {prepared for prepared, _ in got}
+    assert len(made) == 1 and os.getpid() not in made
+    assert made <= {pid for _, pid in got} and len({pid for _, pid in got}) == 2
+    with pytest.raises(ValueError, match="nothing to prepare") as caught:
+        list(results(_with_prepared, [0, 1], jobs=2, prepare=_refuse))
+    assert isinstance(caught.value.__cause__, RemoteTraceback)
+    # With one job, made here and handed to each item alike.
+    assert [v for _, v in results(_with_prepared, [0, 1], prepare=_pid)] == [
+        (os.getpid(), os.getpid())] * 2

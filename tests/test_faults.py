@@ -109,3 +109,30 @@ def test_faults_are_named_by_kind_and_refused_otherwise() -> None:
         as_faults(3)
     assert happened([{"kind": "knock", "stand": -1}, {"kind": "lost-steps", "stand": -1},
                      {"kind": "sign", "stand": 2}]) == ["sign", "lost-steps"]
+
+
+def test_a_fit_without_the_words_on_faults_gives_the_same_estimate(monkeypatch) -> None:
+    """``fault_words=False`` (the ``active`` agent's refits read only the estimate) looks
+    for faults only as far as a repair can change the estimate: the same estimate to the
+    bit as with the words, on a clean notebook and on one whose stands were knocked (both
+    refitted with the knocked stands' new mountings), and the drives' test, which repairs
+    nothing, left out where no stand steps."""
+    from calibrators.estimators import gauss_newton
+    from calibrators.estimators.catalogue import for_study
+
+    made = []
+    sensitivities = gauss_newton.drive_sensitivities
+    monkeypatch.setattr(gauss_newton, "drive_sensitivities",
+                        lambda *args: made.append(1) or sensitivities(*args))
+    named = for_study("extended", 0.02)
+    quiet = named.clone(fault_words=False)
+    for kinds, knocked in ((None, False), ("knock", True)):
+        data = episode(kinds).measurements
+        with_words = named.fit(data)
+        made.clear()
+        without = quiet.fit(data)
+        assert np.array_equal(without.theta, with_words.theta)
+        knocks = [w for w in with_words.warnings if w.startswith("fault knock")]
+        assert bool(knocks) == knocked
+        assert [w for w in without.warnings if w.startswith("fault knock")] == knocks
+        assert bool(made) == knocked

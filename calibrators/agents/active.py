@@ -64,8 +64,9 @@ REFIT_S: float = 600.0
 @lru_cache(maxsize=8)
 def _refitter(sigma: float) -> Estimator:
     """The extended estimator of the refits, for readings of weighting ``sigma`` (mm),
-    made once: only its estimate is read, so its error bars' curvature is left out."""
-    return for_study("extended", sigma).clone(curvature=False)
+    made once: only its estimate is read, so its error bars' curvature and the words on
+    the faults it finds are left out."""
+    return for_study("extended", sigma).clone(curvature=False, fault_words=False)
 
 
 @register

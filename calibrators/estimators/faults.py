@@ -14,6 +14,7 @@ tries, so a clean experiment is flagged at most that often.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from itertools import pairwise
 
@@ -230,14 +231,18 @@ def slips_against_nominal(data: Measurements, design: ReadingLayout, values: np.
 
 def find_faults(data: Measurements, residuals: np.ndarray, used: np.ndarray,
                 outliers: list[int], sigma: float, level: float = LEVEL,
-                drives: np.ndarray | None = None, structural: bool = True) -> list[Finding]:
+                drives: Callable[[], np.ndarray] | None = None, structural: bool = True,
+                words: bool = True) -> list[Finding]:
     """The faults a fit of ``data`` shows: its ``residuals`` (mm, per reading), the readings
-    it ``used``, its left-out ``outliers``, the gauges' ``sigma`` (mm) and the residuals'
-    sensitivities to the drives' offsets (:func:`drive_sensitivities`; None: drives not
-    looked at).  A drive's change steps several stands at once: it is named instead of
-    the stands' steps when its test is stronger than each of theirs.  ``structural``: look
-    for steps and late rows at all (their tests hold where the model can fit the machine;
-    outliers are named whatever the model)."""
+    it ``used``, its left-out ``outliers``, the gauges' ``sigma`` (mm) and what makes the
+    residuals' sensitivities to the drives' offsets (:func:`drive_sensitivities`, called
+    only where their test is run; None: drives not looked at).  A drive's change steps
+    several stands at once: it is named instead of the stands' steps when its test is
+    stronger than each of theirs.  ``structural``: look for steps and late rows at all
+    (their tests hold where the model can fit the machine; outliers are named whatever
+    the model).  ``words``: every fault found is wanted; else only those that repair the
+    readings (a row skipped, a knocked stand) and what holds them back: the drives' test,
+    which repairs nothing, is then run only where a stand steps."""
     values = np.array([m.reading for m in data.items])
     gauge = np.array([not isinstance(m.gauge, TrackerAxis) for m in data.items])
     finite = used & gauge & np.isfinite(residuals)
@@ -280,7 +285,8 @@ def find_faults(data: Measurements, residuals: np.ndarray, used: np.ndarray,
     if not structural:
         return found
     steps = change_points(residuals, groups, spread, level)
-    drive = None if drives is None else drive_steps(residuals, drives, finite, spread, level)
+    drive = (None if drives is None or not (words or steps)
+             else drive_steps(residuals, drives(), finite, spread, level))
     if drive is not None and all(drive[3] >= s[3] for s in steps):
         axis, first, size, z = drive
         found.append(Finding("lost-steps", f"{PREFIX} lost-steps: drive {AXIS_NAMES[axis]} "

@@ -270,7 +270,11 @@ class GaussNewtonCalibrator(Estimator):
     interferometer or ballbar readings puts the model's curvature into its covariance
     (:func:`~calibrators.estimators.exact_fit.fit_batch`); a caller that reads only the
     estimate, not its error bars, leaves it out (the same estimate, at about half a
-    three-hour notebook's cost).
+    three-hour notebook's cost); ``fault_words``: every fault the readings show is named
+    in the warnings (:func:`~calibrators.estimators.faults.find_faults`); a caller that
+    reads only the estimate leaves them out: the faults are then looked for as far as a
+    repair can change the estimate (the same estimate, without the drives' test where no
+    stand steps).
     """
 
     name = "gauss-newton"
@@ -297,6 +301,7 @@ class GaussNewtonCalibrator(Estimator):
                                                        f"{list(TERM_FAMILIES)}")],
         "node_spacing": [NONE, Interval(0, None, "neither")],
         "curvature": [BOOLEAN],
+        "fault_words": [BOOLEAN],
     }
 
     def __init__(self, *, params: str = "paper6", sigma: float = DEFAULT_SIGMA,
@@ -306,13 +311,13 @@ class GaussNewtonCalibrator(Estimator):
                  explain: bool = True, conditions: Conditions | str = "ideal",
                  left_out: str = DEFAULT_PRESET, fit_world: bool | tuple[str, ...] = False,
                  node_spacing: float | None = None, world_check: bool = False,
-                 curvature: bool = True) -> None:
+                 curvature: bool = True, fault_words: bool = True) -> None:
         self.params, self.sigma, self.verify, self.prior = params, sigma, verify, prior
         self.fix, self.keep_outliers, self.holdout, self.seed = fix, keep_outliers, holdout, seed
         self.solver, self.tracker_sigma, self.explain = solver, tracker_sigma, explain
         self.conditions, self.left_out, self.fit_world = conditions, left_out, fit_world
         self.node_spacing, self.world_check = node_spacing, world_check
-        self.curvature = curvature
+        self.curvature, self.fault_words = curvature, fault_words
         self._validate_params()
 
     def fit(self, data: Measurements) -> Estimate:
@@ -390,12 +395,15 @@ class GaussNewtonCalibrator(Estimator):
         # A model of the paper's six errors alone cannot fit a machine with more: its
         # residuals step and drift where nothing went wrong.
         structural = any(n in ERROR_NAMES and n not in PARAM_NAMES for n in est.names)
-        design, values = (layout_and_values(est.readings, zeros=False) if layout is None
-                          else layout)
+
+        def drives() -> np.ndarray:
+            design, values = (layout_and_values(est.readings, zeros=False) if layout is None
+                              else layout)
+            return drive_sensitivities(design, values, est.theta, used)
+
         return find_faults(est.readings, residuals, used, est.outliers,
                            weighting_sigma(self.sigma), structural=structural,
-                           drives=drive_sensitivities(design, values, est.theta, used)
-                           if structural else None)
+                           drives=drives if structural else None, words=self.fault_words)
 
     def _fit_all(self, datas: list[Measurements], zeros: bool = True,
                  layouts: list[tuple[ReadingLayout, np.ndarray] | None] | None = None

@@ -450,14 +450,12 @@ def shared_start(config: Config, machine: int, processes: int) -> StartUp:
     return StartUp(made_plans(), made_tables())
 
 
-def _start_made_once(config: Config, machine: int, processes: int) -> StartUp:
-    """:func:`shared_start` made in one spawned process, whose BLAS runs on one thread as
-    the sweep's workers' does: this process's may run threads of its own, which beside the
-    screening's forks spend three times the CPU and wall time (17 CPU-s against 51 for the
-    one-hour ``lab`` plan on 2 cores)."""
-    with closing(results(partial(shared_start, config, processes=processes), [machine],
-                         jobs=2)) as made:
-        return next(made)[1]
+def _started_chunk(config: Config, skip: set[tuple[str, str, int]], start: StartUp,
+                   indices: list[int]) -> list[Trial]:
+    """:func:`run_chunk` of ``indices`` handed ``start``, in the order a sweep's engine
+    calls it (:func:`~calibrators.study.engines.results`' ``prepare``: what was made
+    first, then the item)."""
+    return run_chunk(config, indices, skip, start=start)
 
 
 #: Machines per task: their episodes run in one lab vector env and a fixed design's fits
@@ -494,12 +492,16 @@ def run(config: Config, machines: int, jobs: int = 1, done: list[Trial] | None =
     chunks = [list(range(i, min(i + size, machines))) for i in range(0, machines, size)]
     trials = list(done)
     # Each worker would make the agents' shared plans and their slot tables (seconds of a
-    # core each): made once instead, the plans' screening spread over the cores the
-    # workers are about to take.
-    start = (_start_made_once(config, chunks[0][0], jobs)
-             if jobs > 1 and len(chunks) > 1 and _planners(config) else None)
-    with closing(results(partial(run_chunk, config, skip=skip, start=start), chunks, jobs,
-                         engine, address)) as finished:
+    # core each): made once instead, on the first worker while the others start, the
+    # plans' screening spread over the cores they all take; in a worker, whose BLAS runs
+    # on one thread: beside the screening's forks, this process's own threads spent three
+    # times the CPU and wall time (17 CPU-s against 51 for the one-hour ``lab`` plan on 2
+    # cores).
+    shared = jobs > 1 and len(chunks) > 1 and bool(_planners(config))
+    with closing(results(partial(_started_chunk, config, skip) if shared
+                         else partial(run_chunk, config, skip=skip), chunks, jobs, engine,
+                         address, prepare=partial(shared_start, config, chunks[0][0], jobs)
+                         if shared else None)) as finished:
         for chunk, new in finished:
             for trial in new:
                 trials.append(trial)

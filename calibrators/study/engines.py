@@ -13,12 +13,13 @@ import os
 import signal
 import traceback
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import closing, contextmanager
+from functools import partial
 from importlib.util import find_spec
 from multiprocessing import get_context
 from multiprocessing.connection import Connection, wait
 from multiprocessing.process import BaseProcess
-from typing import TypeVar
+from typing import Any, TypeVar
 
 #: The engines, the first the default.
 ENGINES: tuple[str, ...] = ("local", "ray")
@@ -101,9 +102,9 @@ def _ignore_interrupts() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-def results(function: Callable[[Item], Result], items: list[Item], jobs: int = 1,
-            engine: str = "local", address: str | None = None
-            ) -> Iterator[tuple[Item, Result]]:
+def results(function: Callable[..., Result], items: list[Item], jobs: int = 1,
+            engine: str = "local", address: str | None = None,
+            prepare: Callable[[], Any] | None = None) -> Iterator[tuple[Item, Result]]:
     """``(item, function(item))`` for every item, in the order they end.
 
     ``local`` runs them in this process (``jobs`` 1) or over ``jobs`` spawned processes;
@@ -111,14 +112,32 @@ def results(function: Callable[[Item], Result], items: list[Item], jobs: int = 1
     ``host:port``, ``ray://host:port``, ``auto`` for the latest cluster started on this
     machine; none given, ``RAY_ADDRESS``), or, with neither, to a local Ray instance of
     ``jobs`` CPUs started for the run.  ``function`` and the items must pickle.
+
+    ``prepare``: what every item's call needs, made once before any of them, then handed
+    to each as ``function(prepare(), item)``: in this process with ``jobs`` 1; over
+    spawned processes, on the first worker while the others start and import what
+    ``function`` needs, which then takes items as they do (no process is spawned and set
+    up only to make it); for Ray, in one spawned local process (its workers' thread
+    settings, :func:`worker_environment`).
     """
     if engine == "local":
-        return _in_process(function, items) if jobs == 1 else _pool(function, items, jobs)
+        if jobs == 1:
+            return _in_process(function if prepare is None else partial(function, prepare()),
+                               items)
+        return _pool(function, items, jobs, prepare)
     if engine == "ray":
         if not ray_available():
             raise RuntimeError(f"the ray engine needs Ray: {RAY_INSTALL_HINT}")
+        if prepare is not None:
+            with closing(_pool(_made, [prepare], 1)) as made:
+                function = partial(function, next(made)[1])
         return _ray(function, items, jobs, address or os.environ.get("RAY_ADDRESS"))
     raise ValueError(f"unknown engine '{engine}'; choose from {list(ENGINES)}")
+
+
+def _made(prepare: Callable[[], Result]) -> Result:
+    """``prepare()``, a worker's item (:func:`results`' ``prepare``)."""
+    return prepare()
 
 
 def _in_process(function: Callable[[Item], Result], items: list[Item]
@@ -127,9 +146,10 @@ def _in_process(function: Callable[[Item], Result], items: list[Item]
         yield item, function(item)
 
 
-def _pool(function: Callable[[Item], Result], items: list[Item], jobs: int
-          ) -> Iterator[tuple[Item, Result]]:
-    """A pool of spawned workers, each with a pipe of its own.
+def _pool(function: Callable[..., Result], items: list[Item], jobs: int,
+          prepare: Callable[[], Any] | None = None) -> Iterator[tuple[Item, Result]]:
+    """A pool of spawned workers, each with a pipe of its own; ``prepare`` (see
+    :func:`results`) made on the first, while the others import what ``function`` needs.
 
     Not :class:`concurrent.futures.ProcessPoolExecutor`: an interrupted comparison
     sometimes hung at exit in its threads and shared queues.  Here the parent alone
@@ -148,18 +168,17 @@ def _pool(function: Callable[[Item], Result], items: list[Item], jobs: int
                 process.start()
                 theirs.close()
                 workers.append((process, mine))
+        if prepare is not None and workers:
+            workers[0][1].send((_PREPARE, prepare))
+            prepared = _answer(workers[0][1])
+            for _, connection in workers:
+                connection.send((_BIND, prepared))
         for _, connection in workers:
             _hand(connection, todo, busy)
         while busy:
             for connection in wait(list(busy)):
                 item = busy.pop(connection)
-                try:
-                    done, value = connection.recv()
-                except EOFError:
-                    raise RuntimeError("a worker process ended without an answer") from None
-                if not done:
-                    error, remote = value
-                    raise error from RemoteTraceback(remote)
+                value = _answer(connection)
                 # The worker starts on its next item while this one is consumed.
                 _hand(connection, todo, busy)
                 yield item, value
@@ -177,27 +196,48 @@ def _pool(function: Callable[[Item], Result], items: list[Item], jobs: int
                 process.join()
 
 
+def _answer(connection: Connection) -> Any:
+    """The worker's result at ``connection``, or its error raised here."""
+    try:
+        done, value = connection.recv()
+    except EOFError:
+        raise RuntimeError("a worker process ended without an answer") from None
+    if not done:
+        error, remote = value
+        raise error from RemoteTraceback(remote)
+    return value
+
+
 def _hand(connection: Connection, todo: Iterator[Item], busy: dict[Connection, Item]
           ) -> None:
     """Send the worker at ``connection`` the next item, if any is left."""
     item = next(todo, _NONE)
     if item is not _NONE:
-        connection.send(item)
+        connection.send((_ITEM, item))
         busy[connection] = item
 
 
-def _serve(function: Callable[[Item], Result], connection: Connection) -> None:
-    """A worker's loop: answer each item with ``(True, result)`` or ``(False, (error,
-    its traceback))`` until the parent closes the pipe."""
+#: What a worker is sent: an item, the ``prepare`` of :func:`results` to make, or what
+#: it made, to hand to the function before each item.
+_ITEM, _PREPARE, _BIND = range(3)
+
+
+def _serve(function: Callable[..., Result], connection: Connection) -> None:
+    """A worker's loop: answer each item (and a ``prepare`` to make) with ``(True,
+    result)`` or ``(False, (error, its traceback))`` until the parent closes the pipe."""
     _ignore_interrupts()
     with imports_kept():  # ``function`` came with its modules
         while True:
             try:
-                item = connection.recv()
+                kind, sent = connection.recv()
             except EOFError:
                 return
+            if kind == _BIND:
+                function = partial(function, sent)
+                gc.freeze()  # what was made outlives the items, as the function does
+                continue
             try:
-                answer = (True, function(item))
+                answer = (True, sent() if kind == _PREPARE else function(sent))
             except Exception as error:
                 # A traceback does not pickle: its text goes along.
                 answer = (False, (error, traceback.format_exc()))
