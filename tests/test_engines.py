@@ -166,3 +166,17 @@ def test_a_prepared_value_is_made_once_on_a_worker_that_then_takes_items() -> No
     # With one job, made here and handed to each item alike.
     assert [v for _, v in results(_with_prepared, [0, 1], prepare=_pid)] == [
         (os.getpid(), os.getpid())] * 2
+
+
+def test_a_resumed_runs_progress_counts_each_machine_once() -> None:
+    """A bar that starts at the machines ``done`` holds trials of (the command line's
+    ``initial``) ends at the run's machines: progress counts only the others, though the
+    resumed machine's chunk is handed out again; and the resumed run's trials are the
+    whole run's."""
+    config = Config(("paper",), ("paper",), budget_s=900.0, seed=5)
+    whole = run(config, 3, chunk=1)
+    progress: list[int] = []
+    resumed = run(config, 3, done=[t for t in whole if t.machine == 0], chunk=1,
+                  progress=progress.append)
+    assert progress == [0, 1, 1]
+    assert [t.to_json() for t in resumed] == [t.to_json() for t in whole]

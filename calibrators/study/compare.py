@@ -474,7 +474,9 @@ def run(config: Config, machines: int, jobs: int = 1, done: list[Trial] | None =
     machines spread over ``jobs`` workers of ``engine`` (:func:`calibrators.study.engines.
     results`: ``local`` processes, or ``ray`` at ``address``), skipping the trials in
     ``done``; ``on_trial`` sees each new
-    trial as it ends, ``progress`` the number of machines finished.  Trials come back in
+    trial as it ends, ``progress`` the number of machines finished that had no trial in
+    ``done`` (a bar that starts at those which had one ends at ``machines``).  Trials come
+    back in
     (machine, agent, estimator) order, the same whatever ``jobs``, ``engine`` and
     ``chunk``: a machine's fits are those it gets alone.  A
     KeyboardInterrupt stops the workers at once and is raised again, every trial
@@ -487,6 +489,7 @@ def run(config: Config, machines: int, jobs: int = 1, done: list[Trial] | None =
         raise ValueError(f"chunk must be a whole number of machines >= 1, got {chunk!r}")
     done = list(done or [])
     skip = {t.key for t in done}
+    begun = {t.machine for t in done}
     # Every worker gets work even on short runs.
     size = max(1, min(chunk, -(-machines // jobs)))
     chunks = [list(range(i, min(i + size, machines))) for i in range(0, machines, size)]
@@ -508,7 +511,7 @@ def run(config: Config, machines: int, jobs: int = 1, done: list[Trial] | None =
                 if on_trial:
                     on_trial(trial)
             if progress:
-                progress(len(chunk))
+                progress(sum(i not in begun for i in chunk))
     order = {(a, e): k for k, (a, e) in enumerate(
         (a, e) for a in config.agents for e in config.estimators)}
     return sorted(trials, key=lambda t: (t.machine, order.get((t.agent, t.estimator), 0)))
