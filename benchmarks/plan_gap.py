@@ -90,6 +90,8 @@ def main() -> None:
                         help="with --warm-bins, the plans on that model without its bound "
                              "(CPU-minutes with the laser at three hours)")
     args = parser.parse_args()
+    if args.no_warm_bound and not args.warm_bins:
+        parser.error("--no-warm-bound prices the plans on the model of --warm-bins K: give both")
     owned, conditions = lab_options(parser, args)
     sigma = float(weighting_sigma(GaugeNoise(args.sigma, args.resolution).effective_sigma))
     slots, engaged = tuple(PAPER_SLOTS), (True,) * len(PAPER_SLOTS)
@@ -119,8 +121,8 @@ def main() -> None:
                                                     if warm else ""))
     print("|---|---|---|---|---|---|" + ("---|" if warm else ""))
     groups = plan_bundles(slots, sigma, args.budget, PROTOTYPE, conditions, instruments)
-    rounded = [(f"the bound's design{held}: " + " + ".join(b.label for b in bundles), bundles)
-               for held, bundles in (
+    rounded = [(f"the bound's design{stands}: " + " + ".join(b.label for b in bundles), bundles)
+               for stands, bundles in (
                    ("", bound_bundles(PROTOTYPE, conditions, sigma, args.budget, owned)),
                    (" with the stands held", bound_bundles(PROTOTYPE, conditions, sigma,
                                                            args.budget, owned, False)))
