@@ -101,6 +101,23 @@ def test_a_comparison_imports_no_scipy_stats() -> None:
     assert json.loads(out.strip().splitlines()[-1]) == []
 
 
+def test_a_sweeps_modules_import_no_scipy() -> None:
+    """What a sweep of the planning agents imports in its processes (the study, the agents,
+    the planner and the bound's modules) loads no SciPy: its special functions load where
+    a fit is judged or a reach asked, its linear algebra where a bound is solved (never, in
+    a sweep's processes), a third of each one's start-up.  The statistics that lived in the
+    study are still found there."""
+    code = ("import calibrators.compare, calibrators.agents.active, calibrators.agents.optimal\n"
+            "import calibrators.planning.warm_bound, orthoglide_env.envs.lab_vector")
+    assert _imported_after(code) == ["gymnasium"]
+    from calibrators.study import compare, statistics
+
+    assert compare.summary is statistics.summary
+    assert compare.MIN_INTERVAL == statistics.MIN_INTERVAL
+    with pytest.raises(AttributeError, match="no attribute 'nothing'"):
+        compare.nothing  # noqa: B018
+
+
 def test_a_comparison_imports_only_the_agents_it_plays() -> None:
     """``compare --agents paper`` imports the paper's agent alone: not the other agents'
     modules, the planner's (with SciPy's linear algebra), the learned policy's beliefs or,

@@ -83,10 +83,9 @@ from __future__ import annotations
 import itertools
 from dataclasses import asdict, dataclass
 from functools import cached_property, lru_cache
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve
-from scipy.sparse import csr_matrix, vstack
 
 from calibrators.estimators.consider import DEFAULT_NODE_SPACING, lead_terms
 from calibrators.planning.instruments import Bundle, reading_rows
@@ -102,6 +101,9 @@ from orthoglide_env.reading_model import ParameterSpace, default_scales
 from orthoglide_env.scoring.predicted import rigid_weight_with_drives
 from orthoglide_env.world.conditions import Conditions
 from orthoglide_env.world.table import BALLBAR_LENGTHS_MM
+
+if TYPE_CHECKING:
+    from scipy.sparse import csr_matrix
 
 #: The instruments whose readings are candidates of the bound.
 BOUND_INSTRUMENTS: tuple[str, ...] = ("dial", "interferometer", "ballbar")
@@ -404,6 +406,10 @@ def _information(rows: np.ndarray, counts: np.ndarray) -> np.ndarray:
 
 def _value(information: np.ndarray, factor: np.ndarray) -> tuple[float, np.ndarray]:
     """``f`` at ``I + information`` and ``X = M^-1 F`` (n, r)."""
+    # SciPy's linear algebra loads when a bound is solved: a planning agent's process that
+    # is handed its plan (a sweep's workers) never solves one.
+    from scipy.linalg import cho_factor, cho_solve
+
     m = np.eye(len(information)) + information
     x = cho_solve(cho_factor(m), factor)
     return float(np.sum(x * factor)), x
@@ -525,6 +531,8 @@ def best_rate(visits: Visits, grid: np.ndarray, lasers: np.ndarray, bars: np.nda
 
 def _atoms(members: list[np.ndarray], n: int) -> csr_matrix:
     """(A, n) 0/1: the readings each visit in ``members`` (candidate indices) takes."""
+    from scipy.sparse import csr_matrix  # as :func:`_value`'s linear algebra
+
     lengths = [len(m) for m in members]
     indptr = np.concatenate([[0], np.cumsum(lengths)])
     indices = np.concatenate(members) if members else np.zeros(0, dtype=int)
@@ -628,6 +636,8 @@ def _generate(atoms: csr_matrix, place: np.ndarray, share: np.ndarray, gains: np
     added = 0.5 * owned[new] + VANISHED * share.max()
     members = [picked[p][picked[p] >= 0] for p in new]
     cost = visits.prices(members, grid)
+    from scipy.sparse import vstack  # as :func:`_value`'s linear algebra
+
     atoms = vstack([atoms, _atoms(members, atoms.shape[1])], format="csr")
     share = np.concatenate([share[:n_atoms], added, share[n_atoms:]])
     share /= share.sum()

@@ -41,15 +41,6 @@ from calibrators.study.episodes import (
     run_episodes,
 )
 from calibrators.study.labs import lab_id, lab_kwargs
-
-# The statistics lived here; scripts that import them from this module keep working.
-from calibrators.study.statistics import (  # noqa: F401
-    MIN_INTERVAL,
-    median_interval,
-    paired,
-    summary,
-    warning_kind,
-)
 from calibrators.study.trials import Trial
 from orthoglide_env.instruments.dial import (
     DEFAULT_RESOLUTION,
@@ -76,6 +67,22 @@ from orthoglide_env.world.truth import World
 
 if TYPE_CHECKING:
     from calibrators.planning.bound import Bound
+
+#: The statistics that lived here (:mod:`calibrators.study.statistics`), which scripts
+#: import from this module still (:func:`__getattr__`).
+_STATISTICS: frozenset[str] = frozenset(
+    ("MIN_INTERVAL", "median_interval", "paired", "summary", "warning_kind"))
+
+
+def __getattr__(name: str) -> Any:
+    """The statistics of :data:`_STATISTICS`, imported at their first use: a sweep's
+    processes compute none, and SciPy's special functions, which they load, cost each
+    process a third of its start-up."""
+    if name in _STATISTICS:
+        from calibrators.study import statistics
+
+        return getattr(statistics, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 #: Fractions of an episode's time at which the accuracy-versus-time curve re-estimates.
 CURVE_FRACTIONS: tuple[float, ...] = (0.25, 0.5, 0.75)

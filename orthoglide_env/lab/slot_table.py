@@ -13,7 +13,6 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-from scipy.special import ndtr
 
 from orthoglide_env.instruments.dial import pressed_past_travel
 from orthoglide_env.instruments.rays import exact_ray_distances, exact_target_boxes
@@ -109,6 +108,10 @@ def reach_at(table: SlotTable, slots: np.ndarray, postures: np.ndarray, tip: np.
     Where the tip is on its bar, the tip must be :data:`SAFETY_SIGMAS` of its spread plus
     :data:`END_GAP` off the pushed-in end; where it misses, the bar must be
     :data:`PRESS_MARGIN` clear of pressing the gauge's body."""
+    # SciPy loads at the first reach asked, not with the module: a comparison's own
+    # process imports the planner's modules (its agents') but asks none.
+    from scipy.special import ndtr
+
     missed = np.isnan(tip)
     with np.errstate(invalid="ignore"):
         safe = np.where(missed, ~table.near[slots, postures],
