@@ -35,7 +35,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from scipy import stats
 
 from calibrators.estimators.catalogue import for_study
 from calibrators.estimators.world_sizes import BLIND_SPOT
@@ -51,6 +50,10 @@ FLAGGED: float = 0.9
 
 def z_interval(z: np.ndarray) -> tuple[float, float]:
     """A 95 % interval of the z-RMS from the chi-square of ``len(z)`` degrees of freedom."""
+    # Imported here: world_excess.py imports this script's rows, not its intervals, and
+    # SciPy's distributions take a CPU-second to import.
+    from scipy import stats
+
     n = len(z)
     total = float(np.sum(z**2))
     return (float(np.sqrt(total / stats.chi2.isf(0.025, n))),

@@ -13,7 +13,7 @@ from dataclasses import FrozenInstanceError, fields
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import as_a_terminal_job
+from conftest import as_a_terminal_job, command_here
 from gymnasium.utils.env_checker import check_env
 
 import orthoglide_env
@@ -283,8 +283,9 @@ def test_a_new_agent_is_one_registered_class() -> None:
 @pytest.mark.slow
 def test_compare_json_contract_and_resume(tmp_path, capsys) -> None:
     """The rows scripts rely on; an interrupted run resumed from its trials file ends with
-    the table of an uninterrupted one.  The JSON run is made in this process (one command
-    fewer to start), the others as a script runs them."""
+    the table of an uninterrupted one.  The JSON run and the refused run into the kept
+    folder are made in this process (two commands fewer to start), the others as a script
+    runs them."""
     from calibrators.cli import main
 
     argv = ["compare", "--agents", "paper,tracker", "--estimators", "paper6,extended",
@@ -323,7 +324,7 @@ def test_compare_json_contract_and_resume(tmp_path, capsys) -> None:
     # A resumed machine is fitted in another batch: the same solution to the solver's
     # tolerance (1e-9 of each parameter's scale), not the same bits.
     assert_close(json.loads(resumed.stdout)["rows"], rows)
-    again = orthoglide("--out", str(out))
+    again = command_here([*argv, "--out", str(out)])
     assert again.returncode == 2 and "--resume" in again.stderr
 
 

@@ -12,6 +12,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import command_here
 
 import orthoglide_env
 from calibrators.cli import main
@@ -89,16 +90,15 @@ def calibrated(tmp_path_factory) -> tuple[Path, dict]:
 def test_a_piped_session_is_calibrate_and_resumes(calibrated, tmp_path, capsys) -> None:
     """Fed the machine's readings as they come, with a slip of the finger typed now and
     then (asked again, never fatal), and its input ended after 40 answers (the notebook
-    holds them, the command says how to go on, a new session there is refused), then
-    resumed: the session takes the same readings at the same lab times as `calibrate
-    --agent active` on that machine and seed, and they fit to its estimate."""
+    holds them, the command says how to go on, a new session there is refused: checked in
+    this process, ``command_here``), then resumed: the session takes the same readings at
+    the same lab times as `calibrate --agent active` on that machine and seed, and they fit
+    to its estimate."""
     readings, cal = calibrated
     stopped = _drive(tmp_path / "s", stop_after=40, typos=True)
     assert stopped.returncode == 2 and "--resume goes on" in stopped.stderr
     assert len((tmp_path / "s" / "notebook.jsonl").read_text().splitlines()) == 40
-    again = subprocess.run([sys.executable, "-m", "calibrators.cli", "session", "--agent",
-                            "active", "--out", str(tmp_path / "s")], capture_output=True,
-                           text=True, timeout=120)
+    again = command_here(["session", "--agent", "active", "--out", str(tmp_path / "s")])
     assert again.returncode == 2 and "give --resume" in again.stderr
     resumed = _drive(tmp_path / "s", resume=True, typos=True)
     assert resumed.returncode == 0, resumed.stderr
@@ -127,9 +127,8 @@ def test_an_answer_that_is_no_reading_is_refused(text) -> None:
 
 
 def test_a_planned_agent_is_sent_to_plan(tmp_path) -> None:
-    proc = subprocess.run([sys.executable, "-m", "calibrators.cli", "session", "--agent",
-                           "paper", "--out", str(tmp_path)], capture_output=True, text=True,
-                          timeout=120)
+    """In this process (``command_here``): the piped sessions start the command's own."""
+    proc = command_here(["session", "--agent", "paper", "--out", str(tmp_path)])
     assert proc.returncode == 2 and "orthoglide plan" in proc.stderr
 
 

@@ -90,10 +90,11 @@ def test_an_env_id_with_its_module_registers_it() -> None:
     assert "gymnasium" in _imported_after(code)
 
 
-def test_a_comparison_imports_no_scipy_stats() -> None:
+def test_a_comparison_and_a_plan_import_no_scipy_stats() -> None:
     """A comparison (its command's module, the study, its statistics) needs SciPy's special
-    functions only: ``scipy.stats`` alone costs it a tenth of a 1000-machine run."""
-    code = ("import calibrators.cli.compare, calibrators.study.compare\n"
+    functions only: ``scipy.stats`` alone costs it a tenth of a 1000-machine run.  Nor does
+    ``plan`` import it (a CPU-second of each start), though it can plan a verification."""
+    code = ("import calibrators.cli.compare, calibrators.study.compare, calibrators.cli.plan\n"
             "print(__import__('json').dumps(sorted(m for m in sys.modules\n"
             "                                        if m.startswith('scipy.stats'))))")
     out = subprocess.run([sys.executable, "-c", f"import sys\n{code}"], capture_output=True,

@@ -45,7 +45,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import linalg, stats
+from scipy import linalg
 
 from calibrators.agents.ballbar import circle_steps
 from calibrators.agents.base import PlannedAgent, action
@@ -427,6 +427,10 @@ def verify(est: Estimate, data: Measurements, conditions: Conditions | None = No
         if along.any():
             focused = (float(np.sum((turn[:, along].T @ vec.T @ residual) ** 2
                                     / (1 + ratio[along]))), int(along.sum()))
+    # Imported here: planning a verification (``orthoglide plan``, which imports this
+    # module) needs none of SciPy's distributions, a CPU-second to import.
+    from scipy import stats
+
     # Two tests share the level where there are two (Bonferroni).
     level = CHI2_LEVEL if focused is None else CHI2_LEVEL / 2
     limit = float(stats.chi2.ppf(1 - level, dof))
