@@ -10,6 +10,7 @@ from conftest import paper_experiment
 
 import orthoglide_env
 from calibrators.agents import get_agent
+from calibrators.estimators import solvers
 from calibrators.estimators.exact_fit import fit_batch, z_scores
 from calibrators.estimators.gauss_newton import GaussNewtonCalibrator, layout_and_values
 from calibrators.estimators.parameters import (
@@ -19,6 +20,7 @@ from calibrators.estimators.parameters import (
     scales,
     select,
 )
+from calibrators.estimators.solvers import StartModel
 from calibrators.study.episodes import run_episodes
 from orthoglide_env.instruments.rays import exact_ray_distances, face_distances
 from orthoglide_env.instruments.slots import PAPER_LAYOUT
@@ -41,6 +43,7 @@ from orthoglide_env.model.errors import (
 )
 from orthoglide_env.model.kinematics import PAPER_POSTURES, paper_posture
 from orthoglide_env.reading_model import ReadingLayout, parameters_of, predict
+from orthoglide_env.reading_model import jacobian as reading_jacobian
 
 TABLE1 = MachineParams(**TABLE1_ERRORS)
 
@@ -131,6 +134,35 @@ def test_batched_fit_is_the_single_fits() -> None:
         np.testing.assert_allclose(batch.covariance[m], single.covariance[0], rtol=0,
                                    atol=1e-8 * np.abs(single.covariance[0]).max())
     assert batch.converged.all()
+
+
+def test_a_shared_start_is_the_same_bits(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The refits that leave one reading out after another share their start's model and
+    Jacobian (``StartModel``): each is the same bits as its fit made alone, and solves one
+    Jacobian fewer."""
+    data, _, sigma = experiment(None, 11)
+    design, values = layout_and_values(data)
+    space = design.space
+    free = select("extended", space)
+    prior = prior_sigmas("auto", space, free)
+    args = (free, fixed_values({}, space), prior, scales(space, prior))
+    made = []
+    monkeypatch.setattr(solvers, "jacobian",
+                        lambda *a, **k: made.append(1) or reading_jacobian(*a, **k))
+    shared, mask = StartModel(), np.ones((1, len(values)), bool)
+    for left_out in (None, 3, 17):
+        if left_out is not None:
+            mask[0, left_out] = False
+        made.clear()
+        alone = fit_batch(design, values[None], mask, sigma, *args)
+        solved_alone = len(made)
+        made.clear()
+        kept = fit_batch(design, values[None], mask, sigma, *args, shared=shared)
+        # The first fit with ``shared`` makes its start's Jacobian; the refits take it.
+        assert len(made) == solved_alone - (left_out is not None)
+        for field in ("theta", "covariance", "residuals", "chi2", "iterations"):
+            assert np.array_equal(getattr(alone, field), getattr(kept, field),
+                                  equal_nan=True), field
 
 
 def test_a_gauge_zero_is_eliminated() -> None:

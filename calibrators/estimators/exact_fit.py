@@ -26,7 +26,7 @@ from calibrators.estimators.consider import Consider
 from calibrators.estimators.solvers import MAX_ITERATIONS as MAX_ITERATIONS
 from calibrators.estimators.solvers import RETAIN as RETAIN
 from calibrators.estimators.solvers import SOLVERS as SOLVERS
-from calibrators.estimators.solvers import Problem, centre, damped_step, transposed
+from calibrators.estimators.solvers import Problem, StartModel, centre, damped_step, transposed
 from orthoglide_env.reading_model import (
     ReadingLayout,
     carriage_derivatives,
@@ -177,7 +177,8 @@ def fit_batch(design: ReadingLayout, values: np.ndarray, mask: np.ndarray,
               max_iterations: int = MAX_ITERATIONS, unmodelled: np.ndarray | None = None,
               solver: str = "gauss-newton", consider: Consider | None = None,
               left_out: np.ndarray | None = None, world: np.ndarray | None = None,
-              start: np.ndarray | None = None, curvature: bool = False) -> BatchFit:
+              start: np.ndarray | None = None, curvature: bool = False,
+              shared: StartModel | None = None) -> BatchFit:
     """Fit machines whose readings ``values`` (M, N) of ``design`` are used where ``mask``.
 
     ``free``, ``fixed``, ``prior``, ``scale``: per parameter of ``design.space`` (mask of the
@@ -194,7 +195,10 @@ def fit_batch(design: ReadingLayout, values: np.ndarray, mask: np.ndarray,
     ``start``: where the free parameters start (per parameter, or (M, P); default the
     prior mean): a refit of nearly the same readings converges in a step or two from the
     first fit's solution.  ``curvature``: the model's curvature over the estimate's own
-    spread goes into the covariance too (:func:`_curvature`)."""
+    spread goes into the covariance too (:func:`_curvature`).  ``shared``: the model and
+    Jacobian at the start, kept for the other fits of the same ``design``, ``free``,
+    ``fixed`` and ``scale`` that start there (:class:`~calibrators.estimators.solvers.
+    StartModel`)."""
     if solver not in SOLVERS:
         raise ValueError(f"unknown solver '{solver}'; choose from {list(SOLVERS)}")
     values = np.atleast_2d(np.asarray(values, dtype=float))
@@ -202,7 +206,8 @@ def fit_batch(design: ReadingLayout, values: np.ndarray, mask: np.ndarray,
     values = np.where(mask, values, 0.0)
     m_count = len(values)
     problem = Problem(design, values, mask, sigma, np.asarray(free, dtype=bool),
-                       np.asarray(prior, dtype=float), np.asarray(scale, dtype=float), world)
+                       np.asarray(prior, dtype=float), np.asarray(scale, dtype=float), world,
+                       shared)
     idx, s = problem.idx, problem.s
     theta = np.tile(np.asarray(fixed, dtype=float), (m_count, 1))
     theta[:, idx] = 0.0 if start is None else np.broadcast_to(start, theta.shape)[:, idx]

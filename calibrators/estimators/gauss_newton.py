@@ -81,6 +81,7 @@ from calibrators.estimators.parameters import (
     select,
     sparse_basis,
 )
+from calibrators.estimators.solvers import StartModel
 from calibrators.estimators.world_sizes import (
     blind_spot,
     family_index,
@@ -561,13 +562,17 @@ class GaussNewtonCalibrator(Estimator):
         curved = self.curvature and any(isinstance(s, InterferometerAxis | BallbarSpec)
                                         for s in design.specs)
 
+        # The fits below that start at the prior mean (the refits that leave one outlier
+        # out after another) share its model and Jacobian.
+        shared = StartModel()
+
         def fit(rows: np.ndarray, mask: np.ndarray, terms: Consider = consider,
                 start: np.ndarray | None = None) -> BatchFit:
             return fit_batch(design, values[rows], mask[rows], noise, free, fixed, priors,
                              scale, unmodelled=unmodelled, solver=solver,
                              consider=terms.rows(rows), left_out=spread,
                              world=None if world is None else world[rows], start=start,
-                             curvature=curved)
+                             curvature=curved, shared=shared)
 
         m_count = len(values)
         mask = used
