@@ -96,15 +96,15 @@ class StartModel:
 
 class Problem:
     """The least-squares problem of :func:`fit_batch`, for a subset ``rows`` of machines;
-    ``start``: model readings and derivatives shared with the other fits of the group."""
+    ``shared``: model readings and derivatives shared with the other fits of the group."""
 
     def __init__(self, design: ReadingLayout, values: np.ndarray, mask: np.ndarray,
                  sigma: float | np.ndarray,
                  free: np.ndarray, prior: np.ndarray, scale: np.ndarray,
-                 world: np.ndarray | None = None, start: StartModel | None = None) -> None:
+                 world: np.ndarray | None = None, shared: StartModel | None = None) -> None:
         self.design, self.values, self.mask, self.free, self.scale = (
             design, values, mask, free, scale)
-        self.start = start
+        self.shared = shared
         # Parameters beyond the design's space are the coefficients of ``world``'s reading
         # patterns (M, N, K), mm per unit: they enter the readings linearly.
         self.n = len(design.space.names)
@@ -130,13 +130,13 @@ class Problem:
     def predict(self, theta: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """The readings of machines ``rows`` at ``theta`` (mm)."""
         th = theta[:, :self.n]
-        kept = self.start is not None and self.start.holds(th)
-        if kept and self.start.model is not None:
-            model = np.repeat(self.start.model[None], len(th), axis=0)
+        kept = self.shared is not None and self.shared.holds(th)
+        if kept and self.shared.model is not None:
+            model = np.repeat(self.shared.model[None], len(th), axis=0)
         else:
             model = predict(th, self.design, self._sight(theta, rows))
             if kept:
-                self.start.model = model[0].copy()
+                self.shared.model = model[0].copy()
         if self.world.shape[-1]:
             model += (self.world[rows] @ theta[:, self.n:, None])[..., 0]
         return model
@@ -184,16 +184,16 @@ class Problem:
     def jacobian(self, theta: np.ndarray, rows: np.ndarray, free: np.ndarray | None = None
                  ) -> np.ndarray:
         """Whitened Jacobian over ``free`` (default: the free parameters), scaled units."""
-        kept = free is None and self.start is not None and self.start.holds(theta[:, :self.n])
+        kept = free is None and self.shared is not None and self.shared.holds(theta[:, :self.n])
         free = self.free if free is None else free
         n = self.n
-        if kept and self.start.jac is not None:
-            jac = np.repeat(self.start.jac[None], len(theta), axis=0)
+        if kept and self.shared.jac is not None:
+            jac = np.repeat(self.shared.jac[None], len(theta), axis=0)
         else:
             jac = jacobian(theta[:, :n], self.design, free[:n], self.scale[:n],
                            self._kept_sight(theta, rows))
             if kept:
-                self.start.jac = jac[0].copy()
+                self.shared.jac = jac[0].copy()
         if free[n:].any():
             jac = np.concatenate([jac, self.world[rows][..., free[n:]] * self.scale[n:][free[n:]]],
                                  axis=-1)

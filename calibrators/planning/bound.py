@@ -617,6 +617,8 @@ def _generate(atoms: csr_matrix, place: np.ndarray, share: np.ndarray, gains: np
     without the kinds whose share has vanished (the multiplicative step never revives
     one), and with the best visit of each posture that gains more per second than every
     kind there, given half of the posture's share."""
+    from scipy.sparse import vstack  # as :func:`_value`'s linear algebra
+
     n_atoms = atoms.shape[0]
     keep = np.concatenate([share[:n_atoms] > VANISHED * share.max(),
                            np.ones(len(share) - n_atoms, dtype=bool)])
@@ -636,8 +638,6 @@ def _generate(atoms: csr_matrix, place: np.ndarray, share: np.ndarray, gains: np
     added = 0.5 * owned[new] + VANISHED * share.max()
     members = [picked[p][picked[p] >= 0] for p in new]
     cost = visits.prices(members, grid)
-    from scipy.sparse import vstack  # as :func:`_value`'s linear algebra
-
     atoms = vstack([atoms, _atoms(members, atoms.shape[1])], format="csr")
     share = np.concatenate([share[:n_atoms], added, share[n_atoms:]])
     share /= share.sum()
