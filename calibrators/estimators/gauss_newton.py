@@ -705,14 +705,15 @@ class GaussNewtonCalibrator(Estimator):
                                 f"{'kept' if mask[mine].all() else 'left out'} ("
                                 f"{CAUSE_WORDS[cause]}): {where}")
         # Of an instrument whose readings the loop leaves out by the cap's fraction, and
-        # that no repetition told from model error, the many are the model's error: a
-        # wrong reading is rare (the bar's under a fit without the drives' terms was it).
+        # that no repetition told from model error, the many are the model's error: an
+        # honest reading flags once in 6e-5 and a wrong one is rare, so two or more are
+        # not chance (the bar's under a fit without the drives' terms was it).
         unrepeated = Counter(instrument_of(data.items[k].gauge)
                              for k, c in zip(outliers, causes, strict=True)
                              if c == "unrepeated" and not mask[k])
         read = Counter(instrument_of(m.gauge) for m in data.items)
         for kind, n in unrepeated.items():
-            if n >= MAX_OUTLIER_FRACTION * read[kind]:
+            if n >= max(2, MAX_OUTLIER_FRACTION * read[kind]):
                 warnings.append(f"{n} of the {read[kind]} {kind} readings left out beyond "
                                 f"{OUTLIER_K:g} robust sigmas, unrepeated: so many are the "
                                 "model's error, not wrong readings; fit the terms that move "
