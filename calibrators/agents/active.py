@@ -15,9 +15,10 @@ plunger down wherever the tip stays three of *its* standard deviations inside th
 travel: more postures read each gauge, and more gauges read each posture.
 
 Every :data:`REFIT_S` seconds of lab time the full (non-linear) extended estimator refits
-the whole notebook and its estimate replaces the filter's mean: a poor early estimate
-(the first readings pin down little, and the filter is linearised at the nominal
-machine) is corrected from all the data, so it cannot lock the design.  It stops when
+the whole notebook (``full`` told the lab's conditions, when the notebook holds ballbar
+readings under a world's drives) and its estimate replaces the filter's mean: a poor
+early estimate (the first readings pin down little, and the filter is linearised at the
+nominal machine) is corrected from all the data, so it cannot lock the design.  It stops when
 the predicted error reaches :attr:`ActiveAgent.target_mm` or the budget is spent.
 
 Under ``lab`` or ``workshop`` conditions its filter also holds the world's drift,
