@@ -15,9 +15,10 @@ plunger down wherever the tip stays three of *its* standard deviations inside th
 travel: more postures read each gauge, and more gauges read each posture.
 
 Every :data:`REFIT_S` seconds of lab time the full (non-linear) extended estimator refits
-the whole notebook and its estimate replaces the filter's mean: a poor early estimate
-(the first readings pin down little, and the filter is linearised at the nominal
-machine) is corrected from all the data, so it cannot lock the design.  It stops when
+the whole notebook (``full`` told the lab's conditions, when the notebook holds ballbar
+readings under a world's drives) and its estimate replaces the filter's mean: a poor
+early estimate (the first readings pin down little, and the filter is linearised at the
+nominal machine) is corrected from all the data, so it cannot lock the design.  It stops when
 the predicted error reaches :attr:`ActiveAgent.target_mm` or the budget is spent.
 
 Under ``lab`` or ``workshop`` conditions its filter also holds the world's drift,
@@ -45,7 +46,12 @@ from calibrators.planning.belief import (
     PlannedOperation,
     observe_many,
 )
-from calibrators.planning.instruments import Bundle, operation_keys, planned_bundles
+from calibrators.planning.instruments import (
+    Bundle,
+    conditions_or_default,
+    operation_keys,
+    planned_bundles,
+)
 from calibrators.planning.pricing import PricedMoves
 from calibrators.planning.rounding import plan_bundles
 from calibrators.planning.search import Planner, best_moves, take
@@ -56,17 +62,22 @@ from orthoglide_env.instruments.stands import stand_names
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.model.errors import ERROR_NAMES
 from orthoglide_env.reading_model import ParameterSpace, default_scales
+from orthoglide_env.world.conditions import Conditions
 
 #: Seconds of lab time between two full refits of the notebook.
 REFIT_S: float = 600.0
 
 
 @lru_cache(maxsize=8)
-def _refitter(sigma: float) -> Estimator:
-    """The extended estimator of the refits, for readings of weighting ``sigma`` (mm),
-    made once: only its estimate is read, so its error bars' curvature and the words on
-    the faults it finds are left out."""
-    return for_study("extended", sigma).clone(curvature=False, fault_words=False)
+def _refitter(sigma: float, conditions: Conditions | None = None) -> Estimator:
+    """The estimator of the refits, for readings of weighting ``sigma`` (mm), made once:
+    the extended estimator, or with ``conditions`` ``full`` told them (a notebook that
+    holds ballbar readings under a world's drives: :meth:`ActiveAgent._refit`).  Only its
+    estimate is read, so its error bars' curvature and the words on the faults it finds
+    are left out."""
+    estimator = (for_study("extended", sigma) if conditions is None
+                 else for_study("full", sigma, conditions))
+    return estimator.clone(curvature=False, fault_words=False)
 
 
 @register
@@ -262,8 +273,15 @@ class ActiveAgent(Agent):
         """Replace the filter's mean by the extended estimator's fit of the notebook."""
         records = self.env.records
         planner = self.planner
+        # The bar reads the TCP to 0.35 um, where the drives' lead, lost motion and warm-up
+        # move it by microns: a fit without their terms misfits its readings by several
+        # sigma and leaves them out one refit at a time, up to its outlier cap.  The dials'
+        # 20 um hide those terms, so their refits stay the extended fit.
+        world = conditions_or_default(planner.conditions)
+        told = world if world.active and any(isinstance(r.spec, BallbarSpec)
+                                             for r in records) else None
         try:
-            est = _refitter(planner.sigma).fit(self.notebook.of(records))
+            est = _refitter(planner.sigma, told).fit(self.notebook.of(records))
         except (ValueError, RuntimeError, np.linalg.LinAlgError):
             return  # the filter goes on alone; the next refit has more data
         theta = dict(zip(est.space, est.theta, strict=True))

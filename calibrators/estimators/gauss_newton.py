@@ -12,6 +12,7 @@ readings.  It reads any experiment's notebook or measurement file.
 from __future__ import annotations
 
 import numbers
+from collections import Counter
 from collections.abc import Callable
 from operator import attrgetter
 from typing import Any, ClassVar, NamedTuple
@@ -95,6 +96,7 @@ from calibrators.estimators.world_sizes import (
     warning,
     widening,
 )
+from calibrators.measurements.record import instrument_of
 from orthoglide_env.instruments.ballbar import BallbarSpec, centring_sigma
 from orthoglide_env.instruments.ballbar import sigma as ballbar_sigma
 from orthoglide_env.instruments.dial import DEFAULT_SIGMA, weighting_sigma
@@ -702,6 +704,20 @@ class GaussNewtonCalibrator(Estimator):
                 warnings.append(f"{len(mine)} outlier reading(s) "
                                 f"{'kept' if mask[mine].all() else 'left out'} ("
                                 f"{CAUSE_WORDS[cause]}): {where}")
+        # Of an instrument whose readings the loop leaves out by the cap's fraction, and
+        # that no repetition told from model error, the many are the model's error: an
+        # honest reading flags once in 6e-5 and a wrong one is rare, so two or more are
+        # not chance (the bar's under a fit without the drives' terms was it).
+        unrepeated = Counter(instrument_of(data.items[k].gauge)
+                             for k, c in zip(outliers, causes, strict=True)
+                             if c == "unrepeated" and not mask[k])
+        read = Counter(instrument_of(m.gauge) for m in data.items)
+        for kind, n in unrepeated.items():
+            if n >= max(2, MAX_OUTLIER_FRACTION * read[kind]):
+                warnings.append(f"{n} of the {read[kind]} {kind} readings left out beyond "
+                                f"{OUTLIER_K:g} robust sigmas, unrepeated: so many are the "
+                                "model's error, not wrong readings; fit the terms that move "
+                                "them, or keep them (--keep-outliers)")
         if len(misfits):
             where = ", ".join(_where(data, k, every_residual, repeated)
                               for k in misfits[:LISTED_MISFITS])
