@@ -1,11 +1,12 @@
 """Ctrl-C at any moment of a command: one line on stderr, the shell's status for SIGINT
-(130), no traceback, and every trial finished so far kept.
+(130), no traceback, and every trial finished so far kept; and a comparison's SIGTERM
+likewise, with status 143.
 
 The moments are chosen by events, not by waiting: an import hook sends the interrupt
 when a given module starts loading (the command line's own first module, the
 comparison's numerical libraries), and a comparison with two busy workers is
-interrupted once its first trial is on disk.  The signal goes to the whole process group,
-as a terminal sends it."""
+interrupted once its first trial is on disk.  Ctrl-C goes to the whole process group, as
+a terminal sends it; SIGTERM to the command alone, as ``kill`` sends it."""
 
 from __future__ import annotations
 
@@ -107,3 +108,95 @@ def test_ctrl_c_with_busy_workers_keeps_the_finished_trials(tmp_path) -> None:
     assert len({t.machine for t in kept}) < 400 and stdout.strip()
     saved = json.loads((out / "config.json").read_text())
     assert saved["machines"] == 400
+
+
+#: Four machines of the ideal lab, each a chunk of its own and a second or two of work
+#: (the default agents and estimators): a stop sent once the first trial is written lands
+#: while machines are left.
+SMALL = ["compare", "--conditions", "ideal", "--machines", "4", "--chunk", "1", "--seed",
+         "2", "--quiet"]
+
+
+def _orthoglide(*argv: str) -> list[str]:
+    return [sys.executable, "-m", "calibrators.cli", *argv]
+
+
+def _workers_of_group(group: int) -> list[int]:
+    """The process ids of the spawned workers of process group ``group`` that still run
+    (not zombies): the group's resource tracker, which ends once its parent has, is none."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            # After the command's name in parentheses: state, parent, group.
+            state, _, pgrp = stat.read_text().rsplit(")", 1)[1].split()[:3]
+            command = (stat.parent / "cmdline").read_bytes()
+        except OSError:  # ended meanwhile
+            continue
+        if int(pgrp) == group and state != "Z" and b"spawn_main" in command:
+            found.append(int(stat.parent.name))
+    return found
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory: pytest.TempPathFactory) -> bytes:
+    """The trials file of :data:`SMALL` run to its end in one process."""
+    out = tmp_path_factory.mktemp("uninterrupted") / "run"
+    run = subprocess.run(_orthoglide(*SMALL, "--jobs", "1", "--out", str(out)),
+                         capture_output=True, text=True, timeout=GUARD_S, env=_environment())
+    assert run.returncode == 0, run.stderr
+    return (out / "trials.jsonl").read_bytes()
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads the processes in /proc")
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_sigterm_keeps_the_finished_trials_stops_the_workers_and_resumes(
+        tmp_path: Path, jobs: int, uninterrupted: bytes) -> None:
+    """SIGTERM to the command alone, as ``kill``, ``timeout`` and a batch scheduler send
+    it, once its first trial is on disk: one line says how many trials it keeps and how to
+    resume, the status is 143 (128 + 15), and no worker of the run still runs (stopped,
+    not orphaned: ``kill`` reaches the command alone).  ``--resume`` then writes the trials of an
+    uninterrupted run to the bit: the same bytes in one process; with two workers, which
+    write their machines as they end, the same lines in some order."""
+    out = tmp_path / "run"
+    trials = out / "trials.jsonl"
+    command = _orthoglide(*SMALL, "--jobs", str(jobs), "--out", str(out))
+    # Files, not pipes: the workers would hold a pipe open, and its end wait for theirs.
+    said_out, said_err = tmp_path / "stdout", tmp_path / "stderr"
+    with said_out.open("w") as stdout_file, said_err.open("w") as stderr_file:
+        proc = subprocess.Popen(command, stdout=stdout_file, stderr=stderr_file,
+                                env=_environment(), start_new_session=True)
+    try:
+        while not (trials.exists() and trials.read_text().count("\n") >= 1):
+            assert proc.poll() is None, said_err.read_text()
+            try:
+                proc.wait(0.05)
+            except subprocess.TimeoutExpired:
+                pass
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(GUARD_S)
+        left = _workers_of_group(proc.pid)  # as the command ends
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    stdout, stderr = said_out.read_text(), said_err.read_text()
+    assert proc.returncode == 143, stderr
+    assert not left, f"workers {left} outlived the stopped run"
+    assert "Traceback" not in stderr
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1, stderr
+    said = re.fullmatch(r"orthoglide compare: stopped by SIGTERM after (\d+) trials; kept in "
+                        r"(.+), continue with --resume", lines[0])
+    assert said and Path(said[2]) == trials, stderr
+    kept = [Trial.from_json(line) for line in trials.read_text().splitlines()]
+    assert len(kept) == int(said[1]) >= 1
+    assert stdout.strip()  # the partial table
+    resumed = subprocess.run([*command, "--resume"], capture_output=True, text=True,
+                             timeout=GUARD_S, env=_environment())
+    assert resumed.returncode == 0, resumed.stderr
+    if jobs == 1:
+        assert trials.read_bytes() == uninterrupted
+    else:
+        assert sorted(trials.read_bytes().splitlines()) == sorted(uninterrupted.splitlines())

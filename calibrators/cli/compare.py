@@ -6,8 +6,11 @@ import argparse
 import csv
 import dataclasses
 import json
+import signal
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -46,6 +49,28 @@ if TYPE_CHECKING:
 TRIALS_FILE = "trials.jsonl"
 #: Most processes a run may ask for: beyond the cores they only compete.
 MAX_JOBS = 256
+
+
+class Stopped(BaseException):
+    """SIGTERM, what ``kill``, ``timeout`` and a batch scheduler send, received while a
+    comparison runs: raised where the run is, as Ctrl-C raises KeyboardInterrupt, so that
+    it stops the workers and keeps the finished trials as an interrupt does (not an
+    Exception: no ``except Exception`` of the run may take it for a failed fit)."""
+
+
+def _stop(signum: int, frame: object) -> None:
+    raise Stopped
+
+
+@contextmanager
+def _sigterm_stops() -> Iterator[None]:
+    """While it lasts, SIGTERM raises :class:`Stopped` instead of ending the process
+    where it is, the chunk's workers left running and its finished trials unwritten."""
+    previous = signal.signal(signal.SIGTERM, _stop)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _names(text: str, option: str) -> tuple[str, ...]:
@@ -193,24 +218,29 @@ def run_command(args: argparse.Namespace) -> None:
                    desc="machines", unit="machine", file=sys.stderr)
     start = time.perf_counter()
     try:
-        trials = run(config, args.machines, args.jobs, done, on_trial=keep,
-                     progress=None if bar is None else bar.update, engine=args.engine,
-                     address=args.address, chunk=args.chunk)
+        with _sigterm_stops():
+            trials = run(config, args.machines, args.jobs, done, on_trial=keep,
+                         progress=None if bar is None else bar.update, engine=args.engine,
+                         address=args.address, chunk=args.chunk)
     except KeyboardInterrupt:
-        trials = None
+        trials, stopped_by = None, signal.SIGINT
+    except Stopped:
+        trials, stopped_by = None, signal.SIGTERM
     finally:
         if bar is not None:
             bar.close()
         if handle:
             handle.close()
     if trials is None:
-        print(f"orthoglide compare: interrupted after {len(collected)} trials"
+        said = "interrupted" if stopped_by == signal.SIGINT else "stopped by SIGTERM"
+        print(f"orthoglide compare: {said} after {len(collected)} trials"
               + (f"; kept in {out / TRIALS_FILE}, continue with --resume" if out else ""),
               file=sys.stderr)
-        # The table so far at once: the bound's minute or two is not what Ctrl-C asks for.
+        # The table so far at once: the bound's minute or two is not what a stop asks for.
         _print(collected, dataclasses.replace(config, bound=False),
                len({t.machine for t in collected}), time.perf_counter() - start, args.json)
-        raise SystemExit(130)
+        # The shell's status for a process the signal ended: 130 for SIGINT, 143 for SIGTERM.
+        raise SystemExit(128 + stopped_by)
     rows = _print(trials, config, args.machines, time.perf_counter() - start, args.json)
     if args.verify_pybullet:
         from calibrators.study.crosscheck import verify_pybullet

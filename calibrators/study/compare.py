@@ -486,7 +486,8 @@ def run(config: Config, machines: int, jobs: int = 1, done: list[Trial] | None =
     back in
     (machine, agent, estimator) order, the same whatever ``jobs``, ``engine`` and
     ``chunk``: a machine's fits are those it gets alone.  A
-    KeyboardInterrupt stops the workers at once and is raised again, every trial
+    KeyboardInterrupt (or another exception raised here, as the command line's SIGTERM
+    handler raises one) stops the workers at once and is raised again, every trial
     finished so far having gone to ``on_trial``."""
     for name in config.agents:
         get_agent(name)
