@@ -139,11 +139,21 @@ def restricted_statistics(design: ReadingLayout, values: np.ndarray, mask: np.nd
     return gram * seen[:, :, None] * seen[:, None, :], b * seen
 
 
+def _inner(gram: np.ndarray, root: np.ndarray) -> np.ndarray:
+    """``I + S G S`` (M, K, K) of ``gram`` (M, K, K), ``S`` the terms' prior roots ``root``
+    (M, K), in one array: three temporaries of 4000 machines' (K, K) cost a third of the
+    inverse the expectation-maximisation takes of it at each step."""
+    inner = root[:, :, None] * gram
+    inner *= root[:, None, :]
+    inner += np.eye(gram.shape[-1])
+    return inner
+
+
 def log_likelihood(gram: np.ndarray, b: np.ndarray, variances: np.ndarray) -> np.ndarray:
     """(M,) the restricted log likelihood (up to a constant) of the terms' ``variances``
     (M, K): ``-1/2 [log det(I + S G S) - b S (I + S G S)^-1 S b]`` with ``S`` their roots."""
     root = np.sqrt(variances)
-    inner = root[:, :, None] * gram * root[:, None, :] + np.eye(gram.shape[-1])
+    inner = _inner(gram, root)
     _, logdet = np.linalg.slogdet(inner)
     sb = root * b
     solved = np.linalg.solve(inner, sb[..., None])[..., 0]
@@ -174,12 +184,10 @@ def estimate_scales(gram: np.ndarray, b: np.ndarray, member: np.ndarray, count: 
     scales = np.clip(start, lowest, CEILING)
     sizes = np.bincount(member, minlength=count).astype(float)
     present = sizes > 0
-    eye = np.eye(gram.shape[-1])
     for _ in range(ITERATIONS):
         root = np.sqrt(scales[:, member])
         # Posterior of the coefficients in units of their prior: (I + S G S)^-1.
-        inner = root[:, :, None] * gram * root[:, None, :] + eye
-        cov = np.linalg.inv(inner)
+        cov = np.linalg.inv(_inner(gram, root))
         mean = (cov @ (root * b)[..., None])[..., 0]
         moment = (mean**2 + np.diagonal(cov, axis1=1, axis2=2)) * root**2
         summed = np.zeros_like(scales)
@@ -299,7 +307,7 @@ def power_against(gram: np.ndarray, member: np.ndarray, told: np.ndarray,
 
     machines, families = told.shape
     root = np.sqrt(told[:, member])
-    inner = root[:, :, None] * gram * root[:, None, :] + np.eye(gram.shape[-1])
+    inner = _inner(gram, root)
     # C^T (I + C L C^T)^-1 C over the projected readings, by Woodbury.
     spread = gram - gram @ (root[:, :, None] * np.linalg.solve(
         inner, root[:, :, None] * gram))
