@@ -210,14 +210,14 @@ class Pricer(Belief):
         rate[moves] = gain / priced.seconds[moves]
 
     def _top_rates_open(self, count: int, seconds: np.ndarray, after: np.ndarray,
-                        reads: np.ndarray
+                        reads: np.ndarray, fits: np.ndarray, live: np.ndarray
                         ) -> tuple[np.ndarray, PricedMoves, np.ndarray | None]:
         """:meth:`top_rates`, but with the world's terms the moves of the shortlist
         are left for the caller to price (:meth:`_price`, then :meth:`_take_prices`):
-        the rates, the priced moves, and those moves (None: nothing left to price)."""
+        the rates, the priced moves, and those moves (None: nothing left to price).
+        ``fits`` and ``live``: the moves that fit in the budget and, of those, the
+        postures where some stand reads (:func:`_live`)."""
         wanted = count if self.world is None else max(count, WORLD_SHORTLIST)
-        fits = self.time_s + seconds <= self.budget_s
-        live = np.flatnonzero(fits & reads.any(axis=0))
         gain = np.full(len(seconds), np.nan)
         rate = np.full(len(seconds), -np.inf)
 
@@ -269,12 +269,16 @@ def top_rates_many(pricers: list[Pricer], count: int
         return []
     if all(p.mean is not None and p.table is pricers[0].table
            and len(p.slots) == len(pricers[0].slots) for p in pricers):
-        moved = list(zip(*moves_many(pricers, *move_reaches(pricers)), strict=True))
+        stacked = moves_many(pricers, *move_reaches(pricers))
+        moved = list(zip(*stacked, strict=True))
+        lives = _live(pricers, stacked[0], stacked[2])
     else:
         moved = [pricer._moves() for pricer in pricers]
+        lives = [_live([pricer], seconds[None], reads[None])[0]
+                 for pricer, (seconds, _, reads) in zip(pricers, moved, strict=True)]
     opened = []
-    for pricer, moves in zip(pricers, moved, strict=True):
-        opened.append((*pricer._top_rates_open(count, *moves), moves))
+    for pricer, moves, live in zip(pricers, moved, lives, strict=True):
+        opened.append((*pricer._top_rates_open(count, *moves, *live), moves))
     asked = [i for i, (_, _, shortlist, _) in enumerate(opened) if shortlist is not None]
     gains = price_many([pricers[i] for i in asked],
                        [(opened[i][3][2], opened[i][3][0], opened[i][2]) for i in asked])
@@ -283,16 +287,30 @@ def top_rates_many(pricers: list[Pricer], count: int
     return [(rate, priced) for rate, priced, _, _ in opened]
 
 
+def _live(pricers: list[Pricer], seconds: np.ndarray, reads: np.ndarray
+          ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Of each of ``pricers``' moves (stacked: their seconds (M, P) and how likely each
+    stand reads after them (M, K, P)), those that fit in its budget (P,) and, of those,
+    the postures where some stand reads (L,): worked out for every pricer at once."""
+    fits = (np.array([p.time_s for p in pricers])[:, None] + seconds
+            <= np.array([p.budget_s for p in pricers])[:, None])
+    machines, postures = np.nonzero(fits & reads.any(axis=1))
+    ends = np.cumsum(np.bincount(machines, minlength=len(pricers)))[:-1]
+    return list(zip(fits, np.split(postures, ends), strict=True))
+
+
 def moves_many(pricers: list[Pricer], safe: np.ndarray, contact: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:meth:`Pricer._moves` of each of ``pricers`` (as many stands each) from their
     stands' reach at every posture, stacked (M, K, P): the seconds (M, P), the plungers
     down after each move (M, K, P) and how likely each reads there (M, K, P), each
-    pricer's entries worked out from its own alone."""
+    pricer's entries worked out from its own alone.  ``contact`` becomes the last (its
+    entries where a plunger stays up zeroed in place: megabytes, made for this)."""
     here = safe[np.arange(len(pricers)), :, [p.here for p in pricers]]  # (M, K)
     engaged = np.array([p.engaged for p in pricers], dtype=bool)
     after = safe & (engaged | here)[..., None]
-    reads = np.where(after, contact, 0.0)
+    reads = contact
+    np.copyto(reads, 0.0, where=~after)
     flicks = np.sum(after != engaged[..., None], axis=1)
     drive = np.stack([drive_seconds(p.design, tuple(float(v) for v in p.rho))
                       for p in pricers])
