@@ -23,7 +23,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from calibrators.planning.belief import N_MACHINE, Belief, move_reaches, rigid_factor
+from calibrators.planning.belief import (
+    N_MACHINE,
+    Belief,
+    move_reaches,
+    reading_rows_many,
+    rigid_factor,
+)
 from calibrators.planning.world_terms import directions, gains_many, rows_many
 from orthoglide_env.lab.operations import TIME
 from orthoglide_env.lab.slot_table import slot_table
@@ -114,11 +120,10 @@ class Pricer(Belief):
         """Whitened rows (L, K, n) of the readings of the moves to ``postures`` (L,), the
         world's rows ``fitted`` (K, L, count) of them added, and over the considered terms
         (L, K, m) from their rows ``considered`` (K, L, m) (:meth:`_price`'s)."""
-        rows = self._rows(reads, postures)
-        weight = np.sqrt(reads.T[postures])[:, :, None] / self.sigma
-        rows[..., self.world.start:self.world.start + self.world.count] += (
-            np.swapaxes(fitted, 0, 1) * weight)
-        return rows, np.swapaxes(considered, 0, 1) * weight
+        rows, considered = world_rows_many([self], postures[None],
+                                           np.sqrt(reads.T[postures])[None], fitted[None],
+                                           considered[None])
+        return rows[0], considered[0]
 
     def _moves(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The seconds (P,) of every candidate move, the plungers down after it (K, P) and
@@ -321,6 +326,22 @@ def moves_many(pricers: list[Pricer], safe: np.ndarray, contact: np.ndarray
     return seconds, after, reads
 
 
+def world_rows_many(pricers: list[Pricer], postures: np.ndarray, root: np.ndarray,
+                    fitted: np.ndarray, considered: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """:meth:`Pricer._world_rows` of each of ``pricers`` (one design, as many stands,
+    unknowns and world terms each) at its ``postures`` (M, L), stacked: the whitened rows
+    (M, L, K, n) of the readings there, each stand's weighted by the square root ``root``
+    (M, L, K) of its probability of reading, the world's rows ``fitted`` (M, K, L, count)
+    added, and over the considered terms (M, L, K, m) from their rows ``considered`` (M,
+    K, L, m): each entry as each pricer alone has it."""
+    world = pricers[0].world
+    rows = reading_rows_many(pricers, np.arange(len(pricers[0].slots)), postures, root)
+    weight = root[..., None] / np.array([p.sigma for p in pricers])[:, None, None, None]
+    rows[..., world.start:world.start + world.count] += np.swapaxes(fitted, 1, 2) * weight
+    return rows, np.swapaxes(considered, 1, 2) * weight
+
+
 def price_many(pricers: list[Pricer], asked: list[tuple[np.ndarray, np.ndarray, np.ndarray]]
                ) -> list[np.ndarray]:
     """:meth:`Pricer._price` of each of ``pricers`` with its ``(reads, seconds, postures)``
@@ -346,11 +367,12 @@ def price_many(pricers: list[Pricer], asked: list[tuple[np.ndarray, np.ndarray, 
         fitted, considered = rows_many(
             [p.world for p in group], np.array([p.slots for p in group]), postures, times,
             approach, np.tile(np.arange(len(group[0].slots)), (len(group), 1)))
-        rows, considered = zip(*(p._world_rows(asked[i][0], asked[i][2], f, c)
-                                 for p, i, f, c in zip(group, members, fitted, considered,
-                                                       strict=True)), strict=True)
+        # Each stand's weight at each posture asked, gathered member by member (their
+        # reads are each a slice of megabytes).
+        root = np.sqrt(np.stack([asked[i][0].T[asked[i][2]] for i in members]))
+        rows, considered = world_rows_many(group, postures, root, fitted, considered)
         first = group[0]
-        gains = gains_many(np.stack(rows), np.stack(considered),
+        gains = gains_many(rows, considered,
                            np.stack([pricers[i].covariance for i in members]),
                            np.stack([pricers[i].world.consider for i in members]),
                            rigid_factor(first.design))
