@@ -45,7 +45,7 @@ from typing import NamedTuple
 import numpy as np
 
 from calibrators.planning.instruments import instrument_kit
-from calibrators.planning.world_terms import rows_many, schmidt, world_terms
+from calibrators.planning.world_terms import rows_many, world_terms
 from orthoglide_env.lab.design_belief import (
     N_MACHINE,
     N_STAND,
@@ -314,8 +314,12 @@ class Belief:
         ones)."""
         if len(rows) == 0:
             return
-        _add_many([self], rows[None], None if innovations is None else innovations[None],
-                  None if considered is None else considered[None])
+        gain, b = woodbury_gain(self.covariance, rows)  # (n, R)
+        if self.world is not None:
+            self.world.update(gain, rows, considered)
+        if self.mean is not None and innovations is not None:
+            self.mean = self.mean + gain @ innovations
+        self.covariance = shrunk(self.covariance, gain, b)
 
     def expect_readings(self, stands: np.ndarray | None = None,
                         weights: np.ndarray | None = None) -> None:
@@ -323,18 +327,15 @@ class Belief:
         :meth:`reading_here`)."""
         if stands is None:
             stands, weights = self.reading_here()
-        rows, considered = self._expected(stands, weights, None)
-        self._add(rows, considered=considered)
+        self._expected(stands, weights, None)
 
     def _expected(self, stands: np.ndarray, weights: np.ndarray,
-                  world: tuple[np.ndarray, np.ndarray] | None
-                  ) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`expect_readings`' whitened rows of ``stands`` with ``weights`` and their
-        rows over the considered terms, for :meth:`_add`; ``world``: the world's rows of
-        them (:func:`world_rows_here`), if already computed."""
+                  world: tuple[np.ndarray, np.ndarray] | None) -> None:
+        """:meth:`expect_readings` of ``stands`` with ``weights``, the world's rows of them
+        ``world`` (:func:`world_rows_here`), if already computed."""
         rows, considered = self._rows_here(stands, world)
         weight = np.sqrt(weights)[:, None]
-        return rows * weight / self.sigma, considered * weight / self.sigma
+        self._add(rows * weight / self.sigma, considered=considered * weight / self.sigma)
 
     def _rows_here(self, stands: np.ndarray,
                    world: tuple[np.ndarray, np.ndarray] | None = None
@@ -356,16 +357,14 @@ class Belief:
         observe_many([self], [stands], [values])
 
     def _observed(self, stands: np.ndarray, values: list[float],
-                  world: tuple[np.ndarray, np.ndarray] | None
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  world: tuple[np.ndarray, np.ndarray] | None) -> None:
         """:meth:`observe`'s update by the readings of ``stands`` (some), the world's rows
-        of them ``world`` (:func:`world_rows_here`), for :meth:`_add`: the whitened rows,
-        innovations and rows over the considered terms."""
+        of them ``world`` (:func:`world_rows_here`)."""
         rows, considered = self._rows_here(stands, world)
         nominal = self.table.reading[[self.slots[k] for k in stands], self.here]
         predicted = nominal + rows @ self.mean
-        return (rows / self.sigma, (np.asarray(values, dtype=float) - predicted) / self.sigma,
-                considered / self.sigma)
+        self._add(rows / self.sigma, (np.asarray(values, dtype=float) - predicted) / self.sigma,
+                  considered / self.sigma)
 
     def retire(self, stand: int) -> None:
         """A stand that reads no more (pushed past its travel) until it is re-mounted."""
@@ -748,9 +747,8 @@ def expect_many(beliefs: list[Belief]) -> None:
     (:func:`world_rows_here`): each belief's update its own alone, to the bit."""
     here = [belief.reading_here() for belief in beliefs]
     worlds = world_rows_here(beliefs, [stands for stands, _ in here])
-    expected = [belief._expected(stands, weights, world)
-                for belief, (stands, weights), world in zip(beliefs, here, worlds, strict=True)]
-    _add_grouped(beliefs, [(rows, None, considered) for rows, considered in expected])
+    for belief, (stands, weights), world in zip(beliefs, here, worlds, strict=True):
+        belief._expected(stands, weights, world)
 
 
 def observe_many(beliefs: list[Belief], stands: list[list[int]], values: list[list[float]]
@@ -767,46 +765,5 @@ def observe_many(beliefs: list[Belief], stands: list[list[int]], values: list[li
         reading.append(np.asarray(read, dtype=int))
     live = [i for i, read in enumerate(reading) if read.size]
     worlds = world_rows_here([beliefs[i] for i in live], [reading[i] for i in live])
-    _add_grouped([beliefs[i] for i in live], [
+    for i, world in zip(live, worlds, strict=True):
         beliefs[i]._observed(reading[i], values[i], world)
-        for i, world in zip(live, worlds, strict=True)])
-
-
-def _add_grouped(beliefs: list[Belief], updates: list[tuple[np.ndarray, np.ndarray | None,
-                                                              np.ndarray]]) -> None:
-    """:meth:`Belief._add` of each of ``beliefs`` with its ``updates`` (whitened rows,
-    innovations or None, rows over the considered terms), those of as many readings,
-    unknowns and considered terms stacked (:func:`_add_many`)."""
-    groups: dict[tuple, list[int]] = {}
-    for i, (belief, (rows, _, considered)) in enumerate(zip(beliefs, updates, strict=True)):
-        if len(rows):
-            key = (rows.shape, considered.shape, belief.world is None, belief.mean is None)
-            groups.setdefault(key, []).append(i)
-    for members in groups.values():
-        rows, innovations, considered = zip(*(updates[i] for i in members), strict=True)
-        _add_many([beliefs[i] for i in members], np.stack(rows),
-                  None if innovations[0] is None else np.stack(innovations),
-                  np.stack(considered))
-
-
-def _add_many(beliefs: list[Belief], rows: np.ndarray, innovations: np.ndarray | None,
-              considered: np.ndarray | None) -> None:
-    """:meth:`Belief._add` of each of ``beliefs`` (as many unknowns, and world terms each
-    or none) with its whitened ``rows`` (G, R, n), ``innovations`` (G, R) or None and
-    ``considered`` (G, R, m): every product and solve stacked over them (BLAS and LAPACK
-    item by item), so each update is its own alone, to the bit."""
-    covariance = np.stack([b.covariance for b in beliefs])
-    gain, b = woodbury_gain(covariance, rows)  # (G, n, R)
-    if beliefs[0].world is not None:
-        consider = schmidt(np.stack([x.world.consider for x in beliefs]), gain, rows,
-                           considered)
-    filtering = innovations is not None and beliefs[0].mean is not None
-    if filtering:
-        mean = np.stack([x.mean for x in beliefs]) + (gain @ innovations[..., None])[..., 0]
-    covariance = shrunk(covariance, gain, b)
-    for k, belief in enumerate(beliefs):
-        belief.covariance = covariance[k]
-        if belief.world is not None:
-            belief.world.consider = consider[k]
-        if filtering:
-            belief.mean = mean[k]

@@ -161,6 +161,12 @@ class WorldTerms:
                                                                 self.per_dial))])
             self.dial_columns[stand] = np.arange(old, old + self.per_dial)
 
+    def update(self, gain: np.ndarray, rows: np.ndarray, considered: np.ndarray) -> None:
+        """Schmidt's update of ``D`` by readings of whitened ``rows`` (R, n) over the fitted
+        unknowns and ``considered`` (R, m) over the considered ones, taken with the
+        update's ``gain`` (n, R)."""
+        self.consider = self.consider + gain @ (considered - rows @ self.consider)
+
     def bias(self, weight: np.ndarray) -> float:
         """The considered terms' share of the predicted mean-square TCP error (mm^2)."""
         d = self.consider[:len(weight)]
@@ -180,14 +186,6 @@ class WorldTerms:
         """Whether the plan stops: :data:`STOP_SHARE`'s rule for the best ``rate`` (per
         s) with ``remaining_s`` of the budget left and the ``criterion`` (mm^2) now."""
         return rate * remaining_s < STOP_SHARE * criterion
-
-
-def schmidt(consider: np.ndarray, gain: np.ndarray, rows: np.ndarray, considered: np.ndarray
-            ) -> np.ndarray:
-    """``D`` (n, m) after readings of whitened ``rows`` (R, n) over the fitted unknowns and
-    ``considered`` (R, m) over the considered ones, taken with the update's ``gain`` (n,
-    R): Schmidt's update; or of a stack of beliefs (leading axes), each its own alone."""
-    return consider + gain @ (considered - rows @ consider)
 
 
 def rows_many(terms: list[WorldTerms], slots: np.ndarray, postures: np.ndarray,

@@ -146,19 +146,17 @@ def posture_index(design: MachineDesign) -> dict[bytes, int]:
 
 def woodbury_gain(covariance: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The gain ``K`` (n, R) of whitened readings ``rows`` (R, n) on a belief of
-    ``covariance`` (n, n), and ``B = C R'`` (n, R): the posterior is :func:`shrunk`.  Or
-    of a stack of beliefs (..., n, n) and their readings (..., R, n), each its own alone
-    (stacked products and solves work item by item)."""
-    b = covariance @ _transposed(rows)
-    m = np.eye(rows.shape[-2]) + rows @ b
-    return _transposed(np.linalg.solve(m, _transposed(b))), b
+    ``covariance`` (n, n), and ``B = C R'`` (n, R): the posterior is :func:`shrunk`."""
+    b = covariance @ rows.T
+    m = np.eye(len(rows)) + rows @ b
+    return np.linalg.solve(m, b.T).T, b
 
 
 def shrunk(covariance: np.ndarray, gain: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The covariance after the readings of gain ``gain`` and ``B`` (:func:`woodbury_gain`),
-    kept symmetric (of each of a stack too)."""
-    covariance = covariance - gain @ _transposed(b)
-    return (covariance + _transposed(covariance)) / 2
+    kept symmetric."""
+    covariance = covariance - gain @ b.T
+    return (covariance + covariance.T) / 2
 
 
 def _transposed(matrices: np.ndarray) -> np.ndarray:
