@@ -56,7 +56,7 @@ from orthoglide_env.lab.design_belief import (
     woodbury_gain,
 )
 from orthoglide_env.lab.operations import TIME, Op
-from orthoglide_env.lab.slot_table import END_GAP, reach_at, slot_table
+from orthoglide_env.lab.slot_table import END_GAP, at_entries, reach_at, slot_table
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.world.conditions import Conditions
 
@@ -88,11 +88,15 @@ def _stand_columns(stand: int) -> np.ndarray:
 
 
 @lru_cache(maxsize=256)
-def _block_index(stands: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
-    """The index (G, C, C) into the covariance of the blocks of ``stands`` (G) over the
-    unknowns their tips move with (:meth:`Belief._columns` but the zero), made once."""
+def _block_index(stands: tuple[int, ...], size: int) -> np.ndarray:
+    """The flat index (G, C, C) into a ``size`` by ``size`` covariance of the blocks of
+    ``stands`` (G) over the unknowns their tips move with (:meth:`Belief._columns` but the
+    zero), made once: one ``take`` gathers them, at a quarter of the price of indexing
+    with the rows and columns."""
     columns = np.stack([_stand_columns(k)[:-1] for k in stands])
-    return columns[:, :, None], columns[:, None, :]
+    out = columns[:, :, None] * size + columns[:, None, :]
+    out.setflags(write=False)
+    return out
 
 
 @lru_cache(maxsize=512)
@@ -219,27 +223,9 @@ class Belief:
         as a product of the whole array would have it, but made only where a row has
         entries (a mounting's columns are the machine's, then its stand's, two runs)."""
         stands = np.arange(len(self.slots)) if stands is None else np.asarray(stands, dtype=int)
-        count = len(range(len(self.table.postures))[postures]) if isinstance(
-            postures, slice) else len(postures)
-        out = np.zeros((count, len(stands), len(self.covariance)))
-        slots = np.array(self.slots)[stands]
-        mounted = np.flatnonzero(slots >= 0)  # the stands' places in ``stands`` with rows
-        if not mounted.size:
-            return out
-        # (L, K'', C): each mounted stand's changes at the postures.
-        values = np.moveaxis(self.table.change[slots[mounted]][:, postures] if isinstance(
-            postures, slice) else self.table.change[slots[mounted][:, None], postures], 0, 1)
-        zero = ZERO_SCALE
-        if weight is not None:
-            values = values * weight[:, mounted, None] / self.sigma
-            zero = ZERO_SCALE * weight[:, mounted] / self.sigma
-        # A mounting's columns are the machine's, then its stand's (the zero's last).
-        first = N_MACHINE + N_STAND * stands[mounted]
-        out[:, mounted, :N_MACHINE] = values[..., :N_MACHINE]
-        out[:, mounted[:, None], first[:, None] + np.arange(N_STAND - 1)] = values[
-            ..., N_MACHINE:]
-        out[:, mounted, first + N_STAND - 1] = zero
-        return out
+        index = np.arange(len(self.table.postures))[postures]
+        return reading_rows_many([self], stands, index[None],
+                                 None if weight is None else weight[None])[0]
 
     def _set_rows(self, stand: int) -> None:
         """Make ``stand``'s rows those of its present mounting (:meth:`rows_of`) over the
@@ -266,7 +252,7 @@ class Belief:
             self._touched = np.stack(self.touched_rows, axis=1)
             self._touched.setflags(write=False)
             self._stale, self._patched = frozenset(), 0
-        part = np.swapaxes(self._touched[postures], 0, 1)
+        part = np.swapaxes(self._touched.take(postures, axis=0), 0, 1)
         for stand in self._stale:
             part[stand] = self.touched_rows[stand][postures]
         self._patched += bool(self._stale)
@@ -421,6 +407,36 @@ class Belief:
         return down, contact[down, 0]
 
 
+def reading_rows_many(beliefs: list[Belief], stands: np.ndarray, postures: np.ndarray,
+                      weight: np.ndarray | None = None) -> np.ndarray:
+    """:meth:`Belief.rows_at` of each of ``beliefs`` (one design, as many unknowns and
+    stands each) at its ``postures`` (M, L) for ``stands`` (K'), with its ``weight`` (M,
+    L, K') if any, stacked (M, L, K', n): each entry ``(row * weight) / sigma`` as each
+    belief alone has it, made only where a row has entries."""
+    first_belief = beliefs[0]
+    table = first_belief.table
+    slots = np.array([b.slots for b in beliefs])[:, stands]  # (M, K')
+    out = np.zeros((*postures.shape, len(stands), len(first_belief.covariance)))
+    mounted = slots >= 0
+    if not mounted.any():
+        return out
+    # (M, L, K', C): each stand's changes at the postures.
+    values = table.change[np.maximum(slots, 0)[:, None, :], postures[:, :, None]]
+    zero: float | np.ndarray = ZERO_SCALE
+    if weight is not None:
+        sigma = np.array([b.sigma for b in beliefs])
+        values = values * weight[..., None] / sigma[:, None, None, None]
+        zero = ZERO_SCALE * weight / sigma[:, None, None]
+    # A mounting's columns are the machine's, then its stand's (the zero's last).
+    first = N_MACHINE + N_STAND * stands
+    each = np.arange(len(stands))
+    out[..., :N_MACHINE] = values[..., :N_MACHINE]
+    out[..., each[:, None], first[:, None] + np.arange(N_STAND - 1)] = values[..., N_MACHINE:]
+    out[..., each, first + N_STAND - 1] = zero
+    out.transpose(0, 2, 1, 3)[~mounted] = 0.0  # an empty stand's rows are zero
+    return out
+
+
 def predicted_tips_many(beliefs: list[Belief], postures: np.ndarray | slice = slice(None)
                         ) -> np.ndarray:
     """:meth:`Belief.predicted_tips` of filters ``beliefs`` (readings observed, one design,
@@ -454,7 +470,7 @@ def tips_at(beliefs: list[Belief], asked: tuple[np.ndarray, np.ndarray, np.ndarr
     m, k, j = asked
     pair = m * slots.shape[1] + k
     slot = slots.ravel()[pair]
-    tips = table.tip[slot, j]
+    tips = at_entries(table.tip, slot, j)
     means = _tip_means(beliefs)
     # Each (machine, stand)'s row in its slot's product, each posture's column in it.
     row_of = np.zeros(slots.size, dtype=int)
@@ -472,7 +488,8 @@ def tips_at(beliefs: list[Belief], asked: tuple[np.ndarray, np.ndarray, np.ndarr
         column_of[postures] = np.arange(len(postures))
         rows = np.concatenate((postures, np.full(-len(postures) % 4, postures[-1])))
         change = np.matmul(table.change[value][rows], means[at][..., None])[..., 0]
-        tips[mine] += table.sign[value] * change[row_of[pair[mine]], column_of[j[mine]]]
+        tips[mine] += table.sign[value] * change.take(row_of[pair[mine]] * change.shape[1]
+                                                      + column_of[j[mine]])
     return tips
 
 
@@ -499,8 +516,17 @@ def _missed(beliefs: list[Belief], used: np.ndarray) -> np.ndarray:
     tips themselves."""
     size = np.max(np.abs(_tip_means(beliefs)))
     if np.isfinite(size) and size * _change_bound(beliefs[0].design) < 1e300:
-        return np.isnan(beliefs[0].table.tip[used])
+        return _nominal_misses(beliefs[0].design)[used]
     return np.isnan(predicted_tips_many(beliefs))
+
+
+@lru_cache(maxsize=8)
+def _nominal_misses(design: MachineDesign) -> np.ndarray:
+    """Where the nominal tip of each slot misses its bar at each posture (S, P), read-only:
+    made once, where each decision gathered every stand's tips to test them."""
+    out = np.ascontiguousarray(np.isnan(slot_table(design).tip))
+    out.setflags(write=False)
+    return out
 
 
 def reaches(beliefs: list[Belief], postures: np.ndarray | slice = slice(None)
@@ -519,7 +545,7 @@ def reaches(beliefs: list[Belief], postures: np.ndarray | slice = slice(None)
     never grows until its stand is re-mounted."""
     tip, spread, index = _tips_and_bounds(beliefs, postures)
     safe, contact = np.zeros(tip.shape, dtype=bool), np.zeros(tip.shape)
-    _reach_where(beliefs, tip.ravel(), spread, index,
+    _reach_where(beliefs, tip.ravel(), spread.ravel(), index,
                  np.nonzero(np.ones(tip.shape, dtype=bool)), safe, contact)
     return list(zip(*_unread(beliefs, safe, contact, postures), strict=True))
 
@@ -539,24 +565,26 @@ def move_reaches(beliefs: list[Belief]) -> tuple[np.ndarray, np.ndarray]:
     table = beliefs[0].table
     slots = np.array([b.slots for b in beliefs])  # (M, K)
     used, mounted = np.maximum(slots, 0), slots >= 0
-    spread = _spread_bounds(beliefs, slice(None))
     index = np.arange(len(table.postures))
     machines, here = np.arange(len(beliefs)), np.array([b.here for b in beliefs])
     count = slots.shape[1]
     # Both passes fill one pair of arrays: their entries are apart (here, then elsewhere),
     # the first's taken in the order a mask's would be (machine, stand).  The second
-    # reads no spread bound the first lowered.
+    # reads no spread bound the first lowered, and each reads the bounds at its own
+    # entries alone (:func:`_bounds_at`).
     safe, contact = np.zeros((*slots.shape, len(index)), dtype=bool), np.zeros(
         (*slots.shape, len(index)))
     first = (np.repeat(machines, count), np.tile(np.arange(count), len(beliefs)),
              np.repeat(here, count))
-    _reach_where(beliefs, tips_at(beliefs, first), spread, index, first, safe, contact)
+    _reach_where(beliefs, tips_at(beliefs, first), _bounds_at(beliefs, first), index, first,
+                 safe, contact)
     may = (np.array([b.engaged for b in beliefs]) | safe[machines, :, here]) & mounted
     missed = _missed(beliefs, used)
     asked = may[..., None] & ~missed & ~table.pressed[used]
     asked[machines, :, here] = False
     second = np.nonzero(asked)
-    _reach_where(beliefs, tips_at(beliefs, second), spread, index, second, safe, contact)
+    _reach_where(beliefs, tips_at(beliefs, second), _bounds_at(beliefs, second), index,
+                 second, safe, contact)
     safe |= may[..., None] & missed & ~table.near[used]
     return _unread(beliefs, safe, contact, slice(None))
 
@@ -576,34 +604,64 @@ def _spread_bounds(beliefs: list[Belief], postures: np.ndarray | slice) -> np.nd
     return np.stack([b.spread_bound[:, postures] for b in beliefs]) + SPREAD_SLACK
 
 
-def _reach_where(beliefs: list[Belief], tips: np.ndarray, spread: np.ndarray,
+def _bounds_at(beliefs: list[Belief], asked: tuple[np.ndarray, np.ndarray, np.ndarray]
+               ) -> np.ndarray:
+    """:func:`_spread_bounds` at every posture, at the entries ``asked`` alone (machine,
+    stand and posture indices, in C order): gathered from each belief's bounds, not from
+    a stack of every belief's at every posture (megabytes, for a few hundred entries a
+    stand)."""
+    m, k, j = asked
+    out = np.empty(len(m))
+    for first, last in _runs(m):
+        bound = beliefs[m[first]].spread_bound
+        out[first:last] = bound.take(k[first:last] * bound.shape[1] + j[first:last])
+    out += SPREAD_SLACK
+    return out
+
+
+def _runs(machines: np.ndarray) -> list[tuple[int, int]]:
+    """The bounds (first, past the last) of each run of one value in ``machines``: the
+    entries of each belief, which come belief by belief."""
+    if not len(machines):
+        return []
+    firsts = np.flatnonzero(np.r_[True, machines[1:] != machines[:-1]]).tolist()
+    return list(zip(firsts, [*firsts[1:], len(machines)], strict=True))
+
+
+def _reach_where(beliefs: list[Belief], tips: np.ndarray, spreads: np.ndarray,
                  index: np.ndarray, asked: tuple[np.ndarray, np.ndarray, np.ndarray],
                  safe: np.ndarray, contact: np.ndarray) -> None:
-    """:func:`reaches`' ``safe`` and ``contact`` (M, K, P') from the predicted tips at the
-    entries ``asked`` (machine, stand and posture indices, in C order) and the spread
-    bounds (M, K, P') of :func:`_tips_and_bounds`, entered at those entries, each
-    entry's answer its own: a spread computed where
-    the bound leaves it open (each stand's together, in the order of its postures), its
-    bound lowered to it."""
+    """:func:`reaches`' ``safe`` and ``contact`` (M, K, P') from the predicted tips and the
+    spread bounds (:func:`_spread_bounds`) at the entries ``asked`` (machine, stand and
+    posture indices, in C order), entered at those entries, each entry's answer its own:
+    a spread computed where the bound leaves it open (each stand's together, in the order
+    of its postures), its bound lowered to it (in ``spreads`` too)."""
     table = beliefs[0].table
     slots = np.array([b.slots for b in beliefs])
     m, k, j = asked
-    slot, posture, spreads = np.maximum(slots[m, k], 0), index[j], spread[m, k, j]
+    # The entries' places in the (M, K) and (M, K, P') arrays, flat: one ``take`` or
+    # ``put`` each instead of indexing with two or three arrays.
+    pair = m * slots.shape[1] + k
+    flat = pair * safe.shape[2] + j
+    slot, posture = slots.take(pair), index[j]
+    mounted = slot >= 0
+    slot = np.maximum(slot, 0)
     safe_at, contact_at = reach_at(table, slot, posture, tips, spreads)
     with np.errstate(invalid="ignore"):
         open_ = np.flatnonzero((tips >= END_GAP) & (contact_at < 1.0)
-                               & ~table.pressed[slot, posture] & (slots[m, k] >= 0))
+                               & ~at_entries(table.pressed, slot, posture) & mounted)
     if open_.size:
         mine, own, at = m[open_], k[open_], posture[open_]
         spreads[open_] = value = spreads_many(beliefs, mine, own, at)
         # Each belief's bounds lowered at once (its entries are consecutive).
-        firsts = np.flatnonzero(np.r_[True, mine[1:] != mine[:-1]])
-        for first, last in zip(firsts, [*firsts[1:], len(mine)], strict=True):
-            beliefs[mine[first]].spread_bound[own[first:last], at[first:last]] = value[
-                first:last]
+        for first, last in _runs(mine):
+            bound = beliefs[mine[first]].spread_bound
+            np.put(bound, own[first:last] * bound.shape[1] + at[first:last],
+                   value[first:last])
         safe_at[open_], contact_at[open_] = reach_at(table, slot[open_], at, tips[open_],
                                                      spreads[open_])
-    safe[m, k, j], contact[m, k, j] = safe_at, contact_at
+    np.put(safe, flat, safe_at)
+    np.put(contact, flat, contact_at)
 
 
 def spreads_many(beliefs: list[Belief], machines: np.ndarray, stands: np.ndarray,
@@ -626,26 +684,34 @@ def spreads_many(beliefs: list[Belief], machines: np.ndarray, stands: np.ndarray
     index = postures[starts[:, None] + np.minimum(np.arange(longest), lengths[:, None] - 1)]
     first_machine, first_stand = machines[starts], stands[starts]
     slots = np.array([b.slots for b in beliefs])[first_machine, first_stand]
-    change = table.change[slots[:, None], index]  # (G, L, C)
+    # (G, L, C): each posture's row of its slot's changes, taken from the rows of every
+    # slot's (as one ``take``: a third of the price of indexing with slots and postures).
+    postures_count, columns = table.change.shape[1:]
+    change = np.take(table.change.reshape(-1, columns),
+                     slots[:, None] * postures_count + index, axis=0)
     # Each belief's stands' blocks of its covariance gathered at once (the pairs come
     # belief by belief).
     covariance = np.concatenate([
-        beliefs[i].covariance[_block_index(tuple(int(s) for _, s in pairs))]
+        beliefs[i].covariance.take(_block_index(tuple(int(s) for _, s in pairs),
+                                                len(beliefs[i].covariance)))
         for i, pairs in groupby(zip(first_machine, first_stand, strict=True),
                                 key=itemgetter(0))])
     product = change @ covariance
     values = np.sqrt(np.clip(np.sum(product * change, axis=-1), 0.0, None))
     group = np.repeat(np.arange(len(starts)), lengths)
-    return values[group, np.arange(len(pair)) - starts[group]]
+    return values.take(group * longest + np.arange(len(pair)) - starts[group])
 
 
 def _unread(beliefs: list[Belief], safe: np.ndarray, contact: np.ndarray,
             postures: np.ndarray | slice) -> tuple[np.ndarray, np.ndarray]:
     """The beliefs' ``safe`` and ``contact`` (M, K, P') at ``postures``, nothing for an
-    empty stand and no contact where it was seen not to read."""
+    empty stand and no contact where it was seen not to read: both arrays changed in
+    place (megabytes each, made for this)."""
     mounted = (np.array([b.slots for b in beliefs]) >= 0)[..., None]
-    silent = np.stack([b.silent[:, postures] for b in beliefs])
-    return safe & mounted, np.where(silent, 0.0, contact) * mounted
+    np.copyto(contact, 0.0, where=np.stack([b.silent[:, postures] for b in beliefs]))
+    contact *= mounted
+    safe &= mounted
+    return safe, contact
 
 
 def world_rows_here(beliefs: list[Belief], stands: list[np.ndarray]

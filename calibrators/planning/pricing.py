@@ -23,7 +23,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from calibrators.planning.belief import N_MACHINE, Belief, move_reaches, rigid_factor
+from calibrators.planning.belief import (
+    N_MACHINE,
+    Belief,
+    move_reaches,
+    reading_rows_many,
+    rigid_factor,
+)
 from calibrators.planning.world_terms import directions, gains_many, rows_many
 from orthoglide_env.lab.operations import TIME
 from orthoglide_env.lab.slot_table import slot_table
@@ -114,11 +120,10 @@ class Pricer(Belief):
         """Whitened rows (L, K, n) of the readings of the moves to ``postures`` (L,), the
         world's rows ``fitted`` (K, L, count) of them added, and over the considered terms
         (L, K, m) from their rows ``considered`` (K, L, m) (:meth:`_price`'s)."""
-        rows = self._rows(reads, postures)
-        weight = np.sqrt(reads.T[postures])[:, :, None] / self.sigma
-        rows[..., self.world.start:self.world.start + self.world.count] += (
-            np.swapaxes(fitted, 0, 1) * weight)
-        return rows, np.swapaxes(considered, 0, 1) * weight
+        rows, considered = world_rows_many([self], postures[None],
+                                           np.sqrt(reads.T[postures])[None], fitted[None],
+                                           considered[None])
+        return rows[0], considered[0]
 
     def _moves(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The seconds (P,) of every candidate move, the plungers down after it (K, P) and
@@ -210,14 +215,14 @@ class Pricer(Belief):
         rate[moves] = gain / priced.seconds[moves]
 
     def _top_rates_open(self, count: int, seconds: np.ndarray, after: np.ndarray,
-                        reads: np.ndarray
+                        reads: np.ndarray, fits: np.ndarray, live: np.ndarray
                         ) -> tuple[np.ndarray, PricedMoves, np.ndarray | None]:
         """:meth:`top_rates`, but with the world's terms the moves of the shortlist
         are left for the caller to price (:meth:`_price`, then :meth:`_take_prices`):
-        the rates, the priced moves, and those moves (None: nothing left to price)."""
+        the rates, the priced moves, and those moves (None: nothing left to price).
+        ``fits`` and ``live``: the moves that fit in the budget and, of those, the
+        postures where some stand reads (:func:`_live`)."""
         wanted = count if self.world is None else max(count, WORLD_SHORTLIST)
-        fits = self.time_s + seconds <= self.budget_s
-        live = np.flatnonzero(fits & reads.any(axis=0))
         gain = np.full(len(seconds), np.nan)
         rate = np.full(len(seconds), -np.inf)
 
@@ -269,12 +274,16 @@ def top_rates_many(pricers: list[Pricer], count: int
         return []
     if all(p.mean is not None and p.table is pricers[0].table
            and len(p.slots) == len(pricers[0].slots) for p in pricers):
-        moved = list(zip(*moves_many(pricers, *move_reaches(pricers)), strict=True))
+        stacked = moves_many(pricers, *move_reaches(pricers))
+        moved = list(zip(*stacked, strict=True))
+        lives = _live(pricers, stacked[0], stacked[2])
     else:
         moved = [pricer._moves() for pricer in pricers]
+        lives = [_live([pricer], seconds[None], reads[None])[0]
+                 for pricer, (seconds, _, reads) in zip(pricers, moved, strict=True)]
     opened = []
-    for pricer, moves in zip(pricers, moved, strict=True):
-        opened.append((*pricer._top_rates_open(count, *moves), moves))
+    for pricer, moves, live in zip(pricers, moved, lives, strict=True):
+        opened.append((*pricer._top_rates_open(count, *moves, *live), moves))
     asked = [i for i, (_, _, shortlist, _) in enumerate(opened) if shortlist is not None]
     gains = price_many([pricers[i] for i in asked],
                        [(opened[i][3][2], opened[i][3][0], opened[i][2]) for i in asked])
@@ -283,16 +292,30 @@ def top_rates_many(pricers: list[Pricer], count: int
     return [(rate, priced) for rate, priced, _, _ in opened]
 
 
+def _live(pricers: list[Pricer], seconds: np.ndarray, reads: np.ndarray
+          ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Of each of ``pricers``' moves (stacked: their seconds (M, P) and how likely each
+    stand reads after them (M, K, P)), those that fit in its budget (P,) and, of those,
+    the postures where some stand reads (L,): worked out for every pricer at once."""
+    fits = (np.array([p.time_s for p in pricers])[:, None] + seconds
+            <= np.array([p.budget_s for p in pricers])[:, None])
+    machines, postures = np.nonzero(fits & reads.any(axis=1))
+    ends = np.cumsum(np.bincount(machines, minlength=len(pricers)))[:-1]
+    return list(zip(fits, np.split(postures, ends), strict=True))
+
+
 def moves_many(pricers: list[Pricer], safe: np.ndarray, contact: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:meth:`Pricer._moves` of each of ``pricers`` (as many stands each) from their
     stands' reach at every posture, stacked (M, K, P): the seconds (M, P), the plungers
     down after each move (M, K, P) and how likely each reads there (M, K, P), each
-    pricer's entries worked out from its own alone."""
+    pricer's entries worked out from its own alone.  ``contact`` becomes the last (its
+    entries where a plunger stays up zeroed in place: megabytes, made for this)."""
     here = safe[np.arange(len(pricers)), :, [p.here for p in pricers]]  # (M, K)
     engaged = np.array([p.engaged for p in pricers], dtype=bool)
     after = safe & (engaged | here)[..., None]
-    reads = np.where(after, contact, 0.0)
+    reads = contact
+    np.copyto(reads, 0.0, where=~after)
     flicks = np.sum(after != engaged[..., None], axis=1)
     drive = np.stack([drive_seconds(p.design, tuple(float(v) for v in p.rho))
                       for p in pricers])
@@ -301,6 +324,22 @@ def moves_many(pricers: list[Pricer], safe: np.ndarray, contact: np.ndarray
         if pricer.dwell_s:
             seconds[row] += pricer.dwell_s  # a laser left set up reads at every move
     return seconds, after, reads
+
+
+def world_rows_many(pricers: list[Pricer], postures: np.ndarray, root: np.ndarray,
+                    fitted: np.ndarray, considered: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """:meth:`Pricer._world_rows` of each of ``pricers`` (one design, as many stands,
+    unknowns and world terms each) at its ``postures`` (M, L), stacked: the whitened rows
+    (M, L, K, n) of the readings there, each stand's weighted by the square root ``root``
+    (M, L, K) of its probability of reading, the world's rows ``fitted`` (M, K, L, count)
+    added, and over the considered terms (M, L, K, m) from their rows ``considered`` (M,
+    K, L, m): each entry as each pricer alone has it."""
+    world = pricers[0].world
+    rows = reading_rows_many(pricers, np.arange(len(pricers[0].slots)), postures, root)
+    weight = root[..., None] / np.array([p.sigma for p in pricers])[:, None, None, None]
+    rows[..., world.start:world.start + world.count] += np.swapaxes(fitted, 1, 2) * weight
+    return rows, np.swapaxes(considered, 1, 2) * weight
 
 
 def price_many(pricers: list[Pricer], asked: list[tuple[np.ndarray, np.ndarray, np.ndarray]]
@@ -328,11 +367,12 @@ def price_many(pricers: list[Pricer], asked: list[tuple[np.ndarray, np.ndarray, 
         fitted, considered = rows_many(
             [p.world for p in group], np.array([p.slots for p in group]), postures, times,
             approach, np.tile(np.arange(len(group[0].slots)), (len(group), 1)))
-        rows, considered = zip(*(p._world_rows(asked[i][0], asked[i][2], f, c)
-                                 for p, i, f, c in zip(group, members, fitted, considered,
-                                                       strict=True)), strict=True)
+        # Each stand's weight at each posture asked, gathered member by member (their
+        # reads are each a slice of megabytes).
+        root = np.sqrt(np.stack([asked[i][0].T[asked[i][2]] for i in members]))
+        rows, considered = world_rows_many(group, postures, root, fitted, considered)
         first = group[0]
-        gains = gains_many(np.stack(rows), np.stack(considered),
+        gains = gains_many(rows, considered,
                            np.stack([pricers[i].covariance for i in members]),
                            np.stack([pricers[i].world.consider for i in members]),
                            rigid_factor(first.design))
