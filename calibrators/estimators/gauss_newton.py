@@ -716,8 +716,8 @@ class GaussNewtonCalibrator(Estimator):
             if n >= max(2, MAX_OUTLIER_FRACTION * read[kind]):
                 warnings.append(f"{n} of the {read[kind]} {kind} readings left out beyond "
                                 f"{OUTLIER_K:g} robust sigmas, unrepeated: so many are the "
-                                "model's error, not wrong readings; fit the terms that move "
-                                "them, or keep them (--keep-outliers)")
+                                "model's error, not wrong readings: fit the terms that move "
+                                "them")
         if len(misfits):
             where = ", ".join(_where(data, k, every_residual, repeated)
                               for k in misfits[:LISTED_MISFITS])
