@@ -17,6 +17,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -54,6 +55,22 @@ def _environment() -> dict[str, str]:
     return {**os.environ, "PYTHONPATH": root + os.pathsep + os.environ.get("PYTHONPATH", "")}
 
 
+def _orthoglide(*argv: str) -> list[str]:
+    return [sys.executable, "-m", "calibrators.cli", *argv]
+
+
+def _wait_for_a_trial(proc: subprocess.Popen, trials: Path, stderr: Callable[[], str]
+                      ) -> None:
+    """Wait for the readiness marker, a finished trial on disk, while the run goes on (its
+    ``stderr`` said if it ended first)."""
+    while not (trials.exists() and trials.read_text().count("\n") >= 1):
+        assert proc.poll() is None, stderr()
+        try:
+            proc.wait(0.05)
+        except subprocess.TimeoutExpired:
+            pass
+
+
 @pytest.mark.parametrize("module", ["calibrators.cli.parser", "calibrators.cli.compare",
                                     "scipy", "gymnasium", "orthoglide_env.envs.vector"])
 def test_ctrl_c_while_the_command_loads_is_one_line_and_130(module: str) -> None:
@@ -79,19 +96,13 @@ def test_ctrl_c_with_busy_workers_keeps_the_finished_trials(tmp_path) -> None:
     out = tmp_path / "run"
     trials = out / "trials.jsonl"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "calibrators.cli", *COMPARE, "--machines", "400",
-         "--jobs", "2", "--chunk", "1", "--out", str(out)],
+        _orthoglide(*COMPARE, "--machines", "400", "--jobs", "2", "--chunk", "1", "--out",
+                    str(out)),
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_environment(),
         start_new_session=True, preexec_fn=as_a_terminal_job)
     try:
-        # The readiness marker: a finished trial on disk (the workers are then on the
-        # next machines, of 400).
-        while not (trials.exists() and trials.read_text().count("\n") >= 1):
-            assert proc.poll() is None, proc.communicate()[1]
-            try:
-                proc.wait(0.05)
-            except subprocess.TimeoutExpired:
-                pass
+        # The workers are then on the next machines, of 400.
+        _wait_for_a_trial(proc, trials, lambda: proc.communicate()[1])
         os.killpg(proc.pid, signal.SIGINT)
         stdout, stderr = proc.communicate(timeout=GUARD_S)
     finally:
@@ -115,10 +126,6 @@ def test_ctrl_c_with_busy_workers_keeps_the_finished_trials(tmp_path) -> None:
 #: while machines are left.
 SMALL = ["compare", "--conditions", "ideal", "--machines", "4", "--chunk", "1", "--seed",
          "2", "--quiet"]
-
-
-def _orthoglide(*argv: str) -> list[str]:
-    return [sys.executable, "-m", "calibrators.cli", *argv]
 
 
 def _workers_of_group(group: int) -> list[int]:
@@ -167,12 +174,7 @@ def test_sigterm_keeps_the_finished_trials_stops_the_workers_and_resumes(
         proc = subprocess.Popen(command, stdout=stdout_file, stderr=stderr_file,
                                 env=_environment(), start_new_session=True)
     try:
-        while not (trials.exists() and trials.read_text().count("\n") >= 1):
-            assert proc.poll() is None, said_err.read_text()
-            try:
-                proc.wait(0.05)
-            except subprocess.TimeoutExpired:
-                pass
+        _wait_for_a_trial(proc, trials, said_err.read_text)
         proc.send_signal(signal.SIGTERM)
         proc.wait(GUARD_S)
         left = _workers_of_group(proc.pid)  # as the command ends

@@ -524,7 +524,7 @@ def _missed(beliefs: list[Belief], used: np.ndarray) -> np.ndarray:
 def _nominal_misses(design: MachineDesign) -> np.ndarray:
     """Where the nominal tip of each slot misses its bar at each posture (S, P), read-only:
     made once, where each decision gathered every stand's tips to test them."""
-    out = np.ascontiguousarray(np.isnan(slot_table(design).tip))
+    out = np.isnan(slot_table(design).tip)
     out.setflags(write=False)
     return out
 
@@ -613,8 +613,8 @@ def _bounds_at(beliefs: list[Belief], asked: tuple[np.ndarray, np.ndarray, np.nd
     m, k, j = asked
     out = np.empty(len(m))
     for first, last in _runs(m):
-        bound = beliefs[m[first]].spread_bound
-        out[first:last] = bound.take(k[first:last] * bound.shape[1] + j[first:last])
+        out[first:last] = at_entries(beliefs[m[first]].spread_bound, k[first:last],
+                                     j[first:last])
     out += SPREAD_SLACK
     return out
 

@@ -124,10 +124,10 @@ def reach_at(table: SlotTable, slots: np.ndarray, postures: np.ndarray, tip: np.
 
 
 def at_entries(values: np.ndarray, slots: np.ndarray, postures: np.ndarray) -> np.ndarray:
-    """``values[slots, postures]`` of a table's (S, P) ``values`` at slot and posture
-    indices (non-negative, broadcast together), by one ``take`` of their flat index: a
-    third of the price of indexing with both, on the few hundred entries a stand is
-    asked at every decision."""
+    """``values[slots, postures]`` of an (S, P) array (a slot table's, or a
+    belief's stands' spread bounds) at row and posture indices (non-negative, broadcast
+    together), by one ``take`` of their flat index: a third of the price of indexing with
+    both, on the few hundred entries a stand is asked at every decision."""
     return np.take(values, slots * values.shape[1] + postures)
 
 
