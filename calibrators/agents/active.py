@@ -59,6 +59,7 @@ from calibrators.planning.search import observe as observe_bundle
 from orthoglide_env.instruments.ballbar import BallbarSpec
 from orthoglide_env.instruments.interferometer import InterferometerAxis
 from orthoglide_env.instruments.stands import stand_names
+from orthoglide_env.instruments.step_gauge import StepGaugeSpec
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.model.errors import ERROR_NAMES
 from orthoglide_env.reading_model import ParameterSpace, default_scales
@@ -70,15 +71,16 @@ REFIT_S: float = 600.0
 
 def refit_world(conditions: Conditions | None, records: Sequence[Any]) -> Conditions | None:
     """The world ``active``'s refits tell their fit of the notebook ``records`` (the lab's
-    records): the lab's ``conditions`` when they are active and a record is the ballbar's
-    or the interferometer's, else None (the extended fit, told an ideal world)."""
-    # The bar reads the TCP to 0.35 um and the laser a drive to about a micron, where the
-    # drives' lead, lost motion and warm-up move them by microns: a fit without their terms
+    records): the lab's ``conditions`` when they are active and a record is the ballbar's,
+    the interferometer's or the step gauge's, else None (the extended fit, told an ideal
+    world)."""
+    # The bar, the laser and the step gauge's probe read to 0.1-0.35 um, where the drives'
+    # lead, lost motion and warm-up move the TCP by microns: a fit without their terms
     # misfits those readings by several sigma and leaves them out one refit at a time, up
     # to its outlier cap.  The dials' 20 um hide those terms, so their refits stay the
     # extended fit.
     world = conditions_or_default(conditions)
-    drives = (BallbarSpec, InterferometerAxis)
+    drives = (BallbarSpec, InterferometerAxis, StepGaugeSpec)
     return world if world.active and any(isinstance(r.spec, drives) for r in records) else None
 
 
