@@ -28,7 +28,7 @@ more time does not pay (:mod:`calibrators.planning.world_terms`).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from functools import lru_cache
 from typing import Any
 
@@ -59,6 +59,7 @@ from calibrators.planning.search import observe as observe_bundle
 from orthoglide_env.instruments.ballbar import BallbarSpec
 from orthoglide_env.instruments.interferometer import InterferometerAxis
 from orthoglide_env.instruments.stands import stand_names
+from orthoglide_env.instruments.step_gauge import StepGaugeSpec
 from orthoglide_env.lab.operations import Op
 from orthoglide_env.model.errors import ERROR_NAMES
 from orthoglide_env.reading_model import ParameterSpace, default_scales
@@ -68,11 +69,26 @@ from orthoglide_env.world.conditions import Conditions
 REFIT_S: float = 600.0
 
 
+def refit_world(conditions: Conditions | None, records: Sequence[Any]) -> Conditions | None:
+    """The world ``active``'s refits tell their fit of the notebook ``records`` (the lab's
+    records): the lab's ``conditions`` when they are active and a record is the ballbar's,
+    the interferometer's or the step gauge's, else None (the extended fit, told an ideal
+    world)."""
+    # The bar, the laser and the step gauge's probe read to 0.1-0.35 um, where the drives'
+    # lead, lost motion and warm-up move the TCP by microns: a fit without their terms
+    # misfits those readings by several sigma and leaves them out one refit at a time, up
+    # to its outlier cap.  The dials' 20 um hide those terms, so their refits stay the
+    # extended fit.
+    world = conditions_or_default(conditions)
+    drives = (BallbarSpec, InterferometerAxis, StepGaugeSpec)
+    return world if world.active and any(isinstance(r.spec, drives) for r in records) else None
+
+
 @lru_cache(maxsize=8)
 def _refitter(sigma: float, conditions: Conditions | None = None) -> Estimator:
     """The estimator of the refits, for readings of weighting ``sigma`` (mm), made once:
     the extended estimator, or with ``conditions`` ``full`` told them (a notebook that
-    holds ballbar readings under a world's drives: :meth:`ActiveAgent._refit`).  Only its
+    holds readings of the drives under an active world: :func:`refit_world`).  Only its
     estimate is read, so its error bars' curvature and the words on the faults it finds
     are left out."""
     estimator = (for_study("extended", sigma) if conditions is None
@@ -273,13 +289,7 @@ class ActiveAgent(Agent):
         """Replace the filter's mean by the extended estimator's fit of the notebook."""
         records = self.env.records
         planner = self.planner
-        # The bar reads the TCP to 0.35 um, where the drives' lead, lost motion and warm-up
-        # move it by microns: a fit without their terms misfits its readings by several
-        # sigma and leaves them out one refit at a time, up to its outlier cap.  The dials'
-        # 20 um hide those terms, so their refits stay the extended fit.
-        world = conditions_or_default(planner.conditions)
-        told = world if world.active and any(isinstance(r.spec, BallbarSpec)
-                                             for r in records) else None
+        told = refit_world(planner.conditions, records)
         try:
             est = _refitter(planner.sigma, told).fit(self.notebook.of(records))
         except (ValueError, RuntimeError, np.linalg.LinAlgError):
