@@ -524,9 +524,9 @@ def _asked_and_spared(beliefs: list[Belief], used: np.ndarray
     """Where each stand at slot ``used`` (M, K) of filters ``beliefs`` is to have its reach
     worked out if its plunger may be down (its tip meets its bar and no bar presses it),
     and where it is safe without (its tip misses its bar and no bar comes near), (M, K,
-    P) each: gathered from both masks of every slot (:func:`_nominal_masks`) where
-    :func:`_misses_nominal`, one gather each where the misses, the presses and the
-    near bars were gathered and combined at every decision."""
+    P) each.  Where :func:`_misses_nominal`, one gather each of both masks of every slot
+    (:func:`_nominal_masks`), where the misses, the presses and the near bars were
+    gathered and combined at every decision; else from the predicted tips' misses."""
     if _misses_nominal(beliefs):
         asked, spared = _nominal_masks(beliefs[0].design)
         return asked[used], spared[used]
