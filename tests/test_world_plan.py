@@ -15,9 +15,12 @@ from calibrators.planning.belief import (
     N_STAND,
     PlannedOperation,
     _missed,
+    entries,
     observe_many,
     predicted_tips_many,
+    rows_here_many,
     tips_at,
+    world_rows_here,
 )
 from calibrators.planning.pricing import WORLD_SHORTLIST, top_rates_many
 from calibrators.planning.search import (
@@ -253,6 +256,14 @@ def test_filters_priced_together_price_as_each_alone() -> None:
         stands, _ = p.reading_here()
         nominal = p.table.reading[[p.slots[k] for k in stands], p.here]
         reads.append((list(stands), list(nominal + rng.normal(0.0, SIGMA, len(stands)))))
+    # Each filter's rows here, made with every other's stands', are its rows of the
+    # stands it reads alone, the world's added.
+    for p, (stands, _), (rows, _) in zip(filters, reads, rows_here_many(
+            filters, [s for s, _ in reads]), strict=True):
+        own = p.rows_at(np.array([p.here]), stands)[0].copy()
+        fitted, _ = world_rows_here([p], [np.array(stands)])[0]
+        own[:, p.world.start:p.world.start + p.world.count] += fitted
+        np.testing.assert_array_equal(rows, own)
     alone, together = [p.fork() for p in filters], [p.fork() for p in filters]
     assert len({len(s) for s, _ in reads}) < len(reads)  # some stacked together
     for p, (stands, values) in zip(alone, reads, strict=True):
@@ -262,6 +273,20 @@ def test_filters_priced_together_price_as_each_alone() -> None:
         for name in ("mean", "covariance"):
             np.testing.assert_array_equal(getattr(q, name), getattr(p, name))
         np.testing.assert_array_equal(q.world.consider, p.world.consider)
+
+
+def test_entries_are_the_nonzero_indices() -> None:
+    """The reach's entries found from a mask's flat index are ``np.nonzero``'s index
+    arrays, in its order and type, whatever the shape and however many are set."""
+    rng = np.random.default_rng(3)
+    for shape in ((7,), (3, 5), (4, 6, 9), (2, 1, 3), (3, 0, 2)):
+        for share in (0.0, 0.05, 0.5, 1.0):
+            mask = rng.random(shape) < share
+            got, want = entries(mask), np.nonzero(mask)
+            assert len(got) == len(want)
+            for a, b in zip(got, want, strict=True):
+                assert a.dtype == b.dtype
+                np.testing.assert_array_equal(a, b)
 
 
 @pytest.mark.slow

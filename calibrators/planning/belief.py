@@ -327,40 +327,24 @@ class Belief:
         :meth:`reading_here`)."""
         if stands is None:
             stands, weights = self.reading_here()
-        self._expected(stands, weights, None)
+        self._expected(weights, *rows_here_many([self], [stands])[0])
 
-    def _expected(self, stands: np.ndarray, weights: np.ndarray,
-                  world: tuple[np.ndarray, np.ndarray] | None) -> None:
-        """:meth:`expect_readings` of ``stands`` with ``weights``, the world's rows of them
-        ``world`` (:func:`world_rows_here`), if already computed."""
-        rows, considered = self._rows_here(stands, world)
+    def _expected(self, weights: np.ndarray, rows: np.ndarray, considered: np.ndarray
+                  ) -> None:
+        """:meth:`expect_readings` with ``weights`` of the readings of rows ``rows`` (R, n)
+        and ``considered`` (R, m) here (:func:`rows_here_many`)."""
         weight = np.sqrt(weights)[:, None]
         self._add(rows * weight / self.sigma, considered=considered * weight / self.sigma)
-
-    def _rows_here(self, stands: np.ndarray,
-                   world: tuple[np.ndarray, np.ndarray] | None = None
-                   ) -> tuple[np.ndarray, np.ndarray]:
-        """Rows (R, n) of readings of ``stands`` here and now, mm per unit, and (with
-        world terms) their rows over the considered terms (R, m); ``world``: the world's
-        rows of them (:func:`world_rows_here`), if already computed."""
-        rows = self.rows_at(np.array([self.here]), [int(k) for k in stands])[0]
-        if self.world is None:
-            return rows, np.zeros((len(stands), 0))
-        fitted, considered = world or world_rows_here([self], [stands])[0]
-        rows = rows.copy()
-        rows[:, self.world.start:self.world.start + self.world.count] += fitted
-        return rows, considered
 
     def observe(self, stands: list[int], values: list[float]) -> None:
         """Readings (mm) of ``stands`` taken here (every other engaged stand read nothing):
         update the mean and the covariance (:func:`observe_many` of this belief alone)."""
         observe_many([self], [stands], [values])
 
-    def _observed(self, stands: np.ndarray, values: list[float],
-                  world: tuple[np.ndarray, np.ndarray] | None) -> None:
-        """:meth:`observe`'s update by the readings of ``stands`` (some), the world's rows
-        of them ``world`` (:func:`world_rows_here`)."""
-        rows, considered = self._rows_here(stands, world)
+    def _observed(self, stands: np.ndarray, values: list[float], rows: np.ndarray,
+                  considered: np.ndarray) -> None:
+        """:meth:`observe`'s update by the readings of ``stands`` (some), of rows ``rows``
+        (R, n) and ``considered`` (R, m) (:func:`rows_here_many`)."""
         nominal = self.table.reading[[self.slots[k] for k in stands], self.here]
         predicted = nominal + rows @ self.mean
         self._add(rows / self.sigma, (np.asarray(values, dtype=float) - predicted) / self.sigma,
@@ -510,14 +494,20 @@ def _change_bound(design: MachineDesign) -> float:
 
 def _missed(beliefs: list[Belief], used: np.ndarray) -> np.ndarray:
     """Where each stand's predicted tip (:func:`predicted_tips_many`, M, K, P) misses its
-    bar (NaN), read off the table's nominal tips: a predicted tip is the nominal one
-    plus a product of finite changes with the means, finite (no NaN, no overflow) when
-    the means are finite and below ``1e300`` over :func:`_change_bound`; else from the
-    tips themselves."""
-    size = np.max(np.abs(_tip_means(beliefs)))
-    if np.isfinite(size) and size * _change_bound(beliefs[0].design) < 1e300:
+    bar (NaN): the table's nominal misses where :func:`_misses_nominal`, else read off
+    the tips themselves."""
+    if _misses_nominal(beliefs):
         return _nominal_misses(beliefs[0].design)[used]
     return np.isnan(predicted_tips_many(beliefs))
+
+
+def _misses_nominal(beliefs: list[Belief]) -> bool:
+    """Whether the predicted tips of filters ``beliefs`` miss their bars where the nominal
+    ones do: a predicted tip is the nominal one plus a product of finite changes with the
+    means, finite (no NaN, no overflow) when the means are finite and below ``1e300`` over
+    :func:`_change_bound`."""
+    size = np.max(np.abs(_tip_means(beliefs)))
+    return bool(np.isfinite(size) and size * _change_bound(beliefs[0].design) < 1e300)
 
 
 @lru_cache(maxsize=8)
@@ -527,6 +517,44 @@ def _nominal_misses(design: MachineDesign) -> np.ndarray:
     out = np.isnan(slot_table(design).tip)
     out.setflags(write=False)
     return out
+
+
+def _asked_and_spared(beliefs: list[Belief], used: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Where each stand at slot ``used`` (M, K) of filters ``beliefs`` is to have its reach
+    worked out if its plunger may be down (its tip meets its bar and no bar presses it),
+    and where it is safe without (its tip misses its bar and no bar comes near), (M, K,
+    P) each.  Where :func:`_misses_nominal`, one gather each of both masks of every slot
+    (:func:`_nominal_masks`), where the misses, the presses and the near bars were
+    gathered and combined at every decision; else from the predicted tips' misses."""
+    if _misses_nominal(beliefs):
+        asked, spared = _nominal_masks(beliefs[0].design)
+        return asked[used], spared[used]
+    table, missed = beliefs[0].table, _missed(beliefs, used)
+    return ~missed & ~table.pressed[used], missed & ~table.near[used]
+
+
+@lru_cache(maxsize=8)
+def _nominal_masks(design: MachineDesign) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_asked_and_spared`'s masks of every slot at every posture (S, P) for the
+    nominal misses, read-only, made once."""
+    table, missed = slot_table(design), _nominal_misses(design)
+    out = ~missed & ~table.pressed, missed & ~table.near
+    for mask in out:
+        mask.setflags(write=False)
+    return out
+
+
+def entries(mask: np.ndarray) -> tuple[np.ndarray, ...]:
+    """``np.nonzero(mask)``: the same index arrays, in the same order, worked out from
+    the flat index of the entries set (a third of the price on the moves' arrays of every
+    machine, stand and posture, where a few percent are set)."""
+    flat = np.flatnonzero(mask)
+    out = []
+    for size in reversed(mask.shape[1:]):
+        flat, index = np.divmod(flat, size)
+        out.append(index)
+    return (flat, *reversed(out))
 
 
 def reaches(beliefs: list[Belief], postures: np.ndarray | slice = slice(None)
@@ -579,13 +607,13 @@ def move_reaches(beliefs: list[Belief]) -> tuple[np.ndarray, np.ndarray]:
     _reach_where(beliefs, tips_at(beliefs, first), _bounds_at(beliefs, first), index, first,
                  safe, contact)
     may = (np.array([b.engaged for b in beliefs]) | safe[machines, :, here]) & mounted
-    missed = _missed(beliefs, used)
-    asked = may[..., None] & ~missed & ~table.pressed[used]
+    asked, spared = _asked_and_spared(beliefs, used)
+    asked = may[..., None] & asked
     asked[machines, :, here] = False
-    second = np.nonzero(asked)
+    second = entries(asked)
     _reach_where(beliefs, tips_at(beliefs, second), _bounds_at(beliefs, second), index,
                  second, safe, contact)
-    safe |= may[..., None] & missed & ~table.near[used]
+    safe |= may[..., None] & spared
     return _unread(beliefs, safe, contact, slice(None))
 
 
@@ -668,27 +696,19 @@ def spreads_many(beliefs: list[Belief], machines: np.ndarray, stands: np.ndarray
                  postures: np.ndarray) -> np.ndarray:
     """Standard deviation (N,) of the predicted tip of each entry's stand of ``stands``
     (N,) of its belief of ``machines`` (N,, indices in ``beliefs``, one design) at its
-    posture of ``postures`` (N,), mm, from the covariances, in one stacked product: the
-    entries of one (belief, stand) are consecutive, the beliefs in order.  Each
-    stand's rows are padded to one even count by repeating its last posture, so each
-    item goes to BLAS as an even count of rows, the value of a posture the same to the
-    bit whichever others are computed with it (BLAS's kernels take a lone last row their
-    own way, a few ulps off)."""
+    posture of ``postures`` (N,), mm, from the covariances, in a few stacked products: the
+    entries of one (belief, stand) are consecutive, the beliefs in order.  The stands go
+    to :data:`SPREAD_BUCKETS` products by the count of their entries, each stand's rows
+    padded to its product's even count by repeating its last posture, so each item goes
+    to BLAS as an even count of rows, the value of a posture the same to the bit
+    whichever others are computed with it (BLAS's kernels take a lone last row their own
+    way, a few ulps off), and a stand of few entries is not padded to the longest."""
     table = beliefs[0].table
     pair = machines * len(beliefs[0].slots) + stands
     starts = np.flatnonzero(np.r_[True, pair[1:] != pair[:-1]])  # each (belief, stand)'s
     lengths = np.diff(np.r_[starts, len(pair)])
-    longest = int(lengths.max())
-    longest += longest % 2
-    # Each group's postures, its last repeated up to the even count (G, L).
-    index = postures[starts[:, None] + np.minimum(np.arange(longest), lengths[:, None] - 1)]
     first_machine, first_stand = machines[starts], stands[starts]
     slots = np.array([b.slots for b in beliefs])[first_machine, first_stand]
-    # (G, L, C): each posture's row of its slot's changes, taken from the rows of every
-    # slot's (as one ``take``: a third of the price of indexing with slots and postures).
-    postures_count, columns = table.change.shape[1:]
-    change = np.take(table.change.reshape(-1, columns),
-                     slots[:, None] * postures_count + index, axis=0)
     # Each belief's stands' blocks of its covariance gathered at once (the pairs come
     # belief by belief).
     covariance = np.concatenate([
@@ -696,10 +716,37 @@ def spreads_many(beliefs: list[Belief], machines: np.ndarray, stands: np.ndarray
                                                 len(beliefs[i].covariance)))
         for i, pairs in groupby(zip(first_machine, first_stand, strict=True),
                                 key=itemgetter(0))])
-    product = change @ covariance
-    values = np.sqrt(np.clip(np.sum(product * change, axis=-1), 0.0, None))
-    group = np.repeat(np.arange(len(starts)), lengths)
-    return values.take(group * longest + np.arange(len(pair)) - starts[group])
+    postures_count, columns = table.change.shape[1:]
+    out = np.empty(len(pair))
+    for groups in _by_length(lengths):
+        length = lengths[groups]
+        longest = int(length[-1])
+        longest += longest % 2
+        # Each group's postures, its last repeated up to the even count (G, L).
+        places = starts[groups, None] + np.minimum(np.arange(longest), length[:, None] - 1)
+        # (G, L, C): each posture's row of its slot's changes, taken from the rows of every
+        # slot's (as one ``take``: a third of the price of indexing with slots and
+        # postures).
+        change = np.take(table.change.reshape(-1, columns),
+                         slots[groups, None] * postures_count + postures[places], axis=0)
+        product = change @ covariance[groups]
+        values = np.sqrt(np.clip(np.sum(product * change, axis=-1), 0.0, None))
+        real = np.arange(longest) < length[:, None]
+        out[places[real]] = values[real]
+    return out
+
+
+#: The products :func:`spreads_many` splits its stands over, by their counts of entries
+#: (a stand's entries are the postures where its spread is open: a few to a few hundred).
+SPREAD_BUCKETS: int = 6
+
+
+def _by_length(lengths: np.ndarray) -> list[np.ndarray]:
+    """The indices of ``lengths`` in up to :data:`SPREAD_BUCKETS` runs of as many of them,
+    from the shortest up, each run in increasing length (its last the longest)."""
+    order = np.argsort(lengths, kind="stable")
+    return [part for part in np.array_split(order, min(SPREAD_BUCKETS, len(order)))
+            if part.size]
 
 
 def _unread(beliefs: list[Belief], safe: np.ndarray, contact: np.ndarray,
@@ -707,10 +754,12 @@ def _unread(beliefs: list[Belief], safe: np.ndarray, contact: np.ndarray,
     """The beliefs' ``safe`` and ``contact`` (M, K, P') at ``postures``, nothing for an
     empty stand and no contact where it was seen not to read: both arrays changed in
     place (megabytes each, made for this)."""
-    mounted = (np.array([b.slots for b in beliefs]) >= 0)[..., None]
     np.copyto(contact, 0.0, where=np.stack([b.silent[:, postures] for b in beliefs]))
-    contact *= mounted
-    safe &= mounted
+    # An empty stand's rows zeroed at once: the same as a product with 0 or 1 for the
+    # probabilities (finite, non-negative) and a logical and for the plungers.
+    empty = np.array([b.slots for b in beliefs]) < 0
+    contact[empty] = 0.0
+    safe[empty] = False
     return safe, contact
 
 
@@ -741,21 +790,54 @@ def world_rows_here(beliefs: list[Belief], stands: list[np.ndarray]
     return out
 
 
+def rows_here_many(beliefs: list[Belief], stands: list[np.ndarray]
+                   ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The rows (R, n) of readings of each belief's ``stands`` (R,) here and now, mm per
+    unit, and (with world terms) their rows over the considered terms (R, m; else R by
+    0).  Beliefs of one slot table, stand count and unknowns get every stand's rows here
+    in one stacked pass (:func:`reading_rows_many`, element by element), each reading
+    its own stands off them, and the world's rows are stacked too
+    (:func:`world_rows_here`): each its own alone, where each belief made its rows
+    alone."""
+    index = [np.asarray(read, dtype=int) for read in stands]
+    out: list[tuple[np.ndarray, np.ndarray]] = []
+    every: dict[int, np.ndarray] = {}
+    groups: dict[tuple, list[int]] = {}
+    for i, belief in enumerate(beliefs):
+        groups.setdefault((id(belief.table), len(belief.slots), len(belief.covariance)),
+                          []).append(i)
+    for members in groups.values():
+        group = [beliefs[i] for i in members]
+        rows = reading_rows_many(group, np.arange(len(group[0].slots)),
+                                 np.array([[b.here] for b in group]))
+        every.update((i, rows[j, 0]) for j, i in enumerate(members))
+    for i, (belief, world) in enumerate(zip(beliefs, world_rows_here(beliefs, index),
+                                            strict=True)):
+        rows = every[i][index[i]]  # a copy: its own to change
+        if world is None:
+            out.append((rows, np.zeros((len(index[i]), 0))))
+            continue
+        fitted, considered = world
+        rows[:, belief.world.start:belief.world.start + belief.world.count] += fitted
+        out.append((rows, considered))
+    return out
+
+
 def expect_many(beliefs: list[Belief]) -> None:
     """:meth:`Belief.expect_readings` of each of ``beliefs`` (every stand down here, each
-    with its probability of reading), the world's rows of their readings stacked
-    (:func:`world_rows_here`): each belief's update its own alone, to the bit."""
+    with its probability of reading), the rows of their readings stacked
+    (:func:`rows_here_many`): each belief's update its own alone, to the bit."""
     here = [belief.reading_here() for belief in beliefs]
-    worlds = world_rows_here(beliefs, [stands for stands, _ in here])
-    for belief, (stands, weights), world in zip(beliefs, here, worlds, strict=True):
-        belief._expected(stands, weights, world)
+    rows = rows_here_many(beliefs, [stands for stands, _ in here])
+    for belief, (_, weights), (row, considered) in zip(beliefs, here, rows, strict=True):
+        belief._expected(weights, row, considered)
 
 
 def observe_many(beliefs: list[Belief], stands: list[list[int]], values: list[list[float]]
                  ) -> None:
     """:meth:`Belief.observe` of each of ``beliefs`` (one per machine of a chunk) with its
-    ``stands`` and ``values``, the world's rows of their readings stacked
-    (:func:`world_rows_here`): each belief's update its own alone, to the bit."""
+    ``stands`` and ``values``, the rows of their readings stacked
+    (:func:`rows_here_many`): each belief's update its own alone, to the bit."""
     reading = []
     for belief, read in zip(beliefs, stands, strict=True):
         if belief.mean is None:
@@ -764,6 +846,6 @@ def observe_many(beliefs: list[Belief], stands: list[list[int]], values: list[li
         belief.silent[quiet, belief.here] = True
         reading.append(np.asarray(read, dtype=int))
     live = [i for i, read in enumerate(reading) if read.size]
-    worlds = world_rows_here([beliefs[i] for i in live], [reading[i] for i in live])
-    for i, world in zip(live, worlds, strict=True):
-        beliefs[i]._observed(reading[i], values[i], world)
+    rows = rows_here_many([beliefs[i] for i in live], [reading[i] for i in live])
+    for i, (row, considered) in zip(live, rows, strict=True):
+        beliefs[i]._observed(reading[i], values[i], row, considered)
