@@ -210,20 +210,27 @@ def assert_view_plays_as_lab(view: gym.Env, agent: Any, episode: Episode, seed: 
 
 
 def _module_fixtures(item: pytest.Item) -> set[tuple[str, str]]:
-    """The module-scoped fixtures ``item`` uses, each with its module's name (read from
-    pytest's ``_fixtureinfo``: a fixture's scope has no public view on an item)."""
+    """The fixtures of ``item``'s own module that outlive a test (scoped to the module or
+    to the worker's session), each with its module's name (read from pytest's
+    ``_fixtureinfo``: a fixture's scope has no public view on an item)."""
     defs = getattr(item, "_fixtureinfo", None)
     if defs is None:
         return set()
+    module = item.nodeid.split("::")[0]
     return {(item.module.__name__, name) for name, chain in defs.name2fixturedefs.items()
-            if chain and chain[-1].scope == "module"}
+            if chain and chain[-1].scope in ("module", "session")
+            and chain[-1].baseid == module}
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """The tests marked ``slow`` run first, each in collection order, and with them the
-    tests that share a module-scoped fixture with one: the fixture is built once per
-    worker, and scheduled apart a slow test's plan or sheet was built on both workers
-    (`tests/test_plan.py`'s `optimal` plan, 20 CPU-s each when it was an hour's).
+    tests that share a module's fixture with one: the fixture is built once per worker,
+    and scheduled apart a slow test's plan or sheet was built on both workers
+    (`tests/test_plan.py`'s `optimal` plan, 20 CPU-s each when it was an hour's).  A
+    module's costly fixtures are scoped to the worker's session: a worker that takes
+    tests of a module from the other's queue (``--dist worksteal``) runs them apart from
+    the module's others, and a module-scoped fixture, ended between, was built again
+    (`tests/test_warm_bound.py`'s design, 7.7 CPU-s).
     Spread over workers (``make test``: ``-n auto``), the suite lasts as long as its
     busiest worker: a long test handed out last would keep one worker busy while the
     others idle, whereas started first it overlaps the many short ones.  ``make test``

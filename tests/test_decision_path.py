@@ -303,7 +303,7 @@ def observed_states() -> tuple[np.ndarray, np.ndarray]:
     return np.array(seen), np.array(masks)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def states() -> tuple[np.ndarray, np.ndarray]:
     return observed_states()
 

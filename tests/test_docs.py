@@ -8,7 +8,7 @@ with each group (each ``A | B`` alternative of a group, each ``a|b`` value) in t
 Each variant must parse, and every value a synopsis offers for an option must be one the
 option's ``--help`` names. A line with a placeholder (``FILE``, ``MM``, ``...``) is a
 synopsis, only parsed; each variant of a concrete line of a code block is run, with at
-most one machine, one job and a quarter hour of lab time, in a fresh folder holding the
+most one machine, one job and ten minutes of lab time, in a fresh folder holding the
 ``m.json`` and ``r.csv`` the documents use (a command that several lines give alike, for
 the first of them). Inline spans are the measured runs behind the tables (minutes): parsed
 only.
@@ -41,9 +41,10 @@ TABLE1 = json.dumps(TABLE1_ERRORS)
 #: Options whose value is cut down to keep each run small.  The lab time is given where a
 #: command takes it and a line leaves it at its default hour: a planning agent's plan and a
 #: random agent's play grow with it (the documents' one-hour lines took 12 to 42 CPU-s, a
-#: quarter hour 4 to 15), while the options and the paths a command takes are those of any
-#: budget.  Hour-long plans are played in tests/test_plan.py and tests/test_design.py.
-TINY = {"--machines": "1", "--jobs": "1", "--budget": "900"}
+#: quarter hour 4 to 15, ten minutes 23 CPU-s for all of them where a quarter hour took
+#: 28), while the options and the paths a command takes are those of any budget.
+#: Hour-long plans are played in tests/test_plan.py and tests/test_design.py.
+TINY = {"--machines": "1", "--jobs": "1", "--budget": "600"}
 PLACEHOLDER = re.compile(r"\.\.\.|\b[A-Z][A-Z_]*\b")
 
 
@@ -251,7 +252,7 @@ def _tiny(argv: list[str]) -> list[str]:
     return out
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def documents_folder(tmp_path_factory) -> Path:
     """The files the documents' commands read: ``m.json`` and a measurement file
     ``r.csv``."""

@@ -34,13 +34,13 @@ def episode(faults: str | None, seed: int = SEED, agent: str = "optimal",
     return run_episode(env, get_agent(agent), seed)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def clean():
     """The episode without faults, which every fault's is held against (read only)."""
     return episode(None)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def pair(clean):
     """The same machine and seed without faults and with every kind of fault."""
     return clean, episode(",".join(FAULT_KINDS))

@@ -27,7 +27,7 @@ def run(*argv: str) -> subprocess.CompletedProcess:
     return command_here(list(argv))
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def sheet(tmp_path_factory) -> tuple[Path, Measurements]:
     folder = tmp_path_factory.mktemp("faults")
     path = folder / "clean.csv"

@@ -21,7 +21,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from conftest import as_a_terminal_job
+from conftest import as_a_terminal_job, command_here
 
 from calibrators.study.trials import Trial
 
@@ -121,11 +121,12 @@ def test_ctrl_c_with_busy_workers_keeps_the_finished_trials(tmp_path) -> None:
     assert saved["machines"] == 400
 
 
-#: Four machines of the ideal lab, each a chunk of its own and a second or two of work
-#: (the default agents and estimators): a stop sent once the first trial is written lands
-#: while machines are left.
-SMALL = ["compare", "--conditions", "ideal", "--machines", "4", "--chunk", "1", "--seed",
-         "2", "--quiet"]
+#: Six machines of the ideal lab, each a chunk of its own and half a CPU-second of work
+#: (the default agents and estimators, ten minutes of lab time: ``random`` plays to the
+#: budget, the others stop before it): a stop sent once the first trial is written lands
+#: while four or five machines are left.
+SMALL = ["compare", "--conditions", "ideal", "--machines", "6", "--chunk", "1", "--seed",
+         "2", "--budget", "600", "--quiet"]
 
 
 def _workers_of_group(group: int) -> list[int]:
@@ -144,12 +145,12 @@ def _workers_of_group(group: int) -> list[int]:
     return found
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def uninterrupted(tmp_path_factory: pytest.TempPathFactory) -> bytes:
-    """The trials file of :data:`SMALL` run to its end in one process."""
+    """The trials file of :data:`SMALL` run to its end in one job, in this process (the
+    stopped runs are the commands' processes)."""
     out = tmp_path_factory.mktemp("uninterrupted") / "run"
-    run = subprocess.run(_orthoglide(*SMALL, "--jobs", "1", "--out", str(out)),
-                         capture_output=True, text=True, timeout=GUARD_S, env=_environment())
+    run = command_here([*SMALL, "--jobs", "1", "--out", str(out)])
     assert run.returncode == 0, run.stderr
     return (out / "trials.jsonl").read_bytes()
 

@@ -283,17 +283,16 @@ def test_a_new_agent_is_one_registered_class() -> None:
 @pytest.mark.slow
 def test_compare_json_contract_and_resume(tmp_path, capsys) -> None:
     """The rows scripts rely on; an interrupted run resumed from its trials file ends with
-    the table of an uninterrupted one.  The JSON run and the refused run into the kept
-    folder are made in this process (two commands fewer to start), the others as a script
-    runs them."""
+    the table of an uninterrupted one.  Every run is made in this process, with the
+    output a command prints (``command_here``); the commands that stop a comparison and
+    resume it as processes are tests/test_interrupt.py's."""
     from calibrators.cli import main
 
     argv = ["compare", "--agents", "paper,tracker", "--estimators", "paper6,extended",
             "--machines", "3", "--seed", "4", "--budget", "1800", "--quiet"]
 
     def orthoglide(*extra: str) -> subprocess.CompletedProcess:
-        return subprocess.run([sys.executable, "-m", "calibrators.cli", *argv, *extra],
-                              capture_output=True, text=True, timeout=600)
+        return command_here([*argv, *extra])
 
     assert main([*argv, "--json"]) == 0
     shown = json.loads(capsys.readouterr().out)
@@ -432,9 +431,11 @@ def test_ctrl_c_keeps_the_finished_trials_and_resume_completes_the_table(tmp_pat
     run with one line and the partial table; --resume then ends with the table of an
     uninterrupted run.  Four chunks' worth of machines, so the interrupt, sent when the
     first chunk's trials are written, lands while the third and fourth are pending (the
-    two workers can finish two chunks at once).  The uninterrupted run takes its chunks
-    at the default size in one job, in this process (a command and a pool of workers
-    fewer to start): the table depends on neither."""
+    two workers can finish two chunks at once).  The resumed run takes the chunks left in
+    one job, and the uninterrupted run its chunks at the default size in one job, both in
+    this process (two commands and their pools of workers fewer to start): the table
+    depends on neither; a stopped run resumed by two workers as a command is
+    tests/test_interrupt.py's."""
     import os
     import signal
     import time
@@ -463,8 +464,8 @@ def test_ctrl_c_keeps_the_finished_trials_and_resume_completes_the_table(tmp_pat
     assert "TCP after (rigid) med" in stdout
     kept = len(trials.read_text().splitlines())
     assert 0 < kept < machines
-    resumed = subprocess.run([*chunked, "--out", str(out), "--resume", "--json"],
-                             capture_output=True, text=True, timeout=600)
+    resumed = command_here([*command, "--jobs", "1", "--chunk", str(chunk), "--out",
+                            str(out), "--resume", "--json"])
     assert resumed.returncode == 0, resumed.stderr
     assert main([*command, "--jobs", "1", "--json"]) == 0
     whole = json.loads(capsys.readouterr().out)

@@ -434,7 +434,7 @@ def test_the_stands_follow_the_designs_slot_count() -> None:
 BUILDER = {"L": 280.0, "d": 70.0, "r": 28.0}
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def builder(tmp_path_factory) -> dict[str, Path]:
     """A builder's design file, an estimate of one of its machines, the compensation's
     machine file and a plan with its filled sheet."""

@@ -173,7 +173,7 @@ def test_the_tables_error_bars_hold_against_the_true_lead_error() -> None:
         np.mean(np.concatenate(size) ** 2))
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def tracker_lab() -> tuple:
     """The tracker agent's hour under ``lab`` on one machine (exact backend), its
     readings, the truth and its world."""

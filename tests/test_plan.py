@@ -48,7 +48,7 @@ def run_json(capsys, argv: list[str]) -> dict:
     return json.loads(capsys.readouterr().out)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def paper_plan(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("plan")
     assert main(["plan", "--agent", "paper", "--out", str(out)]) == 0
@@ -369,7 +369,7 @@ def test_a_mounting_on_two_stands_is_refused(paper_plan, tmp_path, capsys) -> No
 OPTIMAL_BUDGET_S = 1200.0
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def optimal_plan() -> Procedure:
     """`plan --agent optimal --conditions lab` for 20 minutes, with the dial gauges: a plan
     that still re-mounts a stand twice (a quarter hour's re-mounts once), which the tests

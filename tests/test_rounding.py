@@ -47,7 +47,7 @@ def test_a_lab_of_dials_has_no_relaxed_bundles():
     assert plan_bundles(PAPER_SLOTS, SIGMA, 3600.0, PROTOTYPE, LAB, ()) == ()
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def half_hour_plan():
     """Half an hour under ``ideal`` with the ballbar: the relaxed bundles and the plan
     that takes them first (quick enough for the suite)."""
@@ -63,7 +63,7 @@ def half_hour_plan():
     return budget, bundles, steps, planner.predicted_rigid_mm()
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def half_hour_design() -> bound.Design:
     """The bound's best design of half an hour under ``ideal`` with the dials and the
     ballbar, after 40 solver steps (the bound stays certified, f - gap, only less tight):

@@ -20,7 +20,7 @@ def run_json(capsys, argv: list[str]) -> dict:
     return json.loads(capsys.readouterr().out)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def calibrated(tmp_path_factory) -> Path:
     """A realistic machine calibrated by the tracker agent (ideal conditions), its truth
     and estimate files, and the verification's plan."""
@@ -166,7 +166,7 @@ def test_the_stated_world_passes_with_its_world_test() -> None:
     assert not any(world for _, world in results), [w for _, w in results if w]
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def ballbar_verified() -> dict[str, list]:
     """The paper's procedure calibrating 4 machines in the workshop, told the workshop and
     told the lab, each verified with a ballbar's ISO 230-4 circles."""

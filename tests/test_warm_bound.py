@@ -28,12 +28,12 @@ LAB = Conditions("lab")
 BUDGET, BINS = 1200.0, 3
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def held():
     with pytest.MonkeyPatch.context() as patch:
         # Fewer steps: the bound stays certified (f - gap), only less tight.
         patch.setattr(warm_bound, "MAX_ITERATIONS", 60)
-        yield warm_design(PROTOTYPE, LAB, SIGMA, BUDGET, bins=BINS)
+        return warm_design(PROTOTYPE, LAB, SIGMA, BUDGET, bins=BINS)
 
 
 def test_the_warm_up_is_read_as_the_fit_reads_it():

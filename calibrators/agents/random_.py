@@ -13,6 +13,7 @@ into it.  It works until the budget runs out.
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Any
 
 import gymnasium as gym
@@ -20,6 +21,7 @@ import numpy as np
 
 from calibrators.agents.base import Agent, action, register
 from orthoglide_env.instruments.dial import pressed_past_travel
+from orthoglide_env.instruments.gauges import Gauge
 from orthoglide_env.instruments.rays import exact_ray_distances, exact_target_boxes
 from orthoglide_env.instruments.slots import on_platform
 from orthoglide_env.instruments.stands import install, installed_on
@@ -53,15 +55,25 @@ def is_safe(rho: np.ndarray, slots: list[int], design: MachineDesign) -> bool:
         return False
     if not slots:
         return True
-    specs = [slot_catalogue(design)[s] for s in slots]
-    gauges = installed_on(nominal, install(specs, nominal))
+    gauges, platform, travel = _set_up(design, tuple(slots))
     centre, rot, half = exact_target_boxes(gauges, boxes)
     if pressed_past_travel(gauges, centre, rot, half + MARGIN).any():
         return False
     t = exact_ray_distances(nominal, gauges, rho, boxes)
-    platform = np.array([on_platform(spec.part) for spec in specs])
-    travel = np.array([g.travel for g in gauges])
     return not (np.any(t < MARGIN) or np.any(platform & ~(t <= travel)))
+
+
+@lru_cache(maxsize=256)
+def _set_up(design: MachineDesign, slots: tuple[int, ...]
+            ) -> tuple[list[Gauge], np.ndarray, np.ndarray]:
+    """The gauges at ``slots`` set up on the nominal machine of ``design``, whether each is
+    on the platform, and their travels (mm).  The same for every posture tried with those
+    gauges engaged, and their set-up cost half of a check: made once per set of slots."""
+    nominal = MachineParams(design=design)
+    specs = [slot_catalogue(design)[s] for s in slots]
+    gauges = installed_on(nominal, install(specs, nominal))
+    return (gauges, np.array([on_platform(spec.part) for spec in specs]),
+            np.array([g.travel for g in gauges]))
 
 
 @register
