@@ -261,19 +261,20 @@ def test_the_full_fit_recovers_the_pitch_table_within_its_error_bars(noisy: bool
     assert np.median(table.sigma[:, 1:]) < 1.5e-3
 
 
-def test_active_refits_the_gauge_s_readings_under_lab_with_the_drives_terms():
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_active_refits_the_gauge_s_readings_under_lab_with_the_drives_terms(seed: int):
     """The probe reads the TCP along the gauge to 0.2 um, where the drives' lead, lost
     motion and warm-up move it by microns.  After one run along each axis (51 readings)
-    and 384 dial readings, ``active``'s refit told an ideal world misfits the gauge's
-    readings by more than twice their sigma (on this machine; on others it does not even
-    converge, and a refit that fails is skipped); told the lab, whose world the refits of
-    such a notebook are told, it leaves none out and fits them to their scatter (the
-    chi-square's 99.9 % quantile over 51 honest readings bounds their RMS at 1.31 sigma;
-    the fit's degrees of freedom only lower it)."""
+    and 384 dial readings, ``active``'s refit told an ideal world either misfits the
+    gauge's readings by more than twice their sigma or does not converge at all (a refit
+    that fails is skipped: on machines 1 and 3 of these three); told the lab, whose world
+    the refits of such a notebook are told, it leaves none out and fits them to their
+    scatter on every machine (the chi-square's 99.9 % quantile over 51 honest readings
+    bounds their RMS at 1.31 sigma; the fit's degrees of freedom only lower it)."""
     from calibrators.agents.active import _refitter, refit_world
     lab = Conditions("lab")
     env = gym.make(V3, errors="realistic", backend="exact", conditions=lab, instruments=OWNED)
-    obs, _ = env.reset(seed=2)
+    obs, _ = env.reset(seed=seed)
     for step in gauge_steps(len(obs["slot"]), PROTOTYPE, 1):
         assert not env.step(step)[4].get("refused")
     for offset in itertools.product((-3.0, -1.0, 1.0, 3.0), repeat=3):
@@ -291,7 +292,11 @@ def test_active_refits_the_gauge_s_readings_under_lab_with_the_drives_terms():
         return (len(faces) - len(kept),
                 float(np.sqrt(np.mean(np.asarray(est.residuals)[kept] ** 2))) * 1e3)
 
-    assert gauge_fit(None)[1] > 2 * sigma_um
+    try:
+        misfit = gauge_fit(None)[1] > 2 * sigma_um
+    except RuntimeError as error:
+        misfit = "did not converge" in str(error)
+    assert misfit
     left_out, rms_um = gauge_fit(lab)
     assert left_out == 0 and rms_um < np.sqrt(chi2.ppf(0.999, 51) / 51) * sigma_um
 
