@@ -178,6 +178,22 @@ def assert_batch_reads_as_alone(env_id: str, steps: list[dict[str, Any]], defaul
     return batched
 
 
+def refit_misfit(data: Measurements, kind: type, conditions: Any, name: str
+                 ) -> tuple[int, float, bool]:
+    """``active``'s refit of ``data`` told ``conditions`` (None: an ideal world): how many
+    readings of the instrument ``kind`` (a gauge spec's class) it leaves out, the RMS (um)
+    of those it keeps, and whether it warns that the ``name`` readings left out are the
+    model's error."""
+    from calibrators.agents.active import _refitter
+    est = _refitter(0.02, conditions).fit(data)
+    mine = np.flatnonzero([isinstance(m.gauge, kind) for m in data.items])
+    kept = np.setdiff1d(mine, est.outliers)
+    said = any(f"{name} readings left out" in w and "model's error" in w
+               for w in est.warnings)
+    rms_um = float(np.sqrt(np.mean(np.asarray(est.residuals)[kept] ** 2))) * 1e3
+    return len(mine) - len(kept), rms_um, said
+
+
 def tiny_maskable_policy(env: gym.Env, lab: dict[str, Any], path: Path) -> Path:
     """A MaskablePPO policy of ``env`` after one update of 64 steps, saved at ``path`` with
     the spec of ``lab`` to be played by its argmax: enough to check how a file plays, not

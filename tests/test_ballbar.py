@@ -10,7 +10,12 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import assert_batch_reads_as_alone, assert_refused_in_one_line, command_here
+from conftest import (
+    assert_batch_reads_as_alone,
+    assert_refused_in_one_line,
+    command_here,
+    refit_misfit,
+)
 
 import orthoglide_env
 from calibrators.agents import get_agent
@@ -453,7 +458,6 @@ def test_active_refits_the_circles_under_lab_with_the_drives_terms():
     leaves none out and fits the bar to its scatter (the chi-square's 99.9 % bound on the
     RMS of 150 honest readings is 1.18 sigma).  The first says that so many of one
     instrument's readings left out are the model's error."""
-    from calibrators.agents.active import _refitter
     env = gym.make(V2, errors="realistic", backend="exact", conditions="lab",
                    instruments=OWNED)
     env.reset(seed=1)
@@ -464,17 +468,8 @@ def test_active_refits_the_circles_under_lab_with_the_drives_terms():
     data = measurements_of(env.unwrapped.records, design=PROTOTYPE)
     bars = np.flatnonzero([isinstance(m.gauge, BallbarSpec) for m in data.items])
     assert len(bars) == 150
-
-    def bar_fit(conditions: Conditions | None) -> tuple[int, float, bool]:
-        est = _refitter(0.02, conditions).fit(data)
-        kept = np.setdiff1d(bars, est.outliers)
-        said = any("ballbar readings left out" in w and "model's error" in w
-                   for w in est.warnings)
-        return (len(bars) - len(kept),
-                float(np.sqrt(np.mean(np.asarray(est.residuals)[kept] ** 2))) * 1e3, said)
-
-    left_out, rms_um, said = bar_fit(None)
+    left_out, rms_um, said = refit_misfit(data, BallbarSpec, None, "ballbar")
     # More than the outlier cap's 5 % of the bar's readings: the warning names model error.
     assert left_out >= 8 and rms_um > 2 * SIGMA_UM and said
-    left_out, rms_um, said = bar_fit(Conditions("lab"))
+    left_out, rms_um, said = refit_misfit(data, BallbarSpec, Conditions("lab"), "ballbar")
     assert left_out == 0 and rms_um < 1.18 * SIGMA_UM and not said

@@ -11,6 +11,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import refit_misfit
 from scipy.stats import chi2
 
 import orthoglide_env
@@ -114,7 +115,7 @@ def test_active_refits_the_drives_readings_under_lab_with_the_drives_terms():
     one instrument's readings left out are the model's error.  The refits' world is the
     lab's for such a notebook, and the extended fit's (None) without an active world or
     with the dials' readings alone, which hide those terms."""
-    from calibrators.agents.active import _refitter, refit_world
+    from calibrators.agents.active import refit_world
     lab = Conditions("lab")
     env = gym.make(orthoglide_env.LAB_V1_ENV_ID, errors="realistic", backend="exact",
                    conditions=lab, instruments=OWNED)
@@ -132,19 +133,10 @@ def test_active_refits_the_drives_readings_under_lab_with_the_drives_terms():
     dials = [r for r in records if not isinstance(r.spec, InterferometerAxis)]
     assert len(dials) < len(records) and refit_world(lab, dials) is None
     sigma_um = interferometer.sigma(lab) * 1e3
-
-    def laser_fit(conditions: Conditions | None) -> tuple[int, float, bool]:
-        est = _refitter(0.02, conditions).fit(data)
-        kept = np.setdiff1d(lasers, est.outliers)
-        said = any("interferometer readings left out" in w and "model's error" in w
-                   for w in est.warnings)
-        return (len(lasers) - len(kept),
-                float(np.sqrt(np.mean(np.asarray(est.residuals)[kept] ** 2))) * 1e3, said)
-
-    left_out, rms_um, said = laser_fit(None)
+    left_out, rms_um, said = refit_misfit(data, InterferometerAxis, None, "interferometer")
     # More than the outlier cap's 5 % of the laser's readings: the warning names model error.
     assert left_out >= 7 and rms_um > 10 * sigma_um and said
-    left_out, rms_um, said = laser_fit(lab)
+    left_out, rms_um, said = refit_misfit(data, InterferometerAxis, lab, "interferometer")
     bound = np.sqrt(chi2.ppf(0.999, len(lasers)) / len(lasers))
     assert left_out == 0 and rms_um < bound * sigma_um and not said
 

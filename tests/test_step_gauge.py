@@ -13,7 +13,12 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import assert_batch_reads_as_alone, assert_refused_in_one_line, command_here
+from conftest import (
+    assert_batch_reads_as_alone,
+    assert_refused_in_one_line,
+    command_here,
+    refit_misfit,
+)
 from scipy.stats import chi2
 
 import orthoglide_env
@@ -271,7 +276,7 @@ def test_active_refits_the_gauge_s_readings_under_lab_with_the_drives_terms(seed
     the refits of such a notebook are told, it leaves none out and fits them to their
     scatter on every machine (the chi-square's 99.9 % quantile over 51 honest readings
     bounds their RMS at 1.31 sigma; the fit's degrees of freedom only lower it)."""
-    from calibrators.agents.active import _refitter, refit_world
+    from calibrators.agents.active import refit_world
     lab = Conditions("lab")
     env = gym.make(V3, errors="realistic", backend="exact", conditions=lab, instruments=OWNED)
     obs, _ = env.reset(seed=seed)
@@ -286,18 +291,12 @@ def test_active_refits_the_gauge_s_readings_under_lab_with_the_drives_terms(seed
     assert len(faces) == 51
     sigma_um = step_gauge.sigma(lab) * 1e3
 
-    def gauge_fit(conditions: Conditions | None) -> tuple[int, float]:
-        est = _refitter(0.02, conditions).fit(data)
-        kept = np.setdiff1d(faces, est.outliers)
-        return (len(faces) - len(kept),
-                float(np.sqrt(np.mean(np.asarray(est.residuals)[kept] ** 2))) * 1e3)
-
     try:
-        misfit = gauge_fit(None)[1] > 2 * sigma_um
+        misfit = refit_misfit(data, StepGaugeSpec, None, "step-gauge")[1] > 2 * sigma_um
     except RuntimeError as error:
         misfit = "did not converge" in str(error)
     assert misfit
-    left_out, rms_um = gauge_fit(lab)
+    left_out, rms_um, _ = refit_misfit(data, StepGaugeSpec, lab, "step-gauge")
     assert left_out == 0 and rms_um < np.sqrt(chi2.ppf(0.999, 51) / 51) * sigma_um
 
 
