@@ -3,6 +3,7 @@
     python benchmarks/buyer.py --machines 50 --jobs 2 --out results/buyer
     python benchmarks/buyer.py --machines 10 --out results/buyer --dry-run
     python benchmarks/buyer.py --machines 20 --agents optimal --sets dial --out results/buyer
+    python benchmarks/buyer.py --machines 50 --agents optimal,active --out results/buyer --table
 
 A machine builder's table under ``lab`` (seed 1, realistic machines, ``full``): per
 instrument set (:data:`SETS`: the dial gauges alone, with the interferometer, with the
@@ -13,7 +14,9 @@ z-RMS, chi-square rejections, failed trials and its median over the bound of the
 instruments it reads (as ``headline.py --bound``, kept in the run's folder); and
 closed-loop drives (``--drives scales``) with the gauges alone.  Each cell is one
 ``orthoglide compare`` run kept in ``--out`` (a run already there is read, not run again:
-``compare --resume`` finishes one cut short); ``--dry-run`` prints the commands.
+``compare --resume`` finishes one cut short, which loses at most its last ``--chunk`` of
+machines); ``--dry-run`` prints the commands; ``--table`` prints the table of the runs
+kept so far, each cell not yet run marked so, and runs nothing.
 
 The whole table is 20 runs of every set's agents, and ``active`` costs most (a minute or
 more of CPU per machine at 3 h).  ``--agents``, ``--sets`` and ``--budgets`` run a part of
@@ -63,7 +66,7 @@ def folder_of(out: Path, row: tuple[str, str, str], budget: float) -> Path:
 
 
 def command(row: tuple[str, str, str], budget: float, agents: tuple[str, ...],
-            machines: int, jobs: int, folder: Path) -> list[str]:
+            machines: int, jobs: int, chunk: int, folder: Path) -> list[str]:
     """The ``orthoglide compare`` arguments of one cell, run with ``agents``."""
     name, indicator, drives = row
     instruments = SETS[name][0]
@@ -72,12 +75,15 @@ def command(row: tuple[str, str, str], budget: float, agents: tuple[str, ...],
             indicator, "--sigma", f"{sigma:g}", "--resolution", f"{resolution:g}", "--drives",
             drives, "--conditions", "lab", "--budget", f"{budget:g}",
             "--machines", str(machines), "--seed", "1", "--estimators", "full", "--jobs",
-            str(jobs), "--quiet", "--out", str(folder)]
+            str(jobs), "--chunk", str(chunk), "--quiet", "--out", str(folder)]
 
 
 def best(folder: Path) -> str:
     """The cell of a kept run: its best agent by rigid median, as headline's row (um), with
-    its median over the bound of the instruments it reads (kept in the folder)."""
+    its median over the bound of the instruments it reads (kept in the folder); 'not run'
+    when the folder holds no finished run."""
+    if not (folder / "summary.csv").exists():
+        return "not run"
     trials = [Trial.from_json(line) for line in (folder / "trials.jsonl").open()]
     agent = min(summary(trials), key=lambda r: r["tcp_after_mm"]["rigid"]["median"])["agent"]
     config = json.loads((folder / "config.json").read_text())
@@ -153,11 +159,16 @@ def main() -> None:
     parser.add_argument("--budgets", default=",".join(f"{b:g}" for b in BUDGETS_H),
                         metavar="LIST", help="budgets in hours, comma-separated "
                                              "(default: %(default)s)")
+    parser.add_argument("--chunk", type=int, default=5,
+                        help="machines per task of each run: a run cut short and resumed "
+                             "loses at most these (default: %(default)s)")
     parser.add_argument("--dry-run", action="store_true",
                         help="print the compare commands, run nothing")
+    parser.add_argument("--table", action="store_true",
+                        help="print the table of the runs kept in --out, run nothing")
     args = parser.parse_args()
-    if args.machines < 1 or args.jobs < 1:
-        parser.error("--machines and --jobs must be at least 1")
+    if min(args.machines, args.jobs, args.chunk) < 1:
+        parser.error("--machines, --jobs and --chunk must be at least 1")
     try:
         sets = names(args.sets, tuple(SETS), "set")
         everyone = tuple(dict.fromkeys(a for _, own in SETS.values() for a in own))
@@ -170,7 +181,8 @@ def main() -> None:
     cells = [(folder_of(args.out, row, budget), row, budget) for row in rows for budget in budgets]
     if args.dry_run:
         for folder, row, budget in cells:
-            argv = command(row, budget, agents[row[0]], args.machines, args.jobs, folder)
+            argv = command(row, budget, agents[row[0]], args.machines, args.jobs, args.chunk,
+                           folder)
             print("orthoglide " + " ".join(argv))
         return
     # Every kept run is checked before the first run starts, not an hour into the table.
@@ -178,9 +190,10 @@ def main() -> None:
         if differs := kept_differs(folder, agents[row[0]], args.machines, NOISE[row[1]]):
             parser.error(differs)
     for folder, row, budget in cells:
-        if (folder / "summary.csv").exists():
+        if args.table or (folder / "summary.csv").exists():
             continue
-        argv = command(row, budget, agents[row[0]], args.machines, args.jobs, folder)
+        argv = command(row, budget, agents[row[0]], args.machines, args.jobs, args.chunk,
+                       folder)
         resume = ["--resume"] if (folder / "config.json").exists() else []
         subprocess.run([sys.executable, "-m", "calibrators.cli", *argv, *resume], check=True)
     print("| instruments | indicator | drives | " + " | ".join(

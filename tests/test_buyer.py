@@ -71,3 +71,26 @@ def test_a_kept_run_of_other_agents_is_not_read_as_the_cell(tmp_path: Path) -> N
                  "--budgets", "1", "--machines", "20")
     assert done.returncode == 2
     assert "sigma, resolution 0.02, 0.01 mm" in done.stderr
+
+
+def test_each_run_is_cut_in_chunks_so_a_resume_loses_little(tmp_path: Path) -> None:
+    runs = buyer("--out", str(tmp_path), "--dry-run", "--chunk", "5").stdout.splitlines()
+    assert len(runs) == 20 and all(" --chunk 5 " in r for r in runs)
+    done = buyer("--out", str(tmp_path), "--dry-run", "--chunk", "0")
+    assert done.returncode == 2
+    assert "--chunk must be at least 1" in done.stderr
+
+
+def test_the_table_marks_cells_not_run_and_runs_nothing(tmp_path: Path) -> None:
+    # A run cut short (its config kept, no summary) is a cell not run, not read.
+    (tmp_path / "dial-dial-screw-1h").mkdir()
+    (tmp_path / "dial-dial-screw-1h" / "config.json").write_text(json.dumps(
+        {"agents": ["optimal", "active"], "machines": 50, "sigma": 0.02, "resolution": 0.01}))
+    done = buyer("--out", str(tmp_path), "--table", "--agents", "optimal,active", "--sets",
+                 "dial", "--machines", "50")
+    assert done.returncode == 0, done.stderr
+    rows = [line for line in done.stdout.splitlines() if line.startswith("| dial |")]
+    # The dial set's four rows, each with its 1 h and 3 h cell.
+    assert len(rows) == 4 and all(r.count("not run") == 2 for r in rows)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dial-dial-screw-1h"]
+    assert not (tmp_path / "dial-dial-screw-1h" / "trials.jsonl").exists()
