@@ -87,7 +87,8 @@ def greedy(held: Held, candidates: tuple[int, ...], slots: tuple[int, ...], foun
            most: int) -> list[tuple[tuple[int, ...], Design]]:
     """From ``slots`` (whose ``B`` is ``found``) up to ``most`` slots: per ``r``, the slot
     whose addition lowers ``B`` most, then one pass of swaps (each slot in turn replaced by
-    the best other, where that lowers ``B``); the set found per ``r`` and its design."""
+    the first other, in the catalogue's order, that lowers ``B``); the set found per ``r``
+    and its design."""
     out = []
     for r in range(len(slots) + 1, most + 1):
         best: tuple[tuple[int, ...], Design] | None = None
@@ -123,6 +124,9 @@ def main() -> None:
                         help="the greedy search's most slots beyond the paper's")
     parser.add_argument("--setups", choices=("all", "relaxation"), default="all",
                         help="every set-up of the lab, or the relaxation's design's alone")
+    parser.add_argument("--sets", default="",
+                        help="also B of these sets of slots beyond the paper's, each with a "
+                             "re-mount per slot (slot names joined by ',', sets by ';')")
     parser.add_argument("--no-plan", action="store_true", help="without optimal's plan")
     parser.add_argument("--sigma", type=float, default=0.02, help="dial repeatability, mm")
     parser.add_argument("--resolution", type=float, default=0.01, help="dial display, mm")
@@ -133,6 +137,11 @@ def main() -> None:
         parser.error(str(error))
     if not 0 <= args.exhaustive <= args.greedy:
         parser.error("--exhaustive must be between 0 and --greedy")
+    try:
+        given = [tuple(sorted(SLOT_NAMES.index(n) for n in text.split(",")))
+                 for text in args.sets.split(";") if text]
+    except ValueError as error:
+        parser.error(f"--sets names a slot not in the catalogue: {error}")
     conditions = Conditions(name)
     sigma = float(weighting_sigma(GaugeNoise(args.sigma, args.resolution).effective_sigma))
     relaxed = best_design(PROTOTYPE, conditions, sigma, budget, owned)
@@ -160,6 +169,13 @@ def main() -> None:
     rows += [(f"r = {len(slots)}, best E found (not certified)", found.bound.bound_mm,
               f"{_names(slots)}: design {UM * found.bound.design_mm:.3f}")
              for slots, found in searched]
+    for slots in given:
+        found = held(slots, len(slots), np.inf)
+        print(f"# given {_names(slots)}: {UM * found.bound.bound_mm:.3f} um, {_cpu()}",
+              flush=True)
+        rows.append((f"r = {len(slots)}, given E (not certified)", found.bound.bound_mm,
+                     f"{_names(slots)}: design {UM * found.bound.design_mm:.3f}, "
+                     f"laser on {found.drives}, pivot {found.pivot}"))
     if not args.no_plan:
         steps, predicted = fixed_plan(tuple(PAPER_SLOTS), (True,) * len(PAPER_SLOTS), sigma,
                                       budget, PROTOTYPE, conditions,
