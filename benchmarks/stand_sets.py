@@ -77,7 +77,8 @@ def exhaustive(held: Held, candidates: tuple[int, ...], most: int
                 best = (slots, found)
             if (i + 1) % 50 == 0 or i + 1 == len(sets):
                 print(f"# r = {r}: {i + 1} of {len(sets)} sets, least design "
-                      f"{UM * best[1].bound.design_mm:.3f} um, {_cpu()}", flush=True)
+                      f"{UM * best[1].bound.design_mm:.3f} um, certified "
+                      f"{UM * np.sqrt(lowest):.3f} um, {_cpu()}", flush=True)
         assert best is not None
         out.append((float(np.sqrt(lowest)), *best))
     return out
