@@ -20,9 +20,7 @@ from calibrators.planning.bound import (
     Bound,
     BoundModel,
     Visits,
-    best_design,
     bound_model,
-    held_design,
     lower_bound,
     plan_counts,
     solve,
@@ -184,57 +182,6 @@ def test_bound_is_below_every_discrete_plan(quick):
     for name, actions in still.items():
         assert not any(a["op"] == Op.REMOUNT for a in actions), name
         assert held.bound_mm <= _plan_mm(model, actions), name
-
-
-@pytest.mark.slow
-def test_whole_re_mounts_bound_between_the_share_relaxation_and_the_plans():
-    # B(E, r): the stands held at the paper's slots and E, r whole re-mounts off the budget.
-    # Each inequality below is the theory's (held_design's docstring) with the solver's own
-    # certificate as the only slack: a certified value is below its problem's optimum, a
-    # design's value above it, so no tolerance is needed.
-    budget = 600.0
-    never = best_design(PROTOTYPE, LAB, SIGMA, budget, remounts=False)
-    # No slot and no re-mount: the very problem of the plans that never re-mount.
-    nothing = held_design(PROTOTYPE, LAB, SIGMA, budget)
-    assert nothing.bound == never.bound
-    assert np.array_equal(nothing.counts, never.counts)
-    share = lower_bound(PROTOTYPE, LAB, SIGMA, budget)
-    empty = held_design(PROTOTYPE, LAB, SIGMA, budget, remounts=1)
-    one = held_design(PROTOTYPE, LAB, SIGMA, budget, slots=(0,))
-    two = held_design(PROTOTYPE, LAB, SIGMA, budget, slots=(0, 30))
-    for held in (empty, one, two):
-        # Each is a subset of the share relaxation's polytope: its optimum is above that
-        # bound.
-        assert held.bound.design_mm >= share.bound_mm
-    # A re-mount's time taken off can only raise the optimum...
-    assert empty.bound.design_mm >= nothing.bound.bound_mm
-    # ...and a slot added at the same re-mounts only lower it; slot 0 (a stand across the
-    # x leg near its platform end, where optimal's plans re-mount) is worth its re-mount,
-    # beyond both certificates.
-    assert one.bound.design_mm < empty.bound.bound_mm
-    assert two.bound.bound_mm <= held_design(PROTOTYPE, LAB, SIGMA, budget, slots=(30,),
-                                             remounts=2).bound.design_mm
-    with pytest.raises(ValueError, match="re-mounts"):
-        held_design(PROTOTYPE, LAB, SIGMA, budget, slots=(0, 30), remounts=1)
-    with pytest.raises(ValueError, match="no time"):
-        held_design(PROTOTYPE, LAB, SIGMA, budget, remounts=5)
-
-
-@pytest.mark.slow
-def test_a_plan_is_above_the_bound_of_its_own_slots_and_re_mounts():
-    # optimal's plan of a quarter hour re-mounts once: its readings are a point of the
-    # problem of its slots and re-mounts, so that problem's certified value is below the
-    # plan's error on the bound's model.
-    budget = 900.0
-    steps, _ = fixed_plan(PAPER_SLOTS, (True,) * len(PAPER_SLOTS), SIGMA, budget, PROTOTYPE,
-                          LAB)
-    moved = tuple(s.slot for s in steps if s.op == Op.REMOUNT)
-    assert len(moved) >= 1
-    own = held_design(PROTOTYPE, LAB, SIGMA, budget, slots=moved, remounts=len(moved))
-    plan = _plan_mm(bound_model(PROTOTYPE, LAB, SIGMA, False),
-                    [{"op": s.op, "rho": s.rho, "stand": s.stand, "slot": s.slot}
-                     for s in steps])
-    assert own.bound.bound_mm <= plan
 
 
 def test_bound_round_trips_and_refuses_bad_input():
