@@ -81,7 +81,7 @@ ballbar only.
 from __future__ import annotations
 
 import itertools
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from functools import cached_property, lru_cache
 from typing import TYPE_CHECKING
 
@@ -717,13 +717,71 @@ def best_design(design: MachineDesign, conditions: Conditions, dial_sigma: float
     """:func:`lower_bound` with the design that reaches it (a plan rounds it:
     :mod:`calibrators.planning.rounding`)."""
     model = lab_model(design, conditions, dial_sigma, budget_s, instruments, stands)
+    return _least(model, problems(design, budget_s, instruments, stands, remounts))
+
+
+def held_design(design: MachineDesign, conditions: Conditions, dial_sigma: float,
+                budget_s: float, instruments: tuple[str, ...] = ("dial",),
+                slots: tuple[int, ...] = (), remounts: int | None = None,
+                stands: int = len(PAPER_SLOTS),
+                setups: tuple[tuple[tuple[int, ...], bool], ...] | None = None,
+                stop_above: float = np.inf) -> Design:
+    """The bound of the plans that re-mount ``remounts`` times (None: once per slot of
+    ``slots`` beyond the paper's) and mount stands only at the paper's slots and
+    ``slots``: :func:`best_design`'s problems with the stands held at all of those slots
+    (each readable on any visit, at most ``stands`` a visit; :class:`Visits` with an
+    infinite ``remount_s``) and the budget less ``remounts`` whole re-mounts
+    (``TIME.remount_s`` each), over every choice of set-ups, or over ``setups`` alone
+    (pairs of the laser's drives and the pivot: then a bound of the plans with those
+    set-ups only).  A problem whose certified value passes ``stop_above`` (mm^2: a search's
+    best so far) is left unsolved: its design is then no optimum, its bound still below it.
+
+    Why it is a bound of those plans: a plan that re-mounts ``r`` times pays ``r`` times
+    ``remount_s`` on top of the visit each re-mount's reading at Zero is (the lab's clock
+    charges a re-mount its drive, settle and work), so its visits fit in the budget less
+    ``r`` re-mounts; at every moment its stands stand at ``stands`` of the slots, so every
+    visit reads at most ``stands`` of them, each once; it is a point of this problem.  So
+    the least of this over the sets of at most ``r`` slots beyond the paper's is a bound of
+    every plan that re-mounts at most ``r`` times (a plan re-mounting ``k <= r`` times is a
+    point of its own ``k``'s problem).
+
+    Why it is above :func:`lower_bound` (re-mounts priced per reading): every kind of visit
+    here is one there, and with ``S`` a problem's seconds there, a slot beyond the paper's
+    is read here on at most ``(S - r remount_s) / settle`` visits, so its readings' shares
+    of a re-mount (:attr:`Visits.moved_s`, ``remount_s settle / S`` each) add at most one
+    ``remount_s``, and the ``r`` slots at most the ``r`` re-mounts taken off: each point
+    here is a point there, at the same ``f``.  With no slot and no re-mount it is
+    :func:`lower_bound` without ``remounts``: the same problems."""
+    start = start_slots(design, stands)
+    added = tuple(s for s in sorted(set(slots)) if s not in start)
+    count = len(added) if remounts is None else remounts
+    if count < len(added):
+        raise ValueError(f"{len(added)} slots beyond the paper's need as many re-mounts, "
+                         f"got {count}")
+    left = budget_s - count * TIME.remount_s
+    if not left > 0:
+        raise ValueError(f"{count} re-mounts leave no time of {budget_s} s")
+    model = lab_model(design, conditions, dial_sigma, budget_s, instruments, stands)
+    held = [(drives, pivot, replace(visits, start=start + added))
+            for drives, pivot, visits in problems(design, left, instruments, stands, False)
+            if setups is None or (drives, pivot) in setups]
+    if not held:
+        raise ValueError(f"no set-up of {setups} fits in {left} s")
+    return _least(model, held, stop_above)
+
+
+def _least(model: BoundModel, choices: list[tuple[tuple[int, ...], bool, Visits]],
+           stop_above: float = np.inf) -> Design:
+    """The :class:`Design` of the least of ``model``'s problems ``choices`` (the laser's
+    drives, the pivot or not, and the visits' polytope, as :func:`problems` gives them),
+    each stopped once it cannot be the least (nor below ``stop_above``, mm^2)."""
     best: tuple[float, tuple[int, ...], bool, np.ndarray] | None = None
     lowest = np.inf
-    for drives, pivot, visits in problems(design, budget_s, instruments, stands, remounts):
+    for drives, pivot, visits in choices:
         lasers = np.flatnonzero(np.isin(model.laser, drives))
         bars = np.flatnonzero(model.laser == BAR) if pivot else None
-        lower, value, counts = solve(model, visits, lasers, best[0] if best else np.inf,
-                                     bars)
+        lower, value, counts = solve(model, visits, lasers,
+                                     min(best[0], stop_above) if best else stop_above, bars)
         lowest = min(lowest, lower)
         if best is None or value < best[0]:
             best = (value, drives, pivot, counts)
