@@ -27,7 +27,7 @@ from scipy.linalg import cho_factor, cho_solve
 
 from calibrators.agents.optimal import fixed_plan
 from calibrators.planning.bound import BoundModel, best_design, lab_model, plan_counts
-from calibrators.planning.instruments import operation_keys
+from calibrators.planning.instruments import step_actions
 from calibrators.planning.warm_bound import warm_design
 from orthoglide_env.instruments.dial import GaugeNoise, weighting_sigma
 from orthoglide_env.lab.operations import PAPER_SLOTS
@@ -70,10 +70,8 @@ def main() -> None:
     slots, engaged = tuple(PAPER_SLOTS), (True,) * len(PAPER_SLOTS)
     steps, _ = fixed_plan(slots, engaged, sigma, args.budget, PROTOTYPE, conditions,
                           instruments=tuple(n for n in owned if n != "dial"), warm_judged=True)
-    actions = [{"op": s.op, "rho": s.rho, "stand": s.stand, "slot": s.slot,
-                **operation_keys(s)} for s in steps]
     rows.append(("`optimal`'s kept plan", np.nan, [model],
-                 plan_counts(model, PROTOTYPE, slots, engaged, actions)[None]))
+                 plan_counts(model, PROTOTYPE, slots, engaged, step_actions(steps))[None]))
     print("| bound or plan | certified µm | its design: RMS, median, p95 µm | median / RMS |")
     print("|---|---|---|---|")
     for name, certified, models, counts in rows:

@@ -45,6 +45,17 @@ WORLDS = ("lab:3600:dial", "lab:3600:dial+ballbar", "lab:3600:dial+interferomete
           "workshop:10800:dial+interferometer+ballbar")
 
 
+def dial_arguments(parser: argparse.ArgumentParser) -> None:
+    """The dials' ``--sigma`` and ``--resolution`` (mm) of the bound's benchmarks."""
+    parser.add_argument("--sigma", type=float, default=0.02, help="dial repeatability, mm")
+    parser.add_argument("--resolution", type=float, default=0.01, help="dial display, mm")
+
+
+def dial_weighting(args: argparse.Namespace) -> float:
+    """The dials' weighting sigma (mm) of :func:`dial_arguments`' options."""
+    return float(weighting_sigma(GaugeNoise(args.sigma, args.resolution).effective_sigma))
+
+
 def parse_world(text: str) -> tuple[str, float, tuple[str, ...]]:
     """``conditions:budget_s:instruments`` as its three parts (``ValueError`` if not)."""
     parts = text.split(":")
@@ -87,14 +98,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--worlds", default=",".join(WORLDS),
                         help="comma-separated conditions:budget_s:instruments")
-    parser.add_argument("--sigma", type=float, default=0.02, help="dial repeatability, mm")
-    parser.add_argument("--resolution", type=float, default=0.01, help="dial display, mm")
+    dial_arguments(parser)
     args = parser.parse_args()
     try:
         worlds = [parse_world(w) for w in args.worlds.split(",")]
     except ValueError as error:
         parser.error(str(error))
-    sigma = float(weighting_sigma(GaugeNoise(args.sigma, args.resolution).effective_sigma))
+    sigma = dial_weighting(args)
     print("| world, budget | instruments | bound | design | set-ups | slots read "
           "| re-mounts paid | never re-mounting | CPU s |")
     print("|---|---|---|---|---|---|---|---|---|")

@@ -36,13 +36,13 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
+from bound_table import dial_arguments, dial_weighting
 
 from calibrators.planning.bound import BAR, best_design, bound_model, plan_counts
-from calibrators.planning.instruments import operation_keys
+from calibrators.planning.instruments import step_actions
 from calibrators.planning.rounding import bound_bundles, plan_bundles, relaxed_plan
 from calibrators.planning.search import Planner, greedy_plan
 from calibrators.planning.warm_bound import steps_value, warm_design, warm_models
-from orthoglide_env.instruments.dial import GaugeNoise, weighting_sigma
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import CONDITION_NAMES, Conditions
@@ -82,8 +82,7 @@ def lab_options(parser: argparse.ArgumentParser,
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     lab_arguments(parser)
-    parser.add_argument("--sigma", type=float, default=0.02, help="dial repeatability, mm")
-    parser.add_argument("--resolution", type=float, default=0.01, help="dial display, mm")
+    dial_arguments(parser)
     parser.add_argument("--stay", action="store_true",
                         help="plans that never re-mount a stand (optimal-stay's)")
     parser.add_argument("--no-warm-bound", action="store_true",
@@ -93,7 +92,7 @@ def main() -> None:
     if args.no_warm_bound and not args.warm_bins:
         parser.error("--no-warm-bound prices the plans on the model of --warm-bins K: give both")
     owned, conditions = lab_options(parser, args)
-    sigma = float(weighting_sigma(GaugeNoise(args.sigma, args.resolution).effective_sigma))
+    sigma = dial_weighting(args)
     slots, engaged = tuple(PAPER_SLOTS), (True,) * len(PAPER_SLOTS)
     found = best_design(PROTOTYPE, conditions, sigma, args.budget, owned).bound
     model = bound_model(PROTOTYPE, conditions, sigma, "interferometer" in owned,
@@ -132,9 +131,7 @@ def main() -> None:
         planner = opened()
         steps = (greedy_plan(planner, remounts=not args.stay) if bundles is None
                  else relaxed_plan(planner, bundles, not args.stay))
-        actions = [{"op": s.op, "rho": s.rho, "stand": s.stand, "slot": s.slot,
-                    **operation_keys(s)} for s in steps]
-        counts = plan_counts(model, PROTOTYPE, slots, engaged, actions)
+        counts = plan_counts(model, PROTOTYPE, slots, engaged, step_actions(steps))
         on_model = float(np.sqrt(model.value(counts)))
         setups = ", ".join([f"{Op(s.op).name.lower()} {s.time_s / 60:.0f}" for s in steps
                             if s.op in (Op.ALIGN, Op.PIVOT)]

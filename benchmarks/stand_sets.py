@@ -30,7 +30,7 @@ import time
 from collections.abc import Callable
 
 import numpy as np
-from bound_table import parse_world
+from bound_table import dial_arguments, dial_weighting, parse_world
 
 from calibrators.agents.optimal import fixed_plan
 from calibrators.planning.bound import (
@@ -42,8 +42,7 @@ from calibrators.planning.bound import (
     plan_counts,
     start_slots,
 )
-from calibrators.planning.instruments import operation_keys
-from orthoglide_env.instruments.dial import GaugeNoise, weighting_sigma
+from calibrators.planning.instruments import step_actions
 from orthoglide_env.lab.operations import PAPER_SLOTS, SLOT_NAMES, Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
@@ -129,8 +128,7 @@ def main() -> None:
                         help="also B of these sets of slots beyond the paper's, each with a "
                              "re-mount per slot (slot names joined by ',', sets by ';')")
     parser.add_argument("--no-plan", action="store_true", help="without optimal's plan")
-    parser.add_argument("--sigma", type=float, default=0.02, help="dial repeatability, mm")
-    parser.add_argument("--resolution", type=float, default=0.01, help="dial display, mm")
+    dial_arguments(parser)
     args = parser.parse_args()
     try:
         name, budget, owned = parse_world(args.world)
@@ -144,7 +142,7 @@ def main() -> None:
     except ValueError as error:
         parser.error(f"--sets names a slot not in the catalogue: {error}")
     conditions = Conditions(name)
-    sigma = float(weighting_sigma(GaugeNoise(args.sigma, args.resolution).effective_sigma))
+    sigma = dial_weighting(args)
     relaxed = best_design(PROTOTYPE, conditions, sigma, budget, owned)
     print(f"# the relaxation {UM * relaxed.bound.bound_mm:.3f} um (design "
           f"{UM * relaxed.bound.design_mm:.3f}), laser on {relaxed.drives}, pivot "
@@ -183,10 +181,9 @@ def main() -> None:
                                       instruments=tuple(n for n in owned if n != "dial"),
                                       warm_judged=True)
         moved = [s.slot for s in steps if s.op == Op.REMOUNT]
-        actions = [{"op": s.op, "rho": s.rho, "stand": s.stand, "slot": s.slot,
-                    **operation_keys(s)} for s in steps]
         on_model = float(np.sqrt(model.value(plan_counts(
-            model, PROTOTYPE, tuple(PAPER_SLOTS), (True,) * len(PAPER_SLOTS), actions))))
+            model, PROTOTYPE, tuple(PAPER_SLOTS), (True,) * len(PAPER_SLOTS),
+            step_actions(steps)))))
         own = held(tuple(moved), len(moved), np.inf)
         print(f"# optimal's plan: {len(moved)} re-mounts to {_names(tuple(sorted(set(moved))))}, "
               f"predicted {UM * predicted:.3f} um, on the bound's model {UM * on_model:.3f} "

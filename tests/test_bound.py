@@ -25,6 +25,7 @@ from calibrators.planning.bound import (
     plan_counts,
     solve,
 )
+from calibrators.planning.instruments import step_actions
 from orthoglide_env.instruments.slots import PAPER_LAYOUT
 from orthoglide_env.lab.design_belief import rigid_weight
 from orthoglide_env.lab.operations import PAPER_SLOTS, TIME, Op
@@ -154,7 +155,7 @@ def test_bound_is_below_every_discrete_plan(quick):
     model = bound_model(PROTOTYPE, LAB, SIGMA, True)
     steps, _ = fixed_plan(PAPER_SLOTS, (True,) * len(PAPER_SLOTS), SIGMA, budget, PROTOTYPE,
                           LAB)
-    optimal = [{"op": s.op, "rho": s.rho, "stand": s.stand, "slot": s.slot} for s in steps]
+    optimal = step_actions(steps)
     legs = tuple(spec.leg for spec in PAPER_LAYOUT)
     paper = [dict(a) for a in paper_plan(legs, (True,) * len(legs), REPETITIONS, PROTOTYPE)]
     iso = drive_steps(len(PAPER_SLOTS), PROTOTYPE, runs_for(budget, PROTOTYPE,
@@ -177,8 +178,7 @@ def test_bound_is_below_every_discrete_plan(quick):
     steps, _ = fixed_plan(PAPER_SLOTS, (True,) * len(PAPER_SLOTS), SIGMA, budget, PROTOTYPE,
                           LAB, remounts=False)
     still = {"paper": paper,
-             "optimal without re-mounts": [{"op": s.op, "rho": s.rho, "stand": s.stand,
-                                             "slot": s.slot} for s in steps]}
+             "optimal without re-mounts": step_actions(steps)}
     for name, actions in still.items():
         assert not any(a["op"] == Op.REMOUNT for a in actions), name
         assert held.bound_mm <= _plan_mm(model, actions), name
@@ -361,8 +361,7 @@ def test_the_bounds_model_prices_a_plan_as_the_planner_does():
     steps, predicted = fixed_plan(PAPER_SLOTS, (True,) * len(PAPER_SLOTS), SIGMA, 600.0,
                                   PROTOTYPE, ideal, remounts=False)
     counts = plan_counts(model, PROTOTYPE, PAPER_SLOTS, (True,) * len(PAPER_SLOTS),
-                         [{"op": s.op, "rho": s.rho, "stand": s.stand, "slot": s.slot}
-                          for s in steps])
+                         step_actions(steps))
     assert not any(s.op == Op.REMOUNT for s in steps)
     whole, at_contact = np.sqrt(model.value(counts)), np.sqrt(model.value(counts * contact))
     assert whole <= predicted <= at_contact

@@ -18,6 +18,7 @@ from calibrators.planning.bound import (
     lower_bound,
     plan_counts,
 )
+from calibrators.planning.instruments import step_actions
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
@@ -72,6 +73,5 @@ def test_a_plan_is_above_the_bound_of_its_own_slots_and_re_mounts():
     own = held_design(PROTOTYPE, LAB, SIGMA, budget, slots=moved, remounts=len(moved))
     model = bound_model(PROTOTYPE, LAB, SIGMA, False)
     counts = plan_counts(model, PROTOTYPE, PAPER_SLOTS, (True,) * len(PAPER_SLOTS),
-                         [{"op": s.op, "rho": s.rho, "stand": s.stand, "slot": s.slot}
-                          for s in steps])
+                         step_actions(steps))
     assert own.bound.bound_mm <= np.sqrt(model.value(counts))

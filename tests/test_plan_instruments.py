@@ -14,7 +14,12 @@ from calibrators.agents.base import action
 from calibrators.agents.optimal import lab_setup, move_dwell_s
 from calibrators.planning import bound
 from calibrators.planning.bound import bound_model, lower_bound, plan_counts
-from calibrators.planning.instruments import marginal, operation_keys, planned_bundles
+from calibrators.planning.instruments import (
+    marginal,
+    operation_keys,
+    planned_bundles,
+    step_actions,
+)
 from calibrators.planning.search import Planner, best_bundle, expect, take
 from orthoglide_env.instruments.ballbar import BallbarSpec
 from orthoglide_env.lab.operations import PAPER_SLOTS, TIME, Op
@@ -105,9 +110,7 @@ def test_bound_with_the_ballbar_is_below_a_plan_that_reads_it(bundle_taken, monk
     with_bar = lower_bound(PROTOTYPE, ideal, SIGMA, 1800.0, ("dial", "ballbar"))
     dial = lower_bound(PROTOTYPE, ideal, SIGMA, 1800.0)
     model = bound_model(PROTOTYPE, ideal, SIGMA, False, True)
-    actions = [{"op": s.op, "rho": s.rho, "stand": s.stand, "slot": s.slot,
-                **operation_keys(s)} for s in ops]
-    counts = plan_counts(model, PROTOTYPE, PAPER_SLOTS, (True,) * 6, actions)
+    counts = plan_counts(model, PROTOTYPE, PAPER_SLOTS, (True,) * 6, step_actions(ops))
     # Every bar reading of the plan is a candidate of the bound's.
     assert counts[model.laser == bound.BAR].sum() == len(bundle.path)
     assert with_bar.bound_mm <= np.sqrt(model.value(counts))

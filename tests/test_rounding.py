@@ -11,7 +11,7 @@ from calibrators.agents import optimal
 from calibrators.agents.optimal import fixed_plan
 from calibrators.planning import bound, rounding
 from calibrators.planning.bound import bound_model, lower_bound, plan_counts
-from calibrators.planning.instruments import operation_keys, planned_bundles
+from calibrators.planning.instruments import planned_bundles, step_actions
 from calibrators.planning.rounding import apportion, plan_bundles, relaxed_plan
 from calibrators.planning.search import Planner
 from orthoglide_env.lab.kept import Kept
@@ -78,9 +78,7 @@ def test_a_rounded_plan_lies_above_the_bound_and_near_it(half_hour_plan, half_ho
     assert [b.instrument for b in bundles] == ["ballbar"]
     found = half_hour_design.bound
     model = bound_model(PROTOTYPE, IDEAL, SIGMA, False, True)
-    actions = [{"op": s.op, "rho": s.rho, "stand": s.stand, "slot": s.slot,
-                **operation_keys(s)} for s in steps]
-    counts = plan_counts(model, PROTOTYPE, PAPER_SLOTS, STANDS, actions)
+    counts = plan_counts(model, PROTOTYPE, PAPER_SLOTS, STANDS, step_actions(steps))
     # Every bar reading of the rounded plan is a candidate of the bound's.
     assert counts[model.laser == bound.BAR].sum() == len(bundles[0].path)
     error = float(np.sqrt(model.value(counts)))

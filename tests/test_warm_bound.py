@@ -11,6 +11,7 @@ from calibrators.agents import optimal
 from calibrators.agents.optimal import fixed_plan
 from calibrators.planning import warm_bound
 from calibrators.planning.bound import best_design, lab_model, plan_hits
+from calibrators.planning.instruments import step_actions
 from calibrators.planning.warm_bound import (
     plan_value,
     steps_value,
@@ -71,9 +72,8 @@ def test_a_plan_is_above_it_on_its_model(held):
     design, warm = held
     steps, _ = fixed_plan(PAPER_SLOTS, (True,) * len(PAPER_SLOTS), SIGMA, BUDGET, PROTOTYPE,
                           LAB)
-    actions = [{"op": s.op, "rho": s.rho, "stand": s.stand, "slot": s.slot} for s in steps]
     hits = plan_hits(warm.models[0], PROTOTYPE, PAPER_SLOTS, (True,) * len(PAPER_SLOTS),
-                     actions)
+                     step_actions(steps))
     times = np.array([s.time_s for s in steps])
     error = float(np.sqrt(plan_value(warm, hits, times)))
     # optimal's plan is a plan of the lab, its readings at their bins' times.

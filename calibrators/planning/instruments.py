@@ -42,6 +42,7 @@ bars' arcs are not candidates.
 from __future__ import annotations
 
 import copy
+from collections.abc import Iterable
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import NamedTuple
@@ -96,6 +97,13 @@ def operation_keys(step: NamedTuple) -> dict[str, int]:
     if isinstance(step, InstrumentOperation) and step.op == Op.PIVOT:
         return {"bar": step.bar}
     return {}
+
+
+def step_actions(steps: Iterable[NamedTuple]) -> list[dict[str, object]]:
+    """The lab env's actions of a planner's ``steps``, as the bound's counters read them
+    (:func:`~calibrators.planning.bound.plan_counts`)."""
+    return [{"op": s.op, "rho": s.rho, "stand": s.stand, "slot": s.slot,  # type: ignore[attr-defined]
+             **operation_keys(s)} for s in steps]
 
 
 def conditions_or_default(conditions: Conditions | None) -> Conditions:

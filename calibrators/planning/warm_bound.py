@@ -71,7 +71,7 @@ from calibrators.planning.bound import (
     problems,
     start_slots,
 )
-from calibrators.planning.instruments import bar_layout, operation_keys
+from calibrators.planning.instruments import bar_layout, step_actions
 from orthoglide_env.instruments import ballbar, interferometer
 from orthoglide_env.lab.operations import PAPER_SLOTS
 from orthoglide_env.lab.slot_table import slot_table
@@ -311,7 +311,5 @@ def steps_value(warm: WarmModels, design: MachineDesign, slots: tuple[int, ...],
                 engaged: tuple[bool, ...], steps: tuple[PlannedOperation, ...]) -> float:
     """:func:`plan_value` (mm^2) of a planner's ``steps`` from stands at ``slots`` with
     plungers ``engaged``, each reading at its step's planned time."""
-    actions = [{"op": s.op, "rho": s.rho, "stand": s.stand, "slot": s.slot,
-                **operation_keys(s)} for s in steps]
-    hits = plan_hits(warm.models[0], design, slots, engaged, actions)
+    hits = plan_hits(warm.models[0], design, slots, engaged, step_actions(steps))
     return plan_value(warm, hits, np.array([s.time_s for s in steps]))
