@@ -136,11 +136,11 @@ def main() -> None:
         parser.error(str(error))
     if not 0 <= args.exhaustive <= args.greedy:
         parser.error("--exhaustive must be between 0 and --greedy")
-    try:
-        given = [tuple(sorted(SLOT_NAMES.index(n) for n in text.split(",")))
-                 for text in args.sets.split(";") if text]
-    except ValueError as error:
-        parser.error(f"--sets names a slot not in the catalogue: {error}")
+    given = [text.split(",") for text in args.sets.split(";") if text]
+    if unknown := sorted({n for names in given for n in names} - set(SLOT_NAMES)):
+        parser.error(f"--sets names slots not in the catalogue: {', '.join(unknown)} "
+                     f"(e.g. {SLOT_NAMES[0]})")
+    given = [tuple(sorted(SLOT_NAMES.index(n) for n in names)) for names in given]
     conditions = Conditions(name)
     sigma = dial_weighting(args)
     relaxed = best_design(PROTOTYPE, conditions, sigma, budget, owned)
