@@ -12,10 +12,10 @@ import pytest
 import orthoglide_env
 from calibrators.agents import get_agent
 from calibrators.agents.instrument_first import InstrumentFirst
-from calibrators.agents.iso230 import drive_steps, least_budget_s, programme_seconds
+from calibrators.agents.iso230 import least_budget_s, programme_seconds
 from calibrators.study.episodes import agent_rng, machine_seed, run_episode
 from orthoglide_env.instruments.interferometer import InterferometerAxis
-from orthoglide_env.lab.operations import PAPER_SLOTS, Op
+from orthoglide_env.lab.operations import PAPER_SLOTS
 from orthoglide_env.model.design import PROTOTYPE
 
 V3 = orthoglide_env.LAB_V3_ENV_ID
@@ -57,25 +57,21 @@ def test_iso230_2s_gauges_read_every_leg_where_they_read_two():
     assert len(after) == len(PAPER_SLOTS), after
 
 
-def test_iso230_2s_gauges_leave_the_laser_unread_in_v4():
+def test_iso230_2s_gauges_read_the_laser_at_every_move_in_v4():
     """In ``OrthoglideLab-v4`` (the lab ``compare`` makes for the interferometer) the
-    laser's readings on moves are the programme's alone: the gauges' part that follows,
-    played as ``compare`` plays it (:func:`run_episode`), leaves the laser it left set up
-    unread on its moves, which pay no dwell (a re-mount's reading at Zero reads it, as in
-    every version); in v3 every one of them reads it."""
-    readings = {}
+    gauges' part that follows the programme, ``active`` (``laser_at_every_move``: its refits
+    use those readings), still reads the laser it left set up at every move, as in v3: the
+    episode, played as ``compare`` plays it (:func:`run_episode`), is v3's record for
+    record, and the laser is read after the programme at postures other than Zero."""
+    episodes = {}
     for env_id in (V3, orthoglide_env.LAB_V4_ENV_ID):
         env = gym.make(env_id, backend="exact", conditions="ideal", errors="realistic",
                        instruments=["dial", "interferometer"], budget_s=3600.0)
         agent = get_agent("iso230-2")
-        episode = run_episode(env, agent, machine_seed(1, 0))
-        readings[env_id] = [r for r in episode.records if isinstance(r.spec, InterferometerAxis)]
-    # Every move of the programme after the first set-up reads it, and its set-ups.
-    programme = drive_steps(len(PAPER_SLOTS), PROTOTYPE, agent.runs)
-    first = next(i for i, s in enumerate(programme) if s["op"] == Op.ALIGN)
-    read = sum(s["op"] in (Op.MOVE, Op.ALIGN) for s in programme[first:])
+        episodes[env_id] = run_episode(env, agent, machine_seed(1, 0)).records
+    v3, v4 = episodes[V3], episodes[orthoglide_env.LAB_V4_ENV_ID]
+    assert [(r.mounting, r.rho, r.reading, r.time_s) for r in v4] == \
+        [(r.mounting, r.rho, r.reading, r.time_s) for r in v3]
     end = programme_seconds(PROTOTYPE, len(PAPER_SLOTS), agent.runs)
-    laser = readings[orthoglide_env.LAB_V4_ENV_ID]
-    assert sum(r.time_s <= end + 1e-6 for r in laser) == read
-    assert all(r.rho == (0.0, 0.0, 0.0) for r in laser[read:])
-    assert any(r.rho != (0.0, 0.0, 0.0) for r in readings[V3][read:])
+    assert any(isinstance(r.spec, InterferometerAxis) and r.time_s > end + 1e-6
+               and r.rho != (0.0, 0.0, 0.0) for r in v4)
