@@ -4,7 +4,7 @@ planner's criterion and on the bound's own model, over the bound.
     python benchmarks/plan_gap.py [--conditions lab] [--budget 3600]
                                   [--instruments dial,ballbar] [--sigma 0.02]
                                   [--resolution 0.01] [--warm-bins 6 [--no-warm-bound]]
-                                  [--stay]
+                                  [--stay] [--laser-at-every-move]
 
 ``optimal`` (:func:`calibrators.agents.optimal.fixed_plan`) makes the greedy plan and, in
 a lab that owns the interferometer or the ballbar, a plan from each rounded design
@@ -27,7 +27,10 @@ terms but the lead error, so a plan whose ratio here is near 1 and whose realise
 the stands' drift) are unknown, its readings in K bins of time
 (:mod:`calibrators.planning.warm_bound`), over that bound (with ``--no-warm-bound``, the
 value alone: ``optimal`` keeps its plan by it).  With ``--stay`` every plan is made
-without re-mounts, as ``optimal-stay`` makes them.  The
+without re-mounts, as ``optimal-stay`` makes them.  The plans are for the lab the comparisons play
+(``OrthoglideLab-v4``: a plan reads the laser on its laser bundles only, and its other
+moves pay no dwell); with ``--laser-at-every-move`` for a lab whose every move reads a
+laser set up and waits its dwell (``OrthoglideLab-v1`` to ``-v3``).  The
 prototype, the paper's stands; no lab episodes (a few CPU-minutes at three hours).
 """
 
@@ -85,6 +88,9 @@ def main() -> None:
     dial_arguments(parser)
     parser.add_argument("--stay", action="store_true",
                         help="plans that never re-mount a stand (optimal-stay's)")
+    parser.add_argument("--laser-at-every-move", action="store_true",
+                        help="plans for a lab whose every move reads the laser set up "
+                             "(OrthoglideLab-v1 to -v3)")
     parser.add_argument("--no-warm-bound", action="store_true",
                         help="with --warm-bins, the plans on that model without its bound "
                              "(CPU-minutes with the laser at three hours)")
@@ -98,10 +104,12 @@ def main() -> None:
     model = bound_model(PROTOTYPE, conditions, sigma, "interferometer" in owned,
                         *(("ballbar" in owned,) if "ballbar" in owned else ()))
     instruments = tuple(n for n in owned if n != "dial")
+    asked = not args.laser_at_every_move
 
     def opened() -> Planner:
         planner = Planner(list(slots), list(engaged), sigma, args.budget, design=PROTOTYPE,
-                          conditions=conditions, instruments=instruments)
+                          conditions=conditions, instruments=instruments,
+                          laser_asked=asked)
         planner.expect_readings()
         return planner
 
@@ -119,7 +127,8 @@ def main() -> None:
           "readings | set-ups (min), re-mounts |" + (" timed terms unknown µm, x its bound |"
                                                     if warm else ""))
     print("|---|---|---|---|---|---|" + ("---|" if warm else ""))
-    groups = plan_bundles(slots, sigma, args.budget, PROTOTYPE, conditions, instruments)
+    groups = plan_bundles(slots, sigma, args.budget, PROTOTYPE, conditions, instruments,
+                          asked)
     rounded = [(f"the bound's design{stands}: " + " + ".join(b.label for b in bundles), bundles)
                for stands, bundles in (
                    ("", bound_bundles(PROTOTYPE, conditions, sigma, args.budget, owned)),

@@ -32,6 +32,8 @@ LAB_V1_ENV_ID = "OrthoglideLab-v1"
 LAB_V2_ENV_ID = "OrthoglideLab-v2"
 #: The lab whose spaces also carry the step gauge (its ``place`` operation and reading).
 LAB_V3_ENV_ID = "OrthoglideLab-v3"
+#: The lab whose moves choose whether to read the interferometer (the action's ``laser``).
+LAB_V4_ENV_ID = "OrthoglideLab-v4"
 FLAT_LAB_ENV_ID = "OrthoglideLabFlat-v0"
 DESIGN_LAB_ENV_ID = "OrthoglideLabDesign-v0"
 #: The design view whose observation also tells how the present posture has been read.
@@ -73,6 +75,12 @@ def _register(gymnasium: ModuleType) -> None:
         gymnasium.register(
             id=LAB_V3_ENV_ID, entry_point="orthoglide_env.envs.lab:OrthoglideLabV3Env",
             vector_entry_point="orthoglide_env.envs.lab_vector:OrthoglideLabV3VectorEnv")
+    if LAB_V4_ENV_ID not in gymnasium.registry:
+        # v4 lets a move leave the laser unread; v3 stays the lab of the step gauge alone.
+        warnings.filterwarnings("ignore", message=f".*{LAB_V3_ENV_ID} is out of date")
+        gymnasium.register(
+            id=LAB_V4_ENV_ID, entry_point="orthoglide_env.envs.lab:OrthoglideLabV4Env",
+            vector_entry_point="orthoglide_env.envs.lab_vector:OrthoglideLabV4VectorEnv")
     if FLAT_LAB_ENV_ID not in gymnasium.registry:
         # The lab with one Box of actions and one of observations, for off-the-shelf
         # learners.
@@ -125,4 +133,4 @@ elif not any(isinstance(f, _RegisterOnImport) for f in sys.meta_path):
 
 __all__ = ["DESIGN_LAB_ENV_ID", "DESIGN_LAB_V1_ENV_ID", "DESIGN_LAB_V2_ENV_ID", "ENV_ID",
            "FLAT_LAB_ENV_ID", "LAB_ENV_ID", "LAB_V1_ENV_ID", "LAB_V2_ENV_ID", "LAB_V3_ENV_ID",
-           "MachineDesign"]
+           "LAB_V4_ENV_ID", "MachineDesign"]

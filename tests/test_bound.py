@@ -23,6 +23,7 @@ from calibrators.planning.bound import (
     bound_model,
     lower_bound,
     plan_counts,
+    plan_hits,
     solve,
 )
 from calibrators.planning.instruments import step_actions
@@ -258,9 +259,9 @@ def _seconds_needed(model: BoundModel, counts: np.ndarray, stands: int, seconds:
 
 def _random_plan(env: gym.Env, model: BoundModel, seed: int) -> tuple[list[dict], float, set]:
     """A random plan of the lab's own operations played on ``env`` (moves to candidate
-    postures, lever flicks, re-mounts, laser set-ups, the ballbar's pivot and moves round
-    its circle): its accepted actions, the seconds the lab's clock took, and the drives
-    the laser was set up on."""
+    postures, reading the laser set up or not, lever flicks, re-mounts, laser set-ups, the
+    ballbar's pivot and moves round its circle): its accepted actions, the seconds the
+    lab's clock took, and the drives the laser was set up on."""
     rng = np.random.default_rng(seed)
     env.reset(seed=seed)
     table = slot_table(PROTOTYPE)
@@ -278,7 +279,9 @@ def _random_plan(env: gym.Env, model: BoundModel, seed: int) -> tuple[list[dict]
                           p=[0.8, 0.06, 0.03, 0.06, 0.05])
         plan: list[dict] = []
         if kind == "move":
-            plan = [{**stand, "op": Op.MOVE, "rho": table.postures[rng.choice(touched)]}]
+            # v4's moves may leave the laser unread (no dwell, no reading).
+            plan = [{**stand, "op": Op.MOVE, "rho": table.postures[rng.choice(touched)],
+                     "laser": int(rng.integers(2))}]
         elif kind == "flick":
             plan = [{**stand, "op": int(rng.choice([Op.LIFT, Op.ENGAGE])),
                      "stand": int(rng.integers(len(held)))}]
@@ -299,11 +302,11 @@ def _random_plan(env: gym.Env, model: BoundModel, seed: int) -> tuple[list[dict]
                     + [{**stand, "op": Op.MOVE, "rho": p} for p in points]
                     + [{**stand, "op": Op.ENGAGE, "stand": 0}])
         for action in plan:
-            *_, info = env.step({k: (np.asarray(v, dtype=float) if k == "rho" else int(v))
-                                 for k, v in action.items()})
+            obs, *_, info = env.step({k: (np.asarray(v, dtype=float) if k == "rho" else int(v))
+                                      for k, v in action.items()})
             if info["refused"]:
                 continue
-            actions.append(action)
+            actions.append({**action, "read": int(obs["interferometer_valid"][0])})
             if action["op"] == Op.REMOUNT:
                 held[action["stand"]] = action["slot"]
             if action["op"] == Op.ALIGN:
@@ -322,12 +325,18 @@ def test_plans_of_the_labs_operations_lie_in_the_polytope_and_above_the_bound(qu
     # held against its own set-ups' is the stronger check, in three solves.
     model = bound_model(PROTOTYPE, LAB, SIGMA, True, True)
     stands = len(PAPER_SLOTS)
-    env = gym.make(orthoglide_env.LAB_V3_ENV_ID, backend="exact", conditions="lab",
+    env = gym.make(orthoglide_env.LAB_V4_ENV_ID, backend="exact", conditions="lab",
                    instruments=["dial", "interferometer", "ballbar"], budget_s=1e6)
     try:
         for seed in (1, 2, 3):
             actions, seconds, drives = _random_plan(env, model, seed)
             counts = plan_counts(model, PROTOTYPE, PAPER_SLOTS, (True,) * stands, actions)
+            # The moves' laser readings are counted as the lab took them, the moves that
+            # left it unread left out.
+            hits = plan_hits(model, PROTOTYPE, PAPER_SLOTS, (True,) * stands, actions)
+            assert sum(actions[i]["op"] == Op.MOVE for i in hits[model.laser[hits[:, 1]] >= 0,
+                                                                  0]) == sum(
+                a["read"] for a in actions if a["op"] == Op.MOVE), seed
             pivot = any(a["op"] == Op.PIVOT for a in actions)
             left = (seconds - bound.setup_seconds(tuple(drives))
                     - (TIME.ballbar_setup_s if pivot else 0.0)

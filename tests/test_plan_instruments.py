@@ -11,10 +11,11 @@ from conftest import DIAL_SIGMA as SIGMA
 
 import orthoglide_env
 from calibrators.agents.base import action
-from calibrators.agents.optimal import lab_setup, move_dwell_s
+from calibrators.agents.optimal import lab_setup, laser_asked, move_dwell_s
 from calibrators.planning import bound
 from calibrators.planning.bound import bound_model, lower_bound, plan_counts
 from calibrators.planning.instruments import (
+    bundles,
     marginal,
     operation_keys,
     planned_bundles,
@@ -22,6 +23,7 @@ from calibrators.planning.instruments import (
 )
 from calibrators.planning.search import Planner, best_bundle, expect, take
 from orthoglide_env.instruments.ballbar import BallbarSpec
+from orthoglide_env.instruments.interferometer import InterferometerAxis
 from orthoglide_env.lab.operations import PAPER_SLOTS, TIME, Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
@@ -185,3 +187,42 @@ def test_a_plan_started_with_the_laser_set_up_moves_on_the_lab_s_clock():
         unaware.move(int(posture), unaware.priced_moves())
         moved += 1
     assert moved >= 3
+
+
+def test_a_plan_for_v4_reads_the_laser_on_its_run_only():
+    """In ``OrthoglideLab-v4`` a plan reads the laser on its bundle's run (its set-up at
+    Zero and every target) and leaves it unread on the dials' moves after it, which pay no
+    dwell: the plan's clock is the lab's, and the bound's counter counts the laser
+    readings the lab took."""
+    env = gym.make(orthoglide_env.LAB_V4_ENV_ID, errors="nominal", backend="exact",
+                   conditions="ideal", instruments=["dial", "interferometer"])
+    obs, _ = env.reset(seed=0)
+    assert laser_asked(env.unwrapped)
+    slots, engaged, sigma, budget, design, conditions = lab_setup(env.unwrapped, obs)
+    planner = Planner(list(slots), list(engaged), sigma, budget, design=design,
+                      conditions=conditions, instruments=("interferometer",),
+                      dwell_s=move_dwell_s(obs, True), laser_asked=True)
+    bundle = next(b for b in bundles(design, ("interferometer",)) if b.axis == 2)
+    ops = take(planner, bundle)
+    assert planner.dwell_s == 0.0
+    for posture in np.flatnonzero(planner.table.postures[:, 2] != 0)[::60]:
+        priced = planner.priced_moves()
+        if np.array_equal(priced.engaged[:, posture], planner.engaged):
+            planner.move(int(posture), priced)
+    played = list(ops) + [s for s in planner.steps if s.op == Op.MOVE and s not in ops]
+    assert len(played) > len(ops) + 2
+    start = float(obs["time"][0])
+    valid = []
+    for step in played:
+        obs, _, _, _, info = env.step(action(step.op, step.rho, step.stand, step.slot,
+                                             **operation_keys(step)))
+        assert not info["refused"], step
+        if step.op == Op.MOVE:
+            valid.append(int(obs["interferometer_valid"][0]))
+    assert float(obs["time"][0]) - start == pytest.approx(planner.time_s, abs=1e-6)
+    runs = len(bundle.path)
+    assert valid == [1] * runs + [0] * (len(valid) - runs)
+    model = bound_model(PROTOTYPE, Conditions("ideal"), SIGMA, True)
+    counts = plan_counts(model, PROTOTYPE, slots, engaged, step_actions(played))
+    taken = [r for r in env.unwrapped.records if isinstance(r.spec, InterferometerAxis)]
+    assert counts[model.laser >= 0].sum() == len(taken) == runs + 1

@@ -167,8 +167,10 @@ def test_check_env_is_clean_with_the_step_gauge():
         warnings.simplefilter("always")
         check_env(gym.make(V3, backend="exact", conditions="lab",
                            instruments=OWNED).unwrapped, skip_render_check=True)
-    # The one warning left, as for v0 to v2: joint targets are in mm, not a normalised box.
-    messages = {str(w.message) for w in caught}
+    # The one warning left, as for v0 to v2: joint targets are in mm, not a normalised box
+    # (besides Gymnasium's note that v4, the lab whose moves may leave the laser unread,
+    # exists).
+    messages = {str(w.message) for w in caught if "is out of date" not in str(w.message)}
     assert all("symmetric and normalized" in m for m in messages), messages
 
 

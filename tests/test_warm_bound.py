@@ -102,7 +102,7 @@ def test_optimal_keeps_the_plan_the_timed_terms_price_least():
     judged = fixed_plan(*setup, LAB, instruments=instruments, warm_judged=True)
     planned = fixed_plan(*setup, LAB, instruments=instruments)
     # Both judges chose among the same candidates, made once.
-    plans = optimal._CANDIDATES.made()[(*setup, LAB, "I", True, instruments, 0.0)]
+    plans = optimal._CANDIDATES.made()[(*setup, LAB, "I", True, instruments, 0.0, False)]
     assert len(plans) >= 2  # the greedy plan and the rounded design's
     assert any(judged is p for p in plans) and any(planned is p for p in plans)
     warm = warm_models(PROTOTYPE, LAB, SIGMA, setup[3], ("dial", *instruments))

@@ -377,7 +377,7 @@ def test_a_handed_plan_serves_only_its_own_set_up(monkeypatch: pytest.MonkeyPatc
     sweep's workers) is the plan of a set-up equal to its key in every argument; a set-up
     one argument away is planned as before."""
     setup = (tuple(PAPER_SLOTS), (True,) * len(PAPER_SLOTS), SIGMA, 60.0, PROTOTYPE, LAB,
-             "I", True, (), 0.0, False)
+             "I", True, (), 0.0, False, False)
     handed = ((PlannedOperation(Op.STOP, time_s=0.0),), 1.0)  # not what planning makes
     # The process's other plans kept out.
     monkeypatch.setattr(optimal, "_PLANS", Kept(optimal.PLANS_KEPT))

@@ -36,7 +36,13 @@ import gymnasium as gym
 import numpy as np
 
 from calibrators.agents.base import Agent, action, register
-from calibrators.agents.optimal import fixed_plan, lab_setup, move_dwell_s, owned_instruments
+from calibrators.agents.optimal import (
+    fixed_plan,
+    lab_setup,
+    laser_asked,
+    move_dwell_s,
+    owned_instruments,
+)
 from calibrators.estimators.base import Estimator
 from calibrators.estimators.catalogue import for_study
 from calibrators.planning.belief import (
@@ -107,6 +113,13 @@ class ActiveAgent(Agent):
     #: Whether the instruments the lab owns beyond its dials are among the options (a
     #: reference procedure that plays its instrument first leaves the rest to the dials).
     plans_instruments: bool = True
+    #: Whether its moves read a laser that is set up at every move, also in a lab that lets
+    #: a move leave it unread (``OrthoglideLab-v4``).  Its refits use those readings (the
+    #: drift, the drive's sections its runs leave, the scale) though its planner prices
+    #: them at nothing: leaving them unread made its fits worse per machine, 1.26 [1.05,
+    #: 1.39] with the three instruments at one hour under ``lab`` (docs/instruments.md, "A
+    #: move that does not wait for the laser").
+    laser_at_every_move: bool = True
 
     def reset(self, env: gym.Env, observation: dict[str, np.ndarray],
               rng: np.random.Generator) -> None:
@@ -114,19 +127,20 @@ class ActiveAgent(Agent):
         setup = lab_setup(self.env, observation, self.reserved_s)
         slots, engaged, sigma, budget, design, conditions = setup
         owned = owned_instruments(self.env) if self.plans_instruments else ()
-        dwell_s, start = move_dwell_s(observation), float(observation["time"][0])
+        asked = laser_asked(self.env) and not self.laser_at_every_move
+        dwell_s, start = move_dwell_s(observation, asked), float(observation["time"][0])
         self.planner = Planner(list(slots), list(engaged), sigma, budget + start,
                                criterion=self.criterion, design=design, conditions=conditions,
-                               instruments=owned, dwell_s=dwell_s)
+                               instruments=owned, dwell_s=dwell_s, laser_asked=asked)
         steps, _ = fixed_plan(*setup, criterion=self.criterion, instruments=owned,
-                              dwell_s=dwell_s)
+                              dwell_s=dwell_s, laser_asked=asked)
         # The fixed plan's clock starts at 0 where the lab's reads ``start``: after a
         # reference procedure's programme, its re-mounts and bundles are due that much later.
         self.remounts = [s._replace(time_s=start + s.time_s) for s in steps
                          if s.op == Op.REMOUNT]
         # The instruments' bundles, taken when and as the fixed plan takes them (as its
         # re-mounts are); the operations of the one under way left, and its first record.
-        relaxed = plan_bundles(slots, sigma, budget, design, conditions, owned)
+        relaxed = plan_bundles(slots, sigma, budget, design, conditions, owned, asked)
         self.bundles = [(start + t, b) for t, b in planned_bundles(steps, design, owned, tuple(
             b for group in relaxed for b in group))] if owned else []
         self.bundle: Bundle | None = None

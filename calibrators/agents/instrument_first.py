@@ -47,7 +47,8 @@ def programme_seconds(steps: list[dict[str, Any]]) -> float:
     """The lab time (s) a fixed programme ``steps`` takes from a reset at Zero, charged as
     the lab charges it (:func:`~orthoglide_env.lab.clock.travel_seconds` on the time
     table): each lift and engagement a flick; a move its drive, settle and dwell (the
-    interferometer's while one is set up, the probe's while it is on a step gauge); an
+    interferometer's while one is set up and the move reads it, the probe's while it is on
+    a step gauge); an
     interferometer's set-up its drive to Zero, its work and, the first, the soak; a step
     gauge's set-up its drive and work.  One clock for the procedures' run counts and the
     lab's charge: a count summed by hand drifts from it as the programme changes."""
@@ -60,7 +61,8 @@ def programme_seconds(steps: list[dict[str, Any]]) -> float:
             continue
         goal = np.zeros(3) if op == Op.ALIGN else np.asarray(step["rho"], dtype=float)
         seconds += float(travel_seconds(np.array([op]), rho[None], goal[None], False,
-                                        laser=np.array([aligned]),
+                                        laser=np.array([aligned and bool(step.get("laser",
+                                                                                  1))]),
                                         soak=np.array([not aligned]),
                                         probe=np.array([probing]))[0])
         rho, aligned = goal, aligned or op == Op.ALIGN

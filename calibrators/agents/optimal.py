@@ -42,13 +42,16 @@ def fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
                budget_s: float, design: MachineDesign,
                conditions: Conditions | None = None, criterion: str = "I",
                remounts: bool = True, instruments: tuple[str, ...] = (), dwell_s: float = 0.0,
-               warm_judged: bool = False) -> tuple[tuple[PlannedOperation, ...], float]:
+               warm_judged: bool = False, laser_asked: bool = False
+               ) -> tuple[tuple[PlannedOperation, ...], float]:
     """The greedy plan from stands at ``slots`` (-1: none) with plungers ``engaged`` on a
     machine of ``design`` in a lab of ``conditions`` (None: ideal) that owns
     ``instruments`` (the interferometer's and the ballbar's bundles are among the plan's
     options: :mod:`calibrators.planning.instruments`), re-mounting stands or not, every
     move ``dwell_s`` longer than its drive and settle from the start (:func:`move_dwell_s`),
-    and the TCP error after rigid motion it predicts (mm).  In a lab that owns the interferometer
+    in a lab whose moves read the interferometer only where they ask (``laser_asked``,
+    ``OrthoglideLab-v4``: :func:`laser_asked`) or at every move, and the TCP error after
+    rigid motion it predicts (mm).  In a lab that owns the interferometer
     or the ballbar, the plans that first take a continuous design of the bound's model
     rounded to bundles (:mod:`calibrators.planning.rounding`) are made too (criterion
     ``I``), and the one kept that predicts the least error: on the planner's criterion,
@@ -62,7 +65,7 @@ def fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
     # Every argument by position: a cache keyed on the call's form made a second plan
     # for the same set-up when a caller left out a default another passed.
     made = (tuple(slots), tuple(engaged), sigma, budget_s, design, conditions, criterion,
-            remounts, tuple(instruments), float(dwell_s))
+            remounts, tuple(instruments), float(dwell_s), bool(laser_asked))
     key = (*made, warm_judged and _judged_apart(conditions, criterion, instruments))
     return _PLANS.get(key, lambda: _fixed_plan(*key))
 
@@ -106,10 +109,11 @@ def _judged_apart(conditions: Conditions | None, criterion: str,
 def _fixed_plan(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
                 budget_s: float, design: MachineDesign, conditions: Conditions | None,
                 criterion: str, remounts: bool, instruments: tuple[str, ...], dwell_s: float,
-                warm_judged: bool) -> tuple[tuple[PlannedOperation, ...], float]:
+                laser_asked: bool, warm_judged: bool
+                ) -> tuple[tuple[PlannedOperation, ...], float]:
     """:func:`fixed_plan`, its arguments all given, made."""
     made = (slots, engaged, sigma, budget_s, design, conditions, criterion, remounts,
-            instruments, dwell_s)
+            instruments, dwell_s, laser_asked)
     plans = _CANDIDATES.get(made, lambda: _candidate_plans(*made))
     if not warm_judged:
         return min(plans, key=lambda plan: plan[1])  # the first of the least, as ever
@@ -143,21 +147,22 @@ def warm_judged_plan(plans: tuple[tuple[tuple[PlannedOperation, ...], float], ..
 def _candidate_plans(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: float,
                      budget_s: float, design: MachineDesign, conditions: Conditions | None,
                      criterion: str, remounts: bool, instruments: tuple[str, ...],
-                     dwell_s: float) -> tuple[tuple[tuple[PlannedOperation, ...], float], ...]:
+                     dwell_s: float, laser_asked: bool
+                     ) -> tuple[tuple[tuple[PlannedOperation, ...], float], ...]:
     """The plans :func:`fixed_plan` chooses among, each with its predicted error (mm): the
     greedy plan, then one per rounded design (:func:`~calibrators.planning.rounding.
     plan_bundles`, criterion ``I``)."""
     def opened() -> Planner:
         planner = Planner(list(slots), list(engaged), sigma, budget_s, criterion=criterion,
                           design=design, conditions=conditions, instruments=instruments,
-                          dwell_s=dwell_s)
+                          dwell_s=dwell_s, laser_asked=laser_asked)
         planner.expect_readings()  # the lab reads every stand as the episode opens
         return planner
 
     planner = opened()
     plans = [(tuple(greedy_plan(planner, remounts=remounts)), planner.predicted_rigid_mm())]
-    for relaxed in plan_bundles(slots, sigma, budget_s, design, conditions, instruments
-                                ) if criterion == "I" else ():
+    for relaxed in plan_bundles(slots, sigma, budget_s, design, conditions, instruments,
+                                laser_asked) if criterion == "I" else ():
         # A design of the bound's model rounded, the dials greedy around it.
         planner = opened()
         plans.append((tuple(relaxed_plan(planner, relaxed, remounts)),
@@ -179,16 +184,26 @@ def lab_setup(env: gym.Env, observation: dict[str, np.ndarray], reserved_s: floa
             env.conditions)
 
 
-def move_dwell_s(observation: dict[str, np.ndarray]) -> float:
-    """Seconds every move takes on top of its drive and settle in the lab as
+def move_dwell_s(observation: dict[str, np.ndarray], laser_asked: bool = False) -> float:
+    """Seconds every move of the dials takes on top of its drive and settle in the lab as
     ``observation`` shows it, the lab's charge (:func:`~orthoglide_env.lab.clock.
     move_dwell_seconds`): the laser's dwell while the interferometer is set up (a
-    reference procedure leaves it set up, :mod:`calibrators.agents.iso230`).  The ballbar
+    reference procedure leaves it set up, :mod:`calibrators.agents.iso230`), but in a lab
+    whose moves ask (``laser_asked``: :func:`laser_asked`), where they leave it unread.
+    The ballbar
     and the step gauge's probe come off at any operation but a move, and the procedures
     that read them end with one (:func:`~calibrators.agents.instrument_first.
     back_to_the_gauges`); no planner plays in a lab with the tracker."""
     axis = observation.get("interferometer_axis")
-    return float(move_dwell_seconds(laser=axis is not None and int(np.ravel(axis)[0]) < 3))
+    return float(move_dwell_seconds(laser=not laser_asked and axis is not None
+                                    and int(np.ravel(axis)[0]) < 3))
+
+
+def laser_asked(env: gym.Env) -> bool:
+    """Whether the lab's moves read the interferometer only where they ask
+    (``OrthoglideLab-v4``'s action key ``laser``): a plan for it reads the laser on its
+    laser bundles only, and its dials' moves pay no dwell."""
+    return "laser" in env.action_space.spaces
 
 
 def owned_instruments(env: gym.Env) -> tuple[str, ...]:
@@ -212,14 +227,16 @@ class OptimalAgent(PlannedAgent):
     warm_judged = True
 
     def make_plan(self, observation: dict[str, np.ndarray]) -> list[dict[str, Any]]:
+        asked = laser_asked(self.env)
         steps, self.predicted_rigid_mm = fixed_plan(*lab_setup(self.env, observation,
                                                                self.reserved_s),
                                                     criterion=self.criterion,
                                                     remounts=self.remounts,
                                                     instruments=owned_instruments(self.env)
                                                     if self.plans_instruments else (),
-                                                    dwell_s=move_dwell_s(observation),
-                                                    warm_judged=self.warm_judged)
+                                                    dwell_s=move_dwell_s(observation, asked),
+                                                    warm_judged=self.warm_judged,
+                                                    laser_asked=asked)
         return [action(s.op, s.rho, s.stand, s.slot, **operation_keys(s)) for s in steps]
 
 

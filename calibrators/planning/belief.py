@@ -69,13 +69,16 @@ SPREAD_SLACK: float = 1e-5
 
 class PlannedOperation(NamedTuple):
     """One lab operation of a plan (the fields of the lab env's action) and the lab time
-    at which the plan starts it."""
+    at which the plan starts it; ``laser``: whether a move reads the interferometer where
+    one is set up and waits its dwell (``OrthoglideLab-v4``'s key; 0 only in a plan for a
+    lab that asks, :attr:`Belief.laser_asked`)."""
 
     op: Op
     rho: tuple[float, float, float] = (0.0, 0.0, 0.0)
     stand: int = 0
     slot: int = 0
     time_s: float = 0.0
+    laser: int = 1
 
 
 @lru_cache(maxsize=64)
@@ -134,12 +137,15 @@ class Belief:
     slot table and scoring grid).  ``conditions``: the lab's world; under ``lab`` or
     ``workshop`` the state also holds the world's unknowns (:mod:`~calibrators.planning.
     world_terms`: drift, backlash, the indicators' curves) and the plan may stop early;
-    None or ``ideal``: the geometry alone.  ``dwell_s``: the seconds every move takes on
-    top of its drive and settle while an instrument stays set up (the lab's
+    None or ``ideal``: the geometry alone.  ``dwell_s``: the seconds every move of the
+    dials takes on top of its drive and settle while an instrument stays set up (the lab's
     :func:`~orthoglide_env.lab.clock.move_dwell_seconds`): 0 from a lab with nothing set
     up, the laser's dwell from one whose interferometer a reference procedure left set
     up (:func:`~calibrators.agents.optimal.move_dwell_s`), and the laser's once a plan
-    sets it up (:func:`~calibrators.planning.search.take`)."""
+    sets it up (:func:`~calibrators.planning.search.take`), unless ``laser_asked``: the
+    lab's moves read the laser, and wait its dwell, only where they ask
+    (``OrthoglideLab-v4``'s action key ``laser``), so the plan's dial moves leave it unread
+    (``laser`` 0) and pay no dwell, and only its laser bundles' moves read it."""
 
     slots: list[int]
     engaged: list[bool]
@@ -152,6 +158,7 @@ class Belief:
     conditions: Conditions | None = None
     instruments: tuple[str, ...] = ()
     dwell_s: float = 0.0
+    laser_asked: bool = False
 
     def __post_init__(self) -> None:
         self.table = slot_table(self.design)

@@ -344,7 +344,8 @@ def plan_counts(model: BoundModel, design: MachineDesign, slots: tuple[int, ...]
     counted per candidate of ``model``: every engaged stand at every posture it moves to or
     is re-mounted or set up at (where its nominal tip touches), and the laser, once set up
     on a drive, at each posture's target along it (its set-up reads at Zero; a target
-    is taken at the nearest candidate), and the ballbar, once its pivot is set up at the
+    is taken at the nearest candidate; a move whose ``laser`` is 0, ``OrthoglideLab-v4``'s,
+    leaves it unread), and the ballbar, once its pivot is set up at the
     model's, at every move until any other operation takes the bar off (a point off the
     candidates counts nothing).  ``f`` of these counts (:meth:`BoundModel.value`) is
     the plan's error on the bound's model, which the bound is below."""
@@ -392,7 +393,7 @@ def plan_hits(model: BoundModel, design: MachineDesign, slots: tuple[int, ...],
             k = dial.get((slot, posture)) if posture is not None and on else None
             if k is not None:
                 hits.append((i, k))
-        if axis >= 0:
+        if axis >= 0 and (op != Op.MOVE or int(step.get("laser", 1))):  # type: ignore[call-overload]
             hits.append((i, model.laser_index(axis, float(rho[axis]))))
     return np.array(hits, dtype=int).reshape(-1, 2)
 

@@ -35,8 +35,10 @@ not carry the lead terms (base-fixed gauges see next to none of them: ``benchmar
 terms.py`` gives 0.00-0.01 of their variance), and a dial move's gain counts the machine's
 errors only, as without instruments; the world's drift, backlash and warm-up do not act
 on an instrument's rows, nor its scale error; a laser left set up reads at every later
-move, which a plan counts in time (its dwell) but not in information; the 100 and 150 mm
-bars' arcs are not candidates.
+move of a lab whose moves do not ask (``OrthoglideLab-v1`` to ``-v3``), which a plan
+counts in time (its dwell) but not in information (in ``OrthoglideLab-v4`` the plan's other
+moves leave it unread: :attr:`~calibrators.planning.belief.Belief.laser_asked`); the 100
+and 150 mm bars' arcs are not candidates.
 """
 
 from __future__ import annotations
@@ -88,14 +90,20 @@ class InstrumentOperation(NamedTuple):
     time_s: float = 0.0
     axis: int = 0
     bar: int = 0
+    laser: int = 1
 
 
 def operation_keys(step: NamedTuple) -> dict[str, int]:
-    """The later version's keys an operation's action needs (none for a dial's)."""
+    """The later version's keys an operation's action needs: an align's ``axis``, a pivot's
+    ``bar``, and ``laser`` 0 on a move that leaves the interferometer unread (only a plan
+    for ``OrthoglideLab-v4`` has one: a move that reads it needs no key there, as in
+    v1-v3, so a plan that reads it at every move plays in every version)."""
     if isinstance(step, InstrumentOperation) and step.op == Op.ALIGN:
         return {"axis": step.axis}
     if isinstance(step, InstrumentOperation) and step.op == Op.PIVOT:
         return {"bar": step.bar}
+    if step.op == Op.MOVE and not step.laser:  # type: ignore[attr-defined]
+        return {"laser": 0}
     return {}
 
 

@@ -11,10 +11,12 @@ around them:
    set-ups, with one clock: a visit to a candidate posture reads the stands mounted
    where the plan starts that touch there safely (:func:`dial_visits`), a reading of the
    bar costs a visit, of the laser a settle and its dwell, and each set-up its lifts and
-   engages (a visit is a settle, and the laser's dwell once it is set up: a plan sets
-   it up first and leaves it).  The bound lets a visit's readings fall at as many
-   postures as it reads stands; a plan's visit is at one posture, where most stands
-   see little, so a design priced so took five times the dials a plan can.  The plan
+   engages (a visit is a settle, and in a lab whose every move reads a laser set up,
+   ``OrthoglideLab-v1`` to ``-v3``, the laser's dwell too: a plan sets it up first and
+   leaves it; where the moves ask, ``-v4``, a visit leaves it unread).  The bound lets a
+   visit's readings fall at as many postures as it reads stands; a plan's visit is at one
+   posture, where most stands see little, so a design priced so took five times the
+   dials a plan can.  The plan
    lifts the plungers while an instrument reads, so unlike the bound's relaxation the
    instruments and the dials do not share visits.
    Solved by the multiplicative algorithm (every reading used gains as much per second
@@ -113,18 +115,21 @@ def dial_visits(model: BoundModel, design: MachineDesign, slots: tuple[int, ...]
 
 
 def sequential_design(model: BoundModel, seconds: float, drives: tuple[int, ...],
-                      pivot: bool, visits: np.ndarray, steps: int = DESIGN_STEPS
-                      ) -> tuple[float, np.ndarray]:
+                      pivot: bool, visits: np.ndarray, steps: int = DESIGN_STEPS,
+                      laser_asked: bool = False) -> tuple[float, np.ndarray]:
     """The continuous design on ``model`` over ``seconds`` of one clock with the laser set
     up on ``drives`` and the bar's pivot or not (see the module), the dials read on
-    ``visits`` (:func:`dial_visits`), after ``steps`` multiplicative steps: its value ``f``
-    (mm^2) and counts (N,) of ``model``'s candidates."""
+    ``visits`` (:func:`dial_visits`), after ``steps`` multiplicative steps, in a lab whose
+    moves read the laser only where they ask (``laser_asked``) or at every move: its value
+    ``f`` (mm^2) and counts (N,) of ``model``'s candidates."""
     instrument = np.flatnonzero(np.isin(model.laser, drives) | ((model.laser == BAR) & pivot))
     postures = np.flatnonzero(visits.any(axis=1))
     read = np.flatnonzero(visits.any(axis=0))
     expected = visits[postures][:, read]  # (V, D): a visit's readings of the dials it reads
-    # A plan sets the laser up first and leaves it set up: every later visit dwells.
-    visit = TIME.settle_and_read_s + (TIME.interferometer_target_s if drives else 0.0)
+    # A plan sets the laser up first and leaves it set up: every later visit dwells, but
+    # where the lab's moves ask.
+    visit = TIME.settle_and_read_s + (TIME.interferometer_target_s
+                                      if drives and not laser_asked else 0.0)
     price = np.concatenate([np.full(len(postures), visit), np.where(
         model.laser[instrument] == BAR, visit,
         TIME.settle_and_read_s + TIME.interferometer_target_s)])
@@ -148,11 +153,12 @@ def sequential_design(model: BoundModel, seconds: float, drives: tuple[int, ...]
 
 @lru_cache(maxsize=8)
 def relaxed_bundles(design: MachineDesign, conditions: Conditions, dial_sigma: float,
-                    budget_s: float, instruments: tuple[str, ...], slots: tuple[int, ...]
-                    ) -> tuple[tuple[Bundle, ...], ...]:
+                    budget_s: float, instruments: tuple[str, ...], slots: tuple[int, ...],
+                    laser_asked: bool = False) -> tuple[tuple[Bundle, ...], ...]:
     """The bundles of the best sequential designs (:func:`sequential_design`) of a lab of
     ``design`` under ``conditions`` with dials of weighting sigma ``dial_sigma`` (mm) on
-    stands at ``slots``, owning ``instruments``, over ``budget_s`` seconds:
+    stands at ``slots``, owning ``instruments``, over ``budget_s`` seconds (its moves
+    reading the laser only where they ask with ``laser_asked``):
     one tuple per choice of set-ups, the :data:`CHOICES_TRIED` of least value first (a
     choice that sets nothing up is the greedy plan's, left out).
 
@@ -173,12 +179,12 @@ def relaxed_bundles(design: MachineDesign, conditions: Conditions, dial_sigma: f
                 - flicks)
 
     ranked = sorted((sequential_design(model, seconds(every[:k], pivot), every[:k], pivot,
-                                       visits, SCREEN_STEPS)[0], every[:k], pivot)
+                                       visits, SCREEN_STEPS, laser_asked)[0], every[:k], pivot)
                     for pivot in ([False, True] if bar else [False])
                     for k in range(len(every) + 1)
                     if (k or pivot) and seconds(every[:k], pivot) > 0)
     return tuple(_bundles(model, design, drives, pivot, sequential_design(
-        model, seconds(drives, pivot), drives, pivot, visits)[1])
+        model, seconds(drives, pivot), drives, pivot, visits, laser_asked=laser_asked)[1])
         for _, drives, pivot in ranked[:CHOICES_TRIED])
 
 
@@ -233,16 +239,18 @@ def bound_bundles(design: MachineDesign, conditions: Conditions, dial_sigma: flo
 
 
 def plan_bundles(slots: tuple[int, ...], sigma: float, budget_s: float, design: MachineDesign,
-                 conditions: Conditions | None, instruments: tuple[str, ...]
-                 ) -> tuple[tuple[Bundle, ...], ...]:
+                 conditions: Conditions | None, instruments: tuple[str, ...],
+                 laser_asked: bool = False) -> tuple[tuple[Bundle, ...], ...]:
     """:func:`relaxed_bundles` of a plan's lab: stands at ``slots`` (-1: none), dials of
     weighting sigma ``sigma`` (mm), ``budget_s`` seconds, ``conditions`` (None: ideal),
-    owning ``instruments``; none where it owns no instrument the bound holds."""
+    owning ``instruments``, its moves reading the laser only where they ask with
+    ``laser_asked``; none where it owns no instrument the bound holds."""
     if not {"interferometer", "ballbar"} & set(instruments):
         return ()
     return relaxed_bundles(design, conditions_or_default(conditions), float(sigma),
                            float(budget_s), ("dial", *instruments),
-                           tuple(int(s) for s in slots if s >= 0))
+                           tuple(int(s) for s in slots if s >= 0),
+                           bool(laser_asked) and "interferometer" in instruments)
 
 
 def relaxed_plan(planner: Planner, bundles: tuple[Bundle, ...], remounts: bool = True

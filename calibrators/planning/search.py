@@ -55,8 +55,9 @@ PLAYED_TOGETHER: int = SCREENED + 1
 #: hold a quarter of the rows.  Without the world nothing is stacked, and holding the
 #: trials only costs memory traffic: they are screened one by one.
 SCREENED_TOGETHER: int = 8
-#: What every move costs on top of its drive and settle once a plan has set the laser up
-#: (s): the lab's charge.
+#: What a move that reads the laser costs on top of its drive and settle (s): the lab's
+#: charge (every move's once a plan has set the laser up, but where the lab's moves ask,
+#: :attr:`~calibrators.planning.belief.Belief.laser_asked`).
 LASER_DWELL_S: float = float(move_dwell_seconds(laser=True))
 #: Processes a re-mount check's screening is spread over (:func:`screening_over`).
 _SCREENING_PROCESSES: int = 1
@@ -149,7 +150,8 @@ class Planner(Pricer):
                 self.steps.append(PlannedOperation(op, stand=k, time_s=clock))
                 clock += TIME.lift_s
         rho = self.table.postures[posture]
-        self.steps.append(PlannedOperation(Op.MOVE, tuple(float(v) for v in rho), time_s=clock))
+        self.steps.append(PlannedOperation(Op.MOVE, tuple(float(v) for v in rho), time_s=clock,
+                                           laser=int(not self.laser_asked)))
         if self.world is not None:
             self.world.moved(self.rho, rho)
         self.engaged = [bool(v) for v in after]
@@ -366,7 +368,9 @@ def operations(planner: Planner, bundle: Bundle) -> tuple[list[InstrumentOperati
     """The lab operations of taking ``bundle`` from the planner's state, each at its lab
     time, and the seconds they take: lift every plunger down, set up, drive the path, take
     the bar off (any operation but a move does), back to Zero and every lifted plunger
-    down again (their zeros were kept)."""
+    down again (their zeros were kept).  A laser's path reads it at every move; a bar's
+    path and the way back read a laser left set up only where the lab's moves do not ask
+    (:attr:`~calibrators.planning.belief.Belief.laser_asked`)."""
     clock = planner.time_s
     kit = planner.kit
     ops: list[InstrumentOperation] = []
@@ -381,24 +385,24 @@ def operations(planner: Planner, bundle: Bundle) -> tuple[list[InstrumentOperati
     for k in down:
         add(Op.LIFT, TIME.lift_s, stand=k)
     here = np.asarray(planner.rho, dtype=float)
-    dwell = planner.dwell_s
+    dwell, laser = planner.dwell_s, int(not planner.laser_asked)
     if bundle.setup == Op.ALIGN:
         soak = 0.0 if kit.soaked else TIME.interferometer_soak_s
         add(Op.ALIGN, float(TIME.move(here, np.zeros(3))) + TIME.interferometer_setup_s + soak,
             axis=bundle.axis)
-        here, dwell = np.zeros(3), LASER_DWELL_S
+        here, dwell, laser = np.zeros(3), LASER_DWELL_S, 1
     else:
         centre = np.asarray(bundle.centre)
         add(Op.PIVOT, float(TIME.move(here, centre)) + TIME.ballbar_setup_s, centre,
             bar=bundle.bar)
         here = centre
     for rho in bundle.path:
-        add(Op.MOVE, float(TIME.move(here, rho)) + dwell, rho)
+        add(Op.MOVE, float(TIME.move(here, rho)) + dwell, rho, laser=laser)
         here = rho
     if bundle.setup == Op.PIVOT:
         add(Op.LIFT, TIME.lift_s, stand=0)
     if here.any():
-        add(Op.MOVE, float(TIME.move(here, np.zeros(3))) + dwell, np.zeros(3))
+        add(Op.MOVE, float(TIME.move(here, np.zeros(3))) + dwell, np.zeros(3), laser=laser)
     for k in down:
         add(Op.ENGAGE, TIME.lift_s, stand=k)
     return ops, clock - planner.time_s
@@ -411,7 +415,9 @@ def take(planner: Planner, bundle: Bundle) -> list[InstrumentOperation]:
     ops, seconds = operations(planner, bundle)
     kit = planner.kit
     if bundle.setup == Op.ALIGN:
-        kit.soaked, planner.dwell_s = True, LASER_DWELL_S
+        kit.soaked = True
+        if not planner.laser_asked:
+            planner.dwell_s = LASER_DWELL_S
     if planner.world is not None:
         planner.world.moved(np.asarray(planner.rho, dtype=float), np.zeros(3))
     planner.steps.extend(ops)

@@ -166,11 +166,12 @@ def run_episodes(envs: gym.vector.VectorEnv, agents: list[Agent], seeds: list[in
     for i, agent in enumerate(agents):
         agent.reset(labs[i], _row(observation, i), agent_rng(seeds[i]))
     idle = {"op": int(Op.LIFT), "rho": np.zeros(3), "stand": 0, "slot": 0}
-    for key in ("axis", "bar"):
+    for key, default in (("axis", 0), ("bar", 0), ("laser", 1)):
         if key in envs.single_action_space.spaces:
             # OrthoglideLab-v1's and -v2's: only an align (a pivot) uses it, and an
-            # agent's other actions leave it out.
-            idle[key] = 0
+            # agent's other actions leave it out; -v4's laser left out reads the laser, as
+            # every move of the earlier versions does.
+            idle[key] = default
     # Plans decided at reset are played as arrays, every machine's step t at once.
     plans = (_plan_arrays([a.plan for a in agents], idle)  # type: ignore[attr-defined]
              if all(type(a).act is PlannedAgent.act for a in agents) else None)

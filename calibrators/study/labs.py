@@ -49,16 +49,16 @@ def lab_kwargs(agent: Agent, instruments: tuple[str, ...] = (), **settings: Any
 
 
 def lab_id(kwargs: dict[str, Any]) -> str:
-    """The lab env that takes ``kwargs``: ``OrthoglideLab-v3`` for a lab with the step
-    gauge, ``OrthoglideLab-v2`` for one with the ballbar, ``OrthoglideLab-v1`` for one with
-    the interferometer, else ``OrthoglideLab-v0``."""
+    """The lab env that takes ``kwargs``: ``OrthoglideLab-v4`` for a lab with the
+    interferometer (its moves choose whether to read it), ``OrthoglideLab-v3`` for one with
+    the step gauge, ``OrthoglideLab-v2`` for one with the ballbar, else
+    ``OrthoglideLab-v0``."""
     owned = kwargs.get("instruments", ())
+    if "interferometer" in owned:
+        return orthoglide_env.LAB_V4_ENV_ID
     if "step-gauge" in owned:
         return orthoglide_env.LAB_V3_ENV_ID
-    if "ballbar" in owned:
-        return orthoglide_env.LAB_V2_ENV_ID
-    return (orthoglide_env.LAB_V1_ENV_ID if "interferometer" in owned
-            else orthoglide_env.LAB_ENV_ID)
+    return orthoglide_env.LAB_V2_ENV_ID if "ballbar" in owned else orthoglide_env.LAB_ENV_ID
 
 
 def make_lab(agent: Agent, **settings: Any) -> gym.Env:

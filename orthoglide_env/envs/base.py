@@ -116,8 +116,9 @@ class Face:
     def _actions(self, actions: Any, shape: tuple[int, ...], used: np.ndarray | None
                  ) -> tuple[np.ndarray, ...]:
         """``op``, ``rho``, ``stand``, ``slot`` (each of ``shape``: ``()`` for a lone env,
-        ``(N,)`` for N) of the checked ``actions`` of the envs ``used`` (None: all), or
-        ``ValueError``."""
+        ``(N,)`` for N) of the checked ``actions`` of the envs ``used`` (None: all), and
+        where the face's action has it, whether each move reads the laser
+        (``OrthoglideLab-v4``), or ``ValueError``."""
         raise NotImplementedError
 
     def _step_info(self, result: StepResult, r: int, i: int) -> dict[str, Any]:
@@ -188,8 +189,7 @@ class EngineEnv(Face, gym.Env):
     def step(self, action: Any
              ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         self._require()
-        op, rho, stand, slot = (part[None] for part in self._actions(action, (), None))
-        result = self._batch.step(ROW, op, rho, stand, slot)
+        result = self._batch.step(ROW, *(part[None] for part in self._actions(action, (), None)))
         return (self._row(result.obs), float(result.reward[0]), bool(result.terminated[0]),
                 bool(result.truncated[0]), self._step_info(result, 0, 0))
 

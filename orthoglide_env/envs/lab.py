@@ -22,7 +22,8 @@ from orthoglide_env.lab.settings import lab_settings, lab_spaces
 from orthoglide_env.lab.spec import LAB, REWARDS, check_arguments, signature
 
 __all__ = ["ACCURACY_UNIT_MM", "REWARDS", "Estimator", "OrthoglideLabEnv",
-           "OrthoglideLabV1Env", "OrthoglideLabV2Env", "OrthoglideLabV3Env", "Record"]
+           "OrthoglideLabV1Env", "OrthoglideLabV2Env", "OrthoglideLabV3Env", "OrthoglideLabV4Env",
+           "Record"]
 
 
 class LabFace(Face):
@@ -245,6 +246,16 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
     operation takes the probe off.  Each set-up is a mounting of the notebook
     (``step-gauge#1``).  ``place`` in a lab without it is refused.
 
+    In ``OrthoglideLab-v4`` a move chooses whether it reads the interferometer set up: the
+    action's ``laser`` 1 waits the laser's dwell and reads it (as every move of v1-v3
+    does, and as a v4 move does whose action leaves the key out), 0 drives, settles and
+    reads the dials (and the tracker, the bar, the probe) without the dwell and without a
+    laser reading (``interferometer_valid`` 0; the beam stays aligned and its count kept,
+    as a technician's laser that is not read at a posture).  ``laser`` has no effect on
+    an operation other than a move (a re-mount's or a set-up's reading at Zero reads a
+    laser set up, without a dwell, as before) nor in a lab whose interferometer is not set
+    up.
+
     Version history
     ---------------
     * every version: an operation that would end past ``budget_s`` is refused and the
@@ -254,6 +265,12 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
       re-mount planned at 1496 s of a 1500 s budget ended at 1621 s).  The spaces are
       unchanged and every episode whose steps all end within the budget is unchanged,
       bit for bit, so the ids keep their versions.
+    * v4 (``OrthoglideLab-v4``, :class:`OrthoglideLabV4Env`): the action gains ``laser``
+      (Discrete(2), optional, 1 when left out): a move with ``laser`` 0 reads no
+      interferometer and pays no dwell (see Instruments).  A lab's operator does not wait
+      for the laser's averaged reading where only the dials are read; in v1-v3 every move
+      with the laser set up waits ``TIME.interferometer_target_s`` and reads it.  The
+      observation is v3's; ``OrthoglideLab-v3`` keeps its spaces and every stream.
     * v3 (``OrthoglideLab-v3``, :class:`OrthoglideLabV3Env`): the lab may own a step gauge
       (``instruments=["dial", "step-gauge"]``, see Instruments).  The action's ``op`` gains
       7, ``place``, which takes the action's ``axis`` (the world axis to lay the gauge
@@ -304,7 +321,8 @@ class OrthoglideLabEnv(LabFace, EngineEnv):
 
     __signature__ = signature(LAB)
 
-    #: The env's version: 1 adds the interferometer to the spaces (see the history).
+    #: The env's version: 1 adds the interferometer to the spaces, 2 the ballbar, 3 the step
+    #: gauge, 4 the moves' choice to read the laser (see the history).
     version: int = 0
 
     def __init__(self, **kwargs: Any) -> None:
@@ -382,3 +400,11 @@ class OrthoglideLabV3Env(OrthoglideLabEnv):
     operation and the observation's ``step_gauge`` keys."""
 
     version = 3
+
+
+class OrthoglideLabV4Env(OrthoglideLabEnv):
+    """``OrthoglideLab-v4``: :class:`OrthoglideLabV3Env`'s spaces, the action with the
+    ``laser`` key: a move reads the interferometer set up, and waits its dwell, only where
+    it asks (:class:`OrthoglideLabEnv`'s docstring is the spec)."""
+
+    version = 4

@@ -125,3 +125,10 @@ class OrthoglideLabV3VectorEnv(OrthoglideLabVectorEnv):
     interferometer, the ballbar and the step gauge in its spaces."""
 
     version = 3
+
+
+class OrthoglideLabV4VectorEnv(OrthoglideLabVectorEnv):
+    """``OrthoglideLab-v4``'s native vector env: :class:`OrthoglideLabV3VectorEnv`'s spaces
+    and the action's ``laser`` key ((N,) of 0 or 1)."""
+
+    version = 4

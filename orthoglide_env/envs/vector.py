@@ -109,12 +109,13 @@ class EngineVectorEnv(Face, VectorEnv):
                                "them (options={'reset_mask': ...}) before stepping again")
         resetting = self._ended if self.autoreset_mode == AutoresetMode.NEXT_STEP else (
             np.zeros(n, dtype=bool))
-        op, rho, stand, slot = self._actions(actions, (n,), ~resetting)
+        parts = self._actions(actions, (n,), ~resetting)
+        op = parts[0]
         rows = np.flatnonzero(~resetting)
         # Only a re-mount draws before it can fail (a slot its machine cannot reach): then
         # no env has stepped and no stream has moved.
         with self._streams_kept(rows[op[rows] == CODE.REMOUNT]):
-            result = self._batch.step(rows, op[rows], rho[rows], stand[rows], slot[rows])
+            result = self._batch.step(rows, *(part[rows] for part in parts))
         obs = self._copy_obs()
         for key, value in result.obs.items():
             if key in obs:

@@ -74,13 +74,17 @@ def check_lab_actions(action: Any, shape: tuple[int, ...], stands: int, slots: i
     (``OrthoglideLab-v1``) adds the ``align`` operation and its ``axis`` field, version 2
     the ``pivot`` operation and its ``bar`` field, version 3 the ``place`` operation, which
     takes ``axis`` too (other operations may leave either out); an align's or a place's
-    axis and a pivot's bar are returned in its ``slot``."""
+    axis and a pivot's bar are returned in its ``slot``.  Version 4 adds the ``laser``
+    field (0 or 1, every operation may leave it out: 1), returned last, as booleans: whether
+    a move reads the interferometer set up (and waits its dwell)."""
     keys = {"op", "rho", "stand", "slot"}
-    optional = {"axis"} if version == 1 else {"axis", "bar"} if version >= 2 else set()
+    optional = ({"axis"} if version == 1 else {"axis", "bar"} if version in (2, 3)
+                else {"axis", "bar", "laser"} if version >= 4 else set())
     if not isinstance(action, dict) or not (keys <= set(action) <= keys | optional):
         raise ValueError("action must be a dict with keys op, rho, stand, slot"
                          + (" and, for align, axis" if version >= 1 else "")
-                         + (" and, for pivot, bar" if version >= 2 else ""))
+                         + (" and, for pivot, bar" if version >= 2 else "")
+                         + (" and, for a move, laser" if version >= 4 else ""))
     used = np.ones(shape, dtype=bool) if rows is None else np.asarray(rows, dtype=bool)
     ops = (len(Op) if version >= 3 else V2_OPS if version == 2 else V1_OPS if version == 1
            else V0_OPS)
@@ -105,7 +109,11 @@ def check_lab_actions(action: Any, shape: tuple[int, ...], stands: int, slots: i
         given = check_targets(action["rho"], (*shape, 3), rows=moving if shape else None,
                               name="action rho", design=design)
         rho[moving] = given[moving]
-    return op, rho, stand, slot
+    if version < 4:
+        return op, rho, stand, slot
+    laser = (np.ones(shape, dtype=bool) if "laser" not in action
+             else _integers(action["laser"], "laser", 2, shape, used).astype(bool) | ~used)
+    return op, rho, stand, slot, laser
 
 
 def _integers(value: Any, name: str, size: int, shape: tuple[int, ...], used: np.ndarray

@@ -326,12 +326,14 @@ class LabBatch:
         return self.observation(rows, values)
 
     def step(self, rows: np.ndarray, op: np.ndarray, rho: np.ndarray, stand: np.ndarray,
-             slot: np.ndarray) -> StepResult:
+             slot: np.ndarray, read_laser: np.ndarray | None = None) -> StepResult:
         """Apply each row's checked action (see
         :func:`~orthoglide_env.lab.actions.check_lab_actions`) to its episode: the clock,
         the refusals, the new installations, the carriages, the levers, a look at the
         machine (overtravel, crashes), the readings, the end and the reward, in this order
-        (the order of every random draw)."""
+        (the order of every random draw).  ``read_laser`` (``OrthoglideLab-v4``): whether each
+        row's move reads the interferometer set up, and waits its dwell (None: every
+        move does, as before; an operation other than a move reads it whatever)."""
         settings, machines = self.settings, self.require()
         # Where each move or re-mount takes the carriages, and when: the commanded posture
         # in an ideal world.
@@ -339,7 +341,9 @@ class LabBatch:
         pivots = op == CODE.PIVOT  # (its bar is in ``slot``)
         places = op == CODE.PLACE  # (its axis is in ``slot``)
         goal = np.where(((op == CODE.REMOUNT) | aligns)[:, None], 0.0, rho)
-        laser = self.laser_axis[rows] >= 0
+        if read_laser is not None:
+            read_laser = read_laser | (op != CODE.MOVE)
+        laser = (self.laser_axis[rows] >= 0) & (True if read_laser is None else read_laser)
         travel_s = travel_seconds(op, self.rho[rows], goal, settings.tracker, (
             (op == CODE.REMOUNT) & self._references(slot) if settings.reference else None),
             *((laser, self.laser_setups[rows] == 0) if settings.interferometer else
@@ -405,7 +409,8 @@ class LabBatch:
         self.gauge_reading[rows] = np.nan
         if reads.any():
             values[reads] = self._read(rows[reads], seconds[reads], Sight(
-                *(part[at[reads]] for part in sight)))
+                *(part[at[reads]] for part in sight)),
+                None if read_laser is None else read_laser[reads])
         if remounts.any():
             self._take_blocks_away(rows[remounts], stand[remounts])
         # The budget ends the lab's time, whatever a step's stands pushed past their travel
@@ -840,10 +845,12 @@ class LabBatch:
                                        gauges.travel, self.settings.design)
         return sight._replace(t=t, tcp=sight.tcp * scale[:, None])
 
-    def _read(self, rows: np.ndarray, pending: np.ndarray, sight: Sight) -> np.ndarray:
+    def _read(self, rows: np.ndarray, pending: np.ndarray, sight: Sight,
+              laser: np.ndarray | None = None) -> np.ndarray:
         """Read every engaged, working gauge (and the tracker) of ``rows``: noisy values per
         stand, NaN where there is none; every reading goes to the notebooks.  ``pending``:
-        the seconds of the step so far (the readings are written at its end)."""
+        the seconds of the step so far (the readings are written at its end); ``laser``:
+        which rows may read their interferometer, where one is set up (None: all)."""
         settings = self.settings
         gauges = self._of(self.gauges, rows)
         mounted = self.slot[rows] >= 0
@@ -852,7 +859,7 @@ class LabBatch:
         good = status == int(Status.VALID)
         ideal = readings_of_status(gauges, sight.t, status)
         draws = np.zeros(ideal.shape)
-        laser = self.laser_axis[rows] >= 0
+        laser = (self.laser_axis[rows] >= 0) & (True if laser is None else laser)
         laser_draws = np.zeros(len(rows))
         counts = mounted.sum(axis=1).tolist()
         drawn = []
@@ -916,7 +923,7 @@ class LabBatch:
                     Record.written(TrackerAxis(c), f"tracker.{AXIS_NAMES[c]}", rho[r],
                                    tracker[r][c], steps[r], stamps[r], room[r])
                     for c in range(3))
-        for r in np.flatnonzero(self.laser_axis[rows] >= 0).tolist():
+        for r in np.flatnonzero(np.isfinite(self.laser_reading[rows])).tolist():
             i, axis = index[r], int(self.laser_axis[index[r]])
             self.notebooks[i].records.append(Record(
                 interferometer.InterferometerAxis(axis),

@@ -78,7 +78,7 @@ class LabSettings:
     reference: bool = False  # the lab has the gauge block: its catalogue the reference slots
     instruments: tuple[str, ...] = ("dial",)  # what the lab owns (catalogue.INSTRUMENT_NAMES)
     version: int = 0  # the env's version: v1's spaces carry the interferometer, v2's ballbar,
-    # v3's step gauge
+    # v3's step gauge, v4's the moves' choice to read the laser
     faults: Faults = NO_FAULTS  # what can go wrong in the session (orthoglide_env.lab.faults)
 
     @property
@@ -218,6 +218,7 @@ def lab_spaces(settings: LabSettings) -> tuple[spaces.Dict, spaces.Dict]:
         "slot": spaces.Discrete(len(settings.slots)),
         **({"axis": spaces.Discrete(3)} if v1 else {}),
         **({"bar": spaces.Discrete(len(BALLBAR_LENGTHS_MM))} if v2 else {}),
+        **({"laser": spaces.Discrete(2)} if settings.version >= 4 else {}),
     })
     observation_space = spaces.Dict({
         # A valid reading lies within +-travel/2 of its zero; the box leaves another
