@@ -85,6 +85,11 @@ def test_the_phased_plan_keeps_the_greedy_re_mounts_and_lies_above_their_bound()
                       phases=phases)
     free = held_design(PROTOTYPE, LAB, SIGMA, budget, slots=added, remounts=len(added))
     assert own.bound.design_mm >= free.bound.bound_mm
+    # The ladder's driving and levers rungs take time off the budget: every point of the
+    # shorter problem is one of the longer, so its design is above the longer's bound.
+    shorter = held_design(PROTOTYPE, LAB, SIGMA, budget - 60.0, slots=added,
+                          remounts=len(added), phases=phases)
+    assert shorter.bound.design_mm >= own.bound.bound_mm
     model = bound_model(PROTOTYPE, LAB, SIGMA, False)
     counts = plan_counts(model, PROTOTYPE, PAPER_SLOTS, (True,) * len(PAPER_SLOTS),
                          step_actions(steps))
