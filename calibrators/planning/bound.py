@@ -425,7 +425,9 @@ class Visits:
     is read).  A slot the stands do not ``start`` at is read only after a re-mount there
     (``remount_s``), so each of its readings adds :attr:`moved_s` to its visit (an
     infinite ``remount_s``: the stands are held where they start, the polytope of the
-    plans that never re-mount)."""
+    plans that never re-mount).  With ``phases`` (sets of slots) a visit reads the slots
+    of one of them only: the stands stand at each set in turn, for as long as a design
+    likes."""
 
     seconds: float
     settle_s: float
@@ -433,6 +435,7 @@ class Visits:
     stands: int
     start: tuple[int, ...] = ()
     remount_s: float = 0.0
+    phases: tuple[tuple[int, ...], ...] = ()
 
     @property
     def moved_s(self) -> float:
@@ -479,7 +482,20 @@ def best_visits(grid: np.ndarray, fall: np.ndarray, visits: Visits, base_s: floa
     dials: its gain per second (P,), and the dial candidates it reads (P, m; -1: none).
     The best of each count of the starting slots' candidates and the others' is the top
     of each (the others' each cost :attr:`Visits.moved_s` alike), so the counts are
-    enumerated."""
+    enumerated; with :attr:`Visits.phases`, the best over the phases, each a grid of its
+    own slots."""
+    if visits.phases:
+        alone = replace(visits, phases=())
+        per = [best_visits(np.where(np.isin(np.arange(grid.shape[1]), phase), grid, -1),
+                           fall, alone, base_s, base_gain) for phase in visits.phases]
+        rates = np.stack([rate for rate, _ in per])
+        best = np.argmax(rates, axis=0)
+        width = max(picked.shape[1] for _, picked in per)
+        picked = np.full((len(grid), width), -1)
+        for j, (_, chosen) in enumerate(per):
+            mine = best == j
+            picked[mine, :chosen.shape[1]] = chosen[mine]
+        return rates[best, np.arange(len(grid))], picked
     k = min(visits.stands, grid.shape[1])
     gains = np.where(grid >= 0, fall[grid], -np.inf)
     start = np.isin(np.arange(grid.shape[1]), visits.start)
@@ -726,7 +742,8 @@ def held_design(design: MachineDesign, conditions: Conditions, dial_sigma: float
                 slots: tuple[int, ...] = (), remounts: int | None = None,
                 stands: int = len(PAPER_SLOTS),
                 setups: tuple[tuple[tuple[int, ...], bool], ...] | None = None,
-                stop_above: float = np.inf) -> Design:
+                stop_above: float = np.inf,
+                phases: tuple[tuple[int, ...], ...] = (), at_contact: bool = False) -> Design:
     """The bound of the plans that re-mount ``remounts`` times (None: once per slot of
     ``slots`` beyond the paper's) and mount stands only at the paper's slots and
     ``slots``: :func:`best_design`'s problems with the stands held at all of those slots
@@ -752,9 +769,18 @@ def held_design(design: MachineDesign, conditions: Conditions, dial_sigma: float
     of a re-mount (:attr:`Visits.moved_s`, ``remount_s settle / S`` each) add at most one
     ``remount_s``, and the ``r`` slots at most the ``r`` re-mounts taken off: each point
     here is a point there, at the same ``f``.  With no slot and no re-mount it is
-    :func:`lower_bound` without ``remounts``: the same problems."""
+    :func:`lower_bound` without ``remounts``: the same problems.
+
+    With ``phases`` (sets of at most ``stands`` of those slots), the bound of the plans
+    whose stands stand at each set in turn: a visit reads the slots of one set only
+    (:attr:`Visits.phases`), each set for as long as the design likes, so such a plan is
+    a point of it, and it is above the bound without them (fewer kinds of visit).  With
+    ``at_contact``, the same problem on :func:`at_contact_model`: the design a plan can
+    expect to read, no bound."""
     start = start_slots(design, stands)
     added = tuple(s for s in sorted(set(slots)) if s not in start)
+    if stray := sorted({s for phase in phases for s in phase} - set(start) - set(added)):
+        raise ValueError(f"phases name slots {stray} neither the paper's nor of {slots}")
     count = len(added) if remounts is None else remounts
     if count < len(added):
         raise ValueError(f"{len(added)} slots beyond the paper's need as many re-mounts, "
@@ -763,12 +789,27 @@ def held_design(design: MachineDesign, conditions: Conditions, dial_sigma: float
     if not left > 0:
         raise ValueError(f"{count} re-mounts leave no time of {budget_s} s")
     model = lab_model(design, conditions, dial_sigma, budget_s, instruments, stands)
-    held = [(drives, pivot, replace(visits, start=start + added))
+    if at_contact:
+        model = at_contact_model(model, design)
+    held = [(drives, pivot, replace(visits, start=start + added,
+                                    phases=tuple(tuple(phase) for phase in phases)))
             for drives, pivot, visits in problems(design, left, instruments, stands, False)
             if setups is None or (drives, pivot) in setups]
     if not held:
         raise ValueError(f"no set-up of {setups} fits in {left} s")
     return _least(model, held, stop_above)
+
+
+def at_contact_model(model: BoundModel, design: MachineDesign) -> BoundModel:
+    """``model`` with each dial reading counted at its a-priori contact probability (its
+    row times the root of it), as a plan expects it (:meth:`~calibrators.planning.belief.
+    Belief.expect_readings`): a reading that misses reads nothing, so its value is above
+    the bound's, which counts every candidate whole; a design to round, no bound."""
+    contact = slot_table(design).prior_reach[1]
+    dial = model.laser == -1
+    weight = np.ones(len(model.laser))
+    weight[dial] = np.sqrt(contact[model.label[dial, 0], model.label[dial, 1]])
+    return replace(model, rows=model.rows * weight[:, None])
 
 
 def _least(model: BoundModel, choices: list[tuple[tuple[int, ...], bool, Visits]],
