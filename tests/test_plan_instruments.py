@@ -226,3 +226,29 @@ def test_a_plan_for_v4_reads_the_laser_on_its_run_only():
     counts = plan_counts(model, PROTOTYPE, slots, engaged, step_actions(played))
     taken = [r for r in env.unwrapped.records if isinstance(r.spec, InterferometerAxis)]
     assert counts[model.laser >= 0].sum() == len(taken) == runs + 1
+
+
+@pytest.mark.parametrize("every_move", [True, False])
+def test_optimal_plans_for_the_laser_at_every_move_unless_told(monkeypatch, every_move):
+    """In ``OrthoglideLab-v4`` ``optimal`` plans as in v1-v3, the laser read (and its dwell
+    paid) at every move once set up, unless its ``laser_at_every_move`` is off: what the
+    planner is told is what the lab's moves will do (leaving the laser unread was measured
+    and not kept, docs/instruments.md)."""
+    import calibrators.agents.optimal as optimal
+
+    told = {}
+
+    def fixed_plan(*args, **kwargs):
+        told.update(kwargs)
+        return (), 0.0
+
+    monkeypatch.setattr(optimal, "fixed_plan", fixed_plan)
+    env = gym.make(orthoglide_env.LAB_V4_ENV_ID, errors="nominal", backend="exact",
+                   conditions="ideal", instruments=["dial", "interferometer"])
+    obs, _ = env.reset(seed=0)
+    agent = optimal.OptimalAgent()
+    agent.laser_at_every_move = every_move
+    agent.env = env.unwrapped
+    agent.reserved_s = 0.0
+    agent.make_plan(obs)
+    assert told["laser_asked"] is (not every_move)
