@@ -27,7 +27,7 @@ import numpy as np
 
 from calibrators.agents import get_agent
 from calibrators.agents.instrument_first import InstrumentFirst
-from calibrators.agents.optimal import fixed_plan, lab_setup, laser_asked, move_dwell_s
+from calibrators.agents.optimal import fixed_plan, lab_setup, leaves_laser_unread, move_dwell_s
 from calibrators.study.compare import Config
 from calibrators.study.episodes import machine_seed, run_episode
 from calibrators.study.labs import make_lab, nominal_options
@@ -59,7 +59,7 @@ class ClockWatch:
         if self.agent.started and self.plan is None and self.agent.gauges == "optimal":
             inner = self.agent.inner
             self.start_s = float(self.before["time"][0])
-            asked = laser_asked(self.lab)
+            asked = leaves_laser_unread(inner)
             self.plan, _ = fixed_plan(*lab_setup(self.lab, self.before, inner.reserved_s),
                                       criterion=inner.criterion, remounts=inner.remounts,
                                       dwell_s=move_dwell_s(self.before, asked),

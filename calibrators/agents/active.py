@@ -39,7 +39,7 @@ from calibrators.agents.base import Agent, action, register
 from calibrators.agents.optimal import (
     fixed_plan,
     lab_setup,
-    laser_asked,
+    leaves_laser_unread,
     move_dwell_s,
     owned_instruments,
 )
@@ -127,7 +127,7 @@ class ActiveAgent(Agent):
         setup = lab_setup(self.env, observation, self.reserved_s)
         slots, engaged, sigma, budget, design, conditions = setup
         owned = owned_instruments(self.env) if self.plans_instruments else ()
-        asked = laser_asked(self.env) and not self.laser_at_every_move
+        asked = leaves_laser_unread(self)
         dwell_s, start = move_dwell_s(observation, asked), float(observation["time"][0])
         self.planner = Planner(list(slots), list(engaged), sigma, budget + start,
                                criterion=self.criterion, design=design, conditions=conditions,

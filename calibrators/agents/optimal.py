@@ -24,7 +24,7 @@ comparison on several workers makes it once before they start and hands it to th
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Protocol
 
 import gymnasium as gym
 import numpy as np
@@ -225,6 +225,21 @@ def laser_asked(env: gym.Env) -> bool:
     return "laser" in env.action_space.spaces
 
 
+class ReadsTheLaser(Protocol):
+    """An agent that plans for a lab whose moves may leave the laser unread: ``optimal``
+    and ``active``."""
+
+    env: gym.Env
+    laser_at_every_move: bool
+
+
+def leaves_laser_unread(agent: ReadsTheLaser) -> bool:
+    """Whether ``agent``'s plan leaves the laser unread on its dials' moves: in a lab whose
+    moves ask (:func:`laser_asked`), unless the agent reads it at every move
+    (``laser_at_every_move``)."""
+    return laser_asked(agent.env) and not agent.laser_at_every_move
+
+
 def owned_instruments(env: gym.Env) -> tuple[str, ...]:
     """The instruments the lab owns that a planner prices besides its dials (the lab
     tells what it owns; none in a lab of dials only, whose plans are today's)."""
@@ -252,7 +267,7 @@ class OptimalAgent(PlannedAgent):
     laser_at_every_move: bool = True
 
     def make_plan(self, observation: dict[str, np.ndarray]) -> list[dict[str, Any]]:
-        asked = laser_asked(self.env) and not self.laser_at_every_move
+        asked = leaves_laser_unread(self)
         steps, self.predicted_rigid_mm = fixed_plan(*lab_setup(self.env, observation,
                                                                self.reserved_s),
                                                     criterion=self.criterion,
