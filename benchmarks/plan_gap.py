@@ -27,10 +27,11 @@ terms but the lead error, so a plan whose ratio here is near 1 and whose realise
 the stands' drift) are unknown, its readings in K bins of time
 (:mod:`calibrators.planning.warm_bound`), over that bound (with ``--no-warm-bound``, the
 value alone: ``optimal`` keeps its plan by it).  With ``--stay`` every plan is made
-without re-mounts, as ``optimal-stay`` makes them.  The plans are for the lab the comparisons play
+without re-mounts, as ``optimal-stay`` makes them.  The plans are for a lab whose moves ask
 (``OrthoglideLab-v4``: a plan reads the laser on its laser bundles only, and its other
-moves pay no dwell); with ``--laser-at-every-move`` for a lab whose every move reads a
-laser set up and waits its dwell (``OrthoglideLab-v1`` to ``-v3``).  The
+moves pay no dwell); with ``--laser-at-every-move``, every move after a set-up reads the
+laser and waits its dwell, as in ``OrthoglideLab-v1`` to ``-v3`` and as ``optimal`` and
+``active`` play in every version (their ``laser_at_every_move``).  The
 prototype, the paper's stands; no lab episodes (a few CPU-minutes at three hours).
 """
 

@@ -28,17 +28,16 @@ import numpy as np
 from bound_table import dial_arguments, dial_weighting
 
 from calibrators.planning.bound import (
+    at_contact_model,
     best_design,
     held_design,
     lab_model,
     plan_counts,
-    plan_hits,
 )
 from calibrators.planning.instruments import step_actions
 from calibrators.planning.phased import overhead_s, phased_plan, plan_phases
 from calibrators.planning.search import Planner, greedy_plan
 from orthoglide_env.lab.operations import PAPER_SLOTS, TIME, Op
-from orthoglide_env.lab.slot_table import slot_table
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import EFFECT_NAMES, Conditions
 
@@ -61,11 +60,7 @@ def ladder(steps: tuple, conditions: Conditions, sigma: float, budget_s: float
 
     model = lab_model(PROTOTYPE, conditions, sigma, budget_s, ("dial",), len(slots))
     actions = step_actions(steps)
-    hits = plan_hits(model, PROTOTYPE, slots, engaged, actions)
-    contact = slot_table(PROTOTYPE).prior_reach[1]
-    at_contact = np.bincount(hits[:, 1], contact[model.label[hits[:, 1], 0],
-                                                 model.label[hits[:, 1], 1]],
-                             minlength=model.rows.shape[0])
+    counts = plan_counts(model, PROTOTYPE, slots, engaged, actions)
     leadless = Conditions(conditions.name, tuple(e for e in EFFECT_NAMES if e != "lead"))
     plain = lab_model(PROTOTYPE, leadless, sigma, budget_s, ("dial",), len(slots))
     return [
@@ -75,10 +70,9 @@ def ladder(steps: tuple, conditions: Conditions, sigma: float, budget_s: float
         (f"+ its levers ({levers:.0f} s)", bound(levers)),
         (f"+ its budget left ({unspent:.0f} s)", bound(unspent)),
         ("+ all four", bound(driving + levers + unspent, phased=True)),
-        ("the plan on the bound's model", float(np.sqrt(model.value(plan_counts(
-            model, PROTOTYPE, slots, engaged, actions))))),
-        ("the plan, its readings counted at a-priori contact", float(np.sqrt(model.value(
-            at_contact)))),
+        ("the plan on the bound's model", float(np.sqrt(model.value(counts)))),
+        ("the plan, its readings counted at a-priori contact", float(np.sqrt(
+            at_contact_model(model, PROTOTYPE).value(counts)))),
         ("without the lead error: B(E)", held_design(
             PROTOTYPE, leadless, sigma, budget_s, ("dial",), added,
             len(remounts)).bound.bound_mm),
