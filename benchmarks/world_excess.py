@@ -4,6 +4,7 @@
                                       [--machines 50] [--seed 1] [--sigma 0.02]
                                       [--budget 3600] [--episodes DIR] [--scale EFFECT=K]
                                       [--instruments LIST] [--effects LIST]
+                                      [--zero LIST [--zero LIST ...]]
 
 The experiments of ``misjudged_world.py`` (the same episodes, kept in ``--episodes``) are
 fitted by ``full`` told ``--told`` with the world check on.  Beside the measured row it
@@ -28,11 +29,23 @@ time, they split the measured excess of z^2 by effect.  The agent still plans fo
 would plan other operations), so every row reads the same operations and the rows are
 paired.  ``--instruments`` names what the
 lab owns (``misjudged_world.py --instruments``).
+
+``--zero LIST`` (repeatable) plays each machine again with those effects' drawn values set
+to zero (:data:`DRAWN`), every other draw as before: the same machine, the same other
+effects and the same plan (its planner is told all of ``--truth``'s effects either way),
+so each row pairs with the one where all of them act.  ``--effects`` cannot do that: an
+effect switched off moves the stream every later one is drawn from.  Each row gives the
+TCP error after rigid motion (median, RMS over machines), the fit's own predicted error
+(RMS over machines), the z-RMS, and per machine its error over the one with every effect
+(median with its 95 % interval, lower on how many).
 """
 
 from __future__ import annotations
 
 import argparse
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -42,10 +55,26 @@ import calibrators.agents.active as active
 import calibrators.agents.optimal as optimal
 import calibrators.estimators.consider as consider
 import calibrators.estimators.gauss_newton as gauss_newton
+from calibrators.estimators.catalogue import for_study
 from calibrators.estimators.consider import TERM_FAMILIES
-from calibrators.study.compare import Config
+from calibrators.study.compare import Config, agent_episodes, scored_trials
+from calibrators.study.statistics import paired
+from calibrators.study.trials import Trial
 from orthoglide_env.world.conditions import CONDITION_NAMES, EFFECT_NAMES, Conditions
 from orthoglide_env.world.table import EFFECTS
+from orthoglide_env.world.truth import World
+
+#: Each effect's values that a played world draws (:meth:`World.draw`, a re-mount's
+#: :meth:`World.mounted`), which ``--zero`` sets to zero; the other effects' sizes are the
+#: table's fixed values.
+DRAWN: dict[str, tuple[str, ...]] = {
+    "lead": ("lead_scale", "lead_a1", "lead_a2", "lead_periodic"),
+    "backlash": ("backlash",),
+    "warmup": ("warm_amplitude",),
+    "room": ("offset", "rate", "walk"),
+    "dial": ("dial_range", "dial_revolution", "retrace"),
+    "stands": ("creep", "thermal"),
+}
 
 
 def scaled_effect(spec: str) -> tuple[str, str | None, float]:
@@ -76,6 +105,66 @@ def effect_list(text: str) -> tuple[str, ...]:
     return names
 
 
+def drawn_list(text: str) -> tuple[str, ...]:
+    """``--zero``: effects whose drawn values are set to zero, comma-separated;
+    ``argparse.ArgumentTypeError`` naming one that draws nothing."""
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    wrong = [n for n in names if n not in DRAWN]
+    if not names or wrong:
+        raise argparse.ArgumentTypeError(f"--zero takes effects of {', '.join(DRAWN)}, "
+                                         f"got {text!r}")
+    return names
+
+
+@contextmanager
+def zeroed(effects: tuple[str, ...]) -> Iterator[None]:
+    """Within it, every world drawn has ``effects``' values at zero (the streams drawn as
+    with them, so every other value is the same)."""
+    draw, mounted = vars(World)["draw"], vars(World)["mounted"]
+
+    def without(world: World) -> World:
+        return world.replace(**{f: np.zeros_like(np.asarray(getattr(world, f)))
+                                for e in effects for f in DRAWN[e]})
+
+    World.draw = classmethod(lambda cls, *a, **k: without(draw.__func__(cls, *a, **k)))
+    World.mounted = lambda self, *a, **k: without(mounted(self, *a, **k))
+    try:
+        yield
+    finally:
+        World.draw, World.mounted = draw, mounted
+
+
+def zeroed_rows(config: Config, agent: str, machines: int, told: str,
+                variants: list[tuple[str, ...]]) -> None:
+    """Print the agent's row with every effect of ``config`` and with each of
+    ``variants``' effects zeroed (:func:`zeroed`), fitted by ``full`` told ``told``, each
+    paired per machine with the first."""
+    def trials(effects: tuple[str, ...]) -> list[Trial]:
+        with zeroed(effects):
+            episodes = agent_episodes(config, agent, list(range(machines)))
+        fit = for_study("full", episodes[0].run.sigma, Conditions(told), "realistic")
+        named = agent + "".join(f" -{e}" for e in effects)
+        return [replace(t, agent=named) for t in scored_trials(
+            episodes, "full", fit.fit_many([e.run.measurements for e in episodes]))]
+
+    first = trials(())
+    for effects in [(), *variants]:
+        rows = first if not effects else trials(effects)
+        ok = [t for t in rows if not t.failed]
+        rigid = np.array([t.tcp_after["rigid"] for t in rows]) * 1e3
+        predicted = np.array([t.predicted_rigid_mm for t in ok]) * 1e3
+        z = np.concatenate([t.z for t in ok])
+        line = (f"{rows[0].agent}: {np.median(rigid):.3f} um, RMS {np.sqrt(np.mean(rigid**2)):.3f}"
+                f", predicted RMS {np.sqrt(np.mean(predicted**2)):.3f}, z-RMS "
+                f"{np.sqrt(np.mean(z**2)):.2f}, failed {len(rows) - len(ok)}")
+        if effects:
+            pair = paired(rows + first)[0]
+            low, high = pair["ratio_ci95"] or (np.nan, np.nan)
+            line += (f"; per machine {pair['ratio_median']:.3f} [{low:.3f}, {high:.3f}], "
+                     f"lower on {pair['win_rate']:.0%} of {pair['machines']}")
+        print(line, flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--truth", choices=CONDITION_NAMES, default="workshop")
@@ -94,7 +183,19 @@ def main() -> None:
                         help="what the lab owns, comma-separated (default: the dial gauges)")
     parser.add_argument("--effects", type=effect_list, default=None,
                         help="only these effects of --truth act in the played world")
+    parser.add_argument("--zero", type=drawn_list, action="append", default=[],
+                        help="these effects' drawn values at zero, every other draw the "
+                        "same (repeatable: one paired row each)")
     args = parser.parse_args()
+    if args.zero:
+        if args.effects is not None or args.scale is not None:
+            parser.error("--zero takes neither --effects nor --scale")
+        zeroed_rows(Config(agents=(args.agent,), estimators=("full",),
+                           conditions=Conditions(args.truth), seed=args.seed,
+                           sigma=args.sigma, budget_s=args.budget,
+                           instruments=args.instruments),
+                    args.agent, args.machines, args.told, args.zero)
+        return
     truth = Conditions(args.truth, effects=args.effects)
     if args.effects is not None:
         setup = optimal.lab_setup
