@@ -14,7 +14,9 @@ predicted mean-square TCP error after rigid motion ``f(n) = trace(W M(n)^-1)`` (
 criterion ``I`` that ``optimal`` and ``active`` price, :mod:`calibrators.planning.belief`,
 with the drives' lead error in it).  ``f`` is convex in ``n``; letting ``n`` be real
 (time shares) makes the least ``f`` over a budget a convex problem, the continuous
-optimal design, whose optimum no discrete plan can beat.
+optimal design, whose optimum no discrete plan can beat.  The same model linearised at a
+machine's truth (:func:`machine_bound_model`) gives that machine's own bound: a
+yardstick for a comparison, never a planner's input.
 
 The unknowns: the machine's 27 errors (the realistic preset's sigmas), the lead error's
 terms as the ``full`` estimator fits them (the pitch table's coefficients, whitened, and
@@ -93,7 +95,7 @@ from orthoglide_env.instruments import interferometer
 from orthoglide_env.instruments.slots import PAPER_LAYOUT
 from orthoglide_env.lab.design_belief import N_MACHINE, N_STAND, ZERO_SCALE
 from orthoglide_env.lab.operations import PAPER_SLOTS, TIME, Op, slot_index
-from orthoglide_env.lab.slot_table import slot_table
+from orthoglide_env.lab.slot_table import changes_at, slot_table
 from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import MachineParams
 from orthoglide_env.model.kinematics import inverse
@@ -264,9 +266,41 @@ def bound_model(design: MachineDesign, conditions: Conditions, dial_sigma: float
     """The candidates of a lab of ``design`` under ``conditions`` whose dials read with
     ``dial_sigma`` (mm, the weighting sigma), with or without the interferometer and the
     ballbar."""
+    return _candidates(MachineParams(design=design), None, conditions, dial_sigma,
+                       interferometer_owned, ballbar_owned)
+
+
+def machine_bound_model(machine: MachineParams, conditions: Conditions, dial_sigma: float,
+                        interferometer_owned: bool, installed: np.ndarray | None = None
+                        ) -> BoundModel:
+    """:func:`bound_model` linearised at ``machine`` (its 27 errors) with the stands at each
+    slot installed with ``installed`` ((S, 4) parameters, None: as aimed) in place of the
+    nominal machine's: the dials' rows and the TCP error's weight are the machine's.
+    The candidates are the nominal model's (a dial where the nominal tip may touch: the
+    machine's own contact could drop or add a few; with more candidates a bound is only
+    lower), and so are the laser's rows (the carriage alone, no geometry).  The ballbar
+    is no candidate here (its rows are the nominal machine's).
+
+    What it is: the local, Cramer-Rao-type bound of that machine, where its fit
+    linearises, so the mean over machines of each one's squared bound is a yardstick no
+    plan, fixed or adaptive, beats on the linearised model.  What it is not: anything a
+    plan can be designed on, since it reads the machine's truth: a yardstick for a
+    comparison, never an agent's input (seconds per machine: its derivatives)."""
+    return _candidates(machine, changes_at(machine, installed), conditions, dial_sigma,
+                       interferometer_owned, False)
+
+
+def _candidates(machine: MachineParams, change: tuple[np.ndarray, np.ndarray] | None,
+                conditions: Conditions, dial_sigma: float, interferometer_owned: bool,
+                ballbar_owned: bool) -> BoundModel:
+    """:func:`bound_model` at ``machine`` whose dials' derivatives are ``change``
+    (:attr:`~orthoglide_env.lab.slot_table.SlotTable.change` and ``at_zero``; None: the
+    slot table's, the nominal machine's)."""
     if not (np.isfinite(dial_sigma) and dial_sigma > 0):
         raise ValueError(f"dial_sigma must be a positive number, got {dial_sigma}")
+    design = machine.design
     table = slot_table(design)
+    derivative, at_zero = (table.change, table.at_zero) if change is None else change
     scale = default_scales(ParameterSpace())
     slots, postures = np.nonzero(table.prior_reach[1] > 0)
     n_slots = len(table.tip)
@@ -281,14 +315,14 @@ def bound_model(design: MachineDesign, conditions: Conditions, dial_sigma: float
     zero = N_MACHINE + n_lead  # the first zero's column
     installed = zero + n_slots + 3  # the first slot's installation's first column
     dial = np.zeros((len(slots), n))
-    dial[:, :N_MACHINE] = table.change[slots, postures, :N_MACHINE]
+    dial[:, :N_MACHINE] = derivative[slots, postures, :N_MACHINE]
     # The stand's installation, one per slot (the fit's and the planner's unknowns: a plan
     # that mounts a stand at a slot twice has two, which the bound knows to be equal).
     columns = installed + N_INSTALL * slots[:, None] + np.arange(N_INSTALL)
-    dial[np.arange(len(slots))[:, None], columns] = table.change[slots, postures, N_MACHINE:]
+    dial[np.arange(len(slots))[:, None], columns] = derivative[slots, postures, N_MACHINE:]
     # A carriage's error moves a reading as its drive's encoder offset does, at the
     # posture (the zero takes the reading's value at Zero).
-    drive = (table.change[slots, postures, :3] + table.at_zero[slots, :3]) / scale[:3]
+    drive = (derivative[slots, postures, :3] + at_zero[slots, :3]) / scale[:3]
     dial[:, N_MACHINE:zero] = np.einsum("ia,iak->ik", drive, lead(table.postures[postures]))
     dial[np.arange(len(slots)), zero + slots] = ZERO_SCALE
     rows, laser = [dial / dial_sigma], [np.full(len(slots), -1)]
@@ -320,8 +354,7 @@ def bound_model(design: MachineDesign, conditions: Conditions, dial_sigma: float
         laser.append(np.full(len(bar.path), BAR))
         label.append(np.stack([np.full(len(bar.path), BAR), np.full(len(bar.path), -1),
                                np.arange(len(bar.path))], axis=-1))
-    nominal = MachineParams(design=design)
-    weight = rigid_weight_with_drives(nominal, lead)
+    weight = rigid_weight_with_drives(machine, lead)
     units = np.concatenate([scale, np.ones(n_lead)])
     weight = weight * np.outer(units, units)
     value, vector = np.linalg.eigh(weight)
@@ -707,13 +740,17 @@ def setup_seconds(drives: tuple[int, ...]) -> float:
 
 def lower_bound(design: MachineDesign, conditions: Conditions, dial_sigma: float,
                 budget_s: float, instruments: tuple[str, ...] = ("dial",),
-                stands: int = len(PAPER_SLOTS), remounts: bool = True) -> Bound:
+                stands: int = len(PAPER_SLOTS), remounts: bool = True,
+                machine: MachineParams | None = None,
+                installed: np.ndarray | None = None) -> Bound:
     """The bound (see the module) of a lab of ``design`` under ``conditions`` with dials of
     weighting sigma ``dial_sigma`` (mm) on ``stands`` stands, owning ``instruments``, over
     a budget of ``budget_s`` seconds; without ``remounts``, the bound of the plans that
-    never re-mount a stand (the stands held at the paper's slots: above the bound)."""
+    never re-mount a stand (the stands held at the paper's slots: above the bound).  With
+    ``machine`` (of ``design``), its bound linearised there, the stands' ``installed``
+    parameters with it (:func:`machine_bound_model`: a yardstick that reads the truth)."""
     return best_design(design, conditions, dial_sigma, budget_s, instruments, stands,
-                       remounts).bound
+                       remounts, machine, installed).bound
 
 
 @dataclass(frozen=True)
@@ -730,10 +767,13 @@ class Design:
 
 def best_design(design: MachineDesign, conditions: Conditions, dial_sigma: float,
                 budget_s: float, instruments: tuple[str, ...] = ("dial",),
-                stands: int = len(PAPER_SLOTS), remounts: bool = True) -> Design:
+                stands: int = len(PAPER_SLOTS), remounts: bool = True,
+                machine: MachineParams | None = None,
+                installed: np.ndarray | None = None) -> Design:
     """:func:`lower_bound` with the design that reaches it (a plan rounds it:
     :mod:`calibrators.planning.rounding`)."""
-    model = lab_model(design, conditions, dial_sigma, budget_s, instruments, stands)
+    model = lab_model(design, conditions, dial_sigma, budget_s, instruments, stands,
+                      machine, installed)
     return _least(model, problems(design, budget_s, instruments, stands, remounts))
 
 
@@ -743,7 +783,9 @@ def held_design(design: MachineDesign, conditions: Conditions, dial_sigma: float
                 stands: int = len(PAPER_SLOTS),
                 setups: tuple[tuple[tuple[int, ...], bool], ...] | None = None,
                 stop_above: float = np.inf,
-                phases: tuple[tuple[int, ...], ...] = (), at_contact: bool = False) -> Design:
+                phases: tuple[tuple[int, ...], ...] = (), at_contact: bool = False,
+                machine: MachineParams | None = None,
+                installed: np.ndarray | None = None) -> Design:
     """The bound of the plans that re-mount ``remounts`` times (None: once per slot of
     ``slots`` beyond the paper's) and mount stands only at the paper's slots and
     ``slots``: :func:`best_design`'s problems with the stands held at all of those slots
@@ -776,7 +818,7 @@ def held_design(design: MachineDesign, conditions: Conditions, dial_sigma: float
     (:attr:`Visits.phases`), each set for as long as the design likes, so such a plan is
     a point of it, and it is above the bound without them (fewer kinds of visit).  With
     ``at_contact``, the same problem on :func:`at_contact_model`: the design a plan can
-    expect to read, no bound."""
+    expect to read, no bound.  ``machine`` and ``installed``: as :func:`lower_bound`'s."""
     start = start_slots(design, stands)
     added = tuple(s for s in sorted(set(slots)) if s not in start)
     if stray := sorted({s for phase in phases for s in phase} - set(start) - set(added)):
@@ -788,7 +830,8 @@ def held_design(design: MachineDesign, conditions: Conditions, dial_sigma: float
     left = budget_s - count * TIME.remount_s
     if not left > 0:
         raise ValueError(f"{count} re-mounts leave no time of {budget_s} s")
-    model = lab_model(design, conditions, dial_sigma, budget_s, instruments, stands)
+    model = lab_model(design, conditions, dial_sigma, budget_s, instruments, stands,
+                      machine, installed)
     if at_contact:
         model = at_contact_model(model, design)
     held = [(drives, pivot, replace(visits, start=start + added,
@@ -843,8 +886,11 @@ def _design(model: BoundModel, lowest: float, value: float, drives: tuple[int, .
 
 
 def lab_model(design: MachineDesign, conditions: Conditions, dial_sigma: float,
-              budget_s: float, instruments: tuple[str, ...], stands: int) -> BoundModel:
-    """:func:`bound_model` of a lab owning ``instruments``, its arguments checked."""
+              budget_s: float, instruments: tuple[str, ...], stands: int,
+              machine: MachineParams | None = None, installed: np.ndarray | None = None
+              ) -> BoundModel:
+    """:func:`bound_model` of a lab owning ``instruments``, its arguments checked; with
+    ``machine``, :func:`machine_bound_model` at it and its stands' ``installed``."""
     if not (np.isfinite(budget_s) and budget_s > 0):
         raise ValueError(f"budget_s must be a positive number of seconds, got {budget_s}")
     if not (isinstance(stands, int) and stands >= 1):
@@ -852,6 +898,12 @@ def lab_model(design: MachineDesign, conditions: Conditions, dial_sigma: float,
     if "dial" not in instruments:
         raise ValueError(f"instruments must include 'dial', got {list(instruments)}")
     owned = "interferometer" in instruments
+    if machine is not None:
+        if machine.design != design:
+            raise ValueError("the machine must be of the lab's design")
+        if "ballbar" in instruments:
+            raise ValueError("a bound at a machine has no ballbar candidates")
+        return machine_bound_model(machine, conditions, float(dial_sigma), owned, installed)
     return (bound_model(design, conditions, float(dial_sigma), owned, True)
             if "ballbar" in instruments
             else bound_model(design, conditions, float(dial_sigma), owned))

@@ -158,17 +158,21 @@ class Config:
                           **({"faults": self.faults} if self.faults.active else {}))
 
 
-def study_bound(config: Config) -> Bound:
+def study_bound(config: Config, machine: MachineParams | None = None,
+                installed: np.ndarray | None = None) -> Bound:
     """The bound (:func:`calibrators.planning.bound.lower_bound`) of the comparison's lab:
     its design, world, dials (their weighting sigma), stands, instruments and budget,
-    the same for every machine."""
+    the same for every machine; with ``machine`` (and its stands' ``installed``
+    parameters), the bound linearised at that machine (a yardstick read off the truth,
+    ``benchmarks/machine_bound.py``)."""
     # Imported here: the bound (and scipy.linalg) is for runs that ask for it.
     from calibrators.planning.bound import lower_bound
 
     noise = GaugeNoise(config.sigma, config.resolution)
     return lower_bound(config.design, config.conditions,
                        float(weighting_sigma(noise.effective_sigma)), config.budget_s,
-                       config.instruments or ("dial",), len(PAPER_SLOTS))
+                       config.instruments or ("dial",), len(PAPER_SLOTS),
+                       machine=machine, installed=installed)
 
 
 @cache

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -25,6 +26,9 @@ from orthoglide_env.model.design import MachineDesign
 from orthoglide_env.model.errors import ERROR_NAMES, MachineParams
 from orthoglide_env.model.kinematics import axis_postures, direct
 from orthoglide_env.reading_model import ReadingLayout, default_scales, jacobian, predict
+
+if TYPE_CHECKING:
+    from orthoglide_env.instruments.slots import GaugeSpec
 
 #: A plunger goes down only where its tip's predicted distance from the pushed-in end is
 #: at least this many standard deviations of the prediction plus :data:`END_GAP` (mm):
@@ -179,13 +183,47 @@ def _slot_table(machine_design: MachineDesign) -> SlotTable:
     at_zero = np.zeros((len(slots), len(ERROR_NAMES) + 4))
     reading = np.zeros((len(slots), len(postures)))
     for k, spec in enumerate(slots):
-        design = ReadingLayout(("m",), (spec,), np.zeros(len(postures), dtype=int), postures,
-                        machine_design)
-        scale = default_scales(design.space)
-        rows = jacobian(np.zeros(len(scale)), design, np.ones(len(scale), bool), scale)
-        change[k], at_zero[k] = rows - rows[zero], rows[zero]
-        values = predict(np.zeros(len(scale)), design)
+        design = _one_slot(spec, postures, machine_design)
+        change[k], at_zero[k] = _change(design, np.zeros(len(ERROR_NAMES) + 4), zero)
+        values = predict(np.zeros(len(ERROR_NAMES) + 4), design)
         reading[k] = values - values[zero]
     sign = np.array([g.sign for g in gauges], dtype=float)
     return SlotTable(postures, zero, tip, pressed, near, change, at_zero, sign, reading,
                      machine_design.gauge_travel)
+
+
+def _one_slot(spec: GaugeSpec, postures: np.ndarray, machine_design: MachineDesign
+              ) -> ReadingLayout:
+    """The readings of one gauge at ``spec``'s slot at every one of ``postures``."""
+    return ReadingLayout(("m",), (spec,), np.zeros(len(postures), dtype=int), postures,
+                         machine_design)
+
+
+def _change(layout: ReadingLayout, theta: np.ndarray, zero: int
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """The derivative (per unit of scale) of ``layout``'s readings' change since posture
+    ``zero`` at parameters ``theta`` (P, 31), and of the reading at ``zero`` (31,)."""
+    scale = default_scales(layout.space)
+    rows = jacobian(theta, layout, np.ones(len(scale), bool), scale)
+    return rows - rows[zero], rows[zero]
+
+
+def changes_at(machine: MachineParams, stands: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """:attr:`SlotTable.change` and :attr:`SlotTable.at_zero` of ``machine``'s design's
+    table linearised at ``machine`` (its errors) with each slot's stand installed with
+    ``stands`` (S, 4) parameters (:data:`~orthoglide_env.instruments.stands.STAND_PARAMS`;
+    None: as the technician aims it) in place of the nominal machine's: what the
+    derivatives are at a machine's truth (a yardstick's, never a plan's; seconds).  The
+    postures are the table's."""
+    table = slot_table(machine.design)
+    slots = slot_catalogue(machine.design)
+    installed = np.zeros((len(slots), 4)) if stands is None else np.asarray(stands, float)
+    if installed.shape != (len(slots), 4):
+        raise ValueError(f"stands must be ({len(slots)}, 4), got {installed.shape}")
+    change, at_zero = np.zeros_like(table.change), np.zeros_like(table.at_zero)
+    for k, spec in enumerate(slots):
+        theta = np.concatenate([machine.to_vector(), installed[k]])
+        change[k], at_zero[k] = _change(_one_slot(spec, table.postures, machine.design),
+                                        theta, table.zero)
+    return change, at_zero

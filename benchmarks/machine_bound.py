@@ -1,0 +1,227 @@
+"""The bound at the machines calibrated: each machine's own bound beside the nominal one.
+
+    python benchmarks/machine_bound.py [--conditions lab] [--budget 3600]
+                                       [--instruments dial] [--machines 50] [--seed 1]
+                                       [--errors realistic] [--out RUN] [--estimators full]
+                                       [--plans]
+
+The bound ``compare --bound`` carries (:func:`~calibrators.study.compare.study_bound`)
+linearises at the nominal machine.  A fit linearises at the machine it reads, so each
+machine has its own bound (:func:`~calibrators.planning.bound.machine_bound_model`: the
+dials' rows and the TCP weight at its 27 errors and its stands' installations), and the
+RMS over machines of those bounds is a yardstick no plan, fixed or adaptive, beats on
+the linearised model.  It reads the truth: a yardstick, never an agent's input.
+
+For machines 0 to ``--machines`` - 1 of a comparison seeded ``--seed`` (drawn as the lab
+draws them at reset), this prints each bound's RMS over the machines with a bootstrap
+95 % interval, against the nominal bound; with ``--out`` (a ``compare --out`` folder of
+that lab, its ``trials.jsonl``), each agent's realised TCP error after rigid motion
+(each of ``--estimators``' fits; a failed fit counts its machine uncalibrated, as ``compare``
+scores it) over both bounds: the RMS over machines over the bound's RMS (the per-machine
+bounds' interval paired by machine), and the median over machines of realised over
+that machine's bound, with its distribution-free interval.  Dial sigma 0.02 mm and
+resolution 0.01 mm unless the run says otherwise; the ballbar is no candidate of a
+machine's bound.  With ``--plans``, each machine's row of the nominal bound's design
+and of ``optimal``'s kept plan (made as ``compare`` makes it, at machine 0's reset) on
+that machine's model: what a design or plan made at the nominal machine is worth at the
+machines.  Seconds per machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from calibrators.planning.bound import best_design, lab_model, plan_counts, start_slots
+from calibrators.planning.instruments import step_actions
+from calibrators.study.compare import Config, shared_start, study_bound
+from calibrators.study.episodes import machine_seed
+from calibrators.study.statistics import median_interval
+from orthoglide_env.instruments.stands import (
+    ideal_rays,
+    install_array,
+    installation_errors,
+    stand_errors,
+)
+from orthoglide_env.lab.operations import PAPER_SLOTS, slot_catalogue
+from orthoglide_env.model.errors import PRESETS, MachineParams, get_preset
+from orthoglide_env.world.conditions import CONDITION_NAMES, Conditions
+
+UM = 1e3  # per mm
+#: Resamples of the machines for the bootstrap intervals of RMS values.
+RESAMPLES: int = 10_000
+
+
+def drawn(config: Config, index: int) -> tuple[MachineParams, np.ndarray]:
+    """Machine ``index`` of ``config``'s comparison and its stands' installations per slot
+    of the catalogue ((S, 4), zero where no stand starts), in the order the lab's reset
+    draws them from the machine's seed: the machine, then the paper's stands'
+    installation errors (a lab without a tracker)."""
+    stream = np.random.default_rng(machine_seed(config.seed, index))
+    preset = get_preset(config.errors)
+    machine = preset.sample(stream, config.design)
+    start = start_slots(config.design, len(PAPER_SLOTS))
+    catalogue = slot_catalogue(config.design)
+    specs = [catalogue[s] for s in start]
+    gauges = install_array(specs, machine,
+                           errors=installation_errors(len(specs), preset, stream))
+    origins, directions = ideal_rays(specs, machine)
+    installed = np.zeros((len(catalogue), 4))
+    installed[list(start)] = stand_errors(specs, gauges.origin, gauges.direction, origins,
+                                          directions)
+    return machine, installed
+
+
+def rms_interval(values: np.ndarray, over: np.ndarray | None = None
+                 ) -> tuple[float, float, float]:
+    """The RMS of ``values`` (or its ratio to ``over``'s RMS, machine by machine paired)
+    and its bootstrap 95 % interval over the machines."""
+    draws = np.random.default_rng(0).integers(0, len(values), (RESAMPLES, len(values)))
+
+    def rms(x: np.ndarray, axis: int | None = None) -> np.ndarray:
+        return np.sqrt(np.mean(x**2, axis=axis))
+
+    value = rms(values) / (1.0 if over is None else rms(over))
+    sampled = rms(values[draws], 1) / (1.0 if over is None else rms(over[draws], 1))
+    low, high = np.quantile(sampled, [0.025, 0.975])
+    return float(value), float(low), float(high)
+
+
+def realised(run: Path, config: Config, estimators: tuple[str, ...], machines: int
+             ) -> dict[tuple[str, str], tuple[np.ndarray, int]]:
+    """Each agent's TCP error after rigid motion (mm) with each of ``estimators``' fits on
+    machines 0 to ``machines`` - 1 of the comparison in ``run`` and how many of those fits
+    failed (``ValueError``: not ``config``'s lab, or machines missing)."""
+    told = json.loads((run / "config.json").read_text())
+    expected = {"conditions": config.conditions.name, "budget_s": config.budget_s,
+                "instruments": list(config.instruments), "seed": config.seed,
+                "errors": config.errors, "effects": list(config.conditions.effects)}
+    differ = {k: told.get(k) for k, v in expected.items() if told.get(k) != v}
+    if differ:
+        raise ValueError(f"{run} is another lab: {differ} (this one: "
+                         f"{ {k: expected[k] for k in differ} })")
+    errors: dict[tuple[str, str], dict[int, float]] = {}
+    failed: dict[tuple[str, str], int] = {}
+    for line in (run / "trials.jsonl").read_text().splitlines():
+        trial = json.loads(line)
+        row = trial["agent"], trial["estimator"]
+        if row[1] in estimators and trial["machine"] < machines:
+            errors.setdefault(row, {})[trial["machine"]] = trial["tcp_after"]["rigid"]
+            failed[row] = failed.get(row, 0) + bool(trial["failed"])
+    if not errors:
+        raise ValueError(f"{run} has no trials of estimators {list(estimators)}")
+    out = {}
+    for row, by_machine in errors.items():
+        missing = sorted(set(range(machines)) - set(by_machine))
+        if missing:
+            raise ValueError(f"{run}: {row} has no trial on machines {missing[:5]}")
+        out[row] = np.array([by_machine[i] for i in range(machines)]), failed[row]
+    return out
+
+
+def plans_at_machines(config: Config, machines: int) -> None:
+    """Print, per machine and as RMS over them, its bound, the nominal bound's design and
+    ``optimal``'s kept plan on its model (µm), beside their values on the nominal one."""
+    plans = shared_start(replace(config, agents=("optimal",)), 0, 1).plans
+    (slots, engaged, sigma, *_), (steps, _) = next(iter(plans.items()))
+    actions = step_actions(steps)
+    owned, stands = config.instruments, len(PAPER_SLOTS)
+    nominal = best_design(config.design, config.conditions, sigma, config.budget_s, owned)
+    model = lab_model(config.design, config.conditions, sigma, config.budget_s, owned, stands)
+    counts = plan_counts(model, config.design, slots, engaged, actions)
+    print("| machine | its bound | its best design | the nominal design there | "
+          "`optimal`'s plan there | plan over its bound |")
+    print("|---|---|---|---|---|---|")
+    rows = []
+    for i in range(-1, machines):
+        if i >= 0:
+            machine, installed = drawn(config, i)
+            found = best_design(config.design, config.conditions, sigma, config.budget_s,
+                                owned, stands, True, machine, installed)
+            model = lab_model(config.design, config.conditions, sigma, config.budget_s,
+                              owned, stands, machine, installed)
+        else:
+            found = nominal
+        row = UM * np.array([found.bound.bound_mm, found.bound.design_mm,
+                             np.sqrt(model.value(nominal.counts)),
+                             np.sqrt(model.value(counts))])
+        rows += [row] if i >= 0 else []
+        print(f"| {i if i >= 0 else 'nominal'} | " + " | ".join(f"{v:.3f}" for v in row)
+              + f" | {row[3] / row[0]:.3f} |")
+    rms = np.sqrt(np.mean(np.array(rows) ** 2, axis=0))
+    print("| RMS | " + " | ".join(f"{v:.3f}" for v in rms) + f" | {rms[3] / rms[0]:.3f} |")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--conditions", default="lab", choices=CONDITION_NAMES)
+    parser.add_argument("--budget", type=float, default=3600.0, help="lab seconds")
+    parser.add_argument("--instruments", default="dial",
+                        help="what the lab owns, comma-separated (dial, interferometer)")
+    parser.add_argument("--machines", type=int, default=50)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--errors", default="realistic", choices=sorted(PRESETS))
+    parser.add_argument("--out", type=Path, help="a compare --out folder of this lab")
+    parser.add_argument("--estimators", default="full",
+                        help="whose fits --out's rows are, comma-separated")
+    parser.add_argument("--plans", action="store_true",
+                        help="the nominal design and optimal's plan at each machine")
+    args = parser.parse_args()
+    owned = tuple(args.instruments.split(","))
+    if "dial" not in owned or set(owned) - {"dial", "interferometer"}:
+        parser.error(f"--instruments must name dial and maybe interferometer (no ballbar "
+                     f"at a machine), got {args.instruments!r}")
+    if not (np.isfinite(args.budget) and args.budget > 0):
+        parser.error(f"--budget must be a positive number of seconds, got {args.budget}")
+    if args.machines < 6:
+        parser.error(f"--machines must be at least 6 (a median's interval), got {args.machines}")
+    config = Config(agents=(), estimators=(), budget_s=args.budget, errors=args.errors,
+                    seed=args.seed, conditions=Conditions(args.conditions),
+                    instruments=owned)
+    if args.plans:
+        plans_at_machines(config, args.machines)
+        return
+    agents: dict[tuple[str, str], tuple[np.ndarray, int]] = {}
+    if args.out is not None:
+        try:
+            agents = realised(args.out, config, tuple(args.estimators.split(",")),
+                              args.machines)
+        except (OSError, ValueError, KeyError) as error:
+            parser.error(str(error))
+    nominal = study_bound(config).bound_mm
+    bounds = np.array([study_bound(config, *drawn(config, i)).bound_mm
+                       for i in range(args.machines)])
+    rms, low, high = rms_interval(bounds)
+    print(f"{args.conditions}, {args.budget:g} s, {'+'.join(owned)}, machines 0-"
+          f"{args.machines - 1} of seed {args.seed}, {args.errors}: nominal bound "
+          f"{UM * nominal:.3f} µm; at the machines RMS {UM * rms:.3f} [{UM * low:.3f}, "
+          f"{UM * high:.3f}] µm ({rms / nominal:.4f}x), median {UM * np.median(bounds):.3f}, "
+          f"range {UM * bounds.min():.3f}-{UM * bounds.max():.3f}")
+    if not agents:
+        return
+    print()
+    print("| agent, estimator | failed | realised RMS µm | RMS / nominal bound "
+          "| RMS / machines' bound RMS | median per machine / nominal "
+          "| median per machine / its bound |")
+    print("|---|---|---|---|---|---|---|")
+    for (agent, estimator), (errors, failures) in sorted(agents.items()):
+        mine, lo, hi = rms_interval(errors)
+        paired = rms_interval(errors, bounds)
+        over = errors / nominal
+        each = errors / bounds
+        a, b = median_interval(over)
+        c, d = median_interval(each)
+        print(f"| {agent}, {estimator} | {failures} | "
+              f"{UM * mine:.2f} [{UM * lo:.2f}, {UM * hi:.2f}] | "
+              f"{mine / nominal:.3f} [{lo / nominal:.3f}, {hi / nominal:.3f}] | "
+              f"{paired[0]:.3f} [{paired[1]:.3f}, {paired[2]:.3f}] | "
+              f"{np.median(over):.3f} [{a:.3f}, {b:.3f}] | "
+              f"{np.median(each):.3f} [{c:.3f}, {d:.3f}] |")
+
+
+if __name__ == "__main__":
+    main()
