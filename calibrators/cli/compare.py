@@ -8,6 +8,7 @@ import dataclasses
 import json
 import signal
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -71,6 +72,27 @@ def _sigterm_stops() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
+
+
+@contextmanager
+def _signals_held() -> Iterator[None]:
+    """While it lasts, SIGINT and SIGTERM wait: each that arrives is raised again as it
+    ends, to the handler it would have met."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    arrived: list[int] = []
+    handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    held = {s: h for s, h in handlers.items() if callable(h)}
+    for s in held:
+        signal.signal(s, lambda signum, _frame: arrived.append(signum))
+    try:
+        yield
+    finally:
+        for s, handler in held.items():
+            signal.signal(s, handler)
+        for s in dict.fromkeys(arrived):
+            signal.raise_signal(s)
 
 
 def _names(text: str, option: str) -> tuple[str, ...]:
@@ -205,10 +227,13 @@ def run_command(args: argparse.Namespace) -> None:
     collected: list[Trial] = list(done)
 
     def keep(trial: Trial) -> None:
-        collected.append(trial)
-        if handle:
-            handle.write(trial.to_json() + "\n")
-            handle.flush()
+        # A stop between the list and the file would say one trial more or fewer than
+        # the file keeps: the signals wait until both hold it.
+        with _signals_held():
+            collected.append(trial)
+            if handle:
+                handle.write(trial.to_json() + "\n")
+                handle.flush()
 
     bar = None
     if not (args.quiet or args.json):
