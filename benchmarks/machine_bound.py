@@ -43,7 +43,6 @@ from scipy.sparse import csr_matrix
 from calibrators.planning.belief import PlannedOperation
 from calibrators.planning.bound import (
     BoundModel,
-    _value,
     at_contact_model,
     best_design,
     dial_grid,
@@ -165,7 +164,7 @@ def mean_design(judged: list[BoundModel], visits: csr_matrix, start: np.ndarray,
         counts = count * (visits.T @ share)
         gain = np.zeros(len(share))
         for model in judged:
-            gain += visits @ model.fall(_value(model.information(counts), model.factor)[1])
+            gain += visits @ model.value_and_fall(counts)[1]
         share = share * gain / (share @ gain)
     return count * (visits.T @ share)
 

@@ -220,6 +220,12 @@ class BoundModel:
         """Each reading's fall of ``f`` (minus its gradient) where ``X = M^-1 F``."""
         return np.sum(self.projected(x) ** 2, axis=1)
 
+    def value_and_fall(self, counts: np.ndarray) -> tuple[float, np.ndarray]:
+        """``f(n)`` (mm^2) of ``counts`` (N,) readings and each candidate's fall of it
+        there (N,): what a multiplicative design step weighs."""
+        value, x = _value(self.information(counts), self.factor)
+        return value, self.fall(x)
+
     def index(self, slot: int, posture: int) -> int:
         """The candidate of a dial at ``slot`` read at ``posture`` (``ValueError`` where the
         nominal tip does not touch: no candidate)."""

@@ -44,7 +44,6 @@ from calibrators.planning.belief import PlannedOperation
 from calibrators.planning.bound import (
     BAR,
     BoundModel,
-    _value,
     bar_bundle,
     best_design,
     bound_model,
@@ -140,10 +139,9 @@ def sequential_design(model: BoundModel, seconds: float, drives: tuple[int, ...]
         taken = w * seconds / price
         counts[read] = taken[:len(postures)] @ expected
         counts[instrument] = taken[len(postures):]
-        value, x = _value(model.information(counts), model.factor)
+        value, fall = model.value_and_fall(counts)
         if step == steps:
             break
-        fall = model.fall(x)
         gain = np.concatenate([expected @ fall[read], fall[instrument]])
         per_second = gain / price
         w = w * per_second / float(w @ per_second)
