@@ -105,6 +105,23 @@ def effect_list(text: str) -> tuple[str, ...]:
     return names
 
 
+def plan_as_told(world: Conditions) -> None:
+    """From here on, ``optimal`` and ``active`` plan as told ``world`` whatever lab they
+    play in (an experiment, not a lab): rows whose played worlds differ then read the
+    same operations."""
+    setup = optimal.lab_setup
+
+    def planned(*given):  # type: ignore[no-untyped-def]
+        return (*setup(*given)[:-1], world)
+
+    optimal.lab_setup = active.lab_setup = planned
+
+
+def z_rms(trials: list[Trial]) -> float:
+    """The pooled z-RMS of the trials whose fit did not fail."""
+    return float(np.sqrt(np.mean(np.concatenate([t.z for t in trials if not t.failed])**2)))
+
+
 def drawn_list(text: str) -> tuple[str, ...]:
     """``--zero``: effects whose drawn values are set to zero, comma-separated;
     ``argparse.ArgumentTypeError`` naming one that draws nothing."""
@@ -153,10 +170,9 @@ def zeroed_rows(config: Config, agent: str, machines: int, told: str,
         ok = [t for t in rows if not t.failed]
         rigid = np.array([t.tcp_after["rigid"] for t in rows]) * 1e3
         predicted = np.array([t.predicted_rigid_mm for t in ok]) * 1e3
-        z = np.concatenate([t.z for t in ok])
         line = (f"{rows[0].agent}: {np.median(rigid):.3f} um, RMS {np.sqrt(np.mean(rigid**2)):.3f}"
                 f", predicted RMS {np.sqrt(np.mean(predicted**2)):.3f}, z-RMS "
-                f"{np.sqrt(np.mean(z**2)):.2f}, failed {len(rows) - len(ok)}")
+                f"{z_rms(rows):.2f}, failed {len(rows) - len(ok)}")
         if effects:
             pair = paired(rows + first)[0]
             low, high = pair["ratio_ci95"] or (np.nan, np.nan)
@@ -198,12 +214,7 @@ def main() -> None:
         return
     truth = Conditions(args.truth, effects=args.effects)
     if args.effects is not None:
-        setup = optimal.lab_setup
-
-        def planned_for_all(*given):  # type: ignore[no-untyped-def]
-            return (*setup(*given)[:-1], Conditions(args.truth))
-
-        optimal.lab_setup = active.lab_setup = planned_for_all
+        plan_as_told(Conditions(args.truth))
     config = Config(agents=(args.agent,), estimators=("full",), conditions=truth,
                     seed=args.seed, sigma=args.sigma, budget_s=args.budget,
                     instruments=args.instruments)

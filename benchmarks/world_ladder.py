@@ -31,8 +31,8 @@ import argparse
 from dataclasses import replace
 
 import numpy as np
+from world_excess import plan_as_told, z_rms
 
-import calibrators.agents.active as active
 import calibrators.agents.optimal as optimal
 from calibrators.estimators.catalogue import for_study
 from calibrators.planning.bound import at_contact_model, lab_model, plan_counts
@@ -65,11 +65,6 @@ def predicted_um(trials: list[Trial]) -> np.ndarray:
     """The fit's predicted error after rigid motion of each trial (µm; NaN where the fit
     failed)."""
     return UM * np.array([np.nan if t.failed else t.predicted_rigid_mm for t in trials])
-
-
-def z_rms(trials: list[Trial]) -> float:
-    """The pooled z-RMS of the trials that did not fail."""
-    return float(np.sqrt(np.mean(np.concatenate([t.z for t in trials if not t.failed])**2)))
 
 
 def realised(trials: list[Trial], full: list[Trial]) -> str:
@@ -106,12 +101,7 @@ def main() -> None:
     if args.machines < 6:
         parser.error("--machines must be at least 6 (a median's 95 % interval)")
     world = Conditions(args.conditions)
-    setup = optimal.lab_setup
-
-    def planned_for_all(*given):  # type: ignore[no-untyped-def]
-        return (*setup(*given)[:-1], world)
-
-    optimal.lab_setup = active.lab_setup = planned_for_all
+    plan_as_told(world)
     if args.plan == "greedy":
         optimal.phased_plan = lambda *given: None
 
