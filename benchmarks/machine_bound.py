@@ -20,8 +20,9 @@ that lab, its ``trials.jsonl``), each agent's realised TCP error after rigid mot
 scores it) over both bounds: the RMS over machines over the bound's RMS (the per-machine
 bounds' interval paired by machine), and the median over machines of realised over
 that machine's bound, with its distribution-free interval.  Dial sigma 0.02 mm and
-resolution 0.01 mm unless the run says otherwise; the ballbar is no candidate of a
-machine's bound.  With ``--plans``, each machine's row of the nominal bound's design
+resolution 0.01 mm on the prototype with screw drives: a run of other dials, another
+design or scales is refused (exit 2).  The ballbar is no candidate of a machine's
+bound.  With ``--plans``, each machine's row of the nominal bound's design
 and of ``optimal``'s kept plan (made as ``compare`` makes it, at machine 0's reset) on
 that machine's model: what a design or plan made at the nominal machine is worth at the
 machines; with ``--robust K``, beside them the phased plan rounded from a design made on
@@ -34,12 +35,15 @@ from __future__ import annotations
 
 import argparse
 import json
+from contextlib import closing
 from dataclasses import replace
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 from scipy.sparse import csr_matrix
 
+from calibrators.agents import get_agent
 from calibrators.planning.belief import PlannedOperation
 from calibrators.planning.bound import (
     BoundModel,
@@ -49,21 +53,16 @@ from calibrators.planning.bound import (
     held_design,
     lab_model,
     plan_counts,
-    start_slots,
 )
 from calibrators.planning.instruments import step_actions
 from calibrators.planning.phased import PASSES, overhead_s, phase_visits, plan_phases, rounded_plan
 from calibrators.planning.search import Planner, greedy_plan
 from calibrators.study.compare import Config, shared_start, study_bound
 from calibrators.study.episodes import machine_seed
+from calibrators.study.labs import lab_id
 from calibrators.study.statistics import median_interval
-from orthoglide_env.instruments.stands import (
-    ideal_rays,
-    install_array,
-    installation_errors,
-    stand_errors,
-)
-from orthoglide_env.lab.operations import PAPER_SLOTS, TIME, slot_catalogue
+from orthoglide_env.instruments.stands import ideal_rays, stand_errors
+from orthoglide_env.lab.operations import PAPER_SLOTS, TIME, slot_catalogue, slot_index
 from orthoglide_env.model.errors import PRESETS, MachineParams, get_preset
 from orthoglide_env.world.conditions import CONDITION_NAMES, Conditions
 
@@ -87,21 +86,23 @@ READ_FLOOR: float = 0.25
 
 def drawn(config: Config, index: int) -> tuple[MachineParams, np.ndarray]:
     """Machine ``index`` of ``config``'s comparison and its stands' installations per slot
-    of the catalogue ((S, 4), zero where no stand starts), in the order the lab's reset
-    draws them from the machine's seed: the machine, then the paper's stands'
-    installation errors (a lab without a tracker)."""
-    stream = np.random.default_rng(machine_seed(config.seed, index))
-    preset = get_preset(config.errors)
-    machine = preset.sample(stream, config.design)
-    start = start_slots(config.design, len(PAPER_SLOTS))
+    of the catalogue ((S, 4), zero where no stand starts): the truth of ``optimal``'s lab
+    reset with that machine's seed, as ``compare`` resets it (the lab's own draws, so
+    whatever it draws before the stands, a tracker station's frame among them, is
+    drawn)."""
+    kwargs = config.lab_kwargs(get_agent("optimal"))
+    with closing(gym.make(lab_id(kwargs), **kwargs)) as env:
+        env.reset(seed=machine_seed(config.seed, index))
+        lab = env.unwrapped
+        machine, gauges = lab.true_machine, lab.true_gauges
     catalogue = slot_catalogue(config.design)
+    start = [slot_index(g.spec, design=config.design) for g in gauges]
     specs = [catalogue[s] for s in start]
-    gauges = install_array(specs, machine,
-                           errors=installation_errors(len(specs), preset, stream))
     origins, directions = ideal_rays(specs, machine)
     installed = np.zeros((len(catalogue), 4))
-    installed[list(start)] = stand_errors(specs, gauges.origin, gauges.direction, origins,
-                                          directions)
+    installed[start] = stand_errors(specs, np.array([g.origin for g in gauges]),
+                                    np.array([g.direction for g in gauges]), origins,
+                                    directions)
     return machine, installed
 
 
@@ -126,9 +127,12 @@ def realised(run: Path, config: Config, estimators: tuple[str, ...], machines: i
     machines 0 to ``machines`` - 1 of the comparison in ``run`` and how many of those fits
     failed (``ValueError``: not ``config``'s lab, or machines missing)."""
     told = json.loads((run / "config.json").read_text())
+    # A run of other dials or of another design has another bound: refused, not compared.
     expected = {"conditions": config.conditions.name, "budget_s": config.budget_s,
                 "instruments": list(config.instruments), "seed": config.seed,
-                "errors": config.errors, "effects": list(config.conditions.effects)}
+                "errors": config.errors, "effects": list(config.conditions.effects),
+                "sigma": config.sigma, "resolution": config.resolution,
+                "indicator": config.conditions.indicator, "design": None, "drives": None}
     differ = {k: told.get(k) for k, v in expected.items() if told.get(k) != v}
     if differ:
         raise ValueError(f"{run} is another lab: {differ} (this one: "
