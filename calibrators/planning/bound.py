@@ -492,9 +492,14 @@ class Visits:
 
     def prices(self, members: list[np.ndarray], grid: np.ndarray) -> np.ndarray:
         """The seconds of a visit that reads each of ``members`` (dial or bar candidates)."""
-        moved = _moved(grid, self.start)
-        return np.array([self.settle_s + self.moved_seconds(np.count_nonzero(np.isin(m, moved)))
-                         for m in members])
+        lengths = [len(m) for m in members]
+        flat = np.concatenate(members) if members else np.zeros(0, dtype=int)
+        hit = np.isin(flat, _moved(grid, self.start))
+        # One membership test over every visit's readings, counted per visit: a visit
+        # per posture each generation made the test per visit the solver's largest cost.
+        count = np.bincount(np.repeat(np.arange(len(members)), lengths), hit,
+                            minlength=len(members)).astype(int)
+        return self.settle_s + self.moved_seconds(count)
 
 
 def _moved(grid: np.ndarray, start: tuple[int, ...]) -> np.ndarray:
@@ -596,8 +601,8 @@ def _atoms(members: list[np.ndarray], n: int) -> csr_matrix:
 
 
 def solve(model: BoundModel, visits: Visits, lasers: np.ndarray,
-          stop_above: float = np.inf, bars: np.ndarray | None = None
-          ) -> tuple[float, float, np.ndarray]:
+          stop_above: float = np.inf, bars: np.ndarray | None = None,
+          stop_below: float = 0.0) -> tuple[float, float, np.ndarray]:
     """The continuous design of least ``f`` over the polytope of ``visits`` with every dial
     candidate, the laser candidates ``lasers`` and the bar points ``bars`` (indices), by
     the multiplicative algorithm (Silvey, Titterington and Torsney 1978; Yu 2010 for
@@ -615,7 +620,9 @@ def solve(model: BoundModel, visits: Visits, lasers: np.ndarray,
     as a new kind, with half of the posture's share.  The best certified value is
     returned with the final design's value and counts.  Stops once the gap is
     :data:`GAP_SHARE` of the value, the certified value passes ``stop_above`` (a problem
-    that cannot be the least), or after :data:`MAX_ITERATIONS`."""
+    that cannot be the least), the design's value falls below ``stop_below`` (mm^2: the
+    optimum is below it, all a search that compares with it asks), or after
+    :data:`MAX_ITERATIONS`."""
     rows, factor = model.rows, model.factor
     grid = dial_grid(model)
     bars = np.zeros(0, dtype=int) if bars is None else bars
@@ -640,7 +647,7 @@ def solve(model: BoundModel, visits: Visits, lasers: np.ndarray,
         if iteration % GAP_EVERY == 0 or iteration == MAX_ITERATIONS:
             lower = max(lower, value - gap(visits, grid, lasers, bars, counts, fall))
             if (value - lower <= GAP_SHARE * value or lower > stop_above
-                    or iteration == MAX_ITERATIONS):
+                    or value < stop_below or iteration == MAX_ITERATIONS):
                 break
             atoms, place, share, gains, price = _generate(
                 atoms, place, share, gains, price, grid, fall, visits)
