@@ -122,38 +122,65 @@ def test_bound_with_the_ballbar_is_below_a_plan_that_reads_it(bundle_taken, monk
 
 
 @pytest.mark.parametrize("world", ["ideal", "lab", "workshop"])
-def test_the_planner_prices_a_pivot_with_the_fits_prior(world):
-    # The planner's rows of a bar's readings over its pivot's centre are the fit's
-    # Jacobian in units of the fit's prior (pivot_sigmas: one source of truth), so what a
-    # plan expects of the bar is what the fit will draw from it.  The prior is the
-    # centring's alone under ideal and wider where the drives err at the centre (10.8 and
-    # 17.5 um against 6 um), so the check is not of equal numbers by accident.
-    from calibrators.estimators.consider import pivot_sigmas
-    from calibrators.planning.instruments import bundles, reading_rows
+def test_the_planner_s_bar_rows_are_the_fit_s(world):
+    # The planner's and the bound's rows of one bar set-up's readings are the rows the
+    # ``full`` fit linearises at the nominal machine, built here the fit's way: the
+    # Jacobian over the machine's errors; its fitted lead terms' columns from
+    # consider_terms (the pitch table and the screw's periodic error, each moving the TCP
+    # the bar reads and, through the pivot, the bar's other end at the set-up's centre
+    # command); the pivot's centre per unit of the fit's prior (pivot_sigmas without the
+    # drives, as gauss_newton sets it); every column whitened by the bar's sigma.  Both
+    # sides are the same sums of the same products, so they agree to rounding (1e-12 of
+    # the largest entry, against ~1e-16 a product); rows that leave the pivot fixed, or
+    # price the drives' errors at the centre in its prior, miss by the pivot's part (its
+    # share is checked to be most of a lead column's size, and the prior 1.7-2.8x wider).
+    from calibrators.estimators.consider import (
+        DEFAULT_NODE_SPACING,
+        FULL_TERMS,
+        consider_terms,
+        lead_terms,
+        pivot_sigmas,
+    )
+    from calibrators.estimators.exact_fit import world_columns
+    from calibrators.planning.instruments import bar_layout, reading_rows
     from orthoglide_env.instruments import ballbar
     from orthoglide_env.reading_model import (
         BALLBAR_CENTRE_SCALE,
-        ReadingLayout,
         default_scales,
         jacobian,
+        pivot_derivatives,
     )
 
     conditions = Conditions(world)
     bar = next(b for b in bundles(PROTOTYPE, ("ballbar",)) if b.instrument == "ballbar")
-    _, setup, _ = reading_rows(bar, PROTOTYPE, conditions, bar.path)
-    layout = ReadingLayout.of(["bar"] * len(bar.path), [bar.spec] * len(bar.path), bar.path,
-                              PROTOTYPE)
+    rows, setup, nominal = reading_rows(bar, PROTOTYPE, conditions, bar.path)
+    layout = bar_layout(bar, PROTOTYPE, bar.path)
     space = layout.space
     derivative = jacobian(np.zeros(len(space)), layout, np.ones(len(space), dtype=bool),
-                          default_scales(space))[:, -3:]  # per BALLBAR_CENTRE_SCALE
-    prior = pivot_sigmas(layout, conditions)
-    # Whitened by the bar's sigma, per unit of the prior: rounding only (~1e-15 relative).
-    expected = derivative * prior / BALLBAR_CENTRE_SCALE / ballbar.sigma(conditions)
-    assert np.allclose(setup[:, :3], expected, rtol=1e-12, atol=0)
+                          default_scales(space))
+    times = np.zeros((1, len(layout)))  # the lead error is not timed
+    terms = consider_terms(layout, nominal[None], times, conditions, DEFAULT_NODE_SPACING)
+    fitted, _ = terms.split((*FULL_TERMS, "periodic"))
+    lead, _ = fitted.split(("lead", "periodic"))
+    names = [n for n, _ in lead_terms(bar.path, PROTOTYPE, conditions, DEFAULT_NODE_SPACING)]
+    assert list(lead.names) == names  # the planner's lead columns, in its order
+    prior = pivot_sigmas(layout, conditions, drives=False)
+    sigma = ballbar.sigma(conditions)
+    expected = np.hstack([derivative[:, :27], world_columns(layout, lead)[0]]) / sigma
+    expected_setup = derivative[:, 27:] * prior / BALLBAR_CENTRE_SCALE / sigma
+    assert rows.shape == expected.shape and setup.shape == (len(layout), 4)
+    tolerance = 1e-12 * np.abs(expected).max()
+    assert np.allclose(rows, expected, rtol=0, atol=tolerance)
+    assert np.allclose(setup[:, :3], expected_setup, rtol=0, atol=1e-12 * np.abs(
+        expected_setup).max())
     if world == "ideal":
-        assert np.allclose(prior, ballbar.centring_sigma(), rtol=1e-12)
-    else:
-        assert np.all(prior > 1.5 * ballbar.centring_sigma())
+        assert not names and np.allclose(prior, ballbar.centring_sigma(), rtol=1e-12)
+        return
+    # The pivot's part of the lead columns is not a rounding: the TCP's part alone (the
+    # pivot fixed) misses by most of a column's size.
+    through_pivot = np.einsum("na,nak->nk", pivot_derivatives(layout), lead.pivot[0]) / sigma
+    assert np.abs(through_pivot).max() > 0.5 * np.abs(expected[:, 27:]).max()
+    assert np.all(pivot_sigmas(layout, conditions) > 1.7 * prior)
 
 
 def test_a_plan_started_with_the_laser_set_up_moves_on_the_lab_s_clock():

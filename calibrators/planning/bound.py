@@ -25,7 +25,8 @@ zero per dial slot and per drive's interferometer set-up (diffuse, :data:`~ortho
 lab.design_belief.ZERO_SCALE`), the installation of a stand at each slot (its
 :data:`N_INSTALL` errors at the realistic preset's tolerances, unknowns of the fit and of
 the planner), and the ballbar set-up's pivot centre (the fit's prior,
-:func:`~calibrators.estimators.consider.pivot_sigmas`) and zero (the fit's rows:
+:func:`~calibrators.estimators.consider.pivot_sigmas` without the drives, whose lead terms
+move the pivot in the bar's rows as in the fit's) and zero (the fit's rows:
 :func:`~calibrators.planning.instruments.reading_rows`).  ``W`` is the TCP error's weight
 over the first two groups (:func:`~orthoglide_env.scoring.predicted.rigid_weight_with_drives`).
 

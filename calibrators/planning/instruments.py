@@ -19,8 +19,10 @@ The bundles (:func:`bundles`):
   (:mod:`calibrators.agents.iso230`).
 
 Their readings' rows are the fit's (:mod:`orthoglide_env.reading_model`): a ballbar's over
-the 27 machine errors, the drives' lead error through the TCP and its set-up's pivot
-centre and zero; a laser's over its drive's lead error and its set-up's zero.  The lead
+the 27 machine errors, the drives' lead error through the TCP and through the pivot
+(centred where the carriages put the TCP at the set-up's centre command,
+:func:`bar_columns`), and its set-up's pivot centre (its prior without the drives', as
+the fit's) and zero; a laser's over its drive's lead error and its set-up's zero.  The lead
 error's terms are those ``full`` fits (the pitch table's whitened coefficients and the
 screw's periodic error, :func:`~calibrators.estimators.consider.lead_terms`): a lab that
 owns such an instrument can see them, so its planner carries them as unknowns
@@ -44,14 +46,20 @@ and 150 mm bars' arcs are not candidates.
 from __future__ import annotations
 
 import copy
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
 
-from calibrators.estimators.consider import DEFAULT_NODE_SPACING, lead_terms, pivot_sigmas
+from calibrators.estimators.consider import (
+    DEFAULT_NODE_SPACING,
+    Consider,
+    lead_terms,
+    pivot_sigmas,
+)
+from calibrators.estimators.exact_fit import world_columns
 from orthoglide_env.instruments import ballbar, interferometer
 from orthoglide_env.instruments.ballbar import BallbarSpec
 from orthoglide_env.lab.design_belief import N_MACHINE, ZERO_SCALE
@@ -63,7 +71,6 @@ from orthoglide_env.reading_model import (
     BALLBAR_CENTRE_SCALE,
     ParameterSpace,
     ReadingLayout,
-    carriage_derivatives,
     default_scales,
     jacobian,
 )
@@ -256,10 +263,13 @@ def reading_rows(bundle: Bundle, design: MachineDesign, conditions: Conditions |
     derivative = jacobian(np.zeros(len(space)), layout, np.ones(len(space), dtype=bool),
                           default_scales(space))
     rows[:, :N_MACHINE] = derivative[:, :N_MACHINE]
-    rows[:, N_MACHINE:] = np.einsum("ra,ral->rl", carriage_derivatives(layout), lead)
-    # The pivot's centre, in units of the fit's prior (the centring and the drives' errors
-    # where it was centred), and the bar's length.
-    centre = derivative[:, N_MACHINE:] * pivot_sigmas(layout, world) / BALLBAR_CENTRE_SCALE
+    rows[:, N_MACHINE:] = bar_columns(
+        bundle, layout, lambda rho: lead_patterns(design, conditions, rho))
+    # The pivot's centre, in units of the fit's prior (the centring and the room's growth:
+    # the drives' share is the lead columns' and, in the bound, a known term's), and the
+    # bar's length.
+    centre = (derivative[:, N_MACHINE:] * pivot_sigmas(layout, world, drives=False)
+              / BALLBAR_CENTRE_SCALE)
     setup = np.column_stack([centre, np.full(len(path), ZERO_SCALE)])
     sigma = ballbar.sigma(world)
     return rows / sigma, setup / sigma, ballbar.nominal_readings(design, bundle.spec, path)
@@ -270,6 +280,20 @@ def bar_layout(bundle: Bundle, design: MachineDesign, path: np.ndarray) -> Readi
     set-up."""
     return ReadingLayout.of(["ballbar#planned"] * len(path), [bundle.spec] * len(path),
                             path, design)
+
+
+def bar_columns(bundle: Bundle, layout: ReadingLayout,
+                patterns: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """(R, K) the fit's columns (:func:`~calibrators.estimators.exact_fit.world_columns`,
+    mm per unit coefficient) of K carriage terms over a ballbar ``bundle``'s readings
+    (``layout``, :func:`bar_layout`), the terms' patterns at commands ``rho`` (P, 3) being
+    ``patterns(rho)`` (P, 3, K): each term moves the TCP the bar reads and, through the
+    pivot centred where the carriages put the TCP at the set-up's centre command, the bar's
+    other end (:attr:`~calibrators.estimators.consider.Consider.pivot`)."""
+    at = patterns(layout.rho)
+    centre = np.broadcast_to(patterns(np.asarray(bundle.centre, dtype=float)[None]), at.shape)
+    return world_columns(layout, Consider((), at[None], np.zeros((1, len(at), 0)),
+                                          centre[None]))[0]
 
 
 def marginal(rows: np.ndarray, setup: np.ndarray, residual: np.ndarray | None = None

@@ -26,10 +26,11 @@ What it assumes, beyond the bound's relaxations:
 * a reading's timed terms are those of its bin's middle (the warm-up's curves vary by
   their time constants, 20-40 minutes under ``lab``; the value's change with twice as
   many bins is measured in ``docs/instruments.md``);
-* the warm-up moves a ballbar reading through the TCP it reads, as the lead error does in
-  the bound's rows (:func:`~calibrators.planning.instruments.reading_rows`); the pivot's
-  share, its centring where the warmed carriages put it, is in the centre's prior
-  (:func:`~calibrators.estimators.consider.pivot_sigmas`), as for the lead error;
+* the warm-up moves a ballbar reading through the TCP it reads and through the pivot,
+  centred where the warmed carriages put the TCP at the set-up's centre command, as the
+  lead error does in the bound's rows (:func:`~calibrators.planning.instruments.
+  bar_columns`), both at the reading's bin (the fit's pivot is warmed as at its set-up's
+  end, earlier than the bins of a set-up's later readings: the bins' approximation);
 * a stand's drift is counted from the lab's start and only at the slots it starts at; a
   stand re-mounted elsewhere, the backlash and the indicators' curves stay known: their
   unknowns would only raise it.
@@ -71,12 +72,12 @@ from calibrators.planning.bound import (
     problems,
     start_slots,
 )
-from calibrators.planning.instruments import bar_layout, step_actions
+from calibrators.planning.instruments import bar_columns, bar_layout, step_actions
 from orthoglide_env.instruments import ballbar, interferometer
 from orthoglide_env.lab.operations import PAPER_SLOTS
 from orthoglide_env.lab.slot_table import slot_table
 from orthoglide_env.model.design import MachineDesign
-from orthoglide_env.reading_model import ParameterSpace, carriage_derivatives, default_scales
+from orthoglide_env.reading_model import ParameterSpace, default_scales
 from orthoglide_env.world.conditions import Conditions
 
 #: The budget's bins of time.  Assumption: six, ten minutes at one hour and thirty at
@@ -108,7 +109,7 @@ def warm_rows(model: BoundModel, design: MachineDesign, conditions: Conditions,
     """(N, W) each candidate of ``model``'s whitened row over the timed terms ``terms``
     read at lab time ``t`` (s).  ``warmup``: a carriage's warm-up moves a reading as its
     error does in the bound's rows (a dial's through its drive's encoder offset at the
-    posture, the laser's along its drive, the bar's through the TCP).  ``stands``: the
+    posture, the laser's along its drive, the bar's through the TCP and the pivot).  ``stands``: the
     drift of the stands mounted at the ``start`` slots at the lab's start, as the planner
     carries it (:func:`~calibrators.estimators.consider.drift_terms`, since time 0), on
     their dials' readings; other slots' mountings drift as known."""
@@ -142,8 +143,7 @@ def warm_rows(model: BoundModel, design: MachineDesign, conditions: Conditions,
         bars = np.flatnonzero(model.laser == BAR)
         if bars.size:
             bundle = bar_bundle(design)
-            moved = carriage_derivatives(bar_layout(bundle, design, bundle.path))
-            out[bars] = (np.einsum("ra,raw->rw", moved, on(bundle.path))
+            out[bars] = (bar_columns(bundle, bar_layout(bundle, design, bundle.path), on)
                          / ballbar.sigma(conditions))
         parts.append(out)
     if "stands" in terms and "stands" in conditions and start:
