@@ -4,7 +4,7 @@ planner's criterion and on the bound's own model, over the bound.
     python benchmarks/plan_gap.py [--conditions lab] [--budget 3600]
                                   [--instruments dial,ballbar] [--sigma 0.02]
                                   [--resolution 0.01] [--warm-bins 6 [--no-warm-bound]]
-                                  [--stay] [--laser-at-every-move]
+                                  [--stay] [--laser-at-every-move] [--phased]
 
 ``optimal`` (:func:`calibrators.agents.optimal.fixed_plan`) makes the greedy plan and, in
 a lab that owns the interferometer or the ballbar, a plan from each rounded design
@@ -31,7 +31,13 @@ without re-mounts, as ``optimal-stay`` makes them.  The plans are for a lab whos
 (``OrthoglideLab-v4``: a plan reads the laser on its laser bundles only, and its other
 moves pay no dwell); with ``--laser-at-every-move``, every move after a set-up reads the
 laser and waits its dwell, as in ``OrthoglideLab-v1`` to ``-v3`` and as ``optimal`` and
-``active`` play in every version (their ``laser_at_every_move``).  The
+``active`` play in every version (their ``laser_at_every_move``).  With ``--phased``,
+each plan that re-mounts is followed by the plan on its slots, re-mounts and laser runs
+whose dials read as the design of the bound of its phases does
+(:func:`calibrators.planning.phased.phased_plan`, which ``optimal`` weighs in a lab of
+dials, or of dials and the interferometer, under a world's conditions), and by ``B`` of
+the plan's slots and re-mounts with its laser's drives set up
+(:func:`calibrators.planning.bound.held_design`, no phases: below both plans).  The
 prototype, the paper's stands; no lab episodes (a few CPU-minutes at three hours).
 """
 
@@ -42,8 +48,9 @@ import argparse
 import numpy as np
 from bound_table import dial_arguments, dial_weighting
 
-from calibrators.planning.bound import BAR, best_design, bound_model, plan_counts
+from calibrators.planning.bound import BAR, best_design, bound_model, held_design, plan_counts
 from calibrators.planning.instruments import step_actions
+from calibrators.planning.phased import phased_plan, plan_phases
 from calibrators.planning.rounding import bound_bundles, plan_bundles, relaxed_plan
 from calibrators.planning.search import Planner, greedy_plan
 from calibrators.planning.warm_bound import steps_value, warm_design, warm_models
@@ -95,6 +102,10 @@ def main() -> None:
     parser.add_argument("--no-warm-bound", action="store_true",
                         help="with --warm-bins, the plans on that model without its bound "
                              "(CPU-minutes with the laser at three hours)")
+    parser.add_argument("--phased", action="store_true",
+                        help="each plan that re-mounts also read as the design of the bound "
+                             "of its own phases, its laser runs kept (phased_plan), and that "
+                             "bound without the phases (B of its slots)")
     args = parser.parse_args()
     if args.no_warm_bound and not args.warm_bins:
         parser.error("--no-warm-bound prices the plans on the model of --warm-bins K: give both")
@@ -113,6 +124,15 @@ def main() -> None:
                           laser_asked=asked)
         planner.expect_readings()
         return planner
+
+    def own_bound(steps: tuple) -> float:
+        """``B`` of the slots and re-mounts of a plan of ``steps`` with its laser's drives
+        set up (mm): a bound of the plans that re-mount so with those set-ups."""
+        remounts = plan_phases(slots, steps)[1]
+        drives = tuple(sorted({s.axis for s in steps if s.op == Op.ALIGN}))
+        return held_design(PROTOTYPE, conditions, sigma, args.budget, owned,
+                           tuple(slot for _, slot in remounts), len(remounts),
+                           setups=((drives, False),)).bound.bound_mm
 
     print(f"bound {UM * found.bound_mm:.3f} um (design {UM * found.design_mm:.3f} um)")
     warm, held = None, None
@@ -136,11 +156,8 @@ def main() -> None:
                    (" with the stands held", bound_bundles(PROTOTYPE, conditions, sigma,
                                                            args.budget, owned, False)))
                if bundles]
-    for name, bundles in [("greedy", None)] + [
-            (" + ".join(b.label for b in group), group) for group in groups] + rounded:
-        planner = opened()
-        steps = (greedy_plan(planner, remounts=not args.stay) if bundles is None
-                 else relaxed_plan(planner, bundles, not args.stay))
+
+    def row(name: str, steps: tuple, predicted_mm: float) -> None:
         counts = plan_counts(model, PROTOTYPE, slots, engaged, step_actions(steps))
         on_model = float(np.sqrt(model.value(counts)))
         setups = ", ".join([f"{Op(s.op).name.lower()} {s.time_s / 60:.0f}" for s in steps
@@ -151,10 +168,24 @@ def main() -> None:
             on_warm = float(np.sqrt(steps_value(warm, PROTOTYPE, slots, engaged, tuple(steps))))
             extra = f" {UM * on_warm:.3f}, " + (f"{on_warm / held.bound.bound_mm:.2f} |"
                                                 if held else "- |")
-        print(f"| {name} | {UM * planner.predicted_rigid_mm():.3f} | {UM * on_model:.3f} | "
+        print(f"| {name} | {UM * predicted_mm:.3f} | {UM * on_model:.3f} | "
               f"{on_model / found.bound_mm:.2f} | {counts[model.laser == -1].sum():.0f}, "
               f"{counts[model.laser == BAR].sum():.0f}, {counts[model.laser >= 0].sum():.0f}"
               f" | {setups} |{extra}", flush=True)
+
+    weighed = [("greedy", None)] + [(" + ".join(b.label for b in group), group)
+                                    for group in groups]
+    for k, (name, bundles) in enumerate(weighed + rounded):
+        planner = opened()
+        steps = tuple(greedy_plan(planner, remounts=not args.stay) if bundles is None
+                      else relaxed_plan(planner, bundles, not args.stay))
+        row(name, steps, planner.predicted_rigid_mm())
+        # optimal's own candidates only: it phases no rounded bound's design.
+        phased = (phased_plan(opened(), steps) if args.phased and k < len(weighed)
+                  and any(s.op == Op.REMOUNT for s in steps) else None)
+        if phased is not None:
+            row(f"{name}, phased (B of its slots, re-mounts and set-ups "
+                f"{UM * own_bound(steps):.3f})", *phased)
 
 
 if __name__ == "__main__":

@@ -11,12 +11,19 @@ from calibrators.planning.belief import PlannedOperation
 from calibrators.planning.bound import (
     at_contact_model,
     bound_model,
+    given_model,
     held_design,
     plan_counts,
 )
-from calibrators.planning.instruments import step_actions
-from calibrators.planning.phased import phase_visits, phased_plan, plan_phases
-from calibrators.planning.search import Planner, greedy_plan
+from calibrators.planning.instruments import InstrumentOperation, bundles, step_actions
+from calibrators.planning.phased import (
+    overhead_s,
+    phase_visits,
+    phased_plan,
+    plan_phases,
+    plan_runs,
+)
+from calibrators.planning.search import Planner, expect, greedy_plan, take
 from orthoglide_env.lab.operations import PAPER_SLOTS, Op
 from orthoglide_env.model.design import PROTOTYPE
 from orthoglide_env.world.conditions import Conditions
@@ -98,7 +105,7 @@ def test_the_phased_plan_keeps_the_greedy_re_mounts_and_lies_above_their_bound()
 
 def test_no_phased_plan_where_the_bound_does_not_hold_the_lab():
     # Under ideal conditions the bound's model is no world's; a stand off the paper's
-    # slots is not where the bound's stands start.
+    # slots is not where the bound's stands start; a lab with the ballbar is not held.
     ideal = Planner(list(PAPER_SLOTS), [True] * len(PAPER_SLOTS), SIGMA, 900.0,
                     design=PROTOTYPE)
     assert phased_plan(ideal, (PlannedOperation(Op.STOP),)) is None
@@ -106,3 +113,98 @@ def test_no_phased_plan_where_the_bound_does_not_hold_the_lab():
     moved = Planner([*PAPER_SLOTS[:-1], other],
                     [True] * len(PAPER_SLOTS), SIGMA, 900.0, design=PROTOTYPE, conditions=LAB)
     assert phased_plan(moved, (PlannedOperation(Op.STOP),)) is None
+    # The bar's runs are no part of a phased plan.
+    bar = Planner(list(PAPER_SLOTS), [True] * len(PAPER_SLOTS), SIGMA, 900.0,
+                  design=PROTOTYPE, conditions=LAB, instruments=("ballbar",))
+    assert phased_plan(bar, (PlannedOperation(Op.STOP),)) is None
+
+
+def test_readings_given_to_a_model_count_as_read_before_any_design():
+    # f of a design's counts on the model given some laser readings is f of both counts
+    # on the model itself (the prior's square root taken out exactly, to rounding).
+    model = bound_model(PROTOTYPE, LAB, SIGMA, True)
+    rng = np.random.default_rng(3)
+    given = np.where(model.laser >= 0, rng.integers(0, 3, len(model.laser)), 0).astype(float)
+    counts = np.zeros(len(model.laser))
+    counts[rng.choice(np.flatnonzero(model.laser == -1), 200, replace=False)] = 2.0
+    counts[np.flatnonzero(model.laser == 1)[::9]] = 1.0
+    on_given = given_model(model, given).value(counts)
+    assert on_given == pytest.approx(model.value(given + counts), rel=1e-9)
+    assert given_model(model, np.zeros(len(model.laser))) is model
+    with pytest.raises(ValueError, match="own columns"):
+        given_model(model, np.where(model.laser == -1, 1.0, 0.0))
+
+
+def _run_plan(budget: float) -> tuple[PlannedOperation, ...]:
+    """A plan under lab with the interferometer: a few dial moves, a re-mount, the laser's
+    run along x, then the dials greedily without re-mounts."""
+    planner = Planner(list(PAPER_SLOTS), [True] * len(PAPER_SLOTS), SIGMA, budget,
+                      design=PROTOTYPE, conditions=LAB, instruments=("interferometer",))
+    planner.expect_readings()
+    for _ in range(5):
+        planner.greedy_move()
+    other = next(s for s in range(len(PAPER_SLOTS) + 1) if s not in PAPER_SLOTS)
+    planner.remount(0, other)
+    planner.expect_readings()
+    for _ in range(5):
+        planner.greedy_move()
+    laser = next(b for b in bundles(PROTOTYPE, ("interferometer",)) if b.axis == 0)
+    take(planner, laser)
+    expect(planner, laser)
+    return tuple(greedy_plan(planner, remounts=False))
+
+
+def test_a_plans_laser_runs_fall_in_its_phases_at_their_share_of_its_visits():
+    steps = (PlannedOperation(Op.MOVE, (1.0, 0.0, 0.0)),
+             PlannedOperation(Op.REMOUNT, stand=1, slot=9),
+             PlannedOperation(Op.MOVE, (0.0, 1.0, 0.0)),
+             InstrumentOperation(Op.LIFT, stand=0),
+             InstrumentOperation(Op.ALIGN, axis=2),
+             InstrumentOperation(Op.MOVE, (0.0, 0.0, 5.0)),
+             InstrumentOperation(Op.MOVE, (0.0, 0.0, 0.0)),
+             InstrumentOperation(Op.ENGAGE, stand=0),
+             PlannedOperation(Op.MOVE, (0.0, 2.0, 0.0)),
+             PlannedOperation(Op.MOVE, (0.0, 3.0, 0.0)),
+             PlannedOperation(Op.STOP, time_s=300.0))
+    runs = plan_runs(steps)
+    assert len(runs) == 2 and runs[0] == ()
+    (share, run), = runs[1]
+    assert share == pytest.approx(1 / 3) and run.axis == 2 and run.setup == Op.ALIGN
+    assert np.array_equal(run.path, [[0.0, 0.0, 5.0], [0.0, 0.0, 0.0]])
+    # The bound's clock charges the dials' four moves and the re-mount (a visit and its
+    # work), not the laser's run.
+    assert overhead_s(steps) == pytest.approx(300.0 - 5 * 5.0 - 120.0)
+
+
+@pytest.mark.slow
+def test_the_phased_plan_keeps_a_plans_laser_runs_and_re_mounts():
+    # Forty minutes under lab with the interferometer: a plan that re-mounts once and
+    # sets the laser up on x.  The phased plan mounts the same stands at the same slots in
+    # the same order and drives the same laser run (the same path along the same drive)
+    # within the budget, and its readings are a point of the bound of its phases with the
+    # laser on x: that certified value is below it on the bound's model.
+    budget = 2400.0
+    plan = _run_plan(budget)
+
+    def opened() -> Planner:
+        planner = Planner(list(PAPER_SLOTS), [True] * len(PAPER_SLOTS), SIGMA, budget,
+                          design=PROTOTYPE, conditions=LAB, instruments=("interferometer",))
+        planner.expect_readings()
+        return planner
+
+    made = phased_plan(opened(), plan)
+    assert made is not None
+    steps, predicted = made
+    phases, remounts = plan_phases(tuple(PAPER_SLOTS), steps)
+    assert (phases, remounts) == plan_phases(tuple(PAPER_SLOTS), plan)
+    kept = [[(run.axis, run.path.tolist()) for _, run in phase] for phase in plan_runs(plan)]
+    assert kept == [[(run.axis, run.path.tolist()) for _, run in phase]
+                    for phase in plan_runs(steps)]
+    assert any(kept) and steps[-1].time_s <= budget and predicted > 0
+    own = held_design(PROTOTYPE, LAB, SIGMA, budget, ("dial", "interferometer"),
+                      tuple(slot for _, slot in remounts), len(remounts),
+                      setups=(((0,), False),), phases=phases)
+    model = bound_model(PROTOTYPE, LAB, SIGMA, True)
+    counts = plan_counts(model, PROTOTYPE, PAPER_SLOTS, (True,) * len(PAPER_SLOTS),
+                         step_actions(steps))
+    assert own.bound.bound_mm <= np.sqrt(model.value(counts))

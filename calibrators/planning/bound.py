@@ -799,7 +799,8 @@ def held_design(design: MachineDesign, conditions: Conditions, dial_sigma: float
                 stop_above: float = np.inf,
                 phases: tuple[tuple[int, ...], ...] = (), at_contact: bool = False,
                 machine: MachineParams | None = None,
-                installed: np.ndarray | None = None) -> Design:
+                installed: np.ndarray | None = None,
+                given: np.ndarray | None = None) -> Design:
     """The bound of the plans that re-mount ``remounts`` times (None: once per slot of
     ``slots`` beyond the paper's) and mount stands only at the paper's slots and
     ``slots``: :func:`best_design`'s problems with the stands held at all of those slots
@@ -832,7 +833,10 @@ def held_design(design: MachineDesign, conditions: Conditions, dial_sigma: float
     (:attr:`Visits.phases`), each set for as long as the design likes, so such a plan is
     a point of it, and it is above the bound without them (fewer kinds of visit).  With
     ``at_contact``, the same problem on :func:`at_contact_model`: the design a plan can
-    expect to read, no bound.  ``machine`` and ``installed``: as :func:`lower_bound`'s."""
+    expect to read, no bound.  With ``given`` (N,), readings of the model's candidates
+    taken whatever the design (a plan's laser runs, :func:`given_model`; their time is
+    not in ``budget_s``): the least of the other readings beside them, a design to round,
+    no bound.  ``machine`` and ``installed``: as :func:`lower_bound`'s."""
     start = start_slots(design, stands)
     added = tuple(s for s in sorted(set(slots)) if s not in start)
     if stray := sorted({s for phase in phases for s in phase} - set(start) - set(added)):
@@ -848,6 +852,8 @@ def held_design(design: MachineDesign, conditions: Conditions, dial_sigma: float
                       machine, installed)
     if at_contact:
         model = at_contact_model(model, design)
+    if given is not None:
+        model = given_model(model, given)
     held = [(drives, pivot, replace(visits, start=start + added,
                                     phases=tuple(tuple(phase) for phase in phases)))
             for drives, pivot, visits in problems(design, left, instruments, stands, False)
@@ -867,6 +873,28 @@ def at_contact_model(model: BoundModel, design: MachineDesign) -> BoundModel:
     weight = np.ones(len(model.laser))
     weight[dial] = np.sqrt(contact[model.label[dial, 0], model.label[dial, 1]])
     return replace(model, rows=model.rows * weight[:, None])
+
+
+def given_model(model: BoundModel, counts: np.ndarray) -> BoundModel:
+    """``model`` with ``counts`` (N,) readings taken before any design, none of a dial's
+    own columns (:attr:`BoundModel.local`): ``f`` of a design's counts ``n`` on it is ``f``
+    of ``counts + n`` on ``model``.  With ``I + G = L L^T`` the prior and the given
+    readings' information on the columns they touch (the identity elsewhere), ``M = L (I +
+    sum n_i b_i b_i^T) L^T`` with ``b_i = L^-1 a_i``, so the rows become ``b_i`` and the
+    factor ``L^-1 F``: the same rows' structure, a dial's own columns untouched."""
+    from scipy.linalg import cholesky, solve_triangular  # as :func:`_value`'s
+
+    information = model.information(np.asarray(counts, dtype=float))
+    columns = np.flatnonzero(np.any(information != 0, axis=0))
+    if not columns.size:
+        return model
+    if model.local is not None and np.isin(columns, model.local[model.local >= 0]).any():
+        raise ValueError("given readings must not read a dial's own columns")
+    lower = cholesky(np.eye(len(columns)) + information[np.ix_(columns, columns)], lower=True)
+    rows, factor = model.rows.copy(), model.factor.copy()
+    rows[:, columns] = solve_triangular(lower, model.rows[:, columns].T, lower=True).T
+    factor[columns] = solve_triangular(lower, model.factor[columns], lower=True)
+    return replace(model, rows=rows, factor=factor)
 
 
 def _least(model: BoundModel, choices: list[tuple[tuple[int, ...], bool, Visits]],

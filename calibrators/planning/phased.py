@@ -1,5 +1,5 @@
-"""A dial plan from the bound of its own slots: a greedy plan's re-mounts kept, its
-readings re-chosen by the design of the bound of the plans that re-mount so.
+"""A dial plan from the bound of its own slots: a plan's re-mounts (and laser runs) kept,
+its dials' readings re-chosen by the design of the bound of the plans that re-mount so.
 
 The greedy search (:mod:`calibrators.planning.search`) chooses its re-mounts well (under
 ``lab``, one hour, dials alone, its five slots' bound is 0.8 % above the best five found,
@@ -19,6 +19,15 @@ of the plan's slot sets in turn (:func:`~calibrators.planning.bound.held_design`
    (the drive is a cost the bound does not price), the re-mounts between, and the budget
    left spent greedily without re-mounts.
 
+In a lab that owns the interferometer the plan's laser runs are kept as it has them
+(:func:`plan_runs`: each set-up and the run it opens, in its phase, after the same share
+of the phase's dial visits), and their readings, with those the laser takes at the dials'
+moves where every move reads it, are given to the design
+(:func:`~calibrators.planning.bound.given_model`): it chooses the dials' readings beside
+them.  A design's own laser readings are no plan's (the bound's model reads the laser at
+any target on any visit, where a plan reads it along one drive at a time), so rounding
+them was not tried.
+
 The design is that of the bound's model with each dial reading counted at its a-priori
 contact (:func:`~calibrators.planning.bound.at_contact_model`), as the planner expects
 readings: rounded from the design counted whole, the plan read where the stands seldom
@@ -27,8 +36,8 @@ contact, against the greedy plan's 6.370 and 6.424 um) and realised no better on
 machines (docs/instruments.md, "The dial plan read as the bound of its own slots").
 
 The design's budget is the plan's less what the bound leaves out (driving, the levers,
-the re-mounts' drives to Zero): first as the greedy plan spends it, then as the rounded
-plan does (:data:`PASSES`).
+the re-mounts' drives to Zero) and the laser's part (its runs, and its dwell at the dials'
+moves): first as the plan spends it, then as the rounded plan does (:data:`PASSES`).
 """
 
 from __future__ import annotations
@@ -36,10 +45,17 @@ from __future__ import annotations
 import numpy as np
 
 from calibrators.planning.belief import PlannedOperation
-from calibrators.planning.bound import dial_grid, held_design, lab_model, start_slots
+from calibrators.planning.bound import (
+    dial_grid,
+    held_design,
+    lab_model,
+    plan_counts,
+    start_slots,
+)
+from calibrators.planning.instruments import Bundle, InstrumentOperation, step_actions
 from calibrators.planning.pricing import PricedMoves
 from calibrators.planning.rounding import apportion
-from calibrators.planning.search import Planner, greedy_plan
+from calibrators.planning.search import Planner, greedy_plan, take_fitting
 from orthoglide_env.lab.operations import TIME, Op
 
 #: Designs made, each at the budget less the last plan's time beyond its visits and
@@ -66,12 +82,42 @@ def plan_phases(slots: tuple[int, ...], steps: tuple[PlannedOperation, ...]
 
 
 def overhead_s(steps: tuple[PlannedOperation, ...] | list[PlannedOperation]) -> float:
-    """The seconds a plan of ``steps`` spends beyond its visits' settles and its re-mounts'
-    work (the bound's clock): driving and the levers."""
-    visits = sum(s.op in (Op.MOVE, Op.REMOUNT) for s in steps)
+    """The seconds a plan of ``steps`` spends beyond its dials' visits' settles and its
+    re-mounts' work (the bound's clock): driving and the levers, and its laser runs
+    (:func:`plan_runs`, given to the design: :func:`phased_plan`) and the laser's dwell at
+    the dials' moves where it reads there."""
+    visits = sum(s.op == Op.REMOUNT or (s.op == Op.MOVE and not isinstance(
+        s, InstrumentOperation)) for s in steps)
     remounts = sum(s.op == Op.REMOUNT for s in steps)
     return float(steps[-1].time_s - visits * TIME.settle_and_read_s
                  - remounts * TIME.remount_s)
+
+
+def plan_runs(steps: tuple[PlannedOperation, ...]
+              ) -> tuple[tuple[tuple[float, Bundle], ...], ...]:
+    """Per phase of a plan of ``steps`` (:func:`plan_phases`), its laser runs in order: the
+    bundle each set-up opens (the set-up and the moves it drives) with the share of the
+    phase's dial visits the plan takes before it."""
+    runs: list[list[tuple[int, Bundle]]] = [[]]
+    visits = [0]
+    for i, step in enumerate(steps):
+        if step.op == Op.REMOUNT:
+            runs.append([])
+            visits.append(0)
+        elif step.op == Op.MOVE and not isinstance(step, InstrumentOperation):
+            visits[-1] += 1
+        elif step.op == Op.ALIGN:
+            path = []
+            for later in steps[i + 1:]:
+                if later.op != Op.MOVE or not isinstance(later, InstrumentOperation):
+                    break
+                path.append(later.rho)
+            axis = step.axis  # type: ignore[attr-defined]
+            runs[-1].append((visits[-1], Bundle(
+                "interferometer", f"interferometer {'xyz'[axis]} (kept)", Op.ALIGN,
+                np.array(path, dtype=float).reshape(-1, 3), axis=axis)))
+    return tuple(tuple((before / max(total, 1), bundle) for before, bundle in phase)
+                 for phase, total in zip(runs, visits, strict=True))
 
 
 def phase_visits(readings: np.ndarray, phases: tuple[tuple[int, ...], ...]) -> np.ndarray:
@@ -97,11 +143,14 @@ def phase_visits(readings: np.ndarray, phases: tuple[tuple[int, ...], ...]) -> n
 
 
 def rounded_plan(planner: Planner, visits: np.ndarray,
-                 remounts: tuple[tuple[int, int], ...]) -> list[PlannedOperation]:
+                 remounts: tuple[tuple[int, int], ...],
+                 runs: tuple[tuple[tuple[float, Bundle], ...], ...] = ()
+                 ) -> list[PlannedOperation]:
     """``visits`` (P, J) taken phase by phase from the planner's state, each posture's
-    nearest first, the ``remounts`` between the phases, each step that fits in the budget
-    (readings expected), then the budget spent by :func:`~calibrators.planning.search.
-    greedy_plan` without re-mounts."""
+    nearest first, the ``remounts`` between the phases and each phase's laser ``runs``
+    (:func:`plan_runs`) once its share of the phase's visits is taken, each step that fits
+    in the budget (readings expected), then the budget spent by
+    :func:`~calibrators.planning.search.greedy_plan` without re-mounts."""
     for phase in range(visits.shape[1]):
         if phase:
             if planner.time_s + planner.remount_seconds() > planner.budget_s:
@@ -109,43 +158,66 @@ def rounded_plan(planner: Planner, visits: np.ndarray,
             planner.remount(*remounts[phase - 1])
             planner.expect_readings()
         left = {int(p): int(n) for p, n in enumerate(visits[:, phase]) if n}
-        while left:
+        due = list(runs[phase]) if runs else []
+        total, taken = visits[:, phase].sum(), 0
+        while left or due:
+            if due and (not left or taken >= due[0][0] * total):
+                take_fitting(planner, due.pop(0)[1])
+                continue
             seconds, after, reads = planner._moves()
             posture = min(left, key=lambda p: (seconds[p], p))
             if planner.time_s + seconds[posture] > planner.budget_s:
                 break
             planner.move(posture, PricedMoves(np.zeros(len(seconds)), seconds, after, reads))
             planner.expect_readings()
+            taken += 1
             left[posture] -= 1
             if not left[posture]:
                 del left[posture]
     return greedy_plan(planner, remounts=False)
 
 
-def phased_plan(opened: Planner, greedy: tuple[PlannedOperation, ...]
+def phased_plan(opened: Planner, plan: tuple[PlannedOperation, ...]
                 ) -> tuple[tuple[PlannedOperation, ...], float] | None:
     """The plan of :func:`rounded_plan` from the fresh planner ``opened`` (its opening's
-    readings expected; a copy is planned) on the slots and re-mounts of the ``greedy``
-    plan, and its predicted error (mm); None where the bound's design does not apply:
-    stands not all at the paper's slots with their plungers down, a lab that owns an
-    instrument beyond its dials or moves that dwell, or ``ideal`` conditions (the
-    bound's model is a world's)."""
+    readings expected; a copy is planned) on the slots, re-mounts and laser runs of
+    ``plan`` (:func:`plan_runs`), and its predicted error (mm); None where the bound's
+    design does not apply: stands not all at the paper's slots with their plungers down,
+    a lab that owns an instrument beyond its dials and the interferometer or moves that
+    dwell from the start, or ``ideal`` conditions (the bound's model is a world's).
+
+    The laser runs are the plan's, not the design's: the bound's model reads the laser
+    at any target on any visit, where a plan reads it along one drive at a time, in the
+    runs a set-up opens (and, in a lab whose every move reads it, at each posture's place
+    along that drive), so a design's laser readings are no plan's.  Their readings on the
+    bound's model are given to the design (:func:`~calibrators.planning.bound.
+    given_model`), which chooses the dials' beside them over the time the plan's dial
+    visits take."""
     slots = tuple(int(s) for s in opened.slots)
+    owned = () if opened.kit is None else opened.kit.owned
     if (slots != start_slots(opened.design, len(slots)) or not all(opened.engaged)
-            or opened.kit is not None or opened.dwell_s or opened.conditions is None):
+            or set(owned) - {"interferometer"} or opened.dwell_s
+            or opened.conditions is None):
         return None
-    phases, remounts = plan_phases(slots, greedy)
+    phases, remounts = plan_phases(slots, plan)
+    runs = plan_runs(plan) if owned else ()
     added = tuple(sorted({s for phase in phases for s in phase} - set(slots)))
+    instruments = ("dial", *owned)
     model = lab_model(opened.design, opened.conditions, opened.sigma, opened.budget_s,
-                      ("dial",), len(slots))
+                      instruments, len(slots))
     grid = dial_grid(model)
-    steps: tuple[PlannedOperation, ...] = greedy
+    steps: tuple[PlannedOperation, ...] = plan
     planner = opened
     for _ in range(PASSES):
+        # The laser's readings of the last plan, its runs' and its moves'.
+        given = np.where(model.laser >= 0, plan_counts(
+            model, opened.design, slots, tuple(opened.engaged), step_actions(steps)),
+            0.0) if owned else None
         design = held_design(opened.design, opened.conditions, opened.sigma,
-                             opened.budget_s - overhead_s(steps), ("dial",), added,
-                             len(remounts), len(slots), phases=phases, at_contact=True)
+                             opened.budget_s - overhead_s(steps), instruments, added,
+                             len(remounts), len(slots), setups=(((), False),) if owned
+                             else None, phases=phases, at_contact=True, given=given)
         readings = np.where(grid >= 0, design.counts[np.maximum(grid, 0)], 0.0)
         planner = opened.fork()
-        steps = tuple(rounded_plan(planner, phase_visits(readings, phases), remounts))
+        steps = tuple(rounded_plan(planner, phase_visits(readings, phases), remounts, runs))
     return steps, planner.predicted_rigid_mm()

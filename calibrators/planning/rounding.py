@@ -50,7 +50,7 @@ from calibrators.planning.bound import (
     setup_seconds,
 )
 from calibrators.planning.instruments import Bundle, conditions_or_default
-from calibrators.planning.search import Planner, expect, greedy_plan, take
+from calibrators.planning.search import Planner, greedy_plan, take_fitting
 from orthoglide_env.lab.operations import TIME, Op
 from orthoglide_env.lab.slot_table import slot_table
 from orthoglide_env.model.design import MachineDesign
@@ -256,9 +256,5 @@ def relaxed_plan(planner: Planner, bundles: tuple[Bundle, ...], remounts: bool =
     """``bundles`` taken first, each that fits in the planner's budget, their readings
     expected, then the budget spent by :func:`~calibrators.planning.search.greedy_plan`."""
     for bundle in bundles:
-        trial = planner.fork()
-        take(trial, bundle)
-        if trial.time_s <= trial.budget_s:
-            take(planner, bundle)
-            expect(planner, bundle)
+        take_fitting(planner, bundle)
     return greedy_plan(planner, remounts=remounts)

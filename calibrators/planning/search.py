@@ -426,6 +426,18 @@ def take(planner: Planner, bundle: Bundle) -> list[InstrumentOperation]:
     return ops
 
 
+def take_fitting(planner: Planner, bundle: Bundle) -> bool:
+    """Take ``bundle`` in the plan, its readings expected, where it ends within the
+    planner's budget; whether it did."""
+    trial = planner.fork()
+    take(trial, bundle)
+    if trial.time_s > trial.budget_s:
+        return False
+    take(planner, bundle)
+    expect(planner, bundle)
+    return True
+
+
 def _update(planner: Planner, equivalent: np.ndarray, innovation: np.ndarray | None) -> None:
     full = np.zeros((len(equivalent), len(planner.covariance)))
     full[:, planner.kit.columns] = equivalent
