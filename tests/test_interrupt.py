@@ -211,16 +211,18 @@ def test_a_stop_waits_until_the_trial_is_kept_in_memory_and_on_disk(
         signum: int, raised: str) -> None:
     """A signal that arrives while a trial is being kept (in the list the stop line counts
     and in the trials file) raises only once both hold it: raised between the two, the
-    stop line counted one trial more than the file kept.  The signal is the process's own,
-    sent inside the held block; the statements after it must run, and the stop must come
-    as the block ends, to the handler the run had installed."""
+    stop line counted one trial more than the file kept.  The signal is raised in this
+    thread inside the held block (``raise_signal``: a signal sent to the process may be
+    taken by another of its threads, such as a test worker's, and reach the handlers only
+    after the block, which then held nothing); the statements after it must run, and the
+    stop must come as the block ends, to the handler the run had installed."""
     from calibrators.cli import compare
 
     kept: list[str] = []
     with compare._sigterm_stops():
         with pytest.raises(BaseException) as stop:
             with compare._signals_held():
-                os.kill(os.getpid(), signum)
+                signal.raise_signal(signum)
                 kept.append("in memory")
                 kept.append("on disk")
     assert type(stop.value).__name__ == raised
