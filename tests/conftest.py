@@ -43,7 +43,7 @@ def _bytecode_for_this_run() -> None:
     folder = tempfile.mkdtemp(prefix="orthoglide-bytecode-")
     atexit.register(shutil.rmtree, folder, ignore_errors=True)
     os.environ["PYTHONPYCACHEPREFIX"] = folder
-    del os.environ["PYTHONDONTWRITEBYTECODE"]
+    os.environ.pop("PYTHONDONTWRITEBYTECODE", None)  # absent where -B set the flag
     sys.pycache_prefix, sys.dont_write_bytecode = folder, False
 
 
