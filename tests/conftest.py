@@ -3,13 +3,17 @@ experiment in the lab."""
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import functools
 import io
+import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import warnings
 from pathlib import Path
 from typing import Any
@@ -25,6 +29,26 @@ from calibrators.measurements import Measurements
 from calibrators.study.episodes import Episode, run_episode
 from orthoglide_env.instruments.dial import GaugeNoise, weighting_sigma
 from orthoglide_env.model.design import PROTOTYPE
+
+
+def _bytecode_for_this_run() -> None:
+    """Where the environment forbids bytecode (``PYTHONDONTWRITEBYTECODE``, as container
+    images set it), the workers and every child a test starts would compile NumPy, SciPy,
+    Gymnasium and the package again, about 0.9 CPU-s a child that imports the command
+    line: they write it instead to a folder of this run's own (``PYTHONPYCACHEPREFIX``,
+    never into a shared environment), removed at its end.  ``make test`` unsets the
+    variable and writes bytecode in place, and a run given a folder keeps it."""
+    if not sys.flags.dont_write_bytecode or os.environ.get("PYTHONPYCACHEPREFIX"):
+        return
+    folder = tempfile.mkdtemp(prefix="orthoglide-bytecode-")
+    atexit.register(shutil.rmtree, folder, ignore_errors=True)
+    os.environ["PYTHONPYCACHEPREFIX"] = folder
+    os.environ.pop("PYTHONDONTWRITEBYTECODE", None)  # absent where -B set the flag
+    sys.pycache_prefix, sys.dont_write_bytecode = folder, False
+
+
+_bytecode_for_this_run()
+
 
 #: Rows of eq. (10) as (posture, index of the gauge in the paper layout).  The paper's
 #: labels of rows 9-12 are misprinted (docs/estimators.md); these are the physical ones.

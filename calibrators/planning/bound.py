@@ -182,6 +182,15 @@ class BoundModel:
         return (shared, np.ascontiguousarray(self.rows[:, shared]), owned,
                 np.take_along_axis(self.rows[owned], self.local[owned], axis=1))
 
+    @cached_property
+    def _groups(self) -> list[tuple[int, int, np.ndarray]]:
+        """Each slot's local candidates, contiguous in :attr:`_blocks`' (M,): their
+        start, end and local columns (every candidate of a slot has the slot's)."""
+        columns = self.local[self._blocks[2]]
+        starts = np.flatnonzero(np.r_[True, columns[1:, 0] != columns[:-1, 0]])
+        ends = np.r_[starts[1:], len(columns)]
+        return [(int(a), int(b), columns[a]) for a, b in zip(starts, ends, strict=True)]
+
     def information(self, counts: np.ndarray) -> np.ndarray:
         """``sum_i n_i a_i a_i^T`` (n, n) over the candidates read (``counts`` > 0)."""
         if self.local is None:
@@ -196,16 +205,20 @@ class BoundModel:
         if not rows.size:
             return out
         columns = self.local[rows]
-        # Each slot's candidates are contiguous: sum their outer products per slot.
+        # Each slot's candidates are contiguous: sum their outer products per slot.  The
+        # products are laid out candidates last, so each slot's sum runs over contiguous
+        # memory (the same sums, a third of the time of candidates first).
         starts = np.flatnonzero(np.r_[True, columns[1:, 0] != columns[:-1, 0]])
-        weighted = values * n[:, None]
-        cross = np.add.reduceat(np.einsum("ig,ik->igk", on_shared[rows], weighted), starts,
-                                axis=0)
-        own = np.add.reduceat(np.einsum("ij,ik->ijk", values, weighted), starts, axis=0)
-        for block, across, local in zip(columns[starts], cross, own, strict=True):
-            out[np.ix_(shared, block)] = across
-            out[np.ix_(block, shared)] = across.T
-            out[np.ix_(block, block)] = local
+        weighted = np.ascontiguousarray((values * n[:, None]).T)[None]
+        cross = np.add.reduceat(np.ascontiguousarray(on_shared[rows].T)[:, None] * weighted,
+                                starts, axis=2)
+        own = np.add.reduceat(np.ascontiguousarray(values.T)[:, None] * weighted, starts,
+                              axis=2)
+        # Every slot's blocks at once (no two slots share a column).
+        blocks = columns[starts].T
+        out[shared[:, None, None], blocks] = cross
+        out[blocks, shared[:, None, None]] = cross
+        out[blocks[:, None], blocks] = own
         return out
 
     def projected(self, x: np.ndarray) -> np.ndarray:
@@ -214,7 +227,11 @@ class BoundModel:
             return self.rows @ x
         shared, on_shared, owned, values = self._blocks
         out = on_shared @ x[shared]
-        out[owned] += np.einsum("ik,ikr->ir", values, x[self.local[owned]])
+        # Per slot, whose candidates share its columns: not each candidate's copy of them.
+        local = out[owned]
+        for start, end, columns in self._groups:
+            local[start:end] += np.einsum("ik,kr->ir", values[start:end], x[columns])
+        out[owned] = local
         return out
 
     def fall(self, x: np.ndarray) -> np.ndarray:
