@@ -35,8 +35,8 @@ laser and waits its dwell, as in ``OrthoglideLab-v1`` to ``-v3`` and as ``optima
 each plan that re-mounts is followed by the plan on its slots, re-mounts and instrument
 runs (the laser's, the bar's) whose dials read as the design of the bound of its phases
 does (:func:`calibrators.planning.phased.phased_plan`, which ``optimal`` weighs under a
-world's conditions), and by ``B`` of the plan's slots and re-mounts with its laser's
-drives and its bar's pivot set up as the plan sets them up
+world's conditions in a lab without the bar), and by ``B`` of the plan's slots and
+re-mounts with its laser's drives and its bar's pivot set up as the plan sets them up
 (:func:`calibrators.planning.bound.held_design`, no phases: below both plans).  The
 prototype, the paper's stands; no lab episodes (a few CPU-minutes at three hours).
 """
