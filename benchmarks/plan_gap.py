@@ -32,11 +32,11 @@ without re-mounts, as ``optimal-stay`` makes them.  The plans are for a lab whos
 moves pay no dwell); with ``--laser-at-every-move``, every move after a set-up reads the
 laser and waits its dwell, as in ``OrthoglideLab-v1`` to ``-v3`` and as ``optimal`` and
 ``active`` play in every version (their ``laser_at_every_move``).  With ``--phased``,
-each plan that re-mounts is followed by the plan on its slots, re-mounts and laser runs
-whose dials read as the design of the bound of its phases does
-(:func:`calibrators.planning.phased.phased_plan`, which ``optimal`` weighs in a lab of
-dials, or of dials and the interferometer, under a world's conditions), and by ``B`` of
-the plan's slots and re-mounts with its laser's drives set up
+each plan that re-mounts is followed by the plan on its slots, re-mounts and instrument
+runs (the laser's, the bar's) whose dials read as the design of the bound of its phases
+does (:func:`calibrators.planning.phased.phased_plan`, which ``optimal`` weighs under a
+world's conditions in a lab without the bar), and by ``B`` of the plan's slots and
+re-mounts with its laser's drives and its bar's pivot set up as the plan sets them up
 (:func:`calibrators.planning.bound.held_design`, no phases: below both plans).  The
 prototype, the paper's stands; no lab episodes (a few CPU-minutes at three hours).
 """
@@ -104,8 +104,8 @@ def main() -> None:
                              "(CPU-minutes with the laser at three hours)")
     parser.add_argument("--phased", action="store_true",
                         help="each plan that re-mounts also read as the design of the bound "
-                             "of its own phases, its laser runs kept (phased_plan), and that "
-                             "bound without the phases (B of its slots)")
+                             "of its own phases, its instruments' runs kept (phased_plan), "
+                             "and that bound without the phases (B of its slots)")
     args = parser.parse_args()
     if args.no_warm_bound and not args.warm_bins:
         parser.error("--no-warm-bound prices the plans on the model of --warm-bins K: give both")
@@ -127,12 +127,14 @@ def main() -> None:
 
     def own_bound(steps: tuple) -> float:
         """``B`` of the slots and re-mounts of a plan of ``steps`` with its laser's drives
-        set up (mm): a bound of the plans that re-mount so with those set-ups."""
+        and its bar's pivot set up (mm): a bound of the plans that re-mount so with those
+        set-ups."""
         remounts = plan_phases(slots, steps)[1]
         drives = tuple(sorted({s.axis for s in steps if s.op == Op.ALIGN}))
+        pivot = any(s.op == Op.PIVOT for s in steps)
         return held_design(PROTOTYPE, conditions, sigma, args.budget, owned,
                            tuple(slot for _, slot in remounts), len(remounts),
-                           setups=((drives, False),)).bound.bound_mm
+                           setups=((drives, pivot),)).bound.bound_mm
 
     print(f"bound {UM * found.bound_mm:.3f} um (design {UM * found.design_mm:.3f} um)")
     warm, held = None, None

@@ -181,6 +181,10 @@ def _candidate_plans(slots: tuple[int, ...], engaged: tuple[bool, ...], sigma: f
     # Dial indicators only: with a digital indicator the phased plan's runs of readings at
     # a posture leave the fit's error bars too wide (the retrace's turns considered per
     # run: z-RMS 0.83 on tests/test_digital_indicator.py's 12 machines, below the band).
+    # Not with the ballbar: there active, which replays the plan the planner's criterion
+    # predicts least, replayed the greedy plan's phased plan under lab at one hour and was
+    # worse per machine, 1.12 [1.00, 1.24] (docs/instruments.md, "The phased plan with the
+    # bar").
     if (criterion == "I" and set(instruments) <= {"interferometer"} and conditions is not None
             and conditions.name != "ideal" and conditions.indicator == "dial"):
         phased = (phased_plan(opened(), steps) for steps, _ in tuple(plans)

@@ -851,7 +851,7 @@ def held_design(design: MachineDesign, conditions: Conditions, dial_sigma: float
     a point of it, and it is above the bound without them (fewer kinds of visit).  With
     ``at_contact``, the same problem on :func:`at_contact_model`: the design a plan can
     expect to read, no bound.  With ``given`` (N,), readings of the model's candidates
-    taken whatever the design (a plan's laser runs, :func:`given_model`; their time is
+    taken whatever the design (a plan's laser or bar runs, :func:`given_model`; their time is
     not in ``budget_s``): the least of the other readings beside them, a design to round,
     no bound.  ``machine`` and ``installed``: as :func:`lower_bound`'s."""
     start = start_slots(design, stands)

@@ -1,5 +1,6 @@
-"""A dial plan from the bound of its own slots: a plan's re-mounts (and laser runs) kept,
-its dials' readings re-chosen by the design of the bound of the plans that re-mount so.
+"""A dial plan from the bound of its own slots: a plan's re-mounts (and its instruments'
+runs) kept, its dials' readings re-chosen by the design of the bound of the plans that
+re-mount so.
 
 The greedy search (:mod:`calibrators.planning.search`) chooses its re-mounts well (under
 ``lab``, one hour, dials alone, its five slots' bound is 0.8 % above the best five found,
@@ -19,14 +20,18 @@ of the plan's slot sets in turn (:func:`~calibrators.planning.bound.held_design`
    (the drive is a cost the bound does not price), the re-mounts between, and the budget
    left spent greedily without re-mounts.
 
-In a lab that owns the interferometer the plan's laser runs are kept as it has them
-(:func:`plan_runs`: each set-up and the run it opens, in its phase, after the same share
-of the phase's dial visits), and their readings, with those the laser takes at the dials'
-moves where every move reads it, are given to the design
-(:func:`~calibrators.planning.bound.given_model`): it chooses the dials' readings beside
-them.  A design's own laser readings are no plan's (the bound's model reads the laser at
-any target on any visit, where a plan reads it along one drive at a time), so rounding
-them was not tried.
+In a lab that owns the interferometer or the ballbar the plan's runs of them are kept as
+it has them (:func:`plan_runs`: each set-up, the laser's alignment or the bar's pivot, and
+the run it opens, in its phase, after the same share of the phase's dial visits), and
+their readings are given to the design (:func:`~calibrators.planning.bound.given_model`):
+it chooses the dials' readings beside them.  The laser, once set up, also reads at the
+dials' moves where every move reads it, so its given readings are those of the last plan
+made (they move with its dial visits); the bar comes off at the first operation that is
+not a move of its run, and the plungers are lifted while it reads, so its readings are
+its runs' alone, the same whatever the dials do.  A design's own laser or bar readings
+are no plan's (the bound's model reads the laser at any target on any visit and the bar
+at any point of its circles, where a plan reads the laser along one drive at a time and
+the bar round the arcs of a pivot's set-up), so rounding them was not tried.
 
 The design is that of the bound's model with each dial reading counted at its a-priori
 contact (:func:`~calibrators.planning.bound.at_contact_model`), as the planner expects
@@ -36,8 +41,9 @@ contact, against the greedy plan's 6.370 and 6.424 um) and realised no better on
 machines (docs/instruments.md, "The dial plan read as the bound of its own slots").
 
 The design's budget is the plan's less what the bound leaves out (driving, the levers,
-the re-mounts' drives to Zero) and the laser's part (its runs, and its dwell at the dials'
-moves): first as the plan spends it, then as the rounded plan does (:data:`PASSES`).
+the re-mounts' drives to Zero) and the instruments' part (their runs with their set-ups,
+lifts and engages, and the laser's dwell at the dials' moves): first as the plan spends
+it, then as the rounded plan does (:data:`PASSES`).
 """
 
 from __future__ import annotations
@@ -57,6 +63,7 @@ from calibrators.planning.pricing import PricedMoves
 from calibrators.planning.rounding import apportion
 from calibrators.planning.search import Planner, greedy_plan, take_fitting
 from orthoglide_env.lab.operations import TIME, Op
+from orthoglide_env.world.table import BALLBAR_LENGTHS_MM
 
 #: Designs made, each at the budget less the last plan's time beyond its visits and
 #: re-mounts: the greedy plan's, then the rounded plan's (under ``lab``, one hour, dials
@@ -83,7 +90,7 @@ def plan_phases(slots: tuple[int, ...], steps: tuple[PlannedOperation, ...]
 
 def overhead_s(steps: tuple[PlannedOperation, ...] | list[PlannedOperation]) -> float:
     """The seconds a plan of ``steps`` spends beyond its dials' visits' settles and its
-    re-mounts' work (the bound's clock): driving and the levers, and its laser runs
+    re-mounts' work (the bound's clock): driving and the levers, and its instruments' runs
     (:func:`plan_runs`, given to the design: :func:`phased_plan`) and the laser's dwell at
     the dials' moves where it reads there."""
     visits = sum(s.op == Op.REMOUNT or (s.op == Op.MOVE and not isinstance(
@@ -95,9 +102,11 @@ def overhead_s(steps: tuple[PlannedOperation, ...] | list[PlannedOperation]) -> 
 
 def plan_runs(steps: tuple[PlannedOperation, ...]
               ) -> tuple[tuple[tuple[float, Bundle], ...], ...]:
-    """Per phase of a plan of ``steps`` (:func:`plan_phases`), its laser runs in order: the
-    bundle each set-up opens (the set-up and the moves it drives) with the share of the
-    phase's dial visits the plan takes before it."""
+    """Per phase of a plan of ``steps`` (:func:`plan_phases`), its instruments' runs in
+    order: the bundle each set-up (the laser's alignment or the bar's pivot) opens, the
+    set-up and the moves it drives until any other operation (the laser's back to Zero;
+    the bar's before the operation that takes it off), with the share of the phase's dial
+    visits the plan takes before it."""
     runs: list[list[tuple[int, Bundle]]] = [[]]
     visits = [0]
     for i, step in enumerate(steps):
@@ -106,18 +115,29 @@ def plan_runs(steps: tuple[PlannedOperation, ...]
             visits.append(0)
         elif step.op == Op.MOVE and not isinstance(step, InstrumentOperation):
             visits[-1] += 1
-        elif step.op == Op.ALIGN:
+        elif step.op in (Op.ALIGN, Op.PIVOT):
             path = []
             for later in steps[i + 1:]:
                 if later.op != Op.MOVE or not isinstance(later, InstrumentOperation):
                     break
                 path.append(later.rho)
-            axis = step.axis  # type: ignore[attr-defined]
-            runs[-1].append((visits[-1], Bundle(
-                "interferometer", f"interferometer {'xyz'[axis]} (kept)", Op.ALIGN,
-                np.array(path, dtype=float).reshape(-1, 3), axis=axis)))
+            runs[-1].append((visits[-1], kept_bundle(step, np.array(
+                path, dtype=float).reshape(-1, 3))))
     return tuple(tuple((before / max(total, 1), bundle) for before, bundle in phase)
                  for phase, total in zip(runs, visits, strict=True))
+
+
+def kept_bundle(setup: PlannedOperation, path: np.ndarray) -> Bundle:
+    """The bundle of a plan's set-up operation ``setup`` (an ``ALIGN`` or a ``PIVOT``,
+    :class:`~calibrators.planning.instruments.InstrumentOperation`) driving ``path``
+    (R, 3): taken again (:func:`~calibrators.planning.search.take`), the same operations."""
+    if setup.op == Op.ALIGN:
+        axis = setup.axis  # type: ignore[attr-defined]
+        return Bundle("interferometer", f"interferometer {'xyz'[axis]} (kept)", Op.ALIGN,
+                      path, axis=axis)
+    bar = setup.bar  # type: ignore[attr-defined]
+    return Bundle("ballbar", f"ballbar {BALLBAR_LENGTHS_MM[bar]:g} mm (kept)", Op.PIVOT, path,
+                  centre=tuple(float(v) for v in setup.rho), bar=bar)
 
 
 def phase_visits(readings: np.ndarray, phases: tuple[tuple[int, ...], ...]) -> np.ndarray:
@@ -147,7 +167,7 @@ def rounded_plan(planner: Planner, visits: np.ndarray,
                  runs: tuple[tuple[tuple[float, Bundle], ...], ...] = ()
                  ) -> list[PlannedOperation]:
     """``visits`` (P, J) taken phase by phase from the planner's state, each posture's
-    nearest first, the ``remounts`` between the phases and each phase's laser ``runs``
+    nearest first, the ``remounts`` between the phases and each phase's instrument ``runs``
     (:func:`plan_runs`) once its share of the phase's visits is taken, each step that fits
     in the budget (readings expected), then the budget spent by
     :func:`~calibrators.planning.search.greedy_plan` without re-mounts."""
@@ -180,24 +200,25 @@ def rounded_plan(planner: Planner, visits: np.ndarray,
 def phased_plan(opened: Planner, plan: tuple[PlannedOperation, ...]
                 ) -> tuple[tuple[PlannedOperation, ...], float] | None:
     """The plan of :func:`rounded_plan` from the fresh planner ``opened`` (its opening's
-    readings expected; a copy is planned) on the slots, re-mounts and laser runs of
+    readings expected; a copy is planned) on the slots, re-mounts and instrument runs of
     ``plan`` (:func:`plan_runs`), and its predicted error (mm); None where the bound's
     design does not apply: stands not all at the paper's slots with their plungers down,
-    a lab that owns an instrument beyond its dials and the interferometer or moves that
-    dwell from the start, or ``ideal`` conditions (the bound's model is a world's).
+    moves that dwell from the start, or ``ideal`` conditions (the bound's model is a
+    world's).
 
-    The laser runs are the plan's, not the design's: the bound's model reads the laser
-    at any target on any visit, where a plan reads it along one drive at a time, in the
-    runs a set-up opens (and, in a lab whose every move reads it, at each posture's place
-    along that drive), so a design's laser readings are no plan's.  Their readings on the
-    bound's model are given to the design (:func:`~calibrators.planning.bound.
-    given_model`), which chooses the dials' beside them over the time the plan's dial
-    visits take."""
+    The laser's runs and the bar's are the plan's, not the design's: the bound's model
+    reads the laser at any target on any visit and the bar at any point of its circles,
+    where a plan reads the laser along one drive at a time, in the runs a set-up opens
+    (and, in a lab whose every move reads it, at each posture's place along that drive),
+    and the bar round its set-up's arcs, so a design's readings of them are no plan's.
+    Their readings on the bound's model (the laser's at the last plan's dial moves too;
+    the bar reads at none: it comes off before them) are given to the design
+    (:func:`~calibrators.planning.bound.given_model`), which chooses the dials' beside
+    them over the time the plan's dial visits take."""
     slots = tuple(int(s) for s in opened.slots)
     owned = () if opened.kit is None else opened.kit.owned
     if (slots != start_slots(opened.design, len(slots)) or not all(opened.engaged)
-            or set(owned) - {"interferometer"} or opened.dwell_s
-            or opened.conditions is None):
+            or opened.dwell_s or opened.conditions is None):
         return None
     phases, remounts = plan_phases(slots, plan)
     runs = plan_runs(plan) if owned else ()
@@ -209,8 +230,9 @@ def phased_plan(opened: Planner, plan: tuple[PlannedOperation, ...]
     steps: tuple[PlannedOperation, ...] = plan
     planner = opened
     for _ in range(PASSES):
-        # The laser's readings of the last plan, its runs' and its moves'.
-        given = np.where(model.laser >= 0, plan_counts(
+        # The instruments' readings of the last plan: its runs', and the laser's at its
+        # dial moves.
+        given = np.where(model.laser != -1, plan_counts(
             model, opened.design, slots, tuple(opened.engaged), step_actions(steps)),
             0.0) if owned else None
         design = held_design(opened.design, opened.conditions, opened.sigma,
