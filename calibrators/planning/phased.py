@@ -18,7 +18,9 @@ of the plan's slot sets in turn (:func:`~calibrators.planning.bound.held_design`
    phases (:func:`~calibrators.planning.rounding.apportion`).
 3. :func:`rounded_plan`: the phases in order, each posture's visits taken nearest first
    (the drive is a cost the bound does not price), the re-mounts between, and the budget
-   left spent greedily without re-mounts.
+   left spent greedily without re-mounts.  A visit is taken only where the re-mounts and
+   laser runs still due fit after it (:func:`due_seconds`), so the plan keeps every one
+   of them: a design whose visits overrun the budget loses visits, not what comes last.
 
 In a lab that owns the interferometer or the ballbar the plan's runs of them are kept as
 it has them (:func:`plan_runs`: each set-up, the laser's alignment or the bar's pivot, and
@@ -43,10 +45,19 @@ machines (docs/instruments.md, "The dial plan read as the bound of its own slots
 The design's budget is the plan's less what the bound leaves out (driving, the levers,
 the re-mounts' drives to Zero) and the instruments' part (their runs with their set-ups,
 lifts and engages, and the laser's dwell at the dials' moves): first as the plan spends
-it, then as the rounded plan does (:data:`PASSES`).
+it, then as the rounded plan does (:data:`PASSES`).  The first pass prices the phased
+plan's visits at the plan's overhead, and the phased plan takes more visits (in the
+workshop at three hours with the laser, 17-34 % more dial readings), each paying its
+drive, levers and the laser's dwell: its rounded plan overruns and, without the reserve
+of what is due, dropped its last re-mount or laser run, and the second pass, priced at
+that shorter plan, did not get it back.  With the reserve the first rounded plan keeps
+them, its visits cut instead, and the second pass is priced at the overhead of a plan
+that has all of them.
 """
 
 from __future__ import annotations
+
+import copy
 
 import numpy as np
 
@@ -61,7 +72,7 @@ from calibrators.planning.bound import (
 from calibrators.planning.instruments import Bundle, InstrumentOperation, step_actions
 from calibrators.planning.pricing import PricedMoves
 from calibrators.planning.rounding import apportion
-from calibrators.planning.search import Planner, greedy_plan, take_fitting
+from calibrators.planning.search import Planner, greedy_plan, operations, take_fitting
 from orthoglide_env.lab.operations import TIME, Op
 from orthoglide_env.world.table import BALLBAR_LENGTHS_MM
 
@@ -162,6 +173,27 @@ def phase_visits(readings: np.ndarray, phases: tuple[tuple[int, ...], ...]) -> n
     return apportion(visits.ravel(), round(float(visits.sum()))).reshape(visits.shape)
 
 
+def due_seconds(planner: Planner, rho: np.ndarray, engaged: np.ndarray,
+                items: list[tuple[int, int] | Bundle]) -> float:
+    """Seconds the re-mounts (stand, slot) and laser runs of ``items`` take in turn, nothing
+    between them, from posture ``rho`` with the plungers ``engaged`` (K,) and the
+    planner's laser as it is: the lab's clock of :meth:`~calibrators.planning.belief.
+    Belief.remount_seconds` and :func:`~calibrators.planning.search.operations`."""
+    state = copy.copy(planner)  # only the clock's inputs change: no belief is touched
+    state.rho, state.engaged = np.asarray(rho, dtype=float), [bool(v) for v in engaged]
+    state.kit = None if planner.kit is None else planner.kit.copy()
+    seconds = 0.0
+    for item in items:
+        if isinstance(item, Bundle):
+            seconds += operations(state, item)[1]
+            state.kit.soaked = True
+        else:
+            seconds += state.remount_seconds()
+            state.engaged[item[0]] = True
+        state.rho = np.zeros(3)
+    return seconds
+
+
 def rounded_plan(planner: Planner, visits: np.ndarray,
                  remounts: tuple[tuple[int, int], ...],
                  runs: tuple[tuple[tuple[float, Bundle], ...], ...] = ()
@@ -170,24 +202,44 @@ def rounded_plan(planner: Planner, visits: np.ndarray,
     nearest first, the ``remounts`` between the phases and each phase's instrument ``runs``
     (:func:`plan_runs`) once its share of the phase's visits is taken, each step that fits
     in the budget (readings expected), then the budget spent by
-    :func:`~calibrators.planning.search.greedy_plan` without re-mounts."""
-    for phase in range(visits.shape[1]):
+    :func:`~calibrators.planning.search.greedy_plan` without re-mounts.
+
+    A visit fits where the re-mounts and runs still due, taken in turn after it
+    (:func:`due_seconds`), end within the budget too; where the nearest does not, the
+    phase's other visits are dropped.  So every re-mount and run that fits after the
+    opening is kept, and a design that overruns the budget (its budget is an estimate
+    of the time its visits leave) loses the visits before what is due instead."""
+    phases = visits.shape[1]
+    kept = [list(runs[phase]) if runs else [] for phase in range(phases)]
+    for phase in range(phases):
         if phase:
             if planner.time_s + planner.remount_seconds() > planner.budget_s:
                 break
             planner.remount(*remounts[phase - 1])
             planner.expect_readings()
         left = {int(p): int(n) for p, n in enumerate(visits[:, phase]) if n}
-        due = list(runs[phase]) if runs else []
+        due = kept[phase]
+        later = [item for after in range(phase + 1, phases)
+                 for item in (remounts[after - 1], *(run for _, run in kept[after]))]
+        # The seconds of what is due after a visit, by its posture and plungers: a phase's
+        # visits come back to few postures, and what is due changes only with a run.
+        reserve: dict[tuple, float] = {}
         total, taken = visits[:, phase].sum(), 0
         while left or due:
             if due and (not left or taken >= due[0][0] * total):
                 take_fitting(planner, due.pop(0)[1])
+                reserve.clear()
                 continue
             seconds, after, reads = planner._moves()
             posture = min(left, key=lambda p: (seconds[p], p))
-            if planner.time_s + seconds[posture] > planner.budget_s:
-                break
+            down = after[:, posture]
+            key = (posture, *(bool(v) for v in down))
+            if key not in reserve:
+                reserve[key] = due_seconds(planner, planner.table.postures[posture], down,
+                                           [run for _, run in due] + later)
+            if planner.time_s + seconds[posture] + reserve[key] > planner.budget_s:
+                left.clear()
+                continue
             planner.move(posture, PricedMoves(np.zeros(len(seconds)), seconds, after, reads))
             planner.expect_readings()
             taken += 1
