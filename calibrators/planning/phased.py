@@ -175,7 +175,7 @@ def phase_visits(readings: np.ndarray, phases: tuple[tuple[int, ...], ...]) -> n
 
 def due_seconds(planner: Planner, rho: np.ndarray, engaged: np.ndarray,
                 items: list[tuple[int, int] | Bundle]) -> float:
-    """Seconds the re-mounts (stand, slot) and laser runs of ``items`` take in turn, nothing
+    """Seconds the re-mounts (stand, slot) and instrument runs of ``items`` take in turn, nothing
     between them, from posture ``rho`` with the plungers ``engaged`` (K,) and the
     planner's laser as it is: the lab's clock of :meth:`~calibrators.planning.belief.
     Belief.remount_seconds` and :func:`~calibrators.planning.search.operations`."""
@@ -186,7 +186,8 @@ def due_seconds(planner: Planner, rho: np.ndarray, engaged: np.ndarray,
     for item in items:
         if isinstance(item, Bundle):
             seconds += operations(state, item)[1]
-            state.kit.soaked = True
+            # As :func:`~calibrators.planning.search.take` has it: a bar's run soaks no laser.
+            state.kit.soaked |= item.setup == Op.ALIGN
         else:
             seconds += state.remount_seconds()
             state.engaged[item[0]] = True
