@@ -194,9 +194,7 @@ def test_a_rounded_plan_drops_visits_before_what_is_due_not_what_is_due():
     # as they fit, the visits spent the budget and the run and the re-mount were lost:
     # here the visits that would leave no time for them are dropped instead.
     budget = 1800.0
-    planner = Planner(list(PAPER_SLOTS), [True] * len(PAPER_SLOTS), SIGMA, budget,
-                      design=PROTOTYPE, conditions=LAB, instruments=("interferometer",))
-    planner.expect_readings()
+    planner = _opened(budget, "interferometer")
     visits = np.zeros((len(planner.table.postures), 2), dtype=int)
     visits[planner.here] = (400, 10)
     other = next(s for s in range(len(PAPER_SLOTS) + 1) if s not in PAPER_SLOTS)
@@ -228,14 +226,7 @@ def test_the_phased_plan_keeps_a_run_its_plan_takes_last():
     # overran, and the run, due last, was dropped (and again at the second pass, priced
     # at the plan without it).  Kept, with the plan's re-mount, within the budget.
     budget = 2400.0
-
-    def opened() -> Planner:
-        planner = Planner(list(PAPER_SLOTS), [True] * len(PAPER_SLOTS), SIGMA, budget,
-                          design=PROTOTYPE, conditions=LAB, instruments=("interferometer",))
-        planner.expect_readings()
-        return planner
-
-    planner = opened()
+    planner = _opened(budget, "interferometer")
     for _ in range(5):
         planner.greedy_move()
     other = next(s for s in range(len(PAPER_SLOTS) + 1) if s not in PAPER_SLOTS)
@@ -253,7 +244,7 @@ def test_the_phased_plan_keeps_a_run_its_plan_takes_last():
     take(planner, laser)
     expect(planner, laser)
     plan = tuple(greedy_plan(planner, remounts=False))
-    made = phased_plan(opened(), plan)
+    made = phased_plan(_opened(budget, "interferometer"), plan)
     assert made is not None
     steps, _ = made
     assert plan_phases(tuple(PAPER_SLOTS), steps) == plan_phases(tuple(PAPER_SLOTS), plan)
@@ -314,8 +305,7 @@ def test_the_phased_plan_keeps_a_plans_bar_runs_and_reads_better_beside_them():
     # readings are a point of the bound of its phases with the pivot set up (that
     # certified value is below it, no tolerance), and its dials, read as that bound's
     # design beside the bar's readings, leave less error there than the plan's greedy
-    # ones (the reason to make it; two deterministic values, no tolerance either).  Built
-    # so at half an hour, the phased plan loses the plan's one run (docs/instruments.md).
+    # ones (the reason to make it; two deterministic values, no tolerance either).
     budget = 2400.0
     plan = _run_plan(budget, "ballbar")
     made = phased_plan(_opened(budget, "ballbar"), plan)
